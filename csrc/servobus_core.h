@@ -1,0 +1,119 @@
+/* servobus C core: the byte work under the Python layers.
+ *
+ * This header is also the cffi cdef (read by src/servobus/_build_core.py), so it stays parsable by
+ * cffi: no #include, no macros other than integer constants, no function bodies. The .c files
+ * include sb_internal.h, which brings <stdint.h>/<stddef.h> in first.
+ *
+ * Every function is pure over caller-owned buffers: input pointer + length, output arrays from the
+ * caller, an int count or status back. No malloc, no globals (tables are static const), no Python.
+ */
+
+#define SB_CORE_ABI 1
+
+/* ---- status codes (mapped to exceptions in one table: servobus/codec/_lib.py) ---- */
+#define SB_OK 0
+#define SB_E_RANGE -1    /* a value lies outside its field's [lo, hi] */
+#define SB_E_NAN -2      /* a value is NaN */
+#define SB_E_LAYOUT -3   /* unknown layout or deframer kind */
+#define SB_E_ARG -4      /* bad size, stride or option */
+
+/* Compiled-in package version, compared at import with servobus.__version__. */
+const char *sb_core_version(void);
+
+/* ---- CRC (crc.c) ----
+ * CRC-16/MODBUS: reflected poly 0xA001, init 0xFFFF, no final xor. Pass 0xFFFF to start, or a
+ * previous result to continue over more data. Sent low byte first.
+ * CRC-32/ISO-HDLC (zlib, IEEE 802.3): same chaining convention as zlib.crc32: start with 0. */
+uint16_t sb_crc16_modbus(const char *data, size_t len, uint16_t crc);
+uint32_t sb_crc32_ieee(const char *data, size_t len, uint32_t crc);
+
+/* ---- field scaling and bit packing (bitpack.c) ----
+ * A field maps a physical value x to an integer code:
+ *     code = round_half_away((x - origin) * codes / span)     (exactly this order of operations)
+ *     x    = code * span / codes + origin
+ * Packing first checks lo <= x <= hi (NaN always fails; with SB_PACK_SATURATE, x is clamped into
+ * [lo, hi] instead), then clamps the code into the field's bit width, which only matters at the top
+ * of offset-binary fields where +full scale is one code past the last (hollow manual §4.3). */
+typedef struct {
+    double lo;      /* smallest accepted physical value */
+    double hi;      /* largest accepted physical value */
+    double origin;  /* physical value of code 0 */
+    double codes;   /* `span` physical units are `codes` codes */
+    double span;
+} sb_field;
+
+/* Where a pack failed: frame index within the batch, field index within the layout, the value. */
+typedef struct {
+    size_t frame;
+    int field;
+    double value;
+} sb_pack_error;
+
+#define SB_PACK_SATURATE 1
+
+/* Frame layouts. Fields are listed in the order of the `values` rows (the layout's field order). */
+#define SB_LAYOUT_MIT_COMMAND 1        /* 8 B: p u16, v u12, kp u12, kd u12, t u12 (big-endian bits) */
+#define SB_LAYOUT_HOLLOW_SETPOINT 2    /* as MIT_COMMAND, but never emits FF x7 + F9..FE (a special command) */
+#define SB_LAYOUT_MIT_REPLY 3          /* 6 B: id u8, p u16, v u12, t u12 */
+#define SB_LAYOUT_HOLLOW_EXT_REPLY 4   /* 8 B: id u8, x s32 (bytes 1-2 = x[15:0], 6-7 = x[31:16]), v u12, t u12 */
+#define SB_LAYOUT_HOLLOW_FD_COMMAND 5  /* 16 B: pos s40, vel s32, cur s16, mode u8, run u8, kp u8, kd u8, zero u8 */
+#define SB_LAYOUT_HOLLOW_FD_REPLY 6    /* 16 B: pos s40, vel s32, cur s16, mode u8, run u8, reserved u8, temp s8, slave u8 */
+#define SB_LAYOUT_COUNT 6
+
+/* Bytes a layout occupies (0 for an unknown layout), and its number of fields. */
+int sb_layout_size(int layout);
+int sb_layout_fields(int layout);
+/* Width in bits of field `field` (negative for a signed field), 0 when out of range. */
+int sb_layout_field_bits(int layout, int field);
+
+/* Pack n frames. values: n rows of sb_layout_fields() doubles. out: n * stride bytes; bytes past the
+ * layout size in each slot are zeroed. Returns SB_OK, or an error with *err filled and the output
+ * undefined (the caller sends nothing). */
+int sb_pack(int layout, const sb_field *fields, const double *values, size_t n, size_t stride,
+            int flags, uint8_t *out, sb_pack_error *err);
+
+/* Unpack n frames laid out every `stride` bytes into n rows of doubles. Every bit pattern decodes. */
+int sb_unpack(int layout, const sb_field *fields, const uint8_t *frames, size_t n, size_t stride,
+              double *values);
+
+/* ---- incremental stream de-framers (deframe.c) ----
+ * Fed bytes in any chunking, they return whole frames. Bytes that cannot start a valid frame are
+ * dropped one at a time and counted (discarded_bytes); a frame whose check fails where a frame was
+ * expected (stream start, or right after a good frame) counts once in crc_errors, then the
+ * de-framer hunts byte by byte for the next frame that checks. Memory is the fixed buffer below. */
+#define SB_DEFRAME_CAPACITY 1024
+
+#define SB_DEFRAME_MYACTUATOR_RS485 1  /* 0x3E, ID, LEN, DATA[LEN], CRC16 lo, hi; option = max LEN (1..255) */
+#define SB_DEFRAME_HOLLOW_TRANSPARENT 2 /* ID, 16 bytes, CRC32 LSB first (21 bytes, no header); option 0 */
+#define SB_DEFRAME_MODBUS_RTU 3         /* functions 0x03/0x10 and their exceptions; option = direction mask */
+
+#define SB_MODBUS_REQUESTS 1
+#define SB_MODBUS_REPLIES 2
+
+#define SB_RS485_MAX_FRAME 260          /* 5 + 255 */
+#define SB_TRANSPARENT_FRAME 21
+#define SB_MODBUS_MAX_FRAME 256
+
+typedef struct {
+    int kind;
+    int option;
+    int synced;               /* 1 when the next byte is where a frame should start */
+    size_t len;               /* bytes held in buf */
+    uint64_t frames;
+    uint64_t discarded_bytes;
+    uint64_t crc_errors;
+    uint8_t buf[SB_DEFRAME_CAPACITY];
+} sb_deframer;
+
+/* Returns SB_OK or SB_E_LAYOUT / SB_E_ARG. */
+int sb_deframer_init(sb_deframer *d, int kind, int option);
+
+/* Largest frame this de-framer can return. */
+size_t sb_deframer_max_frame(const sb_deframer *d);
+
+/* Consume input and write whole frames back to back into out, their lengths into lens. Stops when
+ * the input is used up and nothing more parses, or when out/lens cannot take another frame of the
+ * maximum size. *consumed tells how much input was taken (taken bytes are held internally); call
+ * again with the rest. Returns the number of frames written. */
+size_t sb_deframer_feed(sb_deframer *d, const char *data, size_t len, size_t *consumed,
+                        uint8_t *out, size_t out_cap, uint16_t *lens, size_t max_frames);

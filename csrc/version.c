@@ -1,0 +1,11 @@
+/* The package version the core was compiled for; the Python wrapper refuses a stale build. */
+#include "sb_internal.h"
+
+#ifndef SB_CORE_VERSION
+#error "SB_CORE_VERSION is set by src/servobus/_build_core.py"
+#endif
+
+const char *sb_core_version(void)
+{
+    return SB_CORE_VERSION;
+}

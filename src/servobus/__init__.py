@@ -1,0 +1,19 @@
+"""servobus: asyncio orchestrator for buses of servo actuators, with a small C core.
+
+Layers (see the README's map): ``servobus.codec`` wraps the C core (CRCs, bit packing, de-framers);
+protocol families, the scheduler, transports, the simulator and the Bus build on it.
+"""
+
+from servobus._version import __version__
+from servobus.errors import MotorFault, MotorTimeout, ProtocolError, ServobusError, TransportError
+from servobus.frame import Frame
+
+__all__ = [
+    "Frame",
+    "MotorFault",
+    "MotorTimeout",
+    "ProtocolError",
+    "ServobusError",
+    "TransportError",
+    "__version__",
+]

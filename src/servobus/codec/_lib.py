@@ -1,0 +1,58 @@
+"""The only importer of the compiled C core. Checks that it matches this package, and maps status
+codes to exceptions through one table. Nothing outside servobus.codec sees cdata."""
+
+from __future__ import annotations
+
+import sys
+from typing import Any, NoReturn, TypeAlias
+
+from servobus._version import __version__
+
+try:
+    from servobus._core import ffi, lib
+except ImportError as exc:  # pragma: no cover - depends on how the package was installed
+    raise ImportError(
+        "servobus._core (the C core) is not built. Install the package with `pip install .` "
+        "(or `pip install -e .` for development); it needs a C compiler."
+    ) from exc
+
+_built_for = ffi.string(lib.sb_core_version()).decode()
+if _built_for != __version__:  # pragma: no cover - only after an upgrade without rebuild
+    raise ImportError(
+        f"servobus._core was built for servobus {_built_for} but this is servobus {__version__}: "
+        "rebuild it with `pip install -e .` (or reinstall)."
+    )
+
+__all__ = ["Buffer", "as_cbuffer", "ffi", "is_buffer", "lib", "raise_status"]
+
+if sys.version_info >= (3, 12):
+    from collections.abc import Buffer
+else:  # pragma: no cover - Python 3.11 has no Buffer ABC; numpy arrays etc. still work at runtime
+    Buffer: TypeAlias = bytes | bytearray | memoryview
+
+_STATUS: dict[int, tuple[type[Exception], str]] = {
+    lib.SB_E_RANGE: (ValueError, "value out of range"),
+    lib.SB_E_NAN: (ValueError, "value is NaN"),
+    lib.SB_E_LAYOUT: (ValueError, "unknown layout or de-framer kind"),
+    lib.SB_E_ARG: (ValueError, "bad size, stride or option"),
+}
+
+
+def raise_status(status: int, detail: str = "") -> NoReturn:
+    """Raise the exception that a non-zero C status code stands for."""
+    exc_type, text = _STATUS.get(status, (RuntimeError, f"C core returned unknown status {status}"))
+    raise exc_type(f"{detail}: {text}" if detail else text)
+
+
+def as_cbuffer(data: Any) -> Any:
+    """bytes go to C as they are (no copy); other buffers through ffi.from_buffer (no copy)."""
+    return data if type(data) is bytes else ffi.from_buffer(data)
+
+
+def is_buffer(obj: object) -> bool:
+    """True for anything that exposes the buffer protocol (bytes, array, numpy arrays, ...)."""
+    try:
+        memoryview(obj)  # type: ignore[arg-type]
+    except TypeError:
+        return False
+    return True

@@ -1,0 +1,176 @@
+"""Incremental de-framers for the serial links, run by the C core.
+
+Feed bytes as they arrive, in any chunking; get whole, CRC-checked frames back. Garbage is dropped
+and counted, never raised: a serial reader must keep going. Counters:
+
+* ``frames``: frames returned.
+* ``discarded_bytes``: bytes dropped because they could not start a frame that checks.
+* ``crc_errors``: frames that stood where a frame was expected and failed their check.
+* ``pending``: bytes held for a frame not yet complete (bounded; see ``SB_DEFRAME_CAPACITY``).
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar, Literal
+
+from servobus.codec._lib import Buffer, ffi, lib, raise_status
+
+__all__ = ["Deframer", "HollowTransparentDeframer", "ModbusRtuDeframer", "MyActuatorRs485Deframer"]
+
+_CHUNK = 1 << 16  # output scratch sized for this much input per C call
+
+
+class Deframer:
+    """Base of the three de-framers; use a subclass."""
+
+    _KIND: ClassVar[int]
+    _MIN_FRAME: ClassVar[int]
+
+    __slots__ = ("_consumed", "_lens", "_max_frame", "_out", "_state")
+
+    def __init__(self, option: int) -> None:
+        self._state = ffi.new("sb_deframer *")
+        status = lib.sb_deframer_init(self._state, self._KIND, option)
+        if status:
+            raise_status(status, type(self).__name__)
+        self._max_frame = lib.sb_deframer_max_frame(self._state)
+        out_cap = _CHUNK + lib.SB_DEFRAME_CAPACITY
+        self._out = ffi.new("uint8_t[]", out_cap)
+        self._lens = ffi.new("uint16_t[]", out_cap // self._MIN_FRAME + 1)
+        self._consumed = ffi.new("size_t *")
+
+    def feed(self, data: Buffer) -> list[bytes]:
+        """Take received bytes; return the whole frames they complete, in order.
+
+        Never raises for bad bytes: they are dropped and counted.
+        """
+        src = ffi.from_buffer(data)
+        total, frames = len(src), []
+        consumed = self._consumed
+        # Input goes in slices of at most _CHUNK bytes. The scratch output holds _CHUNK bytes plus
+        # more than the de-framer can have buffered, so one C call always takes a whole slice.
+        for offset in range(0, total, _CHUNK):
+            size = min(_CHUNK, total - offset)
+            n = lib.sb_deframer_feed(
+                self._state, src + offset, size, consumed, self._out, len(self._out), self._lens, len(self._lens)
+            )
+            if consumed[0] != size:  # pragma: no cover - guarded by the sizing above
+                raise RuntimeError("servobus: de-framer scratch buffer too small")
+            if n:
+                lens = ffi.unpack(self._lens, n)
+                blob = ffi.buffer(self._out, sum(lens))[:]
+                pos = 0
+                for length in lens:
+                    frames.append(blob[pos : pos + length])
+                    pos += length
+        return frames
+
+    def feed_into(self, data: Buffer, out: Buffer, lens: Buffer) -> tuple[int, int]:
+        """Allocation-free form for tight loops and benchmarks.
+
+        Frames go back to back into the writable ``out``; their lengths into ``lens`` (a writable
+        uint16 buffer, e.g. ``array('H')``). Stops when ``out``/``lens`` cannot take another frame.
+
+        Returns:
+            (frames written, input bytes consumed). Call again with the unconsumed rest.
+        """
+        view = memoryview(lens)
+        if view.format not in ("H", "<H", "=H"):
+            raise TypeError("lens must be a writable uint16 buffer, e.g. array('H')")
+        src = ffi.from_buffer(data)
+        dst = ffi.from_buffer("uint8_t[]", out, require_writable=True)
+        lens_c = ffi.from_buffer("uint16_t[]", lens, require_writable=True)
+        consumed = ffi.new("size_t *")
+        n = lib.sb_deframer_feed(self._state, src, len(src), consumed, dst, len(dst), lens_c, len(lens_c))
+        return n, consumed[0]
+
+    def clear(self) -> None:
+        """Drop buffered partial bytes (after a port reopen, say); they count as discarded."""
+        self._state.discarded_bytes += self._state.len
+        self._state.len = 0
+        self._state.synced = 1
+
+    @property
+    def frames(self) -> int:
+        return int(self._state.frames)
+
+    @property
+    def discarded_bytes(self) -> int:
+        return int(self._state.discarded_bytes)
+
+    @property
+    def crc_errors(self) -> int:
+        return int(self._state.crc_errors)
+
+    @property
+    def pending(self) -> int:
+        return int(self._state.len)
+
+    @property
+    def max_frame(self) -> int:
+        return int(self._max_frame)
+
+    def __repr__(self) -> str:
+        return (
+            f"{type(self).__name__}(frames={self.frames}, discarded_bytes={self.discarded_bytes}, "
+            f"crc_errors={self.crc_errors}, pending={self.pending})"
+        )
+
+
+class MyActuatorRs485Deframer(Deframer):
+    """MyActuator RS485: ``0x3E, ID, LEN, DATA[LEN], CRC16/MODBUS low byte first``.
+
+    Args:
+        max_data_len: largest LEN accepted (the standard protocol fixes it at 8; a larger LEN is
+            treated as noise, which keeps resynchronisation quick).
+    """
+
+    _KIND = lib.SB_DEFRAME_MYACTUATOR_RS485
+    _MIN_FRAME = 6
+    __slots__ = ()
+
+    def __init__(self, max_data_len: int = 8) -> None:
+        if not 1 <= max_data_len <= 255:
+            raise ValueError(f"max_data_len={max_data_len} is outside [1, 255]")
+        super().__init__(max_data_len)
+
+
+class HollowTransparentDeframer(Deframer):
+    """Hollow RS485→CANFD converter, transparent mode: ``ID + 16 bytes + CRC32 LSB first``.
+
+    The frame has no header, so the de-framer synchronises on the CRC.
+    """
+
+    _KIND = lib.SB_DEFRAME_HOLLOW_TRANSPARENT
+    _MIN_FRAME = lib.SB_TRANSPARENT_FRAME
+    __slots__ = ()
+
+    def __init__(self) -> None:
+        super().__init__(0)
+
+
+_DIRECTIONS: dict[str, int] = {
+    "requests": lib.SB_MODBUS_REQUESTS,
+    "replies": lib.SB_MODBUS_REPLIES,
+    "both": lib.SB_MODBUS_REQUESTS | lib.SB_MODBUS_REPLIES,
+}
+
+
+class ModbusRtuDeframer(Deframer):
+    """Modbus RTU frames of functions 0x03 and 0x10 (and their exception replies), CRC16.
+
+    Args:
+        direction: ``"replies"`` on a host (the default), ``"requests"`` on a device or
+            simulator, ``"both"`` for a bus monitor (the CRC tells the two 0x03 forms apart).
+    """
+
+    _KIND = lib.SB_DEFRAME_MODBUS_RTU
+    _MIN_FRAME = 5
+    __slots__ = ()
+
+    def __init__(self, direction: Literal["requests", "replies", "both"] = "replies") -> None:
+        try:
+            option = _DIRECTIONS[direction]
+        except KeyError:
+            raise ValueError(f"direction={direction!r} is not one of {sorted(_DIRECTIONS)}") from None
+        super().__init__(option)

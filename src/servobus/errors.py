@@ -1,0 +1,61 @@
+"""The servobus exception tree.
+
+    ServobusError
+     ├── ProtocolError      bytes that cannot be decoded (raw bytes in hex, motor id, command)
+     ├── MotorTimeout       no reply in time (also a TimeoutError)
+     ├── MotorFault         the motor reported error flags (decoded)
+     └── TransportError     adapter lost, bus-off, port closed (raised from its cause)
+
+Bad *input* from the caller is not in this tree: an out-of-range setpoint raises ValueError naming
+the field, the value and the limit, before any frame is built.
+"""
+
+from __future__ import annotations
+
+__all__ = ["MotorFault", "MotorTimeout", "ProtocolError", "ServobusError", "TransportError"]
+
+
+class ServobusError(Exception):
+    """Base class of every error servobus raises about motors, buses and bytes."""
+
+
+class ProtocolError(ServobusError):
+    """Received bytes that do not decode.
+
+    Attributes:
+        raw: the offending bytes (shown in hex in the message).
+        motor_id: the motor the bytes came from, when known.
+        command: the command byte involved, when known.
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        raw: bytes = b"",
+        motor_id: int | None = None,
+        command: int | None = None,
+    ) -> None:
+        self.raw = bytes(raw)
+        self.motor_id = motor_id
+        self.command = command
+        details = []
+        if motor_id is not None:
+            details.append(f"motor {motor_id}")
+        if command is not None:
+            details.append(f"command 0x{command:02X}")
+        if raw:
+            details.append(f"raw {self.raw.hex(' ').upper()}")
+        super().__init__(f"{message} ({', '.join(details)})" if details else message)
+
+
+class MotorTimeout(ServobusError, TimeoutError):
+    """A motor did not answer within its deadline."""
+
+
+class MotorFault(ServobusError):
+    """A motor reported error flags."""
+
+
+class TransportError(ServobusError):
+    """The adapter or port failed: unplugged, bus-off, closed."""
