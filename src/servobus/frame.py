@@ -37,7 +37,9 @@ class Frame:
         limit = 0x1FFFFFFF if self.is_extended_id else 0x7FF
         if not 0 <= self.arbitration_id <= limit:
             kind = "extended" if self.is_extended_id else "standard"
-            raise ValueError(f"arbitration_id=0x{self.arbitration_id:X} outside the {kind} range 0..0x{limit:X}")
+            raise ValueError(
+                f"arbitration_id=0x{self.arbitration_id:X} outside the {kind} range 0..0x{limit:X}"
+            )
         if self.is_fd:
             if len(self.data) not in _FD_SIZES:
                 raise ValueError(f"CAN FD data length {len(self.data)} is not one of {_FD_SIZES}")
@@ -49,4 +51,6 @@ class Frame:
     def __repr__(self) -> str:
         width = 8 if self.is_extended_id else 3
         flags = "".join(f for f, on in (("x", self.is_extended_id), ("f", self.is_fd)) if on)
-        return f"Frame(0x{self.arbitration_id:0{width}X}{flags and ' ' + flags} [{self.data.hex(' ').upper()}])"
+        return (
+            f"Frame(0x{self.arbitration_id:0{width}X}{flags and ' ' + flags} [{self.data.hex(' ').upper()}])"
+        )

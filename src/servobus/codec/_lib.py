@@ -23,7 +23,7 @@ if _built_for != __version__:  # pragma: no cover - only after an upgrade withou
         "rebuild it with `pip install -e .` (or reinstall)."
     )
 
-__all__ = ["Buffer", "as_cbuffer", "ffi", "is_buffer", "lib", "raise_status"]
+__all__ = ["Buffer", "as_cbuffer", "ffi", "is_buffer", "lib", "raise_status", "writable_cbuffer"]
 
 if sys.version_info >= (3, 12):
     from collections.abc import Buffer
@@ -56,3 +56,11 @@ def is_buffer(obj: object) -> bool:
     except TypeError:
         return False
     return True
+
+
+def writable_cbuffer(ctype: str, obj: Any, what: str) -> Any:
+    """A writable buffer as a C array, without copying; TypeError names the argument otherwise."""
+    try:
+        return ffi.from_buffer(ctype, obj, require_writable=True)
+    except (BufferError, TypeError) as exc:
+        raise TypeError(f"{what} must be a writable buffer (bytearray, array, numpy array)") from exc

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-
 from servobus.codec._lib import Buffer, as_cbuffer, lib
 
 __all__ = ["crc16_modbus", "crc32_ieee"]

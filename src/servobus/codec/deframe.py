@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from typing import ClassVar, Literal
 
-from servobus.codec._lib import Buffer, ffi, lib, raise_status
+from servobus.codec._lib import Buffer, ffi, lib, raise_status, writable_cbuffer
 
 __all__ = ["Deframer", "HollowTransparentDeframer", "ModbusRtuDeframer", "MyActuatorRs485Deframer"]
 
@@ -52,7 +52,14 @@ class Deframer:
         for offset in range(0, total, _CHUNK):
             size = min(_CHUNK, total - offset)
             n = lib.sb_deframer_feed(
-                self._state, src + offset, size, consumed, self._out, len(self._out), self._lens, len(self._lens)
+                self._state,
+                src + offset,
+                size,
+                consumed,
+                self._out,
+                len(self._out),
+                self._lens,
+                len(self._lens),
             )
             if consumed[0] != size:  # pragma: no cover - guarded by the sizing above
                 raise RuntimeError("servobus: de-framer scratch buffer too small")
@@ -78,8 +85,8 @@ class Deframer:
         if view.format not in ("H", "<H", "=H"):
             raise TypeError("lens must be a writable uint16 buffer, e.g. array('H')")
         src = ffi.from_buffer(data)
-        dst = ffi.from_buffer("uint8_t[]", out, require_writable=True)
-        lens_c = ffi.from_buffer("uint16_t[]", lens, require_writable=True)
+        dst = writable_cbuffer("uint8_t[]", out, "out")
+        lens_c = writable_cbuffer("uint16_t[]", lens, "lens")
         consumed = ffi.new("size_t *")
         n = lib.sb_deframer_feed(self._state, src, len(src), consumed, dst, len(dst), lens_c, len(lens_c))
         return n, consumed[0]

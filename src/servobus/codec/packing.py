@@ -23,9 +23,9 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
-from servobus.codec._lib import Buffer, as_cbuffer, ffi, is_buffer, lib, raise_status
+from servobus.codec._lib import Buffer, as_cbuffer, ffi, is_buffer, lib, raise_status, writable_cbuffer
 from servobus.errors import ProtocolError
 
 __all__ = [
@@ -141,7 +141,9 @@ LAYOUTS = (MIT_COMMAND, HOLLOW_SETPOINT, MIT_REPLY, HOLLOW_EXT_REPLY, HOLLOW_FD_
 def _double_buffer(values: Buffer, what: str) -> Any:
     view = memoryview(values)
     if view.format not in ("d", "<d", "=d") or not view.c_contiguous:
-        raise TypeError(f"{what} must be a contiguous float64 buffer (array('d'), numpy float64), got {view.format!r}")
+        raise TypeError(
+            f"{what} must be a contiguous float64 buffer (array('d'), numpy float64), got {view.format!r}"
+        )
     return ffi.from_buffer("double[]", values, require_writable=False)
 
 
@@ -199,10 +201,11 @@ class Packer:
         )
         if status:
             self._raise(status, batch=False)
-        return ffi.buffer(self._frame)[:]
+        frame: bytes = ffi.buffer(self._frame)[:]
+        return frame
 
     def pack_many(self, rows: Iterable[Sequence[float]] | Buffer, *, saturate: bool = False) -> bytes:
-        """Pack a batch: rows of values, or a flat float64 buffer of n × fields values.
+        """Pack a batch: rows of values, or a flat float64 buffer of n x fields values.
 
         Returns:
             n frames, each ``stride`` bytes, back to back.
@@ -211,10 +214,10 @@ class Packer:
             ValueError: as :meth:`pack`; the message names the frame index. Nothing is returned.
         """
         if is_buffer(rows):
-            values = _double_buffer(rows, "rows")
+            values = _double_buffer(cast(Buffer, rows), "rows")
         else:
             flat: list[float] = []
-            for i, row in enumerate(rows):
+            for i, row in enumerate(cast(Iterable[Sequence[float]], rows)):
                 if len(row) != self._nf:
                     raise ValueError(f"{self.layout.name} row {i} has {len(row)} values, needs {self._nf}")
                 flat.extend(row)
@@ -224,11 +227,12 @@ class Packer:
             raise ValueError(f"{len(values)} values is not a whole number of {self._nf}-field rows")
         out = ffi.new("uint8_t[]", n * self.stride)
         self._pack_raw(values, n, out, saturate)
-        return ffi.buffer(out)[:]
+        frames: bytes = ffi.buffer(out)[:]
+        return frames
 
     def pack_into(self, values: Buffer, out: Buffer, *, saturate: bool = False) -> int:
-        """Zero-allocation batch pack for control loops: float64 ``values`` (n × fields) into the
-        writable buffer ``out`` (at least n × stride bytes). Returns n.
+        """Zero-allocation batch pack for control loops: float64 ``values`` (n x fields) into the
+        writable buffer ``out`` (at least n x stride bytes). Returns n.
 
         Raises:
             ValueError: as :meth:`pack`, or ``out`` too small.
@@ -238,7 +242,7 @@ class Packer:
         n, extra = divmod(len(src), self._nf)
         if extra:
             raise ValueError(f"{len(src)} values is not a whole number of {self._nf}-field rows")
-        dst = ffi.from_buffer("uint8_t[]", out, require_writable=True)
+        dst = writable_cbuffer("uint8_t[]", out, "out")
         if len(dst) < n * self.stride:
             raise ValueError(f"out holds {len(dst)} bytes, {n} frames need {n * self.stride}")
         self._pack_raw(src, n, dst, saturate)
@@ -255,7 +259,9 @@ class Packer:
             where = f" (frame {self._err.frame})" if batch else ""
             if status == lib.SB_E_NAN:
                 raise ValueError(f"{scale.name} is NaN{where}")
-            raise ValueError(f"{scale.name}={self._err.value!r} is outside [{scale.lo!r}, {scale.hi!r}]{where}")
+            raise ValueError(
+                f"{scale.name}={self._err.value!r} is outside [{scale.lo!r}, {scale.hi!r}]{where}"
+            )
         raise_status(status, self.layout.name)
 
     # ---- unpacking ----
@@ -293,7 +299,7 @@ class Packer:
         return [tuple(flat[i : i + k]) for i in range(0, n * k, k)]
 
     def unpack_into(self, frames: Buffer, out: Buffer) -> int:
-        """Zero-allocation batch decode into a writable float64 buffer of n × fields. Returns n.
+        """Zero-allocation batch decode into a writable float64 buffer of n x fields. Returns n.
 
         Raises:
             ProtocolError: ``frames`` is not a whole number of ``stride``-byte slots.
@@ -301,10 +307,9 @@ class Packer:
         """
         buf = as_cbuffer(frames)
         n = self._count_frames(buf, frames)
-        view = memoryview(out)
-        if view.format not in ("d", "<d", "=d") or view.readonly:
+        if memoryview(out).format not in ("d", "<d", "=d"):
             raise TypeError("out must be a writable float64 buffer")
-        dst = ffi.from_buffer("double[]", out, require_writable=True)
+        dst = writable_cbuffer("double[]", out, "out")
         if len(dst) < n * self._nf:
             raise ValueError(f"out holds {len(dst)} values, {n} frames need {n * self._nf}")
         status = lib.sb_unpack(self.layout.id, self._fields, buf, n, self.stride, dst)
