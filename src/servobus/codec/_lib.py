@@ -4,7 +4,7 @@ codes to exceptions through one table. Nothing outside servobus.codec sees cdata
 from __future__ import annotations
 
 import sys
-from typing import Any, NoReturn, TypeAlias
+from typing import Any, NoReturn
 
 from servobus._version import __version__
 
@@ -27,8 +27,8 @@ __all__ = ["Buffer", "as_cbuffer", "ffi", "is_buffer", "lib", "raise_status", "w
 
 if sys.version_info >= (3, 12):
     from collections.abc import Buffer
-else:  # pragma: no cover - Python 3.11 has no Buffer ABC; numpy arrays etc. still work at runtime
-    Buffer: TypeAlias = bytes | bytearray | memoryview
+else:  # pragma: no cover - the same protocol, backported (typeshed gives array, mmap, ... __buffer__)
+    from typing_extensions import Buffer
 
 _STATUS: dict[int, tuple[type[Exception], str]] = {
     lib.SB_E_RANGE: (ValueError, "value out of range"),
