@@ -155,59 +155,86 @@ static enum parse_result parse(const sb_deframer *d, const uint8_t *b, size_t av
     }
 }
 
+/* Parse what buf holds into out/lens (from *out_used / *nframes on). With line_idle set, the line
+ * has gone quiet, so a frame that still needs bytes will never get them: its first byte is noise.
+ * Returns 1 when out or lens cannot take another frame of the maximum size. */
+static int parse_buffer(sb_deframer *d, int line_idle, uint8_t *out, size_t out_cap, size_t *out_used,
+                        uint16_t *lens, size_t max_frames, size_t *nframes)
+{
+    const size_t max_frame = sb_deframer_max_frame(d);
+    size_t pos = 0;
+    int full = 0;
+
+    while (pos < d->len) {
+        size_t flen = 0;
+        enum parse_result r;
+        if (*nframes >= max_frames || out_cap - *out_used < max_frame) {
+            full = 1;
+            break;
+        }
+        r = parse(d, d->buf + pos, d->len - pos, &flen);
+        if (r == PARSE_NEED_MORE) {
+            if (!line_idle)
+                break;
+            r = PARSE_BAD_HEADER;
+        }
+        if (r == PARSE_FRAME) {
+            memcpy(out + *out_used, d->buf + pos, flen);
+            *out_used += flen;
+            lens[(*nframes)++] = (uint16_t)flen;
+            d->frames++;
+            d->synced = 1;
+            pos += flen;
+            continue;
+        }
+        if (r == PARSE_BAD_CRC && d->synced)
+            d->crc_errors++;
+        d->synced = 0;
+        d->discarded_bytes++;
+        pos++;
+    }
+    if (pos) {
+        memmove(d->buf, d->buf + pos, d->len - pos);
+        d->len -= pos;
+    }
+    return full;
+}
+
+static int valid_kind(const sb_deframer *d)
+{
+    return d->kind >= SB_DEFRAME_MYACTUATOR_RS485 && d->kind <= SB_DEFRAME_MODBUS_RTU;
+}
+
 size_t sb_deframer_feed(sb_deframer *d, const char *data, size_t len, size_t *consumed,
                         uint8_t *out, size_t out_cap, uint16_t *lens, size_t max_frames)
 {
-    const size_t max_frame = sb_deframer_max_frame(d);
     size_t taken = 0, nframes = 0, out_used = 0;
-    int out_full = 0;
+    int full;
 
-    if (d->kind < SB_DEFRAME_MYACTUATOR_RS485 || d->kind > SB_DEFRAME_MODBUS_RTU) {
-        *consumed = 0;
+    *consumed = 0;
+    if (!valid_kind(d))
         return 0;
-    }
-    for (;;) {
-        size_t pos = 0, room = SB_DEFRAME_CAPACITY - d->len, take = len - taken;
+    /* Runs at least once, so an empty feed still returns frames a full output left behind. The
+     * buffer holds more than one maximum frame, so a full buffer always parses something. */
+    do {
+        size_t take = len - taken, room = SB_DEFRAME_CAPACITY - d->len;
         if (take > room)
             take = room;
         memcpy(d->buf + d->len, data + taken, take);
         d->len += take;
         taken += take;
-
-        while (pos < d->len) {
-            size_t flen = 0;
-            enum parse_result r;
-            if (nframes >= max_frames || out_cap - out_used < max_frame) {
-                out_full = 1;
-                break;
-            }
-            r = parse(d, d->buf + pos, d->len - pos, &flen);
-            if (r == PARSE_NEED_MORE)
-                break;
-            if (r == PARSE_FRAME) {
-                memcpy(out + out_used, d->buf + pos, flen);
-                out_used += flen;
-                lens[nframes++] = (uint16_t)flen;
-                d->frames++;
-                d->synced = 1;
-                pos += flen;
-                continue;
-            }
-            if (r == PARSE_BAD_CRC && d->synced)
-                d->crc_errors++;
-            d->synced = 0;
-            d->discarded_bytes++;
-            pos++;
-        }
-        if (pos) {
-            memmove(d->buf, d->buf + pos, d->len - pos);
-            d->len -= pos;
-        }
-        /* Done when the output is full, or every input byte is in and nothing more parses. The
-         * buffer holds at least one whole maximum frame, so a full buffer always makes progress. */
-        if (out_full || taken == len)
-            break;
-    }
+        full = parse_buffer(d, 0, out, out_cap, &out_used, lens, max_frames, &nframes);
+    } while (!full && taken < len);
     *consumed = taken;
+    return nframes;
+}
+
+size_t sb_deframer_idle(sb_deframer *d, uint8_t *out, size_t out_cap, uint16_t *lens, size_t max_frames)
+{
+    size_t out_used = 0, nframes = 0;
+
+    if (!valid_kind(d))
+        return 0;
+    parse_buffer(d, 1, out, out_cap, &out_used, lens, max_frames, &nframes);
     return nframes;
 }

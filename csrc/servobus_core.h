@@ -117,3 +117,9 @@ size_t sb_deframer_max_frame(const sb_deframer *d);
  * again with the rest. Returns the number of frames written. */
 size_t sb_deframer_feed(sb_deframer *d, const char *data, size_t len, size_t *consumed,
                         uint8_t *out, size_t out_cap, uint16_t *lens, size_t max_frames);
+
+/* The line has been quiet long enough that no frame is still arriving (Modbus RTU: 3.5 characters).
+ * Frames the buffer holds are returned; a candidate still waiting for bytes is dropped byte by byte
+ * as noise, so one stray byte cannot hold back the frame behind it until more traffic comes. Stops
+ * early, like feed, when out/lens are full; returns the number of frames written. */
+size_t sb_deframer_idle(sb_deframer *d, uint8_t *out, size_t out_cap, uint16_t *lens, size_t max_frames);

@@ -72,6 +72,13 @@ def test_scale_must_fit_its_field() -> None:
     too_wide = FieldScale(name="kp", lo=0, hi=5000)
     with pytest.raises(ValueError, match=r"kp range \[0, 5000\] maps to codes 0..5000, beyond the 12-bit"):
         Packer(MIT_COMMAND, [MIT[0], MIT[1], too_wide, MIT[3], MIT[4]])
+    too_high = FieldScale(name="p", lo=-0.5, hi=65536.6)  # 1.6 codes past the top: refused
+    with pytest.raises(ValueError, match=r"maps to codes -0\.5\.\.65536\.6"):
+        Packer(MIT_COMMAND, [too_high, *MIT[1:]])
+    Packer(MIT_COMMAND, [FieldScale(name="p", lo=-0.5, hi=65536.5), *MIT[1:]])  # the slack itself
+    huge = FieldScale(name="p", lo=-1e308, hi=1e308, codes=4.0)
+    with pytest.raises(ValueError, match="overflows its codes"):
+        Packer(MIT_COMMAND, [huge, *MIT[1:]])
     with pytest.raises(ValueError, match="has 5 fields, got 4 scales"):
         Packer(MIT_COMMAND, MIT[:4])
     with pytest.raises(ValueError, match="stride 4 is smaller"):
@@ -241,6 +248,34 @@ def test_deframer_large_input_and_feed_into() -> None:
     assert n == 76 and consumed == 1000 and bytes(out[:13]) == frame and list(lens[:n]) == [13] * n
     with pytest.raises(TypeError, match="uint16"):
         raw.feed_into(stream, out, array("I", [0] * 4))
+
+
+def test_feed_into_refuses_buffers_that_cannot_progress_and_empty_feed_drains() -> None:
+    frame = _rs485(3, bytes.fromhex("A2 00 00 00 10 27 00 00"))
+    deframer = MyActuatorRs485Deframer()
+    with pytest.raises(ValueError, match="out needs at least 13 bytes"):
+        deframer.feed_into(frame, bytearray(12), array("H", [0]))
+    with pytest.raises(ValueError, match="lens at least one slot"):
+        deframer.feed_into(frame, bytearray(13), array("H"))
+    # Room for one frame per call: the second frame stays buffered, and an empty feed returns it.
+    assert deframer.feed_into(frame * 2, bytearray(13), array("H", [0])) == (1, 26)
+    assert deframer.pending == 13
+    assert deframer.feed(b"") == [frame]
+
+
+def test_idle_releases_a_frame_held_behind_a_stray_byte() -> None:
+    """``55 03 ...`` reads as the start of a 0x03 reply with byte count 0x10 and waits for 21 bytes;
+    when the line goes quiet (Modbus: 3.5 characters), the stray byte is dropped and the real
+    frame behind it, a write reply from slave 3, comes out."""
+    body = bytes([0x03, 0x10, 0x00, 0x00, 0x00, 0x10])
+    frame = body + crc16_modbus(body).to_bytes(2, "little")
+    deframer = ModbusRtuDeframer("replies")
+    assert deframer.feed(b"\x55" + frame) == []
+    assert deframer.idle() == [frame]
+    assert (deframer.discarded_bytes, deframer.pending) == (1, 0)
+    partial = MyActuatorRs485Deframer()
+    assert partial.feed(b"\x3e\x01\x08\x9c") == [] and partial.idle() == []
+    assert (partial.discarded_bytes, partial.pending) == (4, 0)
 
 
 def test_transparent_resynchronises_after_a_lost_byte() -> None:

@@ -45,11 +45,14 @@ class Deframer:
         Never raises for bad bytes: they are dropped and counted.
         """
         src = ffi.from_buffer(data)
-        total, frames = len(src), []
+        total = len(src)
+        frames: list[bytes] = []
         consumed = self._consumed
-        # Input goes in slices of at most _CHUNK bytes. The scratch output holds _CHUNK bytes plus
+        # Input goes in slices of at most _CHUNK bytes (at least one call, so an empty feed still
+        # returns frames a full feed_into left behind). The scratch output holds _CHUNK bytes plus
         # more than the de-framer can have buffered, so one C call always takes a whole slice.
-        for offset in range(0, total, _CHUNK):
+        offset = 0
+        while True:
             size = min(_CHUNK, total - offset)
             n = lib.sb_deframer_feed(
                 self._state,
@@ -63,23 +66,47 @@ class Deframer:
             )
             if consumed[0] != size:  # pragma: no cover - guarded by the sizing above
                 raise RuntimeError("servobus: de-framer scratch buffer too small")
-            if n:
-                lens = ffi.unpack(self._lens, n)
-                blob = ffi.buffer(self._out, sum(lens))[:]
-                pos = 0
-                for length in lens:
-                    frames.append(blob[pos : pos + length])
-                    pos += length
+            self._collect(n, frames)
+            offset += size
+            if offset >= total:
+                return frames
+
+    def idle(self) -> list[bytes]:
+        """Tell the de-framer the line has gone quiet (Modbus RTU: 3.5 character times of silence).
+
+        Frames still buffered are returned, and a candidate waiting for bytes that will not come
+        is dropped as noise (counted), so a stray byte cannot hold back the frame behind it.
+        """
+        frames: list[bytes] = []
+        self._collect(
+            lib.sb_deframer_idle(self._state, self._out, len(self._out), self._lens, len(self._lens)), frames
+        )
         return frames
+
+    def _collect(self, n: int, frames: list[bytes]) -> None:
+        if n:
+            lens = ffi.unpack(self._lens, n)
+            blob = ffi.buffer(self._out, sum(lens))[:]
+            pos = 0
+            for length in lens:
+                frames.append(blob[pos : pos + length])
+                pos += length
 
     def feed_into(self, data: Buffer, out: Buffer, lens: Buffer) -> tuple[int, int]:
         """Allocation-free form for tight loops and benchmarks.
 
         Frames go back to back into the writable ``out``; their lengths into ``lens`` (a writable
-        uint16 buffer, e.g. ``array('H')``). Stops when ``out``/``lens`` cannot take another frame.
+        uint16 buffer, e.g. ``array('H')``). Stops when ``out``/``lens`` cannot take another frame
+        of :attr:`max_frame` bytes; complete frames left buffered come out of the next call
+        (``feed_into`` with the rest, or ``feed(b"")``).
 
         Returns:
             (frames written, input bytes consumed). Call again with the unconsumed rest.
+
+        Raises:
+            ValueError: ``out`` is shorter than :attr:`max_frame` or ``lens`` is empty, which could
+                never make progress.
+            TypeError: ``lens`` is not a writable uint16 buffer, or ``out`` is not writable.
         """
         view = memoryview(lens)
         if view.format not in ("H", "<H", "=H"):
@@ -87,7 +114,9 @@ class Deframer:
         src = ffi.from_buffer(data)
         dst = writable_cbuffer("uint8_t[]", out, "out")
         lens_c = writable_cbuffer("uint16_t[]", lens, "lens")
-        consumed = ffi.new("size_t *")
+        if len(dst) < self._max_frame or len(lens_c) == 0:
+            raise ValueError(f"out needs at least {self._max_frame} bytes and lens at least one slot")
+        consumed = self._consumed
         n = lib.sb_deframer_feed(self._state, src, len(src), consumed, dst, len(dst), lens_c, len(lens_c))
         return n, consumed[0]
 

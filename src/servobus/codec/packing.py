@@ -330,13 +330,17 @@ class Packer:
 def _check_fits(layout: Layout, scale: FieldScale, bits: int) -> None:
     """A scale whose range maps past the field's bits would silently saturate good values.
 
-    One code past the top is allowed: offset-binary fields put +full scale there (hollow.md §4.3).
+    Compared before rounding, with the slack that rounding and clamping absorb: half a code at the
+    bottom, and one and a half at the top, where offset-binary fields put +full scale one code past
+    the last (hollow.md §4.3). Anything further would clamp values the scale claims to carry.
     """
     width = abs(bits)
     cmin, cmax = (-(1 << (width - 1)), (1 << (width - 1)) - 1) if bits < 0 else (0, (1 << width) - 1)
-    low, high = round(scale._code(scale.lo)), round(scale._code(scale.hi))
-    if low < cmin or high > cmax + 1:
+    low, high = scale._code(scale.lo), scale._code(scale.hi)
+    if not (math.isfinite(low) and math.isfinite(high)):
+        raise ValueError(f"{layout.name}: {scale.name} range [{scale.lo}, {scale.hi}] overflows its codes")
+    if low < cmin - 0.5 or high > cmax + 1.5:
         raise ValueError(
-            f"{layout.name}: {scale.name} range [{scale.lo}, {scale.hi}] maps to codes {low}..{high}, "
+            f"{layout.name}: {scale.name} range [{scale.lo}, {scale.hi}] maps to codes {low:g}..{high:g}, "
             f"beyond the {width}-bit field's {cmin}..{cmax}"
         )
