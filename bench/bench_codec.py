@@ -89,7 +89,8 @@ MIT_SCALES = (
     FieldScale.linear("kd", 0.0, 5.0, 12),
     FieldScale.linear("t_ff_nm", -24.0, 24.0, 12),
 )
-# The manual's worked example (myactuator-v4.md §5.6) and the 11-byte RS485 frame body.
+# Round values near the manual's worked example (myactuator-v4.md §5.6; its v_des is 0x82E = 1.022
+# rad/s, so 1.0 packs one code lower), the example frame itself, and the 11-byte RS485 body.
 MIT_EXAMPLE_VALUES = (10.0, 1.0, 10.0, 1.0, 10.0)
 MIT_EXAMPLE_FRAME = bytes.fromhex("E6 66 82 E0 52 33 3B 55")
 RS485_BODY_11 = bytes.fromhex("3E 01 08 9C 00 00 00 00 00 00 00")

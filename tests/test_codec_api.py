@@ -7,6 +7,7 @@ from array import array
 
 import pytest
 
+from _scales import MIT_V43
 from servobus import Frame, ProtocolError, ServobusError
 from servobus.codec import (
     HOLLOW_EXT_REPLY,
@@ -22,15 +23,6 @@ from servobus.codec import (
     crc16_modbus,
     crc32_ieee,
 )
-
-MIT = [
-    FieldScale.linear("p_des_rad", -12.5, 12.5, 16),
-    FieldScale.linear("v_des_rad_s", -45.0, 45.0, 12),
-    FieldScale.linear("kp", 0.0, 500.0, 12),
-    FieldScale.linear("kd", 0.0, 5.0, 12),
-    FieldScale.linear("t_ff_nm", -24.0, 24.0, 12),
-]
-
 
 # ---- CRC inputs ----
 
@@ -71,25 +63,25 @@ def test_scale_must_fit_its_field() -> None:
     """A range that maps past the field's bits would saturate good values silently: refused."""
     too_wide = FieldScale(name="kp", lo=0, hi=5000)
     with pytest.raises(ValueError, match=r"kp range \[0, 5000\] maps to codes 0..5000, beyond the 12-bit"):
-        Packer(MIT_COMMAND, [MIT[0], MIT[1], too_wide, MIT[3], MIT[4]])
+        Packer(MIT_COMMAND, [MIT_V43[0], MIT_V43[1], too_wide, MIT_V43[3], MIT_V43[4]])
     too_high = FieldScale(name="p", lo=-0.5, hi=65536.6)  # 1.6 codes past the top: refused
     with pytest.raises(ValueError, match=r"maps to codes -0\.5\.\.65536\.6"):
-        Packer(MIT_COMMAND, [too_high, *MIT[1:]])
-    Packer(MIT_COMMAND, [FieldScale(name="p", lo=-0.5, hi=65536.5), *MIT[1:]])  # the slack itself
+        Packer(MIT_COMMAND, [too_high, *MIT_V43[1:]])
+    Packer(MIT_COMMAND, [FieldScale(name="p", lo=-0.5, hi=65536.5), *MIT_V43[1:]])  # the slack itself
     huge = FieldScale(name="p", lo=-1e308, hi=1e308, codes=4.0)
     with pytest.raises(ValueError, match="overflows its codes"):
-        Packer(MIT_COMMAND, [huge, *MIT[1:]])
+        Packer(MIT_COMMAND, [huge, *MIT_V43[1:]])
     with pytest.raises(ValueError, match="has 5 fields, got 4 scales"):
-        Packer(MIT_COMMAND, MIT[:4])
+        Packer(MIT_COMMAND, MIT_V43[:4])
     with pytest.raises(ValueError, match="stride 4 is smaller"):
-        Packer(MIT_COMMAND, MIT, stride=4)
+        Packer(MIT_COMMAND, MIT_V43, stride=4)
 
 
 # ---- packing errors: ValueError naming field, value and limit, before anything is returned ----
 
 
 def test_out_of_range_names_field_value_and_limits() -> None:
-    packer = Packer(MIT_COMMAND, MIT)
+    packer = Packer(MIT_COMMAND, MIT_V43)
     with pytest.raises(ValueError, match=r"^v_des_rad_s=45\.5 is outside \[-45\.0, 45\.0\]$"):
         packer.pack([0.0, 45.5, 0.0, 0.0, 0.0])
     with pytest.raises(ValueError, match=r"^kd is NaN$"):
@@ -99,7 +91,7 @@ def test_out_of_range_names_field_value_and_limits() -> None:
 
 
 def test_saturate_clamps_but_never_accepts_nan() -> None:
-    packer = Packer(MIT_COMMAND, MIT)
+    packer = Packer(MIT_COMMAND, MIT_V43)
     assert packer.pack([99.0, -99.0, 1e9, -1.0, math.inf], saturate=True) == packer.pack(
         [12.5, -45.0, 500.0, 0.0, 24.0]
     )
@@ -108,7 +100,7 @@ def test_saturate_clamps_but_never_accepts_nan() -> None:
 
 
 def test_wrong_row_lengths() -> None:
-    packer = Packer(MIT_COMMAND, MIT)
+    packer = Packer(MIT_COMMAND, MIT_V43)
     with pytest.raises(ValueError, match="takes 5 values, got 4"):
         packer.pack([0.0] * 4)
     with pytest.raises(ValueError, match="row 1 has 6 values"):
@@ -121,7 +113,7 @@ def test_wrong_row_lengths() -> None:
 
 
 def test_batch_forms_agree_with_single_frames() -> None:
-    packer = Packer(MIT_COMMAND, MIT)
+    packer = Packer(MIT_COMMAND, MIT_V43)
     rows = [[i / 10, -i / 5, i * 3.0, i / 50, -i / 7] for i in range(40)]
     singles = b"".join(packer.pack(r) for r in rows)
     assert packer.pack_many(rows) == singles
@@ -136,7 +128,7 @@ def test_batch_forms_agree_with_single_frames() -> None:
 
 
 def test_buffers_are_checked() -> None:
-    packer = Packer(MIT_COMMAND, MIT)
+    packer = Packer(MIT_COMMAND, MIT_V43)
     with pytest.raises(TypeError, match="float64"):
         packer.pack_into(array("f", [0.0] * 5), bytearray(8))
     with pytest.raises(ValueError, match="out holds 7 bytes"):
@@ -148,15 +140,15 @@ def test_buffers_are_checked() -> None:
 
 
 def test_stride_pads_with_zeros() -> None:
-    """MyActuator's motion reply is the 6-byte MIT reply in an 8-byte frame, DATA[6..7] NULL."""
-    scales = [FieldScale.integer("motor_id", 0, 255), MIT[0], MIT[1], MIT[4]]
+    """MyActuator's motion reply is the 6-byte MIT_V43 reply in an 8-byte frame, DATA[6..7] NULL."""
+    scales = [FieldScale.integer("motor_id", 0, 255), MIT_V43[0], MIT_V43[1], MIT_V43[4]]
     packer = Packer(MIT_REPLY, scales, stride=8)
     frames = packer.pack_many([[1, 10.0, 1.0, 10.0], [2, -1.0, 0.0, 0.0]])
     assert len(frames) == 16 and frames[6:8] == b"\x00\x00" and frames[14:16] == b"\x00\x00"
 
 
 def test_short_frames_raise_protocol_error_with_hex() -> None:
-    packer = Packer(MIT_COMMAND, MIT)
+    packer = Packer(MIT_COMMAND, MIT_V43)
     with pytest.raises(ProtocolError, match=r"MIT_COMMAND needs 8 bytes, got 3 \(raw E6 66 82\)") as info:
         packer.unpack(b"\xe6\x66\x82")
     assert isinstance(info.value, ServobusError) and info.value.raw == b"\xe6\x66\x82"

@@ -10,6 +10,7 @@ from typing import Any
 
 import pytest
 
+from _scales import MIT_V43
 from _spec import hexbytes, load_vectors, vector_id
 from servobus.codec import (
     HOLLOW_FD_COMMAND,
@@ -118,14 +119,6 @@ def test_hollow_modbus_read_reply_is_unverifiable_as_the_spec_says() -> None:
 
 
 # ---- bit layouts against the manuals' packed examples ----
-
-MIT_V43 = [
-    FieldScale.linear("p_des_rad", -12.5, 12.5, 16),
-    FieldScale.linear("v_des_rad_s", -45.0, 45.0, 12),
-    FieldScale.linear("kp", 0.0, 500.0, 12),
-    FieldScale.linear("kd", 0.0, 5.0, 12),
-    FieldScale.linear("t_ff_nm", -24.0, 24.0, 12),
-]
 
 
 def test_myactuator_motion_request_example() -> None:
