@@ -90,9 +90,8 @@ int sb_unpack(int layout, const sb_field *fields, const uint8_t *frames, size_t 
 #define SB_MODBUS_REQUESTS 1
 #define SB_MODBUS_REPLIES 2
 
-#define SB_RS485_MAX_FRAME 260          /* 5 + 255 */
 #define SB_TRANSPARENT_FRAME 21
-#define SB_MODBUS_MAX_FRAME 256
+#define SB_MODBUS_MAX_FRAME 255         /* 5 + 250 (0x03 reply) = 9 + 246 (0x10 request) */
 
 typedef struct {
     int kind;
