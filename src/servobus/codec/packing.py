@@ -138,6 +138,10 @@ HOLLOW_FD_REPLY = _layout(
 LAYOUTS = (MIT_COMMAND, HOLLOW_SETPOINT, MIT_REPLY, HOLLOW_EXT_REPLY, HOLLOW_FD_COMMAND, HOLLOW_FD_REPLY)
 
 
+def _flags(saturate: bool) -> int:
+    return lib.SB_PACK_SATURATE if saturate else 0
+
+
 def _double_buffer(values: Buffer, what: str) -> Any:
     view = memoryview(values)
     if view.format not in ("d", "<d", "=d") or not view.c_contiguous:
@@ -197,7 +201,7 @@ class Packer:
             raise ValueError(f"{self.layout.name} takes {self._nf} values, got {len(values)}")
         self._row[0 : self._nf] = values
         status = lib.sb_pack(
-            self.layout.id, self._fields, self._row, 1, self.stride, saturate, self._frame, self._err
+            self.layout.id, self._fields, self._row, 1, self.stride, _flags(saturate), self._frame, self._err
         )
         if status:
             self._raise(status, batch=False)
@@ -249,7 +253,9 @@ class Packer:
         return n
 
     def _pack_raw(self, values: Any, n: int, out: Any, saturate: bool) -> None:
-        status = lib.sb_pack(self.layout.id, self._fields, values, n, self.stride, saturate, out, self._err)
+        status = lib.sb_pack(
+            self.layout.id, self._fields, values, n, self.stride, _flags(saturate), out, self._err
+        )
         if status:
             self._raise(status, batch=True)
 
