@@ -44,6 +44,7 @@ import argparse
 import array
 import gc
 import importlib
+import importlib.util
 import random
 import re
 import shlex
@@ -77,9 +78,20 @@ from servobus.codec import (  # noqa: E402
 
 KEY = "codec"
 MIN_RATIO = 20.0
-# The C core's default build (src/servobus/_build_core.py; SERVOBUS_DEBUG/SANITIZE builds are not
-# benchmark builds).
-CFLAGS = "-std=c11 -O2 -ffp-contract=off"
+
+
+def default_cflags() -> str:
+    """The compile flags of the C core's default build, asked of the builder itself so the report
+    cannot drift from it (SERVOBUS_DEBUG/SANITIZE builds are not benchmark builds)."""
+    spec = importlib.util.spec_from_file_location("_sb_builder", REPO / "src" / "servobus" / "_build_core.py")
+    assert spec and spec.loader
+    builder = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(builder)
+    cflags, _ = builder.compile_args({})
+    return " ".join(f for f in cflags if not f.startswith("-W"))
+
+
+CFLAGS = default_cflags()
 
 # MIT motion-mode scales of myactuator-v4.md §5.5 ([002] V4.3 ranges).
 MIT_SCALES = (

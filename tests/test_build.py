@@ -7,6 +7,7 @@ import importlib.util
 import subprocess
 import sys
 from pathlib import Path
+from types import ModuleType
 
 import servobus
 from servobus.codec import _lib
@@ -43,34 +44,24 @@ def test_status_codes_map_to_exceptions() -> None:
             raise AssertionError(f"status {status} raised nothing")
 
 
-def _load_builder(monkeypatch_env: dict[str, str]) -> list[str]:
-    import os
-
-    old = {k: os.environ.get(k) for k in monkeypatch_env}
-    os.environ.update(monkeypatch_env)
-    try:
-        spec = importlib.util.spec_from_file_location(
-            "_sb_builder", ROOT / "src" / "servobus" / "_build_core.py"
-        )
-        assert spec and spec.loader
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-        cflags, ldflags = module.compile_args()
-        assert module.package_version() == servobus.__version__
-        return [*cflags, *ldflags]
-    finally:
-        for k, v in old.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
+def _builder() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("_sb_builder", ROOT / "src" / "servobus" / "_build_core.py")
+    assert spec and spec.loader
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def test_builder_switches() -> None:
     """SERVOBUS_SANITIZE=1 adds ASan+UBSan to compile and link; the default is -O2 without them;
     FMA contraction is always off so C rounds like the Python reference."""
-    default = _load_builder({"SERVOBUS_SANITIZE": "0", "SERVOBUS_DEBUG": "0"})
-    assert "-O2" in default and not any("sanitize" in f for f in default)
-    assert "-ffp-contract=off" in default
-    sanitized = _load_builder({"SERVOBUS_SANITIZE": "1"})
-    assert sanitized.count("-fsanitize=address,undefined") == 2
+    builder = _builder()
+    assert builder.package_version() == servobus.__version__
+    cflags, ldflags = builder.compile_args({})
+    assert "-O2" in cflags and not any("sanitize" in f for f in cflags + ldflags)
+    assert "-ffp-contract=off" in cflags
+    cflags, ldflags = builder.compile_args({"SERVOBUS_SANITIZE": "1"})
+    assert "-fsanitize=address,undefined" in cflags and "-fsanitize=address,undefined" in ldflags
+    assert "-O2" not in cflags
+    cflags, _ = builder.compile_args({"SERVOBUS_DEBUG": "1"})
+    assert "-O0" in cflags and "-g" in cflags

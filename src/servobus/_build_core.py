@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import re
+from collections.abc import Mapping
 from pathlib import Path
 
 from cffi import FFI
@@ -27,16 +28,17 @@ def package_version() -> str:
     return match.group(1)
 
 
-def compile_args() -> tuple[list[str], list[str]]:
+def compile_args(env: Mapping[str, str] = os.environ) -> tuple[list[str], list[str]]:
+    """(compile flags, link flags) for the switches set in ``env``."""
     # -ffp-contract=off: no fused multiply-add, so the C scaling rounds exactly as the Python
     # reference in tests/reference does.
     cflags = ["-std=c11", "-Wall", "-Wextra", "-ffp-contract=off"]
     ldflags: list[str] = []
-    if os.environ.get("SERVOBUS_SANITIZE") == "1":
+    if env.get("SERVOBUS_SANITIZE") == "1":
         san = ["-fsanitize=address,undefined", "-fno-sanitize-recover=undefined", "-fno-omit-frame-pointer"]
         cflags += ["-O1", "-g", *san]
         ldflags += san
-    elif os.environ.get("SERVOBUS_DEBUG") == "1":
+    elif env.get("SERVOBUS_DEBUG") == "1":
         cflags += ["-O0", "-g"]
     else:
         cflags += ["-O2"]
