@@ -288,10 +288,11 @@ def test_modbus_exception_reply() -> None:
 # ---- Frame ----
 
 
-def test_frame_equality_ignores_timestamp_and_validates() -> None:
-    assert Frame(arbitration_id=0x141, data=b"\x9c", timestamp=1.0) == Frame(
+def test_frame_equality_ignores_timestamp_and_direction_and_validates() -> None:
+    assert Frame(arbitration_id=0x141, data=b"\x9c", timestamp=1.0, is_rx=False) == Frame(
         arbitration_id=0x141, data=b"\x9c"
     )
+    assert Frame(arbitration_id=0x141).is_rx
     assert repr(Frame(arbitration_id=0x141, data=b"\x9c\x00")) == "Frame(0x141 [9C 00])"
     with pytest.raises(ValueError, match="outside the standard range"):
         Frame(arbitration_id=0x800)

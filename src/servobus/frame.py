@@ -17,8 +17,13 @@ _FD_SIZES = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
 class Frame:
     """A CAN or CAN FD frame (or one serial frame addressed by ``arbitration_id``).
 
-    Equality ignores ``timestamp``, so a frame from the simulator compares equal to the frame a
-    test expects.
+    Equality ignores ``timestamp`` and ``is_rx``, so a frame from the simulator compares equal to
+    the frame a test expects.
+
+    ``is_rx`` follows python-can's ``Message.is_rx``: False marks our own transmitted frame coming
+    back from an adapter that loops sent frames back. It matters where a reply uses the request's
+    own identifier (LK V2.35: request and echo reply both on 0x140+ID), so our own request is never
+    taken for the motor's reply.
 
     Raises:
         ValueError: identifier out of range for its format, or data too long for the frame type.
@@ -30,6 +35,7 @@ class Frame:
     is_fd: bool = False
     bitrate_switch: bool = False
     timestamp: float = field(default=0.0, compare=False)
+    is_rx: bool = field(default=True, compare=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.data, bytes):
