@@ -12,7 +12,16 @@ from pathlib import Path
 import pytest
 
 SRC = Path(__file__).resolve().parents[1] / "src" / "servobus"
-SANS_IO = ["codec", "frame.py", "errors.py", "protocols", "scheduler.py", "sim/timing.py", "sim/canbus.py"]
+SANS_IO = [
+    "codec",
+    "frame.py",
+    "errors.py",
+    "protocols",
+    "scheduler.py",
+    "sim/timing.py",
+    "sim/canbus.py",
+    "sim/plant.py",
+]
 FORBIDDEN_MODULES = {"asyncio", "anyio", "time", "threading", "socket", "selectors", "serial", "can"}
 FORBIDDEN_CALLS = {("datetime", "now"), ("datetime", "utcnow")}
 
