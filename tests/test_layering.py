@@ -21,6 +21,7 @@ SANS_IO = [
     "sim/timing.py",
     "sim/canbus.py",
     "sim/plant.py",
+    "sim/slcan.py",
 ]
 FORBIDDEN_MODULES = {"asyncio", "anyio", "time", "threading", "socket", "selectors", "serial", "can"}
 FORBIDDEN_CALLS = {("datetime", "now"), ("datetime", "utcnow")}
