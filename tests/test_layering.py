@@ -22,6 +22,7 @@ SANS_IO = [
     "sim/canbus.py",
     "sim/plant.py",
     "sim/slcan.py",
+    "sim/faults.py",
 ]
 FORBIDDEN_MODULES = {"asyncio", "anyio", "time", "threading", "socket", "selectors", "serial", "can"}
 FORBIDDEN_CALLS = {("datetime", "now"), ("datetime", "utcnow")}
