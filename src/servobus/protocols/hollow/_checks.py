@@ -1,0 +1,128 @@
+"""Validation helpers of the hollow messages: one wording for every ValueError and ProtocolError.
+
+Commands and replies check their fields in ``__post_init__`` with these (ValueError naming the field,
+the value and the limits, before any byte exists); decoders build objects through :func:`build`, so a
+received value that the constructor refuses becomes a ProtocolError carrying the raw bytes.
+"""
+
+from __future__ import annotations
+
+import struct
+from enum import IntEnum
+from typing import Any, TypeVar
+
+from servobus.errors import ProtocolError
+from servobus.protocols._fields import check_choice, check_range
+
+__all__ = [
+    "FLOAT32_MAX",
+    "build",
+    "check_choice_int",
+    "check_flag",
+    "check_int",
+    "check_real",
+    "decode_enum",
+    "require_size",
+    "to_enum",
+    "unpack_float32_be",
+]
+
+E = TypeVar("E", bound=IntEnum)
+T = TypeVar("T")
+
+# The largest finite IEEE-754 single: a bigger multiplier would not fit the PI frames' float32.
+FLOAT32_MAX = struct.unpack(">f", b"\x7f\x7f\xff\xff")[0]
+
+
+def check_real(name: str, value: object, lo: float, hi: float) -> None:
+    """Raise ValueError unless ``value`` is a real number (not bool) within [lo, hi]."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ValueError(f"{name}={value!r} is not a number")
+    check_range(name, value, lo, hi)
+
+
+def check_int(name: str, value: object, lo: int, hi: int) -> None:
+    """Raise ValueError unless ``value`` is an int (not bool) within [lo, hi]."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ValueError(f"{name}={value!r} is not an integer")
+    check_range(name, value, lo, hi)
+
+
+def check_choice_int(name: str, value: object, choices: tuple[int, ...]) -> None:
+    """Raise ValueError unless ``value`` is an int (not bool) among ``choices``."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ValueError(f"{name}={value!r} is not an integer")
+    check_choice(name, value, choices)
+
+
+def check_flag(name: str, value: object) -> bool:
+    """``value`` as a bool; accepts True/False and 0/1.
+
+    Raises:
+        ValueError: anything else.
+    """
+    if value is True or value is False:
+        return value
+    if isinstance(value, int) and value in (0, 1):
+        return bool(value)
+    raise ValueError(f"{name}={value!r} is not one of False, True")
+
+
+def to_enum(name: str, value: object, enum: type[E]) -> E:
+    """``value`` as a member of ``enum`` (members and their integer values are accepted).
+
+    Raises:
+        ValueError: no member has that value (the message lists the members).
+    """
+    # A member of another enum (CanMode.NORMAL for a ControlMode) is a mistake, not its integer.
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int)
+        or (isinstance(value, IntEnum) and not isinstance(value, enum))
+    ):
+        raise ValueError(f"{name}={value!r} is not one of {', '.join(m.name for m in enum)}")
+    try:
+        return enum(value)
+    except ValueError:
+        members = ", ".join(f"{m.name}={m.value}" for m in enum)
+        raise ValueError(f"{name}={value!r} is not one of {members}") from None
+
+
+def decode_enum(name: str, value: int, enum: type[E], data: bytes, *, motor_id: int | None = None) -> E:
+    """A received byte as a member of ``enum``.
+
+    Raises:
+        ProtocolError: the byte is no member's value (reserved or unknown), with the raw bytes.
+    """
+    try:
+        return enum(value)
+    except ValueError:
+        raise ProtocolError(f"{name}: unknown value {value}", raw=data, motor_id=motor_id) from None
+
+
+def unpack_float32_be(data: bytes, offset: int) -> float:
+    """The big-endian IEEE-754 single at ``data[offset:offset + 4]`` (hollow.md §6)."""
+    value: float = struct.unpack_from(">f", data, offset)[0]
+    return value
+
+
+def require_size(data: bytes, size: int, *, what: str) -> None:
+    """Raise ProtocolError unless ``data`` is exactly ``size`` bytes long.
+
+    Unlike the shared ``require_length`` it names no command byte: hollow frames have none.
+    """
+    if len(data) != size:
+        raise ProtocolError(f"{what}: expected {size} data bytes, got {len(data)}", raw=data)
+
+
+def build(cls: type[T], data: bytes, **fields: Any) -> T:
+    """Construct ``cls(**fields)`` from received bytes; a ValueError becomes a ProtocolError.
+
+    Raises:
+        ProtocolError: the constructor refused a value; the message keeps its wording, and the raw
+            bytes are attached.
+    """
+    try:
+        return cls(**fields)
+    except ValueError as exc:
+        raise ProtocolError(f"{cls.__name__}: {exc}", raw=data) from None

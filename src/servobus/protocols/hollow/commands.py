@@ -1,0 +1,448 @@
+"""Classic-CAN requests of the hollow series (hollow.md §4-§6): special commands, setpoints, the
+extended-id mode switch and the PI multiplier frames; and the enums requests and replies share.
+
+Frames are told apart by identifier kind and content, not by a DATA[0] command byte:
+
+* standard id, 8 bytes, ``FF x7 + F9..FE``: a special command (§4.1);
+* standard id, 8 bytes, anything else: a setpoint, absolute in normal mode (§4.2) and an increment in
+  extended mode (§5.2) - the bytes are the same, the motor's CAN mode decides;
+* extended id, D0 = 0x00 and D1 = 0x01..0x04: a PI multiplier frame (§6);
+* extended id, otherwise: the normal/extended mode switch (§5.1).
+
+Each class says which identifier kind and frame type it travels in (``EXTENDED_ID``, ``FD``), so a
+transport can build the frame (:func:`servobus.protocols.hollow.codec.request_frame`).
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass, field
+from enum import IntEnum
+from typing import ClassVar, Self
+
+from servobus.errors import ProtocolError
+from servobus.protocols._message import Command
+from servobus.protocols.hollow._checks import (
+    FLOAT32_MAX,
+    build,
+    check_int,
+    check_real,
+    decode_enum,
+    require_size,
+    to_enum,
+    unpack_float32_be,
+)
+from servobus.protocols.hollow.model import DEFAULT_MODEL, HollowModel, packers
+
+__all__ = [
+    "SETPOINT_GAIN_MAX",
+    "SPECIAL_CODES",
+    "SPECIAL_PREFIX",
+    "CanMode",
+    "CanModeSwitch",
+    "ControlMode",
+    "HollowCommand",
+    "IncrementalSetpoint",
+    "PiGain",
+    "PiMultiplier",
+    "SelectMode",
+    "SetZero",
+    "Setpoint",
+    "SpecialCommand",
+    "Start",
+    "Stop",
+    "check_model",
+    "decode_extended_request",
+    "decode_setpoint_frame",
+    "decode_special",
+    "is_special_command",
+]
+
+
+class ControlMode(IntEnum):
+    """The control mode (hollow.md §0): CAN FD Mode Sel / Mode byte, and F9 + value in classic CAN."""
+
+    TORQUE = 0  # "Moment": current loop, F9
+    VELOCITY = 1  # speed-torque, FA
+    POSITION = 2  # position-velocity-torque triple closed loop, FB
+
+
+class CanMode(IntEnum):
+    """Classic-CAN addressing mode; the value is D0 bit 1 of the mode-switch frame (§5.1, A4)."""
+
+    EXTENDED = 0  # incremental position, 8-byte replies
+    NORMAL = 1  # absolute position, 6-byte replies; the power-on default (§3)
+
+
+class PiGain(IntEnum):
+    """D1 of the motor's PI multiplier frame (§6). The converter numbers them one higher (A18)."""
+
+    SPEED_KP = 0x01
+    SPEED_KI = 0x02
+    CURRENT_KP = 0x03
+    CURRENT_KI = 0x04
+
+
+# §4.1: D0..D6 = 0xFF, D7 = the command code (A1, A2).
+SPECIAL_PREFIX = b"\xff" * 7
+SPECIAL_CODES = range(0xF9, 0xFF)
+# §4.2 / §4.3: KP and KD are raw 12-bit codes.
+SETPOINT_GAIN_MAX = 0xFFF
+
+_SETPOINT_SIZE = 8
+_MODE_SWITCH_SIZE = 8
+_MODE_SWITCH_BIT = 0x02
+_PI_SIZES = range(6, 9)  # A17: DLC 6 or 8; we send 8
+_PI_PADDING = b"\x00\x00"
+
+
+def is_special_command(data: bytes) -> bool:
+    """True for the special-command pattern ``FF FF FF FF FF FF FF F9..FE`` (§4.1, A35)."""
+    return len(data) == _SETPOINT_SIZE and data[:7] == SPECIAL_PREFIX and data[7] in SPECIAL_CODES
+
+
+def check_model(model: object) -> None:
+    """Raise ValueError unless ``model`` is a :class:`HollowModel`."""
+    if not isinstance(model, HollowModel):
+        raise ValueError(f"model={model!r} is not a HollowModel")
+
+
+class HollowCommand(Command):
+    """A host -> motor CAN or CAN FD request of the hollow family, with the frame kind it travels in.
+
+    The RS-485 converter's frames (:mod:`~servobus.protocols.hollow.rs485`,
+    :mod:`~servobus.protocols.hollow.converter`) are serial frames, not CAN requests, so they derive
+    from :class:`~servobus.protocols.Command` directly.
+    """
+
+    __slots__ = ()
+    EXTENDED_ID: ClassVar[bool] = False  # 29-bit identifier (mode switch, PI frames)
+    FD: ClassVar[bool] = False  # CAN FD frame (16-byte control frames)
+
+
+# ---- special commands (§4.1) ----
+
+
+class SpecialCommand(HollowCommand):
+    """An 8-byte ``FF x7 + code`` command, the same in normal and extended mode (§4.1, §5.2)."""
+
+    __slots__ = ()
+    SPECIAL_CODE: ClassVar[int]
+
+    @property
+    def special_code(self) -> int:
+        """D7 of the frame."""
+        return self.SPECIAL_CODE
+
+    def encode(self) -> bytes:
+        return SPECIAL_PREFIX + bytes([self.special_code])
+
+    @classmethod
+    def decode(cls, data: bytes) -> Self:
+        """Decode ``data`` as this special command.
+
+        Raises:
+            ProtocolError: not the special pattern, or another special command.
+        """
+        command = decode_special(data)
+        if not isinstance(command, cls):
+            raise ProtocolError(
+                f"special command 0x{data[7]:02X} is not {cls.__name__}", raw=data, command=data[7]
+            )
+        return command
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Start(SpecialCommand):
+    """FC: run in the selected mode with the last received setpoint (send a setpoint first).
+
+    In extended position mode the motor locks at its present position (§5.2).
+    """
+
+    SPECIAL_CODE: ClassVar[int] = 0xFC
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Stop(SpecialCommand):
+    """FD: no output power, the motor is free (§4.1; bytes reconstructed, A2)."""
+
+    SPECIAL_CODE: ClassVar[int] = 0xFD
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SetZero(SpecialCommand):
+    """FE: the present position becomes the mechanical zero, multi-turn count cleared.
+
+    Only while the motor is not enabled (send :class:`Stop` first); not persisted (§4.1, A33).
+    """
+
+    SPECIAL_CODE: ClassVar[int] = 0xFE
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SelectMode(SpecialCommand):
+    """F9/FA/FB: switch the control mode until power-off (§4.1; D7 = 0xF9 + mode, A3).
+
+    Attributes:
+        mode: the control mode to switch to.
+    """
+
+    SPECIAL_CODE: ClassVar[int] = 0xF9  # + mode
+    mode: ControlMode
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "mode", to_enum("mode", self.mode, ControlMode))
+
+    @property
+    def special_code(self) -> int:
+        return self.SPECIAL_CODE + self.mode
+
+
+def _require_special(data: bytes) -> None:
+    require_size(data, _SETPOINT_SIZE, what="special command")
+    if not is_special_command(data):
+        raise ProtocolError("not a special command (FF x7 + F9..FE)", raw=data)
+
+
+def decode_special(data: bytes) -> SpecialCommand:
+    """Decode an ``FF x7 + F9..FE`` frame (§4.1).
+
+    Raises:
+        ProtocolError: ``data`` is not 8 bytes of the special pattern.
+    """
+    _require_special(data)
+    code = data[7]
+    if code == Start.SPECIAL_CODE:
+        return Start()
+    if code == Stop.SPECIAL_CODE:
+        return Stop()
+    if code == SetZero.SPECIAL_CODE:
+        return SetZero()
+    return SelectMode(mode=ControlMode(code - SelectMode.SPECIAL_CODE))
+
+
+# ---- setpoints (§4.2-§4.4, §5.2) ----
+
+
+def _check_setpoint(
+    model: HollowModel, position_name: str, position: float, values: tuple[object, ...]
+) -> None:
+    check_model(model)
+    speed, kp, kd, current = values
+    check_real(position_name, position, -model.position_full_scale_deg, model.position_full_scale_deg)
+    check_real("speed_rad_s", speed, -model.speed_full_scale_rad_s, model.speed_full_scale_rad_s)
+    check_int("kp", kp, 0, SETPOINT_GAIN_MAX)
+    check_int("kd", kd, 0, SETPOINT_GAIN_MAX)
+    check_real("current_a", current, -model.current_full_scale_a, model.current_full_scale_a)
+
+
+def _unpack_setpoint(data: bytes, model: HollowModel, what: str) -> tuple[float, float, int, int, float]:
+    require_size(data, _SETPOINT_SIZE, what=what)
+    if is_special_command(data):
+        # §4.1 / A35: the special pattern is checked first, so it is never a setpoint.
+        raise ProtocolError(f"{what}: the frame is a special command", raw=data, command=data[7])
+    position, speed, kp, kd, current = packers(model).setpoint.unpack(data)
+    return position, speed, int(kp), int(kd), current
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Setpoint(HollowCommand):
+    """The normal-mode setpoint frame: absolute position plus limits and gains (§4.2-§4.4).
+
+    What the motor does with each field depends on its control mode (§4.4): in position mode P is
+    the target, V the maximum speed, T the maximum current, KP/KD the PD gains; in speed mode V is
+    the target and T the current limit; in torque mode T is the target current.
+
+    Encoding quantises to the 16/12-bit codes (round half away from zero, the C core's rule) and
+    clamps +full scale onto the last code (§4.3). The position code 0xFFFF is lowered to 0xFFFE
+    when the frame would otherwise read as a special command (§4.1, A35).
+
+    Attributes:
+        position_deg: target position from the mechanical zero, within ±360·Pmax.
+        speed_rad_s: speed (target or limit), within ±ω_fs of the model.
+        kp: position-loop gain code 0..4095 (0x800 is "50 %").
+        kd: position-loop damping code 0..4095.
+        current_a: current (target or limit), within ±I_fs of the model; torque = Kt·I.
+        model: the scaling of the motor (:data:`~servobus.protocols.hollow.model.DEFAULT_MODEL`).
+    """
+
+    position_deg: float
+    speed_rad_s: float
+    kp: int
+    kd: int
+    current_a: float
+    model: HollowModel = field(default=DEFAULT_MODEL, repr=False)
+
+    def __post_init__(self) -> None:
+        _check_setpoint(
+            self.model,
+            "position_deg",
+            self.position_deg,
+            (self.speed_rad_s, self.kp, self.kd, self.current_a),
+        )
+
+    def encode(self) -> bytes:
+        return packers(self.model).setpoint.pack(
+            [self.position_deg, self.speed_rad_s, self.kp, self.kd, self.current_a]
+        )
+
+    @classmethod
+    def decode(cls, data: bytes, *, model: HollowModel = DEFAULT_MODEL) -> Self:
+        """Decode an 8-byte setpoint frame with ``model``'s scales.
+
+        Raises:
+            ProtocolError: wrong length, or the special-command pattern.
+        """
+        position, speed, kp, kd, current = _unpack_setpoint(data, model, "setpoint")
+        return build(
+            cls, data, position_deg=position, speed_rad_s=speed, kp=kp, kd=kd, current_a=current, model=model
+        )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class IncrementalSetpoint(HollowCommand):
+    """The extended-mode setpoint: the same bytes as :class:`Setpoint`, but P is a step (§5.2).
+
+    Each frame moves the target by ``step_deg`` once (A11); a step of 0 moves nothing and polls.
+
+    Attributes:
+        step_deg: position increment, within ±360·Pmax.
+        speed_rad_s, kp, kd, current_a, model: as in :class:`Setpoint`.
+    """
+
+    step_deg: float
+    speed_rad_s: float
+    kp: int
+    kd: int
+    current_a: float
+    model: HollowModel = field(default=DEFAULT_MODEL, repr=False)
+
+    def __post_init__(self) -> None:
+        _check_setpoint(
+            self.model, "step_deg", self.step_deg, (self.speed_rad_s, self.kp, self.kd, self.current_a)
+        )
+
+    def encode(self) -> bytes:
+        return packers(self.model).setpoint.pack(
+            [self.step_deg, self.speed_rad_s, self.kp, self.kd, self.current_a]
+        )
+
+    @classmethod
+    def decode(cls, data: bytes, *, model: HollowModel = DEFAULT_MODEL) -> Self:
+        """Decode an 8-byte extended-mode setpoint frame with ``model``'s scales.
+
+        Raises:
+            ProtocolError: wrong length, or the special-command pattern.
+        """
+        step, speed, kp, kd, current = _unpack_setpoint(data, model, "incremental setpoint")
+        return build(
+            cls, data, step_deg=step, speed_rad_s=speed, kp=kp, kd=kd, current_a=current, model=model
+        )
+
+
+# ---- extended-id frames (§5.1, §6) ----
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CanModeSwitch(HollowCommand):
+    """Select normal (absolute) or extended (incremental) CAN mode: extended id, DLC 8 (§5.1).
+
+    D0 bit 1 is the mode (1 = normal, 0 = extended, A4); every other bit and byte is zero.
+    Extended mode lasts until power-off. The reply's length confirms the mode (6 or 8 bytes).
+
+    Attributes:
+        mode: the CAN mode to select.
+    """
+
+    EXTENDED_ID: ClassVar[bool] = True
+    mode: CanMode
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "mode", to_enum("mode", self.mode, CanMode))
+
+    def encode(self) -> bytes:
+        return bytes([_MODE_SWITCH_BIT if self.mode is CanMode.NORMAL else 0x00]) + bytes(7)
+
+    @classmethod
+    def decode(cls, data: bytes) -> Self:
+        """Decode the 8-byte mode switch.
+
+        Raises:
+            ProtocolError: wrong length, a PI multiplier frame, or a reserved bit/byte set (the
+                manual requires D0's other bits to be zero and leaves D1..D7 unused, sent as 0).
+        """
+        require_size(data, _MODE_SWITCH_SIZE, what="CAN mode switch")
+        if _is_pi_frame(data):
+            raise ProtocolError("CAN mode switch: the frame is a PI multiplier frame", raw=data)
+        if data[0] & ~_MODE_SWITCH_BIT or any(data[1:]):
+            raise ProtocolError("CAN mode switch: reserved bits are not zero", raw=data, command=data[0])
+        return cls(mode=CanMode.NORMAL if data[0] & _MODE_SWITCH_BIT else CanMode.EXTENDED)
+
+
+def _is_pi_frame(data: bytes) -> bool:
+    # §5.1 [I]: both frames are extended with D0 = 0; a PI frame names its gain in D1 = 1..4.
+    return len(data) >= 2 and data[0] == 0x00 and data[1] in PiGain._value2member_map_
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class PiMultiplier(HollowCommand):
+    """Scale one speed- or current-loop PI gain at runtime: extended id (§6).
+
+    ``D0 = 0x00, D1 = gain, D2..D5 = float32 big-endian``, padded with two zero bytes to DLC 8 (A17).
+    The actual gain is the preset gain times ``multiplier``; not persisted.
+
+    Attributes:
+        gain: which gain to scale.
+        multiplier: the factor, a finite float32 >= 0 (1.0 leaves the gain unchanged). A negative
+            factor would invert a control loop, so it is refused [I].
+    """
+
+    EXTENDED_ID: ClassVar[bool] = True
+    gain: PiGain
+    multiplier: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "gain", to_enum("gain", self.gain, PiGain))
+        check_real("multiplier", self.multiplier, 0.0, FLOAT32_MAX)
+
+    def encode(self) -> bytes:
+        return bytes([0x00, self.gain]) + struct.pack(">f", self.multiplier) + _PI_PADDING
+
+    @classmethod
+    def decode(cls, data: bytes) -> Self:
+        """Decode a PI multiplier frame of 6 to 8 bytes (D6/D7, when present, are not defined: ignored).
+
+        Raises:
+            ProtocolError: wrong length, D0 not 0, unknown gain, or a multiplier that is NaN,
+                infinite or negative.
+        """
+        if len(data) not in _PI_SIZES:
+            raise ProtocolError(f"PI multiplier: expected 6 to 8 data bytes, got {len(data)}", raw=data)
+        if data[0] != 0x00:
+            raise ProtocolError("PI multiplier: D0 is not 0x00", raw=data, command=data[0])
+        gain = decode_enum("PI gain", data[1], PiGain, data)
+        return build(cls, data, gain=gain, multiplier=unpack_float32_be(data, 2))
+
+
+def decode_extended_request(data: bytes) -> HollowCommand:
+    """Decode an extended-id request: a PI multiplier frame or the CAN mode switch (§5.1 rule).
+
+    Raises:
+        ProtocolError: neither layout fits.
+    """
+    if _is_pi_frame(data):
+        return PiMultiplier.decode(data)
+    return CanModeSwitch.decode(data)
+
+
+def decode_setpoint_frame(data: bytes, *, model: HollowModel, can_mode: CanMode) -> HollowCommand:
+    """Decode a standard-id 8-byte frame: special command first, else a setpoint of ``can_mode``.
+
+    Raises:
+        ProtocolError: wrong length.
+    """
+    if is_special_command(data):
+        return decode_special(data)
+    if can_mode is CanMode.EXTENDED:
+        return IncrementalSetpoint.decode(data, model=model)
+    return Setpoint.decode(data, model=model)
