@@ -1,0 +1,140 @@
+"""Devices on the simulated CAN bus in virtual time (servobus.sim.network).
+
+The devices here are minimal stand-ins (a responder, a streamer) so the network's own rules are
+tested apart from any protocol; the family device models have their own tests on this network.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import pytest
+
+from servobus.frame import Frame
+from servobus.sim.canbus import CanBusModel
+from servobus.sim.device import Emission
+from servobus.sim.faults import FaultInjector, FaultPlan
+from servobus.sim.network import SimCanNetwork
+from servobus.sim.timing import CLASSIC_8_BYTE_STANDARD_BITS
+
+TURNAROUND_S = 100e-6
+
+
+@dataclass
+class Responder:
+    """Answers a frame on 0x140+id with the same data on 0x240+id after TURNAROUND_S."""
+
+    motor_id: int
+    seen: list[tuple[float, Frame]] = field(default_factory=list)
+
+    @property
+    def name(self) -> str:
+        return f"motor{self.motor_id}"
+
+    def receive(self, frame: Frame, now_s: float) -> list[Emission]:
+        self.seen.append((now_s, frame))
+        if frame.arbitration_id != 0x140 + self.motor_id:
+            return []
+        return [Emission(now_s + TURNAROUND_S, Frame(arbitration_id=0x240 + self.motor_id, data=frame.data))]
+
+    def poll(self, now_s: float) -> list[Emission]:
+        return []
+
+    def next_deadline_s(self) -> float | None:
+        return None
+
+
+@dataclass
+class Streamer:
+    """Sends a frame every ``period_s`` on its own."""
+
+    period_s: float
+    next_s: float = 0.0
+    name: str = "streamer"
+
+    def receive(self, frame: Frame, now_s: float) -> list[Emission]:
+        return []
+
+    def poll(self, now_s: float) -> list[Emission]:
+        out = []
+        while self.next_s <= now_s:
+            out.append(Emission(self.next_s, Frame(arbitration_id=0x7FF, data=b"\x01")))
+            self.next_s += self.period_s
+        return out
+
+    def next_deadline_s(self) -> float | None:
+        return self.next_s
+
+
+def _request(motor_id: int) -> Frame:
+    return Frame(arbitration_id=0x140 + motor_id, data=bytes([0x9C, motor_id, 0, 0, 0, 0, 0, 0]))
+
+
+def test_thirty_two_request_reply_pairs_fit_the_bit_count_bound_plus_turnaround() -> None:
+    network = SimCanNetwork([Responder(i) for i in range(1, 33)])
+    for i in range(1, 33):
+        network.send(_request(i), 0.0)
+    received = network.run_until_idle()
+    assert sorted(f.arbitration_id for _, f in received) == [0x240 + i for i in range(1, 33)]
+    lo, hi = CLASSIC_8_BYTE_STANDARD_BITS
+    assert 64 * lo / 1e6 <= network.bus.busy_s <= 64 * hi / 1e6
+    # The host's 32 requests leave back to back; each reply waits for its turnaround, then the wire.
+    last_end = received[-1][0]
+    assert network.bus.busy_s <= last_end <= network.bus.busy_s + TURNAROUND_S
+
+
+def test_replies_ready_together_leave_in_identifier_order() -> None:
+    devices = [Responder(i) for i in (9, 2, 30, 5)]
+    network = SimCanNetwork(devices)
+    for device in devices:  # requests queued in this order by the host...
+        network.send(_request(device.motor_id), 0.0)
+    received = network.run_until_idle()
+    # ...and leave back to back (0x14x beats every 0x24x reply); a reply is ready 100 µs after its
+    # request, shorter than one frame, so the replies contend once the requests are out and leave
+    # by identifier, not in the order their requests went.
+    assert [f.arbitration_id - 0x240 for _, f in received] == [2, 5, 9, 30]
+
+
+def test_every_device_sees_every_frame_but_its_own() -> None:
+    a, b = Responder(1), Responder(2)
+    network = SimCanNetwork([a, b])
+    network.send(_request(1), 0.0)
+    network.run_until_idle()
+    assert [f.arbitration_id for _, f in a.seen] == [0x141]  # not its own reply 0x241
+    assert [f.arbitration_id for _, f in b.seen] == [0x141, 0x241]
+
+
+def test_spontaneous_frames_follow_the_device_deadline() -> None:
+    network = SimCanNetwork([Streamer(period_s=0.010)])
+    received = network.advance(0.0505)
+    assert len(received) == 6  # t = 0, 10, ..., 50 ms
+    assert received[1][0] == pytest.approx(0.010 + received[0][0])
+
+
+def test_faults_towards_the_host_are_seeded() -> None:
+    def run(seed: int) -> list[tuple[float, Frame]]:
+        network = SimCanNetwork(
+            [Responder(i) for i in range(1, 33)],
+            to_host=FaultInjector(FaultPlan(drop=0.2, delay=0.2, duplicate=0.1), seed),
+        )
+        for i in range(1, 33):
+            network.send(_request(i), 0.0)
+        return network.run_until_idle()
+
+    first = run(4)
+    assert first == run(4)
+    assert len(first) != 32 or first != run(5)
+
+
+def test_slower_bit_rate_stretches_the_same_traffic() -> None:
+    fast = SimCanNetwork([Responder(1)])
+    slow = SimCanNetwork([Responder(1)], bus=CanBusModel(bitrate=500_000))
+    for network in (fast, slow):
+        network.send(_request(1), 0.0)
+    (t_fast, _), (t_slow, _) = fast.run_until_idle()[0], slow.run_until_idle()[0]
+    assert t_slow - TURNAROUND_S == pytest.approx(2 * (t_fast - TURNAROUND_S))
+
+
+def test_names_are_unique() -> None:
+    with pytest.raises(ValueError, match="already on this bus"):
+        SimCanNetwork([Responder(1), Responder(1)])
