@@ -15,7 +15,7 @@ from typing import Protocol
 
 from servobus.frame import Frame
 
-__all__ = ["Device", "Emission"]
+__all__ = ["Device", "Emission", "SerialDevice", "SerialEmission"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -40,6 +40,37 @@ class Device(Protocol):
 
     def poll(self, now_s: float) -> list[Emission]:
         """Spontaneous frames due by ``now_s`` (streams, error reports, timeouts)."""
+        ...
+
+    def next_deadline_s(self) -> float | None:
+        """When :meth:`poll` next has something to do (None: nothing scheduled)."""
+        ...
+
+
+@dataclass(frozen=True, slots=True)
+class SerialEmission:
+    """Bytes a serial device wants to write, and when it starts writing them."""
+
+    ready_s: float
+    data: bytes
+
+
+class SerialDevice(Protocol):
+    """A simulated device on an RS485 line: bytes in (any chunking), timed bytes out.
+
+    The device de-frames its input itself (with the C core's de-framers), as a real one does, so
+    corrupt, split and concatenated input behave as on a wire.
+    """
+
+    @property
+    def name(self) -> str: ...
+
+    def receive_bytes(self, data: bytes, now_s: float) -> list[SerialEmission]:
+        """Bytes that arrived on the line by ``now_s``."""
+        ...
+
+    def poll(self, now_s: float) -> list[SerialEmission]:
+        """Spontaneous output due by ``now_s``."""
         ...
 
     def next_deadline_s(self) -> float | None:
