@@ -1,69 +1,20 @@
 """Devices on the simulated CAN bus in virtual time (servobus.sim.network).
 
-The devices here are minimal stand-ins (a responder, a streamer) so the network's own rules are
+The devices here are minimal stand-ins (tests/sim/_standins.py) so the network's own rules are
 tested apart from any protocol; the family device models have their own tests on this network.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import pytest
 
 from servobus.frame import Frame
 from servobus.sim.canbus import CanBusModel
-from servobus.sim.device import Emission
 from servobus.sim.faults import FaultInjector, FaultPlan
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.timing import CLASSIC_8_BYTE_STANDARD_BITS
 
-TURNAROUND_S = 100e-6
-
-
-@dataclass
-class Responder:
-    """Answers a frame on 0x140+id with the same data on 0x240+id after TURNAROUND_S."""
-
-    motor_id: int
-    seen: list[tuple[float, Frame]] = field(default_factory=list)
-
-    @property
-    def name(self) -> str:
-        return f"motor{self.motor_id}"
-
-    def receive(self, frame: Frame, now_s: float) -> list[Emission]:
-        self.seen.append((now_s, frame))
-        if frame.arbitration_id != 0x140 + self.motor_id:
-            return []
-        return [Emission(now_s + TURNAROUND_S, Frame(arbitration_id=0x240 + self.motor_id, data=frame.data))]
-
-    def poll(self, now_s: float) -> list[Emission]:
-        return []
-
-    def next_deadline_s(self) -> float | None:
-        return None
-
-
-@dataclass
-class Streamer:
-    """Sends a frame every ``period_s`` on its own."""
-
-    period_s: float
-    next_s: float = 0.0
-    name: str = "streamer"
-
-    def receive(self, frame: Frame, now_s: float) -> list[Emission]:
-        return []
-
-    def poll(self, now_s: float) -> list[Emission]:
-        out = []
-        while self.next_s <= now_s:
-            out.append(Emission(self.next_s, Frame(arbitration_id=0x7FF, data=b"\x01")))
-            self.next_s += self.period_s
-        return out
-
-    def next_deadline_s(self) -> float | None:
-        return self.next_s
+from ._standins import TURNAROUND_S, Responder, Streamer
 
 
 def _request(motor_id: int) -> Frame:

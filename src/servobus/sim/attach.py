@@ -1,0 +1,202 @@
+"""Attachments: the simulated devices, driven in real time, behind real I/O a host can open.
+
+The device models and the network are sans-IO and timed by ``now_s``; these coroutines give them
+a clock (the event loop's) and an end a host talks to:
+
+* :func:`serve_slcan`: a simulated SLCAN USB-CAN adapter on a pseudo-terminal, so python-can's own
+  ``slcan`` interface (or any LAWICEL tool) exchanges frames with the devices on a
+  :class:`~servobus.sim.network.SimCanNetwork`;
+* :func:`serve_python_can`: the same network joined to a python-can bus (the ``virtual``
+  interface in-process, CAN FD included);
+* :func:`serve_rs485`: serial devices on one half-duplex RS485 line on a pseudo-terminal, each
+  reply written when its last byte would have arrived at the line's baud rate.
+
+Each runs until cancelled (or its port closes) and leaves the port or bus to its owner to close.
+Its tasks run in a task group: an exception in a device model ends the whole attachment and
+reaches the caller, never dies silently in a background task.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable, Coroutine, Sequence
+from typing import Any
+
+import can
+
+from servobus.frame import Frame
+from servobus.sim.device import SerialDevice, SerialEmission
+from servobus.sim.network import SimCanNetwork
+from servobus.sim.pty import PtyPort
+from servobus.sim.slcan import SlcanAdapter
+from servobus.sim.timing import uart_time_s
+
+__all__ = ["SimClock", "serve_python_can", "serve_rs485", "serve_slcan"]
+
+
+class SimClock:
+    """Simulated seconds since start, read from the event loop's monotonic clock."""
+
+    def __init__(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._t0 = self._loop.time()
+
+    def now(self) -> float:
+        return self._loop.time() - self._t0
+
+
+async def _run_network(
+    network: SimCanNetwork,
+    inbox: asyncio.Queue[Frame],
+    deliver: Callable[[Frame], None],
+    clock: SimClock,
+) -> None:
+    """Feed host frames in as they come, sleep until the network's next event, deliver its output."""
+    while True:
+        wake = network.next_event_s()
+        timeout = None if wake is None else max(0.0, wake - clock.now())
+        try:
+            frame = await asyncio.wait_for(inbox.get(), timeout)
+        except TimeoutError:
+            pass
+        else:
+            network.send(frame, max(network.now_s, clock.now()))
+        for _, received in network.advance(clock.now()):
+            deliver(received)
+
+
+async def serve_slcan(network: SimCanNetwork, port: PtyPort, adapter: SlcanAdapter | None = None) -> None:
+    """Serve ``network`` to a host that opens ``port.name`` as an SLCAN adapter.
+
+    The adapter's bit rates (``S``/``Y`` commands) set the network's bus model, as a real adapter's
+    would set its controller.
+    """
+    adapter = adapter or SlcanAdapter()
+    clock = SimClock()
+    inbox: asyncio.Queue[Frame] = asyncio.Queue()
+
+    def deliver(frame: Frame) -> None:
+        if not port.closed and (line := adapter.to_host(frame)):
+            port.write(line)
+
+    async def read_host() -> None:
+        async for data in port:
+            answer, frames = adapter.receive(data)
+            if adapter.bitrate:
+                network.bus.bitrate = adapter.bitrate
+            network.bus.data_bitrate = adapter.data_bitrate
+            if answer:
+                port.write(answer)
+            for frame in frames:
+                inbox.put_nowait(frame)
+        raise _PortClosed
+
+    await _run_together(_run_network(network, inbox, deliver, clock), read_host())
+
+
+async def serve_python_can(network: SimCanNetwork, bus: can.BusABC) -> None:
+    """Serve ``network`` on a python-can bus (typically ``virtual``): its frames in, replies out."""
+    loop = asyncio.get_running_loop()
+    clock = SimClock()
+    inbox: asyncio.Queue[Frame] = asyncio.Queue()
+    reader = can.AsyncBufferedReader()
+    notifier = can.Notifier(bus, [reader], loop=loop)
+
+    def deliver(frame: Frame) -> None:
+        bus.send(
+            can.Message(
+                arbitration_id=frame.arbitration_id,
+                data=frame.data,
+                is_extended_id=frame.is_extended_id,
+                is_fd=frame.is_fd,
+                bitrate_switch=frame.bitrate_switch,
+            )
+        )
+
+    async def read_host() -> None:
+        async for message in reader:
+            if message.is_error_frame or message.is_remote_frame:
+                continue
+            inbox.put_nowait(
+                Frame(
+                    arbitration_id=message.arbitration_id,
+                    data=bytes(message.data),
+                    is_extended_id=message.is_extended_id,
+                    is_fd=message.is_fd,
+                    bitrate_switch=message.bitrate_switch,
+                )
+            )
+
+    try:
+        await _run_together(_run_network(network, inbox, deliver, clock), read_host())
+    finally:
+        notifier.stop()
+
+
+async def serve_rs485(devices: Sequence[SerialDevice], port: PtyPort, *, baud: int) -> None:
+    """Serve serial ``devices`` sharing one RS485 line on ``port`` at ``baud``.
+
+    Every device hears every byte the host writes. Half-duplex: one device talks at a time, so
+    replies that are ready together leave one after the other, each taking its bytes' line time.
+    """
+    clock = SimClock()
+    line_free_s = 0.0
+    pending: list[SerialEmission] = []
+    wakeup = asyncio.Event()
+
+    def collect(emissions: list[SerialEmission]) -> None:
+        pending.extend(emissions)
+        pending.sort(key=lambda e: e.ready_s)
+        wakeup.set()
+
+    async def writer() -> None:
+        nonlocal line_free_s
+        while True:
+            deadlines = [d for d in (dev.next_deadline_s() for dev in devices) if d is not None]
+            due = min([*(e.ready_s for e in pending[:1]), *deadlines], default=None)
+            wakeup.clear()
+            if due is None:
+                await wakeup.wait()
+                continue
+            delay = due - clock.now()
+            if delay > 0:
+                try:
+                    await asyncio.wait_for(wakeup.wait(), delay)
+                    continue  # something new arrived: recompute
+                except TimeoutError:
+                    pass
+            now = clock.now()
+            for device in devices:
+                if (deadline := device.next_deadline_s()) is not None and deadline <= now:
+                    collect(device.poll(now))
+            while pending and pending[0].ready_s <= now:
+                emission = pending.pop(0)
+                start = max(emission.ready_s, line_free_s)
+                line_free_s = start + uart_time_s(len(emission.data), baud)
+                await asyncio.sleep(max(0.0, line_free_s - clock.now()))
+                if port.closed:
+                    return
+                port.write(emission.data)
+
+    async def read_host() -> None:
+        async for data in port:
+            now = clock.now()
+            for device in devices:
+                collect(device.receive_bytes(data, now))
+        raise _PortClosed
+
+    await _run_together(writer(), read_host())
+
+
+class _PortClosed(Exception):
+    """The host-facing port closed: the attachment ends normally."""
+
+
+async def _run_together(*coroutines: Coroutine[Any, Any, None]) -> None:
+    """Run ``coroutines`` until one ends; its exception (other than a closed port) propagates."""
+    try:
+        async with asyncio.TaskGroup() as group:
+            for coroutine in coroutines:
+                group.create_task(coroutine)
+    except* _PortClosed:
+        pass
