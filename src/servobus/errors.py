@@ -36,6 +36,7 @@ class ProtocolError(ServobusError):
         motor_id: int | None = None,
         command: int | None = None,
     ) -> None:
+        self.message = message
         self.raw = bytes(raw)
         self.motor_id = motor_id
         self.command = command
@@ -47,6 +48,19 @@ class ProtocolError(ServobusError):
         if raw:
             details.append(f"raw {self.raw.hex(' ').upper()}")
         super().__init__(f"{message} ({', '.join(details)})" if details else message)
+
+    def with_context(self, *, motor_id: int | None = None, command: int | None = None) -> ProtocolError:
+        """A copy that also names ``motor_id``/``command`` (kept where already known), for re-raising.
+
+        Codecs raise without knowing which motor a payload came from; the layer that knows adds it:
+        ``raise exc.with_context(motor_id=3) from None``.
+        """
+        return type(self)(
+            self.message,
+            raw=self.raw,
+            motor_id=self.motor_id if self.motor_id is not None else motor_id,
+            command=self.command if self.command is not None else command,
+        )
 
 
 class MotorTimeout(ServobusError, TimeoutError):

@@ -84,6 +84,20 @@ def test_check_choice_lists_the_choices() -> None:
         check_choice("mode", 3, list(Mode))
     with pytest.raises(ValueError, match=r"id=0 is not one of 1..32"):
         check_choice("id", 0, range(1, 33))
+    # an enum class: members and their values count, anything else is a ValueError (3.11 raised TypeError)
+    check_choice("mode", 2, Mode)
+    for wrong in (3, "A", None):
+        with pytest.raises(ValueError, match="is not one of"):
+            check_choice("mode", wrong, Mode)
+    with pytest.raises(ValueError, match="is not one of"):
+        check_choice("mode", [1], {1, 2})
+
+
+def test_protocol_error_gains_context_without_losing_what_it_knew() -> None:
+    error = ProtocolError("bad length", raw=b"\x9c\x00", command=0x9C)
+    richer = error.with_context(motor_id=3, command=0x11)
+    assert str(richer) == "bad length (motor 3, command 0x9C, raw 9C 00)"
+    assert (richer.motor_id, richer.command, richer.raw) == (3, 0x9C, b"\x9c\x00")
 
 
 def test_decode_by_code_and_require_length_raise_protocol_errors() -> None:

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from enum import Enum
 
 __all__ = ["IntField", "ScaledField", "check_choice", "check_range", "round_half_away"]
 
@@ -33,8 +34,19 @@ def check_range(name: str, value: float, lo: float, hi: float) -> None:
 
 
 def check_choice(name: str, value: object, choices: object) -> None:
-    """Raise ValueError unless ``value in choices`` (an enum class, a set, a range)."""
-    if value not in choices:  # type: ignore[operator]
+    """Raise ValueError unless ``value`` is among ``choices`` (an enum class, a set, a range).
+
+    For an enum class, a member or a member's value counts (Python 3.12's ``in``; 3.11 raises
+    TypeError for non-members instead).
+    """
+    if isinstance(choices, type) and issubclass(choices, Enum):
+        found = isinstance(value, choices) or any(value == member.value for member in choices)
+    else:
+        try:
+            found = value in choices  # type: ignore[operator]
+        except TypeError:  # unhashable value for a set, a str for a range...
+            found = False
+    if not found:
         raise ValueError(f"{name}={value!r} is not one of {_describe(choices)}")
 
 
