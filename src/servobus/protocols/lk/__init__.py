@@ -1,0 +1,272 @@
+"""LK-TECH (LingKong) MS/MF/MH/MG CAN protocol V2.36 and the RMD-S/RMD-F V2.35 variant, sans-IO.
+
+Typed commands and replies in physical units <-> 8-byte CAN payloads (spec ``lk-v2.md``; manuals
+[001] = V2.36, [003] = V2.35). Modules: ``model`` (revision, motor type, encoder width), ``ids``
+(identifiers, match keys, the V2.35 echo rule), ``commands`` / ``commands_motion`` (requests),
+``replies`` / ``replies_encoder`` (replies), ``params`` (parameter addressing) with
+``params_v236`` / ``params_v235`` (parameter messages), ``states`` (named state bytes), ``codec``
+(tables and entry points).
+
+Parameters. ``LkModel(revision=V2_36, motor_type=MG, encoder_bits=14)`` bundles what layouts and units
+depend on; ``decode_request`` / ``decode_reply`` / ``encode_request`` take ``revision=`` and/or
+``model=``. A message whose bytes depend on motor type or encoder width carries it as a field, so
+``encode()`` needs nothing else (``TorqueControl(motor_type=MotorType.MF, current_a=1.5)``). A layout
+that differs between revisions is two classes (``SpeedControl`` / ``SpeedControlV235``).
+
+Resolutions of the spec's open points (spec §10, §8.2):
+
+* Torque current: MF 33/4096 A, MG 66/4096 A per count on both revisions ([003]'s "±32 A" for MG
+  is read as a rounding). MH has no stated scale: its values stay raw (``iq_counts``). MS reports
+  power (``power_counts``, unitless) in status-2 replies and has no torque loop.
+* 0xA8 maxSpeed: 1 dps/LSB (text of both manuals, A2/A6); worked examples W5/W6 label the same bytes
+  0.01 dps/LSB — bytes agree, only the reading differs.
+* 0x9B on V2.35: a reply whose DATA[0] is 0x9A is accepted (A4; ``ids.request_keys``).
+* 0x92: 56-bit two's complement (A7). 0x44 V2.36 reply DATA[7]: NULL (A14).
+* 0x33 (V2.35) and the 0x280 frame: layouts inferred by the spec (``codec.INFERRED_LAYOUTS``).
+* 18-bit encoders: counts 0..65535, angle assumes the top 16 bits are sent (inferred).
+* NULL bytes are ignored on decode, written as 0x00 on encode.
+"""
+
+from __future__ import annotations
+
+from servobus.protocols._family import Family
+from servobus.protocols.lk._base import LkCommand, LkReply
+from servobus.protocols.lk.codec import (
+    COMMAND_CLASSES,
+    INFERRED_LAYOUTS,
+    REPLY_CLASSES,
+    REQUESTS,
+    check_available,
+    decode_reply,
+    decode_request,
+    encode_request,
+    reply_class,
+    reply_frame,
+    request_classes,
+    request_frame,
+    resolve_model,
+)
+from servobus.protocols.lk.commands import (
+    BrakeControl,
+    CalibrateEncoder,
+    ClearErrors,
+    MotorOff,
+    MotorRun,
+    MotorStop,
+    ReadAcceleration,
+    ReadEncoder,
+    ReadMultiTurnAngle,
+    ReadSingleTurnAngle,
+    ReadStatus1,
+    ReadStatus2,
+    ReadStatus3,
+    SetZeroRam,
+    SetZeroRom,
+    WriteAcceleration,
+    WriteEncoderOffset,
+)
+from servobus.protocols.lk.commands_motion import (
+    IncrementalPosition,
+    IncrementalPositionSpeed,
+    MultiMotorTorque,
+    MultiTurnPosition,
+    MultiTurnPositionSpeed,
+    OpenLoopControl,
+    SingleTurnPosition,
+    SingleTurnPositionSpeed,
+    SingleTurnPositionSpeedV235,
+    SingleTurnPositionV235,
+    SpeedControl,
+    SpeedControlV235,
+    TorqueControl,
+)
+from servobus.protocols.lk.ids import (
+    MULTI_MOTOR_ID,
+    is_reply_id,
+    is_request_id,
+    match_key,
+    motor_id_from_reply_id,
+    motor_id_from_request_id,
+    multi_motor_reply_keys,
+    reply_id,
+    reply_key,
+    request_id,
+    request_keys,
+)
+from servobus.protocols.lk.model import DEFAULT_MODEL, IQ_AMPS_PER_COUNT, LkModel, MotorType, Revision
+from servobus.protocols.lk.params import (
+    BusType,
+    CanBaud,
+    ControlParam,
+    ParamId,
+    ParamValue,
+    PidGains,
+    Rs485Baud,
+    SettingParam,
+    max_angle_from_halves,
+    max_angle_halves,
+)
+from servobus.protocols.lk.params_v235 import (
+    ParamReply,
+    ParamWriteReply,
+    ReadParam,
+    WriteParamRam,
+    WriteParamRom,
+)
+from servobus.protocols.lk.params_v236 import (
+    ControlParamReply,
+    ReadControlParam,
+    ReadSetting,
+    SaveSettings,
+    SaveSettingsReply,
+    SettingReply,
+    WriteControlParam,
+    WriteSetting,
+)
+from servobus.protocols.lk.replies import (
+    BrakeReply,
+    EchoReply,
+    Status1Reply,
+    Status1ReplyV235,
+    Status2Reply,
+    Status3Reply,
+    Status3ReplyV235,
+)
+from servobus.protocols.lk.replies_encoder import (
+    AccelerationReply,
+    CalibrationReply,
+    EncoderOffsetReply,
+    EncoderReply,
+    MultiTurnAngleReply,
+    SingleTurnAngleReply,
+    SingleTurnAngleReplyV235,
+)
+from servobus.protocols.lk.states import (
+    AlignState,
+    BrakeAction,
+    BrakeState,
+    ErrorState,
+    ErrorStateV235,
+    MotorState,
+    ParamResult,
+    SpinDirection,
+)
+
+__all__ = [
+    "COMMAND_CLASSES",
+    "DEFAULT_MODEL",
+    "FAMILY",
+    "INFERRED_LAYOUTS",
+    "IQ_AMPS_PER_COUNT",
+    "MULTI_MOTOR_ID",
+    "REPLY_CLASSES",
+    "REQUESTS",
+    "AccelerationReply",
+    "AlignState",
+    "BrakeAction",
+    "BrakeControl",
+    "BrakeReply",
+    "BrakeState",
+    "BusType",
+    "CalibrateEncoder",
+    "CalibrationReply",
+    "CanBaud",
+    "ClearErrors",
+    "ControlParam",
+    "ControlParamReply",
+    "EchoReply",
+    "EncoderOffsetReply",
+    "EncoderReply",
+    "ErrorState",
+    "ErrorStateV235",
+    "IncrementalPosition",
+    "IncrementalPositionSpeed",
+    "LkCommand",
+    "LkModel",
+    "LkReply",
+    "MotorOff",
+    "MotorRun",
+    "MotorState",
+    "MotorStop",
+    "MotorType",
+    "MultiMotorTorque",
+    "MultiTurnAngleReply",
+    "MultiTurnPosition",
+    "MultiTurnPositionSpeed",
+    "OpenLoopControl",
+    "ParamId",
+    "ParamReply",
+    "ParamResult",
+    "ParamValue",
+    "ParamWriteReply",
+    "PidGains",
+    "ReadAcceleration",
+    "ReadControlParam",
+    "ReadEncoder",
+    "ReadMultiTurnAngle",
+    "ReadParam",
+    "ReadSetting",
+    "ReadSingleTurnAngle",
+    "ReadStatus1",
+    "ReadStatus2",
+    "ReadStatus3",
+    "Revision",
+    "Rs485Baud",
+    "SaveSettings",
+    "SaveSettingsReply",
+    "SetZeroRam",
+    "SetZeroRom",
+    "SettingParam",
+    "SettingReply",
+    "SingleTurnAngleReply",
+    "SingleTurnAngleReplyV235",
+    "SingleTurnPosition",
+    "SingleTurnPositionSpeed",
+    "SingleTurnPositionSpeedV235",
+    "SingleTurnPositionV235",
+    "SpeedControl",
+    "SpeedControlV235",
+    "SpinDirection",
+    "Status1Reply",
+    "Status1ReplyV235",
+    "Status2Reply",
+    "Status3Reply",
+    "Status3ReplyV235",
+    "TorqueControl",
+    "WriteAcceleration",
+    "WriteControlParam",
+    "WriteEncoderOffset",
+    "WriteParamRam",
+    "WriteParamRom",
+    "WriteSetting",
+    "check_available",
+    "decode_reply",
+    "decode_request",
+    "encode_request",
+    "is_reply_id",
+    "is_request_id",
+    "match_key",
+    "max_angle_from_halves",
+    "max_angle_halves",
+    "motor_id_from_reply_id",
+    "motor_id_from_request_id",
+    "multi_motor_reply_keys",
+    "reply_class",
+    "reply_frame",
+    "reply_id",
+    "reply_key",
+    "request_classes",
+    "request_frame",
+    "request_id",
+    "request_keys",
+    "resolve_model",
+]
+
+FAMILY = Family(
+    name="lk",
+    description="LK-TECH MS/MF/MH/MG CAN V2.36 and RMD-S/RMD-F V2.35 (0x140+ID -> 0x180+ID / 0x140+ID)",
+    revisions=(Revision.V2_36, Revision.V2_35),
+    default_revision=Revision.V2_36,
+    decode_request=decode_request,
+    decode_reply=decode_reply,
+)

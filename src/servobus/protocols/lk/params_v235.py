@@ -1,0 +1,186 @@
+"""LK V2.35 parameter messages: ParamID read (0x40), write RAM (0x42), write ROM (0x44).
+
+Spec §4.27..§4.29, §6.3: one ParamID byte, values from DATA[2]; the 0x42/0x44 reply says 0x00 =
+written, 0x01 = failed (the opposite of V2.36's save flag; spec §7.7).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar, Self
+
+from servobus.protocols.lk._base import (
+    V2_35_ONLY,
+    LkCommand,
+    LkReply,
+    build,
+    check_command,
+    enum_byte,
+    expect,
+    payload,
+)
+from servobus.protocols.lk.model import DEFAULT_MODEL, LkModel, check_member
+from servobus.protocols.lk.params import (
+    PARAM_LAYOUTS,
+    WRITE_RESULT_V235,
+    ParamId,
+    ParamValue,
+    check_value,
+    decode_result,
+    result_byte,
+)
+from servobus.protocols.lk.states import ParamResult
+
+__all__ = [
+    "ParamReply",
+    "ParamWriteReply",
+    "ReadParam",
+    "WriteParamRam",
+    "WriteParamRom",
+]
+
+
+# ---- V2.35 ParamID (0x40 / 0x42 / 0x44) ------------------------------------------------------
+
+
+class _ParamMessage:
+    """Shared body of V2.35 0x40 replies and 0x42/0x44 requests: ``cmd | ParamID | value``."""
+
+    __slots__ = ()
+    param: ParamId
+    value: ParamValue
+
+    def _check(self) -> None:
+        check_member("param", self.param, ParamId)
+        check_value(self.param, self.value, PARAM_LAYOUTS)
+
+    def _body(self, code: int) -> bytes:
+        return payload(code, (1, bytes([self.param])), PARAM_LAYOUTS[self.param].encode(self.value))
+
+    @staticmethod
+    def _fields(data: bytes, what: str) -> dict[str, object]:
+        param = enum_byte(ParamId, data, 1, what=what)
+        return {"param": param, "value": PARAM_LAYOUTS[param].decode(data, what=what)}
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReadParam(LkCommand):
+    """0x40, V2.35 layout: read a parameter, ``40 | ParamID | 00..`` (spec §4.27; worked example W4)."""
+
+    CODE: ClassVar[int] = 0x40
+    REVISIONS = V2_35_ONLY
+    param: ParamId
+
+    def __post_init__(self) -> None:
+        check_member("param", self.param, ParamId)
+
+    def encode(self) -> bytes:
+        return payload(self.CODE, (1, bytes([self.param])))
+
+    @classmethod
+    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
+        expect(data, cls.CODE, cls.__name__)
+        return build(cls, data, param=enum_byte(ParamId, data, 1, what=cls.__name__))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ParamReply(_ParamMessage, LkReply):
+    """0x40 reply, V2.35 layout: ``40 | ParamID | value`` (spec §4.27, §6.3).
+
+    Attributes:
+        param: which parameter.
+        value: :class:`PidGains` or int.
+    """
+
+    CODE: ClassVar[int] = 0x40
+    REVISIONS = V2_35_ONLY
+    param: ParamId
+    value: ParamValue
+
+    def __post_init__(self) -> None:
+        self._check()
+
+    def encode(self) -> bytes:
+        return self._body(self.CODE)
+
+    @classmethod
+    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
+        expect(data, cls.CODE, cls.__name__)
+        return build(cls, data, **cls._fields(data, cls.__name__))
+
+
+class _WriteParam(_ParamMessage, LkCommand):
+    """0x42/0x44 V2.35 request body; the subclasses differ only in the command byte."""
+
+    __slots__ = ()
+    CODE: ClassVar[int]
+
+    def __post_init__(self) -> None:
+        self._check()
+
+    def encode(self) -> bytes:
+        return self._body(self.CODE)
+
+    @classmethod
+    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
+        expect(data, cls.CODE, cls.__name__)
+        return build(cls, data, **cls._fields(data, cls.__name__))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class WriteParamRam(_WriteParam):
+    """0x42, V2.35 layout: write one parameter to RAM, lost at power-off (spec §4.28, §6.3)."""
+
+    CODE: ClassVar[int] = 0x42
+    REVISIONS = V2_35_ONLY
+    param: ParamId
+    value: ParamValue
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class WriteParamRom(_WriteParam):
+    """0x44, V2.35 layout: write one parameter to ROM, kept over power-off (spec §4.29, §6.3)."""
+
+    CODE: ClassVar[int] = 0x44
+    REVISIONS = V2_35_ONLY
+    param: ParamId
+    value: ParamValue
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ParamWriteReply(LkReply):
+    """0x42/0x44 reply, V2.35 layout ``cmd | ParamID | status``: 0x00 = written, 0x01 = failed (spec §7.7).
+
+    Attributes:
+        command: 0x42 (RAM) or 0x44 (ROM).
+        param: the parameter written.
+        result: SUCCESS or FAILURE.
+    """
+
+    REVISIONS = V2_35_ONLY
+    command: int
+    param: ParamId
+    result: ParamResult
+
+    def __post_init__(self) -> None:
+        check_command(self.command, (0x42, 0x44))
+        check_member("param", self.param, ParamId)
+        check_member("result", self.result, ParamResult)
+
+    @property
+    def ok(self) -> bool:
+        return self.result is ParamResult.SUCCESS
+
+    def encode(self) -> bytes:
+        return payload(self.command, (1, bytes([self.param]) + result_byte(WRITE_RESULT_V235, self.result)))
+
+    @classmethod
+    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
+        command = expect(data, (0x42, 0x44), cls.__name__)
+        return build(
+            cls,
+            data,
+            command=command,
+            param=enum_byte(ParamId, data, 1, what=cls.__name__),
+            result=decode_result(WRITE_RESULT_V235, data, what=cls.__name__),
+        )

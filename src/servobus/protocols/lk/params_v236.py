@@ -1,0 +1,299 @@
+"""LK V2.36 parameter messages: control parameters in RAM (0xC0/0xC1), settings (0x40/0x42/0x44).
+
+Spec §4.18, §4.19, §6.1 (control parameters) and §4.27..§4.29, §6.2 (setting parameters, two
+address bytes, saved all at once by ``44 05 FA``, whose reply says 0x01 = saved; spec §7.7).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar, Self
+
+from servobus.errors import ProtocolError
+from servobus.protocols.lk._base import (
+    V2_36_ONLY,
+    LkCommand,
+    LkReply,
+    build,
+    check_command,
+    enum_byte,
+    expect,
+    payload,
+)
+from servobus.protocols.lk.model import DEFAULT_MODEL, LkModel, check_member
+from servobus.protocols.lk.params import (
+    CONTROL_LAYOUTS,
+    SAVE_RESULT,
+    SETTING_LAYOUTS,
+    ControlParam,
+    ParamValue,
+    SettingParam,
+    check_value,
+    decode_result,
+    decode_setting_address,
+    result_byte,
+    setting_address,
+)
+from servobus.protocols.lk.states import ParamResult
+
+__all__ = [
+    "ControlParamReply",
+    "ReadControlParam",
+    "ReadSetting",
+    "SaveSettings",
+    "SaveSettingsReply",
+    "SettingReply",
+    "WriteControlParam",
+    "WriteSetting",
+]
+
+
+# ---- V2.36 control parameters (0xC0 / 0xC1) --------------------------------------------------
+
+
+class _ControlMessage:
+    """Shared body of 0xC0/0xC1 frames with a value: ``cmd | id | byte1..6``."""
+
+    __slots__ = ()
+    param: ControlParam
+    value: ParamValue
+
+    def _check(self) -> None:
+        check_member("param", self.param, ControlParam)
+        check_value(self.param, self.value, CONTROL_LAYOUTS)
+
+    def _body(self, code: int) -> bytes:
+        return payload(code, (1, bytes([self.param])), CONTROL_LAYOUTS[self.param].encode(self.value))
+
+    @staticmethod
+    def _fields(data: bytes, what: str) -> dict[str, object]:
+        param = enum_byte(ControlParam, data, 1, what=what)
+        return {"param": param, "value": CONTROL_LAYOUTS[param].decode(data, what=what)}
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReadControlParam(LkCommand):
+    """0xC0, V2.36 only: read a control parameter from RAM (spec §4.18)."""
+
+    CODE: ClassVar[int] = 0xC0
+    REVISIONS = V2_36_ONLY
+    param: ControlParam
+
+    def __post_init__(self) -> None:
+        check_member("param", self.param, ControlParam)
+
+    def encode(self) -> bytes:
+        return payload(self.CODE, (1, bytes([self.param])))
+
+    @classmethod
+    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
+        expect(data, cls.CODE, cls.__name__)
+        return build(cls, data, param=enum_byte(ControlParam, data, 1, what=cls.__name__))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class WriteControlParam(_ControlMessage, LkCommand):
+    """0xC1, V2.36 only: write a control parameter to RAM, effective at once (spec §4.19, §6.1).
+
+    Attributes:
+        param: which parameter.
+        value: :class:`PidGains` for the PID entries, an int for the others (ranges per spec §6.1).
+    """
+
+    CODE: ClassVar[int] = 0xC1
+    REVISIONS = V2_36_ONLY
+    param: ControlParam
+    value: ParamValue
+
+    def __post_init__(self) -> None:
+        self._check()
+
+    def encode(self) -> bytes:
+        return self._body(self.CODE)
+
+    @classmethod
+    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
+        expect(data, cls.CODE, cls.__name__)
+        return build(cls, data, **cls._fields(data, cls.__name__))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ControlParamReply(_ControlMessage, LkReply):
+    """0xC0 reply (the value read) and 0xC1 reply (the value written), V2.36 only (spec §4.18, §4.19).
+
+    Attributes:
+        command: 0xC0 or 0xC1.
+        param: which parameter.
+        value: :class:`PidGains` or int.
+    """
+
+    REVISIONS = V2_36_ONLY
+    command: int
+    param: ControlParam
+    value: ParamValue
+
+    def __post_init__(self) -> None:
+        check_command(self.command, (0xC0, 0xC1))
+        self._check()
+
+    def encode(self) -> bytes:
+        return self._body(self.command)
+
+    @classmethod
+    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
+        command = expect(data, (0xC0, 0xC1), cls.__name__)
+        return build(cls, data, command=command, **cls._fields(data, cls.__name__))
+
+
+# ---- V2.36 setting parameters (0x40 / 0x42 / 0x44) ---------------------------------------------
+
+
+class _SettingMessage:
+    """Shared body of 0x40 replies and 0x42 frames: ``cmd | address | value`` (spec §6.2, §13)."""
+
+    __slots__ = ()
+    param: SettingParam
+    value: ParamValue
+
+    def _check(self) -> None:
+        check_member("param", self.param, SettingParam)
+        check_value(self.param, self.value, SETTING_LAYOUTS)
+
+    def _body(self, code: int) -> bytes:
+        # The PID layout starts at DATA[2] and overwrites the (zero) second address byte with Kp.
+        return payload(code, (1, setting_address(self.param)), SETTING_LAYOUTS[self.param].encode(self.value))
+
+    @staticmethod
+    def _fields(data: bytes, what: str) -> dict[str, object]:
+        param = decode_setting_address(data, what=what)
+        return {"param": param, "value": SETTING_LAYOUTS[param].decode(data, what=what)}
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReadSetting(LkCommand):
+    """0x40, V2.36 layout: read a setting parameter, ``40 | addr1 | addr2 | 00..`` (spec §4.27)."""
+
+    CODE: ClassVar[int] = 0x40
+    REVISIONS = V2_36_ONLY
+    param: SettingParam
+
+    def __post_init__(self) -> None:
+        check_member("param", self.param, SettingParam)
+
+    def encode(self) -> bytes:
+        return payload(self.CODE, (1, setting_address(self.param)))
+
+    @classmethod
+    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
+        expect(data, cls.CODE, cls.__name__)
+        return build(cls, data, param=decode_setting_address(data, what=cls.__name__))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class WriteSetting(_SettingMessage, LkCommand):
+    """0x42, V2.36 layout: write a setting parameter; saved to ROM only by 0x44 (spec §4.28).
+
+    Attributes:
+        param: which parameter.
+        value: int, :class:`BusType`, :class:`Rs485Baud`, :class:`CanBaud` or :class:`PidGains`.
+    """
+
+    CODE: ClassVar[int] = 0x42
+    REVISIONS = V2_36_ONLY
+    param: SettingParam
+    value: ParamValue
+
+    def __post_init__(self) -> None:
+        self._check()
+
+    def encode(self) -> bytes:
+        return self._body(self.CODE)
+
+    @classmethod
+    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
+        expect(data, cls.CODE, cls.__name__)
+        return build(cls, data, **cls._fields(data, cls.__name__))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SettingReply(_SettingMessage, LkReply):
+    """0x40 reply (value read) and 0x42 reply (value written), V2.36 layout (spec §4.27, §4.28).
+
+    Attributes:
+        command: 0x40 or 0x42.
+        param: which parameter.
+        value: as for :class:`WriteSetting`.
+    """
+
+    REVISIONS = V2_36_ONLY
+    command: int
+    param: SettingParam
+    value: ParamValue
+
+    def __post_init__(self) -> None:
+        check_command(self.command, (0x40, 0x42))
+        self._check()
+
+    def encode(self) -> bytes:
+        return self._body(self.command)
+
+    @classmethod
+    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
+        command = expect(data, (0x40, 0x42), cls.__name__)
+        return build(cls, data, command=command, **cls._fields(data, cls.__name__))
+
+
+_SAVE_ADDRESS = bytes([0x05, 0xFA])  # spec §4.29: request 44 05 FA, reply 44 05 flag
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SaveSettings(LkCommand):
+    """0x44, V2.36 layout: save every written setting to ROM, ``44 05 FA 00 ..`` (spec §4.29).
+
+    The drive needs a power cycle (or the restart command [001] mentions but does not document).
+    """
+
+    CODE: ClassVar[int] = 0x44
+    REVISIONS = V2_36_ONLY
+
+    def encode(self) -> bytes:
+        return payload(self.CODE, (1, _SAVE_ADDRESS))
+
+    @classmethod
+    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
+        expect(data, cls.CODE, cls.__name__)
+        if data[1:3] != _SAVE_ADDRESS:
+            raise ProtocolError(f"{cls.__name__}: DATA[1..2] must be 05 FA", raw=data, command=data[0])
+        return cls()
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SaveSettingsReply(LkReply):
+    """0x44 reply, V2.36 layout ``44 05 flag``: 0x01 = saved, 0x00 = failed (spec §4.29, §7.7).
+
+    DATA[7] is lost in the OCR text (A14); like every other NULL byte it is ignored on decode.
+
+    Attributes:
+        result: SUCCESS or FAILURE.
+    """
+
+    CODE: ClassVar[int] = 0x44
+    REVISIONS = V2_36_ONLY
+    result: ParamResult
+
+    def __post_init__(self) -> None:
+        check_member("result", self.result, ParamResult)
+
+    @property
+    def ok(self) -> bool:
+        return self.result is ParamResult.SUCCESS
+
+    def encode(self) -> bytes:
+        return payload(self.CODE, (1, b"\x05" + result_byte(SAVE_RESULT, self.result)))
+
+    @classmethod
+    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
+        expect(data, cls.CODE, cls.__name__)
+        if data[1] != 0x05:
+            raise ProtocolError(f"{cls.__name__}: DATA[1] must be 0x05", raw=data, command=data[0])
+        return build(cls, data, result=decode_result(SAVE_RESULT, data, what=cls.__name__))

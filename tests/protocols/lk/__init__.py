@@ -1,0 +1,1 @@
+"""Tests of the LK family (servobus.protocols.lk)."""
