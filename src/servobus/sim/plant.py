@@ -214,7 +214,12 @@ class Plant:
             torque = control.kp * error + control.kd * speed_error + control.t_ff_nm
             return _clamp(torque / p.torque_constant_nm_per_a, p.max_current_a)
         if isinstance(control, PositionControl):
-            limit = min(control.max_speed_dps or p.max_speed_dps, p.max_speed_dps)
+            # a limit of 0 means "do not move" (hollow V = 0), not "no limit"
+            limit = (
+                p.max_speed_dps
+                if control.max_speed_dps is None
+                else min(control.max_speed_dps, p.max_speed_dps)
+            )
             wanted = 2 * math.pi * p.position_bandwidth_hz * (control.position_deg - self.position_deg)
             return self._speed_loop(_clamp(wanted, limit), control.max_current_a, dt)
         return self._speed_loop(control.speed_dps, control.max_current_a, dt)

@@ -1,0 +1,445 @@
+"""The simulated hollow-series motor: classic CAN (normal/extended) or CAN FD, one reply per request.
+
+Protocol model (hollow.md §3-§7, §13) on top of the shared codec, plant model apart:
+
+* The motor accepts only frames whose identifier equals its ``motor_id`` and whose kind its
+  interface takes: classic frames when not ``fd_enabled``; 16-byte CAN FD frames (and the PI
+  multiplier frames, classic or FD, A17) when ``fd_enabled``. Everything else is ignored, as a real
+  motor does (§3 "pure slave"), and counted in :attr:`HollowMotor.counters`.
+* Every accepted frame is answered once (A37), ``turnaround_s`` after it was received, on the host
+  id: 6 bytes in normal mode, 8 in extended mode, 16 FD bytes in CAN FD mode. The values are the
+  plant's measurements when the request was processed (§4.4: "reported values are always real-time
+  measurements").
+
+Mode -> plant mapping (§4.4 "meaning of the fields in each mode"; CAN FD by analogy, §7.2):
+
+==========  =================================================================================
+torque      :class:`~servobus.sim.plant.CurrentControl` at T (the target current)
+speed       :class:`~servobus.sim.plant.SpeedControl` at V, current limited to \\|T\\|
+position    :class:`~servobus.sim.plant.PositionControl` to P (from the zero), speed limited to
+            \\|V\\|, current limited to \\|T\\|: the manual's "position-velocity-torque triple closed
+            loop" is a cascade with those two limits. KP/KD are stored (:attr:`HollowMotor.setpoint`)
+            but do not shape the response: the plant's position loop has one bandwidth
+            (``PlantParams.position_bandwidth_hz``) and no per-command gains.
+stopped     :class:`~servobus.sim.plant.Off` (FD / Run Cmd 0: "no output power, free")
+==========  =================================================================================
+
+Start without a setpoint: the manual says the motion is undefined (§4.1). The simulator chooses
+the safe reading: the motor is enabled but commands zero current (it holds no position and moves
+only if something else moves it) and counts ``start_without_setpoint``. The exception is the one
+the manual defines: FC in extended position mode locks at the present position (§5.2), with the
+last setpoint's limits or, if there is none, the model's full scales.
+
+Faults: the hollow replies carry no error or fault field (§4.5, §5.3, §7.3; the manual describes
+no error state at all), so there is nothing to inject beyond :meth:`HollowMotor.reboot` and
+:attr:`HollowMotor.unresponsive`.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+from collections import Counter
+from dataclasses import dataclass
+
+from servobus.errors import ProtocolError
+from servobus.frame import Frame
+from servobus.protocols.hollow import (
+    DEFAULT_HOST_ID,
+    DEFAULT_MODEL,
+    CanMode,
+    CanModeSwitch,
+    ControlMode,
+    ExtendedReply,
+    FdCommand,
+    FdReply,
+    HollowCommand,
+    HollowModel,
+    HollowReply,
+    IncrementalSetpoint,
+    NormalReply,
+    PiGain,
+    PiMultiplier,
+    SelectMode,
+    Setpoint,
+    SetZero,
+    Start,
+    Stop,
+    decode_request_frame,
+    reply_frame,
+)
+from servobus.protocols.hollow.ids import check_host_id, check_motor_id
+from servobus.protocols.hollow.replies import EXTENDED_POSITION_LIMITS_DEG
+from servobus.sim.device import Emission
+from servobus.sim.plant import (
+    Control,
+    CurrentControl,
+    Off,
+    Plant,
+    PlantParams,
+    PositionControl,
+    SpeedControl,
+)
+
+__all__ = [
+    "DEFAULT_FD_CURRENT_A_PER_COUNT",
+    "DEFAULT_TURNAROUND_S",
+    "HOLLOW_PLANT_PARAMS",
+    "HeldSetpoint",
+    "HollowMotor",
+]
+
+# §3 / A13: "from receipt of commands to the answer the module requires 500 µs"; §3's simulator
+# advice: "a fixed 500 µs is a good default".
+DEFAULT_TURNAROUND_S = 500e-6
+# A27: the CAN FD current field is a raw int16 with no stated unit. The simulator reads it as
+# milliamperes [I]: ±32.767 A covers every hollow model, and the one printed reply (H17, raw 8 at
+# rest) is then a plausible idle current.
+DEFAULT_FD_CURRENT_A_PER_COUNT = 0.001
+# A small direct-drive hollow joint motor [I]: no gear (the manual's zero is single-turn and
+# "gearbox offsets are the user's responsibility", §2.5), a 4 A current limit matching the
+# default model's current full scale (A8), a light rotor.
+HOLLOW_PLANT_PARAMS = PlantParams(
+    inertia_kgm2=2e-4,
+    viscous_friction_nm_s_per_rad=0.002,
+    torque_constant_nm_per_a=0.25,
+    gear_ratio=1.0,
+    max_current_a=4.0,
+    max_speed_dps=3600.0,
+    max_acceleration_dps2=36000.0,
+    position_bandwidth_hz=8.0,
+    winding_resistance_ohm=1.0,
+    thermal_resistance_c_per_w=3.0,
+    thermal_capacity_j_per_c=30.0,
+)
+
+_DPS_PER_RAD_S = 180.0 / math.pi
+_DPS_PER_RPM = 6.0
+_TEMPERATURE_LIMITS_C = (-125, 125)  # §7.3
+_INT16 = (-(1 << 15), (1 << 15) - 1)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class HeldSetpoint:
+    """The motor's last setpoint, in the plant's units (one form for normal, extended and FD frames).
+
+    Attributes:
+        target_deg: position target from the mechanical zero: absolute (normal mode, CAN FD, A29)
+            or the sum of the increments (extended mode, A11).
+        speed_dps: V / Vel: target speed (speed mode) or speed limit (position mode).
+        current_a: T / Cur: target current (torque mode) or current limit (speed, position).
+        kp, kd: the position gains as received (CAN 0..4095, CAN FD 0..255, A16).
+    """
+
+    target_deg: float
+    speed_dps: float
+    current_a: float
+    kp: int
+    kd: int
+
+
+class HollowMotor:
+    """One hollow-series motor on a CAN or CAN FD bus (implements :class:`~servobus.sim.device.Device`).
+
+    Args:
+        motor_id: console *g*: the CAN id it accepts (0..100).
+        host_id: console *h*: the id it replies on (default 100).
+        model: the scales of the motor model (speed/current full scales, Pmax, pole pairs).
+        fd_enabled: console *f*: CAN FD (True) or classic CAN (False), never both (§1).
+        control_mode: console *p*: the control mode at power-up (§2.3).
+        plant_params: the mechanics (default :data:`HOLLOW_PLANT_PARAMS`).
+        turnaround_s: delay from a request's reception to its reply being ready (≤ 500 µs, §3).
+        turnaround_jitter_s: if > 0, each reply is ready a seeded-random 0..jitter earlier than
+            ``turnaround_s`` (a real firmware's loop phase), so the delay stays within the manual's
+            bound when ``turnaround_s`` is 500 µs.
+        seed: seed of the jitter generator (same seed, same delays).
+        fd_current_a_per_count: amperes per count of the CAN FD Cur field (unit not stated, A27).
+        console_zero_deg: the console-stored zero, in the plant's angle frame (§2.5).
+        name: the device name on its bus (default ``hollow<id>``).
+        now_s: simulated time of power-up.
+
+    Raises:
+        ValueError: an id out of range, or a negative turnaround / jitter larger than it.
+    """
+
+    def __init__(
+        self,
+        motor_id: int,
+        *,
+        host_id: int = DEFAULT_HOST_ID,
+        model: HollowModel = DEFAULT_MODEL,
+        fd_enabled: bool = False,
+        control_mode: ControlMode = ControlMode.POSITION,
+        plant_params: PlantParams | None = None,
+        turnaround_s: float = DEFAULT_TURNAROUND_S,
+        turnaround_jitter_s: float = 0.0,
+        seed: int = 0,
+        fd_current_a_per_count: float = DEFAULT_FD_CURRENT_A_PER_COUNT,
+        console_zero_deg: float = 0.0,
+        name: str | None = None,
+        now_s: float = 0.0,
+    ) -> None:
+        self.motor_id = check_motor_id(motor_id)
+        self.host_id = check_host_id(host_id)
+        if not 0.0 <= turnaround_jitter_s <= turnaround_s:
+            raise ValueError(
+                f"need 0 <= turnaround_jitter_s <= turnaround_s "
+                f"(turnaround_s={turnaround_s}, turnaround_jitter_s={turnaround_jitter_s})"
+            )
+        if not fd_current_a_per_count > 0:
+            raise ValueError(f"fd_current_a_per_count={fd_current_a_per_count!r} must be > 0")
+        self.model = model
+        self.fd_enabled = fd_enabled
+        self.power_up_mode = ControlMode(control_mode)
+        self.turnaround_s = turnaround_s
+        self.turnaround_jitter_s = turnaround_jitter_s
+        self.fd_current_a_per_count = fd_current_a_per_count
+        self.console_zero_deg = console_zero_deg
+        self._name = name or f"hollow{motor_id}"
+        self._rng = random.Random(seed)
+        self.plant = Plant(plant_params or HOLLOW_PLANT_PARAMS, now_s=now_s)
+        # A fault knob of the simulator, not motor RAM: a reboot leaves it as it is.
+        self.unresponsive = False
+        self.counters: Counter[str] = Counter()
+        # RAM state (§13), set by _power_up.
+        self.enabled = False
+        self.can_mode = CanMode.NORMAL
+        self.ctrl_mode = self.power_up_mode
+        self.setpoint: HeldSetpoint | None = None
+        self.zero_offset_deg = 0.0
+        self.pi_multipliers: dict[PiGain, float] = {}
+        self._power_up()
+
+    # ---- Device protocol ----
+
+    @property
+    def name(self) -> str:
+        """The device name on its bus."""
+        return self._name
+
+    def receive(self, frame: Frame, now_s: float) -> list[Emission]:
+        """A frame seen on the bus at ``now_s``: apply it if it is ours, and answer once.
+
+        Args:
+            frame: the frame, as every node on the wire sees it.
+            now_s: when its transmission ended.
+
+        Returns:
+            One reply on the host id, or nothing (not ours, not decodable, or unresponsive).
+        """
+        self.plant.advance(now_s)
+        self.counters["received"] += 1
+        if frame.arbitration_id != self.motor_id:
+            self.counters["ignored_id"] += 1
+            return []
+        if not self._right_kind(frame):
+            self.counters["ignored_kind"] += 1
+            return []
+        try:
+            command = decode_request_frame(frame, model=self.model, can_mode=self.can_mode)
+        except ProtocolError:
+            self.counters["undecodable"] += 1
+            return []
+        if isinstance(command, CanModeSwitch) and self.fd_enabled:
+            # §5: normal/extended are classic-CAN modes; a CAN FD motor has nothing to switch.
+            self.counters["ignored_kind"] += 1
+            return []
+        self.counters["accepted"] += 1
+        self._apply(command)
+        self.plant.set_control(self._control())
+        if self.unresponsive:
+            self.counters["unanswered"] += 1
+            return []
+        self.counters["replied"] += 1
+        return [Emission(now_s + self._turnaround(), reply_frame(self.host_id, self.status_reply()))]
+
+    def poll(self, now_s: float) -> list[Emission]:
+        """Nothing: the motor never transmits on its own (§3, "pure slave")."""
+        self.plant.advance(now_s)
+        return []
+
+    def next_deadline_s(self) -> float | None:
+        """None: no spontaneous frames."""
+        return None
+
+    # ---- faults and power ----
+
+    def reboot(self, now_s: float) -> None:
+        """A power cycle at ``now_s``: RAM state returns to its power-up values.
+
+        Extended mode, the CAN-set zero, mode switches and PI multipliers are all lost (§2.3, §3,
+        §4.1, §6); the motor is stopped and has no setpoint. The shaft keeps its physical angle and
+        speed; the multi-turn count is lost, so the reported position restarts as the single-turn
+        angle from the console zero, in [-180°, 180°) [I]. A reply already handed to the bus is in
+        the transceiver and still goes out.
+        """
+        self.plant.advance(now_s)
+        self.counters["reboots"] += 1
+        self._power_up()
+
+    def _power_up(self) -> None:
+        self.enabled = False
+        self.can_mode = CanMode.NORMAL
+        self.ctrl_mode = self.power_up_mode
+        self.setpoint = None
+        self.pi_multipliers = dict.fromkeys(PiGain, 1.0)
+        single_turn = (self.plant.position_deg - self.console_zero_deg + 180.0) % 360.0 - 180.0
+        self.zero_offset_deg = self.plant.position_deg - single_turn
+        self.plant.set_control(Off())
+
+    # ---- what the motor reports ----
+
+    @property
+    def position_deg(self) -> float:
+        """Multi-turn position from the mechanical zero (what the replies encode)."""
+        return self.plant.position_deg - self.zero_offset_deg
+
+    def status_reply(self) -> HollowReply:
+        """The reply the motor would send now, in the format of its active interface and mode."""
+        plant = self.plant
+        if self.fd_enabled:
+            return FdReply(
+                position_deg=self.position_deg,
+                velocity_rpm=plant.speed_dps / _DPS_PER_RPM,
+                current_raw=round(_clamp(plant.current_a / self.fd_current_a_per_count, *_INT16)),
+                mode=self.ctrl_mode,
+                running=self.enabled,
+                temperature_c=round(_clamp(plant.temperature_c, *_TEMPERATURE_LIMITS_C)),
+                slave_id=self.motor_id,
+                model=self.model,
+            )
+        model = self.model
+        speed = _clamp(
+            plant.speed_dps / _DPS_PER_RAD_S, -model.speed_full_scale_rad_s, model.speed_full_scale_rad_s
+        )
+        current = _clamp(plant.current_a, -model.current_full_scale_a, model.current_full_scale_a)
+        if self.can_mode is CanMode.NORMAL:
+            # A34: outside ±Pmax the code sticks at 0x0000 / 0xFFFF.
+            full = model.position_full_scale_deg
+            return NormalReply(
+                motor_id=self.motor_id,
+                position_deg=_clamp(self.position_deg, -full, full),
+                speed_rad_s=speed,
+                current_a=current,
+                model=model,
+            )
+        return ExtendedReply(
+            motor_id=self.motor_id,
+            position_deg=_clamp(self.position_deg, *EXTENDED_POSITION_LIMITS_DEG),
+            speed_rad_s=speed,
+            current_a=current,
+            model=model,
+        )
+
+    # ---- protocol model ----
+
+    def _right_kind(self, frame: Frame) -> bool:
+        if frame.is_extended_id:
+            # §6 / A17: PI frames come classic or FD in CAN FD mode; classic CAN controllers
+            # cannot receive FD frames at all.
+            return self.fd_enabled or not frame.is_fd
+        return frame.is_fd == self.fd_enabled
+
+    def _apply(self, command: HollowCommand) -> None:
+        if isinstance(command, Start):
+            self._start()
+        elif isinstance(command, Stop):
+            self.enabled = False
+        elif isinstance(command, SelectMode):
+            self.ctrl_mode = command.mode  # temporary, not persisted (§4.1)
+        elif isinstance(command, SetZero):
+            self._set_zero()
+        elif isinstance(command, Setpoint):
+            self.setpoint = HeldSetpoint(
+                target_deg=command.position_deg,
+                speed_dps=command.speed_rad_s * _DPS_PER_RAD_S,
+                current_a=command.current_a,
+                kp=command.kp,
+                kd=command.kd,
+            )
+        elif isinstance(command, IncrementalSetpoint):
+            # §5.2 / A11: each frame moves the target once; the first one starts from where the
+            # motor is.
+            base = self.setpoint.target_deg if self.setpoint is not None else self.position_deg
+            self.setpoint = HeldSetpoint(
+                target_deg=base + command.step_deg,
+                speed_dps=command.speed_rad_s * _DPS_PER_RAD_S,
+                current_a=command.current_a,
+                kp=command.kp,
+                kd=command.kd,
+            )
+        elif isinstance(command, CanModeSwitch):
+            self.can_mode = command.mode  # until power-off (§5.1)
+        elif isinstance(command, PiMultiplier):
+            # §6: stored and reported by the simulator; the plant's loops have no gain knob.
+            self.pi_multipliers[command.gain] = command.multiplier
+        elif isinstance(command, FdCommand):
+            self._apply_fd(command)
+
+    def _start(self) -> None:
+        self.enabled = True
+        if self.can_mode is CanMode.EXTENDED and self.ctrl_mode is ControlMode.POSITION:
+            # §5.2 [M]: FC in extended position mode locks at the present position.
+            held = self.setpoint
+            self.setpoint = HeldSetpoint(
+                target_deg=self.position_deg,
+                speed_dps=held.speed_dps if held else self.model.speed_full_scale_rad_s * _DPS_PER_RAD_S,
+                current_a=held.current_a if held else self.model.current_full_scale_a,
+                kp=held.kp if held else 0,
+                kd=held.kd if held else 0,
+            )
+        elif self.setpoint is None:
+            self.counters["start_without_setpoint"] += 1
+
+    def _set_zero(self) -> None:
+        # §4.1 / A33: only while not enabled; not persisted. The multi-turn count is cleared with it.
+        if self.enabled:
+            self.counters["zero_refused"] += 1
+            return
+        self.zero_offset_deg = self.plant.position_deg
+
+    def _apply_fd(self, command: FdCommand) -> None:
+        # §7.2 / §13: Mode Sel, Run Cmd, Kp, Kd, then Zero, which acts only if the motor is not
+        # running once this frame's Run Cmd is applied ("only while not enabled").
+        self.ctrl_mode = command.mode
+        self.enabled = command.run
+        self.setpoint = HeldSetpoint(
+            target_deg=command.position_deg,
+            speed_dps=command.velocity_rpm * _DPS_PER_RPM,
+            current_a=command.current_raw * self.fd_current_a_per_count,
+            kp=command.kp,
+            kd=command.kd,
+        )
+        if command.zero:
+            self._set_zero()
+
+    def _control(self) -> Control:
+        """The plant control for the present state (the mapping in the module docstring)."""
+        held = self.setpoint
+        if not self.enabled:
+            return Off()
+        if held is None:
+            return CurrentControl(current_a=0.0)  # start without a setpoint: the safe choice
+        if self.ctrl_mode is ControlMode.TORQUE:
+            return CurrentControl(current_a=held.current_a)
+        if self.ctrl_mode is ControlMode.VELOCITY:
+            return SpeedControl(speed_dps=held.speed_dps, max_current_a=abs(held.current_a))
+        return PositionControl(
+            position_deg=held.target_deg + self.zero_offset_deg,
+            max_speed_dps=abs(held.speed_dps),  # V = 0 holds still (§4.4)
+            max_current_a=abs(held.current_a),
+        )
+
+    def _turnaround(self) -> float:
+        if self.turnaround_jitter_s == 0.0:
+            return self.turnaround_s
+        return self.turnaround_s - self._rng.uniform(0.0, self.turnaround_jitter_s)
+
+    def __repr__(self) -> str:
+        kind = "fd" if self.fd_enabled else self.can_mode.name.lower()
+        state = "enabled" if self.enabled else "stopped"
+        return f"HollowMotor(id={self.motor_id}, {kind}, {self.ctrl_mode.name.lower()}, {state})"
+
+
+def _clamp(value: float, lo: float, hi: float) -> float:
+    return max(lo, min(hi, value))
