@@ -1,0 +1,74 @@
+"""``python -m servobus.sim``: the first line is a path any tool can open, and motors answer there."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from collections.abc import Callable, Iterator, Sequence
+
+import can
+import can.interfaces.slcan
+import pytest
+import serial
+
+from servobus.protocols import hollow
+
+Start = Callable[[Sequence[str]], str]  # starts the simulator with these arguments, returns its path
+
+
+@pytest.fixture
+def simulator() -> Iterator[Start]:
+    processes: list[subprocess.Popen[str]] = []
+
+    def start(args: Sequence[str]) -> str:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "servobus.sim", *args],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        processes.append(process)
+        assert process.stdout is not None
+        path = process.stdout.readline().strip()
+        assert path.startswith("/"), (
+            f"first line was {path!r}; stderr: {process.stderr.read() if not path else ''}"
+        )
+        return path
+
+    yield start
+    for process in processes:
+        process.terminate()
+        process.wait(timeout=5)
+
+
+def test_slcan_hollow_motors_answer_python_can(simulator: Start) -> None:
+    path = simulator(["--family", "hollow", "--motors", "4", "--slcan"])
+    bus = can.Bus(interface="slcan", channel=path, bitrate=1_000_000, sleep_after_open=0)
+    try:
+        for motor_id in (1, 4):
+            frame = hollow.request_frame(motor_id, hollow.Start())
+            bus.send(can.Message(arbitration_id=frame.arbitration_id, data=frame.data, is_extended_id=False))
+            reply = bus.recv(timeout=2.0)
+            assert reply is not None and reply.arbitration_id == hollow.DEFAULT_HOST_ID
+            decoded = hollow.decode_reply(reply.arbitration_id, bytes(reply.data))
+            assert isinstance(decoded, hollow.NormalReply) and decoded.motor_id == motor_id
+    finally:
+        bus.shutdown()
+
+
+def test_rs485_hollow_converter_answers_a_serial_port(simulator: Start) -> None:
+    path = simulator(["--family", "hollow", "--motors", "2", "--rs485"])
+    with serial.Serial(path, 1_000_000, timeout=2.0) as port:
+        port.write(hollow.TransparentRequest(motor_id=2).encode())
+        reply = hollow.TransparentReply.decode(port.read(21))
+    assert reply.reply.slave_id == 2
+
+
+def test_bad_arguments_are_refused() -> None:
+    result = subprocess.run(
+        [sys.executable, "-m", "servobus.sim", "--family", "hollow", "--motors", "40"],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert result.returncode == 2 and "--motors 40 is outside 1..32" in result.stderr
