@@ -1,0 +1,528 @@
+"""MyActuator requests other than closed-loop control: parameters, reads, zeroing, system, ids.
+
+One frozen, slotted, keyword-only dataclass per request of myactuator-v4.md §4 (closed-loop control
+commands are in :mod:`.commands_control`, motion mode in :mod:`.motion`). Each validates its fields on
+construction (ValueError naming field, value and limits), encodes to the 8 data bytes with ``encode()``
+(the same bytes on CAN and inside an RS485 frame) and decodes them with ``decode(data)``.
+
+``encode()`` knows nothing of revisions: a V4.3-only command still encodes. Sending it to a V4.4 motor
+is refused by ``codec.encode_request`` / ``codec.check_available``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar, Self
+
+from servobus.errors import ProtocolError
+from servobus.protocols._fields import IntField, ScaledField, check_range, round_half_away
+from servobus.protocols._message import Command
+from servobus.protocols.myactuator._layout import (
+    BoolField,
+    EnumField,
+    Fixed,
+    Float32Field,
+    StepField,
+    check_payload,
+    construct,
+)
+from servobus.protocols.myactuator.enums import (
+    BAUD_RATE_INDEXES,
+    FUNCTION_VALUES,
+    AccelIndex,
+    BaudRateSetting,
+    FunctionIndex,
+    PidIndex,
+    StreamableCommand,
+)
+from servobus.protocols.myactuator.revision import ONLY_V4_3, ONLY_V4_4, Revision, revision_names
+
+__all__ = [
+    "ActiveReply",
+    "BrakeLock",
+    "BrakeRelease",
+    "FunctionControl",
+    "MotorShutdown",
+    "MotorStop",
+    "MyActuatorCommand",
+    "ReadAcceleration",
+    "ReadCanId",
+    "ReadEncoderOffset",
+    "ReadEncoderPosition",
+    "ReadEncoderRaw",
+    "ReadModel",
+    "ReadModelPart",
+    "ReadMultiTurnAngle",
+    "ReadPid",
+    "ReadRunMode",
+    "ReadRunTime",
+    "ReadSingleTurnAngle",
+    "ReadSingleTurnEncoder",
+    "ReadStatus1",
+    "ReadStatus2",
+    "ReadStatus3",
+    "ReadVersionDate",
+    "SetBaudRate",
+    "SetCanId",
+    "SetCommTimeout",
+    "SystemReset",
+    "WriteAcceleration",
+    "WriteCurrentPositionAsZero",
+    "WriteEncoderZero",
+    "WritePidRam",
+    "WritePidRom",
+]
+
+
+class MyActuatorCommand(Fixed, Command):
+    """A MyActuator request with the standard 8-byte layout."""
+
+    __slots__ = ()
+
+
+# ---- 0x20 function control (§4.37) ----
+
+_FUNCTION_INDEX = EnumField("index", 1, FunctionIndex)
+_UINT32 = IntField("value", 4)
+_INT32 = IntField("value", 4, signed=True)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class FunctionControl(MyActuatorCommand):
+    """0x20 function control: ``index`` selects the function, ``value`` is its 32-bit argument.
+
+    What each index accepts is :data:`enums.FUNCTION_VALUES` (1: 0; 2, 3, 4, 8: 0/1; 5: motor id 1..32;
+    6, 7: raw int32, sent signed). Index 8 (error auto-recovery) exists only in V4.4. The reply is an
+    echo. The classmethods build each function by name.
+    """
+
+    CODE: ClassVar[int] = 0x20
+    TITLE: ClassVar[str] = "function control"
+    FIELDS = ((1, _FUNCTION_INDEX),)
+    index: FunctionIndex
+    value: int = 0
+
+    def __post_init__(self) -> None:
+        Fixed.__post_init__(self)
+        meaning = FUNCTION_VALUES[self.index]
+        if isinstance(self.value, bool) or not isinstance(self.value, int):
+            raise ValueError(f"value={self.value!r} is not an integer")
+        # Every per-index range lies inside the 32-bit field, so this also bounds the encoding.
+        check_range(f"value (index {self.index.name})", self.value, meaning.lo, meaning.hi)
+
+    def encode(self) -> bytes:
+        signed = FUNCTION_VALUES[self.index].signed
+        return Fixed.encode(self)[:4] + self.value.to_bytes(4, "little", signed=signed)
+
+    @classmethod
+    def decode(cls, data: bytes) -> Self:
+        check_payload(data, cls.CODE, what=cls.__name__)
+        try:
+            index = _FUNCTION_INDEX.decode(data, 1)
+        except ValueError as exc:
+            raise ProtocolError(f"{cls.__name__}: {exc}", raw=data, command=data[0]) from None
+        spec = _INT32 if FUNCTION_VALUES[FunctionIndex(index)].signed else _UINT32
+        return construct(cls, data, {"index": index, "value": spec.decode(data, 4)})
+
+    def unavailable_reason(self, revision: Revision) -> str | None:
+        revisions = FUNCTION_VALUES[self.index].revisions
+        if revision in revisions:
+            return None
+        return (
+            f"0x20 function control index {int(self.index)} ({self.index.name}) exists only in "
+            f"{revision_names(revisions)} (revision {revision.name} given)"
+        )
+
+    @property
+    def meaning(self) -> str:
+        """What ``value`` means for this index (§4.37)."""
+        return FUNCTION_VALUES[self.index].meaning
+
+    @classmethod
+    def clear_multi_turn(cls) -> Self:
+        """Index 1: clear the multi-turn value, update the zero and save (after restart)."""
+        return cls(index=FunctionIndex.CLEAR_MULTI_TURN, value=0)
+
+    @classmethod
+    def can_id_filter(cls, enabled: bool) -> Self:
+        """Index 2: CAN-ID filter on/off (off is needed for 0x280 broadcasts). Saved in FLASH."""
+        return cls(index=FunctionIndex.CAN_ID_FILTER, value=int(enabled))
+
+    @classmethod
+    def error_reporting(cls, enabled: bool) -> Self:
+        """Index 3: send 0x9A every 100 ms while an error is present."""
+        return cls(index=FunctionIndex.ERROR_REPORTING, value=int(enabled))
+
+    @classmethod
+    def save_multi_turn(cls, enabled: bool) -> Self:
+        """Index 4: keep the multi-turn value over power-off (off: single-turn mode)."""
+        return cls(index=FunctionIndex.SAVE_MULTI_TURN, value=int(enabled))
+
+    @classmethod
+    def set_can_id(cls, motor_id: int) -> Self:
+        """Index 5: new CAN id 1..32 (ROM, after reboot)."""
+        return cls(index=FunctionIndex.SET_CAN_ID, value=motor_id)
+
+    @classmethod
+    def max_positive_angle(cls, raw: int) -> Self:
+        """Index 6: maximum positive angle, raw int32 (unit not stated; 0.01° likely, §9 item 17)."""
+        return cls(index=FunctionIndex.MAX_POSITIVE_ANGLE, value=raw)
+
+    @classmethod
+    def max_negative_angle(cls, raw: int) -> Self:
+        """Index 7: maximum negative angle, raw int32 (as index 6)."""
+        return cls(index=FunctionIndex.MAX_NEGATIVE_ANGLE, value=raw)
+
+    @classmethod
+    def error_auto_recovery(cls, enabled: bool) -> Self:
+        """Index 8 (V4.4): over/under-voltage and over-speed errors clear by themselves."""
+        return cls(index=FunctionIndex.ERROR_AUTO_RECOVERY, value=int(enabled))
+
+
+# ---- 0x30..0x32 PID parameters (§4.1-4.3) ----
+
+_PID_INDEX = EnumField("index", 1, PidIndex)
+_PID_VALUE = Float32Field("value")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReadPid(MyActuatorCommand):
+    """0x30 read one PID parameter. Reply: ``PidReply``."""
+
+    CODE: ClassVar[int] = 0x30
+    TITLE: ClassVar[str] = "read PID parameter"
+    FIELDS = ((1, _PID_INDEX),)
+    index: PidIndex
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class WritePidRam(MyActuatorCommand):
+    """0x31 write one PID parameter (float32) to RAM, lost at power-off. Reply: echo."""
+
+    CODE: ClassVar[int] = 0x31
+    TITLE: ClassVar[str] = "write PID parameter to RAM"
+    FIELDS = ((1, _PID_INDEX), (4, _PID_VALUE))
+    index: PidIndex
+    value: float
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class WritePidRom(MyActuatorCommand):
+    """0x32 write one PID parameter (float32) to ROM. [000]: saved only while the motor is disabled.
+    Reply: echo."""
+
+    CODE: ClassVar[int] = 0x32
+    TITLE: ClassVar[str] = "write PID parameter to ROM"
+    FIELDS = ((1, _PID_INDEX), (4, _PID_VALUE))
+    index: PidIndex
+    value: float
+
+
+# ---- 0x42/0x43 acceleration (§4.4, §4.5) ----
+
+_ACCEL_INDEX = EnumField("index", 1, AccelIndex)
+# §9 item 19: sent as uint32; the manuals' range is 100..60000, and 0 has a documented meaning (0xA2/0xA4
+# "acceleration = 0": no planning), so 0 is accepted too. 1..99 are refused.
+_ACCEL_WRITE = ScaledField("acceleration_dps_s", size=4, signed=False, counts_per_unit=1, lo=0, hi=60000)
+ACCELERATION_MIN_DPS_S = 100
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReadAcceleration(MyActuatorCommand):
+    """0x42 read one acceleration value. Reply: ``AccelerationReply``."""
+
+    CODE: ClassVar[int] = 0x42
+    TITLE: ClassVar[str] = "read acceleration"
+    FIELDS = ((1, _ACCEL_INDEX),)
+    index: AccelIndex
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class WriteAcceleration(MyActuatorCommand):
+    """0x43 write one acceleration (1 dps/s) to RAM and ROM: 0 or 100..60000. Reply: echo."""
+
+    CODE: ClassVar[int] = 0x43
+    TITLE: ClassVar[str] = "write acceleration"
+    FIELDS = ((1, _ACCEL_INDEX), (4, _ACCEL_WRITE))
+    index: AccelIndex
+    acceleration_dps_s: float
+
+    def __post_init__(self) -> None:
+        Fixed.__post_init__(self)
+        if 0 < _ACCEL_WRITE.to_code(self.acceleration_dps_s) < ACCELERATION_MIN_DPS_S:
+            raise ValueError(
+                f"acceleration_dps_s={self.acceleration_dps_s!r} is outside [{ACCELERATION_MIN_DPS_S}, "
+                f"{_ACCEL_WRITE.limits[1]!r}] (0 is also accepted: no planning)"
+            )
+
+
+# ---- commands without arguments ----
+
+
+class _NoArgs(MyActuatorCommand):
+    """A request whose DATA[1..7] are all NULL."""
+
+    __slots__ = ()
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReadEncoderPosition(_NoArgs):
+    """0x60 read the multi-turn encoder position (raw - zero offset). Reply: ``EncoderPositionReply``."""
+
+    CODE: ClassVar[int] = 0x60
+    TITLE: ClassVar[str] = "read multi-turn encoder position"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReadEncoderRaw(_NoArgs):
+    """0x61 read the raw multi-turn encoder position. Reply: ``EncoderRawReply``."""
+
+    CODE: ClassVar[int] = 0x61
+    TITLE: ClassVar[str] = "read multi-turn encoder raw position"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReadEncoderOffset(_NoArgs):
+    """0x62 read the multi-turn encoder zero offset. Reply: ``EncoderOffsetReply``."""
+
+    CODE: ClassVar[int] = 0x62
+    TITLE: ClassVar[str] = "read multi-turn encoder zero offset"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class WriteEncoderZero(MyActuatorCommand):
+    """0x63 write an encoder value (int32 counts) to ROM as the zero; effective after restart. Reply:
+    echo. (§9 item 11: the manuals' ``>>8`` for DATA[6..7] is a typo; the value is int32 LE.)"""
+
+    CODE: ClassVar[int] = 0x63
+    TITLE: ClassVar[str] = "write encoder value to ROM as zero"
+    FIELDS = ((4, IntField("offset_counts", 4, signed=True)),)
+    offset_counts: int
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class WriteCurrentPositionAsZero(_NoArgs):
+    """0x64 write the current position to ROM as the zero (effective after 0x76). Reply:
+    ``ZeroOffsetReply``."""
+
+    CODE: ClassVar[int] = 0x64
+    TITLE: ClassVar[str] = "write current position to ROM as zero"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReadRunMode(_NoArgs):
+    """0x70 read the operating mode. Reply: ``RunModeReply``."""
+
+    CODE: ClassVar[int] = 0x70
+    TITLE: ClassVar[str] = "read operating mode"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SystemReset(_NoArgs):
+    """0x76 reset the system. **No reply**: the program restarts."""
+
+    CODE: ClassVar[int] = 0x76
+    TITLE: ClassVar[str] = "system reset"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class BrakeRelease(_NoArgs):
+    """0x77 open the holding brake. Reply: echo."""
+
+    CODE: ClassVar[int] = 0x77
+    TITLE: ClassVar[str] = "brake release"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class BrakeLock(_NoArgs):
+    """0x78 close the holding brake. Reply: echo."""
+
+    CODE: ClassVar[int] = 0x78
+    TITLE: ClassVar[str] = "brake lock"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class MotorShutdown(_NoArgs):
+    """0x80 motor off: output off, running state cleared. Reply: echo."""
+
+    CODE: ClassVar[int] = 0x80
+    TITLE: ClassVar[str] = "motor shutdown"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class MotorStop(_NoArgs):
+    """0x81 stop and hold; the closed loop stays active. Reply: echo."""
+
+    CODE: ClassVar[int] = 0x81
+    TITLE: ClassVar[str] = "motor stop"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReadSingleTurnEncoder(_NoArgs):
+    """0x90 read the single-turn encoder (V4.3 only; removed in V4.4). Reply: ``SingleTurnEncoderReply``."""
+
+    CODE: ClassVar[int] = 0x90
+    TITLE: ClassVar[str] = "read single-turn encoder"
+    REVISIONS = ONLY_V4_3
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReadMultiTurnAngle(_NoArgs):
+    """0x92 read the multi-turn angle. Reply: ``MultiTurnAngleReply``."""
+
+    CODE: ClassVar[int] = 0x92
+    TITLE: ClassVar[str] = "read multi-turn angle"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReadSingleTurnAngle(_NoArgs):
+    """0x94 read the single-turn angle. The reply layout differs by revision: ``SingleTurnAngleReply``
+    (V4.4, int32 ±180°) or ``CircleAngleReply`` (V4.3, uint16 0..359.99°)."""
+
+    CODE: ClassVar[int] = 0x94
+    TITLE: ClassVar[str] = "read single-turn angle"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReadStatus1(_NoArgs):
+    """0x9A read temperature, brake, voltage and error flags. Reply: ``Status1Reply``."""
+
+    CODE: ClassVar[int] = 0x9A
+    TITLE: ClassVar[str] = "read status 1 and error flags"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReadStatus2(_NoArgs):
+    """0x9C read temperature, torque current, speed, angle. Reply: ``StatusReply`` (R2)."""
+
+    CODE: ClassVar[int] = 0x9C
+    TITLE: ClassVar[str] = "read status 2"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReadStatus3(_NoArgs):
+    """0x9D read temperature and phase currents. Reply: ``Status3Reply``."""
+
+    CODE: ClassVar[int] = 0x9D
+    TITLE: ClassVar[str] = "read status 3"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReadRunTime(_NoArgs):
+    """0xB1 read the time since power-up or reset. Reply: ``RunTimeReply``."""
+
+    CODE: ClassVar[int] = 0xB1
+    TITLE: ClassVar[str] = "read system run time"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReadVersionDate(_NoArgs):
+    """0xB2 read the firmware version date. Reply: ``VersionDateReply`` (see
+    ``revision_from_version_date``)."""
+
+    CODE: ClassVar[int] = 0xB2
+    TITLE: ClassVar[str] = "read software version date"
+
+
+# ---- 0x79 CAN-ID / RS485-ID setting (V4.3, §4.38) ----
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SetCanId(MyActuatorCommand):
+    """0x79 write the motor id (V4.3 only). Sent on CAN 0x300 or RS485 ID byte 0xCD: **every motor on the
+    bus takes it**, so connect one motor. DATA[2] = 0 (write), DATA[7] = new id. Reply: echo."""
+
+    CODE: ClassVar[int] = 0x79
+    TITLE: ClassVar[str] = "CAN-ID setting"
+    REVISIONS = ONLY_V4_3
+    CONSTANTS = ((2, 0),)
+    FIELDS = ((7, IntField("motor_id", 1, lo=1, hi=32)),)
+    motor_id: int
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReadCanId(MyActuatorCommand):
+    """0x79 read the motor id (V4.3 only; DATA[2] = 1). Sent like ``SetCanId``. Reply: ``CanIdReply``."""
+
+    CODE: ClassVar[int] = 0x79
+    TITLE: ClassVar[str] = "CAN-ID setting"
+    REVISIONS = ONLY_V4_3
+    CONSTANTS = ((2, 1),)
+
+
+# ---- 0xB3..0xB6 ----
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SetCommTimeout(MyActuatorCommand):
+    """0xB3 communication-interruption protection: without traffic for ``timeout_ms`` the motor cuts its
+    output and locks the brake. 0 disables it. Saved in ROM. Reply: echo (or all zero, §9 item 8)."""
+
+    CODE: ClassVar[int] = 0xB3
+    TITLE: ClassVar[str] = "communication-interruption protection time"
+    FIELDS = ((4, IntField("timeout_ms", 4)),)
+    timeout_ms: int
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SetBaudRate(MyActuatorCommand):
+    """0xB4 set the link rate by raw index (DATA[7]), used from the next power-up. The index meaning
+    differs between the manuals (§4.34); :attr:`setting` gives [002]'s mapping. The reply is garbage at
+    the changing rate: none is decoded."""
+
+    CODE: ClassVar[int] = 0xB4
+    TITLE: ClassVar[str] = "set communication baud rate"
+    FIELDS = ((7, IntField("baud_index", 1)),)
+    baud_index: int
+
+    @property
+    def setting(self) -> BaudRateSetting | None:
+        """The rates per [002]'s mapping, or None where no manual states them (3 and above)."""
+        return BAUD_RATE_INDEXES.get(self.baud_index)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReadModel(_NoArgs):
+    """0xB5 read the motor model, V4.3 form: all-zero request, 7 characters back (``ModelReply``)."""
+
+    CODE: ClassVar[int] = 0xB5
+    TITLE: ClassVar[str] = "read motor model (single frame)"
+    REVISIONS = ONLY_V4_3
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReadModelPart(MyActuatorCommand):
+    """0xB5 read the motor model, V4.4 form: DATA[1] = 0x01, DATA[2] = ``part`` (1: characters 1-5, 2:
+    6-10, 3: 11-15). Reply: ``ModelPartReply``; join the three with ``replies.join_model``."""
+
+    CODE: ClassVar[int] = 0xB5
+    TITLE: ClassVar[str] = "read motor model (indexed)"
+    REVISIONS = ONLY_V4_4
+    CONSTANTS = ((1, 0x01),)
+    FIELDS = ((2, IntField("part", 1, lo=1, hi=3)),)
+    part: int
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ActiveReply(MyActuatorCommand):
+    """0xB6 active reply (CAN only): stream ``command``'s reply every ``interval_ms`` (10 ms/LSB).
+
+    While any stream is on, the motor stops answering requests (§9 item 18): disable it before relying
+    on request/response. The 0xB6 frame itself gets no reply. Not supported on RS485.
+    """
+
+    CODE: ClassVar[int] = 0xB6
+    TITLE: ClassVar[str] = "active reply"
+    FIELDS = (
+        (1, EnumField("command", 1, StreamableCommand)),
+        (2, BoolField("enabled")),
+        (3, StepField("interval_ms", 2, step=10)),
+    )
+    command: StreamableCommand
+    enabled: bool
+    interval_ms: int = 0
+
+    @property
+    def interval_code(self) -> int:
+        """The interval as sent, in 10 ms counts."""
+        return round_half_away(self.interval_ms / 10)
