@@ -9,7 +9,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from servobus.errors import ProtocolError
-from servobus.protocols import FAMILIES, Reply, get_family
+from servobus.protocols import FAMILIES, Family, Reply, get_family
 from servobus.protocols._fields import IntField, ScaledField, check_choice, round_half_away
 from servobus.protocols._message import decode_by_code, require_length
 
@@ -122,3 +122,14 @@ def test_registry_knows_the_three_families_and_names_unknown_ones() -> None:
     assert set(FAMILIES) == {"myactuator", "lk", "hollow"}
     with pytest.raises(ValueError, match="unknown protocol family 'canopen'"):
         get_family("canopen")
+
+
+@pytest.mark.parametrize("name", sorted(FAMILIES))
+def test_every_registered_family_loads(name: str) -> None:
+    family = get_family(name)
+    assert isinstance(family, Family)
+    assert family.name == name
+    assert family.revision(family.default_revision) is family.default_revision
+    assert family.revision(family.default_revision.name.lower()) is family.default_revision
+    with pytest.raises(ValueError, match="has no revision"):
+        family.revision("V0_0")

@@ -279,8 +279,7 @@ def _decode(
     try:
         return cls.decode(data, model=model)
     except ProtocolError as exc:
-        exc.motor_id = motor_id
-        raise
+        raise exc.with_context(motor_id=motor_id) from None
 
 
 def reply_class(command: int, revision: Revision) -> type[LkReply]:

@@ -305,12 +305,6 @@ def _decode_in(
     raise next((e for e in errors if not isinstance(e, LayoutMismatch)), errors[0])
 
 
-def _name_motor(exc: ProtocolError, motor_id: int | None) -> None:
-    """Fill in ``ProtocolError.motor_id`` from the identifier (the message stays as raised)."""
-    if exc.motor_id is None:
-        exc.motor_id = motor_id
-
-
 def _check_revision(revision: Revision) -> None:
     # A wrong revision argument is the caller's bug, not bad bytes: ValueError, as for commands.
     if not isinstance(revision, Revision):
@@ -371,8 +365,7 @@ def decode_request(
     try:
         return _decode_request(kind, can_id, data, revision, motion_scales)
     except ProtocolError as exc:
-        _name_motor(exc, motor_id)
-        raise
+        raise exc.with_context(motor_id=motor_id) from None
 
 
 def _decode_request(
@@ -428,8 +421,7 @@ def decode_reply(
     try:
         return _decode_reply(kind, motor_id, can_id, data, revision, motion_scales)
     except ProtocolError as exc:
-        _name_motor(exc, motor_id)
-        raise
+        raise exc.with_context(motor_id=motor_id) from None
 
 
 def _decode_reply(
