@@ -13,11 +13,11 @@ raw bytes. Never any other exception: a decoder checks lengths and enum values i
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import ClassVar, TypeVar
+from typing import Any, ClassVar, TypeVar
 
 from servobus.errors import ProtocolError
 
-__all__ = ["Command", "Message", "Reply", "decode_by_code", "require_length"]
+__all__ = ["Command", "Message", "Reply", "construct", "decode_by_code", "require_length"]
 
 M = TypeVar("M", bound="Message")
 
@@ -72,3 +72,20 @@ def decode_by_code(table: Mapping[int, Callable[[bytes], M]], data: bytes, *, wh
     if decoder is None:
         raise ProtocolError(f"unknown {what} command byte", raw=data, command=data[0])
     return decoder(data)
+
+
+def construct(
+    cls: type[M], data: bytes, fields: dict[str, Any], *, what: str | None = None, command: int | None = None
+) -> M:
+    """``cls(**fields)`` for values decoded from ``data``; a value its validation refuses is bad bytes.
+
+    A decoded value the typed message rejects (a count above the encoder's width, a reserved enum
+    value) means the bytes do not decode, so the ValueError surfaces as ProtocolError with them.
+
+    Raises:
+        ProtocolError: the constructor refused a value (its message kept, the raw bytes attached).
+    """
+    try:
+        return cls(**fields)
+    except ValueError as exc:
+        raise ProtocolError(f"{what or cls.__name__}: {exc}", raw=data, command=command) from None

@@ -13,6 +13,7 @@ from typing import Any, TypeVar
 
 from servobus.errors import ProtocolError
 from servobus.protocols._fields import check_choice, check_range
+from servobus.protocols._message import Message, construct
 
 __all__ = [
     "FLOAT32_MAX",
@@ -28,7 +29,7 @@ __all__ = [
 ]
 
 E = TypeVar("E", bound=IntEnum)
-T = TypeVar("T")
+M = TypeVar("M", bound=Message)
 
 # The largest finite IEEE-754 single: a bigger multiplier would not fit the PI frames' float32.
 FLOAT32_MAX = struct.unpack(">f", b"\x7f\x7f\xff\xff")[0]
@@ -115,14 +116,9 @@ def require_size(data: bytes, size: int, *, what: str) -> None:
         raise ProtocolError(f"{what}: expected {size} data bytes, got {len(data)}", raw=data)
 
 
-def build(cls: type[T], data: bytes, **fields: Any) -> T:
-    """Construct ``cls(**fields)`` from received bytes; a ValueError becomes a ProtocolError.
+def build(cls: type[M], data: bytes, **fields: Any) -> M:
+    """``cls(**fields)`` from received bytes; a refused value is a ProtocolError (see ``construct``).
 
-    Raises:
-        ProtocolError: the constructor refused a value; the message keeps its wording, and the raw
-            bytes are attached.
+    Hollow frames have no command byte, so the error names none.
     """
-    try:
-        return cls(**fields)
-    except ValueError as exc:
-        raise ProtocolError(f"{cls.__name__}: {exc}", raw=data) from None
+    return construct(cls, data, fields)

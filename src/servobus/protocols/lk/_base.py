@@ -16,7 +16,7 @@ from typing import Any, ClassVar, Self, TypeVar
 
 from servobus.errors import ProtocolError
 from servobus.protocols._fields import IntField, ScaledField
-from servobus.protocols._message import Command, Message, Reply, require_length
+from servobus.protocols._message import Command, Message, Reply, construct, require_length
 from servobus.protocols.lk.model import (
     DEFAULT_MODEL,
     LkModel,
@@ -115,15 +115,8 @@ def expect(data: bytes, codes: int | Collection[int], what: str) -> int:
 
 
 def build(cls: type[M], data: bytes, **fields: Any) -> M:
-    """``cls(**fields)``, with a ValueError from its validation re-raised as ProtocolError.
-
-    Decoded values that the typed message rejects (an encoder count above the declared width, a
-    PID gain above 2000) are bytes that do not decode, so they must surface as ProtocolError.
-    """
-    try:
-        return cls(**fields)
-    except ValueError as exc:
-        raise ProtocolError(f"{cls.__name__}: {exc}", raw=data, command=data[0] if data else None) from exc
+    """``cls(**fields)`` from decoded bytes; a refused value is a ProtocolError (see ``construct``)."""
+    return construct(cls, data, fields, command=data[0] if data else None)
 
 
 def enum_byte(enum_cls: type[E], data: bytes, offset: int, *, what: str) -> E:

@@ -23,6 +23,7 @@ from typing import Any, ClassVar, Protocol, Self, TypeVar
 from servobus.errors import ProtocolError
 from servobus.protocols._fields import IntField, check_range, round_half_away
 from servobus.protocols._message import Message, require_length
+from servobus.protocols._message import construct as _construct
 from servobus.protocols.myactuator.revision import ALL_REVISIONS, Revision, revision_names
 
 __all__ = [
@@ -267,13 +268,8 @@ class LayoutMismatch(ProtocolError):
 
 
 def construct(cls: type[M], data: bytes, values: dict[str, Any], *, what: str | None = None) -> M:
-    """Build ``cls(**values)`` from decoded bytes, turning a rejected value into ProtocolError."""
-    try:
-        return cls(**values)
-    except ValueError as exc:
-        raise ProtocolError(
-            f"{what or cls.__name__}: {exc}", raw=data, command=data[0] if data else None
-        ) from None
+    """``cls(**values)`` from decoded bytes; a refused value is a ProtocolError naming DATA[0]."""
+    return _construct(cls, data, values, what=what, command=data[0] if data else None)
 
 
 class MyActuatorMessage(Message):
