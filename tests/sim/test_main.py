@@ -56,6 +56,17 @@ def test_slcan_hollow_motors_answer_python_can(simulator: Start) -> None:
         bus.shutdown()
 
 
+def test_slcan_lk_v235_motors_reply_on_the_request_id(simulator: Start) -> None:
+    path = simulator(["--family", "lk", "--motors", "2", "--revision", "V2_35"])
+    bus = can.Bus(interface="slcan", channel=path, bitrate=1_000_000, sleep_after_open=0)
+    try:
+        bus.send(can.Message(arbitration_id=0x142, data=[0x9C] + [0] * 7, is_extended_id=False))
+        reply = bus.recv(timeout=2.0)
+    finally:
+        bus.shutdown()
+    assert reply is not None and reply.arbitration_id == 0x142 and reply.data[0] == 0x9C
+
+
 def test_rs485_hollow_converter_answers_a_serial_port(simulator: Start) -> None:
     path = simulator(["--family", "hollow", "--motors", "2", "--rs485"])
     with serial.Serial(path, 1_000_000, timeout=2.0) as port:

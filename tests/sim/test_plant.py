@@ -143,3 +143,12 @@ def test_an_idle_motor_costs_one_step_and_cools_exactly() -> None:
     plant.set_control(Off())
     _run(plant, 5.0, step=0.1)
     assert plant.speed_dps == 0.0 and plant.current_a == 0.0  # coasted to a stop, back on the fast path
+
+
+def test_long_fast_moves_brake_in_time_instead_of_ringing() -> None:
+    plant = Plant(PlantParams(max_acceleration_dps2=6000.0, max_speed_dps=3000.0))
+    plant.set_control(PositionControl(position_deg=800.0, max_speed_dps=2000.0))
+    samples = _run(plant, 1.5)
+    # 800 deg at 6000 dps/s: a triangle profile of about 0.73 s; settled well before 1.5 s
+    assert plant.position_deg == pytest.approx(800.0, abs=1.0)
+    assert max(p for p, _ in samples) <= 800.0 + 5.0

@@ -6,6 +6,7 @@ interrupted (Ctrl-C)::
     python -m servobus.sim --family hollow --motors 4 --slcan
     python -m servobus.sim --family hollow --motors 4 --rs485          # converter, transparent, 1 Mbaud
     python -m servobus.sim --family hollow --motors 4 --rs485 --modbus # converter, Modbus RTU, 19200
+    python -m servobus.sim --family lk --motors 8 --revision V2_35
 
 ``--slcan`` presents a USB-CAN adapter speaking SLCAN (python-can: ``interface="slcan"``);
 ``--rs485`` presents the family's RS485 line. ``--link PATH`` also creates a stable symlink.
@@ -47,7 +48,19 @@ def _hollow(args: argparse.Namespace) -> Setup:
     return Setup(serial_devices=[converter], baud=converter.baud)
 
 
-FAMILIES: dict[str, Callable[[argparse.Namespace], Setup]] = {"hollow": _hollow}
+def _lk(args: argparse.Namespace) -> Setup:
+    from servobus.protocols.lk import LkModel, Revision
+    from servobus.sim.devices.lk import LkMotor
+
+    if args.rs485:
+        raise SystemExit("lk: neither LK manual defines an RS485 framing (lk-v2.md §1.3); use --slcan")
+    model = LkModel(revision=Revision[args.revision or "V2_36"])
+    return Setup(
+        can_devices=[LkMotor(i, model=model) for i in range(args.first_id, args.first_id + args.motors)]
+    )
+
+
+FAMILIES: dict[str, Callable[[argparse.Namespace], Setup]] = {"hollow": _hollow, "lk": _lk}
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
@@ -59,6 +72,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     medium.add_argument("--slcan", action="store_true", help="a simulated SLCAN USB-CAN adapter (default)")
     medium.add_argument("--rs485", action="store_true", help="the family's RS485 line")
     parser.add_argument("--baud", type=int, help="RS485 baud rate (default: the family's)")
+    parser.add_argument("--revision", help="protocol revision, e.g. V2_35 (default: the family's newest)")
     parser.add_argument("--fd", action="store_true", help="CAN FD motors (hollow)")
     parser.add_argument("--modbus", action="store_true", help="hollow converter in Modbus RTU mode")
     parser.add_argument("--link", help="also create this symlink to the pty")

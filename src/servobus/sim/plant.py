@@ -220,7 +220,11 @@ class Plant:
                 if control.max_speed_dps is None
                 else min(control.max_speed_dps, p.max_speed_dps)
             )
-            wanted = 2 * math.pi * p.position_bandwidth_hz * (control.position_deg - self.position_deg)
+            error = control.position_deg - self.position_deg
+            wanted = 2 * math.pi * p.position_bandwidth_hz * error
+            # never ask for more speed than the acceleration limit can brake to zero within the error:
+            # v = sqrt(2·a·|e|), or long fast moves overshoot and ring
+            limit = min(limit, math.sqrt(2 * self.acceleration_dps2 * abs(error)))
             return self._speed_loop(_clamp(wanted, limit), control.max_current_a, dt)
         return self._speed_loop(control.speed_dps, control.max_current_a, dt)
 
