@@ -11,7 +11,7 @@ import can.interfaces.slcan
 import pytest
 import serial
 
-from servobus.protocols import hollow
+from servobus.protocols import hollow, myactuator
 
 Start = Callable[[Sequence[str]], str]  # starts the simulator with these arguments, returns its path
 
@@ -73,6 +73,17 @@ def test_rs485_hollow_converter_answers_a_serial_port(simulator: Start) -> None:
         port.write(hollow.TransparentRequest(motor_id=2).encode())
         reply = hollow.TransparentReply.decode(port.read(21))
     assert reply.reply.slave_id == 2
+
+
+@pytest.mark.parametrize("baud", [115_200, 1_000_000])
+def test_rs485_myactuator_motors_answer_a_serial_port(simulator: Start, baud: int) -> None:
+    path = simulator(["--family", "myactuator", "--motors", "3", "--rs485", "--baud", str(baud)])
+    with serial.Serial(path, baud, timeout=2.0) as port:
+        port.write(myactuator.encode_rs485(3, myactuator.ReadStatus2()))
+        motor_id, data = myactuator.decode_rs485(port.read(13))
+    assert motor_id == 3 and isinstance(
+        myactuator.decode_reply(myactuator.reply_id(3), data), myactuator.StatusReply
+    )
 
 
 def test_bad_arguments_are_refused() -> None:

@@ -3,6 +3,8 @@
 Prints the device path a host should open on its first line of output, then serves until
 interrupted (Ctrl-C)::
 
+    python -m servobus.sim --family myactuator --motors 4 --slcan
+    python -m servobus.sim --family myactuator --motors 4 --rs485 --baud 1000000
     python -m servobus.sim --family hollow --motors 4 --slcan
     python -m servobus.sim --family hollow --motors 4 --rs485          # converter, transparent, 1 Mbaud
     python -m servobus.sim --family hollow --motors 4 --rs485 --modbus # converter, Modbus RTU, 19200
@@ -60,7 +62,26 @@ def _lk(args: argparse.Namespace) -> Setup:
     )
 
 
-FAMILIES: dict[str, Callable[[argparse.Namespace], Setup]] = {"hollow": _hollow, "lk": _lk}
+def _myactuator(args: argparse.Namespace) -> Setup:
+    from servobus.protocols.myactuator import Revision
+    from servobus.sim.devices.myactuator import MyActuatorMotor
+    from servobus.sim.devices.myactuator_rs485 import MyActuatorRs485Motor
+
+    revision = Revision[args.revision or "V4_4"]
+    motors = [
+        MyActuatorMotor(i, revision=revision) for i in range(args.first_id, args.first_id + args.motors)
+    ]
+    if args.rs485:
+        # the manuals list 115200 .. 2.5 Mbit/s and name no default (spec §1.2): 1 Mbit/s here
+        return Setup(serial_devices=[MyActuatorRs485Motor(m) for m in motors], baud=1_000_000)
+    return Setup(can_devices=motors)
+
+
+FAMILIES: dict[str, Callable[[argparse.Namespace], Setup]] = {
+    "hollow": _hollow,
+    "lk": _lk,
+    "myactuator": _myactuator,
+}
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
