@@ -142,3 +142,14 @@ def test_info_commands_close_and_overlong_lines() -> None:
     answer, _ = adapter.receive(b"t" + b"0" * 300 + b"\r")
     assert answer == b"\a" and adapter.discarded > 0
     assert adapter.receive(b"sABCD\r")[0] == b"\r" and adapter.bitrate is None
+
+
+def test_the_hollow_vectors_for_the_usb_adapter_are_each_answered_ok() -> None:
+    from _spec import hexbytes, load_vectors
+
+    adapter_vectors = [v for v in load_vectors("hollow") if v["transport"] == "slcan-ascii"]
+    assert [v["id"] for v in adapter_vectors] == ["H23", "H24", "H25"]
+    adapter = SlcanAdapter(bitrate=None)
+    for vector in adapter_vectors:  # in the manual's order: S8, Y5, then O
+        assert adapter.receive(hexbytes(vector["data"]))[0] == b"\r", vector["id"]
+    assert (adapter.bitrate, adapter.data_bitrate, adapter.is_open) == (1_000_000, 5_000_000, True)
