@@ -6,6 +6,8 @@ tested apart from any protocol; the family device models have their own tests on
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from servobus.frame import Frame
@@ -89,3 +91,16 @@ def test_slower_bit_rate_stretches_the_same_traffic() -> None:
 def test_names_are_unique() -> None:
     with pytest.raises(ValueError, match="already on this bus"):
         SimCanNetwork([Responder(1), Responder(1)])
+
+
+def test_a_zero_latency_bus_leaves_only_the_turnaround() -> None:
+    network = SimCanNetwork([Responder(i) for i in (3, 1, 2)], bus=CanBusModel(bitrate=math.inf))
+    for motor_id in (3, 1, 2):
+        network.send(_request(motor_id), 0.0)
+    received = network.run_until_idle()
+    assert [(t, f.arbitration_id) for t, f in received] == [
+        (TURNAROUND_S, 0x241),
+        (TURNAROUND_S, 0x242),
+        (TURNAROUND_S, 0x243),
+    ]
+    assert network.bus.busy_s == 0.0

@@ -55,7 +55,8 @@ class CanBusModel:
     """Arbitration and wire time of one CAN (FD) bus.
 
     Args:
-        bitrate: nominal bit rate, bit/s (1 Mbit/s for every family's default).
+        bitrate: nominal bit rate, bit/s (1 Mbit/s for every family's default). ``math.inf`` gives
+            a zero-latency bus: frames take no wire time but still leave one at a time by priority.
         data_bitrate: CAN FD data-phase bit rate for frames with bit-rate switching.
     """
 
