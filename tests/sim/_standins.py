@@ -81,3 +81,21 @@ class SerialResponder:
 
     def next_deadline_s(self) -> float | None:
         return None
+
+
+@dataclass
+class Sniffer:
+    """A passive node: records every frame on the wire with the time its transmission ended."""
+
+    name: str = "sniffer"
+    seen: list[tuple[float, Frame]] = field(default_factory=list)
+
+    def receive(self, frame: Frame, now_s: float) -> list[Emission]:
+        self.seen.append((now_s, frame))
+        return []
+
+    def poll(self, now_s: float) -> list[Emission]:
+        return []
+
+    def next_deadline_s(self) -> float | None:
+        return None

@@ -2,35 +2,15 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
 from servobus.protocols._message import Reply
-from servobus.sim.device import Emission
 from servobus.sim.devices.myactuator import DEFAULT_TURNAROUND_S, MyActuatorMotor
 
 R = TypeVar("R", bound=Reply)
 TURNAROUND = DEFAULT_TURNAROUND_S
-
-
-@dataclass
-class Sniffer:
-    """A passive node: records every frame on the wire with the time its transmission ended."""
-
-    name: str = "sniffer"
-    seen: list[tuple[float, Frame]] = field(default_factory=list)
-
-    def receive(self, frame: Frame, now_s: float) -> list[Emission]:
-        self.seen.append((now_s, frame))
-        return []
-
-    def poll(self, now_s: float) -> list[Emission]:
-        return []
-
-    def next_deadline_s(self) -> float | None:
-        return None
 
 
 def frame_for(motor: MyActuatorMotor, command: Any, *, broadcast: bool = False) -> Frame:

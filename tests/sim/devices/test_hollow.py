@@ -6,7 +6,6 @@ a round trip through the protocol's second implementation. Network tests run in 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -42,7 +41,6 @@ from servobus.protocols.hollow import (
     request_frame,
 )
 from servobus.sim.canbus import CanBusModel
-from servobus.sim.device import Emission
 from servobus.sim.devices.hollow import DEFAULT_TURNAROUND_S, HOLLOW_PLANT_PARAMS, HollowMotor
 from servobus.sim.devices.hollow_converter import ConverterMode, HollowConverter
 from servobus.sim.network import SimCanNetwork
@@ -50,29 +48,13 @@ from servobus.sim.plant import CurrentControl, Off, PlantParams, PositionControl
 from servobus.sim.timing import frame_time_s
 from test_layering import violations
 
+from .._standins import Sniffer
+
 HOST = DEFAULT_HOST_ID
 TURNAROUND = DEFAULT_TURNAROUND_S
 FD_BUS = {"bitrate": 1_000_000, "data_bitrate": 5_000_000}  # A28
 
 # ---- helpers ----
-
-
-@dataclass
-class Sniffer:
-    """A passive node: records every frame on the wire with the time its transmission ended."""
-
-    name: str = "sniffer"
-    seen: list[tuple[float, Frame]] = field(default_factory=list)
-
-    def receive(self, frame: Frame, now_s: float) -> list[Emission]:
-        self.seen.append((now_s, frame))
-        return []
-
-    def poll(self, now_s: float) -> list[Emission]:
-        return []
-
-    def next_deadline_s(self) -> float | None:
-        return None
 
 
 def _setpoint(**overrides: Any) -> Setpoint:

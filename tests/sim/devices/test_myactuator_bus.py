@@ -16,7 +16,8 @@ from servobus.sim.network import SimCanNetwork
 from servobus.sim.plant import Brake, Off, SpeedControl
 from servobus.sim.timing import frame_time_s
 
-from ._myactuator import TURNAROUND, Sniffer, frame_for
+from .._standins import Sniffer
+from ._myactuator import TURNAROUND, frame_for
 
 ErrorFlags = ma.ErrorFlags
 
