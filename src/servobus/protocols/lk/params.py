@@ -21,11 +21,11 @@ from __future__ import annotations
 import enum
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, TypeAlias
+from typing import Any, ClassVar, TypeAlias
 
 from servobus.errors import ProtocolError
 from servobus.protocols._fields import IntField
-from servobus.protocols.lk._base import enum_byte
+from servobus.protocols.lk._base import enum_byte, payload
 from servobus.protocols.lk.model import check_member
 from servobus.protocols.lk.states import ParamResult
 
@@ -39,6 +39,7 @@ __all__ = [
     "CanBaud",
     "ControlParam",
     "ParamId",
+    "ParamMessage",
     "ParamValue",
     "PidGains",
     "Rs485Baud",
@@ -357,3 +358,38 @@ def decode_result(table: Mapping[int, ParamResult], data: bytes, *, what: str) -
             raw=data,
             command=data[0],
         ) from None
+
+
+class ParamMessage:
+    """The shared body of every parameter frame with a value: ``cmd | key | value`` (spec §13).
+
+    The three parameter schemes (V2.36 control parameters, V2.36 settings, V2.35 ParamIDs) differ
+    only in their key enum, their value layouts and how the key is written; subclasses set
+    ``PARAMS`` and ``LAYOUTS`` and, for two-byte keys, override :meth:`_encode_key`/:meth:`_decode_key`.
+    """
+
+    __slots__ = ()
+    PARAMS: ClassVar[type[enum.IntEnum]]
+    LAYOUTS: ClassVar[Mapping[Any, ValueLayout]]
+    param: Any
+    value: ParamValue
+
+    def _check(self) -> None:
+        check_member("param", self.param, self.PARAMS)
+        check_value(self.param, self.value, self.LAYOUTS)
+
+    @classmethod
+    def _encode_key(cls, param: Any) -> bytes:
+        return bytes([param])
+
+    @classmethod
+    def _decode_key(cls, data: bytes, what: str) -> Any:
+        return enum_byte(cls.PARAMS, data, 1, what=what)
+
+    def _body(self, code: int) -> bytes:
+        return payload(code, (1, self._encode_key(self.param)), self.LAYOUTS[self.param].encode(self.value))
+
+    @classmethod
+    def _fields(cls, data: bytes, what: str) -> dict[str, object]:
+        param = cls._decode_key(data, what)
+        return {"param": param, "value": cls.LAYOUTS[param].decode(data, what=what)}

@@ -24,8 +24,8 @@ from servobus.protocols.lk.params import (
     PARAM_LAYOUTS,
     WRITE_RESULT_V235,
     ParamId,
+    ParamMessage,
     ParamValue,
-    check_value,
     decode_result,
     result_byte,
 )
@@ -43,24 +43,12 @@ __all__ = [
 # ---- V2.35 ParamID (0x40 / 0x42 / 0x44) ------------------------------------------------------
 
 
-class _ParamMessage:
-    """Shared body of V2.35 0x40 replies and 0x42/0x44 requests: ``cmd | ParamID | value``."""
+class _ParamMessage(ParamMessage):
+    """V2.35 0x40 replies and 0x42/0x44 requests: ``cmd | ParamID | value``."""
 
     __slots__ = ()
-    param: ParamId
-    value: ParamValue
-
-    def _check(self) -> None:
-        check_member("param", self.param, ParamId)
-        check_value(self.param, self.value, PARAM_LAYOUTS)
-
-    def _body(self, code: int) -> bytes:
-        return payload(code, (1, bytes([self.param])), PARAM_LAYOUTS[self.param].encode(self.value))
-
-    @staticmethod
-    def _fields(data: bytes, what: str) -> dict[str, object]:
-        param = enum_byte(ParamId, data, 1, what=what)
-        return {"param": param, "value": PARAM_LAYOUTS[param].decode(data, what=what)}
+    PARAMS = ParamId
+    LAYOUTS = PARAM_LAYOUTS
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -26,9 +26,9 @@ from servobus.protocols.lk.params import (
     SAVE_RESULT,
     SETTING_LAYOUTS,
     ControlParam,
+    ParamMessage,
     ParamValue,
     SettingParam,
-    check_value,
     decode_result,
     decode_setting_address,
     result_byte,
@@ -51,24 +51,12 @@ __all__ = [
 # ---- V2.36 control parameters (0xC0 / 0xC1) --------------------------------------------------
 
 
-class _ControlMessage:
-    """Shared body of 0xC0/0xC1 frames with a value: ``cmd | id | byte1..6``."""
+class _ControlMessage(ParamMessage):
+    """0xC0/0xC1 frames with a value: ``cmd | id | byte1..6``."""
 
     __slots__ = ()
-    param: ControlParam
-    value: ParamValue
-
-    def _check(self) -> None:
-        check_member("param", self.param, ControlParam)
-        check_value(self.param, self.value, CONTROL_LAYOUTS)
-
-    def _body(self, code: int) -> bytes:
-        return payload(code, (1, bytes([self.param])), CONTROL_LAYOUTS[self.param].encode(self.value))
-
-    @staticmethod
-    def _fields(data: bytes, what: str) -> dict[str, object]:
-        param = enum_byte(ControlParam, data, 1, what=what)
-        return {"param": param, "value": CONTROL_LAYOUTS[param].decode(data, what=what)}
+    PARAMS = ControlParam
+    LAYOUTS = CONTROL_LAYOUTS
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -148,25 +136,23 @@ class ControlParamReply(_ControlMessage, LkReply):
 # ---- V2.36 setting parameters (0x40 / 0x42 / 0x44) ---------------------------------------------
 
 
-class _SettingMessage:
-    """Shared body of 0x40 replies and 0x42 frames: ``cmd | address | value`` (spec §6.2, §13)."""
+class _SettingMessage(ParamMessage):
+    """0x40 replies and 0x42 frames: ``cmd | address | value`` (spec §6.2, §13).
+
+    The PID layout starts at DATA[2] and overwrites the (zero) second address byte with Kp.
+    """
 
     __slots__ = ()
-    param: SettingParam
-    value: ParamValue
+    PARAMS = SettingParam
+    LAYOUTS = SETTING_LAYOUTS
 
-    def _check(self) -> None:
-        check_member("param", self.param, SettingParam)
-        check_value(self.param, self.value, SETTING_LAYOUTS)
+    @classmethod
+    def _encode_key(cls, param: SettingParam) -> bytes:
+        return setting_address(param)
 
-    def _body(self, code: int) -> bytes:
-        # The PID layout starts at DATA[2] and overwrites the (zero) second address byte with Kp.
-        return payload(code, (1, setting_address(self.param)), SETTING_LAYOUTS[self.param].encode(self.value))
-
-    @staticmethod
-    def _fields(data: bytes, what: str) -> dict[str, object]:
-        param = decode_setting_address(data, what=what)
-        return {"param": param, "value": SETTING_LAYOUTS[param].decode(data, what=what)}
+    @classmethod
+    def _decode_key(cls, data: bytes, what: str) -> SettingParam:
+        return decode_setting_address(data, what=what)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
