@@ -18,7 +18,7 @@ SANS_IO = [
     "errors.py",
     "protocols",
     "scheduler.py",
-    "sim/timing.py",
+    "timing.py",
     "sim/canbus.py",
     "sim/plant.py",
     "sim/slcan.py",

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from servobus.frame import Frame
 from servobus.sim.canbus import CanBusModel, arbitration_priority
-from servobus.sim.timing import CLASSIC_8_BYTE_STANDARD_BITS, frame_time_s
+from servobus.timing import CLASSIC_8_BYTE_STANDARD_BITS, frame_time_s
 
 
 def _frame(ident: int, *, extended: bool = False) -> Frame:

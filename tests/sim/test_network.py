@@ -14,7 +14,7 @@ from servobus.frame import Frame
 from servobus.sim.canbus import CanBusModel
 from servobus.sim.faults import FaultInjector, FaultPlan
 from servobus.sim.network import SimCanNetwork
-from servobus.sim.timing import CLASSIC_8_BYTE_STANDARD_BITS
+from servobus.timing import CLASSIC_8_BYTE_STANDARD_BITS
 
 from ._standins import TURNAROUND_S, Responder, Streamer
 

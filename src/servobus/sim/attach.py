@@ -29,7 +29,7 @@ from servobus.sim.device import SerialDevice, SerialEmission
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.pty import PtyPort
 from servobus.sim.slcan import SlcanAdapter
-from servobus.sim.timing import uart_time_s
+from servobus.timing import uart_time_s
 
 __all__ = ["SimClock", "serve_python_can", "serve_rs485", "serve_slcan"]
 

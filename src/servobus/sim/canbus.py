@@ -19,7 +19,7 @@ from collections.abc import Hashable
 from dataclasses import dataclass
 
 from servobus.frame import Frame
-from servobus.sim.timing import frame_time_s
+from servobus.timing import frame_time_s
 
 __all__ = ["CanBusModel", "Transmission", "arbitration_priority"]
 

@@ -45,7 +45,7 @@ from servobus.sim.devices.hollow import DEFAULT_TURNAROUND_S, HOLLOW_PLANT_PARAM
 from servobus.sim.devices.hollow_converter import ConverterMode, HollowConverter
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.plant import CurrentControl, Off, PlantParams, PositionControl, SpeedControl
-from servobus.sim.timing import frame_time_s
+from servobus.timing import frame_time_s
 from test_layering import violations
 
 from .._standins import Sniffer

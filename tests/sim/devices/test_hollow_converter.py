@@ -38,7 +38,7 @@ from servobus.sim.devices.hollow_converter import (
     HollowConverter,
 )
 from servobus.sim.plant import PlantParams
-from servobus.sim.timing import frame_time_s, uart_time_s
+from servobus.timing import frame_time_s, uart_time_s
 
 VECTORS = {v["id"]: v for v in load_vectors("hollow")}
 H12, H13 = hexbytes(VECTORS["H12"]["data"]), hexbytes(VECTORS["H13"]["data_reconstructed"])

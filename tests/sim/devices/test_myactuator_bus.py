@@ -14,7 +14,7 @@ from servobus.protocols import myactuator as ma
 from servobus.sim.devices.myactuator import MyActuatorMotor
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.plant import Brake, Off, SpeedControl
-from servobus.sim.timing import frame_time_s
+from servobus.timing import frame_time_s
 
 from .._standins import Sniffer
 from ._myactuator import TURNAROUND, frame_for

@@ -15,7 +15,7 @@ Implements :class:`~servobus.sim.device.SerialDevice`. The DIP switches choose t
   range, 0x03 (illegal data value) otherwise.
 
 Structure: the module owns its motors in a dict by CAN id (the slave id) and talks to each over a
-point-to-point CAN FD link, timed with :func:`~servobus.sim.timing.frame_time_s` at 1 Mbit/s
+point-to-point CAN FD link, timed with :func:`~servobus.timing.frame_time_s` at 1 Mbit/s
 nominal and 5 Mbit/s data with BRS (A28). It does not share a :class:`~servobus.sim.network.SimCanNetwork`
 with other traffic: the module is the only host on its CAN side, one request at a time. A request
 is processed when its last byte arrives (``now_s``); its reply starts writing at
@@ -49,7 +49,7 @@ from servobus.protocols.hollow import (
 )
 from servobus.sim.device import SerialEmission
 from servobus.sim.devices.hollow import HollowMotor
-from servobus.sim.timing import frame_time_s, uart_time_s
+from servobus.timing import frame_time_s, uart_time_s
 
 __all__ = [
     "DEFAULT_CONVERTER_TURNAROUND_S",

@@ -1,4 +1,4 @@
-"""Wire time of CAN, CAN FD and UART frames (servobus.sim.timing)."""
+"""Wire time of CAN, CAN FD and UART frames (servobus.timing)."""
 
 from __future__ import annotations
 
@@ -7,12 +7,13 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from servobus.frame import Frame
-from servobus.sim.timing import (
+from servobus.timing import (
     CLASSIC_8_BYTE_STANDARD_BITS,
     can_crc15,
     classic_frame_bits,
     fd_frame_bits,
     frame_time_s,
+    nominal_frame_time_s,
     uart_time_s,
 )
 
@@ -90,3 +91,31 @@ def test_uart_time() -> None:
     assert uart_time_s(8, 19200) == pytest.approx(80 / 19200)
     with pytest.raises(ValueError):
         uart_time_s(1, 0)
+
+
+@pytest.mark.parametrize("is_extended_id", [False, True])
+@pytest.mark.parametrize("is_fd", [False, True])
+@given(data=st.binary(max_size=64))
+def test_nominal_frame_time_is_the_exact_time_without_its_stuff_bits(
+    is_extended_id: bool, is_fd: bool, data: bytes
+) -> None:
+    sizes = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64) if is_fd else tuple(range(9))
+    data = data[: max(s for s in sizes if s <= len(data))]
+    frame = Frame(arbitration_id=0x123, data=data, is_extended_id=is_extended_id, is_fd=is_fd)
+    exact = frame_time_s(frame, 1.0)
+    nominal = nominal_frame_time_s(frame, 1.0)
+    # Stuff bits are the only difference: never negative, at most one per four bits after the first.
+    assert nominal <= exact <= nominal + (nominal - 13) / 4 + 1
+
+
+def test_nominal_frame_time_of_an_eight_byte_standard_frame_is_the_unstuffed_111_bits() -> None:
+    frame = Frame(arbitration_id=0x141, data=bytes(8))
+    assert nominal_frame_time_s(frame, 1_000_000) == CLASSIC_8_BYTE_STANDARD_BITS[0] / 1_000_000
+
+
+def test_nominal_frame_time_of_a_switched_fd_frame_splits_its_phases() -> None:
+    frame = Frame(arbitration_id=0x1, data=bytes(16), is_fd=True, bitrate_switch=True)
+    nominal_bits, data_bits = fd_frame_bits(frame)
+    slow = nominal_frame_time_s(frame, 1.0, 1e9)
+    assert slow <= nominal_bits <= slow * 1.25
+    assert nominal_frame_time_s(frame, 1.0, 1.0) <= nominal_bits + data_bits

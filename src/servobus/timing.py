@@ -1,9 +1,10 @@
 """How long a frame occupies the wire: CAN, CAN FD and UART, bit-exact where the standard is.
 
-Sans-IO arithmetic for the simulator's bus model and for benchmarks that state which bus they
-assume. Classic CAN times are exact: the frame's real bit stream is built (including its CRC-15)
-and stuff bits are counted where ISO 11898-1 inserts them, so an 8-byte standard frame costs
-between 111 and 135 bit times (design.md, "Environment facts") depending on its bytes.
+Sans-IO arithmetic for the simulator's bus model, the transports' bus-load estimate and for
+benchmarks that state which bus they assume. Classic CAN times are exact: the frame's real bit
+stream is built (including its CRC-15) and stuff bits are counted where ISO 11898-1 inserts them,
+so an 8-byte standard frame costs between 111 and 135 bit times (design.md, "Environment facts")
+depending on its bytes.
 
 CAN FD (ISO variant) is exact for dynamic stuffing up to the end of the data field; the stuff
 count and CRC field use fixed stuff bits, counted by rule, so no CRC is needed. Bits from the BRS
@@ -21,6 +22,7 @@ __all__ = [
     "classic_frame_bits",
     "fd_frame_bits",
     "frame_time_s",
+    "nominal_frame_time_s",
     "uart_time_s",
 ]
 
@@ -137,6 +139,28 @@ def frame_time_s(frame: Frame, bitrate: float = 1_000_000, data_bitrate: float |
         return classic_frame_bits(frame) / bitrate
     nominal_bits, data_bits = fd_frame_bits(frame)
     return nominal_bits / bitrate + data_bits / (data_bitrate or bitrate)
+
+
+def nominal_frame_time_s(frame: Frame, bitrate: float, data_bitrate: float | None = None) -> float:
+    """Seconds ``frame`` takes on the wire without stuff bits: a cheap lower bound of :func:`frame_time_s`.
+
+    Pure arithmetic on the frame's format and length (no bit stream is built), so a transport can
+    afford it for every frame it counts; stuff bits add at most about a fifth on top.
+    """
+    n = len(frame.data)
+    trailer = 1 + 2 + 7 + INTERFRAME_BITS  # CRC delimiter, ACK slot + delimiter, EOF, intermission
+    if not frame.is_fd:
+        # SOF, identifier (+ SRR, IDE, 18 more bits), RTR, IDE/r1, r0, DLC, data, CRC-15.
+        head = 39 if frame.is_extended_id else 19
+        return (head + 8 * n + 15 + trailer) / bitrate
+    crc_bits = 17 if n <= 16 else 21
+    crc_field = 4 + crc_bits + 1 + (4 + crc_bits) // 4
+    # Nominal phase up to BRS: SOF, identifier (extended: SRR, IDE, 18 bits), RRS, IDE, FDF, res, BRS.
+    nominal = (36 if frame.is_extended_id else 17) + trailer
+    data_phase = 1 + 4 + 8 * n + crc_field  # ESI, DLC, data, stuff count + CRC with fixed stuff bits
+    if not frame.bitrate_switch:
+        return (nominal + data_phase) / bitrate
+    return nominal / bitrate + data_phase / (data_bitrate or bitrate)
 
 
 def uart_time_s(n_bytes: int, baud: float, *, bits_per_byte: int = 10) -> float:
