@@ -7,13 +7,12 @@ models are exercised through the same attachments in tests/sim/devices.
 from __future__ import annotations
 
 import asyncio
-import contextlib
-from collections.abc import AsyncIterator
 
 import can
 import pytest
 import serial
 
+from _serving import serving
 from servobus.codec import crc16_modbus
 from servobus.sim.attach import serve_python_can, serve_rs485, serve_slcan
 from servobus.sim.network import SimCanNetwork
@@ -21,17 +20,6 @@ from servobus.sim.pty import PtyPort
 from servobus.sim.slcan import SlcanAdapter
 
 from ._standins import Responder, SerialResponder
-
-
-@contextlib.asynccontextmanager
-async def _serving(coro: object) -> AsyncIterator[None]:
-    task = asyncio.ensure_future(coro)  # type: ignore[arg-type]
-    try:
-        yield
-    finally:
-        task.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await task
 
 
 def _exchange(bus: can.BusABC, requests: list[can.Message], expect: int) -> list[can.Message]:
@@ -48,7 +36,7 @@ async def test_python_can_slcan_talks_to_thirty_two_simulated_devices_over_a_pty
     network = SimCanNetwork([Responder(i) for i in range(1, 33)])
     port = PtyPort()
     adapter = SlcanAdapter(bitrate=None)
-    async with _serving(serve_slcan(network, port, adapter)):
+    async with serving(serve_slcan(network, port, adapter)):
         bus = can.Bus(interface="slcan", channel=port.path, bitrate=1_000_000, sleep_after_open=0)
         try:
             requests = [
@@ -72,7 +60,7 @@ async def test_python_can_virtual_bus_carries_classic_and_fd_frames() -> None:
     channel = f"sim-{id(network)}"
     sim_side = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
     host = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
-    async with _serving(serve_python_can(network, sim_side)):
+    async with serving(serve_python_can(network, sim_side)):
         requests = [
             can.Message(arbitration_id=0x141, data=[0x9C] + [0] * 7, is_extended_id=False),
             can.Message(arbitration_id=0x141, data=bytes(range(16)), is_fd=True, is_extended_id=False),
@@ -108,7 +96,7 @@ def _transact(path: str, baud: int) -> tuple[list[bytes], float]:
 @pytest.mark.parametrize("baud", [115_200, 1_000_000])
 async def test_rs485_request_reply_with_thirty_two_devices_over_a_pty(baud: int) -> None:
     port = PtyPort()
-    async with _serving(serve_rs485([SerialResponder(i) for i in range(1, 33)], port, baud=baud)):
+    async with serving(serve_rs485([SerialResponder(i) for i in range(1, 33)], port, baud=baud)):
         replies, elapsed = await asyncio.to_thread(_transact, port.path, baud)
     port.close()
     assert replies == [_rs485_frame(i) for i in range(1, 33)]

@@ -11,10 +11,7 @@ load is skipped with a warning rather than breaking the built-in ones.
 
 from __future__ import annotations
 
-import importlib
-import warnings
-from importlib.metadata import entry_points
-
+from servobus import _plugins
 from servobus.protocols._family import Family
 from servobus.protocols._message import Command, Message, Reply
 
@@ -31,8 +28,7 @@ ENTRY_POINT_GROUP = "servobus.families"
 
 def available_families() -> dict[str, str]:
     """Built-in families plus those registered by installed plug-ins (built-ins win on a clash)."""
-    found = {ep.name: ep.value for ep in entry_points(group=ENTRY_POINT_GROUP)}
-    return {**found, **FAMILIES}
+    return _plugins.available(ENTRY_POINT_GROUP, FAMILIES)
 
 
 def get_family(name: str) -> Family:
@@ -41,19 +37,7 @@ def get_family(name: str) -> Family:
     Raises:
         ValueError: no family has that name, or a plug-in's target is not a Family.
     """
-    families = available_families()
-    try:
-        target = families[name]
-    except KeyError:
-        raise ValueError(f"unknown protocol family {name!r} (known: {', '.join(sorted(families))})") from None
-    module_name, _, attribute = target.partition(":")
-    try:
-        family = getattr(importlib.import_module(module_name), attribute)
-    except (ImportError, AttributeError) as exc:
-        if name in FAMILIES:
-            raise
-        warnings.warn(f"protocol family plug-in {name!r} ({target}) failed to load: {exc}", stacklevel=2)
-        raise ValueError(f"protocol family {name!r} failed to load") from exc
+    family = _plugins.load(ENTRY_POINT_GROUP, FAMILIES, name, "protocol family")
     if not isinstance(family, Family):
-        raise ValueError(f"{target} is {type(family).__name__}, not a servobus Family")
+        raise ValueError(f"{available_families()[name]} is {type(family).__name__}, not a servobus Family")
     return family

@@ -30,6 +30,7 @@ from servobus.sim.network import SimCanNetwork
 from servobus.sim.pty import PtyPort
 from servobus.sim.slcan import SlcanAdapter
 from servobus.timing import uart_time_s
+from servobus.transports.can import frame_from_message, message_from_frame
 
 __all__ = ["SimClock", "serve_python_can", "serve_rs485", "serve_slcan"]
 
@@ -103,29 +104,13 @@ async def serve_python_can(network: SimCanNetwork, bus: can.BusABC) -> None:
     notifier = can.Notifier(bus, [reader], loop=loop)
 
     def deliver(frame: Frame) -> None:
-        bus.send(
-            can.Message(
-                arbitration_id=frame.arbitration_id,
-                data=frame.data,
-                is_extended_id=frame.is_extended_id,
-                is_fd=frame.is_fd,
-                bitrate_switch=frame.bitrate_switch,
-            )
-        )
+        bus.send(message_from_frame(frame))
 
     async def read_host() -> None:
         async for message in reader:
             if message.is_error_frame or message.is_remote_frame:
                 continue
-            inbox.put_nowait(
-                Frame(
-                    arbitration_id=message.arbitration_id,
-                    data=bytes(message.data),
-                    is_extended_id=message.is_extended_id,
-                    is_fd=message.is_fd,
-                    bitrate_switch=message.bitrate_switch,
-                )
-            )
+            inbox.put_nowait(frame_from_message(message, clock.now()))
 
     try:
         await _run_together(_run_network(network, inbox, deliver, clock), read_host())

@@ -7,13 +7,12 @@ Spec §1.2 (frame, CRC-16/MODBUS), §1.3 (0xCD broadcast: each motor answers wit
 from __future__ import annotations
 
 import asyncio
-import contextlib
-from collections.abc import AsyncIterator
 from typing import Any
 
 import pytest
 import serial
 
+from _serving import serving
 from servobus.protocols import myactuator as ma
 from servobus.sim.attach import serve_rs485
 from servobus.sim.devices.myactuator import MyActuatorMotor
@@ -106,17 +105,6 @@ def test_v43_id_setting_uses_0xcd_both_ways() -> None:
 # ---- 32 motors on a real pty line ----
 
 
-@contextlib.asynccontextmanager
-async def _serving(coro: Any) -> AsyncIterator[None]:
-    task = asyncio.ensure_future(coro)
-    try:
-        yield
-    finally:
-        task.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await task
-
-
 def _line_session(path: str, baud: int) -> dict[str, Any]:
     """One host: a request to each motor in turn, a broadcast, and a corrupted frame."""
     found: dict[str, Any] = {}
@@ -144,7 +132,7 @@ def _line_session(path: str, baud: int) -> dict[str, Any]:
 async def test_thirty_two_rs485_motors_on_one_pty_line(baud: int) -> None:
     fronts = [_front(i) for i in range(1, 33)]
     port = PtyPort()
-    async with _serving(serve_rs485(fronts, port, baud=baud)):
+    async with serving(serve_rs485(fronts, port, baud=baud)):
         found = await asyncio.to_thread(_line_session, port.path, baud)
     port.close()
     assert [(i, type(r)) for i, r in found["single"]] == [(i, ma.StatusReply) for i in range(1, 33)]

@@ -1,0 +1,96 @@
+"""Transports: frames to and from real devices, asyncio, with counters and recovery.
+
+One interface (:class:`Transport`: ``open``/``close``, ``send``, ``drain``, ``receive``,
+``async for``, ``events``, ``stats``) over two kinds of line:
+
+* ``"can"``: :class:`CanTransport`, any python-can interface, CAN and CAN FD, carrying
+  :class:`~servobus.frame.Frame`.
+* ``"rs485"``: :class:`SerialTransport`, an RS485 port through pyserial-asyncio-fast, carrying
+  whole CRC-checked :class:`SerialFrame` frames.
+
+:func:`create_transport` builds one by name; third-party transports register under the
+``servobus.transports`` entry-point group. The heavy modules load on first use.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from servobus import _plugins
+from servobus.transports.base import SendQueueFull, Transport
+from servobus.transports.events import (
+    BusOff,
+    CanErrorClass,
+    ErrorFrame,
+    FramesDropped,
+    StateChanged,
+    TransportEvent,
+    TransportState,
+)
+from servobus.transports.stats import TransportStats
+
+if TYPE_CHECKING:
+    from servobus.transports.can import CanTransport
+    from servobus.transports.rs485 import SerialFrame, SerialMode, SerialTransport
+
+__all__ = [
+    "TRANSPORTS",
+    "BusOff",
+    "CanErrorClass",
+    "CanTransport",
+    "ErrorFrame",
+    "FramesDropped",
+    "SendQueueFull",
+    "SerialFrame",
+    "SerialMode",
+    "SerialTransport",
+    "StateChanged",
+    "Transport",
+    "TransportEvent",
+    "TransportState",
+    "TransportStats",
+    "available_transports",
+    "create_transport",
+]
+
+TRANSPORTS: dict[str, str] = {
+    "can": "servobus.transports.can:CanTransport",
+    "rs485": "servobus.transports.rs485:SerialTransport",
+}
+
+ENTRY_POINT_GROUP = "servobus.transports"
+
+_LAZY = {
+    "CanTransport": "servobus.transports.can",
+    "SerialFrame": "servobus.transports.rs485",
+    "SerialMode": "servobus.transports.rs485",
+    "SerialTransport": "servobus.transports.rs485",
+}
+
+
+def available_transports() -> dict[str, str]:
+    """Built-in transports plus those registered by installed plug-ins (built-ins win on a clash)."""
+    return _plugins.available(ENTRY_POINT_GROUP, TRANSPORTS)
+
+
+def create_transport(name: str, *args: Any, **options: Any) -> Transport[Any, Any]:
+    """Build (not open) the transport registered as ``name`` with these arguments.
+
+    ``async with create_transport("can", "virtual", "bus0", fd=True) as bus: ...``
+
+    Raises:
+        ValueError: no transport has that name, or its target is not a Transport class.
+    """
+    cls = _plugins.load(ENTRY_POINT_GROUP, TRANSPORTS, name, "transport")
+    if not (isinstance(cls, type) and issubclass(cls, Transport)):
+        raise ValueError(f"{available_transports()[name]} is not a servobus Transport class")
+    transport: Transport[Any, Any] = cls(*args, **options)
+    return transport
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,0 +1,447 @@
+"""CAN and CAN FD through python-can: any interface it supports, configured the way it is.
+
+* **Configuration** is python-can's own, merged once: arguments first, then ``can.rc``, the
+  environment (``CAN_INTERFACE``, ``CAN_CHANNEL``, ``CAN_BITRATE``, ``CAN_CONFIG``) and the config
+  files (``~/.canrc``, ``~/can.conf``, ...), in python-can's order (``can.util.load_config``).
+  ``config_context`` picks a section; ``ignore_config=True`` uses the arguments alone.
+* **Receiving** runs inside the event loop: where the bus has a file descriptor (socketcan,
+  slcan and other serial adapters) the loop watches it (``add_reader``) and reads one frame per
+  readiness, with no thread. Buses without one (virtual, most vendor drivers) get a single reader
+  thread, as python-can's own ``Notifier`` does, which hands frames over in batches.
+* **Sending** never blocks the loop: python-can's ``send`` is a blocking call on most
+  interfaces, so the queued frames go to one writer thread per transport, in order, with an
+  optional minimum gap between frames. A full adapter buffer (ENOBUFS, "transmit buffer full")
+  is handled by policy: ``"wait"`` retries until ``enobufs_timeout_s`` and then drops, ``"drop"``
+  drops at once; both are counted.
+* **Filters**: :meth:`CanTransport.set_receive_ids` installs exact-match filters for the reply
+  identifiers in use; python-can puts them in the kernel or adapter where the interface can, and
+  filters in software otherwise. They are re-applied after a reopen.
+* **Error frames** become :class:`~servobus.transports.events.ErrorFrame` events (and
+  :class:`~servobus.transports.events.BusOff` for bus-off); remote frames are counted and dropped.
+
+The conversions between :class:`~servobus.frame.Frame` and ``can.Message`` live here and nowhere
+else (:func:`frame_from_message`, :func:`message_from_frame`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import errno
+import functools
+import threading
+import time
+from collections.abc import Iterable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import can
+
+from servobus.errors import TransportError
+from servobus.frame import Frame
+from servobus.timing import nominal_frame_time_s
+from servobus.transports.base import Outgoing, Transport, logger
+from servobus.transports.events import BusOff, CanErrorClass, ErrorFrame
+
+__all__ = ["CanTransport", "frame_from_message", "message_from_frame"]
+
+_THREAD_POLL_S = 0.05  # how long a reader thread blocks in recv(): bounds how fast close() is
+_THREAD_BATCH = 256  # frames a reader thread hands to the loop per wake-up, at most
+_ENOBUFS_RETRY_S = 0.0005
+
+
+def frame_from_message(message: can.Message, timestamp: float) -> Frame:
+    """A received ``can.Message`` as a :class:`Frame` stamped ``timestamp`` (keeps ``is_rx``)."""
+    return Frame(
+        arbitration_id=message.arbitration_id,
+        data=bytes(message.data),
+        is_extended_id=message.is_extended_id,
+        is_fd=message.is_fd,
+        bitrate_switch=message.bitrate_switch,
+        timestamp=timestamp,
+        is_rx=message.is_rx,
+    )
+
+
+def message_from_frame(frame: Frame) -> can.Message:
+    """A :class:`Frame` as the ``can.Message`` python-can sends (already validated by Frame)."""
+    return can.Message(
+        arbitration_id=frame.arbitration_id,
+        data=frame.data,
+        is_extended_id=frame.is_extended_id,
+        is_fd=frame.is_fd,
+        bitrate_switch=frame.bitrate_switch,
+        check=False,
+    )
+
+
+@dataclass(slots=True)
+class _SendReport:
+    """What the writer thread did with one batch."""
+
+    sent: list[Frame] = field(default_factory=list)
+    stale: int = 0
+    purged: int = 0
+    enobufs_waits: int = 0
+    enobufs_dropped: int = 0
+    error: BaseException | None = None
+
+
+class CanTransport(Transport[Frame, Frame]):
+    """A CAN or CAN FD bus through python-can.
+
+    Args:
+        interface, channel: python-can's; None takes them from python-can's configuration.
+        bitrate, data_bitrate: python-can's (nominal and CAN FD data rate). Also used for the
+            bus-load estimate; without a bit rate from arguments or configuration the load is
+            unknown (None).
+        fd: open the bus for CAN FD (python-can's ``fd``); FD frames are refused without it.
+        config_context, ignore_config: python-can's configuration section, or none at all.
+        min_gap_s: least time between the starts of two sent frames (0: back to back).
+        enobufs: what to do when the adapter's send buffer is full: ``"wait"`` or ``"drop"``.
+        enobufs_timeout_s: with ``"wait"``, how long one frame may wait for buffer room.
+        send_timeout_s: the timeout given to python-can's ``send``.
+        receive_ids: reply identifiers to filter for (see :meth:`set_receive_ids`).
+        queue_size, rx_buffer, stale_after_s, reopen, reopen_backoff_s: see
+            :class:`~servobus.transports.base.Transport`.
+        **options: any other python-can argument (``sleep_after_open``, ``receive_own_messages``,
+            ``tty_baudrate``, ...).
+
+    Raises:
+        ValueError: no interface given or configured, or an option out of range.
+    """
+
+    def __init__(
+        self,
+        interface: str | None = None,
+        channel: Any = None,
+        *,
+        bitrate: int | None = None,
+        data_bitrate: int | None = None,
+        fd: bool = False,
+        config_context: str | None = None,
+        ignore_config: bool = False,
+        min_gap_s: float = 0.0,
+        enobufs: Literal["wait", "drop"] = "wait",
+        enobufs_timeout_s: float = 0.1,
+        send_timeout_s: float | None = 0.05,
+        receive_ids: Iterable[int] | None = None,
+        queue_size: int = 256,
+        rx_buffer: int = 65536,
+        stale_after_s: float | None = 0.5,
+        reopen: bool = True,
+        reopen_backoff_s: tuple[float, float] = (0.05, 2.0),
+        **options: Any,
+    ) -> None:
+        if enobufs not in ("wait", "drop"):
+            raise ValueError(f"enobufs={enobufs!r} must be 'wait' or 'drop'")
+        if min_gap_s < 0 or enobufs_timeout_s < 0:
+            raise ValueError(f"min_gap_s={min_gap_s} and enobufs_timeout_s={enobufs_timeout_s} must be >= 0")
+        given = {"interface": interface, "channel": channel, "bitrate": bitrate, "data_bitrate": data_bitrate}
+        config: dict[str, Any] = {key: value for key, value in given.items() if value is not None}
+        config.update(options)
+        if fd:
+            config["fd"] = True
+        if not ignore_config:
+            try:
+                config = dict(can.util.load_config(config=config, context=config_context))
+            except can.CanInterfaceNotImplementedError as exc:
+                raise ValueError(f"no usable CAN interface: {exc}") from exc
+        if not config.get("interface"):
+            raise ValueError("no CAN interface given and none in python-can's configuration")
+        self.config = config
+        self.fd = bool(config.get("fd", False))
+        self.bitrate: int | None = config.get("bitrate")
+        self.data_bitrate: int | None = config.get("data_bitrate")
+        super().__init__(
+            name=f"can:{config['interface']}:{config.get('channel')}",
+            queue_size=queue_size,
+            rx_buffer=rx_buffer,
+            stale_after_s=stale_after_s,
+            reopen=reopen,
+            reopen_backoff_s=reopen_backoff_s,
+        )
+        self._load_known = self.bitrate is not None
+        self._min_gap_s = min_gap_s
+        self._enobufs = enobufs
+        self._enobufs_timeout_s = enobufs_timeout_s
+        self._send_timeout_s = send_timeout_s
+        self._filters: list[can.typechecking.CanFilter] | None = None
+        if receive_ids is not None:
+            self._filters = _exact_filters(receive_ids, extended=False)
+        self._bus: can.BusABC | None = None
+        self._reader_fd: int | None = None
+        self._reader_thread: threading.Thread | None = None
+        self._reader_stop = threading.Event()
+        self._executor: ThreadPoolExecutor | None = None
+        self._send_abort = threading.Event()
+        self._last_send = 0.0  # perf_counter of the last frame's start (writer thread only)
+
+    # ----------------------------------------------------------------- public API
+
+    def send(self, frame: Frame) -> None:
+        """Queue ``frame``; it is written in order by the writer thread.
+
+        Raises:
+            ValueError: an FD frame on a bus opened without ``fd=True``.
+            SendQueueFull: the queue is full.
+            TransportError: the bus is not open (lost or closed).
+        """
+        if frame.is_fd and not self.fd:
+            raise ValueError(f"{self.name}: CAN FD frame {frame!r} on a bus opened without fd=True")
+        self._enqueue(frame)
+
+    def set_receive_ids(self, ids: Iterable[int] | None, *, extended: bool = False) -> None:
+        """Receive only these identifiers (exact match); None receives everything again.
+
+        The filters stay across reopens.
+        """
+        self._filters = None if ids is None else _exact_filters(ids, extended=extended)
+        if self._bus is not None:
+            self._bus.set_filters(self._filters)
+
+    @property
+    def bus(self) -> can.BusABC | None:
+        """The python-can bus while open (for interface-specific calls; do not recv() from it)."""
+        return self._bus
+
+    # ----------------------------------------------------------------- connection
+
+    async def _connect(self) -> None:
+        opening = asyncio.get_running_loop().run_in_executor(
+            None, functools.partial(can.Bus, ignore_config=True, **self.config)
+        )
+        try:
+            bus = await asyncio.shield(opening)
+        except asyncio.CancelledError:  # closed while opening: shut the bus down when it exists
+            opening.add_done_callback(_shutdown_when_opened)
+            raise
+        except (can.CanError, OSError) as exc:
+            raise TransportError(f"{self.name}: cannot open: {exc}") from exc
+        if self._filters is not None:
+            bus.set_filters(self._filters)
+        self._bus = bus
+        self._send_abort = threading.Event()
+        self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"{self.name} writer")
+        loop = asyncio.get_running_loop()
+        generation = self._generation
+        fileno = -1
+        with contextlib.suppress(NotImplementedError, can.CanError, OSError):
+            fileno = bus.fileno()
+        if fileno >= 0:
+            loop.add_reader(fileno, self._on_readable, bus, generation)
+            self._reader_fd = fileno
+        else:
+            self._reader_stop = threading.Event()
+            self._reader_thread = threading.Thread(
+                target=self._read_thread,
+                args=(bus, loop, generation, self._reader_stop),
+                name=f"{self.name} reader",
+                daemon=True,
+            )
+            self._reader_thread.start()
+
+    async def _disconnect(self) -> None:
+        bus, self._bus = self._bus, None
+        if self._reader_fd is not None:
+            with contextlib.suppress(Exception):
+                asyncio.get_running_loop().remove_reader(self._reader_fd)
+            self._reader_fd = None
+        if self._reader_thread is not None:
+            self._reader_stop.set()
+            await asyncio.to_thread(self._reader_thread.join)
+            self._reader_thread = None
+        self._send_abort.set()
+        executor, self._executor = self._executor, None
+        if executor is not None:
+            executor.shutdown(wait=False, cancel_futures=True)
+        if bus is not None:
+            try:
+                await asyncio.to_thread(bus.shutdown)
+            except Exception as exc:  # a vanished adapter cannot be told goodbye
+                logger.debug("%s: shutdown of a failed bus raised %s", self.name, exc)
+
+    # ----------------------------------------------------------------- receiving
+
+    def _on_readable(self, bus: can.BusABC, generation: int) -> None:
+        try:
+            message = bus.recv(0)
+        except Exception as exc:
+            with contextlib.suppress(Exception):
+                asyncio.get_running_loop().remove_reader(self._reader_fd or -1)
+            self._reader_fd = None
+            self._lose(exc, generation)
+            return
+        if message is not None:
+            self._take([(message, time.monotonic())], generation)
+
+    def _read_thread(
+        self, bus: can.BusABC, loop: asyncio.AbstractEventLoop, generation: int, stop: threading.Event
+    ) -> None:
+        monotonic = time.monotonic
+        while not stop.is_set():
+            try:
+                message = bus.recv(_THREAD_POLL_S)
+                if message is None:
+                    continue
+                batch = [(message, monotonic())]
+                while len(batch) < _THREAD_BATCH and (message := bus.recv(0)) is not None:
+                    batch.append((message, monotonic()))
+            except Exception as exc:
+                if not stop.is_set():
+                    loop.call_soon_threadsafe(self._lose, exc, generation)
+                return
+            try:
+                loop.call_soon_threadsafe(self._take, batch, generation)
+            except RuntimeError:  # the loop closed under us
+                return
+
+    def _take(self, batch: Sequence[tuple[can.Message, float]], generation: int) -> None:
+        if generation != self._generation:
+            return
+        frames: list[Frame] = []
+        stats = self._stats
+        for message, timestamp in batch:
+            if message.is_error_frame:
+                self._on_error_frame(message, timestamp)
+                continue
+            if message.is_remote_frame:
+                stats.ignored += 1
+                continue
+            try:
+                frame = frame_from_message(message, timestamp)
+            except ValueError:
+                stats.ignored += 1
+                continue
+            frames.append(frame)
+            stats.bytes_in += len(frame.data)
+            if self._load_known:
+                self._load.add(timestamp, self._frame_time_s(frame))
+        if frames:
+            stats.frames_in += len(frames)
+            self._deliver(frames)
+
+    def _on_error_frame(self, message: can.Message, timestamp: float) -> None:
+        classes = CanErrorClass(message.arbitration_id & 0x3FF)
+        self._stats.error_frames += 1
+        self._emit(ErrorFrame(timestamp, classes, bytes(message.data)))
+        if CanErrorClass.BUS_OFF in classes:
+            self._stats.bus_off += 1
+            self._emit(BusOff(timestamp))
+
+    def _frame_time_s(self, frame: Frame) -> float:
+        assert self.bitrate is not None
+        return nominal_frame_time_s(frame, self.bitrate, self.data_bitrate)
+
+    # ----------------------------------------------------------------- sending
+
+    async def _transmit(self, batch: list[Outgoing[Frame]]) -> None:
+        assert self._bus is not None and self._executor is not None
+        loop = asyncio.get_running_loop()
+        await loop.run_in_executor(
+            self._executor, self._send_blocking, self._bus, batch, loop, self._generation
+        )
+
+    def _send_blocking(
+        self,
+        bus: can.BusABC,
+        batch: list[Outgoing[Frame]],
+        loop: asyncio.AbstractEventLoop,
+        generation: int,
+    ) -> None:
+        """Writer thread: send ``batch`` in order, honouring the gap and the ENOBUFS policy.
+
+        The report goes back to the loop by itself, so frames are counted even when the task
+        that awaited this batch was cancelled by a loss. A loss also stops the batch: the frames
+        not yet sent are purged, never written after the device comes back.
+        """
+        report = _SendReport()
+        clock = time.perf_counter
+        stale_after_s = self._stale_after_s
+        for index, outgoing in enumerate(batch):
+            if generation != self._generation:
+                report.purged = len(batch) - index
+                break
+            if stale_after_s is not None and time.monotonic() - outgoing.queued_at > stale_after_s:
+                report.stale += 1  # waited out an ENOBUFS stretch or a long gap: too old to send
+                continue
+            if self._min_gap_s and (wait := self._last_send + self._min_gap_s - clock()) > 0:
+                self._send_abort.wait(wait)  # a sleep that a loss or close cuts short
+                if generation != self._generation:
+                    report.purged = len(batch) - index
+                    break
+            if not self._send_one(bus, message_from_frame(outgoing.item), report):
+                break
+            report.sent.append(outgoing.item)
+        with contextlib.suppress(RuntimeError):  # the loop is gone: nobody is left to count
+            loop.call_soon_threadsafe(self._account, report, generation)
+
+    def _send_one(self, bus: can.BusABC, message: can.Message, report: _SendReport) -> bool:
+        """Send with the ENOBUFS policy; False when the bus failed (``report.error`` says how)."""
+        give_up = time.perf_counter() + self._enobufs_timeout_s
+        while True:
+            try:
+                bus.send(message, timeout=self._send_timeout_s)
+            except can.CanError as exc:
+                if not _buffer_full(exc):
+                    report.error = exc
+                    return False
+                if self._enobufs == "drop" or time.perf_counter() >= give_up:
+                    report.enobufs_dropped += 1
+                    return True
+                report.enobufs_waits += 1
+                time.sleep(_ENOBUFS_RETRY_S)
+            except Exception as exc:
+                report.error = exc
+                return False
+            else:
+                self._last_send = time.perf_counter()
+                return True
+
+    def _account(self, report: _SendReport, generation: int) -> None:
+        stats = self._stats
+        stats.frames_out += len(report.sent)
+        stats.enobufs_waits += report.enobufs_waits
+        for reason, count in (
+            ("stale", report.stale),
+            ("enobufs_dropped", report.enobufs_dropped),
+            ("purged", report.purged),
+        ):
+            self._dropped(reason, count)
+        now = time.monotonic()
+        for frame in report.sent:
+            stats.bytes_out += len(frame.data)
+            if self._load_known:
+                self._load.add(now, self._frame_time_s(frame))
+        if report.error is not None:
+            self._lose(report.error, generation)
+
+
+def _shutdown_when_opened(opening: asyncio.Future[can.BusABC]) -> None:
+    if not opening.cancelled() and opening.exception() is None:
+        with contextlib.suppress(Exception):
+            opening.result().shutdown()
+
+
+def _buffer_full(exc: can.CanError) -> bool:
+    """python-can's ways of saying "the adapter's send buffer is full, try again"."""
+    if isinstance(exc, can.CanTimeoutError):
+        return True
+    code = getattr(exc, "error_code", None)
+    if code in (errno.ENOBUFS, errno.EAGAIN):
+        return True
+    cause = exc.__cause__
+    if isinstance(cause, OSError) and cause.errno in (errno.ENOBUFS, errno.EAGAIN):
+        return True
+    return "buffer full" in str(exc).lower()
+
+
+def _exact_filters(ids: Iterable[int], *, extended: bool) -> list[can.typechecking.CanFilter]:
+    mask = 0x1FFFFFFF if extended else 0x7FF
+    filters: list[can.typechecking.CanFilter] = []
+    for can_id in sorted(set(ids)):
+        if not 0 <= can_id <= mask:
+            raise ValueError(f"receive id 0x{can_id:X} is outside 0..0x{mask:X}")
+        filters.append({"can_id": can_id, "can_mask": mask, "extended": extended})
+    return filters
