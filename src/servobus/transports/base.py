@@ -183,7 +183,7 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
             return
         self._generation += 1
         self._failure = ("closed", None)
-        self._set_state(TransportState.CLOSED)
+        self._state = TransportState.CLOSED  # announced last, after the drops it causes
         for task in (self._recovery, self._writer):
             if task is not None and task is not asyncio.current_task():
                 task.cancel()
@@ -195,6 +195,7 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
         self._fail_waiters(self._rx_waiters)
         self._fail_waiters(self._idle_waiters)
         await self._disconnect()  # also when LOST: the recovery task may not have got to it
+        self._set_state(TransportState.CLOSED)
 
     async def __aenter__(self) -> Self:
         await self.open()

@@ -255,7 +255,11 @@ class SerialTransport(Transport[SerialFrame, bytes]):
         stats = self._stats
         for outgoing in batch:
             if (rest := self._line_quiet_at + self.gap_s - time.monotonic()) > 0:
-                await asyncio.sleep(rest)
+                try:
+                    await asyncio.sleep(rest)
+                except asyncio.CancelledError:  # lost or closed before it was written
+                    self._dropped("purged", 1)
+                    raise
             line = self._line
             if line is None or line.is_closing():
                 return  # lost meanwhile: the base has purged the rest

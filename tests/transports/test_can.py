@@ -1,0 +1,261 @@
+"""CanTransport's own rules: python-can configuration, filters, error frames, ENOBUFS, gaps, load.
+
+Traffic goes through python-can's ``virtual`` interface to a plain python-can peer; the ENOBUFS
+and send-failure policies use a python-can bus whose ``send`` fails on cue.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import errno
+import itertools
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any, ClassVar
+
+import can
+import pytest
+
+from servobus.frame import Frame
+from servobus.transports import (
+    BusOff,
+    CanErrorClass,
+    CanTransport,
+    ErrorFrame,
+    TransportEvent,
+    TransportState,
+)
+from servobus.transports.can import frame_from_message, message_from_frame
+
+_channels = itertools.count()
+
+
+@pytest.fixture
+def channel() -> str:
+    return f"can-test-{next(_channels)}"
+
+
+@pytest.fixture
+def peer(channel: str) -> Iterator[can.BusABC]:
+    bus = can.Bus(interface="virtual", channel=channel)
+    yield bus
+    bus.shutdown()
+
+
+def _recv_all(bus: can.BusABC, n: int, timeout: float = 2.0) -> list[can.Message]:
+    got = []
+    while len(got) < n and (message := bus.recv(timeout)) is not None:
+        got.append(message)
+    return got
+
+
+@pytest.fixture
+def clean_config(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """No python-can configuration anywhere: an empty home and no CAN_* variables."""
+    monkeypatch.setenv("HOME", str(tmp_path))
+    for name in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
+        monkeypatch.delenv(name, raising=False)
+
+
+def test_frames_convert_to_and_from_python_can_messages() -> None:
+    frame = Frame(arbitration_id=0x1ABCDEF0, data=bytes(range(12)), is_extended_id=True, is_fd=True)
+    message = message_from_frame(frame)
+    assert (message.arbitration_id, bytes(message.data), message.is_extended_id, message.is_fd) == (
+        0x1ABCDEF0,
+        bytes(range(12)),
+        True,
+        True,
+    )
+    back = frame_from_message(message, 12.5)
+    assert back == frame and back.timestamp == 12.5
+    message.is_rx = False
+    assert frame_from_message(message, 0.0).is_rx is False  # our own echo stays marked
+
+
+@pytest.mark.asyncio
+@pytest.mark.usefixtures("clean_config")
+async def test_the_adapter_comes_from_python_cans_environment_configuration(
+    monkeypatch: pytest.MonkeyPatch, channel: str, peer: can.BusABC
+) -> None:
+    monkeypatch.setenv("CAN_INTERFACE", "virtual")
+    monkeypatch.setenv("CAN_CHANNEL", channel)
+    monkeypatch.setenv("CAN_BITRATE", "500000")
+    async with CanTransport() as transport:
+        assert transport.config["interface"] == "virtual" and transport.bitrate == 500_000
+        transport.send(Frame(arbitration_id=0x141, data=b"\x9c"))
+        (message,) = await asyncio.to_thread(_recv_all, peer, 1)
+        assert message.arbitration_id == 0x141
+        assert transport.stats().bus_load_pct is not None
+
+
+@pytest.mark.asyncio
+@pytest.mark.usefixtures("clean_config")
+async def test_a_canrc_file_is_read_and_arguments_win_over_it(tmp_path: Path, channel: str) -> None:
+    (tmp_path / ".canrc").write_text(
+        f"[default]\ninterface = virtual\nchannel = {channel}\nbitrate = 250000\n"
+    )
+    assert CanTransport().config["bitrate"] == 250_000
+    assert CanTransport(bitrate=1_000_000).bitrate == 1_000_000
+    assert "bitrate" not in CanTransport("virtual", channel, ignore_config=True).config
+
+
+@pytest.mark.usefixtures("clean_config")
+def test_no_interface_anywhere_is_a_clear_error() -> None:
+    with pytest.raises(ValueError, match="CAN interface"):
+        CanTransport()
+    with pytest.raises(ValueError, match="enobufs"):
+        CanTransport("virtual", "x", enobufs="block", ignore_config=True)  # type: ignore[arg-type]
+
+
+@pytest.mark.asyncio
+async def test_fd_frames_need_an_fd_bus(channel: str) -> None:
+    async with CanTransport("virtual", channel, ignore_config=True) as transport:
+        with pytest.raises(ValueError, match="fd=True"):
+            transport.send(Frame(arbitration_id=0x1, data=bytes(16), is_fd=True))
+
+
+@pytest.mark.asyncio
+async def test_receive_ids_filter_what_arrives(channel: str, peer: can.BusABC) -> None:
+    async with CanTransport("virtual", channel, ignore_config=True, receive_ids=[0x241, 0x242]) as transport:
+        for can_id in (0x240, 0x241, 0x243, 0x242):
+            peer.send(can.Message(arbitration_id=can_id, data=b"\x01", is_extended_id=False))
+        got = [await asyncio.wait_for(transport.receive(), 1.0) for _ in range(2)]
+        assert [f.arbitration_id for f in got] == [0x241, 0x242]
+        transport.set_receive_ids(None)
+        peer.send(can.Message(arbitration_id=0x243, data=b"\x02", is_extended_id=False))
+        assert (await asyncio.wait_for(transport.receive(), 1.0)).arbitration_id == 0x243
+        with pytest.raises(ValueError, match="outside"):
+            transport.set_receive_ids([0x800])
+
+
+@pytest.mark.asyncio
+async def test_error_frames_and_bus_off_become_events_and_remote_frames_are_dropped(
+    channel: str, peer: can.BusABC
+) -> None:
+    events: list[TransportEvent] = []
+    async with CanTransport("virtual", channel, ignore_config=True) as transport:
+        transport.add_listener(events.append)
+        peer.send(
+            can.Message(is_error_frame=True, arbitration_id=0x004, data=bytes([0, 0x10, 0, 0, 0, 0, 0, 0]))
+        )
+        peer.send(can.Message(is_error_frame=True, arbitration_id=0x040, data=bytes(8)))
+        peer.send(can.Message(is_remote_frame=True, arbitration_id=0x141, dlc=8, is_extended_id=False))
+        peer.send(can.Message(arbitration_id=0x241, data=b"\x01", is_extended_id=False))
+        frame = await asyncio.wait_for(transport.receive(), 1.0)
+        assert frame.arbitration_id == 0x241
+        stats = transport.stats()
+    errors = [e for e in events if isinstance(e, ErrorFrame)]
+    assert [e.classes for e in errors] == [CanErrorClass.CONTROLLER, CanErrorClass.BUS_OFF]
+    assert errors[0].data[1] == 0x10
+    assert sum(isinstance(e, BusOff) for e in events) == 1
+    assert (stats.error_frames, stats.bus_off, stats.ignored, stats.frames_in) == (2, 1, 1, 1)
+
+
+@pytest.mark.asyncio
+async def test_min_gap_spaces_the_frames_on_the_wire(channel: str, peer: can.BusABC) -> None:
+    async with CanTransport("virtual", channel, ignore_config=True, min_gap_s=0.01) as transport:
+        for i in range(5):
+            transport.send(Frame(arbitration_id=0x141, data=bytes([i])))
+        await transport.drain()
+    times = [m.timestamp for m in await asyncio.to_thread(_recv_all, peer, 5)]
+    assert min(b - a for a, b in itertools.pairwise(times)) >= 0.009
+
+
+@pytest.mark.asyncio
+async def test_bus_load_counts_frames_both_ways_at_the_configured_bit_rate(
+    channel: str, peer: can.BusABC
+) -> None:
+    async with CanTransport("virtual", channel, ignore_config=True, bitrate=1_000_000) as transport:
+        for _ in range(100):
+            transport.send(Frame(arbitration_id=0x141, data=bytes(8)))
+        await transport.drain()
+        for _ in range(100):
+            peer.send(can.Message(arbitration_id=0x241, data=bytes(8), is_extended_id=False))
+        for _ in range(100):
+            await asyncio.wait_for(transport.receive(), 1.0)
+        load = transport.stats().bus_load_pct
+    # 200 unstuffed 8-byte standard frames of 111 bits at 1 Mbit/s within the last second.
+    assert load == pytest.approx(100 * 200 * 111e-6, rel=1e-6)
+    async with CanTransport("virtual", channel, ignore_config=True) as unknown:
+        assert unknown.stats().bus_load_pct is None
+
+
+class _FlakyBus(can.BusABC):
+    """A python-can bus whose sends fail as the test says; receives nothing."""
+
+    sent: ClassVar[list[can.Message]] = []
+    failures: ClassVar[list[can.CanError]] = []
+
+    def __init__(self, channel: Any = None, **kwargs: Any) -> None:
+        super().__init__(channel=channel, **kwargs)
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        if self.failures:
+            raise self.failures.pop(0)
+        self.sent.append(msg)
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        time.sleep(timeout or 0)
+        return None, False
+
+
+@pytest.fixture
+def flaky(monkeypatch: pytest.MonkeyPatch) -> type[_FlakyBus]:
+    _FlakyBus.sent = []
+    _FlakyBus.failures = []
+    monkeypatch.setattr(can, "Bus", lambda **config: _FlakyBus(**config))
+    return _FlakyBus
+
+
+def _enobufs() -> can.CanOperationError:
+    return can.CanOperationError("Failed to transmit: [Errno 105] No buffer space available", errno.ENOBUFS)
+
+
+@pytest.mark.asyncio
+async def test_enobufs_wait_policy_retries_until_the_adapter_takes_the_frame(flaky: type[_FlakyBus]) -> None:
+    flaky.failures = [_enobufs(), _enobufs(), can.CanOperationError("Transmit buffer full")]
+    async with CanTransport("flaky", "x", ignore_config=True, enobufs="wait") as transport:
+        transport.send(Frame(arbitration_id=0x141, data=b"\x01"))
+        await transport.drain()
+        stats = transport.stats()
+    assert [bytes(m.data) for m in flaky.sent] == [b"\x01"]
+    assert (stats.enobufs_waits, stats.enobufs_dropped, stats.frames_out) == (3, 0, 1)
+
+
+@pytest.mark.asyncio
+async def test_enobufs_drop_policy_and_wait_timeout_drop_and_count(flaky: type[_FlakyBus]) -> None:
+    flaky.failures = [_enobufs()]
+    async with CanTransport("flaky", "x", ignore_config=True, enobufs="drop") as transport:
+        transport.send(Frame(arbitration_id=0x141, data=b"\x01"))
+        transport.send(Frame(arbitration_id=0x141, data=b"\x02"))
+        await transport.drain()
+        assert transport.stats().enobufs_dropped == 1
+    flaky.failures = [_enobufs() for _ in range(10_000)]
+    async with CanTransport(
+        "flaky", "x", ignore_config=True, enobufs="wait", enobufs_timeout_s=0.01
+    ) as transport:
+        transport.send(Frame(arbitration_id=0x141, data=b"\x03"))
+        await transport.drain()
+        stats = transport.stats()
+    assert [bytes(m.data) for m in flaky.sent] == [b"\x02"]
+    assert stats.enobufs_dropped == 1 and stats.enobufs_waits > 1
+
+
+@pytest.mark.asyncio
+async def test_any_other_send_failure_is_a_loss_and_the_bus_is_reopened(flaky: type[_FlakyBus]) -> None:
+    flaky.failures = [
+        can.CanOperationError("Failed to transmit: [Errno 100] Network is down", errno.ENETDOWN)
+    ]
+    async with CanTransport("flaky", "x", ignore_config=True, reopen_backoff_s=(0.01, 0.01)) as transport:
+        states: list[TransportState] = []
+        transport.add_listener(lambda e: states.append(e.state) if hasattr(e, "state") else None)
+        transport.send(Frame(arbitration_id=0x141, data=b"\x01"))
+        await asyncio.sleep(0.1)  # the writer thread fails, the loss is reported, a reopen follows
+        await transport.wait_open(timeout=2.0)
+        transport.send(Frame(arbitration_id=0x141, data=b"\x02"))
+        await transport.drain()
+        stats = transport.stats()
+    assert states[:2] == [TransportState.LOST, TransportState.OPEN]
+    assert (stats.losses, stats.reopens) == (1, 1)
+    assert [bytes(m.data) for m in flaky.sent] == [b"\x02"]
