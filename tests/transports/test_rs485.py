@@ -175,3 +175,17 @@ async def test_modbus_rtu_at_19200_and_a_truncated_frame_is_dropped_on_the_silen
     # Dropped as noise when the line went quiet, not counted as a frame that failed its CRC (which
     # is what the de-framer says if the cut frame's bytes run into the next one without a silence).
     assert (stats.discarded_bytes, stats.crc_errors, stats.frames_in) == (10, 0, 1)
+
+
+@pytest.mark.asyncio
+async def test_a_frame_split_by_a_usb_style_burst_gap_is_still_whole() -> None:
+    # A USB adapter can deliver the second half of a frame milliseconds after the first: far longer
+    # than 3.5 characters at 1 Mbaud (35 us), so the host must not take that gap for the line's
+    # inter-frame silence.
+    reply = ma.encode_rs485(1, ma.ReadStatus1())
+    bursty = Scripted(script=[(0.0, reply[:5]), (0.008, reply[5:])])
+    async with line([bursty], baud=1_000_000, mode="myactuator") as transport:
+        transport.send(ma.encode_rs485(1, ma.ReadStatus1()), reply_timeout_s=0.2)
+        frame = await asyncio.wait_for(transport.receive(), 1.0)
+        stats = transport.stats()
+    assert frame.data == reply and stats.discarded_bytes == 0

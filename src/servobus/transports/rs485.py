@@ -10,8 +10,11 @@ One :class:`SerialTransport` is one port and one half-duplex line:
   queued frame go. Between frames the line rests for ``gap_s`` (default 3.5 character times, the
   Modbus RTU silence), counted from the end of the last byte either side sent.
 * **Framing**: received bytes go through the de-framer as they arrive; whole, CRC-checked frames
-  come out as :class:`SerialFrame`. After 3.5 character times of silence the de-framer is told the
-  line went idle, which ends a Modbus frame and drops a stray partial one.
+  come out as :class:`SerialFrame`, found by header, length and CRC. When no byte has come for
+  ``idle_s`` the de-framer is told the line went idle, which drops a stray partial frame as noise.
+  ``idle_s`` is not the wire's 3.5-character silence: USB adapters hand bytes over in bursts (an
+  FTDI's default latency timer is 16 ms), so a host sees gaps inside frames that the wire never
+  had. It defaults to 20 ms, or 3.5 characters where that is longer.
 * **Loss**: a port that vanishes (EIO, ENODEV, EOF on a pty) fails every waiter at once and is
   reopened by path with backoff, as in :class:`~servobus.transports.base.Transport`.
 
@@ -42,6 +45,7 @@ from servobus.transports.stats import TransportStats
 __all__ = ["SerialFrame", "SerialMode", "SerialTransport"]
 
 _IDLE_CHARS = 3.5  # Modbus RTU's inter-frame silence, in character times
+_USB_BURST_S = 0.02  # longer than the gaps USB adapters put inside frames (FTDI latency timer: 16 ms)
 
 
 class SerialMode(enum.Enum):
@@ -92,6 +96,8 @@ class SerialTransport(Transport[SerialFrame, bytes]):
         baud: the line's rate; one the mode's manual allows (default: the mode's first).
         parity: ``"N"``, ``"E"`` or ``"O"`` (Modbus devices differ; the others use none).
         gap_s: rest between frames on the line (default: 3.5 character times).
+        idle_s: silence after which buffered partial bytes are dropped (default: 20 ms, or 3.5
+            character times where that is longer).
         exclusive: lock the port against other processes (pyserial's ``exclusive``).
         queue_size, rx_buffer, stale_after_s, reopen, reopen_backoff_s: see
             :class:`~servobus.transports.base.Transport`.
@@ -111,6 +117,7 @@ class SerialTransport(Transport[SerialFrame, bytes]):
         baud: int | None = None,
         parity: str = "N",
         gap_s: float | None = None,
+        idle_s: float | None = None,
         exclusive: bool = True,
         queue_size: int = 256,
         rx_buffer: int = 65536,
@@ -130,8 +137,8 @@ class SerialTransport(Transport[SerialFrame, bytes]):
             raise ValueError(f"baud={self.baud} is not one of {self.mode.value}'s rates {spec.bauds}")
         if parity not in _PARITY_BITS:
             raise ValueError(f"parity={parity!r} is not one of 'N', 'E', 'O'")
-        if gap_s is not None and gap_s < 0:
-            raise ValueError(f"gap_s={gap_s} must be >= 0")
+        if (gap_s is not None and gap_s < 0) or (idle_s is not None and idle_s <= 0):
+            raise ValueError(f"need gap_s >= 0 and idle_s > 0 (gap_s={gap_s}, idle_s={idle_s})")
         super().__init__(
             name=f"rs485:{port}",
             queue_size=queue_size,
@@ -143,8 +150,9 @@ class SerialTransport(Transport[SerialFrame, bytes]):
         self.port = port
         self.parity = parity
         self.bits_per_char = 10 + _PARITY_BITS[parity]
-        self.idle_s = uart_time_s(1, self.baud, bits_per_byte=self.bits_per_char) * _IDLE_CHARS
-        self.gap_s = self.idle_s if gap_s is None else gap_s
+        silence_s = uart_time_s(1, self.baud, bits_per_byte=self.bits_per_char) * _IDLE_CHARS
+        self.gap_s = silence_s if gap_s is None else gap_s
+        self.idle_s = max(silence_s, _USB_BURST_S) if idle_s is None else idle_s
         self._serial_options = {"exclusive": exclusive, **options}
         self._deframer = spec.deframer()
         self._load_known = True
