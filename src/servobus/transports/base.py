@@ -416,8 +416,11 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
         while not self._rx:
             await self._wait_rx()
         rx = self._rx
-        n = len(rx) if max_frames is None else min(max_frames, len(rx))
-        return [rx.popleft() for _ in range(n)]
+        if max_frames is None or max_frames >= len(rx):
+            frames = list(rx)
+            rx.clear()
+            return frames
+        return [rx.popleft() for _ in range(max_frames)]
 
     async def _wait_rx(self) -> None:
         if self._state is not TransportState.OPEN:

@@ -45,6 +45,7 @@ from servobus.transports.stats import TransportStats
 __all__ = ["SerialFrame", "SerialMode", "SerialTransport"]
 
 _IDLE_CHARS = 3.5  # Modbus RTU's inter-frame silence, in character times
+_READ_SIZE = 16384  # bytes taken from the port per wake-up, at most
 _USB_BURST_S = 0.02  # longer than the gaps USB adapters put inside frames (FTDI latency timer: 16 ms)
 
 
@@ -210,6 +211,10 @@ class SerialTransport(Transport[SerialFrame, bytes]):
             )
         except (serial.SerialException, OSError) as exc:
             raise TransportError(f"{self.name}: cannot open: {exc}") from exc
+        # pyserial-asyncio-fast reads at most 1 KiB per wake-up (its own TODO says so); a larger read
+        # takes a burst in one call, which is what the de-framer is built for.
+        if hasattr(line, "_max_read_size"):
+            line._max_read_size = _READ_SIZE
         self._deframer.clear()  # bytes of a frame cut by the loss cannot be completed
         self._line, self._protocol = line, protocol
 
