@@ -12,11 +12,13 @@ import itertools
 import time
 from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import pytest
 
 from _serving import serving
 from servobus.codec import crc16_modbus
+from servobus.errors import TransportError
 from servobus.protocols import myactuator as ma
 from servobus.protocols.hollow.rs485 import (
     ModbusRead,
@@ -189,3 +191,32 @@ async def test_a_frame_split_by_a_usb_style_burst_gap_is_still_whole() -> None:
         frame = await asyncio.wait_for(transport.receive(), 1.0)
         stats = transport.stats()
     assert frame.data == reply and stats.discarded_bytes == 0
+
+
+@pytest.mark.asyncio
+async def test_a_loss_while_waiting_for_a_reply_leaves_the_line_usable_after_the_reopen(
+    tmp_path: Path,
+) -> None:
+    link = tmp_path / "tty485"
+    first, second = PtyPort(link=link), None
+    transport = SerialTransport(str(link), mode="myactuator", reopen_backoff_s=(0.01, 0.05))
+    try:
+        async with serving(serve_rs485([Scripted(script=[])], first, baud=1_000_000)), transport:
+            transport.send(ma.encode_rs485(1, ma.ReadStatus1()), reply_timeout_s=5.0)  # never answered
+            await asyncio.sleep(0.05)
+            first.unplug()  # while the writer waits for that reply
+            with pytest.raises(TransportError):
+                await asyncio.wait_for(transport.receive(), 1.0)
+            second = PtyPort(link=link)
+            async with serving(
+                serve_rs485([MyActuatorRs485Motor(MyActuatorMotor(1))], second, baud=1_000_000)
+            ):
+                await transport.wait_open(timeout=5.0)
+                transport.send(ma.encode_rs485(ma.RS485_BROADCAST_ID, ma.MotorStop()))  # no reply expected
+                transport.send(ma.encode_rs485(1, ma.ReadStatus1()), reply_timeout_s=0.2)
+                reply = await asyncio.wait_for(transport.receive(), 1.0)
+    finally:
+        for port in (first, second):
+            if port is not None:
+                port.close()
+    assert ma.decode_rs485_reply(reply.data)[0] == 1

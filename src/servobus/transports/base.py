@@ -224,13 +224,8 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
             return
         if self._state is TransportState.CLOSED:
             raise self._error()
-        waiter = asyncio.get_running_loop().create_future()
-        self._open_waiters.append(waiter)
-        try:
-            async with asyncio.timeout(timeout):
-                await waiter
-        finally:
-            _discard(self._open_waiters, waiter)
+        async with asyncio.timeout(timeout):
+            await _park(self._open_waiters)
 
     def _connected(self) -> None:
         self._failure = None
@@ -275,8 +270,9 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
             self._generation += 1
             try:
                 await self._connect()
-            except TransportError as exc:
-                logger.debug("%s: reopen failed: %s", self.name, exc)
+            except Exception as exc:  # the device is still away (or refuses): try again later
+                log = logger.debug if isinstance(exc, TransportError) else logger.warning
+                log("%s: reopen failed: %s", self.name, exc)
                 delay = min(2 * delay, longest)
                 continue
             if self._state is not TransportState.LOST:  # closed while we were opening
@@ -332,12 +328,7 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
         while self._queue or self._transmitting:
             if self._state is not TransportState.OPEN:
                 raise self._error()
-            waiter = asyncio.get_running_loop().create_future()
-            self._idle_waiters.append(waiter)
-            try:
-                await waiter
-            finally:
-                _discard(self._idle_waiters, waiter)
+            await _park(self._idle_waiters)
         if self._state is not TransportState.OPEN:
             raise self._error()
 
@@ -425,12 +416,7 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
     async def _wait_rx(self) -> None:
         if self._state is not TransportState.OPEN:
             raise self._error()
-        waiter = asyncio.get_running_loop().create_future()
-        self._rx_waiters.append(waiter)
-        try:
-            await waiter
-        finally:
-            _discard(self._rx_waiters, waiter)
+        await _park(self._rx_waiters)
 
     async def __aiter__(self) -> AsyncIterator[RxT]:
         """Received frames until the transport is closed; a loss raises TransportError."""
@@ -497,6 +483,12 @@ def _wake(future: asyncio.Future[None]) -> None:
         future.set_result(None)
 
 
-def _discard(waiters: list[asyncio.Future[None]], waiter: asyncio.Future[None]) -> None:
-    with contextlib.suppress(ValueError):
-        waiters.remove(waiter)
+async def _park(waiters: list[asyncio.Future[None]]) -> None:
+    """Wait on a new future in ``waiters`` until it is woken (or failed), then leave the list."""
+    waiter = asyncio.get_running_loop().create_future()
+    waiters.append(waiter)
+    try:
+        await waiter
+    finally:
+        with contextlib.suppress(ValueError):  # already cleared by _fail_waiters
+            waiters.remove(waiter)

@@ -238,7 +238,8 @@ class SerialTransport(Transport[SerialFrame, bytes]):
         now = time.monotonic()
         self._stats.bytes_in += len(data)
         self._load.add(now, uart_time_s(len(data), self.baud, bits_per_byte=self.bits_per_char))
-        self._last_rx = self._line_quiet_at = max(self._line_quiet_at, now)
+        self._last_rx = now
+        self._line_quiet_at = max(self._line_quiet_at, now)
         self._take(self._deframer.feed(data), now)
         if self._deframer.pending and self._idle_timer is None:
             self._idle_timer = asyncio.get_running_loop().call_later(self.idle_s, self._on_quiet, generation)
@@ -264,21 +265,21 @@ class SerialTransport(Transport[SerialFrame, bytes]):
     # ----------------------------------------------------------------- sending
 
     async def _transmit(self, batch: list[Outgoing[bytes]]) -> None:
-        loop = asyncio.get_running_loop()
         stats = self._stats
         for outgoing in batch:
-            if (rest := self._line_quiet_at + self.gap_s - time.monotonic()) > 0:
-                try:
+            try:
+                if (rest := self._line_quiet_at + self.gap_s - time.monotonic()) > 0:
                     await asyncio.sleep(rest)
-                except asyncio.CancelledError:  # lost or closed before it was written
-                    self._dropped("purged", 1)
-                    raise
+            except asyncio.CancelledError:  # lost or closed before it was written
+                self._dropped("purged", 1)
+                raise
             line = self._line
-            if line is None or line.is_closing():
-                return  # lost meanwhile: the base has purged the rest
+            if line is None or line.is_closing():  # failed while we rested
+                self._dropped("purged", 1)
+                return
             data = outgoing.item
-            if outgoing.hold_s is not None:
-                self._reply = loop.create_future()
+            reply = None if outgoing.hold_s is None else asyncio.get_running_loop().create_future()
+            self._reply = reply
             line.write(data)
             on_wire_s = uart_time_s(len(data), self.baud, bits_per_byte=self.bits_per_char)
             now = time.monotonic()
@@ -286,10 +287,13 @@ class SerialTransport(Transport[SerialFrame, bytes]):
             stats.frames_out += 1
             stats.bytes_out += len(data)
             self._load.add(now, on_wire_s)
-            if self._reply is not None:
-                with contextlib.suppress(TimeoutError):
-                    await asyncio.wait_for(self._reply, on_wire_s + outgoing.hold_s)  # type: ignore[operator]
-                self._reply = None
+            if reply is not None and outgoing.hold_s is not None:
+                try:
+                    await asyncio.wait_for(reply, on_wire_s + outgoing.hold_s)
+                except TimeoutError:
+                    pass  # no reply: the line is free again; matching the silence is the caller's job
+                finally:
+                    self._reply = None
 
 
 class _LineProtocol(asyncio.Protocol):
