@@ -80,7 +80,7 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
     """
 
     #: frames the writer hands to :meth:`_transmit` at once (a half-duplex line takes one at a time,
-    #: so that frames still queued when the device is lost are purged, not half-sent)
+    #: so each frame's age is checked when its own transaction starts)
     batch_size: ClassVar[int] = 64
 
     def __init__(
@@ -141,7 +141,12 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
 
     @abc.abstractmethod
     async def _transmit(self, batch: list[Outgoing[TxT]]) -> None:
-        """Write ``batch`` in order, count it, and call :meth:`_lose` if the device fails."""
+        """Write ``batch`` in order, count it, and call :meth:`_lose` if the device fails.
+
+        Take each frame off the front of ``batch`` as it goes out (a writer thread that accounts
+        for its frames itself may take them all at once). Whatever is still in ``batch`` when this
+        returns, or when a loss or close cancels it, is counted as purged here in the base.
+        """
 
     # ----------------------------------------------------------------- life cycle
 
@@ -357,6 +362,7 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
                 return
             finally:
                 self._transmitting = False
+                self._dropped("purged", len(batch))  # not written: lost, closed or failed mid-batch
             if generation != self._generation:  # _transmit lost the device
                 return
 

@@ -267,10 +267,10 @@ class CanTransport(Transport[Frame, Frame]):
     def _on_readable(self, bus: can.BusABC, generation: int) -> None:
         try:
             message = bus.recv(0)
-        except Exception as exc:
-            with contextlib.suppress(Exception):
-                asyncio.get_running_loop().remove_reader(self._reader_fd or -1)
-            self._reader_fd = None
+        except Exception as exc:  # a vanished device stays readable: stop watching it now
+            if self._reader_fd is not None:
+                asyncio.get_running_loop().remove_reader(self._reader_fd)
+                self._reader_fd = None
             self._lose(exc, generation)
             return
         if message is not None:
@@ -338,9 +338,11 @@ class CanTransport(Transport[Frame, Frame]):
 
     async def _transmit(self, batch: list[Outgoing[Frame]]) -> None:
         assert self._bus is not None and self._executor is not None
+        frames = batch.copy()
+        batch.clear()  # the writer thread accounts for these itself, even if this task is cancelled
         loop = asyncio.get_running_loop()
         await loop.run_in_executor(
-            self._executor, self._send_blocking, self._bus, batch, loop, self._generation
+            self._executor, self._send_blocking, self._bus, frames, loop, self._generation
         )
 
     def _send_blocking(

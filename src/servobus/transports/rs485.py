@@ -266,17 +266,13 @@ class SerialTransport(Transport[SerialFrame, bytes]):
 
     async def _transmit(self, batch: list[Outgoing[bytes]]) -> None:
         stats = self._stats
-        for outgoing in batch:
-            try:
-                if (rest := self._line_quiet_at + self.gap_s - time.monotonic()) > 0:
-                    await asyncio.sleep(rest)
-            except asyncio.CancelledError:  # lost or closed before it was written
-                self._dropped("purged", 1)
-                raise
+        while batch:
+            if (rest := self._line_quiet_at + self.gap_s - time.monotonic()) > 0:
+                await asyncio.sleep(rest)
             line = self._line
-            if line is None or line.is_closing():  # failed while we rested
-                self._dropped("purged", 1)
+            if line is None or line.is_closing():  # failed while we rested: the base purges the rest
                 return
+            outgoing = batch.pop(0)
             data = outgoing.item
             reply = None if outgoing.hold_s is None else asyncio.get_running_loop().create_future()
             self._reply = reply
