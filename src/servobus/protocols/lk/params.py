@@ -21,12 +21,13 @@ from __future__ import annotations
 import enum
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, ClassVar, TypeAlias
+from typing import Any, ClassVar, Self, TypeAlias
 
 from servobus.errors import ProtocolError
 from servobus.protocols._fields import IntField
-from servobus.protocols.lk._base import enum_byte, payload
-from servobus.protocols.lk.model import check_member
+from servobus.protocols._message import Message
+from servobus.protocols.lk._base import build, check_command, enum_byte, expect, payload
+from servobus.protocols.lk.model import DEFAULT_MODEL, LkModel, check_member
 from servobus.protocols.lk.states import ParamResult
 
 __all__ = [
@@ -360,23 +361,31 @@ def decode_result(table: Mapping[int, ParamResult], data: bytes, *, what: str) -
         ) from None
 
 
-class ParamMessage:
-    """The shared body of every parameter frame with a value: ``cmd | key | value`` (spec §13).
+class ParamMessage(Message):
+    """The shared body of every parameter frame: ``cmd | key [| value]`` (spec §13).
 
     The three parameter schemes (V2.36 control parameters, V2.36 settings, V2.35 ParamIDs) differ
-    only in their key enum, their value layouts and how the key is written; subclasses set
-    ``PARAMS`` and ``LAYOUTS`` and, for two-byte keys, override :meth:`_encode_key`/:meth:`_decode_key`.
+    only in their key enum (``PARAMS``), how the key is written (:meth:`_encode_key` and
+    :meth:`_decode_key`, overridden for two-byte keys) and their value layouts (``LAYOUTS``; None
+    for a read request, which carries the key alone). The command byte is the class's ``CODE``, or
+    for a reply that answers several requests its ``command`` field, one of ``COMMANDS``.
+    A message class sets these and declares its fields; checking, encoding and decoding are here.
     """
 
     __slots__ = ()
+    COMMANDS: ClassVar[tuple[int, ...]] = ()
     PARAMS: ClassVar[type[enum.IntEnum]]
-    LAYOUTS: ClassVar[Mapping[Any, ValueLayout]]
+    LAYOUTS: ClassVar[Mapping[Any, ValueLayout] | None] = None
+    command: int
     param: Any
     value: ParamValue
 
-    def _check(self) -> None:
+    def __post_init__(self) -> None:
+        if self.COMMANDS:
+            check_command(self.command, self.COMMANDS)
         check_member("param", self.param, self.PARAMS)
-        check_value(self.param, self.value, self.LAYOUTS)
+        if self.LAYOUTS is not None:
+            check_value(self.param, self.value, self.LAYOUTS)
 
     @classmethod
     def _encode_key(cls, param: Any) -> bytes:
@@ -386,10 +395,24 @@ class ParamMessage:
     def _decode_key(cls, data: bytes, what: str) -> Any:
         return enum_byte(cls.PARAMS, data, 1, what=what)
 
-    def _body(self, code: int) -> bytes:
-        return payload(code, (1, self._encode_key(self.param)), self.LAYOUTS[self.param].encode(self.value))
+    def encode(self) -> bytes:
+        code = self.command if self.COMMANDS else self.CODE
+        assert code is not None  # every parameter message has a command byte
+        key = (1, self._encode_key(self.param))
+        if self.LAYOUTS is None:
+            return payload(code, key)
+        return payload(code, key, self.LAYOUTS[self.param].encode(self.value))
 
     @classmethod
-    def _fields(cls, data: bytes, what: str) -> dict[str, object]:
+    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
+        what = cls.__name__
+        codes = cls.COMMANDS if cls.COMMANDS else cls.CODE
+        assert codes is not None
+        command = expect(data, codes, what)
         param = cls._decode_key(data, what)
-        return {"param": param, "value": cls.LAYOUTS[param].decode(data, what=what)}
+        fields: dict[str, object] = {"param": param}
+        if cls.COMMANDS:
+            fields["command"] = command
+        if cls.LAYOUTS is not None:
+            fields["value"] = cls.LAYOUTS[param].decode(data, what=what)
+        return build(cls, data, **fields)

@@ -52,23 +52,13 @@ class _ParamMessage(ParamMessage):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadParam(LkCommand):
+class ReadParam(ParamMessage, LkCommand):
     """0x40, V2.35 layout: read a parameter, ``40 | ParamID | 00..`` (spec §4.27; worked example W4)."""
 
     CODE: ClassVar[int] = 0x40
     REVISIONS = V2_35_ONLY
+    PARAMS = ParamId
     param: ParamId
-
-    def __post_init__(self) -> None:
-        check_member("param", self.param, ParamId)
-
-    def encode(self) -> bytes:
-        return payload(self.CODE, (1, bytes([self.param])))
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        expect(data, cls.CODE, cls.__name__)
-        return build(cls, data, param=enum_byte(ParamId, data, 1, what=cls.__name__))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -85,38 +75,9 @@ class ParamReply(_ParamMessage, LkReply):
     param: ParamId
     value: ParamValue
 
-    def __post_init__(self) -> None:
-        self._check()
-
-    def encode(self) -> bytes:
-        return self._body(self.CODE)
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        expect(data, cls.CODE, cls.__name__)
-        return build(cls, data, **cls._fields(data, cls.__name__))
-
-
-class _WriteParam(_ParamMessage, LkCommand):
-    """0x42/0x44 V2.35 request body; the subclasses differ only in the command byte."""
-
-    __slots__ = ()
-    CODE: ClassVar[int]
-
-    def __post_init__(self) -> None:
-        self._check()
-
-    def encode(self) -> bytes:
-        return self._body(self.CODE)
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        expect(data, cls.CODE, cls.__name__)
-        return build(cls, data, **cls._fields(data, cls.__name__))
-
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class WriteParamRam(_WriteParam):
+class WriteParamRam(_ParamMessage, LkCommand):
     """0x42, V2.35 layout: write one parameter to RAM, lost at power-off (spec §4.28, §6.3)."""
 
     CODE: ClassVar[int] = 0x42
@@ -126,7 +87,7 @@ class WriteParamRam(_WriteParam):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class WriteParamRom(_WriteParam):
+class WriteParamRom(_ParamMessage, LkCommand):
     """0x44, V2.35 layout: write one parameter to ROM, kept over power-off (spec §4.29, §6.3)."""
 
     CODE: ClassVar[int] = 0x44

@@ -15,8 +15,6 @@ from servobus.protocols.lk._base import (
     LkCommand,
     LkReply,
     build,
-    check_command,
-    enum_byte,
     expect,
     payload,
 )
@@ -60,23 +58,13 @@ class _ControlMessage(ParamMessage):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadControlParam(LkCommand):
+class ReadControlParam(ParamMessage, LkCommand):
     """0xC0, V2.36 only: read a control parameter from RAM (spec §4.18)."""
 
     CODE: ClassVar[int] = 0xC0
     REVISIONS = V2_36_ONLY
+    PARAMS = ControlParam
     param: ControlParam
-
-    def __post_init__(self) -> None:
-        check_member("param", self.param, ControlParam)
-
-    def encode(self) -> bytes:
-        return payload(self.CODE, (1, bytes([self.param])))
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        expect(data, cls.CODE, cls.__name__)
-        return build(cls, data, param=enum_byte(ControlParam, data, 1, what=cls.__name__))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -93,17 +81,6 @@ class WriteControlParam(_ControlMessage, LkCommand):
     param: ControlParam
     value: ParamValue
 
-    def __post_init__(self) -> None:
-        self._check()
-
-    def encode(self) -> bytes:
-        return self._body(self.CODE)
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        expect(data, cls.CODE, cls.__name__)
-        return build(cls, data, **cls._fields(data, cls.__name__))
-
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ControlParamReply(_ControlMessage, LkReply):
@@ -116,35 +93,20 @@ class ControlParamReply(_ControlMessage, LkReply):
     """
 
     REVISIONS = V2_36_ONLY
+    COMMANDS = (0xC0, 0xC1)
     command: int
     param: ControlParam
     value: ParamValue
-
-    def __post_init__(self) -> None:
-        check_command(self.command, (0xC0, 0xC1))
-        self._check()
-
-    def encode(self) -> bytes:
-        return self._body(self.command)
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        command = expect(data, (0xC0, 0xC1), cls.__name__)
-        return build(cls, data, command=command, **cls._fields(data, cls.__name__))
 
 
 # ---- V2.36 setting parameters (0x40 / 0x42 / 0x44) ---------------------------------------------
 
 
-class _SettingMessage(ParamMessage):
-    """0x40 replies and 0x42 frames: ``cmd | address | value`` (spec §6.2, §13).
-
-    The PID layout starts at DATA[2] and overwrites the (zero) second address byte with Kp.
-    """
+class _SettingKey(ParamMessage):
+    """Setting frames are keyed by two address bytes (spec §6.2)."""
 
     __slots__ = ()
     PARAMS = SettingParam
-    LAYOUTS = SETTING_LAYOUTS
 
     @classmethod
     def _encode_key(cls, param: SettingParam) -> bytes:
@@ -155,24 +117,23 @@ class _SettingMessage(ParamMessage):
         return decode_setting_address(data, what=what)
 
 
+class _SettingMessage(_SettingKey):
+    """0x40 replies and 0x42 frames: ``cmd | address | value`` (spec §6.2, §13).
+
+    The PID layout starts at DATA[2] and overwrites the (zero) second address byte with Kp.
+    """
+
+    __slots__ = ()
+    LAYOUTS = SETTING_LAYOUTS
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadSetting(LkCommand):
+class ReadSetting(_SettingKey, LkCommand):
     """0x40, V2.36 layout: read a setting parameter, ``40 | addr1 | addr2 | 00..`` (spec §4.27)."""
 
     CODE: ClassVar[int] = 0x40
     REVISIONS = V2_36_ONLY
     param: SettingParam
-
-    def __post_init__(self) -> None:
-        check_member("param", self.param, SettingParam)
-
-    def encode(self) -> bytes:
-        return payload(self.CODE, (1, setting_address(self.param)))
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        expect(data, cls.CODE, cls.__name__)
-        return build(cls, data, param=decode_setting_address(data, what=cls.__name__))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -189,17 +150,6 @@ class WriteSetting(_SettingMessage, LkCommand):
     param: SettingParam
     value: ParamValue
 
-    def __post_init__(self) -> None:
-        self._check()
-
-    def encode(self) -> bytes:
-        return self._body(self.CODE)
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        expect(data, cls.CODE, cls.__name__)
-        return build(cls, data, **cls._fields(data, cls.__name__))
-
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class SettingReply(_SettingMessage, LkReply):
@@ -212,21 +162,10 @@ class SettingReply(_SettingMessage, LkReply):
     """
 
     REVISIONS = V2_36_ONLY
+    COMMANDS = (0x40, 0x42)
     command: int
     param: SettingParam
     value: ParamValue
-
-    def __post_init__(self) -> None:
-        check_command(self.command, (0x40, 0x42))
-        self._check()
-
-    def encode(self) -> bytes:
-        return self._body(self.command)
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        command = expect(data, (0x40, 0x42), cls.__name__)
-        return build(cls, data, command=command, **cls._fields(data, cls.__name__))
 
 
 _SAVE_ADDRESS = bytes([0x05, 0xFA])  # spec §4.29: request 44 05 FA, reply 44 05 flag
