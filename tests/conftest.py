@@ -2,14 +2,25 @@
 
 tests/reference/ (the pure-Python oracle of the C core) is imported as ``reference``: pytest's default
 import mode already puts tests/ on sys.path; this keeps that true under --import-mode=importlib too.
+
+Hypothesis profiles, chosen with HYPOTHESIS_PROFILE (or hypothesis' own ``--hypothesis-profile``):
+``default`` (300 examples per property, the everyday run) and ``ci`` (3,000, the long run). Every
+property follows the profile, the oracle tests included (tests/reference/settings.py); a test keeps a
+lower count of its own only where one example is expensive.
 """
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
+
+settings.register_profile("default", max_examples=300)
+settings.register_profile("ci", max_examples=3000)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
 
 _TESTS = str(Path(__file__).resolve().parent)
 if _TESTS not in sys.path:

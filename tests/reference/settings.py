@@ -1,7 +1,8 @@
 """Hypothesis settings shared by the oracle tests (tests/test_oracle_*.py).
 
-SERVOBUS_ORACLE_EXAMPLES lowers the example count for slow builds (a sanitizer smoke run, say):
-``SERVOBUS_ORACLE_EXAMPLES=300 pytest tests/test_oracle_*.py``.
+The example count follows the Hypothesis profile (tests/conftest.py: ``default`` 300, ``ci`` 3,000;
+HYPOTHESIS_PROFILE chooses). SERVOBUS_ORACLE_EXAMPLES overrides it for these tests alone (a sanitizer
+smoke run, say): ``SERVOBUS_ORACLE_EXAMPLES=500 pytest tests/test_oracle_*.py``.
 """
 
 from __future__ import annotations
@@ -12,12 +13,15 @@ from hypothesis import HealthCheck, settings
 
 __all__ = ["ORACLE_EXAMPLES", "oracle_settings"]
 
-ORACLE_EXAMPLES = int(os.environ.get("SERVOBUS_ORACLE_EXAMPLES", "10000"))
+_override = os.environ.get("SERVOBUS_ORACLE_EXAMPLES")
 
-# deadline=None: timing varies with the machine and with sanitizers; too_slow/data_too_large: the
-# strategies build whole frame streams and batches on purpose.
+# Settings left unnamed here come from the profile loaded when this module is imported (conftest loads
+# it before any test module). deadline=None: timing varies with the machine and with sanitizers;
+# too_slow/data_too_large: the strategies build whole frame streams and batches on purpose.
 oracle_settings = settings(
-    max_examples=ORACLE_EXAMPLES,
     deadline=None,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+    **({"max_examples": int(_override)} if _override else {}),
 )
+
+ORACLE_EXAMPLES: int = oracle_settings.max_examples
