@@ -140,6 +140,7 @@ def _motion_reply(scales: ma.MotionScales) -> st.SearchStrategy[ma.MotionReply]:
 SPECIAL: dict[type, Callable[[], st.SearchStrategy[Any]]] = {
     ma.FunctionControl: _function_control,
     ma.WriteAcceleration: lambda: fixed_strategy(ma.WriteAcceleration, acceleration_dps_s=_ACCELERATION),
+    ma.AccelerationReply: lambda: fixed_strategy(ma.AccelerationReply, acceleration_dps_s=_ACCELERATION),
     ma.CanIdReply: lambda: fixed_strategy(ma.CanIdReply, layout=st.sampled_from(list(ma.CanIdLayout))),
     ma.MotionCommand: lambda: scales_strategy.flatmap(_motion_command),
     ma.MotionReply: lambda: scales_strategy.flatmap(_motion_reply),

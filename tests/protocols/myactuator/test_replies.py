@@ -89,12 +89,18 @@ def test_status1_decodes_flags_and_keeps_unknown_bits() -> None:
         ma.Status1Reply.decode(bytes.fromhex("9A 32 00 02 E5 01 00 00"))
 
 
-def test_run_mode_keeps_undefined_values() -> None:
-    # §9 item 27: the mode after 0x80 or in motion mode is undefined; it is passed through.
+@pytest.mark.parametrize("code", [0x00, 0x04, 0x07, 0xFF])
+def test_run_mode_outside_the_three_manual_modes_is_a_protocol_error(code: int) -> None:
+    # [002] §2.25.3 / [000] §2.26.3: the run mode "has the following 3 states" (0x01..0x03); the manual
+    # overrides the spec's pass-through (§9 item 27).
     assert ma.RunModeReply.decode(bytes.fromhex("70 00 00 00 00 00 00 03")).mode is ma.RunMode.POSITION_LOOP
-    unknown = ma.RunModeReply.decode(bytes.fromhex("70 00 00 00 00 00 00 07"))
-    assert unknown.mode == 7 and not isinstance(unknown.mode, ma.RunMode)
-    assert unknown.encode() == bytes.fromhex("70 00 00 00 00 00 00 07")
+    data = bytes([0x70, 0, 0, 0, 0, 0, 0, code])
+    with pytest.raises(ProtocolError, match=f"mode=0x{code:02X} is not one of RunMode"):
+        ma.RunModeReply.decode(data)
+    with pytest.raises(ProtocolError, match=f"mode=0x{code:02X}"):
+        ma.decode_reply(0x241, data)
+    with pytest.raises(ValueError, match=f"mode={code}"):
+        ma.RunModeReply(mode=code)  # type: ignore[arg-type]
 
 
 def test_pid_reply_refuses_non_finite_floats() -> None:
@@ -197,3 +203,73 @@ def test_fault_table_matches_the_manual() -> None:
     assert ma.ErrorFlags.COMPONENT_OVER_TEMPERATURE not in flags
     assert ma.ErrorFlags.ENCODER_DATA_ERROR not in flags
     assert next(f for f in ma.FAULTS if f.flag is None).name == "hardware over-current"
+
+
+# ---- decoded values outside the manuals' ranges (issue 13) ----
+
+
+def test_v4_3_single_turn_frame_read_as_v4_4_is_out_of_range_and_named() -> None:
+    # [002] §2.13's example (uint16 100.00° in DATA[6..7]) read with V4.4's int32 layout is 65536.00°,
+    # outside [000] §2.12's -180..+180°; V4.3's layout reads every byte of it.
+    data = bytes.fromhex("94 00 00 00 00 00 10 27")
+    message = r"angle_deg=6553600\.0 is outside \[-180, 180\]; looks like a V4\.3 frame"
+    with pytest.raises(ProtocolError, match=message):
+        ma.decode_reply(0x241, data, revision=ma.Revision.V4_4)
+    with pytest.raises(ProtocolError, match=r"angle_deg=6553600\.0"):
+        ma.SingleTurnAngleReply.decode(data)
+    assert ma.decode_reply(0x241, data, revision=ma.Revision.V4_3) == ma.CircleAngleReply(angle_deg=100.0)
+
+
+def test_v4_4_negative_single_turn_frame_read_as_v4_3_is_out_of_range_and_named() -> None:
+    data = ma.SingleTurnAngleReply(angle_deg=-75.0).encode()  # B4 E2 FF FF: DATA[6..7] = 0xFFFF
+    message = r"angle_deg=655\.35 is outside \[0, 359\.99\]; looks like a V4\.4 frame"
+    with pytest.raises(ProtocolError, match=message):
+        ma.decode_reply(0x241, data, revision=ma.Revision.V4_3)
+
+
+@pytest.mark.parametrize(
+    ("data", "revision", "message"),
+    [
+        # 180.01°: V4.3 would read 0° only by skipping DATA[4..5], so no other revision is named.
+        ("94 00 00 00 51 46 00 00", ma.Revision.V4_4, r"angle_deg=180\.01 is outside \[-180, 180\] \("),
+        ("94 00 00 00 AF B9 FF FF", ma.Revision.V4_4, r"angle_deg=-180\.01 is outside \[-180, 180\] \("),
+        # 360.00°: [002] §2.13 "0~35999"; as a V4.4 int32 it is far out of range too.
+        ("94 00 00 00 00 00 A0 8C", ma.Revision.V4_3, r"angle_deg=360\.0 is outside \[0, 359\.99\] \("),
+    ],
+)
+def test_single_turn_angle_outside_the_revision_range(data: str, revision: ma.Revision, message: str) -> None:
+    with pytest.raises(ProtocolError, match=message):
+        ma.decode_reply(0x241, bytes.fromhex(data), revision=revision)
+
+
+def test_single_turn_angle_range_ends_decode() -> None:
+    v44 = ma.Revision.V4_4
+    assert ma.decode_reply(0x241, ma.SingleTurnAngleReply(angle_deg=180.0).encode(), revision=v44)
+    assert ma.decode_reply(0x241, ma.SingleTurnAngleReply(angle_deg=-180.0).encode(), revision=v44)
+    last = ma.decode_reply(0x241, bytes.fromhex("94 00 00 00 00 00 9F 8C"), revision=ma.Revision.V4_3)
+    assert last == ma.CircleAngleReply(angle_deg=359.99)
+
+
+def test_mos_temperature_is_unsigned() -> None:
+    # [002] §2.14.3 / [000] §2.13.3 print DATA[2] = (uint8_t)(motorMOStemperature).
+    reply = ma.decode_reply(0x241, bytes.fromhex("9A 32 C8 01 E5 01 04 00"))
+    assert isinstance(reply, ma.Status1Reply) and reply.mos_temperature_c == 200
+    with pytest.raises(ValueError, match="mos_temperature_c=-1"):
+        ma.Status1Reply(temperature_c=50, mos_temperature_c=-1, brake_released=True, voltage_v=48.5)
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        (50, r"acceleration_dps_s=50\.0 is outside \[100, 60000\]"),
+        (60001, r"acceleration_dps_s=60001\.0 is outside"),
+    ],
+)
+def test_acceleration_reply_outside_0_or_100_to_60000(value: int, message: str) -> None:
+    # [000]/[002] 0x42: Accel 100..60000 dps/s (0 has a documented meaning, spec §9 item 19).
+    data = bytes([0x42, 0, 0, 0]) + value.to_bytes(4, "little")
+    with pytest.raises(ProtocolError, match=message):
+        ma.decode_reply(0x241, data)
+    assert ma.decode_reply(0x241, bytes.fromhex("42 00 00 00 00 00 00 00")) == ma.AccelerationReply(
+        index=ma.AccelIndex.POSITION_ACCELERATION, acceleration_dps_s=0.0
+    )

@@ -65,7 +65,7 @@ def test_comm_timeout_cuts_the_output_and_locks_the_brake_at_exactly_the_set_tim
     replies = {type(r): r for _, _, r in _decoded(network.advance(0.51))}
     assert replies[ma.Status1Reply].brake_released is False
     assert replies[ma.Status1Reply].errors == ErrorFlags.NONE  # the manuals name no error flag for it
-    assert replies[ma.RunModeReply].mode == 0
+    assert replies[ma.RunModeReply].mode == ma.RunMode.SPEED_LOOP  # the tripped loop's mode stays
     assert motor.counters["comm_restored"] == 1 and not motor.comm_tripped
     _send(network, motor, speed, 0.52)
     network.advance(0.6)

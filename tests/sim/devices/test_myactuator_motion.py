@@ -11,7 +11,7 @@ import math
 import pytest
 
 from servobus.protocols import myactuator as ma
-from servobus.sim.devices.myactuator import RUN_MODE_OFF, MyActuatorMotor
+from servobus.sim.devices.myactuator import RUN_MODE_POWER_UP, MyActuatorMotor
 from servobus.sim.plant import Brake, CurrentControl, Impedance, Off, PositionControl, SpeedControl
 
 from ._myactuator import angle, ask, frame_for, status, status1, tell
@@ -194,7 +194,8 @@ def test_injected_error_shows_in_0x9a_cuts_the_output_and_control_is_refused() -
     assert isinstance(motor.plant.control, Off)
     reply = status1(motor, 0.5)
     assert reply.errors == ErrorFlags.OVER_VOLTAGE | ErrorFlags.MOTOR_OVER_TEMPERATURE
-    assert _run_mode(motor, 0.5) == RUN_MODE_OFF
+    # Output cut, but 0x70 still reports one of the three defined modes (§4.27): the last loop's.
+    assert _run_mode(motor, 0.5) == ma.RunMode.SPEED_LOOP
     # §0: control commands run "when the motor has no fault": answered with the status, not executed.
     for command in (
         ma.SpeedControl(speed_dps=100.0),
@@ -347,7 +348,7 @@ def test_reboot_restores_power_up_state() -> None:
     motor.reboot(0.5)
     assert motor.counters["reboots"] == 1
     assert isinstance(motor.plant.control, Brake) and not motor.brake_released  # power-off locks it
-    assert _run_mode(motor, 0.5) == RUN_MODE_OFF
+    assert _run_mode(motor, 0.5) == RUN_MODE_POWER_UP
     assert motor.ram.error_reporting  # 0x20 values are ROM values
     assert ask(motor, ma.ReadRunTime(), 0.75, ma.RunTimeReply).run_time_ms == 250
 

@@ -302,7 +302,33 @@ def _decode_in(
             raise ProtocolError(reason, raw=data, command=data[0])
         return message
     # Report the layout the bytes matched (a bad value), not one they were never meant to be.
-    raise next((e for e in errors if not isinstance(e, LayoutMismatch)), errors[0])
+    error = next((e for e in errors if not isinstance(e, LayoutMismatch)), errors[0])
+    if not isinstance(error, LayoutMismatch):
+        # A value outside this revision's range may be another revision's frame read with the wrong
+        # layout (a V4.3 0x94 uint16 in DATA[6..7] reads as a V4.4 int32 of 655.36° and up): say so.
+        other = _other_revision_reading(layouts, data, revision)
+        if other is not None:
+            raise ProtocolError(f"{error.message}; looks like a {other} frame", raw=data, command=data[0])
+    raise error
+
+
+def _other_revision_reading(layouts: tuple[Layout, ...], data: bytes, revision: Revision) -> str | None:
+    """The revisions of the first layout outside ``revision`` that reads ``data`` whole, or None.
+
+    "Whole": the layout decodes the bytes and encodes its reading back to the same bytes, so no
+    non-zero byte was skipped as NULL (V4.3's 0x94 layout would read any V4.4 frame with DATA[6..7] = 0
+    as 0°, which is no reading of it).
+    """
+    for layout in layouts:
+        if revision in layout.revisions:
+            continue
+        try:
+            if layout.decode(data).encode() != data:
+                continue
+        except ProtocolError:
+            continue
+        return revision_names(layout.revisions)
+    return None
 
 
 def _check_revision(revision: Revision) -> None:

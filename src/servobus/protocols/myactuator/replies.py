@@ -9,8 +9,11 @@ Layouts that differ by revision have one class per layout, and ``codec.decode_re
 * 0x94: :class:`SingleTurnAngleReply` (V4.4, int32 ±180°) / :class:`CircleAngleReply` (V4.3, uint16).
 * 0xB5: :class:`ModelPartReply` (V4.4, 5 characters of three) / :class:`ModelReply` (V4.3, 7 characters).
 
-Reply fields are bounded only by their integer types, not by command limits: a reply reports what the
-motor measured. NULL bytes are ignored on decode.
+Reply fields are bounded by their integer types and, where a manual states a range for the reported
+value, by that range (0x94's angle, 0x70's modes, 0x42's acceleration): a value outside it is not data,
+so decoding it raises ProtocolError naming the field and the value (each range cites its section).
+Command limits do not bound replies otherwise: a reply reports what the motor measured. NULL bytes are
+ignored on decode.
 """
 
 from __future__ import annotations
@@ -33,10 +36,9 @@ from servobus.protocols.myactuator._layout import (
     Float32Field,
     LayoutMismatch,
     MyActuatorMessage,
-    OpenEnumField,
     check_payload,
 )
-from servobus.protocols.myactuator.commands import MyActuatorCommand
+from servobus.protocols.myactuator.commands import ACCELERATION_MIN_DPS_S, MyActuatorCommand
 from servobus.protocols.myactuator.enums import (
     STATUS_COMMAND_REVISIONS,
     AccelIndex,
@@ -141,6 +143,8 @@ _ANGLE_I32 = ScaledField("angle_deg", size=4, signed=True, counts_per_unit=100) 
 
 # ---- 0x30, 0x42 ----
 
+_ACCEL_READ = ScaledField("acceleration_dps_s", size=4, signed=True, counts_per_unit=1, lo=0, hi=60000)
+
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class PidReply(MyActuatorReply):
@@ -159,12 +163,19 @@ class AccelerationReply(MyActuatorReply):
 
     CODE: ClassVar[int] = 0x42
     TITLE: ClassVar[str] = "read acceleration"
-    FIELDS = (
-        (1, EnumField("index", 1, AccelIndex)),
-        (4, ScaledField("acceleration_dps_s", size=4, signed=True, counts_per_unit=1)),
-    )
+    # [000]/[002] §2.4 (spec §4.4): Accel 100..60000 dps/s; 0 also reads back, as 0x43 accepts it
+    # (it has a documented meaning, spec §9 item 19), so 0 or 100..60000.
+    FIELDS = ((1, EnumField("index", 1, AccelIndex)), (4, _ACCEL_READ))
     index: AccelIndex
     acceleration_dps_s: float
+
+    def __post_init__(self) -> None:
+        Fixed.__post_init__(self)
+        if 0 < _ACCEL_READ.to_code(self.acceleration_dps_s) < ACCELERATION_MIN_DPS_S:
+            raise ValueError(
+                f"acceleration_dps_s={self.acceleration_dps_s!r} is outside [{ACCELERATION_MIN_DPS_S}, 60000]"
+                " (or 0)"
+            )
 
 
 # ---- 0x60..0x64 encoder ----
@@ -215,13 +226,17 @@ class ZeroOffsetReply(MyActuatorReply):
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class RunModeReply(MyActuatorReply):
-    """0x70 reply: operating mode in DATA[7]. Undefined values (after 0x80, in motion mode) are kept as
-    plain ints (§9 item 27)."""
+    """0x70 reply: operating mode in DATA[7], one of the three :class:`RunMode` values (§4.27).
+
+    The manuals say the run mode "has the following 3 states" ([002] §2.25.3, [000] §2.26.3: current,
+    speed, position loop). The spec (§9 item 27) chose to pass other values through; the manual is the
+    authority and lists no other state, so any other byte is a ProtocolError naming it.
+    """
 
     CODE: ClassVar[int] = 0x70
     TITLE: ClassVar[str] = "read operating mode"
-    FIELDS = ((7, OpenEnumField("mode", 1, RunMode)),)
-    mode: RunMode | int
+    FIELDS = ((7, EnumField("mode", 1, RunMode)),)
+    mode: RunMode
 
 
 # ---- 0x79 (V4.3) ----
@@ -322,7 +337,8 @@ class SingleTurnAngleReply(MyActuatorReply):
     CODE: ClassVar[int] = 0x94
     TITLE: ClassVar[str] = "read single-turn angle (int32 ±180°)"
     REVISIONS = ONLY_V4_4
-    FIELDS = ((4, _ANGLE_I32),)
+    # [000] §2.12.1: "The single-turn angle range of the motor is -180° to +180°" (int32, 0.01°/LSB).
+    FIELDS = ((4, ScaledField("angle_deg", size=4, signed=True, counts_per_unit=100, lo=-180, hi=180)),)
     angle_deg: float
 
 
@@ -334,7 +350,8 @@ class CircleAngleReply(MyActuatorReply):
     CODE: ClassVar[int] = 0x94
     TITLE: ClassVar[str] = "read single-turn angle (uint16 0..359.99°)"
     REVISIONS = ONLY_V4_3
-    FIELDS = ((6, ScaledField("angle_deg", size=2, signed=False, counts_per_unit=100)),)
+    # [002] §2.13.3: circleAngle "数值范围 0~35999" (0..359.99°, 0.01°/LSB).
+    FIELDS = ((6, ScaledField("angle_deg", size=2, signed=False, counts_per_unit=100, lo=0, hi=359.99)),)
     angle_deg: float
 
 
@@ -363,16 +380,17 @@ def guess_single_turn_revision(data: bytes) -> Revision | None:
 class Status1Reply(MyActuatorReply):
     """0x9A reply: temperatures, brake, supply voltage and error flags (§4.14).
 
-    ``mos_temperature_c`` (DATA[2]) is listed but not described by the manuals; read as int8 1 °C/LSB
-    like DATA[1] (§9 item 16, UNVERIFIED). ``brake_released``: True when the brake-release command is in
-    effect. ``errors`` keeps undefined bits (see ``ErrorFlags``).
+    ``mos_temperature_c`` (DATA[2]) is listed but not described by the manuals; the tables print it as
+    ``DATA[2] = (uint8_t)(motorMOStemperature)`` ([002] §2.14.3, [000] §2.13.3), so it is read as uint8
+    0..255, 1 °C/LSB like DATA[1] (the unit is §9 item 16's guess, UNVERIFIED). ``brake_released``:
+    True when the brake-release command is in effect. ``errors`` keeps undefined bits (see ``ErrorFlags``).
     """
 
     CODE: ClassVar[int] = 0x9A
     TITLE: ClassVar[str] = "read status 1 and error flags"
     FIELDS = (
         (1, _TEMPERATURE),
-        (2, IntField("mos_temperature_c", 1, signed=True)),
+        (2, IntField("mos_temperature_c", 1)),  # uint8 as printed (§4.14)
         (3, BoolField("brake_released")),
         (4, ScaledField("voltage_v", size=2, signed=False, counts_per_unit=10)),
         (6, FlagsField("errors", 2, ErrorFlags)),

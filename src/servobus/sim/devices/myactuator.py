@@ -35,7 +35,8 @@ Command -> plant control (§4.19-§4.26, §5):
 0xA8                   ``PositionControl(measured angle + increment)``.
 0xA9                   ``PositionControl(angle, maxSpeed, limit as 0xA2)``.
 0x400+ID motion        ``Impedance`` with the command's gains (MIT law, §5.1).
-0x80 off               ``Off``: output off, run mode 0 (undefined in the manuals, §9 item 27).
+0x80 off               ``Off``: output off; the 0x70 run mode keeps the last loop's value (the
+                       manuals define only three modes, §4.27; what 0x80 leaves is unstated [I]).
 0x81 stop              hold the present position (``PositionControl``, loop kept, §4.18); no
                        effect while the output is off.
 0x77 / 0x78            brake released / locked: a locked brake is the plant's ``Brake`` whatever
@@ -140,10 +141,12 @@ _POSITION_ABSOLUTE = (
     ma.PositionSpeedFeedforward,
     ma.PositionTorqueFeedforward,
 )
-# [I] run mode after 0x80 / at power-up (undefined, §9 item 27) and in motion mode (the MIT law
-# ends in a q-axis current reference, so the drive runs its current loop).
-RUN_MODE_OFF = 0
-_RUN_MODE_MOTION = int(ma.RunMode.CURRENT_LOOP)
+# [I] The manuals define three run modes and no other (§4.27: "has the following 3 states"), so 0x70
+# always reports one: after 0x80 (or a fault or comm trip) the last loop's mode stays; at power-up,
+# before any control command, the position loop (the manuals' only 0x70 example reads 0x03). In motion
+# mode the MIT law ends in a q-axis current reference, so the drive runs its current loop.
+RUN_MODE_POWER_UP = ma.RunMode.POSITION_LOOP
+_RUN_MODE_MOTION = ma.RunMode.CURRENT_LOOP
 _OTHER_REVISION = {Revision.V4_3: Revision.V4_4, Revision.V4_4: Revision.V4_3}
 
 
@@ -254,7 +257,7 @@ class MyActuatorMotor:
         self.unresponsive = False
         self.counters: Counter[str] = Counter()
         self.control: Control = Off()
-        self.run_mode = RUN_MODE_OFF
+        self.run_mode = RUN_MODE_POWER_UP
         self.brake_released = False
         self.comm_tripped = False
         self.streams: dict[StreamableCommand, Stream] = {}
@@ -396,7 +399,7 @@ class MyActuatorMotor:
         self.advance(now_s)
         self.errors.start(ErrorFlags(flags))
         self.counters["errors_injected"] += 1
-        self._set_control(Off(), RUN_MODE_OFF)
+        self._set_control(Off(), self.run_mode)
         self._update_reports(now_s)
 
     def clear_error(self, flags: ErrorFlags, now_s: float) -> None:
@@ -455,7 +458,7 @@ class MyActuatorMotor:
         self.feedforward_pct = None
         self._boot_s = self._last_heard_s = now_s
         self._next_report_s = None
-        self._set_control(Off(), RUN_MODE_OFF)
+        self._set_control(Off(), RUN_MODE_POWER_UP)
         self._update_reports(now_s)
 
     def _route(self, frame: Frame) -> IdKind | None:
@@ -485,7 +488,7 @@ class MyActuatorMotor:
         self.comm_tripped = True
         self.counters["comm_timeouts"] += 1
         self.brake_released = False
-        self._set_control(Off(), RUN_MODE_OFF)
+        self._set_control(Off(), self.run_mode)
 
     def _update_reports(self, now_s: float) -> None:
         if not (self.errors.flags and self.ram.error_reporting):
@@ -493,7 +496,7 @@ class MyActuatorMotor:
         elif self._next_report_s is None:
             self._next_report_s = now_s
 
-    def _set_control(self, control: Control, run_mode: int) -> None:
+    def _set_control(self, control: Control, run_mode: ma.RunMode) -> None:
         self.control = control
         self.run_mode = run_mode
         self._apply_plant()
@@ -555,12 +558,12 @@ class MyActuatorMotor:
 
     def _run(self, command: Command) -> None:
         control: Control
-        position = int(ma.RunMode.POSITION_LOOP)
+        position = ma.RunMode.POSITION_LOOP
         if isinstance(command, ma.TorqueControl):
             # §4.19: 0xA1 cannot release the brake; a locked brake keeps the shaft held.
             if self.has_brake and not self.brake_released:
                 self.counters["brake_locked"] += 1
-            self._set_control(CurrentControl(current_a=command.current_a), int(ma.RunMode.CURRENT_LOOP))
+            self._set_control(CurrentControl(current_a=command.current_a), ma.RunMode.CURRENT_LOOP)
             return
         self.brake_released = True
         if isinstance(command, MotionCommand):
@@ -578,7 +581,7 @@ class MyActuatorMotor:
             limit = self._current_limit(command.max_torque_pct)
             self._set_control(
                 PlantSpeedControl(speed_dps=command.speed_dps, max_current_a=limit),
-                int(ma.RunMode.SPEED_LOOP),
+                ma.RunMode.SPEED_LOOP,
             )
             return
         assert isinstance(command, _CONTROL_COMMANDS)
@@ -634,8 +637,7 @@ class MyActuatorMotor:
             value = self.ram.acceleration_dps_s[command.index]
             return ma.AccelerationReply(index=command.index, acceleration_dps_s=value)
         if isinstance(command, ma.ReadRunMode):
-            mode = self.run_mode
-            return ma.RunModeReply(mode=ma.RunMode(mode) if mode in ma.RunMode._value2member_map_ else mode)
+            return ma.RunModeReply(mode=self.run_mode)
         if isinstance(command, ma.ReadRunTime):
             return ma.RunTimeReply(run_time_ms=math.floor((now_s - self._boot_s) * 1000 + 1e-6) % (1 << 32))
         if isinstance(command, ma.ReadVersionDate):
@@ -690,7 +692,7 @@ class MyActuatorMotor:
             self._active_reply(command, now_s)
             return None
         elif isinstance(command, ma.MotorShutdown):
-            self._set_control(Off(), RUN_MODE_OFF)
+            self._set_control(Off(), self.run_mode)
         elif isinstance(command, ma.MotorStop):
             if self.enabled and not self.errors.flags:  # hold where it is; the loop stays (§4.18)
                 self._set_control(PositionControl(position_deg=self.plant.position_deg), self.run_mode)

@@ -102,6 +102,7 @@ AUTO_RECOVERABLE = (
 RECOVERY_SWITCHABLE = ErrorFlags.LOW_VOLTAGE | ErrorFlags.OVER_VOLTAGE | ErrorFlags.OVER_SPEED
 
 _INT8 = (-128, 127)
+_UINT8 = (0, 255)
 _INT16 = (-32768, 32767)
 _INT32 = (-(1 << 31), (1 << 31) - 1)
 _RAD_PER_DEG = math.pi / 180.0
@@ -272,11 +273,11 @@ def single_turn_status_reply(r: Readings) -> SingleTurnStatusReply:
 
 def status1_reply(r: Readings, *, brake_released: bool, errors: ErrorFlags) -> Status1Reply:
     """0x9A (§4.14). [I] The MOS temperature is reported as the winding's: the plant has one thermal
-    mass."""
+    mass (clamped to its uint8 field, 0..255 °C)."""
     temperature = _int(r.temperature_c, _INT8)
     return Status1Reply(
         temperature_c=temperature,
-        mos_temperature_c=temperature,
+        mos_temperature_c=_int(r.temperature_c, _UINT8),
         brake_released=brake_released,
         voltage_v=_clamp(round(r.voltage_v, 1), 0.0, 6553.5),
         errors=errors,
