@@ -90,7 +90,8 @@ def status2(draw: st.DrawFn) -> lk.Status2Reply:
         "encoder_counts": draw(ints(0, (1 << min(bits, 16)) - 1)),
     }
     if motor_type is MotorType.MS:
-        return lk.Status2Reply(**common, power_counts=draw(ints(*INT16)))
+        # Round trips decode under V2.36 (``model_for``), where MS power is -1000..1000 ([001] §3).
+        return lk.Status2Reply(**common, power_counts=draw(ints(-1000, 1000)))
     if motor_type is MotorType.MH:
         return lk.Status2Reply(**common, iq_counts=draw(ints(*INT16)))
     return lk.Status2Reply(**common, current_a=draw(amps_within(motor_type, *INT16)))

@@ -259,3 +259,56 @@ def test_replies_ignore_null_bytes() -> None:
 def test_reply_fields_are_validated(factory: Any, message: str) -> None:
     with pytest.raises(ValueError, match=message):
         factory()
+
+
+# ---- decoded values outside the manuals' ranges (issue 13) ----
+
+
+@pytest.mark.parametrize(
+    ("revision", "motor_type", "command", "counts", "message"),
+    [
+        # [001] §3: "MS motor power range -1000~1000".
+        (
+            Revision.V2_36,
+            MotorType.MS,
+            0x9C,
+            1001,
+            r"power_counts=1001 \(1001 counts\) is outside \[-1000, 1000\]",
+        ),
+        (Revision.V2_36, MotorType.MS, 0xA0, -1001, r"power_counts=-1001 .* outside \[-1000, 1000\]"),
+        # [003] §4.14 / §5: iq "Range:-2048~2048" in the 0x9C and 0xA1..0xA8 replies.
+        (
+            Revision.V2_35,
+            MotorType.MG,
+            0x9C,
+            2049,
+            r"current_a=33\.01611328125 \(2049 counts\) is outside \[-2048",
+        ),
+        (
+            Revision.V2_35,
+            MotorType.MF,
+            0xA4,
+            -2049,
+            r"current_a=.* \(-2049 counts\) is outside \[-2048, 2048\]",
+        ),
+        (Revision.V2_35, MotorType.MH, 0xA1, 4000, r"iq_counts=4000 .* outside \[-2048, 2048\]"),
+        # [003] §5.1: 0xA0 reply "Motor Power (int16_t type, Range:-850~850)".
+        (Revision.V2_35, MotorType.MS, 0xA0, 851, r"power_counts=851 .* outside \[-850, 850\]"),
+    ],
+)
+def test_status2_torque_field_outside_the_stated_range_is_a_protocol_error(
+    revision: Revision, motor_type: MotorType, command: int, counts: int, message: str
+) -> None:
+    model = LkModel(revision=revision, motor_type=motor_type)
+    data = struct.pack("<BbhhH", command, 30, counts, 0, 0)
+    with pytest.raises(ProtocolError, match=message):
+        lk.Status2Reply.decode(data, model=model)
+    limit = lk.replies.torque_range(revision, motor_type, command)
+    assert limit is not None
+    edge = struct.pack("<BbhhH", command, 30, limit[1] if counts > 0 else limit[0], 0, 0)
+    assert lk.Status2Reply.decode(edge, model=model).encode() == edge
+
+
+def test_status2_v236_iq_has_no_stated_range() -> None:
+    # [001] gives only the resolution of a reported iq (MF/MG/MH): the int16 range decodes.
+    assert lk.replies.torque_range(Revision.V2_36, MotorType.MG, 0x9C) is None

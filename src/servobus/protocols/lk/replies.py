@@ -8,8 +8,11 @@ Where a layout differs between revisions (0x9A/0x9B, 0x9D, 0x94) the V2.35 class
 suffix. Values whose scale depends on the motor type or encoder width carry ``motor_type`` /
 ``encoder_bits`` as fields, so every reply encodes by itself (the simulator encodes replies).
 
-Ranges are the wire types' ranges (a motor may report beyond the nominal ±2048 iq); encoder counts
-must fit the declared encoder width, so a wrong ``encoder_bits`` shows up as a ProtocolError.
+Ranges are the wire types' ranges, narrowed where a manual states the range of the reported value:
+encoder counts must fit the declared encoder width (so a wrong ``encoder_bits`` shows up as a
+ProtocolError), and DATA[2..3] of the status-2 shape has the ranges of :func:`torque_range` (MS power
+±1000 in V2.36; iq ±2048 and 0xA0 power ±850 in V2.35). V2.36 states no range for a reported iq, so
+there it may go beyond the nominal ±2048 up to the int16 limits.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar, Self
 
+from servobus.errors import ProtocolError
 from servobus.protocols._fields import IntField, ScaledField
 from servobus.protocols.lk._base import (
     V2_35_ONLY,
@@ -34,6 +38,7 @@ from servobus.protocols.lk.model import (
     DEFAULT_MODEL,
     LkModel,
     MotorType,
+    Revision,
     check_encoder_bits,
     check_member,
     encoder_counts_per_turn,
@@ -50,6 +55,7 @@ __all__ = [
     "Status2Reply",
     "Status3Reply",
     "Status3ReplyV235",
+    "torque_range",
 ]
 
 ECHO_CODES = frozenset({0x80, 0x81, 0x88, 0x95})
@@ -77,6 +83,35 @@ PHASE = IqSlot(
     min_counts=-0x8000,
 )
 PHASE_V235 = ScaledField("currents_a", size=2, signed=True, counts_per_unit=64)  # [003]: 1/64 A/LSB
+
+
+def torque_range(revision: Revision, motor_type: MotorType, command: int) -> tuple[int, int] | None:
+    """The stated count range of the status-2 shape's DATA[2..3] (iq or MS power), or None if unstated.
+
+    * V2.36, MS: output power -1000..1000 ([001] §3, 0x9C reply: "MS motor power range -1000~1000").
+    * V2.35, 0xA0: motor power -850..850 ([003] §5.1, 0xA0 reply: "Motor Power ... Range:-850~850").
+    * V2.35, any other: iq -2048..2048 ([003] §4.14 0x9C and §5 0xA1..0xA8 replies: "Range:-2048~2048").
+    * V2.36, MF/MH/MG: not stated (only the resolution), so the int16 range.
+    """
+    if revision is Revision.V2_35:
+        return (-850, 850) if command == 0xA0 else (-2048, 2048)
+    if motor_type is MotorType.MS:
+        return (-1000, 1000)
+    return None
+
+
+def _check_torque_range(data: bytes, model: LkModel, what: str) -> None:
+    limits = torque_range(model.revision, model.motor_type, data[0])
+    counts = _i16(data, 2)
+    if limits is not None and not limits[0] <= counts <= limits[1]:
+        named = [(k, v) for k, v in REPLY_IQ.from_counts(model.motor_type, counts).items() if v is not None]
+        name, value = named[0] if named else ("iq_counts", counts)
+        raise ProtocolError(
+            f"{what}: {name}={value!r} ({counts} counts) is outside [{limits[0]}, {limits[1]}] counts "
+            f"({model.revision.name}, {model.motor_type.name})",
+            raw=data,
+            command=data[0],
+        )
 
 
 def _u16(data: bytes, offset: int) -> int:
@@ -272,6 +307,7 @@ class Status2Reply(LkReply):
     @classmethod
     def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
         command = expect(data, STATUS2_CODES, cls.__name__)
+        _check_torque_range(data, model, cls.__name__)
         return build(
             cls,
             data,

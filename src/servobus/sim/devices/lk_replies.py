@@ -20,6 +20,7 @@ from servobus.protocols.lk import (
     MotorType,
     Revision,
 )
+from servobus.protocols.lk.replies import torque_range
 from servobus.sim.devices.lk_state import AngleFrame, amps_per_count, single_turn_period_deg
 from servobus.sim.plant import Plant
 
@@ -27,7 +28,6 @@ __all__ = ["encoder_reply", "single_turn_deg", "status1", "status2", "status3"]
 
 _INT8 = (-128, 127)
 _INT16 = (-(1 << 15), (1 << 15) - 1)
-_MS_POWER = 1000  # [001] §3: MS power -1000..1000 in replies
 # The pole count is not in the protocol; 14 pole pairs, typical of LK's flat motors, is assumed.
 _POLE_PAIRS = 14
 
@@ -67,7 +67,8 @@ def status2(code: int, model: LkModel, plant: Plant, *, encoder_counts: int) -> 
     """The status-2 shape (spec §8.1): temperature, iq (MS: power), motor speed, encoder."""
     motor_type = model.motor_type
     apc = amps_per_count(motor_type, plant.params)
-    limits = (-_MS_POWER, _MS_POWER) if motor_type is MotorType.MS else _INT16
+    # The manuals' stated range of the reply's iq / MS power (``torque_range``), else the int16 range.
+    limits = torque_range(model.revision, motor_type, code) or _INT16
     counts = int(_clamp(round(plant.current_a / apc), *limits))
     # Exactly the one DATA[2..3] field the motor type has (spec §8.2).
     current_a = counts * lk.IQ_AMPS_PER_COUNT[motor_type] if motor_type in lk.IQ_AMPS_PER_COUNT else None
