@@ -55,6 +55,31 @@ int sb_layout_field_bits(int layout, int field)
 
 /* ---- scaling ---- */
 
+/* A field the formulas below can use. A zero codes or span (or a NaN anywhere) would make the code
+ * NaN, and converting NaN to an integer is undefined behaviour; so would an infinite origin. */
+static int field_ok(const sb_field *f)
+{
+    return isfinite(f->lo) && isfinite(f->hi) && isfinite(f->origin) && isfinite(f->codes) &&
+           isfinite(f->span) && f->lo <= f->hi && f->codes > 0 && f->span > 0;
+}
+
+/* Checks shared by sb_pack and sb_unpack: the pointers, the stride, that `cap` holds n slots of
+ * `per_slot` (compared by division, so n * per_slot cannot overflow), and every field. */
+static int check_batch(const layout_desc *l, const sb_field *fields, const void *in, size_t n,
+                       size_t stride, const void *out, size_t cap, size_t per_slot)
+{
+    if (stride < (size_t)l->size)
+        return SB_E_ARG;
+    if (n == 0)
+        return SB_OK;
+    if (!fields || !in || !out || n > cap / per_slot)
+        return SB_E_ARG;
+    for (int k = 0; k < l->nfields; k++)
+        if (!field_ok(&fields[k]))
+            return SB_E_ARG;
+    return SB_OK;
+}
+
 static inline int encode(const sb_field *f, double x, int bits, int flags, int64_t *code)
 {
     int64_t lo, hi;
@@ -190,23 +215,54 @@ static void get_hollow_fd(const uint8_t *b, int64_t *c, int signed_byte14)
         c[6] = (int8_t)b[14];
 }
 
+/* Every layout is listed: an unknown one is an error, never another layout's bytes. */
+static int put_codes(int layout, const int64_t *c, uint8_t *o)
+{
+    switch (layout) {
+    case SB_LAYOUT_MIT_COMMAND: put_mit_command(c, o); return SB_OK;
+    case SB_LAYOUT_HOLLOW_SETPOINT: put_hollow_setpoint(c, o); return SB_OK;
+    case SB_LAYOUT_MIT_REPLY: put_mit_reply(c, o); return SB_OK;
+    case SB_LAYOUT_HOLLOW_EXT_REPLY: put_hollow_ext_reply(c, o); return SB_OK;
+    case SB_LAYOUT_HOLLOW_FD_COMMAND:
+    case SB_LAYOUT_HOLLOW_FD_REPLY: put_hollow_fd(c, o); return SB_OK;
+    }
+    return SB_E_LAYOUT;
+}
+
+static int get_codes(int layout, const uint8_t *b, int64_t *c)
+{
+    switch (layout) {
+    case SB_LAYOUT_MIT_COMMAND:
+    case SB_LAYOUT_HOLLOW_SETPOINT: get_mit_command(b, c); return SB_OK;
+    case SB_LAYOUT_MIT_REPLY: get_mit_reply(b, c); return SB_OK;
+    case SB_LAYOUT_HOLLOW_EXT_REPLY: get_hollow_ext_reply(b, c); return SB_OK;
+    case SB_LAYOUT_HOLLOW_FD_COMMAND: get_hollow_fd(b, c, 0); return SB_OK;
+    case SB_LAYOUT_HOLLOW_FD_REPLY: get_hollow_fd(b, c, 1); return SB_OK;
+    }
+    return SB_E_LAYOUT;
+}
+
 /* ---- batch entry points ---- */
 
 int sb_pack(int layout, const sb_field *fields, const double *values, size_t n, size_t stride,
-            int flags, uint8_t *out, sb_pack_error *err)
+            int flags, uint8_t *out, size_t out_cap, sb_pack_error *err)
 {
     const layout_desc *l = find_layout(layout);
     int64_t codes[MAX_FIELDS];
+    int status;
 
     if (!l)
         return SB_E_LAYOUT;
-    if (stride < (size_t)l->size || (n && (!fields || !values || !out)))
+    if (flags & ~SB_PACK_SATURATE)
         return SB_E_ARG;
+    status = check_batch(l, fields, values, n, stride, out, out_cap, stride);
+    if (status != SB_OK)
+        return status;
     for (size_t i = 0; i < n; i++) {
         const double *row = values + i * (size_t)l->nfields;
         uint8_t *o = out + i * stride;
         for (int k = 0; k < l->nfields; k++) {
-            int status = encode(&fields[k], row[k], l->bits[k], flags, &codes[k]);
+            status = encode(&fields[k], row[k], l->bits[k], flags, &codes[k]);
             if (status != SB_OK) {
                 if (err) {
                     err->frame = i;
@@ -216,13 +272,9 @@ int sb_pack(int layout, const sb_field *fields, const double *values, size_t n, 
                 return status;
             }
         }
-        switch (layout) {
-        case SB_LAYOUT_MIT_COMMAND: put_mit_command(codes, o); break;
-        case SB_LAYOUT_HOLLOW_SETPOINT: put_hollow_setpoint(codes, o); break;
-        case SB_LAYOUT_MIT_REPLY: put_mit_reply(codes, o); break;
-        case SB_LAYOUT_HOLLOW_EXT_REPLY: put_hollow_ext_reply(codes, o); break;
-        default: put_hollow_fd(codes, o); break;
-        }
+        status = put_codes(layout, codes, o);
+        if (status != SB_OK)
+            return status;
         if (stride > (size_t)l->size)
             memset(o + l->size, 0, stride - (size_t)l->size);
     }
@@ -230,26 +282,23 @@ int sb_pack(int layout, const sb_field *fields, const double *values, size_t n, 
 }
 
 int sb_unpack(int layout, const sb_field *fields, const uint8_t *frames, size_t n, size_t stride,
-              double *values)
+              double *values, size_t values_cap)
 {
     const layout_desc *l = find_layout(layout);
     int64_t codes[MAX_FIELDS];
+    int status;
 
     if (!l)
         return SB_E_LAYOUT;
-    if (stride < (size_t)l->size || (n && (!fields || !values || !frames)))
-        return SB_E_ARG;
+    status = check_batch(l, fields, frames, n, stride, values, values_cap, (size_t)l->nfields);
+    if (status != SB_OK)
+        return status;
     for (size_t i = 0; i < n; i++) {
         const uint8_t *b = frames + i * stride;
         double *row = values + i * (size_t)l->nfields;
-        switch (layout) {
-        case SB_LAYOUT_MIT_COMMAND:
-        case SB_LAYOUT_HOLLOW_SETPOINT: get_mit_command(b, codes); break;
-        case SB_LAYOUT_MIT_REPLY: get_mit_reply(b, codes); break;
-        case SB_LAYOUT_HOLLOW_EXT_REPLY: get_hollow_ext_reply(b, codes); break;
-        case SB_LAYOUT_HOLLOW_FD_COMMAND: get_hollow_fd(b, codes, 0); break;
-        default: get_hollow_fd(b, codes, 1); break;
-        }
+        status = get_codes(layout, b, codes);
+        if (status != SB_OK)
+            return status;
         for (int k = 0; k < l->nfields; k++)
             row[k] = decode(&fields[k], codes[k]);
     }

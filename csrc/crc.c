@@ -6,9 +6,8 @@
 #include "sb_internal.h"
 #include "crc_tables.h"
 
-uint16_t sb_crc16_modbus(const char *data, size_t len, uint16_t crc)
+uint16_t sb_crc16_modbus_raw(const uint8_t *p, size_t len, uint16_t crc)
 {
-    const uint8_t *p = (const uint8_t *)data;
     const uint16_t (*t)[256] = crc16_modbus_table;
     uint32_t c = crc;
 
@@ -24,9 +23,8 @@ uint16_t sb_crc16_modbus(const char *data, size_t len, uint16_t crc)
     return (uint16_t)c;
 }
 
-uint32_t sb_crc32_ieee(const char *data, size_t len, uint32_t crc)
+uint32_t sb_crc32_ieee_raw(const uint8_t *p, size_t len, uint32_t crc)
 {
-    const uint8_t *p = (const uint8_t *)data;
     const uint32_t (*t)[256] = crc32_ieee_table;
     uint32_t c = ~crc;
 
@@ -45,4 +43,19 @@ uint32_t sb_crc32_ieee(const char *data, size_t len, uint32_t crc)
     while (len--)
         c = (c >> 8) ^ t[0][(c ^ *p++) & 0xFF];
     return ~c;
+}
+
+/* The public entry points: the one check the loops above cannot make, then the loop. */
+int32_t sb_crc16_modbus(const char *data, size_t len, uint16_t crc)
+{
+    if (len && !data)
+        return SB_E_ARG;
+    return sb_crc16_modbus_raw((const uint8_t *)data, len, crc);
+}
+
+int64_t sb_crc32_ieee(const char *data, size_t len, uint32_t crc)
+{
+    if (len && !data)
+        return SB_E_ARG;
+    return sb_crc32_ieee_raw((const uint8_t *)data, len, crc);
 }

@@ -6,15 +6,17 @@
  * dropped one byte at a time too (its first byte may have been noise before a real frame), and
  * counts as one CRC error if it stood where a frame was expected. Nothing here can read outside
  * buf[0 .. len): every parse step checks `avail` before it looks. */
+#include <limits.h>
 #include <string.h>
 
 #include "sb_internal.h"
 
-enum parse_result { PARSE_FRAME, PARSE_NEED_MORE, PARSE_BAD_HEADER, PARSE_BAD_CRC };
+/* PARSE_BAD_KIND: the state names no known de-framer (checked on entry, so never expected). */
+enum parse_result { PARSE_FRAME, PARSE_NEED_MORE, PARSE_BAD_HEADER, PARSE_BAD_CRC, PARSE_BAD_KIND };
 
 static inline int crc16_ok(const uint8_t *b, size_t n)
 {
-    uint16_t crc = sb_crc16_modbus((const char *)b, n - 2, 0xFFFF);
+    uint16_t crc = sb_crc16_modbus_raw(b, n - 2, 0xFFFF);
     return b[n - 2] == (uint8_t)crc && b[n - 1] == (uint8_t)(crc >> 8);
 }
 
@@ -41,7 +43,7 @@ static enum parse_result parse_transparent(const uint8_t *b, size_t avail, size_
 
     if (avail < SB_TRANSPARENT_FRAME)
         return PARSE_NEED_MORE;
-    crc = sb_crc32_ieee((const char *)b, 17, 0);
+    crc = sb_crc32_ieee_raw(b, 17, 0);
     sent = (uint32_t)b[17] | ((uint32_t)b[18] << 8) | ((uint32_t)b[19] << 16) | ((uint32_t)b[20] << 24);
     *flen = SB_TRANSPARENT_FRAME;
     return crc == sent ? PARSE_FRAME : PARSE_BAD_CRC;
@@ -87,7 +89,7 @@ static enum parse_result parse_modbus(const uint8_t *b, size_t avail, int dirs, 
         if (dirs & SB_MODBUS_REPLIES)
             cand[ncand++] = 5;  /* addr fn|0x80 exception-code crc(2) */
         break;
-    default:
+    default:  /* a wire byte, not a kind: any other function cannot start a frame, so it is noise */
         return PARSE_BAD_HEADER;
     }
     /* Candidates are appended in increasing length except for 0x03 both-ways; sort the pair. */
@@ -112,36 +114,70 @@ static enum parse_result parse_modbus(const uint8_t *b, size_t avail, int dirs, 
     return checked ? PARSE_BAD_CRC : PARSE_BAD_HEADER;
 }
 
+/* Every kind is listed with its options; an unknown kind is SB_E_LAYOUT. */
+static int check_kind(int kind, int option)
+{
+    switch (kind) {
+    case SB_DEFRAME_MYACTUATOR_RS485:
+        return option >= 1 && option <= 255 ? SB_OK : SB_E_ARG;
+    case SB_DEFRAME_HOLLOW_TRANSPARENT:
+        return option == 0 ? SB_OK : SB_E_ARG;
+    case SB_DEFRAME_MODBUS_RTU:
+        return option >= 1 && option <= (SB_MODBUS_REQUESTS | SB_MODBUS_REPLIES) ? SB_OK : SB_E_ARG;
+    }
+    return SB_E_LAYOUT;
+}
+
+/* The state is caller memory (Python can write its fields), so every entry point checks it before
+ * trusting kind, option or len: a bad len would let memcpy/memmove run past buf. */
+static int check_state(const sb_deframer *d)
+{
+    int status;
+
+    if (!d)
+        return SB_E_ARG;
+    status = check_kind(d->kind, d->option);
+    if (status != SB_OK)
+        return status;
+    return d->len <= SB_DEFRAME_CAPACITY ? SB_OK : SB_E_ARG;
+}
+
 size_t sb_deframer_max_frame(const sb_deframer *d)
 {
+    if (check_state(d) != SB_OK)
+        return 0;
     switch (d->kind) {
     case SB_DEFRAME_MYACTUATOR_RS485: return (size_t)d->option + 5;
     case SB_DEFRAME_HOLLOW_TRANSPARENT: return SB_TRANSPARENT_FRAME;
-    default: return SB_MODBUS_MAX_FRAME;
+    case SB_DEFRAME_MODBUS_RTU: return SB_MODBUS_MAX_FRAME;
     }
+    return 0;
 }
 
 int sb_deframer_init(sb_deframer *d, int kind, int option)
 {
+    int status;
+
+    if (!d)
+        return SB_E_ARG;
     memset(d, 0, sizeof *d);
-    switch (kind) {
-    case SB_DEFRAME_MYACTUATOR_RS485:
-        if (option < 1 || option > 255)
-            return SB_E_ARG;
-        break;
-    case SB_DEFRAME_HOLLOW_TRANSPARENT:
-        if (option != 0)
-            return SB_E_ARG;
-        break;
-    case SB_DEFRAME_MODBUS_RTU:
-        if (option < 1 || option > (SB_MODBUS_REQUESTS | SB_MODBUS_REPLIES))
-            return SB_E_ARG;
-        break;
-    default:
-        return SB_E_LAYOUT;
-    }
+    status = check_kind(kind, option);
+    if (status != SB_OK)
+        return status;
     d->kind = kind;
     d->option = option;
+    d->synced = 1;
+    return SB_OK;
+}
+
+int sb_deframer_reset(sb_deframer *d)
+{
+    int status = check_state(d);
+
+    if (status != SB_OK)
+        return status;
+    d->discarded_bytes += d->len;
+    d->len = 0;
     d->synced = 1;
     return SB_OK;
 }
@@ -151,13 +187,15 @@ static enum parse_result parse(const sb_deframer *d, const uint8_t *b, size_t av
     switch (d->kind) {
     case SB_DEFRAME_MYACTUATOR_RS485: return parse_rs485(b, avail, d->option, flen);
     case SB_DEFRAME_HOLLOW_TRANSPARENT: return parse_transparent(b, avail, flen);
-    default: return parse_modbus(b, avail, d->option, flen);
+    case SB_DEFRAME_MODBUS_RTU: return parse_modbus(b, avail, d->option, flen);
     }
+    return PARSE_BAD_KIND;
 }
 
 /* Parse what buf holds into out/lens (from *out_used / *nframes on). With line_idle set, the line
  * has gone quiet, so a frame that still needs bytes will never get them: its first byte is noise.
- * Returns 1 when out or lens cannot take another frame of the maximum size. */
+ * Returns 1 when out or lens cannot take another frame of the maximum size, 0 when buf is parsed as
+ * far as it goes, SB_E_LAYOUT for an unknown kind (the buffer is left as it was). */
 static int parse_buffer(sb_deframer *d, int line_idle, uint8_t *out, size_t out_cap, size_t *out_used,
                         uint16_t *lens, size_t max_frames, size_t *nframes)
 {
@@ -173,6 +211,8 @@ static int parse_buffer(sb_deframer *d, int line_idle, uint8_t *out, size_t out_
             break;
         }
         r = parse(d, d->buf + pos, d->len - pos, &flen);
+        if (r == PARSE_BAD_KIND)
+            return SB_E_LAYOUT;
         if (r == PARSE_NEED_MORE) {
             if (!line_idle)
                 break;
@@ -200,20 +240,36 @@ static int parse_buffer(sb_deframer *d, int line_idle, uint8_t *out, size_t out_
     return full;
 }
 
-static int valid_kind(const sb_deframer *d)
+/* Checks shared by feed and idle: a valid state, and output that can take at least one frame of
+ * the maximum size (less could never make progress). Caps max_frames so the count fits an int. */
+static int check_output(const sb_deframer *d, const uint8_t *out, size_t out_cap, const uint16_t *lens,
+                        size_t *max_frames)
 {
-    return d->kind >= SB_DEFRAME_MYACTUATOR_RS485 && d->kind <= SB_DEFRAME_MODBUS_RTU;
+    int status = check_state(d);
+
+    if (status != SB_OK)
+        return status;
+    if (!out || !lens || out_cap < sb_deframer_max_frame(d) || *max_frames == 0)
+        return SB_E_ARG;
+    if (*max_frames > INT_MAX)
+        *max_frames = INT_MAX;
+    return SB_OK;
 }
 
-size_t sb_deframer_feed(sb_deframer *d, const char *data, size_t len, size_t *consumed,
-                        uint8_t *out, size_t out_cap, uint16_t *lens, size_t max_frames)
+int sb_deframer_feed(sb_deframer *d, const char *data, size_t len, size_t *consumed,
+                     uint8_t *out, size_t out_cap, uint16_t *lens, size_t max_frames)
 {
     size_t taken = 0, nframes = 0, out_used = 0;
     int full;
 
+    if (!consumed)
+        return SB_E_ARG;
     *consumed = 0;
-    if (!valid_kind(d))
-        return 0;
+    full = check_output(d, out, out_cap, lens, &max_frames);
+    if (full != SB_OK)
+        return full;
+    if (len && !data)
+        return SB_E_ARG;
     /* Runs at least once, so an empty feed still returns frames a full output left behind. The
      * buffer holds more than one maximum frame, so a full buffer always parses something. */
     do {
@@ -224,17 +280,22 @@ size_t sb_deframer_feed(sb_deframer *d, const char *data, size_t len, size_t *co
         d->len += take;
         taken += take;
         full = parse_buffer(d, 0, out, out_cap, &out_used, lens, max_frames, &nframes);
+        if (full < 0) {
+            *consumed = 0;
+            return full;
+        }
     } while (!full && taken < len);
     *consumed = taken;
-    return nframes;
+    return (int)nframes;
 }
 
-size_t sb_deframer_idle(sb_deframer *d, uint8_t *out, size_t out_cap, uint16_t *lens, size_t max_frames)
+int sb_deframer_idle(sb_deframer *d, uint8_t *out, size_t out_cap, uint16_t *lens, size_t max_frames)
 {
     size_t out_used = 0, nframes = 0;
+    int status = check_output(d, out, out_cap, lens, &max_frames);
 
-    if (!valid_kind(d))
-        return 0;
-    parse_buffer(d, 1, out, out_cap, &out_used, lens, max_frames, &nframes);
-    return nframes;
+    if (status != SB_OK)
+        return status;
+    status = parse_buffer(d, 1, out, out_cap, &out_used, lens, max_frames, &nframes);
+    return status < 0 ? status : (int)nframes;
 }

@@ -4,4 +4,9 @@
 #include <stddef.h>
 #include <stdint.h>
 #include "servobus_core.h"
+
+/* The CRC loops without the public functions' argument checks, for callers inside csrc/ that own
+ * their buffers (the de-framers). Same conventions as sb_crc16_modbus / sb_crc32_ieee. */
+uint16_t sb_crc16_modbus_raw(const uint8_t *data, size_t len, uint16_t crc);
+uint32_t sb_crc32_ieee_raw(const uint8_t *data, size_t len, uint32_t crc);
 #endif

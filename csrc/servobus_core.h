@@ -6,26 +6,33 @@
  *
  * Every function is pure over caller-owned buffers: input pointer + length, output arrays from the
  * caller, an int count or status back. No malloc, no globals (tables are static const), no Python.
+ * Every function checks its arguments (NULL with a non-zero length, capacities, field scales,
+ * layouts and kinds) and returns a status for a bad one: nothing here trusts the caller.
  */
 
-#define SB_CORE_ABI 1
+/* Bumped whenever a signature or struct below changes; the wrapper refuses another value. */
+#define SB_CORE_ABI 2
 
 /* ---- status codes (mapped to exceptions in one table: servobus/codec/_lib.py) ---- */
 #define SB_OK 0
 #define SB_E_RANGE -1    /* a value lies outside its field's [lo, hi] */
 #define SB_E_NAN -2      /* a value is NaN */
 #define SB_E_LAYOUT -3   /* unknown layout or deframer kind */
-#define SB_E_ARG -4      /* bad size, stride or option */
+#define SB_E_ARG -4      /* bad pointer, size, capacity, stride, field scale, flag or option */
 
 /* Compiled-in package version, compared at import with servobus.__version__. */
 const char *sb_core_version(void);
+/* SB_CORE_ABI as compiled, compared at import with the wrapper's own number. */
+int sb_core_abi(void);
 
 /* ---- CRC (crc.c) ----
  * CRC-16/MODBUS: reflected poly 0xA001, init 0xFFFF, no final xor. Pass 0xFFFF to start, or a
  * previous result to continue over more data. Sent low byte first.
- * CRC-32/ISO-HDLC (zlib, IEEE 802.3): same chaining convention as zlib.crc32: start with 0. */
-uint16_t sb_crc16_modbus(const char *data, size_t len, uint16_t crc);
-uint32_t sb_crc32_ieee(const char *data, size_t len, uint32_t crc);
+ * CRC-32/ISO-HDLC (zlib, IEEE 802.3): same chaining convention as zlib.crc32: start with 0.
+ * Both return the CRC (never negative), or SB_E_ARG for data NULL with len > 0: the return types are
+ * wider than the CRCs so that a status fits beside them. */
+int32_t sb_crc16_modbus(const char *data, size_t len, uint16_t crc);
+int64_t sb_crc32_ieee(const char *data, size_t len, uint32_t crc);
 
 /* ---- field scaling and bit packing (bitpack.c) ----
  * A field maps a physical value x to an integer code:
@@ -33,7 +40,8 @@ uint32_t sb_crc32_ieee(const char *data, size_t len, uint32_t crc);
  *     x    = code * span / codes + origin
  * Packing first checks lo <= x <= hi (NaN always fails; with SB_PACK_SATURATE, x is clamped into
  * [lo, hi] instead), then clamps the code into the field's bit width, which only matters at the top
- * of offset-binary fields where +full scale is one code past the last (hollow manual §4.3). */
+ * of offset-binary fields where +full scale is one code past the last (hollow manual §4.3).
+ * A field must have finite members, lo <= hi, and codes > 0, span > 0 (SB_E_ARG otherwise). */
 typedef struct {
     double lo;      /* smallest accepted physical value */
     double hi;      /* largest accepted physical value */
@@ -49,7 +57,7 @@ typedef struct {
     double value;
 } sb_pack_error;
 
-#define SB_PACK_SATURATE 1
+#define SB_PACK_SATURATE 1  /* the only flag; any other bit is SB_E_ARG */
 
 /* Frame layouts. Fields are listed in the order of the `values` rows (the layout's field order). */
 #define SB_LAYOUT_MIT_COMMAND 1        /* 8 B: p u16, v u12, kp u12, kd u12, t u12 (big-endian bits) */
@@ -66,15 +74,19 @@ int sb_layout_fields(int layout);
 /* Width in bits of field `field` (negative for a signed field), 0 when out of range. */
 int sb_layout_field_bits(int layout, int field);
 
-/* Pack n frames. values: n rows of sb_layout_fields() doubles. out: n * stride bytes; bytes past the
- * layout size in each slot are zeroed. Returns SB_OK, or an error with *err filled and the output
- * undefined (the caller sends nothing). */
+/* Pack n frames. values: n rows of sb_layout_fields() doubles. out: out_cap bytes, at least
+ * n * stride; bytes past the layout size in each slot are zeroed. Returns SB_OK; SB_E_LAYOUT for an
+ * unknown layout; SB_E_ARG for a NULL pointer (when n > 0), stride < layout size, out_cap too small,
+ * a bad field or an unknown flag; SB_E_RANGE / SB_E_NAN with *err filled (err may be NULL). After an
+ * error the output is undefined (the caller sends nothing). */
 int sb_pack(int layout, const sb_field *fields, const double *values, size_t n, size_t stride,
-            int flags, uint8_t *out, sb_pack_error *err);
+            int flags, uint8_t *out, size_t out_cap, sb_pack_error *err);
 
-/* Unpack n frames laid out every `stride` bytes into n rows of doubles. Every bit pattern decodes. */
+/* Unpack n frames laid out every `stride` bytes into n rows of doubles; values holds values_cap
+ * doubles, at least n * sb_layout_fields(). Every bit pattern decodes. Errors as sb_pack (no
+ * SB_E_RANGE / SB_E_NAN). */
 int sb_unpack(int layout, const sb_field *fields, const uint8_t *frames, size_t n, size_t stride,
-              double *values);
+              double *values, size_t values_cap);
 
 /* ---- incremental stream de-framers (deframe.c) ----
  * Fed bytes in any chunking, they return whole frames. Bytes that cannot start a valid frame are
@@ -104,21 +116,30 @@ typedef struct {
     uint8_t buf[SB_DEFRAME_CAPACITY];
 } sb_deframer;
 
-/* Returns SB_OK or SB_E_LAYOUT / SB_E_ARG. */
+/* Returns SB_OK, SB_E_LAYOUT for an unknown kind, SB_E_ARG for a bad option or d NULL. After an
+ * error the state is zeroed, and every other function refuses it. */
 int sb_deframer_init(sb_deframer *d, int kind, int option);
 
-/* Largest frame this de-framer can return. */
+/* Largest frame this de-framer can return; 0 when d is NULL or not a valid de-framer. */
 size_t sb_deframer_max_frame(const sb_deframer *d);
+
+/* Drop the buffered bytes (they count as discarded) and expect a frame at the next byte. Returns
+ * SB_OK, or SB_E_LAYOUT / SB_E_ARG for an invalid de-framer. */
+int sb_deframer_reset(sb_deframer *d);
 
 /* Consume input and write whole frames back to back into out, their lengths into lens. Stops when
  * the input is used up and nothing more parses, or when out/lens cannot take another frame of the
  * maximum size. *consumed tells how much input was taken (taken bytes are held internally); call
- * again with the rest. Returns the number of frames written. */
-size_t sb_deframer_feed(sb_deframer *d, const char *data, size_t len, size_t *consumed,
-                        uint8_t *out, size_t out_cap, uint16_t *lens, size_t max_frames);
+ * again with the rest. Returns the number of frames written (at most INT_MAX), or a negative status:
+ * SB_E_LAYOUT / SB_E_ARG for an invalid de-framer, SB_E_ARG for a NULL pointer (data may be NULL
+ * when len is 0), out_cap below sb_deframer_max_frame() or max_frames 0, which could never make
+ * progress. *consumed is 0 after an error. */
+int sb_deframer_feed(sb_deframer *d, const char *data, size_t len, size_t *consumed,
+                     uint8_t *out, size_t out_cap, uint16_t *lens, size_t max_frames);
 
 /* The line has been quiet long enough that no frame is still arriving (Modbus RTU: 3.5 characters).
  * Frames the buffer holds are returned; a candidate still waiting for bytes is dropped byte by byte
  * as noise, so one stray byte cannot hold back the frame behind it until more traffic comes. Stops
- * early, like feed, when out/lens are full; returns the number of frames written. */
-size_t sb_deframer_idle(sb_deframer *d, uint8_t *out, size_t out_cap, uint16_t *lens, size_t max_frames);
+ * early, like feed, when out/lens are full; returns the number of frames written or a negative
+ * status, as feed. */
+int sb_deframer_idle(sb_deframer *d, uint8_t *out, size_t out_cap, uint16_t *lens, size_t max_frames);

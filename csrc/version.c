@@ -1,4 +1,4 @@
-/* The package version the core was compiled for; the Python wrapper refuses a stale build. */
+/* The package version and ABI the core was compiled for; the Python wrapper refuses a stale build. */
 #include "sb_internal.h"
 
 #ifndef SB_CORE_VERSION
@@ -8,4 +8,9 @@
 const char *sb_core_version(void)
 {
     return SB_CORE_VERSION;
+}
+
+int sb_core_abi(void)
+{
+    return SB_CORE_ABI;
 }

@@ -1,5 +1,6 @@
-"""The only importer of the compiled C core. Checks that it matches this package, and maps status
-codes to exceptions through one table. Nothing outside servobus.codec sees cdata."""
+"""The only importer of the compiled C core. Checks that it matches this package (ABI number and
+version), and maps status codes to exceptions through one table. Nothing outside servobus.codec
+sees cdata."""
 
 from __future__ import annotations
 
@@ -16,6 +17,24 @@ except ImportError as exc:  # pragma: no cover - depends on how the package was 
         "(or `pip install -e .` for development); it needs a C compiler."
     ) from exc
 
+# The SB_CORE_ABI this wrapper calls (csrc/servobus_core.h). A core built from another header takes
+# other arguments, so it is refused before anything calls it.
+CORE_ABI = 2
+
+
+def check_abi(core_abi: int) -> None:
+    """Raise ImportError unless the compiled core's ABI number is the one this wrapper calls."""
+    if core_abi != CORE_ABI:
+        raise ImportError(
+            f"servobus._core has C ABI {core_abi} but this servobus wrapper needs ABI {CORE_ABI}: "
+            "the compiled core is stale; reinstall servobus to rebuild it (`pip install -e .` in a "
+            "checkout, `pip install --force-reinstall servobus` otherwise)."
+        )
+
+
+# A core older than sb_core_abi() itself is ABI 1.
+check_abi(lib.sb_core_abi() if hasattr(lib, "sb_core_abi") else 1)
+
 _built_for = ffi.string(lib.sb_core_version()).decode()
 if _built_for != __version__:  # pragma: no cover - only after an upgrade without rebuild
     raise ImportError(
@@ -23,7 +42,18 @@ if _built_for != __version__:  # pragma: no cover - only after an upgrade withou
         "rebuild it with `pip install -e .` (or reinstall)."
     )
 
-__all__ = ["Buffer", "as_cbuffer", "ffi", "is_buffer", "lib", "raise_status", "writable_cbuffer"]
+__all__ = [
+    "CORE_ABI",
+    "Buffer",
+    "as_cbuffer",
+    "check_abi",
+    "ffi",
+    "is_buffer",
+    "lib",
+    "raise_status",
+    "readable_cbuffer",
+    "writable_cbuffer",
+]
 
 if sys.version_info >= (3, 12):
     from collections.abc import Buffer
@@ -34,7 +64,7 @@ _STATUS: dict[int, tuple[type[Exception], str]] = {
     lib.SB_E_RANGE: (ValueError, "value out of range"),
     lib.SB_E_NAN: (ValueError, "value is NaN"),
     lib.SB_E_LAYOUT: (ValueError, "unknown layout or de-framer kind"),
-    lib.SB_E_ARG: (ValueError, "bad size, stride or option"),
+    lib.SB_E_ARG: (ValueError, "bad argument (pointer, size, capacity, stride, field scale, flag or option)"),
 }
 
 
@@ -44,9 +74,24 @@ def raise_status(status: int, detail: str = "") -> NoReturn:
     raise exc_type(f"{detail}: {text}" if detail else text)
 
 
-def as_cbuffer(data: Any) -> Any:
-    """bytes go to C as they are (no copy); other buffers through ffi.from_buffer (no copy)."""
-    return data if type(data) is bytes else ffi.from_buffer(data)
+def readable_cbuffer(data: Any, what: str = "data") -> Any:
+    """Any buffer as a C char array, without copying.
+
+    Raises:
+        TypeError: ``data`` is not a C-contiguous buffer (cffi says BufferError for a strided one).
+    """
+    try:
+        return ffi.from_buffer(data)
+    except (BufferError, TypeError) as exc:
+        raise TypeError(
+            f"{what} must be a contiguous bytes-like buffer (bytes, bytearray, array, contiguous "
+            f"memoryview), not {type(data).__name__}"
+        ) from exc
+
+
+def as_cbuffer(data: Any, what: str = "data") -> Any:
+    """bytes go to C as they are (no copy); other buffers as :func:`readable_cbuffer` (no copy)."""
+    return data if type(data) is bytes else readable_cbuffer(data, what)
 
 
 def is_buffer(obj: object) -> bool:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from typing import ClassVar, Literal
 
-from servobus.codec._lib import Buffer, ffi, lib, raise_status, writable_cbuffer
+from servobus.codec._lib import Buffer, ffi, lib, raise_status, readable_cbuffer, writable_cbuffer
 
 __all__ = ["Deframer", "HollowTransparentDeframer", "ModbusRtuDeframer", "MyActuatorRs485Deframer"]
 
@@ -29,8 +29,13 @@ class Deframer:
     __slots__ = ("_consumed", "_lens", "_max_frame", "_out", "_state")
 
     def __init__(self, option: int) -> None:
+        if not hasattr(type(self), "_KIND"):
+            raise TypeError("Deframer is the base class; use one of its subclasses")
         self._state = ffi.new("sb_deframer *")
-        status = lib.sb_deframer_init(self._state, self._KIND, option)
+        try:
+            status = lib.sb_deframer_init(self._state, self._KIND, option)
+        except (OverflowError, TypeError):
+            raise TypeError(f"{type(self).__name__} option must be a small int, not {option!r}") from None
         if status:
             raise_status(status, type(self).__name__)
         self._max_frame = lib.sb_deframer_max_frame(self._state)
@@ -43,8 +48,11 @@ class Deframer:
         """Take received bytes; return the whole frames they complete, in order.
 
         Never raises for bad bytes: they are dropped and counted.
+
+        Raises:
+            TypeError: ``data`` is not a contiguous bytes-like buffer.
         """
-        src = ffi.from_buffer(data)
+        src = readable_cbuffer(data)
         total = len(src)
         frames: list[bytes] = []
         consumed = self._consumed
@@ -64,6 +72,8 @@ class Deframer:
                 self._lens,
                 len(self._lens),
             )
+            if n < 0:
+                raise_status(n, type(self).__name__)
             if consumed[0] != size:  # pragma: no cover - guarded by the sizing above
                 raise RuntimeError("servobus: de-framer scratch buffer too small")
             self._collect(n, frames)
@@ -78,9 +88,10 @@ class Deframer:
         is dropped as noise (counted), so a stray byte cannot hold back the frame behind it.
         """
         frames: list[bytes] = []
-        self._collect(
-            lib.sb_deframer_idle(self._state, self._out, len(self._out), self._lens, len(self._lens)), frames
-        )
+        n = lib.sb_deframer_idle(self._state, self._out, len(self._out), self._lens, len(self._lens))
+        if n < 0:
+            raise_status(n, type(self).__name__)
+        self._collect(n, frames)
         return frames
 
     def _collect(self, n: int, frames: list[bytes]) -> None:
@@ -106,25 +117,31 @@ class Deframer:
         Raises:
             ValueError: ``out`` is shorter than :attr:`max_frame` or ``lens`` is empty, which could
                 never make progress.
-            TypeError: ``lens`` is not a writable uint16 buffer, or ``out`` is not writable.
+            TypeError: ``data`` is not a contiguous buffer, ``lens`` is not a writable uint16
+                buffer, or ``out`` is not writable.
         """
-        view = memoryview(lens)
-        if view.format not in ("H", "<H", "=H"):
+        try:
+            lens_format = memoryview(lens).format
+        except TypeError:
+            lens_format = None
+        if lens_format not in ("H", "<H", "=H"):
             raise TypeError("lens must be a writable uint16 buffer, e.g. array('H')")
-        src = ffi.from_buffer(data)
+        src = readable_cbuffer(data)
         dst = writable_cbuffer("uint8_t[]", out, "out")
         lens_c = writable_cbuffer("uint16_t[]", lens, "lens")
         if len(dst) < self._max_frame or len(lens_c) == 0:
             raise ValueError(f"out needs at least {self._max_frame} bytes and lens at least one slot")
         consumed = self._consumed
         n = lib.sb_deframer_feed(self._state, src, len(src), consumed, dst, len(dst), lens_c, len(lens_c))
+        if n < 0:
+            raise_status(n, type(self).__name__)
         return n, consumed[0]
 
     def clear(self) -> None:
         """Drop buffered partial bytes (after a port reopen, say); they count as discarded."""
-        self._state.discarded_bytes += self._state.len
-        self._state.len = 0
-        self._state.synced = 1
+        status = lib.sb_deframer_reset(self._state)
+        if status:
+            raise_status(status, type(self).__name__)
 
     @property
     def frames(self) -> int:

@@ -15,12 +15,16 @@ Scaling, exactly as the C core computes it (tests/reference holds the same in Py
     x    = code * span / codes + origin
 
 A value outside [lo, hi] raises ValueError naming the field, the value and the limits, unless
-``saturate=True`` is passed, which clamps it. NaN always raises.
+``saturate=True`` is passed, which clamps it. NaN always raises. Arguments of the wrong type raise
+TypeError, of the right type but unusable ValueError; the C core checks the same again (capacities,
+field scales, layouts) and answers with a status, never undefined behaviour.
 """
 
 from __future__ import annotations
 
 import math
+import numbers
+import operator
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any, cast
@@ -53,6 +57,7 @@ class FieldScale:
         codes, span: ``span`` physical units are ``codes`` codes.
 
     Raises:
+        TypeError: ``name`` is not a str, or a parameter is not a real number.
         ValueError: non-finite parameters, ``lo > hi``, or non-positive ``codes``/``span``.
     """
 
@@ -64,8 +69,18 @@ class FieldScale:
     span: float = 1.0
 
     def __post_init__(self) -> None:
+        if not isinstance(self.name, str):
+            raise TypeError(f"FieldScale name must be a str, not {type(self.name).__name__}")
         for attr in ("lo", "hi", "origin", "codes", "span"):
-            if not math.isfinite(getattr(self, attr)):
+            value = getattr(self, attr)
+            if not isinstance(value, numbers.Real):
+                kind = type(value).__name__
+                raise TypeError(f"FieldScale {self.name!r}: {attr} must be a real number, not {kind}")
+            try:
+                finite = math.isfinite(value)
+            except OverflowError:  # an int past the float range
+                finite = False
+            if not finite:
                 raise ValueError(f"FieldScale {self.name!r}: {attr} must be finite")
         if self.lo > self.hi:
             raise ValueError(f"FieldScale {self.name!r}: lo={self.lo} exceeds hi={self.hi}")
@@ -143,12 +158,30 @@ def _flags(saturate: bool) -> int:
 
 
 def _double_buffer(values: Buffer, what: str) -> Any:
-    view = memoryview(values)
+    try:
+        view = memoryview(values)
+    except TypeError:
+        raise TypeError(f"{what} must be a float64 buffer, not {type(values).__name__}") from None
     if view.format not in ("d", "<d", "=d") or not view.c_contiguous:
         raise TypeError(
             f"{what} must be a contiguous float64 buffer (array('d'), numpy float64), got {view.format!r}"
         )
     return ffi.from_buffer("double[]", values, require_writable=False)
+
+
+def _new_doubles(values: Any, what: str) -> Any:
+    """ffi.new("double[]", values) with servobus' exceptions: TypeError for a non-number, ValueError
+    for an int too large for a float (cffi says OverflowError)."""
+    try:
+        return ffi.new("double[]", values)
+    except TypeError as exc:
+        raise TypeError(f"{what} must be real numbers: {exc}") from None
+    except OverflowError:
+        raise ValueError(f"{what} holds an int too large for a float") from None
+
+
+# A frame slot is a few bytes (CAN FD carries 64); a stride past this is a mistake, not a frame.
+_MAX_STRIDE = 1 << 16
 
 
 class Packer:
@@ -164,22 +197,38 @@ class Packer:
             MyActuator's motion reply, for example, is MIT_REPLY with stride 8.
 
     Raises:
-        ValueError: wrong number of scales, a scale whose range does not fit the field's bits,
-            or a stride smaller than the layout.
+        TypeError: layout is not a :class:`Layout`, a scale is not a :class:`FieldScale`, or
+            stride is not an int.
+        ValueError: a layout that is not one of :data:`LAYOUTS`, wrong number of scales, a scale
+            whose range does not fit the field's bits, or a stride smaller than the layout (or
+            past 64 KiB).
     """
 
     __slots__ = ("_err", "_fields", "_frame", "_nf", "_row", "layout", "scales", "stride")
 
     def __init__(self, layout: Layout, scales: Sequence[FieldScale], *, stride: int | None = None) -> None:
+        if not isinstance(layout, Layout):
+            raise TypeError(f"layout must be a servobus.codec Layout, not {type(layout).__name__}")
+        if layout not in LAYOUTS:  # the C core knows only these; a look-alike would lie about sizes
+            raise ValueError(f"layout {layout.name!r} (id {layout.id}) is not one of servobus.codec.LAYOUTS")
+        scales = tuple(scales)
+        for scale in scales:
+            if not isinstance(scale, FieldScale):
+                raise TypeError(f"scales must be FieldScale objects, not {type(scale).__name__}")
         if len(scales) != len(layout.fields):
             raise ValueError(f"{layout.name} has {len(layout.fields)} fields, got {len(scales)} scales")
         for scale, bits in zip(scales, layout.bits, strict=True):
             _check_fits(layout, scale, bits)
         self.layout = layout
-        self.scales = tuple(scales)
-        self.stride = layout.size if stride is None else stride
+        self.scales = scales
+        try:
+            self.stride = layout.size if stride is None else operator.index(stride)
+        except TypeError:
+            raise TypeError(f"stride must be an int, not {type(stride).__name__}") from None
         if self.stride < layout.size:
             raise ValueError(f"stride {self.stride} is smaller than {layout.name}'s {layout.size} bytes")
+        if self.stride > _MAX_STRIDE:
+            raise ValueError(f"stride {self.stride} is past {_MAX_STRIDE} bytes; no frame is that long")
         self._nf = len(scales)
         self._fields = ffi.new("sb_field[]", [(s.lo, s.hi, s.origin, s.codes, s.span) for s in scales])
         self._row = ffi.new("double[]", self._nf)
@@ -199,9 +248,22 @@ class Packer:
         """
         if len(values) != self._nf:
             raise ValueError(f"{self.layout.name} takes {self._nf} values, got {len(values)}")
-        self._row[0 : self._nf] = values
+        try:
+            self._row[0 : self._nf] = values
+        except TypeError as exc:
+            raise TypeError(f"{self.layout.name} values must be real numbers: {exc}") from None
+        except OverflowError:
+            raise ValueError(f"{self.layout.name} values hold an int too large for a float") from None
         status = lib.sb_pack(
-            self.layout.id, self._fields, self._row, 1, self.stride, _flags(saturate), self._frame, self._err
+            self.layout.id,
+            self._fields,
+            self._row,
+            1,
+            self.stride,
+            _flags(saturate),
+            self._frame,
+            self.stride,
+            self._err,
         )
         if status:
             self._raise(status, batch=False)
@@ -225,12 +287,12 @@ class Packer:
                 if len(row) != self._nf:
                     raise ValueError(f"{self.layout.name} row {i} has {len(row)} values, needs {self._nf}")
                 flat.extend(row)
-            values = ffi.new("double[]", flat)
+            values = _new_doubles(flat, f"{self.layout.name} rows")
         n, extra = divmod(len(values), self._nf)
         if extra:
             raise ValueError(f"{len(values)} values is not a whole number of {self._nf}-field rows")
         out = ffi.new("uint8_t[]", n * self.stride)
-        self._pack_raw(values, n, out, saturate)
+        self._pack_raw(values, n, out, len(out), saturate)
         frames: bytes = ffi.buffer(out)[:]
         return frames
 
@@ -249,12 +311,12 @@ class Packer:
         dst = writable_cbuffer("uint8_t[]", out, "out")
         if len(dst) < n * self.stride:
             raise ValueError(f"out holds {len(dst)} bytes, {n} frames need {n * self.stride}")
-        self._pack_raw(src, n, dst, saturate)
+        self._pack_raw(src, n, dst, len(dst), saturate)
         return n
 
-    def _pack_raw(self, values: Any, n: int, out: Any, saturate: bool) -> None:
+    def _pack_raw(self, values: Any, n: int, out: Any, out_cap: int, saturate: bool) -> None:
         status = lib.sb_pack(
-            self.layout.id, self._fields, values, n, self.stride, _flags(saturate), out, self._err
+            self.layout.id, self._fields, values, n, self.stride, _flags(saturate), out, out_cap, self._err
         )
         if status:
             self._raise(status, batch=True)
@@ -278,12 +340,12 @@ class Packer:
         Raises:
             ProtocolError: the frame is shorter than the layout.
         """
-        buf = as_cbuffer(frame)
+        buf = as_cbuffer(frame, "frame")
         if len(buf) < self.layout.size:
             raise ProtocolError(
                 f"{self.layout.name} needs {self.layout.size} bytes, got {len(buf)}", raw=bytes(frame)
             )
-        status = lib.sb_unpack(self.layout.id, self._fields, buf, 1, self.layout.size, self._row)
+        status = lib.sb_unpack(self.layout.id, self._fields, buf, 1, self.layout.size, self._row, self._nf)
         if status:
             raise_status(status, self.layout.name)
         return tuple(self._row[0 : self._nf])
@@ -294,10 +356,10 @@ class Packer:
         Raises:
             ProtocolError: the buffer is not a whole number of ``stride``-byte slots.
         """
-        buf = as_cbuffer(frames)
+        buf = as_cbuffer(frames, "frames")
         n = self._count_frames(buf, frames)
         out = ffi.new("double[]", n * self._nf)
-        status = lib.sb_unpack(self.layout.id, self._fields, buf, n, self.stride, out)
+        status = lib.sb_unpack(self.layout.id, self._fields, buf, n, self.stride, out, len(out))
         if status:
             raise_status(status, self.layout.name)
         flat = ffi.unpack(out, n * self._nf)
@@ -311,14 +373,14 @@ class Packer:
             ProtocolError: ``frames`` is not a whole number of ``stride``-byte slots.
             ValueError: ``out`` too small.
         """
-        buf = as_cbuffer(frames)
+        buf = as_cbuffer(frames, "frames")
         n = self._count_frames(buf, frames)
-        if memoryview(out).format not in ("d", "<d", "=d"):
+        if not is_buffer(out) or memoryview(out).format not in ("d", "<d", "=d"):
             raise TypeError("out must be a writable float64 buffer")
         dst = writable_cbuffer("double[]", out, "out")
         if len(dst) < n * self._nf:
             raise ValueError(f"out holds {len(dst)} values, {n} frames need {n * self._nf}")
-        status = lib.sb_unpack(self.layout.id, self._fields, buf, n, self.stride, dst)
+        status = lib.sb_unpack(self.layout.id, self._fields, buf, n, self.stride, dst, len(dst))
         if status:
             raise_status(status, self.layout.name)
         return n
