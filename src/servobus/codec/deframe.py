@@ -39,7 +39,10 @@ class Deframer:
         if status:
             raise_status(status, type(self).__name__)
         self._max_frame = lib.sb_deframer_max_frame(self._state)
-        out_cap = _CHUNK + lib.SB_DEFRAME_CAPACITY
+        # feed() needs one C call per input slice to return every frame it completes: the slice,
+        # plus what feed_into may have left buffered (up to the capacity), plus the margin parse
+        # stops at (room for one more maximum frame).
+        out_cap = _CHUNK + lib.SB_DEFRAME_CAPACITY + self._max_frame
         self._out = ffi.new("uint8_t[]", out_cap)
         self._lens = ffi.new("uint16_t[]", out_cap // self._MIN_FRAME + 1)
         self._consumed = ffi.new("size_t *")
