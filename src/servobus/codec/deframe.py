@@ -7,6 +7,9 @@ and counted, never raised: a serial reader must keep going. Counters:
 * ``discarded_bytes``: bytes dropped because they could not start a frame that checks.
 * ``crc_errors``: frames that stood where a frame was expected and failed their check.
 * ``pending``: bytes held for a frame not yet complete (bounded; see ``SB_DEFRAME_CAPACITY``).
+
+A de-framer belongs to one thread: it holds a stream's state and scratch buffers and is not
+thread-safe. Use one per reader (per port), never one shared by several threads.
 """
 
 from __future__ import annotations
@@ -21,7 +24,12 @@ _CHUNK = 1 << 16  # output scratch sized for this much input per C call
 
 
 class Deframer:
-    """Base of the three de-framers; use a subclass."""
+    """Base of the three de-framers; use a subclass.
+
+    Not thread-safe: a de-framer belongs to one thread. It holds one stream's partial frame and
+    reuses scratch buffers on every call, so give each reader (each port) its own, and never feed
+    one from two threads. asyncio code on one loop is fine.
+    """
 
     _KIND: ClassVar[int]
     _MIN_FRAME: ClassVar[int]
