@@ -116,7 +116,7 @@ def fd_replies(draw: st.DrawFn) -> FdReply:
         mode=draw(st.sampled_from(ControlMode)),
         running=draw(st.booleans()),
         reserved=draw(st.integers(0, 255)),
-        temperature_c=draw(st.integers(-128, 127)),
+        temperature_c=draw(st.integers(-125, 125)),  # manual §VII: -125..125 °C
         slave_id=draw(st.integers(0, 100)),
         model=model,
     )

@@ -103,6 +103,19 @@ def test_fd_reply_temperature_is_int8() -> None:
     assert (reply.temperature_c, reply.slave_id) == (-30, 7)
 
 
+@pytest.mark.parametrize(("byte", "value"), [(0x7E, 126), (0x7F, 127), (0x80, -128), (0x82, -126)])
+def test_fd_reply_temperature_outside_the_manual_range_is_a_protocol_error(byte: int, value: int) -> None:
+    # Manual §VII (spec §7.3, A39): "Temperature -125-125 degrees"; int8 holds 3 more each side.
+    frame = bytearray(16)
+    frame[14] = byte
+    frame[15] = 7
+    with pytest.raises(ProtocolError, match=rf"temperature_c={value} is outside \[-125, 125\]"):
+        FdReply.decode(bytes(frame))
+    for edge, degrees in ((0x7D, 125), (0x83, -125)):
+        frame[14] = edge
+        assert FdReply.decode(bytes(frame)).temperature_c == degrees
+
+
 @pytest.mark.parametrize(
     ("index", "value", "message"),
     [
@@ -159,8 +172,8 @@ def test_classic_reply_speed_and_current_just_outside(model: HollowModel, cls: t
 
 
 def test_fd_reply_ranges() -> None:
-    with pytest.raises(ValueError, match=r"temperature_c=128 is outside \[-128, 127\]"):
-        FdReply(slave_id=1, temperature_c=128)
+    with pytest.raises(ValueError, match=r"temperature_c=126 is outside \[-125, 125\]"):
+        FdReply(slave_id=1, temperature_c=126)
     with pytest.raises(ValueError, match=r"reserved=256 is outside \[0, 255\]"):
         FdReply(slave_id=1, reserved=256)
     assert FdReply(slave_id=1, mode=2).mode is ControlMode.POSITION  # type: ignore[arg-type]

@@ -40,7 +40,9 @@ EXTENDED_POSITION_LIMITS_DEG = (
     -(1 << 31) * 360.0 / COUNTS_PER_TURN,
     ((1 << 31) - 1) * 360.0 / COUNTS_PER_TURN,
 )
-_TEMPERATURE_LIMITS = (-128, 127)  # §7.3: -125..125 °C stated, carried as int8 (A39)
+# Manual §VII (CAN FD reply): "Temperature -125-125 degrees" (spec §7.3, A39): carried as int8, but a
+# value outside -125..125 is outside what the motor reports, so it does not decode.
+_TEMPERATURE_LIMITS = (-125, 125)
 
 
 class HollowReply(Reply):
@@ -181,7 +183,8 @@ class FdReply(HollowReply):
         running: Run Status, True when started.
         reserved: D13, "not yet available", 0 in every example; kept as received so the frame
             re-encodes unchanged, never interpreted.
-        temperature_c: int8 °C (the manual states -125..125; the whole int8 range decodes).
+        temperature_c: °C, -125..125 as the manual states (int8 on the wire; -128..-126 and 126..127
+            are a ProtocolError).
         slave_id: D15, the sending motor's id, 0..100 (the hollow encoder answers with 0, §12).
         model: scaling (pole pairs) of the motor.
     """
@@ -234,8 +237,8 @@ class FdReply(HollowReply):
         """Decode a 16-byte CAN FD reply.
 
         Raises:
-            ProtocolError: wrong length, an unknown mode, a Run Status other than 0/1, or a slave
-                id outside 0..100.
+            ProtocolError: wrong length, an unknown mode, a Run Status other than 0/1, a temperature
+                outside -125..125 °C, or a slave id outside 0..100.
         """
         require_size(data, FD_PAYLOAD_SIZE, what="CAN FD reply")
         position, velocity, current, mode, run, reserved, temperature, slave = packers(model).fd_reply.unpack(
