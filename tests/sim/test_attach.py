@@ -51,7 +51,7 @@ async def test_python_can_slcan_talks_to_thirty_two_simulated_devices_over_a_pty
         (0x240 + i, bytes([0x9C, i, 0, 0, 0, 0, 0, 0])) for i in range(1, 33)
     ]
     assert adapter.bitrate == 1_000_000 and network.bus.bitrate == 1_000_000  # python-can's S8 reached it
-    assert network.bus.frames == 64
+    assert network.bus.frames == 64  # the 32 requests and the 32 replies
 
 
 @pytest.mark.asyncio
