@@ -13,7 +13,7 @@ _CLASSIC_MAX = 8
 _FD_SIZES = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
 
 
-@dataclass(frozen=True, slots=True, kw_only=True)
+@dataclass(frozen=True, slots=True, kw_only=True, init=False)
 class Frame:
     """A CAN or CAN FD frame (or one serial frame addressed by ``arbitration_id``).
 
@@ -37,22 +37,41 @@ class Frame:
     timestamp: float = field(default=0.0, compare=False)
     is_rx: bool = field(default=True, compare=False)
 
-    def __post_init__(self) -> None:
-        if not isinstance(self.data, bytes):
-            object.__setattr__(self, "data", bytes(self.data))
-        limit = 0x1FFFFFFF if self.is_extended_id else 0x7FF
-        if not 0 <= self.arbitration_id <= limit:
-            kind = "extended" if self.is_extended_id else "standard"
-            raise ValueError(
-                f"arbitration_id=0x{self.arbitration_id:X} outside the {kind} range 0..0x{limit:X}"
-            )
-        if self.is_fd:
-            if len(self.data) not in _FD_SIZES:
-                raise ValueError(f"CAN FD data length {len(self.data)} is not one of {_FD_SIZES}")
-        elif len(self.data) > _CLASSIC_MAX:
-            raise ValueError(f"classic CAN data length {len(self.data)} exceeds 8 bytes")
-        if self.bitrate_switch and not self.is_fd:
+    # Every encoded and every received frame is built here, so __init__ is written out: the checks
+    # in one pass and the slots set through their descriptors (a frozen dataclass's generated
+    # __init__ goes through object.__setattr__ per field, twice as slow).
+    def __init__(
+        self,
+        *,
+        arbitration_id: int,
+        data: bytes = b"",
+        is_extended_id: bool = False,
+        is_fd: bool = False,
+        bitrate_switch: bool = False,
+        timestamp: float = 0.0,
+        is_rx: bool = True,
+    ) -> None:
+        if type(data) is not bytes:
+            data = bytes(data)
+        if not 0 <= arbitration_id <= (0x1FFFFFFF if is_extended_id else 0x7FF):
+            limit = 0x1FFFFFFF if is_extended_id else 0x7FF
+            kind = "extended" if is_extended_id else "standard"
+            raise ValueError(f"arbitration_id=0x{arbitration_id:X} outside the {kind} range 0..0x{limit:X}")
+        size = len(data)
+        if size > _CLASSIC_MAX or is_fd:
+            if not is_fd:
+                raise ValueError(f"classic CAN data length {size} exceeds 8 bytes")
+            if size not in _FD_SIZES:
+                raise ValueError(f"CAN FD data length {size} is not one of {_FD_SIZES}")
+        if bitrate_switch and not is_fd:
             raise ValueError("bitrate_switch needs is_fd")
+        _SET_ID(self, arbitration_id)
+        _SET_DATA(self, data)
+        _SET_EXTENDED(self, is_extended_id)
+        _SET_FD(self, is_fd)
+        _SET_BRS(self, bitrate_switch)
+        _SET_TIMESTAMP(self, timestamp)
+        _SET_RX(self, is_rx)
 
     def __repr__(self) -> str:
         width = 8 if self.is_extended_id else 3
@@ -60,3 +79,12 @@ class Frame:
         return (
             f"Frame(0x{self.arbitration_id:0{width}X}{flags and ' ' + flags} [{self.data.hex(' ').upper()}])"
         )
+
+
+_SET_ID = Frame.arbitration_id.__set__  # type: ignore[attr-defined,misc]
+_SET_DATA = Frame.data.__set__  # type: ignore[attr-defined,misc]
+_SET_EXTENDED = Frame.is_extended_id.__set__  # type: ignore[attr-defined,misc]
+_SET_FD = Frame.is_fd.__set__  # type: ignore[attr-defined,misc]
+_SET_BRS = Frame.bitrate_switch.__set__  # type: ignore[attr-defined,misc]
+_SET_TIMESTAMP = Frame.timestamp.__set__  # type: ignore[attr-defined,misc]
+_SET_RX = Frame.is_rx.__set__  # type: ignore[attr-defined,misc]

@@ -12,10 +12,24 @@ load is skipped with a warning rather than breaking the built-in ones.
 from __future__ import annotations
 
 from servobus import _plugins
+from servobus.protocols._bound import BoundCodec, Broadcast, FrameKind, Framing, check_bus
 from servobus.protocols._family import Family
 from servobus.protocols._message import Command, Message, Reply
 
-__all__ = ["FAMILIES", "Command", "Family", "Message", "Reply", "available_families", "get_family"]
+__all__ = [
+    "FAMILIES",
+    "BoundCodec",
+    "Broadcast",
+    "Command",
+    "Family",
+    "FrameKind",
+    "Framing",
+    "Message",
+    "Reply",
+    "available_families",
+    "check_bus",
+    "get_family",
+]
 
 FAMILIES: dict[str, str] = {
     "myactuator": "servobus.protocols.myactuator:FAMILY",

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from enum import Enum
 from typing import Any
 
+from servobus.protocols._bound import BoundCodec, Broadcast
 from servobus.protocols._message import Command, Reply
 
 __all__ = ["Family"]
@@ -28,6 +29,11 @@ class Family:
         default_revision: the revision used when none is given.
         decode_request: ``(can_id, data, *, revision=..., **params) -> Command``.
         decode_reply: ``(can_id, data, *, revision=..., **params) -> Reply``.
+        links: the links the family speaks (``"can"``, ``"rs485"``, ...), default first.
+        bind: ``(motor_id, *, revision=None, model=None, link="can", **options) -> BoundCodec``: one
+            motor's codec on Frames, the only thing the Bus and the CLI use (protocols/_bound.py).
+        broadcast: ``(command, motors) -> Broadcast``: one frame for several bound motors and the
+            keys of the replies it collects; ValueError where the family has no such frame.
     """
 
     name: str
@@ -36,6 +42,9 @@ class Family:
     default_revision: Enum
     decode_request: Callable[..., Command]
     decode_reply: Callable[..., Reply]
+    links: tuple[str, ...]
+    bind: Callable[..., BoundCodec]
+    broadcast: Callable[..., Broadcast]
 
     def __post_init__(self) -> None:
         if self.default_revision not in self.revisions:

@@ -19,6 +19,7 @@ Scales that the manual leaves per motor model live in :class:`HollowModel`.
 from __future__ import annotations
 
 from servobus.protocols._family import Family
+from servobus.protocols.hollow import bound as _bound
 from servobus.protocols.hollow.codec import (
     DEFAULT_REVISION,
     Revision,
@@ -145,4 +146,7 @@ FAMILY = Family(
     default_revision=DEFAULT_REVISION,
     decode_request=decode_request,
     decode_reply=decode_reply,
+    links=_bound.LINKS,
+    bind=_bound.bind,
+    broadcast=_bound.broadcast,
 )

@@ -30,6 +30,7 @@ Resolutions of the spec's open points (spec §10, §8.2):
 from __future__ import annotations
 
 from servobus.protocols._family import Family
+from servobus.protocols.lk import bound as _bound
 from servobus.protocols.lk._base import LkCommand, LkReply
 from servobus.protocols.lk.codec import (
     COMMAND_CLASSES,
@@ -269,4 +270,7 @@ FAMILY = Family(
     default_revision=Revision.V2_36,
     decode_request=decode_request,
     decode_reply=decode_reply,
+    links=_bound.LINKS,
+    bind=_bound.bind,
+    broadcast=_bound.broadcast,
 )

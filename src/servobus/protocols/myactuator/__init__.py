@@ -23,6 +23,7 @@ Usage::
 from __future__ import annotations
 
 from servobus.protocols._family import Family
+from servobus.protocols.myactuator import bound as _bound
 from servobus.protocols.myactuator.codec import (
     ECHO_COMMANDS,
     NO_REPLY,
@@ -304,4 +305,7 @@ FAMILY = Family(
     default_revision=Revision.V4_4,
     decode_request=decode_request,
     decode_reply=decode_reply,
+    links=_bound.LINKS,
+    bind=_bound.bind,
+    broadcast=_bound.broadcast,
 )

@@ -81,6 +81,13 @@ class MotionScales:
 
     def command_scales(self) -> tuple[FieldScale, ...]:
         """FieldScales of MIT_COMMAND (p_des, v_des, kp, kd, t_ff), in layout order."""
+        return _command_scales(self)
+
+    def reply_scales(self) -> tuple[FieldScale, ...]:
+        """FieldScales of MIT_REPLY (motor id, p, v, t), in layout order."""
+        return _reply_scales(self)
+
+    def _command_scales(self) -> tuple[FieldScale, ...]:
         return (
             FieldScale.linear("p_des_rad", -self.p_max_rad, self.p_max_rad, 16),
             FieldScale.linear("v_des_rad_s", -self.v_max_rad_s, self.v_max_rad_s, 12),
@@ -89,8 +96,7 @@ class MotionScales:
             FieldScale.linear("t_ff_nm", -self.t_max_nm, self.t_max_nm, 12),
         )
 
-    def reply_scales(self) -> tuple[FieldScale, ...]:
-        """FieldScales of MIT_REPLY (motor id, p, v, t), in layout order."""
+    def _reply_scales(self) -> tuple[FieldScale, ...]:
         p, v, _, _, t = self.command_scales()
         return (
             FieldScale.integer("motor_id", MOTOR_IDS.start, MOTOR_IDS.stop - 1),
@@ -109,6 +115,11 @@ class MotionScales:
             if scale.name == name:
                 return scale.span / scale.codes
         raise KeyError(name)
+
+
+# Every command and reply checks its values against these: build them once per scales value.
+_command_scales = functools.cache(MotionScales._command_scales)
+_reply_scales = functools.cache(MotionScales._reply_scales)
 
 
 MOTION_SCALES: dict[Revision, MotionScales] = {

@@ -1,0 +1,217 @@
+"""The one contract between the orchestrator and every family: ``Family.bind()`` -> :class:`BoundCodec`.
+
+A bound codec is one motor's codec (family, id, revision, model, link fixed at bind time), working on
+:class:`~servobus.Frame` only. The Bus, the scheduler and the CLI use nothing else, so none of them ever
+writes ``if family == ...``:
+
+==================================  ================================================================
+member                              gives
+==================================  ================================================================
+``encode(command)``                 the Frame to send (values already checked by the command class)
+``reply_key(command)``              the key the reply will carry, or None when no reply comes
+``classify(frame)``                 ``(FrameKind, key)`` from ids and DATA[0] only, no payload decode
+``decode(frame)``                   the typed reply (``ProtocolError`` for bytes that do not decode)
+``timeout_s(command)``              how long a reply may take (brake release, ROM writes: longer)
+``retry_safe(command)``             True only for commands that change nothing (reads)
+``note_sent(command)``              tell the codec a command left (0xB6 streams, 0x9A reports change
+                                    what the motor's frames mean)
+``request_ids`` / ``reply_ids``     this motor's own identifiers (filters, the collision check)
+``shared_ids``                      identifiers every motor of the family uses (broadcasts, a host id)
+``framing``                         serial links: Frame <-> bytes on the wire; None on CAN
+==================================  ================================================================
+
+A key is an opaque hashable (an ``int`` in the built-in families, cheap to hash): equal keys mean "this
+frame can answer that request". On serial links a Frame stands for one serial message: the address
+byte as ``arbitration_id`` and the message body as ``data`` (the framing adds headers and the CRC).
+
+Sans-IO like everything below the Bus: nothing here reads a clock, awaits or does I/O.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Hashable, Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
+
+from servobus.frame import Frame
+from servobus.protocols._message import Command, Reply
+
+__all__ = [
+    "EXTENDED",
+    "BoundCodec",
+    "Broadcast",
+    "FrameKind",
+    "Framing",
+    "StreamDeframer",
+    "check_bus",
+    "describe_id",
+    "frame_key",
+    "id_key",
+]
+
+#: Flag or-ed into an identifier in ``request_ids``/``reply_ids`` for 29-bit (extended) identifiers,
+#: which are a different identifier space on the wire from the 11-bit ones.
+EXTENDED = 1 << 29
+
+
+class FrameKind(enum.Enum):
+    """What a received frame is to one motor's codec."""
+
+    REPLY = "reply"  # answers a request of ours (if one with its key is pending)
+    STREAM = "stream"  # an active-reply (0xB6) frame of a command the motor streams
+    REPORT = "report"  # an automatic error report (MyActuator 0x9A with 0x20 index 3 on)
+    NOT_OURS = "not ours"  # another motor's, another host's, our own loop-back, or no family frame
+
+
+def id_key(arbitration_id: int, is_extended_id: bool = False) -> int:
+    """An identifier as listed in ``request_ids``/``reply_ids`` (extended ones carry :data:`EXTENDED`)."""
+    return arbitration_id | EXTENDED if is_extended_id else arbitration_id
+
+
+def frame_key(arbitration_id: int, byte: int | None = None) -> int:
+    """The built-in families' match key: the identifier, and DATA[0] (or another keying byte) if any.
+
+    ``(id << 9) | 0x100 | byte`` keeps "keyed by id and byte" apart from "keyed by id alone".
+    """
+    return arbitration_id << 9 if byte is None else (arbitration_id << 9) | 0x100 | byte
+
+
+def describe_id(ident: int) -> str:
+    """``0x141`` or ``0x00000064 (extended)`` for an entry of ``request_ids``/``reply_ids``."""
+    if ident & EXTENDED:
+        return f"0x{ident & ~EXTENDED:08X} (extended)"
+    return f"0x{ident:03X}"
+
+
+class StreamDeframer(Protocol):
+    """Bytes in (any chunking), whole Frames out; noise is dropped and counted, never raised."""
+
+    def feed(self, data: bytes) -> list[Frame]: ...
+
+    def idle(self) -> list[Frame]:
+        """The line went quiet: frames a timing-delimited framing (Modbus RTU) was holding back."""
+        ...
+
+
+@runtime_checkable
+class Framing(Protocol):
+    """How a serial link carries Frames: chosen by the family, used by the serial transport."""
+
+    name: str
+
+    def encode(self, frame: Frame) -> bytes:
+        """The bytes on the wire for ``frame`` (header, address, body, CRC)."""
+        ...
+
+    def deframer(self) -> StreamDeframer:
+        """A fresh de-framer for one received byte stream."""
+        ...
+
+
+@dataclass(frozen=True, slots=True)
+class Broadcast:
+    """A frame addressed to several motors, and the replies it collects.
+
+    Attributes:
+        frame: what to send once.
+        replies: motor id -> the key its reply carries (empty when no motor answers).
+    """
+
+    frame: Frame
+    replies: dict[int, Hashable]
+
+
+class BoundCodec(Protocol):
+    """One motor's codec; see the module docstring for the meaning of each member."""
+
+    @property
+    def family(self) -> str: ...
+
+    @property
+    def motor_id(self) -> int: ...
+
+    @property
+    def revision(self) -> enum.Enum: ...
+
+    @property
+    def model(self) -> Any: ...
+
+    @property
+    def link(self) -> str: ...
+
+    @property
+    def request_ids(self) -> frozenset[int]: ...
+
+    @property
+    def reply_ids(self) -> frozenset[int]: ...
+
+    @property
+    def shared_ids(self) -> frozenset[int]: ...
+
+    @property
+    def framing(self) -> Framing | None: ...
+
+    def encode(self, command: Command) -> Frame: ...
+
+    def reply_key(self, command: Command) -> Hashable | None: ...
+
+    def classify(self, frame: Frame) -> tuple[FrameKind, Hashable | None]: ...
+
+    def decode(self, frame: Frame) -> Reply: ...
+
+    def timeout_s(self, command: Command) -> float: ...
+
+    def retry_safe(self, command: Command) -> bool: ...
+
+    def note_sent(self, command: Command) -> None: ...
+
+    @property
+    def streams(self) -> frozenset[int]: ...
+
+
+def _name(codec: BoundCodec) -> str:
+    return f"{codec.family} motor {codec.motor_id} ({codec.revision.name}, {codec.link})"
+
+
+def check_bus(codecs: Iterable[BoundCodec]) -> None:
+    """Refuse motors that cannot share one bus: some frame would belong to two of them.
+
+    Two motors collide when an identifier one of them sends or takes (its own requests and replies)
+    is also one of the other's, or is an identifier the other's family uses for every motor (0x280,
+    0x300, a hollow host id); and two families collide when they use the same shared identifier for
+    different things (MyActuator's 0x280 broadcast is LK V2.35's multi-motor torque frame). Motors of
+    one family share their family's shared identifiers by design.
+
+    Raises:
+        ValueError: naming both motors and the identifier.
+    """
+    seen: list[BoundCodec] = []
+    for codec in codecs:
+        own = codec.request_ids | codec.reply_ids
+        for other in seen:
+            other_own = other.request_ids | other.reply_ids
+            clash = own & other_own
+            why = "both use"
+            if not clash:
+                clash = own & other.shared_ids or other_own & codec.shared_ids
+                why = "one's own identifier is shared by the other's family:"
+            if not clash and codec.family != other.family:
+                clash = codec.shared_ids & other.shared_ids
+                why = "the two families give different meanings to"
+            if clash:
+                ids = ", ".join(describe_id(i) for i in sorted(clash))
+                raise ValueError(f"{_name(other)} and {_name(codec)} cannot share a bus: {why} {ids}")
+        seen.append(codec)
+
+
+def motor_ids_of(codecs: Sequence[BoundCodec]) -> list[int]:
+    """The motor ids of ``codecs``, refusing a repeated one (helper of the families' ``broadcast``).
+
+    Raises:
+        ValueError: a motor id appears twice.
+    """
+    ids = [c.motor_id for c in codecs]
+    if len(set(ids)) != len(ids):
+        raise ValueError(f"motor ids {ids} repeat")
+    return ids

@@ -1,0 +1,270 @@
+"""One LK motor's codec on Frames (protocols/_bound.py's contract): ``FAMILY.bind(3, revision="V2_35")``.
+
+Link: ``"can"``. Requests go to 0x140 + ID; replies come on 0x180 + ID (V2.36) or on the request's own
+identifier (V2.35), so on V2.35 our own frames looped back by an adapter (``is_rx`` False) are never
+taken for replies. On V2.35 the reply to 0x9B (clear errors) may say 0x9A (spec A4): both bytes map to
+one key, so a 0x9B request waits for either and FIFO order keeps pairs straight.
+
+LK motors send nothing on their own (no streams, no error reports): every frame on a motor's reply
+identifier is a REPLY.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Callable, Hashable, Sequence
+from typing import Any
+
+from servobus.errors import ProtocolError
+from servobus.frame import Frame
+from servobus.protocols._bound import Broadcast, FrameKind, check_bus, frame_key, motor_ids_of
+from servobus.protocols._fast import Slow, maker
+from servobus.protocols._message import Command, Reply
+from servobus.protocols.lk import commands as cmd
+from servobus.protocols.lk import params_v235 as p235
+from servobus.protocols.lk import params_v236 as p236
+from servobus.protocols.lk._base import LkCommand
+from servobus.protocols.lk.codec import check_available, decode_reply, resolve_model
+from servobus.protocols.lk.commands_motion import MultiMotorTorque
+from servobus.protocols.lk.ids import (
+    MULTI_MOTOR_ID,
+    MULTI_MOTOR_IDS,
+    MULTI_MOTOR_REPLY_CODE,
+    reply_id,
+    request_id,
+)
+from servobus.protocols.lk.model import LkModel, Revision, encoder_max_count
+from servobus.protocols.lk.replies import REPLY_IQ, REPLY_SPEED, STATUS2_CODES, TEMPERATURE, Status2Reply
+
+__all__ = ["LINKS", "LkCodec", "bind", "broadcast"]
+
+LINKS = ("can",)
+
+DEFAULT_TIMEOUT_S = 0.02
+#: ROM writes and the encoder calibration (0x18 turns the motor for seconds) take longer.
+SLOW_TIMEOUT_S = 0.5
+CALIBRATION_TIMEOUT_S = 10.0
+_SLOW: tuple[type, ...] = (
+    cmd.SetZeroRom,
+    cmd.WriteEncoderOffset,
+    cmd.BrakeControl,
+    p235.WriteParamRom,
+    p236.SaveSettings,
+)
+_READS: tuple[type, ...] = (
+    cmd.ReadStatus1,
+    cmd.ReadStatus2,
+    cmd.ReadStatus3,
+    cmd.ReadEncoder,
+    cmd.ReadMultiTurnAngle,
+    cmd.ReadSingleTurnAngle,
+    cmd.ReadAcceleration,
+    p235.ReadParam,
+    p236.ReadControlParam,
+    p236.ReadSetting,
+)
+_V235_ALIASES = {0x9B: 0x9A}  # spec A4: [003] prints the 0x9B reply's DATA[0] as 0x9A
+
+
+def _status2_decoder(model: LkModel) -> Callable[[bytes], Status2Reply]:
+    """Status 2 (``<BbhhH``: 0x9C, 0xA0..0xA8) without re-validation; :class:`Slow` when in doubt."""
+    unpack = struct.Struct("<BbhhH").unpack
+    iq = REPLY_IQ.field(model.motor_type)
+    counts_name = REPLY_IQ.counts_names.get(model.motor_type)
+    iq_name = "current_a" if iq is not None else counts_name
+    if iq_name is None:
+        raise ValueError(f"no status-2 layout for {model.motor_type.name}")
+    iq_lo, iq_hi = REPLY_IQ.limits
+    cpu = iq.counts_per_unit if iq is not None else None
+    t_lo, t_hi = TEMPERATURE.limits
+    s_lo, s_hi = REPLY_SPEED.limits
+    e_hi = encoder_max_count(model.encoder_bits)
+    codes = STATUS2_CODES
+    make = maker(
+        Status2Reply,
+        ("command", "motor_type", "encoder_bits", "temperature_c", "speed_dps", "encoder_counts", iq_name),
+    )
+    motor_type, bits = model.motor_type, model.encoder_bits
+
+    def decode(data: bytes) -> Status2Reply:
+        if len(data) != 8:
+            raise Slow
+        command, temperature, current, speed, encoder = unpack(data)
+        if (
+            command not in codes
+            or not t_lo <= temperature <= t_hi
+            or not iq_lo <= current <= iq_hi
+            or not s_lo <= speed <= s_hi
+            or encoder > e_hi
+        ):
+            raise Slow
+        value = current / cpu if cpu is not None else current
+        return make(command, motor_type, bits, temperature, float(speed), encoder, value)  # type: ignore[no-any-return]
+
+    return decode
+
+
+class LkCodec:
+    """One LK motor on CAN. Build it with :func:`bind` (or ``FAMILY.bind``)."""
+
+    family = "lk"
+    link = "can"
+    framing = None
+
+    __slots__ = (
+        "_aliases",
+        "_fast",
+        "_reply_base",
+        "_reply_id",
+        "_request_id",
+        "model",
+        "motor_id",
+        "reply_ids",
+        "request_ids",
+        "revision",
+        "shared_ids",
+    )
+
+    def __init__(self, motor_id: int, model: LkModel) -> None:
+        self._request_id = request_id(motor_id)
+        self.motor_id = motor_id
+        self.model = model
+        self.revision = model.revision
+        self._reply_id = reply_id(motor_id, model.revision)
+        self._reply_base = frame_key(self._reply_id, 0)
+        self._aliases = _V235_ALIASES if model.revision is Revision.V2_35 else {}
+        self.request_ids = frozenset({self._request_id})
+        self.reply_ids = frozenset({self._reply_id})
+        self.shared_ids = frozenset({MULTI_MOTOR_ID}) if model.revision is Revision.V2_35 else frozenset()
+        status2 = _status2_decoder(model)
+        self._fast: dict[int, Callable[[bytes], Any]] = dict.fromkeys(STATUS2_CODES, status2)
+
+    def __repr__(self) -> str:
+        return f"<lk motor {self.motor_id} {self.revision.name}>"
+
+    @property
+    def streams(self) -> frozenset[int]:
+        """Always empty: LK motors do not stream."""
+        return frozenset()
+
+    def _check(self, command: Command) -> LkCommand:
+        if not isinstance(command, LkCommand):
+            raise ValueError(f"{command!r} is not an LK command")
+        if isinstance(command, MultiMotorTorque):
+            raise ValueError("the 0x280 multi-motor torque frame goes to four motors: use FAMILY.broadcast")
+        check_available(command, model=self.model)
+        return command
+
+    def encode(self, command: Command) -> Frame:
+        """The frame that sends ``command`` to this motor.
+
+        Raises:
+            ValueError: not an LK command, the 0x280 frame, or a command this revision or motor type lacks.
+        """
+        return Frame(arbitration_id=self._request_id, data=self._check(command).encode(), is_rx=False)
+
+    def reply_key(self, command: Command) -> Hashable | None:
+        """The key of the reply to ``command`` (every single-motor LK command is answered).
+
+        Raises:
+            ValueError: as :meth:`encode`.
+        """
+        code = self._check(command).CODE
+        assert code is not None
+        return self._reply_base | self._aliases.get(code, code)
+
+    def timeout_s(self, command: Command) -> float:
+        """How long to wait for the reply to ``command``."""
+        if isinstance(command, cmd.CalibrateEncoder):
+            return CALIBRATION_TIMEOUT_S
+        return SLOW_TIMEOUT_S if isinstance(command, _SLOW) else DEFAULT_TIMEOUT_S
+
+    def retry_safe(self, command: Command) -> bool:
+        """True for reads: resending them changes nothing on the motor."""
+        return isinstance(command, _READS)
+
+    def note_sent(self, command: Command) -> None:
+        """Nothing an LK command changes alters how its frames are classified."""
+
+    def classify(self, frame: Frame) -> tuple[FrameKind, Hashable | None]:
+        """REPLY for a received frame on this motor's reply identifier, else NOT_OURS."""
+        if frame.arbitration_id != self._reply_id or not frame.is_rx or frame.is_extended_id or frame.is_fd:
+            return FrameKind.NOT_OURS, None
+        data = frame.data
+        if not data:
+            return FrameKind.REPLY, None
+        code = data[0]
+        return FrameKind.REPLY, self._reply_base | self._aliases.get(code, code)
+
+    def decode(self, frame: Frame) -> Reply:
+        """The typed reply in ``frame``.
+
+        Raises:
+            ProtocolError: bytes that are not a reply of this revision and model, or another motor's frame.
+        """
+        data = frame.data
+        if frame.arbitration_id != self._reply_id:
+            raise ProtocolError(f"{frame!r} is not a frame of this motor", raw=data, motor_id=self.motor_id)
+        if data:
+            fast = self._fast.get(data[0])
+            if fast is not None:
+                try:
+                    return fast(data)  # type: ignore[no-any-return]
+                except Slow:
+                    pass
+        return decode_reply(frame.arbitration_id, data, model=self.model)
+
+    def decode_many(self, frames: Sequence[Frame]) -> list[Reply]:
+        """:meth:`decode` of each frame."""
+        return [self.decode(f) for f in frames]
+
+
+def bind(
+    motor_id: int, *, revision: Revision | str | None = None, model: LkModel | None = None, link: str = "can"
+) -> LkCodec:
+    """The codec of LK motor ``motor_id``.
+
+    Args:
+        motor_id: 1..32.
+        revision: V2_36 (default) or V2_35, as a Revision or its name; must agree with ``model``.
+        model: revision, motor type (MS/MF/MH/MG) and encoder width (default: MG, 14 bits).
+        link: ``"can"``.
+
+    Raises:
+        ValueError: an id outside 1..32, an unknown revision or link, or ``revision`` contradicting ``model``.
+    """
+    from servobus.protocols.lk import FAMILY
+
+    if link not in LINKS:
+        raise ValueError(f"lk has no link {link!r} (links: {', '.join(LINKS)})")
+    rev = FAMILY.revision(revision) if revision is not None else None
+    return LkCodec(motor_id, resolve_model(rev, model))
+
+
+def broadcast(command: Command, motors: Sequence[LkCodec]) -> Broadcast:
+    """The V2.35 multi-motor torque frame (0x280) to motors 1..4; each replies with 0xA1 status 2.
+
+    Args:
+        command: a :class:`MultiMotorTorque` (the only multi-motor LK frame).
+        motors: the bound codecs of the motors (ids 1..4, V2.35) whose replies to gather.
+
+    Raises:
+        ValueError: another command, a motor that is not V2.35 or not 1..4, or motor types that differ
+            from the command's.
+    """
+    if not isinstance(command, MultiMotorTorque):
+        raise ValueError(f"{type(command).__name__} has no LK broadcast form (only MultiMotorTorque)")
+    motor_ids_of(motors)
+    check_bus(motors)
+    for motor in motors:
+        if not isinstance(motor, LkCodec) or motor.revision is not Revision.V2_35:
+            raise ValueError(f"{motor!r}: the 0x280 frame exists only for LK V2.35 motors")
+        if motor.motor_id not in MULTI_MOTOR_IDS:
+            raise ValueError(f"{motor!r}: the 0x280 frame addresses motors 1..4 only")
+        if motor.model.motor_type is not command.motor_type:
+            raise ValueError(
+                f"{motor!r} is {motor.model.motor_type.name}, the command {command.motor_type.name}"
+            )
+        check_available(command, model=motor.model)
+    replies: dict[int, Hashable] = {m.motor_id: m._reply_base | MULTI_MOTOR_REPLY_CODE for m in motors}
+    return Broadcast(Frame(arbitration_id=MULTI_MOTOR_ID, data=command.encode(), is_rx=False), replies)
