@@ -181,6 +181,7 @@ def test_every_command_round_trips_through_the_device(case: Case, name: str, dat
     command = data.draw(case.commands[name])
     frame = codec.encode(command)
     assert isinstance(frame, Frame) and not frame.is_rx
+    assert frame.data == command.encode()  # the fast encoders are byte-exact
     key = codec.reply_key(command)
     replies = _exchange(codec, case.device(), frame)
     if key is None:

@@ -74,7 +74,10 @@ def _status2_decoder(model: LkModel) -> Callable[[bytes], Status2Reply]:
     iq_name = "current_a" if iq is not None else counts_name
     if iq_name is None:
         raise ValueError(f"no status-2 layout for {model.motor_type.name}")
-    iq_lo, iq_hi = REPLY_IQ.limits
+    # The decode-time limits of the torque/power field differ by revision, motor type and command
+    # (V2.35 ±2048, MS power ±1000, V2.35 0xA0 ±850): the fast path takes the window every one of
+    # them allows and leaves the rest to the full decoder.
+    iq_lo, iq_hi = max(REPLY_IQ.limits[0], -850), min(REPLY_IQ.limits[1], 850)
     cpu = iq.counts_per_unit if iq is not None else None
     t_lo, t_hi = TEMPERATURE.limits
     s_lo, s_hi = REPLY_SPEED.limits

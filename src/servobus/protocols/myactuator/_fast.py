@@ -152,8 +152,8 @@ def compile_fixed(cls: type[Fixed]) -> Callable[[bytes], Any] | None:
     return decode
 
 
-def motion_reply_decoder(scales: MotionScales) -> Callable[[bytes], Any]:
-    """A fast decoder of 0x500+ID payloads for ``scales`` (raising :class:`Slow` when in doubt)."""
+def motion_reply_decoder(scales: MotionScales, motor_id: int) -> Callable[[bytes], Any]:
+    """A fast decoder of motor ``motor_id``'s 0x500+ID payloads (raising :class:`Slow` when in doubt)."""
     packer = reply_packer(scales)
     _, p, v, t = packer.scales
     make = maker(MotionReply, ("motor_id", "position_rad", "velocity_rad_s", "torque_nm", "scales"))
@@ -162,7 +162,7 @@ def motion_reply_decoder(scales: MotionScales) -> Callable[[bytes], Any]:
     t_span, t_codes, t_origin, t_lo, t_hi = t.span, t.codes, t.origin, t.lo, t.hi
 
     def decode(data: bytes) -> Any:
-        if len(data) != PAYLOAD_SIZE or not 1 <= data[0] <= 32:
+        if len(data) != PAYLOAD_SIZE or data[0] != motor_id:
             raise Slow
         pc = (data[1] << 8) | data[2]
         vc = (data[3] << 4) | (data[4] >> 4)

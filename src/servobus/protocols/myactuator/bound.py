@@ -177,7 +177,7 @@ class MyActuatorCodec:
         self._streams: frozenset[int] = frozenset()
         self._reports = False
         self._fast = _FAST[revision]
-        self._motion_fast = motion_reply_decoder(scales)
+        self._motion_fast = motion_reply_decoder(scales, motor_id)
         self._motion_encode = motion_command_encoder(scales)
         if self._rs485:
             self._reply_id = self._request_id = motor_id
