@@ -276,9 +276,11 @@ int sb_deframer_feed(sb_deframer *d, const char *data, size_t len, size_t *consu
         size_t take = len - taken, room = SB_DEFRAME_CAPACITY - d->len;
         if (take > room)
             take = room;
-        memcpy(d->buf + d->len, data + taken, take);
-        d->len += take;
-        taken += take;
+        if (take) {  /* data may be NULL when len is 0, and memcpy from NULL is undefined even for 0 */
+            memcpy(d->buf + d->len, data + taken, take);
+            d->len += take;
+            taken += take;
+        }
         full = parse_buffer(d, 0, out, out_cap, &out_used, lens, max_frames, &nframes);
         if (full < 0) {
             *consumed = 0;
