@@ -64,6 +64,7 @@ if str(BENCH_DIR) not in sys.path:  # so `_results` imports however this script 
     sys.path.insert(0, str(BENCH_DIR))
 
 import _results  # noqa: E402
+import _typed  # noqa: E402
 import servobus  # noqa: E402
 from servobus.codec import (  # noqa: E402
     MIT_COMMAND,
@@ -801,8 +802,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     bench.crc(rng)
     bench.packing(rng)
     bench.deframing(rng)
+    print("typed codec through Family.bind():", flush=True)
+    typed = _typed.run(args.quick, lambda line: print(line, flush=True))
 
-    missed = [m for fig in bench.figures for m in fig.misses]
+    missed = [m for fig in bench.figures for m in fig.misses] + _typed.misses(typed)
     command = shlex.join([sys.executable, "bench/bench_codec.py", *(sys.argv[1:] if argv is None else argv)])
     meta = {
         "command": command,
@@ -826,8 +829,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     if below:
         print(f"Information only (no target), under {MIN_RATIO:.0f}x the reference: {', '.join(below)}")
     if out_dir is not None:
-        _results.replace_markdown_section(out_dir / "RESULTS.md", KEY, render_markdown(bench, meta, missed))
-        _results.update_results_json(out_dir / "results.json", KEY, build_json(bench, meta, missed))
+        markdown = (
+            render_markdown(bench, meta, missed).rstrip("\n")
+            + "\n"
+            + "\n".join(_typed.markdown(typed))
+            + "\n"
+        )
+        _results.replace_markdown_section(out_dir / "RESULTS.md", KEY, markdown)
+        _results.update_results_json(out_dir / "results.json", KEY, build_json(bench, meta, missed) | typed)
         print(f"Wrote {out_dir / 'RESULTS.md'} and {out_dir / 'results.json'} (key {KEY!r}).")
     print(f"Total runtime: {time.perf_counter() - started:.1f} s")
     return 1 if args.check and (missed or bench.checks) else 0

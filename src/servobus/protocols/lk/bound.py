@@ -116,6 +116,7 @@ class LkCodec:
 
     __slots__ = (
         "_aliases",
+        "_available",
         "_fast",
         "_reply_base",
         "_reply_id",
@@ -130,6 +131,7 @@ class LkCodec:
 
     def __init__(self, motor_id: int, model: LkModel) -> None:
         self._request_id = request_id(motor_id)
+        self._available: set[tuple[type, Any]] = set()
         self.motor_id = motor_id
         self.model = model
         self.revision = model.revision
@@ -155,7 +157,11 @@ class LkCodec:
             raise ValueError(f"{command!r} is not an LK command")
         if isinstance(command, MultiMotorTorque):
             raise ValueError("the 0x280 multi-motor torque frame goes to four motors: use FAMILY.broadcast")
-        check_available(command, model=self.model)
+        # Availability depends on the class and the command's own motor type only: check once each.
+        key = (type(command), getattr(command, "motor_type", None))
+        if key not in self._available:
+            check_available(command, model=self.model)
+            self._available.add(key)
         return command
 
     def encode(self, command: Command) -> Frame:
