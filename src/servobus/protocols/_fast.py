@@ -27,6 +27,11 @@ class Slow(Exception):
 def maker(cls: type, names: tuple[str, ...] | None = None) -> Callable[..., Any]:
     """A function ``make(v1, v2, ...)`` returning a ``cls`` with those field values, unvalidated.
 
+    The object is built as an instance of a twin class (the same bases and slots, no frozen
+    ``__setattr__``), whose plain attribute stores are the fastest Python has, and then becomes a
+    ``cls`` by ``__class__`` assignment, which CPython allows between classes of identical layout (and
+    checks: a twin it refuses falls back to setting each slot through its descriptor).
+
     Args:
         cls: a slotted dataclass (frozen or not).
         names: the fields in argument order; default: every field in declaration order. Fields left
@@ -38,28 +43,49 @@ def maker(cls: type, names: tuple[str, ...] | None = None) -> Callable[..., Any]
     fields = {f.name: f for f in dataclasses.fields(cls)}
     if names is None:
         names = tuple(fields)
-    setters: dict[str, Any] = {}
     defaults: dict[str, Any] = {}
     for name in fields:
-        descriptor: Any = getattr(cls, name, None)
-        if type(descriptor).__name__ != "member_descriptor":
+        if type(getattr(cls, name, None)).__name__ != "member_descriptor":
             raise TypeError(f"{cls.__name__}.{name} is not a slot")
-        setters[f"_s_{name}"] = descriptor.__set__
         if name not in names:
             default = fields[name].default
             if default is dataclasses.MISSING:
                 raise TypeError(f"{cls.__name__}.{name} has no default and is not given")
             defaults[f"_d_{name}"] = default
     args = ", ".join(f"a{i}" for i in range(len(names)))
-    body = [f"_s_{name}(o, a{i})" for i, name in enumerate(names)]
-    body += [f"_s_{name}(o, _d_{name})" for name in fields if name not in names]
-    keywords = ", ".join(f"{k}={k}" for k in (*setters, *defaults))
-    source = (
-        f"def make({args}{', ' if args else ''}*, _new=_new, _cls=_cls, {keywords}):\n"
-        f"    o = _new(_cls)\n" + "".join(f"    {line}\n" for line in body) + "    return o\n"
+    values = {name: f"a{i}" for i, name in enumerate(names)} | {
+        n: f"_d_{n}" for n in fields if n not in names
+    }
+    namespace: dict[str, Any] = {"_cls": cls, "_new": object.__new__, **defaults}
+    make: Callable[..., Any] = _twin_maker(cls, args, values, namespace) or _descriptor_maker(
+        cls, args, values, namespace
     )
-    namespace: dict[str, Any] = {"_new": object.__new__, "_cls": cls, **setters, **defaults}
-    exec(source, namespace)
-    make: Callable[..., Any] = namespace["make"]
     make.__qualname__ = f"make_{cls.__name__}"
     return make
+
+
+def _twin_maker(cls: type, args: str, values: dict[str, str], namespace: dict[str, Any]) -> Any:
+    body = "".join(f"    self.{name} = {value}\n" for name, value in values.items())
+    source = f"def __init__(self, {args}):\n{body}" if args else f"def __init__(self):\n{body}"
+    exec(source, namespace)
+    twin = type(f"_{cls.__name__}Twin", cls.__bases__, {"__slots__": cls.__dict__.get("__slots__", ())})
+    if any("__setattr__" in vars(base) for base in twin.__mro__[1:-1]):  # a frozen base would refuse
+        return None
+    twin.__init__ = namespace.pop("__init__")  # type: ignore[misc]
+    namespace["_twin"] = twin
+    exec(f"def make({args}):\n    o = _twin({args})\n    o.__class__ = _cls\n    return o\n", namespace)
+    make = namespace["make"]
+    try:  # CPython checks the layouts on assignment: prove they match once, here
+        probe: Any = object.__new__(twin)
+        probe.__class__ = cls
+    except TypeError:
+        return None
+    return make
+
+
+def _descriptor_maker(cls: type, args: str, values: dict[str, str], namespace: dict[str, Any]) -> Any:
+    setters = {f"_s_{name}": getattr(cls, name).__set__ for name in values}
+    namespace.update(setters)
+    body = "".join(f"    _s_{name}(o, {value})\n" for name, value in values.items())
+    exec(f"def make({args}):\n    o = _new(_cls)\n{body}    return o\n", namespace)
+    return namespace["make"]

@@ -13,14 +13,17 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Callable, Hashable, Sequence
+from operator import attrgetter
 from typing import Any
 
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
 from servobus.protocols._bound import Broadcast, FrameKind, check_bus, frame_key, motor_ids_of
 from servobus.protocols._fast import Slow, maker
+from servobus.protocols._fields import round_half_away
 from servobus.protocols._message import Command, Reply
 from servobus.protocols.lk import commands as cmd
+from servobus.protocols.lk import commands_motion as motion
 from servobus.protocols.lk import params_v235 as p235
 from servobus.protocols.lk import params_v236 as p236
 from servobus.protocols.lk._base import LkCommand
@@ -107,6 +110,36 @@ def _status2_decoder(model: LkModel) -> Callable[[bytes], Status2Reply]:
     return decode
 
 
+def _iq_code(slot: Any, motor_type: Any) -> Callable[[Any], int]:
+    """The int16 count of an already validated message's torque field (amperes or raw counts)."""
+    field = slot.field(motor_type)
+    if field is not None:
+        get_amps, cpu = attrgetter(slot.amps_name), field.counts_per_unit
+        return lambda m: round_half_away(get_amps(m) * cpu)
+    return attrgetter(slot.counts_names[motor_type]) if motor_type in slot.counts_names else _no_iq
+
+
+def _no_iq(message: Any) -> int:
+    raise ValueError(f"{type(message).__name__} has no torque field for its motor type")
+
+
+def _fast_encoders(model: LkModel) -> dict[type, Callable[[Any], bytes]]:
+    """``command.encode()`` by one ``struct.pack`` for the control-loop commands (validated on build)."""
+    torque = _iq_code(motion.TORQUE, model.motor_type)
+    limit = _iq_code(motion.TORQUE_LIMIT, model.motor_type)
+    a1, a2, a3, a4 = (struct.Struct(f).pack for f in ("<B3xh2x", "<Bxhi", "<B3xi", "<BxHi"))
+    return {
+        motion.TorqueControl: lambda m: a1(0xA1, torque(m)),
+        motion.SpeedControl: lambda m: a2(0xA2, limit(m), round_half_away(m.speed_dps * 100)),
+        motion.SpeedControlV235: lambda m: a3(0xA2, round_half_away(m.speed_dps * 100)),
+        motion.MultiTurnPosition: lambda m: a3(0xA3, round_half_away(m.angle_deg * 100)),
+        motion.MultiTurnPositionSpeed: lambda m: a4(
+            0xA4, round_half_away(m.max_speed_dps), round_half_away(m.angle_deg * 100)
+        ),
+        motion.IncrementalPosition: lambda m: a3(0xA7, round_half_away(m.increment_deg * 100)),
+    }
+
+
 class LkCodec:
     """One LK motor on CAN. Build it with :func:`bind` (or ``FAMILY.bind``)."""
 
@@ -117,6 +150,7 @@ class LkCodec:
     __slots__ = (
         "_aliases",
         "_available",
+        "_encoders",
         "_fast",
         "_reply_base",
         "_reply_id",
@@ -143,6 +177,7 @@ class LkCodec:
         self.shared_ids = frozenset({MULTI_MOTOR_ID}) if model.revision is Revision.V2_35 else frozenset()
         status2 = _status2_decoder(model)
         self._fast: dict[int, Callable[[bytes], Any]] = dict.fromkeys(STATUS2_CODES, status2)
+        self._encoders = _fast_encoders(model)
 
     def __repr__(self) -> str:
         return f"<lk motor {self.motor_id} {self.revision.name}>"
@@ -170,7 +205,10 @@ class LkCodec:
         Raises:
             ValueError: not an LK command, the 0x280 frame, or a command this revision or motor type lacks.
         """
-        return Frame(arbitration_id=self._request_id, data=self._check(command).encode(), is_rx=False)
+        message = self._check(command)
+        fast = self._encoders.get(type(message))
+        data = fast(message) if fast is not None else message.encode()
+        return Frame(arbitration_id=self._request_id, data=data, is_rx=False)
 
     def reply_key(self, command: Command) -> Hashable | None:
         """The key of the reply to ``command`` (every single-motor LK command is answered).

@@ -16,6 +16,7 @@ Classification tracks two things the motor's configuration changes, told through
 
 from __future__ import annotations
 
+from array import array
 from collections.abc import Callable, Hashable, Sequence
 from typing import Any
 
@@ -31,7 +32,7 @@ from servobus.protocols.myactuator._fast import (
     motion_command_encoder,
     motion_reply_decoder,
 )
-from servobus.protocols.myactuator._layout import Fixed, MyActuatorMessage
+from servobus.protocols.myactuator._layout import PAYLOAD_SIZE, Fixed, MyActuatorMessage
 from servobus.protocols.myactuator.codec import (
     NO_REPLY,
     REPLIES,
@@ -365,28 +366,25 @@ class MyActuatorCodec:
 
 
 def _decode_motion_batch(codec: MyActuatorCodec, frames: Sequence[Frame]) -> list[Reply]:
-    packer = reply_packer(codec.model)
-    try:
-        rows = packer.unpack_many(b"".join(f.data for f in frames))
-    except ProtocolError:  # a frame of the wrong size: decide frame by frame
+    """Motion replies in one C-core call; any frame that is not a plain 8-byte reply of this motor
+    sends the whole batch through :meth:`MyActuatorCodec.decode`, frame by frame."""
+    motor_id = codec.motor_id
+    datas = [f.data for f in frames]
+    joined = b"".join(datas)
+    n = len(datas)
+    if len(joined) != PAYLOAD_SIZE * n or any(d[0] != motor_id for d in datas):
         return [codec.decode(f) for f in frames]
+    packer = reply_packer(codec.model)
+    values = array("d", bytes(8 * 4 * n))
+    packer.unpack_into(joined, values)
     _, ps, vs, ts = packer.scales
-    scales = codec.model
-    out: list[Reply] = []
-    for frame, (_, p, v, t) in zip(frames, rows, strict=True):
-        if frame.data[0] != codec.motor_id:
-            out.append(codec.decode(frame))
-            continue
-        out.append(
-            _MAKE_MOTION(
-                codec.motor_id,
-                ps.lo if p < ps.lo else ps.hi if p > ps.hi else p,
-                vs.lo if v < vs.lo else vs.hi if v > vs.hi else v,
-                ts.lo if t < ts.lo else ts.hi if t > ts.hi else t,
-                scales,
-            )
-        )
-    return out
+    p_hi, v_hi, t_hi, scales, make = ps.hi, vs.hi, ts.hi, codec.model, _MAKE_MOTION
+    # Codes decode into [lo, hi + 1 ulp]: only the top needs the clamp MotionReply.decode applies.
+    it = iter(values)
+    return [
+        make(motor_id, p if p <= p_hi else p_hi, v if v <= v_hi else v_hi, t if t <= t_hi else t_hi, scales)
+        for _, p, v, t in zip(it, it, it, it, strict=True)
+    ]
 
 
 _MAKE_MOTION = maker(MotionReply, ("motor_id", "position_rad", "velocity_rad_s", "torque_nm", "scales"))
