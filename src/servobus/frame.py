@@ -10,12 +10,17 @@ from dataclasses import dataclass, field
 __all__ = ["Frame"]
 
 _CLASSIC_MAX = 8
+_SERIAL_MAX = 255
 _FD_SIZES = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True, init=False)
 class Frame:
-    """A CAN or CAN FD frame (or one serial frame addressed by ``arbitration_id``).
+    """A CAN or CAN FD frame, or one serial-link message.
+
+    A serial message (``is_serial``) is what a family's framing cuts out of an RS-485 byte stream:
+    ``arbitration_id`` is its address byte (0..255) and ``data`` its body, up to 255 bytes, without the
+    header, length and CRC the framing adds on the wire. It never goes to a CAN adapter.
 
     Equality ignores ``timestamp`` and ``is_rx``, so a frame from the simulator compares equal to
     the frame a test expects.
@@ -34,6 +39,7 @@ class Frame:
     is_extended_id: bool = False
     is_fd: bool = False
     bitrate_switch: bool = False
+    is_serial: bool = False
     timestamp: float = field(default=0.0, compare=False)
     is_rx: bool = field(default=True, compare=False)
 
@@ -48,34 +54,41 @@ class Frame:
         is_extended_id: bool = False,
         is_fd: bool = False,
         bitrate_switch: bool = False,
+        is_serial: bool = False,
         timestamp: float = 0.0,
         is_rx: bool = True,
     ) -> None:
         if type(data) is not bytes:
             data = bytes(data)
-        if not 0 <= arbitration_id <= (0x1FFFFFFF if is_extended_id else 0x7FF):
-            limit = 0x1FFFFFFF if is_extended_id else 0x7FF
-            kind = "extended" if is_extended_id else "standard"
-            raise ValueError(f"arbitration_id=0x{arbitration_id:X} outside the {kind} range 0..0x{limit:X}")
-        size = len(data)
-        if size > _CLASSIC_MAX or is_fd:
-            if not is_fd:
-                raise ValueError(f"classic CAN data length {size} exceeds 8 bytes")
-            if size not in _FD_SIZES:
-                raise ValueError(f"CAN FD data length {size} is not one of {_FD_SIZES}")
-        if bitrate_switch and not is_fd:
-            raise ValueError("bitrate_switch needs is_fd")
+        if is_serial:
+            _check_serial(arbitration_id, data, is_extended_id or is_fd or bitrate_switch)
+        else:
+            if not 0 <= arbitration_id <= (0x1FFFFFFF if is_extended_id else 0x7FF):
+                limit = 0x1FFFFFFF if is_extended_id else 0x7FF
+                kind = "extended" if is_extended_id else "standard"
+                raise ValueError(
+                    f"arbitration_id=0x{arbitration_id:X} outside the {kind} range 0..0x{limit:X}"
+                )
+            if is_fd:
+                if len(data) not in _FD_SIZES:
+                    raise ValueError(f"CAN FD data length {len(data)} is not one of {_FD_SIZES}")
+            elif len(data) > _CLASSIC_MAX:
+                raise ValueError(f"classic CAN data length {len(data)} exceeds 8 bytes")
+            elif bitrate_switch:
+                raise ValueError("bitrate_switch needs is_fd")
         _SET_ID(self, arbitration_id)
         _SET_DATA(self, data)
         _SET_EXTENDED(self, is_extended_id)
         _SET_FD(self, is_fd)
         _SET_BRS(self, bitrate_switch)
+        _SET_SERIAL(self, is_serial)
         _SET_TIMESTAMP(self, timestamp)
         _SET_RX(self, is_rx)
 
     def __repr__(self) -> str:
         width = 8 if self.is_extended_id else 3
-        flags = "".join(f for f, on in (("x", self.is_extended_id), ("f", self.is_fd)) if on)
+        kinds = (("x", self.is_extended_id), ("f", self.is_fd), ("s", self.is_serial))
+        flags = "".join(f for f, on in kinds if on)
         return (
             f"Frame(0x{self.arbitration_id:0{width}X}{flags and ' ' + flags} [{self.data.hex(' ').upper()}])"
         )
@@ -86,5 +99,15 @@ _SET_DATA = Frame.data.__set__  # type: ignore[attr-defined,misc]
 _SET_EXTENDED = Frame.is_extended_id.__set__  # type: ignore[attr-defined,misc]
 _SET_FD = Frame.is_fd.__set__  # type: ignore[attr-defined,misc]
 _SET_BRS = Frame.bitrate_switch.__set__  # type: ignore[attr-defined,misc]
+_SET_SERIAL = Frame.is_serial.__set__  # type: ignore[attr-defined,misc]
 _SET_TIMESTAMP = Frame.timestamp.__set__  # type: ignore[attr-defined,misc]
 _SET_RX = Frame.is_rx.__set__  # type: ignore[attr-defined,misc]
+
+
+def _check_serial(address: int, data: bytes, can_flags: bool) -> None:
+    if not 0 <= address <= 0xFF:
+        raise ValueError(f"arbitration_id=0x{address:X}: a serial message's address is one byte (0..0xFF)")
+    if len(data) > _SERIAL_MAX:
+        raise ValueError(f"serial message body of {len(data)} bytes exceeds {_SERIAL_MAX}")
+    if can_flags:
+        raise ValueError("a serial message has no extended id, FD or bit-rate-switch flag")

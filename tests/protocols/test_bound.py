@@ -24,7 +24,7 @@ from servobus.protocols import FrameKind, check_bus, get_family, lk
 from servobus.protocols import hollow as ho
 from servobus.protocols import myactuator as ma
 from servobus.sim.devices.hollow import HollowMotor
-from servobus.sim.devices.hollow_converter import HollowConverter
+from servobus.sim.devices.hollow_converter import ConverterMode, HollowConverter
 from servobus.sim.devices.lk import LkMotor
 from servobus.sim.devices.myactuator import MyActuatorMotor
 from servobus.sim.devices.myactuator_rs485 import MyActuatorRs485Motor
@@ -90,6 +90,8 @@ def _hollow_commands(link: str) -> dict[str, st.SearchStrategy[Any]]:
     pi = {"PiMultiplier": hs.pi_multipliers}
     if link == "rs485":
         return fd
+    if link == "modbus":
+        return {**fd, "ModbusRead": st.just(ho.ModbusRead(slave_id=MOTOR))}
     if link == "canfd":
         return {**fd, **pi}
     setpoints = hs.setpoints().filter(lambda m: m.model == default)
@@ -148,6 +150,13 @@ CASES = [
         lambda: HollowConverter([HollowMotor(MOTOR, fd_enabled=True)]),
         _hollow_commands("rs485"),
     ),
+    Case(
+        "hollow",
+        "modbus",
+        {},
+        lambda: HollowConverter([HollowMotor(MOTOR, fd_enabled=True)], mode=ConverterMode.MODBUS),
+        _hollow_commands("modbus"),
+    ),
 ]
 
 PAIRS = [
@@ -181,7 +190,7 @@ def test_every_command_round_trips_through_the_device(case: Case, name: str, dat
     command = data.draw(case.commands[name])
     frame = codec.encode(command)
     assert isinstance(frame, Frame) and not frame.is_rx
-    assert frame.data == command.encode()  # the fast encoders are byte-exact
+    assert frame.data == _expected_body(case, command)  # the fast encoders are byte-exact
     key = codec.reply_key(command)
     replies = _exchange(codec, case.device(), frame)
     if key is None:
@@ -193,8 +202,23 @@ def test_every_command_round_trips_through_the_device(case: Case, name: str, dat
     decoded = codec.decode(reply)
     assert decoded == _family_decode(case, reply)
     # Our own frame looped back by an adapter is never a reply.
-    echo = Frame(arbitration_id=reply.arbitration_id, data=reply.data, is_fd=reply.is_fd, is_rx=False)
+    echo = Frame(
+        arbitration_id=reply.arbitration_id,
+        data=reply.data,
+        is_fd=reply.is_fd,
+        is_serial=reply.is_serial,
+        is_rx=False,
+    )
     assert codec.classify(echo)[0] is FrameKind.NOT_OURS
+
+
+def _expected_body(case: Case, command: Any) -> bytes:
+    """What the family's own encoders put in the frame (on Modbus: the PDU of the write or read)."""
+    if case.link != "modbus":
+        return bytes(command.encode())
+    if not isinstance(command, ho.ModbusRead):
+        command = ho.ModbusWrite(slave_id=MOTOR, command=command)
+    return bytes(command.encode()[1:-2])
 
 
 def _family_decode(case: Case, frame: Frame) -> Any:
@@ -205,7 +229,16 @@ def _family_decode(case: Case, frame: Frame) -> Any:
         return ma.decode_reply(frame.arbitration_id, frame.data, **case.options)
     if case.family == "lk":
         return lk.decode_reply(frame.arbitration_id, frame.data, **case.options)
-    return ho.decode_reply(frame.arbitration_id, frame.data, is_fd=frame.is_fd)
+    if case.link == "modbus":
+        assert frame.is_serial
+        return ho.decode_modbus_reply(bytes([frame.arbitration_id]) + frame.data + _crc16(frame))
+    return ho.decode_reply(frame.arbitration_id, frame.data, is_fd=frame.is_fd or frame.is_serial)
+
+
+def _crc16(frame: Frame) -> bytes:
+    from servobus.codec import crc16_modbus
+
+    return crc16_modbus(bytes([frame.arbitration_id]) + frame.data).to_bytes(2, "little")
 
 
 def test_every_link_of_every_family_is_covered() -> None:

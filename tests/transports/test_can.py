@@ -116,6 +116,13 @@ async def test_fd_frames_need_an_fd_bus(channel: str) -> None:
 
 
 @pytest.mark.asyncio
+async def test_serial_messages_never_go_to_a_can_adapter(channel: str) -> None:
+    async with CanTransport("virtual", channel, ignore_config=True) as transport:
+        with pytest.raises(ValueError, match="serial-link message"):
+            transport.send(Frame(arbitration_id=0x1, data=bytes(8), is_serial=True))
+
+
+@pytest.mark.asyncio
 async def test_receive_ids_filter_what_arrives(channel: str, peer: can.BusABC) -> None:
     async with CanTransport("virtual", channel, ignore_config=True, receive_ids=[0x241, 0x242]) as transport:
         for can_id in (0x240, 0x241, 0x243, 0x242):

@@ -184,10 +184,12 @@ class CanTransport(Transport[Frame, Frame]):
         """Queue ``frame``; it is written in order by the writer thread.
 
         Raises:
-            ValueError: an FD frame on a bus opened without ``fd=True``.
+            ValueError: an FD frame on a bus opened without ``fd=True``, or a serial-link message.
             SendQueueFull: the queue is full.
             TransportError: the bus is not open (lost or closed).
         """
+        if frame.is_serial:
+            raise ValueError(f"{self.name}: {frame!r} is a serial-link message, not a CAN frame")
         if frame.is_fd and not self.fd:
             raise ValueError(f"{self.name}: CAN FD frame {frame!r} on a bus opened without fd=True")
         self._enqueue(frame)

@@ -7,13 +7,18 @@ Links:
   comes on the host id with the motor id in D0.
 * ``"canfd"``: the 16-byte CAN FD control frame on the motor id (and the PI frames, 29-bit); the
   reply comes on the host id with the Slave ID in D15.
-* ``"rs485"``: the RS-485 -> CANFD converter in transparent mode (§9.4). It carries the CAN FD frame
-  as it is, so a Frame here is the FD frame (``arbitration_id`` = the ID byte, ``data`` = the 16 bytes)
-  and the framing adds the CRC-32.
+* ``"rs485"``: the RS-485 -> CANFD converter in transparent mode (§9.4, 1 Mbaud). It carries the
+  16-byte FD control frame as it is: a serial Frame's address is the ID byte (the motor id out, the
+  host id back), its body the 16 bytes; the framing adds the CRC-32.
+* ``"modbus"``: the converter in Modbus RTU mode (§9.5, 19200 baud). An FdCommand is written to
+  holding registers 0..15 (function 0x10, answered by an acknowledgement only); the motor's reply
+  bytes are read back with ``ModbusRead`` (function 0x03). A serial Frame's address is the slave id,
+  its body the function code and what follows, up to the CRC-16.
 
-Every request is answered once (§3, "one request, one reply"), and all motors reply on the one host
-id, so a reply's key is (host id, motor id from the payload). The host id is every hollow motor's
-shared identifier: a motor whose own id equals it is refused on a bus with others.
+On CAN and in transparent mode every request is answered once (§3, "one request, one reply") and all
+motors reply on the one host id, so a reply's key is (host id, motor id from the payload); the host
+id is every hollow motor's shared identifier, and a motor whose own id equals it is refused on a bus
+with others. On Modbus the key is (slave id, function).
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ from __future__ import annotations
 from collections.abc import Callable, Hashable, Sequence
 from typing import Any
 
-from servobus.codec import HollowTransparentDeframer
+from servobus.codec import HollowTransparentDeframer, ModbusRtuDeframer, crc16_modbus
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
 from servobus.protocols._bound import EXTENDED, Broadcast, FrameKind, frame_key
@@ -34,17 +39,30 @@ from servobus.protocols.hollow.commands_fd import (
     fd_position_limits_deg,
     fd_velocity_limits_rpm,
 )
-from servobus.protocols.hollow.ids import DEFAULT_HOST_ID, check_host_id, check_motor_id
+from servobus.protocols.hollow.ids import (
+    DEFAULT_HOST_ID,
+    check_host_id,
+    check_modbus_slave_id,
+    check_motor_id,
+)
 from servobus.protocols.hollow.model import DEFAULT_MODEL, HollowModel, packers
 from servobus.protocols.hollow.replies import ExtendedReply, FdReply, NormalReply
-from servobus.protocols.hollow.rs485 import encode_transparent
+from servobus.protocols.hollow.rs485 import (
+    ModbusFunction,
+    ModbusRead,
+    ModbusWrite,
+    decode_modbus_reply,
+    encode_transparent,
+)
 
-__all__ = ["LINKS", "HollowCodec", "TransparentFraming", "bind", "broadcast"]
+__all__ = ["LINKS", "HollowCodec", "ModbusFraming", "TransparentFraming", "bind", "broadcast"]
 
-LINKS = ("can", "canfd", "rs485")
+LINKS = ("can", "canfd", "rs485", "modbus")
+MODBUS_BROADCAST = 0  # §9.5: address 0 reaches every slave and is never answered
+_WRITE = ModbusFunction.WRITE_MULTIPLE_REGISTERS
 
 #: §3: the motor answers within 500 µs; the converter adds a serial round trip at 1 Mbaud.
-DEFAULT_TIMEOUT_S = {"can": 0.01, "canfd": 0.01, "rs485": 0.02}
+DEFAULT_TIMEOUT_S = {"can": 0.01, "canfd": 0.01, "rs485": 0.02, "modbus": 0.1}
 _MOTOR_IDS = range(0, 101)
 _TEMPERATURE = (-128, 127)
 
@@ -125,7 +143,6 @@ class HollowCodec:
         "_fast_classic",
         "_fast_ext",
         "_fast_fd",
-        "_fd",
         "_key",
         "framing",
         "host_id",
@@ -144,12 +161,21 @@ class HollowCodec:
         self.revision = revision
         self.model = model
         self.link = link
-        self._fd = link != "can"
         self._key = frame_key(host_id, motor_id)
-        self.request_ids = frozenset({motor_id, motor_id | EXTENDED})
         self.reply_ids: frozenset[int] = frozenset()
         self.shared_ids = frozenset({host_id})
-        self.framing: TransparentFraming | None = TransparentFraming() if link == "rs485" else None
+        self.request_ids = frozenset({motor_id, motor_id | EXTENDED})
+        self.framing: TransparentFraming | ModbusFraming | None = None
+        if link == "rs485":
+            if host_id > 0xFF:
+                raise ValueError(f"host_id=0x{host_id:X}: the converter's frames carry a one-byte id")
+            self.request_ids = frozenset({motor_id})
+            self.framing = TransparentFraming()
+        elif link == "modbus":
+            check_modbus_slave_id(motor_id)
+            self.request_ids = self.reply_ids = frozenset({motor_id})
+            self.shared_ids = frozenset({MODBUS_BROADCAST})
+            self.framing = ModbusFraming()
         self._fast_classic = _classic_decoder(model, extended=False)
         self._fast_ext = _classic_decoder(model, extended=True)
         self._fast_fd = _fd_decoder(model)
@@ -162,20 +188,24 @@ class HollowCodec:
         """Always empty: hollow motors only answer."""
         return frozenset()
 
-    def _check(self, command: Command) -> HollowCommand:
+    def _check(self, command: Command) -> Command:
+        if self.link == "modbus":
+            if isinstance(command, ModbusWrite | ModbusRead):
+                if command.slave_id != self.motor_id:
+                    raise ValueError(f"{command!r} addresses slave {command.slave_id}, not {self.motor_id}")
+                command = command.command if isinstance(command, ModbusWrite) else command
+            if isinstance(command, ModbusRead):
+                return command
         if not isinstance(command, HollowCommand):
             raise ValueError(f"{command!r} is not a hollow command")
-        if self._fd:
-            if not command.FD and not command.EXTENDED_ID:
+        if self.link != "can":
+            if not command.FD and (self.link != "canfd" or not command.EXTENDED_ID):
                 raise ValueError(
-                    f"{type(command).__name__} is a classic-CAN frame; a {self.link} motor takes FD"
+                    f"{type(command).__name__} is a classic-CAN frame; link={self.link!r} carries the "
+                    "16-byte FD control frame" + (" and the PI frames" if self.link == "canfd" else "")
                 )
             if isinstance(command, CanModeSwitch):
                 raise ValueError("a CAN FD motor has no normal/extended mode to switch (§5)")
-            if self.link == "rs485" and not command.FD:
-                raise ValueError(
-                    f"the converter carries 16-byte FD frames only, not {type(command).__name__}"
-                )
         elif command.FD:
             raise ValueError(f"{type(command).__name__} is a CAN FD frame; link='can' is classic CAN")
         model = getattr(command, "model", None)
@@ -186,10 +216,22 @@ class HollowCodec:
     def encode(self, command: Command) -> Frame:
         """The frame that sends ``command`` to this motor.
 
+        On ``modbus`` an FdCommand (or a ModbusWrite) becomes the 0x10 write of its 16 bytes, and a
+        ModbusRead the 0x03 read of the motor's reply registers.
+
         Raises:
             ValueError: not a hollow command, or a frame kind this link does not carry.
         """
         message = self._check(command)
+        if self.link == "modbus":
+            if isinstance(message, ModbusRead):
+                wire = message.encode()
+            else:
+                wire = ModbusWrite(slave_id=self.motor_id, command=message).encode()  # type: ignore[arg-type]
+            return Frame(arbitration_id=self.motor_id, data=wire[1:-2], is_serial=True, is_rx=False)
+        assert isinstance(message, HollowCommand)
+        if self.link == "rs485":
+            return Frame(arbitration_id=self.motor_id, data=message.encode(), is_serial=True, is_rx=False)
         fd = message.FD
         return Frame(
             arbitration_id=self.motor_id,
@@ -201,12 +243,17 @@ class HollowCodec:
         )
 
     def reply_key(self, command: Command) -> Hashable | None:
-        """(host id, motor id): every request is answered once.
+        """(host id, motor id) on CAN and in transparent mode, where every request is answered once;
+        (slave, function) on Modbus, where a write is acknowledged and a read answered.
 
         Raises:
             ValueError: as :meth:`encode`.
         """
-        self._check(command)
+        message = self._check(command)
+        if self.link == "modbus":
+            return frame_key(
+                self.motor_id, int(message.FUNCTION if isinstance(message, ModbusRead) else _WRITE)
+            )
         return self._key
 
     def timeout_s(self, command: Command) -> float:
@@ -214,18 +261,24 @@ class HollowCodec:
         return DEFAULT_TIMEOUT_S[self.link]
 
     def retry_safe(self, command: Command) -> bool:
-        """False: every hollow request is a set-point or a mode change; none is a pure read."""
-        return False
+        """True only for a Modbus read: every other hollow request is a set-point or a mode change."""
+        return isinstance(command, ModbusRead)
 
     def note_sent(self, command: Command) -> None:
         """Nothing a hollow command changes alters how its frames are classified."""
 
     def classify(self, frame: Frame) -> tuple[FrameKind, Hashable | None]:
-        """REPLY for a received frame on the host id whose payload names this motor, else NOT_OURS."""
-        if frame.arbitration_id != self.host_id or not frame.is_rx or frame.is_extended_id:
+        """REPLY for a received reply naming this motor (by payload on CAN, by address on Modbus)."""
+        if not frame.is_rx or frame.is_extended_id or frame.is_serial != (self.framing is not None):
             return FrameKind.NOT_OURS, None
         data = frame.data
-        if frame.is_fd:
+        if self.link == "modbus":
+            if frame.arbitration_id == self.motor_id and data:
+                return FrameKind.REPLY, frame_key(self.motor_id, data[0] & 0x7F)
+            return FrameKind.NOT_OURS, None
+        if frame.arbitration_id != self.host_id:
+            return FrameKind.NOT_OURS, None
+        if frame.is_fd or frame.is_serial:
             if len(data) == FD_PAYLOAD_SIZE and data[15] == self.motor_id:
                 return FrameKind.REPLY, self._key
         elif len(data) in (6, 8) and data[0] == self.motor_id:
@@ -239,21 +292,22 @@ class HollowCodec:
             ProtocolError: bytes that do not decode, or a frame that is not this motor's reply.
         """
         data = frame.data
+        if self.link == "modbus":
+            if frame.arbitration_id != self.motor_id:
+                raise ProtocolError(f"{frame!r} is not from slave {self.motor_id}", raw=data)
+            return decode_modbus_reply(ModbusFraming().encode(frame), model=self.model)
         if frame.arbitration_id != self.host_id:
             raise ProtocolError(
                 f"{frame!r} is not on the host id {self.host_id}", raw=data, motor_id=self.motor_id
             )
-        fast = self._fast_fd if frame.is_fd else self._fast_ext if len(data) == 8 else self._fast_classic
+        fd = frame.is_fd or frame.is_serial
+        fast = self._fast_fd if fd else self._fast_ext if len(data) == 8 else self._fast_classic
         try:
             return fast(data)
         except Slow:
             pass
         return decode_reply(
-            frame.arbitration_id,
-            data,
-            is_extended_id=frame.is_extended_id,
-            is_fd=frame.is_fd,
-            model=self.model,
+            frame.arbitration_id, data, is_extended_id=frame.is_extended_id, is_fd=fd, model=self.model
         )
 
     def decode_many(self, frames: Sequence[Frame]) -> list[Reply]:
@@ -262,7 +316,7 @@ class HollowCodec:
 
 
 class TransparentFraming:
-    """The converter's transparent mode: ``ID | 16 bytes | CRC-32`` <-> FD Frame(ID byte, 16 bytes)."""
+    """The converter's transparent mode: ``ID | 16 bytes | CRC-32`` <-> Frame(ID byte, 16 bytes)."""
 
     name = "hollow-transparent"
 
@@ -270,26 +324,48 @@ class TransparentFraming:
         """The 21 bytes on the wire.
 
         Raises:
-            ValueError: an ID above 255 or data not 16 bytes.
+            ValueError: an ID above 255 or a body that is not 16 bytes.
         """
         return encode_transparent(frame.arbitration_id, frame.data)
 
-    def deframer(self) -> _TransparentFrameDeframer:
-        """A de-framer of received bytes into FD Frames (CRC checked, noise counted)."""
-        return _TransparentFrameDeframer()
+    def deframer(self) -> _SerialFrames:
+        """A de-framer of received bytes into Frames (CRC checked, noise counted)."""
+        return _SerialFrames(HollowTransparentDeframer(), trailer=4)
 
 
-class _TransparentFrameDeframer:
-    __slots__ = ("_inner",)
+class ModbusFraming:
+    """Modbus RTU: ``slave | function ... | CRC-16`` <-> Frame(slave, function and the rest)."""
 
-    def __init__(self) -> None:
-        self._inner = HollowTransparentDeframer()
+    name = "hollow-modbus-rtu"
+
+    def encode(self, frame: Frame) -> bytes:
+        """The frame on the wire: address, body, CRC-16/MODBUS low byte first."""
+        head = bytes([frame.arbitration_id]) + frame.data
+        return head + crc16_modbus(head).to_bytes(2, "little")
+
+    def deframer(self) -> _SerialFrames:
+        """A de-framer of received replies into Frames (CRC checked, noise counted)."""
+        return _SerialFrames(ModbusRtuDeframer("replies"), trailer=2)
+
+
+class _SerialFrames:
+    """A byte de-framer whose whole frames become serial Frames: address byte, body, no check."""
+
+    __slots__ = ("_inner", "_trailer")
+
+    def __init__(self, inner: Any, *, trailer: int) -> None:
+        self._inner = inner
+        self._trailer = trailer
+
+    def _frames(self, raws: list[bytes]) -> list[Frame]:
+        end = -self._trailer
+        return [Frame(arbitration_id=raw[0], data=raw[1:end], is_serial=True) for raw in raws]
 
     def feed(self, data: bytes) -> list[Frame]:
-        return [Frame(arbitration_id=raw[0], data=raw[1:17], is_fd=True) for raw in self._inner.feed(data)]
+        return self._frames(self._inner.feed(data))
 
     def idle(self) -> list[Frame]:
-        return [Frame(arbitration_id=raw[0], data=raw[1:17], is_fd=True) for raw in self._inner.idle()]
+        return self._frames(self._inner.idle())
 
 
 def bind(

@@ -1,7 +1,7 @@
 """One MyActuator motor's codec on Frames (protocols/_bound.py's contract): ``FAMILY.bind(3)``.
 
 Links: ``"can"`` (0x140/0x240 + ID, motion mode on 0x400/0x500 + ID, 0x79 on 0x300) and ``"rs485"`` (the
-0x3E frame; a Frame's ``arbitration_id`` is the ID byte and ``data`` the 8 DATA bytes). RS485 motion
+0x3E frame; a serial Frame's ``arbitration_id`` is the ID byte and ``data`` the 8 DATA bytes). RS485 motion
 frames (FE EE) are refused on the rs485 link: their size and CRC are not known well enough to cut them
 out of a byte stream (myactuator-v4.md §6), so no transport could receive their replies.
 
@@ -252,7 +252,7 @@ class MyActuatorCodec:
                 raise ValueError("0xB6 active reply is CAN only: RS485 does not support it (§4.36)")
             is_id = isinstance(message, cmd.SetCanId | cmd.ReadCanId)
             address = RS485_BROADCAST_ID if is_id else self.motor_id
-            return Frame(arbitration_id=address, data=message.encode(), is_rx=False)
+            return Frame(arbitration_id=address, data=message.encode(), is_serial=True, is_rx=False)
         if isinstance(message, MotionCommand):
             return Frame(
                 arbitration_id=self._motion_request_id, data=self._motion_encode(message), is_rx=False
@@ -305,7 +305,7 @@ class MyActuatorCodec:
 
         ``(REPLY, None)`` is a frame on this motor's reply identifier that can answer nothing (empty).
         """
-        if not frame.is_rx or frame.is_extended_id or frame.is_fd:
+        if not frame.is_rx or frame.is_extended_id or frame.is_fd or frame.is_serial is not self._rs485:
             return FrameKind.NOT_OURS, None
         ident = frame.arbitration_id
         data = frame.data
@@ -391,7 +391,7 @@ _MAKE_MOTION = maker(MotionReply, ("motor_id", "position_rad", "velocity_rad_s",
 
 
 class Rs485Framing:
-    """The 0x3E frame: ``3E ID 08 DATA[8] CRC16`` <-> Frame(ID byte, 8 DATA bytes)."""
+    """The 0x3E frame: ``3E ID 08 DATA[8] CRC16`` <-> serial Frame(ID byte, 8 DATA bytes)."""
 
     name = "myactuator-rs485"
     frame_size = RS485_FRAME_SIZE
@@ -416,10 +416,12 @@ class _Rs485FrameDeframer:
         self._inner = rs485_deframer()
 
     def feed(self, data: bytes) -> list[Frame]:
-        return [Frame(arbitration_id=raw[1], data=raw[3:-2]) for raw in self._inner.feed(data)]
+        return [
+            Frame(arbitration_id=raw[1], data=raw[3:-2], is_serial=True) for raw in self._inner.feed(data)
+        ]
 
     def idle(self) -> list[Frame]:
-        return [Frame(arbitration_id=raw[1], data=raw[3:-2]) for raw in self._inner.idle()]
+        return [Frame(arbitration_id=raw[1], data=raw[3:-2], is_serial=True) for raw in self._inner.idle()]
 
 
 def bind(
@@ -480,4 +482,4 @@ def broadcast(command: Command, motors: Sequence[MyActuatorCodec]) -> Broadcast:
         raise ValueError("0xB6 active reply is CAN only")
     ident = RS485_BROADCAST_ID if rs485 else BROADCAST_ID
     replies = {m: k for m, k in keys.items() if k is not None}
-    return Broadcast(Frame(arbitration_id=ident, data=frame.data, is_rx=False), replies)
+    return Broadcast(Frame(arbitration_id=ident, data=frame.data, is_serial=rs485, is_rx=False), replies)
