@@ -151,9 +151,7 @@ def run(quick: bool, log: Callable[[str], None]) -> dict[str, Any]:
     ours = _per_call_us(lambda: mab.decode(r2), target_s, repeats)
     hand = _per_call_us(lambda: _hand_decode(r2), target_s, repeats)
     plain = _per_call_us(lambda: _plain_decode(r2), target_s, repeats)
-    log(
-        f"  R2 status: bound {ours:.2f} µs, struct + frozen dataclass {hand:.2f} µs, plain {plain:.2f} µs"
-    )
+    log(f"  R2 status: bound {ours:.2f} µs, struct + frozen dataclass {hand:.2f} µs, plain {plain:.2f} µs")
     out["typed_decode_us"] = round(max(decode_us.values()), 3)
     out["typed_decode_slowest"] = max(decode_us, key=decode_us.__getitem__)
     out["typed_encode_us"] = round(max(encode_us.values()), 3)

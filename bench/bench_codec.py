@@ -1,6 +1,6 @@
-"""Codec benchmark: the C core (servobus.codec) against the pure-Python reference, in one run.
+"""Codec benchmark: the C core (servobus.core) against the pure-Python reference, in one run.
 
-What is measured, each as seen from Python through the public wrapper (servobus.codec):
+What is measured, each as seen from Python through the public wrapper (servobus.core):
 
 * CRC16/MODBUS and CRC32/IEEE in bulk: one call over a 1 MiB random buffer, MB/s (MB = 10**6 bytes).
 * CRC16 per call: ``crc16_modbus(b)`` on an 11-byte frame body in a tight loop, calls/s. The loop
@@ -66,7 +66,7 @@ if str(BENCH_DIR) not in sys.path:  # so `_results` imports however this script 
 import _results  # noqa: E402
 import _typed  # noqa: E402
 import servobus  # noqa: E402
-from servobus.codec import (  # noqa: E402
+from servobus.core import (  # noqa: E402
     MIT_COMMAND,
     FieldScale,
     HollowTransparentDeframer,

@@ -6,7 +6,7 @@ the core's tests take them from here.
 
 from __future__ import annotations
 
-from servobus.codec import FieldScale
+from servobus.core import FieldScale
 
 # MyActuator motion mode, V4.3 ranges (myactuator-v4.md §5.5, [002]).
 MIT_V43 = [

@@ -10,7 +10,7 @@ from pathlib import Path
 from types import ModuleType
 
 import servobus
-from servobus.codec import _lib
+from servobus.core import _lib
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -17,7 +17,7 @@ from typing import Any
 import pytest
 
 from _scales import MIT_V43
-from servobus.codec import (
+from servobus.core import (
     HOLLOW_FD_REPLY,
     LAYOUTS,
     MIT_COMMAND,
@@ -33,7 +33,7 @@ from servobus.codec import (
     crc16_modbus,
     crc32_ieee,
 )
-from servobus.codec._lib import ffi, lib
+from servobus.core._lib import ffi, lib
 
 CSRC = Path(__file__).resolve().parents[1] / "csrc"
 GOOD_FIELD = (-12.5, 12.5, -12.5, 65535.0, 25.0)  # lo, hi, origin, codes, span

@@ -13,7 +13,7 @@ import pytest
 
 SRC = Path(__file__).resolve().parents[1] / "src" / "servobus"
 SANS_IO = [
-    "codec",
+    "core",
     "frame.py",
     "errors.py",
     "protocols",

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from reference import crc as ref
 from reference.settings import oracle_settings
-from servobus.codec import crc16_modbus, crc32_ieee
+from servobus.core import crc16_modbus, crc32_ieee
 
 # (bytes covered, CRC as sent on the wire: low byte first), from the specs' verified examples.
 CRC16_VECTORS = [

@@ -19,8 +19,8 @@ from hypothesis import strategies as st
 from reference import deframe as ref
 from reference.crc import crc16_modbus, crc32_ieee
 from reference.settings import oracle_settings
-from servobus.codec import HollowTransparentDeframer, ModbusRtuDeframer, MyActuatorRs485Deframer
-from servobus.codec.deframe import Deframer
+from servobus.core import HollowTransparentDeframer, ModbusRtuDeframer, MyActuatorRs485Deframer
+from servobus.core.deframe import Deframer
 
 # Bytes that start or steer a frame: RS485 header and standard LEN, Modbus functions, fill bytes.
 INTERESTING = [0x3E, 0x08, 0x03, 0x10, 0x83, 0x90, 0x00, 0xFF, 0x01, 0x20, 0x64]

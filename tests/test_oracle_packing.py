@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 
 from reference import packing as ref
 from reference.settings import oracle_settings
-from servobus.codec import (
+from servobus.core import (
     HOLLOW_EXT_REPLY,
     HOLLOW_FD_COMMAND,
     HOLLOW_FD_REPLY,
@@ -52,7 +52,7 @@ def _magnitude(rng: random.Random) -> float:
 
 
 def _fits(scale: FieldScale, bits: int) -> bool:
-    """Packer's own admission rule (servobus.codec.packing._check_fits): before rounding, lo and hi
+    """Packer's own admission rule (servobus.core.packing._check_fits): before rounding, lo and hi
     map no further than half a code below the field and one and a half above it (offset binary puts
     +full scale one code past the top). Used to pick scales, not tested."""
     cmin, cmax = ref.code_range(bits)

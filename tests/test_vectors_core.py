@@ -12,7 +12,7 @@ import pytest
 
 from _scales import MIT_V43
 from _spec import hexbytes, load_vectors, vector_id
-from servobus.codec import (
+from servobus.core import (
     HOLLOW_FD_COMMAND,
     HOLLOW_FD_REPLY,
     HOLLOW_SETPOINT,

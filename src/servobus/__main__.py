@@ -11,7 +11,7 @@ import sys
 from collections.abc import Callable
 
 from servobus import __version__
-from servobus.codec import (
+from servobus.core import (
     HOLLOW_SETPOINT,
     MIT_COMMAND,
     FieldScale,

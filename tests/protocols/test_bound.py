@@ -236,7 +236,7 @@ def _family_decode(case: Case, frame: Frame) -> Any:
 
 
 def _crc16(frame: Frame) -> bytes:
-    from servobus.codec import crc16_modbus
+    from servobus.core import crc16_modbus
 
     return crc16_modbus(bytes([frame.arbitration_id]) + frame.data).to_bytes(2, "little")
 

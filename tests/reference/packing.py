@@ -47,7 +47,7 @@ ErrorKind = Literal["nan", "range"]
 
 
 class Scale(Protocol):
-    """What the oracle needs of a field scale (servobus.codec.FieldScale has these attributes)."""
+    """What the oracle needs of a field scale (servobus.core.FieldScale has these attributes)."""
 
     @property
     def lo(self) -> float: ...

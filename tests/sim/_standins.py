@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from servobus.codec import MyActuatorRs485Deframer
+from servobus.core import MyActuatorRs485Deframer
 from servobus.frame import Frame
 from servobus.sim.device import Emission, SerialEmission
 

@@ -13,7 +13,7 @@ import pytest
 import serial
 
 from _serving import serving
-from servobus.codec import crc16_modbus
+from servobus.core import crc16_modbus
 from servobus.sim.attach import serve_python_can, serve_rs485, serve_slcan
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.pty import PtyPort

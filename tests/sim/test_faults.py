@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from servobus.codec import MyActuatorRs485Deframer, crc16_modbus
+from servobus.core import MyActuatorRs485Deframer, crc16_modbus
 from servobus.frame import Frame
 from servobus.sim.faults import FaultInjector, FaultPlan
 

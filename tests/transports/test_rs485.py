@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from _serving import serving
-from servobus.codec import crc16_modbus
+from servobus.core import crc16_modbus
 from servobus.errors import TransportError
 from servobus.protocols import myactuator as ma
 from servobus.protocols.hollow.rs485 import (

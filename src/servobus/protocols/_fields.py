@@ -9,7 +9,7 @@ decodes it the same way everywhere::
     SPEED.encode(1.5)         # b'\\x96\\x00\\x00\\x00'
     SPEED.decode(data, 4)     # float
 
-Encoding rounds half away from zero, as the C core does (``servobus.codec.packing``), so a value
+Encoding rounds half away from zero, as the C core does (``servobus.core.packing``), so a value
 decodes to itself quantised to the field's resolution.
 """
 

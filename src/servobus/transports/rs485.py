@@ -31,7 +31,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from servobus.codec import (
+from servobus.core import (
     Deframer,
     HollowTransparentDeframer,
     ModbusRtuDeframer,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from servobus.codec import HOLLOW_EXT_REPLY, HOLLOW_FD_COMMAND, HOLLOW_FD_REPLY, HOLLOW_SETPOINT, MIT_REPLY
+from servobus.core import HOLLOW_EXT_REPLY, HOLLOW_FD_COMMAND, HOLLOW_FD_REPLY, HOLLOW_SETPOINT, MIT_REPLY
 from servobus.protocols.hollow import DEFAULT_MODEL, MODEL_3507, MODELS, HollowModel
 from servobus.protocols.hollow.model import packers
 

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from servobus.codec import HollowTransparentDeframer, ModbusRtuDeframer, crc16_modbus, crc32_ieee
+from servobus.core import HollowTransparentDeframer, ModbusRtuDeframer, crc16_modbus, crc32_ieee
 from servobus.errors import ProtocolError
 from servobus.protocols import Message
 from servobus.protocols.hollow import (

@@ -16,7 +16,7 @@ from typing import Any
 import pytest
 
 from _spec import hexbytes, load_vectors, vector_id
-from servobus.codec import crc16_modbus, crc32_ieee
+from servobus.core import crc16_modbus, crc32_ieee
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
 from servobus.protocols.hollow import (

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from servobus.codec import crc16_modbus
+from servobus.core import crc16_modbus
 from servobus.errors import ProtocolError
 from servobus.protocols import myactuator as ma
 

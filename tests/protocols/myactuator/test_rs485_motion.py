@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from servobus.codec import crc32_ieee
+from servobus.core import crc32_ieee
 from servobus.errors import ProtocolError
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator import rs485_motion

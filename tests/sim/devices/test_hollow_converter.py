@@ -12,7 +12,7 @@ from typing import Any
 import pytest
 
 from _spec import hexbytes, load_vectors
-from servobus.codec import crc16_modbus
+from servobus.core import crc16_modbus
 from servobus.frame import Frame
 from servobus.protocols.hollow import (
     ControlMode,

@@ -26,7 +26,7 @@ from __future__ import annotations
 from collections.abc import Callable, Hashable, Sequence
 from typing import Any
 
-from servobus.codec import HollowTransparentDeframer, ModbusRtuDeframer, crc16_modbus
+from servobus.core import HollowTransparentDeframer, ModbusRtuDeframer, crc16_modbus
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
 from servobus.protocols._bound import EXTENDED, Broadcast, FrameKind, frame_key

@@ -6,7 +6,7 @@ The manual fixes the bit layouts but not all the scales: the classic-CAN speed a
 the pole-pair count (§7.4). :class:`HollowModel` holds those numbers; every command and reply whose
 bytes depend on them carries one, so ``.encode()`` is self-contained.
 
-The :class:`~servobus.codec.Packer` objects for a model are built on first use and cached
+The :class:`~servobus.core.Packer` objects for a model are built on first use and cached
 (:func:`packers`): a control loop never rebuilds a scale table per frame.
 """
 
@@ -16,7 +16,7 @@ import math
 from dataclasses import dataclass
 from functools import lru_cache
 
-from servobus.codec import (
+from servobus.core import (
     HOLLOW_EXT_REPLY,
     HOLLOW_FD_COMMAND,
     HOLLOW_FD_REPLY,
@@ -106,7 +106,7 @@ MODELS: dict[str, HollowModel] = {DEFAULT_MODEL.name: DEFAULT_MODEL, MODEL_3507.
 
 @dataclass(frozen=True, slots=True)
 class Packers:
-    """The five C-core packers of one model (layouts from ``servobus.codec.packing``)."""
+    """The five C-core packers of one model (layouts from ``servobus.core.packing``)."""
 
     setpoint: Packer  # HOLLOW_SETPOINT: p, v, kp, kd, t (§4.2); never emits a special command
     normal_reply: Packer  # MIT_REPLY: motor_id, p, v, t (§4.5, 6 bytes)

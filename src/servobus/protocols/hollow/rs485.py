@@ -11,8 +11,8 @@ Both modes carry the 16 CAN FD bytes of §7.2/§7.3, so their typed frames wrap
   0x0000..0x000F, one CAN FD byte in the low byte of each (high byte 0x00), CRC-16/MODBUS low byte
   first. Only full 16-register transfers from 0x0000 exist in the manual; anything else is refused.
 
-Byte streams are cut into frames by :class:`servobus.codec.HollowTransparentDeframer` and
-:class:`servobus.codec.ModbusRtuDeframer` (which check the CRCs); the decoders here check them again,
+Byte streams are cut into frames by :class:`servobus.core.HollowTransparentDeframer` and
+:class:`servobus.core.ModbusRtuDeframer` (which check the CRCs); the decoders here check them again,
 so they also take frames from anywhere else.
 """
 
@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import ClassVar, Self
 
-from servobus.codec import crc16_modbus, crc32_ieee
+from servobus.core import crc16_modbus, crc32_ieee
 from servobus.errors import ProtocolError
 from servobus.protocols._message import Command, Reply
 from servobus.protocols.hollow._checks import build, check_int, decode_enum, require_size, to_enum

@@ -1,6 +1,6 @@
 """Motion (MIT) mode on CAN: command on 0x400 + ID, reply on 0x500 + ID (myactuator-v4.md §5).
 
-The bit packing is the C core's (``servobus.codec.Packer`` with ``MIT_COMMAND``, and ``MIT_REPLY`` in an
+The bit packing is the C core's (``servobus.core.Packer`` with ``MIT_COMMAND``, and ``MIT_REPLY`` in an
 8-byte slot); this module supplies the ranges, which differ by revision (§5.5, §9 item 24):
 
 =======  ============  ==========================  ==========================================
@@ -28,7 +28,7 @@ import functools
 from dataclasses import dataclass, field
 from typing import ClassVar, Self
 
-from servobus.codec import MIT_COMMAND, MIT_REPLY, FieldScale, Packer
+from servobus.core import MIT_COMMAND, MIT_REPLY, FieldScale, Packer
 from servobus.errors import ProtocolError
 from servobus.protocols._fields import check_range
 from servobus.protocols._message import Command, Reply, require_length

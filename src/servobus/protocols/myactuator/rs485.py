@@ -7,7 +7,7 @@ symbolically; it is the MODBUS convention and what third-party code uses (§1.2,
 
 ID byte: a motor id 1..32, or :data:`RS485_BROADCAST_ID` (0xCD) for every motor; motors reply with
 their own id (0x79 replies keep 0xCD, §4.38). A byte stream is cut into frames by
-``servobus.codec.MyActuatorRs485Deframer``; :func:`decode_rs485` checks one frame.
+``servobus.core.MyActuatorRs485Deframer``; :func:`decode_rs485` checks one frame.
 
 Not on RS485: 0xB6 active reply ("485 version does not support it", §4.36) and the CAN motion mode
 (RS485 motion mode is its own frame, :mod:`.rs485_motion`).
@@ -15,7 +15,7 @@ Not on RS485: 0xB6 active reply ("485 version does not support it", §4.36) and 
 
 from __future__ import annotations
 
-from servobus.codec import MyActuatorRs485Deframer, crc16_modbus
+from servobus.core import MyActuatorRs485Deframer, crc16_modbus
 from servobus.errors import ProtocolError
 from servobus.protocols._message import Command, Message, Reply
 from servobus.protocols.myactuator import commands as cmd

@@ -37,7 +37,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar, Self
 
-from servobus.codec import crc32_ieee
+from servobus.core import crc32_ieee
 from servobus.errors import ProtocolError
 from servobus.protocols._fields import IntField
 from servobus.protocols._message import Command, Reply

@@ -33,7 +33,7 @@ from collections import Counter
 from collections.abc import Iterable
 from enum import Enum
 
-from servobus.codec import HollowTransparentDeframer, ModbusRtuDeframer
+from servobus.core import HollowTransparentDeframer, ModbusRtuDeframer
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
 from servobus.protocols.hollow import (

@@ -9,7 +9,7 @@ import pytest
 
 from _scales import MIT_V43
 from servobus import Frame, ProtocolError, ServobusError
-from servobus.codec import (
+from servobus.core import (
     HOLLOW_EXT_REPLY,
     HOLLOW_FD_COMMAND,
     LAYOUTS,

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from servobus.codec._lib import Buffer, as_cbuffer, lib, raise_status
+from servobus.core._lib import Buffer, as_cbuffer, lib, raise_status
 
 __all__ = ["crc16_modbus", "crc32_ieee"]
 

@@ -29,7 +29,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any, cast
 
-from servobus.codec._lib import Buffer, as_cbuffer, ffi, is_buffer, lib, raise_status, writable_cbuffer
+from servobus.core._lib import Buffer, as_cbuffer, ffi, is_buffer, lib, raise_status, writable_cbuffer
 from servobus.errors import ProtocolError
 
 __all__ = [
@@ -208,9 +208,9 @@ class Packer:
 
     def __init__(self, layout: Layout, scales: Sequence[FieldScale], *, stride: int | None = None) -> None:
         if not isinstance(layout, Layout):
-            raise TypeError(f"layout must be a servobus.codec Layout, not {type(layout).__name__}")
+            raise TypeError(f"layout must be a servobus.core Layout, not {type(layout).__name__}")
         if layout not in LAYOUTS:  # the C core knows only these; a look-alike would lie about sizes
-            raise ValueError(f"layout {layout.name!r} (id {layout.id}) is not one of servobus.codec.LAYOUTS")
+            raise ValueError(f"layout {layout.name!r} (id {layout.id}) is not one of servobus.core.LAYOUTS")
         scales = tuple(scales)
         for scale in scales:
             if not isinstance(scale, FieldScale):

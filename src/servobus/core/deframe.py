@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from typing import ClassVar, Literal
 
-from servobus.codec._lib import Buffer, ffi, lib, raise_status, readable_cbuffer, writable_cbuffer
+from servobus.core._lib import Buffer, ffi, lib, raise_status, readable_cbuffer, writable_cbuffer
 
 __all__ = ["Deframer", "HollowTransparentDeframer", "ModbusRtuDeframer", "MyActuatorRs485Deframer"]
 

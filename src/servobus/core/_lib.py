@@ -1,5 +1,5 @@
 """The only importer of the compiled C core. Checks that it matches this package (ABI number and
-version), and maps status codes to exceptions through one table. Nothing outside servobus.codec
+version), and maps status codes to exceptions through one table. Nothing outside servobus.core
 sees cdata."""
 
 from __future__ import annotations

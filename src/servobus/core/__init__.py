@@ -1,22 +1,22 @@
-"""servobus.codec: the Python face of the C core (servobus._core).
+"""servobus.core: the Python face of the C core (servobus._core).
 
 * CRCs: :func:`crc16_modbus`, :func:`crc32_ieee`.
 * Float <-> code scaling and frame bit layouts: :class:`FieldScale`, :class:`Packer`, the layouts.
 * Stream de-framers: :class:`MyActuatorRs485Deframer`, :class:`HollowTransparentDeframer`,
   :class:`ModbusRtuDeframer`.
 
-Sans-IO: nothing here awaits, sleeps or reads a clock. Only servobus.codec._lib imports the
+Sans-IO: nothing here awaits, sleeps or reads a clock. Only servobus.core._lib imports the
 compiled module, and nothing above this package sees cdata.
 """
 
-from servobus.codec.crc import crc16_modbus, crc32_ieee
-from servobus.codec.deframe import (
+from servobus.core.crc import crc16_modbus, crc32_ieee
+from servobus.core.deframe import (
     Deframer,
     HollowTransparentDeframer,
     ModbusRtuDeframer,
     MyActuatorRs485Deframer,
 )
-from servobus.codec.packing import (
+from servobus.core.packing import (
     HOLLOW_EXT_REPLY,
     HOLLOW_FD_COMMAND,
     HOLLOW_FD_REPLY,
