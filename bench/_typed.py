@@ -124,7 +124,7 @@ def run(quick: bool, log: Callable[[str], None]) -> dict[str, Any]:
         "myactuator_position": (mab, lambda: ma.AbsolutePositionControl(angle_deg=90.0, max_speed_dps=360.0)),
         "myactuator_motion": (
             mab,
-            lambda: ma.MotionCommand(p_des_rad=1.0, v_des_rad_s=0.5, kp=20.0, kd=1.0, t_ff_nm=0.5),
+            lambda: ma.MotionCommand(position_rad=1.0, velocity_rad_s=0.5, kp=20.0, kd=1.0, torque_ff_nm=0.5),
         ),
         "lk_torque": (lkb, lambda: lk.TorqueControl(motor_type=lk.MotorType.MG, current_a=1.5)),
         "lk_speed": (

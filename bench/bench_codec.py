@@ -96,11 +96,11 @@ CFLAGS = default_cflags()
 
 # MIT motion-mode scales of myactuator-v4.md §5.5 ([002] V4.3 ranges).
 MIT_SCALES = (
-    FieldScale.linear("p_des_rad", -12.5, 12.5, 16),
-    FieldScale.linear("v_des_rad_s", -45.0, 45.0, 12),
+    FieldScale.linear("position_rad", -12.5, 12.5, 16),
+    FieldScale.linear("velocity_rad_s", -45.0, 45.0, 12),
     FieldScale.linear("kp", 0.0, 500.0, 12),
     FieldScale.linear("kd", 0.0, 5.0, 12),
-    FieldScale.linear("t_ff_nm", -24.0, 24.0, 12),
+    FieldScale.linear("torque_ff_nm", -24.0, 24.0, 12),
 )
 # Round values near the manual's worked example (myactuator-v4.md §5.6; its v_des is 0x82E = 1.022
 # rad/s, so 1.0 packs one code lower), the example frame itself, and the 11-byte RS485 body.

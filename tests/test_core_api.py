@@ -82,11 +82,11 @@ def test_scale_must_fit_its_field() -> None:
 
 def test_out_of_range_names_field_value_and_limits() -> None:
     packer = Packer(MIT_COMMAND, MIT_V43)
-    with pytest.raises(ValueError, match=r"^v_des_rad_s=45\.5 is outside \[-45\.0, 45\.0\]$"):
+    with pytest.raises(ValueError, match=r"^velocity_rad_s=45\.5 is outside \[-45\.0, 45\.0\]$"):
         packer.pack([0.0, 45.5, 0.0, 0.0, 0.0])
     with pytest.raises(ValueError, match=r"^kd is NaN$"):
         packer.pack([0.0, 0.0, 0.0, math.nan, 0.0])
-    with pytest.raises(ValueError, match=r"t_ff_nm=-inf is outside .* \(frame 2\)"):
+    with pytest.raises(ValueError, match=r"torque_ff_nm=-inf is outside .* \(frame 2\)"):
         packer.pack_many([[0.0] * 5, [0.0] * 5, [0.0, 0.0, 0.0, 0.0, -math.inf]])
 
 

@@ -213,11 +213,11 @@ def test_layout_tables_match_specs(layout: Layout) -> None:
 # ---- golden frames from the specs ----
 
 MIT_V43 = [  # myactuator-v4.md §5.5, [002] V4.3 ranges
-    FieldScale.linear("p_des_rad", -12.5, 12.5, 16),
-    FieldScale.linear("v_des_rad_s", -45.0, 45.0, 12),
+    FieldScale.linear("position_rad", -12.5, 12.5, 16),
+    FieldScale.linear("velocity_rad_s", -45.0, 45.0, 12),
     FieldScale.linear("kp", 0.0, 500.0, 12),
     FieldScale.linear("kd", 0.0, 5.0, 12),
-    FieldScale.linear("t_ff_nm", -24.0, 24.0, 12),
+    FieldScale.linear("torque_ff_nm", -24.0, 24.0, 12),
 ]
 HOLLOW_H1 = [  # hollow.md §4.6: Pmax 1 turn = 360°, ω_fs 200 rad/s, I_fs 4 A
     FieldScale.offset_binary("p_deg", 360.0, 16),
@@ -325,7 +325,7 @@ def test_offset_binary_top_clamps_to_last_code() -> None:
 def test_range_and_nan_errors() -> None:
     """Out of range raises (even by one ulp) unless saturating; NaN raises even when saturating."""
     packer = Packer(MIT_COMMAND, MIT_V43)
-    with pytest.raises(ValueError, match=r"^p_des_rad=12\.500000000000002 is outside \[-12\.5, 12\.5\]$"):
+    with pytest.raises(ValueError, match=r"^position_rad=12\.500000000000002 is outside \[-12\.5, 12\.5\]$"):
         packer.pack([math.nextafter(12.5, INF), 0, 0, 0, 0])
     assert packer.pack([INF, -INF, 1e9, -1.0, 0.0], saturate=True) == bytes.fromhex("FFFF000FFF000800")
     with pytest.raises(ValueError, match=r"^kd is NaN \(frame 1\)$"):

@@ -25,11 +25,11 @@ from servobus.core import (
 
 def _mit_example() -> bytes:
     scales = [
-        FieldScale.linear("p_des_rad", -12.5, 12.5, 16),
-        FieldScale.linear("v_des_rad_s", -45.0, 45.0, 12),
+        FieldScale.linear("position_rad", -12.5, 12.5, 16),
+        FieldScale.linear("velocity_rad_s", -45.0, 45.0, 12),
         FieldScale.linear("kp", 0.0, 500.0, 12),
         FieldScale.linear("kd", 0.0, 5.0, 12),
-        FieldScale.linear("t_ff_nm", -24.0, 24.0, 12),
+        FieldScale.linear("torque_ff_nm", -24.0, 24.0, 12),
     ]
     return Packer(MIT_COMMAND, scales).pack([10.0, 2094 * 90 / 4095 - 45, 10.0, 1.0, 10.0])
 

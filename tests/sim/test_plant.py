@@ -78,7 +78,7 @@ def test_position_mode_settles_without_exceeding_its_speed_limit() -> None:
 def test_impedance_law_holds_a_spring_against_a_load() -> None:
     plant = Plant()
     plant.external_torque_nm = -1.0
-    plant.set_control(Impedance(p_des_rad=0.5, v_des_rad_s=0.0, kp=10.0, kd=1.0, t_ff_nm=0.0))
+    plant.set_control(Impedance(position_rad=0.5, velocity_rad_s=0.0, kp=10.0, kd=1.0, torque_ff_nm=0.0))
     _run(plant, 3.0)
     # kp·(p_des - p) = 1 N·m at rest
     assert math.radians(plant.position_deg) == pytest.approx(0.5 - 0.1, abs=0.005)

@@ -5,7 +5,7 @@ says how a physical value becomes a code (it changes with firmware revision and 
 the family codecs supply it); a :class:`Packer` joins one layout with one scale per field and
 packs or unpacks one frame or a whole batch per C call::
 
-    p = Packer(MIT_COMMAND, [FieldScale.linear("p_des_rad", -12.5, 12.5, 16), ...])
+    p = Packer(MIT_COMMAND, [FieldScale.linear("position_rad", -12.5, 12.5, 16), ...])
     p.pack([10.0, 1.0, 10.0, 1.0, 10.0])        # one frame
     p.pack_many(rows)                          # a control tick over many motors, one C call
 
@@ -51,7 +51,7 @@ class FieldScale:
     """How one field's physical value maps to its integer code.
 
     Attributes:
-        name: the field's name with its unit (``p_des_rad``); errors quote it.
+        name: the field's name with its unit (``position_rad``); errors quote it.
         lo, hi: the accepted physical range, inclusive.
         origin: the physical value of code 0.
         codes, span: ``span`` physical units are ``codes`` codes.

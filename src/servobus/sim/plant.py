@@ -119,11 +119,11 @@ class PositionControl:
 class Impedance:
     """MIT law: torque = kp·(p_des - p) + kd·(v_des - v) + t_ff, in rad, rad/s, N·m."""
 
-    p_des_rad: float
-    v_des_rad_s: float
+    position_rad: float
+    velocity_rad_s: float
     kp: float
     kd: float
-    t_ff_nm: float
+    torque_ff_nm: float
 
 
 Control = Off | Brake | CurrentControl | SpeedControl | PositionControl | Impedance
@@ -209,9 +209,9 @@ class Plant:
         if isinstance(control, CurrentControl):
             return _clamp(control.current_a, p.max_current_a)
         if isinstance(control, Impedance):
-            error = control.p_des_rad - self.position_deg * _RAD_PER_DEG
-            speed_error = control.v_des_rad_s - self.speed_dps * _RAD_PER_DEG
-            torque = control.kp * error + control.kd * speed_error + control.t_ff_nm
+            error = control.position_rad - self.position_deg * _RAD_PER_DEG
+            speed_error = control.velocity_rad_s - self.speed_dps * _RAD_PER_DEG
+            torque = control.kp * error + control.kd * speed_error + control.torque_ff_nm
             return _clamp(torque / p.torque_constant_nm_per_a, p.max_current_a)
         if isinstance(control, PositionControl):
             # a limit of 0 means "do not move" (hollow V = 0), not "no limit"

@@ -1,4 +1,4 @@
-"""LK requests (commands.py, commands_motion.py): round trips, exact layouts, range errors."""
+"""LK requests (commands.py, commands_control.py): round trips, exact layouts, range errors."""
 
 from __future__ import annotations
 

@@ -117,11 +117,11 @@ scales_strategy = st.one_of(
 def _motion_command(scales: ma.MotionScales) -> st.SearchStrategy[ma.MotionCommand]:
     return st.builds(
         ma.MotionCommand,
-        p_des_rad=st.floats(-scales.p_max_rad, scales.p_max_rad),
-        v_des_rad_s=st.floats(-scales.v_max_rad_s, scales.v_max_rad_s),
+        position_rad=st.floats(-scales.p_max_rad, scales.p_max_rad),
+        velocity_rad_s=st.floats(-scales.v_max_rad_s, scales.v_max_rad_s),
         kp=st.floats(0.0, scales.kp_max),
         kd=st.floats(0.0, scales.kd_max),
-        t_ff_nm=st.floats(-scales.t_max_nm, scales.t_max_nm),
+        torque_ff_nm=st.floats(-scales.t_max_nm, scales.t_max_nm),
         scales=st.just(scales),
     )
 
@@ -196,11 +196,11 @@ def assert_round_trip(message: Any, decode: Callable[[bytes], Any]) -> None:
 
 
 MOTION_FIELDS = (
-    "p_des_rad",
-    "v_des_rad_s",
+    "position_rad",
+    "velocity_rad_s",
     "kp",
     "kd",
-    "t_ff_nm",
+    "torque_ff_nm",
     "position_rad",
     "velocity_rad_s",
     "torque_nm",
@@ -214,11 +214,11 @@ def assert_quantised_message(decoded: Any, given: Any) -> None:
     if isinstance(given, ma.MotionCommand | ma.MotionReply):
         assert decoded.scales == given.scales
         for name in (
-            "p_des_rad",
-            "v_des_rad_s",
+            "position_rad",
+            "velocity_rad_s",
             "kp",
             "kd",
-            "t_ff_nm",
+            "torque_ff_nm",
             "position_rad",
             "velocity_rad_s",
             "torque_nm",

@@ -153,7 +153,7 @@ def test_no_command_outside_the_table_and_none_the_spec_calls_undefined() -> Non
         (ma.ReadModel(), V44, "0xB5 read motor model \\(single frame\\) exists only in V4.3"),
         (ma.ReadModelPart(part=1), V43, "0xB5 read motor model \\(indexed\\) exists only in V4.4"),
         (
-            ma.Rs485MotionCommand(motor_id=1, p_des_rad=0, v_des_rad_s=0, kp=0, kd=0, t_ff_nm=0),
+            ma.Rs485MotionCommand(motor_id=1, position_rad=0, velocity_rad_s=0, kp=0, kd=0, torque_ff_nm=0),
             V43,
             "RS485 motion mode command exists only in V4.4",
         ),
@@ -264,7 +264,7 @@ def test_motion_scales_can_be_passed_explicitly() -> None:
     command = ma.decode_request(0x401, bytes.fromhex("E6 66 82 E0 52 33 3B 55"), motion_scales=scales)
     assert isinstance(command, ma.MotionCommand)
     assert command.scales is scales
-    assert command.t_ff_nm == pytest.approx(4.168, abs=1e-3)
+    assert command.torque_ff_nm == pytest.approx(4.168, abs=1e-3)
 
 
 def test_replies_that_do_not_exist_say_why() -> None:
@@ -283,7 +283,7 @@ def test_where_commands_go() -> None:
     assert ma.arbitration_id(ma.MotorStop(), 3) == 0x143
     assert ma.arbitration_id(ma.MotorStop(), broadcast=True) == 0x280
     assert ma.arbitration_id(ma.SetCanId(motor_id=2)) == 0x300
-    motion = ma.MotionCommand(p_des_rad=0, v_des_rad_s=0, kp=0, kd=0, t_ff_nm=0)
+    motion = ma.MotionCommand(position_rad=0, velocity_rad_s=0, kp=0, kd=0, torque_ff_nm=0)
     assert ma.arbitration_id(motion, 32) == 0x420
     with pytest.raises(ValueError, match="motor_id is required"):
         ma.arbitration_id(ma.MotorStop())

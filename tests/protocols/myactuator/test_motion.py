@@ -31,7 +31,7 @@ def test_revision_defaults() -> None:
         ma.MotionScales.for_revision(ma.Revision.V4_3, max_torque_nm=33.0)
     with pytest.raises(ValueError, match="kd_max=0 must be a positive finite number"):
         ma.MotionScales(p_max_rad=1, v_max_rad_s=1, kp_max=1, kd_max=0, t_max_nm=1)
-    assert ma.MotionCommand(p_des_rad=0, v_des_rad_s=0, kp=0, kd=0, t_ff_nm=0).scales is V44
+    assert ma.MotionCommand(position_rad=0, velocity_rad_s=0, kp=0, kd=0, torque_ff_nm=0).scales is V44
 
 
 def test_packers_are_built_once_per_scales() -> None:
@@ -43,12 +43,19 @@ def test_packers_are_built_once_per_scales() -> None:
 def test_worked_example_per_revision() -> None:
     """§5.6: the same bytes mean kd 1.0 under V4.3 and 10.0 under V4.4, p 10.0002 or 10.053 rad."""
     v43 = ma.MotionCommand.decode(EXAMPLE, V43)
-    assert (v43.p_des_rad, v43.kd, v43.t_ff_nm) == pytest.approx((10.0002, 1.0, 10.0044), abs=1e-4)
+    assert (v43.position_rad, v43.kd, v43.torque_ff_nm) == pytest.approx((10.0002, 1.0, 10.0044), abs=1e-4)
     v44 = ma.MotionCommand.decode(EXAMPLE, V44)
-    assert (v44.p_des_rad, v44.kd, v44.t_ff_nm / 24) == pytest.approx((10.053, 10.0, 0.41685), abs=1e-3)
+    assert (v44.position_rad, v44.kd, v44.torque_ff_nm / 24) == pytest.approx(
+        (10.053, 10.0, 0.41685), abs=1e-3
+    )
     assert (
         ma.MotionCommand(
-            p_des_rad=10.0, v_des_rad_s=v43.v_des_rad_s, kp=10.0, kd=1.0, t_ff_nm=10.0, scales=V43
+            position_rad=10.0,
+            velocity_rad_s=v43.velocity_rad_s,
+            kp=10.0,
+            kd=1.0,
+            torque_ff_nm=10.0,
+            scales=V43,
         ).encode()
         == EXAMPLE
     )
@@ -57,25 +64,32 @@ def test_worked_example_per_revision() -> None:
 @pytest.mark.parametrize(
     ("field", "value", "limits"),
     [
-        ("p_des_rad", 12.51, "[-12.5, 12.5]"),
-        ("p_des_rad", -12.51, "[-12.5, 12.5]"),
-        ("v_des_rad_s", 45.1, "[-45.0, 45.0]"),
+        ("position_rad", 12.51, "[-12.5, 12.5]"),
+        ("position_rad", -12.51, "[-12.5, 12.5]"),
+        ("velocity_rad_s", 45.1, "[-45.0, 45.0]"),
         ("kp", -0.1, "[0.0, 500.0]"),
         ("kd", 5.01, "[0.0, 5.0]"),
-        ("t_ff_nm", -24.5, "[-24.0, 24.0]"),
-        ("t_ff_nm", float("nan"), "[-24.0, 24.0]"),
+        ("torque_ff_nm", -24.5, "[-24.0, 24.0]"),
+        ("torque_ff_nm", float("nan"), "[-24.0, 24.0]"),
     ],
 )
 def test_out_of_range_names_field_and_limits(field: str, value: float, limits: str) -> None:
-    values = {"p_des_rad": 0.0, "v_des_rad_s": 0.0, "kp": 0.0, "kd": 0.0, "t_ff_nm": 0.0, field: value}
+    values = {
+        "position_rad": 0.0,
+        "velocity_rad_s": 0.0,
+        "kp": 0.0,
+        "kd": 0.0,
+        "torque_ff_nm": 0.0,
+        field: value,
+    }
     with pytest.raises(ValueError, match=rf"{field}=.* is outside \{limits[:-1]}\]"):
         ma.MotionCommand(**values, scales=V43)
 
 
 def test_v44_accepts_what_v43_refuses() -> None:
-    ma.MotionCommand(p_des_rad=12.566, v_des_rad_s=0, kp=0, kd=50, t_ff_nm=0)
+    ma.MotionCommand(position_rad=12.566, velocity_rad_s=0, kp=0, kd=50, torque_ff_nm=0)
     with pytest.raises(ValueError, match="kd=50"):
-        ma.MotionCommand(p_des_rad=0, v_des_rad_s=0, kp=0, kd=50, t_ff_nm=0, scales=V43)
+        ma.MotionCommand(position_rad=0, velocity_rad_s=0, kp=0, kd=50, torque_ff_nm=0, scales=V43)
 
 
 def test_reply_layout_and_checks() -> None:
@@ -101,14 +115,14 @@ def test_end_codes_decode_inside_the_range(scales: ma.MotionScales, data: str) -
     """The top code maps to hi (an ulp over for ±12.566 before clamping): any frame decodes."""
     command = ma.MotionCommand.decode(bytes.fromhex(data), scales)
     assert command.encode() == bytes.fromhex(data)
-    assert abs(command.p_des_rad) == scales.p_max_rad
+    assert abs(command.position_rad) == scales.p_max_rad
 
 
 @given(st.floats(-12.566, 12.566), st.floats(0.0, 50.0))
 def test_quantisation_is_one_code(p: float, kd: float) -> None:
-    command = ma.MotionCommand(p_des_rad=p, v_des_rad_s=0, kp=0, kd=kd, t_ff_nm=0)
+    command = ma.MotionCommand(position_rad=p, velocity_rad_s=0, kp=0, kd=kd, torque_ff_nm=0)
     decoded = ma.MotionCommand.decode(command.encode(), V44)
-    assert_quantised(decoded.p_des_rad, p, V44.resolution("p_des_rad"), field="p_des_rad")
+    assert_quantised(decoded.position_rad, p, V44.resolution("position_rad"), field="position_rad")
     assert_quantised(decoded.kd, kd, V44.resolution("kd"), field="kd")
     assert V44.resolution("kd") == 50 / 4095
 

@@ -77,7 +77,7 @@ def test_frame_checks() -> None:
 def test_what_has_no_rs485_standard_frame() -> None:
     with pytest.raises(ValueError, match="0xB6 active reply is CAN only"):
         ma.encode_rs485(1, ma.ActiveReply(command=ma.StreamableCommand.ENCODER_POSITION, enabled=True))
-    motion = ma.MotionCommand(p_des_rad=0, v_des_rad_s=0, kp=0, kd=0, t_ff_nm=0)
+    motion = ma.MotionCommand(position_rad=0, velocity_rad_s=0, kp=0, kd=0, torque_ff_nm=0)
     with pytest.raises(ValueError, match="no RS485 standard frame"):
         ma.encode_rs485(1, motion)
     with pytest.raises(ValueError, match="0x79 is sent with ID byte 0xCD, not 1"):

@@ -15,7 +15,9 @@ from servobus.protocols.myactuator import rs485_motion
 
 from .._contract import decodes_or_protocol_error
 
-COMMAND = ma.Rs485MotionCommand(motor_id=1, p_des_rad=1.5, v_des_rad_s=-2.0, kp=10.0, kd=0.5, t_ff_nm=0.25)
+COMMAND = ma.Rs485MotionCommand(
+    motor_id=1, position_rad=1.5, velocity_rad_s=-2.0, kp=10.0, kd=0.5, torque_ff_nm=0.25
+)
 
 
 def test_request_layout() -> None:
@@ -74,20 +76,24 @@ def test_frame_checks() -> None:
 
 
 def test_ids_and_revision() -> None:
-    broadcast = ma.Rs485MotionCommand(motor_id=0xBB, p_des_rad=0, v_des_rad_s=0, kp=0, kd=0, t_ff_nm=0)
+    broadcast = ma.Rs485MotionCommand(
+        motor_id=0xBB, position_rad=0, velocity_rad_s=0, kp=0, kd=0, torque_ff_nm=0
+    )
     assert broadcast.encode()[2] == 0xBB
     with pytest.raises(ValueError, match="not the broadcast 0xBB"):
-        ma.Rs485MotionCommand(motor_id=0x33, p_des_rad=0, v_des_rad_s=0, kp=0, kd=0, t_ff_nm=0)
+        ma.Rs485MotionCommand(motor_id=0x33, position_rad=0, velocity_rad_s=0, kp=0, kd=0, torque_ff_nm=0)
     with pytest.raises(ValueError, match=r"RS485 motion mode command exists only in V4\.4"):
         ma.check_available(COMMAND, ma.Revision.V4_3)
     ma.check_available(COMMAND, ma.Revision.V4_4)
 
 
 def test_values_are_float32() -> None:
-    command = ma.Rs485MotionCommand(motor_id=1, p_des_rad=0.1, v_des_rad_s=0, kp=0, kd=0, t_ff_nm=0)
-    assert ma.Rs485MotionCommand.decode(command.encode()).p_des_rad == rs485_motion.float32(0.1) != 0.1
+    command = ma.Rs485MotionCommand(
+        motor_id=1, position_rad=0.1, velocity_rad_s=0, kp=0, kd=0, torque_ff_nm=0
+    )
+    assert ma.Rs485MotionCommand.decode(command.encode()).position_rad == rs485_motion.float32(0.1) != 0.1
     with pytest.raises(ValueError, match="kp=1e\\+39 is outside"):
-        ma.Rs485MotionCommand(motor_id=1, p_des_rad=0, v_des_rad_s=0, kp=1e39, kd=0, t_ff_nm=0)
+        ma.Rs485MotionCommand(motor_id=1, position_rad=0, velocity_rad_s=0, kp=1e39, kd=0, torque_ff_nm=0)
 
 
 @given(st.binary(max_size=32), st.booleans())

@@ -355,28 +355,30 @@ def test_motion_request_vector(v: dict[str, Any]) -> None:
     scales = ma.MotionScales.for_revision(rev)
     command = ma.decode_request(int(v["can_id"], 16), data, revision=rev)
     assert isinstance(command, ma.MotionCommand) and command.scales == scales
-    assert "1.021" in text["v_des"] and command.v_des_rad_s == pytest.approx(1.02198, abs=1e-5)
+    assert "1.021" in text["v_des"] and command.velocity_rad_s == pytest.approx(1.02198, abs=1e-5)
     assert "10.012" in text["kp"] and command.kp == pytest.approx(10.012, abs=1e-3)
     if rev is ma.Revision.V4_3:
-        assert "10.0002" in text["p_des"] and command.p_des_rad == pytest.approx(10.0002, abs=1e-4)
+        assert "10.0002" in text["p_des"] and command.position_rad == pytest.approx(10.0002, abs=1e-4)
         assert "= 1.0" in text["kd"] and command.kd == pytest.approx(1.0, abs=1e-3)
-        assert "10.004" in text["t_ff"] and command.t_ff_nm == pytest.approx(10.004, abs=1e-3)
+        assert "10.004" in text["t_ff"] and command.torque_ff_nm == pytest.approx(10.004, abs=1e-3)
         as_stated = ma.MotionCommand(
-            p_des_rad=10.0, v_des_rad_s=1.02198, kp=10.0, kd=1.0, t_ff_nm=10.0, scales=scales
+            position_rad=10.0, velocity_rad_s=1.02198, kp=10.0, kd=1.0, torque_ff_nm=10.0, scales=scales
         )
     else:
-        assert "10.053" in text["p_des"] and command.p_des_rad == pytest.approx(10.053, abs=1e-3)
+        assert "10.053" in text["p_des"] and command.position_rad == pytest.approx(10.053, abs=1e-3)
         assert "= 10" in text["kd"] and command.kd == pytest.approx(10.0, abs=1e-3)
-        assert "0.416" in text["t_ff"] and command.t_ff_nm / scales.t_max_nm == pytest.approx(0.416, abs=1e-3)
+        assert "0.416" in text["t_ff"] and command.torque_ff_nm / scales.t_max_nm == pytest.approx(
+            0.416, abs=1e-3
+        )
         example = dataclasses.replace(scales, p_max_rad=12.5)
-        assert ma.MotionCommand.decode(data, example).p_des_rad == pytest.approx(10.0002, abs=1e-4)
+        assert ma.MotionCommand.decode(data, example).position_rad == pytest.approx(10.0002, abs=1e-4)
         as_stated = ma.MotionCommand(
             # t_ff: "0.416 x MaxTorque" is truncated (0.41685); with the default 24 N·m, 10 N·m is 0xB55.
-            p_des_rad=10.0,
-            v_des_rad_s=1.02198,
+            position_rad=10.0,
+            velocity_rad_s=1.02198,
             kp=10.0,
             kd=10.0,
-            t_ff_nm=10.0,
+            torque_ff_nm=10.0,
             scales=example,
         )
     assert as_stated.encode() == data

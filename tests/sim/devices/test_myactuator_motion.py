@@ -146,7 +146,7 @@ def test_a_motor_without_brake_runs_0xa1_at_once() -> None:
 def test_motion_mode_applies_the_mit_law_to_the_plant() -> None:
     """§5.1: torque = kp (p_des - p) + kd (v_des - v) + t_ff, output side; reply on 0x500+ID."""
     motor = MyActuatorMotor(4)
-    pure_ff = ma.MotionCommand(p_des_rad=0.0, v_des_rad_s=0.0, kp=0.0, kd=0.0, t_ff_nm=2.0)
+    pure_ff = ma.MotionCommand(position_rad=0.0, velocity_rad_s=0.0, kp=0.0, kd=0.0, torque_ff_nm=2.0)
     reply = ask(motor, pure_ff, 0.0, ma.MotionReply)
     assert reply.motor_id == 4
     assert isinstance(motor.plant.control, Impedance)
@@ -155,13 +155,13 @@ def test_motion_mode_applies_the_mit_law_to_the_plant() -> None:
     assert after.torque_nm == pytest.approx(2.0, abs=torque_code)  # kp = kd = 0: torque = t_ff
     assert motor.plant.current_a == pytest.approx(2.0 / motor.plant.params.torque_constant_nm_per_a, rel=1e-3)
 
-    spring = ma.MotionCommand(p_des_rad=1.0, v_des_rad_s=0.0, kp=30.0, kd=2.0, t_ff_nm=0.0)
+    spring = ma.MotionCommand(position_rad=1.0, velocity_rad_s=0.0, kp=30.0, kd=2.0, torque_ff_nm=0.0)
     ask(motor, spring, 0.01, ma.MotionReply)
     settled = ask(motor, spring, 3.0, ma.MotionReply)
     # At rest the law balances: kp (p_des - p) + kd v_des + t_ff = 0, with the values as the motor
     # decoded them (12-bit v and t cannot carry an exact 0: v_des = 0.011 rad/s, t_ff = 0.006 N·m).
     got = ma.MotionCommand.decode(spring.encode(), motor.motion_scales)
-    rest = got.p_des_rad + (got.kd * got.v_des_rad_s + got.t_ff_nm) / got.kp
+    rest = got.position_rad + (got.kd * got.velocity_rad_s + got.torque_ff_nm) / got.kp
     p_code = 2 * motor.motion_scales.p_max_rad / 65535
     assert settled.position_rad == pytest.approx(rest, abs=p_code)
     assert settled.velocity_rad_s == pytest.approx(0.0, abs=0.03)
@@ -178,7 +178,7 @@ def test_motion_mode_positions_are_relative_to_the_zero() -> None:
     motor.plant.position_deg = 50.0
     ask(motor, ma.WriteCurrentPositionAsZero(), 0.0, ma.ZeroOffsetReply)
     motor.receive(frame_for(motor, ma.SystemReset()), 0.0)
-    hold = ma.MotionCommand(p_des_rad=0.0, v_des_rad_s=0.0, kp=50.0, kd=2.0, t_ff_nm=0.0)
+    hold = ma.MotionCommand(position_rad=0.0, velocity_rad_s=0.0, kp=50.0, kd=2.0, torque_ff_nm=0.0)
     assert ask(motor, hold, 0.01, ma.MotionReply).position_rad == pytest.approx(0.0, abs=1e-3)
     ask(motor, hold, 2.0, ma.MotionReply)
     assert motor.plant.position_deg == pytest.approx(50.0, abs=0.05)  # held where the zero is
@@ -212,7 +212,7 @@ def test_injected_error_shows_in_0x9a_cuts_the_output_and_control_is_refused() -
         ask(motor, command, 0.6, ma.SingleTurnStatusReply if command.code == 0xA6 else ma.StatusReply)
     ask(
         motor,
-        ma.MotionCommand(p_des_rad=1.0, v_des_rad_s=0.0, kp=10.0, kd=1.0, t_ff_nm=1.0),
+        ma.MotionCommand(position_rad=1.0, velocity_rad_s=0.0, kp=10.0, kd=1.0, torque_ff_nm=1.0),
         0.6,
         ma.MotionReply,
     )

@@ -2,8 +2,8 @@
 
 Typed commands and replies in physical units <-> 8-byte CAN payloads (spec ``lk-v2.md``; manuals
 [001] = V2.36, [003] = V2.35). Modules: ``model`` (revision, motor type, encoder width), ``ids``
-(identifiers, match keys, the V2.35 echo rule), ``commands`` / ``commands_motion`` (requests),
-``replies`` / ``replies_encoder`` (replies), ``params`` (parameter addressing) with
+(identifiers, match keys, the V2.35 echo rule), ``commands`` / ``commands_control`` (requests),
+``replies`` / ``replies_position`` (replies), ``params`` (parameter addressing) with
 ``params_v236`` / ``params_v235`` (parameter messages), ``states`` (named state bytes), ``codec``
 (tables and entry points).
 
@@ -66,7 +66,7 @@ from servobus.protocols.lk.commands import (
     WriteAcceleration,
     WriteEncoderOffset,
 )
-from servobus.protocols.lk.commands_motion import (
+from servobus.protocols.lk.commands_control import (
     IncrementalPosition,
     IncrementalPositionSpeed,
     MultiMotorTorque,
@@ -133,7 +133,7 @@ from servobus.protocols.lk.replies import (
     Status3Reply,
     Status3ReplyV235,
 )
-from servobus.protocols.lk.replies_encoder import (
+from servobus.protocols.lk.replies_position import (
     AccelerationReply,
     CalibrationReply,
     EncoderOffsetReply,

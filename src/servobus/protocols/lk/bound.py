@@ -23,12 +23,12 @@ from servobus.protocols._fast import Slow, maker
 from servobus.protocols._fields import round_half_away
 from servobus.protocols._message import Command, Reply
 from servobus.protocols.lk import commands as cmd
-from servobus.protocols.lk import commands_motion as motion
+from servobus.protocols.lk import commands_control as ctl
 from servobus.protocols.lk import params_v235 as p235
 from servobus.protocols.lk import params_v236 as p236
 from servobus.protocols.lk._base import LkCommand
 from servobus.protocols.lk.codec import check_available, decode_reply, resolve_model
-from servobus.protocols.lk.commands_motion import MultiMotorTorque
+from servobus.protocols.lk.commands_control import MultiMotorTorque
 from servobus.protocols.lk.ids import (
     MULTI_MOTOR_ID,
     MULTI_MOTOR_IDS,
@@ -125,18 +125,18 @@ def _no_iq(message: Any) -> int:
 
 def _fast_encoders(model: LkModel) -> dict[type, Callable[[Any], bytes]]:
     """``command.encode()`` by one ``struct.pack`` for the control-loop commands (validated on build)."""
-    torque = _iq_code(motion.TORQUE, model.motor_type)
-    limit = _iq_code(motion.TORQUE_LIMIT, model.motor_type)
+    torque = _iq_code(ctl.TORQUE, model.motor_type)
+    limit = _iq_code(ctl.TORQUE_LIMIT, model.motor_type)
     a1, a2, a3, a4 = (struct.Struct(f).pack for f in ("<B3xh2x", "<Bxhi", "<B3xi", "<BxHi"))
     return {
-        motion.TorqueControl: lambda m: a1(0xA1, torque(m)),
-        motion.SpeedControl: lambda m: a2(0xA2, limit(m), round_half_away(m.speed_dps * 100)),
-        motion.SpeedControlV235: lambda m: a3(0xA2, round_half_away(m.speed_dps * 100)),
-        motion.MultiTurnPosition: lambda m: a3(0xA3, round_half_away(m.angle_deg * 100)),
-        motion.MultiTurnPositionSpeed: lambda m: a4(
+        ctl.TorqueControl: lambda m: a1(0xA1, torque(m)),
+        ctl.SpeedControl: lambda m: a2(0xA2, limit(m), round_half_away(m.speed_dps * 100)),
+        ctl.SpeedControlV235: lambda m: a3(0xA2, round_half_away(m.speed_dps * 100)),
+        ctl.MultiTurnPosition: lambda m: a3(0xA3, round_half_away(m.angle_deg * 100)),
+        ctl.MultiTurnPositionSpeed: lambda m: a4(
             0xA4, round_half_away(m.max_speed_dps), round_half_away(m.angle_deg * 100)
         ),
-        motion.IncrementalPosition: lambda m: a3(0xA7, round_half_away(m.increment_deg * 100)),
+        ctl.IncrementalPosition: lambda m: a3(0xA7, round_half_away(m.increment_deg * 100)),
     }
 
 

@@ -27,11 +27,11 @@ from typing import TypeVar
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
 from servobus.protocols.lk import commands as cmd
-from servobus.protocols.lk import commands_motion as motion
+from servobus.protocols.lk import commands_control as ctl
 from servobus.protocols.lk import params_v235 as p235
 from servobus.protocols.lk import params_v236 as p236
 from servobus.protocols.lk import replies as rep
-from servobus.protocols.lk import replies_encoder as renc
+from servobus.protocols.lk import replies_position as rpos
 from servobus.protocols.lk._base import LkCommand, LkReply
 from servobus.protocols.lk.ids import (
     MULTI_MOTOR_ID,
@@ -68,18 +68,18 @@ COMMAND_CLASSES: tuple[type[LkCommand], ...] = (
     cmd.MotorStop,
     cmd.MotorRun,
     cmd.BrakeControl,
-    motion.OpenLoopControl,
-    motion.TorqueControl,
-    motion.SpeedControl,
-    motion.SpeedControlV235,
-    motion.MultiTurnPosition,
-    motion.MultiTurnPositionSpeed,
-    motion.SingleTurnPosition,
-    motion.SingleTurnPositionV235,
-    motion.SingleTurnPositionSpeed,
-    motion.SingleTurnPositionSpeedV235,
-    motion.IncrementalPosition,
-    motion.IncrementalPositionSpeed,
+    ctl.OpenLoopControl,
+    ctl.TorqueControl,
+    ctl.SpeedControl,
+    ctl.SpeedControlV235,
+    ctl.MultiTurnPosition,
+    ctl.MultiTurnPositionSpeed,
+    ctl.SingleTurnPosition,
+    ctl.SingleTurnPositionV235,
+    ctl.SingleTurnPositionSpeed,
+    ctl.SingleTurnPositionSpeedV235,
+    ctl.IncrementalPosition,
+    ctl.IncrementalPositionSpeed,
     p236.ReadControlParam,
     p236.WriteControlParam,
     cmd.ReadEncoder,
@@ -97,7 +97,7 @@ COMMAND_CLASSES: tuple[type[LkCommand], ...] = (
     p235.WriteParamRom,
     cmd.ReadAcceleration,
     cmd.WriteAcceleration,
-    motion.MultiMotorTorque,
+    ctl.MultiMotorTorque,
 )
 
 # Reply layouts and the command bytes each serves (shared layouts serve several).
@@ -109,13 +109,13 @@ REPLY_LAYOUTS: tuple[tuple[type[LkReply], frozenset[int]], ...] = (
     (rep.Status3Reply, frozenset({0x9D})),
     (rep.Status3ReplyV235, frozenset({0x9D})),
     (rep.BrakeReply, frozenset({0x8C})),
-    (renc.EncoderReply, frozenset({0x90})),
-    (renc.CalibrationReply, frozenset({0x18})),
-    (renc.EncoderOffsetReply, frozenset({0x19, 0x91})),
-    (renc.MultiTurnAngleReply, frozenset({0x92})),
-    (renc.SingleTurnAngleReply, frozenset({0x94})),
-    (renc.SingleTurnAngleReplyV235, frozenset({0x94})),
-    (renc.AccelerationReply, frozenset({0x33, 0x34})),
+    (rpos.EncoderReply, frozenset({0x90})),
+    (rpos.CalibrationReply, frozenset({0x18})),
+    (rpos.EncoderOffsetReply, frozenset({0x19, 0x91})),
+    (rpos.MultiTurnAngleReply, frozenset({0x92})),
+    (rpos.SingleTurnAngleReply, frozenset({0x94})),
+    (rpos.SingleTurnAngleReplyV235, frozenset({0x94})),
+    (rpos.AccelerationReply, frozenset({0x33, 0x34})),
     (p236.ControlParamReply, frozenset({0xC0, 0xC1})),
     (p236.SettingReply, frozenset({0x40, 0x42})),
     (p236.SaveSettingsReply, frozenset({0x44})),
@@ -214,11 +214,11 @@ def decode_request(
     model = resolve_model(revision, model)
     data = bytes(data)
     if can_id == MULTI_MOTOR_ID:
-        if model.revision not in motion.MultiMotorTorque.REVISIONS:
+        if model.revision not in ctl.MultiMotorTorque.REVISIONS:
             raise ProtocolError(
                 f"identifier 0x280 (multi-motor) does not exist in {model.revision.name}", raw=data
             )
-        return motion.MultiMotorTorque.decode(data, model=model)
+        return ctl.MultiMotorTorque.decode(data, model=model)
     motor_id = motor_id_from_request_id(can_id)
     if motor_id is None:
         raise ProtocolError(
@@ -353,7 +353,7 @@ def request_frame(
         ValueError: unavailable command, ``motor_id`` not 1..32, or a motor id given for 0x280.
     """
     data = encode_request(command, revision=revision, model=model)
-    if isinstance(command, motion.MultiMotorTorque):
+    if isinstance(command, ctl.MultiMotorTorque):
         if motor_id is not None:
             raise ValueError(f"motor_id={motor_id!r}: the 0x280 frame addresses motors 1..4 by position")
         return Frame(arbitration_id=MULTI_MOTOR_ID, data=data)

@@ -1,6 +1,6 @@
 """LK requests that read state or change the motor's mode, zero, brake or acceleration (no set-points).
 
-Set-point commands (0xA0..0xA8, 0x280) are in :mod:`~servobus.protocols.lk.commands_motion`,
+Set-point commands (0xA0..0xA8, 0x280) are in :mod:`~servobus.protocols.lk.commands_control`,
 parameter commands (0x40/0x42/0x44, 0xC0/0xC1) in :mod:`~servobus.protocols.lk.params`.
 Spec sections are cited per class; [001] = V2.36 manual, [003] = V2.35 manual.
 """

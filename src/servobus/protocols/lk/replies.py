@@ -1,6 +1,6 @@
 """LK replies about the motor's state: echoes, status 1/2/3, brake. One class per reply layout.
 
-Encoder, zero, angle and acceleration replies are in :mod:`~servobus.protocols.lk.replies_encoder`,
+Encoder, zero, angle and acceleration replies are in :mod:`~servobus.protocols.lk.replies_position`,
 parameter replies in :mod:`~servobus.protocols.lk.params_v236` / ``params_v235``. Where
 several command bytes share a layout (echoes; the status-2 shape of 0x9C and 0xA0..0xA8; 0x9A and
 0x9B; 0x19 and 0x91; 0x33 and 0x34) one class serves them and carries the byte as ``command``.

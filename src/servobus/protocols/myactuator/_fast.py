@@ -246,10 +246,10 @@ def motion_command_encoder(scales: MotionScales) -> Callable[[MotionCommand], by
     # Validated values lie in [lo, hi] with lo = origin and codes = 2**bits - 1, so y is in [0, codes]
     # and no clamp is needed; each field is written out because a call per field costs 0.15 µs.
     def encode(m: MotionCommand) -> bytes:
-        y = (m.p_des_rad - po) * pc / ps
+        y = (m.position_rad - po) * pc / ps
         p = floor(y)
         p += y - p >= 0.5
-        y = (m.v_des_rad_s - vo) * vc / vs
+        y = (m.velocity_rad_s - vo) * vc / vs
         v = floor(y)
         v += y - v >= 0.5
         y = (m.kp - ko) * kc / ks
@@ -258,7 +258,7 @@ def motion_command_encoder(scales: MotionScales) -> Callable[[MotionCommand], by
         y = (m.kd - do) * dc / ds
         kd = floor(y)
         kd += y - kd >= 0.5
-        y = (m.t_ff_nm - to) * tc / ts
+        y = (m.torque_ff_nm - to) * tc / ts
         t = floor(y)
         t += y - t >= 0.5
         return bytes(

@@ -45,7 +45,7 @@ __all__ = [
     "NO_REPLY",
     "REPLIES",
     "REQUESTS",
-    "Layout",
+    "Candidate",
     "arbitration_id",
     "check_available",
     "decode_reply",
@@ -59,8 +59,8 @@ DEFAULT_REVISION = Revision.V4_4
 
 
 @dataclass(frozen=True, slots=True)
-class Layout:
-    """One candidate layout of a command byte: its decoder, message class and revisions."""
+class Candidate:
+    """One candidate reading of a command byte: its decoder, message class and revisions."""
 
     message: type[MyActuatorMessage]
     decode: Callable[[bytes], MyActuatorMessage]
@@ -71,16 +71,16 @@ class Layout:
         return f"0x{code:02X} {self.message.TITLE} exists only in {names} (revision {revision.name} given)"
 
 
-def _layout(message: Any) -> tuple[int, Layout]:
-    return message.CODE, Layout(message, message.decode, message.REVISIONS)
+def _layout(message: Any) -> tuple[int, Candidate]:
+    return message.CODE, Candidate(message, message.decode, message.REVISIONS)
 
 
-def _echo(command: type[cmd.MyActuatorCommand]) -> tuple[int, Layout]:
+def _echo(command: type[cmd.MyActuatorCommand]) -> tuple[int, Candidate]:
     def decode(data: bytes) -> MyActuatorMessage:
         return rep.Echo.decode(data, command)
 
     assert command.CODE is not None
-    return command.CODE, Layout(command, decode, command.REVISIONS)
+    return command.CODE, Candidate(command, decode, command.REVISIONS)
 
 
 _REQUEST_CLASSES: tuple[type[cmd.MyActuatorCommand], ...] = (
@@ -127,15 +127,15 @@ _REQUEST_CLASSES: tuple[type[cmd.MyActuatorCommand], ...] = (
 )
 
 
-def _table(layouts: list[tuple[int, Layout]]) -> dict[int, tuple[Layout, ...]]:
-    table: dict[int, tuple[Layout, ...]] = {}
+def _table(layouts: list[tuple[int, Candidate]]) -> dict[int, tuple[Candidate, ...]]:
+    table: dict[int, tuple[Candidate, ...]] = {}
     for code, layout in layouts:
         table[code] = (*table.get(code, ()), layout)
     return table
 
 
 #: Request layouts by DATA[0] (standard 8-byte commands; motion mode has no command byte).
-REQUESTS: Mapping[int, tuple[Layout, ...]] = _table([_layout(c) for c in _REQUEST_CLASSES])
+REQUESTS: Mapping[int, tuple[Candidate, ...]] = _table([_layout(c) for c in _REQUEST_CLASSES])
 
 #: Commands answered by an echo of their own data (§0); their replies decode to ``Echo(command=...)``.
 ECHO_COMMANDS: tuple[type[cmd.MyActuatorCommand], ...] = (
@@ -153,13 +153,13 @@ ECHO_COMMANDS: tuple[type[cmd.MyActuatorCommand], ...] = (
 )
 
 #: Reply layouts by DATA[0].
-REPLIES: Mapping[int, tuple[Layout, ...]] = _table(
+REPLIES: Mapping[int, tuple[Candidate, ...]] = _table(
     [_echo(c) for c in ECHO_COMMANDS]
     # One R2 layout for eight command bytes; 0x72/0x73 exist only in V4.4.
     + [
         (
             int(code),
-            Layout(
+            Candidate(
                 rep.StatusReply, rep.StatusReply.decode, STATUS_COMMAND_REVISIONS.get(code, ALL_REVISIONS)
             ),
         )
@@ -276,7 +276,7 @@ def request_frame(
 
 
 def _decode_in(
-    table: Mapping[int, tuple[Layout, ...]], data: bytes, revision: Revision, *, what: str
+    table: Mapping[int, tuple[Candidate, ...]], data: bytes, revision: Revision, *, what: str
 ) -> MyActuatorMessage:
     if not data:
         raise ProtocolError(f"empty {what}")
@@ -312,7 +312,7 @@ def _decode_in(
     raise error
 
 
-def _other_revision_reading(layouts: tuple[Layout, ...], data: bytes, revision: Revision) -> str | None:
+def _other_revision_reading(layouts: tuple[Candidate, ...], data: bytes, revision: Revision) -> str | None:
     """The revisions of the first layout outside ``revision`` that reads ``data`` whole, or None.
 
     "Whole": the layout decodes the bytes and encodes its reading back to the same bytes, so no

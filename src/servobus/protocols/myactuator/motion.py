@@ -89,11 +89,11 @@ class MotionScales:
 
     def _command_scales(self) -> tuple[FieldScale, ...]:
         return (
-            FieldScale.linear("p_des_rad", -self.p_max_rad, self.p_max_rad, 16),
-            FieldScale.linear("v_des_rad_s", -self.v_max_rad_s, self.v_max_rad_s, 12),
+            FieldScale.linear("position_rad", -self.p_max_rad, self.p_max_rad, 16),
+            FieldScale.linear("velocity_rad_s", -self.v_max_rad_s, self.v_max_rad_s, 12),
             FieldScale.linear("kp", 0.0, self.kp_max, 12),
             FieldScale.linear("kd", 0.0, self.kd_max, 12),
-            FieldScale.linear("t_ff_nm", -self.t_max_nm, self.t_max_nm, 12),
+            FieldScale.linear("torque_ff_nm", -self.t_max_nm, self.t_max_nm, 12),
         )
 
     def _reply_scales(self) -> tuple[FieldScale, ...]:
@@ -106,7 +106,7 @@ class MotionScales:
         )
 
     def resolution(self, name: str) -> float:
-        """One code of field ``name`` (``p_des_rad``, ``kd``, ``torque_nm``…) in its unit.
+        """One code of field ``name`` (``position_rad``, ``kd``, ``torque_nm``…) in its unit.
 
         Raises:
             KeyError: no motion field has that name.
@@ -164,11 +164,11 @@ class MotionCommand(MyActuatorMessage, Command):
 
     CODE: ClassVar[int | None] = None  # no command byte: DATA[0] is p_des's high byte
     TITLE: ClassVar[str] = "motion mode command"
-    p_des_rad: float
-    v_des_rad_s: float
+    position_rad: float
+    velocity_rad_s: float
     kp: float
     kd: float
-    t_ff_nm: float
+    torque_ff_nm: float
     scales: MotionScales = field(default=MOTION_SCALES[Revision.V4_4])
 
     def __post_init__(self) -> None:
@@ -176,11 +176,11 @@ class MotionCommand(MyActuatorMessage, Command):
 
     def _named(self) -> tuple[tuple[str, float], ...]:
         return (
-            ("p_des_rad", self.p_des_rad),
-            ("v_des_rad_s", self.v_des_rad_s),
+            ("position_rad", self.position_rad),
+            ("velocity_rad_s", self.velocity_rad_s),
             ("kp", self.kp),
             ("kd", self.kd),
-            ("t_ff_nm", self.t_ff_nm),
+            ("torque_ff_nm", self.torque_ff_nm),
         )
 
     def encode(self) -> bytes:
@@ -197,7 +197,14 @@ class MotionCommand(MyActuatorMessage, Command):
         require_length(data, PAYLOAD_SIZE, what="motion command", command=None)
         packer = command_packer(scales)
         p, v, kp, kd, t = _clamped(packer.unpack(data), packer)
-        values = {"p_des_rad": p, "v_des_rad_s": v, "kp": kp, "kd": kd, "t_ff_nm": t, "scales": scales}
+        values = {
+            "position_rad": p,
+            "velocity_rad_s": v,
+            "kp": kp,
+            "kd": kd,
+            "torque_ff_nm": t,
+            "scales": scales,
+        }
         return construct(cls, data, values)
 
 

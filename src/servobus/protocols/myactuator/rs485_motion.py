@@ -159,18 +159,18 @@ class Rs485MotionCommand(_Rs485MotionFrame, Command):
     FIELDS = (
         (2, _MOTOR_ID_OR_BROADCAST),
         (3, EnumField("mode", 1, Rs485MotionMode)),
-        (4, Float32Field("t_ff_nm")),
-        (8, Float32Field("v_des_rad_s")),
-        (12, Float32Field("p_des_rad")),
+        (4, Float32Field("torque_ff_nm")),
+        (8, Float32Field("velocity_rad_s")),
+        (12, Float32Field("position_rad")),
         (16, Float32Field("kp")),
         (20, Float32Field("kd")),
     )
     motor_id: int
-    p_des_rad: float
-    v_des_rad_s: float
+    position_rad: float
+    velocity_rad_s: float
     kp: float
     kd: float
-    t_ff_nm: float
+    torque_ff_nm: float
     mode: Rs485MotionMode = Rs485MotionMode.SERVO
 
     def __post_init__(self) -> None:

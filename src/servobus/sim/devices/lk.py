@@ -25,7 +25,7 @@ Run states (spec §4.5..§4.7, §9 D15):
   after 0x81 a new control command moves the motor (0x88 changes only OFF -> ON).
 * V2.35: 0x88 resumes the command held before 0x81; any control command runs the motor.
 
-Control commands map to plant controls as :mod:`~servobus.sim.devices.lk_motion` tabulates; the
+Control commands map to plant controls as :mod:`~servobus.sim.devices.lk_control` tabulates; the
 parameter commands and the ROM/RAM rules are in :mod:`~servobus.sim.devices.lk_state`; replies are
 filled from the plant by :mod:`~servobus.sim.devices.lk_replies`.
 
@@ -69,7 +69,7 @@ from servobus.protocols.lk.ids import MULTI_MOTOR_IDS, MULTI_MOTOR_REPLY_CODE
 from servobus.protocols.lk.model import encoder_counts_per_turn
 from servobus.protocols.lk.replies import STATUS2_CODES
 from servobus.sim.device import Emission
-from servobus.sim.devices.lk_motion import MotionContext, plant_control
+from servobus.sim.devices.lk_control import MotionContext, plant_control
 from servobus.sim.devices.lk_replies import encoder_reply, single_turn_deg, status1, status2, status3
 from servobus.sim.devices.lk_state import (
     LK_PLANT_PARAMS,

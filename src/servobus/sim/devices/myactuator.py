@@ -567,13 +567,13 @@ class MyActuatorMotor:
             return
         self.brake_released = True
         if isinstance(command, MotionCommand):
-            p_des_deg = self._target(math.degrees(command.p_des_rad))
+            p_des_deg = self._target(math.degrees(command.position_rad))
             control = Impedance(
-                p_des_rad=math.radians(p_des_deg),
-                v_des_rad_s=command.v_des_rad_s,
+                position_rad=math.radians(p_des_deg),
+                velocity_rad_s=command.velocity_rad_s,
                 kp=command.kp,
                 kd=command.kd,
-                t_ff_nm=command.t_ff_nm,
+                torque_ff_nm=command.torque_ff_nm,
             )
             self._set_control(control, _RUN_MODE_MOTION)
             return
