@@ -54,7 +54,7 @@ import serial
 import _results
 import servobus
 from servobus.core import MyActuatorRs485Deframer
-from servobus.protocols.myactuator import encode_rs485
+from servobus.protocols.myactuator.rs485 import encode_rs485
 from servobus.timing import uart_time_s
 from servobus.transports import SerialTransport
 

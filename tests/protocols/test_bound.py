@@ -23,6 +23,8 @@ from servobus.errors import ProtocolError
 from servobus.protocols import FrameKind, check_bus, get_family, lk
 from servobus.protocols import hollow as ho
 from servobus.protocols import myactuator as ma
+from servobus.protocols.hollow.rs485 import decode_modbus_reply
+from servobus.protocols.myactuator.rs485 import decode_rs485_reply, encode_rs485
 from servobus.sim.devices.hollow import HollowMotor
 from servobus.sim.devices.hollow_converter import ConverterMode, HollowConverter
 from servobus.sim.devices.lk import LkMotor
@@ -225,13 +227,13 @@ def _family_decode(case: Case, frame: Frame) -> Any:
     """The family's own (non-bound) decoder for a reply frame."""
     if case.family == "myactuator":
         if case.link == "rs485":
-            return ma.decode_rs485_reply(ma.encode_rs485(frame.arbitration_id, frame.data), **case.options)[1]
+            return decode_rs485_reply(encode_rs485(frame.arbitration_id, frame.data), **case.options)[1]
         return ma.decode_reply(frame.arbitration_id, frame.data, **case.options)
     if case.family == "lk":
         return lk.decode_reply(frame.arbitration_id, frame.data, **case.options)
     if case.link == "modbus":
         assert frame.is_serial
-        return ho.decode_modbus_reply(bytes([frame.arbitration_id]) + frame.data + _crc16(frame))
+        return decode_modbus_reply(bytes([frame.arbitration_id]) + frame.data + _crc16(frame))
     return ho.decode_reply(frame.arbitration_id, frame.data, is_fd=frame.is_fd or frame.is_serial)
 
 
@@ -262,7 +264,7 @@ def test_hollow_fd_reply_decodes_through_family() -> None:
 
 def test_myactuator_rs485_reply_decodes_through_family() -> None:
     codec = get_family("myactuator").bind(2, link="rs485")
-    wire = ma.encode_rs485(2, bytes.fromhex("9C 32 64 00 F4 01 2D 00"))
+    wire = encode_rs485(2, bytes.fromhex("9C 32 64 00 F4 01 2D 00"))
     assert codec.framing is not None
     (frame,) = codec.framing.deframer().feed(wire)
     assert codec.classify(frame) == (FrameKind.REPLY, codec.reply_key(ma.ReadStatus2()))

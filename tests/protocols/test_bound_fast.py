@@ -20,6 +20,7 @@ from servobus.errors import ProtocolError
 from servobus.protocols import get_family, lk
 from servobus.protocols import hollow as ho
 from servobus.protocols import myactuator as ma
+from servobus.protocols.lk.ids import reply_id
 
 
 def _outcome(decode: Any, frame: Frame) -> Any:
@@ -70,7 +71,7 @@ LK_MODELS = [
 @given(code=st.sampled_from([0x9C, *range(0xA0, 0xA9)]), rest=st.binary(min_size=0, max_size=8))
 def test_lk_fast_decode_agrees_with_the_codec(model: lk.LkModel, code: int, rest: bytes) -> None:
     codec = get_family("lk").bind(2, model=model)
-    ident = lk.reply_id(2, model.revision)
+    ident = reply_id(2, model.revision)
     frame = Frame(arbitration_id=ident, data=(bytes([code]) + rest)[:8])
     expected = _outcome(lambda f: lk.decode_reply(f.arbitration_id, f.data, model=model), frame)
     assert _outcome(codec.decode, frame) == expected

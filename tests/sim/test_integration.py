@@ -15,6 +15,7 @@ import pytest
 
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
+from servobus.protocols.myactuator.ids import BROADCAST_ID, reply_id, request_id
 from servobus.sim.attach import serve_slcan
 from servobus.sim.devices.myactuator import DEFAULT_TURNAROUND_S, MyActuatorMotor
 from servobus.sim.network import SimCanNetwork
@@ -30,9 +31,9 @@ def _network() -> SimCanNetwork:
 def test_thirty_two_pairs_take_the_bit_count_bound_plus_turnaround_in_virtual_time() -> None:
     network = _network()
     for motor_id in range(1, 33):
-        network.send(Frame(arbitration_id=ma.request_id(motor_id), data=READ_STATUS_2), 0.0)
+        network.send(Frame(arbitration_id=request_id(motor_id), data=READ_STATUS_2), 0.0)
     received = network.run_until_idle()
-    assert sorted(f.arbitration_id for _, f in received) == [ma.reply_id(i) for i in range(1, 33)]
+    assert sorted(f.arbitration_id for _, f in received) == [reply_id(i) for i in range(1, 33)]
     assert all(isinstance(ma.decode_reply(f.arbitration_id, f.data), ma.StatusReply) for _, f in received)
     assert 7.10e-3 <= network.bus.busy_s <= 8.64e-3
     # the wire never idles longer than one turnaround: the last reply ends by busy time + turnaround
@@ -41,7 +42,7 @@ def test_thirty_two_pairs_take_the_bit_count_bound_plus_turnaround_in_virtual_ti
 
 def test_replies_ready_together_leave_in_identifier_order() -> None:
     network = _network()
-    network.send(Frame(arbitration_id=ma.BROADCAST_ID, data=READ_STATUS_2), 0.0)  # one frame, 32 replies
+    network.send(Frame(arbitration_id=BROADCAST_ID, data=READ_STATUS_2), 0.0)  # one frame, 32 replies
     received = network.run_until_idle()
     ids = [f.arbitration_id for _, f in received]
     assert ids == sorted(ids) and len(ids) == 32
@@ -57,7 +58,7 @@ async def test_python_can_slcan_exchanges_frames_with_thirty_two_simulated_motor
     def exchange() -> list[can.Message]:
         for motor_id in range(1, 33):
             bus.send(
-                can.Message(arbitration_id=ma.request_id(motor_id), data=READ_STATUS_2, is_extended_id=False)
+                can.Message(arbitration_id=request_id(motor_id), data=READ_STATUS_2, is_extended_id=False)
             )
         replies = []
         while len(replies) < 32 and (message := bus.recv(timeout=2.0)) is not None:
@@ -72,7 +73,7 @@ async def test_python_can_slcan_exchanges_frames_with_thirty_two_simulated_motor
         with contextlib.suppress(asyncio.CancelledError):
             await serving
         port.close()
-    assert sorted(m.arbitration_id for m in replies) == [ma.reply_id(i) for i in range(1, 33)]
+    assert sorted(m.arbitration_id for m in replies) == [reply_id(i) for i in range(1, 33)]
     for message in replies:
         reply = ma.decode_reply(message.arbitration_id, bytes(message.data))
         assert isinstance(reply, ma.StatusReply) and reply.temperature_c > 0

@@ -12,6 +12,8 @@ import pytest
 import serial
 
 from servobus.protocols import hollow, myactuator
+from servobus.protocols.hollow.codec import request_frame
+from servobus.protocols.myactuator.rs485 import decode_rs485, encode_rs485
 
 Start = Callable[[Sequence[str]], str]  # starts the simulator with these arguments, returns its path
 
@@ -46,7 +48,7 @@ def test_slcan_hollow_motors_answer_python_can(simulator: Start) -> None:
     bus = can.Bus(interface="slcan", channel=path, bitrate=1_000_000, sleep_after_open=0)
     try:
         for motor_id in (1, 4):
-            frame = hollow.request_frame(motor_id, hollow.Start())
+            frame = request_frame(motor_id, hollow.Start())
             bus.send(can.Message(arbitration_id=frame.arbitration_id, data=frame.data, is_extended_id=False))
             reply = bus.recv(timeout=2.0)
             assert reply is not None and reply.arbitration_id == hollow.DEFAULT_HOST_ID
@@ -79,11 +81,9 @@ def test_rs485_hollow_converter_answers_a_serial_port(simulator: Start) -> None:
 def test_rs485_myactuator_motors_answer_a_serial_port(simulator: Start, baud: int) -> None:
     path = simulator(["--family", "myactuator", "--motors", "3", "--rs485", "--baud", str(baud)])
     with serial.Serial(path, baud, timeout=2.0) as port:
-        port.write(myactuator.encode_rs485(3, myactuator.ReadStatus2()))
-        motor_id, data = myactuator.decode_rs485(port.read(13))
-    assert motor_id == 3 and isinstance(
-        myactuator.decode_reply(myactuator.reply_id(3), data), myactuator.StatusReply
-    )
+        port.write(encode_rs485(3, myactuator.ReadStatus2()))
+        motor_id, data = decode_rs485(port.read(13))
+    assert motor_id == 3 and isinstance(myactuator.decode_reply(0x243, data), myactuator.StatusReply)
 
 
 def test_bad_arguments_are_refused() -> None:

@@ -27,7 +27,7 @@ import can
 
 from _serving import serving
 from servobus.frame import Frame
-from servobus.protocols.myactuator import encode_rs485
+from servobus.protocols.myactuator.rs485 import encode_rs485
 from servobus.sim.attach import serve_python_can, serve_rs485, serve_slcan
 from servobus.sim.canbus import CanBusModel
 from servobus.sim.network import SimCanNetwork

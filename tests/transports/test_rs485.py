@@ -27,6 +27,8 @@ from servobus.protocols.hollow.rs485 import (
     TransparentRequest,
     decode_modbus_reply,
 )
+from servobus.protocols.myactuator.ids import RS485_BROADCAST_ID
+from servobus.protocols.myactuator.rs485 import decode_rs485_reply, encode_rs485
 from servobus.sim.attach import serve_rs485
 from servobus.sim.device import SerialDevice, SerialEmission
 from servobus.sim.devices.hollow import HollowMotor
@@ -93,10 +95,10 @@ async def test_myactuator_motors_answer_at_two_baud_rates_and_the_line_time_show
     async with line(motors, baud=baud, mode="myactuator") as transport:
         started = time.monotonic()
         for motor_id in (1, 2, 3):
-            transport.send(ma.encode_rs485(motor_id, ma.ReadStatus1()), reply_timeout_s=0.1)
+            transport.send(encode_rs485(motor_id, ma.ReadStatus1()), reply_timeout_s=0.1)
         replies = [await asyncio.wait_for(transport.receive(), 1.0) for _ in range(3)]
         elapsed = time.monotonic() - started
-    decoded = [ma.decode_rs485_reply(r.data) for r in replies]
+    decoded = [decode_rs485_reply(r.data) for r in replies]
     assert [(i, type(reply)) for i, reply in decoded] == [(i, ma.Status1Reply) for i in (1, 2, 3)]
     # Three half-duplex transactions of 13 + 13 bytes cannot take less than their line time.
     assert elapsed >= 3 * uart_time_s(26, baud)
@@ -105,17 +107,17 @@ async def test_myactuator_motors_answer_at_two_baud_rates_and_the_line_time_show
 
 @pytest.mark.asyncio
 async def test_the_line_is_held_for_a_reply_then_released_by_the_reply_or_the_timeout() -> None:
-    slow = Scripted(script=[(0.03, ma.encode_rs485(1, ma.ReadStatus1()))], turnaround_s=0.03)
+    slow = Scripted(script=[(0.03, encode_rs485(1, ma.ReadStatus1()))], turnaround_s=0.03)
     async with line([slow], baud=1_000_000, mode="myactuator") as transport:
-        transport.send(ma.encode_rs485(1, ma.ReadStatus1()), reply_timeout_s=0.5)  # answered at 30 ms
-        transport.send(ma.encode_rs485(1, ma.ReadStatus1()), reply_timeout_s=0.5)  # answered 30 ms later
+        transport.send(encode_rs485(1, ma.ReadStatus1()), reply_timeout_s=0.5)  # answered at 30 ms
+        transport.send(encode_rs485(1, ma.ReadStatus1()), reply_timeout_s=0.5)  # answered 30 ms later
         await transport.drain()
         assert len(await transport.receive_batch()) in (1, 2)
         assert slow.heard[1] - slow.heard[0] >= 0.03  # the second waited for the first reply
         # No reply expected: frames follow each other with only the gap between them.
         before = len(slow.heard)
         for _ in range(3):
-            transport.send(ma.encode_rs485(ma.RS485_BROADCAST_ID, ma.MotorStop()))
+            transport.send(encode_rs485(RS485_BROADCAST_ID, ma.MotorStop()))
         await transport.drain()
         await asyncio.sleep(0.1)
         quick = slow.heard[before:]
@@ -123,8 +125,8 @@ async def test_the_line_is_held_for_a_reply_then_released_by_the_reply_or_the_ti
         # A reply that never comes holds the line for reply_timeout_s, no longer.
         silent = Scripted(script=[])
     async with line([silent], baud=1_000_000, mode="myactuator") as transport:
-        transport.send(ma.encode_rs485(1, ma.ReadStatus1()), reply_timeout_s=0.05)
-        transport.send(ma.encode_rs485(1, ma.ReadStatus1()))
+        transport.send(encode_rs485(1, ma.ReadStatus1()), reply_timeout_s=0.05)
+        transport.send(encode_rs485(1, ma.ReadStatus1()))
         await transport.drain()
         await asyncio.sleep(0.02)
     assert 0.05 <= silent.heard[1] - silent.heard[0] < 0.5
@@ -132,7 +134,7 @@ async def test_the_line_is_held_for_a_reply_then_released_by_the_reply_or_the_ti
 
 @pytest.mark.asyncio
 async def test_garbage_and_corrupt_frames_are_counted_and_the_good_frame_still_comes() -> None:
-    good = ma.encode_rs485(1, ma.ReadStatus1())
+    good = encode_rs485(1, ma.ReadStatus1())
     corrupt = good[:-1] + bytes([good[-1] ^ 0xFF])
     noisy = Scripted(script=[(0.0, corrupt + b"\x00\x11\x22" + good)])
     async with line([noisy], baud=1_000_000, mode="myactuator") as transport:
@@ -184,10 +186,10 @@ async def test_a_frame_split_by_a_usb_style_burst_gap_is_still_whole() -> None:
     # A USB adapter can deliver the second half of a frame milliseconds after the first: far longer
     # than 3.5 characters at 1 Mbaud (35 us), so the host must not take that gap for the line's
     # inter-frame silence.
-    reply = ma.encode_rs485(1, ma.ReadStatus1())
+    reply = encode_rs485(1, ma.ReadStatus1())
     bursty = Scripted(script=[(0.0, reply[:5]), (0.008, reply[5:])])
     async with line([bursty], baud=1_000_000, mode="myactuator") as transport:
-        transport.send(ma.encode_rs485(1, ma.ReadStatus1()), reply_timeout_s=0.2)
+        transport.send(encode_rs485(1, ma.ReadStatus1()), reply_timeout_s=0.2)
         frame = await asyncio.wait_for(transport.receive(), 1.0)
         stats = transport.stats()
     assert frame.data == reply and stats.discarded_bytes == 0
@@ -202,7 +204,7 @@ async def test_a_loss_while_waiting_for_a_reply_leaves_the_line_usable_after_the
     transport = SerialTransport(str(link), mode="myactuator", reopen_backoff_s=(0.01, 0.05))
     try:
         async with serving(serve_rs485([Scripted(script=[])], first, baud=1_000_000)), transport:
-            transport.send(ma.encode_rs485(1, ma.ReadStatus1()), reply_timeout_s=5.0)  # never answered
+            transport.send(encode_rs485(1, ma.ReadStatus1()), reply_timeout_s=5.0)  # never answered
             await asyncio.sleep(0.05)
             first.unplug()  # while the writer waits for that reply
             with pytest.raises(TransportError):
@@ -212,11 +214,11 @@ async def test_a_loss_while_waiting_for_a_reply_leaves_the_line_usable_after_the
                 serve_rs485([MyActuatorRs485Motor(MyActuatorMotor(1))], second, baud=1_000_000)
             ):
                 await transport.wait_open(timeout=5.0)
-                transport.send(ma.encode_rs485(ma.RS485_BROADCAST_ID, ma.MotorStop()))  # no reply expected
-                transport.send(ma.encode_rs485(1, ma.ReadStatus1()), reply_timeout_s=0.2)
+                transport.send(encode_rs485(RS485_BROADCAST_ID, ma.MotorStop()))  # no reply expected
+                transport.send(encode_rs485(1, ma.ReadStatus1()), reply_timeout_s=0.2)
                 reply = await asyncio.wait_for(transport.receive(), 1.0)
     finally:
         for port in (first, second):
             if port is not None:
                 port.close()
-    assert ma.decode_rs485_reply(reply.data)[0] == 1
+    assert decode_rs485_reply(reply.data)[0] == 1

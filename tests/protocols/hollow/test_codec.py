@@ -27,8 +27,10 @@ from servobus.protocols.hollow import (
     Setpoint,
     SpecialCommand,
     decode_reply,
-    decode_reply_frame,
     decode_request,
+)
+from servobus.protocols.hollow.codec import (
+    decode_reply_frame,
     decode_request_frame,
     reply_frame,
     request_frame,

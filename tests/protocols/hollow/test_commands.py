@@ -25,10 +25,8 @@ from servobus.protocols.hollow import (
     SpecialCommand,
     Start,
     Stop,
-    decode_special,
-    is_special_command,
 )
-from servobus.protocols.hollow.commands import decode_extended_request
+from servobus.protocols.hollow.commands import decode_extended_request, decode_special, is_special_command
 
 from .._contract import assert_quantised
 from ._strategies import (

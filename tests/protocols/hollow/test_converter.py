@@ -8,12 +8,8 @@ from hypothesis import strategies as st
 
 from servobus.errors import ProtocolError
 from servobus.protocols import Message
-from servobus.protocols.hollow import (
-    ConverterGain,
-    ConverterPdGains,
-    ConverterPiMultiplier,
-    decode_converter_config,
-)
+from servobus.protocols.hollow import ConverterGain, ConverterPdGains, ConverterPiMultiplier
+from servobus.protocols.hollow.converter import decode_converter_config
 
 from .._contract import decodes_or_protocol_error
 from ._strategies import converter_configs

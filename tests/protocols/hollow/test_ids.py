@@ -7,13 +7,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from servobus.frame import Frame
-from servobus.protocols.hollow import (
-    FdReply,
-    NormalReply,
-    TransparentReply,
-    reply_frame,
-    request_frame,
-)
+from servobus.protocols.hollow import FdReply, NormalReply, TransparentReply
+from servobus.protocols.hollow.codec import reply_frame, request_frame
 from servobus.protocols.hollow.ids import (
     DEFAULT_HOST_ID,
     check_host_id,

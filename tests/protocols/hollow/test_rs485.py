@@ -21,6 +21,8 @@ from servobus.protocols.hollow import (
     ModbusWriteAck,
     TransparentReply,
     TransparentRequest,
+)
+from servobus.protocols.hollow.rs485 import (
     decode_modbus_reply,
     decode_modbus_request,
     decode_transparent,

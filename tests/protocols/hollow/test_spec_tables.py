@@ -30,13 +30,12 @@ from servobus.protocols.hollow import (
     SpecialCommand,
     Start,
     Stop,
-    decode_converter_config,
-    decode_modbus_reply,
-    decode_modbus_request,
     decode_reply,
     decode_request,
 )
+from servobus.protocols.hollow.converter import decode_converter_config
 from servobus.protocols.hollow.model import DEFAULT_MODEL
+from servobus.protocols.hollow.rs485 import decode_modbus_reply, decode_modbus_request
 
 SPEC = SPEC_DIR / "hollow.md"
 if not SPEC.exists():

@@ -40,14 +40,13 @@ from servobus.protocols.hollow import (
     Stop,
     TransparentReply,
     TransparentRequest,
-    decode_converter_config,
-    decode_modbus_reply,
-    decode_modbus_request,
     decode_reply,
     decode_request,
-    request_frame,
 )
+from servobus.protocols.hollow.codec import request_frame
+from servobus.protocols.hollow.converter import decode_converter_config
 from servobus.protocols.hollow.model import COUNTS_PER_TURN
+from servobus.protocols.hollow.rs485 import decode_modbus_reply, decode_modbus_request
 
 VECTORS = {v["id"]: v for v in load_vectors("hollow")}
 MOTOR = 1  # the examples' motor id where the vector leaves it open ("motor CAN id (not stated)")

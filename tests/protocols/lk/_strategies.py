@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 
 from servobus.protocols import Message, lk
 from servobus.protocols.lk import MotorType, ParamId, PidGains, Revision
+from servobus.protocols.lk.codec import COMMAND_CLASSES
 
 from .._contract import assert_quantised
 
@@ -163,7 +164,7 @@ angle32 = floats(INT32[0] / 100, INT32[1] / 100)
 max_speed = floats(0, 0xFFFF)
 single_turn_v236 = floats(0, (2**32 - 1) / 100)
 single_turn_v235 = floats(0, 359.99)
-fixed = {cls: Case(st.just(cls())) for cls in lk.COMMAND_CLASSES if issubclass(cls, lk.commands.FixedCommand)}
+fixed = {cls: Case(st.just(cls())) for cls in COMMAND_CLASSES if issubclass(cls, lk.commands.FixedCommand)}
 
 COMMANDS: dict[type[Message], Case] = {
     **fixed,

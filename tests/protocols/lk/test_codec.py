@@ -15,6 +15,18 @@ from servobus.errors import ProtocolError
 from servobus.frame import Frame
 from servobus.protocols import get_family, lk
 from servobus.protocols.lk import LkModel, MotorType, Revision, ids
+from servobus.protocols.lk.codec import (
+    COMMAND_CLASSES,
+    INFERRED_LAYOUTS,
+    REPLY_CLASSES,
+    REQUESTS,
+    check_available,
+    encode_request,
+    reply_class,
+    request_classes,
+    request_frame,
+    resolve_model,
+)
 
 from .._contract import can_payloads, decodes_or_protocol_error, standard_ids
 from ._strategies import COMMANDS, model_for
@@ -60,27 +72,27 @@ def test_every_spec_command_has_encoder_and_decoders(
 ) -> None:
     for revision, exists in present.items():
         if code == ids.MULTI_MOTOR_ID:
-            has_request = lk.MultiMotorTorque in lk.request_classes(revision)
+            has_request = lk.MultiMotorTorque in request_classes(revision)
             reply_code = ids.MULTI_MOTOR_REPLY_CODE
         else:
-            has_request = code in lk.REQUESTS[revision]
+            has_request = code in REQUESTS[revision]
             reply_code = code
         assert has_request is exists, f"{revision.name}: request for {row}"
         if not exists:
             continue
         # An encoder (a command class with a round-trip strategy) and both decoders exist.
-        cls = lk.MultiMotorTorque if code == ids.MULTI_MOTOR_ID else lk.REQUESTS[revision][code]
+        cls = lk.MultiMotorTorque if code == ids.MULTI_MOTOR_ID else REQUESTS[revision][code]
         assert cls in COMMANDS
-        assert reply_code in lk.REPLY_CLASSES[revision], f"{revision.name}: reply decoder for {row}"
+        assert reply_code in REPLY_CLASSES[revision], f"{revision.name}: reply decoder for {row}"
         # Layouts the manuals do not print are implemented from the spec's inference: documented.
         if "listed only" in row or "inferred" in row:
-            assert code in lk.INFERRED_LAYOUTS, row
+            assert code in INFERRED_LAYOUTS, row
 
 
 def test_no_command_outside_the_spec_table() -> None:
     spec = {(code, r) for code, present, _ in ROWS for r, exists in present.items() if exists}
-    ours = {(code, r) for r in Revision for code in lk.REQUESTS[r]}
-    ours |= {(ids.MULTI_MOTOR_ID, r) for r in Revision if lk.MultiMotorTorque in lk.request_classes(r)}
+    ours = {(code, r) for r in Revision for code in REQUESTS[r]}
+    ours |= {(ids.MULTI_MOTOR_ID, r) for r in Revision if lk.MultiMotorTorque in request_classes(r)}
     assert ours == spec
 
 
@@ -106,15 +118,15 @@ REVISION_ONLY = [
 def test_commands_of_one_revision_only(command: Any, only: Revision) -> None:
     other = V235 if only is V236 else V236
     model = LkModel(revision=only, motor_type=getattr(command, "motor_type", MotorType.MG))
-    data = lk.encode_request(command, model=model)
+    data = encode_request(command, model=model)
     assert data == command.encode()
     with pytest.raises(ValueError, match=rf"{type(command).__name__} \(.*\) does not exist in {other.name}"):
-        lk.encode_request(command, revision=other)
+        encode_request(command, revision=other)
     can_id = ids.MULTI_MOTOR_ID if isinstance(command, lk.MultiMotorTorque) else 0x141
     decoded = lk.decode_request(can_id, data, model=model)
     assert type(decoded) is type(command)
     assert decoded.encode() == data
-    same_byte_exists = can_id != ids.MULTI_MOTOR_ID and data[0] in lk.REQUESTS[other]
+    same_byte_exists = can_id != ids.MULTI_MOTOR_ID and data[0] in REQUESTS[other]
     if same_byte_exists:
         # 0x40/0x42/0x44, 0xA2, 0xA5: the byte exists in the other revision with another layout.
         # The other scheme's address/value bytes may not fit at all (ProtocolError), or decode to
@@ -176,24 +188,24 @@ def test_decode_errors_name_the_motor() -> None:
 def test_motor_type_restrictions_of_the_v236_manual() -> None:
     # [001]: 0xA0 only on MS; 0xA1 only on MF/MH/MG. [003] names no such restriction for 0xA0.
     open_loop = lk.OpenLoopControl(power_counts=100)
-    lk.check_available(open_loop, model=LkModel(motor_type=MotorType.MS))
+    check_available(open_loop, model=LkModel(motor_type=MotorType.MS))
     with pytest.raises(
         ValueError, match=r"OpenLoopControl \(0xA0\) is not implemented on MG motors in V2_36"
     ):
-        lk.encode_request(open_loop, model=LkModel(motor_type=MotorType.MG))
-    lk.check_available(open_loop, model=LkModel(revision=V235, motor_type=MotorType.MG))
-    lk.check_available(open_loop, revision=V236)  # no motor type known: nothing to refuse
+        encode_request(open_loop, model=LkModel(motor_type=MotorType.MG))
+    check_available(open_loop, model=LkModel(revision=V235, motor_type=MotorType.MG))
+    check_available(open_loop, revision=V236)  # no motor type known: nothing to refuse
     torque = lk.TorqueControl(motor_type=MotorType.MF, current_a=1)
-    lk.check_available(torque, revision=V235)
+    check_available(torque, revision=V235)
     with pytest.raises(ValueError, match=r"motor_type=MF contradicts model\.motor_type=MG"):
-        lk.check_available(torque, model=LkModel(motor_type=MotorType.MG))
+        check_available(torque, model=LkModel(motor_type=MotorType.MG))
 
 
 def test_revision_and_model_must_agree() -> None:
-    assert lk.resolve_model() == LkModel()
-    assert lk.resolve_model(V235) == LkModel(revision=V235)
+    assert resolve_model() == LkModel()
+    assert resolve_model(V235) == LkModel(revision=V235)
     model = LkModel(revision=V235, motor_type=MotorType.MF, encoder_bits=16)
-    assert lk.resolve_model(V235, model) is model
+    assert resolve_model(V235, model) is model
     with pytest.raises(ValueError, match=r"revision=V2_36 contradicts model\.revision=V2_35"):
         lk.decode_reply(0x141, bytes(8), revision=V236, model=model)
     with pytest.raises(ValueError, match=r"revision='v2\.35' is not one of"):
@@ -201,12 +213,12 @@ def test_revision_and_model_must_agree() -> None:
 
 
 def test_reply_class_names_what_answers_a_request() -> None:
-    assert lk.reply_class(0xA4, V236) is lk.Status2Reply
-    assert lk.reply_class(0x9A, V235) is lk.Status1ReplyV235
-    assert lk.reply_class(0x44, V236) is lk.SaveSettingsReply
-    assert lk.reply_class(0x44, V235) is lk.ParamWriteReply
+    assert reply_class(0xA4, V236) is lk.Status2Reply
+    assert reply_class(0x9A, V235) is lk.Status1ReplyV235
+    assert reply_class(0x44, V236) is lk.SaveSettingsReply
+    assert reply_class(0x44, V235) is lk.ParamWriteReply
     with pytest.raises(ValueError, match="0x8C does not exist in V2_35"):
-        lk.reply_class(0x8C, V235)
+        reply_class(0x8C, V235)
 
 
 def test_family_is_registered() -> None:
@@ -235,7 +247,7 @@ lk_ids = st.one_of(
 lk_payloads = st.one_of(
     can_payloads,
     st.tuples(
-        st.sampled_from(sorted({c for r in Revision for c in lk.REPLY_CLASSES[r]})),
+        st.sampled_from(sorted({c for r in Revision for c in REPLY_CLASSES[r]})),
         st.binary(min_size=7, max_size=7),
     ).map(lambda t: bytes([t[0]]) + t[1]),
 )
@@ -259,7 +271,7 @@ def test_host_and_simulated_motor_agree(cls: type, data: st.DataObject) -> None:
     # names; the host keys the answer like the scheduler will (our own loop-back is not a reply).
     command = data.draw(COMMANDS[cls].strategy)
     model = model_for(command)
-    frame = lk.request_frame(command, motor_id=None if cls is lk.MultiMotorTorque else 7, model=model)
+    frame = request_frame(command, motor_id=None if cls is lk.MultiMotorTorque else 7, model=model)
     assert lk.decode_request(frame.arbitration_id, frame.data, model=model) is not None
     looped_back = Frame(arbitration_id=frame.arbitration_id, data=frame.data, is_rx=False)
     assert ids.reply_key(looped_back, revision=model.revision) is None
@@ -267,7 +279,7 @@ def test_host_and_simulated_motor_agree(cls: type, data: st.DataObject) -> None:
         expected = set(ids.multi_motor_reply_keys(model.revision))
         assert all(key[1] == 0xA1 for key in expected)
         return
-    reply_cls = lk.reply_class(frame.data[0], model.revision)
+    reply_cls = reply_class(frame.data[0], model.revision)
     assert command.CODE is not None
     keys = ids.request_keys(7, command.CODE, model.revision)
     # Whatever the reply class, a received frame on the reply id that starts with the request's command
@@ -281,7 +293,7 @@ def test_host_and_simulated_motor_agree(cls: type, data: st.DataObject) -> None:
 
 
 CLASS_CODES: dict[Any, frozenset[int]] = {
-    **{cls: frozenset({cls.CODE}) for cls in lk.COMMAND_CLASSES if cls.CODE is not None},
+    **{cls: frozenset({cls.CODE}) for cls in COMMAND_CLASSES if cls.CODE is not None},
     lk.MultiMotorTorque: frozenset(),
     **dict(lk.codec.REPLY_LAYOUTS),
 }

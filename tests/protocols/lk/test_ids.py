@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 from servobus.frame import Frame
 from servobus.protocols import lk
 from servobus.protocols.lk import Revision, ids
+from servobus.protocols.lk.codec import reply_frame, request_frame
 
 from .._contract import can_payloads, standard_ids
 
@@ -104,19 +105,19 @@ def test_reply_key_ignores_extended_and_fd_frames() -> None:
 
 
 def test_request_frame_and_reply_frame_use_the_revision_ids() -> None:
-    frame = lk.request_frame(lk.MotorStop(), motor_id=3, revision=V235)
+    frame = request_frame(lk.MotorStop(), motor_id=3, revision=V235)
     assert frame == Frame(arbitration_id=0x143, data=bytes.fromhex("81 00 00 00 00 00 00 00"))
-    echo = lk.reply_frame(lk.EchoReply(command=0x81), motor_id=3, revision=V235)
+    echo = reply_frame(lk.EchoReply(command=0x81), motor_id=3, revision=V235)
     assert echo == frame  # same id, same bytes: only is_rx separates them on the bus
-    assert lk.reply_frame(lk.EchoReply(command=0x81), motor_id=3, revision=V236).arbitration_id == 0x183
+    assert reply_frame(lk.EchoReply(command=0x81), motor_id=3, revision=V236).arbitration_id == 0x183
     multi = lk.MultiMotorTorque(motor_type=lk.MotorType.MG, currents_a=(0.0, 0.0, 0.0, 0.0))
-    assert lk.request_frame(multi, motor_id=None, revision=V235).arbitration_id == 0x280
+    assert request_frame(multi, motor_id=None, revision=V235).arbitration_id == 0x280
     with pytest.raises(ValueError, match=r"addresses motors 1\.\.4 by position"):
-        lk.request_frame(multi, motor_id=1, revision=V235)
+        request_frame(multi, motor_id=1, revision=V235)
     with pytest.raises(ValueError, match="motor_id is required"):
-        lk.request_frame(lk.MotorStop(), motor_id=None)
+        request_frame(lk.MotorStop(), motor_id=None)
     with pytest.raises(ValueError, match="Status1ReplyV235 does not exist in V2_36"):
-        lk.reply_frame(
+        reply_frame(
             lk.Status1ReplyV235(command=0x9A, temperature_c=0, voltage_v=0, error_state=lk.ErrorStateV235(0)),
             motor_id=1,
         )

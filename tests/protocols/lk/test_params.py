@@ -19,6 +19,7 @@ from servobus.protocols.lk import (
     Rs485Baud,
     SettingParam,
 )
+from servobus.protocols.lk.params import max_angle_from_halves, max_angle_halves
 
 PID = PidGains(kp=100, ki=200, kd=2000)
 
@@ -220,16 +221,16 @@ def test_parameter_values_are_validated_naming_the_parameter_and_limit(factory: 
 def test_max_angle_halves_round_trip() -> None:
     # Spec §6.3: maxAngle is 8 bytes split over 0x9B (bytes 0..3) and 0x9C (bytes 4..7).
     for value in (0, 1, -1, 2**40 + 5, -(2**63), 2**63 - 1):
-        low, high = lk.max_angle_halves(value)
+        low, high = max_angle_halves(value)
         lk.WriteParamRam(param=ParamId.MAX_ANGLE_LOW, value=low)
         lk.WriteParamRam(param=ParamId.MAX_ANGLE_HIGH, value=high)
-        assert lk.max_angle_from_halves(low, high) == value
+        assert max_angle_from_halves(low, high) == value
     assert (
         struct.pack("<q", -2)[:4]
-        == lk.WriteParamRam(param=ParamId.MAX_ANGLE_LOW, value=lk.max_angle_halves(-2)[0]).encode()[2:6]
+        == lk.WriteParamRam(param=ParamId.MAX_ANGLE_LOW, value=max_angle_halves(-2)[0]).encode()[2:6]
     )
     with pytest.raises(ValueError, match="max_angle"):
-        lk.max_angle_halves(2**63)
+        max_angle_halves(2**63)
 
 
 def test_baud_enums_name_their_rates() -> None:

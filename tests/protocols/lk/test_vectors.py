@@ -28,6 +28,7 @@ import pytest
 from _spec import hexbytes, load_vectors, vector_id
 from servobus.protocols import Message, lk
 from servobus.protocols.lk import ParamResult, Revision, ids
+from servobus.protocols.lk.codec import REQUESTS, encode_request, reply_frame, request_frame
 
 VECTORS = load_vectors("lk-v2")
 DIALECTS = {"v2.36": Revision.V2_36, "v2.35": Revision.V2_35}
@@ -43,7 +44,7 @@ Builder = Callable[[dict[str, Any], Revision], Message]
 
 
 def _fixed_request(code: int) -> Builder:
-    return lambda decoded, revision: lk.REQUESTS[revision][code]()
+    return lambda decoded, revision: REQUESTS[revision][code]()
 
 
 REQUEST_BUILDERS: dict[int, Builder] = {
@@ -103,16 +104,16 @@ def test_vector(vector: dict[str, Any]) -> None:
     can_id = can_id_of(vector, revision)
     if vector["direction"] == "request":
         command = REQUEST_BUILDERS[code](vector["decoded"], revision)
-        assert lk.encode_request(command, revision=revision) == data
+        assert encode_request(command, revision=revision) == data
         assert lk.decode_request(can_id, data, revision=revision) == command
-        frame = lk.request_frame(command, motor_id=ids.motor_id_from_request_id(can_id), revision=revision)
+        frame = request_frame(command, motor_id=ids.motor_id_from_request_id(can_id), revision=revision)
         assert frame.arbitration_id == can_id
         assert frame.data == data
     else:
         reply = REPLY_BUILDERS[code](vector["decoded"], revision)
         assert lk.decode_reply(can_id, data, revision=revision) == reply
         assert reply.encode() == data
-        assert lk.reply_frame(reply, motor_id=1, revision=revision).arbitration_id == can_id
+        assert reply_frame(reply, motor_id=1, revision=revision).arbitration_id == can_id
 
 
 CONFLICTS = [v for v in VECTORS if v.get("decode_conflict")]

@@ -26,6 +26,8 @@ from servobus.protocols.myactuator._layout import (
     OpenEnumField,
     StepField,
 )
+from servobus.protocols.myactuator.codec import ECHO_COMMANDS
+from servobus.protocols.myactuator.rs485_motion import RS485_MOTION_BROADCAST_ID
 
 from .._contract import assert_quantised
 
@@ -146,12 +148,10 @@ SPECIAL: dict[type, Callable[[], st.SearchStrategy[Any]]] = {
     ma.MotionReply: lambda: scales_strategy.flatmap(_motion_reply),
     ma.Rs485MotionCommand: lambda: fixed_strategy(
         ma.Rs485MotionCommand,
-        motor_id=st.one_of(st.integers(1, 32), st.just(ma.RS485_MOTION_BROADCAST_ID)),
+        motor_id=st.one_of(st.integers(1, 32), st.just(RS485_MOTION_BROADCAST_ID)),
     ),
     ma.Echo: lambda: (
-        st.sampled_from(ma.ECHO_COMMANDS)
-        .flatmap(message_strategy)
-        .map(lambda command: ma.Echo(command=command))
+        st.sampled_from(ECHO_COMMANDS).flatmap(message_strategy).map(lambda command: ma.Echo(command=command))
     ),
 }
 

@@ -19,6 +19,17 @@ from servobus.errors import ProtocolError
 from servobus.frame import Frame
 from servobus.protocols import get_family
 from servobus.protocols import myactuator as ma
+from servobus.protocols.myactuator.codec import (
+    ECHO_COMMANDS,
+    NO_REPLY,
+    REPLIES,
+    REQUESTS,
+    arbitration_id,
+    check_available,
+    encode_request,
+    expects_reply,
+    request_frame,
+)
 
 from .._contract import can_payloads, decodes_or_protocol_error, standard_ids
 from ._strategies import message_classes
@@ -88,19 +99,19 @@ def test_the_table_was_read() -> None:
 @pytest.mark.parametrize("row", STANDARD_ROWS, ids=lambda r: r.command)
 def test_every_command_of_the_table_has_an_encoder_and_decoders(row: Row) -> None:
     code = int(row.command, 16)
-    layouts = ma.REQUESTS.get(code)
+    layouts = REQUESTS.get(code)
     assert layouts, f"{row.command} {row.name}: no request class"
     assert frozenset().union(*(layout.revisions for layout in layouts)) == row.revisions
     for layout in layouts:
         assert callable(layout.message.encode) and code == layout.message.CODE
     reply = row.reply.lower()
     if "none" in reply or "random" in reply:
-        assert ma.NO_REPLY[code], f"{row.command}: no reply, and a reason is documented"
-        assert code not in ma.REPLIES
+        assert NO_REPLY[code], f"{row.command}: no reply, and a reason is documented"
+        assert code not in REPLIES
         return
-    replies = ma.REPLIES[code]
-    echoes = [layout for layout in replies if layout.message in ma.ECHO_COMMANDS]
-    others = [layout for layout in replies if layout.message not in ma.ECHO_COMMANDS]
+    replies = REPLIES[code]
+    echoes = [layout for layout in replies if layout.message in ECHO_COMMANDS]
+    others = [layout for layout in replies if layout.message not in ECHO_COMMANDS]
     if reply.startswith("echo"):
         assert echoes, f"{row.command}: the reply is an echo"
     if not reply.startswith("echo") or "/" in reply:  # "echo / ID" (0x79) has both
@@ -120,14 +131,14 @@ def test_motion_rows() -> None:
 
 def test_no_command_outside_the_table_and_none_the_spec_calls_undefined() -> None:
     table = {int(r.command, 16) for r in STANDARD_ROWS}
-    assert set(ma.REQUESTS) == table
+    assert set(REQUESTS) == table
     section = _spec_section()
     start = section.index("not defined in either manual")
     sentence = re.sub(r"\([^)]*\)", "", re.split(r"\.\s", section[start:], maxsplit=1)[0])  # drop remarks
     undefined = {int(code, 16) for code in re.findall(r"0x[0-9A-F]{2}", sentence)}
     assert undefined == {0x9B, 0x9E, 0x9F, 0x8C, 0x88, 0x19}
-    assert not undefined & set(ma.REQUESTS) and not undefined & set(ma.REPLIES)
-    assert 0xA3 not in ma.REQUESTS and 0xA5 not in ma.REQUESTS  # removed in V3.7 (merged into 0xA4)
+    assert not undefined & set(REQUESTS) and not undefined & set(REPLIES)
+    assert 0xA3 not in REQUESTS and 0xA5 not in REQUESTS  # removed in V3.7 (merged into 0xA4)
 
 
 # ---- revisions ----
@@ -163,16 +174,16 @@ def test_a_command_the_revision_lacks_is_refused(
     command: ma.MyActuatorCommand, revision: ma.Revision, message: str
 ) -> None:
     with pytest.raises(ValueError, match=message):
-        ma.check_available(command, revision)
+        check_available(command, revision)
     with pytest.raises(ValueError, match=message):
-        ma.encode_request(command, revision=revision)
+        encode_request(command, revision=revision)
     other = V43 if revision is V44 else V44
-    assert ma.encode_request(command, revision=other) == command.encode()  # encode() itself is revision-free
+    assert encode_request(command, revision=other) == command.encode()  # encode() itself is revision-free
 
 
 def test_encode_request_needs_a_revision_enum() -> None:
     with pytest.raises(ValueError, match="is not a Revision"):
-        ma.encode_request(ma.MotorStop(), revision="V4_4")  # type: ignore[arg-type]
+        encode_request(ma.MotorStop(), revision="V4_4")  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize(
@@ -274,28 +285,28 @@ def test_replies_that_do_not_exist_say_why() -> None:
         ma.decode_reply(0x241, bytes.fromhex("9E 00 00 00 00 00 00 00"))
     with pytest.raises(ProtocolError, match="empty reply"):
         ma.decode_reply(0x241, b"")
-    assert not ma.expects_reply(ma.SystemReset())
-    assert not ma.expects_reply(ma.ActiveReply(command=ma.StreamableCommand.STATUS_2, enabled=False))
-    assert ma.expects_reply(ma.MotorStop())
+    assert not expects_reply(ma.SystemReset())
+    assert not expects_reply(ma.ActiveReply(command=ma.StreamableCommand.STATUS_2, enabled=False))
+    assert expects_reply(ma.MotorStop())
 
 
 def test_where_commands_go() -> None:
-    assert ma.arbitration_id(ma.MotorStop(), 3) == 0x143
-    assert ma.arbitration_id(ma.MotorStop(), broadcast=True) == 0x280
-    assert ma.arbitration_id(ma.SetCanId(motor_id=2)) == 0x300
+    assert arbitration_id(ma.MotorStop(), 3) == 0x143
+    assert arbitration_id(ma.MotorStop(), broadcast=True) == 0x280
+    assert arbitration_id(ma.SetCanId(motor_id=2)) == 0x300
     motion = ma.MotionCommand(position_rad=0, velocity_rad_s=0, kp=0, kd=0, torque_ff_nm=0)
-    assert ma.arbitration_id(motion, 32) == 0x420
+    assert arbitration_id(motion, 32) == 0x420
     with pytest.raises(ValueError, match="motor_id is required"):
-        ma.arbitration_id(ma.MotorStop())
+        arbitration_id(ma.MotorStop())
     with pytest.raises(ValueError, match="no broadcast form"):
-        ma.arbitration_id(motion, broadcast=True)
+        arbitration_id(motion, broadcast=True)
     with pytest.raises(ValueError, match="no 0x280 form"):
-        ma.arbitration_id(ma.ReadCanId(), broadcast=True)
-    frame = ma.request_frame(ma.ReadStatus2(), 1)
+        arbitration_id(ma.ReadCanId(), broadcast=True)
+    frame = request_frame(ma.ReadStatus2(), 1)
     assert frame == Frame(arbitration_id=0x141, data=bytes.fromhex("9C 00 00 00 00 00 00 00"))
     assert not frame.is_rx
     with pytest.raises(ValueError, match=r"only in V4\.3"):
-        ma.request_frame(ma.ReadCanId(), revision=V44)
+        request_frame(ma.ReadCanId(), revision=V44)
 
 
 def test_family_registration() -> None:
@@ -311,7 +322,7 @@ def test_family_registration() -> None:
 # ---- any bytes: a message or ProtocolError ----
 
 OUR_IDS = st.sampled_from([0x141, 0x160, 0x280, 0x300, 0x401, 0x241, 0x260, 0x501, 0x520])
-CODES = sorted(set(ma.REQUESTS) | set(ma.REPLIES) | set(ma.NO_REPLY))
+CODES = sorted(set(REQUESTS) | set(REPLIES) | set(NO_REPLY))
 payloads = st.one_of(
     can_payloads,
     st.tuples(st.sampled_from(CODES), st.binary(min_size=7, max_size=7)).map(lambda t: bytes([t[0]]) + t[1]),

@@ -22,6 +22,7 @@ from servobus.protocols.myactuator._layout import (
     Float32Field,
     StepField,
 )
+from servobus.protocols.myactuator.codec import REQUESTS
 
 from ._strategies import assert_round_trip, message_classes, message_strategy, minimal_value
 
@@ -34,9 +35,7 @@ OTHER_COMMANDS = [c for c in message_classes() if issubclass(c, Command) and c n
 def test_the_command_lists_hold_every_exported_command() -> None:
     # The exported commands are exactly those the codec's request table decodes, each once.
     assert len(set(STANDARD_COMMANDS)) == len(STANDARD_COMMANDS)
-    assert set(STANDARD_COMMANDS) == {
-        layout.message for layouts in ma.REQUESTS.values() for layout in layouts
-    }
+    assert set(STANDARD_COMMANDS) == {layout.message for layouts in REQUESTS.values() for layout in layouts}
     assert set(OTHER_COMMANDS) == {ma.MotionCommand, ma.Rs485MotionCommand}
 
 

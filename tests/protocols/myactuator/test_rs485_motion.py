@@ -12,6 +12,8 @@ from servobus.core import crc32_ieee
 from servobus.errors import ProtocolError
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator import rs485_motion
+from servobus.protocols.myactuator.codec import check_available
+from servobus.protocols.myactuator.rs485_motion import crc32_iso_hdlc_le
 
 from .._contract import decodes_or_protocol_error
 
@@ -60,7 +62,7 @@ def test_the_crc_rule_is_pluggable() -> None:
     other = COMMAND.encode(crc=big_endian)
     assert other[:24] == frame[:24] and other[24:] == frame[24:][::-1]
     assert ma.Rs485MotionCommand.decode(other, crc=big_endian) == COMMAND
-    assert ma.crc32_iso_hdlc_le(b"123456789") == (0xCBF43926).to_bytes(4, "little")
+    assert crc32_iso_hdlc_le(b"123456789") == (0xCBF43926).to_bytes(4, "little")
 
 
 def test_frame_checks() -> None:
@@ -83,8 +85,8 @@ def test_ids_and_revision() -> None:
     with pytest.raises(ValueError, match="not the broadcast 0xBB"):
         ma.Rs485MotionCommand(motor_id=0x33, position_rad=0, velocity_rad_s=0, kp=0, kd=0, torque_ff_nm=0)
     with pytest.raises(ValueError, match=r"RS485 motion mode command exists only in V4\.4"):
-        ma.check_available(COMMAND, ma.Revision.V4_3)
-    ma.check_available(COMMAND, ma.Revision.V4_4)
+        check_available(COMMAND, ma.Revision.V4_3)
+    check_available(COMMAND, ma.Revision.V4_4)
 
 
 def test_values_are_float32() -> None:

@@ -24,6 +24,10 @@ import pytest
 from _spec import hexbytes, load_vectors
 from servobus.errors import ProtocolError
 from servobus.protocols import myactuator as ma
+from servobus.protocols.myactuator import codec as ma_codec
+from servobus.protocols.myactuator.codec import arbitration_id, encode_request
+from servobus.protocols.myactuator.ids import BROADCAST_ID, ID_SETTING_ID, motor_id_from_reply_id
+from servobus.protocols.myactuator.rs485 import decode_rs485_reply, decode_rs485_request, encode_rs485
 
 VECTORS = load_vectors("myactuator-v4")
 MOTION = "0x400+ID (motion mode)"
@@ -254,7 +258,7 @@ def stated_values(v: dict[str, Any], cls: type) -> dict[str, Any]:
 
 def request_class(v: dict[str, Any]) -> type:
     code = int(v["command"], 16)
-    layouts = [layout for layout in ma.REQUESTS[code] if revision(v) in layout.revisions]
+    layouts = [layout for layout in ma_codec.REQUESTS[code] if revision(v) in layout.revisions]
     if code == 0x79:  # two layouts share the byte; the vector says which
         flag = v["decoded"]["wReadWriteFlag"]
         return ma.ReadCanId if re.search(r"1 -> read", flag) else ma.SetCanId
@@ -280,22 +284,22 @@ def test_request_vector(v: dict[str, Any]) -> None:
     cls = request_class(v)
     command = cls(**stated_values(v, cls))
     rev = revision(v)
-    assert ma.encode_request(command, revision=rev) == payload(v)
+    assert encode_request(command, revision=rev) == payload(v)
     if v["transport"] == "can":
         can_id = int(v["can_id"], 16)
         assert ma.decode_request(can_id, payload(v), revision=rev) == command
-        if can_id == ma.BROADCAST_ID:
-            assert ma.arbitration_id(command, broadcast=True) == can_id
-        elif can_id == ma.ID_SETTING_ID:
-            assert ma.arbitration_id(command) == can_id
+        if can_id == BROADCAST_ID:
+            assert arbitration_id(command, broadcast=True) == can_id
+        elif can_id == ID_SETTING_ID:
+            assert arbitration_id(command) == can_id
         else:
-            assert ma.arbitration_id(command, can_id - 0x140) == can_id
+            assert arbitration_id(command, can_id - 0x140) == can_id
     else:
         frame = hexbytes(v["frame_with_computed_crc"])
         rs485_id = int(v["rs485_id"], 16)
         assert frame == body(v) + hexbytes(v["computed_crc"])
-        assert ma.encode_rs485(rs485_id, command, revision=rev) == frame
-        assert ma.decode_rs485_request(frame, revision=rev) == (rs485_id, command)
+        assert encode_rs485(rs485_id, command, revision=rev) == frame
+        assert decode_rs485_request(frame, revision=rev) == (rs485_id, command)
 
 
 # ---- replies ----
@@ -315,13 +319,13 @@ def test_reply_vector(v: dict[str, Any]) -> None:
     if v["transport"] == "can":
         can_id = int(v["can_id"], 16)
         reply = ma.decode_reply(can_id, payload(v), revision=rev)
-        motor_id = ma.motor_id_from_reply_id(can_id) if can_id != ma.ID_SETTING_ID else None
+        motor_id = motor_id_from_reply_id(can_id) if can_id != ID_SETTING_ID else None
     else:
         frame = hexbytes(v["frame_with_computed_crc"])
         assert frame == body(v) + hexbytes(v["computed_crc"])
-        motor_id, reply = ma.decode_rs485_reply(frame, revision=rev)
+        motor_id, reply = decode_rs485_reply(frame, revision=rev)
         assert motor_id == int(v["rs485_id"], 16)
-        assert ma.encode_rs485(motor_id, reply) == frame
+        assert encode_rs485(motor_id, reply) == frame
     assert reply.encode() == payload(v)
     if "motor" in v["decoded"]:
         assert f"ID {motor_id} " in v["decoded"]["motor"]
@@ -382,7 +386,7 @@ def test_motion_request_vector(v: dict[str, Any]) -> None:
             scales=example,
         )
     assert as_stated.encode() == data
-    assert ma.arbitration_id(as_stated, 1) == int(v["can_id"], 16)
+    assert arbitration_id(as_stated, 1) == int(v["can_id"], 16)
 
 
 @pytest.mark.parametrize("v", [m for m in MOTION_VECTORS if m["direction"] == "reply"], ids=key)

@@ -7,6 +7,7 @@ from typing import Any, TypeVar
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
 from servobus.protocols._message import Reply
+from servobus.protocols.myactuator.codec import request_frame
 from servobus.sim.devices.myactuator import DEFAULT_TURNAROUND_S, MyActuatorMotor
 
 R = TypeVar("R", bound=Reply)
@@ -15,7 +16,7 @@ TURNAROUND = DEFAULT_TURNAROUND_S
 
 def frame_for(motor: MyActuatorMotor, command: Any, *, broadcast: bool = False) -> Frame:
     """The CAN frame the host sends ``command`` in (revision checked by the codec)."""
-    return ma.request_frame(command, motor.motor_id, revision=motor.revision, broadcast=broadcast)
+    return request_frame(command, motor.motor_id, revision=motor.revision, broadcast=broadcast)
 
 
 def ask(motor: MyActuatorMotor, command: Any, at: float, expected: type[R]) -> R:

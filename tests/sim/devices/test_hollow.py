@@ -36,10 +36,9 @@ from servobus.protocols.hollow import (
     Start,
     Stop,
     TransparentReply,
-    decode_modbus_reply,
-    decode_reply_frame,
-    request_frame,
 )
+from servobus.protocols.hollow.codec import decode_reply_frame, request_frame
+from servobus.protocols.hollow.rs485 import decode_modbus_reply
 from servobus.sim.canbus import CanBusModel
 from servobus.sim.devices.hollow import DEFAULT_TURNAROUND_S, HOLLOW_PLANT_PARAMS, HollowMotor
 from servobus.sim.devices.hollow_converter import ConverterMode, HollowConverter

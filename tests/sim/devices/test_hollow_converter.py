@@ -26,10 +26,9 @@ from servobus.protocols.hollow import (
     ModbusWriteAck,
     TransparentReply,
     TransparentRequest,
-    decode_modbus_reply,
-    encode_transparent,
-    request_frame,
 )
+from servobus.protocols.hollow.codec import request_frame
+from servobus.protocols.hollow.rs485 import decode_modbus_reply, encode_transparent
 from servobus.sim.device import SerialEmission
 from servobus.sim.devices.hollow import DEFAULT_TURNAROUND_S, HollowMotor
 from servobus.sim.devices.hollow_converter import (

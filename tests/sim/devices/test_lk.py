@@ -29,10 +29,9 @@ from servobus.protocols.lk import (
     Revision,
     SettingParam,
     decode_reply,
-    reply_class,
-    reply_id,
-    request_frame,
 )
+from servobus.protocols.lk.codec import reply_class, request_frame
+from servobus.protocols.lk.ids import reply_id
 from servobus.sim.devices import lk as lk_device
 from servobus.sim.devices.lk import DEFAULT_CALIBRATION_S, DEFAULT_TURNAROUND_S, LkMotor, RunState
 from servobus.sim.devices.lk_state import LK_PLANT_PARAMS

@@ -15,6 +15,15 @@ import pytest
 from _spec import hexbytes, load_vectors, vector_id
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
+from servobus.protocols.myactuator.codec import NO_REPLY
+from servobus.protocols.myactuator.ids import (
+    BROADCAST_ID,
+    ID_SETTING_ID,
+    RS485_BROADCAST_ID,
+    motion_reply_id,
+    reply_id,
+)
+from servobus.protocols.myactuator.rs485 import decode_rs485_reply, encode_rs485
 from servobus.sim.devices.myactuator import MyActuatorMotor
 from servobus.sim.devices.myactuator_rs485 import MyActuatorRs485Motor
 from servobus.sim.plant import PlantParams
@@ -69,7 +78,7 @@ def _expected(code: int | None, data: bytes, revision: ma.Revision) -> type[Any]
     """The reply class the manual documents for this request, None where it says there is none."""
     if code is None:
         return ma.MotionReply
-    if code in ma.NO_REPLY:
+    if code in NO_REPLY:
         return None
     if code in _ECHO or (code == 0x79 and data[2] == 0):
         return ma.Echo
@@ -84,14 +93,14 @@ def test_the_vectors_cover_both_manuals_both_transports_and_every_no_reply_comma
     assert {(_revision(v), v["transport"]) for v in VECTORS} == {
         (r, t) for r in ma.Revision for t in ("can", "rs485")
     }
-    assert {_code(v) for v in VECTORS} >= set(ma.NO_REPLY)
+    assert {_code(v) for v in VECTORS} >= set(NO_REPLY)
 
 
 @pytest.mark.parametrize("vector", [v for v in VECTORS if v["transport"] == "can"], ids=vector_id)
 def test_can_request_vector_gets_the_documented_reply_on_the_right_id(vector: dict[str, Any]) -> None:
     revision, data, code = _revision(vector), _request_bytes(vector), _code(vector)
     can_id = int(vector["can_id"], 16)
-    broadcast = can_id in (ma.BROADCAST_ID, ma.ID_SETTING_ID)
+    broadcast = can_id in (BROADCAST_ID, ID_SETTING_ID)
     motors = [MyActuatorMotor(i, revision=revision) for i in (BROADCAST_MOTORS if broadcast else (1,))]
     expected = _expected(code, data, revision)
     for motor in motors:
@@ -103,13 +112,13 @@ def test_can_request_vector_gets_the_documented_reply_on_the_right_id(vector: di
         (emission,) = emissions
         assert emission.ready_s == pytest.approx(0.25 + TURNAROUND, abs=1e-12)
         if code is None:
-            reply_id = ma.motion_reply_id(motor.motor_id)
-        elif can_id == ma.ID_SETTING_ID:
-            reply_id = ma.ID_SETTING_ID  # the 0x79 examples print the reply on 0x300 (§4.38)
+            expected_id = motion_reply_id(motor.motor_id)
+        elif can_id == ID_SETTING_ID:
+            expected_id = ID_SETTING_ID  # the 0x79 examples print the reply on 0x300 (§4.38)
         else:
-            reply_id = ma.reply_id(motor.motor_id)  # 0x280 too: each motor on its own id (§1.3)
+            expected_id = reply_id(motor.motor_id)  # 0x280 too: each motor on its own id (§1.3)
         frame = emission.frame
-        assert frame.arbitration_id == reply_id and len(frame.data) == 8
+        assert frame.arbitration_id == expected_id and len(frame.data) == 8
         reply = ma.decode_reply(frame.arbitration_id, frame.data, revision=revision)
         assert isinstance(reply, expected)
         if code is not None:
@@ -125,7 +134,7 @@ def test_rs485_request_vector_gets_the_documented_reply_frame(vector: dict[str, 
     revision, code = _revision(vector), _code(vector)
     frame = hexbytes(vector["frame_with_computed_crc"])
     id_byte = int(vector["rs485_id"], 16)
-    ids = BROADCAST_MOTORS if id_byte == ma.RS485_BROADCAST_ID else (1,)
+    ids = BROADCAST_MOTORS if id_byte == RS485_BROADCAST_ID else (1,)
     fronts = [MyActuatorRs485Motor(MyActuatorMotor(i, revision=revision)) for i in ids]
     expected = _expected(code, frame[3:11], revision)
     for front in fronts:
@@ -136,9 +145,9 @@ def test_rs485_request_vector_gets_the_documented_reply_frame(vector: dict[str, 
             continue
         (emission,) = out
         assert emission.ready_s == pytest.approx(0.5 + TURNAROUND, abs=1e-12)
-        motor_id, reply = ma.decode_rs485_reply(emission.data, revision=revision)
+        motor_id, reply = decode_rs485_reply(emission.data, revision=revision)
         # §1.3: every motor answers a 0xCD frame with its own id; 0x79 keeps 0xCD (§4.38).
-        assert motor_id == (ma.RS485_BROADCAST_ID if code == 0x79 else front.motor.motor_id)
+        assert motor_id == (RS485_BROADCAST_ID if code == 0x79 else front.motor.motor_id)
         assert isinstance(reply, expected)
         assert emission.data[3] == code
         if expected is ma.Echo:
@@ -199,10 +208,10 @@ def test_can_id_read_reply_matches_both_manual_examples() -> None:
     """[002] §4/§7: motor 2 answers the 0x79 read with 0x0242 on CAN and DATA[7] = 2 on RS485."""
     motor = MyActuatorMotor(2, revision=ma.Revision.V4_3)
     read = ma.ReadCanId()
-    (e,) = motor.receive(Frame(arbitration_id=ma.ID_SETTING_ID, data=read.encode()), 0.0)
+    (e,) = motor.receive(Frame(arbitration_id=ID_SETTING_ID, data=read.encode()), 0.0)
     assert (e.frame.arbitration_id, e.frame.data) == (0x300, _manual_reply("002", "0x79", "can", 2))
     front = MyActuatorRs485Motor(MyActuatorMotor(2, revision=ma.Revision.V4_3))
-    (out,) = front.receive_bytes(ma.encode_rs485(ma.RS485_BROADCAST_ID, read), 0.0)
+    (out,) = front.receive_bytes(encode_rs485(RS485_BROADCAST_ID, read), 0.0)
     assert out.data[:11] == _manual_reply("002", "0x79", "rs485", 2)
 
 

@@ -11,6 +11,7 @@ import pytest
 
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
+from servobus.protocols.myactuator.codec import request_frame
 from servobus.sim.devices.myactuator import MyActuatorMotor
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.plant import Brake, Off, SpeedControl
@@ -188,7 +189,7 @@ def test_broadcast_with_the_filter_off_every_motor_executes_and_replies_on_its_o
     for motor in motors:
         _send(network, motor, ma.SpeedControl(speed_dps=30.0), 0.0)
     network.advance(0.1)
-    network.send(ma.request_frame(ma.MotorShutdown(), broadcast=True), 0.1)
+    network.send(request_frame(ma.MotorShutdown(), broadcast=True), 0.1)
     frames = _decoded(network.advance(0.2))
     assert sorted(can_id for _, can_id, _ in frames) == [0x241, 0x242, 0x243, 0x244]
     assert all(r == ma.Echo(command=ma.MotorShutdown()) for _, _, r in frames)
@@ -202,14 +203,14 @@ def test_broadcast_with_the_filter_on_is_not_received() -> None:
     for motor in motors:
         _send(network, motor, ma.FunctionControl.can_id_filter(True), 0.0)
     network.advance(0.01)
-    network.send(ma.request_frame(ma.SpeedControl(speed_dps=30.0), broadcast=True), 0.01)
-    network.send(ma.request_frame(ma.ReadEncoderPosition(), broadcast=True), 0.01)
+    network.send(request_frame(ma.SpeedControl(speed_dps=30.0), broadcast=True), 0.01)
+    network.send(request_frame(ma.ReadEncoderPosition(), broadcast=True), 0.01)
     assert network.advance(0.2) == []
     assert all(m.counters["filtered"] == 2 and isinstance(m.plant.control, Brake) for m in motors)
     motors[0].reboot(0.2)  # FLASH: "the value is kept after power-off"
     assert motors[0].ram.can_id_filter
     _send(network, motors[0], ma.FunctionControl.can_id_filter(False), 0.2)
-    network.send(ma.request_frame(ma.ReadEncoderPosition(), broadcast=True), 0.21)
+    network.send(request_frame(ma.ReadEncoderPosition(), broadcast=True), 0.21)
     frames = _decoded(network.advance(0.3))
     assert [(can_id, type(r)) for _, can_id, r in frames][-1] == (0x241, ma.EncoderPositionReply)
 
@@ -226,7 +227,7 @@ def test_thirty_two_motors_on_one_bus_each_answer() -> None:
     for at, frame in received:
         started = at - network.bus.frame_time_s(frame)
         assert started >= request_end[frame.arbitration_id - 0x100] + TURNAROUND - 1e-12
-    network.send(ma.request_frame(ma.ReadMultiTurnAngle(), broadcast=True), network.now_s)
+    network.send(request_frame(ma.ReadMultiTurnAngle(), broadcast=True), network.now_s)
     replies = _decoded(network.run_until_idle())
     assert sorted(can_id for _, can_id, _ in replies) == [0x240 + i for i in range(1, 33)]
     assert all(isinstance(r, ma.MultiTurnAngleReply) for _, _, r in replies)

@@ -21,14 +21,9 @@ from __future__ import annotations
 from servobus.protocols._family import Family
 from servobus.protocols.hollow import bound as _bound
 from servobus.protocols.hollow.codec import (
-    DEFAULT_REVISION,
     Revision,
     decode_reply,
-    decode_reply_frame,
     decode_request,
-    decode_request_frame,
-    reply_frame,
-    request_frame,
 )
 from servobus.protocols.hollow.commands import (
     CanMode,
@@ -44,24 +39,15 @@ from servobus.protocols.hollow.commands import (
     SpecialCommand,
     Start,
     Stop,
-    decode_special,
-    is_special_command,
 )
 from servobus.protocols.hollow.commands_fd import FdCommand
 from servobus.protocols.hollow.converter import (
     ConverterGain,
     ConverterPdGains,
     ConverterPiMultiplier,
-    decode_converter_config,
 )
 from servobus.protocols.hollow.ids import (
     DEFAULT_HOST_ID,
-    MOTOR_IDS,
-    motor_id_from_reply,
-    reply_id,
-    reply_key,
-    request_id,
-    request_key,
 )
 from servobus.protocols.hollow.model import DEFAULT_MODEL, MODEL_3507, MODELS, HollowModel
 from servobus.protocols.hollow.replies import ExtendedReply, FdReply, HollowReply, NormalReply
@@ -74,20 +60,14 @@ from servobus.protocols.hollow.rs485 import (
     ModbusWriteAck,
     TransparentReply,
     TransparentRequest,
-    decode_modbus_reply,
-    decode_modbus_request,
-    decode_transparent,
-    encode_transparent,
 )
 
 __all__ = [
     "DEFAULT_HOST_ID",
     "DEFAULT_MODEL",
-    "DEFAULT_REVISION",
     "FAMILY",
     "MODELS",
     "MODEL_3507",
-    "MOTOR_IDS",
     "CanMode",
     "CanModeSwitch",
     "ControlMode",
@@ -119,31 +99,15 @@ __all__ = [
     "Stop",
     "TransparentReply",
     "TransparentRequest",
-    "decode_converter_config",
-    "decode_modbus_reply",
-    "decode_modbus_request",
     "decode_reply",
-    "decode_reply_frame",
     "decode_request",
-    "decode_request_frame",
-    "decode_special",
-    "decode_transparent",
-    "encode_transparent",
-    "is_special_command",
-    "motor_id_from_reply",
-    "reply_frame",
-    "reply_id",
-    "reply_key",
-    "request_frame",
-    "request_id",
-    "request_key",
 ]
 
 FAMILY = Family(
     name="hollow",
     description="hollow-series joint motors: CAN normal/extended, CAN FD, RS-485 transparent and Modbus RTU",
     revisions=(Revision.HO_SERIES,),
-    default_revision=DEFAULT_REVISION,
+    default_revision=Revision.HO_SERIES,
     decode_request=decode_request,
     decode_reply=decode_reply,
     links=_bound.LINKS,

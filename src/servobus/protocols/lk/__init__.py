@@ -33,19 +33,8 @@ from servobus.protocols._family import Family
 from servobus.protocols.lk import bound as _bound
 from servobus.protocols.lk._base import LkCommand, LkReply
 from servobus.protocols.lk.codec import (
-    COMMAND_CLASSES,
-    INFERRED_LAYOUTS,
-    REPLY_CLASSES,
-    REQUESTS,
-    check_available,
     decode_reply,
     decode_request,
-    encode_request,
-    reply_class,
-    reply_frame,
-    request_classes,
-    request_frame,
-    resolve_model,
 )
 from servobus.protocols.lk.commands import (
     BrakeControl,
@@ -81,19 +70,6 @@ from servobus.protocols.lk.commands_control import (
     SpeedControlV235,
     TorqueControl,
 )
-from servobus.protocols.lk.ids import (
-    MULTI_MOTOR_ID,
-    is_reply_id,
-    is_request_id,
-    match_key,
-    motor_id_from_reply_id,
-    motor_id_from_request_id,
-    multi_motor_reply_keys,
-    reply_id,
-    reply_key,
-    request_id,
-    request_keys,
-)
 from servobus.protocols.lk.model import DEFAULT_MODEL, IQ_AMPS_PER_COUNT, LkModel, MotorType, Revision
 from servobus.protocols.lk.params import (
     BusType,
@@ -104,8 +80,6 @@ from servobus.protocols.lk.params import (
     PidGains,
     Rs485Baud,
     SettingParam,
-    max_angle_from_halves,
-    max_angle_halves,
 )
 from servobus.protocols.lk.params_v235 import (
     ParamReply,
@@ -154,14 +128,9 @@ from servobus.protocols.lk.states import (
 )
 
 __all__ = [
-    "COMMAND_CLASSES",
     "DEFAULT_MODEL",
     "FAMILY",
-    "INFERRED_LAYOUTS",
     "IQ_AMPS_PER_COUNT",
-    "MULTI_MOTOR_ID",
-    "REPLY_CLASSES",
-    "REQUESTS",
     "AccelerationReply",
     "AlignState",
     "BrakeAction",
@@ -240,27 +209,8 @@ __all__ = [
     "WriteParamRam",
     "WriteParamRom",
     "WriteSetting",
-    "check_available",
     "decode_reply",
     "decode_request",
-    "encode_request",
-    "is_reply_id",
-    "is_request_id",
-    "match_key",
-    "max_angle_from_halves",
-    "max_angle_halves",
-    "motor_id_from_reply_id",
-    "motor_id_from_request_id",
-    "multi_motor_reply_keys",
-    "reply_class",
-    "reply_frame",
-    "reply_id",
-    "reply_key",
-    "request_classes",
-    "request_frame",
-    "request_id",
-    "request_keys",
-    "resolve_model",
 ]
 
 FAMILY = Family(

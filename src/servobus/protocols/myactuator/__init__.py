@@ -25,17 +25,8 @@ from __future__ import annotations
 from servobus.protocols._family import Family
 from servobus.protocols.myactuator import bound as _bound
 from servobus.protocols.myactuator.codec import (
-    ECHO_COMMANDS,
-    NO_REPLY,
-    REPLIES,
-    REQUESTS,
-    arbitration_id,
-    check_available,
     decode_reply,
     decode_request,
-    encode_request,
-    expects_reply,
-    request_frame,
 )
 from servobus.protocols.myactuator.commands import (
     ActiveReply,
@@ -102,23 +93,7 @@ from servobus.protocols.myactuator.enums import (
     StreamableCommand,
 )
 from servobus.protocols.myactuator.ids import (
-    BROADCAST_ID,
-    ID_SETTING_ID,
-    MOTOR_IDS,
-    RS485_BROADCAST_ID,
     IdKind,
-    broadcast_reply_keys,
-    check_motor_id,
-    classify_id,
-    motion_reply_id,
-    motion_request_id,
-    motor_id_from_reply_id,
-    reply_id,
-    reply_key,
-    request_id,
-    request_key,
-    rs485_reply_key,
-    rs485_request_key,
 )
 from servobus.protocols.myactuator.motion import MOTION_SCALES, MotionCommand, MotionReply, MotionScales
 from servobus.protocols.myactuator.replies import (
@@ -149,39 +124,19 @@ from servobus.protocols.myactuator.replies import (
     join_model,
 )
 from servobus.protocols.myactuator.revision import V4_4_MANUAL_DATE, Revision, revision_from_version_date
-from servobus.protocols.myactuator.rs485 import (
-    RS485_FRAME_SIZE,
-    decode_rs485,
-    decode_rs485_reply,
-    decode_rs485_request,
-    encode_rs485,
-    rs485_deframer,
-)
 from servobus.protocols.myactuator.rs485_motion import (
-    RS485_MOTION_BROADCAST_ID,
     Crc32Rule,
     Rs485MotionCommand,
     Rs485MotionReply,
-    crc32_iso_hdlc_le,
 )
 
 __all__ = [
     "BAUD_RATE_INDEXES",
-    "BROADCAST_ID",
-    "ECHO_COMMANDS",
     "ERROR_FLAG_INFO",
     "FAMILY",
     "FAULTS",
     "FUNCTION_VALUES",
-    "ID_SETTING_ID",
     "MOTION_SCALES",
-    "MOTOR_IDS",
-    "NO_REPLY",
-    "REPLIES",
-    "REQUESTS",
-    "RS485_BROADCAST_ID",
-    "RS485_FRAME_SIZE",
-    "RS485_MOTION_BROADCAST_ID",
     "V4_4_MANUAL_DATE",
     "AbsolutePositionControl",
     "AccelIndex",
@@ -268,34 +223,11 @@ __all__ = [
     "WritePidRam",
     "WritePidRom",
     "ZeroOffsetReply",
-    "arbitration_id",
-    "broadcast_reply_keys",
-    "check_available",
-    "check_motor_id",
-    "classify_id",
-    "crc32_iso_hdlc_le",
     "decode_reply",
     "decode_request",
-    "decode_rs485",
-    "decode_rs485_reply",
-    "decode_rs485_request",
-    "encode_request",
-    "encode_rs485",
-    "expects_reply",
     "guess_single_turn_revision",
     "join_model",
-    "motion_reply_id",
-    "motion_request_id",
-    "motor_id_from_reply_id",
-    "reply_id",
-    "reply_key",
-    "request_frame",
-    "request_id",
-    "request_key",
     "revision_from_version_date",
-    "rs485_deframer",
-    "rs485_reply_key",
-    "rs485_request_key",
 ]
 
 FAMILY = Family(

@@ -65,9 +65,8 @@ from servobus.protocols.hollow import (
     SetZero,
     Start,
     Stop,
-    decode_request_frame,
-    reply_frame,
 )
+from servobus.protocols.hollow.codec import decode_request_frame, reply_frame
 from servobus.protocols.hollow.ids import check_host_id, check_motor_id
 from servobus.protocols.hollow.replies import EXTENDED_POSITION_LIMITS_DEG
 from servobus.sim.device import Emission

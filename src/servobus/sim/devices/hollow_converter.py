@@ -43,10 +43,8 @@ from servobus.protocols.hollow import (
     ModbusRead,
     ModbusReadReply,
     ModbusWriteAck,
-    decode_modbus_request,
-    decode_transparent,
-    encode_transparent,
 )
+from servobus.protocols.hollow.rs485 import decode_modbus_request, decode_transparent, encode_transparent
 from servobus.sim.device import SerialEmission
 from servobus.sim.devices.hollow import HollowMotor
 from servobus.timing import frame_time_s, uart_time_s

@@ -47,8 +47,6 @@ from servobus.frame import Frame
 from servobus.protocols import lk
 from servobus.protocols.lk import (
     DEFAULT_MODEL,
-    MULTI_MOTOR_ID,
-    REQUESTS,
     BrakeAction,
     BrakeState,
     ErrorState,
@@ -60,12 +58,10 @@ from servobus.protocols.lk import (
     ParamValue,
     Revision,
     SettingParam,
-    check_available,
     decode_request,
-    reply_frame,
-    request_id,
 )
-from servobus.protocols.lk.ids import MULTI_MOTOR_IDS, MULTI_MOTOR_REPLY_CODE
+from servobus.protocols.lk.codec import REQUESTS, check_available, reply_frame
+from servobus.protocols.lk.ids import MULTI_MOTOR_ID, MULTI_MOTOR_IDS, MULTI_MOTOR_REPLY_CODE, request_id
 from servobus.protocols.lk.model import encoder_counts_per_turn
 from servobus.protocols.lk.replies import STATUS2_CODES
 from servobus.sim.device import Emission

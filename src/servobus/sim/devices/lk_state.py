@@ -50,10 +50,15 @@ from servobus.protocols.lk import (
     Revision,
     Rs485Baud,
     SettingParam,
+)
+from servobus.protocols.lk.params import (
+    CONTROL_LAYOUTS,
+    PARAM_LAYOUTS,
+    SETTING_LAYOUTS,
+    check_value,
     max_angle_from_halves,
     max_angle_halves,
 )
-from servobus.protocols.lk.params import CONTROL_LAYOUTS, PARAM_LAYOUTS, SETTING_LAYOUTS, check_value
 from servobus.sim.plant import PlantParams
 
 __all__ = [

@@ -84,6 +84,13 @@ from servobus.protocols import myactuator as ma
 from servobus.protocols._message import Command, Reply
 from servobus.protocols.myactuator import ErrorFlags, IdKind, MotionCommand, Revision, StreamableCommand
 from servobus.protocols.myactuator.codec import decode_standard_request
+from servobus.protocols.myactuator.ids import (
+    ID_SETTING_ID,
+    check_motor_id,
+    classify_id,
+    motion_reply_id,
+    reply_id,
+)
 from servobus.sim.device import Emission
 from servobus.sim.devices.myactuator_state import (
     DEFAULT_ENCODER_COUNTS_PER_TURN,
@@ -227,7 +234,7 @@ class MyActuatorMotor:
         name: str | None = None,
         now_s: float = 0.0,
     ) -> None:
-        ma.check_motor_id(motor_id)
+        check_motor_id(motor_id)
         if not isinstance(revision, Revision):
             raise ValueError(f"revision={revision!r} is not a Revision (V4_3, V4_4)")
         if not turnaround_s >= 0:
@@ -303,18 +310,18 @@ class MyActuatorMotor:
         if reply is None:
             return []
         if kind is IdKind.MOTION_REQUEST:
-            can_id = ma.motion_reply_id(motor_id)
+            can_id = motion_reply_id(motor_id)
         elif kind is IdKind.ID_SETTING:
-            can_id = ma.ID_SETTING_ID  # the 0x79 examples print the reply on 0x300 (§4.38)
+            can_id = ID_SETTING_ID  # the 0x79 examples print the reply on 0x300 (§4.38)
         else:
-            can_id = ma.reply_id(motor_id)
+            can_id = reply_id(motor_id)
         return [Emission(now_s + self.turnaround_s, Frame(arbitration_id=can_id, data=reply.encode()))]
 
     def poll(self, now_s: float) -> list[Emission]:
         """Spontaneous frames due by ``now_s``: 0xB6 streams and 0x9A error reports (0x240+ID); also
         trips the 0xB3 protection when its time has passed."""
         return [
-            Emission(at, Frame(arbitration_id=ma.reply_id(self.motor_id), data=reply.encode()))
+            Emission(at, Frame(arbitration_id=reply_id(self.motor_id), data=reply.encode()))
             for at, reply in self.spontaneous(now_s)
         ]
 
@@ -465,7 +472,7 @@ class MyActuatorMotor:
         if frame.is_extended_id or frame.is_fd:
             self.counters["ignored_kind"] += 1
             return None
-        found = ma.classify_id(frame.arbitration_id)
+        found = classify_id(frame.arbitration_id)
         kind, motor_id = found if found else (None, None)
         if kind in (IdKind.REQUEST, IdKind.MOTION_REQUEST) and motor_id == self.motor_id:
             return kind

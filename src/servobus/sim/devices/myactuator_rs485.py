@@ -26,14 +26,9 @@ from __future__ import annotations
 from collections import Counter
 
 from servobus.errors import ProtocolError
-from servobus.protocols.myactuator import (
-    RS485_BROADCAST_ID,
-    ReadCanId,
-    SetCanId,
-    decode_rs485_request,
-    encode_rs485,
-    rs485_deframer,
-)
+from servobus.protocols.myactuator import ReadCanId, SetCanId
+from servobus.protocols.myactuator.ids import RS485_BROADCAST_ID
+from servobus.protocols.myactuator.rs485 import decode_rs485_request, encode_rs485, rs485_deframer
 from servobus.sim.device import SerialEmission
 from servobus.sim.devices.myactuator import MyActuatorMotor
 
