@@ -59,6 +59,9 @@ static enum parse_result parse_modbus(const uint8_t *b, size_t avail, int dirs, 
 
     if (avail < 2)
         return PARSE_NEED_MORE;
+    /* A wire byte, not a kind: any other function cannot start a frame, so it is noise. */
+    if (b[1] != 0x03 && b[1] != 0x10 && b[1] != 0x83 && b[1] != 0x90)
+        return PARSE_BAD_HEADER;
     switch (b[1]) {
     case 0x03:
         if (dirs & SB_MODBUS_REQUESTS)
@@ -89,8 +92,6 @@ static enum parse_result parse_modbus(const uint8_t *b, size_t avail, int dirs, 
         if (dirs & SB_MODBUS_REPLIES)
             cand[ncand++] = 5;  /* addr fn|0x80 exception-code crc(2) */
         break;
-    default:  /* a wire byte, not a kind: any other function cannot start a frame, so it is noise */
-        return PARSE_BAD_HEADER;
     }
     /* Candidates are appended in increasing length except for 0x03 both-ways; sort the pair. */
     if (ncand == 2 && cand[0] > cand[1]) {
