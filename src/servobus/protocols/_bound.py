@@ -170,6 +170,49 @@ class BoundCodec(Protocol):
     def streams(self) -> frozenset[int]: ...
 
 
+class CodecBase:
+    """What the built-in bound codecs share: the contract's public attributes, and the defaults of a
+    family whose motors never stream or report (``streams`` empty, ``note_sent`` a no-op)."""
+
+    __slots__ = (
+        "framing",
+        "link",
+        "model",
+        "motor_id",
+        "reply_ids",
+        "request_ids",
+        "revision",
+        "shared_ids",
+    )
+    family: str
+    framing: Framing | None
+    link: str
+    model: Any
+    motor_id: int
+    reply_ids: frozenset[int]
+    request_ids: frozenset[int]
+    revision: enum.Enum
+    shared_ids: frozenset[int]
+
+    def __repr__(self) -> str:
+        return f"<{self.family} motor {self.motor_id} {self.revision.name} {self.link}>"
+
+    @property
+    def streams(self) -> frozenset[int]:
+        """The command bytes the motor streams (none, unless the family overrides this)."""
+        return frozenset()
+
+    def note_sent(self, command: Command) -> None:
+        """Nothing the family's commands change alters how its frames are classified."""
+
+    def decode(self, frame: Frame) -> Reply:
+        raise NotImplementedError
+
+    def decode_many(self, frames: Sequence[Frame]) -> list[Reply]:
+        """:meth:`decode` of each frame."""
+        return [self.decode(f) for f in frames]
+
+
 def _name(codec: BoundCodec) -> str:
     return f"{codec.family} motor {codec.motor_id} ({codec.revision.name}, {codec.link})"
 

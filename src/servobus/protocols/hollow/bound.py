@@ -29,7 +29,7 @@ from typing import Any
 from servobus.core import HollowTransparentDeframer, ModbusRtuDeframer, crc16_modbus
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
-from servobus.protocols._bound import EXTENDED, Broadcast, FrameKind, frame_key
+from servobus.protocols._bound import EXTENDED, Broadcast, CodecBase, FrameKind, frame_key
 from servobus.protocols._fast import Slow, maker
 from servobus.protocols._message import Command, Reply
 from servobus.protocols.hollow.codec import decode_reply
@@ -134,25 +134,18 @@ def _fd_decoder(model: HollowModel) -> Callable[[bytes], FdReply]:
     return decode
 
 
-class HollowCodec:
+class HollowCodec(CodecBase):
     """One hollow motor on one link. Build it with :func:`bind` (or ``FAMILY.bind``)."""
 
     family = "hollow"
+    model: HollowModel
 
     __slots__ = (
         "_fast_classic",
         "_fast_ext",
         "_fast_fd",
         "_key",
-        "framing",
         "host_id",
-        "link",
-        "model",
-        "motor_id",
-        "reply_ids",
-        "request_ids",
-        "revision",
-        "shared_ids",
     )
 
     def __init__(self, motor_id: int, revision: Any, model: HollowModel, link: str, host_id: int) -> None:
@@ -182,11 +175,6 @@ class HollowCodec:
 
     def __repr__(self) -> str:
         return f"<hollow motor {self.motor_id} {self.link}, host id {self.host_id}>"
-
-    @property
-    def streams(self) -> frozenset[int]:
-        """Always empty: hollow motors only answer."""
-        return frozenset()
 
     def _check(self, command: Command) -> Command:
         if self.link == "modbus":
@@ -264,9 +252,6 @@ class HollowCodec:
         """True only for a Modbus read: every other hollow request is a set-point or a mode change."""
         return isinstance(command, ModbusRead)
 
-    def note_sent(self, command: Command) -> None:
-        """Nothing a hollow command changes alters how its frames are classified."""
-
     def classify(self, frame: Frame) -> tuple[FrameKind, Hashable | None]:
         """REPLY for a received reply naming this motor (by payload on CAN, by address on Modbus)."""
         if not frame.is_rx or frame.is_extended_id or frame.is_serial != (self.framing is not None):
@@ -309,10 +294,6 @@ class HollowCodec:
         return decode_reply(
             frame.arbitration_id, data, is_extended_id=frame.is_extended_id, is_fd=fd, model=self.model
         )
-
-    def decode_many(self, frames: Sequence[Frame]) -> list[Reply]:
-        """:meth:`decode` of each frame."""
-        return [self.decode(f) for f in frames]
 
 
 class TransparentFraming:

@@ -18,7 +18,7 @@ from typing import Any
 
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
-from servobus.protocols._bound import Broadcast, FrameKind, check_bus, frame_key, motor_ids_of
+from servobus.protocols._bound import Broadcast, CodecBase, FrameKind, check_bus, frame_key, motor_ids_of
 from servobus.protocols._fast import Slow, maker
 from servobus.protocols._fields import round_half_away
 from servobus.protocols._message import Command, Reply
@@ -140,12 +140,12 @@ def _fast_encoders(model: LkModel) -> dict[type, Callable[[Any], bytes]]:
     }
 
 
-class LkCodec:
+class LkCodec(CodecBase):
     """One LK motor on CAN. Build it with :func:`bind` (or ``FAMILY.bind``)."""
 
     family = "lk"
-    link = "can"
-    framing = None
+    revision: Revision
+    model: LkModel
 
     __slots__ = (
         "_aliases",
@@ -155,12 +155,6 @@ class LkCodec:
         "_reply_base",
         "_reply_id",
         "_request_id",
-        "model",
-        "motor_id",
-        "reply_ids",
-        "request_ids",
-        "revision",
-        "shared_ids",
     )
 
     def __init__(self, motor_id: int, model: LkModel) -> None:
@@ -168,6 +162,8 @@ class LkCodec:
         self._available: set[tuple[type, Any]] = set()
         self.motor_id = motor_id
         self.model = model
+        self.link = "can"
+        self.framing = None
         self.revision = model.revision
         self._reply_id = reply_id(motor_id, model.revision)
         self._reply_base = frame_key(self._reply_id, 0)
@@ -178,14 +174,6 @@ class LkCodec:
         status2 = _status2_decoder(model)
         self._fast: dict[int, Callable[[bytes], Any]] = dict.fromkeys(STATUS2_CODES, status2)
         self._encoders = _fast_encoders(model)
-
-    def __repr__(self) -> str:
-        return f"<lk motor {self.motor_id} {self.revision.name}>"
-
-    @property
-    def streams(self) -> frozenset[int]:
-        """Always empty: LK motors do not stream."""
-        return frozenset()
 
     def _check(self, command: Command) -> LkCommand:
         if not isinstance(command, LkCommand):
@@ -230,9 +218,6 @@ class LkCodec:
         """True for reads: resending them changes nothing on the motor."""
         return isinstance(command, _READS)
 
-    def note_sent(self, command: Command) -> None:
-        """Nothing an LK command changes alters how its frames are classified."""
-
     def classify(self, frame: Frame) -> tuple[FrameKind, Hashable | None]:
         """REPLY for a received frame on this motor's reply identifier, else NOT_OURS."""
         if frame.arbitration_id != self._reply_id or not frame.is_rx or frame.is_extended_id or frame.is_fd:
@@ -260,10 +245,6 @@ class LkCodec:
                 except Slow:
                     pass
         return decode_reply(frame.arbitration_id, data, model=self.model)
-
-    def decode_many(self, frames: Sequence[Frame]) -> list[Reply]:
-        """:meth:`decode` of each frame."""
-        return [self.decode(f) for f in frames]
 
 
 def bind(

@@ -22,7 +22,7 @@ from typing import Any
 
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
-from servobus.protocols._bound import Broadcast, FrameKind, check_bus, frame_key, motor_ids_of
+from servobus.protocols._bound import Broadcast, CodecBase, FrameKind, check_bus, frame_key, motor_ids_of
 from servobus.protocols._fast import Slow, maker
 from servobus.protocols._message import Command, Reply
 from servobus.protocols.myactuator import commands as cmd
@@ -141,10 +141,12 @@ def _class_plan(cls: type, revision: Revision) -> tuple[bool, Callable[[Any], by
 _PLANS: dict[tuple[type, Revision], tuple[bool, Callable[[Any], bytes] | None]] = {}
 
 
-class MyActuatorCodec:
+class MyActuatorCodec(CodecBase):
     """One MyActuator motor on one link. Build it with :func:`bind` (or ``FAMILY.bind``)."""
 
     family = "myactuator"
+    revision: Revision
+    model: MotionScales
 
     __slots__ = (
         "_fast",
@@ -159,14 +161,6 @@ class MyActuatorCodec:
         "_request_id",
         "_rs485",
         "_streams",
-        "framing",
-        "link",
-        "model",
-        "motor_id",
-        "reply_ids",
-        "request_ids",
-        "revision",
-        "shared_ids",
     )
 
     def __init__(self, motor_id: int, revision: Revision, scales: MotionScales, link: str) -> None:
@@ -197,9 +191,6 @@ class MyActuatorCodec:
             self.framing = None
         self._reply_base = frame_key(self._reply_id, 0)
         self._motion_key = frame_key(self._motion_reply_id) if not self._rs485 else None
-
-    def __repr__(self) -> str:
-        return f"<myactuator motor {self.motor_id} {self.revision.name} {self.link}>"
 
     @property
     def streams(self) -> frozenset[int]:
