@@ -143,3 +143,70 @@ int sb_deframer_feed(sb_deframer *d, const char *data, size_t len, size_t *consu
  * early, like feed, when out/lens are full; returns the number of frames written or a negative
  * status, as feed. */
 int sb_deframer_idle(sb_deframer *d, uint8_t *out, size_t out_cap, uint16_t *lens, size_t max_frames);
+
+/* ---- SLCAN (LAWICEL) receive lines (slcan.c) ----
+ * What a USB-CAN adapter speaking LAWICEL sends its host, cut at CR and checked. Frame lines:
+ *   tiiiL<data>     standard, 3 hex id digits (<= 0x7FF), DLC 0..8, 2 hex digits per data byte
+ *   TiiiiiiiiL<data> extended, 8 hex id digits (<= 0x1FFFFFFF)
+ *   riiiL, RiiiiiiiiL remote (no data): counted in `remote` and dropped (servobus carries no RTR)
+ *   d/D, b/B        CAN FD as t/T (b/B: bit-rate switch), DLC code 0..F for 0..8,12,16,20,24,32,48,64
+ * With SB_SLCAN_TIMESTAMPS (the adapter was sent Z1) every frame line ends in exactly 4 hex digits
+ * of timestamp; without it, none. Hex digits may be either case. The number of data digits must be
+ * exactly what the DLC says, or the line is malformed: never truncated, never padded.
+ * Other lines: an empty line (the adapter's OK, a bare CR) counts in `oks`; `z`/`Z` (transmit
+ * acknowledgements) in `acks`; anything else is malformed. BEL (0x07, the adapter's error reply)
+ * ends a line by itself: it counts in `bells`, and an unfinished line before it is malformed. A LF
+ * at the start of a line is skipped (CR LF adapters). A line longer than the longest valid one
+ * counts once in `overlong` and is dropped up to its CR (or BEL): its bytes are never held.
+ * Every byte of a malformed or over-long line, its terminating CR included, counts in
+ * discarded_bytes. Memory is the fixed line buffer below, whatever the input. */
+#define SB_SLCAN_TIMESTAMPS 1        /* the only option bit */
+#define SB_SLCAN_MAX_LINE 142        /* longest valid line before its CR: D + 8 + 1 + 128 + 4 timestamp */
+#define SB_SLCAN_MAX_DATA 64
+
+#define SB_SLCAN_EXTENDED 1          /* sb_slcan_frame.flags */
+#define SB_SLCAN_FD 2
+#define SB_SLCAN_BRS 4
+
+typedef struct {
+    uint32_t id;
+    uint8_t flags;            /* SB_SLCAN_EXTENDED | SB_SLCAN_FD | SB_SLCAN_BRS */
+    uint8_t len;              /* data bytes, 0..64 */
+    uint16_t timestamp;       /* the line's timestamp suffix (SB_SLCAN_TIMESTAMPS), else 0 */
+    uint8_t data[SB_SLCAN_MAX_DATA];
+} sb_slcan_frame;
+
+typedef struct {
+    int option;
+    int dropping;             /* 1 while the rest of an over-long line is dropped up to its CR */
+    size_t len;               /* bytes of the current line held in line */
+    uint64_t frames;          /* data frames returned */
+    uint64_t remote;          /* remote frames (counted, not returned) */
+    uint64_t acks;            /* z/Z lines */
+    uint64_t oks;             /* empty lines */
+    uint64_t bells;           /* BEL bytes */
+    uint64_t malformed;       /* lines dropped as malformed (bad form, hex, id, DLC, length; unknown) */
+    uint64_t overlong;        /* lines dropped as longer than the longest valid line */
+    uint64_t discarded_bytes; /* bytes of malformed and over-long lines, their CR included */
+    uint8_t line[SB_SLCAN_MAX_LINE];
+} sb_slcan;
+
+/* Returns SB_OK, or SB_E_ARG for s NULL or an unknown option bit (the state is then zeroed, and
+ * every other function refuses it). */
+int sb_slcan_init(sb_slcan *s, int option);
+
+/* Longest line (before its CR) this state accepts: 138, or 142 with SB_SLCAN_TIMESTAMPS; 0 for an
+ * invalid state. */
+size_t sb_slcan_max_line(const sb_slcan *s);
+
+/* Drop the line held so far (its bytes count as discarded) and start at a line boundary. Returns
+ * SB_OK or SB_E_ARG for an invalid state. */
+int sb_slcan_reset(sb_slcan *s);
+
+/* Consume input and write the data frames it completes into out[0 .. max_frames). Stops after the
+ * input is used up or right after the frame that fills out; *consumed tells how much input was
+ * taken (call again with the rest). Returns the number of frames written (at most INT_MAX), or
+ * SB_E_ARG for an invalid state, a NULL pointer (data may be NULL when len is 0) or max_frames 0;
+ * *consumed is 0 after an error. */
+int sb_slcan_feed(sb_slcan *s, const char *data, size_t len, size_t *consumed, sb_slcan_frame *out,
+                  size_t max_frames);

@@ -3,7 +3,7 @@
 * CRCs: :func:`crc16_modbus`, :func:`crc32_ieee`.
 * Float <-> code scaling and frame bit layouts: :class:`FieldScale`, :class:`Packer`, the layouts.
 * Stream de-framers: :class:`MyActuatorRs485Deframer`, :class:`HollowTransparentDeframer`,
-  :class:`ModbusRtuDeframer`.
+  :class:`ModbusRtuDeframer`; SLCAN (LAWICEL) lines into Frames: :class:`SlcanDeframer`.
 
 Sans-IO: nothing here awaits, sleeps or reads a clock. Only servobus.core._lib imports the
 compiled module, and nothing above this package sees cdata.
@@ -28,6 +28,7 @@ from servobus.core.packing import (
     Layout,
     Packer,
 )
+from servobus.core.slcan import SlcanDeframer
 
 __all__ = [
     "HOLLOW_EXT_REPLY",
@@ -44,6 +45,7 @@ __all__ = [
     "ModbusRtuDeframer",
     "MyActuatorRs485Deframer",
     "Packer",
+    "SlcanDeframer",
     "crc16_modbus",
     "crc32_ieee",
 ]
