@@ -5,6 +5,8 @@
 * ``rs485``: SerialTransport (MyActuator framing) -> a pty -> a simulated RS485 line with one
   responder, paced at the line's baud rate.
 * ``virtual-fd``: CanTransport with CAN FD -> python-can's ``virtual`` bus -> the simulated bus.
+* ``native-slcan``: SlcanTransport (no python-can) -> a pty -> the simulated SLCAN adapter -> a
+  simulated CAN bus at 1 Mbit/s with one responder.
 
 A path sends numbered requests (:meth:`LinePath.request`) that its peer answers with the same
 payload, so a test can check order, loss and duplication from the replies alone. The pty paths
@@ -33,10 +35,10 @@ from servobus.sim.canbus import CanBusModel
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.pty import PtyPort
 from servobus.sim.slcan import SlcanAdapter
-from servobus.transports import CanTransport, SerialTransport, Transport
+from servobus.transports import CanTransport, SerialTransport, SlcanTransport, Transport
 from sim._standins import Responder, SerialResponder
 
-PATHS = ("slcan", "rs485", "virtual-fd")
+PATHS = ("slcan", "rs485", "virtual-fd", "native-slcan")
 REPLY_TIMEOUT_S = 0.2
 
 
@@ -66,7 +68,9 @@ class LinePath:
 @contextlib.asynccontextmanager
 async def open_path(name: str, tmp_path: Path, **transport_options: Any) -> AsyncIterator[LinePath]:
     """``name`` from :data:`PATHS`, opened; ``transport_options`` go to the transport."""
-    opener = {"slcan": _slcan, "rs485": _rs485, "virtual-fd": _virtual_fd}[name]
+    opener = {"slcan": _slcan, "rs485": _rs485, "virtual-fd": _virtual_fd, "native-slcan": _native_slcan}[
+        name
+    ]
     async with opener(tmp_path, **transport_options) as path:
         yield path
 
@@ -111,6 +115,32 @@ async def _slcan(tmp_path: Path, **options: Any) -> AsyncIterator[LinePath]:
         async with transport:
             yield LinePath(
                 name="slcan",
+                transport=transport,
+                request=lambda seq: transport.send(Frame(arbitration_id=0x141, data=payload(seq, 8))),
+                reply_payload=lambda frame: frame.data,
+                peer_seen=lambda: [f.data for _, f in responders[-1].seen],
+                unplug=peer.unplug,
+                replug=peer.plug,
+            )
+    finally:
+        await peer.close()
+
+
+@contextlib.asynccontextmanager
+async def _native_slcan(tmp_path: Path, **options: Any) -> AsyncIterator[LinePath]:
+    responders: list[Responder] = []
+
+    def serve(port: PtyPort) -> Coroutine[Any, Any, None]:
+        responders.append(Responder(1))  # a fresh device each time it is plugged in
+        return serve_slcan(SimCanNetwork([responders[-1]]), port, SlcanAdapter(bitrate=None))
+
+    peer = _PtyPeer(tmp_path / "ttySLCAN", serve)
+    await peer.plug()
+    transport = SlcanTransport(str(peer.link), bitrate=1_000_000, **options)
+    try:
+        async with transport:
+            yield LinePath(
+                name="native-slcan",
                 transport=transport,
                 request=lambda seq: transport.send(Frame(arbitration_id=0x141, data=payload(seq, 8))),
                 reply_payload=lambda frame: frame.data,

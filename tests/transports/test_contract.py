@@ -19,7 +19,7 @@ from servobus.transports import TransportState
 
 from ._paths import PATHS, LinePath, open_path
 
-PTY_PATHS = ("slcan", "rs485")
+PTY_PATHS = ("slcan", "rs485", "native-slcan")
 SHORT_SOAK = 2_000
 LONG_SOAK = 100_000
 
@@ -86,7 +86,7 @@ async def test_no_frame_lost_duplicated_or_reordered_over_100k_frames(name: str,
 async def _stall_writer(path: LinePath) -> None:
     """Leave frames queued, unanswered, so a drain() stays pending (no device has id 9).
 
-    RS485 holds the line for each frame's reply; the slcan path is opened with a long gap.
+    RS485 holds the line for each frame's reply; the slcan paths are opened with a long gap.
     """
     for seq in range(3):
         if path.name == "rs485":
@@ -98,7 +98,8 @@ async def _stall_writer(path: LinePath) -> None:
 @pytest.mark.asyncio
 @pytest.mark.parametrize("name", PTY_PATHS)
 async def test_unplug_fails_every_pending_waiter_within_100_ms(name: str, tmp_path: Path) -> None:
-    options = {"min_gap_s": 0.5} if name == "slcan" else {}  # slcan: keep frames queued for a while
+    # slcan (both): keep frames queued for a while
+    options = {"min_gap_s": 0.5} if name in ("slcan", "native-slcan") else {}
     async with open_path(name, tmp_path, reopen=False, **options) as path:
         transport = path.transport
         await _stall_writer(path)

@@ -5,6 +5,9 @@ One interface (:class:`Transport`: ``open``/``close``, ``send``, ``drain``, ``re
 
 * ``"can"``: :class:`CanTransport`, any python-can interface, CAN and CAN FD, carrying
   :class:`~servobus.frame.Frame`.
+* ``"slcan"``: :class:`SlcanTransport`, an SLCAN (LAWICEL) USB-CAN adapter spoken natively
+  (pyserial-asyncio-fast and the C line de-framer, no python-can), carrying
+  :class:`~servobus.frame.Frame`.
 * ``"rs485"``: :class:`SerialTransport`, an RS485 port through pyserial-asyncio-fast, carrying
   whole CRC-checked :class:`SerialFrame` frames.
 
@@ -32,6 +35,7 @@ from servobus.transports.stats import TransportStats
 if TYPE_CHECKING:
     from servobus.transports.can import CanTransport
     from servobus.transports.rs485 import SerialFrame, SerialMode, SerialTransport
+    from servobus.transports.slcan import SlcanTransport
 
 __all__ = [
     "TRANSPORTS",
@@ -44,6 +48,7 @@ __all__ = [
     "SerialFrame",
     "SerialMode",
     "SerialTransport",
+    "SlcanTransport",
     "StateChanged",
     "Transport",
     "TransportEvent",
@@ -56,6 +61,7 @@ __all__ = [
 TRANSPORTS: dict[str, str] = {
     "can": "servobus.transports.can:CanTransport",
     "rs485": "servobus.transports.rs485:SerialTransport",
+    "slcan": "servobus.transports.slcan:SlcanTransport",
 }
 
 ENTRY_POINT_GROUP = "servobus.transports"
@@ -65,6 +71,7 @@ _LAZY = {
     "SerialFrame": "servobus.transports.rs485",
     "SerialMode": "servobus.transports.rs485",
     "SerialTransport": "servobus.transports.rs485",
+    "SlcanTransport": "servobus.transports.slcan",
 }
 
 

@@ -1,0 +1,439 @@
+"""SLCAN (LAWICEL) USB-CAN adapters, natively: pyserial-asyncio-fast reads, the C core cuts lines.
+
+:class:`SlcanTransport` speaks to an SLCAN adapter (CANable, CANUSB, the hollow manual's USB-CANFD
+adapter, the simulator's pty) without python-can, on the event loop, with no thread:
+
+* **Receiving**: the bytes the adapter sends go through :class:`~servobus.core.SlcanDeframer` as
+  they arrive (up to 64 KiB per wake-up). A malformed line (``t12``, bad hex, an 11-bit id above
+  0x7FF, a DLC that disagrees with its data) is counted in ``stats().bad_frames`` and dropped; the
+  frames around it still arrive and the transport stays OPEN. A line longer than the longest valid
+  one is dropped without being held, so a peer sending bytes without end costs a fixed 142-byte
+  buffer. Remote frames are counted in ``ignored`` and dropped. Adapter replies (OK, BEL, ``z``/``Z``
+  acknowledgements) are counted in :meth:`SlcanTransport.line_counters`.
+* **Opening**: ``C`` (close whatever was open), ``S0``..``S8`` for the nominal bit rate, ``Y1``/``Y2``/
+  ``Y4``/``Y5`` for a CAN FD data rate, then ``O`` (``L`` for listen-only), each answered before the
+  next goes. A BEL to ``S``, ``Y`` or ``O``, or no answer within ``open_timeout_s``, fails the open
+  with :class:`~servobus.errors.TransportError`. ``bitrate=None`` leaves the adapter's rate alone.
+* **Sending**: frames become ``t``/``T`` lines (``d``/``D``/``b``/``B`` for CAN FD) written straight to
+  the port's file descriptor, a batch per write, never more than the kernel takes at once: lines
+  the kernel did not take stay in our queue, where ``stale_after_s`` still applies (only a line
+  cut in the middle is finished). pyserial-asyncio-fast's own write path is not used: with
+  ``write_timeout=0`` pyserial retries EAGAIN in a busy loop.
+* **A stalled adapter is backpressure, not loss**: when the port takes nothing (EAGAIN) or the
+  driver's output queue (``out_waiting``) is above ``write_high_water`` bytes, the writer waits;
+  ``send`` keeps queueing until the queue is full (:class:`~servobus.transports.base.SendQueueFull`),
+  and a frame that waited longer than ``stale_after_s`` is dropped (counted and reported), never
+  written late. Bytes already in the kernel's buffer are beyond recall: on a real tty the high-water
+  mark bounds them; a pty reports no output queue.
+* **Loss**: a port that vanishes (EIO, EOF on a pty, an unplugged adapter) fails every waiter at
+  once and the port is reopened by path with backoff, as in
+  :class:`~servobus.transports.base.Transport`.
+
+pyserial-asyncio-fast is imported when the first port opens.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import binascii
+import contextlib
+import os
+from typing import Any
+
+from servobus.core import SlcanDeframer
+from servobus.errors import TransportError
+from servobus.frame import Frame
+from servobus.timing import nominal_frame_time_s
+from servobus.transports.base import Outgoing, Transport
+from servobus.transports.stats import TransportStats
+
+__all__ = ["DATA_BITRATES", "NOMINAL_BITRATES", "SlcanTransport", "encode_line"]
+
+#: LAWICEL's ``Sn`` table (S7 is 800 kbit/s there).
+NOMINAL_BITRATES: dict[int, int] = {
+    10_000: 0,
+    20_000: 1,
+    50_000: 2,
+    100_000: 3,
+    125_000: 4,
+    250_000: 5,
+    500_000: 6,
+    800_000: 7,
+    1_000_000: 8,
+}
+#: ``Yn`` of CANable-2.0-type CAN FD firmware.
+DATA_BITRATES: dict[int, int] = {1_000_000: 1, 2_000_000: 2, 4_000_000: 4, 5_000_000: 5}
+
+_READ_SIZE = 65536  # bytes taken from the port per wake-up, at most
+_STALL_POLL_S = 0.001  # how often a writer held by the driver's output queue looks again
+_FD_DLC = {n: code for code, n in enumerate((0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64))}
+_FD_KINDS = {(False, False): b"d", (True, False): b"D", (False, True): b"b", (True, True): b"B"}
+_HEX = binascii.hexlify
+
+
+def encode_line(frame: Frame) -> bytes:
+    """The LAWICEL line (CR included) that transmits ``frame``: ``t``/``T``, or ``d``/``D``/``b``/``B``."""
+    data = frame.data
+    if frame.is_fd:
+        kind = _FD_KINDS[frame.is_extended_id, frame.bitrate_switch]
+        dlc = _FD_DLC[len(data)]
+    else:
+        kind = b"T" if frame.is_extended_id else b"t"
+        dlc = len(data)
+    form = b"%s%08X%X" if frame.is_extended_id else b"%s%03X%X"
+    return form % (kind, frame.arbitration_id, dlc) + _HEX(data).upper() + b"\r"
+
+
+class SlcanTransport(Transport[Frame, Frame]):
+    """One SLCAN adapter on a serial port (USB CDC, a pty): CAN and CAN FD frames in and out.
+
+    Args:
+        port: the serial device (``/dev/ttyACM0``, a pty, or any pyserial URL with a file descriptor).
+        bitrate: nominal bit rate, one of :data:`NOMINAL_BITRATES` (``S0``..``S8``); None leaves the
+            adapter's configured rate as it is (and the bus load unknown).
+        data_bitrate: CAN FD data rate, one of :data:`DATA_BITRATES` (``Y1``..``Y5``); implies ``fd``.
+        fd: accept CAN FD frames for sending (received FD frames always arrive).
+        listen_only: open with ``L``: frames are received, none can be sent.
+        timestamps: the adapter appends 4-digit timestamps to its lines (it was configured with
+            ``Z1`` elsewhere); servobus does not send ``Z``.
+        tty_baudrate: the serial line's own rate (USB CDC adapters ignore it).
+        write_high_water: bytes the driver's output queue may hold before the writer waits.
+        min_gap_s: least time between the starts of two written frames (0: batches back to back);
+            for adapters that overflow when fed faster than their bus.
+        open_timeout_s: how long each open command may wait for the adapter's answer.
+        exclusive: lock the port against other processes (pyserial's ``exclusive``).
+        queue_size, rx_buffer, stale_after_s, reopen, reopen_backoff_s: see
+            :class:`~servobus.transports.base.Transport`.
+        **options: other pyserial arguments.
+
+    Raises:
+        ValueError: a bit rate the adapter has no command for, or an option out of range.
+    """
+
+    def __init__(
+        self,
+        port: str,
+        *,
+        bitrate: int | None = 1_000_000,
+        data_bitrate: int | None = None,
+        fd: bool = False,
+        listen_only: bool = False,
+        timestamps: bool = False,
+        tty_baudrate: int = 115_200,
+        write_high_water: int = 4096,
+        min_gap_s: float = 0.0,
+        open_timeout_s: float = 1.0,
+        exclusive: bool = True,
+        queue_size: int = 256,
+        rx_buffer: int = 65536,
+        stale_after_s: float | None = 0.5,
+        reopen: bool = True,
+        reopen_backoff_s: tuple[float, float] = (0.05, 2.0),
+        **options: Any,
+    ) -> None:
+        if bitrate is not None and bitrate not in NOMINAL_BITRATES:
+            raise ValueError(f"bitrate={bitrate} is not an SLCAN rate (one of {sorted(NOMINAL_BITRATES)})")
+        if data_bitrate is not None and data_bitrate not in DATA_BITRATES:
+            raise ValueError(
+                f"data_bitrate={data_bitrate} is not an SLCAN CAN FD rate (one of {sorted(DATA_BITRATES)})"
+            )
+        if write_high_water < 0 or min_gap_s < 0 or open_timeout_s <= 0:
+            raise ValueError(
+                f"need write_high_water >= 0, min_gap_s >= 0 and open_timeout_s > 0 (write_high_water="
+                f"{write_high_water}, min_gap_s={min_gap_s}, open_timeout_s={open_timeout_s})"
+            )
+        super().__init__(
+            name=f"slcan:{port}",
+            queue_size=queue_size,
+            rx_buffer=rx_buffer,
+            stale_after_s=stale_after_s,
+            reopen=reopen,
+            reopen_backoff_s=reopen_backoff_s,
+        )
+        self.port = port
+        self.bitrate = bitrate
+        self.data_bitrate = data_bitrate
+        self.fd = fd or data_bitrate is not None
+        self.listen_only = listen_only
+        self.tty_baudrate = tty_baudrate
+        self.write_high_water = write_high_water
+        self.min_gap_s = min_gap_s
+        self.open_timeout_s = open_timeout_s
+        self._last_start = -float("inf")  # loop time the last frame was written (for min_gap_s)
+        self._serial_options = {"exclusive": exclusive, **options}
+        self._deframer = SlcanDeframer(timestamps=timestamps)
+        self._load_known = bitrate is not None
+        self._line: asyncio.Transport | None = None
+        self._protocol: _LineProtocol | None = None
+        self._serial: Any = None  # the pyserial Serial under the line
+        self._fd = -1
+        self._tail = b""  # the unwritten rest of a line the kernel took only part of
+        self._writable: asyncio.Future[None] | None = None
+        self._writer_armed = False
+        self._answer: asyncio.Future[None] | None = None  # an open command waiting for OK or BEL
+
+    # ----------------------------------------------------------------- public API
+
+    def send(self, frame: Frame) -> None:
+        """Queue ``frame``; the writer puts it on the port in order.
+
+        Raises:
+            ValueError: a serial-link message, a CAN FD frame without ``fd=True``, or any frame on a
+                listen-only adapter.
+            SendQueueFull: the queue is full.
+            TransportError: the adapter is not open (lost or closed).
+        """
+        if frame.is_serial:
+            raise ValueError(f"{self.name}: {frame!r} is a serial-link message, not a CAN frame")
+        if frame.is_fd and not self.fd:
+            raise ValueError(f"{self.name}: CAN FD frame {frame!r} on an adapter opened without fd=True")
+        if self.listen_only:
+            raise ValueError(f"{self.name}: the adapter is open listen-only; it sends nothing")
+        self._enqueue(frame)
+
+    def line_counters(self) -> dict[str, int]:
+        """The line de-framer's counters since creation: frames, remote, acks (``z``/``Z``), oks (empty
+        lines), bells (BEL: the adapter refused a command or frame), malformed, overlong,
+        discarded_bytes, pending (bytes of the line held now)."""
+        d = self._deframer
+        return {
+            "frames": d.frames,
+            "remote": d.remote,
+            "acks": d.acks,
+            "oks": d.oks,
+            "bells": d.bells,
+            "malformed": d.malformed,
+            "overlong": d.overlong,
+            "discarded_bytes": d.discarded_bytes,
+            "pending": d.pending,
+        }
+
+    def stats(self) -> TransportStats:
+        snapshot = super().stats()
+        d = self._deframer
+        snapshot.bad_frames += d.malformed + d.overlong
+        snapshot.ignored += d.remote
+        snapshot.discarded_bytes = d.discarded_bytes
+        return snapshot
+
+    # ----------------------------------------------------------------- connection
+
+    async def _connect(self) -> None:
+        import serial
+        import serial_asyncio_fast
+
+        loop = asyncio.get_running_loop()
+        protocol = _LineProtocol(self, self._generation)
+        try:
+            line, _ = await serial_asyncio_fast.create_serial_connection(
+                loop,
+                lambda: protocol,
+                self.port,
+                baudrate=self.tty_baudrate,
+                **self._serial_options,
+            )
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise TransportError(f"{self.name}: cannot open: {exc}") from exc
+        if hasattr(line, "_max_read_size"):  # it reads 1 KiB per wake-up by default
+            line._max_read_size = _READ_SIZE
+        self._deframer.clear()  # a line cut by the loss cannot be completed
+        self._line, self._protocol = line, protocol
+        self._serial = line.get_extra_info("serial")
+        self._fd = self._serial.fileno()
+        self._tail = b""
+        try:
+            await self._open_channel()
+        except BaseException:
+            await self._disconnect()
+            raise
+
+    async def _open_channel(self) -> None:
+        await self._command(b"C", must_succeed=False)  # BEL when nothing was open: fine
+        if self.bitrate is not None:
+            await self._command(b"S%d" % NOMINAL_BITRATES[self.bitrate])
+        if self.data_bitrate is not None:
+            await self._command(b"Y%d" % DATA_BITRATES[self.data_bitrate])
+        await self._command(b"L" if self.listen_only else b"O")
+
+    async def _command(self, command: bytes, *, must_succeed: bool = True) -> None:
+        """Write one configuration command and wait for its answer (CR: done, BEL: refused)."""
+        deframer = self._deframer
+        answered = deframer.oks + deframer.bells
+        bells = deframer.bells
+        self._answer = asyncio.get_running_loop().create_future()
+        try:
+            try:
+                written = os.write(self._fd, command + b"\r")
+            except OSError as exc:
+                raise TransportError(f"{self.name}: cannot write {command.decode()!r}: {exc}") from exc
+            if written != len(command) + 1:
+                raise TransportError(f"{self.name}: the adapter did not take {command.decode()!r}")
+            async with asyncio.timeout(self.open_timeout_s):
+                while deframer.oks + deframer.bells == answered:
+                    await self._answer
+                    self._answer = asyncio.get_running_loop().create_future()
+        except TimeoutError:
+            raise TransportError(
+                f"{self.name}: no answer to {command.decode()!r} within {self.open_timeout_s} s: "
+                "is it an SLCAN adapter?"
+            ) from None
+        finally:
+            self._answer = None
+        if must_succeed and deframer.bells != bells:
+            raise TransportError(f"{self.name}: the adapter refused {command.decode()!r} (BEL)")
+
+    async def _disconnect(self) -> None:
+        line, protocol = self._line, self._protocol
+        self._line = self._protocol = None
+        self._disarm_writer()
+        if self._writable is not None and not self._writable.done():
+            self._writable.set_result(None)
+        self._writable = None
+        self._tail = b""
+        if line is not None and protocol is not None:
+            if not line.is_closing():  # a failed line is already closing (closing twice breaks it)
+                with contextlib.suppress(OSError):
+                    os.write(self._fd, b"C\r")  # take the adapter off the bus; best effort
+                line.abort()
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(asyncio.shield(protocol.closed), 1.0)
+        self._fd = -1
+        self._serial = None
+
+    # ----------------------------------------------------------------- receiving
+
+    def _on_bytes(self, data: bytes, generation: int) -> None:
+        if generation != self._generation:
+            return
+        now = self._now()
+        frames = self._deframer.feed(data, now)
+        if self._answer is not None and not self._answer.done():
+            self._answer.set_result(None)
+        if not frames:
+            return
+        stats = self._stats
+        stats.frames_in += len(frames)
+        stats.bytes_in += sum(len(frame.data) for frame in frames)
+        if self._load_known:
+            self._load.add(now, sum(self._frame_time_s(frame) for frame in frames))
+        self._deliver(frames)
+
+    def _frame_time_s(self, frame: Frame) -> float:
+        assert self.bitrate is not None
+        return nominal_frame_time_s(frame, self.bitrate, self.data_bitrate)
+
+    # ----------------------------------------------------------------- sending
+
+    async def _transmit(self, batch: list[Outgoing[Frame]]) -> None:
+        generation = self._generation
+        stats = self._stats
+        limit = self._stale_after_s
+        gap = self.min_gap_s
+        while batch:
+            if not await self._wait_for_room():
+                return  # the line went away: the base counts the rest as purged
+            now = self._now()
+            if gap and (rest := self._last_start + gap - now) > 0:
+                await asyncio.sleep(rest)
+                continue  # look at room and freshness again after the rest
+            if limit is not None and now - batch[0].queued_at > limit:
+                stale = [o for o in batch if now - o.queued_at > limit]
+                batch[:] = [o for o in batch if now - o.queued_at <= limit]
+                self._dropped("stale", [o.item for o in stale])
+                if not batch:
+                    return
+            lines = [encode_line(o.item) for o in (batch[:1] if gap else batch)]
+            data = b"".join(lines)
+            try:
+                written = os.write(self._fd, data)
+            except BlockingIOError:
+                written = 0
+            except OSError as exc:
+                self._lose(exc, generation)
+                return
+            # Frames whose line went out whole, or at least started (its rest is finished first).
+            sent = end = 0
+            while sent < len(lines) and end < written:
+                end += len(lines[sent])
+                sent += 1
+            if end > written:
+                self._tail = data[written:end]
+                self._arm_writer()
+            if sent:
+                self._last_start = now
+            for outgoing in batch[:sent]:
+                frame = outgoing.item
+                stats.frames_out += 1
+                stats.bytes_out += len(frame.data)
+                if self._load_known:
+                    self._load.add(now, self._frame_time_s(frame))
+                self._sent(frame, now)
+            del batch[:sent]
+
+    async def _wait_for_room(self) -> bool:
+        """Wait until the port takes bytes again; False when the line is gone meanwhile."""
+        while True:
+            line = self._line
+            if line is None or line.is_closing() or self._fd < 0:
+                return False
+            if self._tail:
+                self._arm_writer()
+                assert self._writable is not None
+                await self._writable
+                continue
+            try:
+                queued = self._serial.out_waiting
+            except Exception:  # no output queue to ask for, or a failing port (the reader reports it)
+                queued = 0
+            if queued > self.write_high_water:
+                await asyncio.sleep(_STALL_POLL_S)
+                continue
+            return True
+
+    def _arm_writer(self) -> None:
+        if self._writable is None or self._writable.done():
+            self._writable = asyncio.get_running_loop().create_future()
+        if not self._writer_armed and self._fd >= 0:
+            asyncio.get_running_loop().add_writer(self._fd, self._on_writable)
+            self._writer_armed = True
+
+    def _disarm_writer(self) -> None:
+        if self._writer_armed:
+            with contextlib.suppress(Exception):
+                asyncio.get_running_loop().remove_writer(self._fd)
+            self._writer_armed = False
+
+    def _on_writable(self) -> None:
+        """The kernel has room: finish the cut line; wake the writer once nothing of it is left."""
+        try:
+            written = os.write(self._fd, self._tail) if self._tail else 0
+        except BlockingIOError:
+            return
+        except OSError as exc:
+            self._disarm_writer()
+            self._lose(exc)
+            return
+        self._tail = self._tail[written:]
+        if not self._tail:
+            self._disarm_writer()
+            if self._writable is not None and not self._writable.done():
+                self._writable.set_result(None)
+
+
+class _LineProtocol(asyncio.Protocol):
+    """pyserial-asyncio-fast's callbacks, forwarded to the transport of one connection."""
+
+    def __init__(self, owner: SlcanTransport, generation: int) -> None:
+        self._owner = owner
+        self._generation = generation
+        self.closed: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+
+    def data_received(self, data: bytes) -> None:
+        self._owner._on_bytes(data, self._generation)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if not self.closed.done():
+            self.closed.set_result(None)
+        if exc is None:
+            exc = ConnectionError("the port closed")
+        self._owner._lose(exc, self._generation)
