@@ -5,6 +5,7 @@ from __future__ import annotations
 import subprocess
 import sys
 from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
 
 import can
 import can.interfaces.slcan
@@ -86,11 +87,92 @@ def test_rs485_myactuator_motors_answer_a_serial_port(simulator: Start, baud: in
     assert motor_id == 3 and isinstance(myactuator.decode_reply(0x243, data), myactuator.StatusReply)
 
 
-def test_bad_arguments_are_refused() -> None:
-    result = subprocess.run(
-        [sys.executable, "-m", "servobus.sim", "--family", "hollow", "--motors", "40"],
+def run_simulator(args: Sequence[str], cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
+    """Run the simulator to completion (for arguments it must refuse before serving anything)."""
+    return subprocess.run(
+        [sys.executable, "-m", "servobus.sim", *args],
         capture_output=True,
         text=True,
         timeout=30,
+        cwd=cwd,
     )
-    assert result.returncode == 2 and "--motors 40 is outside 1..32" in result.stderr
+
+
+def assert_refused(result: subprocess.CompletedProcess[str], *naming: str) -> None:
+    """Exit status 2, nothing on stdout, and exactly one stderr line: the error, naming the problem."""
+    lines = result.stderr.splitlines()
+    assert result.returncode == 2, result.stderr
+    assert result.stdout == ""
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("servobus.sim: error: ")
+    for text in naming:
+        assert text in lines[0]
+
+
+REFUSED = {
+    # issue 14: each of these ended in a traceback (or served a line that could not work)
+    "first id outside myactuator's ids": (
+        ["--family", "myactuator", "--first-id", "99"],
+        ["--first-id 99", "1..32"],
+    ),
+    "unknown revision": (["--family", "myactuator", "--revision", "V9"], ["--revision V9", "V4_3", "V4_4"]),
+    "negative baud": (["--family", "myactuator", "--rs485", "--baud", "-5"], ["--baud -5", "115200"]),
+    "baud not on the myactuator line": (
+        ["--family", "myactuator", "--rs485", "--baud", "9600"],
+        ["--baud 9600", "2500000"],
+    ),
+    "lk has no rs485": (["--family", "lk", "--rs485"], ["--rs485", "--slcan"]),
+    # the id range, per family, first id and last
+    "too many myactuator motors": (["--family", "myactuator", "--motors", "40"], ["--motors 40", "1..32"]),
+    "last lk id past 32": (
+        ["--family", "lk", "--first-id", "30", "--motors", "4"],
+        ["--first-id 30 --motors 4", "30..33", "1..32"],
+    ),
+    "lk id 0": (["--family", "lk", "--first-id", "0"], ["--first-id 0", "1..32"]),
+    "hollow id past 100": (["--family", "hollow", "--first-id", "101"], ["--first-id 101", "0..100"]),
+    "hollow motors past 100": (
+        ["--family", "hollow", "--first-id", "0", "--motors", "102"],
+        ["--motors 102", "0..100"],
+    ),
+    "hollow modbus broadcast address": (
+        ["--family", "hollow", "--rs485", "--modbus", "--first-id", "0"],
+        ["--first-id 0", "--modbus", "1..100"],
+    ),
+    "no motors": (["--family", "hollow", "--motors", "0"], ["--motors 0"]),
+    "negative motors": (["--family", "lk", "--motors", "-3"], ["--motors -3"]),
+    # contradictory flags
+    "slcan and rs485": (["--family", "myactuator", "--slcan", "--rs485"], ["--rs485", "--slcan"]),
+    "baud without rs485": (["--family", "myactuator", "--baud", "1000000"], ["--baud", "--rs485"]),
+    "baud on the hollow converter": (
+        ["--family", "hollow", "--rs485", "--baud", "1000000"],
+        ["--baud", "converter"],
+    ),
+    "modbus without rs485": (["--family", "hollow", "--modbus"], ["--modbus", "--rs485"]),
+    "modbus on myactuator": (["--family", "myactuator", "--rs485", "--modbus"], ["--modbus", "myactuator"]),
+    "fd with rs485": (["--family", "hollow", "--rs485", "--fd"], ["--fd", "--rs485"]),
+    "fd on lk": (["--family", "lk", "--fd"], ["--fd", "lk"]),
+    # what argparse itself refuses is one line too
+    "unknown family": (["--family", "bogus"], ["--family", "bogus"]),
+    "no family": (["--motors", "2"], ["--family"]),
+    "not a number": (["--family", "hollow", "--baud", "fast"], ["--baud", "fast"]),
+}
+
+
+@pytest.mark.parametrize("args, naming", list(REFUSED.values()), ids=list(REFUSED))
+def test_bad_arguments_exit_2_with_one_line(args: list[str], naming: list[str]) -> None:
+    assert_refused(run_simulator(args), *naming)
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["--family", "lk", "--revision", "v2.35"],  # as the family's revision() reads it
+        ["--family", "myactuator", "--revision", "v4_3", "--first-id", "29", "--motors", "4"],
+        ["--family", "hollow", "--revision", "ho_series", "--first-id", "0", "--motors", "101"],
+        ["--family", "hollow", "--rs485", "--modbus", "--first-id", "100"],
+        ["--family", "myactuator", "--rs485", "--baud", "2500000"],
+    ],
+    ids=["lk-v2.35", "myactuator-ids-29-32", "hollow-ids-0-100", "hollow-modbus-100", "myactuator-2.5M"],
+)
+def test_arguments_at_the_limits_are_served(simulator: Start, args: list[str]) -> None:
+    assert simulator(args).startswith("/dev/")

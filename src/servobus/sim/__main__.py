@@ -12,6 +12,9 @@ interrupted (Ctrl-C)::
 
 ``--slcan`` presents a USB-CAN adapter speaking SLCAN (python-can: ``interface="slcan"``);
 ``--rs485`` presents the family's RS485 line. ``--link PATH`` also creates a stable symlink.
+
+Every argument is checked before anything is opened: a bad one, or flags that contradict each
+other, print one line (``servobus.sim: error: ...``) to stderr and exit with status 2.
 """
 
 from __future__ import annotations
@@ -22,11 +25,26 @@ import contextlib
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import NoReturn
 
+from servobus.protocols import get_family
 from servobus.sim.attach import serve_rs485, serve_slcan
 from servobus.sim.device import Device, SerialDevice
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.pty import PtyPort
+
+ERROR_PREFIX = "servobus.sim: error: "
+EXIT_USAGE = 2
+
+#: Motor ids each family's manuals allow (myactuator and lk: 1..32; hollow: 0..100, hollow.md §2.4).
+MOTOR_IDS: dict[str, range] = {"hollow": range(0, 101), "lk": range(1, 33), "myactuator": range(1, 33)}
+#: The MyActuator RS485 rates (myactuator-v4.md §1.2); the manuals name no default, 1 Mbit/s here.
+MYACTUATOR_BAUDS = (115_200, 500_000, 1_000_000, 1_500_000, 2_500_000)
+MYACTUATOR_DEFAULT_BAUD = 1_000_000
+
+
+class UsageError(Exception):
+    """An argument the simulator refuses; the message is the one line the user sees."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -51,29 +69,25 @@ def _hollow(args: argparse.Namespace) -> Setup:
 
 
 def _lk(args: argparse.Namespace) -> Setup:
-    from servobus.protocols.lk import LkModel, Revision
+    from servobus.protocols.lk import LkModel
     from servobus.sim.devices.lk import LkMotor
 
-    if args.rs485:
-        raise SystemExit("lk: neither LK manual defines an RS485 framing (lk-v2.md §1.3); use --slcan")
-    model = LkModel(revision=Revision[args.revision or "V2_36"])
+    model = LkModel(revision=args.revision)
     return Setup(
         can_devices=[LkMotor(i, model=model) for i in range(args.first_id, args.first_id + args.motors)]
     )
 
 
 def _myactuator(args: argparse.Namespace) -> Setup:
-    from servobus.protocols.myactuator import Revision
     from servobus.sim.devices.myactuator import MyActuatorMotor
     from servobus.sim.devices.myactuator_rs485 import MyActuatorRs485Motor
 
-    revision = Revision[args.revision or "V4_4"]
     motors = [
-        MyActuatorMotor(i, revision=revision) for i in range(args.first_id, args.first_id + args.motors)
+        MyActuatorMotor(i, revision=args.revision) for i in range(args.first_id, args.first_id + args.motors)
     ]
     if args.rs485:
-        # the manuals list 115200 .. 2.5 Mbit/s and name no default (spec §1.2): 1 Mbit/s here
-        return Setup(serial_devices=[MyActuatorRs485Motor(m) for m in motors], baud=1_000_000)
+        baud = args.baud or MYACTUATOR_DEFAULT_BAUD
+        return Setup(serial_devices=[MyActuatorRs485Motor(m) for m in motors], baud=baud)
     return Setup(can_devices=motors)
 
 
@@ -84,51 +98,137 @@ FAMILIES: dict[str, Callable[[argparse.Namespace], Setup]] = {
 }
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse, but an error is one line on stderr (no usage block) and exit status 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_USAGE, f"{ERROR_PREFIX}{message}\n")
+
+
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="python -m servobus.sim", description=__doc__.split("\n\n")[0])
+    """Parse and check ``argv``; on a bad argument print one line and exit 2 (``SystemExit(2)``).
+
+    ``args.revision`` comes back as the family's revision enum member (the default filled in).
+    """
+    parser = _Parser(prog="python -m servobus.sim", description=__doc__.split("\n\n")[0])
     parser.add_argument("--family", choices=sorted(FAMILIES), required=True)
     parser.add_argument("--motors", type=int, default=1, help="how many motors (default 1)")
     parser.add_argument("--first-id", type=int, default=1, help="id of the first motor (default 1)")
     medium = parser.add_mutually_exclusive_group()
     medium.add_argument("--slcan", action="store_true", help="a simulated SLCAN USB-CAN adapter (default)")
     medium.add_argument("--rs485", action="store_true", help="the family's RS485 line")
-    parser.add_argument("--baud", type=int, help="RS485 baud rate (default: the family's)")
+    parser.add_argument("--baud", type=int, help="RS485 baud rate (myactuator; default 1000000)")
     parser.add_argument("--revision", help="protocol revision, e.g. V2_35 (default: the family's newest)")
-    parser.add_argument("--fd", action="store_true", help="CAN FD motors (hollow)")
+    parser.add_argument("--fd", action="store_true", help="CAN FD motors (hollow, over SLCAN)")
     parser.add_argument("--modbus", action="store_true", help="hollow converter in Modbus RTU mode")
     parser.add_argument("--link", help="also create this symlink to the pty")
     args = parser.parse_args(argv)
-    if not 1 <= args.motors <= 32:
-        parser.error(f"--motors {args.motors} is outside 1..32")
+    try:
+        check_args(args)
+    except UsageError as exc:
+        parser.error(str(exc))
     return args
 
 
-async def serve(args: argparse.Namespace, ready: Callable[[str], None]) -> None:
-    """Build the devices, open the pty, report its path through ``ready`` and serve until cancelled."""
-    setup = FAMILIES[args.family](args)
+def check_args(args: argparse.Namespace) -> None:
+    """Refuse what cannot be served, before anything is opened; fills in ``args.revision``.
+
+    Raises:
+        UsageError: a bad value or contradictory flags (the message names the argument).
+    """
+    family = args.family
+    # the medium first: the flags that only make sense on one of them
+    if args.rs485 and family == "lk":
+        raise UsageError("--rs485: neither LK manual defines an RS485 framing (lk-v2.md §1.3); use --slcan")
+    if args.modbus and family != "hollow":
+        raise UsageError(f"--modbus: only the hollow converter speaks Modbus RTU, not {family}")
+    if args.modbus and not args.rs485:
+        raise UsageError("--modbus: the hollow converter's RS485 mode; it needs --rs485")
+    if args.fd and family != "hollow":
+        raise UsageError(f"--fd: only hollow motors speak CAN FD, not {family}")
+    if args.fd and args.rs485:
+        raise UsageError("--fd: behind --rs485 the hollow converter always talks CAN FD; drop --fd")
+    if args.baud is not None:
+        if not args.rs485:
+            raise UsageError(f"--baud {args.baud}: the rate of an RS485 line; it needs --rs485")
+        if family == "hollow":
+            raise UsageError(
+                f"--baud {args.baud}: the hollow converter fixes its own rate "
+                "(1000000 transparent, 19200 with --modbus); drop --baud"
+            )
+        if args.baud not in MYACTUATOR_BAUDS:
+            rates = ", ".join(str(b) for b in MYACTUATOR_BAUDS)
+            raise UsageError(f"--baud {args.baud}: the {family} RS485 line runs at one of {rates}")
+    # the motors
+    if args.motors < 1:
+        raise UsageError(f"--motors {args.motors}: need at least 1 motor")
+    ids = MOTOR_IDS[family]
+    if args.modbus:
+        ids = range(1, ids.stop)  # hollow.md §9.5: Modbus address 0 is the broadcast, never answered
+    last = args.first_id + args.motors - 1
+    if args.first_id not in ids or last not in ids:
+        given = f"--first-id {args.first_id}"
+        if args.motors > 1:
+            given += f" --motors {args.motors}: ids {args.first_id}..{last}, but"
+        else:
+            given += ":"
+        rule = " (Modbus address 0 is the broadcast)" if args.modbus else ""
+        with_modbus = " with --modbus" if args.modbus else ""
+        raise UsageError(f"{given} {family} motor ids{with_modbus} are {ids.start}..{ids.stop - 1}{rule}")
+    # the revision: the family's own parser, case-insensitive ("v2.35", "V2_35")
+    protocol = get_family(family)
+    if args.revision is None:
+        args.revision = protocol.default_revision
+    else:
+        try:
+            args.revision = protocol.revision(args.revision)
+        except ValueError as exc:
+            raise UsageError(f"--revision {args.revision}: {exc}") from None
+
+
+def build(args: argparse.Namespace) -> Setup:
+    """The devices ``args`` (checked by :func:`parse_args`) describe; nothing is opened yet.
+
+    Raises:
+        UsageError: a device refused its settings (a check above missed a rule).
+    """
+    try:
+        return FAMILIES[args.family](args)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+async def serve(setup: Setup, port: PtyPort) -> None:
+    """Serve ``setup``'s devices on ``port`` until cancelled."""
+    if setup.serial_devices:
+        await serve_rs485(setup.serial_devices, port, baud=setup.baud)
+    else:
+        await serve_slcan(SimCanNetwork(setup.can_devices), port)
+
+
+async def run(args: argparse.Namespace, setup: Setup) -> None:
+    """Open the pty (and ``args.link``), print what a host should open, serve until cancelled."""
     port = PtyPort(args.link)
     try:
-        ready(port.name)
-        if setup.serial_devices:
-            await serve_rs485(setup.serial_devices, port, baud=args.baud or setup.baud)
-        else:
-            await serve_slcan(SimCanNetwork(setup.can_devices), port)
+        print(port.name, flush=True)
+        kind = "RS485 line" if args.rs485 else "SLCAN adapter"
+        print(
+            f"{args.motors} simulated {args.family} motor(s) behind a {kind}; Ctrl-C stops", file=sys.stderr
+        )
+        await serve(setup, port)
     finally:
         port.close()
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
-
-    def ready(path: str) -> None:
-        print(path, flush=True)
-        kind = "RS485 line" if args.rs485 else "SLCAN adapter"
-        print(
-            f"{args.motors} simulated {args.family} motor(s) behind a {kind}; Ctrl-C stops", file=sys.stderr
-        )
-
-    with contextlib.suppress(KeyboardInterrupt):
-        asyncio.run(serve(args, ready))
+    try:
+        setup = build(args)
+        with contextlib.suppress(KeyboardInterrupt):
+            asyncio.run(run(args, setup))
+    except UsageError as exc:
+        print(f"{ERROR_PREFIX}{exc}", file=sys.stderr)
+        return EXIT_USAGE
     return 0
 
 
