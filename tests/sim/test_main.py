@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import signal
+import stat
 import subprocess
 import sys
 from collections.abc import Callable, Iterator, Sequence
@@ -176,3 +179,75 @@ def test_bad_arguments_exit_2_with_one_line(args: list[str], naming: list[str]) 
 )
 def test_arguments_at_the_limits_are_served(simulator: Start, args: list[str]) -> None:
     assert simulator(args).startswith("/dev/")
+
+
+def test_link_never_overwrites_an_existing_file(tmp_path: Path) -> None:
+    notes = tmp_path / "notes.txt"
+    notes.write_text("my notes\n")
+    notes.chmod(0o640)
+    result = run_simulator(["--family", "hollow", "--link", "notes.txt"], cwd=tmp_path)
+    assert_refused(result, "--link notes.txt", "already exists")
+    assert not notes.is_symlink() and notes.read_text() == "my notes\n"
+    assert stat.S_IMODE(notes.stat().st_mode) == 0o640
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]  # no .new or other leftovers
+
+
+def test_link_never_replaces_an_existing_symlink(tmp_path: Path) -> None:
+    link = tmp_path / "motor"
+    link.symlink_to("/dev/null")
+    assert_refused(run_simulator(["--family", "lk", "--link", str(link)]), f"--link {link}", "/dev/null")
+    assert os.readlink(link) == "/dev/null"
+
+
+@pytest.mark.parametrize("folder", ["missing", "file"])
+def test_link_in_a_missing_folder_is_refused(tmp_path: Path, folder: str) -> None:
+    (tmp_path / "file").write_text("")
+    link = tmp_path / folder / "motor"
+    assert_refused(run_simulator(["--family", "myactuator", "--link", str(link)]), f"--link {link}")
+    assert not (tmp_path / "missing").exists() and (tmp_path / "file").read_text() == ""
+
+
+def start_linked(link: Path) -> subprocess.Popen[str]:
+    process = subprocess.Popen(
+        [sys.executable, "-m", "servobus.sim", "--family", "hollow", "--link", str(link)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    assert process.stdout is not None
+    assert process.stdout.readline().strip() == str(link)
+    return process
+
+
+@pytest.mark.parametrize("stop", [signal.SIGTERM, signal.SIGINT, signal.SIGHUP], ids=["TERM", "INT", "HUP"])
+def test_link_is_created_and_removed_on_exit(tmp_path: Path, stop: signal.Signals) -> None:
+    link = tmp_path / "motor"
+    process = start_linked(link)
+    try:
+        assert os.readlink(link).startswith("/dev/pts/")
+        bus = can.Bus(interface="slcan", channel=str(link), bitrate=1_000_000, sleep_after_open=0)
+        bus.shutdown()
+    finally:
+        process.send_signal(stop)
+        assert process.wait(timeout=10) == 0
+    assert not os.path.lexists(link)
+
+
+@pytest.mark.parametrize("replacement", ["symlink", "file"])
+def test_link_replaced_meanwhile_is_left_alone(tmp_path: Path, replacement: str) -> None:
+    link = tmp_path / "motor"
+    process = start_linked(link)
+    try:
+        new = tmp_path / "motor.other"
+        if replacement == "symlink":
+            new.symlink_to("/dev/null")
+        else:
+            new.write_text("someone else's")
+        new.replace(link)
+    finally:
+        process.terminate()
+        assert process.wait(timeout=10) == 0
+    if replacement == "symlink":
+        assert os.readlink(link) == "/dev/null"
+    else:
+        assert link.read_text() == "someone else's"

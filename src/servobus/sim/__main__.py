@@ -1,7 +1,7 @@
 """``python -m servobus.sim``: simulated motors on a pseudo-terminal, for any tool to talk to.
 
 Prints the device path a host should open on its first line of output, then serves until
-interrupted (Ctrl-C)::
+interrupted (Ctrl-C, SIGTERM or SIGHUP)::
 
     python -m servobus.sim --family myactuator --motors 4 --slcan
     python -m servobus.sim --family myactuator --motors 4 --rs485 --baud 1000000
@@ -11,7 +11,8 @@ interrupted (Ctrl-C)::
     python -m servobus.sim --family lk --motors 8 --revision V2_35
 
 ``--slcan`` presents a USB-CAN adapter speaking SLCAN (python-can: ``interface="slcan"``);
-``--rs485`` presents the family's RS485 line. ``--link PATH`` also creates a stable symlink.
+``--rs485`` presents the family's RS485 line. ``--link PATH`` also creates a symlink to the pty at a
+path that must not exist yet; it is removed on exit if it still points at this pty.
 
 Every argument is checked before anything is opened: a bad one, or flags that contradict each
 other, print one line (``servobus.sim: error: ...``) to stderr and exit with status 2.
@@ -22,9 +23,12 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import os
+import signal
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import NoReturn
 
 from servobus.protocols import get_family
@@ -121,7 +125,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--revision", help="protocol revision, e.g. V2_35 (default: the family's newest)")
     parser.add_argument("--fd", action="store_true", help="CAN FD motors (hollow, over SLCAN)")
     parser.add_argument("--modbus", action="store_true", help="hollow converter in Modbus RTU mode")
-    parser.add_argument("--link", help="also create this symlink to the pty")
+    parser.add_argument("--link", help="also create this symlink to the pty (the path must not exist)")
     args = parser.parse_args(argv)
     try:
         check_args(args)
@@ -184,6 +188,26 @@ def check_args(args: argparse.Namespace) -> None:
             args.revision = protocol.revision(args.revision)
         except ValueError as exc:
             raise UsageError(f"--revision {args.revision}: {exc}") from None
+    if args.link is not None:
+        _check_link(args.link)
+
+
+def _check_link(text: str) -> None:
+    link = Path(text)
+    if os.path.lexists(link):
+        if link.is_symlink():
+            what = f"a symlink to {os.readlink(link)}"
+        elif link.is_dir():
+            what = "a folder"
+        else:
+            what = "a file"
+        raise UsageError(
+            f"--link {text}: already exists ({what}); the simulator replaces nothing, choose a free path"
+        )
+    folder = link.parent
+    if not folder.is_dir():
+        problem = f"{folder} is not a folder" if os.path.lexists(folder) else f"no folder {folder}"
+        raise UsageError(f"--link {text}: {problem}")
 
 
 def build(args: argparse.Namespace) -> Setup:
@@ -198,6 +222,27 @@ def build(args: argparse.Namespace) -> Setup:
         raise UsageError(str(exc)) from None
 
 
+def make_link(link: Path, target: str) -> None:
+    """Create the symlink ``link`` -> ``target``; never replaces anything (the create is exclusive).
+
+    Raises:
+        UsageError: ``link`` appeared meanwhile, or the folder refused the symlink.
+    """
+    try:
+        os.symlink(target, link)
+    except FileExistsError:
+        raise UsageError(f"--link {link}: already exists; the simulator replaces nothing") from None
+    except OSError as exc:
+        raise UsageError(f"--link {link}: cannot create it: {exc.strerror}") from None
+
+
+def remove_link(link: Path, target: str) -> None:
+    """Remove ``link`` only if it is still the symlink to ``target`` this process made."""
+    with contextlib.suppress(OSError):  # gone or unreadable: someone else's now, leave it
+        if os.readlink(link) == target:
+            link.unlink()
+
+
 async def serve(setup: Setup, port: PtyPort) -> None:
     """Serve ``setup``'s devices on ``port`` until cancelled."""
     if setup.serial_devices:
@@ -207,17 +252,47 @@ async def serve(setup: Setup, port: PtyPort) -> None:
 
 
 async def run(args: argparse.Namespace, setup: Setup) -> None:
-    """Open the pty (and ``args.link``), print what a host should open, serve until cancelled."""
-    port = PtyPort(args.link)
+    """Open the pty (and ``args.link``), print what a host should open, serve until stopped.
+
+    SIGTERM and SIGHUP stop it as Ctrl-C does: the pty is closed and the link removed, if it still
+    points at this pty. The signal handlers are in place before the path is printed, so a caller that
+    stops the simulator as soon as it has read the path never leaves a link behind.
+
+    Raises:
+        UsageError: the link could not be created (it appeared after the checks, or the folder refused).
+    """
+    loop = asyncio.get_running_loop()
+    task = asyncio.current_task()
+    assert task is not None
+    signalled: list[int] = []
+
+    def stop(signum: int) -> None:
+        signalled.append(signum)
+        task.cancel()
+
+    for signum in (signal.SIGTERM, signal.SIGHUP):
+        loop.add_signal_handler(signum, stop, signum)
+    port = PtyPort()
+    link = Path(args.link) if args.link is not None else None
+    made_link = False
     try:
-        print(port.name, flush=True)
+        if link is not None:
+            make_link(link, port.path)
+            made_link = True
+        print(port.path if link is None else link, flush=True)
         kind = "RS485 line" if args.rs485 else "SLCAN adapter"
         print(
             f"{args.motors} simulated {args.family} motor(s) behind a {kind}; Ctrl-C stops", file=sys.stderr
         )
         await serve(setup, port)
+    except asyncio.CancelledError:
+        if not signalled:
+            raise
+        task.uncancel()
     finally:
         port.close()
+        if made_link and link is not None:
+            remove_link(link, port.path)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
