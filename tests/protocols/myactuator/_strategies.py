@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 from servobus.protocols import Message
 from servobus.protocols import myactuator as ma
 from servobus.protocols._fields import IntField, ScaledField
+from servobus.protocols._special import SpecialZero
 from servobus.protocols.myactuator._layout import (
     AsciiField,
     BoolField,
@@ -41,6 +42,9 @@ def float32(value: float) -> float:
 
 def field_strategy(spec: Any) -> st.SearchStrategy[Any]:
     """Any valid value of one field."""
+    if isinstance(spec, SpecialZero):  # the explicit None, or a number off the special code
+        numbers = field_strategy(spec.inner).filter(lambda v: spec.code_of(v) != spec.raw)
+        return st.one_of(st.none(), numbers) if spec.explicit else numbers
     if isinstance(spec, ScaledField):
         lo, hi = spec.limits
         return st.floats(min_value=lo, max_value=hi, allow_nan=False)
@@ -73,6 +77,10 @@ def _maybe_enum(enum: type[IntEnum], code: int) -> IntEnum | int:
 
 def minimal_value(spec: Any) -> Any:
     """A valid value of one field, chosen without randomness (the low end of its range)."""
+    if isinstance(spec, SpecialZero):
+        if spec.explicit:
+            return None
+        return spec.raw + 1 if isinstance(spec.inner, IntField) else (spec.raw + 1) * spec.resolution
     if isinstance(spec, ScaledField | IntField | StepField):
         return spec.limits[0]
     if isinstance(spec, EnumField | OpenEnumField):
@@ -107,6 +115,22 @@ _ACCELERATION = st.one_of(
     st.floats(min_value=0.0, max_value=0.49),  # quantises to 0: "no planning"
     st.floats(min_value=100.0, max_value=60000.0),
 )
+# The 0x43 request asks for "no planning" only with None (issue 19).
+_ACCELERATION_WRITE = st.one_of(st.none(), st.floats(min_value=99.5, max_value=60000.0))
+
+
+def _active_reply() -> st.SearchStrategy[ma.ActiveReply]:
+    # An enabled stream needs an interval of at least one 10 ms step; None only disables.
+    interval = field_strategy(ma.ActiveReply.field_specs()["interval_ms"])
+    return st.booleans().flatmap(
+        lambda enabled: st.builds(
+            ma.ActiveReply,
+            command=st.sampled_from(list(ma.StreamableCommand)),
+            enabled=st.just(enabled),
+            interval_ms=interval.filter(lambda v: v is not None) if enabled else interval,
+        )
+    )
+
 
 scales_strategy = st.one_of(
     st.sampled_from(list(ma.MOTION_SCALES.values())),
@@ -141,7 +165,10 @@ def _motion_reply(scales: ma.MotionScales) -> st.SearchStrategy[ma.MotionReply]:
 
 SPECIAL: dict[type, Callable[[], st.SearchStrategy[Any]]] = {
     ma.FunctionControl: _function_control,
-    ma.WriteAcceleration: lambda: fixed_strategy(ma.WriteAcceleration, acceleration_dps_s=_ACCELERATION),
+    ma.WriteAcceleration: lambda: fixed_strategy(
+        ma.WriteAcceleration, acceleration_dps_s=_ACCELERATION_WRITE
+    ),
+    ma.ActiveReply: _active_reply,
     ma.AccelerationReply: lambda: fixed_strategy(ma.AccelerationReply, acceleration_dps_s=_ACCELERATION),
     ma.CanIdReply: lambda: fixed_strategy(ma.CanIdReply, layout=st.sampled_from(list(ma.CanIdLayout))),
     ma.MotionCommand: lambda: scales_strategy.flatmap(_motion_command),
@@ -177,6 +204,11 @@ def message_classes() -> list[type[Message]]:
 
 def assert_field_quantised(spec: Any, decoded: Any, given: Any, *, field: str) -> None:
     """``decoded`` is ``given`` quantised to the field's resolution."""
+    if isinstance(spec, SpecialZero):
+        if given is None:
+            assert decoded is None, f"{field}: None decoded as {decoded!r}"
+            return
+        spec = spec.inner
     if isinstance(spec, ScaledField | StepField):
         assert_quantised(decoded, given, spec.resolution, field=field)
     elif isinstance(spec, Float32Field):

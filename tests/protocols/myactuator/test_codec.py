@@ -151,12 +151,12 @@ def test_no_command_outside_the_table_and_none_the_spec_calls_undefined() -> Non
         (ma.ReadCanId(), V44, r"0x79 CAN-ID setting exists only in V4\.3 \(revision V4_4 given\)"),
         (ma.ReadSingleTurnEncoder(), V44, "0x90 read single-turn encoder exists only in V4.3"),
         (
-            ma.PositionSpeedFeedforward(angle_deg=0, max_speed_dps=0, feedforward_speed_pct=0),
+            ma.PositionSpeedFeedforward(angle_deg=0, max_speed_dps=None, feedforward_speed_pct=0),
             V43,
             r"0x72 position control with speed feed-forward exists only in V4\.4 \(revision V4_3 given\)",
         ),
         (
-            ma.PositionTorqueFeedforward(angle_deg=0, max_speed_dps=0, feedforward_torque_pct=0),
+            ma.PositionTorqueFeedforward(angle_deg=0, max_speed_dps=None, feedforward_torque_pct=0),
             V43,
             "0x73 position control with torque feed-forward exists only in V4.4",
         ),

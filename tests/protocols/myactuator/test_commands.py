@@ -14,6 +14,7 @@ from servobus.errors import ProtocolError
 from servobus.protocols import Command
 from servobus.protocols import myactuator as ma
 from servobus.protocols._fields import IntField, ScaledField
+from servobus.protocols._special import SpecialZero
 from servobus.protocols.myactuator._layout import (
     AsciiField,
     BoolField,
@@ -63,6 +64,8 @@ def minimal(cls: Any) -> dict[str, Any]:
 
 def _outside(spec: Any) -> list[tuple[Any, str]]:
     """Values just outside a field's range, each with a pattern its ValueError must match."""
+    if isinstance(spec, SpecialZero):
+        return _outside(spec.inner)
     if isinstance(spec, ScaledField):
         lo, hi = spec.limits
         step = spec.resolution
@@ -212,11 +215,17 @@ def test_function_control_decode_refuses_values_its_index_does_not_take() -> Non
 # ---- 0x43 ----
 
 
-def test_acceleration_is_zero_or_100_to_60000() -> None:
-    # §9 item 19: the range is 100..60000 and 0 has a documented meaning; 1..99 are refused.
-    assert ma.WriteAcceleration(index=ma.AccelIndex.SPEED_ACCELERATION, acceleration_dps_s=0).encode() == (
+def test_acceleration_is_none_or_100_to_60000() -> None:
+    # §9 item 19: the range is 100..60000 and 0 has a documented meaning (no planning), asked for
+    # with None only (issue 19); the numbers 0..99 are refused.
+    assert ma.WriteAcceleration(index=ma.AccelIndex.SPEED_ACCELERATION, acceleration_dps_s=None).encode() == (
         bytes.fromhex("43 02 00 00 00 00 00 00")
     )
+    assert ma.WriteAcceleration.decode(bytes.fromhex("43 02 00 00 00 00 00 00")).acceleration_dps_s is None
+    with pytest.raises(ValueError, match=r"acceleration_dps_s=0 encodes to raw 0, which means no planning"):
+        ma.WriteAcceleration(index=ma.AccelIndex.SPEED_ACCELERATION, acceleration_dps_s=0)
+    with pytest.raises(ValueError, match=r"acceleration_dps_s=0.4 rounds .* acceleration_dps_s=None"):
+        ma.WriteAcceleration(index=ma.AccelIndex.SPEED_ACCELERATION, acceleration_dps_s=0.4)
     ma.WriteAcceleration(index=ma.AccelIndex.SPEED_ACCELERATION, acceleration_dps_s=100)
     ma.WriteAcceleration(index=ma.AccelIndex.SPEED_ACCELERATION, acceleration_dps_s=99.5)  # rounds to 100
     with pytest.raises(ValueError, match=r"acceleration_dps_s=50 is outside \[100, 60000\]"):
@@ -237,7 +246,9 @@ def test_single_turn_angle_passes_360_through_unchanged() -> None:
     )
     assert command.encode() == bytes.fromhex("A6 00 F4 01 A0 8C 00 00")
     with pytest.raises(ValueError, match=r"angle_deg=360.01 is outside \[0.0, 360.0\]"):
-        ma.SingleTurnPositionControl(angle_deg=360.01, max_speed_dps=0, direction=ma.SpinDirection.CLOCKWISE)
+        ma.SingleTurnPositionControl(
+            angle_deg=360.01, max_speed_dps=None, direction=ma.SpinDirection.CLOCKWISE
+        )
 
 
 def test_speed_control_torque_limit_defaults_off() -> None:
@@ -246,15 +257,15 @@ def test_speed_control_torque_limit_defaults_off() -> None:
 
 
 def test_feedforward_percentages_are_signed_bytes() -> None:
-    sf = ma.PositionSpeedFeedforward(angle_deg=0, max_speed_dps=0, feedforward_speed_pct=-128)
+    sf = ma.PositionSpeedFeedforward(angle_deg=0, max_speed_dps=None, feedforward_speed_pct=-128)
     assert sf.encode() == bytes.fromhex("72 80 00 00 00 00 00 00")
-    tf = ma.PositionTorqueFeedforward(angle_deg=0, max_speed_dps=0, feedforward_torque_pct=127)
+    tf = ma.PositionTorqueFeedforward(angle_deg=0, max_speed_dps=None, feedforward_torque_pct=127)
     assert tf.encode() == bytes.fromhex("73 7F 00 00 00 00 00 00")
 
 
 @given(st.floats(min_value=-21474836.48, max_value=21474836.47))
 def test_position_angle_quantises_to_a_hundredth_of_a_degree(angle: float) -> None:
-    command = ma.AbsolutePositionControl(angle_deg=angle, max_speed_dps=0)
+    command = ma.AbsolutePositionControl(angle_deg=angle, max_speed_dps=None)
     decoded = ma.AbsolutePositionControl.decode(command.encode())
     assert abs(decoded.angle_deg - angle) <= 0.005 + 1e-9 * max(1.0, abs(angle))
 
@@ -294,6 +305,24 @@ def test_active_reply_interval_is_in_10_ms_steps_and_never_streams_0x9e() -> Non
         ma.ActiveReply(command=0x9E, enabled=True)  # type: ignore[arg-type]
     with pytest.raises(ProtocolError, match="enabled=2 is not 0 or 1"):
         ma.ActiveReply.decode(bytes.fromhex("B6 60 02 01 00 00 00 00"))
+
+
+def test_active_reply_interval_0_is_only_for_disabling() -> None:
+    # §4.36: interval 0 is undefined for a stream; 3 ms rounds to it on the 10 ms field (issue 19).
+    with pytest.raises(
+        ValueError, match=r"interval_ms=3 rounds .* step of 10 ms\) to raw 0, which is not defined"
+    ):
+        ma.ActiveReply(command=ma.StreamableCommand.STATUS_2, enabled=True, interval_ms=3)
+    with pytest.raises(ValueError, match=r"interval_ms=None sends interval 0"):
+        ma.ActiveReply(command=ma.StreamableCommand.STATUS_2, enabled=True)
+    off = ma.ActiveReply(command=ma.StreamableCommand.STATUS_2, enabled=False)
+    assert off.encode() == bytes.fromhex("B6 9C 00 00 00 00 00 00")
+    assert ma.ActiveReply.decode(off.encode()) == off
+    assert (
+        ma.ActiveReply(command=ma.StreamableCommand.STATUS_2, enabled=True, interval_ms=5).interval_code == 1
+    )
+    with pytest.raises(ProtocolError, match="interval_ms=None sends interval 0"):
+        ma.ActiveReply.decode(bytes.fromhex("B6 9C 01 00 00 00 00 00"))
 
 
 def test_the_base_layout_writes_constants_before_fields() -> None:

@@ -83,7 +83,9 @@ def test_frame_checks() -> None:
 
 def test_what_has_no_rs485_standard_frame() -> None:
     with pytest.raises(ValueError, match="0xB6 active reply is CAN only"):
-        encode_rs485(1, ma.ActiveReply(command=ma.StreamableCommand.ENCODER_POSITION, enabled=True))
+        encode_rs485(
+            1, ma.ActiveReply(command=ma.StreamableCommand.ENCODER_POSITION, enabled=True, interval_ms=10)
+        )
     motion = ma.MotionCommand(position_rad=0, velocity_rad_s=0, kp=0, kd=0, torque_ff_nm=0)
     with pytest.raises(ValueError, match="no RS485 standard frame"):
         encode_rs485(1, motion)

@@ -24,6 +24,7 @@ import pytest
 from _spec import hexbytes, load_vectors
 from servobus.errors import ProtocolError
 from servobus.protocols import myactuator as ma
+from servobus.protocols._special import SpecialZero
 from servobus.protocols.myactuator import codec as ma_codec
 from servobus.protocols.myactuator.codec import arbitration_id, encode_request
 from servobus.protocols.myactuator.ids import BROADCAST_ID, ID_SETTING_ID, motor_id_from_reply_id
@@ -64,7 +65,7 @@ REQUEST_OF = {
     if v["direction"] == "request"
 }
 
-ZERO_B3 = "§9.8: the all-zero reply is accepted: Echo(SetCommTimeout(timeout_ms=0))"
+ZERO_B3 = "§9.8: the all-zero reply is accepted: Echo(SetCommTimeout(timeout_ms=None))"
 #: The vectors flagged uncertain, and the resolution these tests apply (spec §9).
 UNCERTAIN: dict[str, str] = {
     "000-2.2.5-ex1-0x31-can-reply-0x241": "§9.2: Data[1] lost; probable_data 31 01 00 00 00 00 C0 3F (echo)",
@@ -253,7 +254,20 @@ def stated_values(v: dict[str, Any], cls: type) -> dict[str, Any]:
         assert name in FIELDS, f"{key(v)}: no parser for decoded key {name!r}"
         attribute, parse = FIELDS[name]
         values[RENAMED.get((cls, name), attribute)] = parse(text)
-    return values
+    return {name: explicit(cls, name, value) for name, value in values.items()}
+
+
+def explicit(cls: type, name: str, value: Any) -> Any:
+    """A stated raw special value (maxTorque 0, timeout 0) as the explicit None it decodes to."""
+    spec = cls.field_specs().get(name) if hasattr(cls, "field_specs") else None
+    if (
+        isinstance(spec, SpecialZero)
+        and spec.explicit
+        and value is not None
+        and spec.code_of(value) == spec.raw
+    ):
+        return None
+    return value
 
 
 def request_class(v: dict[str, Any]) -> type:
@@ -333,7 +347,7 @@ def test_reply_vector(v: dict[str, Any]) -> None:
         request = REQUEST_OF[(v["source"], v["section"], v["example"], v["transport"])]
         expected = ma.Echo(command=request_class(request)(**stated_values(request, request_class(request))))
         if "printed_reply" in v["decoded"]:  # §9.8: the all-zero reply printed for a 1000 ms request
-            expected = ma.Echo(command=ma.SetCommTimeout(timeout_ms=0))
+            expected = ma.Echo(command=ma.SetCommTimeout.protection_off())
             assert "all-zero" in v["decoded"]["printed_reply"]
         assert reply == expected
         return

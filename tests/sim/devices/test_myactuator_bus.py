@@ -82,7 +82,7 @@ def test_comm_timeout_zero_keeps_executing_the_last_command() -> None:
     motor = MyActuatorMotor(1)
     network = SimCanNetwork([motor])
     _send(network, motor, ma.SetCommTimeout(timeout_ms=50), 0.0)
-    _send(network, motor, ma.SetCommTimeout(timeout_ms=0), 0.01)
+    _send(network, motor, ma.SetCommTimeout.protection_off(), 0.01)
     _send(network, motor, ma.SpeedControl(speed_dps=50.0), 0.02)
     network.advance(2.0)
     motor.advance(2.0)

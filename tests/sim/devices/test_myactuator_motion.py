@@ -48,7 +48,7 @@ def test_speed_command_torque_limit_form_caps_the_current() -> None:
     ask(motor, ma.SpeedControl(speed_dps=1000.0, max_torque_pct=20), 0.0, ma.StatusReply)
     assert motor.plant.control == SpeedControl(speed_dps=1000.0, max_current_a=2.0)
     assert max(abs(status(motor, k * 0.002).current_a) for k in range(1, 50)) <= 2.0
-    ask(motor, ma.SpeedControl(speed_dps=10.0, max_torque_pct=0), 0.2, ma.StatusReply)
+    ask(motor, ma.SpeedControl(speed_dps=10.0, max_torque_pct=None), 0.2, ma.StatusReply)
     assert motor.plant.control == SpeedControl(speed_dps=10.0, max_current_a=None)
     ask(
         motor, ma.SpeedControl(speed_dps=10.0, max_torque_pct=255), 0.3, ma.StatusReply

@@ -20,6 +20,7 @@ from typing import Any
 
 from servobus.protocols._fast import Slow, maker
 from servobus.protocols._fields import IntField, ScaledField, _int_limits, round_half_away
+from servobus.protocols._special import SpecialZero
 from servobus.protocols.myactuator._layout import (
     PAYLOAD_SIZE,
     BoolField,
@@ -46,6 +47,19 @@ Convert = Callable[[int], Any]
 def _converter(spec: Any) -> tuple[str, Convert | None, tuple[float, float] | None] | None:
     """(struct code, conversion or None, range to check or None) for one field, or None if unknown."""
     kind = type(spec)
+    if kind is SpecialZero:
+        fmt = _FORMATS.get((spec.size, spec.signed))
+        if fmt is None:
+            return None
+        from_code = spec.from_code
+
+        def special(code: int) -> Any:
+            try:
+                return from_code(code)
+            except ValueError:  # an undefined raw value: the full decoder reports it
+                raise Slow from None
+
+        return fmt, special, None
     if kind is IntField:
         fmt = _FORMATS.get((spec.size, spec.signed))
         full = _int_limits(spec.size, spec.signed)
@@ -184,6 +198,13 @@ def motion_reply_decoder(scales: MotionScales, motor_id: int) -> Callable[[bytes
 def _encoder_step(spec: Any) -> tuple[str, Callable[[Any], int]] | None:
     """(struct code, value -> code) for one field of an already validated message, or None."""
     kind = type(spec)
+    if kind is SpecialZero:
+        inner = _encoder_step(spec.inner)
+        if inner is None:
+            return None
+        code, convert = inner
+        raw = spec.raw
+        return code, lambda value: raw if value is None else convert(value)
     fmt = _FORMATS.get((spec.size, getattr(spec, "signed", False)))
     if fmt is None:
         return None

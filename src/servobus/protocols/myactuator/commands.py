@@ -17,6 +17,7 @@ from typing import ClassVar, Self
 from servobus.errors import ProtocolError
 from servobus.protocols._fields import IntField, ScaledField, check_range, round_half_away
 from servobus.protocols._message import Command
+from servobus.protocols._special import SpecialZero
 from servobus.protocols.myactuator._layout import (
     BoolField,
     EnumField,
@@ -222,8 +223,15 @@ class WritePidRom(MyActuatorCommand):
 
 _ACCEL_INDEX = EnumField("index", 1, AccelIndex)
 # §9 item 19: sent as uint32; the manuals' range is 100..60000, and 0 has a documented meaning (0xA2/0xA4
-# "acceleration = 0": no planning), so 0 is accepted too. 1..99 are refused.
-_ACCEL_WRITE = ScaledField("acceleration_dps_s", size=4, signed=False, counts_per_unit=1, lo=0, hi=60000)
+# "acceleration = 0": no planning), asked for with None (issue 19). 0..99 as numbers are refused.
+_ACCEL_WRITE = SpecialZero(
+    ScaledField("acceleration_dps_s", size=4, signed=False, counts_per_unit=1, lo=0, hi=60000),
+    meaning=(
+        "means no planning: position tracks the target directly, speed is limited by the current "
+        "(§4.5, §4.21)"
+    ),
+    unit="dps/s",
+)
 ACCELERATION_MIN_DPS_S = 100
 
 
@@ -239,20 +247,24 @@ class ReadAcceleration(MyActuatorCommand):
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class WriteAcceleration(MyActuatorCommand):
-    """0x43 write one acceleration (1 dps/s) to RAM and ROM: 0 or 100..60000. Reply: echo."""
+    """0x43 write one acceleration (1 dps/s) to RAM and ROM: 100..60000, or ``None`` for 0 on the wire
+    (no planning: direct tracking, §4.21). The number 0 is refused: ask for "no planning" with None.
+    Reply: echo."""
 
     CODE: ClassVar[int] = 0x43
     TITLE: ClassVar[str] = "write acceleration"
     FIELDS = ((1, _ACCEL_INDEX), (4, _ACCEL_WRITE))
     index: AccelIndex
-    acceleration_dps_s: float
+    acceleration_dps_s: float | None
 
     def __post_init__(self) -> None:
         Fixed.__post_init__(self)
+        if self.acceleration_dps_s is None:
+            return
         if 0 < _ACCEL_WRITE.to_code(self.acceleration_dps_s) < ACCELERATION_MIN_DPS_S:
             raise ValueError(
                 f"acceleration_dps_s={self.acceleration_dps_s!r} is outside [{ACCELERATION_MIN_DPS_S}, "
-                f"{_ACCEL_WRITE.limits[1]!r}] (0 is also accepted: no planning)"
+                f"{_ACCEL_WRITE.limits[1]!r}] (acceleration_dps_s=None asks for 0: no planning)"
             )
 
 
@@ -452,16 +464,41 @@ class ReadCanId(MyActuatorCommand):
 
 # ---- 0xB3..0xB6 ----
 
+# §4.33: CanRecvTime_MS 0 = protection disabled; asked for with None only (issue 19).
+_COMM_TIMEOUT = SpecialZero(
+    IntField("timeout_ms", 4),
+    meaning=(
+        "turns communication-interruption protection off: the motor keeps executing the last command (§4.33)"
+    ),
+    unit="ms",
+)
+# §4.36: the interval is 10 ms/LSB; 0 is undefined while streaming. None (sent as 0) only with enabled=False.
+_STREAM_INTERVAL = SpecialZero(
+    StepField("interval_ms", 2, step=10),
+    meaning="is not defined for an enabled stream (§4.36)",
+    unit="ms",
+    how="interval_ms=None with enabled=False (disabling a stream)",
+)
+
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class SetCommTimeout(MyActuatorCommand):
     """0xB3 communication-interruption protection: without traffic for ``timeout_ms`` the motor cuts its
-    output and locks the brake. 0 disables it. Saved in ROM. Reply: echo (or all zero, §9 item 8)."""
+    output and locks the brake. Saved in ROM. Reply: echo (or all zero, §9 item 8).
+
+    ``timeout_ms=None`` (or :meth:`protection_off`) turns the protection off: 0 on the wire, after which
+    the motor keeps executing the last command when communication stops (§4.33). The number 0 is
+    refused, so "0 ms" can never silently mean "no protection"."""
 
     CODE: ClassVar[int] = 0xB3
     TITLE: ClassVar[str] = "communication-interruption protection time"
-    FIELDS = ((4, IntField("timeout_ms", 4)),)
-    timeout_ms: int
+    FIELDS = ((4, _COMM_TIMEOUT),)
+    timeout_ms: int | None
+
+    @classmethod
+    def protection_off(cls) -> Self:
+        """Turn communication-interruption protection off (0 on the wire, §4.33)."""
+        return cls(timeout_ms=None)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -507,6 +544,10 @@ class ReadModelPart(MyActuatorCommand):
 class ActiveReply(MyActuatorCommand):
     """0xB6 active reply (CAN only): stream ``command``'s reply every ``interval_ms`` (10 ms/LSB).
 
+    ``interval_ms`` is rounded to 10 ms half away from zero; one that rounds to 0 (1..4 ms) is refused,
+    because interval 0 is undefined (§4.36). Leave it ``None`` (sent as 0) only to disable a stream
+    (``enabled=False``); an enabled stream needs an interval of at least 5 ms (one 10 ms step).
+
     While any stream is on, the motor stops answering requests (§9 item 18): disable it before relying
     on request/response. The 0xB6 frame itself gets no reply. Not supported on RS485.
     """
@@ -516,13 +557,21 @@ class ActiveReply(MyActuatorCommand):
     FIELDS = (
         (1, EnumField("command", 1, StreamableCommand)),
         (2, BoolField("enabled")),
-        (3, StepField("interval_ms", 2, step=10)),
+        (3, _STREAM_INTERVAL),
     )
     command: StreamableCommand
     enabled: bool
-    interval_ms: int = 0
+    interval_ms: int | None = None
+
+    def __post_init__(self) -> None:
+        Fixed.__post_init__(self)
+        if self.enabled is True and self.interval_ms is None:
+            raise ValueError(
+                "interval_ms=None sends interval 0, which is not defined for an enabled stream (§4.36): "
+                "give the interval (10 ms steps)"
+            )
 
     @property
     def interval_code(self) -> int:
-        """The interval as sent, in 10 ms counts."""
-        return round_half_away(self.interval_ms / 10)
+        """The interval as sent, in 10 ms counts (0 for ``None``)."""
+        return 0 if self.interval_ms is None else round_half_away(self.interval_ms / 10)

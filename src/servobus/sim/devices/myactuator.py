@@ -59,7 +59,8 @@ reply after receiving the command." The simulator reads it literally (spec §9 i
 stream is on, received commands are still executed but never answered (``silenced_by_active_reply``),
 motion commands and broadcasts included. Each streamed command has its own timer of
 ``interval x 10 ms`` (the first frame one interval after the 0xB6 frame; several commands interleave
-by their timers; interval 0 is taken as 10 ms [I]); frames go to 0x240+ID (unstated, §1.1).
+by their timers; an enabled interval 0 is undefined (§4.36) and does not decode, so that frame is
+dropped like any undecodable one); frames go to 0x240+ID (unstated, §1.1).
 
 0xB3 communication-interruption protection: "If the communication is interrupted for more than the
 set time, it will cut off the output [and] brake lock. To run again, you need to establish stable
@@ -525,7 +526,9 @@ class MyActuatorMotor:
             return False
         return True
 
-    def _current_limit(self, pct: int) -> float | None:
+    def _current_limit(self, pct: int | None) -> float | None:
+        if pct is None:  # maxTorque 0: force-limit mode off (§4.20)
+            return None
         limit = pct / 100.0 * self.rated_current_a
         return limit if 0 < limit < self.plant.params.max_current_a else None
 
@@ -592,7 +595,7 @@ class MyActuatorMotor:
             )
             return
         assert isinstance(command, _CONTROL_COMMANDS)
-        max_speed = getattr(command, "max_speed_dps", 0.0) or None  # 0: no limit (§4.21)
+        max_speed = getattr(command, "max_speed_dps", None)  # None (maxSpeed 0): no limit (§4.21)
         limit = None
         if isinstance(command, _POSITION_ABSOLUTE):
             target = self._target(command.angle_deg)
@@ -670,9 +673,10 @@ class MyActuatorMotor:
             if self._rom_ok():
                 rom.pid[command.index] = command.value
         elif isinstance(command, ma.WriteAcceleration):
-            ram.acceleration_dps_s[command.index] = command.acceleration_dps_s
+            accel = 0.0 if command.acceleration_dps_s is None else command.acceleration_dps_s  # None: 0
+            ram.acceleration_dps_s[command.index] = accel
             if self._rom_ok():
-                rom.acceleration_dps_s[command.index] = command.acceleration_dps_s
+                rom.acceleration_dps_s[command.index] = accel
             self._apply_plant()
         elif isinstance(command, ma.WriteEncoderZero):
             if self._rom_ok():  # takes effect after a restart (§4.9)
@@ -684,7 +688,8 @@ class MyActuatorMotor:
             return ma.ZeroOffsetReply(offset_counts=offset)
         elif isinstance(command, ma.SetCommTimeout):
             # ROM, and not in [000]'s "only when disabled" list (§8 item 15).
-            ram.comm_timeout_ms = rom.comm_timeout_ms = command.timeout_ms
+            timeout = 0 if command.timeout_ms is None else command.timeout_ms  # None: protection off
+            ram.comm_timeout_ms = rom.comm_timeout_ms = timeout
         elif isinstance(command, ma.SetCanId):
             rom.motor_id = command.motor_id  # V4.3 only, which has no "only when disabled" rule
         elif isinstance(command, ma.SetBaudRate):
@@ -731,7 +736,7 @@ class MyActuatorMotor:
         if not command.enabled:
             self.streams.pop(command.command, None)
             return
-        interval_s = max(1, command.interval_code) * STREAM_STEP_S  # [I] 0 taken as one step
+        interval_s = command.interval_code * STREAM_STEP_S  # >= 1 step: enabled streams need one
         self.streams[command.command] = Stream(interval_s=interval_s, origin_s=now_s)
 
     def __repr__(self) -> str:
