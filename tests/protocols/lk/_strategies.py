@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 from servobus.protocols import Message, lk
 from servobus.protocols.lk import MotorType, ParamId, PidGains, Revision
 from servobus.protocols.lk.codec import COMMAND_CLASSES
+from servobus.protocols.lk.commands_control import TORQUE_LIMIT
 
 from .._contract import assert_quantised
 
@@ -62,10 +63,14 @@ def torque_control(draw: st.DrawFn) -> lk.TorqueControl:
 def speed_control(draw: st.DrawFn) -> lk.SpeedControl:
     motor_type = draw(st.sampled_from(list(MotorType)))
     speed = draw(floats(INT32[0] / 100, INT32[1] / 100))
+    # A limit of 0 counts is not defined (spec §4.11) and refused.
     if motor_type in AMPS:
-        limit = draw(amps_within(motor_type, -2048, 2048))
+        amps = TORQUE_LIMIT.field(motor_type)
+        assert amps is not None
+        limit = draw(amps_within(motor_type, -2048, 2048).filter(lambda a: amps.to_code(a) != 0))
         return lk.SpeedControl(speed_dps=speed, motor_type=motor_type, current_limit_a=limit)
-    return lk.SpeedControl(speed_dps=speed, motor_type=motor_type, iq_limit_counts=draw(ints(-2048, 2048)))
+    counts = draw(ints(-2048, 2048).filter(bool))
+    return lk.SpeedControl(speed_dps=speed, motor_type=motor_type, iq_limit_counts=counts)
 
 
 @st.composite
@@ -161,7 +166,8 @@ def with_value(
 
 direction = st.sampled_from(list(lk.SpinDirection))
 angle32 = floats(INT32[0] / 100, INT32[1] / 100)
-max_speed = floats(0, 0xFFFF)
+# maxSpeed 0 is asked for only with None (issue 19): numbers that round to it are refused.
+max_speed = st.one_of(st.none(), floats(0.5, 0xFFFF))
 single_turn_v236 = floats(0, (2**32 - 1) / 100)
 single_turn_v235 = floats(0, 359.99)
 fixed = {cls: Case(st.just(cls())) for cls in COMMAND_CLASSES if issubclass(cls, lk.commands.FixedCommand)}

@@ -26,6 +26,7 @@ from typing import Any
 import pytest
 
 from _spec import hexbytes, load_vectors, vector_id
+from servobus.errors import ProtocolError
 from servobus.protocols import Message, lk
 from servobus.protocols.lk import ParamResult, Revision, ids
 from servobus.protocols.lk.codec import REQUESTS, encode_request, reply_frame, request_frame
@@ -132,14 +133,14 @@ def test_decode_conflict_both_readings_of_the_same_count(vector: dict[str, Any])
     assert command.increment_deg == vector["decoded"]["angleIncrement"]["value"]
 
 
-def test_w3_read_as_v236_is_a_zero_torque_limit() -> None:
-    # W3's note: under the V2.36 layout DATA[2..3] is iqControl, which this V2.35 frame sets to 0.
+def test_w3_read_as_v236_is_an_undefined_zero_torque_limit() -> None:
+    # W3's note: under the V2.36 layout DATA[2..3] is iqControl, which this V2.35 frame sets to 0. Neither
+    # manual defines a limit of 0 (spec §4.11), so the V2.36 layout refuses it (issue 19).
     (w3,) = [v for v in VECTORS if v.get("id") == "W3"]
-    as_v236 = lk.decode_request(0x141, hexbytes(w3["data"]), revision=Revision.V2_36)
     expected = w3["decoded"]["if_decoded_as_v2.36_(001)"]
-    assert isinstance(as_v236, lk.SpeedControl)
-    assert as_v236.current_limit_a == expected["iqControl_torque_limit_raw"] == 0
-    assert as_v236.speed_dps * 100 == expected["speedControl_raw"]
+    assert expected["iqControl_torque_limit_raw"] == 0
+    with pytest.raises(ProtocolError, match=r"iqControl 0, which is not defined by the manuals"):
+        lk.decode_request(0x141, hexbytes(w3["data"]), revision=Revision.V2_36)
 
 
 UNCERTAIN = [v for v in VECTORS if v["uncertain"]]

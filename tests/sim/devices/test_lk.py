@@ -504,7 +504,9 @@ def test_v235_parameters_ram_and_rom() -> None:
 def test_unresponsive_motor_acts_but_never_replies() -> None:
     rig = Rig(V236)
     rig.motor.unresponsive = True
-    rig.net.send(request_frame(lk.SpeedControlV235(speed_dps=0.0), motor_id=1, model=LkModel(revision=V235)))
+    # (A V2.35 0xA2 frame would not do here: read as V2.36 its torque limit 0 is undefined and does
+    # not decode, issue 19.)
+    assert rig.ask_all(lk.ReadStatus1(), 1) == []
     assert (
         rig.ask_all(lk.SpeedControl(speed_dps=360.0, motor_type=MotorType.MG, current_limit_a=20.0), 1) == []
     )

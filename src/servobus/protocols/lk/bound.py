@@ -134,7 +134,7 @@ def _fast_encoders(model: LkModel) -> dict[type, Callable[[Any], bytes]]:
         ctl.SpeedControlV235: lambda m: a3(0xA2, round_half_away(m.speed_dps * 100)),
         ctl.MultiTurnPosition: lambda m: a3(0xA3, round_half_away(m.angle_deg * 100)),
         ctl.MultiTurnPositionSpeed: lambda m: a4(
-            0xA4, round_half_away(m.max_speed_dps), round_half_away(m.angle_deg * 100)
+            0xA4, ctl.MAX_SPEED.to_code(m.max_speed_dps), round_half_away(m.angle_deg * 100)
         ),
         ctl.IncrementalPosition: lambda m: a3(0xA7, round_half_away(m.increment_deg * 100)),
     }

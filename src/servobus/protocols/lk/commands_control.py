@@ -17,6 +17,7 @@ from typing import ClassVar, Self
 
 from servobus.errors import ProtocolError
 from servobus.protocols._fields import IntField, ScaledField
+from servobus.protocols._special import SpecialZero
 from servobus.protocols.lk._base import (
     V2_35_ONLY,
     V2_36_ONLY,
@@ -59,7 +60,13 @@ SPEED = ScaledField("speed_dps", size=4, signed=True, counts_per_unit=100)
 ANGLE = ScaledField("angle_deg", size=4, signed=True, counts_per_unit=100)
 INCREMENT = ScaledField("increment_deg", size=4, signed=True, counts_per_unit=100)
 # Spec §4.13/§4.15/§4.17 and A2/A6: maxSpeed uint16, 1 dps/LSB (the text, not [003]'s example label).
-MAX_SPEED = ScaledField("max_speed_dps", size=2, signed=False, counts_per_unit=1)
+# maxSpeed 0 is not defined by the LK manuals (MyActuator's V4 manual, of the same firmware line, reads it
+# as "no limit"): it is sent only when asked for with None, never for 0 or 0.4 dps (issue 19).
+MAX_SPEED = SpecialZero(
+    ScaledField("max_speed_dps", size=2, signed=False, counts_per_unit=1),
+    meaning="is not defined by the LK manuals (MyActuator V4 reads it as no speed limit) (§4.13)",
+    unit="dps",
+)
 # Spec §4.14 D8: single-turn target uint32 on V2.36 (range not stated), uint16 0..35999 on V2.35.
 SINGLE_TURN = ScaledField("angle_deg", size=4, signed=False, counts_per_unit=100)
 SINGLE_TURN_V235 = ScaledField("angle_deg", size=2, signed=False, counts_per_unit=100, lo=0, hi=35999 / 100)
@@ -136,7 +143,8 @@ class SpeedControl(LkCommand):
     Attributes:
         speed_dps: target speed (int32 DATA[4..7], 0.01 dps/LSB); limited by Max Speed.
         motor_type: MF/MG give ``current_limit_a``; MH/MS give ``iq_limit_counts``.
-        current_limit_a: torque-current limit in A (int16 DATA[2..3], ±2048 counts, 0xA1's scale).
+        current_limit_a: torque-current limit in A (int16 DATA[2..3], ±2048 counts, 0xA1's scale);
+            one that encodes to 0 counts is refused (not defined by the manuals, §4.11).
         iq_limit_counts: MH/MS only: the limit as raw counts, -2048..2048.
     """
 
@@ -150,7 +158,13 @@ class SpeedControl(LkCommand):
     def __post_init__(self) -> None:
         SPEED.check(self.speed_dps)
         check_member("motor_type", self.motor_type, MotorType)
-        self._limit_counts()
+        if self._limit_counts() == 0:  # spec §4.11: neither manual says what a limit of 0 does
+            given = self.iq_limit_counts if self.current_limit_a is None else self.current_limit_a
+            name = "iq_limit_counts" if self.current_limit_a is None else "current_limit_a"
+            raise ValueError(
+                f"{name}={given!r} encodes to iqControl 0, which is not defined by the manuals (§4.11): "
+                "it cannot be sent; give a limit of at least one count"
+            )
 
     def _limit_counts(self) -> int:
         return TORQUE_LIMIT.to_counts(
@@ -226,12 +240,13 @@ class MultiTurnPositionSpeed(LkCommand):
 
     Attributes:
         angle_deg: target (int32 DATA[4..7], 0.01 °/LSB).
-        max_speed_dps: speed limit (uint16 DATA[2..3], 1 dps/LSB).
+        max_speed_dps: speed limit (uint16 DATA[2..3], 1 dps/LSB), rounded half away from zero; it
+            must give at least 1. ``None`` sends 0, which the LK manuals do not define.
     """
 
     CODE: ClassVar[int] = 0xA4
     angle_deg: float
-    max_speed_dps: float
+    max_speed_dps: float | None
 
     def __post_init__(self) -> None:
         ANGLE.check(self.angle_deg)
@@ -327,7 +342,8 @@ class SingleTurnPositionSpeed(_SingleTurn):
     Attributes:
         angle_deg: target, 0.01 °/LSB (uint32 DATA[4..7]).
         direction: CLOCKWISE or COUNTER_CLOCKWISE.
-        max_speed_dps: speed limit (uint16 DATA[2..3], 1 dps/LSB).
+        max_speed_dps: speed limit (uint16 DATA[2..3], 1 dps/LSB), rounded half away from zero; it
+            must give at least 1. ``None`` sends 0, which the LK manuals do not define.
     """
 
     CODE: ClassVar[int] = 0xA6
@@ -336,7 +352,7 @@ class SingleTurnPositionSpeed(_SingleTurn):
     _SPEED_LIMIT = True
     angle_deg: float
     direction: SpinDirection
-    max_speed_dps: float
+    max_speed_dps: float | None
 
     def __post_init__(self) -> None:
         SINGLE_TURN.check(self.angle_deg)
@@ -351,7 +367,8 @@ class SingleTurnPositionSpeedV235(_SingleTurn):
     Attributes:
         angle_deg: target, 0.01 °/LSB, 0..359.99.
         direction: CLOCKWISE or COUNTER_CLOCKWISE.
-        max_speed_dps: speed limit (uint16 DATA[2..3], 1 dps/LSB).
+        max_speed_dps: speed limit (uint16 DATA[2..3], 1 dps/LSB), rounded half away from zero; it
+            must give at least 1. ``None`` sends 0, which the LK manuals do not define.
     """
 
     CODE: ClassVar[int] = 0xA6
@@ -360,7 +377,7 @@ class SingleTurnPositionSpeedV235(_SingleTurn):
     _SPEED_LIMIT = True
     angle_deg: float
     direction: SpinDirection
-    max_speed_dps: float
+    max_speed_dps: float | None
 
     def __post_init__(self) -> None:
         SINGLE_TURN_V235.check(self.angle_deg)
@@ -400,12 +417,13 @@ class IncrementalPositionSpeed(LkCommand):
 
     Attributes:
         increment_deg: angleIncrement (int32 DATA[4..7], 0.01 °/LSB); the sign is the direction.
-        max_speed_dps: speed limit (uint16 DATA[2..3], 1 dps/LSB).
+        max_speed_dps: speed limit (uint16 DATA[2..3], 1 dps/LSB), rounded half away from zero; it
+            must give at least 1. ``None`` sends 0, which the LK manuals do not define.
     """
 
     CODE: ClassVar[int] = 0xA8
     increment_deg: float
-    max_speed_dps: float
+    max_speed_dps: float | None
 
     def __post_init__(self) -> None:
         INCREMENT.check(self.increment_deg)

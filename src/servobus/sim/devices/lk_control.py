@@ -89,18 +89,19 @@ def plant_control(command: LkCommand, ctx: MotionContext) -> Control:
         case lk.MultiTurnPosition():
             target, speed = _multi_turn(command.angle_deg, ctx), limits.speed_dps
         case lk.MultiTurnPositionSpeed():
-            target, speed = _multi_turn(command.angle_deg, ctx), command.max_speed_dps
+            target, speed = _multi_turn(command.angle_deg, ctx), _speed_limit(command.max_speed_dps, limits)
         case lk.SingleTurnPosition() | lk.SingleTurnPositionV235():
             target, speed = _single_turn(command.angle_deg, command.direction, ctx), limits.speed_dps
         case lk.SingleTurnPositionSpeed() | lk.SingleTurnPositionSpeedV235():
-            target, speed = _single_turn(command.angle_deg, command.direction, ctx), command.max_speed_dps
+            target = _single_turn(command.angle_deg, command.direction, ctx)
+            speed = _speed_limit(command.max_speed_dps, limits)
         case lk.IncrementalPosition() | lk.IncrementalPositionSpeed():
             # Increments add to the running target, so a host streaming them does not accumulate
             # the tracking error; the first one starts from where the shaft is.
             base = ctx.position_deg if ctx.held_target_deg is None else ctx.held_target_deg
             target = base + command.increment_deg / ratio
             if isinstance(command, lk.IncrementalPositionSpeed):
-                speed = command.max_speed_dps
+                speed = _speed_limit(command.max_speed_dps, limits)
             else:
                 speed = limits.speed_dps if ctx.revision is Revision.V2_36 else math.inf
         case _:
@@ -109,6 +110,11 @@ def plant_control(command: LkCommand, ctx: MotionContext) -> Control:
     return PositionControl(
         position_deg=target, max_speed_dps=max_speed, max_current_a=limits.torque_counts * apc
     )
+
+
+def _speed_limit(max_speed_dps: float | None, limits: Limits) -> float:
+    """A command's speed limit; maxSpeed 0 (None) is not defined by the manuals: the Max Speed setting [I]."""
+    return limits.speed_dps if max_speed_dps is None else max_speed_dps
 
 
 def _amps(current_a: float | None, counts: int | None, amps_per_count: float) -> float:
