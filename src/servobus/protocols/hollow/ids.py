@@ -80,6 +80,11 @@ def check_modbus_slave_id(slave_id: int) -> int:
     Raises:
         ValueError: not an integer in 1..100.
     """
+    if slave_id == 0 and not isinstance(slave_id, bool):
+        raise ValueError(
+            "slave_id=0 is outside [1, 100]: 0 is the Modbus broadcast address (§9.5), which every motor "
+            "would take and none would answer; broadcast cannot be sent"
+        )
     return _check_id("slave_id", slave_id, MODBUS_SLAVE_IDS)
 
 
