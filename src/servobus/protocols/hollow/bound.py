@@ -46,6 +46,7 @@ from servobus.protocols.hollow.ids import (
     check_motor_id,
 )
 from servobus.protocols.hollow.model import DEFAULT_MODEL, HollowModel, packers
+from servobus.protocols.hollow.replies import _TEMPERATURE_LIMITS as FD_TEMPERATURE_LIMITS
 from servobus.protocols.hollow.replies import ExtendedReply, FdReply, NormalReply
 from servobus.protocols.hollow.rs485 import (
     ModbusFunction,
@@ -96,6 +97,7 @@ def _fd_decoder(model: HollowModel) -> Callable[[bytes], FdReply]:
     unpack = packers(model).fd_reply.unpack
     modes = {int(m): m for m in ControlMode}
     p_lo, p_hi = fd_position_limits_deg()
+    t_lo, t_hi = FD_TEMPERATURE_LIMITS
     v_lo, v_hi = fd_velocity_limits_rpm(model)
     make = maker(
         FdReply,
@@ -117,7 +119,9 @@ def _fd_decoder(model: HollowModel) -> Callable[[bytes], FdReply]:
             raise Slow
         position, velocity, current, mode, _, reserved, temperature, _ = unpack(data)
         member = modes.get(int(mode))
-        if member is None or not (p_lo <= position <= p_hi and v_lo <= velocity <= v_hi):
+        if member is None or not (
+            p_lo <= position <= p_hi and v_lo <= velocity <= v_hi and t_lo <= temperature <= t_hi
+        ):
             raise Slow
         return make(  # type: ignore[no-any-return]
             position,
