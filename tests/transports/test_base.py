@@ -303,3 +303,78 @@ def test_load_meter_sums_a_sliding_window() -> None:
     assert meter.percent(3.0) == 0.0
     with pytest.raises(ValueError):
         LoadMeter(window_s=0)
+
+
+# ---- push delivery and send reports ----
+
+
+@pytest.mark.asyncio
+async def test_a_consumer_gets_every_batch_and_frames_buffered_before_it() -> None:
+    batches: list[list[bytes]] = []
+    async with MemoryTransport() as transport:
+        transport.inject(b"early")
+        transport.set_consumer(batches.append)
+        transport.inject(b"a", b"b")
+        transport.inject(b"c")
+        assert batches == [[b"early"], [b"a", b"b"], [b"c"]]
+        transport.set_consumer(None)
+        transport.inject(b"d")
+        assert await transport.receive() == b"d"
+
+
+@pytest.mark.asyncio
+async def test_a_failing_consumer_is_logged_and_delivery_goes_on(caplog: pytest.LogCaptureFixture) -> None:
+    seen: list[bytes] = []
+
+    def consumer(frames: list[bytes]) -> None:
+        seen.extend(frames)
+        if frames == [b"bad"]:
+            raise RuntimeError("consumer bug")
+
+    async with MemoryTransport() as transport:
+        transport.set_consumer(consumer)
+        transport.inject(b"bad")
+        transport.inject(b"good")
+        assert transport.is_open
+    assert seen == [b"bad", b"good"]
+    assert "consumer bug" in caplog.text
+
+
+@pytest.mark.asyncio
+async def test_every_accepted_frame_is_reported_sent_or_dropped_with_the_reason() -> None:
+    reports: list[tuple[bytes, float | None, str | None]] = []
+
+    class Reporting(MemoryTransport):
+        async def _transmit(self, batch: list[Outgoing[bytes]]) -> None:
+            while batch:
+                await self.gate.wait()
+                item = batch.pop(0).item
+                self.wire.append(item)
+                self._sent(item, self._now())
+
+    transport = Reporting(stale_after_s=0.05, reopen=False)
+    await transport.open()
+    transport.set_send_reporter(lambda item, at, why: reports.append((item, at, why)))
+    loop = asyncio.get_running_loop()
+    before = loop.time()
+    transport.send(b"sent")
+    await transport.drain()
+    transport.gate.clear()
+    transport.send(b"held")  # the writer takes it and waits at the gate
+    await asyncio.sleep(0)
+    transport.send(b"stale")
+    await asyncio.sleep(0.1)
+    transport.gate.set()
+    await transport.drain()
+    transport.gate.clear()
+    transport.send(b"in flight")
+    await asyncio.sleep(0)
+    transport.send(b"queued")
+    transport.fail(OSError("unplugged"))
+    await transport.close()
+    by_item = {item: (at, why) for item, at, why in reports}
+    assert by_item[b"sent"][1] is None and before <= by_item[b"sent"][0] <= loop.time()  # type: ignore[operator]
+    assert by_item[b"held"][1] is None
+    assert by_item[b"stale"] == (None, "stale")
+    assert by_item[b"in flight"] == (None, "purged") and by_item[b"queued"] == (None, "purged")
+    assert len(reports) == 5

@@ -266,3 +266,112 @@ async def test_any_other_send_failure_is_a_loss_and_the_bus_is_reopened(flaky: t
     assert states[:2] == [TransportState.LOST, TransportState.OPEN]
     assert (stats.losses, stats.reopens) == (1, 1)
     assert [bytes(m.data) for m in flaky.sent] == [b"\x02"]
+
+
+# ---- what python-can's readers and adapters get wrong, handled here (issue 14) ----
+
+
+def test_a_message_whose_dlc_disagrees_with_its_data_does_not_convert() -> None:
+    message = can.Message(arbitration_id=0x123, data=b"\x11\x22\x33", check=False)
+    message.dlc = 8  # what python-can's slcan reader builds from "t1238112233\r"
+    with pytest.raises(ValueError, match="DLC 8 but 3 data bytes"):
+        frame_from_message(message, 0.0)
+
+
+@pytest.mark.asyncio
+async def test_virtual_sends_are_written_from_send_itself_and_reported(
+    channel: str, peer: can.BusABC
+) -> None:
+    reports: list[tuple[Frame, float | None, str | None]] = []
+    async with CanTransport("virtual", channel, ignore_config=True) as transport:
+        transport.set_send_reporter(lambda frame, at, why: reports.append((frame, at, why)))
+        frame = Frame(arbitration_id=0x141, data=b"\x9c" + bytes(7))
+        transport.send(frame)  # no await between: written before send() returned
+        assert [(f, why) for f, _, why in reports] == [(frame, None)]
+        assert transport.stats().frames_out == 1 and transport.stats().queue_depth == 0
+    (message,) = _recv_all(peer, 1)
+    assert bytes(message.data) == frame.data
+
+
+def _stalled() -> can.CanOperationError:
+    import serial
+
+    error = can.CanOperationError("could not send message")
+    error.__cause__ = serial.SerialTimeoutException("Write timeout")
+    return error
+
+
+@pytest.mark.asyncio
+async def test_a_stalled_adapter_is_backpressure_not_a_lost_device(flaky: type[_FlakyBus]) -> None:
+    flaky.failures = [_stalled(), _stalled()]
+    async with CanTransport("flaky", "x", ignore_config=True, enobufs="wait") as transport:
+        transport.send(Frame(arbitration_id=0x141, data=b"\x01"))
+        await transport.drain()
+        stats = transport.stats()
+        assert transport.is_open
+    assert [bytes(m.data) for m in flaky.sent] == [b"\x01"]
+    assert (stats.losses, stats.enobufs_waits, stats.frames_out) == (0, 2, 1)
+
+
+class _ParseErrorBus(_FlakyBus):
+    """Receives what the test queues: a Message, or an exception python-can's reader would raise."""
+
+    incoming: ClassVar[list[can.Message | BaseException]] = []
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        if not self.incoming:
+            time.sleep(timeout or 0)
+            return None, False
+        item = self.incoming.pop(0)
+        if isinstance(item, BaseException):
+            raise item
+        return item, False
+
+
+@pytest.mark.asyncio
+async def test_frames_python_can_cannot_parse_are_counted_and_reading_goes_on(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    good = can.Message(arbitration_id=0x241, data=b"\x9c" + bytes(7), is_extended_id=False)
+    short = can.Message(arbitration_id=0x242, data=b"\x01", is_extended_id=False, check=False)
+    short.dlc = 8
+    _ParseErrorBus.incoming = [
+        IndexError("string index out of range"),
+        good,
+        ValueError("non-hex"),
+        short,
+        good,
+    ]
+    monkeypatch.setattr(can, "Bus", lambda **config: _ParseErrorBus(**config))
+    async with CanTransport("parse", "x", ignore_config=True) as transport:
+        frames = [await asyncio.wait_for(transport.receive(), 2.0) for _ in range(2)]
+        stats = transport.stats()
+        assert transport.is_open
+    assert [f.arbitration_id for f in frames] == [0x241, 0x241]
+    assert (stats.bad_frames, stats.losses) == (3, 0)
+
+
+@pytest.mark.asyncio
+async def test_a_malformed_slcan_line_on_a_real_pty_is_one_bad_frame_not_a_lost_adapter() -> None:
+    import os
+
+    master, slave = os.openpty()
+    try:
+        async with CanTransport(
+            "slcan", os.ttyname(slave), bitrate=1_000_000, ignore_config=True, sleep_after_open=0
+        ) as transport:
+            await asyncio.sleep(0.05)
+            os.read(master, 1024)  # the open sequence python-can wrote
+            os.write(master, b"t12\r" + b"t12311\r" + b"t2418" + b"9C" + b"00" * 7 + b"\r")
+            frame = await asyncio.wait_for(transport.receive(), 2.0)
+            assert frame == Frame(arbitration_id=0x241, data=b"\x9c" + bytes(7))
+            # A peer that never ends its line (written from a thread: the pty holds only a few KiB).
+            await asyncio.to_thread(os.write, master, b"x" * 100_000)
+            await asyncio.sleep(0.2)
+            stats = transport.stats()
+            assert transport.is_open
+            assert len(transport.bus._buffer) <= 200  # type: ignore[union-attr]
+        assert stats.bad_frames >= 3 and stats.losses == 0 and stats.discarded_bytes > 90_000
+    finally:
+        os.close(master)
+        os.close(slave)

@@ -9,9 +9,17 @@ failed device with :meth:`Transport._lose`. Everything else is here, once:
 * **Sending never blocks the loop.** :meth:`Transport.send` appends to a bounded queue and
   returns; one writer task empties it in batches. A full queue raises :class:`SendQueueFull`;
   ``await drain()`` waits until everything queued has been written.
-* **Receiving** is a bounded buffer read by :meth:`Transport.receive`,
-  :meth:`Transport.receive_batch` or ``async for frame in transport``. When nobody reads, the
-  oldest frames are dropped and counted, never memory without end.
+* **Receiving is pushed**: :meth:`Transport.set_consumer` makes the transport call one consumer
+  (the Bus's intake) on the event loop with every batch of received frames. Without a consumer,
+  frames wait in a bounded buffer read by :meth:`Transport.receive`, :meth:`Transport.receive_batch`
+  or ``async for frame in transport``; when nobody reads, the oldest are dropped and counted, never
+  memory without end.
+* **Every send is accounted for**: :meth:`Transport.set_send_reporter` gets
+  ``reporter(item, sent_at, None)`` when a frame left (``sent_at`` on the loop's clock), or
+  ``reporter(item, None, reason)`` when it never will (``"stale"``, ``"purged"``, ``"enobufs_dropped"``).
+* **No hop where none is needed**: a transport whose device never blocks (python-can's ``virtual``,
+  the in-process simulator) writes a frame from :meth:`Transport.send` itself when nothing is queued
+  ahead of it.
 * **Loss.** When the device fails, every pending ``receive()`` and ``drain()`` raises
   :class:`~servobus.errors.TransportError` (chained to the cause) at once, the state goes to
   ``LOST``, the queued frames are purged (counted), and a background task reopens the device with
@@ -19,8 +27,9 @@ failed device with :meth:`Transport._lose`. Everything else is here, once:
   may just have restarted; frames that waited longer than ``stale_after_s`` are dropped too.
 * **Events** (state changes, error frames, bus-off, drops) go to listeners and :meth:`events`.
 
-Received frames carry ``timestamp = time.monotonic()`` taken when the transport read them: the
-event loop's clock, so they compare directly with ``loop.time()`` deadlines.
+Received frames carry the time the transport read them on the event loop's clock (``loop.time()``,
+which is ``time.monotonic()`` on a plain asyncio loop and the virtual clock under ``looptime``), so
+they compare directly with ``loop.time()`` deadlines.
 """
 
 from __future__ import annotations
@@ -42,12 +51,17 @@ from servobus.errors import TransportError
 from servobus.transports.events import FramesDropped, StateChanged, TransportEvent, TransportState
 from servobus.transports.stats import LoadMeter, TransportStats
 
-__all__ = ["Outgoing", "SendQueueFull", "Transport"]
+__all__ = ["Consumer", "Outgoing", "SendQueueFull", "SendReporter", "Transport"]
 
 logger = logging.getLogger("servobus.transports")
 
 RxT = TypeVar("RxT")
 TxT = TypeVar("TxT")
+
+#: ``consumer(frames)``: a batch of received frames, called on the event loop.
+Consumer = Callable[[list[RxT]], object]
+#: ``reporter(item, sent_at, reason)``: ``sent_at`` when the item left, else ``reason`` it never will.
+SendReporter = Callable[[TxT, float | None, str | None], object]
 
 
 class SendQueueFull(TransportError, asyncio.QueueFull):
@@ -124,6 +138,11 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
         self._generation = 0  # bumped per connection: callbacks of an old one are ignored
         self._loop: asyncio.AbstractEventLoop | None = None
         self._ever_opened = False
+        self._consumer: Consumer[RxT] | None = None
+        self._reporter: SendReporter[TxT] | None = None
+        #: set by a subclass whose device never blocks a write: send() then writes at once when
+        #: nothing is queued ahead (see :meth:`_write_now`)
+        self._direct = False
 
     # ----------------------------------------------------------------- subclass interface
 
@@ -147,6 +166,20 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
         for its frames itself may take them all at once). Whatever is still in ``batch`` when this
         returns, or when a loss or close cancels it, is counted as purged here in the base.
         """
+
+    def _write_now(self, item: TxT) -> bool:
+        """Write ``item`` from the caller's stack (only called while ``self._direct`` is True).
+
+        Returns:
+            True when written (counted and reported here by the subclass); False to queue it
+            instead (the device cannot take it now).
+        """
+        raise NotImplementedError
+
+    def _now(self) -> float:
+        """The event loop's clock (time.monotonic() before the transport was first opened)."""
+        loop = self._loop
+        return loop.time() if loop is not None else time.monotonic()
 
     # ----------------------------------------------------------------- life cycle
 
@@ -290,7 +323,7 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
 
     def _set_state(self, state: TransportState, cause: BaseException | None = None) -> None:
         self._state = state
-        self._emit(StateChanged(state, time.monotonic(), cause))
+        self._emit(StateChanged(state, self._now(), cause))
 
     def _error(self) -> TransportError:
         """A fresh TransportError saying why the transport cannot serve now, chained to the cause."""
@@ -310,12 +343,14 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
     def _enqueue(self, item: TxT, hold_s: float | None = None) -> None:
         if self._state is not TransportState.OPEN:
             raise self._error()
+        if self._direct and not self._queue and not self._transmitting and self._write_now(item):
+            return
         if len(self._queue) >= self._queue_size:
             self._stats.queue_full += 1
             raise SendQueueFull(
                 f"{self.name}: send queue full ({self._queue_size} frames); await drain() before sending more"
             )
-        self._queue.append(Outgoing(item, time.monotonic(), hold_s))
+        self._queue.append(Outgoing(item, self._now(), hold_s))
         if self._writer_wake is not None:
             _wake(self._writer_wake)
 
@@ -349,7 +384,7 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
                 self._writer_wake = None
                 continue
             batch = [queue.popleft() for _ in range(min(self.batch_size, len(queue)))]
-            batch = self._drop_stale(batch, time.monotonic())
+            batch = self._drop_stale(batch, self._now())
             if not batch:
                 continue
             self._transmitting = True
@@ -362,7 +397,7 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
                 return
             finally:
                 self._transmitting = False
-                self._dropped("purged", len(batch))  # not written: lost, closed or failed mid-batch
+                self._dropped("purged", [o.item for o in batch])  # not written: lost, closed or failed
             if generation != self._generation:  # _transmit lost the device
                 return
 
@@ -371,23 +406,68 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
         if limit is None or now - batch[0].queued_at <= limit:  # the oldest is first
             return batch
         fresh = [item for item in batch if now - item.queued_at <= limit]
-        self._dropped("stale", len(batch) - len(fresh))
+        self._dropped("stale", [o.item for o in batch if now - o.queued_at > limit])
         return fresh
 
     def _purge(self, reason: str) -> None:
         if self._queue:
-            self._dropped(reason, len(self._queue))
+            self._dropped(reason, [o.item for o in self._queue])
             self._queue.clear()
 
-    def _dropped(self, reason: str, count: int) -> None:
+    def _dropped(self, reason: str, items: Sequence[TxT] | int) -> None:
+        """Count frames that will never be sent, and report each one that is known."""
+        count = items if isinstance(items, int) else len(items)
         if count:
             setattr(self._stats, reason, getattr(self._stats, reason) + count)
-            self._emit(FramesDropped(reason, count, time.monotonic()))
+            self._emit(FramesDropped(reason, count, self._now()))
+            reporter = self._reporter
+            if reporter is not None and not isinstance(items, int):
+                for item in items:
+                    self._call(reporter, item, None, reason)
+
+    def _sent(self, item: TxT, sent_at: float) -> None:
+        """Report that ``item`` left at ``sent_at`` (a subclass calls it; counting is its own)."""
+        if self._reporter is not None:
+            self._call(self._reporter, item, sent_at, None)
+
+    def set_send_reporter(self, reporter: SendReporter[TxT] | None) -> None:
+        """Call ``reporter(item, sent_at, None)`` for every frame that left, and
+        ``reporter(item, None, reason)`` for every one dropped after :meth:`send` accepted it.
+
+        Called on the event loop; its exceptions are logged, never raised into the transport.
+        """
+        self._reporter = reporter
+
+    def _call(self, callback: Callable[..., object], *args: object) -> None:
+        try:
+            callback(*args)
+        except Exception:
+            logger.exception("%s: callback %r failed", self.name, callback)
 
     # ----------------------------------------------------------------- receiving
 
+    def set_consumer(self, consumer: Consumer[RxT] | None) -> None:
+        """Push delivery: call ``consumer(frames)`` on the event loop with every received batch.
+
+        With a consumer, nothing is buffered for :meth:`receive`; frames already buffered are handed
+        to it at once. Its exceptions are logged, never raised into the reader. None goes back to
+        buffering.
+        """
+        self._consumer = consumer
+        if consumer is not None and self._rx:
+            frames = list(self._rx)
+            self._rx.clear()
+            self._call(consumer, frames)
+
     def _deliver(self, frames: Sequence[RxT]) -> None:
-        """Hand received frames to readers (call in the loop thread)."""
+        """Hand received frames to the consumer, or to readers (call in the loop thread)."""
+        consumer = self._consumer
+        if consumer is not None:
+            try:
+                consumer(frames if isinstance(frames, list) else list(frames))
+            except Exception:
+                logger.exception("%s: consumer %r failed", self.name, consumer)
+            return
         rx = self._rx
         rx.extend(frames)
         if (overflow := len(rx) - self._rx_capacity) > 0:
@@ -477,7 +557,7 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
         snapshot = copy.copy(self._stats)
         snapshot.state = self._state
         snapshot.queue_depth = len(self._queue)
-        snapshot.bus_load_pct = self._load.percent(time.monotonic()) if self._load_known else None
+        snapshot.bus_load_pct = self._load.percent(self._now()) if self._load_known else None
         return snapshot
 
     def __repr__(self) -> str:

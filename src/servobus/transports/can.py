@@ -52,7 +52,14 @@ _ENOBUFS_RETRY_S = 0.0005
 
 
 def frame_from_message(message: can.Message, timestamp: float) -> Frame:
-    """A received ``can.Message`` as a :class:`Frame` stamped ``timestamp`` (keeps ``is_rx``)."""
+    """A received ``can.Message`` as a :class:`Frame` stamped ``timestamp`` (keeps ``is_rx``).
+
+    Raises:
+        ValueError: the message's DLC disagrees with its data (python-can's slcan reader builds such
+            messages from short lines), or its id or length is out of range.
+    """
+    if message.dlc != len(message.data):
+        raise ValueError(f"DLC {message.dlc} but {len(message.data)} data bytes")
     return Frame(
         arbitration_id=message.arbitration_id,
         data=bytes(message.data),
@@ -78,13 +85,13 @@ def message_from_frame(frame: Frame) -> can.Message:
 
 @dataclass(slots=True)
 class _SendReport:
-    """What the writer thread did with one batch."""
+    """What the writer thread did with one batch (times on time.monotonic, the loop's clock)."""
 
-    sent: list[Frame] = field(default_factory=list)
-    stale: int = 0
-    purged: int = 0
+    sent: list[tuple[Frame, float]] = field(default_factory=list)
+    stale: list[Frame] = field(default_factory=list)
+    purged: list[Frame] = field(default_factory=list)
     enobufs_waits: int = 0
-    enobufs_dropped: int = 0
+    enobufs_dropped: list[Frame] = field(default_factory=list)
     error: BaseException | None = None
 
 
@@ -228,6 +235,9 @@ class CanTransport(Transport[Frame, Frame]):
         self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"{self.name} writer")
         loop = asyncio.get_running_loop()
         generation = self._generation
+        # python-can's virtual bus hands a sent frame to its peers' queues and never blocks; with no
+        # gap to keep, send() writes it at once (the writer thread still serves a queue, if any).
+        self._direct = self.config.get("interface") == "virtual" and not self._min_gap_s
         fileno = -1
         with contextlib.suppress(NotImplementedError, can.CanError, OSError):
             fileno = bus.fileno()
@@ -254,6 +264,7 @@ class CanTransport(Transport[Frame, Frame]):
             self._reader_stop.set()
             await asyncio.to_thread(self._reader_thread.join)
             self._reader_thread = None
+        self._direct = False
         self._send_abort.set()
         executor, self._executor = self._executor, None
         if executor is not None:
@@ -269,35 +280,53 @@ class CanTransport(Transport[Frame, Frame]):
     def _on_readable(self, bus: can.BusABC, generation: int) -> None:
         try:
             message = bus.recv(0)
-        except Exception as exc:  # a vanished device stays readable: stop watching it now
-            if self._reader_fd is not None:
+        except Exception as exc:
+            if not _device_failed(exc):  # a line python-can could not parse: one bad frame
+                self._stats.bad_frames += 1
+                return
+            if self._reader_fd is not None:  # a vanished device stays readable: stop watching it
                 asyncio.get_running_loop().remove_reader(self._reader_fd)
                 self._reader_fd = None
             self._lose(exc, generation)
             return
+        finally:
+            _bound_line_buffer(bus, self._stats)
         if message is not None:
-            self._take([(message, time.monotonic())], generation)
+            self._take([(message, self._now())], generation)
 
     def _read_thread(
         self, bus: can.BusABC, loop: asyncio.AbstractEventLoop, generation: int, stop: threading.Event
     ) -> None:
-        monotonic = time.monotonic
+        monotonic = time.monotonic  # the loop's clock on a plain asyncio loop
+        bad = 0
         while not stop.is_set():
+            batch: list[tuple[can.Message, float]] = []
             try:
                 message = bus.recv(_THREAD_POLL_S)
                 if message is None:
                     continue
-                batch = [(message, monotonic())]
+                batch.append((message, monotonic()))
                 while len(batch) < _THREAD_BATCH and (message := bus.recv(0)) is not None:
                     batch.append((message, monotonic()))
             except Exception as exc:
-                if not stop.is_set():
-                    loop.call_soon_threadsafe(self._lose, exc, generation)
-                return
+                if _device_failed(exc):
+                    if not stop.is_set():
+                        with contextlib.suppress(RuntimeError):
+                            loop.call_soon_threadsafe(self._lose, exc, generation)
+                    return
+                bad += 1  # a frame python-can could not parse: counted, the reader goes on
             try:
-                loop.call_soon_threadsafe(self._take, batch, generation)
+                if bad:
+                    loop.call_soon_threadsafe(self._count_bad, bad, generation)
+                    bad = 0
+                if batch:
+                    loop.call_soon_threadsafe(self._take, batch, generation)
             except RuntimeError:  # the loop closed under us
                 return
+
+    def _count_bad(self, count: int, generation: int) -> None:
+        if generation == self._generation:
+            self._stats.bad_frames += count
 
     def _take(self, batch: Sequence[tuple[can.Message, float]], generation: int) -> None:
         if generation != self._generation:
@@ -314,7 +343,7 @@ class CanTransport(Transport[Frame, Frame]):
             try:
                 frame = frame_from_message(message, timestamp)
             except ValueError:
-                stats.ignored += 1
+                stats.bad_frames += 1
                 continue
             frames.append(frame)
             stats.bytes_in += len(frame.data)
@@ -365,24 +394,34 @@ class CanTransport(Transport[Frame, Frame]):
         stale_after_s = self._stale_after_s
         for index, outgoing in enumerate(batch):
             if generation != self._generation:
-                report.purged = len(batch) - index
+                report.purged = [o.item for o in batch[index:]]
                 break
             if stale_after_s is not None and time.monotonic() - outgoing.queued_at > stale_after_s:
-                report.stale += 1  # waited out an ENOBUFS stretch or a long gap: too old to send
+                report.stale.append(outgoing.item)  # waited out an ENOBUFS stretch or a long gap
                 continue
             if self._min_gap_s and (wait := self._last_send + self._min_gap_s - clock()) > 0:
                 self._send_abort.wait(wait)  # a sleep that a loss or close cuts short
                 if generation != self._generation:
-                    report.purged = len(batch) - index
+                    report.purged = [o.item for o in batch[index:]]
                     break
-            if not self._send_one(bus, message_from_frame(outgoing.item), report):
+            sent = self._send_one(bus, message_from_frame(outgoing.item), report)
+            if sent is None:
+                report.purged = [o.item for o in batch[index + 1 :]]
                 break
-            report.sent.append(outgoing.item)
+            if sent:
+                report.sent.append((outgoing.item, time.monotonic()))
+            else:
+                report.enobufs_dropped.append(outgoing.item)
         with contextlib.suppress(RuntimeError):  # the loop is gone: nobody is left to count
             loop.call_soon_threadsafe(self._account, report, generation)
 
-    def _send_one(self, bus: can.BusABC, message: can.Message, report: _SendReport) -> bool:
-        """Send with the ENOBUFS policy; False when the bus failed (``report.error`` says how)."""
+    def _send_one(self, bus: can.BusABC, message: can.Message, report: _SendReport) -> bool | None:
+        """Send with the ENOBUFS policy: True sent, False dropped by the policy, None when the bus
+        failed (``report.error`` says how).
+
+        A full adapter buffer (ENOBUFS) and a stalled adapter (a serial write timeout, as python-can's
+        slcan reports it) are both backpressure: wait and retry, or drop, by the policy.
+        """
         give_up = time.perf_counter() + self._enobufs_timeout_s
         while True:
             try:
@@ -390,15 +429,14 @@ class CanTransport(Transport[Frame, Frame]):
             except can.CanError as exc:
                 if not _buffer_full(exc):
                     report.error = exc
-                    return False
+                    return None
                 if self._enobufs == "drop" or time.perf_counter() >= give_up:
-                    report.enobufs_dropped += 1
-                    return True
+                    return False
                 report.enobufs_waits += 1
                 time.sleep(_ENOBUFS_RETRY_S)
             except Exception as exc:
                 report.error = exc
-                return False
+                return None
             else:
                 self._last_send = time.perf_counter()
                 return True
@@ -407,25 +445,74 @@ class CanTransport(Transport[Frame, Frame]):
         stats = self._stats
         stats.frames_out += len(report.sent)
         stats.enobufs_waits += report.enobufs_waits
-        for reason, count in (
+        for reason, items in (
             ("stale", report.stale),
             ("enobufs_dropped", report.enobufs_dropped),
             ("purged", report.purged),
         ):
-            self._dropped(reason, count)
-        now = time.monotonic()
-        for frame in report.sent:
+            self._dropped(reason, items)
+        for frame, sent_at in report.sent:
             stats.bytes_out += len(frame.data)
             if self._load_known:
-                self._load.add(now, self._frame_time_s(frame))
+                self._load.add(sent_at, self._frame_time_s(frame))
+            self._sent(frame, sent_at)
         if report.error is not None:
             self._lose(report.error, generation)
+
+    def _write_now(self, frame: Frame) -> bool:
+        """Loop-native send for a bus whose ``send`` never blocks (python-can's ``virtual``)."""
+        bus = self._bus
+        if bus is None:
+            return False
+        try:
+            bus.send(message_from_frame(frame), timeout=0)
+        except can.CanError as exc:
+            if _buffer_full(exc):
+                return False  # queue it: the writer thread applies the ENOBUFS policy
+            self._lose(exc, self._generation)
+            raise self._error() from exc
+        now = self._now()
+        stats = self._stats
+        stats.frames_out += 1
+        stats.bytes_out += len(frame.data)
+        if self._load_known:
+            self._load.add(now, self._frame_time_s(frame))
+        self._sent(frame, now)
+        return True
 
 
 def _shutdown_when_opened(opening: asyncio.Future[can.BusABC]) -> None:
     if not opening.cancelled() and opening.exception() is None:
         with contextlib.suppress(Exception):
             opening.result().shutdown()
+
+
+def _device_failed(exc: BaseException) -> bool:
+    """Whether a receive error means the device is gone (an OS or serial error), not a bad frame.
+
+    python-can's readers raise ValueError/IndexError for a line they cannot parse (slcan: ``t12\r``)
+    and wrap OS errors in CanOperationError; only the latter is a lost device.
+    """
+    while exc is not None:
+        if isinstance(exc, OSError):
+            return True
+        if isinstance(exc, ValueError | IndexError | KeyError | TypeError):
+            return False
+        exc = exc.__cause__ or exc.__context__  # type: ignore[assignment]
+    return True  # unknown: treat as lost, the reopen logic recovers a device that is still there
+
+
+#: python-can's slcan reader keeps bytes until a ``\r`` arrives; a peer that never sends one would grow
+#: its buffer without end. No valid line is longer than this (CAN FD extended, with timestamp).
+_SLCAN_MAX_LINE = 1 + 8 + 1 + 128 + 4 + 1
+
+
+def _bound_line_buffer(bus: can.BusABC, stats: Any) -> None:
+    buffer = getattr(bus, "_buffer", None)
+    if isinstance(buffer, bytearray) and len(buffer) > _SLCAN_MAX_LINE:
+        stats.bad_frames += 1
+        stats.discarded_bytes += len(buffer)
+        buffer.clear()
 
 
 def _buffer_full(exc: can.CanError) -> bool:
@@ -438,7 +525,10 @@ def _buffer_full(exc: can.CanError) -> bool:
     cause = exc.__cause__
     if isinstance(cause, OSError) and cause.errno in (errno.ENOBUFS, errno.EAGAIN):
         return True
-    return "buffer full" in str(exc).lower()
+    if type(cause).__name__ == "SerialTimeoutException":  # pyserial: a stalled adapter, not a lost one
+        return True
+    text = str(exc).lower()
+    return "buffer full" in text or "write timeout" in text
 
 
 def _exact_filters(ids: Iterable[int], *, extended: bool) -> list[can.typechecking.CanFilter]:

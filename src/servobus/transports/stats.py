@@ -34,6 +34,8 @@ class TransportStats:
         rx_overflow: received frames dropped because nobody read the receive buffer.
         error_frames, bus_off: error frames and bus-off events reported by the adapter.
         ignored: received frames a transport does not carry (CAN remote frames).
+        bad_frames: received frames or lines that do not parse (a malformed SLCAN line, a DLC that
+            disagrees with the data): counted and dropped, never a lost device.
         losses, reopens: times the device was lost, and reopened.
     """
 
@@ -55,6 +57,7 @@ class TransportStats:
     error_frames: int = 0
     bus_off: int = 0
     ignored: int = 0
+    bad_frames: int = 0
     losses: int = 0
     reopens: int = 0
 
