@@ -1,0 +1,385 @@
+"""The request scheduler of one bus: sans-IO, like the codecs below it (h11's model).
+
+The Bus is its only caller. It hands the scheduler requests, the frames the transport received and
+the transport's send reports, each with a clock value; the scheduler answers with decisions and keeps
+every rule about matching and timing in this one file:
+
+* **Matching** is by the key the motor's bound codec gives (``reply_key`` for a request, ``classify``
+  for a frame); requests with equal keys wait in FIFO order. A frame whose key matches nothing is
+  classified, never dropped silently: a **late** reply (to a request that timed out or was
+  cancelled), a **duplicate** (the same key again right after a reply), a **stream** or **report**
+  frame of a motor, an **unsolicited** reply, a frame of **another** node, or a **malformed** one (it
+  claims to be a reply but does not decode). A malformed frame never resolves a request: the request
+  keeps waiting for a frame that decodes, or times out.
+* **Life cycle** of a request (one table, :data:`TRANSITIONS`): QUEUED -> SENDING (handed to the
+  transport) -> SENT (the transport reported when it left; the deadline starts there) -> REPLIED, or
+  TIMED_OUT (deadline passed; a retry-safe read with retries left goes back to QUEUED), or CANCELLED,
+  or FAILED (the transport never sent it, or was lost). A request with no key (no reply expected) is
+  REPLIED as soon as it left.
+* **Pacing**: at most ``max_in_flight`` requests SENDING or SENT at once; a half-duplex line
+  (``one_at_a_time``) allows one, and rests ``gap_s`` after each exchange before the next frame.
+* **Streams**: a request whose key a motor streams (0xB6) is answered by the first stream frame that
+  arrives after the request left (the same fact, fresh), as design.md's matching rule says.
+
+Nothing here reads a clock, sleeps or awaits: ``now`` is always an argument, so every timing rule is
+tested with plain calls.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import enum
+from collections import Counter, deque
+from collections.abc import Hashable, Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+from servobus.errors import ProtocolError
+from servobus.frame import Frame
+from servobus.protocols import BoundCodec, FrameKind, check_bus
+from servobus.protocols._message import Command, Reply
+
+__all__ = [
+    "TRANSITIONS",
+    "Received",
+    "Request",
+    "RequestState",
+    "Scheduler",
+    "Traffic",
+]
+
+
+class RequestState(enum.Enum):
+    QUEUED = "queued"
+    SENDING = "sending"
+    SENT = "sent"
+    REPLIED = "replied"
+    TIMED_OUT = "timed out"
+    CANCELLED = "cancelled"
+    FAILED = "failed"
+
+
+S = RequestState
+#: Every legal move; anything else is a bug in the caller and raises RuntimeError naming the request.
+TRANSITIONS: dict[RequestState, frozenset[RequestState]] = {
+    S.QUEUED: frozenset({S.SENDING, S.CANCELLED, S.FAILED}),
+    S.SENDING: frozenset({S.SENT, S.REPLIED, S.CANCELLED, S.FAILED}),
+    S.SENT: frozenset({S.REPLIED, S.TIMED_OUT, S.QUEUED, S.CANCELLED, S.FAILED}),
+    S.REPLIED: frozenset(),
+    S.TIMED_OUT: frozenset(),
+    S.CANCELLED: frozenset(),
+    S.FAILED: frozenset(),
+}
+FINAL = frozenset({S.REPLIED, S.TIMED_OUT, S.CANCELLED, S.FAILED})
+
+
+class Traffic(enum.Enum):
+    """What a received frame was to the scheduler (each kind is counted)."""
+
+    REPLY = "reply"  # resolved a request
+    STREAM = "stream"  # a motor's 0xB6 frame (may also have answered a read of the streamed command)
+    REPORT = "report"  # an automatic error report
+    LATE = "late"  # the reply of a request that timed out or was cancelled
+    DUPLICATE = "duplicate"  # the same reply again, right after one resolved its request
+    UNSOLICITED = "unsolicited"  # a reply-shaped frame of one of our motors that nobody asked for
+    MALFORMED = "malformed"  # one of our motors' frames that does not decode
+    FOREIGN = "foreign"  # not ours: another node, our own loop-back
+
+
+@dataclass(eq=False, slots=True)
+class Request:
+    """One command to one motor and what became of it."""
+
+    codec: BoundCodec
+    command: Command
+    frame: Frame
+    key: Hashable | None
+    timeout_s: float
+    retries: int = 0
+    context: Any = None  # the caller's (the Bus keeps its future here)
+    state: RequestState = RequestState.QUEUED
+    sent_at: float | None = None
+    deadline: float | None = None
+    reply: Reply | None = None
+    error: BaseException | None = None
+    attempts: int = 0
+
+    def describe(self) -> str:
+        return f"{self.codec.family} motor {self.codec.motor_id} {type(self.command).__name__}"
+
+
+@dataclass(slots=True)
+class Received:
+    """The verdict on one received frame."""
+
+    traffic: Traffic
+    frame: Frame
+    codec: BoundCodec | None = None
+    reply: Reply | None = None
+    request: Request | None = None  # the request it resolved
+    error: ProtocolError | None = None
+
+
+@dataclass(slots=True)
+class _Recent:
+    """Keys that may still see a frame nobody waits for, and until when."""
+
+    late: dict[Hashable, list[float]] = field(default_factory=dict)
+    replied: dict[Hashable, float] = field(default_factory=dict)
+
+
+class Scheduler:
+    """Pending requests of one bus, matched by key, paced, timed out, counted.
+
+    Args:
+        codecs: the motors on the bus (checked together with :func:`~servobus.protocols.check_bus`).
+        max_in_flight: requests SENDING or SENT at once.
+        one_at_a_time: a half-duplex line: one exchange at a time, ``gap_s`` of rest after each.
+        gap_s: rest after an exchange before the next frame (half-duplex lines).
+        late_window_s: how long after a timeout or cancel a frame with that key counts as LATE (and
+            after a reply, as DUPLICATE) rather than UNSOLICITED.
+
+    Raises:
+        ValueError: motors that cannot share a bus, or options out of range.
+    """
+
+    def __init__(
+        self,
+        codecs: Iterable[BoundCodec] = (),
+        *,
+        max_in_flight: int = 64,
+        one_at_a_time: bool = False,
+        gap_s: float = 0.0,
+        late_window_s: float = 1.0,
+    ) -> None:
+        if max_in_flight < 1 or gap_s < 0 or late_window_s < 0:
+            raise ValueError(
+                f"max_in_flight={max_in_flight} must be >= 1, "
+                f"gap_s={gap_s} and late_window_s={late_window_s} >= 0"
+            )
+        self.max_in_flight = 1 if one_at_a_time else max_in_flight
+        self.one_at_a_time = one_at_a_time
+        self.gap_s = gap_s
+        self.late_window_s = late_window_s
+        self.codecs: list[BoundCodec] = []
+        self._by_id: dict[int, list[BoundCodec]] = {}
+        self._queue: deque[Request] = deque()
+        self._pending: dict[Hashable, deque[Request]] = {}
+        self._in_flight: list[Request] = []  # SENDING or SENT, in send order
+        self._recent = _Recent()
+        self._rest_until = 0.0
+        self.counts: Counter[str] = Counter()
+        for codec in codecs:
+            self.add(codec)
+
+    # ---- motors ----
+
+    def add(self, codec: BoundCodec) -> None:
+        """Put a motor on the bus.
+
+        Raises:
+            ValueError: it collides with a motor already there (both named).
+        """
+        check_bus([*self.codecs, codec])
+        self.codecs.append(codec)
+        for ident in codec.reply_ids | codec.shared_ids:
+            self._by_id.setdefault(ident & 0x1FFFFFFF, []).append(codec)
+
+    # ---- requests ----
+
+    def request(
+        self,
+        codec: BoundCodec,
+        command: Command,
+        *,
+        timeout_s: float | None = None,
+        retries: int = 0,
+        context: Any = None,
+    ) -> Request:
+        """A request for ``command`` to ``codec``'s motor, encoded now (nothing is queued yet).
+
+        Raises:
+            ValueError: the command is refused by the codec (before any frame exists), a negative
+                timeout or retry count, or retries asked for a command that is not safe to repeat.
+        """
+        frame = codec.encode(command)
+        timeout = codec.timeout_s(command) if timeout_s is None else timeout_s
+        if timeout <= 0 or retries < 0:
+            raise ValueError(f"timeout_s={timeout} must be > 0 and retries={retries} >= 0")
+        if retries and not codec.retry_safe(command):
+            raise ValueError(f"{type(command).__name__} changes the motor: it is never retried automatically")
+        return Request(codec, command, frame, codec.reply_key(command), timeout, retries, context)
+
+    def submit(self, request: Request) -> None:
+        """Queue ``request`` behind the others (FIFO)."""
+        if request.state is not S.QUEUED or request in self._queue:
+            where = "already queued" if request.state is S.QUEUED else request.state.value
+            raise RuntimeError(f"{request.describe()} is {where}: a request is submitted once")
+        self._queue.append(request)
+        self.counts["requests"] += 1
+
+    def next_to_send(self, now: float) -> list[Request]:
+        """The requests that may leave now, in order (they become SENDING; write their frames)."""
+        out: list[Request] = []
+        if now < self._rest_until:
+            return out
+        while self._queue and len(self._in_flight) < self.max_in_flight:
+            request = self._queue.popleft()
+            self._move(request, S.SENDING)
+            request.attempts += 1
+            self._in_flight.append(request)
+            if request.key is not None:
+                self._pending.setdefault(request.key, deque()).append(request)
+            out.append(request)
+        return out
+
+    def sent(self, request: Request, at: float) -> None:
+        """The transport reports that ``request``'s frame left at ``at``: its deadline starts."""
+        if request.state is not S.SENDING:
+            return  # cancelled while the frame was on its way
+        request.sent_at = at
+        if request.key is None:  # nothing to wait for
+            self._finish(request, S.REPLIED, at)
+            return
+        self._move(request, S.SENT)
+        request.deadline = at + request.timeout_s
+
+    def not_sent(self, request: Request, reason: str, now: float) -> None:
+        """The transport dropped ``request``'s frame (stale, purged, ...): it fails."""
+        if request.state in FINAL:
+            return
+        request.error = RuntimeError(f"{request.describe()}: frame not sent ({reason})")
+        self._finish(request, S.FAILED, now)
+        self.counts[f"not_sent_{reason}"] += 1
+
+    def cancel(self, request: Request, now: float) -> None:
+        """The caller gave up on ``request``; a reply that still comes is counted LATE."""
+        if request.state in FINAL:
+            return
+        was_out = request.state in (S.SENDING, S.SENT)
+        self._finish(request, S.CANCELLED, now)
+        if was_out and request.key is not None:
+            self._recent.late.setdefault(request.key, []).append(now + self.late_window_s)
+
+    def fail_all(self, error: BaseException, now: float) -> list[Request]:
+        """The transport was lost: every request not yet answered fails with ``error``."""
+        failed = [*self._in_flight, *self._queue]  # in the order they were sent or queued
+        for request in failed:
+            request.error = error
+            self._finish(request, S.FAILED, now)
+        self._queue.clear()
+        return failed
+
+    # ---- time ----
+
+    def expire(self, now: float) -> list[Request]:
+        """Requests whose deadline passed: TIMED_OUT, or back in the queue's front for a retry."""
+        expired: list[Request] = []
+        for request in list(self._in_flight):
+            if request.state is S.SENT and request.deadline is not None and request.deadline <= now:
+                self._leave_flight(request, now)
+                if request.attempts <= request.retries:
+                    self._move(request, S.QUEUED)
+                    self._queue.appendleft(request)
+                    self.counts["retries"] += 1
+                    continue
+                self._move(request, S.TIMED_OUT)
+                self.counts["timeouts"] += 1
+                if request.key is not None:
+                    self._recent.late.setdefault(request.key, []).append(now + self.late_window_s)
+                expired.append(request)
+        return expired
+
+    def next_deadline(self) -> float | None:
+        """When :meth:`expire` or :meth:`next_to_send` next has something to do (None: nothing)."""
+        times = [r.deadline for r in self._in_flight if r.state is S.SENT and r.deadline is not None]
+        if self._queue and self._rest_until and len(self._in_flight) < self.max_in_flight:
+            times.append(self._rest_until)
+        return min(times) if times else None
+
+    # ---- receiving ----
+
+    def receive(self, frame: Frame, now: float) -> Received:
+        """Classify ``frame``, resolve the request it answers, count it."""
+        for codec in self._by_id.get(frame.arbitration_id, ()):
+            kind, key = codec.classify(frame)
+            if kind is not FrameKind.NOT_OURS:
+                return self._ours(codec, kind, key, frame, now)
+        self.counts["foreign"] += 1
+        return Received(Traffic.FOREIGN, frame)
+
+    def _ours(
+        self, codec: BoundCodec, kind: FrameKind, key: Hashable | None, frame: Frame, now: float
+    ) -> Received:
+        try:
+            reply = codec.decode(frame)
+        except ProtocolError as exc:
+            self.counts["malformed"] += 1
+            return Received(Traffic.MALFORMED, frame, codec, error=exc)
+        waiting = self._pending.get(key) if key is not None else None
+        if waiting:
+            request = waiting[0]
+            # A stream frame answers a read only if it came after the request left (fresh).
+            fresh = kind is FrameKind.REPLY or (
+                request.sent_at is not None and frame.timestamp >= request.sent_at
+            )
+            if request.state is S.SENT and fresh:
+                request.reply = reply
+                self._finish(request, S.REPLIED, now)
+                self._recent.replied[key] = now + self.late_window_s
+                traffic = Traffic.REPLY if kind is FrameKind.REPLY else Traffic(kind.value)
+                self.counts["replies"] += 1
+                if traffic is not Traffic.REPLY:
+                    self.counts[traffic.value] += 1
+                return Received(traffic, frame, codec, reply, request)
+        if kind is FrameKind.STREAM or kind is FrameKind.REPORT:
+            self.counts[kind.value] += 1
+            return Received(Traffic(kind.value), frame, codec, reply)
+        traffic = self._unmatched(key, now)
+        self.counts[traffic.value] += 1
+        return Received(traffic, frame, codec, reply)
+
+    def _unmatched(self, key: Hashable | None, now: float) -> Traffic:
+        recent = self._recent
+        late = recent.late.get(key)
+        if late:
+            late[:] = [t for t in late if t >= now]
+            if late:
+                late.pop(0)
+                return Traffic.LATE
+        until = recent.replied.get(key)
+        if until is not None and until >= now:
+            return Traffic.DUPLICATE
+        return Traffic.UNSOLICITED
+
+    # ---- bookkeeping ----
+
+    @property
+    def pending(self) -> int:
+        """Requests not yet resolved (queued, sending or sent)."""
+        return len(self._queue) + len(self._in_flight)
+
+    def _move(self, request: Request, state: RequestState) -> None:
+        if state not in TRANSITIONS[request.state]:
+            raise RuntimeError(f"{request.describe()}: {request.state.value} -> {state.value} is not allowed")
+        request.state = state
+
+    def _finish(self, request: Request, state: RequestState, now: float) -> None:
+        if request.state is S.QUEUED:
+            self._queue.remove(request)
+        else:
+            self._leave_flight(request, now)
+        self._move(request, state)
+
+    def _leave_flight(self, request: Request, now: float) -> None:
+        if request in self._in_flight:
+            self._in_flight.remove(request)
+            if self.one_at_a_time:
+                self._rest_until = now + self.gap_s
+        if request.key is not None:
+            waiting = self._pending.get(request.key)
+            if waiting is not None:
+                with contextlib.suppress(ValueError):  # a retry already left the deque
+                    waiting.remove(request)
+                if not waiting:
+                    del self._pending[request.key]

@@ -1,0 +1,261 @@
+"""servobus.scheduler: matching, pacing, time-outs and frame classification, with plain calls and a
+virtual clock (the sans-IO simulator network; no asyncio anywhere)."""
+
+from __future__ import annotations
+
+import dataclasses
+import random
+
+import pytest
+
+from servobus import Frame
+from servobus.protocols import get_family
+from servobus.protocols import myactuator as ma
+from servobus.scheduler import TRANSITIONS, Request, RequestState, Scheduler, Traffic
+from servobus.sim.devices.myactuator import MyActuatorMotor
+from servobus.sim.faults import FaultInjector, FaultPlan
+from servobus.sim.network import SimCanNetwork
+
+MA = get_family("myactuator")
+S = RequestState
+STATUS = bytes.fromhex("9C 32 64 00 F4 01 2D 00")
+
+
+def _reply(motor: int, data: bytes = STATUS, t: float = 0.0) -> Frame:
+    return Frame(arbitration_id=0x240 + motor, data=data, timestamp=t)
+
+
+def _send_all(scheduler: Scheduler, now: float) -> list[Request]:
+    out = scheduler.next_to_send(now)
+    for request in out:
+        scheduler.sent(request, now)
+    return out
+
+
+def test_a_reply_resolves_its_request_and_equal_keys_resolve_in_order() -> None:
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec])
+    first, second = (scheduler.request(codec, ma.ReadStatus2()) for _ in range(2))
+    scheduler.submit(first)
+    scheduler.submit(second)
+    assert _send_all(scheduler, 0.0) == [first, second]
+    got = scheduler.receive(_reply(1, t=0.001), 0.001)
+    assert (got.traffic, got.request) == (Traffic.REPLY, first) and first.state is S.REPLIED
+    assert isinstance(first.reply, ma.StatusReply) and second.state is S.SENT
+    scheduler.receive(_reply(1, t=0.002), 0.002)
+    assert second.state is S.REPLIED and scheduler.pending == 0
+
+
+def test_replies_of_other_commands_or_motors_never_resolve_the_wrong_request() -> None:
+    one, two = MA.bind(1), MA.bind(2)
+    scheduler = Scheduler([one, two])
+    status = scheduler.request(one, ma.ReadStatus2())
+    angle = scheduler.request(two, ma.ReadMultiTurnAngle())
+    for request in (status, angle):
+        scheduler.submit(request)
+    _send_all(scheduler, 0.0)
+    assert scheduler.receive(_reply(2, STATUS), 0.001).traffic is Traffic.UNSOLICITED  # motor 2, wrong code
+    assert scheduler.receive(Frame(arbitration_id=0x7FF, data=b"\x01"), 0.001).traffic is Traffic.FOREIGN
+    assert (status.state, angle.state) == (S.SENT, S.SENT)
+    assert scheduler.counts["unsolicited"] == 1 and scheduler.counts["foreign"] == 1
+
+
+def test_a_malformed_frame_is_counted_and_the_request_keeps_waiting() -> None:
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec])
+    request = scheduler.request(codec, ma.ReadStatus2())
+    scheduler.submit(request)
+    _send_all(scheduler, 0.0)
+    got = scheduler.receive(_reply(1, STATUS[:5]), 0.001)  # truncated: keyed 0x9C, does not decode
+    assert got.traffic is Traffic.MALFORMED and got.error is not None and request.state is S.SENT
+    scheduler.receive(_reply(1), 0.002)
+    assert request.state is S.REPLIED
+
+
+def test_a_request_times_out_at_its_deadline_from_when_it_left_and_its_reply_is_late() -> None:
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec])
+    request = scheduler.request(codec, ma.ReadStatus2(), timeout_s=0.01)
+    scheduler.submit(request)
+    scheduler.next_to_send(0.0)
+    assert scheduler.next_deadline() is None  # not left yet: no deadline
+    scheduler.sent(request, 0.005)
+    assert scheduler.next_deadline() == pytest.approx(0.015)
+    assert scheduler.expire(0.0149) == []
+    assert scheduler.expire(0.015) == [request] and request.state is S.TIMED_OUT
+    assert scheduler.receive(_reply(1), 0.02).traffic is Traffic.LATE
+    assert scheduler.receive(_reply(1), 0.021).traffic is Traffic.UNSOLICITED  # one late reply per request
+
+
+def test_a_cancelled_requests_reply_is_late_and_never_reaches_a_later_request() -> None:
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec])
+    old = scheduler.request(codec, ma.ReadStatus2())
+    scheduler.submit(old)
+    _send_all(scheduler, 0.0)
+    scheduler.cancel(old, 0.001)
+    new = scheduler.request(codec, ma.ReadStatus2())
+    scheduler.submit(new)
+    _send_all(scheduler, 0.002)
+    # The old request's reply arrives first: it goes to the new one (same key, same fact, fresh
+    # enough) only if it was sent after the new request left... a plain reply cannot tell, so FIFO:
+    # the new request takes the next reply. A cancelled request leaves nothing pending.
+    assert scheduler.pending == 1 and old.state is S.CANCELLED
+    scheduler.receive(_reply(1), 0.003)
+    assert new.state is S.REPLIED and scheduler.pending == 0
+
+
+def test_retry_safe_reads_go_again_and_writes_are_never_retried() -> None:
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec])
+    read = scheduler.request(codec, ma.ReadStatus2(), timeout_s=0.01, retries=1)
+    scheduler.submit(read)
+    _send_all(scheduler, 0.0)
+    assert scheduler.expire(0.01) == [] and read.state is S.QUEUED
+    assert _send_all(scheduler, 0.01) == [read]
+    assert scheduler.expire(0.02) == [read] and read.attempts == 2
+    with pytest.raises(ValueError, match="never retried"):
+        scheduler.request(codec, ma.SpeedControl(speed_dps=10.0), retries=1)
+
+
+def test_pacing_keeps_the_in_flight_limit_and_a_half_duplex_line_rests_between_exchanges() -> None:
+    codecs = [MA.bind(m, link="rs485") for m in (1, 2, 3)]
+    scheduler = Scheduler(codecs, one_at_a_time=True, gap_s=0.001)
+    requests = [scheduler.request(c, ma.ReadStatus2()) for c in codecs]
+    for request in requests:
+        scheduler.submit(request)
+    assert _send_all(scheduler, 0.0) == requests[:1] and _send_all(scheduler, 0.0) == []
+    reply = Frame(arbitration_id=1, data=STATUS, is_serial=True)
+    scheduler.receive(reply, 0.002)
+    assert _send_all(scheduler, 0.0025) == [] and scheduler.next_deadline() == pytest.approx(0.003)
+    assert _send_all(scheduler, 0.003) == requests[1:2]
+    limited = Scheduler([MA.bind(1)], max_in_flight=2)
+    for _ in range(3):
+        limited.submit(limited.request(limited.codecs[0], ma.ReadStatus2()))
+    assert len(_send_all(limited, 0.0)) == 2
+
+
+def test_commands_without_a_reply_are_done_when_they_leave() -> None:
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec])
+    reset = scheduler.request(codec, ma.SystemReset())
+    scheduler.submit(reset)
+    _send_all(scheduler, 0.0)
+    assert reset.state is S.REPLIED and reset.reply is None and scheduler.pending == 0
+
+
+def test_a_streamed_read_is_answered_by_the_next_stream_frame_after_it_left() -> None:
+    codec = MA.bind(1)
+    codec.note_sent(ma.ActiveReply(command=ma.StreamableCommand(0x9C), enabled=True, interval_ms=10))
+    scheduler = Scheduler([codec])
+    read = scheduler.request(codec, ma.ReadStatus2())
+    scheduler.submit(read)
+    _send_all(scheduler, 0.010)
+    assert scheduler.receive(_reply(1, t=0.009), 0.0101).traffic is Traffic.STREAM  # older than the request
+    assert read.state is S.SENT
+    got = scheduler.receive(_reply(1, t=0.019), 0.019)
+    assert (got.traffic, got.request, read.state) == (Traffic.STREAM, read, S.REPLIED)
+
+
+def test_a_lost_transport_fails_everything_pending() -> None:
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec], max_in_flight=1)
+    requests = [scheduler.request(codec, ma.ReadStatus2()) for _ in range(3)]
+    for request in requests:
+        scheduler.submit(request)
+    _send_all(scheduler, 0.0)
+    error = OSError("unplugged")
+    assert scheduler.fail_all(error, 0.001) == requests
+    assert all(r.state is S.FAILED and r.error is error for r in requests) and scheduler.pending == 0
+
+
+def test_motors_that_collide_are_refused_when_added() -> None:
+    with pytest.raises(ValueError, match="cannot share a bus"):
+        Scheduler([MA.bind(1), get_family("lk").bind(1, revision="V2_35")])
+
+
+def test_illegal_moves_name_the_request() -> None:
+    assert TRANSITIONS[S.REPLIED] == frozenset()
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec])
+    request = scheduler.request(codec, ma.ReadStatus2())
+    scheduler.submit(request)
+    with pytest.raises(RuntimeError, match="myactuator motor 1 ReadStatus2 is already queued"):
+        scheduler.submit(request)
+    _send_all(scheduler, 0.0)
+    scheduler.receive(_reply(1), 0.001)
+    with pytest.raises(RuntimeError, match="is replied: a request is submitted once"):
+        scheduler.submit(request)
+
+
+# ---- a seeded run over the simulated bus, with faults (issue 15's reliability figure, sans-IO) ----
+
+READS = (ma.ReadStatus1, ma.ReadStatus2, ma.ReadStatus3, ma.ReadMultiTurnAngle, ma.ReadEncoderPosition)
+
+
+def _run(n_requests: int, seed: int) -> tuple[Scheduler, list[Request], list[tuple[float, int]]]:
+    rng = random.Random(seed)
+    motors = [MyActuatorMotor(m) for m in range(1, 33)]
+    plan = FaultPlan(drop=0.05, duplicate=0.01, corrupt=0.01, delay=0.01, delay_s=(0.012, 0.03))
+    network = SimCanNetwork(motors, to_host=FaultInjector(plan, seed=seed))
+    codecs = [MA.bind(m) for m in range(1, 33)]
+    scheduler = Scheduler(codecs, max_in_flight=32)
+    requests: list[Request] = []
+    trace: list[tuple[float, int]] = []
+    now = 0.0
+    while len(requests) < n_requests or scheduler.pending:
+        while len(requests) < n_requests and len(requests) - _done(requests) < 64:
+            codec = rng.choice(codecs)
+            request = scheduler.request(codec, rng.choice(READS)(), timeout_s=0.01)
+            scheduler.submit(request)
+            requests.append(request)
+        for request in scheduler.next_to_send(now):
+            network.send(request.frame, now)
+            scheduler.sent(request, now)
+        times = [t for t in (network.next_event_s(), scheduler.next_deadline()) if t is not None]
+        now = max(now, min(times)) if times else now
+        for at, frame in network.advance(now):
+            got = scheduler.receive(dataclasses.replace(frame, timestamp=at), at)
+            trace.append((at, frame.arbitration_id))
+            if got.request is not None:
+                _check_answer(got.request, frame)
+        scheduler.expire(now)
+    return scheduler, requests, trace
+
+
+def _done(requests: list[Request]) -> int:
+    return sum(r.state in (S.REPLIED, S.TIMED_OUT) for r in requests)
+
+
+def _check_answer(request: Request, frame: Frame) -> None:
+    """The frame that resolved ``request`` is its motor's reply to its own command byte."""
+    assert frame.arbitration_id == 0x240 + request.codec.motor_id
+    assert frame.data[0] == request.frame.data[0]
+
+
+def _verify(scheduler: Scheduler, requests: list[Request]) -> None:
+    assert scheduler.pending == 0
+    for request in requests:
+        assert request.state in (S.REPLIED, S.TIMED_OUT), request
+        if request.state is S.TIMED_OUT:
+            assert request.deadline is not None and request.sent_at is not None
+            assert request.deadline == pytest.approx(request.sent_at + request.timeout_s)
+    counts = scheduler.counts
+    assert counts["replies"] + counts["timeouts"] == len(requests)
+    assert counts["timeouts"] > 0 and counts["late"] > 0 and counts["duplicate"] > 0
+
+
+def test_seeded_faults_never_cost_a_request_its_right_answer() -> None:
+    scheduler, requests, _ = _run(3_000, seed=7)
+    _verify(scheduler, requests)
+
+
+def test_the_same_seed_gives_the_same_run() -> None:
+    assert _run(500, seed=3)[2] == _run(500, seed=3)[2]
+
+
+@pytest.mark.slow
+def test_seeded_faults_over_100k_requests() -> None:
+    scheduler, requests, _ = _run(100_000, seed=11)
+    _verify(scheduler, requests)
+    print(dict(scheduler.counts))
