@@ -465,7 +465,7 @@ class CanTransport(Transport[Frame, Frame]):
         if bus is None:
             return False
         try:
-            bus.send(message_from_frame(frame), timeout=0)
+            bus.send(message_from_frame(frame))  # no timeout: a timeout=0 put costs a clock read
         except can.CanError as exc:
             if _buffer_full(exc):
                 return False  # queue it: the writer thread applies the ENOBUFS policy
