@@ -442,3 +442,30 @@ def test_decode_of_another_motors_frame_is_a_protocol_error() -> None:
     assert codec.classify(other)[0] is FrameKind.NOT_OURS
     with pytest.raises(ProtocolError, match="motor 1"):
         codec.decode(other)
+
+
+@pytest.mark.parametrize(
+    ("family", "options", "kinds"),
+    [
+        ("myactuator", {}, {"stop": 0x81, "shutdown": 0x80, "brake": 0x78}),
+        ("lk", {}, {"stop": 0x81, "shutdown": 0x80, "brake": 0x8C}),
+        ("lk", {"revision": "V2_35"}, {"stop": 0x81, "shutdown": 0x80}),
+        ("hollow", {}, {"stop": 0xFD, "shutdown": 0xFD}),
+        ("hollow", {"link": "canfd"}, {"stop": None, "shutdown": None}),
+    ],
+)
+def test_safe_commands_encode_for_the_motor_or_are_refused(
+    family: str, options: dict[str, Any], kinds: dict[str, int | None]
+) -> None:
+    codec = get_family(family).bind(3, **options)
+    for kind in ("stop", "shutdown", "brake"):
+        if kind not in kinds:
+            with pytest.raises(ValueError):
+                codec.safe_command(kind)
+            continue
+        frame = codec.encode(codec.safe_command(kind))
+        code = kinds[kind]
+        if code is None:  # an FD control frame with Run Cmd off
+            assert frame.is_fd and frame.data[12] == 0
+        else:
+            assert frame.data[-1 if family == "hollow" else 0] == code

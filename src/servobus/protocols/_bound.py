@@ -15,6 +15,8 @@ member                              gives
 ``retry_safe(command)``             True only for commands that change nothing (reads)
 ``note_sent(command)``              tell the codec a command left (0xB6 streams, 0x9A reports change
                                     what the motor's frames mean)
+``safe_command(kind)``              the command that stops the motor: ``"stop"``, ``"shutdown"`` or
+                                    ``"brake"`` (ValueError where the motor has no such command)
 ``request_ids`` / ``reply_ids``     this motor's own identifiers (filters, the collision check)
 ``shared_ids``                      identifiers every motor of the family uses (broadcasts, a host id)
 ``framing``                         serial links: Frame <-> bytes on the wire; None on CAN
@@ -32,7 +34,7 @@ from __future__ import annotations
 import enum
 from collections.abc import Hashable, Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, ClassVar, Protocol, runtime_checkable
 
 from servobus.frame import Frame
 from servobus.protocols._message import Command, Reply
@@ -166,6 +168,8 @@ class BoundCodec(Protocol):
 
     def note_sent(self, command: Command) -> None: ...
 
+    def safe_command(self, kind: str = "stop") -> Command: ...
+
     @property
     def streams(self) -> frozenset[int]: ...
 
@@ -205,8 +209,29 @@ class CodecBase:
     def note_sent(self, command: Command) -> None:
         """Nothing the family's commands change alters how its frames are classified."""
 
+    def encode(self, command: Command) -> Frame:
+        raise NotImplementedError
+
     def decode(self, frame: Frame) -> Reply:
         raise NotImplementedError
+
+    #: kind -> a function building the command, per family (see :meth:`safe_command`)
+    SAFE_COMMANDS: ClassVar[dict[str, Any]] = {}
+
+    def safe_command(self, kind: str = "stop") -> Command:
+        """The command that makes this motor safe: ``"stop"`` (hold, output off), ``"shutdown"``
+        (motor off) or ``"brake"`` (lock the brake).
+
+        Raises:
+            ValueError: an unknown kind, or one this motor's family or revision has no command for.
+        """
+        build = self.SAFE_COMMANDS.get(kind)
+        if build is None:
+            known = ", ".join(sorted(self.SAFE_COMMANDS))
+            raise ValueError(f"{self.family} motors have no {kind!r} safe command (known: {known})")
+        command: Command = build(self)
+        self.encode(command)  # refused now (revision, link), not when the motors must stop
+        return command
 
     def decode_many(self, frames: Sequence[Frame]) -> list[Reply]:
         """:meth:`decode` of each frame."""

@@ -33,9 +33,10 @@ from servobus.protocols._bound import EXTENDED, Broadcast, CodecBase, FrameKind,
 from servobus.protocols._fast import Slow, maker
 from servobus.protocols._message import Command, Reply
 from servobus.protocols.hollow.codec import decode_reply
-from servobus.protocols.hollow.commands import CanModeSwitch, HollowCommand
+from servobus.protocols.hollow.commands import CanModeSwitch, HollowCommand, Stop
 from servobus.protocols.hollow.commands_fd import (
     FD_PAYLOAD_SIZE,
+    FdCommand,
     fd_position_limits_deg,
     fd_velocity_limits_rpm,
 )
@@ -142,6 +143,12 @@ class HollowCodec(CodecBase):
     """One hollow motor on one link. Build it with :func:`bind` (or ``FAMILY.bind``)."""
 
     family = "hollow"
+    # Classic CAN has the special Stop frame; an FD motor (and the converter) is stopped by a control
+    # frame with Run Cmd off. The hollow motors have no brake command and no separate power-off.
+    SAFE_COMMANDS = {  # noqa: RUF012 - a class table, not per instance
+        "stop": lambda codec: Stop() if codec.link == "can" else FdCommand(run=False, model=codec.model),
+        "shutdown": lambda codec: Stop() if codec.link == "can" else FdCommand(run=False, model=codec.model),
+    }
     model: HollowModel
 
     __slots__ = (

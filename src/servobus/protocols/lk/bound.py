@@ -38,6 +38,7 @@ from servobus.protocols.lk.ids import (
 )
 from servobus.protocols.lk.model import LkModel, Revision, encoder_max_count
 from servobus.protocols.lk.replies import REPLY_IQ, REPLY_SPEED, STATUS2_CODES, TEMPERATURE, Status2Reply
+from servobus.protocols.lk.states import BrakeAction
 
 __all__ = ["LINKS", "LkCodec", "bind", "broadcast"]
 
@@ -144,6 +145,11 @@ class LkCodec(CodecBase):
     """One LK motor on CAN. Build it with :func:`bind` (or ``FAMILY.bind``)."""
 
     family = "lk"
+    SAFE_COMMANDS = {  # noqa: RUF012 - a class table, not per instance
+        "stop": lambda codec: cmd.MotorStop(),
+        "shutdown": lambda codec: cmd.MotorOff(),
+        "brake": lambda codec: cmd.BrakeControl(action=BrakeAction.ENGAGE),
+    }
     revision: Revision
     model: LkModel
 

@@ -145,6 +145,11 @@ class MyActuatorCodec(CodecBase):
     """One MyActuator motor on one link. Build it with :func:`bind` (or ``FAMILY.bind``)."""
 
     family = "myactuator"
+    SAFE_COMMANDS = {  # noqa: RUF012 - a class table, not per instance
+        "stop": lambda codec: cmd.MotorStop(),
+        "shutdown": lambda codec: cmd.MotorShutdown(),
+        "brake": lambda codec: cmd.BrakeLock(),
+    }
     revision: Revision
     model: MotionScales
 
