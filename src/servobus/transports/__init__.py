@@ -10,6 +10,9 @@ One interface (:class:`Transport`: ``open``/``close``, ``send``, ``drain``, ``re
   :class:`~servobus.frame.Frame`.
 * ``"rs485"``: :class:`SerialTransport`, an RS485 port through pyserial-asyncio-fast, carrying
   whole CRC-checked :class:`SerialFrame` frames.
+* ``"sim"``: :class:`SimTransport`, the in-process bus onto a simulated CAN network
+  (:class:`~servobus.sim.network.SimCanNetwork`), on the event loop's clock (virtual time under
+  ``looptime`` or :func:`servobus.sim.virtual.run`), carrying :class:`~servobus.frame.Frame`.
 
 :func:`create_transport` builds one by name; third-party transports register under the
 ``servobus.transports`` entry-point group. The heavy modules load on first use.
@@ -35,6 +38,7 @@ from servobus.transports.stats import TransportStats
 if TYPE_CHECKING:
     from servobus.transports.can import CanTransport
     from servobus.transports.rs485 import SerialFrame, SerialMode, SerialTransport
+    from servobus.transports.sim import SimTransport
     from servobus.transports.slcan import SlcanTransport
 
 __all__ = [
@@ -48,6 +52,7 @@ __all__ = [
     "SerialFrame",
     "SerialMode",
     "SerialTransport",
+    "SimTransport",
     "SlcanTransport",
     "StateChanged",
     "Transport",
@@ -61,6 +66,7 @@ __all__ = [
 TRANSPORTS: dict[str, str] = {
     "can": "servobus.transports.can:CanTransport",
     "rs485": "servobus.transports.rs485:SerialTransport",
+    "sim": "servobus.transports.sim:SimTransport",
     "slcan": "servobus.transports.slcan:SlcanTransport",
 }
 
@@ -71,6 +77,7 @@ _LAZY = {
     "SerialFrame": "servobus.transports.rs485",
     "SerialMode": "servobus.transports.rs485",
     "SerialTransport": "servobus.transports.rs485",
+    "SimTransport": "servobus.transports.sim",
     "SlcanTransport": "servobus.transports.slcan",
 }
 

@@ -1,0 +1,227 @@
+"""The in-process bus: a transport straight onto a simulated CAN network, on the event loop's clock.
+
+:class:`SimTransport` joins the orchestrator to a :class:`~servobus.sim.network.SimCanNetwork` with
+no pty, adapter or thread between them:
+
+* **Zero-copy out**: :meth:`SimTransport.send` hands the caller's own :class:`~servobus.frame.Frame`
+  to the network (``network.send(frame, now)``) from the caller's stack, with no queue hop; the
+  network's bus model then gives it its exact bit time and arbitration.
+* **One timer in**: the transport keeps a single ``loop.call_at`` timer on the network's next event.
+  When it fires, the network runs up to the loop's time and the frames the host received are
+  delivered as one batch, stamped with the time their transmission ended (on the loop's clock).
+  Nothing polls: an idle network arms no timer at all.
+* **Time**: network time = loop time - ``t0``, where ``t0`` is fixed the first time the transport
+  opens on a loop (so that the network's clock continues from its ``now_s`` at that moment; a fresh
+  network on a ``looptime`` loop that starts at 0 gets ``t0 = 0``, and the two clocks are the same
+  numbers). On a plain asyncio loop the network then runs in real time; on a virtual-time loop
+  (``looptime``, :func:`servobus.sim.virtual.run`) it runs as fast as the host can compute it,
+  because the only timers are the network's own events and the host's sleeps.
+* **Loss**: :meth:`SimTransport.unplug` pulls the adapter: pending receivers and drains fail at once
+  with :class:`~servobus.errors.TransportError`, the state goes to ``LOST`` and reopening fails until
+  :meth:`SimTransport.replug`. The devices keep running meanwhile; what they sent while the host was
+  away is lost (counted in ``stats().ignored``), as on a real bus.
+
+Everything else (counters, send reports, push delivery, events) is the base
+:class:`~servobus.transports.base.Transport`'s.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+from collections.abc import Iterable
+
+from servobus.errors import TransportError
+from servobus.frame import Frame
+from servobus.sim.canbus import CanBusModel
+from servobus.sim.device import Device
+from servobus.sim.faults import FaultInjector
+from servobus.sim.network import SimCanNetwork
+from servobus.transports.base import Outgoing, Transport
+
+__all__ = ["SimTransport"]
+
+
+class SimTransport(Transport[Frame, Frame]):
+    """A host on a simulated CAN (FD) bus, in the same process.
+
+    Args:
+        network: the simulated network to join; None builds one from the next four arguments.
+        devices: the simulated devices of a new network.
+        bus: its bus model (1 Mbit/s classic CAN by default).
+        to_devices, to_host: fault injectors on each direction of a new network's link.
+        name: a label for errors and logs.
+        queue_size, rx_buffer, stale_after_s, reopen, reopen_backoff_s: see
+            :class:`~servobus.transports.base.Transport`. Sends are written at once, so the queue
+            only holds frames sent while an earlier batch is being transmitted.
+
+    Raises:
+        ValueError: both a network and the parts of a new one were given.
+    """
+
+    def __init__(
+        self,
+        network: SimCanNetwork | None = None,
+        *,
+        devices: Iterable[Device] = (),
+        bus: CanBusModel | None = None,
+        to_devices: FaultInjector | None = None,
+        to_host: FaultInjector | None = None,
+        name: str = "sim",
+        queue_size: int = 256,
+        rx_buffer: int = 65536,
+        stale_after_s: float | None = 0.5,
+        reopen: bool = True,
+        reopen_backoff_s: tuple[float, float] = (0.05, 2.0),
+    ) -> None:
+        if network is None:
+            network = SimCanNetwork(devices, bus=bus, to_devices=to_devices, to_host=to_host)
+        elif devices or bus is not None or to_devices is not None or to_host is not None:
+            raise ValueError("give a network, or the devices, bus and faults of a new one, not both")
+        super().__init__(
+            name=name,
+            queue_size=queue_size,
+            rx_buffer=rx_buffer,
+            stale_after_s=stale_after_s,
+            reopen=reopen,
+            reopen_backoff_s=reopen_backoff_s,
+        )
+        self.network = network
+        self._load_known = True  # measured exactly: the bus model's busy time
+        self._plugged = True
+        self._anchor: tuple[asyncio.AbstractEventLoop, float] | None = None  # (loop, t0)
+        self._t0 = 0.0
+        self._timer: asyncio.TimerHandle | None = None
+        self._timer_at = 0.0  # network time the timer is armed for
+        self._busy_s = 0.0  # the bus model's busy time already added to the load meter
+
+    # ----------------------------------------------------------------- public API
+
+    def send(self, frame: Frame) -> None:
+        """Put ``frame`` (this very object) on the simulated bus now; it never blocks.
+
+        Raises:
+            ValueError: a serial-link message.
+            SendQueueFull: the queue is full (only while a queued batch is being written).
+            TransportError: the transport is not open (lost, unplugged or closed).
+        """
+        if frame.is_serial:
+            raise ValueError(f"{self.name}: {frame!r} is a serial-link message, not a CAN frame")
+        self._enqueue(frame)
+
+    @property
+    def t0(self) -> float:
+        """The loop time at which the network's clock read 0 (network time = loop time - t0)."""
+        return self._t0
+
+    def network_time(self, loop_time: float) -> float:
+        """A time on the loop's clock as the network's time."""
+        return loop_time - self._t0
+
+    def loop_time(self, network_time: float) -> float:
+        """A time on the network's clock as the loop's time (what received frames are stamped with)."""
+        return network_time + self._t0
+
+    @property
+    def plugged(self) -> bool:
+        return self._plugged
+
+    def unplug(self) -> None:
+        """Pull the simulated adapter out: the transport is lost at once and cannot reopen until
+        :meth:`replug`."""
+        self._plugged = False
+        self._lose(TransportError(f"{self.name}: adapter unplugged"), self._generation)
+
+    def replug(self) -> None:
+        """Plug the adapter back in: the transport's recovery reopens it on its next attempt."""
+        self._plugged = True
+
+    # ----------------------------------------------------------------- connection
+
+    async def _connect(self) -> None:
+        if not self._plugged:
+            raise TransportError(f"{self.name}: cannot open: adapter unplugged")
+        loop = asyncio.get_running_loop()
+        network = self.network
+        if self._anchor is None or self._anchor[0] is not loop:
+            self._t0 = loop.time() - network.now_s
+            self._anchor = (loop, self._t0)
+        else:  # reopened on the same loop: the devices ran on while we were away, unheard
+            self._stats.ignored += len(network.advance(max(network.now_s, loop.time() - self._t0)))
+        self._busy_s = network.bus.busy_s
+        self._direct = True
+        self._rearm(self._generation)
+
+    async def _disconnect(self) -> None:
+        self._direct = False
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+
+    # ----------------------------------------------------------------- sending
+
+    def _write_now(self, frame: Frame) -> bool:
+        if not self._plugged:
+            self._lose(TransportError(f"{self.name}: adapter unplugged"), self._generation)
+            raise self._error()
+        self._put(frame, self._now())
+        return True
+
+    async def _transmit(self, batch: list[Outgoing[Frame]]) -> None:
+        while batch:
+            if not self._plugged:
+                self._lose(TransportError(f"{self.name}: adapter unplugged"), self._generation)
+                return  # what is left in batch is counted as purged by the base
+            self._put(batch.pop(0).item, self._now())
+
+    def _put(self, frame: Frame, now: float) -> None:
+        network = self.network
+        at = now - self._t0
+        network.send(frame, at if at > network.now_s else network.now_s)
+        stats = self._stats
+        stats.frames_out += 1
+        stats.bytes_out += len(frame.data)
+        self._sent(frame, now)
+        self._arm(network.now_s if at < network.now_s else at, self._generation)
+
+    # ----------------------------------------------------------------- the network's clock
+
+    def _arm(self, at: float, generation: int) -> None:
+        """Have the timer fire at network time ``at`` (or earlier, if it already would)."""
+        timer = self._timer
+        if timer is not None:
+            if self._timer_at <= at:
+                return
+            timer.cancel()
+        assert self._loop is not None
+        self._timer_at = at
+        self._timer = self._loop.call_at(at + self._t0, self._on_timer, generation)
+
+    def _rearm(self, generation: int) -> None:
+        at = self.network.next_event_s()
+        if at is not None:
+            self._arm(at, generation)
+
+    def _on_timer(self, generation: int) -> None:
+        self._timer = None
+        if generation != self._generation:
+            return
+        assert self._loop is not None
+        network = self.network
+        # asyncio runs a timer that is due within its clock's resolution: never run short of the
+        # event the timer was armed for, or it would be re-armed for the same instant.
+        until = max(self._loop.time() - self._t0, self._timer_at)
+        received = network.advance(until)
+        busy = network.bus.busy_s
+        if busy != self._busy_s:
+            self._load.add(until + self._t0, busy - self._busy_s)
+            self._busy_s = busy
+        if received:
+            t0 = self._t0
+            frames = [dataclasses.replace(frame, timestamp=at + t0) for at, frame in received]
+            stats = self._stats
+            stats.frames_in += len(frames)
+            stats.bytes_in += sum(len(frame.data) for frame in frames)
+            self._deliver(frames)  # a consumer may send (and arm) from here
+        if generation == self._generation:
+            self._rearm(generation)
