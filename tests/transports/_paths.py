@@ -7,6 +7,8 @@
 * ``virtual-fd``: CanTransport with CAN FD -> python-can's ``virtual`` bus -> the simulated bus.
 * ``native-slcan``: SlcanTransport (no python-can) -> a pty -> the simulated SLCAN adapter -> a
   simulated CAN bus at 1 Mbit/s with one responder.
+* ``sim``: SimTransport, the in-process bus: straight onto a simulated CAN bus at 1 Mbit/s with one
+  responder, on the loop's clock (real time here).
 
 A path sends numbered requests (:meth:`LinePath.request`) that its peer answers with the same
 payload, so a test can check order, loss and duplication from the replies alone. The pty paths
@@ -35,10 +37,10 @@ from servobus.sim.canbus import CanBusModel
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.pty import PtyPort
 from servobus.sim.slcan import SlcanAdapter
-from servobus.transports import CanTransport, SerialTransport, SlcanTransport, Transport
+from servobus.transports import CanTransport, SerialTransport, SimTransport, SlcanTransport, Transport
 from sim._standins import Responder, SerialResponder
 
-PATHS = ("slcan", "rs485", "virtual-fd", "native-slcan")
+PATHS = ("slcan", "rs485", "virtual-fd", "native-slcan", "sim")
 REPLY_TIMEOUT_S = 0.2
 
 
@@ -68,9 +70,13 @@ class LinePath:
 @contextlib.asynccontextmanager
 async def open_path(name: str, tmp_path: Path, **transport_options: Any) -> AsyncIterator[LinePath]:
     """``name`` from :data:`PATHS`, opened; ``transport_options`` go to the transport."""
-    opener = {"slcan": _slcan, "rs485": _rs485, "virtual-fd": _virtual_fd, "native-slcan": _native_slcan}[
-        name
-    ]
+    opener = {
+        "slcan": _slcan,
+        "rs485": _rs485,
+        "virtual-fd": _virtual_fd,
+        "native-slcan": _native_slcan,
+        "sim": _sim,
+    }[name]
     async with opener(tmp_path, **transport_options) as path:
         yield path
 
@@ -208,3 +214,23 @@ async def _virtual_fd(tmp_path: Path, **options: Any) -> AsyncIterator[LinePath]
             )
     finally:
         sim_side.shutdown()
+
+
+@contextlib.asynccontextmanager
+async def _sim(tmp_path: Path, **options: Any) -> AsyncIterator[LinePath]:
+    responder = Responder(1)
+    transport = SimTransport(devices=[responder], **options)
+
+    async def replug() -> None:
+        transport.replug()
+
+    async with transport:
+        yield LinePath(
+            name="sim",
+            transport=transport,
+            request=lambda seq: transport.send(Frame(arbitration_id=0x141, data=payload(seq, 8))),
+            reply_payload=lambda frame: frame.data,
+            peer_seen=lambda: [f.data for _, f in responder.seen],
+            unplug=transport.unplug,
+            replug=replug,
+        )

@@ -1,4 +1,5 @@
-"""One contract, three real I/O paths: SLCAN on a pty, RS485 on a pty, CAN FD on the virtual bus.
+"""One contract over every path: SLCAN on a pty (python-can's and native), RS485 on a pty, CAN FD on
+the virtual bus, and the in-process simulated bus.
 
 Every test here runs over each path of tests/transports/_paths.py; the unplug and reopen tests
 over the two pty paths, where a device can really vanish.
