@@ -2,8 +2,8 @@
 
 * ``slcan``: CanTransport -> python-can ``slcan`` -> a pty -> the simulated SLCAN adapter -> a
   simulated CAN bus at 1 Mbit/s with one responder.
-* ``rs485``: SerialTransport (MyActuator framing) -> a pty -> a simulated RS485 line with one
-  responder, paced at the line's baud rate.
+* ``rs485``: SerialTransport (the MyActuator family's framing, serial Frames) -> a pty -> a
+  simulated RS485 line with one responder, paced at the line's baud rate.
 * ``virtual-fd``: CanTransport with CAN FD -> python-can's ``virtual`` bus -> the simulated bus.
 * ``native-slcan``: SlcanTransport (no python-can) -> a pty -> the simulated SLCAN adapter -> a
   simulated CAN bus at 1 Mbit/s with one responder.
@@ -31,7 +31,7 @@ import can
 
 from _serving import serving
 from servobus.frame import Frame
-from servobus.protocols.myactuator.rs485 import encode_rs485
+from servobus.protocols import myactuator as ma
 from servobus.sim.attach import serve_python_can, serve_rs485, serve_slcan
 from servobus.sim.canbus import CanBusModel
 from servobus.sim.network import SimCanNetwork
@@ -174,10 +174,12 @@ async def _rs485(tmp_path: Path, *, baud: int = 2_500_000, **options: Any) -> As
 
     peer = _PtyPeer(tmp_path / "tty485", serve)
     await peer.plug()
-    transport = SerialTransport(str(peer.link), mode="myactuator", baud=baud, **options)
+    framing = ma.FAMILY.bind(1, link="rs485").framing
+    transport = SerialTransport(str(peer.link), framing=framing, baud=baud, **options)
 
     def request(seq: int) -> None:
-        transport.send(encode_rs485(1, payload(seq, 8)), reply_timeout_s=REPLY_TIMEOUT_S)
+        frame = Frame(arbitration_id=1, data=payload(seq, 8), is_serial=True)
+        transport.send(frame, reply_timeout_s=REPLY_TIMEOUT_S)
 
     try:
         async with transport:
@@ -185,7 +187,7 @@ async def _rs485(tmp_path: Path, *, baud: int = 2_500_000, **options: Any) -> As
                 name="rs485",
                 transport=transport,
                 request=request,
-                reply_payload=lambda frame: frame.data[3:-2],
+                reply_payload=lambda frame: frame.data,
                 peer_seen=lambda: seen,
                 unplug=peer.unplug,
                 replug=peer.plug,

@@ -91,7 +91,8 @@ async def _stall_writer(path: LinePath) -> None:
     """
     for seq in range(3):
         if path.name == "rs485":
-            path.transport.send(bytes([0x3E, 9, 1, seq, 0, 0]), reply_timeout_s=5.0)
+            frame = Frame(arbitration_id=9, data=bytes([seq, 0, 0, 0, 0, 0, 0, 0]), is_serial=True)
+            path.transport.send(frame, reply_timeout_s=5.0)
         else:
             path.transport.send(Frame(arbitration_id=0x149, data=bytes([seq])))
 

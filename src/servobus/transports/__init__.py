@@ -9,7 +9,7 @@ One interface (:class:`Transport`: ``open``/``close``, ``send``, ``drain``, ``re
   (pyserial-asyncio-fast and the C line de-framer, no python-can), carrying
   :class:`~servobus.frame.Frame`.
 * ``"rs485"``: :class:`SerialTransport`, an RS485 port through pyserial-asyncio-fast, carrying
-  whole CRC-checked :class:`SerialFrame` frames.
+  serial :class:`~servobus.frame.Frame` messages in the framing its family supplies.
 * ``"sim"``: :class:`SimTransport`, the in-process bus onto a simulated CAN network
   (:class:`~servobus.sim.network.SimCanNetwork`), on the event loop's clock (virtual time under
   ``looptime`` or :func:`servobus.sim.virtual.run`), carrying :class:`~servobus.frame.Frame`.
@@ -37,7 +37,7 @@ from servobus.transports.stats import TransportStats
 
 if TYPE_CHECKING:
     from servobus.transports.can import CanTransport
-    from servobus.transports.rs485 import SerialFrame, SerialMode, SerialTransport
+    from servobus.transports.rs485 import SerialMode, SerialTransport
     from servobus.transports.sim import SimTransport
     from servobus.transports.slcan import SlcanTransport
 
@@ -49,7 +49,6 @@ __all__ = [
     "ErrorFrame",
     "FramesDropped",
     "SendQueueFull",
-    "SerialFrame",
     "SerialMode",
     "SerialTransport",
     "SimTransport",
@@ -74,7 +73,6 @@ ENTRY_POINT_GROUP = "servobus.transports"
 
 _LAZY = {
     "CanTransport": "servobus.transports.can",
-    "SerialFrame": "servobus.transports.rs485",
     "SerialMode": "servobus.transports.rs485",
     "SerialTransport": "servobus.transports.rs485",
     "SimTransport": "servobus.transports.sim",

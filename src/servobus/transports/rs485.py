@@ -1,22 +1,54 @@
-"""RS485 serial lines through pyserial-asyncio-fast, cut into frames by the C de-framers.
+"""RS485 serial lines through pyserial-asyncio-fast: Frames in and out, the framing chosen by the family.
 
 One :class:`SerialTransport` is one port and one half-duplex line:
 
-* **Modes** pick the framing, the de-framer and the baud rates the manuals allow:
-  ``"myactuator"`` (``0x3E`` frames, CRC-16/MODBUS; 115200, 500 k, 1 M, 1.5 M, 2.5 Mbaud),
-  ``"hollow-transparent"`` (ID + 16 bytes + CRC32; 1 Mbaud) and ``"modbus-rtu"`` (19200 baud).
-* **Half-duplex**: one transaction at a time per port. A frame sent with ``reply_timeout_s`` keeps
-  the line until one whole frame has come back or the timeout passes; only then does the next
-  queued frame go. Between frames the line rests for ``gap_s`` (default 3.5 character times, the
-  Modbus RTU silence), counted from the end of the last byte either side sent.
-* **Framing**: received bytes go through the de-framer as they arrive; whole, CRC-checked frames
-  come out as :class:`SerialFrame`, found by header, length and CRC. When no byte has come for
-  ``idle_s`` the de-framer is told the line went idle, which drops a stray partial frame as noise.
-  ``idle_s`` is not the wire's 3.5-character silence: USB adapters hand bytes over in bursts (an
-  FTDI's default latency timer is 16 ms), so a host sees gaps inside frames that the wire never
-  had. It defaults to 20 ms, or 3.5 characters where that is longer.
+* **Frames on every link.** :meth:`SerialTransport.send` takes a serial
+  :class:`~servobus.frame.Frame` (``is_serial``: the address byte as ``arbitration_id``, the
+  message body as ``data``, as a family's bound codec encodes it on its ``"rs485"`` link) and
+  writes ``framing.encode(frame)``; received bytes go through ``framing.deframer()`` and come out
+  as Frames stamped with the event loop's clock. The **framing** is a plug-in the family supplies
+  (``FAMILY.bind(id, link="rs485").framing``), not something the transport knows: any object with
+  ``encode(frame) -> bytes`` and ``deframer()`` (:class:`~servobus.protocols._bound.Framing`) works.
+  ``mode="myactuator"``, ``"hollow-transparent"`` and ``"modbus-rtu"`` remain as shorthands that
+  pick the family's framing and the baud rates its manual allows.
+* **The line's rules are declared**, read-only, for the orchestrator to schedule by:
+  :attr:`~SerialTransport.half_duplex` (True), :attr:`~SerialTransport.max_outstanding` (one
+  request per port), :attr:`~SerialTransport.char_time_s`, :attr:`~SerialTransport.gap_s` (rest
+  between two frames of ours) and :attr:`~SerialTransport.turnaround_s` (rest after the far end's
+  last byte before we drive the line). The Bus will enforce them itself. Standalone (scripts,
+  tests) the transport keeps doing it: a frame sent with ``reply_timeout_s`` holds the line until
+  one whole frame comes back or the timeout passes, and the rests are kept between frames.
+* **Backpressure and freshness.** Every byte not yet written stays in our own queue; the port gets
+  one frame at a time, and only when it can take it now: the OS output buffer holds at most
+  ``high_water_bytes`` (``TIOCOUTQ``, polled no faster than every millisecond) and the write does
+  not block (``EAGAIN``: wait for the descriptor to become writable, event-driven). A frame older
+  than ``stale_after_s`` when it would be written is dropped (reported ``"stale"``), never
+  written; one that cannot be written whole before it goes stale is abandoned and its head flushed
+  from the OS buffer (``tcflush``); and when the OS reports bytes it has held, without taking more,
+  for longer than ``stale_after_s`` (a stalled adapter), they are flushed too. For a motor a stale
+  set-point is worse than none. What the OS cannot report stays out of reach: a pty's buffer
+  (``TIOCOUTQ`` says 0) keeps the frames it took while they were fresh.
+* **Receiving**: bytes go through the de-framer as they arrive; when no byte has come for
+  ``idle_s`` the de-framer is told the line went idle, which drops a stray partial frame as noise
+  (and ends a Modbus RTU frame). ``idle_s`` is not the wire's 3.5-character silence: USB adapters
+  hand bytes over in bursts (an FTDI's default latency timer is 16 ms), so a host sees gaps inside
+  frames that the wire never had. It defaults to 20 ms, or 3.5 characters where that is longer.
 * **Loss**: a port that vanishes (EIO, ENODEV, EOF on a pty) fails every waiter at once and is
   reopened by path with backoff, as in :class:`~servobus.transports.base.Transport`.
+
+**Why we write to the descriptor ourselves.** pyserial-asyncio-fast (0.16) reads well, but its
+write path has two upstream bugs that a slow or stalled port triggers
+(https://github.com/home-assistant-libs/pyserial-asyncio-fast/pull/36, "fix defered writes", open;
+also pyserial/pyserial-asyncio#77): after a partial write it registers a writer callback and never
+removes it, so once the buffer is drained ``_write_ready`` runs on every loop iteration and fails
+``assert data, "Write buffer should not be empty"``: 100 % CPU, an exception logged per
+iteration; and its direct write goes through pyserial's ``Serial.write``, which with
+``write_timeout=0`` retries ``EAGAIN`` in a busy loop, blocking the event loop until the port takes
+the bytes. Its buffer is also unbounded and below our freshness check. So we never call its
+``write``: the frame goes to the port's file descriptor with ``os.write`` (non-blocking), and when
+the port is full we wait with ``loop.add_writer`` for one wake-up and remove the callback again.
+pyserial-asyncio-fast still opens the port and reads it. (A ``socket://`` URL, which has no tty
+descriptor, goes through the library's transport, one frame at a time into an empty buffer.)
 
 pyserial-asyncio-fast is imported when the first port opens, so CAN-only users never load it.
 """
@@ -26,86 +58,105 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import enum
-import time
+import errno
+import fcntl
+import os
+import struct
+import termios
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any
 
-from servobus.core import (
-    Deframer,
-    HollowTransparentDeframer,
-    ModbusRtuDeframer,
-    MyActuatorRs485Deframer,
-)
 from servobus.errors import TransportError
+from servobus.frame import Frame
+from servobus.protocols._bound import Framing, StreamDeframer
 from servobus.timing import uart_time_s
 from servobus.transports.base import Outgoing, Transport
 from servobus.transports.stats import TransportStats
 
-__all__ = ["SerialFrame", "SerialMode", "SerialTransport"]
+__all__ = ["SerialMode", "SerialTransport"]
 
 _IDLE_CHARS = 3.5  # Modbus RTU's inter-frame silence, in character times
 _READ_SIZE = 16384  # bytes taken from the port per wake-up, at most
 _USB_BURST_S = 0.02  # longer than the gaps USB adapters put inside frames (FTDI latency timer: 16 ms)
+_POLL_MIN_S = 0.001  # the OS output buffer is polled no faster than this: never a spin
+_POLL_MAX_S = 0.05
+_HIGH_WATER_BYTES = 64  # about one frame of any built-in framing may wait in the OS buffer
+_TIOCOUTQ_ARG = bytes(4)
+
+#: a received Frame is fresh from the de-framer, held by nobody else: stamp it in place
+_SET_TIMESTAMP: Callable[[Frame, float], None] = Frame.timestamp.__set__  # type: ignore[attr-defined,misc]
 
 
 class SerialMode(enum.Enum):
-    """The framing on the line."""
+    """Shorthands for the built-in families' framings (``mode=`` of :class:`SerialTransport`)."""
 
     MYACTUATOR = "myactuator"
     HOLLOW_TRANSPARENT = "hollow-transparent"
     MODBUS_RTU = "modbus-rtu"
 
 
-@dataclass(frozen=True, slots=True)
-class _ModeSpec:
-    deframer: Callable[[], Deframer]
-    bauds: tuple[int, ...]  # the first is the default
-
-
-_MODES: dict[SerialMode, _ModeSpec] = {
-    SerialMode.MYACTUATOR: _ModeSpec(
-        MyActuatorRs485Deframer, (115_200, 500_000, 1_000_000, 1_500_000, 2_500_000)
-    ),
-    SerialMode.HOLLOW_TRANSPARENT: _ModeSpec(HollowTransparentDeframer, (1_000_000,)),
-    SerialMode.MODBUS_RTU: _ModeSpec(ModbusRtuDeframer, (19_200,)),
+#: baud rates each manual allows, the first the default; by mode and by the framing's name
+_MODE_BAUDS: dict[SerialMode, tuple[int, ...]] = {
+    SerialMode.MYACTUATOR: (115_200, 500_000, 1_000_000, 1_500_000, 2_500_000),
+    SerialMode.HOLLOW_TRANSPARENT: (1_000_000,),
+    SerialMode.MODBUS_RTU: (19_200,),
+}
+_FRAMING_BAUDS: dict[str, tuple[int, ...]] = {
+    "myactuator-rs485": _MODE_BAUDS[SerialMode.MYACTUATOR],
+    "hollow-transparent": _MODE_BAUDS[SerialMode.HOLLOW_TRANSPARENT],
+    "hollow-modbus-rtu": _MODE_BAUDS[SerialMode.MODBUS_RTU],
 }
 
 _PARITY_BITS = {"N": 0, "E": 1, "O": 1}
 
 
-@dataclass(frozen=True, slots=True)
-class SerialFrame:
-    """One whole serial frame as it was on the wire (header, payload and CRC; the CRC checked).
+def _mode_framing(mode: SerialMode) -> Framing:
+    """The family's framing for a ``mode=`` shorthand (the families load only here)."""
+    if mode is SerialMode.MYACTUATOR:
+        from servobus.protocols.myactuator.bound import Rs485Framing
 
-    ``timestamp`` is ``time.monotonic()`` when its last byte was read; equality ignores it.
-    """
+        return Rs485Framing()
+    from servobus.protocols.hollow.bound import ModbusFraming, TransparentFraming
 
-    data: bytes
-    timestamp: float = field(default=0.0, compare=False)
-
-    def __repr__(self) -> str:
-        return f"SerialFrame([{self.data.hex(' ').upper()}])"
+    return TransparentFraming() if mode is SerialMode.HOLLOW_TRANSPARENT else ModbusFraming()
 
 
-class SerialTransport(Transport[SerialFrame, bytes]):
-    """One RS485 port: frames out one transaction at a time, whole frames in.
+def _deframer_attr(deframer: StreamDeframer, name: str) -> Any:
+    """A counter or flag of a de-framer, or of the byte de-framer a family's wrapper holds."""
+    for obj in (deframer, getattr(deframer, "_inner", None)):
+        if obj is not None and (value := getattr(obj, name, None)) is not None:
+            return value
+    return None
+
+
+class SerialTransport(Transport[Frame, Frame]):
+    """One RS485 port: serial Frames out one transaction at a time, whole Frames in.
 
     Args:
         port: the serial device (``/dev/ttyUSB0``, a pty, or any pyserial URL).
-        mode: ``"myactuator"``, ``"hollow-transparent"`` or ``"modbus-rtu"``.
-        baud: the line's rate; one the mode's manual allows (default: the mode's first).
+        framing: how Frames look on the wire, from the family:
+            ``FAMILY.bind(motor_id, link="rs485").framing``.
+        mode: a shorthand for a built-in family's framing and baud rates: ``"myactuator"``,
+            ``"hollow-transparent"`` or ``"modbus-rtu"``. With ``framing`` too, the mode gives
+            only the allowed baud rates.
+        baud: the line's rate; one the manual allows (default: the first). A framing the
+            transport does not know takes any rate (its ``bauds`` attribute, if it has one,
+            lists the allowed ones) and then needs ``baud``.
         parity: ``"N"``, ``"E"`` or ``"O"`` (Modbus devices differ; the others use none).
-        gap_s: rest between frames on the line (default: 3.5 character times).
+        gap_s: rest between two frames of ours on the line (default: 3.5 character times).
+        turnaround_s: rest after the far end's last byte before we send (default: ``gap_s``).
         idle_s: silence after which buffered partial bytes are dropped (default: 20 ms, or 3.5
             character times where that is longer).
+        high_water_bytes: the next frame is written only when the OS output buffer holds at most
+            this many bytes (default 64, about one frame).
         exclusive: lock the port against other processes (pyserial's ``exclusive``).
         queue_size, rx_buffer, stale_after_s, reopen, reopen_backoff_s: see
             :class:`~servobus.transports.base.Transport`.
         **options: other pyserial arguments.
 
     Raises:
-        ValueError: unknown mode or parity, or a baud rate the mode does not use.
+        ValueError: neither framing nor mode, unknown mode or parity, a baud rate the framing
+            does not use, negative times.
     """
 
     batch_size = 1  # half-duplex: one transaction at a time
@@ -114,11 +165,14 @@ class SerialTransport(Transport[SerialFrame, bytes]):
         self,
         port: str,
         *,
-        mode: SerialMode | str,
+        framing: Framing | None = None,
+        mode: SerialMode | str | None = None,
         baud: int | None = None,
         parity: str = "N",
         gap_s: float | None = None,
+        turnaround_s: float | None = None,
         idle_s: float | None = None,
+        high_water_bytes: int = _HIGH_WATER_BYTES,
         exclusive: bool = True,
         queue_size: int = 256,
         rx_buffer: int = 65536,
@@ -127,19 +181,46 @@ class SerialTransport(Transport[SerialFrame, bytes]):
         reopen_backoff_s: tuple[float, float] = (0.05, 2.0),
         **options: Any,
     ) -> None:
-        try:
-            self.mode = SerialMode(mode)
-        except ValueError:
-            known = ", ".join(m.value for m in SerialMode)
-            raise ValueError(f"mode={mode!r} is not one of {known}") from None
-        spec = _MODES[self.mode]
-        self.baud = spec.bauds[0] if baud is None else baud
-        if self.baud not in spec.bauds:
-            raise ValueError(f"baud={self.baud} is not one of {self.mode.value}'s rates {spec.bauds}")
+        self.mode: SerialMode | None = None
+        if mode is not None:
+            try:
+                self.mode = SerialMode(mode)
+            except ValueError:
+                known = ", ".join(m.value for m in SerialMode)
+                raise ValueError(f"mode={mode!r} is not one of {known}") from None
+        if framing is None:
+            if self.mode is None:
+                raise ValueError(
+                    "give framing= (the family's: FAMILY.bind(1, link='rs485').framing) or mode="
+                )
+            framing = _mode_framing(self.mode)
+        elif not isinstance(framing, Framing):
+            raise ValueError(f"framing={framing!r} has no encode(frame) and deframer()")
+        self._framing = framing
+        label = self.mode.value if self.mode is not None else framing.name
+        bauds: tuple[int, ...] | None = (
+            _MODE_BAUDS[self.mode]
+            if self.mode is not None
+            else _FRAMING_BAUDS.get(framing.name) or getattr(framing, "bauds", None)
+        )
+        if baud is None:
+            if not bauds:
+                raise ValueError(f"baud= is needed: framing {framing.name!r} names no baud rates")
+            baud = bauds[0]
+        if bauds and baud not in bauds:
+            raise ValueError(f"baud={baud} is not one of {label}'s rates {tuple(bauds)}")
+        if baud <= 0:
+            raise ValueError(f"baud={baud} must be positive")
         if parity not in _PARITY_BITS:
             raise ValueError(f"parity={parity!r} is not one of 'N', 'E', 'O'")
-        if (gap_s is not None and gap_s < 0) or (idle_s is not None and idle_s <= 0):
-            raise ValueError(f"need gap_s >= 0 and idle_s > 0 (gap_s={gap_s}, idle_s={idle_s})")
+        negative = any(t is not None and t < 0 for t in (gap_s, turnaround_s))
+        if negative or (idle_s is not None and idle_s <= 0):
+            raise ValueError(
+                f"need gap_s, turnaround_s >= 0 and idle_s > 0 (gap_s={gap_s}, "
+                f"turnaround_s={turnaround_s}, idle_s={idle_s})"
+            )
+        if high_water_bytes < 0:
+            raise ValueError(f"high_water_bytes={high_water_bytes} must be >= 0")
         super().__init__(
             name=f"rs485:{port}",
             queue_size=queue_size,
@@ -149,45 +230,104 @@ class SerialTransport(Transport[SerialFrame, bytes]):
             reopen_backoff_s=reopen_backoff_s,
         )
         self.port = port
+        self.baud = baud
         self.parity = parity
         self.bits_per_char = 10 + _PARITY_BITS[parity]
-        silence_s = uart_time_s(1, self.baud, bits_per_byte=self.bits_per_char) * _IDLE_CHARS
-        self.gap_s = silence_s if gap_s is None else gap_s
+        self._char_time_s = uart_time_s(1, baud, bits_per_byte=self.bits_per_char)
+        silence_s = self._char_time_s * _IDLE_CHARS
+        self._gap_s = silence_s if gap_s is None else gap_s
+        self._turnaround_s = self._gap_s if turnaround_s is None else turnaround_s
         self.idle_s = max(silence_s, _USB_BURST_S) if idle_s is None else idle_s
+        self._high_water = high_water_bytes
         self._serial_options = {"exclusive": exclusive, **options}
-        self._deframer = spec.deframer()
+        self._deframer: StreamDeframer = framing.deframer()
+        self._old_counts = [0, 0]  # discarded bytes, CRC errors of the de-framers of past connections
         self._load_known = True
         self._line: asyncio.Transport | None = None
         self._protocol: _LineProtocol | None = None
-        self._line_quiet_at = 0.0  # monotonic time the line's last byte ends (either side)
+        self._fd: int | None = None  # the port's descriptor, written by us (see the module docstring)
+        self._tx_quiet_at = 0.0  # loop time our last byte ends on the wire
+        self._rx_quiet_at = 0.0  # loop time the far end's last byte came
+        self._written_at = 0.0  # loop time the port last took bytes from us
+        self._flushes = 0
         self._last_rx = 0.0
         self._idle_timer: asyncio.TimerHandle | None = None
         self._reply: asyncio.Future[None] | None = None
 
+    # ----------------------------------------------------------------- the line's rules
+
+    @property
+    def framing(self) -> Framing:
+        """How Frames look on this line's wire (the family's plug-in)."""
+        return self._framing
+
+    @property
+    def half_duplex(self) -> bool:
+        """One direction at a time: a request and its reply never overlap on the line."""
+        return True
+
+    @property
+    def max_outstanding(self) -> int:
+        """Requests awaiting a reply at once on this port: one."""
+        return 1
+
+    @property
+    def char_time_s(self) -> float:
+        """One character on the wire: start, 8 data bits, parity if any, stop, at the baud rate."""
+        return self._char_time_s
+
+    @property
+    def gap_s(self) -> float:
+        """Rest between the end of one frame of ours and the start of the next (3.5 characters)."""
+        return self._gap_s
+
+    @property
+    def turnaround_s(self) -> float:
+        """Rest between the far end's last byte and our next frame (the line changes direction)."""
+        return self._turnaround_s
+
+    @property
+    def high_water_bytes(self) -> int:
+        """Bytes the OS output buffer may hold when the next frame is written."""
+        return self._high_water
+
+    @property
+    def output_flushes(self) -> int:
+        """Times the OS output buffer was flushed: bytes it reported outlasted ``stale_after_s``,
+        or a frame could not be written whole before it went stale."""
+        return self._flushes
+
+    def wire_time_s(self, n_bytes: int) -> float:
+        """Seconds ``n_bytes`` occupy this line."""
+        return n_bytes * self._char_time_s
+
     # ----------------------------------------------------------------- public API
 
-    def send(self, frame: bytes, *, reply_timeout_s: float | None = None) -> None:
-        """Queue one whole frame (as the codec encoded it, CRC included).
+    def send(self, frame: Frame, *, reply_timeout_s: float | None = None) -> None:
+        """Queue one serial Frame (as the family's codec encoded it on its ``"rs485"`` link).
 
         Args:
             reply_timeout_s: a reply is expected: keep the line for up to this long after the
                 frame has left, until a whole frame comes back. None: no reply (broadcast).
 
         Raises:
-            ValueError: empty frame or negative timeout.
+            ValueError: not a serial Frame, one the framing refuses, or a negative timeout.
             SendQueueFull: the queue is full.
             TransportError: the port is not open (lost or closed).
         """
-        if not frame:
-            raise ValueError("cannot send an empty serial frame")
+        if not isinstance(frame, Frame) or not frame.is_serial:
+            raise ValueError(f"{frame!r} is not a serial Frame (is_serial=True): RS485 carries those")
         if reply_timeout_s is not None and reply_timeout_s < 0:
             raise ValueError(f"reply_timeout_s={reply_timeout_s} must be >= 0")
-        self._enqueue(bytes(frame), reply_timeout_s)
+        self._framing.encode(frame)  # refuse now what the framing cannot put on the wire
+        self._enqueue(frame, reply_timeout_s)
 
     def stats(self) -> TransportStats:
         snapshot = super().stats()
-        snapshot.discarded_bytes = self._deframer.discarded_bytes
-        snapshot.crc_errors = self._deframer.crc_errors
+        snapshot.discarded_bytes = self._old_counts[0] + (
+            _deframer_attr(self._deframer, "discarded_bytes") or 0
+        )
+        snapshot.crc_errors = self._old_counts[1] + (_deframer_attr(self._deframer, "crc_errors") or 0)
         return snapshot
 
     # ----------------------------------------------------------------- connection
@@ -215,18 +355,29 @@ class SerialTransport(Transport[SerialFrame, bytes]):
         # takes a burst in one call, which is what the de-framer is built for.
         if hasattr(line, "_max_read_size"):
             line._max_read_size = _READ_SIZE
-        self._deframer.clear()  # bytes of a frame cut by the loss cannot be completed
-        self._line, self._protocol = line, protocol
+        fd: int | None = None
+        port = getattr(line, "serial", None)
+        if isinstance(line, serial_asyncio_fast.SerialTransport) and port is not None:
+            with contextlib.suppress(AttributeError, OSError, ValueError, TypeError):
+                fd = port.fileno()
+                os.set_blocking(fd, False)
+        # Bytes of a frame cut by the loss cannot be completed: a fresh de-framer, counts kept.
+        self._old_counts[0] += _deframer_attr(self._deframer, "discarded_bytes") or 0
+        self._old_counts[1] += _deframer_attr(self._deframer, "crc_errors") or 0
+        self._deframer = self._framing.deframer()
+        self._line, self._protocol, self._fd = line, protocol, fd
+        self._written_at = loop.time()
 
     async def _disconnect(self) -> None:
         line, protocol = self._line, self._protocol
         self._line = self._protocol = None
+        self._fd = None
         if self._idle_timer is not None:
             self._idle_timer.cancel()
             self._idle_timer = None
         if line is not None and protocol is not None:
             if not line.is_closing():  # a failed line is already closing (closing twice breaks it)
-                line.abort()  # queued bytes belong to a line that is going away
+                line.abort()
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(asyncio.shield(protocol.closed), 1.0)
 
@@ -235,54 +386,69 @@ class SerialTransport(Transport[SerialFrame, bytes]):
     def _on_bytes(self, data: bytes, generation: int) -> None:
         if generation != self._generation:
             return
-        now = time.monotonic()
+        now = self._now()
         self._stats.bytes_in += len(data)
         self._load.add(now, uart_time_s(len(data), self.baud, bits_per_byte=self.bits_per_char))
-        self._last_rx = now
-        self._line_quiet_at = max(self._line_quiet_at, now)
+        self._last_rx = self._rx_quiet_at = now
         self._take(self._deframer.feed(data), now)
-        if self._deframer.pending and self._idle_timer is None:
+        if self._idle_timer is None and _deframer_attr(self._deframer, "pending") is not False:
             self._idle_timer = asyncio.get_running_loop().call_later(self.idle_s, self._on_quiet, generation)
 
     def _on_quiet(self, generation: int) -> None:
         self._idle_timer = None
         if generation != self._generation:
             return
-        still = self._last_rx + self.idle_s - time.monotonic()
+        now = self._now()
+        still = self._last_rx + self.idle_s - now
         if still > 0:  # bytes came meanwhile: the silence starts over
             self._idle_timer = asyncio.get_running_loop().call_later(still, self._on_quiet, generation)
             return
-        self._take(self._deframer.idle(), time.monotonic())
+        self._take(self._deframer.idle(), now)
 
-    def _take(self, frames: list[bytes], now: float) -> None:
+    def _take(self, frames: list[Frame], now: float) -> None:
         if not frames:
             return
+        for frame in frames:
+            _SET_TIMESTAMP(frame, now)
         self._stats.frames_in += len(frames)
-        self._deliver([SerialFrame(frame, now) for frame in frames])
+        self._deliver(frames)
         if self._reply is not None and not self._reply.done():
             self._reply.set_result(None)
 
     # ----------------------------------------------------------------- sending
 
-    async def _transmit(self, batch: list[Outgoing[bytes]]) -> None:
+    async def _transmit(self, batch: list[Outgoing[Frame]]) -> None:
+        loop = asyncio.get_running_loop()
         stats = self._stats
+        limit = self._stale_after_s
+        generation = self._generation
         while batch:
-            if (rest := self._line_quiet_at + self.gap_s - time.monotonic()) > 0:
+            outgoing = batch[0]
+            deadline = None if limit is None else outgoing.queued_at + limit
+            rest = max(self._tx_quiet_at + self._gap_s, self._rx_quiet_at + self._turnaround_s) - loop.time()
+            if rest > 0:
                 await asyncio.sleep(rest)
             line = self._line
             if line is None or line.is_closing():  # failed while we rested: the base purges the rest
                 return
-            outgoing = batch.pop(0)
-            data = outgoing.item
-            reply = None if outgoing.hold_s is None else asyncio.get_running_loop().create_future()
+            data = self._framing.encode(outgoing.item)
+            try:
+                now = await self._write(line, data, deadline)
+            except OSError as exc:  # the port failed under the write (EIO: unplugged)
+                self._lose(exc, generation)
+                return
+            batch.pop(0)
+            if now is None:
+                self._dropped("stale", [outgoing.item])
+                continue
+            reply = None if outgoing.hold_s is None else loop.create_future()
             self._reply = reply
-            line.write(data)
-            on_wire_s = uart_time_s(len(data), self.baud, bits_per_byte=self.bits_per_char)
-            now = time.monotonic()
-            self._line_quiet_at = now + on_wire_s
+            on_wire_s = self._char_time_s * len(data)
+            self._tx_quiet_at = now + on_wire_s
             stats.frames_out += 1
             stats.bytes_out += len(data)
             self._load.add(now, on_wire_s)
+            self._sent(outgoing.item, now)
             if reply is not None and outgoing.hold_s is not None:
                 try:
                     await asyncio.wait_for(reply, on_wire_s + outgoing.hold_s)
@@ -290,6 +456,105 @@ class SerialTransport(Transport[SerialFrame, bytes]):
                     pass  # no reply: the line is free again; matching the silence is the caller's job
                 finally:
                     self._reply = None
+
+    async def _write(self, line: asyncio.Transport, data: bytes, deadline: float | None) -> float | None:
+        """Hand ``data`` to the port whole, when it can take it.
+
+        Returns:
+            The loop time its last bytes were handed over, or None: ``deadline`` came first (the
+            frame went stale) and nothing of it is left in front of the next frame.
+
+        Raises:
+            OSError: the port failed (not EAGAIN).
+        """
+        fd = self._fd
+        if fd is None:  # no tty descriptor (socket:// URL): the library's transport, one frame at a time
+            while line.get_write_buffer_size():
+                if not await self._pause(deadline, line.get_write_buffer_size() * self._char_time_s):
+                    return None
+            now = asyncio.get_running_loop().time()
+            if deadline is not None and now > deadline:
+                return None
+            line.write(data)
+            self._written_at = now
+            return now
+        while (queued := self._out_waiting(fd)) > self._high_water:
+            if not await self._pause(deadline, (queued - self._high_water) * self._char_time_s):
+                return None
+        loop = asyncio.get_running_loop()
+        view = memoryview(data)
+        done = 0
+        while True:
+            now = loop.time()
+            if deadline is not None and now > deadline:  # went stale while we waited
+                if done:  # a cut frame must not sit in front of the next one
+                    self._flush(fd)
+                return None
+            try:
+                done += os.write(fd, view[done:])
+            except BlockingIOError:
+                pass
+            except InterruptedError:
+                continue
+            if done:
+                self._written_at = now
+            if done == len(data):
+                return now
+            await self._writable(fd, deadline)
+
+    async def _pause(self, deadline: float | None, drain_s: float) -> bool:
+        """Sleep while the port drains (at least 1 ms: never a spin); False once ``deadline`` passed."""
+        now = asyncio.get_running_loop().time()
+        self._flush_if_stalled(now)
+        if deadline is not None and now >= deadline:
+            return False
+        wait = min(max(drain_s, _POLL_MIN_S), _POLL_MAX_S)
+        await asyncio.sleep(wait if deadline is None else min(wait, deadline - now))
+        return True
+
+    async def _writable(self, fd: int, deadline: float | None) -> None:
+        """Wait, event-driven, until ``fd`` takes bytes again or ``deadline`` passes.
+
+        One wake-up, then the callback is removed (upstream's stays registered and spins).
+        """
+        loop = asyncio.get_running_loop()
+        ready: asyncio.Future[None] = loop.create_future()
+        loop.add_writer(fd, _wake, ready)
+        try:
+            timeout = None if deadline is None else max(deadline - loop.time(), 0.0)
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(ready, timeout)
+        finally:
+            loop.remove_writer(fd)
+
+    def _flush_if_stalled(self, now: float) -> None:
+        """The OS holds bytes for the port (above the high-water mark) and has taken nothing from us
+        for longer than ``stale_after_s``: what it holds was written before that, so it is stale."""
+        limit = self._stale_after_s
+        if limit is None or self._fd is None or now - self._written_at <= limit:
+            return
+        self._flush(self._fd)
+        self._written_at = now  # once per stall period, not on every poll
+
+    def _flush(self, fd: int) -> None:
+        """Discard what the OS holds for the port and has not yet sent (``tcflush(TCOFLUSH)``)."""
+        with contextlib.suppress(OSError):
+            termios.tcflush(fd, termios.TCOFLUSH)
+            self._flushes += 1
+
+    def _out_waiting(self, fd: int) -> int:
+        """Bytes the OS still holds for the port (0 where the driver cannot tell, as on a pty)."""
+        try:
+            return int(struct.unpack("I", fcntl.ioctl(fd, termios.TIOCOUTQ, _TIOCOUTQ_ARG))[0])
+        except OSError as exc:
+            if exc.errno in (errno.ENOTTY, errno.EINVAL, errno.ENOTSUP):
+                return 0
+            raise
+
+
+def _wake(future: asyncio.Future[None]) -> None:
+    if not future.done():
+        future.set_result(None)
 
 
 class _LineProtocol(asyncio.Protocol):
