@@ -9,7 +9,9 @@ from servobus.errors import MotorFault, MotorTimeout, ProtocolError, ServobusErr
 from servobus.frame import Frame
 
 __all__ = [
+    "Bus",
     "Frame",
+    "Motor",
     "MotorFault",
     "MotorTimeout",
     "ProtocolError",
@@ -17,3 +19,12 @@ __all__ = [
     "TransportError",
     "__version__",
 ]
+
+
+def __getattr__(name: str) -> object:
+    # The Bus pulls in asyncio and anyio: imported when first used, so the codecs stay light.
+    if name in ("Bus", "Motor"):
+        from servobus import bus
+
+        return getattr(bus, name)
+    raise AttributeError(f"module 'servobus' has no attribute {name!r}")

@@ -1,0 +1,462 @@
+"""The Bus: one physical bus, its motors, and every request's life on it (asyncio, anyio-friendly).
+
+``async with Bus(transport) as bus`` takes a transport (CAN through python-can, the native SLCAN
+link, an RS485 line, or the in-process simulator), and then:
+
+* ``bus.motor("myactuator", 3)`` binds a motor through its family's codec (``Family.bind``); motors
+  that cannot share the bus are refused with both named.
+* ``await motor.request(command)``, or ``await motor.read_status2()`` / ``motor.speed_control(...)``
+  for every command of the family: the typed reply, or :class:`~servobus.errors.MotorTimeout`
+  naming motor, command and timeout.
+* ``await bus.cycle([(motor, command), ...])``: one control tick, every request in flight at once,
+  one result per item in order (a reply, or the exception as a value), so one silent motor never
+  costs the others their replies.
+* ``await bus.broadcast(command, motors)``: MyActuator's 0x280/0xCD and LK's multi-motor torque.
+* Leaving the ``async with`` block, normally, by an exception or by cancellation, sends the safe
+  command (stop by default) to every motor this Bus commanded, shielded, within ``safe_timeout_s``.
+
+Inside, the sans-IO :class:`~servobus.scheduler.Scheduler` matches, paces and times out; the Bus only
+moves frames between it and the transport (push delivery and send reports, no polling) and keeps one
+timer. No global state, no signal handlers: a Bus lives inside the user's loop and task groups.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import functools
+import logging
+import re
+from collections.abc import Awaitable, Callable, Hashable, Iterable, Sequence
+from types import TracebackType
+from typing import Any, Protocol, Self
+
+import anyio
+
+from servobus.errors import MotorTimeout, TransportError
+from servobus.frame import Frame
+from servobus.protocols import BoundCodec, get_family
+from servobus.protocols._message import Command, Reply
+from servobus.scheduler import Request, RequestState, Scheduler, Traffic
+from servobus.transports.events import StateChanged, TransportEvent, TransportState
+
+__all__ = ["Bus", "FrameLink", "Motor"]
+
+logger = logging.getLogger("servobus.bus")
+
+
+class FrameLink(Protocol):
+    """What the Bus needs of a transport (every servobus transport is one)."""
+
+    name: str
+
+    @property
+    def is_open(self) -> bool: ...
+
+    async def open(self) -> None: ...
+
+    async def close(self) -> None: ...
+
+    def send(self, frame: Frame) -> None: ...
+
+    def set_consumer(self, consumer: Callable[[list[Frame]], object] | None) -> None: ...
+
+    def set_send_reporter(
+        self, reporter: Callable[[Frame, float | None, str | None], object] | None
+    ) -> None: ...
+
+    def add_listener(self, listener: Callable[[TransportEvent], object]) -> None: ...
+
+    def remove_listener(self, listener: Callable[[TransportEvent], object]) -> None: ...
+
+
+Result = Reply | BaseException | None
+
+
+def _snake(name: str) -> str:
+    return re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", name).lower()
+
+
+def _command_classes(family: str) -> dict[str, type[Command]]:
+    """The family's command classes by snake_case name (``ReadStatus2`` -> ``read_status2``)."""
+    module = __import__(f"servobus.protocols.{family}", fromlist=["__all__"])
+    out: dict[str, type[Command]] = {}
+    for name in getattr(module, "__all__", ()):
+        obj = getattr(module, name, None)
+        if isinstance(obj, type) and issubclass(obj, Command) and obj.__module__.startswith("servobus."):
+            out[_snake(name)] = obj
+    return out
+
+
+class Motor:
+    """One motor on a Bus: its codec, its latest telemetry, and a method per command of its family.
+
+    ``await motor.speed_control(speed_dps=100)`` builds ``SpeedControl(speed_dps=100)`` (its range
+    checks raise ValueError before anything is sent) and awaits the typed reply.
+
+    Attributes:
+        codec: the bound codec (family, id, revision, link).
+        state: the latest reply, stream frame or error report received from this motor (None yet).
+        last_seen: when it was received (the loop's clock; None yet).
+    """
+
+    def __init__(self, bus: Bus, codec: BoundCodec) -> None:
+        self.bus = bus
+        self.codec = codec
+        self.state: Reply | None = None
+        self.last_seen: float | None = None
+        self._commands = _command_classes(codec.family)
+
+    @property
+    def motor_id(self) -> int:
+        return self.codec.motor_id
+
+    def __repr__(self) -> str:
+        return f"<Motor {self.codec.family} {self.codec.motor_id} on {self.bus.name}>"
+
+    async def request(
+        self, command: Command, *, timeout_s: float | None = None, retries: int = 0
+    ) -> Reply | None:
+        """Send ``command`` and await its reply (None for commands that get none).
+
+        Raises:
+            ValueError: the command is refused by the codec (before any frame is sent).
+            MotorTimeout: no reply within the timeout (the codec's default for the command).
+            TransportError: the transport was lost or refused the frame.
+        """
+        return await self.bus.request(self, command, timeout_s=timeout_s, retries=retries)
+
+    def __getattr__(self, name: str) -> Callable[..., Awaitable[Reply | None]]:
+        try:
+            cls = self.__dict__["_commands"][name]
+        except KeyError:
+            raise AttributeError(f"{self.codec.family} motors have no command {name!r}") from None
+
+        async def call(*, timeout_s: float | None = None, retries: int = 0, **fields: Any) -> Reply | None:
+            return await self.request(cls(**fields), timeout_s=timeout_s, retries=retries)
+
+        call.__name__ = name
+        call.__doc__ = f"Send {cls.__name__} and await its reply.\n\n{cls.__doc__ or ''}"
+        return call
+
+    def __dir__(self) -> list[str]:
+        return [*super().__dir__(), *self._commands]
+
+
+class Bus:
+    """One bus and its motors.
+
+    Args:
+        transport: the link; opened (and closed on exit) by the Bus unless it is already open.
+        safe: the command every commanded motor gets when the block is left: ``"stop"``,
+            ``"shutdown"``, ``"brake"``, or None for nothing.
+        safe_timeout_s: how long the safe stop may take in all.
+        max_in_flight: requests in flight at once (default: 64; 1 on a half-duplex line).
+        name: a label for errors and logs (default: the transport's).
+    """
+
+    def __init__(
+        self,
+        transport: FrameLink,
+        *,
+        safe: str | None = "stop",
+        safe_timeout_s: float = 0.25,
+        max_in_flight: int = 64,
+        name: str | None = None,
+    ) -> None:
+        if safe_timeout_s <= 0:
+            raise ValueError(f"safe_timeout_s={safe_timeout_s} must be positive")
+        self.transport = transport
+        self.name = name or transport.name
+        self.safe = safe
+        self.safe_timeout_s = safe_timeout_s
+        half_duplex = bool(getattr(transport, "half_duplex", False))
+        self.scheduler = Scheduler(
+            max_in_flight=max_in_flight,
+            one_at_a_time=half_duplex,
+            gap_s=float(getattr(transport, "gap_s", 0.0) or 0.0) if half_duplex else 0.0,
+        )
+        self.motors: dict[tuple[str, int], Motor] = {}
+        self._by_codec: dict[int, Motor] = {}
+        self._commanded: dict[int, Motor] = {}
+        self._by_frame: dict[int, Request] = {}
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._owns_transport = False
+        # The Bus's one timer: a loop callback at the scheduler's next deadline (no task to cancel).
+        self._timer: asyncio.TimerHandle | None = None
+        self._subscribers: list[Callable[[Motor, Traffic, Reply], object]] = []
+
+    # ---- life cycle ----
+
+    async def __aenter__(self) -> Self:
+        self._loop = asyncio.get_running_loop()
+        if not self.transport.is_open:
+            await self.transport.open()
+            self._owns_transport = True
+        self.transport.set_consumer(self._on_frames)
+        self.transport.set_send_reporter(self._on_report)
+        self.transport.add_listener(self._on_event)
+        return self
+
+    async def __aexit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> bool | None:
+        try:
+            with anyio.CancelScope(shield=True):
+                await self._safe_stop()
+        finally:
+            if self._timer is not None:
+                self._timer.cancel()
+                self._timer = None
+            self.transport.set_consumer(None)
+            self.transport.set_send_reporter(None)
+            with contextlib.suppress(ValueError):
+                self.transport.remove_listener(self._on_event)
+            if self._owns_transport:
+                with anyio.CancelScope(shield=True):
+                    await self.transport.close()
+        return None
+
+    async def _safe_stop(self) -> None:
+        """Send the safe command to every commanded motor; wait for the replies within the limit."""
+        if self.safe is None or not self._commanded or not self.transport.is_open:
+            return
+        pending = []
+        for motor in list(self._commanded.values()):
+            try:
+                command = motor.codec.safe_command(self.safe)
+                pending.append(self._submit(motor, command, timeout_s=self.safe_timeout_s, retries=0))
+            except (ValueError, TransportError):
+                continue
+        with anyio.move_on_after(self.safe_timeout_s):
+            await asyncio.gather(*pending, return_exceptions=True)
+
+    # ---- motors ----
+
+    def motor(self, family: str, motor_id: int, **options: Any) -> Motor:
+        """The motor ``motor_id`` of ``family`` on this bus (bound once; the same object after).
+
+        Args:
+            family: ``"myactuator"``, ``"lk"``, ``"hollow"`` or a plug-in family.
+            motor_id: the motor's id.
+            **options: ``revision``, ``model``, ``link`` and family options, as ``Family.bind``.
+
+        Raises:
+            ValueError: a bad id or option, or a motor whose identifiers collide with one already on
+                this bus (both named).
+        """
+        key = (family, motor_id)
+        if key in self.motors:
+            return self.motors[key]
+        codec = get_family(family).bind(motor_id, **options)
+        self.scheduler.add(codec)
+        motor = Motor(self, codec)
+        self.motors[key] = motor
+        self._by_codec[id(codec)] = motor
+        return motor
+
+    def subscribe(self, callback: Callable[[Motor, Traffic, Reply], object]) -> None:
+        """Call ``callback(motor, traffic, reply)`` for every decoded frame of a motor on this bus."""
+        self._subscribers.append(callback)
+
+    # ---- requests ----
+
+    async def request(
+        self, motor: Motor, command: Command, *, timeout_s: float | None = None, retries: int = 0
+    ) -> Reply | None:
+        """:meth:`Motor.request`."""
+        reply: Reply | None = await self._submit(motor, command, timeout_s=timeout_s, retries=retries)
+        return reply
+
+    def _submit(
+        self, motor: Motor, command: Command, *, timeout_s: float | None, retries: int
+    ) -> asyncio.Future[Any]:
+        if self._loop is None:
+            raise RuntimeError(f"{self.name}: use the Bus inside 'async with'")
+        future: asyncio.Future[Any] = self._loop.create_future()
+        request = self.scheduler.request(
+            motor.codec, command, timeout_s=timeout_s, retries=retries, context=future
+        )
+        if not motor.codec.retry_safe(command):
+            self._commanded[id(motor.codec)] = motor
+        motor.codec.note_sent(command)
+        self.scheduler.submit(request)
+        future.add_done_callback(functools.partial(self._on_done, request=request))
+        self._pump()
+        return future
+
+    def _on_done(self, future: asyncio.Future[Any], request: Request) -> None:
+        if future.cancelled() and self._loop is not None:
+            self.scheduler.cancel(request, self._loop.time())
+            self._by_frame.pop(id(request.frame), None)
+            self._pump()
+
+    async def cycle(
+        self, items: Iterable[tuple[Motor, Command]], *, timeout_s: float | None = None
+    ) -> list[Result]:
+        """One control tick: send every command (pipelined, paced), await every reply.
+
+        Returns:
+            One result per item, in order: the reply (None for commands without one), or the
+            exception that ended it (MotorTimeout, TransportError) as a value.
+
+        Raises:
+            ValueError: a command is refused by its codec (nothing of the tick is sent then).
+        """
+        items = list(items)
+        for motor, command in items:  # every command is checked before the first frame leaves
+            motor.codec.encode(command)
+        futures = [self._submit(m, c, timeout_s=timeout_s, retries=0) for m, c in items]
+        try:
+            return list(await asyncio.gather(*futures, return_exceptions=True))
+        except BaseException:
+            for future in futures:
+                future.cancel()
+            raise
+
+    async def broadcast(
+        self, command: Command, motors: Sequence[Motor], *, timeout_s: float | None = None
+    ) -> dict[int, Result]:
+        """One frame for several motors of one family; each motor's reply or timeout, by motor id.
+
+        Raises:
+            ValueError: the family has no broadcast form for ``command``, or mixed families.
+        """
+        families = {m.codec.family for m in motors}
+        if len(families) != 1:
+            raise ValueError(f"a broadcast goes to motors of one family, not {sorted(families)}")
+        plan = get_family(families.pop()).broadcast(command, [m.codec for m in motors])
+        assert self._loop is not None
+        futures: dict[int, asyncio.Future[Any]] = {}
+        by_id = {m.motor_id: m for m in motors}
+        timeout = timeout_s if timeout_s is not None else max(m.codec.timeout_s(command) for m in motors)
+        for motor_id, key in plan.replies.items():
+            futures[motor_id] = self._expect(by_id[motor_id], command, key, timeout)
+        for motor in motors:
+            if not motor.codec.retry_safe(command):
+                self._commanded[id(motor.codec)] = motor
+        self.transport.send(plan.frame)
+        results = await asyncio.gather(*futures.values(), return_exceptions=True)
+        return dict(zip(futures, results, strict=True))
+
+    def _expect(self, motor: Motor, command: Command, key: Hashable, timeout_s: float) -> asyncio.Future[Any]:
+        """A request whose frame is sent by someone else (a broadcast): it only awaits ``key``."""
+        assert self._loop is not None
+        future: asyncio.Future[Any] = self._loop.create_future()
+        request = Request(motor.codec, command, Frame(arbitration_id=0), key, timeout_s, context=future)
+        self.scheduler.submit(request)
+        for sent in self.scheduler.next_to_send(self._loop.time()):
+            if sent is request:
+                self.scheduler.sent(request, self._loop.time())
+            else:  # another queued request got its turn too: it goes out as usual
+                self._hand_over(sent)
+        future.add_done_callback(functools.partial(self._on_done, request=request))
+        self._kick()
+        return future
+
+    # ---- the engine ----
+
+    def _pump(self) -> None:
+        """Hand the requests the scheduler lets go to the transport."""
+        assert self._loop is not None
+        for request in self.scheduler.next_to_send(self._loop.time()):
+            self._hand_over(request)
+        self._kick()
+
+    def _hand_over(self, request: Request) -> None:
+        self._by_frame[id(request.frame)] = request
+        try:
+            self.transport.send(request.frame)
+        except Exception as exc:  # a full queue, a lost transport: this request fails, nothing else
+            self._by_frame.pop(id(request.frame), None)
+            self.scheduler.not_sent(request, type(exc).__name__, self._loop.time())  # type: ignore[union-attr]
+            self._settle(request, exc)
+
+    def _on_report(self, frame: Frame, sent_at: float | None, reason: str | None) -> None:
+        request = self._by_frame.pop(id(frame), None)
+        if request is None:
+            return
+        assert self._loop is not None
+        if reason is not None:
+            self.scheduler.not_sent(request, reason, self._loop.time())
+            self._settle(request, TransportError(f"{self.name}: {request.describe()} not sent ({reason})"))
+        else:
+            self.scheduler.sent(request, sent_at if sent_at is not None else self._loop.time())
+            if request.state is RequestState.REPLIED:  # nothing to wait for
+                self._settle(request, None)
+        self._kick()
+
+    def _on_frames(self, frames: list[Frame]) -> None:
+        assert self._loop is not None
+        now = self._loop.time()
+        receive = self.scheduler.receive
+        for frame in frames:
+            got = receive(frame, now)
+            if got.codec is None or got.reply is None:
+                continue
+            motor = self._by_codec.get(id(got.codec))
+            if motor is not None:
+                motor.state = got.reply
+                motor.last_seen = frame.timestamp or now
+                for callback in self._subscribers:
+                    try:
+                        callback(motor, got.traffic, got.reply)
+                    except Exception:  # a subscriber's bug must not stop the reader
+                        logger.exception("%s: subscriber %r failed", self.name, callback)
+            if got.request is not None:
+                self._settle(got.request, None)
+        self._pump()
+
+    def _on_event(self, event: TransportEvent) -> None:
+        if isinstance(event, StateChanged) and event.state is TransportState.LOST and self._loop is not None:
+            error = TransportError(f"{self.name}: transport lost ({event.cause})")
+            for request in self.scheduler.fail_all(error, self._loop.time()):
+                self._by_frame.pop(id(request.frame), None)
+                self._settle(request, error)
+
+    def _settle(self, request: Request, error: BaseException | None) -> None:
+        future: asyncio.Future[Any] = request.context
+        if future is None or future.done():
+            return
+        if error is not None:
+            future.set_exception(error)
+        elif request.state is RequestState.REPLIED:
+            future.set_result(request.reply)
+        elif request.state is RequestState.TIMED_OUT:
+            future.set_exception(
+                MotorTimeout(
+                    f"{request.describe()}: no reply within {request.timeout_s:g} s"
+                    + (f" ({request.attempts} attempts)" if request.attempts > 1 else "")
+                )
+            )
+        else:
+            future.set_exception(TransportError(f"{self.name}: {request.describe()} {request.state.value}"))
+
+    def _kick(self) -> None:
+        """Re-arm the timer at the scheduler's next deadline (time-outs, a half-duplex line's rest)."""
+        loop = self._loop
+        if loop is None:
+            return
+        deadline = self.scheduler.next_deadline()
+        timer = self._timer
+        if timer is not None:
+            if deadline is not None and timer.when() == deadline:
+                return
+            timer.cancel()
+            self._timer = None
+        if deadline is not None:
+            self._timer = loop.call_at(deadline, self._on_timer)
+
+    def _on_timer(self) -> None:
+        assert self._loop is not None
+        self._timer = None
+        for request in self.scheduler.expire(self._loop.time()):
+            self._by_frame.pop(id(request.frame), None)
+            self._settle(request, None)
+        self._pump()
+
+    # ---- numbers ----
+
+    def stats(self) -> dict[str, int]:
+        """The scheduler's counters: requests, replies, timeouts, retries and every kind of frame."""
+        return dict(self.scheduler.counts)

@@ -1,0 +1,246 @@
+"""servobus.Bus and Motor over the in-process simulated bus, on virtual time (no real clock)."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Awaitable, Callable
+from typing import Any, TypeVar
+
+import pytest
+
+from servobus.bus import Bus
+from servobus.errors import MotorTimeout
+from servobus.protocols import hollow as ho
+from servobus.protocols import lk
+from servobus.protocols import myactuator as ma
+from servobus.scheduler import Traffic
+from servobus.sim import virtual
+from servobus.sim.devices.hollow import HollowMotor
+from servobus.sim.devices.lk import LkMotor
+from servobus.sim.devices.myactuator import MyActuatorMotor
+from servobus.transports.sim import SimTransport
+from sim._standins import Sniffer
+
+T = TypeVar("T")
+
+
+def run(scenario: Callable[[], Awaitable[T]]) -> T:
+    async def main() -> T:
+        return await scenario()
+
+    return virtual.run(main())
+
+
+def _motors(n: int = 4) -> list[MyActuatorMotor]:
+    return [MyActuatorMotor(m) for m in range(1, n + 1)]
+
+
+def test_a_motor_command_returns_its_typed_reply() -> None:
+    async def scenario() -> tuple[Any, Any, float]:
+        async with Bus(SimTransport(devices=_motors(1))) as bus:
+            motor = bus.motor("myactuator", 1)
+            start = asyncio.get_running_loop().time()
+            status = await motor.read_status2()
+            speed = await motor.speed_control(speed_dps=90.0)
+            return status, speed, asyncio.get_running_loop().time() - start
+
+    status, speed, elapsed = run(scenario)
+    assert isinstance(status, ma.StatusReply) and status.command is ma.StatusCommand.READ_STATUS_2
+    assert isinstance(speed, ma.StatusReply) and speed.command is ma.StatusCommand.SPEED_CONTROL
+    assert elapsed < 0.002  # two exchanges at 1 Mbit/s with the simulator's turnaround
+
+
+def test_a_cycle_returns_every_reply_in_order_and_a_silent_motor_only_costs_its_own() -> None:
+    motors = _motors(32)
+    motors[4].unresponsive = True
+
+    async def scenario() -> list[Any]:
+        async with Bus(SimTransport(devices=motors)) as bus:
+            handles = [bus.motor("myactuator", m) for m in range(1, 33)]
+            return await bus.cycle([(h, ma.ReadStatus2()) for h in handles])
+
+    results = run(scenario)
+    assert len(results) == 32
+    assert isinstance(results[4], MotorTimeout) and "myactuator motor 5 ReadStatus2" in str(results[4])
+    assert all(isinstance(r, ma.StatusReply) for i, r in enumerate(results) if i != 4)
+
+
+def test_a_timeout_names_motor_command_and_time() -> None:
+    motor = MyActuatorMotor(1)
+    motor.unresponsive = True
+
+    async def scenario() -> None:
+        async with Bus(SimTransport(devices=[motor])) as bus:
+            await bus.motor("myactuator", 1).read_status2(timeout_s=0.05)
+
+    with pytest.raises(MotorTimeout, match=r"myactuator motor 1 ReadStatus2: no reply within 0\.05 s"):
+        run(scenario)
+
+
+def test_a_cancelled_request_leaves_nothing_pending_and_its_reply_is_counted_late() -> None:
+    async def scenario() -> dict[str, int]:
+        async with Bus(SimTransport(devices=_motors(1)), safe=None) as bus:
+            motor = bus.motor("myactuator", 1)
+            task = asyncio.create_task(motor.read_status2())
+            await asyncio.sleep(0)  # the frame is on the wire now
+            task.cancel()
+            with pytest.raises(asyncio.CancelledError):
+                await task
+            assert bus.scheduler.pending == 0
+            await asyncio.sleep(0.01)  # the reply arrives
+            later = await motor.read_status2()  # and never answers a later request
+            assert isinstance(later, ma.StatusReply)
+            return bus.stats()
+
+    stats = run(scenario)
+    assert stats["late"] == 1 and stats["replies"] == 1
+
+
+def _stops(sniffer: Sniffer, code: int = 0x81) -> set[int]:
+    """The motors a request with command byte ``code`` went to (requests only: 0x141..0x160)."""
+    return {
+        f.arbitration_id - 0x140
+        for _, f in sniffer.seen
+        if 0x141 <= f.arbitration_id <= 0x160 and f.data[:1] == bytes([code])
+    }
+
+
+def test_an_exception_in_the_block_stops_every_commanded_motor() -> None:
+    sniffer = Sniffer()
+
+    async def scenario() -> None:
+        async with Bus(SimTransport(devices=[*_motors(4), sniffer])) as bus:
+            for m in (1, 2, 3):
+                await bus.motor("myactuator", m).speed_control(speed_dps=30.0)
+            await bus.motor("myactuator", 4).read_status2()  # only read: not commanded
+            raise RuntimeError("user code failed")
+
+    with pytest.raises(RuntimeError, match="user code failed"):
+        run(scenario)
+    assert _stops(sniffer) == {1, 2, 3}
+
+
+def test_cancellation_stops_every_commanded_motor_too() -> None:
+    sniffer = Sniffer()
+
+    async def scenario() -> None:
+        async def control() -> None:
+            async with Bus(SimTransport(devices=[*_motors(2), sniffer]), safe="shutdown") as bus:
+                for m in (1, 2):
+                    await bus.motor("myactuator", m).torque_control(current_a=0.5)
+                await asyncio.sleep(10)
+
+        task = asyncio.create_task(control())
+        await asyncio.sleep(1)
+        task.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await task
+
+    run(scenario)
+    assert _stops(sniffer, 0x80) == {1, 2}
+
+
+def test_out_of_range_values_raise_before_anything_is_sent() -> None:
+    sniffer = Sniffer()
+
+    async def scenario() -> None:
+        async with Bus(SimTransport(devices=[*_motors(1), sniffer]), safe=None) as bus:
+            motor = bus.motor("myactuator", 1)
+            with pytest.raises(ValueError, match="speed_dps"):
+                await motor.speed_control(speed_dps=1e12)
+            with pytest.raises(ValueError, match="motor_id"):
+                await bus.cycle([(motor, ma.ReadStatus2()), (motor, ma.SetCanId(motor_id=40))])
+
+    run(scenario)
+    assert sniffer.seen == []
+
+
+def test_every_family_through_one_bus() -> None:
+    devices = [MyActuatorMotor(1), LkMotor(9), HollowMotor(20)]
+
+    async def scenario() -> list[Any]:
+        async with Bus(SimTransport(devices=devices)) as bus:
+            return await bus.cycle(
+                [
+                    (bus.motor("myactuator", 1), ma.ReadMultiTurnAngle()),
+                    (bus.motor("lk", 9), lk.ReadStatus2()),
+                    (
+                        bus.motor("hollow", 20),
+                        ho.Setpoint(position_deg=0.0, speed_rad_s=0.0, kp=0, kd=0, current_a=0.0),
+                    ),
+                ]
+            )
+
+    angle, status, hollow_reply = run(scenario)
+    assert isinstance(angle, ma.MultiTurnAngleReply)
+    assert isinstance(status, lk.Status2Reply)
+    assert isinstance(hollow_reply, ho.NormalReply) and hollow_reply.motor_id == 20
+
+
+def test_motors_that_collide_are_refused_with_both_named() -> None:
+    async def scenario() -> None:
+        async with Bus(SimTransport(devices=[])) as bus:
+            bus.motor("myactuator", 1)
+            bus.motor("lk", 1, revision="V2_35")
+
+    with pytest.raises(ValueError, match=r"myactuator motor 1 .* lk motor 1"):
+        run(scenario)
+
+
+def test_a_broadcast_gathers_each_motors_reply() -> None:
+    async def scenario() -> dict[int, Any]:
+        async with Bus(SimTransport(devices=_motors(4))) as bus:
+            handles = [bus.motor("myactuator", m) for m in range(1, 5)]
+            return await bus.broadcast(ma.ReadStatus2(), handles)
+
+    results = run(scenario)
+    assert sorted(results) == [1, 2, 3, 4] and all(isinstance(r, ma.StatusReply) for r in results.values())
+
+
+def test_state_and_subscribers_see_stream_frames() -> None:
+    async def scenario() -> tuple[list[Traffic], Any]:
+        seen: list[Traffic] = []
+        async with Bus(SimTransport(devices=_motors(1)), safe=None) as bus:
+            bus.subscribe(lambda motor, traffic, reply: seen.append(traffic))
+            motor = bus.motor("myactuator", 1)
+            await motor.request(
+                ma.ActiveReply(command=ma.StreamableCommand(0x9C), enabled=True, interval_ms=10)
+            )
+            await asyncio.sleep(0.1)
+            read = await motor.read_status2()  # answered by the next stream frame
+            await motor.request(
+                ma.ActiveReply(command=ma.StreamableCommand(0x9C), enabled=False, interval_ms=None)
+            )
+            return seen, read
+
+    seen, read = run(scenario)
+    assert seen.count(Traffic.STREAM) >= 9 and isinstance(read, ma.StatusReply)
+
+
+def test_a_lost_transport_fails_what_is_pending_at_once() -> None:
+    motor = MyActuatorMotor(1)
+    motor.unresponsive = True
+
+    async def scenario() -> None:
+        transport = SimTransport(devices=[motor], reopen=False)
+        async with Bus(transport, safe=None) as bus:
+            task = asyncio.create_task(bus.motor("myactuator", 1).read_status2(timeout_s=5.0))
+            await asyncio.sleep(0.01)
+            transport.unplug()
+            await task
+
+    from servobus.errors import TransportError
+
+    with pytest.raises(TransportError, match="lost"):
+        run(scenario)
+
+
+def test_unknown_commands_are_an_attribute_error() -> None:
+    async def scenario() -> None:
+        async with Bus(SimTransport(devices=[])) as bus:
+            motor = bus.motor("lk", 2)
+            assert "read_status2" in dir(motor)
+            motor.fly_to_the_moon  # noqa: B018
+
+    with pytest.raises(AttributeError, match="lk motors have no command 'fly_to_the_moon'"):
+        run(scenario)
