@@ -78,12 +78,12 @@ class Frame:
                 raise ValueError("bitrate_switch needs is_fd")
         _SET_ID(self, arbitration_id)
         _SET_DATA(self, data)
-        _SET_EXTENDED(self, is_extended_id)
-        _SET_FD(self, is_fd)
-        _SET_BRS(self, bitrate_switch)
-        _SET_SERIAL(self, is_serial)
+        _SET_EXTENDED(self, bool(is_extended_id))
+        _SET_FD(self, bool(is_fd))
+        _SET_BRS(self, bool(bitrate_switch))
+        _SET_SERIAL(self, bool(is_serial))
         _SET_TIMESTAMP(self, timestamp)
-        _SET_RX(self, is_rx)
+        _SET_RX(self, bool(is_rx))
 
     def __repr__(self) -> str:
         width = 8 if self.is_extended_id else 3

@@ -469,3 +469,39 @@ def test_safe_commands_encode_for_the_motor_or_are_refused(
             assert frame.is_fd and frame.data[12] == 0
         else:
             assert frame.data[-1 if family == "hollow" else 0] == code
+
+
+# ---- what a review found (issue 13 follow-up) ----
+
+
+def test_motors_on_different_media_cannot_share_a_bus() -> None:
+    with pytest.raises(ValueError, match=r"one is on CAN, the other on the hollow-modbus-rtu serial line"):
+        check_bus([get_family("myactuator").bind(1), get_family("hollow").bind(2, link="modbus")])
+    with pytest.raises(ValueError, match=r"myactuator-rs485 serial line, the other on CAN"):
+        check_bus([get_family("myactuator").bind(5, link="rs485"), get_family("lk").bind(5)])
+
+
+def test_an_lk_command_for_another_encoder_width_is_refused() -> None:
+    codec = get_family("lk").bind(1, revision="V2_35")  # 14-bit encoder
+    with pytest.raises(ValueError, match="encoder_bits=16 contradicts the motor's 14-bit encoder"):
+        codec.encode(lk.WriteEncoderOffset(encoder_bits=16, offset_counts=40000))
+
+
+def test_a_can_id_change_is_never_broadcast() -> None:
+    family = get_family("myactuator")
+    with pytest.raises(ValueError, match="every motor would take the same id"):
+        family.broadcast(
+            ma.FunctionControl(index=ma.FunctionIndex.SET_CAN_ID, value=7), [family.bind(1), family.bind(2)]
+        )
+
+
+def test_only_a_revision_with_0x79_claims_its_reply() -> None:
+    frame = Frame(arbitration_id=0x300, data=bytes.fromhex("79 00 01 00 00 00 00 02"))
+    assert get_family("myactuator").bind(1, revision="V4_3").classify(frame)[0] is FrameKind.REPLY
+    assert get_family("myactuator").bind(1, revision="V4_4").classify(frame)[0] is FrameKind.NOT_OURS
+
+
+def test_frame_flags_are_stored_as_bools() -> None:
+    frame = Frame(arbitration_id=2, data=b"\x9c" + bytes(7), is_serial=1)  # type: ignore[arg-type]
+    assert frame.is_serial is True
+    assert get_family("myactuator").bind(2, link="rs485").classify(frame)[0] is FrameKind.REPLY

@@ -238,6 +238,12 @@ class CodecBase:
         return [self.decode(f) for f in frames]
 
 
+def _medium(codec: BoundCodec) -> str:
+    """What a motor's frames travel on: ``"CAN"``, or the serial framing's name."""
+    framing = codec.framing
+    return "CAN" if framing is None else f"the {framing.name} serial line"
+
+
 def _name(codec: BoundCodec) -> str:
     return f"{codec.family} motor {codec.motor_id} ({codec.revision.name}, {codec.link})"
 
@@ -245,7 +251,8 @@ def _name(codec: BoundCodec) -> str:
 def check_bus(codecs: Iterable[BoundCodec]) -> None:
     """Refuse motors that cannot share one bus: some frame would belong to two of them.
 
-    Two motors collide when an identifier one of them sends or takes (its own requests and replies)
+    Motors on different media (CAN, or a serial line's framing) never share a bus. Two motors collide
+    when an identifier one of them sends or takes (its own requests and replies)
     is also one of the other's, or is an identifier the other's family uses for every motor (0x280,
     0x300, a hollow host id); and two families collide when they use the same shared identifier for
     different things (MyActuator's 0x280 broadcast is LK V2.35's multi-motor torque frame). Motors of
@@ -258,6 +265,11 @@ def check_bus(codecs: Iterable[BoundCodec]) -> None:
     for codec in codecs:
         own = codec.request_ids | codec.reply_ids
         for other in seen:
+            if _medium(codec) != _medium(other):  # CAN ids and serial addresses are different spaces
+                raise ValueError(
+                    f"{_name(other)} and {_name(codec)} cannot share a bus: one is on "
+                    f"{_medium(other)}, the other on {_medium(codec)}"
+                )
             other_own = other.request_ids | other.reply_ids
             clash = own & other_own
             why = "both use"

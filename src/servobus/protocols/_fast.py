@@ -65,7 +65,7 @@ def maker(cls: type, names: tuple[str, ...] | None = None) -> Callable[..., Any]
 
 
 def _twin_maker(cls: type, args: str, values: dict[str, str], namespace: dict[str, Any]) -> Any:
-    body = "".join(f"    self.{name} = {value}\n" for name, value in values.items())
+    body = "".join(f"    self.{name} = {value}\n" for name, value in values.items()) or "    pass\n"
     source = f"def __init__(self, {args}):\n{body}" if args else f"def __init__(self):\n{body}"
     exec(source, namespace)
     twin = type(f"_{cls.__name__}Twin", cls.__bases__, {"__slots__": cls.__dict__.get("__slots__", ())})

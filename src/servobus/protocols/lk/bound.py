@@ -186,6 +186,14 @@ class LkCodec(CodecBase):
             raise ValueError(f"{command!r} is not an LK command")
         if isinstance(command, MultiMotorTorque):
             raise ValueError("the 0x280 multi-motor torque frame goes to four motors: use FAMILY.broadcast")
+        # A command that carries an encoder width must carry the motor's: its counts were checked
+        # against that width, and a wider one would put counts on the wire the motor cannot hold.
+        bits = getattr(command, "encoder_bits", None)
+        if bits is not None and bits != self.model.encoder_bits:
+            raise ValueError(
+                f"{type(command).__name__}.encoder_bits={bits} contradicts the motor's "
+                f"{self.model.encoder_bits}-bit encoder"
+            )
         # Availability depends on the class and the command's own motor type only: check once each.
         key = (type(command), getattr(command, "motor_type", None))
         if key not in self._available:

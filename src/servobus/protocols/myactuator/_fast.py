@@ -52,12 +52,16 @@ def _converter(spec: Any) -> tuple[str, Convert | None, tuple[float, float] | No
         if fmt is None:
             return None
         from_code = spec.from_code
+        limits = getattr(spec.inner, "limits", None)  # the plain field's own range still holds
 
         def special(code: int) -> Any:
             try:
-                return from_code(code)
+                value = from_code(code)
             except ValueError:  # an undefined raw value: the full decoder reports it
                 raise Slow from None
+            if value is not None and limits is not None and not limits[0] <= value <= limits[1]:
+                raise Slow
+            return value
 
         return fmt, special, None
     if kind is IntField:

@@ -131,7 +131,9 @@ def _class_plan(cls: type, revision: Revision) -> tuple[bool, Callable[[Any], by
     """(available in ``revision`` whatever its values, fast encoder or None) for a command class."""
     per_instance = cls.unavailable_reason is not MyActuatorMessage.unavailable_reason  # type: ignore[attr-defined]
     # Motion commands are checked per instance: their scales must be the motor's.
-    always = not per_instance and revision in getattr(cls, "REVISIONS", ()) and cls is not MotionCommand
+    always = (
+        not per_instance and revision in getattr(cls, "REVISIONS", ()) and not issubclass(cls, MotionCommand)
+    )
     # 0x79 goes to 0x300 (RS485: 0xCD), not to the motor's request identifier.
     to_motor = issubclass(cls, Fixed) and not issubclass(cls, cmd.SetCanId | cmd.ReadCanId)
     fast = compile_fixed_encoder(cls) if to_motor else None
@@ -155,6 +157,7 @@ class MyActuatorCodec(CodecBase):
 
     __slots__ = (
         "_fast",
+        "_has_id_setting",
         "_motion_encode",
         "_motion_fast",
         "_motion_key",
@@ -174,6 +177,7 @@ class MyActuatorCodec(CodecBase):
         self.model = scales
         self.link = link
         self._rs485 = link == "rs485"
+        self._has_id_setting = revision in cmd.SetCanId.REVISIONS
         self._streams: frozenset[int] = frozenset()
         self._reports = False
         self._fast = _FAST[revision]
@@ -316,8 +320,10 @@ class MyActuatorCodec(CodecBase):
             return FrameKind.REPLY, self._reply_base | code
         if ident == self._motion_reply_id:
             return FrameKind.REPLY, self._motion_key
+        # 0x79 replies come on an identifier every motor shares, so one 0x79 exchange at a time per
+        # bus; and only a revision that has 0x79 claims them.
         shared = RS485_BROADCAST_ID if self._rs485 else ID_SETTING_ID
-        if ident == shared and data and data[0] == ID_SETTING_CODE:
+        if ident == shared and data and data[0] == ID_SETTING_CODE and self._has_id_setting:
             return FrameKind.REPLY, frame_key(shared, ID_SETTING_CODE)
         return FrameKind.NOT_OURS, None
 
@@ -471,6 +477,8 @@ def broadcast(command: Command, motors: Sequence[MyActuatorCodec]) -> Broadcast:
         command, MyActuatorMessage
     ):
         raise ValueError(f"{type(command).__name__} has no broadcast form")
+    if isinstance(command, cmd.FunctionControl) and command.index is FunctionIndex.SET_CAN_ID:
+        raise ValueError("0x20 index 5 sets the CAN id: broadcast, every motor would take the same id")
     keys = {m.motor_id: m.reply_key(command) for m in motors}
     frame = motors[0].encode(command)
     rs485 = links == {"rs485"}
