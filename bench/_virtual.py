@@ -53,7 +53,9 @@ class _Echo:
             message = bus.recv(0.05)
             if message is not None:
                 bus.send(
-                    can.Message(arbitration_id=message.arbitration_id + 0x100, data=message.data, is_extended_id=False)
+                    can.Message(
+                        arbitration_id=message.arbitration_id + 0x100, data=message.data, is_extended_id=False
+                    )
                 )
 
     def close(self) -> None:
@@ -170,7 +172,9 @@ async def _rtt_naive(n: int, depth: int) -> float:
     start = time.perf_counter()
     for round_ in range(n // depth):
         for k in range(depth):
-            bus.send(can.Message(arbitration_id=0x141, data=_payload(round_ * depth + k), is_extended_id=False))
+            bus.send(
+                can.Message(arbitration_id=0x141, data=_payload(round_ * depth + k), is_extended_id=False)
+            )
         for k in range(depth):
             message = await reader.get_message()
             assert int.from_bytes(message.data, "little") == round_ * depth + k
@@ -216,7 +220,11 @@ Measure = Callable[[], Any]
 def run(quick: bool, log: Callable[[str], None]) -> dict[str, Any]:
     """Measure the four pairs, alternating ours and naive, median of the repeats."""
     repeats = 3 if quick else 5
-    sizes = {"tx": 5_000 if quick else 50_000, "rx": 5_000 if quick else 50_000, "rtt": 300 if quick else 3_000}
+    sizes = {
+        "tx": 5_000 if quick else 50_000,
+        "rx": 5_000 if quick else 50_000,
+        "rtt": 300 if quick else 3_000,
+    }
     sizes["pipelined32"] = 32 * (30 if quick else 300)
     pairs: dict[str, tuple[Callable[[], Any], Callable[[], Any]]] = {
         "tx": (lambda: _tx_ours(sizes["tx"]), lambda: _tx_naive(sizes["tx"])),
@@ -237,7 +245,9 @@ def run(quick: bool, log: Callable[[str], None]) -> dict[str, Any]:
         out[f"virtual_{name}_per_s"] = round(mine)
         out[f"virtual_{name}_naive_per_s"] = round(theirs)
         out[f"virtual_{name}_vs_naive"] = round(mine / theirs, 2)
-        log(f"  virtual {name:<12} servobus {mine:>10,.0f}/s   naive python-can {theirs:>10,.0f}/s   {mine / theirs:.2f}x")
+        log(
+            f"  virtual {name:<12} servobus {mine:>10,.0f}/s   naive python-can {theirs:>10,.0f}/s   {mine / theirs:.2f}x"
+        )
     out["virtual_sizes"] = sizes
     return out
 

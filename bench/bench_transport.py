@@ -55,6 +55,8 @@ from typing import Any
 import serial
 
 import _results
+import _slcan
+import _virtual
 import servobus
 from servobus.core import MyActuatorRs485Deframer
 from servobus.protocols import myactuator as ma
@@ -234,6 +236,38 @@ def render_markdown(figures: dict[str, Any], meta: dict[str, Any]) -> str:
     )
 
 
+def _link_lines(figures: dict[str, Any]) -> list[str]:
+    """The native SLCAN and virtual-interface figures (issue 14), under the RS485 table."""
+    rows = [
+        (
+            "native SLCAN (`SlcanTransport`) vs python-can `slcan`, frames/s received",
+            f"{figures['slcan_native_frames_s']:,.0f}",
+            f"{figures['slcan_python_can_frames_s']:,.0f}",
+            f"{figures['slcan_vs_python_can']:.1f}",
+            ">= 5",
+        ),
+        *(
+            (
+                f"`CanTransport` on `virtual` vs a naive python-can loop: {name}",
+                f"{figures[f'virtual_{name}_per_s']:,}",
+                f"{figures[f'virtual_{name}_naive_per_s']:,}",
+                f"{figures[f'virtual_{name}_vs_naive']:.2f}",
+                ">= 1.0",
+            )
+            for name in ("tx", "rx", "rtt", "pipelined32")
+        ),
+    ]
+    return [
+        "### Links (issue 14): native SLCAN and the loop-native virtual path",
+        "",
+        "Each pair measured in the same run, repeats alternated, median (bench/_slcan.py and "
+        "bench/_virtual.py say exactly what each side does). rtt: sequential request/reply to an echo "
+        "thread; pipelined32: 32 requests, then their 32 replies.",
+        "",
+        _results.markdown_table(["figure", "servobus", "baseline", "ratio", "target"], rows, "lrrrr"),
+    ]
+
+
 def kept(out_dir: Path) -> dict[str, Any]:
     """What results.json already holds under ``transport`` (other benchmarks' figures stay)."""
     path = out_dir / "results.json"
@@ -255,7 +289,12 @@ def main(argv: list[str] | None = None) -> int:
     default_dir = None if args.quick else _results.BENCH_DIR
     out_dir: Path | None = args.output if args.output is not None else default_dir
     print(f"bench_transport ({cfg.mode}): {cfg.frames:,} frames x {cfg.repeats} per receiver", flush=True)
-    figures = summarise(measure(cfg, args.seed, lambda line: print(line, flush=True)))
+    log = lambda line: print(line, flush=True)  # noqa: E731
+    figures = summarise(measure(cfg, args.seed, log))
+    print("native SLCAN against python-can's slcan, same pty feed:", flush=True)
+    figures |= _slcan.run(args.quick, log)
+    print("CanTransport on python-can's virtual interface against a naive python-can loop:", flush=True)
+    figures |= _virtual.run(args.quick, log)
     arguments = sys.argv[1:] if argv is None else argv
     command = shlex.join([sys.executable, "bench/bench_transport.py", *arguments])
     meta = {
@@ -272,7 +311,10 @@ def main(argv: list[str] | None = None) -> int:
         f"frames/s, ratio {figures['rs485_vs_pyserial']:.2f}; wire limit {figures['wire_limit_frames_s']:,}"
     )
     if out_dir is not None:
-        _results.replace_markdown_section(out_dir / "RESULTS.md", KEY, render_markdown(figures, meta))
+        markdown = (
+            render_markdown(figures, meta).rstrip("\n") + "\n\n" + "\n".join(_link_lines(figures)) + "\n"
+        )
+        _results.replace_markdown_section(out_dir / "RESULTS.md", KEY, markdown)
         _results.update_results_json(out_dir / "results.json", KEY, {**kept(out_dir), **figures, **meta})
         print(f"Wrote {out_dir / 'RESULTS.md'} and {out_dir / 'results.json'} (key {KEY!r}).")
     print(f"Total runtime: {time.perf_counter() - started:.1f} s")
