@@ -17,6 +17,7 @@ from typing import Any, ClassVar
 import can
 import pytest
 
+from servobus.errors import TransportError
 from servobus.frame import Frame
 from servobus.transports import (
     BusOff,
@@ -375,3 +376,36 @@ async def test_a_malformed_slcan_line_on_a_real_pty_is_one_bad_frame_not_a_lost_
     finally:
         os.close(master)
         os.close(slave)
+
+
+@pytest.mark.asyncio
+async def test_the_virtual_fast_send_hands_every_listener_its_own_message(channel: str) -> None:
+    first = can.Bus(interface="virtual", channel=channel)
+    second = can.Bus(interface="virtual", channel=channel)
+    try:
+        async with CanTransport("virtual", channel, ignore_config=True) as transport:
+            transport.send(Frame(arbitration_id=0x141, data=b"\x01\x02"))
+            a, b = first.recv(1.0), second.recv(1.0)
+            assert a is not None and b is not None and a is not b and a.data is not b.data
+            for message in (a, b):
+                assert (message.arbitration_id, bytes(message.data), message.is_rx) == (
+                    0x141,
+                    b"\x01\x02",
+                    True,
+                )
+                assert message.channel == channel and message.timestamp > 0
+    finally:
+        first.shutdown()
+        second.shutdown()
+
+
+@pytest.mark.asyncio
+async def test_a_full_virtual_listener_queue_is_a_failed_send_not_a_blocked_loop(channel: str) -> None:
+    peer = can.Bus(interface="virtual", channel=channel, rx_queue_size=1)
+    try:
+        async with CanTransport("virtual", channel, ignore_config=True, reopen=False) as transport:
+            transport.send(Frame(arbitration_id=0x141, data=b"\x01"))
+            with pytest.raises(TransportError, match=r"device lost \(Could not send"):
+                transport.send(Frame(arbitration_id=0x141, data=b"\x02"))
+    finally:
+        peer.shutdown()
