@@ -66,10 +66,10 @@ import termios
 from collections.abc import Callable
 from typing import Any
 
-from servobus.errors import TransportError
 from servobus.frame import Frame
 from servobus.protocols._bound import Framing, StreamDeframer
 from servobus.timing import uart_time_s
+from servobus.transports._serialport import LineProtocol, close_port, open_port
 from servobus.transports.base import Outgoing, Transport
 from servobus.transports.stats import TransportStats
 
@@ -244,7 +244,7 @@ class SerialTransport(Transport[Frame, Frame]):
         self._old_counts = [0, 0]  # discarded bytes, CRC errors of the de-framers of past connections
         self._load_known = True
         self._line: asyncio.Transport | None = None
-        self._protocol: _LineProtocol | None = None
+        self._protocol: LineProtocol | None = None
         self._fd: int | None = None  # the port's descriptor, written by us (see the module docstring)
         self._tx_quiet_at = 0.0  # loop time our last byte ends on the wire
         self._rx_quiet_at = 0.0  # loop time the far end's last byte came
@@ -333,28 +333,20 @@ class SerialTransport(Transport[Frame, Frame]):
     # ----------------------------------------------------------------- connection
 
     async def _connect(self) -> None:
-        import serial
         import serial_asyncio_fast
 
         loop = asyncio.get_running_loop()
-        protocol = _LineProtocol(self, self._generation)
-        try:
-            line, _ = await serial_asyncio_fast.create_serial_connection(
-                loop,
-                lambda: protocol,
-                self.port,
-                baudrate=self.baud,
-                parity=self.parity,
-                bytesize=8,
-                stopbits=1,
-                **self._serial_options,
-            )
-        except (serial.SerialException, OSError) as exc:
-            raise TransportError(f"{self.name}: cannot open: {exc}") from exc
-        # pyserial-asyncio-fast reads at most 1 KiB per wake-up (its own TODO says so); a larger read
-        # takes a burst in one call, which is what the de-framer is built for.
-        if hasattr(line, "_max_read_size"):
-            line._max_read_size = _READ_SIZE
+        line, protocol = await open_port(
+            self,
+            self._generation,
+            self.port,
+            read_size=_READ_SIZE,
+            baudrate=self.baud,
+            parity=self.parity,
+            bytesize=8,
+            stopbits=1,
+            **self._serial_options,
+        )
         fd: int | None = None
         port = getattr(line, "serial", None)
         if isinstance(line, serial_asyncio_fast.SerialTransport) and port is not None:
@@ -375,11 +367,7 @@ class SerialTransport(Transport[Frame, Frame]):
         if self._idle_timer is not None:
             self._idle_timer.cancel()
             self._idle_timer = None
-        if line is not None and protocol is not None:
-            if not line.is_closing():  # a failed line is already closing (closing twice breaks it)
-                line.abort()
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(asyncio.shield(protocol.closed), 1.0)
+        await close_port(line, protocol)
 
     # ----------------------------------------------------------------- receiving
 
@@ -555,22 +543,3 @@ class SerialTransport(Transport[Frame, Frame]):
 def _wake(future: asyncio.Future[None]) -> None:
     if not future.done():
         future.set_result(None)
-
-
-class _LineProtocol(asyncio.Protocol):
-    """pyserial-asyncio-fast's callbacks, forwarded to the transport of one connection."""
-
-    def __init__(self, owner: SerialTransport, generation: int) -> None:
-        self._owner = owner
-        self._generation = generation
-        self.closed: asyncio.Future[None] = asyncio.get_running_loop().create_future()
-
-    def data_received(self, data: bytes) -> None:
-        self._owner._on_bytes(data, self._generation)
-
-    def connection_lost(self, exc: Exception | None) -> None:
-        if not self.closed.done():
-            self.closed.set_result(None)
-        if exc is None:
-            exc = ConnectionError("the port closed")
-        self._owner._lose(exc, self._generation)

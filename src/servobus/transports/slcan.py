@@ -44,6 +44,7 @@ from servobus.core import SlcanDeframer
 from servobus.errors import TransportError
 from servobus.frame import Frame
 from servobus.timing import nominal_frame_time_s
+from servobus.transports._serialport import LineProtocol, close_port, open_port
 from servobus.transports.base import Outgoing, Transport
 from servobus.transports.stats import TransportStats
 
@@ -164,7 +165,7 @@ class SlcanTransport(Transport[Frame, Frame]):
         self._deframer = SlcanDeframer(timestamps=timestamps)
         self._load_known = bitrate is not None
         self._line: asyncio.Transport | None = None
-        self._protocol: _LineProtocol | None = None
+        self._protocol: LineProtocol | None = None
         self._serial: Any = None  # the pyserial Serial under the line
         self._fd = -1
         self._tail = b""  # the unwritten rest of a line the kernel took only part of
@@ -219,23 +220,14 @@ class SlcanTransport(Transport[Frame, Frame]):
     # ----------------------------------------------------------------- connection
 
     async def _connect(self) -> None:
-        import serial
-        import serial_asyncio_fast
-
-        loop = asyncio.get_running_loop()
-        protocol = _LineProtocol(self, self._generation)
-        try:
-            line, _ = await serial_asyncio_fast.create_serial_connection(
-                loop,
-                lambda: protocol,
-                self.port,
-                baudrate=self.tty_baudrate,
-                **self._serial_options,
-            )
-        except (serial.SerialException, OSError, ValueError) as exc:
-            raise TransportError(f"{self.name}: cannot open: {exc}") from exc
-        if hasattr(line, "_max_read_size"):  # it reads 1 KiB per wake-up by default
-            line._max_read_size = _READ_SIZE
+        line, protocol = await open_port(
+            self,
+            self._generation,
+            self.port,
+            read_size=_READ_SIZE,
+            baudrate=self.tty_baudrate,
+            **self._serial_options,
+        )
         self._deframer.clear()  # a line cut by the loss cannot be completed
         self._line, self._protocol = line, protocol
         self._serial = line.get_extra_info("serial")
@@ -290,13 +282,10 @@ class SlcanTransport(Transport[Frame, Frame]):
             self._writable.set_result(None)
         self._writable = None
         self._tail = b""
-        if line is not None and protocol is not None:
-            if not line.is_closing():  # a failed line is already closing (closing twice breaks it)
-                with contextlib.suppress(OSError):
-                    os.write(self._fd, b"C\r")  # take the adapter off the bus; best effort
-                line.abort()
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(asyncio.shield(protocol.closed), 1.0)
+        if line is not None and not line.is_closing():
+            with contextlib.suppress(OSError):
+                os.write(self._fd, b"C\r")  # take the adapter off the bus; best effort
+        await close_port(line, protocol)
         self._fd = -1
         self._serial = None
 
@@ -418,22 +407,3 @@ class SlcanTransport(Transport[Frame, Frame]):
             self._disarm_writer()
             if self._writable is not None and not self._writable.done():
                 self._writable.set_result(None)
-
-
-class _LineProtocol(asyncio.Protocol):
-    """pyserial-asyncio-fast's callbacks, forwarded to the transport of one connection."""
-
-    def __init__(self, owner: SlcanTransport, generation: int) -> None:
-        self._owner = owner
-        self._generation = generation
-        self.closed: asyncio.Future[None] = asyncio.get_running_loop().create_future()
-
-    def data_received(self, data: bytes) -> None:
-        self._owner._on_bytes(data, self._generation)
-
-    def connection_lost(self, exc: Exception | None) -> None:
-        if not self.closed.done():
-            self.closed.set_result(None)
-        if exc is None:
-            exc = ConnectionError("the port closed")
-        self._owner._lose(exc, self._generation)
