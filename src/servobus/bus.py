@@ -153,6 +153,9 @@ class Bus:
         safe_timeout_s: how long the safe stop may take in all.
         max_in_flight: requests in flight at once (default: 64; 1 on a half-duplex line).
         name: a label for errors and logs (default: the transport's).
+        min_reply_s: the least time a reply can take after its request left (default: two of the
+            shortest frames at the transport's bit rate, where it has one): a frame with the reply's
+            key that arrives sooner is not taken for it.
     """
 
     def __init__(
@@ -163,6 +166,7 @@ class Bus:
         safe_timeout_s: float = 0.25,
         max_in_flight: int = 64,
         name: str | None = None,
+        min_reply_s: float | None = None,
     ) -> None:
         if safe_timeout_s <= 0:
             raise ValueError(f"safe_timeout_s={safe_timeout_s} must be positive")
@@ -171,10 +175,15 @@ class Bus:
         self.safe = safe
         self.safe_timeout_s = safe_timeout_s
         half_duplex = bool(getattr(transport, "half_duplex", False))
+        if min_reply_s is None:
+            bitrate = getattr(transport, "bitrate", None)
+            # 47 bits: a standard frame with no data, the shortest there is (request and reply).
+            min_reply_s = 2 * 47 / bitrate if isinstance(bitrate, int) and bitrate > 0 else 0.0
         self.scheduler = Scheduler(
             max_in_flight=max_in_flight,
             one_at_a_time=half_duplex,
             gap_s=float(getattr(transport, "gap_s", 0.0) or 0.0) if half_duplex else 0.0,
+            min_reply_s=min_reply_s,
         )
         self.motors: dict[tuple[str, int], Motor] = {}
         self._by_codec: dict[int, Motor] = {}

@@ -138,6 +138,8 @@ class Scheduler:
         gap_s: rest after an exchange before the next frame (half-duplex lines).
         late_window_s: how long after a timeout or cancel a frame with that key counts as LATE (and
             after a reply, as DUPLICATE) rather than UNSOLICITED.
+        min_reply_s: the least time from a request leaving to its reply arriving (the two frames'
+            wire time): a frame with the key that arrives sooner cannot be the reply.
 
     Raises:
         ValueError: motors that cannot share a bus, or options out of range.
@@ -151,6 +153,7 @@ class Scheduler:
         one_at_a_time: bool = False,
         gap_s: float = 0.0,
         late_window_s: float = 1.0,
+        min_reply_s: float = 0.0,
     ) -> None:
         if max_in_flight < 1 or gap_s < 0 or late_window_s < 0:
             raise ValueError(
@@ -161,6 +164,7 @@ class Scheduler:
         self.one_at_a_time = one_at_a_time
         self.gap_s = gap_s
         self.late_window_s = late_window_s
+        self.min_reply_s = min_reply_s
         self.codecs: list[BoundCodec] = []
         self._by_id: dict[int, list[BoundCodec]] = {}
         self._queue: deque[Request] = deque()
@@ -219,18 +223,30 @@ class Scheduler:
         self.counts["requests"] += 1
 
     def next_to_send(self, now: float) -> list[Request]:
-        """The requests that may leave now, in order (they become SENDING; write their frames)."""
+        """The requests that may leave now, in order (they become SENDING; write their frames).
+
+        A request whose key is already on the wire waits for that exchange to end: two replies with
+        one key cannot be told apart, so a duplicated or late frame could otherwise answer the
+        second request with the first one's data.
+        """
         out: list[Request] = []
-        if now < self._rest_until:
+        if now < self._rest_until or not self._queue:
             return out
-        while self._queue and len(self._in_flight) < self.max_in_flight:
-            request = self._queue.popleft()
+        waiting: deque[Request] = deque()
+        queue = self._queue
+        while queue and len(self._in_flight) < self.max_in_flight:
+            request = queue.popleft()
+            if request.key is not None and request.key in self._pending:
+                waiting.append(request)
+                continue
             self._move(request, S.SENDING)
             request.attempts += 1
             self._in_flight.append(request)
             if request.key is not None:
                 self._pending.setdefault(request.key, deque()).append(request)
             out.append(request)
+        waiting.extend(queue)
+        self._queue = waiting
         return out
 
     def sent(self, request: Request, at: float) -> None:
@@ -319,10 +335,16 @@ class Scheduler:
         waiting = self._pending.get(key) if key is not None else None
         if waiting:
             request = waiting[0]
-            # A stream frame answers a read only if it came after the request left (fresh).
-            fresh = kind is FrameKind.REPLY or (
-                request.sent_at is not None and frame.timestamp >= request.sent_at
-            )
+            # A reply cannot arrive before its request left plus the two frames' wire time (an
+            # unstamped frame is taken as it comes); a stream frame answers a read only if it came
+            # after the request left (the same fact, fresh).
+            sent_at = request.sent_at
+            if kind is FrameKind.REPLY:
+                fresh = (
+                    sent_at is None or not frame.timestamp or frame.timestamp >= sent_at + self.min_reply_s
+                )
+            else:
+                fresh = sent_at is not None and frame.timestamp >= sent_at
             if request.state is S.SENT and fresh:
                 request.reply = reply
                 self._finish(request, S.REPLIED, now)
