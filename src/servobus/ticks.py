@@ -1,4 +1,4 @@
-"""A fixed-rate pacer for control loops: ``async for tick in servobus.ticks(hz=1000): ...``.
+"""A fixed-rate pacer for control loops: ``async for tick in ticks(hz=1000): ...``.
 
 Ticks are due at absolute times ``start + n / hz``, never "period after the last one", so a slow
 iteration does not push every later tick back. asyncio's sleep cannot hit a deadline inside a
@@ -7,9 +7,11 @@ takes 1 ms or more. The pacer therefore sleeps until ``spin_s`` (default 1.2 ms)
 and then yields to the loop (``sleep(0)``, other tasks still run) until the deadline has come. At
 1 kHz that spins the whole period, one core at 100%, and ticks start 1 µs late (median; p99 2 µs;
 2,000 ticks here); with ``spin_s=0.0005`` the CPU falls to 9% and the median lateness grows to
-0.27 ms. Below ~400 Hz most of each period is slept. A tick whose deadline has already passed when the previous
-iteration ends is reported (``late_s``); ticks that were missed entirely are skipped, not run in a
-burst, and counted (``skipped``). One pacer can drive several buses: await their cycles in the body.
+0.27 ms. Below ~400 Hz most of each period is slept.
+
+A tick whose deadline has already passed when the previous iteration ends is reported (``late_s``);
+ticks that were missed entirely are skipped, not run in a burst, and counted (``skipped``). One
+pacer can drive several buses: await their cycles in the body.
 
 Works on any asyncio loop, including virtual time (``servobus.sim.virtual``), where every tick is
 exactly on time.
