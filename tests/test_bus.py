@@ -244,3 +244,21 @@ def test_unknown_commands_are_an_attribute_error() -> None:
 
     with pytest.raises(AttributeError, match="lk motors have no command 'fly_to_the_moon'"):
         run(scenario)
+
+
+def test_a_motors_stream_frames_come_through_a_bounded_iterator() -> None:
+    async def scenario() -> tuple[list[Any], int, int]:
+        async with Bus(SimTransport(devices=_motors(1)), safe=None) as bus:
+            motor = bus.motor("myactuator", 1)
+            async with motor.frames(size=4) as frames:
+                await motor.active_reply(command=ma.StreamableCommand(0x9C), enabled=True, interval_ms=10)
+                got = [await frames.__anext__() for _ in range(3)]
+                await asyncio.sleep(0.1)  # ten more frames come; only the newest four are kept
+                kept = len(frames._items)
+                dropped = frames.dropped
+            await motor.active_reply(command=ma.StreamableCommand(0x9C), enabled=False, interval_ms=None)
+            return got, kept, dropped
+
+    got, kept, dropped = run(scenario)
+    assert all(isinstance(r, ma.StatusReply) for r in got)
+    assert kept == 4 and dropped >= 5

@@ -27,6 +27,7 @@ import contextlib
 import functools
 import logging
 import re
+from collections import deque
 from collections.abc import Awaitable, Callable, Hashable, Iterable, Sequence
 from types import TracebackType
 from typing import Any, Protocol, Self
@@ -40,7 +41,7 @@ from servobus.protocols._message import Command, Reply
 from servobus.scheduler import Request, RequestState, Scheduler, Traffic
 from servobus.transports.events import StateChanged, TransportEvent, TransportState
 
-__all__ = ["Bus", "FrameLink", "Motor"]
+__all__ = ["Bus", "FrameLink", "Motor", "MotorFrames"]
 
 logger = logging.getLogger("servobus.bus")
 
@@ -88,6 +89,56 @@ def _command_classes(family: str) -> dict[str, type[Command]]:
     return out
 
 
+class MotorFrames:
+    """The decoded frames of one motor as an async iterator, buffered up to ``size``.
+
+    Use ``async with motor.frames() as frames: async for reply in frames: ...``. When the reader falls
+    behind, the oldest frames are dropped and counted in :attr:`dropped`, so a slow consumer never
+    holds memory without end or slows the Bus.
+    """
+
+    def __init__(self, motor: Motor, size: int, kinds: frozenset[Traffic]) -> None:
+        if size < 1:
+            raise ValueError(f"size={size} must be at least 1")
+        self.motor = motor
+        self.kinds = kinds
+        self.dropped = 0
+        self._size = size
+        self._items: deque[Reply] = deque()
+        self._ready = asyncio.Event()
+        self._closed = False
+
+    def _push(self, traffic: Traffic, reply: Reply) -> None:
+        if traffic not in self.kinds:
+            return
+        if len(self._items) >= self._size:
+            self._items.popleft()
+            self.dropped += 1
+        self._items.append(reply)
+        self._ready.set()
+
+    async def __aenter__(self) -> Self:
+        self.motor._watchers.append(self)
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        self._closed = True
+        with contextlib.suppress(ValueError):
+            self.motor._watchers.remove(self)
+        self._ready.set()
+
+    def __aiter__(self) -> Self:
+        return self
+
+    async def __anext__(self) -> Reply:
+        while not self._items:
+            if self._closed:
+                raise StopAsyncIteration
+            self._ready.clear()
+            await self._ready.wait()
+        return self._items.popleft()
+
+
 class Motor:
     """One motor on a Bus: its codec, its latest telemetry, and a method per command of its family.
 
@@ -106,6 +157,18 @@ class Motor:
         self.state: Reply | None = None
         self.last_seen: float | None = None
         self._commands = _command_classes(codec.family)
+        self._watchers: list[MotorFrames] = []
+
+    def frames(
+        self, *, size: int = 64, kinds: Iterable[Traffic] = (Traffic.STREAM, Traffic.REPORT)
+    ) -> MotorFrames:
+        """This motor's decoded frames of ``kinds`` (default: 0xB6 stream frames and error reports)
+        as an async iterator; enable a stream first (MyActuator: ``await motor.active_reply(...)``).
+
+        Raises:
+            ValueError: ``size`` below 1.
+        """
+        return MotorFrames(self, size, frozenset(kinds))
 
     @property
     def motor_id(self) -> int:
@@ -407,6 +470,8 @@ class Bus:
             if motor is not None:
                 motor.state = got.reply
                 motor.last_seen = frame.timestamp or now
+                for watcher in motor._watchers:
+                    watcher._push(got.traffic, got.reply)
                 for callback in self._subscribers:
                     try:
                         callback(motor, got.traffic, got.reply)
