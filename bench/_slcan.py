@@ -28,19 +28,17 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import os
 import random
 import statistics
-import subprocess
 import sys
 import time
-import tty
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import can
 
+from _pty import Pty
 from servobus.transports import SlcanTransport
 
 BITRATE = 1_000_000
@@ -86,31 +84,6 @@ def stream(n: int, seed: int) -> tuple[bytes, tuple[int, bytes]]:
         ident, data = rng.randint(0x241, 0x260), rng.randbytes(8)
         lines.append(b"t%03X8%s\r" % (ident, data.hex().upper().encode()))
     return b"".join(lines), (ident, data)
-
-
-class Pty:
-    """A raw pty whose master is played by the adapter process once :meth:`start` is called."""
-
-    def __init__(self) -> None:
-        self.master, self.slave = os.openpty()
-        tty.setraw(self.slave)
-        self.path = os.ttyname(self.slave)
-        self._adapter: subprocess.Popen[bytes] | None = None
-
-    def start(self, blob: bytes) -> None:
-        self._adapter = subprocess.Popen(
-            [sys.executable, "-c", _ADAPTER, str(self.master)], stdin=subprocess.PIPE, pass_fds=[self.master]
-        )
-        assert self._adapter.stdin is not None
-        self._adapter.stdin.write(blob)
-        self._adapter.stdin.close()
-
-    def close(self) -> None:
-        if self._adapter is not None:
-            self._adapter.kill()
-            self._adapter.wait()
-        os.close(self.master)
-        os.close(self.slave)
 
 
 def run_python_can(pty: Pty, blob: bytes, n: int, last: tuple[int, bytes]) -> float:
@@ -173,7 +146,7 @@ def measure(cfg: Config, seed: int, log: Callable[[str], None]) -> dict[str, lis
     rates: dict[str, list[float]] = {name: [] for name in streams}
     for repeat in range(cfg.repeats):
         for name, (run, n, blob, last) in streams.items():
-            pty = Pty()
+            pty = Pty(_ADAPTER)
             try:
                 rate = run(pty, blob, n, last)
             finally:

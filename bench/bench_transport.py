@@ -39,14 +39,11 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
-import os
 import random
 import shlex
 import statistics
-import subprocess
 import sys
 import time
-import tty
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -58,6 +55,7 @@ import _results
 import _slcan
 import _virtual
 import servobus
+from _pty import Pty
 from servobus.core import MyActuatorRs485Deframer
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.rs485 import encode_rs485
@@ -99,36 +97,11 @@ def stream(n: int, seed: int) -> bytes:
     return b"".join(encode_rs485(rng.randint(1, 32), rng.randbytes(8)) for _ in range(n))
 
 
-class Pty:
-    """A raw pty whose master gets ``blob`` from a writer process once :meth:`pour` is called."""
-
-    def __init__(self) -> None:
-        self.master, self.slave = os.openpty()
-        tty.setraw(self.slave)
-        self.path = os.ttyname(self.slave)
-        self._writer: subprocess.Popen[bytes] | None = None
-
-    def pour(self, blob: bytes) -> None:
-        self._writer = subprocess.Popen(
-            [sys.executable, "-c", _WRITER, str(self.master)], stdin=subprocess.PIPE, pass_fds=[self.master]
-        )
-        assert self._writer.stdin is not None
-        self._writer.stdin.write(blob)
-        self._writer.stdin.close()
-
-    def close(self) -> None:
-        if self._writer is not None:
-            self._writer.kill()
-            self._writer.wait()
-        os.close(self.master)
-        os.close(self.slave)
-
-
 def run_pyserial(path: str, pty: Pty, blob: bytes, n: int) -> float:
     deframer = MyActuatorRs485Deframer()
     got = 0
     with serial.Serial(path, BAUD, timeout=5.0) as port:
-        pty.pour(blob)
+        pty.start(blob)
         first = 0.0
         while got < n:
             data = port.read(port.in_waiting or 1)
@@ -146,7 +119,7 @@ async def _servobus(path: str, pty: Pty, blob: bytes, n: int) -> float:
     got = 0
     framing = ma.FAMILY.bind(1, link="rs485").framing
     async with SerialTransport(path, framing=framing, baud=BAUD, reopen=False) as transport:
-        pty.pour(blob)
+        pty.start(blob)
         first = 0.0
         while got < n:
             frames = await asyncio.wait_for(transport.receive_batch(), 5.0)
@@ -174,7 +147,7 @@ def measure(cfg: Config, seed: int, log: Callable[[str], None]) -> dict[str, lis
     runners = {"servobus": run_servobus, "pyserial": run_pyserial}
     for repeat in range(cfg.repeats):
         for name, run in runners.items():
-            pty = Pty()
+            pty = Pty(_WRITER)
             try:
                 rate = run(pty.path, pty, blob, cfg.frames)
             finally:
