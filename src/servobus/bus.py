@@ -343,19 +343,26 @@ class Bus:
     def _submit(
         self, motor: Motor, command: Command, *, timeout_s: float | None, retries: int
     ) -> asyncio.Future[Any]:
+        request = self._prepare(motor, command, timeout_s=timeout_s, retries=retries)
+        self._enqueue(motor, request)
+        self._pump()
+        return request.context  # type: ignore[no-any-return]
+
+    def _prepare(self, motor: Motor, command: Command, *, timeout_s: float | None, retries: int) -> Request:
+        """The request for ``command``, encoded (ValueError here, before anything is queued)."""
         if self._loop is None:
             raise RuntimeError(f"{self.name}: use the Bus inside 'async with'")
         future: asyncio.Future[Any] = self._loop.create_future()
-        request = self.scheduler.request(
+        return self.scheduler.request(
             motor.codec, command, timeout_s=timeout_s, retries=retries, context=future
         )
-        if not motor.codec.retry_safe(command):
+
+    def _enqueue(self, motor: Motor, request: Request) -> None:
+        if not motor.codec.retry_safe(request.command):
             self._commanded[id(motor.codec)] = motor
-        motor.codec.note_sent(command)
+        motor.codec.note_sent(request.command)
         self.scheduler.submit(request)
-        future.add_done_callback(functools.partial(self._on_done, request=request))
-        self._pump()
-        return future
+        request.context.add_done_callback(functools.partial(self._on_done, request=request))
 
     def _on_done(self, future: asyncio.Future[Any], request: Request) -> None:
         if future.cancelled() and self._loop is not None:
@@ -375,10 +382,12 @@ class Bus:
         Raises:
             ValueError: a command is refused by its codec (nothing of the tick is sent then).
         """
-        items = list(items)
-        for motor, command in items:  # every command is checked before the first frame leaves
-            motor.codec.encode(command)
-        futures = [self._submit(m, c, timeout_s=timeout_s, retries=0) for m, c in items]
+        # Every command is encoded (and checked) before the first one is queued; then one pump.
+        prepared = [(m, self._prepare(m, c, timeout_s=timeout_s, retries=0)) for m, c in items]
+        for motor, request in prepared:
+            self._enqueue(motor, request)
+        self._pump()
+        futures = [request.context for _, request in prepared]
         try:
             return list(await asyncio.gather(*futures, return_exceptions=True))
         except BaseException:
