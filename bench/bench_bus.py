@@ -165,7 +165,7 @@ class _Sniffer:
         return None
 
 
-async def _efficiency_run(cycles: int, build: Callable[[], Command], sequential: bool) -> dict[str, Any]:
+async def efficiency_run(cycles: int, build: Callable[[], Command], sequential: bool) -> dict[str, Any]:
     sniffer = _Sniffer()
     devices = [MyActuatorMotor(i) for i in _motor_ids()]
     transport = SimTransport(devices=[*devices, sniffer])
@@ -223,7 +223,7 @@ def efficiency(cfg: Config, log: Callable[[str], None]) -> dict[str, Any]:
     }
     for name, build in commands.items():
         for mode in ("cycle", "sequential"):
-            run = virtual.run(_efficiency_run(cfg.efficiency_cycles, build, mode == "sequential"))
+            run = virtual.run(efficiency_run(cfg.efficiency_cycles, build, mode == "sequential"))
             ratio = run["achieved_cycles_s"] / run["bound_cycles_s"]
             run["vs_bound"] = ratio
             if mode == "sequential":
