@@ -580,7 +580,17 @@ def source_state() -> dict[str, Any]:
         return done.stdout.strip() if done.returncode == 0 else ""
 
     status = git("status", "--porcelain", "--", "src")
-    return {"commit": git("rev-parse", "--short", "HEAD"), "src_changes": status.splitlines()}
+    return {
+        "commit": git("rev-parse", "--short", "HEAD"),
+        "src_changes": [s.strip() for s in status.splitlines()],
+    }
+
+
+def command_line(arguments: Sequence[str]) -> str:
+    """The command as run, with PYTHONPATH when it was set (it decides which servobus is measured)."""
+    command = shlex.join([sys.executable, "bench/bench_bus.py", *arguments])
+    pythonpath = os.environ.get("PYTHONPATH")
+    return f"PYTHONPATH={shlex.quote(pythonpath)} {command}" if pythonpath else command
 
 
 def render_markdown(figures: dict[str, Any], meta: dict[str, Any]) -> str:
@@ -670,7 +680,8 @@ def render_markdown(figures: dict[str, Any], meta: dict[str, Any]) -> str:
         "## Bus: `cycle()` over 32 MyActuator motors (`bench/bench_bus.py`)",
         "",
         f"- Command: `{meta['command']}` (from the repository root; {meta['runtime_s']:.0f} s)",
-        f"- Date: {machine['date_utc']}; servobus {meta['servobus']}, commit {source['commit']}{changed}",
+        f"- Date: {machine['date_utc']}; servobus {meta['servobus']} from `{meta['servobus_path']}`, "
+        f"commit {source['commit']}{changed}",
         f"- Machine: {machine['platform']}; CPU {machine['cpu_model']}, {machine['cpu_count']} cores "
         "(shared, noisy)",
         f"- Python: {machine['python']}; python-can {can.__version__}; load average (1, 5, 15 min) at "
@@ -738,7 +749,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     figures = summarise(eff, tx, cfg)
     arguments = sys.argv[1:] if argv is None else list(argv)
     meta = {
-        "command": shlex.join([sys.executable, "bench/bench_bus.py", *arguments]),
+        "command": command_line(arguments),
+        "servobus_path": str(Path(servobus.__file__).resolve().parent),
         "machine": _results.machine_info(),
         "servobus": servobus.__version__,
         "python_can": can.__version__,
