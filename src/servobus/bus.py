@@ -28,7 +28,8 @@ import functools
 import logging
 import re
 from collections import deque
-from collections.abc import Awaitable, Callable, Hashable, Iterable, Sequence
+from collections.abc import AsyncIterator, Awaitable, Callable, Hashable, Iterable, Sequence
+from dataclasses import dataclass
 from types import TracebackType
 from typing import Any, Protocol, Self
 
@@ -36,12 +37,14 @@ import anyio
 
 from servobus.errors import MotorTimeout, TransportError
 from servobus.frame import Frame
+from servobus.metrics import Metrics
 from servobus.protocols import BoundCodec, get_family
 from servobus.protocols._message import Command, Reply
 from servobus.scheduler import Request, RequestState, Scheduler, Traffic
+from servobus.ticks import Tick, ticks
 from servobus.transports.events import StateChanged, TransportEvent, TransportState
 
-__all__ = ["Bus", "FrameLink", "Motor", "MotorFrames"]
+__all__ = ["Bus", "FrameLink", "Motor", "MotorFrames", "MotorStatus"]
 
 logger = logging.getLogger("servobus.bus")
 
@@ -72,6 +75,23 @@ class FrameLink(Protocol):
 
 
 Result = Reply | BaseException | None
+
+
+@dataclass(frozen=True, slots=True)
+class MotorStatus:
+    """A motor went offline (missed replies, or silent too long) or came back (it answered).
+
+    Attributes:
+        motor: the motor.
+        online: its new state.
+        at: when (the loop's clock).
+        reason: why, in words (``"3 replies missed"``, ``"silent for 0.5 s"``, ``"answered"``).
+    """
+
+    motor: Motor
+    online: bool
+    at: float
+    reason: str
 
 
 def _snake(name: str) -> str:
@@ -149,6 +169,9 @@ class Motor:
         codec: the bound codec (family, id, revision, link).
         state: the latest reply, stream frame or error report received from this motor (None yet).
         last_seen: when it was received (the loop's clock; None yet).
+        online: the host-side watchdog's verdict: True once it answered, False after
+            ``offline_after_misses`` missed replies in a row or ``offline_after_s`` of silence, None
+            before either happened. A motor that answers again is online again.
     """
 
     def __init__(self, bus: Bus, codec: BoundCodec) -> None:
@@ -156,8 +179,44 @@ class Motor:
         self.codec = codec
         self.state: Reply | None = None
         self.last_seen: float | None = None
+        self.online: bool | None = None
+        self._misses = 0
         self._commands = _command_classes(codec.family)
         self._watchers: list[MotorFrames] = []
+
+    def metrics(self) -> Metrics:
+        """This motor's counters and request-to-reply latency (see :class:`~servobus.metrics.Metrics`)."""
+        scheduler = self.bus.scheduler
+        key = id(self.codec)
+        return Metrics.of(scheduler.motor_counts[key], scheduler.motor_latency[key].snapshot())
+
+    @contextlib.asynccontextmanager
+    async def stream(
+        self, command: int | type[Command], *, interval_ms: int, size: int = 64
+    ) -> AsyncIterator[MotorFrames]:
+        """Have the motor stream ``command``'s reply every ``interval_ms`` (MyActuator 0xB6) and iterate
+        the frames; the stream is switched off when the block is left, however it is left.
+
+        ``async with motor.stream(ma.ReadStatus2, interval_ms=10) as frames: async for r in frames``.
+        While a stream is on the motor answers no requests (MyActuator §9 item 18), except reads of
+        the streamed command, which the next stream frame answers.
+
+        Raises:
+            ValueError: the family has no streams, the command cannot be streamed, or a bad interval.
+        """
+        active_reply: Callable[..., Command] | None = self._commands.get("active_reply")
+        if active_reply is None:
+            raise ValueError(f"{self.codec.family} motors have no active-reply streams")
+        code = getattr(command, "CODE", command)
+        on = active_reply(command=code, enabled=True, interval_ms=interval_ms)
+        off = active_reply(command=code, enabled=False)
+        async with self.frames(size=size, kinds=(Traffic.STREAM,)) as frames:
+            await self.request(on)
+            try:
+                yield frames
+            finally:
+                with anyio.CancelScope(shield=True), contextlib.suppress(TransportError, MotorTimeout):
+                    await self.request(off)
 
     def frames(
         self, *, size: int = 64, kinds: Iterable[Traffic] = (Traffic.STREAM, Traffic.REPORT)
@@ -219,6 +278,9 @@ class Bus:
         min_reply_s: the least time a reply can take after its request left (default: two of the
             shortest frames at the transport's bit rate, where it has one): a frame with the reply's
             key that arrives sooner is not taken for it.
+        offline_after_misses: replies missed in a row after which a motor is marked offline.
+        offline_after_s: silence after which a motor that answered before is marked offline (None:
+            silence alone never does; set it when the motor streams or is polled steadily).
     """
 
     def __init__(
@@ -230,9 +292,17 @@ class Bus:
         max_in_flight: int = 64,
         name: str | None = None,
         min_reply_s: float | None = None,
+        offline_after_misses: int = 3,
+        offline_after_s: float | None = None,
     ) -> None:
         if safe_timeout_s <= 0:
             raise ValueError(f"safe_timeout_s={safe_timeout_s} must be positive")
+        if offline_after_misses < 1:
+            raise ValueError(f"offline_after_misses={offline_after_misses} must be at least 1")
+        if offline_after_s is not None and offline_after_s <= 0:
+            raise ValueError(f"offline_after_s={offline_after_s} must be positive (or None)")
+        self.offline_after_misses = offline_after_misses
+        self.offline_after_s = offline_after_s
         self.transport = transport
         self.name = name or transport.name
         self.safe = safe
@@ -257,6 +327,10 @@ class Bus:
         # The Bus's one timer: a loop callback at the scheduler's next deadline (no task to cancel).
         self._timer: asyncio.TimerHandle | None = None
         self._subscribers: list[Callable[[Motor, Traffic, Reply], object]] = []
+        self._status_listeners: list[Callable[[MotorStatus], object]] = []
+        # The silence watchdog's timer, at the earliest moment an online motor can turn silent.
+        self._silence: asyncio.TimerHandle | None = None
+        self._silence_at = 0.0
 
     # ---- life cycle ----
 
@@ -277,9 +351,10 @@ class Bus:
             with anyio.CancelScope(shield=True):
                 await self._safe_stop()
         finally:
-            if self._timer is not None:
-                self._timer.cancel()
-                self._timer = None
+            for timer in (self._timer, self._silence):
+                if timer is not None:
+                    timer.cancel()
+            self._timer = self._silence = None
             self.transport.set_consumer(None)
             self.transport.set_send_reporter(None)
             with contextlib.suppress(ValueError):
@@ -330,6 +405,14 @@ class Bus:
     def subscribe(self, callback: Callable[[Motor, Traffic, Reply], object]) -> None:
         """Call ``callback(motor, traffic, reply)`` for every decoded frame of a motor on this bus."""
         self._subscribers.append(callback)
+
+    def subscribe_status(self, callback: Callable[[MotorStatus], object]) -> None:
+        """Call ``callback(status)`` whenever the watchdog marks a motor offline or online."""
+        self._status_listeners.append(callback)
+
+    def ticks(self, hz: float, *, spin_s: float = 0.0012, count: int | None = None) -> AsyncIterator[Tick]:
+        """A fixed-rate pacer: :func:`servobus.ticks.ticks` (one pacer may drive several buses)."""
+        return ticks(hz, spin_s=spin_s, count=count)
 
     # ---- requests ----
 
@@ -479,6 +562,9 @@ class Bus:
             if motor is not None:
                 motor.state = got.reply
                 motor.last_seen = frame.timestamp or now
+                motor._misses = 0
+                if motor.online is not True:
+                    self._set_status(motor, True, now, "answered")
                 for watcher in motor._watchers:
                     watcher._push(got.traffic, got.reply)
                 for callback in self._subscribers:
@@ -533,13 +619,63 @@ class Bus:
     def _on_timer(self) -> None:
         assert self._loop is not None
         self._timer = None
-        for request in self.scheduler.expire(self._loop.time()):
+        now = self._loop.time()
+        for request in self.scheduler.expire(now):
             self._by_frame.pop(id(request.frame), None)
+            self._missed(request, now)
             self._settle(request, None)
         self._pump()
+
+    # ---- the host-side watchdog ----
+
+    def _missed(self, request: Request, now: float) -> None:
+        motor = self._by_codec.get(id(request.codec))
+        if motor is None:
+            return
+        motor._misses += 1
+        if motor._misses >= self.offline_after_misses and motor.online is not False:
+            self._set_status(motor, False, now, f"{motor._misses} replies missed")
+
+    def _set_status(self, motor: Motor, online: bool, at: float, reason: str) -> None:
+        motor.online = online
+        status = MotorStatus(motor, online, at, reason)
+        (logger.info if online else logger.warning)(
+            "%s: %r %s (%s)", self.name, motor, "online" if online else "offline", reason
+        )
+        for callback in self._status_listeners:
+            try:
+                callback(status)
+            except Exception:  # a listener's bug must not stop the reader
+                logger.exception("%s: status listener %r failed", self.name, callback)
+        if online:
+            self._arm_silence()
+
+    def _arm_silence(self) -> None:
+        """Time the silence check for the online motor heard from longest ago (if none is armed)."""
+        if self.offline_after_s is None or self._silence is not None or self._loop is None:
+            return
+        heard = [m.last_seen for m in self.motors.values() if m.online and m.last_seen is not None]
+        if heard:
+            self._silence_at = min(heard) + self.offline_after_s
+            self._silence = self._loop.call_at(self._silence_at, self._on_silence)
+
+    def _on_silence(self) -> None:
+        self._silence = None
+        assert self.offline_after_s is not None and self._loop is not None
+        silent = self.offline_after_s
+        for motor in self.motors.values():
+            if motor.online and motor.last_seen is not None and motor.last_seen + silent <= self._silence_at:
+                self._set_status(motor, False, self._loop.time(), f"silent for {silent:g} s")
+        self._arm_silence()
 
     # ---- numbers ----
 
     def stats(self) -> dict[str, int]:
         """The scheduler's counters: requests, replies, timeouts, retries and every kind of frame."""
         return dict(self.scheduler.counts)
+
+    def metrics(self) -> Metrics:
+        """This bus's counters, request-to-reply latency and the line's load (from the transport)."""
+        stats = getattr(self.transport, "stats", None)
+        load = getattr(stats(), "bus_load_pct", None) if callable(stats) else None
+        return Metrics.of(self.scheduler.counts, self.scheduler.latency.snapshot(), load)

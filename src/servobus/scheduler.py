@@ -36,6 +36,7 @@ from typing import Any
 
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
+from servobus.metrics import LatencyWindow
 from servobus.protocols import BoundCodec, FrameKind, check_bus
 from servobus.protocols._message import Command, Reply
 
@@ -173,6 +174,10 @@ class Scheduler:
         self._recent = _Recent()
         self._rest_until = 0.0
         self.counts: Counter[str] = Counter()
+        self.latency = LatencyWindow(4096)
+        # Per motor (by codec identity: a plug-in's codec need not be hashable).
+        self.motor_counts: dict[int, Counter[str]] = {}
+        self.motor_latency: dict[int, LatencyWindow] = {}
         for codec in codecs:
             self.add(codec)
 
@@ -186,6 +191,8 @@ class Scheduler:
         """
         check_bus([*self.codecs, codec])
         self.codecs.append(codec)
+        self.motor_counts[id(codec)] = Counter()
+        self.motor_latency[id(codec)] = LatencyWindow(1024)
         for ident in codec.reply_ids | codec.shared_ids:
             self._by_id.setdefault(ident & 0x1FFFFFFF, []).append(codec)
 
@@ -206,6 +213,8 @@ class Scheduler:
             ValueError: the command is refused by the codec (before any frame exists), a negative
                 timeout or retry count, or retries asked for a command that is not safe to repeat.
         """
+        if id(codec) not in self.motor_counts:
+            raise ValueError(f"{codec!r} is not on this bus: add() it first")
         frame = codec.encode(command)
         timeout = codec.timeout_s(command) if timeout_s is None else timeout_s
         if timeout <= 0 or retries < 0:
@@ -220,7 +229,7 @@ class Scheduler:
             where = "already queued" if request.state is S.QUEUED else request.state.value
             raise RuntimeError(f"{request.describe()} is {where}: a request is submitted once")
         self._queue.append(request)
-        self.counts["requests"] += 1
+        self._count(request.codec, "requests")
 
     def next_to_send(self, now: float) -> list[Request]:
         """The requests that may leave now, in order (they become SENDING; write their frames).
@@ -266,7 +275,7 @@ class Scheduler:
             return
         request.error = RuntimeError(f"{request.describe()}: frame not sent ({reason})")
         self._finish(request, S.FAILED, now)
-        self.counts[f"not_sent_{reason}"] += 1
+        self._count(request.codec, f"not_sent_{reason}")
 
     def cancel(self, request: Request, now: float) -> None:
         """The caller gave up on ``request``; a reply that still comes is counted LATE."""
@@ -297,10 +306,10 @@ class Scheduler:
                 if request.attempts <= request.retries:
                     self._move(request, S.QUEUED)
                     self._queue.appendleft(request)
-                    self.counts["retries"] += 1
+                    self._count(request.codec, "retries")
                     continue
                 self._move(request, S.TIMED_OUT)
-                self.counts["timeouts"] += 1
+                self._count(request.codec, "timeouts")
                 if request.key is not None:
                     self._recent.late.setdefault(request.key, []).append(now + self.late_window_s)
                 expired.append(request)
@@ -330,7 +339,7 @@ class Scheduler:
         try:
             reply = codec.decode(frame)
         except ProtocolError as exc:
-            self.counts["malformed"] += 1
+            self._count(codec, "malformed")
             return Received(Traffic.MALFORMED, frame, codec, error=exc)
         waiting = self._pending.get(key) if key is not None else None
         if waiting:
@@ -350,15 +359,19 @@ class Scheduler:
                 self._finish(request, S.REPLIED, now)
                 self._recent.replied[key] = now + self.late_window_s
                 traffic = Traffic.REPLY if kind is FrameKind.REPLY else Traffic(kind.value)
-                self.counts["replies"] += 1
+                self._count(codec, "replies")
                 if traffic is not Traffic.REPLY:
-                    self.counts[traffic.value] += 1
+                    self._count(codec, traffic.value)
+                if sent_at is not None:
+                    latency = (frame.timestamp or now) - sent_at
+                    self.latency.add(latency)
+                    self.motor_latency[id(codec)].add(latency)
                 return Received(traffic, frame, codec, reply, request)
         if kind is FrameKind.STREAM or kind is FrameKind.REPORT:
-            self.counts[kind.value] += 1
+            self._count(codec, kind.value)
             return Received(Traffic(kind.value), frame, codec, reply)
         traffic = self._unmatched(key, now)
-        self.counts[traffic.value] += 1
+        self._count(codec, traffic.value)
         return Received(traffic, frame, codec, reply)
 
     def _unmatched(self, key: Hashable | None, now: float) -> Traffic:
@@ -380,6 +393,10 @@ class Scheduler:
     def pending(self) -> int:
         """Requests not yet resolved (queued, sending or sent)."""
         return len(self._queue) + len(self._in_flight)
+
+    def _count(self, codec: BoundCodec, name: str) -> None:
+        self.counts[name] += 1
+        self.motor_counts[id(codec)][name] += 1
 
     def _move(self, request: Request, state: RequestState) -> None:
         if state not in TRANSITIONS[request.state]:

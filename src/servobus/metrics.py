@@ -1,0 +1,117 @@
+"""A bus's and a motor's health in numbers: counters by kind, request-to-reply latency, bus load.
+
+The scheduler counts and samples (sans-IO: every time is a clock value it was given); this module
+holds the sample window and the frozen snapshots ``bus.metrics()`` and ``motor.metrics()`` return.
+Latency is measured from when the transport reported the request's frame left to when the reply's
+frame was received (the transport's own timestamps), so it is the motor's and the wire's time, not
+the time the event loop took to notice.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+__all__ = ["Latency", "LatencyWindow", "Metrics"]
+
+
+@dataclass(frozen=True, slots=True)
+class Latency:
+    """Request-to-reply times of the most recent replies (None while there are none).
+
+    Percentiles are nearest-rank: ``p99_s`` is a latency that was actually measured.
+    """
+
+    samples: int
+    p50_s: float | None
+    p99_s: float | None
+    max_s: float | None
+
+
+class LatencyWindow:
+    """The last ``size`` latencies, in seconds."""
+
+    __slots__ = ("_samples",)
+
+    def __init__(self, size: int = 1024) -> None:
+        if size < 1:
+            raise ValueError(f"size={size} must be at least 1")
+        self._samples: deque[float] = deque(maxlen=size)
+
+    def add(self, seconds: float) -> None:
+        self._samples.append(seconds)
+
+    def clear(self) -> None:
+        self._samples.clear()
+
+    def snapshot(self) -> Latency:
+        ordered = sorted(self._samples)
+        n = len(ordered)
+        if not n:
+            return Latency(0, None, None, None)
+
+        def rank(q: float) -> float:
+            return ordered[max(0, math.ceil(q * n) - 1)]
+
+        return Latency(n, rank(0.50), rank(0.99), ordered[-1])
+
+
+@dataclass(frozen=True, slots=True)
+class Metrics:
+    """Counters since the Bus was created, the recent latency, and (for a bus) the line's load.
+
+    Attributes:
+        requests: requests submitted (a retry is not a new request).
+        replies: requests answered (by a reply, or by a stream frame of the streamed command).
+        timeouts: requests that got no reply in time (after their retries).
+        retries: automatic resends of retry-safe reads.
+        not_sent: requests the transport dropped (stale, purged, lost) or refused.
+        late: replies of requests that had timed out or were cancelled.
+        duplicate: the same reply again, right after one answered its request.
+        unsolicited: reply-shaped frames of a motor that nobody asked for.
+        malformed: frames of a motor that did not decode (never taken as a reply).
+        stream, report: a motor's 0xB6 stream frames and automatic error reports.
+        foreign: frames of no motor on this bus (bus only; always 0 for a motor).
+        latency: request-to-reply time of the last replies.
+        bus_load_pct: share of the line used in the last second, from the transport (bus only;
+            None when unknown).
+    """
+
+    requests: int
+    replies: int
+    timeouts: int
+    retries: int
+    not_sent: int
+    late: int
+    duplicate: int
+    unsolicited: int
+    malformed: int
+    stream: int
+    report: int
+    foreign: int
+    latency: Latency
+    bus_load_pct: float | None = None
+
+    @classmethod
+    def of(cls, counts: Mapping[str, int], latency: Latency, bus_load_pct: float | None = None) -> Metrics:
+        """A snapshot from the scheduler's counters (``not_sent_<reason>`` summed into ``not_sent``)."""
+        not_sent = sum(v for k, v in counts.items() if k.startswith("not_sent_"))
+        c = counts.get
+        return cls(
+            requests=c("requests", 0),
+            replies=c("replies", 0),
+            timeouts=c("timeouts", 0),
+            retries=c("retries", 0),
+            not_sent=not_sent,
+            late=c("late", 0),
+            duplicate=c("duplicate", 0),
+            unsolicited=c("unsolicited", 0),
+            malformed=c("malformed", 0),
+            stream=c("stream", 0),
+            report=c("report", 0),
+            foreign=c("foreign", 0),
+            latency=latency,
+            bus_load_pct=bus_load_pct,
+        )

@@ -1,0 +1,163 @@
+"""The Bus's watchdogs (host side, and the motor's own 0xB3), streams and metrics, on virtual time."""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Any
+
+import pytest
+
+from servobus.bus import Bus, MotorStatus
+from servobus.errors import MotorTimeout
+from servobus.metrics import LatencyWindow
+from servobus.protocols import myactuator as ma
+from servobus.sim.devices.lk import LkMotor
+from servobus.sim.devices.myactuator import MyActuatorMotor
+from servobus.transports.sim import SimTransport
+from test_bus import run
+
+
+def _events(bus: Bus) -> list[MotorStatus]:
+    seen: list[MotorStatus] = []
+    bus.subscribe_status(seen.append)
+    return seen
+
+
+def _brief(events: list[MotorStatus]) -> list[tuple[int, bool, str]]:
+    return [(s.motor.motor_id, s.online, s.reason) for s in events]
+
+
+def test_a_motor_that_misses_replies_goes_offline_and_comes_back_when_it_answers() -> None:
+    device = MyActuatorMotor(1)
+
+    async def scenario() -> tuple[list[MotorStatus], list[bool | None]]:
+        async with Bus(SimTransport(devices=[device]), offline_after_misses=2) as bus:
+            events = _events(bus)
+            motor = bus.motor("myactuator", 1)
+            states = [motor.online]
+            await motor.read_status1()
+            states.append(motor.online)
+            device.unresponsive = True
+            for _ in range(2):
+                with pytest.raises(MotorTimeout):
+                    await motor.read_status1(timeout_s=0.01)
+                states.append(motor.online)
+            device.unresponsive = False
+            await motor.read_status1()
+            states.append(motor.online)
+            return events, states
+
+    events, states = run(scenario)
+    assert states == [None, True, True, False, True]
+    assert _brief(events) == [(1, True, "answered"), (1, False, "2 replies missed"), (1, True, "answered")]
+
+
+def test_a_silent_motor_goes_offline_after_the_silence_limit_and_only_then() -> None:
+    devices = [MyActuatorMotor(1), MyActuatorMotor(2)]
+
+    async def scenario() -> tuple[list[MotorStatus], float, float]:
+        async with Bus(SimTransport(devices=devices), offline_after_s=0.5) as bus:
+            events = _events(bus)
+            loop = asyncio.get_running_loop()
+            one, two = bus.motor("myactuator", 1), bus.motor("myactuator", 2)
+            await bus.cycle([(one, ma.ReadStatus1()), (two, ma.ReadStatus1())])
+            heard = two.last_seen
+            assert heard is not None
+            for _ in range(10):  # motor 1 is polled every 0.1 s; motor 2 never again
+                await asyncio.sleep(0.1)
+                await one.read_status1()
+            return events, heard, loop.time()
+
+    events, heard, end = run(scenario)
+    assert _brief(events) == [(1, True, "answered"), (2, True, "answered"), (2, False, "silent for 0.5 s")]
+    assert events[-1].at == pytest.approx(heard + 0.5, abs=1e-6) and end > heard + 1.0
+
+
+def test_watchdog_options_are_checked() -> None:
+    with pytest.raises(ValueError, match="offline_after_misses=0"):
+        Bus(SimTransport(devices=[]), offline_after_misses=0)
+    with pytest.raises(ValueError, match="offline_after_s=0"):
+        Bus(SimTransport(devices=[]), offline_after_s=0)
+
+
+def test_the_motor_side_watchdog_0xb3_stops_a_motor_the_host_stopped_talking_to() -> None:
+    device = MyActuatorMotor(1)
+
+    async def scenario() -> tuple[bool, bool]:
+        async with Bus(SimTransport(devices=[device]), safe=None) as bus:
+            motor = bus.motor("myactuator", 1)
+            await motor.set_comm_timeout(timeout_ms=100)
+            await motor.speed_control(speed_dps=90.0)
+            await asyncio.sleep(0.05)
+            before = device.comm_tripped
+            await asyncio.sleep(0.2)  # the host goes quiet (a crashed control loop)
+            return before, device.comm_tripped
+
+    before, after = run(scenario)
+    assert (before, after) == (False, True)
+
+
+def test_a_stream_is_switched_on_iterated_and_switched_off_even_on_an_exception() -> None:
+    device = MyActuatorMotor(1)
+
+    async def scenario() -> tuple[list[Any], int]:
+        async with Bus(SimTransport(devices=[device]), safe=None) as bus:
+            motor = bus.motor("myactuator", 1)
+            got: list[Any] = []
+            with pytest.raises(RuntimeError, match="user code"):
+                async with motor.stream(ma.ReadStatus2, interval_ms=10) as frames:
+                    async for reply in frames:
+                        got.append(reply)
+                        if len(got) == 5:
+                            raise RuntimeError("user code")
+            after = bus.stats().get("stream", 0)
+            await asyncio.sleep(0.1)  # switched off: no more frames
+            return got, bus.stats().get("stream", 0) - after
+
+    got, more = run(scenario)
+    assert len(got) == 5 and all(isinstance(r, ma.StatusReply) for r in got)
+    assert more == 0
+
+
+def test_a_family_without_streams_says_so() -> None:
+    async def scenario() -> None:
+        async with Bus(SimTransport(devices=[LkMotor(1)])) as bus:
+            stream = bus.motor("lk", 1).stream(0x9C, interval_ms=10)
+            await stream.__aenter__()
+
+    with pytest.raises(ValueError, match="lk motors have no active-reply streams"):
+        run(scenario)
+
+
+def test_metrics_count_per_bus_and_per_motor_with_latency_from_the_wire() -> None:
+    devices = [MyActuatorMotor(1), MyActuatorMotor(2)]
+    devices[1].unresponsive = True
+
+    async def scenario() -> tuple[Any, Any, Any]:
+        async with Bus(SimTransport(devices=devices)) as bus:
+            one, two = bus.motor("myactuator", 1), bus.motor("myactuator", 2)
+            for _ in range(10):
+                await bus.cycle([(one, ma.ReadStatus2()), (two, ma.ReadStatus2())], timeout_s=0.01)
+            return bus.metrics(), one.metrics(), two.metrics()
+
+    bus, one, two = run(scenario)
+    assert (bus.requests, bus.replies, bus.timeouts) == (20, 10, 10)
+    assert (one.requests, one.replies, one.timeouts) == (10, 10, 0)
+    assert (two.requests, two.replies, two.timeouts) == (10, 0, 10)
+    assert one.latency.samples == 10 and two.latency.samples == 0 and two.latency.p50_s is None
+    # Request and reply are two 8-byte standard frames at 1 Mbit/s (~111 bits each with stuffing
+    # and interframe space) plus the simulator's turnaround: a fraction of a millisecond.
+    assert one.latency.p50_s is not None and 0.0002 < one.latency.p50_s < 0.001
+    assert bus.bus_load_pct is not None and bus.bus_load_pct > 0
+
+
+def test_latency_percentiles_are_nearest_rank() -> None:
+    window = LatencyWindow(100)
+    for ms in range(1, 201):  # only the last 100 are kept: 101..200
+        window.add(ms / 1000)
+    latency = window.snapshot()
+    assert latency.samples == 100
+    assert latency.p50_s == pytest.approx(0.150) and latency.p99_s == pytest.approx(0.199)
+    assert latency.max_s == pytest.approx(0.200)
+    with pytest.raises(ValueError, match="size=0"):
+        LatencyWindow(0)
