@@ -161,3 +161,22 @@ def test_latency_percentiles_are_nearest_rank() -> None:
     assert latency.max_s == pytest.approx(0.200)
     with pytest.raises(ValueError, match="size=0"):
         LatencyWindow(0)
+
+
+def test_while_a_motor_streams_a_write_is_sent_without_awaiting_the_reply_it_will_never_get() -> None:
+    device = MyActuatorMotor(1)
+
+    async def scenario() -> tuple[Any, Any, float, int]:
+        async with Bus(SimTransport(devices=[device]), safe=None) as bus:
+            motor = bus.motor("myactuator", 1)
+            loop = asyncio.get_running_loop()
+            async with motor.stream(ma.ReadStatus2, interval_ms=10):
+                start = loop.time()
+                written = await motor.speed_control(speed_dps=45.0)
+                took = loop.time() - start
+                read = await motor.read_status2()  # the streamed command: the next stream frame
+            return written, read, took, bus.metrics().timeouts
+
+    written, read, took, timeouts = run(scenario)
+    assert written is None and isinstance(read, ma.StatusReply) and read.speed_dps == pytest.approx(45, abs=1)
+    assert took < 0.001 and timeouts == 0

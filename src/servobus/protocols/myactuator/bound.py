@@ -264,17 +264,19 @@ class MyActuatorCodec(CodecBase):
         return Frame(arbitration_id=ident, data=message.encode(), is_rx=False)
 
     def reply_key(self, command: Command) -> Hashable | None:
-        """The key of the reply to ``command``, or None for 0x76, 0xB4 and 0xB6 (no reply).
+        """The key of the reply to ``command``, or None for 0x76, 0xB4 and 0xB6 (no reply), and for
+        every command but a read of a streamed one while the motor streams (it answers none then,
+        §4.36 and spec ambiguity 18: the command is executed, its reply never comes).
 
         Raises:
             ValueError: as :meth:`encode`.
         """
         message = self._check(command)
         if isinstance(message, MotionCommand):
-            return self._motion_key
+            return None if self._streams else self._motion_key
         code = message.code
         assert code is not None
-        if code in NO_REPLY:
+        if code in NO_REPLY or (self._streams and code not in self._streams):
             return None
         if code == ID_SETTING_CODE:
             return frame_key(RS485_BROADCAST_ID if self._rs485 else ID_SETTING_ID, ID_SETTING_CODE)
