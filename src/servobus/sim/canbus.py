@@ -10,11 +10,20 @@ have completed by a given time. The rules a real bus follows and this model keep
 * a node sends its own frames in the order it queued them (a transmit FIFO): only the head of
   each node's queue contends, so a host's burst of requests leaves in submission order;
 * a transmission that has started is decided: frames submitted later cannot pre-empt it.
+
+A frame joins its node's queue when it is submitted, or, :meth:`~CanBusModel.schedule`\\ d, at the
+time it becomes ready: a node that hands a frame to its controller later (a device's turnaround)
+can be told about it at once, with no event of its own at the ready time.
+
+Cost: a frame's bit-exact wire time is computed once per distinct frame (cached), and the next
+arbitration is computed once per change of the queues, however often it is asked for.
 """
 
 from __future__ import annotations
 
-from collections import deque
+import bisect
+import heapq
+import itertools
 from collections.abc import Hashable
 from dataclasses import dataclass
 
@@ -45,10 +54,18 @@ def arbitration_priority(frame: Frame) -> tuple[int, int, int]:
     return frame.arbitration_id, 0, 0
 
 
-@dataclass(slots=True)
-class _Queued:
-    frame: Frame
-    ready_s: float
+# A node's queue is a heap of (joined_s, seq, ready_s, frame): in the order the frames joined it
+# (submission order for submit(), the ready time for schedule()), ties in the order they were given.
+_Queued = tuple[float, int, float, Frame]
+_Choice = tuple[Hashable, float, float, Frame]  # (source, start_s, duration_s, frame): the next winner
+# A queue head as arbitration sees it: ((priority, the node's first (joined_s, seq)), ready_s, node).
+_Rank = tuple[tuple[int, int, int], tuple[float, int]]
+_Head = tuple[_Rank, float, Hashable]
+
+_NONE = object()
+
+#: distinct frames whose wire time is kept (the cache starts over when it is full)
+FRAME_TIME_CACHE = 4096
 
 
 class CanBusModel:
@@ -63,32 +80,107 @@ class CanBusModel:
     def __init__(self, *, bitrate: float = 1_000_000, data_bitrate: float | None = None) -> None:
         if bitrate <= 0 or (data_bitrate is not None and data_bitrate <= 0):
             raise ValueError(f"bit rates must be positive (bitrate={bitrate}, data_bitrate={data_bitrate})")
-        self.bitrate = bitrate
-        self.data_bitrate = data_bitrate
+        self._times: dict[Frame, float] = {}  # frame time by frame (equality ignores the timestamp)
+        self._chosen = False
+        self._bitrate = bitrate
+        self._data_bitrate = data_bitrate
         self.busy_s = 0.0  # total time the wire carried frames
         self.frames = 0
-        self._queues: dict[Hashable, deque[_Queued]] = {}
+        self._queues: dict[Hashable, list[_Queued]] = {}  # only nodes with frames queued
+        self._heads: list[_Head] = []  # every queue's head, best arbitration rank first
+        self._head_of: dict[Hashable, _Head] = {}
+        # Each node's first (joined_s, seq): equal identifiers from two nodes (a collision on a real
+        # bus) go to the node that queued first, whatever order the simulator learnt of them in.
+        self._first: dict[Hashable, tuple[float, int]] = {}
+        self._seq = itertools.count()
         self._free_at = 0.0
         self._now = 0.0  # the time advance() has run to: submissions cannot be older
         self._in_flight: Transmission | None = None
+        self._choice: _Choice | None = None  # the next winner, while _chosen
+
+    @property
+    def bitrate(self) -> float:
+        """Nominal bit rate, bit/s. Settable (an adapter's bit-rate command): later frames use it."""
+        return self._bitrate
+
+    @bitrate.setter
+    def bitrate(self, value: float) -> None:
+        self._bitrate = value
+        self._rates_changed()
+
+    @property
+    def data_bitrate(self) -> float | None:
+        """CAN FD data-phase bit rate (None: the nominal rate). Settable, as :attr:`bitrate`."""
+        return self._data_bitrate
+
+    @data_bitrate.setter
+    def data_bitrate(self, value: float | None) -> None:
+        self._data_bitrate = value
+        self._rates_changed()
+
+    def _rates_changed(self) -> None:
+        self._times.clear()
+        self._chosen = False  # a tentative next transmission's length changes with the rate
 
     def frame_time_s(self, frame: Frame) -> float:
-        return frame_time_s(frame, self.bitrate, self.data_bitrate)
+        """Seconds ``frame`` occupies this bus (:func:`servobus.timing.frame_time_s`, cached per frame)."""
+        duration = self._times.get(frame)
+        if duration is None:
+            if len(self._times) >= FRAME_TIME_CACHE:
+                self._times.clear()
+            duration = self._times[frame] = frame_time_s(frame, self.bitrate, self.data_bitrate)
+        return duration
 
     def submit(self, frame: Frame, ready_s: float, source: Hashable = "host") -> None:
-        """Queue ``frame`` at node ``source``; it may start at ``ready_s`` or when the bus is free.
+        """Queue ``frame`` at node ``source`` now; it may start at ``ready_s`` or when the bus is free.
 
         Raises:
             ValueError: ``ready_s`` is earlier than the time the bus has already run to.
         """
+        self._join(frame, ready_s, source, self._now)
+
+    def schedule(self, frame: Frame, ready_s: float, source: Hashable = "host") -> None:
+        """Queue ``frame`` at node ``source`` as of ``ready_s``: the same as :meth:`submit` called at
+        ``ready_s``, behind what the node queued before then and ahead of what it queues later.
+
+        Raises:
+            ValueError: ``ready_s`` is earlier than the time the bus has already run to.
+        """
+        self._join(frame, ready_s, source, ready_s)
+
+    def _join(self, frame: Frame, ready_s: float, source: Hashable, joined_s: float) -> None:
         if ready_s < self._now:
             raise ValueError(f"ready_s={ready_s} is before the bus time {self._now} (time runs forward)")
-        self._queues.setdefault(source, deque()).append(_Queued(frame, ready_s))
+        seq = next(self._seq)
+        first = self._first.get(source)
+        if first is None or (joined_s, seq) < first:
+            self._first[source] = (joined_s, seq)
+        item = (joined_s, seq, ready_s, frame)
+        queue = self._queues.get(source)
+        if queue is None:
+            self._queues[source] = [item]
+        else:
+            heapq.heappush(queue, item)
+            if queue[0] is not item:
+                return  # behind the head: arbitration does not see it yet
+            self._heads.remove(self._head_of[source])
+        self._set_head(source, item)
+
+    def _set_head(self, source: Hashable, item: _Queued) -> None:
+        head = ((arbitration_priority(item[3]), self._first[source]), item[2], source)
+        self._head_of[source] = head
+        bisect.insort(self._heads, head)
+        self._chosen = False
 
     @property
     def pending(self) -> int:
         """Frames queued and not yet on the wire."""
         return sum(len(q) for q in self._queues.values())
+
+    def queued(self, source: Hashable) -> int:
+        """Frames node ``source`` has queued (scheduled ones included) and not yet on the wire."""
+        queue = self._queues.get(source)
+        return len(queue) if queue else 0
 
     def next_event_s(self) -> float | None:
         """When the next transmission will complete, as far as the bus knows now (None: idle).
@@ -98,41 +190,56 @@ class CanBusModel:
         if self._in_flight is not None:
             return self._in_flight.end_s
         chosen = self._arbitrate()
-        if chosen is None:
-            return None
-        _, item, start = chosen
-        return start + self.frame_time_s(item.frame)
+        return None if chosen is None else chosen[1] + chosen[2]
 
     def advance(self, until_s: float) -> list[Transmission]:
         """Run the bus up to ``until_s``; return the transmissions completed by then, in order."""
-        self._now = max(self._now, until_s)
+        if until_s > self._now:
+            self._now = until_s
         done: list[Transmission] = []
         while True:
             if self._in_flight is None:
                 chosen = self._arbitrate()
-                if chosen is None or chosen[2] > until_s:
+                if chosen is None or chosen[1] > until_s:
                     return done  # idle, or the next start is still open to later submissions
-                self._start(*chosen)
-            assert self._in_flight is not None
-            if self._in_flight.end_s > until_s:
+                self._start(chosen)
+            in_flight = self._in_flight
+            assert in_flight is not None
+            if in_flight.end_s > until_s:
                 return done
-            done.append(self._in_flight)
+            done.append(in_flight)
             self._in_flight = None
 
-    def _arbitrate(self) -> tuple[Hashable, _Queued, float] | None:
-        """The next winner among the queue heads and when it starts, without committing to it."""
-        heads = [(source, q[0]) for source, q in self._queues.items() if q]
-        if not heads:
-            return None
-        start = max(self._free_at, min(item.ready_s for _, item in heads))
-        contenders = [(source, item) for source, item in heads if item.ready_s <= start]
-        source, winner = min(contenders, key=lambda c: arbitration_priority(c[1].frame))
-        return source, winner, start
+    def _arbitrate(self) -> _Choice | None:
+        """The next winner among the queue heads, when it starts and ends, without committing to it."""
+        if self._chosen:
+            return self._choice
+        choice: _Choice | None = None
+        heads = self._heads
+        if heads:
+            # start = max(free_at, earliest ready); the winner is the best rank ready by then.
+            start = self._free_at
+            source = next((source for _, ready, source in heads if ready <= start), _NONE)
+            if source is _NONE:
+                start = min(head[1] for head in heads)
+                source = next(source for _, ready, source in heads if ready <= start)
+            frame = self._queues[source][0][3]
+            choice = (source, start, self.frame_time_s(frame), frame)
+        self._choice = choice
+        self._chosen = True
+        return choice
 
-    def _start(self, source: Hashable, item: _Queued, start: float) -> None:
-        self._queues[source].popleft()
-        duration = self.frame_time_s(item.frame)
-        self._in_flight = Transmission(frame=item.frame, source=source, start_s=start, end_s=start + duration)
+    def _start(self, chosen: _Choice) -> None:
+        source, start, duration, frame = chosen
+        queue = self._queues[source]
+        heapq.heappop(queue)
+        self._heads.remove(self._head_of.pop(source))
+        if queue:
+            self._set_head(source, queue[0])
+        else:
+            del self._queues[source]
+        self._chosen = False
+        self._in_flight = Transmission(frame=frame, source=source, start_s=start, end_s=start + duration)
         self._free_at = start + duration
         self.busy_s += duration
         self.frames += 1
