@@ -6,16 +6,41 @@ back. A device answers a request with frames stamped with the time they are read
 turnaround), and may also produce frames on its own (active reply streams, automatic error
 reports, protection trips), which the caller collects with :meth:`Device.poll` at or after
 :meth:`Device.next_deadline_s`.
+
+**Listening devices.** On a wire every node sees every frame, but a device model only acts on a few
+identifiers; handing each one every frame makes a 32-motor bus cost 32 calls a frame. A device may
+therefore also have ``listen_ids()`` (the identifiers it acts on, or None for every frame: sniffers,
+fault injectors), ``attach(link)`` and ``settle()`` (a :class:`Listener`). A
+:class:`~servobus.sim.network.SimCanNetwork` then hands it (``receive``) only the frames on those
+identifiers and keeps a :class:`BusLink` for the rest: how many there were, of which kind, and when
+each ended. The device settles up through the link whenever it is used (:class:`ListeningDevice`
+does it whenever its counters or plant are read), so what it reports is the same as if it had
+received every frame: the same counters, and its plant integrated over the same steps. It tells the
+network through the link when its identifiers or its :meth:`~Device.next_deadline_s` change outside
+a ``receive``/``poll`` (a reboot, an injected error); after those the network asks again itself. A
+device without these methods gets every frame and is asked for its deadline at every event.
 """
 
 from __future__ import annotations
 
+from collections import Counter
+from collections.abc import Callable, Collection
 from dataclasses import dataclass
 from typing import Protocol
 
 from servobus.frame import Frame
+from servobus.sim.plant import Plant
 
-__all__ = ["Device", "Emission", "SerialDevice", "SerialEmission"]
+__all__ = [
+    "BusLink",
+    "Device",
+    "Emission",
+    "FrameLog",
+    "Listener",
+    "ListeningDevice",
+    "SerialDevice",
+    "SerialEmission",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -35,7 +60,7 @@ class Device(Protocol):
         ...
 
     def receive(self, frame: Frame, now_s: float) -> list[Emission]:
-        """A frame seen on the bus at ``now_s`` (every device sees every frame, as on a wire)."""
+        """A frame seen on the bus at ``now_s`` (every frame, or those on its ``listen_ids()``)."""
         ...
 
     def poll(self, now_s: float) -> list[Emission]:
@@ -45,6 +70,172 @@ class Device(Protocol):
     def next_deadline_s(self) -> float | None:
         """When :meth:`poll` next has something to do (None: nothing scheduled)."""
         ...
+
+
+class Listener(Device, Protocol):
+    """A device that is handed only the frames on its identifiers (see the module docstring)."""
+
+    def listen_ids(self) -> Collection[int] | None:
+        """The identifiers this device acts on (None: every frame)."""
+        ...
+
+    def attach(self, link: BusLink | None) -> None:
+        """Join a network through ``link``, or leave it (None)."""
+        ...
+
+    def settle(self) -> None:
+        """Take account of every frame ``link`` has logged for this device, now."""
+        ...
+
+
+class FrameLog:
+    """The frames one network has carried, as its listening devices need them: one per network.
+
+    ``ends`` and ``sources`` hold the end time and sender of frames ``base`` .. ``count - 1`` (the
+    network drops the older ones once every device has settled up); ``odd`` counts the frames with
+    an extended identifier or in CAN FD format, which device models ignore by kind rather than by id.
+    """
+
+    __slots__ = ("base", "count", "ends", "odd", "sources")
+
+    def __init__(self) -> None:
+        self.ends: list[float] = []
+        self.sources: list[str] = []
+        self.base = 0
+        self.count = 0
+        self.odd = 0
+
+    def add(self, end_s: float, source: str, odd: bool) -> None:
+        self.ends.append(end_s)
+        self.sources.append(source)
+        self.count += 1
+        if odd:
+            self.odd += 1
+
+    def drop(self) -> None:
+        """Forget the logged times (every link has settled up to :attr:`count`)."""
+        self.ends.clear()
+        self.sources.clear()
+        self.base = self.count
+
+
+class BusLink:
+    """One device's account with a network: the frames on the bus it was not handed.
+
+    The network counts, per device, the frames it sent (``own``) and the frames it handed it
+    (``taken``); every other frame on the bus was "missed" and the device settles up for those with
+    :meth:`catch_up`.
+    """
+
+    __slots__ = ("_log", "_marks", "_notify", "cursor", "name", "own", "own_odd", "taken", "taken_odd")
+
+    def __init__(self, log: FrameLog, name: str, notify: Callable[[str], None]) -> None:
+        self._log = log
+        self._notify = notify
+        self.name = name
+        self.own = self.own_odd = self.taken = self.taken_odd = 0
+        self.cursor = log.count  # frames before this link was made are not the device's concern
+        self._marks = (log.odd, 0, 0, 0, 0)  # (log.odd, own, own_odd, taken, taken_odd) at cursor
+
+    @property
+    def behind(self) -> bool:
+        """Frames have gone by since the last :meth:`catch_up`."""
+        return self.cursor != self._log.count
+
+    def catch_up(self, *, every_end: bool) -> tuple[int, int, list[float]]:
+        """Settle up: (frames missed, of which odd, end times) since the last call.
+
+        The end times are those of every frame the device did not send itself (taken ones too: the
+        device has already advanced to those, so they cost it nothing); with ``every_end`` False only
+        the last of them (enough for a device whose state does not depend on the steps).
+        """
+        log = self._log
+        start, self.cursor = self.cursor, log.count
+        odd, own, own_odd, taken, taken_odd = self._marks
+        self._marks = (log.odd, self.own, self.own_odd, self.taken, self.taken_odd)
+        missed = (log.count - start) - (self.own - own) - (self.taken - taken)
+        missed_odd = (log.odd - odd) - (self.own_odd - own_odd) - (self.taken_odd - taken_odd)
+        first = start - log.base
+        assert first >= 0, "the network dropped frames a device had not settled up for"
+        name, ends, sources = self.name, log.ends, log.sources
+        if every_end:
+            return missed, missed_odd, [ends[i] for i in range(first, len(ends)) if sources[i] != name]
+        for i in range(len(ends) - 1, first - 1, -1):
+            if sources[i] != name:
+                return missed, missed_odd, [ends[i]]
+        return missed, missed_odd, []
+
+    def changed(self) -> None:
+        """The device's identifiers or deadline changed outside the network's calls: ask again."""
+        self._notify(self.name)
+
+
+class ListeningDevice:
+    """The listening half of a device model on a :class:`Plant`, with a :class:`~collections.Counter`.
+
+    A subclass sets ``_plant`` and ``_counters`` and defines :meth:`listen_ids`; :attr:`plant` and
+    :attr:`counters` settle up with the network before they are read, so they read as if the device
+    had received every frame on the bus. Frames it was not handed count as ``received`` and as
+    ``ignored_kind`` (extended or FD) or ``ignored_id``, which is what the models' own filters say of
+    a frame on another identifier (:attr:`MISSED_ODD` names what a model calls an odd one).
+    """
+
+    #: the counter a missed extended or CAN FD frame goes to
+    MISSED_ODD = "ignored_kind"
+    _link: BusLink | None = None
+    _plant: Plant
+    _counters: Counter[str]
+
+    def listen_ids(self) -> Collection[int] | None:
+        """The identifiers this device acts on (None: every frame)."""
+        raise NotImplementedError
+
+    def attach(self, link: BusLink | None) -> None:
+        """Join a network (``link``) or leave it (None); the network calls this.
+
+        Raises:
+            ValueError: the device is already on another network.
+        """
+        if link is not None and self._link is not None:
+            raise ValueError(f"{self!r} is already on a network: remove it from that one first")
+        self.settle()
+        self._link = link
+
+    @property
+    def plant(self) -> Plant:
+        """The mechanics, integrated up to the last frame on the bus."""
+        self.settle()
+        return self._plant
+
+    @property
+    def counters(self) -> Counter[str]:
+        """Frames and events by kind (see the model's docstring), every frame on the bus counted."""
+        self.settle()
+        return self._counters
+
+    def settle(self) -> None:
+        """Settle up with the network for the frames it did not hand this device (cheap if none)."""
+        link = self._link
+        if link is None or not link.behind:
+            return
+        missed, odd, ends = link.catch_up(every_end=not self._plant.resting)
+        if missed:
+            counters = self._counters
+            counters["received"] += missed
+            if odd:
+                counters[self.MISSED_ODD] += odd
+            if missed != odd:
+                counters["ignored_id"] += missed - odd
+        for end in ends:
+            self._overhear(end)
+
+    def _overhear(self, now_s: float) -> None:
+        """What receiving a frame on another identifier at ``now_s`` does (advance the plant)."""
+        self._plant.advance(now_s)
+
+    def _changed(self) -> None:
+        if self._link is not None:
+            self._link.changed()
 
 
 @dataclass(frozen=True, slots=True)

@@ -3,7 +3,13 @@
 Sans-IO discrete-event loop joining the pieces: the host :meth:`~SimCanNetwork.send`\\ s frames,
 the :class:`~servobus.sim.canbus.CanBusModel` decides who gets the wire and for how long, every
 device sees every completed frame (except its own) and answers after its turnaround, and
-:meth:`~SimCanNetwork.advance` returns what the host would have received by then. With no real
+:meth:`~SimCanNetwork.advance` returns what the host would have received by then.
+
+Cost per frame does not grow with the number of devices (issue [sim], virtual time >= 50x real
+time): a frame is handed only to the devices that listen to its identifier (the others settle up
+lazily, see :mod:`servobus.sim.device`), device deadlines are kept in a heap and asked again only of
+a device the network has just called or that said it changed, and a device's answer goes straight
+into the bus model's queue for the time it is ready (no event of its own). With no real
 clock anywhere, timing rules are tested exactly and bus efficiency measured without host noise
 (issue [sim], "virtual-clock mode"); a real-time attachment drives the same object from asyncio.
 
@@ -16,15 +22,19 @@ from __future__ import annotations
 import heapq
 import itertools
 from collections.abc import Iterable
+from typing import cast
 
 from servobus.frame import Frame
 from servobus.sim.canbus import CanBusModel, Transmission
-from servobus.sim.device import Device, Emission
+from servobus.sim.device import BusLink, Device, Emission, FrameLog, Listener
 from servobus.sim.faults import FaultInjector
 
 __all__ = ["HOST", "SimCanNetwork"]
 
 HOST = "host"
+
+#: frame end times kept for listening devices before the network settles them all up and drops them
+LOG_LIMIT = 4096
 
 
 class SimCanNetwork:
@@ -46,28 +56,61 @@ class SimCanNetwork:
     ) -> None:
         self.bus = bus or CanBusModel()
         self.devices: dict[str, Device] = {}
-        for device in devices:
-            self.add(device)
         self.to_devices = to_devices
         self.to_host = to_host
         self.now_s = 0.0
-        self._emissions: list[tuple[float, int, str, Frame]] = []  # heap: (ready, seq, source, frame)
         self._seq = itertools.count()
         self._host_pending: list[tuple[float, int, Frame]] = []  # faults can delay delivery to the host
+        self._log = FrameLog()
+        self._links: dict[str, BusLink] = {}  # listening devices
+        self._listeners: dict[str, Listener] = {}
+        self._order: dict[str, int] = {}  # device name -> position in the order devices were added
+        self._unlinked: list[Device] = []  # devices asked for their deadline at every event
+        self._routes: dict[int, list[tuple[Device, BusLink | None]]] = {}  # by identifier, built lazily
+        self._listen: dict[str, frozenset[int] | None] = {}  # what each listening device said
+        self._deadlines: dict[str, tuple[float, int]] = {}  # listening device -> (deadline, seq)
+        self._deadline_heap: list[tuple[float, int, str]] = []  # stale entries are skipped
+        self._dirty: list[str] = []  # listening devices that said they changed
+        # Ready times of queued frames still ahead of now_s: a frame becoming ready is no event of
+        # its own, but run_until_idle() still runs the clock to the last one within its limit.
+        self._ready_marks: list[float] = []
+        for device in devices:
+            self.add(device)
 
     def add(self, device: Device) -> None:
         """Put ``device`` on the bus.
 
         Raises:
-            ValueError: another device has the same name.
+            ValueError: another device has the same name, or the device is on another network.
         """
-        if device.name in self.devices or device.name == HOST:
-            raise ValueError(f"a device named {device.name!r} is already on this bus")
-        self.devices[device.name] = device
+        name = device.name
+        if name in self.devices or name == HOST:
+            raise ValueError(f"a device named {name!r} is already on this bus")
+        if all(hasattr(device, method) for method in ("listen_ids", "attach", "settle")):
+            listener = cast(Listener, device)
+            link = BusLink(self._log, name, self._dirty.append)
+            listener.attach(link)
+            self._links[name] = link
+            self._listeners[name] = listener
+            self._dirty.append(name)
+        else:
+            self._unlinked.append(device)
+        self.devices[name] = device
+        self._order[name] = next(self._seq)
+        self._routes.clear()
 
     def remove(self, name: str) -> Device:
         """Take a device off the bus (unplugged, powered off)."""
-        return self.devices.pop(name)
+        device = self.devices.pop(name)
+        self._order.pop(name)
+        if self._links.pop(name, None) is not None:
+            self._listeners.pop(name).attach(None)  # settles up first
+            self._listen.pop(name, None)
+            self._deadlines.pop(name, None)
+        else:
+            self._unlinked.remove(device)
+        self._routes.clear()
+        return device
 
     def send(self, frame: Frame, now_s: float | None = None) -> None:
         """The host queues ``frame`` for transmission at ``now_s`` (default: the network's time)."""
@@ -76,14 +119,21 @@ class SimCanNetwork:
 
     def next_event_s(self) -> float | None:
         """The earliest time anything happens on this network (None: nothing will)."""
-        times = [self.bus.next_event_s()]
-        if self._emissions:
-            times.append(self._emissions[0][0])
+        if self._dirty:
+            self._refresh()
+        found = self.bus.next_event_s()
         if self._host_pending:
-            times.append(self._host_pending[0][0])
-        times += [d.next_deadline_s() for d in self.devices.values()]
-        found = [t for t in times if t is not None]
-        return min(found) if found else None
+            at = self._host_pending[0][0]
+            if found is None or at < found:
+                found = at
+        deadline = self._next_deadline()
+        if deadline is not None and (found is None or deadline < found):
+            found = deadline
+        for device in self._unlinked:
+            deadline = device.next_deadline_s()
+            if deadline is not None and (found is None or deadline < found):
+                found = deadline
+        return found
 
     def advance(self, until_s: float) -> list[tuple[float, Frame]]:
         """Run the network to ``until_s``; return (time, frame) the host received, in order.
@@ -93,23 +143,28 @@ class SimCanNetwork:
         """
         received: list[tuple[float, Frame]] = []
         while (t := self.next_event_s()) is not None and t <= until_s:
-            self.now_s = max(self.now_s, t)
-            if self._emissions and self._emissions[0][0] <= t:
-                ready, _, source, frame = heapq.heappop(self._emissions)
-                self.bus.submit(frame, ready, source)
-                continue
+            if t > self.now_s:
+                self.now_s = t
             if self._host_pending and self._host_pending[0][0] <= t:
                 at, _, frame = heapq.heappop(self._host_pending)
                 received.append((at, frame))
                 continue
-            due = [d for d in self.devices.values() if (dl := d.next_deadline_s()) is not None and dl <= t]
+            due = self._due(t)
             if due:
                 for device in due:
                     self._queue_all(device.name, device.poll(t))
+                    if device.name in self._links:
+                        self._set_deadline(device)
                 continue
             for transmission in self.bus.advance(t):
                 self._deliver(transmission, received)
-        self.now_s = max(self.now_s, until_s)
+        if until_s > self.now_s:
+            self.now_s = until_s
+        marks = self._ready_marks
+        while marks and marks[0] <= until_s:
+            heapq.heappop(marks)
+        if len(self._log.ends) >= LOG_LIMIT:
+            self._drop_log()
         return received
 
     def run_until_idle(self, limit_s: float = 1.0) -> list[tuple[float, Frame]]:
@@ -118,13 +173,46 @@ class SimCanNetwork:
         deadline = self.now_s + limit_s
         while (t := self.next_event_s()) is not None and t <= deadline:
             received += self.advance(t)
+        marks = self._ready_marks
+        while marks and marks[0] <= deadline:
+            self.now_s = max(self.now_s, heapq.heappop(marks))
         return received
+
+    # ---- routing ----
+
+    def _recipients(self, can_id: int) -> list[tuple[Device, BusLink | None]]:
+        """The devices ``can_id`` is handed to, in the order they were added (built once per id)."""
+        found = self._routes.get(can_id)
+        if found is None:
+            found = self._routes[can_id] = [
+                (device, self._links.get(name))
+                for name, device in self.devices.items()
+                if name not in self._links or (ids := self._listen.get(name)) is None or can_id in ids
+            ]
+        return found
 
     def _deliver(self, transmission: Transmission, received: list[tuple[float, Frame]]) -> None:
         end, frame, source = transmission.end_s, transmission.frame, transmission.source
-        for name, device in list(self.devices.items()):
-            if name != source:
+        assert isinstance(source, str)
+        odd = frame.is_extended_id or frame.is_fd
+        self._log.add(end, source, odd)
+        sender = self._links.get(source)
+        if sender is not None:
+            sender.own += 1
+            if odd:
+                sender.own_odd += 1
+        for device, link in self._recipients(frame.arbitration_id):
+            name = device.name
+            if name == source:
+                continue
+            if link is None:
                 self._queue_all(name, device.receive(frame, end))
+                continue
+            link.taken += 1
+            if odd:
+                link.taken_odd += 1
+            self._queue_all(name, device.receive(frame, end))
+            self._set_deadline(device)
         if source != HOST:
             outcomes = self.to_host.apply(frame, end) if self.to_host else [(end, frame)]
             for at, item in outcomes:
@@ -134,15 +222,83 @@ class SimCanNetwork:
                 else:
                     heapq.heappush(self._host_pending, (at, next(self._seq), item))
 
+    def _refresh(self) -> None:
+        """Ask the devices that said they changed for their identifiers and deadline again."""
+        names, self._dirty[:] = set(self._dirty), []
+        for name in names:
+            device = self._listeners.get(name)
+            if device is None:
+                continue
+            ids = device.listen_ids()
+            listen = None if ids is None else frozenset(ids)
+            if name not in self._listen or self._listen[name] != listen:
+                self._listen[name] = listen
+                self._routes.clear()
+            self._set_deadline(device)
+
+    # ---- deadlines ----
+
+    def _set_deadline(self, device: Device) -> None:
+        name = device.name
+        deadline = device.next_deadline_s()
+        current = self._deadlines.get(name)
+        if deadline is None:
+            if current is not None:
+                del self._deadlines[name]
+        elif current is None or current[0] != deadline:
+            seq = next(self._seq)
+            self._deadlines[name] = (deadline, seq)
+            heapq.heappush(self._deadline_heap, (deadline, seq, name))
+
+    def _next_deadline(self) -> float | None:
+        heap, deadlines = self._deadline_heap, self._deadlines
+        while heap:
+            deadline, seq, name = heap[0]
+            current = deadlines.get(name)
+            if current is not None and current[1] == seq:
+                return deadline
+            heapq.heappop(heap)
+        return None
+
+    def _due(self, t: float) -> list[Device]:
+        """The devices whose deadline has come by ``t``, in the order they were added."""
+        due: list[Device] = []
+        heap, deadlines = self._deadline_heap, self._deadlines
+        while heap and heap[0][0] <= t:
+            _, seq, name = heapq.heappop(heap)
+            current = deadlines.get(name)
+            if current is not None and current[1] == seq:
+                del deadlines[name]  # asked again after its poll
+                due.append(self.devices[name])
+        for device in self._unlinked:
+            if (when := device.next_deadline_s()) is not None and when <= t:
+                due.append(device)
+        if len(due) > 1:
+            due.sort(key=lambda d: self._order[d.name])
+        return due
+
+    # ---- frames ----
+
+    def _drop_log(self) -> None:
+        """Settle every listening device up and forget the frame times logged so far."""
+        for device in self._listeners.values():
+            device.settle()
+        if all(not link.behind for link in self._links.values()):
+            self._log.drop()
+
     def _queue_all(self, source: str, emissions: list[Emission]) -> None:
         for emission in emissions:
             self._queue(emission.ready_s, source, emission.frame)
 
     def _queue(self, ready_s: float, source: str, frame: Frame) -> None:
         if source == HOST and self.to_devices is not None:
-            outcomes = self.to_devices.apply(frame, ready_s)
+            for at, item in self.to_devices.apply(frame, ready_s):
+                assert isinstance(item, Frame)
+                self._schedule(item, at, source)
         else:
-            outcomes = [(ready_s, frame)]
-        for at, item in outcomes:
-            assert isinstance(item, Frame)
-            heapq.heappush(self._emissions, (at, next(self._seq), source, item))
+            self._schedule(frame, ready_s, source)
+
+    def _schedule(self, frame: Frame, ready_s: float, source: str) -> None:
+        self.bus.schedule(frame, ready_s, source)
+        if ready_s > self.now_s:
+            heapq.heappush(self._ready_marks, ready_s)

@@ -170,6 +170,15 @@ class Plant:
         """Rotor angle (before the gear), what a motor-side encoder counts."""
         return self.position_deg * self.params.gear_ratio
 
+    @property
+    def resting(self) -> bool:
+        """Unpowered, still and at ambient temperature: :meth:`advance` only moves its clock.
+
+        Until its control changes such a plant reaches the same state however its time is cut into
+        steps, so a device may advance it over many frames at once.
+        """
+        return self._at_rest() and self.speed_dps == 0.0 and self.temperature_c == self.params.ambient_c
+
     def set_control(self, control: Control) -> None:
         if type(control) is not type(self.control):
             self._speed_integral = 0.0  # a new mode starts its loops fresh, from the present speed

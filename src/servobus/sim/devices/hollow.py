@@ -69,7 +69,7 @@ from servobus.protocols.hollow import (
 from servobus.protocols.hollow.codec import decode_request_frame, reply_frame
 from servobus.protocols.hollow.ids import check_host_id, check_motor_id
 from servobus.protocols.hollow.replies import EXTENDED_POSITION_LIMITS_DEG
-from servobus.sim.device import Emission
+from servobus.sim.device import Emission, ListeningDevice
 from servobus.sim.plant import (
     Control,
     CurrentControl,
@@ -137,7 +137,7 @@ class HeldSetpoint:
     kd: int
 
 
-class HollowMotor:
+class HollowMotor(ListeningDevice):
     """One hollow-series motor on a CAN or CAN FD bus (implements :class:`~servobus.sim.device.Device`).
 
     Args:
@@ -160,6 +160,8 @@ class HollowMotor:
     Raises:
         ValueError: an id out of range, or a negative turnaround / jitter larger than it.
     """
+
+    MISSED_ODD = "ignored_id"  # the motor checks the identifier before the kind
 
     def __init__(
         self,
@@ -196,10 +198,10 @@ class HollowMotor:
         self.console_zero_deg = console_zero_deg
         self._name = name or f"hollow{motor_id}"
         self._rng = random.Random(seed)
-        self.plant = Plant(plant_params or HOLLOW_PLANT_PARAMS, now_s=now_s)
+        self._plant = Plant(plant_params or HOLLOW_PLANT_PARAMS, now_s=now_s)
         # A fault knob of the simulator, not motor RAM: a reboot leaves it as it is.
         self.unresponsive = False
-        self.counters: Counter[str] = Counter()
+        self._counters: Counter[str] = Counter()
         # RAM state (§13), set by _power_up.
         self.enabled = False
         self.can_mode = CanMode.NORMAL
@@ -260,6 +262,10 @@ class HollowMotor:
     def next_deadline_s(self) -> float | None:
         """None: no spontaneous frames."""
         return None
+
+    def listen_ids(self) -> frozenset[int]:
+        """Its own id (any kind): any other identifier is ``ignored_id``, which the motor checks first."""
+        return frozenset((self.motor_id,))
 
     # ---- faults and power ----
 

@@ -64,7 +64,7 @@ from servobus.protocols.lk.codec import REQUESTS, check_available, reply_frame
 from servobus.protocols.lk.ids import MULTI_MOTOR_ID, MULTI_MOTOR_IDS, MULTI_MOTOR_REPLY_CODE, request_id
 from servobus.protocols.lk.model import encoder_counts_per_turn
 from servobus.protocols.lk.replies import STATUS2_CODES
-from servobus.sim.device import Emission
+from servobus.sim.device import Emission, ListeningDevice
 from servobus.sim.devices.lk_control import MotionContext, plant_control
 from servobus.sim.devices.lk_replies import encoder_reply, single_turn_deg, status1, status2, status3
 from servobus.sim.devices.lk_state import (
@@ -105,7 +105,7 @@ class RunState(enum.Enum):
     OFF = "off"
 
 
-class LkMotor:
+class LkMotor(ListeningDevice):
     """One LK motor on a CAN bus (implements :class:`~servobus.sim.device.Device`).
 
     Args:
@@ -161,7 +161,7 @@ class LkMotor:
         self.turnaround_s = turnaround_s
         self.calibration_s = calibration_s
         self._name = name or f"lk{motor_id}"
-        self.plant = Plant(params, now_s=now_s)
+        self._plant = Plant(params, now_s=now_s)
         rom = default_settings(model, motor_id, params)
         for param, value in (settings or {}).items():
             rom[param] = value
@@ -176,7 +176,7 @@ class LkMotor:
         self.angles = AngleFrame(per_turn)
         self.brake_at_power_up = brake_engaged
         self.unresponsive = False  # a fault knob, not motor RAM: a reboot keeps it
-        self.counters: Counter[str] = Counter()
+        self._counters: Counter[str] = Counter()
         self._conditions = 0  # fault conditions present now (bits of ErrorState)
         # RAM state, set by _power_up.
         self.state = RunState.ON
@@ -236,6 +236,11 @@ class LkMotor:
     def next_deadline_s(self) -> float | None:
         """None: no spontaneous frames."""
         return None
+
+    def listen_ids(self) -> frozenset[int]:
+        """0x140+ID and 0x280: any other identifier is ``ignored_id`` (``ignored_kind`` if extended
+        or FD) whatever it carries."""
+        return frozenset((request_id(self.motor_id), MULTI_MOTOR_ID))
 
     # ---- faults and power ----
 
@@ -299,6 +304,7 @@ class LkMotor:
     # ---- power-up and the effective control ----
 
     def _power_up(self) -> None:
+        self._changed()  # a saved driver id becomes the motor id (V2.36)
         memory = self.memory
         memory.power_up()
         if self.revision is Revision.V2_36:

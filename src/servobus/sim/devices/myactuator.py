@@ -75,6 +75,7 @@ when the error appears (or reporting is switched on).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections import Counter
 from dataclasses import dataclass
@@ -86,13 +87,16 @@ from servobus.protocols._message import Command, Reply
 from servobus.protocols.myactuator import ErrorFlags, IdKind, MotionCommand, Revision, StreamableCommand
 from servobus.protocols.myactuator.codec import decode_standard_request
 from servobus.protocols.myactuator.ids import (
+    BROADCAST_ID,
     ID_SETTING_ID,
     check_motor_id,
     classify_id,
     motion_reply_id,
+    motion_request_id,
     reply_id,
+    request_id,
 )
-from servobus.sim.device import Emission
+from servobus.sim.device import Emission, ListeningDevice
 from servobus.sim.devices.myactuator_state import (
     DEFAULT_ENCODER_COUNTS_PER_TURN,
     DEFAULT_MODEL,
@@ -178,7 +182,7 @@ class Stream:
         return skipped
 
 
-class MyActuatorMotor:
+class MyActuatorMotor(ListeningDevice):
     """One MyActuator RMD-X motor on a CAN bus (implements :class:`~servobus.sim.device.Device`).
 
     Args:
@@ -257,13 +261,13 @@ class MyActuatorMotor:
         self.rated_speed_dps = rated_speed_dps
         self.pole_pairs = pole_pairs
         self._name = name or f"myactuator{motor_id}"
-        self.plant = Plant(plant_params or MYACTUATOR_PLANT_PARAMS, now_s=now_s)
+        self._plant = Plant(plant_params or MYACTUATOR_PLANT_PARAMS, now_s=now_s)
         self.encoder = EncoderFrame(encoder_counts_per_turn, self.plant.params.gear_ratio)
         self.rom = Settings(motor_id=motor_id, can_id_filter=can_id_filter)
         self.ram = self.rom.copy()
         self.errors = ErrorLatch()
         self.unresponsive = False
-        self.counters: Counter[str] = Counter()
+        self._counters: Counter[str] = Counter()
         self.control: Control = Off()
         self.run_mode = RUN_MODE_POWER_UP
         self.brake_released = False
@@ -332,6 +336,14 @@ class MyActuatorMotor:
         times += [stream.next_s for stream in self.streams.values()]
         found = [t for t in times if t is not None]
         return min(found) if found else None
+
+    def listen_ids(self) -> frozenset[int]:
+        """0x140+ID, 0x400+ID, 0x280 and 0x300 (filtered or not, it counts them): any other
+        identifier is ``ignored_id`` (``ignored_kind`` if extended or FD) whatever it carries."""
+        return _listen_ids(self.motor_id)
+
+    def _overhear(self, now_s: float) -> None:
+        self.advance(now_s)
 
     # ---- shared with the RS485 front ----
 
@@ -493,12 +505,14 @@ class MyActuatorMotor:
 
     def _trip(self) -> None:
         # §4.33: "cut off the output [and] brake lock".
+        self._changed()
         self.comm_tripped = True
         self.counters["comm_timeouts"] += 1
         self.brake_released = False
         self._set_control(Off(), self.run_mode)
 
     def _update_reports(self, now_s: float) -> None:
+        self._changed()  # the report deadline, and after a restart the identifiers
         if not (self.errors.flags and self.ram.error_reporting):
             self._next_report_s = None
         elif self._next_report_s is None:
@@ -743,6 +757,11 @@ class MyActuatorMotor:
         state = "on" if self.enabled else "off"
         errors = self.errors.flags
         return f"MyActuatorMotor(id={self.motor_id}, {self.revision.name}, {state}, errors={errors!r})"
+
+
+@functools.cache
+def _listen_ids(motor_id: int) -> frozenset[int]:
+    return frozenset((request_id(motor_id), motion_request_id(motor_id), BROADCAST_ID, ID_SETTING_ID))
 
 
 # 0x20 indexes that act at once: the Settings attribute and how the 32-bit value is read.
