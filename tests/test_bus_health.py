@@ -8,8 +8,9 @@ from typing import Any
 import pytest
 
 from servobus.bus import Bus, MotorStatus
-from servobus.errors import MotorTimeout
+from servobus.errors import MotorFault, MotorTimeout
 from servobus.metrics import LatencyWindow
+from servobus.protocols import lk
 from servobus.protocols import myactuator as ma
 from servobus.sim.devices.lk import LkMotor
 from servobus.sim.devices.myactuator import MyActuatorMotor
@@ -180,3 +181,34 @@ def test_while_a_motor_streams_a_write_is_sent_without_awaiting_the_reply_it_wil
     written, read, took, timeouts = run(scenario)
     assert written is None and isinstance(read, ma.StatusReply) and read.speed_dps == pytest.approx(45, abs=1)
     assert took < 0.001 and timeouts == 0
+
+
+def test_a_reported_fault_is_kept_as_a_motor_fault_with_its_flags_until_a_report_without_it() -> None:
+    device = MyActuatorMotor(1)
+    lk_device = LkMotor(2)
+
+    async def scenario() -> list[Any]:
+        async with Bus(SimTransport(devices=[device, lk_device]), safe=None) as bus:
+            motor, lk_motor = bus.motor("myactuator", 1), bus.motor("lk", 2)
+            seen: list[Any] = [motor.fault]
+            await motor.read_status1()
+            seen.append(motor.fault)
+            device.inject_error(ma.ErrorFlags.OVER_VOLTAGE, asyncio.get_running_loop().time())
+            await motor.read_status2()  # a reply without flags says nothing about them
+            seen.append(motor.fault)
+            await motor.read_status1()
+            seen.append(motor.fault)
+            device.clear_error(ma.ErrorFlags.OVER_VOLTAGE, asyncio.get_running_loop().time())
+            await motor.read_status1()
+            seen.append(motor.fault)
+            lk_device.inject_error(lk.ErrorState.MOTOR_OVER_TEMPERATURE, asyncio.get_running_loop().time())
+            await lk_motor.read_status1()
+            seen.append(lk_motor.fault)
+            return seen
+
+    seen = run(scenario)
+    assert seen[:3] == [None, None, None] and seen[4] is None
+    fault = seen[3]
+    assert isinstance(fault, MotorFault) and fault.flags == ma.ErrorFlags.OVER_VOLTAGE and fault.motor_id == 1
+    assert "OVER_VOLTAGE" in str(fault) and "myactuator 1" in str(fault)
+    assert isinstance(seen[5], MotorFault) and seen[5].flags == lk.ErrorState.MOTOR_OVER_TEMPERATURE

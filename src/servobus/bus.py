@@ -35,7 +35,7 @@ from typing import Any, Protocol, Self
 
 import anyio
 
-from servobus.errors import MotorTimeout, TransportError
+from servobus.errors import MotorFault, MotorTimeout, TransportError
 from servobus.frame import Frame
 from servobus.metrics import Metrics
 from servobus.protocols import BoundCodec, get_family
@@ -169,6 +169,8 @@ class Motor:
         codec: the bound codec (family, id, revision, link).
         state: the latest reply, stream frame or error report received from this motor (None yet).
         last_seen: when it was received (the loop's clock; None yet).
+        fault: the error flags the motor last reported (a :class:`~servobus.errors.MotorFault`, to
+            read or raise), or None when its last report of them had none (or none came yet).
         online: the host-side watchdog's verdict: True once it answered, False after
             ``offline_after_misses`` missed replies in a row or ``offline_after_s`` of silence, None
             before either happened. A motor that answers again is online again.
@@ -180,6 +182,7 @@ class Motor:
         self.state: Reply | None = None
         self.last_seen: float | None = None
         self.online: bool | None = None
+        self.fault: MotorFault | None = None
         self._misses = 0
         self._commands = _command_classes(codec.family)
         self._watchers: list[MotorFrames] = []
@@ -565,6 +568,8 @@ class Bus:
                 motor._misses = 0
                 if motor.online is not True:
                     self._set_status(motor, True, now, "answered")
+                if got.reply.FAULTS is not None:
+                    self._note_faults(motor, getattr(got.reply, got.reply.FAULTS))
                 for watcher in motor._watchers:
                     watcher._push(got.traffic, got.reply)
                 for callback in self._subscribers:
@@ -625,6 +630,13 @@ class Bus:
             self._missed(request, now)
             self._settle(request, None)
         self._pump()
+
+    def _note_faults(self, motor: Motor, flags: Any) -> None:
+        if not flags:
+            motor.fault = None
+        elif motor.fault is None or motor.fault.flags != flags:
+            motor.fault = MotorFault(f"{motor!r} reports {flags!r}", flags=flags, motor_id=motor.motor_id)
+            logger.warning("%s: %s", self.name, motor.fault)
 
     # ---- the host-side watchdog ----
 

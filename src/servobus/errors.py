@@ -13,6 +13,8 @@ the field, the value and the limit, before any frame is built.
 
 from __future__ import annotations
 
+import enum
+
 __all__ = ["MotorFault", "MotorTimeout", "ProtocolError", "ServobusError", "TransportError"]
 
 
@@ -69,7 +71,17 @@ class MotorTimeout(ServobusError, TimeoutError):
 
 
 class MotorFault(ServobusError):
-    """A motor reported error flags."""
+    """A motor reported error flags.
+
+    Attributes:
+        flags: the decoded flags (the family's flag enum; unknown bits kept).
+        motor_id: the motor that reported them.
+    """
+
+    def __init__(self, message: str, *, flags: enum.Flag, motor_id: int) -> None:
+        super().__init__(message)
+        self.flags = flags
+        self.motor_id = motor_id
 
 
 class TransportError(ServobusError):

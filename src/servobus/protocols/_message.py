@@ -45,9 +45,14 @@ class Command(Message):
 
 
 class Reply(Message):
-    """A motor -> host message."""
+    """A motor -> host message.
+
+    ``FAULTS`` names the field that holds the motor's error flags in replies that carry them (the Bus
+    keeps ``motor.fault`` from it); None in every other reply.
+    """
 
     __slots__ = ()
+    FAULTS: ClassVar[str | None] = None
 
 
 def require_length(data: bytes, length: int, *, what: str, command: int | None = None) -> None:

@@ -161,6 +161,7 @@ class Status1Reply(LkReply):
     """
 
     REVISIONS = V2_36_ONLY
+    FAULTS: ClassVar[str | None] = "error_state"
     command: int
     temperature_c: int
     voltage_v: float
@@ -215,6 +216,7 @@ class Status1ReplyV235(LkReply):
     """
 
     REVISIONS = V2_35_ONLY
+    FAULTS: ClassVar[str | None] = "error_state"
     command: int
     temperature_c: int
     voltage_v: float

@@ -388,6 +388,7 @@ class Status1Reply(MyActuatorReply):
 
     CODE: ClassVar[int] = 0x9A
     TITLE: ClassVar[str] = "read status 1 and error flags"
+    FAULTS: ClassVar[str | None] = "errors"
     FIELDS = (
         (1, _TEMPERATURE),
         (2, IntField("mos_temperature_c", 1)),  # uint8 as printed (§4.14)
