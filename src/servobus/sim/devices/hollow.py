@@ -229,29 +229,29 @@ class HollowMotor(ListeningDevice):
             One reply on the host id, or nothing (not ours, not decodable, or unresponsive).
         """
         self.plant.advance(now_s)
-        self.counters["received"] += 1
+        self._counters["received"] += 1
         if frame.arbitration_id != self.motor_id:
-            self.counters["ignored_id"] += 1
+            self._counters["ignored_id"] += 1
             return []
         if not self._right_kind(frame):
-            self.counters["ignored_kind"] += 1
+            self._counters["ignored_kind"] += 1
             return []
         try:
             command = decode_request_frame(frame, model=self.model, can_mode=self.can_mode)
         except ProtocolError:
-            self.counters["undecodable"] += 1
+            self._counters["undecodable"] += 1
             return []
         if isinstance(command, CanModeSwitch) and self.fd_enabled:
             # §5: normal/extended are classic-CAN modes; a CAN FD motor has nothing to switch.
-            self.counters["ignored_kind"] += 1
+            self._counters["ignored_kind"] += 1
             return []
-        self.counters["accepted"] += 1
+        self._counters["accepted"] += 1
         self._apply(command)
         self.plant.set_control(self._control())
         if self.unresponsive:
-            self.counters["unanswered"] += 1
+            self._counters["unanswered"] += 1
             return []
-        self.counters["replied"] += 1
+        self._counters["replied"] += 1
         return [Emission(now_s + self._turnaround(), reply_frame(self.host_id, self.status_reply()))]
 
     def poll(self, now_s: float) -> list[Emission]:
@@ -279,7 +279,7 @@ class HollowMotor(ListeningDevice):
         the transceiver and still goes out.
         """
         self.plant.advance(now_s)
-        self.counters["reboots"] += 1
+        self._counters["reboots"] += 1
         self._power_up()
 
     def _power_up(self) -> None:
@@ -394,12 +394,12 @@ class HollowMotor(ListeningDevice):
                 kd=held.kd if held else 0,
             )
         elif self.setpoint is None:
-            self.counters["start_without_setpoint"] += 1
+            self._counters["start_without_setpoint"] += 1
 
     def _set_zero(self) -> None:
         # §4.1 / A33: only while not enabled; not persisted. The multi-turn count is cleared with it.
         if self.enabled:
-            self.counters["zero_refused"] += 1
+            self._counters["zero_refused"] += 1
             return
         self.zero_offset_deg = self.plant.position_deg
 

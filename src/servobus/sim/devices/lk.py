@@ -206,25 +206,25 @@ class LkMotor(ListeningDevice):
             calibration), or nothing (ignored, or :attr:`unresponsive`).
         """
         self.plant.advance(now_s)
-        self.counters["received"] += 1
+        self._counters["received"] += 1
         reason = self._ignore_reason(frame, now_s)
         if reason is not None:
-            self.counters[reason] += 1
+            self._counters[reason] += 1
             return []
         try:
             command = decode_request(frame.arbitration_id, frame.data, model=self.model)
         except ProtocolError:
             reply = self._undecodable(frame)
         else:
-            self.counters["accepted"] += 1
+            self._counters["accepted"] += 1
             reply = self._handle(command, now_s)
         self.plant.set_control(self._control(now_s))
         if reply is None:
             return []
         if self.unresponsive:
-            self.counters["unanswered"] += 1
+            self._counters["unanswered"] += 1
             return []
-        self.counters["replied"] += 1
+        self._counters["replied"] += 1
         delay = self.calibration_s if isinstance(reply, lk.CalibrationReply) else self.turnaround_s
         return [Emission(now_s + delay, reply_frame(reply, motor_id=self.motor_id, model=self.model))]
 
@@ -251,7 +251,7 @@ class LkMotor(ListeningDevice):
         latch again at power-up. A reply already handed to the bus still goes out.
         """
         self.plant.advance(now_s)
-        self.counters["reboots"] += 1
+        self._counters["reboots"] += 1
         self._power_up()
 
     def inject_error(
@@ -365,16 +365,16 @@ class LkMotor(ListeningDevice):
         code = data[0] if data and frame.arbitration_id != MULTI_MOTOR_ID else None
         ours = REQUESTS[self.revision]
         if code is not None and code not in ours and any(code in REQUESTS[r] for r in Revision):
-            self.counters["other_revision"] += 1
+            self._counters["other_revision"] += 1
             return None
         if code is not None and code in ours and len(data) == 8:
             # 0xA1 is "only implemented on MF, MH, MG" ([001] §10; the codec has no iq for MS on
             # either revision). The motor still answers (one reply per request, spec §1.1), idle.
             allowed = ours[code].MOTOR_TYPES.get(self.revision)
             if allowed is not None and self.model.motor_type not in allowed:
-                self.counters["not_implemented"] += 1
+                self._counters["not_implemented"] += 1
                 return self._status2(code)
-        self.counters["undecodable"] += 1
+        self._counters["undecodable"] += 1
         return None
 
     # ---- commands ----
@@ -443,13 +443,13 @@ class LkMotor(ListeningDevice):
         try:
             check_available(command, model=self.model)
         except ValueError:
-            self.counters["not_implemented"] += 1  # [001] 0xA0 on MF/MH/MG: "invalid"
+            self._counters["not_implemented"] += 1  # [001] 0xA0 on MF/MH/MG: "invalid"
             return
         if self._latched:
-            self.counters["not_executed_fault"] += 1
+            self._counters["not_executed_fault"] += 1
             return
         if self.revision is Revision.V2_36 and self.state is RunState.OFF:
-            self.counters["not_executed_off"] += 1  # [001] §5: replies, "will not perform the action"
+            self._counters["not_executed_off"] += 1  # [001] §5: replies, "will not perform the action"
             return
         self.state, self.held = RunState.ON, control
 
@@ -497,6 +497,6 @@ class LkMotor(ListeningDevice):
         if reply is None:  # pragma: no cover - every request class has a handler
             raise AssertionError(f"no handler for {type(command).__name__}")
         if isinstance(reply, lk.ParamWriteReply) and not reply.ok:
-            self.counters["refused"] += 1
+            self._counters["refused"] += 1
         self._apply_acceleration()  # 0xC1, 0x42/0x44 (V2.35) and 0x34 may change it
         return reply

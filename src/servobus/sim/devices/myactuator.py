@@ -112,7 +112,7 @@ from servobus.sim.devices.myactuator_state import (
     single_turn_encoder_reply,
     single_turn_reply,
     single_turn_status_reply,
-    status1_reply,
+    status1,
     status3_reply,
     status_reply,
 )
@@ -299,14 +299,12 @@ class MyActuatorMotor(ListeningDevice):
             manual, streaming, or unresponsive).
         """
         self.advance(now_s)
-        self.counters["received"] += 1
+        self._counters["received"] += 1
         kind = self._route(frame)
         if kind is None:
             return []
         try:
-            command = ma.decode_request(
-                frame.arbitration_id, frame.data, revision=self.revision, motion_scales=self.motion_scales
-            )
+            command = _decode(frame.arbitration_id, frame.data, self.revision, self.motion_scales)
         except ProtocolError:
             self.count_refused_bytes(frame.data, can_id=frame.arbitration_id)
             return []
@@ -320,7 +318,7 @@ class MyActuatorMotor(ListeningDevice):
             can_id = ID_SETTING_ID  # the 0x79 examples print the reply on 0x300 (§4.38)
         else:
             can_id = reply_id(motor_id)
-        return [Emission(now_s + self.turnaround_s, Frame(arbitration_id=can_id, data=reply.encode()))]
+        return [Emission(now_s + self.turnaround_s, Frame(arbitration_id=can_id, data=_encode(reply)))]
 
     def poll(self, now_s: float) -> list[Emission]:
         """Spontaneous frames due by ``now_s``: 0xB6 streams and 0x9A error reports (0x240+ID); also
@@ -349,11 +347,13 @@ class MyActuatorMotor(ListeningDevice):
 
     def advance(self, now_s: float) -> None:
         """Bring the plant (and a due 0xB3 trip, at its exact time) up to ``now_s``."""
+        self.settle()
+        plant = self._plant
         deadline = self.protection_deadline_s()
         if deadline is not None and deadline <= now_s:
-            self.plant.advance(deadline)
+            plant.advance(deadline)
             self._trip()
-        self.plant.advance(now_s)
+        plant.advance(now_s)
 
     def protection_deadline_s(self) -> float | None:
         """When the 0xB3 protection trips if no frame for this motor arrives first (None: off)."""
@@ -367,35 +367,35 @@ class MyActuatorMotor(ListeningDevice):
         out: list[tuple[float, Reply]] = []
         for command, stream in self.streams.items():
             if stream.next_s <= now_s:
-                self.counters["stream_skipped"] += stream.advance_past(now_s)
-                self.counters["stream_frames"] += 1
+                self._counters["stream_skipped"] += stream.advance_past(now_s)
+                self._counters["stream_frames"] += 1
                 reply = self._execute(_STREAMED[command](), now_s, rs485=False)
                 assert reply is not None
                 out.append((now_s, reply))
         if self._next_report_s is not None and self._next_report_s <= now_s:
             periods = math.floor((now_s - self._next_report_s) / ERROR_REPORT_PERIOD_S + 1e-9) + 1
             self._next_report_s += periods * ERROR_REPORT_PERIOD_S
-            self.counters["error_reports"] += 1
+            self._counters["error_reports"] += 1
             out.append((now_s, self._status1()))
         if out and self.unresponsive:
-            self.counters["unanswered"] += len(out)
+            self._counters["unanswered"] += len(out)
             return []
         return out
 
     def handle(self, command: Command, now_s: float, *, rs485: bool = False) -> Reply | None:
         """Act on a decoded request addressed to this motor; return the reply to send, if any."""
-        self.counters["accepted"] += 1
+        self._counters["accepted"] += 1
         self._heard(now_s)
         reply = self._execute(command, now_s, rs485=rs485)
         if reply is None:
             return None
         if self.unresponsive:
-            self.counters["unanswered"] += 1
+            self._counters["unanswered"] += 1
             return None
         if self.streams:
-            self.counters["silenced_by_active_reply"] += 1
+            self._counters["silenced_by_active_reply"] += 1
             return None
-        self.counters["replied"] += 1
+        self._counters["replied"] += 1
         return reply
 
     def count_refused_bytes(self, data: bytes, *, can_id: int | None = None, rs485: bool = False) -> None:
@@ -408,9 +408,9 @@ class MyActuatorMotor(ListeningDevice):
                 assert can_id is not None
                 ma.decode_request(can_id, data, revision=other)
         except ProtocolError:
-            self.counters["undecodable"] += 1
+            self._counters["undecodable"] += 1
         else:
-            self.counters["other_revision"] += 1
+            self._counters["other_revision"] += 1
 
     # ---- faults and power ----
 
@@ -418,7 +418,7 @@ class MyActuatorMotor(ListeningDevice):
         """A fault condition starts at ``now_s``: its 0x9A flags set and the output is cut (§7)."""
         self.advance(now_s)
         self.errors.start(ErrorFlags(flags))
-        self.counters["errors_injected"] += 1
+        self._counters["errors_injected"] += 1
         self._set_control(Off(), self.run_mode)
         self._update_reports(now_s)
 
@@ -434,7 +434,7 @@ class MyActuatorMotor(ListeningDevice):
         """A power cycle at ``now_s``: RAM is loaded from ROM, streams stop, the output is off and the
         brake locked (§4.30), the run time restarts. Physical shaft angle and speed are kept."""
         self.advance(now_s)
-        self.counters["reboots"] += 1
+        self._counters["reboots"] += 1
         self._power_up(now_s)
 
     # ---- what the motor reports ----
@@ -483,7 +483,7 @@ class MyActuatorMotor(ListeningDevice):
 
     def _route(self, frame: Frame) -> IdKind | None:
         if frame.is_extended_id or frame.is_fd:
-            self.counters["ignored_kind"] += 1
+            self._counters["ignored_kind"] += 1
             return None
         found = classify_id(frame.arbitration_id)
         kind, motor_id = found if found else (None, None)
@@ -491,23 +491,23 @@ class MyActuatorMotor(ListeningDevice):
             return kind
         if kind in (IdKind.BROADCAST, IdKind.ID_SETTING):
             if self.ram.can_id_filter:  # §1.1: with the filter on, 0x280 (and 0x300) are not received
-                self.counters["filtered"] += 1
+                self._counters["filtered"] += 1
                 return None
             return kind
-        self.counters["ignored_id"] += 1
+        self._counters["ignored_id"] += 1
         return None
 
     def _heard(self, now_s: float) -> None:
         self._last_heard_s = now_s
         if self.comm_tripped:
             self.comm_tripped = False
-            self.counters["comm_restored"] += 1
+            self._counters["comm_restored"] += 1
 
     def _trip(self) -> None:
         # §4.33: "cut off the output [and] brake lock".
         self._changed()
         self.comm_tripped = True
-        self.counters["comm_timeouts"] += 1
+        self._counters["comm_timeouts"] += 1
         self.brake_released = False
         self._set_control(Off(), self.run_mode)
 
@@ -536,7 +536,7 @@ class MyActuatorMotor(ListeningDevice):
     def _rom_ok(self) -> bool:
         # [000]: "the parameters can only be saved to ROM successfully when the motor is disabled".
         if self.revision is Revision.V4_4 and self.enabled:
-            self.counters["rom_write_refused"] += 1
+            self._counters["rom_write_refused"] += 1
             return False
         return True
 
@@ -550,7 +550,10 @@ class MyActuatorMotor(ListeningDevice):
         return self.encoder.output_deg_for(angle_deg)
 
     def _status1(self) -> Reply:
-        return status1_reply(self.readings(), brake_released=self.brake_released, errors=self.errors.flags)
+        plant = self.plant
+        return status1(
+            plant.temperature_c, plant.voltage_v, brake_released=self.brake_released, errors=self.errors.flags
+        )
 
     def _model_replies(self) -> list[Reply]:
         if self.revision is Revision.V4_3:
@@ -569,7 +572,7 @@ class MyActuatorMotor(ListeningDevice):
 
     def _control_command(self, command: Command) -> Reply:
         if self.errors.flags:
-            self.counters["refused_fault"] += 1
+            self._counters["refused_fault"] += 1
         else:
             self._run(command)
         readings = self.readings()
@@ -586,7 +589,7 @@ class MyActuatorMotor(ListeningDevice):
         if isinstance(command, ma.TorqueControl):
             # §4.19: 0xA1 cannot release the brake; a locked brake keeps the shaft held.
             if self.has_brake and not self.brake_released:
-                self.counters["brake_locked"] += 1
+                self._counters["brake_locked"] += 1
             self._set_control(CurrentControl(current_a=command.current_a), ma.RunMode.CURRENT_LOOP)
             return
         self.brake_released = True
@@ -711,7 +714,7 @@ class MyActuatorMotor(ListeningDevice):
                 rom.baud_index = command.baud_index
             return None
         elif isinstance(command, ma.SystemReset):
-            self.counters["resets"] += 1
+            self._counters["resets"] += 1
             self._power_up(now_s)  # §4.28: no reply, the program restarts
             return None
         elif isinstance(command, ma.ActiveReply):
@@ -762,6 +765,39 @@ class MyActuatorMotor(ListeningDevice):
 @functools.cache
 def _listen_ids(motor_id: int) -> frozenset[int]:
     return frozenset((request_id(motor_id), motion_request_id(motor_id), BROADCAST_ID, ID_SETTING_ID))
+
+
+# A motor decodes the same few requests and encodes the same few replies over and over: both are pure
+# (frozen messages in, frozen messages or bytes out), so they are looked up once per distinct value.
+_CACHE_SIZE = 4096
+
+
+@functools.lru_cache(maxsize=_CACHE_SIZE)
+def _decode(can_id: int, data: bytes, revision: Revision, scales: ma.MotionScales) -> Command:
+    return ma.decode_request(can_id, data, revision=revision, motion_scales=scales)
+
+
+@functools.lru_cache(maxsize=_CACHE_SIZE)
+def _encode_cached(reply: Reply) -> bytes:
+    return reply.encode()
+
+
+# Replies whose fields are all integers or scaled to integers: equal replies encode to equal bytes
+# (a float32 field would tell 0.0 from -0.0, which compare equal).
+_ENCODE_CACHED = frozenset(
+    (
+        ma.Status1Reply,
+        ma.StatusReply,
+        ma.Status3Reply,
+        ma.SingleTurnStatusReply,
+        ma.MultiTurnAngleReply,
+        ma.EncoderPositionReply,
+    )
+)
+
+
+def _encode(reply: Reply) -> bytes:
+    return _encode_cached(reply) if type(reply) in _ENCODE_CACHED else reply.encode()
 
 
 # 0x20 indexes that act at once: the Settings attribute and how the 32-bit value is read.

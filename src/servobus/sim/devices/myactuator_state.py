@@ -17,6 +17,7 @@ Values the manuals do not state are marked [I] (inference) with the reason.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, replace
 
@@ -58,6 +59,7 @@ __all__ = [
     "single_turn_encoder_reply",
     "single_turn_reply",
     "single_turn_status_reply",
+    "status1",
     "status1_reply",
     "status3_reply",
     "status_reply",
@@ -252,12 +254,25 @@ def _int(value: float, limits: tuple[int, int]) -> int:
 
 def status_reply(code: StatusCommand, r: Readings) -> StatusReply:
     """R2 (§3.1). The int16 degree field saturates at ±32767° (wrap or saturate is unstated, §9 item 28)."""
+    current = _clamp(round(r.current_a, 2), -327.68, 327.67)
+    return _status_reply(
+        code,
+        _int(r.temperature_c, _INT8),
+        current,
+        math.copysign(1.0, current),  # 0.0 and -0.0 are equal keys, not equal values
+        _int(r.speed_dps, _INT16),
+        _int(r.angle_deg, _INT16),
+    )
+
+
+# Replies are frozen and their fields are the rounded values above, so motors polled again and again
+# share one reply per distinct content instead of building (and validating) a new one each time.
+@functools.lru_cache(maxsize=4096)
+def _status_reply(
+    code: StatusCommand, temperature: int, current: float, _sign: float, speed: int, angle: int
+) -> StatusReply:
     return StatusReply(
-        command=code,
-        temperature_c=_int(r.temperature_c, _INT8),
-        current_a=_clamp(round(r.current_a, 2), -327.68, 327.67),
-        speed_dps=_int(r.speed_dps, _INT16),
-        angle_deg=_int(r.angle_deg, _INT16),
+        command=code, temperature_c=temperature, current_a=current, speed_dps=speed, angle_deg=angle
     )
 
 
@@ -274,12 +289,31 @@ def single_turn_status_reply(r: Readings) -> SingleTurnStatusReply:
 def status1_reply(r: Readings, *, brake_released: bool, errors: ErrorFlags) -> Status1Reply:
     """0x9A (§4.14). [I] The MOS temperature is reported as the winding's: the plant has one thermal
     mass (clamped to its uint8 field, 0..255 °C)."""
-    temperature = _int(r.temperature_c, _INT8)
+    return status1(r.temperature_c, r.voltage_v, brake_released=brake_released, errors=errors)
+
+
+def status1(
+    temperature_c: float, voltage_v: float, *, brake_released: bool, errors: ErrorFlags
+) -> Status1Reply:
+    """:func:`status1_reply` from the only two readings it carries."""
+    return _status1(
+        _int(temperature_c, _INT8),
+        _int(temperature_c, _UINT8),
+        brake_released,
+        _clamp(round(voltage_v, 1), 0.0, 6553.5),
+        errors,
+    )
+
+
+@functools.lru_cache(maxsize=1024)
+def _status1(
+    temperature: int, mos: int, brake_released: bool, voltage: float, errors: ErrorFlags
+) -> Status1Reply:
     return Status1Reply(
         temperature_c=temperature,
-        mos_temperature_c=_int(r.temperature_c, _UINT8),
+        mos_temperature_c=mos,
         brake_released=brake_released,
-        voltage_v=_clamp(round(r.voltage_v, 1), 0.0, 6553.5),
+        voltage_v=voltage,
         errors=errors,
     )
 
