@@ -182,6 +182,18 @@ class CanBusModel:
         queue = self._queues.get(source)
         return len(queue) if queue else 0
 
+    def head(self, source: Hashable) -> tuple[float, float] | None:
+        """(joined_s, ready_s) of the frame node ``source`` sends next, or None if it has none queued."""
+        queue = self._queues.get(source)
+        return (queue[0][0], queue[0][2]) if queue else None
+
+    def completing(self) -> Hashable | None:
+        """The node whose frame completes next (on the wire, or tentatively next), or None if idle."""
+        if self._in_flight is not None:
+            return self._in_flight.source
+        chosen = self._arbitrate()
+        return None if chosen is None else chosen[0]
+
     def next_event_s(self) -> float | None:
         """When the next transmission will complete, as far as the bus knows now (None: idle).
 

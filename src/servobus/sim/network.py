@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
+import math
 from collections.abc import Iterable
 from typing import cast
 
@@ -166,6 +167,34 @@ class SimCanNetwork:
         if len(self._log.ends) >= LOG_LIMIT:
             self._drop_log()
         return received
+
+    def run_ahead(self, host_time_s: float) -> None:
+        """Run on, past ``host_time_s``, over what the host can neither see nor change.
+
+        The host (whose clock reads ``host_time_s``) only sees frames the devices send, and only
+        changes the bus by queueing frames. While the host still has a frame queued from before
+        ``host_time_s``, anything it queues from then on waits behind that one, so it cannot change
+        who wins the wire until that frame has started, nor what the devices receive before then.
+        This runs the network over those events (the host's frames ending, devices answering,
+        device deadlines) and stops before the next frame the host would receive. The network's
+        clock may then be ahead of the host's: frames the host sends meanwhile are queued at the
+        network's time, which changes nothing, as they wait behind the queued one anyway.
+
+        Nothing is run with faults towards the devices (their delays reorder the host's frames) or
+        on a zero-latency bus (a device frame could end at the same instant a host frame does).
+        """
+        bus = self.bus
+        if self.to_devices is not None or not math.isfinite(bus.bitrate):
+            return
+        while (head := bus.head(HOST)) is not None and head[0] <= host_time_s:
+            t = self.next_event_s()
+            if t is None or (self._host_pending and self._host_pending[0][0] <= t):
+                return
+            end = bus.next_event_s()
+            if end is not None and end <= t and bus.completing() != HOST:
+                return  # the next frame to end is one the host receives
+            received = self.advance(t)
+            assert not received, "run_ahead() went past a frame the host receives"
 
     def run_until_idle(self, limit_s: float = 1.0) -> list[tuple[float, Frame]]:
         """Advance until nothing is pending or ``limit_s`` of virtual time has passed."""

@@ -224,4 +224,6 @@ class SimTransport(Transport[Frame, Frame]):
             stats.bytes_in += sum(len(frame.data) for frame in frames)
             self._deliver(frames)  # a consumer may send (and arm) from here
         if generation == self._generation:
+            # Events the host can neither see nor change need no timer of their own.
+            network.run_ahead(until)
             self._rearm(generation)
