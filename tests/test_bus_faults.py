@@ -12,14 +12,14 @@ token of the reflector's own, unique per frame, in the angle. A reply that reach
 request therefore shows a token that is not its request's.
 
 Checked for every request, always: it resolved with its own reply or with MotorTimeout, and timed
-out only when its reply was dropped, corrupted or delayed; the one exception allowed is the known
-defect (STALE_REPLY_BUG: a late reply resolving the next request with the same key), recognised
-narrowly and counted; it resolved within its timeout plus one frame time of leaving (virtual
+out only when its reply was dropped, corrupted or delayed (a late reply never answers the next
+request with its key: the Bus is told how late a reply can be, ``late_hold_s``); it resolved
+within its timeout plus one frame time of leaving (virtual
 clock); its caller (``cycle`` or ``request``) got its future's result; nothing is left pending; and
 the Bus's counters add up (replies + timeouts = requests, corrupt frames counted malformed or
 foreign and never delivered, every other frame a reply, late or duplicate). Then the done-when
-exactly (no stale reply, timeouts = lost replies): while the defect shows, the run ends there as an
-xfail that names it; the strict xfail tests at the end reproduce each defect alone.
+exactly (no stale reply, timeouts = lost replies); the tests at the end pin the two Bus bugs this
+run found (a late reply answering the next request; a reply beating its send report).
 """
 
 from __future__ import annotations
@@ -53,18 +53,9 @@ MAX_TIMEOUT_S = 0.02  # the longest timeout a request here gets
 TIMEOUTS = (0.005, 0.01, 0.02)
 READ_TIMEOUTS = (None, *TIMEOUTS)  # None: the codec's default, 20 ms for a read (a ROM write's is 0.5 s)
 LOST = frozenset({"drop", "corrupt", "delay"})  # faults after which the request must time out
-EARLY_REPLY_BUG = (
-    "Bus bug (scheduler.Scheduler._ours matches only SENT requests): a reply that arrives before the "
-    "transport's send report of its request is counted unsolicited and the request times out. "
-    "CanTransport reports sends from its writer thread (call_soon_threadsafe after bus.send, per "
-    "batch) while its reader thread delivers replies, so over python-can's slcan on a pty a reply "
-    "can win, even one request at a time under load (tests/test_bus_pty.py)"
-)
-STALE_REPLY_BUG = (
-    "Bus bug (scheduler.Scheduler._ours): a reply that comes after its request timed out resolves the "
-    "next request with the same key, if that request left at least min_reply_s before it came; the "
-    "late entry the timeout left for the key is only consulted for frames nobody waits for"
-)
+# A delayed reply comes at most MAX_TIMEOUT_S + 15 ms after its request left (FaultPlan): the Bus holds
+# a timed-out key that long, so no late reply can answer the next request with its key.
+LATE_HOLD_S = MAX_TIMEOUT_S + 0.015
 
 
 @dataclass(frozen=True, slots=True)
@@ -361,7 +352,7 @@ async def _scenario(n_requests: int, seed: int) -> tuple[Bus, FaultyReflector, C
     rng = random.Random(seed)
     link = FaultyReflector(FaultPlan(), seed=seed + 1)
     tokens = [0]
-    async with Bus(link, safe=None) as bus:
+    async with Bus(link, safe=None, late_hold_s=LATE_HOLD_S) as bus:
         checker = Checker(bus, link)
         motors = [bus.motor("myactuator", m) for m in MOTORS]
 
@@ -434,8 +425,7 @@ def _check(n_requests: int, seed: int) -> None:
     duplicate (which of the two is the scheduler's guess: a duplicate that comes while an older
     timeout of its key is still in the late window is counted late)."""
     stats, faults, checker, _ = _run(n_requests, seed)
-    if checker.stale:  # the known defect; the strict test below fails until it is fixed
-        pytest.xfail(f"{len(checker.stale)} stale replies ({checker.stale[0]}): {STALE_REPLY_BUG}")
+    assert not checker.stale
     assert stats["timeouts"] == faults["drop"] + faults["corrupt"] + faults["delay"]
     assert stats["late"] + stats["duplicate"] == faults["delay"] + faults["duplicate"]
     assert stats["unsolicited"] == 0
@@ -450,10 +440,9 @@ def test_seeded_faults_through_the_bus_100k_requests() -> None:
     _check(100_000, seed=13)
 
 
-# ---- the defects, alone ----
+# ---- the two defects this run found, alone (fixed in the scheduler) ----
 
 
-@pytest.mark.xfail(strict=True, reason=STALE_REPLY_BUG)
 def test_a_slow_motors_late_reply_never_answers_the_next_request() -> None:
     """A motor that answers every read 5.5 ms after it left, asked with a 5 ms timeout, one read
     after the other: each read must time out and each reply be counted late."""
@@ -478,7 +467,6 @@ def test_a_slow_motors_late_reply_never_answers_the_next_request() -> None:
     assert stats.get("late") == 5
 
 
-@pytest.mark.xfail(strict=True, reason=EARLY_REPLY_BUG)
 def test_a_reply_that_comes_before_the_send_report_answers_its_request() -> None:
     link = FaultyReflector(
         FaultPlan(drop=0, duplicate=0, corrupt=0, delay=0), seed=0, report_after_reply=True

@@ -212,11 +212,6 @@ async def test_an_exception_over_native_slcan_stops_every_commanded_motor() -> N
     assert bench.myactuator[2].control == Off() and bench.lk[10].state is RunState.ON
 
 
-@pytest.mark.xfail(
-    strict=False,  # a race: it shows only now and then, under load
-    reason="a reply that comes before python-can's writer thread reports its send is lost: the Bus bug "
-    "of test_bus_faults.py::test_a_reply_that_comes_before_the_send_report_answers_its_request",
-)
 @pytest.mark.asyncio
 async def test_requests_over_python_can_slcan_reach_every_family() -> None:
     bench = CanBench()

@@ -113,10 +113,57 @@ def test_a_cancelled_requests_reply_is_late_and_never_reaches_a_later_request() 
     new = scheduler.request(codec, ma.ReadStatus2())
     scheduler.submit(new)
     _send_all(scheduler, 0.002)
-    # The old request's reply, on the wire before the new request could have been answered:
+    assert new.state is S.QUEUED  # held: the old request's reply may still come
     assert scheduler.receive(_reply(1, t=0.0021), 0.0021).traffic is Traffic.LATE
+    _send_all(scheduler, 0.0022)  # it came: the key is free again
+    assert new.state is S.SENT
     scheduler.receive(_reply(1, t=0.0025), 0.0025)
     assert new.state is S.REPLIED and scheduler.pending == 0
+
+
+def test_after_a_timeout_the_key_is_held_for_the_late_reply_then_released_by_time() -> None:
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec], late_hold_s=0.05)
+    old = scheduler.request(codec, ma.ReadStatus2(), timeout_s=0.01)
+    scheduler.submit(old)
+    _send_all(scheduler, 0.0)
+    assert scheduler.expire(0.01) == [old]
+    new = scheduler.request(codec, ma.ReadStatus2())
+    other = scheduler.request(codec, ma.ReadStatus1())  # another key is not held
+    scheduler.submit(new)
+    scheduler.submit(other)
+    assert scheduler.next_to_send(0.02) == [other]
+    assert scheduler.next_deadline() == pytest.approx(0.06)
+    assert scheduler.next_to_send(0.0599) == [] and scheduler.next_to_send(0.0601) == [new]
+
+
+def test_a_reply_that_beats_its_send_report_answers_its_request() -> None:
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec], min_reply_s=0.0002)
+    request = scheduler.request(codec, ma.ReadStatus2())
+    scheduler.submit(request)
+    assert scheduler.next_to_send(0.0) == [request] and request.state is S.SENDING
+    assert scheduler.receive(_reply(1, t=0.0004), 0.0004).traffic is Traffic.EARLY
+    got = scheduler.sent(request, 0.0001)  # the report comes after: now the reply can be judged
+    assert got is not None and got.traffic is Traffic.REPLY and got.request is request
+    assert request.state is S.REPLIED and scheduler.pending == 0 and scheduler.counts["replies"] == 1
+
+
+def test_an_early_frame_too_soon_after_its_send_time_is_not_the_reply() -> None:
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec], min_reply_s=0.0002)
+    first = scheduler.request(codec, ma.ReadStatus2())
+    scheduler.submit(first)
+    _send_all(scheduler, 0.0)
+    scheduler.receive(_reply(1, t=0.0003), 0.0003)
+    second = scheduler.request(codec, ma.ReadStatus2())
+    scheduler.submit(second)
+    assert scheduler.next_to_send(0.0004) == [second]
+    # The first reply's duplicate, stamped before the second request could have been answered:
+    assert scheduler.receive(_reply(1, t=0.0005), 0.0005).traffic is Traffic.EARLY
+    got = scheduler.sent(second, 0.0004)
+    assert got is not None and got.traffic is Traffic.DUPLICATE and got.request is None
+    assert second.state is S.SENT
 
 
 def test_retry_safe_reads_go_again_and_writes_are_never_retried() -> None:

@@ -40,7 +40,7 @@ from servobus.frame import Frame
 from servobus.metrics import Metrics
 from servobus.protocols import BoundCodec, get_family
 from servobus.protocols._message import Command, Reply
-from servobus.scheduler import Request, RequestState, Scheduler, Traffic
+from servobus.scheduler import Received, Request, RequestState, Scheduler, Traffic
 from servobus.ticks import Tick, ticks
 from servobus.transports.events import StateChanged, TransportEvent, TransportState
 
@@ -281,6 +281,9 @@ class Bus:
         min_reply_s: the least time a reply can take after its request left (default: two of the
             shortest frames at the transport's bit rate, where it has one): a frame with the reply's
             key that arrives sooner is not taken for it.
+        late_hold_s: how late a reply may come after its request timed out (default: that request's
+            timeout); the next request with its key waits that long, or until the late reply came,
+            because no reply carries a sequence number. A reply later still could answer it.
         offline_after_misses: replies missed in a row after which a motor is marked offline.
         offline_after_s: silence after which a motor that answered before is marked offline (None:
             silence alone never does; set it when the motor streams or is polled steadily).
@@ -295,6 +298,7 @@ class Bus:
         max_in_flight: int = 64,
         name: str | None = None,
         min_reply_s: float | None = None,
+        late_hold_s: float | None = None,
         offline_after_misses: int = 3,
         offline_after_s: float | None = None,
     ) -> None:
@@ -320,6 +324,7 @@ class Bus:
             one_at_a_time=half_duplex,
             gap_s=float(getattr(transport, "gap_s", 0.0) or 0.0) if half_duplex else 0.0,
             min_reply_s=min_reply_s,
+            late_hold_s=late_hold_s,
         )
         self.motors: dict[tuple[str, int], Motor] = {}
         self._by_codec: dict[int, Motor] = {}
@@ -548,8 +553,11 @@ class Bus:
             self.scheduler.not_sent(request, reason, self._loop.time())
             self._settle(request, TransportError(f"{self.name}: {request.describe()} not sent ({reason})"))
         else:
-            self.scheduler.sent(request, sent_at if sent_at is not None else self._loop.time())
-            if request.state is RequestState.REPLIED:  # nothing to wait for
+            now = self._loop.time()
+            early = self.scheduler.sent(request, sent_at if sent_at is not None else now)
+            if early is not None and early.reply is not None:  # its reply came before this report
+                self._deliver(early, now)
+            if request.state is RequestState.REPLIED:  # nothing to wait for, or the early reply
                 self._settle(request, None)
         self._kick()
 
@@ -559,27 +567,32 @@ class Bus:
         receive = self.scheduler.receive
         for frame in frames:
             got = receive(frame, now)
-            if got.codec is None or got.reply is None:
-                continue
-            motor = self._by_codec.get(id(got.codec))
-            if motor is not None:
-                motor.state = got.reply
-                motor.last_seen = frame.timestamp or now
-                motor._misses = 0
-                if motor.online is not True:
-                    self._set_status(motor, True, now, "answered")
-                if got.reply.FAULTS is not None:
-                    self._note_faults(motor, getattr(got.reply, got.reply.FAULTS))
-                for watcher in motor._watchers:
-                    watcher._push(got.traffic, got.reply)
-                for callback in self._subscribers:
-                    try:
-                        callback(motor, got.traffic, got.reply)
-                    except Exception:  # a subscriber's bug must not stop the reader
-                        logger.exception("%s: subscriber %r failed", self.name, callback)
-            if got.request is not None:
-                self._settle(got.request, None)
+            if got.codec is not None and got.reply is not None:
+                self._deliver(got, now)
         self._pump()
+
+    def _deliver(self, got: Received, now: float) -> None:
+        """A decoded frame of one of our motors: its state, watchdog, watchers, and its request."""
+        motor = self._by_codec.get(id(got.codec))
+        reply = got.reply
+        assert reply is not None
+        if motor is not None:
+            motor.state = reply
+            motor.last_seen = got.frame.timestamp or now
+            motor._misses = 0
+            if motor.online is not True:
+                self._set_status(motor, True, now, "answered")
+            if reply.FAULTS is not None:
+                self._note_faults(motor, getattr(reply, reply.FAULTS))
+            for watcher in motor._watchers:
+                watcher._push(got.traffic, reply)
+            for callback in self._subscribers:
+                try:
+                    callback(motor, got.traffic, reply)
+                except Exception:  # a subscriber's bug must not stop the reader
+                    logger.exception("%s: subscriber %r failed", self.name, callback)
+        if got.request is not None:
+            self._settle(got.request, None)
 
     def _on_event(self, event: TransportEvent) -> None:
         if isinstance(event, StateChanged) and event.state is TransportState.LOST and self._loop is not None:

@@ -85,6 +85,7 @@ class Traffic(enum.Enum):
     UNSOLICITED = "unsolicited"  # a reply-shaped frame of one of our motors that nobody asked for
     MALFORMED = "malformed"  # one of our motors' frames that does not decode
     FOREIGN = "foreign"  # not ours: another node, our own loop-back
+    EARLY = "early"  # came before its request's send report: judged (and counted) when that comes
 
 
 @dataclass(eq=False, slots=True)
@@ -141,6 +142,10 @@ class Scheduler:
             after a reply, as DUPLICATE) rather than UNSOLICITED.
         min_reply_s: the least time from a request leaving to its reply arriving (the two frames'
             wire time): a frame with the key that arrives sooner cannot be the reply.
+        late_hold_s: after a request that left times out or is cancelled, the next request with its
+            key waits until the late reply came or this long passed (None: the timed-out request's
+            own timeout). These protocols carry no sequence numbers: a reply later than this could
+            answer the next request with the same key, so it bounds how late a reply may be.
 
     Raises:
         ValueError: motors that cannot share a bus, or options out of range.
@@ -155,12 +160,19 @@ class Scheduler:
         gap_s: float = 0.0,
         late_window_s: float = 1.0,
         min_reply_s: float = 0.0,
+        late_hold_s: float | None = None,
     ) -> None:
-        if max_in_flight < 1 or gap_s < 0 or late_window_s < 0:
+        if (
+            max_in_flight < 1
+            or gap_s < 0
+            or late_window_s < 0
+            or (late_hold_s is not None and late_hold_s < 0)
+        ):
             raise ValueError(
-                f"max_in_flight={max_in_flight} must be >= 1, "
-                f"gap_s={gap_s} and late_window_s={late_window_s} >= 0"
+                f"max_in_flight={max_in_flight} must be >= 1, gap_s={gap_s}, "
+                f"late_window_s={late_window_s} and late_hold_s={late_hold_s} >= 0"
             )
+        self.late_hold_s = late_hold_s
         self.max_in_flight = 1 if one_at_a_time else max_in_flight
         self.one_at_a_time = one_at_a_time
         self.gap_s = gap_s
@@ -172,6 +184,8 @@ class Scheduler:
         self._pending: dict[Hashable, deque[Request]] = {}
         self._in_flight: list[Request] = []  # SENDING or SENT, in send order
         self._recent = _Recent()
+        self._held: dict[Hashable, float] = {}  # key -> until when its next exchange waits
+        self._early: dict[Hashable, tuple[BoundCodec, Frame]] = {}  # key -> a reply before its report
         self._rest_until = 0.0
         self.counts: Counter[str] = Counter()
         self.latency = LatencyWindow(4096)
@@ -241,11 +255,15 @@ class Scheduler:
         out: list[Request] = []
         if now < self._rest_until or not self._queue:
             return out
+        held = self._held
+        if held:
+            for key in [k for k, until in held.items() if until <= now]:
+                del held[key]
         waiting: deque[Request] = deque()
         queue = self._queue
         while queue and len(self._in_flight) < self.max_in_flight:
             request = queue.popleft()
-            if request.key is not None and request.key in self._pending:
+            if request.key is not None and (request.key in self._pending or request.key in held):
                 waiting.append(request)
                 continue
             self._move(request, S.SENDING)
@@ -258,16 +276,26 @@ class Scheduler:
         self._queue = waiting
         return out
 
-    def sent(self, request: Request, at: float) -> None:
-        """The transport reports that ``request``'s frame left at ``at``: its deadline starts."""
+    def sent(self, request: Request, at: float) -> Received | None:
+        """The transport reports that ``request``'s frame left at ``at``: its deadline starts.
+
+        Returns:
+            The verdict on a reply-shaped frame with its key that came before this report (EARLY),
+            now that the send time is known: the reply, or a duplicate or late frame.
+        """
         if request.state is not S.SENDING:
-            return  # cancelled while the frame was on its way
+            return None  # cancelled while the frame was on its way
         request.sent_at = at
         if request.key is None:  # nothing to wait for
             self._finish(request, S.REPLIED, at)
-            return
+            return None
         self._move(request, S.SENT)
         request.deadline = at + request.timeout_s
+        early = self._early.pop(request.key, None) if self._early else None
+        if early is None:
+            return None
+        codec, frame = early
+        return self._ours(codec, FrameKind.REPLY, request.key, frame, frame.timestamp or at)
 
     def not_sent(self, request: Request, reason: str, now: float) -> None:
         """The transport dropped ``request``'s frame (stale, purged, ...): it fails."""
@@ -284,7 +312,7 @@ class Scheduler:
         was_out = request.state in (S.SENDING, S.SENT)
         self._finish(request, S.CANCELLED, now)
         if was_out and request.key is not None:
-            self._recent.late.setdefault(request.key, []).append(now + self.late_window_s)
+            self._expect_late(request, now)
 
     def fail_all(self, error: BaseException, now: float) -> list[Request]:
         """The transport was lost: every request not yet answered fails with ``error``."""
@@ -311,15 +339,26 @@ class Scheduler:
                 self._move(request, S.TIMED_OUT)
                 self._count(request.codec, "timeouts")
                 if request.key is not None:
-                    self._recent.late.setdefault(request.key, []).append(now + self.late_window_s)
+                    self._expect_late(request, now)
                 expired.append(request)
         return expired
+
+    def _expect_late(self, request: Request, now: float) -> None:
+        """``request`` left and its reply may still come: count it LATE, and hold its key meanwhile."""
+        key = request.key
+        self._recent.late.setdefault(key, []).append(now + self.late_window_s)
+        hold = request.timeout_s if self.late_hold_s is None else self.late_hold_s
+        if hold > 0:
+            self._held[key] = now + hold
 
     def next_deadline(self) -> float | None:
         """When :meth:`expire` or :meth:`next_to_send` next has something to do (None: nothing)."""
         times = [r.deadline for r in self._in_flight if r.state is S.SENT and r.deadline is not None]
-        if self._queue and self._rest_until and len(self._in_flight) < self.max_in_flight:
-            times.append(self._rest_until)
+        if self._queue and len(self._in_flight) < self.max_in_flight:
+            if self._rest_until:
+                times.append(self._rest_until)
+            if self._held:
+                times.append(min(self._held.values()))
         return min(times) if times else None
 
     # ---- receiving ----
@@ -347,6 +386,14 @@ class Scheduler:
             # A reply cannot arrive before its request left plus the two frames' wire time (an
             # unstamped frame is taken as it comes); a stream frame answers a read only if it came
             # after the request left (the same fact, fresh).
+            if request.state is S.SENDING and kind is FrameKind.REPLY:
+                # It beat the transport's send report (a reader and a writer thread): judged when
+                # the report says when the request left.
+                if key in self._early:  # the same reply twice before the report
+                    self._count(codec, Traffic.DUPLICATE.value)
+                    return Received(Traffic.DUPLICATE, frame, codec, reply)
+                self._early[key] = (codec, frame)
+                return Received(Traffic.EARLY, frame, codec)
             sent_at = request.sent_at
             if kind is FrameKind.REPLY:
                 fresh = (
@@ -381,6 +428,8 @@ class Scheduler:
             late[:] = [t for t in late if t >= now]
             if late:
                 late.pop(0)
+                if not late:  # the reply the key was held for came: the next exchange may go
+                    self._held.pop(key, None)
                 return Traffic.LATE
         until = recent.replied.get(key)
         if until is not None and until >= now:
@@ -411,6 +460,9 @@ class Scheduler:
         self._move(request, state)
 
     def _leave_flight(self, request: Request, now: float) -> None:
+        if self._early and request.key in self._early:  # it never got its send report
+            codec, _ = self._early.pop(request.key)
+            self._count(codec, self._unmatched(request.key, now).value)
         if request in self._in_flight:
             self._in_flight.remove(request)
             if self.one_at_a_time:
