@@ -4,15 +4,22 @@ Layers (see the README's map): ``servobus.core`` wraps the C core (CRCs, bit pac
 protocol families, the scheduler, transports, the simulator and the Bus build on it.
 """
 
+from typing import TYPE_CHECKING
+
 from servobus._version import __version__
 from servobus.errors import MotorFault, MotorTimeout, ProtocolError, ServobusError, TransportError
 from servobus.frame import Frame
 
+if TYPE_CHECKING:
+    from servobus.bus import Bus, FrameLink, Motor, MotorStatus
+
 __all__ = [
     "Bus",
     "Frame",
+    "FrameLink",
     "Motor",
     "MotorFault",
+    "MotorStatus",
     "MotorTimeout",
     "ProtocolError",
     "ServobusError",
@@ -23,7 +30,7 @@ __all__ = [
 
 def __getattr__(name: str) -> object:
     # The Bus pulls in asyncio and anyio: imported when first used, so the codecs stay light.
-    if name in ("Bus", "Motor"):
+    if name in ("Bus", "FrameLink", "Motor", "MotorStatus"):
         from servobus import bus
 
         return getattr(bus, name)
