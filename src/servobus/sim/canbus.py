@@ -33,7 +33,7 @@ from servobus.timing import frame_time_s
 __all__ = ["CanBusModel", "Transmission", "arbitration_priority"]
 
 
-@dataclass(frozen=True, slots=True, kw_only=True)
+@dataclass(frozen=True, slots=True, kw_only=True, init=False)
 class Transmission:
     """One frame's time on the wire: it started at ``start_s`` and was received by all at ``end_s``."""
 
@@ -41,6 +41,20 @@ class Transmission:
     source: Hashable
     start_s: float
     end_s: float
+
+    # One per frame on the wire: set through the slot descriptors (a frozen dataclass's generated
+    # __init__ goes through object.__setattr__ per field, several times slower).
+    def __init__(self, *, frame: Frame, source: Hashable, start_s: float, end_s: float) -> None:
+        _SET_FRAME(self, frame)
+        _SET_SOURCE(self, source)
+        _SET_START(self, start_s)
+        _SET_END(self, end_s)
+
+
+_SET_FRAME = Transmission.frame.__set__  # type: ignore[attr-defined,misc]
+_SET_SOURCE = Transmission.source.__set__  # type: ignore[attr-defined,misc]
+_SET_START = Transmission.start_s.__set__  # type: ignore[attr-defined,misc]
+_SET_END = Transmission.end_s.__set__  # type: ignore[attr-defined,misc]
 
 
 def arbitration_priority(frame: Frame) -> tuple[int, int, int]:
@@ -80,7 +94,7 @@ class CanBusModel:
     def __init__(self, *, bitrate: float = 1_000_000, data_bitrate: float | None = None) -> None:
         if bitrate <= 0 or (data_bitrate is not None and data_bitrate <= 0):
             raise ValueError(f"bit rates must be positive (bitrate={bitrate}, data_bitrate={data_bitrate})")
-        self._times: dict[Frame, float] = {}  # frame time by frame (equality ignores the timestamp)
+        self._times: dict[tuple[int, bytes, bool, bool, bool], float] = {}  # frame time by content
         self._chosen = False
         self._bitrate = bitrate
         self._data_bitrate = data_bitrate
@@ -124,11 +138,13 @@ class CanBusModel:
 
     def frame_time_s(self, frame: Frame) -> float:
         """Seconds ``frame`` occupies this bus (:func:`servobus.timing.frame_time_s`, cached per frame)."""
-        duration = self._times.get(frame)
+        # Keyed by a plain tuple: hashed and compared in C, unlike the dataclass's own __hash__/__eq__.
+        key = (frame.arbitration_id, frame.data, frame.is_extended_id, frame.is_fd, frame.bitrate_switch)
+        duration = self._times.get(key)
         if duration is None:
             if len(self._times) >= FRAME_TIME_CACHE:
                 self._times.clear()
-            duration = self._times[frame] = frame_time_s(frame, self.bitrate, self.data_bitrate)
+            duration = self._times[key] = frame_time_s(frame, self.bitrate, self.data_bitrate)
         return duration
 
     def submit(self, frame: Frame, ready_s: float, source: Hashable = "host") -> None:
@@ -167,7 +183,9 @@ class CanBusModel:
         self._set_head(source, item)
 
     def _set_head(self, source: Hashable, item: _Queued) -> None:
-        head = ((arbitration_priority(item[3]), self._first[source]), item[2], source)
+        frame = item[3]
+        priority = arbitration_priority(frame) if frame.is_extended_id else (frame.arbitration_id, 0, 0)
+        head = ((priority, self._first[source]), item[2], source)
         self._head_of[source] = head
         bisect.insort(self._heads, head)
         self._chosen = False

@@ -43,12 +43,22 @@ __all__ = [
 ]
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, init=False)
 class Emission:
     """A frame a device wants to send, and when it is ready to leave."""
 
     ready_s: float
     frame: Frame
+
+    # One per reply: set through the slot descriptors (a frozen dataclass's generated __init__ goes
+    # through object.__setattr__ per field, several times slower).
+    def __init__(self, ready_s: float, frame: Frame) -> None:
+        _SET_READY(self, ready_s)
+        _SET_FRAME(self, frame)
+
+
+_SET_READY = Emission.ready_s.__set__  # type: ignore[attr-defined,misc]
+_SET_FRAME = Emission.frame.__set__  # type: ignore[attr-defined,misc]
 
 
 class Device(Protocol):
@@ -216,7 +226,7 @@ class ListeningDevice:
     def settle(self) -> None:
         """Settle up with the network for the frames it did not hand this device (cheap if none)."""
         link = self._link
-        if link is None or not link.behind:
+        if link is None or link.cursor == link._log.count:
             return
         missed, odd, ends = link.catch_up(every_end=not self._plant.resting)
         if missed:

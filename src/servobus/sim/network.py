@@ -67,7 +67,7 @@ class SimCanNetwork:
         self._listeners: dict[str, Listener] = {}
         self._order: dict[str, int] = {}  # device name -> position in the order devices were added
         self._unlinked: list[Device] = []  # devices asked for their deadline at every event
-        self._routes: dict[int, list[tuple[Device, BusLink | None]]] = {}  # by identifier, built lazily
+        self._routes: dict[int, list[tuple[str, Device, BusLink | None]]] = {}  # by id, built lazily
         self._listen: dict[str, frozenset[int] | None] = {}  # what each listening device said
         self._deadlines: dict[str, tuple[float, int]] = {}  # listening device -> (deadline, seq)
         self._deadline_heap: list[tuple[float, int, str]] = []  # stale entries are skipped
@@ -144,29 +144,37 @@ class SimCanNetwork:
         """
         received: list[tuple[float, Frame]] = []
         while (t := self.next_event_s()) is not None and t <= until_s:
-            if t > self.now_s:
-                self.now_s = t
-            if self._host_pending and self._host_pending[0][0] <= t:
-                at, _, frame = heapq.heappop(self._host_pending)
-                received.append((at, frame))
-                continue
-            due = self._due(t)
-            if due:
-                for device in due:
-                    self._queue_all(device.name, device.poll(t))
-                    if device.name in self._links:
-                        self._set_deadline(device)
-                continue
-            for transmission in self.bus.advance(t):
-                self._deliver(transmission, received)
+            self._step(t, received)
         if until_s > self.now_s:
             self.now_s = until_s
+        self._tidy()
+        return received
+
+    def _step(self, t: float, received: list[tuple[float, Frame]]) -> None:
+        """Process what happens at ``t``, the network's next event: in this order, a delayed frame
+        reaching the host, the devices whose deadline has come, or the frames ending on the bus."""
+        if t > self.now_s:
+            self.now_s = t
+        if self._host_pending and self._host_pending[0][0] <= t:
+            at, _, frame = heapq.heappop(self._host_pending)
+            received.append((at, frame))
+            return
+        due = self._due(t)
+        if due:
+            for device in due:
+                self._queue_all(device.name, device.poll(t))
+                if device.name in self._links:
+                    self._set_deadline(device)
+            return
+        for transmission in self.bus.advance(t):
+            self._deliver(transmission, received)
+
+    def _tidy(self) -> None:
         marks = self._ready_marks
-        while marks and marks[0] <= until_s:
+        while marks and marks[0] <= self.now_s:
             heapq.heappop(marks)
         if len(self._log.ends) >= LOG_LIMIT:
             self._drop_log()
-        return received
 
     def run_ahead(self, host_time_s: float) -> None:
         """Run on, past ``host_time_s``, over what the host can neither see nor change.
@@ -186,15 +194,17 @@ class SimCanNetwork:
         bus = self.bus
         if self.to_devices is not None or not math.isfinite(bus.bitrate):
             return
+        received: list[tuple[float, Frame]] = []
         while (head := bus.head(HOST)) is not None and head[0] <= host_time_s:
             t = self.next_event_s()
             if t is None or (self._host_pending and self._host_pending[0][0] <= t):
-                return
+                break
             end = bus.next_event_s()
             if end is not None and end <= t and bus.completing() != HOST:
-                return  # the next frame to end is one the host receives
-            received = self.advance(t)
+                break  # the next frame to end is one the host receives
+            self._step(t, received)
             assert not received, "run_ahead() went past a frame the host receives"
+        self._tidy()
 
     def run_until_idle(self, limit_s: float = 1.0) -> list[tuple[float, Frame]]:
         """Advance until nothing is pending or ``limit_s`` of virtual time has passed."""
@@ -209,12 +219,12 @@ class SimCanNetwork:
 
     # ---- routing ----
 
-    def _recipients(self, can_id: int) -> list[tuple[Device, BusLink | None]]:
+    def _recipients(self, can_id: int) -> list[tuple[str, Device, BusLink | None]]:
         """The devices ``can_id`` is handed to, in the order they were added (built once per id)."""
         found = self._routes.get(can_id)
         if found is None:
             found = self._routes[can_id] = [
-                (device, self._links.get(name))
+                (name, device, self._links.get(name))
                 for name, device in self.devices.items()
                 if name not in self._links or (ids := self._listen.get(name)) is None or can_id in ids
             ]
@@ -230,18 +240,18 @@ class SimCanNetwork:
             sender.own += 1
             if odd:
                 sender.own_odd += 1
-        for device, link in self._recipients(frame.arbitration_id):
-            name = device.name
+        schedule = self._schedule
+        for name, device, link in self._recipients(frame.arbitration_id):
             if name == source:
                 continue
-            if link is None:
-                self._queue_all(name, device.receive(frame, end))
-                continue
-            link.taken += 1
-            if odd:
-                link.taken_odd += 1
-            self._queue_all(name, device.receive(frame, end))
-            self._set_deadline(device)
+            if link is not None:
+                link.taken += 1
+                if odd:
+                    link.taken_odd += 1
+            for emission in device.receive(frame, end):
+                schedule(emission.frame, emission.ready_s, name)  # a device's frames: no faults
+            if link is not None:
+                self._set_deadline(device)
         if source != HOST:
             outcomes = self.to_host.apply(frame, end) if self.to_host else [(end, frame)]
             for at, item in outcomes:

@@ -188,15 +188,18 @@ class Plant:
     def advance(self, now_s: float) -> None:
         """Integrate up to ``now_s`` (no-op if it is not later than the plant's time)."""
         remaining = now_s - self._now
-        if remaining > 0 and self._at_rest():
+        if remaining <= 0:
+            return
+        if self._at_rest():
             if self.temperature_c != self.params.ambient_c or self.speed_dps != 0.0:
                 self._cool(remaining)  # idle motors cost one step however long they idle
-            remaining = 0.0  # (and nothing at all once cooled to ambient: the step would change nothing)
+            self._now = now_s  # (and nothing at all once cooled to ambient: the step would change nothing)
+            return
         while remaining > 1e-12:
             dt = min(self._max_step, remaining)
             self._step(dt)
             remaining -= dt
-        self._now = max(self._now, now_s)
+        self._now = now_s
 
     # ---- dynamics ----
 
