@@ -268,6 +268,9 @@ class MyActuatorMotor(ListeningDevice):
         self.errors = ErrorLatch()
         self.unresponsive = False
         self._counters: Counter[str] = Counter()
+        self._decoded: dict[tuple[int, bytes] | None, Command | tuple[Revision, ma.MotionScales]] = {}
+        self._status1_key: tuple[float, float, bool, ErrorFlags] | None = None  # the last 0x9A's inputs
+        self._status1_reply: Reply | None = None
         self.control: Control = Off()
         self.run_mode = RUN_MODE_POWER_UP
         self.brake_released = False
@@ -304,7 +307,7 @@ class MyActuatorMotor(ListeningDevice):
         if kind is None:
             return []
         try:
-            command = _decode(frame.arbitration_id, frame.data, self.revision, self.motion_scales)
+            command = self._decode(frame.arbitration_id, frame.data)
         except ProtocolError:
             self.count_refused_bytes(frame.data, can_id=frame.arbitration_id)
             return []
@@ -317,8 +320,27 @@ class MyActuatorMotor(ListeningDevice):
         elif kind is IdKind.ID_SETTING:
             can_id = ID_SETTING_ID  # the 0x79 examples print the reply on 0x300 (§4.38)
         else:
-            can_id = reply_id(motor_id)
+            can_id = _reply_id(motor_id)
         return [Emission(now_s + self.turnaround_s, Frame(arbitration_id=can_id, data=_encode(reply)))]
+
+    def _decode(self, can_id: int, data: bytes) -> Command:
+        """The request in a frame: decoded once per distinct frame (a pure function of the bytes, the
+        revision and the motion scales; commands are frozen, so one object serves every time)."""
+        decoded = self._decoded
+        if decoded.get(None) != (self.revision, self.motion_scales):  # changed since: start over
+            decoded.clear()
+            decoded[None] = (self.revision, self.motion_scales)
+        key = (can_id, data)
+        command = decoded.get(key)
+        if command is None:
+            if len(decoded) > _CACHE_SIZE:
+                decoded.clear()
+                decoded[None] = (self.revision, self.motion_scales)
+            command = decoded[key] = ma.decode_request(
+                can_id, data, revision=self.revision, motion_scales=self.motion_scales
+            )
+        assert isinstance(command, Command)
+        return command
 
     def poll(self, now_s: float) -> list[Emission]:
         """Spontaneous frames due by ``now_s``: 0xB6 streams and 0x9A error reports (0x240+ID); also
@@ -330,7 +352,10 @@ class MyActuatorMotor(ListeningDevice):
 
     def next_deadline_s(self) -> float | None:
         """The earliest of: the 0xB3 trip, the next stream frame, the next error report."""
-        times = [self.protection_deadline_s(), self._next_report_s]
+        protection, report = self.protection_deadline_s(), self._next_report_s
+        if not self.streams and (protection is None or report is None):
+            return report if protection is None else protection  # the network asks after every frame
+        times = [protection, report]
         times += [stream.next_s for stream in self.streams.values()]
         found = [t for t in times if t is not None]
         return min(found) if found else None
@@ -485,7 +510,7 @@ class MyActuatorMotor(ListeningDevice):
         if frame.is_extended_id or frame.is_fd:
             self._counters["ignored_kind"] += 1
             return None
-        found = classify_id(frame.arbitration_id)
+        found = _classify_id(frame.arbitration_id)
         kind, motor_id = found if found else (None, None)
         if kind in (IdKind.REQUEST, IdKind.MOTION_REQUEST) and motor_id == self.motor_id:
             return kind
@@ -551,9 +576,11 @@ class MyActuatorMotor(ListeningDevice):
 
     def _status1(self) -> Reply:
         plant = self.plant
-        return status1(
-            plant.temperature_c, plant.voltage_v, brake_released=self.brake_released, errors=self.errors.flags
-        )
+        key = (plant.temperature_c, plant.voltage_v, self.brake_released, self.errors.flags)
+        if self._status1_reply is None or key != self._status1_key:  # the same poll after poll at rest
+            self._status1_key = key
+            self._status1_reply = status1(key[0], key[1], brake_released=key[2], errors=key[3])
+        return self._status1_reply
 
     def _model_replies(self) -> list[Reply]:
         if self.revision is Revision.V4_3:
@@ -637,10 +664,10 @@ class MyActuatorMotor(ListeningDevice):
         self._set_control(control, position)
 
     def _read(self, command: Command, now_s: float, *, rs485: bool) -> Reply | None:
+        if isinstance(command, ma.ReadStatus1):  # the most polled: before anything else is computed
+            return self._status1()
         r = self.readings
         rotor = self.plant.motor_position_deg
-        if isinstance(command, ma.ReadStatus1):
-            return self._status1()
         if isinstance(command, ma.ReadStatus2):
             return status_reply(ma.StatusCommand.READ_STATUS_2, r())
         if isinstance(command, ma.ReadStatus3):
@@ -762,19 +789,18 @@ class MyActuatorMotor(ListeningDevice):
         return f"MyActuatorMotor(id={self.motor_id}, {self.revision.name}, {state}, errors={errors!r})"
 
 
+_classify_id = functools.lru_cache(maxsize=None)(classify_id)  # at most 0x800 standard identifiers
+_reply_id = functools.lru_cache(maxsize=None)(reply_id)  # a bad id still raises (errors are not cached)
+
+
 @functools.cache
 def _listen_ids(motor_id: int) -> frozenset[int]:
     return frozenset((request_id(motor_id), motion_request_id(motor_id), BROADCAST_ID, ID_SETTING_ID))
 
 
-# A motor decodes the same few requests and encodes the same few replies over and over: both are pure
-# (frozen messages in, frozen messages or bytes out), so they are looked up once per distinct value.
+# A motor decodes the same few requests (MyActuatorMotor._decode) and encodes the same few replies
+# over and over: both are pure, so each is done once per distinct value.
 _CACHE_SIZE = 4096
-
-
-@functools.lru_cache(maxsize=_CACHE_SIZE)
-def _decode(can_id: int, data: bytes, revision: Revision, scales: ma.MotionScales) -> Command:
-    return ma.decode_request(can_id, data, revision=revision, motion_scales=scales)
 
 
 @functools.lru_cache(maxsize=_CACHE_SIZE)
@@ -796,8 +822,22 @@ _ENCODE_CACHED = frozenset(
 )
 
 
+_ENCODED: dict[int, tuple[Reply, bytes]] = {}  # by id(): the entry keeps its reply (and id) alive
+
+
 def _encode(reply: Reply) -> bytes:
-    return _encode_cached(reply) if type(reply) in _ENCODE_CACHED else reply.encode()
+    if type(reply) not in _ENCODE_CACHED:
+        return reply.encode()
+    # The status replies come from a memo, so the very same object recurs: look it up by identity
+    # first (cheap), by value second.
+    found = _ENCODED.get(id(reply))
+    if found is not None and found[0] is reply:
+        return found[1]
+    if len(_ENCODED) >= _CACHE_SIZE:
+        _ENCODED.clear()
+    data = _encode_cached(reply)
+    _ENCODED[id(reply)] = (reply, data)
+    return data
 
 
 # 0x20 indexes that act at once: the Settings attribute and how the 32-bit value is read.

@@ -301,20 +301,18 @@ def status1(
         _int(temperature_c, _UINT8),
         brake_released,
         _clamp(round(voltage_v, 1), 0.0, 6553.5),
-        errors,
+        int(errors),  # hashed as a plain int (an enum's hash runs in Python)
     )
 
 
 @functools.lru_cache(maxsize=1024)
-def _status1(
-    temperature: int, mos: int, brake_released: bool, voltage: float, errors: ErrorFlags
-) -> Status1Reply:
+def _status1(temperature: int, mos: int, brake_released: bool, voltage: float, errors: int) -> Status1Reply:
     return Status1Reply(
         temperature_c=temperature,
         mos_temperature_c=mos,
         brake_released=brake_released,
         voltage_v=voltage,
-        errors=errors,
+        errors=ErrorFlags(errors),
     )
 
 
