@@ -703,4 +703,4 @@ class Bus:
         """This bus's counters, request-to-reply latency and the line's load (from the transport)."""
         stats = getattr(self.transport, "stats", None)
         load = getattr(stats(), "bus_load_pct", None) if callable(stats) else None
-        return Metrics.of(self.scheduler.counts, self.scheduler.latency.snapshot(), load)
+        return Metrics.of(self.scheduler.counts, self.scheduler.latency().snapshot(), load)

@@ -43,6 +43,12 @@ class LatencyWindow:
     def add(self, seconds: float) -> None:
         self._samples.append(seconds)
 
+    def extend(self, other: LatencyWindow) -> None:
+        self._samples.extend(other._samples)
+
+    def __len__(self) -> int:
+        return len(self._samples)
+
     def clear(self) -> None:
         self._samples.clear()
 

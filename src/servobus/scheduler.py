@@ -27,8 +27,8 @@ tested with plain calls.
 
 from __future__ import annotations
 
-import contextlib
 import enum
+import heapq
 from collections import Counter, deque
 from collections.abc import Hashable, Iterable
 from dataclasses import dataclass, field
@@ -72,6 +72,10 @@ TRANSITIONS: dict[RequestState, frozenset[RequestState]] = {
     S.FAILED: frozenset(),
 }
 FINAL = frozenset({S.REPLIED, S.TIMED_OUT, S.CANCELLED, S.FAILED})
+# The same table as each state's ``next`` tuple: checked by identity on the hot path (an Enum's
+# hash is a Python-level call).
+for _state, _allowed in TRANSITIONS.items():
+    _state.next = tuple(_allowed)  # type: ignore[attr-defined]
 
 
 class Traffic(enum.Enum):
@@ -105,6 +109,7 @@ class Request:
     reply: Reply | None = None
     error: BaseException | None = None
     attempts: int = 0
+    submitted: bool = False
 
     def describe(self) -> str:
         return f"{self.codec.family} motor {self.codec.motor_id} {type(self.command).__name__}"
@@ -182,14 +187,16 @@ class Scheduler:
         self._by_id: dict[int, list[BoundCodec]] = {}
         self._queue: deque[Request] = deque()
         self._pending: dict[Hashable, deque[Request]] = {}
-        self._in_flight: list[Request] = []  # SENDING or SENT, in send order
+        self._in_flight: dict[Request, None] = {}  # SENDING or SENT, in send order
+        self._deadlines: list[tuple[float, int, Request]] = []  # a heap; entries of left requests stay
+        self._sent_count = 0  # a tie-breaker for the heap
         self._recent = _Recent()
         self._held: dict[Hashable, float] = {}  # key -> until when its next exchange waits
         self._early: dict[Hashable, tuple[BoundCodec, Frame]] = {}  # key -> a reply before its report
         self._rest_until = 0.0
-        self.counts: Counter[str] = Counter()
-        self.latency = LatencyWindow(4096)
-        # Per motor (by codec identity: a plug-in's codec need not be hashable).
+        self._bus_counts: Counter[str] = Counter()  # frames of no motor
+        # Per motor (by codec identity: a plug-in's codec need not be hashable); the bus's counts
+        # are their sum, so the hot path counts once.
         self.motor_counts: dict[int, Counter[str]] = {}
         self.motor_latency: dict[int, LatencyWindow] = {}
         for codec in codecs:
@@ -239,11 +246,12 @@ class Scheduler:
 
     def submit(self, request: Request) -> None:
         """Queue ``request`` behind the others (FIFO)."""
-        if request.state is not S.QUEUED or request in self._queue:
+        if request.submitted:
             where = "already queued" if request.state is S.QUEUED else request.state.value
             raise RuntimeError(f"{request.describe()} is {where}: a request is submitted once")
+        request.submitted = True
         self._queue.append(request)
-        self._count(request.codec, "requests")
+        self.motor_counts[id(request.codec)]["requests"] += 1
 
     def next_to_send(self, now: float) -> list[Request]:
         """The requests that may leave now, in order (they become SENDING; write their frames).
@@ -268,7 +276,7 @@ class Scheduler:
                 continue
             self._move(request, S.SENDING)
             request.attempts += 1
-            self._in_flight.append(request)
+            self._in_flight[request] = None
             if request.key is not None:
                 self._pending.setdefault(request.key, deque()).append(request)
             out.append(request)
@@ -290,7 +298,9 @@ class Scheduler:
             self._finish(request, S.REPLIED, at)
             return None
         self._move(request, S.SENT)
-        request.deadline = at + request.timeout_s
+        request.deadline = deadline = at + request.timeout_s
+        self._sent_count += 1
+        heapq.heappush(self._deadlines, (deadline, self._sent_count, request))
         early = self._early.pop(request.key, None) if self._early else None
         if early is None:
             return None
@@ -328,8 +338,10 @@ class Scheduler:
     def expire(self, now: float) -> list[Request]:
         """Requests whose deadline passed: TIMED_OUT, or back in the queue's front for a retry."""
         expired: list[Request] = []
-        for request in list(self._in_flight):
-            if request.state is S.SENT and request.deadline is not None and request.deadline <= now:
+        heap = self._deadlines
+        while heap and heap[0][0] <= now:
+            deadline, _, request = heapq.heappop(heap)
+            if request.state is S.SENT and request.deadline == deadline:
                 self._leave_flight(request, now)
                 if request.attempts <= request.retries:
                     self._move(request, S.QUEUED)
@@ -353,7 +365,10 @@ class Scheduler:
 
     def next_deadline(self) -> float | None:
         """When :meth:`expire` or :meth:`next_to_send` next has something to do (None: nothing)."""
-        times = [r.deadline for r in self._in_flight if r.state is S.SENT and r.deadline is not None]
+        heap = self._deadlines
+        while heap and (heap[0][2].state is not S.SENT or heap[0][2].deadline != heap[0][0]):
+            heapq.heappop(heap)  # the request left (replied, cancelled) or was sent again
+        times = [heap[0][0]] if heap else []
         if self._queue and len(self._in_flight) < self.max_in_flight:
             if self._rest_until:
                 times.append(self._rest_until)
@@ -369,7 +384,7 @@ class Scheduler:
             kind, key = codec.classify(frame)
             if kind is not FrameKind.NOT_OURS:
                 return self._ours(codec, kind, key, frame, now)
-        self.counts["foreign"] += 1
+        self._bus_counts["foreign"] += 1
         return Received(Traffic.FOREIGN, frame)
 
     def _ours(
@@ -410,9 +425,7 @@ class Scheduler:
                 if traffic is not Traffic.REPLY:
                     self._count(codec, traffic.value)
                 if sent_at is not None:
-                    latency = (frame.timestamp or now) - sent_at
-                    self.latency.add(latency)
-                    self.motor_latency[id(codec)].add(latency)
+                    self.motor_latency[id(codec)].add((frame.timestamp or now) - sent_at)
                 return Received(traffic, frame, codec, reply, request)
         if kind is FrameKind.STREAM or kind is FrameKind.REPORT:
             self._count(codec, kind.value)
@@ -439,16 +452,30 @@ class Scheduler:
     # ---- bookkeeping ----
 
     @property
+    def counts(self) -> Counter[str]:
+        """Every counter of the bus: the motors' summed, and frames of no motor (``foreign``)."""
+        total = Counter(self._bus_counts)
+        for counts in self.motor_counts.values():
+            total.update(counts)
+        return total
+
+    def latency(self) -> LatencyWindow:
+        """The latencies of every motor's last replies, in one window."""
+        window = LatencyWindow(sum(len(w) for w in self.motor_latency.values()) or 1)
+        for motor in self.motor_latency.values():
+            window.extend(motor)
+        return window
+
+    @property
     def pending(self) -> int:
         """Requests not yet resolved (queued, sending or sent)."""
         return len(self._queue) + len(self._in_flight)
 
     def _count(self, codec: BoundCodec, name: str) -> None:
-        self.counts[name] += 1
         self.motor_counts[id(codec)][name] += 1
 
     def _move(self, request: Request, state: RequestState) -> None:
-        if state not in TRANSITIONS[request.state]:
+        if state not in request.state.next:  # type: ignore[attr-defined]
             raise RuntimeError(f"{request.describe()}: {request.state.value} -> {state.value} is not allowed")
         request.state = state
 
@@ -463,14 +490,14 @@ class Scheduler:
         if self._early and request.key in self._early:  # it never got its send report
             codec, _ = self._early.pop(request.key)
             self._count(codec, self._unmatched(request.key, now).value)
-        if request in self._in_flight:
-            self._in_flight.remove(request)
-            if self.one_at_a_time:
-                self._rest_until = now + self.gap_s
+        if self._in_flight.pop(request, 0) is None and self.one_at_a_time:  # None: it was in flight
+            self._rest_until = now + self.gap_s
         if request.key is not None:
             waiting = self._pending.get(request.key)
             if waiting is not None:
-                with contextlib.suppress(ValueError):  # a retry already left the deque
+                if waiting[0] is request:
+                    waiting.popleft()
+                elif request in waiting:  # (a retry already left the deque)
                     waiting.remove(request)
                 if not waiting:
                     del self._pending[request.key]
