@@ -76,8 +76,6 @@ _Choice = tuple[Hashable, float, float, Frame]  # (source, start_s, duration_s, 
 _Rank = tuple[tuple[int, int, int], tuple[float, int]]
 _Head = tuple[_Rank, float, Hashable]
 
-_NONE = object()
-
 #: distinct frames whose wire time is kept (the cache starts over when it is full)
 FRAME_TIME_CACHE = 4096
 
@@ -205,12 +203,14 @@ class CanBusModel:
         queue = self._queues.get(source)
         return (queue[0][0], queue[0][2]) if queue else None
 
-    def completing(self) -> Hashable | None:
-        """The node whose frame completes next (on the wire, or tentatively next), or None if idle."""
-        if self._in_flight is not None:
-            return self._in_flight.source
+    def next_completion(self) -> tuple[float, Hashable] | None:
+        """(end_s, node) of the transmission that completes next (on the wire, or tentatively next:
+        see :meth:`next_event_s`), or None if the bus is idle."""
+        in_flight = self._in_flight
+        if in_flight is not None:
+            return in_flight.end_s, in_flight.source
         chosen = self._arbitrate()
-        return None if chosen is None else chosen[0]
+        return None if chosen is None else (chosen[1] + chosen[2], chosen[0])
 
     def next_event_s(self) -> float | None:
         """When the next transmission will complete, as far as the bus knows now (None: idle).
@@ -249,10 +249,13 @@ class CanBusModel:
         if heads:
             # start = max(free_at, earliest ready); the winner is the best rank ready by then.
             start = self._free_at
-            source = next((source for _, ready, source in heads if ready <= start), _NONE)
-            if source is _NONE:
+            for head in heads:  # best rank first: the first one ready wins
+                if head[1] <= start:
+                    break
+            else:  # none ready while the wire is busy: the bus idles until the first is ready
                 start = min(head[1] for head in heads)
-                source = next(source for _, ready, source in heads if ready <= start)
+                head = next(head for head in heads if head[1] <= start)
+            source = head[2]
             frame = self._queues[source][0][3]
             choice = (source, start, self.frame_time_s(frame), frame)
         self._choice = choice
@@ -263,7 +266,11 @@ class CanBusModel:
         source, start, duration, frame = chosen
         queue = self._queues[source]
         heapq.heappop(queue)
-        self._heads.remove(self._head_of.pop(source))
+        heads, head = self._heads, self._head_of.pop(source)
+        if heads[0] is head:  # the usual winner: the best rank
+            del heads[0]
+        else:
+            heads.remove(head)
         if queue:
             self._set_head(source, queue[0])
         else:

@@ -199,8 +199,8 @@ class SimCanNetwork:
             t = self.next_event_s()
             if t is None or (self._host_pending and self._host_pending[0][0] <= t):
                 break
-            end = bus.next_event_s()
-            if end is not None and end <= t and bus.completing() != HOST:
+            completion = bus.next_completion()
+            if completion is not None and completion[0] <= t and completion[1] != HOST:
                 break  # the next frame to end is one the host receives
             self._step(t, received)
             assert not received, "run_ahead() went past a frame the host receives"
