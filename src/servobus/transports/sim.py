@@ -9,7 +9,12 @@ no pty, adapter or thread between them:
 * **One timer in**: the transport keeps a single ``loop.call_at`` timer on the network's next event.
   When it fires, the network runs up to the loop's time and the frames the host received are
   delivered as one batch, stamped with the time their transmission ended (on the loop's clock).
-  Nothing polls: an idle network arms no timer at all.
+  Nothing polls: an idle network arms no timer at all. Then the network runs ahead over what the
+  host can neither see nor change (:meth:`~servobus.sim.network.SimCanNetwork.run_ahead`: while the
+  host still has a frame queued, its later frames wait behind it), so the timer is next armed for
+  the next frame the host receives rather than for every frame on the wire: a burst of requests
+  costs one timer, not one per request. The trace is the same; device state (a simulated motor's
+  counters, say) may read ahead of the loop's clock by the host's queued burst.
 * **Time**: network time = loop time - ``t0``, where ``t0`` is fixed the first time the transport
   opens on a loop (so that the network's clock continues from its ``now_s`` at that moment; a fresh
   network on a ``looptime`` loop that starts at 0 gets ``t0 = 0``, and the two clocks are the same
