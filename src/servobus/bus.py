@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import functools
 import logging
 import re
 from collections import deque
@@ -383,8 +382,11 @@ class Bus:
                 pending.append(self._submit(motor, command, timeout_s=self.safe_timeout_s, retries=0))
             except (ValueError, TransportError):
                 continue
-        with anyio.move_on_after(self.safe_timeout_s):
-            await asyncio.gather(*pending, return_exceptions=True)
+        try:
+            with anyio.move_on_after(self.safe_timeout_s):
+                await asyncio.gather(*(r.context for r in pending), return_exceptions=True)
+        finally:
+            self._abandon(pending)
 
     # ---- motors ----
 
@@ -428,16 +430,19 @@ class Bus:
         self, motor: Motor, command: Command, *, timeout_s: float | None = None, retries: int = 0
     ) -> Reply | None:
         """:meth:`Motor.request`."""
-        reply: Reply | None = await self._submit(motor, command, timeout_s=timeout_s, retries=retries)
+        request = self._submit(motor, command, timeout_s=timeout_s, retries=retries)
+        try:
+            reply: Reply | None = await request.context
+        except asyncio.CancelledError:
+            self._abandon((request,))
+            raise
         return reply
 
-    def _submit(
-        self, motor: Motor, command: Command, *, timeout_s: float | None, retries: int
-    ) -> asyncio.Future[Any]:
+    def _submit(self, motor: Motor, command: Command, *, timeout_s: float | None, retries: int) -> Request:
         request = self._prepare(motor, command, timeout_s=timeout_s, retries=retries)
         self._enqueue(motor, request)
         self._pump()
-        return request.context  # type: ignore[no-any-return]
+        return request
 
     def _prepare(self, motor: Motor, command: Command, *, timeout_s: float | None, retries: int) -> Request:
         """The request for ``command``, encoded (ValueError here, before anything is queued)."""
@@ -453,13 +458,17 @@ class Bus:
             self._commanded[id(motor.codec)] = motor
         motor.codec.note_sent(request.command)
         self.scheduler.submit(request)
-        request.context.add_done_callback(functools.partial(self._on_done, request=request))
 
-    def _on_done(self, future: asyncio.Future[Any], request: Request) -> None:
-        if future.cancelled() and self._loop is not None:
-            self.scheduler.cancel(request, self._loop.time())
+    def _abandon(self, requests: Iterable[Request]) -> None:
+        """The caller stopped waiting (cancelled): unresolved requests are cancelled; a reply that
+        still comes is counted late."""
+        assert self._loop is not None
+        now = self._loop.time()
+        for request in requests:
+            request.context.cancel()  # (no effect on a resolved one)
+            self.scheduler.cancel(request, now)  # (nor here)
             self._by_frame.pop(id(request.frame), None)
-            self._pump()
+        self._pump()
 
     async def cycle(
         self, items: Iterable[tuple[Motor, Command]], *, timeout_s: float | None = None
@@ -478,12 +487,10 @@ class Bus:
         for motor, request in prepared:
             self._enqueue(motor, request)
         self._pump()
-        futures = [request.context for _, request in prepared]
         try:
-            return list(await asyncio.gather(*futures, return_exceptions=True))
+            return list(await asyncio.gather(*[r.context for _, r in prepared], return_exceptions=True))
         except BaseException:
-            for future in futures:
-                future.cancel()
+            self._abandon(r for _, r in prepared)
             raise
 
     async def broadcast(
@@ -499,19 +506,24 @@ class Bus:
             raise ValueError(f"a broadcast goes to motors of one family, not {sorted(families)}")
         plan = get_family(families.pop()).broadcast(command, [m.codec for m in motors])
         assert self._loop is not None
-        futures: dict[int, asyncio.Future[Any]] = {}
         by_id = {m.motor_id: m for m in motors}
         timeout = timeout_s if timeout_s is not None else max(m.codec.timeout_s(command) for m in motors)
-        for motor_id, key in plan.replies.items():
-            futures[motor_id] = self._expect(by_id[motor_id], command, key, timeout)
+        expected = {
+            motor_id: self._expect(by_id[motor_id], command, key, timeout)
+            for motor_id, key in plan.replies.items()
+        }
         for motor in motors:
             if not motor.codec.retry_safe(command):
                 self._commanded[id(motor.codec)] = motor
-        self.transport.send(plan.frame)
-        results = await asyncio.gather(*futures.values(), return_exceptions=True)
-        return dict(zip(futures, results, strict=True))
+        try:
+            self.transport.send(plan.frame)
+            results = await asyncio.gather(*(r.context for r in expected.values()), return_exceptions=True)
+        except BaseException:
+            self._abandon(expected.values())
+            raise
+        return dict(zip(expected, results, strict=True))
 
-    def _expect(self, motor: Motor, command: Command, key: Hashable, timeout_s: float) -> asyncio.Future[Any]:
+    def _expect(self, motor: Motor, command: Command, key: Hashable, timeout_s: float) -> Request:
         """A request whose frame is sent by someone else (a broadcast): it only awaits ``key``."""
         assert self._loop is not None
         future: asyncio.Future[Any] = self._loop.create_future()
@@ -522,9 +534,8 @@ class Bus:
                 self.scheduler.sent(request, self._loop.time())
             else:  # another queued request got its turn too: it goes out as usual
                 self._hand_over(sent)
-        future.add_done_callback(functools.partial(self._on_done, request=request))
         self._kick()
-        return future
+        return request
 
     # ---- the engine ----
 
@@ -557,9 +568,15 @@ class Bus:
             early = self.scheduler.sent(request, sent_at if sent_at is not None else now)
             if early is not None and early.reply is not None:  # its reply came before this report
                 self._deliver(early, now)
+            if request.state is RequestState.SENT:
+                timer = self._timer
+                if timer is not None and request.deadline is not None and timer.when() <= request.deadline:
+                    return  # the timer already fires first (the common case: one per burst)
+                self._kick()
+                return
             if request.state is RequestState.REPLIED:  # nothing to wait for, or the early reply
                 self._settle(request, None)
-        self._kick()
+        self._pump()  # it left the wire's count: the next may go
 
     def _on_frames(self, frames: list[Frame]) -> None:
         assert self._loop is not None

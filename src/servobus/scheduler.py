@@ -418,12 +418,16 @@ class Scheduler:
                 fresh = sent_at is not None and frame.timestamp >= sent_at
             if request.state is S.SENT and fresh:
                 request.reply = reply
-                self._finish(request, S.REPLIED, now)
+                self._leave_flight(request, now)
+                request.state = S.REPLIED  # (SENT -> REPLIED, in TRANSITIONS; the hot path)
                 self._recent.replied[key] = now + self.late_window_s
-                traffic = Traffic.REPLY if kind is FrameKind.REPLY else Traffic(kind.value)
-                self._count(codec, "replies")
-                if traffic is not Traffic.REPLY:
-                    self._count(codec, traffic.value)
+                counts = self.motor_counts[id(codec)]
+                counts["replies"] += 1
+                if kind is FrameKind.REPLY:
+                    traffic = Traffic.REPLY
+                else:
+                    traffic = Traffic(kind.value)
+                    counts[traffic.value] += 1
                 if sent_at is not None:
                     self.motor_latency[id(codec)].add((frame.timestamp or now) - sent_at)
                 return Received(traffic, frame, codec, reply, request)

@@ -100,6 +100,9 @@ _READS = (
     cmd.ReadModel,
     cmd.ReadModelPart,
 )
+# isinstance against those tuples, once per command class (the hot path asks per request)
+_IS_SLOW: dict[type, bool] = {}
+_IS_READ: dict[type, bool] = {}
 _ERROR_REPORT_CODE = cmd.ReadStatus1.CODE
 
 
@@ -284,11 +287,17 @@ class MyActuatorCodec(CodecBase):
 
     def timeout_s(self, command: Command) -> float:
         """How long to wait for the reply to ``command``."""
-        return SLOW_TIMEOUT_S if isinstance(command, _SLOW) else DEFAULT_TIMEOUT_S[self.link]
+        slow = _IS_SLOW.get(type(command))
+        if slow is None:
+            slow = _IS_SLOW[type(command)] = isinstance(command, _SLOW)
+        return SLOW_TIMEOUT_S if slow else DEFAULT_TIMEOUT_S[self.link]
 
     def retry_safe(self, command: Command) -> bool:
         """True for reads: resending them changes nothing on the motor."""
-        return isinstance(command, _READS)
+        read = _IS_READ.get(type(command))
+        if read is None:
+            read = _IS_READ[type(command)] = isinstance(command, _READS)
+        return read
 
     def note_sent(self, command: Command) -> None:
         """Track what ``command`` changes in how the motor talks (0xB6 streams, 0x9A reports, reset)."""
