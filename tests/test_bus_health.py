@@ -8,12 +8,13 @@ from typing import Any
 import pytest
 
 from servobus.bus import Bus, MotorStatus
-from servobus.errors import MotorFault, MotorTimeout
+from servobus.errors import MotorFault, MotorTimeout, TransportError
 from servobus.metrics import LatencyWindow
 from servobus.protocols import lk
 from servobus.protocols import myactuator as ma
 from servobus.sim.devices.lk import LkMotor
 from servobus.sim.devices.myactuator import MyActuatorMotor
+from servobus.ticks import ticks
 from servobus.transports.sim import SimTransport
 from test_bus import run
 
@@ -212,3 +213,49 @@ def test_a_reported_fault_is_kept_as_a_motor_fault_with_its_flags_until_a_report
     assert isinstance(fault, MotorFault) and fault.flags == ma.ErrorFlags.OVER_VOLTAGE and fault.motor_id == 1
     assert "OVER_VOLTAGE" in str(fault) and "myactuator 1" in str(fault)
     assert isinstance(seen[5], MotorFault) and seen[5].flags == lk.ErrorState.MOTOR_OVER_TEMPERATURE
+
+
+def test_after_a_transport_loss_the_pending_fail_at_once_and_requests_work_again_after_recovery() -> None:
+    device = MyActuatorMotor(1)
+
+    async def scenario() -> tuple[BaseException, float, Any]:
+        transport = SimTransport(devices=[device], reopen_backoff_s=(0.05, 0.1))
+        async with Bus(transport, safe=None) as bus:
+            motor = bus.motor("myactuator", 1)
+            loop = asyncio.get_running_loop()
+            device.unresponsive = True
+            waiting = asyncio.ensure_future(motor.read_status2(timeout_s=5.0))
+            await asyncio.sleep(0.01)
+            lost_at = loop.time()
+            transport.unplug()
+            failed = await asyncio.gather(waiting, return_exceptions=True)
+            took = loop.time() - lost_at
+            device.unresponsive = False
+            transport.replug()
+            await transport.wait_open(timeout=1.0)
+            return failed[0], took, await motor.read_status2()
+
+    failed, took, after = run(scenario)
+    assert isinstance(failed, TransportError) and "lost" in str(failed)
+    assert took < 0.001  # at once, not after the 5 s timeout
+    assert isinstance(after, ma.StatusReply)
+
+
+def test_one_pacer_drives_two_buses() -> None:
+    async def scenario() -> list[tuple[int, int, int]]:
+        one = Bus(SimTransport(devices=[MyActuatorMotor(i) for i in (1, 2)]))
+        two = Bus(SimTransport(devices=[LkMotor(i) for i in (1, 2)]))
+        seen: list[tuple[int, int, int]] = []
+        async with one, two:
+            a = [one.motor("myactuator", i) for i in (1, 2)]
+            b = [two.motor("lk", i) for i in (1, 2)]
+            async for tick in ticks(hz=100, count=5):
+                first, second = await asyncio.gather(
+                    one.cycle([(m, ma.ReadStatus2()) for m in a]),
+                    two.cycle([(m, lk.ReadStatus2()) for m in b]),
+                )
+                replies = sum(r is not None and not isinstance(r, BaseException) for r in [*first, *second])
+                seen.append((tick.index, tick.skipped, replies))
+        return seen
+
+    assert run(scenario) == [(i, 0, 4) for i in range(5)]
