@@ -1,0 +1,124 @@
+"""The ``servobus`` command: a bench tool over the Bus (click + rich).
+
+Every subcommand lives in its own module and is imported only when it runs (``servobus --help`` and
+shell completion stay fast, and the optional extras, matplotlib and cantools, load only for ``plot``
+and ``dbc``). Errors are one line on stderr, without a traceback unless ``--debug``:
+
+==========  ==================================================================================
+exit code   meaning
+==========  ==================================================================================
+0           done
+1           the job failed: a motor did not answer, the adapter was lost, a file did not parse
+2           bad usage: an unknown option, a value out of range, a missing or contradictory flag
+130         interrupted (Ctrl-C); every commanded motor got its safe command first
+==========  ==================================================================================
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from collections.abc import Sequence
+
+import click
+
+from servobus import __version__
+from servobus.errors import ServobusError
+
+__all__ = ["cli", "main"]
+
+#: subcommand -> "module:attribute" (imported on first use)
+COMMANDS: dict[str, str] = {
+    "demo": "servobus.cli.demo:demo",
+    "scan": "servobus.cli.scan:scan",
+    "status": "servobus.cli.control:status",
+    "monitor": "servobus.cli.control:monitor",
+    "move": "servobus.cli.control:move",
+    "speed": "servobus.cli.control:speed",
+    "torque": "servobus.cli.control:torque",
+    "mit": "servobus.cli.control:mit",
+    "stop": "servobus.cli.control:stop",
+    "off": "servobus.cli.control:off",
+    "brake": "servobus.cli.control:brake",
+    "zero": "servobus.cli.control:zero",
+    "set-id": "servobus.cli.control:set_id",
+    "clear-errors": "servobus.cli.control:clear_errors",
+    "reset": "servobus.cli.control:reset",
+    "config": "servobus.cli.config:config",
+    "record": "servobus.cli.record:record",
+    "plot": "servobus.cli.plot:plot",
+    "decode": "servobus.cli.decode:decode",
+    "dbc": "servobus.cli.dbc:dbc",
+    "sim": "servobus.cli.sim:sim",
+    "bench": "servobus.cli.bench:bench",
+}
+
+
+class LazyGroup(click.Group):
+    """A group whose subcommands are imported when they are run or asked for help."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted(COMMANDS)
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        target = COMMANDS.get(cmd_name)
+        if target is None:
+            return None
+        module, _, attribute = target.partition(":")
+        command = getattr(importlib.import_module(module), attribute)
+        assert isinstance(command, click.Command), target
+        return command
+
+
+@click.group(
+    cls=LazyGroup,
+    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+    epilog="Examples:\n\n\b\n  servobus demo --duration 5\n  servobus scan --sim 4\n"
+    "  servobus status -i slcan -c /dev/ttyACM0 --ids 1-3\n  servobus decode candump.log\n\n"
+    "Exit codes: 0 done, 1 the job failed, 2 bad usage, 130 interrupted (motors stopped).",
+)
+@click.version_option(__version__, "--version", prog_name="servobus")
+@click.option("--debug", is_flag=True, help="Show the traceback of an error.")
+@click.pass_context
+def cli(ctx: click.Context, debug: bool) -> None:
+    """Drive buses of servo actuators: MyActuator RMD-X, LK-TECH and hollow-series motors."""
+    ctx.ensure_object(dict)
+    ctx.obj["debug"] = debug
+
+
+def _one_line(message: str) -> str:
+    return " ".join(message.split())
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """The console script: run ``cli`` and turn every error into one line and an exit code."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in args
+    try:
+        cli.main(args=args, prog_name="servobus", standalone_mode=False)
+    except click.exceptions.Exit as done:
+        return done.exit_code
+    except click.UsageError as exc:
+        if debug:
+            raise
+        where = f"{exc.ctx.command_path}: " if exc.ctx is not None else "servobus: "
+        click.echo(f"{where}error: {_one_line(exc.format_message())}", err=True)
+        return 2
+    except click.Abort:
+        click.echo("servobus: interrupted", err=True)
+        return 130
+    except KeyboardInterrupt:
+        click.echo("servobus: interrupted (motors stopped)", err=True)
+        return 130
+    except ValueError as exc:  # a value the library refused (a set-point out of range, a bad id)
+        if debug:
+            raise
+        click.echo(f"servobus: error: {_one_line(str(exc))}", err=True)
+        return 2
+    except (ServobusError, OSError, click.ClickException) as exc:
+        if debug:
+            raise
+        message = exc.format_message() if isinstance(exc, click.ClickException) else str(exc)
+        click.echo(f"servobus: error: {_one_line(message) or type(exc).__name__}", err=True)
+        return exc.exit_code if isinstance(exc, click.ClickException) else 1
+    return 0

@@ -1,0 +1,211 @@
+"""The connection options every bus command takes, in python-can's terms, and the Bus they open.
+
+``--sim N`` runs against N simulated motors in-process (real time); ``--interface/--channel``
+(``-i``/``-c``) opens a CAN adapter through python-can (its configuration file and ``CAN_*``
+environment variables are the defaults); ``--port`` opens an RS485 line. ``--family``,
+``--revision`` and ``--ids`` say which motors are there.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+from collections.abc import AsyncIterator, Callable
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+import click
+
+from servobus.bus import Bus, Motor
+
+__all__ = ["Connection", "connection_options", "open_bus", "parse_ids"]
+
+FAMILIES = ("myactuator", "lk", "hollow")
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def parse_ids(text: str) -> tuple[int, ...]:
+    """``"1-3,7"`` -> ``(1, 2, 3, 7)``.
+
+    Raises:
+        ValueError: not a list of ids and ranges, or an empty range.
+    """
+    ids: list[int] = []
+    for part in text.split(","):
+        first, sep, last = part.strip().partition("-")
+        try:
+            lo = int(first)
+            hi = int(last) if sep else lo
+        except ValueError:
+            raise ValueError(f"--ids {text!r}: expected ids and ranges like 1-4,7") from None
+        if hi < lo:
+            raise ValueError(f"--ids {text!r}: the range {part.strip()} is empty")
+        ids.extend(range(lo, hi + 1))
+    return tuple(dict.fromkeys(ids))
+
+
+@dataclass(frozen=True, slots=True)
+class Connection:
+    """Where the motors are (from the command line)."""
+
+    family: str = "myactuator"
+    revision: str | None = None
+    ids: tuple[int, ...] = ()
+    sim: int | None = None
+    interface: str | None = None
+    channel: str | None = None
+    bitrate: int | None = None
+    fd: bool = False
+    data_bitrate: int | None = None
+    port: str | None = None
+    baud: int | None = None
+
+    @property
+    def link(self) -> str:
+        """The family's link name: ``"rs485"`` on a serial port, ``"canfd"``/``"can"`` otherwise."""
+        if self.port is not None:
+            return "rs485"
+        return "canfd" if self.fd and self.family == "hollow" else "can"
+
+    @property
+    def motor_ids(self) -> tuple[int, ...]:
+        """The ids to address: ``--ids``, or 1..N with ``--sim N``, or 1 alone."""
+        if self.ids:
+            return self.ids
+        return tuple(range(1, (self.sim or 1) + 1))
+
+    def bind_options(self) -> dict[str, Any]:
+        options: dict[str, Any] = {"link": self.link}
+        if self.revision is not None:
+            options["revision"] = self.revision
+        return options
+
+    def transport(self) -> Any:
+        """The transport (not yet open) this connection names.
+
+        Raises:
+            click.UsageError: no bus named, or contradictory flags.
+        """
+        if self.sim is not None:
+            from servobus.transports.sim import SimTransport
+
+            return SimTransport(devices=sim_devices(self.family, self.motor_ids, self.revision), name="sim")
+        if self.port is not None:
+            from servobus.protocols import get_family
+            from servobus.transports.rs485 import SerialTransport
+
+            framing = get_family(self.family).bind(self.motor_ids[0], **self.bind_options()).framing
+            return SerialTransport(self.port, framing=framing, baud=self.baud)
+        from servobus.transports.can import CanTransport
+
+        return CanTransport(
+            self.interface,
+            self.channel,
+            bitrate=self.bitrate,
+            fd=self.fd,
+            data_bitrate=self.data_bitrate,
+        )
+
+
+def sim_devices(family: str, ids: tuple[int, ...], revision: str | None = None) -> list[Any]:
+    """Simulated motors of ``family`` with ``ids``."""
+    if family == "myactuator":
+        from servobus.protocols.myactuator import Revision as MaRevision
+        from servobus.sim.devices.myactuator import MyActuatorMotor
+
+        rev = MaRevision[revision] if revision else MaRevision.V4_4
+        return [MyActuatorMotor(i, revision=rev) for i in ids]
+    if family == "lk":
+        from servobus.sim.devices.lk import LkMotor
+
+        return [LkMotor(i) for i in ids]
+    from servobus.sim.devices.hollow import HollowMotor
+
+    return [HollowMotor(i) for i in ids]
+
+
+def _check(conn: Connection) -> Connection:
+    named = [
+        flag
+        for flag, on in (
+            ("--sim", conn.sim is not None),
+            ("--port", conn.port is not None),
+            ("--interface/--channel", bool(conn.interface or conn.channel)),
+        )
+        if on
+    ]
+    if len(named) > 1:
+        raise click.UsageError(f"{' and '.join(named)} name different buses: give one")
+    if conn.baud is not None and conn.port is None:
+        raise click.UsageError("--baud is for a serial --port")
+    if (conn.fd or conn.data_bitrate) and conn.port is not None:
+        raise click.UsageError("--fd and --data-bitrate are for CAN, not a serial --port")
+    if conn.sim is not None and not 1 <= conn.sim <= 32:
+        raise click.UsageError(f"--sim {conn.sim}: between 1 and 32 motors")
+    if not named:
+        import can
+
+        config = can.util.load_config()
+        if not config.get("interface"):
+            raise click.UsageError(
+                "no bus: give --sim N, --interface/--channel (python-can), or a serial --port "
+                "(or configure python-can: ~/.canrc or CAN_INTERFACE)"
+            )
+    return conn
+
+
+def connection_options(func: F) -> F:
+    """Add the connection options to a click command; it receives ``conn: Connection``."""
+
+    @click.option(
+        "--family",
+        "-f",
+        type=click.Choice(FAMILIES),
+        default="myactuator",
+        show_default=True,
+        help="Protocol family of the motors.",
+    )
+    @click.option("--revision", help="Protocol revision (myactuator V4_3/V4_4; lk V2_35/V2_36).")
+    @click.option(
+        "--ids", "ids_text", metavar="IDS", help="Motor ids, e.g. 1-4,7 (default: 1, or 1..N with --sim N)."
+    )
+    @click.option("--sim", type=int, metavar="N", help="Run against N simulated motors in-process.")
+    @click.option("--interface", "-i", help="python-can interface (socketcan, slcan, pcan, virtual, ...).")
+    @click.option("--channel", "-c", help="python-can channel (can0, /dev/ttyACM0, ...).")
+    @click.option(
+        "--bitrate", type=click.IntRange(min=1), help="CAN bit rate [default: the adapter's config]."
+    )
+    @click.option("--fd", is_flag=True, help="CAN FD.")
+    @click.option("--data-bitrate", type=click.IntRange(min=1), help="CAN FD data-phase bit rate.")
+    @click.option("--port", help="Serial port of an RS485 line (/dev/ttyUSB0).")
+    @click.option("--baud", type=click.IntRange(min=1), help="Serial baud rate [default: the family's].")
+    @functools.wraps(func)
+    def wrapper(*args: Any, ids_text: str | None, **kwargs: Any) -> Any:
+        names = (
+            "family",
+            "revision",
+            "sim",
+            "interface",
+            "channel",
+            "bitrate",
+            "fd",
+            "data_bitrate",
+            "port",
+            "baud",
+        )
+        fields = {name: kwargs.pop(name) for name in names}
+        try:
+            ids = parse_ids(ids_text) if ids_text else ()
+        except ValueError as exc:
+            raise click.BadParameter(str(exc), param_hint="--ids") from None
+        return func(*args, conn=_check(Connection(ids=ids, **fields)), **kwargs)
+
+    return wrapper  # type: ignore[return-value]
+
+
+@contextlib.asynccontextmanager
+async def open_bus(conn: Connection, **bus_options: Any) -> AsyncIterator[tuple[Bus, list[Motor]]]:
+    """The Bus on ``conn``'s transport with its motors bound; leaving it stops the commanded ones."""
+    async with Bus(conn.transport(), **bus_options) as bus:
+        motors = [bus.motor(conn.family, i, **conn.bind_options()) for i in conn.motor_ids]
+        yield bus, motors
