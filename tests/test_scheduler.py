@@ -320,3 +320,33 @@ def test_seeded_faults_over_100k_requests() -> None:
     scheduler, requests, _ = _run(100_000, seed=11)
     _verify(scheduler, requests)
     print(dict(scheduler.counts))
+
+
+def test_a_held_key_on_a_half_duplex_line_waits_without_waking_all_the_time() -> None:
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec], one_at_a_time=True, gap_s=0.001, late_hold_s=0.05)
+    old = scheduler.request(codec, ma.ReadStatus2(), timeout_s=0.01)
+    scheduler.submit(old)
+    _send_all(scheduler, 0.0)
+    assert scheduler.expire(0.01) == [old]
+    new = scheduler.request(codec, ma.ReadStatus2())
+    scheduler.submit(new)
+    assert scheduler.next_to_send(0.02) == []  # the rest is over, the key still held
+    assert scheduler.next_deadline() == pytest.approx(0.06)  # not the past rest: no busy timer
+
+
+def test_answered_requests_under_a_long_timeout_do_not_pile_up_in_the_deadline_heap() -> None:
+    codecs = [MA.bind(i) for i in (1, 2)]
+    scheduler = Scheduler(codecs)
+    slow = scheduler.request(codecs[0], ma.ReadStatus2(), timeout_s=60.0)
+    scheduler.submit(slow)
+    _send_all(scheduler, 0.0)
+    for n in range(1000):
+        now = 0.001 * (n + 1)
+        request = scheduler.request(codecs[1], ma.ReadStatus2())
+        scheduler.submit(request)
+        _send_all(scheduler, now)
+        scheduler.receive(_reply(2, t=now + 0.0005), now + 0.0005)
+        assert request.state is S.REPLIED
+    assert len(scheduler._deadlines) <= 64 + 4 * 2
+    assert scheduler.next_deadline() == pytest.approx(60.0)

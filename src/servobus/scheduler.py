@@ -261,12 +261,16 @@ class Scheduler:
         second request with the first one's data.
         """
         out: list[Request] = []
-        if now < self._rest_until or not self._queue:
-            return out
         held = self._held
         if held:
             for key in [k for k, until in held.items() if until <= now]:
                 del held[key]
+        if self._rest_until:
+            if now < self._rest_until:
+                return out
+            self._rest_until = 0.0  # the rest is over (and no longer a deadline)
+        if not self._queue:
+            return out
         waiting: deque[Request] = deque()
         queue = self._queue
         while queue and len(self._in_flight) < self.max_in_flight:
@@ -300,7 +304,11 @@ class Scheduler:
         self._move(request, S.SENT)
         request.deadline = deadline = at + request.timeout_s
         self._sent_count += 1
-        heapq.heappush(self._deadlines, (deadline, self._sent_count, request))
+        heap = self._deadlines
+        heapq.heappush(heap, (deadline, self._sent_count, request))
+        if len(heap) > 64 + 4 * len(self._in_flight):  # answered ones under a long timeout pile up
+            heap[:] = [e for e in heap if e[2].state is S.SENT and e[2].deadline == e[0]]
+            heapq.heapify(heap)
         early = self._early.pop(request.key, None) if self._early else None
         if early is None:
             return None
