@@ -10,8 +10,10 @@ import pytest
 from servobus.bus import Bus, MotorStatus
 from servobus.errors import MotorFault, MotorTimeout, TransportError
 from servobus.metrics import LatencyWindow
+from servobus.protocols import hollow as ho
 from servobus.protocols import lk
 from servobus.protocols import myactuator as ma
+from servobus.sim.devices.hollow import HollowMotor
 from servobus.sim.devices.lk import LkMotor
 from servobus.sim.devices.myactuator import MyActuatorMotor
 from servobus.ticks import ticks
@@ -259,3 +261,26 @@ def test_one_pacer_drives_two_buses() -> None:
         return seen
 
     assert run(scenario) == [(i, 0, 4) for i in range(5)]
+
+
+def test_motion_mode_through_the_bus_for_myactuator_and_hollow() -> None:
+    async def scenario() -> tuple[Any, Any, Any]:
+        devices = [MyActuatorMotor(1), HollowMotor(20)]
+        async with Bus(SimTransport(devices=devices)) as bus:
+            motor, joint = bus.motor("myactuator", 1), bus.motor("hollow", 20)
+            first = await motor.motion_command(
+                position_rad=0.5, velocity_rad_s=0.0, kp=50.0, kd=1.0, torque_ff_nm=0.0
+            )
+            await asyncio.sleep(0.5)  # the simulated rotor follows the spring toward 0.5 rad
+            later = await motor.motion_command(
+                position_rad=0.5, velocity_rad_s=0.0, kp=50.0, kd=1.0, torque_ff_nm=0.0
+            )
+            hollow = await joint.request(
+                ho.Setpoint(position_deg=10.0, speed_rad_s=0.0, kp=5, kd=1, current_a=0.0)
+            )
+            return first, later, hollow
+
+    first, later, hollow = run(scenario)
+    assert isinstance(first, ma.MotionReply) and first.motor_id == 1
+    assert isinstance(later, ma.MotionReply) and abs(later.position_rad - 0.5) < abs(first.position_rad - 0.5)
+    assert isinstance(hollow, ho.NormalReply) and hollow.motor_id == 20
