@@ -143,7 +143,7 @@ def _class_plan(cls: type, revision: Revision) -> tuple[bool, Callable[[Any], by
     return always, fast
 
 
-_PLANS: dict[tuple[type, Revision], tuple[bool, Callable[[Any], bytes] | None]] = {}
+_PLANS: dict[Revision, dict[type, tuple[bool, Callable[[Any], bytes] | None]]] = {}  # by revision, then class
 
 
 class MyActuatorCodec(CodecBase):
@@ -166,6 +166,7 @@ class MyActuatorCodec(CodecBase):
         "_motion_key",
         "_motion_reply_id",
         "_motion_request_id",
+        "_plans",
         "_reply_base",
         "_reply_id",
         "_reports",
@@ -184,6 +185,7 @@ class MyActuatorCodec(CodecBase):
         self._streams: frozenset[int] = frozenset()
         self._reports = False
         self._fast = _FAST[revision]
+        self._plans = _PLANS.setdefault(revision, {})
         self._motion_fast = motion_reply_decoder(scales, motor_id)
         self._motion_encode = motion_command_encoder(scales)
         if self._rs485:
@@ -212,12 +214,11 @@ class MyActuatorCodec(CodecBase):
     # ---- sending ----
 
     def _plan(self, command: Command) -> tuple[bool, Callable[[Any], bytes] | None]:
-        key = (type(command), self.revision)
-        plan = _PLANS.get(key)
+        plan = self._plans.get(type(command))  # (by class alone: an Enum key hashes in Python)
         if plan is None:
             if not isinstance(command, MyActuatorMessage) or not isinstance(command, Command):
                 raise ValueError(f"{command!r} is not a MyActuator command")
-            plan = _PLANS[key] = _class_plan(type(command), self.revision)
+            plan = self._plans[type(command)] = _class_plan(type(command), self.revision)
         return plan
 
     def _check(self, command: Command) -> MyActuatorMessage:
