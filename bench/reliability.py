@@ -1,0 +1,386 @@
+"""The long reliability runs: fuzzing under ASan + UBSan, and the 10-minute fault soak.
+
+    python bench/reliability.py --long          # both, then RELIABILITY.md (about an hour on 2 cores)
+    python bench/reliability.py fuzz [--runs N] [--guided-runs N] [--jobs J] [--targets a,b]
+    python bench/reliability.py soak [--minutes M] [--seed S]
+    python bench/reliability.py report          # RELIABILITY.md again from bench/results.json
+
+Figures go to ``bench/results.json`` under ``reliability`` (``reliability.fuzz``, ``reliability.soak`` and
+the headline numbers beside them; no other key is touched) and to RELIABILITY.md at the top of the
+repository, which is written whole from them.
+
+**Fuzz.** Each target of tests/_fuzz.py (every decoder, every de-framer, the SLCAN and RS485 byte
+streams into real transports with a Bus on them, the scheduler's frame intake) runs in two phases,
+each in its own process:
+
+1. *guided*: atheris (libFuzzer) over servobus's instrumented Python code, in the normal build, for
+   ``--guided-runs`` inputs (default 1,000,000) or ``--guided-seconds``, whichever ends first; it
+   grows a corpus of inputs that reach new code;
+2. *sanitized*: the C core built with AddressSanitizer + UndefinedBehaviorSanitizer (the venv
+   ``.ci/sanitize`` builds: ``.venv-asan``, built first if it is missing), the sanitizer runtimes
+   preloaded and ``PYTHONMALLOC=malloc``, runs every corpus input and then mutations of them,
+   ``--runs`` inputs in all (default 1,000,000). libFuzzer's coverage does not work in this process
+   (gcc's libasan provides the coverage hooks in an uninstrumented Python, and atheris sees none), so
+   the guided phase supplies the inputs that reach deep and this one runs them where memory errors
+   show.
+
+A target that fails stops its phase; the input is printed and kept under ``--artifacts``.
+
+**Soak.** tests/_soak.py's scenario (32 simulated MyActuator motors on 4 in-process buses, seeded
+faults of every kind, invariants checked throughout) on virtual time for ``--minutes`` virtual
+minutes (default 10).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Any
+
+BENCH = Path(__file__).resolve().parent
+ROOT = BENCH.parent
+sys.path.insert(0, str(BENCH))
+sys.path.insert(0, str(ROOT / "tests"))
+
+from _results import machine_info, markdown_table, update_results_json  # noqa: E402
+
+RESULTS = BENCH / "results.json"
+REPORT = ROOT / "RELIABILITY.md"
+KEY = "reliability"
+
+
+# ---- results.json ----
+
+
+def _load() -> dict[str, Any]:
+    if RESULTS.exists():
+        data = json.loads(RESULTS.read_text(encoding="utf-8"))
+        value = data.get(KEY)
+        if isinstance(value, dict):
+            return value
+    return {}
+
+
+def _store(part: str, value: Any, headline: dict[str, Any]) -> None:
+    """Set ``reliability[part]`` and the headline figures beside it; keep the rest of ``reliability``."""
+    current = _load()
+    current[part] = value
+    current.update(headline)
+    update_results_json(RESULTS, KEY, current)
+
+
+# ---- fuzz ----
+
+_DONE = re.compile(r"Done (\d+) runs in (\d+) second")
+
+
+def _asan_python() -> Path:
+    venv = Path(os.environ.get("SERVOBUS_ASAN_VENV", ROOT / ".venv-asan"))
+    python = venv / "bin" / "python"
+    if not python.exists():
+        subprocess.run(["bash", str(ROOT / ".ci" / "sanitize"), "--quick"], check=True)
+    return python
+
+
+def _asan_env() -> dict[str, str]:
+    def lib(name: str) -> str:
+        return subprocess.run(
+            ["gcc", f"-print-file-name={name}"], capture_output=True, text=True, check=True
+        ).stdout.strip()
+
+    env = dict(os.environ)
+    env.update(
+        LD_PRELOAD=f"{lib('libasan.so')} {lib('libubsan.so')}",
+        ASAN_OPTIONS="detect_leaks=0:abort_on_error=1",
+        UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1",
+        PYTHONMALLOC="malloc",
+    )
+    return env
+
+
+def _has_atheris(python: str | Path) -> bool:
+    probe = subprocess.run([str(python), "-c", "import atheris"], capture_output=True)
+    return probe.returncode == 0
+
+
+def _run_phase(
+    command: list[str], env: dict[str, str] | None, log: Path, timeout_s: float
+) -> tuple[int, float, bool, str]:
+    """(inputs run, seconds, passed, the output's tail) of one phase process."""
+    started = time.perf_counter()
+    with log.open("w") as out:
+        try:
+            proc = subprocess.run(command, env=env, stdout=out, stderr=subprocess.STDOUT, timeout=timeout_s)
+            code = proc.returncode
+        except subprocess.TimeoutExpired:
+            code = -1
+    elapsed = time.perf_counter() - started
+    text = log.read_text(errors="replace")
+    done = _DONE.findall(text)
+    runs = int(done[-1][0]) if done else 0
+    if not done:  # died or timed out: the last progress line it printed
+        progress = re.findall(r"#(\d+)", text)
+        runs = int(progress[-1]) if progress else 0
+    return runs, elapsed, code == 0 and bool(done), "\n".join(text.splitlines()[-25:])
+
+
+def fuzz_target(
+    name: str, *, runs: int, guided_runs: int, guided_seconds: int, work: Path, artifacts: Path
+) -> dict[str, Any]:
+    corpus = work / name
+    corpus.mkdir(parents=True, exist_ok=True)
+    script = str(BENCH / "_fuzz_one.py")
+    result: dict[str, Any] = {}
+    normal = sys.executable
+    if guided_runs and _has_atheris(normal):
+        n, seconds, ok, tail = _run_phase(
+            [
+                normal,
+                script,
+                name,
+                str(corpus),
+                f"-runs={guided_runs}",
+                f"-max_total_time={guided_seconds}",
+                "-max_len=512",
+                "-seed=1",
+                f"-artifact_prefix={artifacts}/{name}-",
+            ],
+            None,
+            work / f"{name}.guided.log",
+            guided_seconds + 600,
+        )
+        result["guided"] = {"engine": "atheris", "inputs": n, "seconds": round(seconds, 1), "passed": ok}
+        if not ok:
+            result["guided"]["failure"] = tail
+    result["corpus"] = sum(1 for _ in corpus.iterdir())
+    n, seconds, ok, tail = _run_phase(
+        [
+            str(_asan_python()),
+            script,
+            name,
+            "--mutate",
+            str(corpus),
+            f"-runs={runs}",
+            "-seed=2",
+            "-max_len=512",
+        ],
+        _asan_env(),
+        work / f"{name}.asan.log",
+        max(600, runs / 50),
+    )
+    result["sanitized"] = {
+        "engine": "corpus + mutations",
+        "inputs": n,
+        "seconds": round(seconds, 1),
+        "passed": ok,
+    }
+    if not ok:
+        result["sanitized"]["failure"] = tail
+        (artifacts / f"{name}.asan.log").write_text((work / f"{name}.asan.log").read_text(errors="replace"))
+    print(f"{name}: {json.dumps(result)[:300]}", flush=True)
+    return result
+
+
+def fuzz(args: argparse.Namespace) -> dict[str, Any]:
+    import _fuzz
+
+    names = args.targets.split(",") if args.targets else sorted(_fuzz.TARGETS)
+    _fuzz.close_rigs()
+    work = Path(args.corpus) if args.corpus else Path(tempfile.mkdtemp(prefix="servobus-fuzz-"))
+    artifacts = Path(args.artifacts)
+    artifacts.mkdir(parents=True, exist_ok=True)
+    _asan_python()  # build it once, before the workers start
+    started = time.perf_counter()
+    with ThreadPoolExecutor(args.jobs) as pool:
+        futures = {
+            name: pool.submit(
+                fuzz_target,
+                name,
+                runs=args.runs,
+                guided_runs=args.guided_runs,
+                guided_seconds=args.guided_seconds,
+                work=work,
+                artifacts=artifacts,
+            )
+            for name in names
+        }
+        targets = {name: future.result() for name, future in futures.items()}
+    if not args.corpus:
+        shutil.rmtree(work, ignore_errors=True)
+    value = {
+        "targets": targets,
+        "runs_asked": args.runs,
+        "guided_runs_asked": args.guided_runs,
+        "wall_s": round(time.perf_counter() - started, 1),
+        "command": " ".join(["python bench/reliability.py", *sys.argv[1:]]),
+        "machine": machine_info(),
+    }
+    failed = [
+        n
+        for n, r in targets.items()
+        if not all(p.get("passed", True) for p in r.values() if isinstance(p, dict))
+    ]
+    headline = {
+        "fuzz_inputs_per_target": {n: r["sanitized"]["inputs"] for n, r in targets.items()},
+        "fuzz_failures": failed,
+    }
+    if not args.no_store:
+        _store("fuzz", value, headline)
+    return value
+
+
+# ---- soak ----
+
+
+def soak(args: argparse.Namespace) -> dict[str, Any]:
+    import _soak
+
+    started = time.perf_counter()
+    result = _soak.run(minutes=args.minutes, seed=args.seed)
+    summary = result.summary()
+    summary["wall_s"] = round(time.perf_counter() - started, 1)
+    summary["command"] = " ".join(["python bench/reliability.py", *sys.argv[1:]])
+    summary["machine"] = machine_info()
+    headline = {
+        "requests": summary["requests"],
+        "faults_injected": summary["faults"],
+        "mismatched_replies": summary["mismatched_replies"],
+        "leaked_pending": summary["leaked_pending"],
+        "stale_commands_sent": summary["stale_commands_sent"],
+        "unplug_recovery_s": summary["unplug_recovery_s"],
+    }
+    if not args.no_store:
+        _store("soak", summary, headline)
+    print(json.dumps(summary, indent=2)[:4000])
+    return summary
+
+
+# ---- RELIABILITY.md ----
+
+
+def report() -> None:
+    data = _load()
+    lines = [
+        "# servobus reliability figures",
+        "",
+        "Written by `python bench/reliability.py` from `bench/results.json` (key `reliability`); rerun",
+        "`python bench/reliability.py --long` to measure again. What is promised, and the test that shows",
+        'each promise, is in README.md ("What servobus promises under faults").',
+        "",
+    ]
+    fz = data.get("fuzz")
+    if fz:
+        lines += [
+            "## Fuzzing",
+            "",
+            f"Command: `{fz['command']}` ({fz['wall_s'] / 60:.0f} min wall, {fz['machine']['cpu_count']} "
+            f"cores, {fz['machine']['cpu_model']}, {fz['machine']['date_utc']}).",
+            "",
+            "*guided*: atheris (libFuzzer) coverage-guided over the Python code, normal build. *sanitized*: "
+            "the C core built with ASan + UBSan, the guided phase's corpus and then mutations of it (no "
+            "coverage feedback in that process: see bench/reliability.py).",
+            "",
+        ]
+        rows = []
+        for name, r in sorted(fz["targets"].items()):
+            guided = r.get("guided", {})
+            san = r["sanitized"]
+            ok = all(p.get("passed", True) for p in (guided, san))
+            rows.append(
+                [
+                    f"`{name}`",
+                    f"{guided.get('inputs', 0):,}",
+                    r.get("corpus", 0),
+                    f"{san['inputs']:,}",
+                    f"{san['seconds']:.0f}",
+                    "passed" if ok else "**failed**",
+                ]
+            )
+        lines.append(
+            markdown_table(
+                ["target", "guided inputs", "corpus", "sanitized inputs", "sanitized s", "result"],
+                rows,
+                "lrrrrl",
+            )
+        )
+    sk = data.get("soak")
+    if sk:
+        lines += [
+            "## Soak",
+            "",
+            f"Command: `{sk['command']}`: {sk['virtual_s'] / 60:.1f} virtual minutes in {sk['wall_s']:.0f} s "
+            f"wall ({sk['machine']['date_utc']}); {sk['motors']} simulated motors on {sk['buses']} buses, "
+            f"seed {sk['seed']}.",
+            "",
+            markdown_table(
+                ["figure", "value"],
+                [
+                    ["requests made", f"{sk['requests']:,}"],
+                    [
+                        "replied / timed out / cancelled / failed",
+                        " / ".join(
+                            f"{sk['outcomes'].get(k, 0):,}"
+                            for k in ("replied", "timed_out", "cancelled", "failed")
+                        ),
+                    ],
+                    ["mismatched replies (must be 0)", sk["mismatched_replies"]],
+                    ["leaked pending (must be 0)", sk["leaked_pending"]],
+                    ["stale commands sent (must be 0)", sk["stale_commands_sent"]],
+                    ["most requests pending at once", sk["max_pending"]],
+                    ["traced memory growth after warm-up", f"{sk['memory_growth_bytes']:,} B"],
+                    ["recovery after an unplug (s)", ", ".join(f"{x:.3f}" for x in sk["unplug_recovery_s"])],
+                ],
+                "lr",
+            ),
+            "Faults injected, by kind:",
+            "",
+            markdown_table(
+                ["fault", "count"], [[k, f"{v:,}"] for k, v in sorted(sk["faults"].items())], "lr"
+            ),
+        ]
+    REPORT.write_text("\n".join(lines).rstrip() + "\n", encoding="utf-8")
+    print(f"wrote {REPORT}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("command", nargs="?", choices=["fuzz", "soak", "report"])
+    parser.add_argument("--long", action="store_true", help="fuzz, soak and report at full length")
+    parser.add_argument("--runs", type=int, default=1_000_000, help="sanitized inputs per target")
+    parser.add_argument(
+        "--guided-runs", type=int, default=1_000_000, help="guided inputs per target (0: none)"
+    )
+    parser.add_argument("--guided-seconds", type=int, default=300, help="guided time per target, at most")
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--targets", default="", help="comma-separated (default: every target)")
+    parser.add_argument("--corpus", default="", help="keep the corpora here (default: a temporary folder)")
+    parser.add_argument("--artifacts", default=str(Path(tempfile.gettempdir()) / "servobus-fuzz-artifacts"))
+    parser.add_argument("--minutes", type=float, default=10.0, help="soak length in virtual minutes")
+    parser.add_argument("--seed", type=int, default=2024)
+    parser.add_argument("--no-store", action="store_true", help="print only; results.json untouched")
+    args = parser.parse_args()
+    if args.long or args.command is None:
+        fuzz(args)
+        soak(args)
+        report()
+    elif args.command == "fuzz":
+        fuzz(args)
+        report()
+    elif args.command == "soak":
+        soak(args)
+        report()
+    else:
+        report()
+
+
+if __name__ == "__main__":
+    main()

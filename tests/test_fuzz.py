@@ -1,0 +1,62 @@
+"""The fuzz targets of tests/_fuzz.py under Hypothesis, in every test run (the long run, millions of
+inputs per target under ASan + UBSan with atheris, is ``python bench/reliability.py fuzz``).
+
+Each target raises on a broken promise (only ProtocolError out of a decoder, a transport that stays
+OPEN, a scheduler that resolves only the right request, ...; see tests/_fuzz.py). Inputs that once
+broke one are kept below as regression tests.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import _fuzz
+from _fuzz import TARGETS
+
+# Inputs a fuzzer found, by target: each broke the target once (see the comment by it).
+REGRESSIONS: dict[str, list[bytes]] = {}
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _rigs() -> Iterator[None]:
+    yield
+    _fuzz.close_rigs()
+
+
+def test_every_promised_target_is_there() -> None:
+    assert set(TARGETS) == {
+        "myactuator_can",
+        "myactuator_rs485",
+        "lk_can",
+        "hollow_can",
+        "hollow_rs485",
+        "deframe_myactuator_rs485",
+        "deframe_hollow_transparent",
+        "deframe_modbus_rtu",
+        "deframe_slcan",
+        "transport_slcan",
+        "transport_rs485",
+        "scheduler_intake",
+    }
+
+
+@pytest.mark.parametrize("name", sorted(TARGETS))
+def test_fuzz(name: str) -> None:
+    run = TARGETS[name]
+
+    @settings(deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+    @given(st.binary(max_size=300))
+    def fuzz(data: bytes) -> None:
+        run(data)
+
+    fuzz()
+
+
+def test_regressions() -> None:
+    for name, inputs in sorted(REGRESSIONS.items()):
+        for data in inputs:
+            TARGETS[name](data)
