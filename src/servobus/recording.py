@@ -1,0 +1,206 @@
+"""What ``servobus record`` writes: telemetry rows (CSV, JSONL), raw frames (candump), and its files.
+
+* :class:`TapLink` wraps a transport and shows every frame that went out (at its send report) and
+  every frame that came in to a callback, before the Bus sees it; the Bus works as without it.
+* :class:`CandumpWriter` writes those frames through python-can's ``CanutilsLogWriter``, ``R``/``T``
+  marking direction, so :class:`servobus.logs.FrameDecoder` tells requests from replies on reading.
+* :class:`TelemetryWriter` writes one row per decoded reply: ``time_s``, ``motor_id``, ``family``,
+  ``reply`` and the reply's fields (:func:`servobus.logs.message_values`: units in the names).
+* :class:`NewFiles` opens outputs without overwriting what exists (unless told) and, on failure,
+  removes only the files it created.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import json
+import os
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import Any, TextIO
+
+import can
+
+from servobus.frame import Frame
+from servobus.logs import Scalar, message_values
+from servobus.protocols._message import Reply
+from servobus.transports.can import message_from_frame
+from servobus.transports.events import TransportEvent
+
+__all__ = ["CandumpWriter", "NewFiles", "TapLink", "TelemetryWriter", "telemetry_row"]
+
+#: ``(frame, received, timestamp on the loop's clock)``
+FrameCallback = Callable[[Frame, bool, float], object]
+
+
+class TapLink:
+    """A transport that shows ``on_frame`` every frame sent (once its send report came) and received.
+
+    Everything else goes to ``inner`` (a bit rate, a half-duplex flag: the Bus reads them).
+    """
+
+    def __init__(self, inner: Any, on_frame: FrameCallback, clock: Callable[[], float]) -> None:
+        self._inner = inner
+        self._on_frame = on_frame
+        self._clock = clock
+        self.name: str = inner.name
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._inner, name)
+
+    @property
+    def is_open(self) -> bool:
+        return bool(self._inner.is_open)
+
+    async def open(self) -> None:
+        await self._inner.open()
+
+    async def close(self) -> None:
+        await self._inner.close()
+
+    def send(self, frame: Frame) -> None:
+        self._inner.send(frame)
+
+    def set_consumer(self, consumer: Callable[[list[Frame]], object] | None) -> None:
+        if consumer is None:
+            self._inner.set_consumer(None)
+            return
+
+        def tapped(frames: list[Frame]) -> object:
+            now = self._clock()
+            for frame in frames:
+                self._on_frame(frame, True, frame.timestamp or now)
+            return consumer(frames)
+
+        self._inner.set_consumer(tapped)
+
+    def set_send_reporter(self, reporter: Callable[[Frame, float | None, str | None], object] | None) -> None:
+        if reporter is None:
+            self._inner.set_send_reporter(None)
+            return
+
+        def tapped(frame: Frame, sent_at: float | None, reason: str | None) -> object:
+            if reason is None:
+                self._on_frame(frame, False, sent_at if sent_at is not None else self._clock())
+            return reporter(frame, sent_at, reason)
+
+        self._inner.set_send_reporter(tapped)
+
+    def add_listener(self, listener: Callable[[TransportEvent], object]) -> None:
+        self._inner.add_listener(listener)
+
+    def remove_listener(self, listener: Callable[[TransportEvent], object]) -> None:
+        self._inner.remove_listener(listener)
+
+
+class CandumpWriter:
+    """Frames to a candump log through python-can, stamped ``epoch + (loop time - origin)``."""
+
+    def __init__(self, file: TextIO, *, channel: str = "can0", epoch: float, origin: float) -> None:
+        self._writer = can.io.CanutilsLogWriter(file, channel=channel)
+        self._offset = epoch - origin
+        self.count = 0
+
+    def write(self, frame: Frame, received: bool, timestamp: float) -> None:
+        message = message_from_frame(frame)
+        message.timestamp = timestamp + self._offset
+        message.is_rx = received
+        self._writer.on_message_received(message)
+        self.count += 1
+
+    def close(self) -> None:
+        self._writer.stop()
+
+
+def telemetry_row(time_s: float, family: str, motor_id: int, reply: Reply) -> dict[str, Scalar]:
+    """One row: ``time_s``, ``motor_id``, ``family``, ``reply`` (its class), then its fields."""
+    row: dict[str, Scalar] = {
+        "time_s": round(time_s, 6),
+        "motor_id": motor_id,
+        "family": family,
+        "reply": type(reply).__name__,
+    }
+    for name, value in message_values(reply).items():
+        row.setdefault(name, value)  # a reply's own motor_id is the row's
+    return row
+
+
+class TelemetryWriter:
+    """Rows as JSON lines, or as CSV whose columns are the first row's.
+
+    A CSV holds one reply type: rows whose fields differ from the first row's are not written and
+    are counted in ``skipped`` (JSONL keeps every row).
+    """
+
+    def __init__(self, file: TextIO, fmt: str) -> None:
+        if fmt not in ("csv", "jsonl"):
+            raise ValueError(f"telemetry format {fmt!r} is not csv or jsonl")
+        self._file = file
+        self._fmt = fmt
+        self._csv: csv.DictWriter[str] | None = None
+        self.count = 0
+        self.skipped = 0
+
+    def write(self, row: dict[str, Scalar]) -> None:
+        if self._fmt == "jsonl":
+            self._file.write(json.dumps(row) + "\n")
+        else:
+            if self._csv is None:
+                self._csv = csv.DictWriter(self._file, fieldnames=list(row), lineterminator="\n")
+                self._csv.writeheader()
+            elif list(row) != self._csv.fieldnames:
+                self.skipped += 1
+                return
+            self._csv.writerow(row)
+        self.count += 1
+
+    def close(self) -> None:
+        self._file.close()
+
+
+class NewFiles:
+    """Output files opened for writing: an existing one only with ``force``; :meth:`discard` removes
+    the ones that did not exist before (never a file this object did not create)."""
+
+    def __init__(self, *, force: bool = False) -> None:
+        self.force = force
+        self.created: list[Path] = []
+        self._open: list[TextIO] = []
+
+    def check(self, paths: Iterable[Path]) -> None:
+        """Refuse up front what :meth:`open` would refuse.
+
+        Raises:
+            FileExistsError: a path exists and ``force`` is off.
+        """
+        for path in paths:
+            if path.exists() and not self.force:
+                raise FileExistsError(f"{path} exists (--force overwrites it)")
+
+    def open(self, path: Path) -> TextIO:
+        """``path`` open for writing text.
+
+        Raises:
+            FileExistsError: it exists and ``force`` is off.
+            OSError: it cannot be created.
+        """
+        existed = path.exists()
+        file = path.open("w" if self.force else "x", encoding="utf-8", newline="")
+        if not existed:
+            self.created.append(path)
+        self._open.append(file)
+        return file
+
+    def close(self) -> None:
+        for file in self._open:
+            if not file.closed:
+                file.close()
+
+    def discard(self) -> None:
+        """Close everything and remove the files this object created."""
+        self.close()
+        for path in self.created:
+            with contextlib.suppress(FileNotFoundError):
+                os.remove(path)
+        self.created.clear()
