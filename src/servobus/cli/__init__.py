@@ -95,7 +95,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in args
     try:
-        cli.main(args=args, prog_name="servobus", standalone_mode=False)
+        # Without standalone mode click returns the code of a click.exceptions.Exit raised inside a
+        # command (a delegated server's status) instead of raising it.
+        code = cli.main(args=args, prog_name="servobus", standalone_mode=False)
+        if isinstance(code, int) and not isinstance(code, bool):
+            return code
     except click.exceptions.Exit as done:
         return done.exit_code
     except click.UsageError as exc:
