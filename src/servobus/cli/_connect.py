@@ -2,7 +2,8 @@
 
 ``--sim N`` runs against N simulated motors in-process (real time); ``--interface/--channel``
 (``-i``/``-c``) opens a CAN adapter through python-can (its configuration file and ``CAN_*``
-environment variables are the defaults); ``--port`` opens an RS485 line. ``--family``,
+environment variables are the defaults), or with ``-i servobus-slcan`` an SLCAN adapter through
+servobus's own transport; ``--port`` opens an RS485 line. ``--family``,
 ``--revision`` and ``--ids`` say which motors are there.
 """
 
@@ -21,6 +22,8 @@ from servobus.bus import Bus, Motor
 __all__ = ["Connection", "connection_options", "open_bus", "parse_ids"]
 
 FAMILIES = ("myactuator", "lk", "hollow")
+#: ``--interface`` value for servobus's own SLCAN transport (no python-can; no 2 s wait on open)
+NATIVE_SLCAN = "servobus-slcan"
 F = TypeVar("F", bound=Callable[..., Any])
 
 
@@ -96,6 +99,14 @@ class Connection:
 
             framing = get_family(self.family).bind(self.motor_ids[0], **self.bind_options()).framing
             return SerialTransport(self.port, framing=framing, baud=self.baud)
+        if self.interface == NATIVE_SLCAN:
+            from servobus.transports.slcan import SlcanTransport
+
+            if not self.channel:
+                raise click.UsageError(f"-i {NATIVE_SLCAN} needs the adapter's serial port: -c /dev/ttyACM0")
+            return SlcanTransport(
+                self.channel, bitrate=self.bitrate, data_bitrate=self.data_bitrate, fd=self.fd
+            )
         from servobus.transports.can import CanTransport
 
         return CanTransport(
@@ -108,17 +119,24 @@ class Connection:
 
 
 def sim_devices(family: str, ids: tuple[int, ...], revision: str | None = None) -> list[Any]:
-    """Simulated motors of ``family`` with ``ids``."""
+    """Simulated motors of ``family`` with ``ids``, in ``revision`` (the family's own parser reads it).
+
+    Raises:
+        ValueError: a revision the family does not have.
+    """
     if family == "myactuator":
+        from servobus.protocols.myactuator import FAMILY as MA
         from servobus.protocols.myactuator import Revision as MaRevision
         from servobus.sim.devices.myactuator import MyActuatorMotor
 
-        rev = MaRevision[revision] if revision else MaRevision.V4_4
+        rev: MaRevision = MA.revision(revision) if revision else MaRevision.V4_4
         return [MyActuatorMotor(i, revision=rev) for i in ids]
     if family == "lk":
+        from servobus.protocols.lk import DEFAULT_MODEL, FAMILY, LkModel
         from servobus.sim.devices.lk import LkMotor
 
-        return [LkMotor(i) for i in ids]
+        model = LkModel(revision=FAMILY.revision(revision)) if revision else DEFAULT_MODEL
+        return [LkMotor(i, model=model) for i in ids]
     from servobus.sim.devices.hollow import HollowMotor
 
     return [HollowMotor(i) for i in ids]
@@ -170,7 +188,12 @@ def connection_options(func: F) -> F:
         "--ids", "ids_text", metavar="IDS", help="Motor ids, e.g. 1-4,7 (default: 1, or 1..N with --sim N)."
     )
     @click.option("--sim", type=int, metavar="N", help="Run against N simulated motors in-process.")
-    @click.option("--interface", "-i", help="python-can interface (socketcan, slcan, pcan, virtual, ...).")
+    @click.option(
+        "--interface",
+        "-i",
+        help=f"python-can interface (socketcan, slcan, pcan, virtual, ...), or {NATIVE_SLCAN}: "
+        "servobus's own SLCAN transport.",
+    )
     @click.option("--channel", "-c", help="python-can channel (can0, /dev/ttyACM0, ...).")
     @click.option(
         "--bitrate", type=click.IntRange(min=1), help="CAN bit rate [default: the adapter's config]."
