@@ -1,0 +1,142 @@
+"""Talking to the motors a command names: build every command first, then ask each motor, collect.
+
+Commands are built and encoded for every motor before the first frame goes out, so a value out of
+range or a command the motor's revision lacks stops the whole command with one line (exit 2) and
+nothing sent. A motor that does not answer is a result (its error), not the end of the command:
+the others still get theirs, and :func:`fail_if_any` turns the failures into one line and exit 1.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from collections.abc import Coroutine, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, TypeVar
+
+import click
+
+from servobus.bus import Motor
+from servobus.cli._connect import Connection
+from servobus.cli._families import Op
+from servobus.errors import ServobusError
+from servobus.protocols import get_family
+from servobus.protocols._message import Command, Reply
+
+__all__ = ["Outcome", "ask_all", "codecs", "fail_if_any", "plan", "run", "status_of"]
+
+T = TypeVar("T")
+
+
+def run(coro: Coroutine[Any, Any, T]) -> T:
+    """Run ``coro`` on a fresh event loop. Ctrl-C cancels it (the Bus stops its motors on the way out)
+    and ends here as KeyboardInterrupt, which ``servobus.cli.main`` turns into exit 130."""
+    return asyncio.run(coro)
+
+
+@dataclass(slots=True)
+class Outcome:
+    """One motor's result: the replies to what was sent (in order), or the error that ended it."""
+
+    motor_id: int
+    replies: list[Reply | None] = field(default_factory=list)
+    error: str | None = None
+
+    @property
+    def reply(self) -> Reply | None:
+        """The reply to the last command sent."""
+        return self.replies[-1] if self.replies else None
+
+
+def codecs(conn: Connection) -> list[Any]:
+    """The bound codecs of the motors ``conn`` names (no bus needed: for checks before opening one).
+
+    Raises:
+        ValueError: a bad id or revision for the family.
+    """
+    family = get_family(conn.family)
+    return [family.bind(i, **conn.bind_options()) for i in conn.motor_ids]
+
+
+def plan(conn: Connection, op: Op, values: Mapping[str, Any]) -> list[Sequence[Command]]:
+    """Every motor's commands, in ``conn.motor_ids`` order, built and encoded now (nothing is sent).
+
+    Raises:
+        ValueError: a value out of range, or a command the motor's revision or link lacks.
+        click.UsageError: a combination the family does not support.
+    """
+    planned = []
+    for codec in codecs(conn):
+        commands = op.first(codec, values)
+        for command in commands:
+            codec.encode(command)  # the revision and link checks, before anything is sent
+        planned.append(commands)
+    return planned
+
+
+async def ask_all(motors: Sequence[Motor], planned: Sequence[Sequence[Command]]) -> list[Outcome]:
+    """Send each motor its commands in order (the motors one after the other); collect the replies."""
+    outcomes = []
+    for motor, commands in zip(motors, planned, strict=True):
+        outcome = Outcome(motor.motor_id)
+        for command in commands:
+            try:
+                outcome.replies.append(await motor.request(command))
+            except ServobusError as exc:
+                outcome.error = str(exc)
+                break
+        outcomes.append(outcome)
+    return outcomes
+
+
+#: the columns of a status, and where each family's replies keep them: (field, factor) in order
+STATUS_COLUMNS = ("angle_deg", "speed_dps", "current_a", "torque_nm", "temperature_c", "voltage_v", "errors")
+_DEG_PER_RAD = 180.0 / math.pi
+_SOURCES: dict[str, tuple[tuple[str, float], ...]] = {
+    "angle_deg": (("angle_deg", 1.0), ("position_deg", 1.0), ("position_rad", _DEG_PER_RAD)),
+    "speed_dps": (("speed_dps", 1.0), ("speed_rad_s", _DEG_PER_RAD), ("velocity_rad_s", _DEG_PER_RAD)),
+    "current_a": (("current_a", 1.0),),
+    "torque_nm": (("torque_nm", 1.0),),
+    "temperature_c": (("temperature_c", 1.0),),
+    "voltage_v": (("voltage_v", 1.0),),
+}
+
+
+def status_of(replies: Sequence[Reply | None]) -> dict[str, Any]:
+    """The status columns found in ``replies`` (a later reply fills only what earlier ones left), in
+    the columns' units (radians converted to degrees).
+
+    ``errors`` is the reply's own fault field (``Reply.FAULTS``), as a list of flag names.
+    """
+    from servobus.cli._output import jsonable
+
+    out: dict[str, Any] = dict.fromkeys(STATUS_COLUMNS)
+    for reply in replies:
+        if reply is None:
+            continue
+        for column, sources in _SOURCES.items():
+            if out[column] is not None:
+                continue
+            for name, factor in sources:
+                value = getattr(reply, name, None)
+                if isinstance(value, int | float) and not isinstance(value, bool):
+                    out[column] = value * factor if factor != 1.0 else value
+                    break
+        faults = getattr(reply, "FAULTS", None)
+        if faults is not None and out["errors"] is None:
+            out["errors"] = jsonable(getattr(reply, faults))
+    return out
+
+
+def fail_if_any(outcomes: Sequence[Outcome]) -> None:
+    """Raise one line for the motors that failed (exit 1), after the output was printed.
+
+    Raises:
+        click.ClickException: at least one motor failed.
+    """
+    failed = [o for o in outcomes if o.error is not None]
+    if not failed:
+        return
+    first = failed[0].error
+    more = f" (and {len(failed) - 1} more)" if len(failed) > 1 else ""
+    raise click.ClickException(f"{len(failed)} of {len(outcomes)} motors failed: {first}{more}")

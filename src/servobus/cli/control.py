@@ -1,0 +1,585 @@
+"""The motor commands: ``status``, ``monitor``, set-points (``move``, ``speed``, ``torque``, ``mit``) and
+one-shots (``stop``, ``off``, ``brake``, ``zero``, ``set-id``, ``clear-errors``, ``reset``).
+
+Which command class each sends is the family's table (:mod:`servobus.cli._families`); here are the
+options (units in their names), the confirmation of ROM writes and id changes, and the output.
+Set-points are resent at ``--rate-hz`` until ``--duration`` ends, a move arrives, or Ctrl-C; then
+the motors get the Bus's safe stop (``--keep`` sends once and leaves them running).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import click
+from rich.live import Live
+
+from servobus.bus import Motor
+from servobus.cli._connect import Connection, connection_options, open_bus
+from servobus.cli._families import Op, op, status_reads
+from servobus.cli._motors import (
+    STATUS_COLUMNS,
+    Outcome,
+    ask_all,
+    codecs,
+    fail_if_any,
+    plan,
+    run,
+    status_of,
+)
+from servobus.cli._output import confirm, console, emit_json, json_option, reply_fields, table, yes_option
+from servobus.errors import ServobusError
+from servobus.protocols._message import Command, Reply
+
+__all__ = [
+    "brake",
+    "clear_errors",
+    "mit",
+    "monitor",
+    "move",
+    "off",
+    "reset",
+    "set_id",
+    "speed",
+    "status",
+    "stop",
+    "torque",
+    "zero",
+]
+
+_SETTINGS = {"max_content_width": 100}
+
+
+def _epilog(*examples: str) -> str:
+    return "Examples:\n\n\b\n" + "\n".join(f"  {e}" for e in examples)
+
+
+# ---- output ----
+
+
+def _status_rows(outcomes: Sequence[Outcome]) -> list[dict[str, Any]]:
+    rows = []
+    for o in outcomes:
+        row: dict[str, Any] = {"id": o.motor_id, **status_of(o.replies)}
+        row["error"] = o.error
+        rows.append(row)
+    return rows
+
+
+def _status_table(rows: Sequence[Mapping[str, Any]], title: str | None = None) -> Any:
+    columns = ("id", *STATUS_COLUMNS, "error")
+    shown = [c for c in columns if c in ("id", "error") or any(r.get(c) is not None for r in rows)]
+    if not any(r.get("error") for r in rows):
+        shown.remove("error")
+    return table(title, shown, ([r.get(c) for c in shown] for r in rows))
+
+
+def _print_results(outcomes: Sequence[Outcome], sent: Sequence[Sequence[Command]], as_json: bool) -> None:
+    if as_json:
+        emit_json(
+            [
+                {
+                    "id": o.motor_id,
+                    "sent": [type(c).__name__ for c in commands],
+                    "replies": [
+                        None if r is None else {"type": type(r).__name__, **reply_fields(r)}
+                        for r in o.replies
+                    ],
+                    "error": o.error,
+                }
+                for o, commands in zip(outcomes, sent, strict=True)
+            ]
+        )
+        return
+    rows: list[tuple[Any, ...]] = []
+    for o, commands in zip(outcomes, sent, strict=True):
+        reply = o.reply
+        if o.error is not None:
+            result = ""
+        elif reply is None:
+            result = "sent (no reply by the manual)"
+        else:
+            result = type(reply).__name__ + " " + " ".join(f"{k}={v}" for k, v in reply_fields(reply).items())
+        rows.append((o.motor_id, ", ".join(type(c).__name__ for c in commands), result, o.error))
+    columns = ["id", "sent", "reply", "error"]
+    if not any(r[3] for r in rows):
+        columns, rows = columns[:3], [r[:3] for r in rows]
+    console().print(table(None, columns, rows))
+
+
+# ---- status and monitor ----
+
+
+@click.command(
+    context_settings=_SETTINGS,
+    epilog=_epilog(
+        "servobus status --sim 3",
+        "servobus status -i slcan -c /dev/ttyACM0 --ids 1-3",
+        "servobus status -i socketcan -c can0 --family lk --ids 9,10 --json",
+    ),
+)
+@connection_options
+@json_option
+def status(conn: Connection, as_json: bool) -> None:
+    """Read each motor's position, speed, current, temperature, voltage and errors once."""
+    reads = status_reads(conn.family)
+    planned = plan(conn, reads, {})
+
+    async def go() -> list[Outcome]:
+        async with open_bus(conn, safe=None) as (_, motors):
+            return await ask_all(motors, planned)
+
+    outcomes = run(go())
+    rows = _status_rows(outcomes)
+    if as_json:
+        emit_json(rows)
+    else:
+        console().print(_status_table(rows))
+    fail_if_any(outcomes)
+
+
+@click.command(
+    context_settings=_SETTINGS,
+    epilog=_epilog(
+        "servobus monitor --sim 4                    # live table until Ctrl-C",
+        "servobus monitor --sim 4 --rate-hz 50 --duration 10 --json > samples.jsonl",
+    ),
+)
+@connection_options
+@click.option("--rate-hz", type=click.FloatRange(min=0.1, max=1000), default=10.0, show_default=True)
+@click.option(
+    "--duration", type=click.FloatRange(min=0), help="Stop after this many seconds [default: Ctrl-C]."
+)
+@json_option
+def monitor(conn: Connection, rate_hz: float, duration: float | None, as_json: bool) -> None:
+    """Poll the motors' status at a fixed rate and show it live (JSON: one line per motor and sample).
+
+    Only reads are sent: the motors keep doing what they were doing.
+    """
+    reads = status_reads(conn.family)
+    planned = plan(conn, reads, {})
+    live = not as_json and console(stderr=True).is_terminal
+    outcomes = run(_monitor(conn, planned, rate_hz, duration, as_json, live))
+    if not as_json:
+        console().print(_status_table(_status_rows(outcomes)))
+    fail_if_any(outcomes)
+
+
+async def _monitor(
+    conn: Connection,
+    planned: Sequence[Sequence[Command]],
+    rate_hz: float,
+    duration: float | None,
+    as_json: bool,
+    live: bool,
+) -> list[Outcome]:
+    async with open_bus(conn, safe=None) as (bus, motors):
+        items = [(m, c) for m, commands in zip(motors, planned, strict=True) for c in commands]
+        outcomes = [Outcome(m.motor_id) for m in motors]
+        by_id = {o.motor_id: o for o in outcomes}
+        start = asyncio.get_running_loop().time()
+        view = Live(console=console(stderr=True), auto_refresh=False) if live else None
+        try:
+            if view is not None:
+                view.start()
+            async for tick in bus.ticks(rate_hz, spin_s=0.0):
+                elapsed = tick.started - start
+                if duration is not None and elapsed >= duration:
+                    break
+                results = await bus.cycle(items)
+                fresh: dict[int, list[Reply | None]] = {}
+                errors: dict[int, str] = {}
+                for (motor, _), result in zip(items, results, strict=True):
+                    if isinstance(result, BaseException):
+                        errors[motor.motor_id] = str(result)
+                    else:
+                        fresh.setdefault(motor.motor_id, []).append(result)
+                for motor_id, outcome in by_id.items():
+                    outcome.error = errors.get(motor_id)
+                    if motor_id in fresh:
+                        outcome.replies = fresh[motor_id]
+                    if as_json:
+                        row = {"t": round(elapsed, 4), "id": motor_id, **status_of(fresh.get(motor_id, []))}
+                        row["error"] = outcome.error
+                        emit_json(row)
+                if view is not None and tick.index % max(1, round(rate_hz / 4)) == 0:
+                    title = f"{len(motors)} {conn.family} motor(s), {elapsed:.1f} s (Ctrl-C stops)"
+                    view.update(_status_table(_status_rows(outcomes), title), refresh=True)
+        finally:
+            if view is not None:
+                view.stop()
+        return outcomes
+
+
+# ---- set-points ----
+
+
+def _drive(
+    conn: Connection,
+    name: str,
+    values: Mapping[str, Any],
+    *,
+    rate_hz: float,
+    duration: float | None,
+    keep: bool,
+    as_json: bool,
+    arrived: Callable[[dict[str, Any]], bool] | None = None,
+) -> None:
+    entry = op(conn.family, name)
+    planned = plan(conn, entry, values)
+    repeat = entry.repeat
+    assert repeat is not None
+    repeats = [repeat(codec, values) for codec in codecs(conn)]
+    live = not as_json and console(stderr=True).is_terminal
+    outcomes = run(_run_setpoints(conn, planned, repeats, rate_hz, duration, keep, live, arrived))
+    rows = _status_rows(outcomes)
+    if as_json:
+        emit_json(rows)
+    else:
+        console().print(_status_table(rows))
+        if keep:
+            click.echo("left running (--keep): stop them with `servobus stop`", err=True)
+    fail_if_any(outcomes)
+
+
+async def _run_setpoints(
+    conn: Connection,
+    planned: Sequence[Sequence[Command]],
+    repeats: Sequence[Command],
+    rate_hz: float,
+    duration: float | None,
+    keep: bool,
+    live: bool,
+    arrived: Callable[[dict[str, Any]], bool] | None,
+) -> list[Outcome]:
+    async with open_bus(conn, safe=None if keep else "stop") as (bus, motors):
+        outcomes = await ask_all(motors, planned)
+        if keep or any(o.error for o in outcomes):
+            return outcomes
+        items: list[tuple[Motor, Command]] = list(zip(motors, repeats, strict=True))
+        view = Live(console=console(stderr=True), auto_refresh=False) if live else None
+        settled = 0
+        start = time.monotonic()
+        try:
+            if view is not None:
+                view.start()
+            async for tick in bus.ticks(rate_hz, spin_s=0.0):
+                elapsed = time.monotonic() - start
+                if duration is not None and elapsed >= duration:
+                    break
+                results = await bus.cycle(items)
+                for outcome, result in zip(outcomes, results, strict=True):
+                    if isinstance(result, ServobusError):
+                        outcome.error = str(result)
+                    elif isinstance(result, BaseException):
+                        raise result
+                    else:
+                        outcome.error = None
+                        outcome.replies = [result]
+                if arrived is not None:
+                    done = all(o.error is None and arrived(status_of(o.replies)) for o in outcomes)
+                    settled = settled + 1 if done else 0
+                    if settled >= 3:  # three ticks in a row at the target
+                        break
+                if view is not None and tick.index % max(1, round(rate_hz / 4)) == 0:
+                    title = f"{type(repeats[0]).__name__}, {elapsed:.1f} s (Ctrl-C stops the motors)"
+                    view.update(_status_table(_status_rows(outcomes), title), refresh=True)
+        finally:
+            if view is not None:
+                view.stop()
+        return outcomes
+
+
+_rate = click.option(
+    "--rate-hz",
+    type=click.FloatRange(min=1, max=1000),
+    default=50.0,
+    show_default=True,
+    help="How often the set-point is resent (each reply refreshes the status).",
+)
+_duration = click.option(
+    "--duration", type=click.FloatRange(min=0), help="Seconds to hold the set-point [default: Ctrl-C]."
+)
+_keep = click.option(
+    "--keep", is_flag=True, help="Send the set-point once and leave the motors running (no stop at the end)."
+)
+
+
+@click.command(
+    context_settings=_SETTINGS,
+    epilog=_epilog(
+        "servobus move --sim 2 --angle-deg 90                   # until both are there, then hold",
+        "servobus move --ids 1-3 -i slcan -c /dev/ttyACM0 --angle-deg -45 --max-speed-dps 60",
+        "servobus move --sim 1 --angle-deg 30 --relative --duration 2",
+    ),
+)
+@connection_options
+@click.option("--angle-deg", type=float, required=True, help="Target angle of the output shaft.")
+@click.option(
+    "--max-speed-dps",
+    type=click.FloatRange(min=0, min_open=True),
+    default=180.0,
+    show_default=True,
+    help="Speed limit of the move.",
+)
+@click.option("--no-speed-limit", is_flag=True, help="Send the family's 'no limit' value instead.")
+@click.option("--relative", is_flag=True, help="Move by --angle-deg from where the motor is.")
+@click.option(
+    "--tolerance-deg",
+    type=click.FloatRange(min=0, min_open=True),
+    default=1.0,
+    show_default=True,
+    help="An absolute move ends when every motor reports its angle this close.",
+)
+@_rate
+@_duration
+@_keep
+@json_option
+def move(
+    conn: Connection,
+    angle_deg: float,
+    max_speed_dps: float,
+    no_speed_limit: bool,
+    relative: bool,
+    tolerance_deg: float,
+    rate_hz: float,
+    duration: float | None,
+    keep: bool,
+    as_json: bool,
+) -> None:
+    """Move to an angle (or by one, --relative) and hold it: position control.
+
+    An absolute move ends when every motor reports the target (within --tolerance-deg) three times
+    in a row, or after --duration, or at Ctrl-C; the motors then stop and hold where they are.
+    """
+    values = {"angle_deg": angle_deg, "max_speed_dps": None if no_speed_limit else max_speed_dps}
+    values["relative"] = relative
+
+    def arrived(state: dict[str, Any]) -> bool:
+        angle = state.get("angle_deg")
+        return angle is not None and abs(angle - angle_deg) <= tolerance_deg
+
+    _drive(
+        conn,
+        "move",
+        values,
+        rate_hz=rate_hz,
+        duration=duration,
+        keep=keep,
+        as_json=as_json,
+        arrived=None if relative else arrived,
+    )
+
+
+@click.command(
+    context_settings=_SETTINGS,
+    epilog=_epilog(
+        "servobus speed --sim 2 --speed-dps 90 --duration 3",
+        "servobus speed --ids 1 -i socketcan -c can0 --speed-dps -30      # until Ctrl-C",
+    ),
+)
+@connection_options
+@click.option("--speed-dps", type=float, required=True, help="Speed of the output shaft.")
+@_rate
+@_duration
+@_keep
+@json_option
+def speed(
+    conn: Connection, speed_dps: float, rate_hz: float, duration: float | None, keep: bool, as_json: bool
+) -> None:
+    """Turn at a speed: speed control, until --duration or Ctrl-C; then stop and hold."""
+    _drive(
+        conn,
+        "speed",
+        {"speed_dps": speed_dps},
+        rate_hz=rate_hz,
+        duration=duration,
+        keep=keep,
+        as_json=as_json,
+    )
+
+
+@click.command(
+    context_settings=_SETTINGS,
+    epilog=_epilog(
+        "servobus torque --sim 1 --current-a 0.5 --duration 1",
+        "servobus torque --family lk --ids 9 -i socketcan -c can0 --current-a -1.2",
+    ),
+)
+@connection_options
+@click.option("--current-a", type=float, required=True, help="Torque (q-axis) current.")
+@_rate
+@_duration
+@_keep
+@json_option
+def torque(
+    conn: Connection, current_a: float, rate_hz: float, duration: float | None, keep: bool, as_json: bool
+) -> None:
+    """Drive a torque current: torque control, until --duration or Ctrl-C; then stop and hold."""
+    _drive(
+        conn,
+        "torque",
+        {"current_a": current_a},
+        rate_hz=rate_hz,
+        duration=duration,
+        keep=keep,
+        as_json=as_json,
+    )
+
+
+@click.command(
+    context_settings=_SETTINGS,
+    epilog=_epilog(
+        "servobus mit --sim 1 --position-rad 1.0 --kp 20 --kd 1 --duration 2",
+        "servobus mit --ids 2 -i slcan -c /dev/ttyACM0 --position-rad 0 --kp 5 --kd 0.5 --torque-ff-nm 0.3",
+    ),
+)
+@connection_options
+@click.option("--position-rad", type=float, required=True, help="Target position p_des.")
+@click.option("--velocity-rad-s", type=float, default=0.0, show_default=True, help="Target velocity v_des.")
+@click.option("--kp", type=float, required=True, help="Position gain (N·m/rad).")
+@click.option("--kd", type=float, required=True, help="Velocity gain (N·m·s/rad).")
+@click.option("--torque-ff-nm", type=float, default=0.0, show_default=True, help="Feed-forward torque.")
+@_rate
+@_duration
+@_keep
+@json_option
+def mit(
+    conn: Connection,
+    position_rad: float,
+    velocity_rad_s: float,
+    kp: float,
+    kd: float,
+    torque_ff_nm: float,
+    rate_hz: float,
+    duration: float | None,
+    keep: bool,
+    as_json: bool,
+) -> None:
+    """Motion (MIT) mode: torque = kp·(p_des - p) + kd·(v_des - v) + t_ff, until --duration or Ctrl-C.
+
+    The ranges are the motor revision's (MyActuator V4.4: ±12.5 rad, ±45 rad/s, kp 0..500, kd 0..5).
+    """
+    values = {
+        "position_rad": position_rad,
+        "velocity_rad_s": velocity_rad_s,
+        "kp": kp,
+        "kd": kd,
+        "torque_ff_nm": torque_ff_nm,
+    }
+    _drive(conn, "mit", values, rate_hz=rate_hz, duration=duration, keep=keep, as_json=as_json)
+
+
+# ---- one-shots ----
+
+
+def _one_shot(conn: Connection, name: str, values: Mapping[str, Any], *, yes: bool, as_json: bool) -> None:
+    entry: Op = op(conn.family, name)
+    planned = plan(conn, entry, values)
+    if entry.rom:
+        ids = ", ".join(str(i) for i in conn.motor_ids)
+        confirm(f"{name} writes the ROM of {conn.family} motor(s) {ids}. Continue?", yes)
+
+    async def go() -> list[Outcome]:
+        async with open_bus(conn, safe=None) as (_, motors):
+            return await ask_all(motors, planned)
+
+    outcomes = run(go())
+    _print_results(outcomes, planned, as_json)
+    fail_if_any(outcomes)
+    if entry.note and not as_json:
+        click.echo(f"note: {entry.note}", err=True)
+
+
+@click.command(
+    context_settings=_SETTINGS,
+    epilog=_epilog("servobus stop --sim 2", "servobus stop -i socketcan -c can0 --ids 1-8"),
+)
+@connection_options
+@json_option
+def stop(conn: Connection, as_json: bool) -> None:
+    """Stop and hold position (the loop stays active; hollow motors: output off)."""
+    _one_shot(conn, "stop", {}, yes=True, as_json=as_json)
+
+
+@click.command(
+    context_settings=_SETTINGS,
+    epilog=_epilog("servobus off --sim 2", "servobus off -i socketcan -c can0 --ids 1-8"),
+)
+@connection_options
+@json_option
+def off(conn: Connection, as_json: bool) -> None:
+    """Switch the output off: the shaft is free (MyActuator 0x80, LK 0x80, hollow stop)."""
+    _one_shot(conn, "off", {}, yes=True, as_json=as_json)
+
+
+@click.command(
+    context_settings=_SETTINGS,
+    epilog=_epilog(
+        "servobus brake --sim 1 --release", "servobus brake -i slcan -c /dev/ttyACM0 --ids 3 --lock"
+    ),
+)
+@connection_options
+@click.option("--lock/--release", "lock", required=True, help="Close (hold) or open the holding brake.")
+@json_option
+def brake(conn: Connection, lock: bool, as_json: bool) -> None:
+    """Lock or release the holding brake."""
+    _one_shot(conn, "brake", {"lock": lock}, yes=True, as_json=as_json)
+
+
+@click.command(
+    context_settings=_SETTINGS,
+    epilog=_epilog("servobus zero --sim 1 --yes", "servobus zero -i slcan -c /dev/ttyACM0 --ids 2"),
+)
+@connection_options
+@yes_option
+@json_option
+def zero(conn: Connection, yes: bool, as_json: bool) -> None:
+    """Make the present position the zero (MyActuator and LK: written to ROM; asks first)."""
+    _one_shot(conn, "zero", {}, yes=yes, as_json=as_json)
+
+
+@click.command(
+    "set-id",
+    context_settings=_SETTINGS,
+    epilog=_epilog(
+        "servobus set-id --sim 1 --ids 1 5 --yes", "servobus set-id -i slcan -c /dev/ttyACM0 --ids 1 2"
+    ),
+)
+@connection_options
+@click.argument("new_id", metavar="NEW_ID", type=int)
+@yes_option
+@json_option
+def set_id(conn: Connection, new_id: int, yes: bool, as_json: bool) -> None:
+    """Give one motor (--ids) a new id (written to ROM; asks first)."""
+    if len(conn.motor_ids) != 1:
+        raise click.UsageError(f"set-id changes one motor: give one id with --ids, not {len(conn.motor_ids)}")
+    _one_shot(conn, "set-id", {"new_id": new_id}, yes=yes, as_json=as_json)
+
+
+@click.command(
+    "clear-errors",
+    context_settings=_SETTINGS,
+    epilog=_epilog(
+        "servobus clear-errors --family lk --sim 2", "servobus clear-errors --family lk -i socketcan -c can0"
+    ),
+)
+@connection_options
+@json_option
+def clear_errors(conn: Connection, as_json: bool) -> None:
+    """Clear the motors' error flags (where the family has a request for it)."""
+    _one_shot(conn, "clear-errors", {}, yes=True, as_json=as_json)
+
+
+@click.command(
+    context_settings=_SETTINGS,
+    epilog=_epilog("servobus reset --sim 1", "servobus reset -i slcan -c /dev/ttyACM0 --ids 1-3"),
+)
+@connection_options
+@json_option
+def reset(conn: Connection, as_json: bool) -> None:
+    """Restart the motors' firmware (no reply comes: the motor reboots)."""
+    _one_shot(conn, "reset", {}, yes=True, as_json=as_json)
