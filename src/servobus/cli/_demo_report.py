@@ -1,0 +1,197 @@
+"""What ``servobus demo`` shows: the plan (why so many buses), the live view, and the summary.
+
+Numbers only come in here (:class:`Summary`, built by the demo from the Bus's metrics, the pacer's
+ticks and the process's CPU time); nothing here talks to a bus.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from rich.console import Group
+from rich.table import Table
+from rich.text import Text
+
+from servobus.timing import frame_time_s
+
+__all__ = ["Layout", "Summary", "layout", "live_view", "summary_lines"]
+
+#: a tick's bus traffic must fit in this share of the period
+MARGIN = 0.9
+
+
+@dataclass(frozen=True, slots=True)
+class Layout:
+    """How the motors are spread over buses, and why."""
+
+    hz: float
+    motors: int
+    per_bus: tuple[int, ...]  # motors on each bus
+    capacity: int  # motors one bus carries per tick within the margin
+    pair_s: float  # wire time of one request and its reply
+    turnaround_s: float
+
+    @property
+    def buses(self) -> int:
+        return len(self.per_bus)
+
+    def tick_wire_s(self, k: int) -> float:
+        """Wire time of one tick on a bus of ``k`` motors: requests win arbitration over replies, the
+        first reply waits for its motor's turnaround, then the replies follow one another."""
+        frame = self.pair_s / 2
+        return max(k * self.pair_s, frame + self.turnaround_s + k * frame)
+
+    def why(self) -> str:
+        period_ms = 1e3 / self.hz
+        return (
+            f"classic CAN at 1 Mbit/s: a request and its reply take {self.pair_s * 1e3:.2f} ms of wire time, "
+            f"so one bus carries at most {self.capacity} motor(s) per {period_ms:g} ms tick with margin "
+            f"({self.tick_wire_s(self.capacity) * 1e3:.2f} ms of {MARGIN * period_ms:.2f} ms): "
+            f"{self.motors} motor(s) -> {self.buses} bus" + ("es" if self.buses > 1 else "")
+        )
+
+    def overload(self) -> str | None:
+        """A warning when a bus carries more motors than fit in a tick."""
+        worst = max(self.per_bus)
+        wire = self.tick_wire_s(worst)
+        if wire <= 1 / self.hz:
+            return None
+        return (
+            f"{worst} motors on one bus need {wire * 1e3:.2f} ms of wire time per tick, more than the "
+            f"{1e3 / self.hz:g} ms period: ticks will be missed (use more --buses or a lower --hz)"
+        )
+
+
+def layout(hz: float, motors: int, buses: int | None, turnaround_s: float) -> Layout:
+    """Spread ``motors`` over ``buses`` (default: as few as carry them at ``hz`` within the margin)."""
+    from servobus.frame import Frame
+
+    # An 8-byte position command and an 8-byte status reply (all-zero data: most stuff bits).
+    pair = frame_time_s(Frame(arbitration_id=0x141, data=bytes(8))) + frame_time_s(
+        Frame(arbitration_id=0x241, data=bytes(8))
+    )
+    probe = Layout(hz, motors, (), 0, pair, turnaround_s)
+    capacity = 0
+    while probe.tick_wire_s(capacity + 1) <= MARGIN / hz:
+        capacity += 1
+    count = buses or max(1, math.ceil(motors / max(capacity, 1)))
+    count = min(count, motors)
+    per_bus = tuple(motors // count + (1 if b < motors % count else 0) for b in range(count))
+    return Layout(hz, motors, per_bus, capacity, pair, turnaround_s)
+
+
+@dataclass(slots=True)
+class Summary:
+    """What a run achieved."""
+
+    hz: float
+    motors: int
+    buses: int
+    seconds: float
+    ticks: int
+    missed_ticks: int
+    late_p99_ms: float
+    tick_p50_ms: float  # median time from a tick's start to its last reply
+    wire_ms: float  # what the busiest bus's wire needs per tick
+    pairs: int
+    latency_p50_ms: float | None
+    latency_p99_ms: float | None
+    bus_load_mean_pct: float | None
+    bus_load_max_pct: float | None
+    timeouts: int
+    not_sent: int
+    malformed: int
+    faults: int
+    cpu_s: float
+    simulator_cpu_s: float
+    interrupted: bool = False
+
+    @property
+    def achieved_hz(self) -> float:
+        return self.ticks / self.seconds if self.seconds > 0 else 0.0
+
+    @property
+    def errors(self) -> int:
+        return self.timeouts + self.not_sent + self.malformed + self.faults
+
+    def why(self) -> str | None:
+        """Why the target rate was not kept (None when it was, within 2 %)."""
+        if self.ticks == 0 or self.achieved_hz >= 0.98 * self.hz:
+            return None
+        period_ms = 1e3 / self.hz
+        cpu_share = self.cpu_s / self.seconds if self.seconds > 0 else 0.0
+        sim_ms = self.simulator_cpu_s / self.ticks * 1e3
+        cores = os.cpu_count() or 1
+        load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+        machine = f"this machine: {cores} cores, load average {load:.1f}"
+        if cpu_share < 0.8:
+            return (
+                f"the process got only {cpu_share:.0%} of a CPU core ({machine}): other work held the "
+                f"processor; a tick took {self.tick_p50_ms:.2f} ms (median, start to last reply)"
+            )
+        if self.tick_p50_ms > period_ms:
+            return (
+                f"CPU-bound: a tick took {self.tick_p50_ms:.2f} ms (median, start to last reply; the wire "
+                f"needs {self.wire_ms:.2f} ms), {sim_ms:.2f} ms of it simulating {self.motors} motors (the "
+                f"simulator integrates each motor's mechanics at every frame on its bus); simulator and host "
+                f"share one core in one process, and {self.hz:g} Hz leaves {period_ms:.2f} ms per tick "
+                f"({machine}). Fewer --motors or a lower --hz keep up."
+            )
+        return (
+            f"most ticks fit (median {self.tick_p50_ms:.2f} ms of {period_ms:.2f} ms, {sim_ms:.2f} ms of it "
+            f"simulating), but the loop paused now and then ({machine}): a redraw of the live view, or "
+            f"other processes"
+        )
+
+    def as_dict(self) -> dict[str, Any]:
+        out = asdict(self)
+        out.update(achieved_hz=round(self.achieved_hz, 2), errors=self.errors, why=self.why())
+        return out
+
+
+def _ms(value: float | None) -> str:
+    return "n/a" if value is None else f"{value:.2f} ms"
+
+
+def _pct(value: float | None) -> str:
+    return "n/a" if value is None else f"{value:.1f} %"
+
+
+def summary_lines(s: Summary) -> list[str]:
+    """The summary, one fact per line."""
+    lines = [
+        f"achieved    {s.achieved_hz:,.1f} ticks/s of {s.hz:g} Hz over {s.seconds:.2f} s "
+        f"({s.ticks:,} ticks, {s.pairs:,} request/reply pairs, {s.pairs / max(s.seconds, 1e-9):,.0f}/s)",
+        f"missed      {s.missed_ticks:,} ticks (pacer lateness p99 {s.late_p99_ms:.2f} ms)",
+        f"latency     p50 {_ms(s.latency_p50_ms)}, p99 {_ms(s.latency_p99_ms)} "
+        "(request left -> reply in; worst bus)",
+        f"bus load    mean {_pct(s.bus_load_mean_pct)}, max {_pct(s.bus_load_max_pct)}",
+        f"errors      {s.errors} (timeouts {s.timeouts}, not sent {s.not_sent}, malformed {s.malformed}, "
+        f"motor faults {s.faults})",
+    ]
+    why = s.why()
+    if why:
+        lines.append(f"why         {why}")
+    if s.interrupted:
+        lines.append("stopped     Ctrl-C: every motor got its stop command")
+    return lines
+
+
+def live_view(header: list[str], rows: list[tuple[Any, ...]]) -> Group:
+    """The live view: a few header lines and the motors' table (two side by side above 16 motors)."""
+    columns = ("motor", "bus", "angle °", "target °", "speed dps", "current A", "temp °C")
+    halves = [rows] if len(rows) <= 16 else [rows[: (len(rows) + 1) // 2], rows[(len(rows) + 1) // 2 :]]
+    grid = Table.grid(padding=(0, 2))
+    tables = []
+    for half in halves:
+        t = Table(header_style="bold", padding=(0, 1))
+        for c in columns:
+            t.add_column(c, justify="right")
+        for row in half:
+            t.add_row(*row)
+        tables.append(t)
+    grid.add_row(*tables)
+    return Group(*(Text(line) for line in header), grid)
