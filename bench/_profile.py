@@ -1,0 +1,199 @@
+"""Where the time goes: summaries of cProfile runs and py-spy recordings, for RESULTS.md and results.json.
+
+* :func:`cprofile` runs a callable under :mod:`cProfile` and returns the functions with the most own
+  time (``tottime``) and the most inclusive time (``cumtime``), as shares of the profiled total.
+* :func:`pyspy_record` runs a command under ``py-spy record --format raw`` (collapsed stacks);
+  :func:`collapsed` summarises such a file the same way: own time is the leaf frame's samples,
+  inclusive time every sample a function is anywhere on the stack in, both as shares of all samples;
+  ``by_area`` adds own time up by where the code lives (servobus's modules, asyncio, the selector, ...).
+* :func:`markdown` renders either summary as a short table.
+"""
+
+from __future__ import annotations
+
+import cProfile
+import os
+import pstats
+import re
+import shutil
+import subprocess
+from collections import Counter
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+__all__ = ["collapsed", "cprofile", "markdown", "pyspy_available", "pyspy_record"]
+
+# Frames every run has at the bottom of its stack: left out of the inclusive lists (always ~100 %).
+_WRAPPERS = (
+    "asyncio/runners.py",
+    "asyncio/base_events.py",
+    "asyncio/events.py",
+    "(~",
+    "(<string>",
+    "threading.py",
+)
+
+
+def _wrapper(name: str) -> bool:
+    return any(w in name for w in _WRAPPERS) or name.startswith(("<module>", "<lambda>"))
+
+
+_FRAME = re.compile(r"^(?P<func>.*?) \((?P<file>.*?)(?::(?P<line>\d+))?\)$")
+
+
+def _short(path: str) -> str:
+    for marker in ("/src/servobus/", "/site-packages/", "/lib/python3"):
+        if marker in path:
+            tail = path.split(marker, 1)[1]
+            return ("servobus/" if marker == "/src/servobus/" else "") + (
+                tail.split("/", 1)[1] if marker == "/lib/python3" and "/" in tail else tail
+            )
+    if "/bench/" in path:
+        return "bench/" + path.split("/bench/", 1)[1]
+    return path
+
+
+def _area(file: str, func: str) -> str:
+    """A coarse bucket for own time: which layer the code belongs to."""
+    f = _short(file)
+    if f.startswith("servobus/"):
+        name = f.removeprefix("servobus/").removesuffix(".py")
+        if name.startswith(("protocols/", "core/")):
+            return "servobus codec (protocols, core)"
+        if name.startswith("sim/"):
+            return "servobus.sim (devices, bus model)"
+        return f"servobus.{name.replace('/', '.')}"
+    if "selectors" in f or func in ("select", "poll", "<built-in method select.epoll.poll>"):
+        return "selector (epoll/select: waiting or polling for I/O)"
+    if f.startswith("asyncio/"):
+        return "asyncio (event loop, futures, tasks)"
+    if f.startswith(("serial", "serial_asyncio_fast")):
+        return "pyserial / pyserial-asyncio-fast"
+    if f.startswith("bench/"):
+        return "bench harness"
+    return "builtins and other stdlib"
+
+
+def cprofile(run: Callable[[], object], top: int = 12) -> dict[str, Any]:
+    """Profile ``run()`` with cProfile; return the top functions by own and by inclusive time."""
+    profiler = cProfile.Profile()
+    profiler.enable()
+    try:
+        run()
+    finally:
+        profiler.disable()
+    stats = pstats.Stats(profiler)
+    raw: dict[Any, Any] = stats.stats  # type: ignore[attr-defined]
+    total = max(float(stats.total_tt), 1e-12)  # type: ignore[attr-defined]
+    rows = []
+    areas: Counter[str] = Counter()
+    for (file, line, func), (_cc, ncalls, tottime, cumtime, _callers) in raw.items():
+        name = f"{func} ({_short(file)}:{line})"
+        rows.append((name, ncalls, tottime, cumtime))
+        areas[_area(file, func)] += tottime
+    own = sorted(rows, key=lambda r: -r[2])[:top]
+    inclusive = sorted((r for r in rows if not _wrapper(r[0])), key=lambda r: -r[3])[:top]
+    return {
+        "tool": "cProfile",
+        "total_s": round(total, 4),
+        "own": [{"function": n, "calls": c, "pct": round(100 * t / total, 1)} for n, c, t, _ in own],
+        "inclusive": [
+            {"function": n, "calls": c, "pct": round(100 * ct / total, 1)} for n, c, _, ct in inclusive
+        ],
+        "by_area": [{"area": a, "pct": round(100 * t / total, 1)} for a, t in areas.most_common()],
+    }
+
+
+def pyspy_available() -> bool:
+    return shutil.which("py-spy") is not None
+
+
+def pyspy_record(
+    command: Sequence[str],
+    out: Path,
+    *,
+    rate: int = 250,
+    env: dict[str, str] | None = None,
+    timeout: float = 600,
+) -> subprocess.CompletedProcess[str]:
+    """Run ``command`` under ``py-spy record --format raw --idle --nonblocking``; stacks go to ``out``.
+
+    ``--nonblocking``: py-spy reads the process's memory without pausing it, so the run keeps its
+    timing (a stack may occasionally be torn; py-spy counts those as errors). ``--idle`` keeps the
+    samples where the thread waits (in the selector), so the shares add up to the whole wall time.
+    """
+    cmd = [
+        "py-spy", "record", "--format", "raw", "--idle", "--nonblocking",
+        "--rate", str(rate), "--output", str(out), "--", *command,
+    ]  # fmt: skip
+    return subprocess.run(
+        cmd, capture_output=True, text=True, env={**os.environ, **(env or {})}, timeout=timeout, check=False
+    )
+
+
+def collapsed(path: Path, top: int = 12) -> dict[str, Any]:
+    """Summarise py-spy's raw output (``frame;frame;... count`` per line, outermost frame first)."""
+    own: Counter[str] = Counter()
+    inclusive: Counter[str] = Counter()
+    areas: Counter[str] = Counter()
+    total = 0
+    for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
+        stack, _, count_text = line.rpartition(" ")
+        if not stack or not count_text.isdigit():
+            continue
+        count = int(count_text)
+        total += count
+        frames = []
+        for part in stack.split(";"):
+            match = _FRAME.match(part.strip())
+            if match is None:
+                continue  # the process/thread header py-spy may put first
+            frames.append((match["func"], match["file"], match["line"] or ""))
+        if not frames:
+            continue
+        func, file, lineno = frames[-1]
+        own[f"{func} ({_short(file)}:{lineno})" if lineno else f"{func} ({_short(file)})"] += count
+        areas[_area(file, func)] += count
+        for name in {f"{f} ({_short(fl)})" for f, fl, _ in frames}:
+            inclusive[name] += count
+    total = max(total, 1)
+    return {
+        "tool": "py-spy",
+        "samples": total,
+        "own": [{"function": n, "pct": round(100 * c / total, 1)} for n, c in own.most_common(top)],
+        "inclusive": [
+            {"function": n, "pct": round(100 * c / total, 1)} for n, c in inclusive.most_common(top)
+        ],
+        "by_area": [{"area": a, "pct": round(100 * c / total, 1)} for a, c in areas.most_common()],
+    }
+
+
+def markdown(summary: dict[str, Any], top: int = 10) -> list[str]:
+    """A profile summary as Markdown lines: own time by area, then the top functions."""
+    if not summary:
+        return ["(no profile)"]
+    if summary["tool"] == "cProfile":
+        basis = f"cProfile, {summary['total_s']:.2f} s profiled (cProfile's overhead inflates small calls)"
+    else:
+        basis = f"py-spy, {summary['samples']:,} samples"
+    lines = [
+        f"Own time by area ({basis}): "
+        + "; ".join(f"{a['area']} {a['pct']:.0f} %" for a in summary["by_area"] if a["pct"] >= 1.0)
+        + ".",
+        "",
+        "| own % | function | | inclusive % | function |",
+        "|---:|---|---|---:|---|",
+    ]
+    own, inclusive = summary["own"][:top], summary["inclusive"][:top]
+    for i in range(max(len(own), len(inclusive))):
+        a = own[i] if i < len(own) else None
+        b = inclusive[i] if i < len(inclusive) else None
+        lines.append(
+            "| "
+            + (f"{a['pct']:.1f} | `{a['function']}`" if a else " | ")
+            + " | | "
+            + (f"{b['pct']:.1f} | `{b['function']}`" if b else " | ")
+            + " |"
+        )
+    return lines
