@@ -245,11 +245,13 @@ def soak(args: argparse.Namespace) -> dict[str, Any]:
     import _soak
 
     started = time.perf_counter()
-    result = _soak.run(minutes=args.minutes, seed=args.seed)
+    result = _soak.run(minutes=args.minutes, seed=args.seed, warmup_s=60.0, memory=args.memory)
+    problems = result.problems()
     summary = result.summary()
     summary["wall_s"] = round(time.perf_counter() - started, 1)
     summary["command"] = " ".join(["python bench/reliability.py", *sys.argv[1:]])
     summary["machine"] = machine_info()
+    summary["problems"] = problems
     headline = {
         "requests": summary["requests"],
         "faults_injected": summary["faults"],
@@ -366,6 +368,9 @@ def main() -> None:
     parser.add_argument("--artifacts", default=str(Path(tempfile.gettempdir()) / "servobus-fuzz-artifacts"))
     parser.add_argument("--minutes", type=float, default=10.0, help="soak length in virtual minutes")
     parser.add_argument("--seed", type=int, default=2024)
+    parser.add_argument(
+        "--memory", choices=["rss", "tracemalloc"], default="rss", help="how the soak measures memory"
+    )
     parser.add_argument("--no-store", action="store_true", help="print only; results.json untouched")
     args = parser.parse_args()
     if args.long or args.command is None:
