@@ -1,0 +1,129 @@
+"""Safety: what happens when the control task dies or stalls, how fast the host sees a motor go
+silent, and that out-of-range commands never leave. (SIGTERM: tests/test_signals.py.)
+
+All on the in-process bus with virtual time: a passive node records every frame on the wire.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+
+import pytest
+
+from servobus.bus import Bus, MotorStatus
+from servobus.protocols import myactuator as ma
+from servobus.sim.devices.myactuator import MyActuatorMotor
+from servobus.sim.network import SimCanNetwork
+from servobus.transports import SimTransport
+from sim._standins import Sniffer
+
+COMM_TIMEOUT_MS = 100
+
+
+def _bench(n: int = 2) -> tuple[SimTransport, list[MyActuatorMotor], Sniffer]:
+    motors = [MyActuatorMotor(i) for i in range(1, n + 1)]
+    sniffer = Sniffer()
+    return SimTransport(SimCanNetwork([*motors, sniffer])), motors, sniffer
+
+
+@pytest.mark.parametrize("how", ["dies", "stalls"])
+@pytest.mark.asyncio
+@pytest.mark.looptime
+async def test_when_the_control_task_dies_or_stalls_the_motor_side_timeout_stops_the_motor(how: str) -> None:
+    """0xB3 set to 100 ms; a 100 Hz speed loop runs, then dies (an exception) or stalls (blocks on
+    something that never comes) while the Bus stays open: no frame reaches the motor, and within
+    100 ms of the last one the motor cuts its output, locks the brake and slows to a stop."""
+    transport, (motor, other), _ = _bench()
+    loop = asyncio.get_running_loop()
+    async with transport, Bus(transport, safe=None) as bus:
+        m = bus.motor("myactuator", 1)
+        await m.request(ma.SetCommTimeout(timeout_ms=COMM_TIMEOUT_MS))
+        never = asyncio.Event()
+
+        async def control() -> None:
+            for _i in range(50):
+                await m.speed_control(speed_dps=360)
+                await asyncio.sleep(0.01)
+            if how == "dies":
+                raise RuntimeError("the control task's bug")
+            await never.wait()
+
+        task = asyncio.create_task(control())
+        await asyncio.sleep(0.6)
+        assert not motor.comm_tripped and motor.plant.speed_dps > 300  # running while commanded
+        last = motor._last_heard_s
+        if how == "dies":
+            with pytest.raises(RuntimeError):
+                await task
+        await asyncio.sleep(0.5)
+        motor.advance(transport.network_time(loop.time()))  # the plant is integrated lazily: bring it up
+        assert motor.comm_tripped and motor.counters["comm_timeouts"] == 1
+        assert not motor.enabled and not motor.brake_released
+        assert abs(motor.plant.speed_dps) < 1.0
+        assert other.counters["comm_timeouts"] == 0  # 0xB3 was set on motor 1 only
+        # It tripped 100 ms after the last frame it heard (its own clock, in the network's time).
+        assert transport.loop_time(last) + COMM_TIMEOUT_MS / 1000 <= loop.time()
+        task.cancel()
+
+
+@pytest.mark.asyncio
+@pytest.mark.looptime
+async def test_host_side_offline_detection_fires_within_its_configured_time() -> None:
+    """Two watchdogs: ``offline_after_misses`` missed replies in a row (a polled motor), and
+    ``offline_after_s`` of silence (a motor that was heard and then is not). Each fires within its
+    own bound of the moment the motor stopped answering, and the motor is online at its next reply."""
+    transport, (motor, _other), _ = _bench()
+    loop = asyncio.get_running_loop()
+    statuses: list[MotorStatus] = []
+    async with transport, Bus(transport, offline_after_misses=3, offline_after_s=0.2) as bus:
+        bus.subscribe_status(statuses.append)
+        m1, m2 = bus.motor("myactuator", 1), bus.motor("myactuator", 2)
+        await m1.read_status1()
+        await m2.read_status1()
+        assert m1.online and m2.online
+        # Motor 1 stops answering while it is polled every 10 ms with a 10 ms timeout.
+        motor.unresponsive = True
+        silent_at = loop.time()
+
+        async def poll() -> None:
+            while True:
+                with contextlib.suppress(Exception):
+                    await m1.read_status2(timeout_s=0.01)
+                await asyncio.sleep(0.01)
+
+        poller = asyncio.create_task(poll())
+        await asyncio.sleep(0.3)
+        # Motor 2 is simply not asked any more: only the silence watchdog can see it.
+        offline = {s.motor.motor_id: s for s in statuses if not s.online}
+        assert set(offline) == {1, 2}
+        assert offline[1].reason == "3 replies missed"
+        assert offline[1].at - silent_at <= 3 * 0.02 + 0.01  # three polls, each a 10 ms timeout
+        assert offline[2].reason == "silent for 0.2 s"
+        assert offline[2].at - m2.last_seen <= 0.2 + 1e-6  # type: ignore[operator]
+        motor.unresponsive = False
+        await asyncio.sleep(0.05)
+        assert m1.online and statuses[-1].motor is m1 and statuses[-1].online
+        poller.cancel()
+
+
+@pytest.mark.asyncio
+@pytest.mark.looptime
+async def test_limits_are_enforced_before_any_frame_leaves() -> None:
+    """An out-of-range set-point raises ValueError naming the field and its limit, and nothing goes
+    on the wire; a cycle with one bad command sends none of its commands."""
+    transport, _, sniffer = _bench()
+    async with transport, Bus(transport, safe=None) as bus:
+        m1, m2 = bus.motor("myactuator", 1), bus.motor("myactuator", 2)
+        before = len(sniffer.seen)
+        with pytest.raises(ValueError, match="speed_dps"):
+            await m1.speed_control(speed_dps=1e9)
+        with pytest.raises(ValueError):
+            await m1.request(ma.SetCommTimeout(timeout_ms=0))
+        with pytest.raises(ValueError, match="speed_dps"):
+            await bus.cycle([(m1, ma.SpeedControl(speed_dps=10)), (m2, ma.SpeedControl(speed_dps=-1e12))])
+        await asyncio.sleep(0.05)
+        assert sniffer.seen[before:] == []
+        assert bus.stats().get("requests", 0) == 0
+        await m1.speed_control(speed_dps=10)  # a good one still goes
+        assert len(sniffer.seen) == before + 2
