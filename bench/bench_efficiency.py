@@ -68,6 +68,7 @@ if str(BENCH_DIR) not in sys.path:
     sys.path.insert(0, str(BENCH_DIR))
 
 import _meta  # noqa: E402
+import _profile  # noqa: E402
 import _results  # noqa: E402
 from _serial_line import SerialLine  # noqa: E402
 from servobus.bus import Bus  # noqa: E402
@@ -498,6 +499,17 @@ def render_markdown(figures: dict[str, Any], info: dict[str, Any]) -> str:
             )
             + ": the declared gap is what separates them.",
         ]
+    if figures.get("profile"):
+        lines += [
+            "",
+            "### Where the time goes: `can1m_32` (cProfile of one run)",
+            "",
+            "On virtual time the figure does not depend on host speed; this is where the run's wall-clock "
+            "time goes (the simulator's bus and motor models against the Bus itself), for whoever wants "
+            "the efficiency runs faster.",
+            "",
+            *_profile.markdown(figures["profile"], 10),
+        ]
     return "\n".join(lines) + "\n"
 
 
@@ -517,6 +529,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"bench_efficiency ({cfg.mode}): virtual time, {cfg.cycles} cycles per run", flush=True)
     detail = measure(cfg, lambda line: print(line, flush=True), args.only)
     figures = summarise(detail)
+    if not args.quick:
+        figures["profile"] = _profile.cprofile(lambda: virtual.run(can_run(CAN, 32, cfg.cycles)), top=12)
     arguments = list(sys.argv[1:] if argv is None else argv)
     info = _meta.meta(
         "bench/bench_efficiency.py",

@@ -40,6 +40,15 @@ def test_sequential_baseline_meets_its_own_bound_wire_plus_turnaround() -> None:
 @pytest.mark.parametrize("fd", [False, True])
 def test_reflector_paths_return_typed_replies(fd: bool) -> None:
     replies = bench_bus.prebuilt_replies(ma.ReadStatus2())
-    assert asyncio.run(bench_bus.ours_reflector(3, replies)) > 0
-    assert asyncio.run(bench_bus.naive_reflector(40, replies, fd=fd)) > 0
-    assert asyncio.run(bench_bus.naive_reflector(64, replies, pipelined=True)) > 0
+    assert asyncio.run(bench_bus.ours_reflector(3, replies)).rate > 0
+    assert asyncio.run(bench_bus.naive_reflector(40, replies, fd=fd)).rate > 0
+    assert asyncio.run(bench_bus.naive_reflector(64, replies, pipelined=True)).rate > 0
+
+
+@pytest.mark.parametrize("motors", [1, 4, 32])
+def test_cycle_and_the_asyncio_floor_on_the_reflector(motors: int) -> None:
+    replies = bench_bus.prebuilt_replies(ma.ReadStatus2())
+    ours = asyncio.run(bench_bus.ours_reflector(5, replies, motors))
+    floor = asyncio.run(bench_bus.floor_reflector(5, replies, motors))
+    assert ours.rate > 0 and floor.rate > 0
+    assert ours.cpu_us >= 0 and floor.cpu_us >= 0
