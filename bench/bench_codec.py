@@ -47,7 +47,6 @@ import importlib
 import importlib.util
 import random
 import re
-import shlex
 import statistics
 import sys
 import time
@@ -63,6 +62,8 @@ REPO = BENCH_DIR.parent
 if str(BENCH_DIR) not in sys.path:  # so `_results` imports however this script is started
     sys.path.insert(0, str(BENCH_DIR))
 
+import _handwritten  # noqa: E402
+import _meta  # noqa: E402
 import _results  # noqa: E402
 import _typed  # noqa: E402
 import servobus  # noqa: E402
@@ -320,6 +321,7 @@ class Figure:
     c: Rate
     ref: Rate
     target: float | None  # minimum C rate (in `unit`); None: information only, no target at all
+    hand: Rate | None = None  # the hand-written pure-Python baseline (struct / table), where there is one
 
     @property
     def scale(self) -> float:
@@ -336,6 +338,14 @@ class Figure:
     @property
     def ratio(self) -> float:
         return self.c.per_s / self.ref.per_s
+
+    @property
+    def hand_value(self) -> float | None:
+        return None if self.hand is None else self.hand.per_s * self.scale
+
+    @property
+    def hand_ratio(self) -> float | None:
+        return None if self.hand is None else self.c.per_s / self.hand.per_s
 
     @property
     def misses(self) -> list[str]:
@@ -383,13 +393,27 @@ class Bench:
     def ref_rate(self, run: Callable[[int], int]) -> Rate:
         return measure(run, self.cfg.ref_target_s, self.cfg.ref_repeats)
 
-    def add(self, name: str, label: str, unit: str, c: Rate, ref: Rate, target: float | None = None) -> None:
-        fig = Figure(name, label, unit, c, ref, target)
+    def add(
+        self,
+        name: str,
+        label: str,
+        unit: str,
+        c: Rate,
+        ref: Rate,
+        target: float | None = None,
+        hand: Rate | None = None,
+    ) -> None:
+        fig = Figure(name, label, unit, c, ref, target, hand)
         self.figures.append(fig)
+        by_hand = "" if fig.hand_value is None else f"   struct/table {fmt(fig.hand_value, unit)}"
         self.log(
             f"  {label:<62} C {fmt(fig.c_value, unit):>16}   ref {fmt(fig.ref_value, unit):>14}"
-            f"   {fig.ratio:>8,.0f}x   (spread C {c.spread:.0%}, ref {ref.spread:.0%})"
+            f"   {fig.ratio:>8,.0f}x   (spread C {c.spread:.0%}, ref {ref.spread:.0%}){by_hand}"
         )
+
+    def hand_rate(self, run: Callable[[int], int]) -> Rate:
+        """A hand-written baseline: timed like the reference (it is Python too)."""
+        return measure(run, self.cfg.ref_target_s, self.cfg.ref_repeats)
 
     def agree(self, what: str, ok: bool) -> None:
         if not ok:
@@ -418,8 +442,18 @@ class Bench:
                     f(small)
                 return k * len(small)
 
+            hand = None
+            if name == "crc16_mb_s":
+                self.agree("table-driven crc16", _handwritten.crc16_table(small) == c_fn(small))
+
+                def run_hand(k: int) -> int:
+                    for _ in repeat(None, k):
+                        _handwritten.crc16_table(small)
+                    return k * len(small)
+
+                hand = self.hand_rate(run_hand)
             label = f"{name[:5].upper()} bulk ({size_text(len(data))} per call)"
-            self.add(name, label, "MB/s", self.c_rate(run_c), self.ref_rate(run_ref), target)
+            self.add(name, label, "MB/s", self.c_rate(run_c), self.ref_rate(run_ref), target, hand)
 
         # Context only: the stdlib's CRC-32 (zlib), same buffer.
         def run_zlib(k: int) -> int:
@@ -445,6 +479,12 @@ class Bench:
                 f(body)
             return k
 
+        def calls_hand(k: int) -> int:
+            f = _handwritten.crc16_table
+            for _ in repeat(None, k):
+                f(body)
+            return k
+
         self.add(
             "crc16_calls_s",
             "CRC16 per call, 11 bytes",
@@ -452,6 +492,7 @@ class Bench:
             self.c_rate(calls_c),
             self.ref_rate(calls_ref),
             2e6,
+            self.hand_rate(calls_hand),
         )
 
     # ---- MIT pack / unpack ----
@@ -470,6 +511,26 @@ class Bench:
         rows = [tuple(values[i * nf : (i + 1) * nf]) for i in range(cfg.ref_frames)]
         small_frames = frames_b[: len(rows) * size]
         packer.unpack_into(frames_b, decoded)
+        hand = _handwritten.make_mit(MIT_SCALES)
+        self.agree(f"struct MIT pack of {len(rows)} frames", hand.pack_many(rows) == small_frames)
+        self.agree(
+            f"struct MIT unpack of {len(rows)} frames",
+            hand.unpack_many(small_frames)
+            == [tuple(decoded[i * nf : (i + 1) * nf]) for i in range(len(rows))],
+        )
+
+        def pack_hand(k: int) -> int:
+            pack_many = hand.pack_many
+            for _ in repeat(None, k):
+                pack_many(rows)
+            return k * len(rows)
+
+        def unpack_hand(k: int) -> int:
+            unpack_many = hand.unpack_many
+            for _ in repeat(None, k):
+                unpack_many(small_frames)
+            return k * len(rows)
+
         self.agree(f"MIT pack of {len(rows)} frames", ref.mit_pack(rows) == small_frames)
         self.agree(
             f"MIT unpack of {len(rows)} frames",
@@ -504,7 +565,13 @@ class Bench:
         batch = f"{cfg.frames // 1000}k frames per call"
         pack_rate, pack_ref_rate = self.c_rate(pack_c), self.ref_rate(pack_ref)
         self.add(
-            "mit_pack_frames_s", f"MIT pack_into, batch ({batch})", "frames/s", pack_rate, pack_ref_rate, 10e6
+            "mit_pack_frames_s",
+            f"MIT pack_into, batch ({batch})",
+            "frames/s",
+            pack_rate,
+            pack_ref_rate,
+            10e6,
+            self.hand_rate(pack_hand),
         )
         unpack_rate, unpack_ref_rate = self.c_rate(unpack_c), self.ref_rate(unpack_ref)
         self.add(
@@ -514,6 +581,7 @@ class Bench:
             unpack_rate,
             unpack_ref_rate,
             10e6,
+            self.hand_rate(unpack_hand),
         )
 
         # Per call from Python, one frame: Packer.pack(list of 5 floats) -> bytes, Packer.unpack(bytes)
@@ -525,6 +593,25 @@ class Bench:
             "MIT unpack of the manual's example",
             [packer.unpack(one_frame)] == list(ref.mit_unpack(one_frame)),
         )
+
+        self.agree(
+            "struct MIT pack of the manual's example", hand.pack(one_values) == packer.pack(one_values)
+        )
+        self.agree(
+            "struct MIT unpack of the manual's example", hand.unpack(one_frame) == packer.unpack(one_frame)
+        )
+
+        def pack1_hand(k: int) -> int:
+            pack = hand.pack
+            for _ in repeat(None, k):
+                pack(one_values)
+            return k
+
+        def unpack1_hand(k: int) -> int:
+            unpack = hand.unpack
+            for _ in repeat(None, k):
+                unpack(one_frame)
+            return k
 
         def pack1_c(k: int) -> int:
             pack = packer.pack
@@ -556,6 +643,7 @@ class Bench:
             "calls/s",
             self.c_rate(pack1_c),
             self.ref_rate(pack1_ref),
+            hand=self.hand_rate(pack1_hand),
         )
         self.add(
             "mit_unpack_calls_s",
@@ -563,6 +651,7 @@ class Bench:
             "calls/s",
             self.c_rate(unpack1_c),
             self.ref_rate(unpack1_ref),
+            hand=self.hand_rate(unpack1_hand),
         )
 
     # ---- de-framing ----
@@ -706,12 +795,15 @@ def render_markdown(bench: Bench, meta: dict[str, Any], missed: list[str]) -> st
     machine = meta["machine"]
     rows = []
     for fig in bench.figures:
+        hand_value, hand_ratio = fig.hand_value, fig.hand_ratio
         rows.append(
             (
                 f"{fig.label} (`{fig.name}`)",
                 fmt(fig.c_value, fig.unit),
                 fmt(fig.ref_value, fig.unit),
                 f"{fig.ratio:,.0f}x",
+                "-" if hand_value is None else fmt(hand_value, fig.unit),
+                "-" if hand_ratio is None else f"{hand_ratio:,.1f}x",
                 target_text(fig),
                 met_text(fig),
             )
@@ -731,7 +823,16 @@ def render_markdown(bench: Bench, meta: dict[str, Any], missed: list[str]) -> st
         "ratio = C rate / reference rate in this run. MB = 10^6 bytes. Per-call figures include the "
         "Python loop.",
         "",
-        _results.markdown_table(["figure", "C", "reference", "ratio", "target", "met?"], rows, "lrrrll"),
+        _results.markdown_table(
+            ["figure", "C", "reference", "C / ref", "hand-written", "C / hand", "target", "met?"],
+            rows,
+            "lrrrrrll",
+        ),
+        "Hand-written = what a user writes in plain Python without the C core (bench/_handwritten.py): "
+        "MIT pack/unpack with `struct` and shifts, unrolled for the layout, same range check and float "
+        "operations (its bytes are checked equal to the C core's before timing), per frame and in batch "
+        "(one `struct.pack` of all words / `iter_unpack`); CRC16 table-driven, one lookup per byte.",
+        "",
         "Targets apply to the figures named in the issue; rows marked (info) are extra information with "
         "no target.",
         "",
@@ -761,6 +862,9 @@ def build_json(bench: Bench, meta: dict[str, Any], missed: list[str]) -> dict[st
         out[fig.name] = round(fig.c_value, 3)
         out[f"{fig.name}_reference"] = round(fig.ref_value, 3)
         out[f"{fig.name}_vs_reference"] = round(fig.ratio, 2)
+        if fig.hand_value is not None and fig.hand_ratio is not None:
+            out[f"{fig.name}_handwritten"] = round(fig.hand_value, 3)
+            out[f"{fig.name}_vs_handwritten"] = round(fig.hand_ratio, 2)
         if fig.target is not None:
             targets[fig.name] = {"min": fig.target, "min_vs_reference": MIN_RATIO, "met": not fig.misses}
         detail[fig.name] = {"c": fig.c.as_json(), "reference": fig.ref.as_json(), "unit": fig.unit}
@@ -806,7 +910,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     typed = _typed.run(args.quick, lambda line: print(line, flush=True))
 
     missed = [m for fig in bench.figures for m in fig.misses] + _typed.misses(typed)
-    command = shlex.join([sys.executable, "bench/bench_codec.py", *(sys.argv[1:] if argv is None else argv)])
+    command = _meta.command_line("bench/bench_codec.py", list(sys.argv[1:] if argv is None else argv))
     meta = {
         "command": command,
         "machine": _results.machine_info(),
