@@ -40,7 +40,6 @@ import argparse
 import asyncio
 import json
 import random
-import shlex
 import statistics
 import sys
 import time
@@ -51,6 +50,7 @@ from typing import Any
 
 import serial
 
+import _meta
 import _results
 import _slcan
 import _virtual
@@ -269,7 +269,7 @@ def main(argv: list[str] | None = None) -> int:
     print("CanTransport on python-can's virtual interface against a naive python-can loop:", flush=True)
     figures |= _virtual.run(args.quick, log)
     arguments = sys.argv[1:] if argv is None else argv
-    command = shlex.join([sys.executable, "bench/bench_transport.py", *arguments])
+    command = _meta.command_line("bench/bench_transport.py", list(arguments))
     meta = {
         "command": command,
         "machine": _results.machine_info(),
