@@ -200,3 +200,32 @@ async def test_a_stalled_serial_port_under_cycles_delivers_no_stale_command() ->
         f"\nages at the motor: max {max(ages) * 1e3:.1f} ms of {len(ages)}; {outcomes}; {after} replies after"
     )
     assert ages and max(ages) < STALE_S + 0.05
+
+
+# ---- a defect the soak's faults point at, alone ----
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="scheduler.py: the next request with a key goes out as soon as a reply resolved the one before; "
+    "a request the motor received twice (CAN double reception: the sender retransmits a frame the "
+    "receivers had already taken) is answered twice, and the second answer resolves the next request "
+    "with that key (a WriteEncoderZero gets the previous one's echo)",
+)
+def test_a_request_the_motor_received_twice_never_answers_the_next_request_with_its_key() -> None:
+    from servobus.sim import virtual
+    from servobus.sim.faults import FaultInjector, FaultPlan
+    from servobus.sim.network import SimCanNetwork
+    from servobus.transports import SimTransport
+
+    async def scenario() -> list[object]:
+        network = SimCanNetwork([MyActuatorMotor(1)], to_devices=FaultInjector(FaultPlan(duplicate=1.0)))
+        transport = SimTransport(network)
+        async with transport, Bus(transport, safe=None) as bus:
+            motor = bus.motor("myactuator", 1)
+            writes = [motor.request(ma.WriteEncoderZero(offset_counts=-k), timeout_s=0.05) for k in (1, 2, 3)]
+            results = await asyncio.gather(*writes, return_exceptions=True)
+            await asyncio.sleep(0.1)
+        return [r.command.offset_counts if isinstance(r, ma.Echo) else r for r in results]
+
+    assert virtual.run(scenario()) == [-1, -2, -3]  # each write's own echo (got: [-1, -1, -2])
