@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import cProfile
+import linecache
 import os
 import pstats
 import re
@@ -54,8 +55,25 @@ def _short(path: str) -> str:
     return path
 
 
-def _area(file: str, func: str) -> str:
+def _syscall(file: str, line: str) -> str | None:
+    """py-spy shows no C frames: a leaf frame on a line that calls select/epoll or os.read/os.write
+    is time spent in that system call (waiting in the first case)."""
+    if not line.isdigit():
+        return None
+    text = linecache.getline(file, int(line))
+    if not text and not os.path.isabs(file):  # py-spy names a script by its file name alone
+        text = linecache.getline(str(Path(__file__).resolve().parent / file), int(line))
+    if "select(" in text or ".poll(" in text:
+        return "waiting in select/epoll (idle, or the system call itself)"
+    if "os.write(" in text or "os.read(" in text:
+        return "os.write / os.read system calls (pty)"
+    return None
+
+
+def _area(file: str, func: str, line: str = "") -> str:
     """A coarse bucket for own time: which layer the code belongs to."""
+    if (syscall := _syscall(file, line)) is not None:
+        return syscall
     f = _short(file)
     if f.startswith("servobus/"):
         name = f.removeprefix("servobus/").removesuffix(".py")
@@ -65,7 +83,7 @@ def _area(file: str, func: str) -> str:
             return "servobus.sim (devices, bus model)"
         return f"servobus.{name.replace('/', '.')}"
     if "selectors" in f or func in ("select", "poll", "<built-in method select.epoll.poll>"):
-        return "selector (epoll/select: waiting or polling for I/O)"
+        return "waiting in select/epoll (idle, or the system call itself)"
     if f.startswith("asyncio/"):
         return "asyncio (event loop, futures, tasks)"
     if f.startswith(("serial", "serial_asyncio_fast")):
@@ -132,8 +150,12 @@ def pyspy_record(
     )
 
 
-def collapsed(path: Path, top: int = 12) -> dict[str, Any]:
-    """Summarise py-spy's raw output (``frame;frame;... count`` per line, outermost frame first)."""
+def collapsed(path: Path, top: int = 12, *, main_thread_only: bool = True) -> dict[str, Any]:
+    """Summarise py-spy's raw output (``frame;frame;... count`` per line, outermost frame first).
+
+    ``main_thread_only``: leave out stacks that start in ``threading.py`` (helper threads, e.g. an idle
+    executor worker, which ``--idle`` samples too): the shares are then of the main thread's time.
+    """
     own: Counter[str] = Counter()
     inclusive: Counter[str] = Counter()
     areas: Counter[str] = Counter()
@@ -143,18 +165,18 @@ def collapsed(path: Path, top: int = 12) -> dict[str, Any]:
         if not stack or not count_text.isdigit():
             continue
         count = int(count_text)
-        total += count
         frames = []
         for part in stack.split(";"):
             match = _FRAME.match(part.strip())
             if match is None:
                 continue  # the process/thread header py-spy may put first
             frames.append((match["func"], match["file"], match["line"] or ""))
-        if not frames:
+        if not frames or (main_thread_only and frames[0][1].endswith("threading.py")):
             continue
+        total += count
         func, file, lineno = frames[-1]
         own[f"{func} ({_short(file)}:{lineno})" if lineno else f"{func} ({_short(file)})"] += count
-        areas[_area(file, func)] += count
+        areas[_area(file, func, lineno)] += count
         for name in {f"{f} ({_short(fl)})" for f, fl, _ in frames}:
             inclusive[name] += count
     total = max(total, 1)
