@@ -37,7 +37,9 @@ _WRAPPERS = (
 
 
 def _wrapper(name: str) -> bool:
-    return any(w in name for w in _WRAPPERS) or name.startswith(("<module>", "<lambda>"))
+    return any(w in name for w in _WRAPPERS) or name.startswith(
+        ("<module>", "<lambda>", "main (", "spin (", "host_main (")
+    )
 
 
 _FRAME = re.compile(r"^(?P<func>.*?) \((?P<file>.*?)(?::(?P<line>\d+))?\)$")
@@ -153,10 +155,14 @@ def pyspy_record(
 def collapsed(path: Path, top: int = 12, *, main_thread_only: bool = True) -> dict[str, Any]:
     """Summarise py-spy's raw output (``frame;frame;... count`` per line, outermost frame first).
 
+    ``own``: the leaf frame's function (every line of it); ``own_lines``: the leaf line; ``inclusive``:
+    every function on the stack, once per sample (the event loop's own frames left out).
     ``main_thread_only``: leave out stacks that start in ``threading.py`` (helper threads, e.g. an idle
     executor worker, which ``--idle`` samples too): the shares are then of the main thread's time.
+    Stacks inside an import (start-up) are left out too.
     """
     own: Counter[str] = Counter()
+    own_lines: Counter[str] = Counter()
     inclusive: Counter[str] = Counter()
     areas: Counter[str] = Counter()
     total = 0
@@ -173,49 +179,82 @@ def collapsed(path: Path, top: int = 12, *, main_thread_only: bool = True) -> di
             frames.append((match["func"], match["file"], match["line"] or ""))
         if not frames or (main_thread_only and frames[0][1].endswith("threading.py")):
             continue
+        if any(f[1].startswith("<frozen importlib") for f in frames):
+            continue  # start-up imports, not the measured work
         total += count
         func, file, lineno = frames[-1]
-        own[f"{func} ({_short(file)}:{lineno})" if lineno else f"{func} ({_short(file)})"] += count
+        own[f"{func} ({_short(file)})"] += count
+        own_lines[f"{func} ({_short(file)}:{lineno})" if lineno else f"{func} ({_short(file)})"] += count
         areas[_area(file, func, lineno)] += count
         for name in {f"{f} ({_short(fl)})" for f, fl, _ in frames}:
             inclusive[name] += count
     total = max(total, 1)
+
+    def shares(counter: Counter[str]) -> list[dict[str, Any]]:
+        return [
+            {"function": n, "pct": round(100 * c / total, 1)}
+            for n, c in counter.most_common()
+            if not _wrapper(n)
+        ][:top]
+
     return {
         "tool": "py-spy",
         "samples": total,
-        "own": [{"function": n, "pct": round(100 * c / total, 1)} for n, c in own.most_common(top)],
-        "inclusive": [
-            {"function": n, "pct": round(100 * c / total, 1)} for n, c in inclusive.most_common(top)
-        ],
+        "own": shares(own),
+        "own_lines": shares(own_lines),
+        "inclusive": shares(inclusive),
         "by_area": [{"area": a, "pct": round(100 * c / total, 1)} for a, c in areas.most_common()],
     }
 
 
-def markdown(summary: dict[str, Any], top: int = 10) -> list[str]:
-    """A profile summary as Markdown lines: own time by area, then the top functions."""
+def markdown(
+    summary: dict[str, Any], top: int = 10, *, unit_us: float | None = None, unit: str = ""
+) -> list[str]:
+    """A profile summary as Markdown lines: own time by area, then the top functions.
+
+    ``unit_us``: the measured (unprofiled) cost of one ``unit`` (a transaction, a tick): each share is
+    then also shown as µs of it.
+    """
     if not summary:
         return ["(no profile)"]
     if summary["tool"] == "cProfile":
         basis = f"cProfile, {summary['total_s']:.2f} s profiled (cProfile's overhead inflates small calls)"
     else:
         basis = f"py-spy, {summary['samples']:,} samples"
+
+    def cell(entry: dict[str, Any] | None) -> str:
+        if entry is None:
+            return " | "
+        us = f" ({entry['pct'] / 100 * unit_us:.2f} µs)" if unit_us is not None else ""
+        return f"{entry['pct']:.1f}{us} | `{entry['function']}`"
+
+    per = f" (µs per {unit})" if unit_us is not None else ""
     lines = [
         f"Own time by area ({basis}): "
-        + "; ".join(f"{a['area']} {a['pct']:.0f} %" for a in summary["by_area"] if a["pct"] >= 1.0)
+        + "; ".join(
+            f"{a['area']} {a['pct']:.0f} %" + (f" ({a['pct'] / 100 * unit_us:.2f} µs)" if unit_us else "")
+            for a in summary["by_area"]
+            if a["pct"] >= 1.0
+        )
         + ".",
         "",
-        "| own % | function | | inclusive % | function |",
+        f"| own %{per} | function | | inclusive %{per} | function |",
         "|---:|---|---|---:|---|",
     ]
     own, inclusive = summary["own"][:top], summary["inclusive"][:top]
     for i in range(max(len(own), len(inclusive))):
         a = own[i] if i < len(own) else None
         b = inclusive[i] if i < len(inclusive) else None
-        lines.append(
-            "| "
-            + (f"{a['pct']:.1f} | `{a['function']}`" if a else " | ")
-            + " | | "
-            + (f"{b['pct']:.1f} | `{b['function']}`" if b else " | ")
-            + " |"
-        )
+        lines.append(f"| {cell(a)} | | {cell(b)} |")
+    if summary.get("own_lines"):
+        lines += [
+            "",
+            "Hottest lines (own time): "
+            + "; ".join(
+                f"`{e['function']}` {e['pct']:.1f} %"
+                + (f" ({e['pct'] / 100 * unit_us:.2f} µs)" if unit_us is not None else "")
+                for e in summary["own_lines"][: max(5, top // 2)]
+            )
+            + ".",
+        ]
     return lines
