@@ -69,7 +69,7 @@ class Config:
     process_counts: tuple[int, ...]
 
 
-FULL = Config("full", 20_000, 5, 3.0, 3, PROCESSES)
+FULL = Config("full", 20_000, 5, 3.0, 5, PROCESSES)
 QUICK = Config("quick", 1_000, 1, 0.3, 1, (1, 2))
 
 
