@@ -55,12 +55,14 @@ def _check(result: _soak.SoakResult) -> None:
 
 
 def test_soak_32_motors_4_buses_a_few_virtual_seconds() -> None:
-    _check(_soak.run(minutes=0.1, seed=7, warmup_s=1.0, checkpoint_s=1.0, memory_limit_bytes=8_000_000))
+    result = _soak.run(minutes=0.1, seed=7, warmup_s=1.0, checkpoint_s=1.0, reboot_every_s=1.5)
+    _check(result)
+    assert result.faults["motor_reboot"] >= 2
 
 
 @pytest.mark.slow
 def test_soak_32_motors_4_buses_10_virtual_minutes() -> None:
-    _check(_soak.run(minutes=10, seed=2024, warmup_s=60.0, memory_limit_bytes=8_000_000))
+    _check(_soak.run(minutes=10, seed=2024, warmup_s=60.0, memory="rss"))
 
 
 # ---- a stalled serial port, under a Bus ----
