@@ -128,10 +128,7 @@ class Summary:
         load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
         machine = f"this machine: {cores} cores, load average {load:.1f}"
         if cpu_share < 0.8:
-            return (
-                f"the process got only {cpu_share:.0%} of a CPU core ({machine}): other work held the "
-                f"processor; a tick took {self.tick_p50_ms:.2f} ms (median, start to last reply)"
-            )
+            machine += f"; the process got only {cpu_share:.0%} of a core, other work held the rest"
         if self.tick_p50_ms > period_ms:
             return (
                 f"CPU-bound: a tick took {self.tick_p50_ms:.2f} ms (median, start to last reply; the wire "
@@ -139,6 +136,12 @@ class Summary:
                 f"simulator integrates each motor's mechanics at every frame on its bus); simulator and host "
                 f"share one core in one process, and {self.hz:g} Hz leaves {period_ms:.2f} ms per tick "
                 f"({machine}). Fewer --motors or a lower --hz keep up."
+            )
+        if cpu_share < 0.8:
+            return (
+                f"the process got only {cpu_share:.0%} of a CPU core ({cores} cores, load average "
+                f"{load:.1f}): other work held the processor; a tick took {self.tick_p50_ms:.2f} ms "
+                f"(median, start to last reply) of {period_ms:.2f} ms"
             )
         return (
             f"most ticks fit (median {self.tick_p50_ms:.2f} ms of {period_ms:.2f} ms, {sim_ms:.2f} ms of it "
