@@ -338,7 +338,13 @@ def report() -> None:
                     ["leaked pending (must be 0)", sk["leaked_pending"]],
                     ["stale commands sent (must be 0)", sk["stale_commands_sent"]],
                     ["most requests pending at once", sk["max_pending"]],
-                    ["traced memory growth after warm-up", f"{sk['memory_growth_bytes']:,} B"],
+                    [
+                        f"memory growth after the warm-up ({sk['memory_measure']})",
+                        f"{sk['memory_growth_bytes']:,} B ({sk['memory_first_last']})",
+                    ],
+                    ["live objects, first and last checkpoint", str(sk.get("live_objects_first_last", []))],
+                    ["safe stops missing at the end", sk["safe_stops_missing"]],
+                    ["problems", "; ".join(sk.get("problems", [])) or "none"],
                     ["recovery after an unplug (s)", ", ".join(f"{x:.3f}" for x in sk["unplug_recovery_s"])],
                 ],
                 "lr",
@@ -349,8 +355,40 @@ def report() -> None:
                 ["fault", "count"], [[k, f"{v:,}"] for k, v in sorted(sk["faults"].items())], "lr"
             ),
         ]
+    lines += FINDINGS.splitlines()
     REPORT.write_text("\n".join(lines).rstrip() + "\n", encoding="utf-8")
     print(f"wrote {REPORT}")
+
+
+FINDINGS = """
+## What the runs found
+
+* The soak's faults pointed at a Bus defect, now pinned alone by a strict xfail
+  (`tests/test_soak.py::test_a_request_the_motor_received_twice_never_answers_the_next_request_with_its_key`):
+  a request the motor receives twice (CAN double reception, the soak's `to_devices_duplicate`) is
+  answered twice, and when another request with the same key is queued, the scheduler sends it as
+  soon as the first answer came, so the second answer resolves it: a WriteEncoderZero then gets the
+  previous one's echo. Any mismatched reply in the soak above is this.
+* The stalled serial port under a Bus (`tests/test_soak.py`): one request at a time stays within
+  `stale_after_s`, but the commands of a `cycle()` on a half-duplex line wait in the Scheduler's
+  queue, which has no freshness limit, and reach the motor up to (n - 1) x `stale_after_s` after
+  they were made (strict xfail
+  `tests/test_soak.py::test_a_stalled_serial_port_under_cycles_delivers_no_stale_command`).
+* The fuzz targets found no input that breaks a promise (any that did would be in
+  `tests/test_fuzz.py`'s `REGRESSIONS`).
+
+## How to read these figures
+
+* Inputs are counted per target and phase; a target's *sanitized* count is what ran with the C core
+  under ASan + UBSan. The guided phase stops at its time limit (`--guided-seconds`), so its count is
+  below a million where the target is slow.
+* CAN "corruption" in the soak is what CAN does with a damaged frame: every controller's CRC check
+  rejects it and the sender retransmits it one frame time later (`servobus.sim.faults`); undecodable
+  frames reach the host in the fuzz targets and `tests/test_bus_faults.py`.
+* The 10-minute soak measures memory as the process's resident size and its count of live objects
+  at each checkpoint after a one-minute warm-up (tracemalloc, which the every-run soak uses, makes
+  a run about 5x slower); the simulator's own caches are bounded and fill during the run.
+"""
 
 
 def main() -> None:
