@@ -1,0 +1,143 @@
+"""``servobus plot``: position, speed and current against time per motor, from a ``record`` file."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import click
+
+__all__ = ["plot"]
+
+EPILOG = """\b
+Reads the telemetry `servobus record` writes (.csv or .jsonl) and draws three panels against
+time_s, one line per motor: position (the first column named position*, angle* or encoder*), speed
+(speed*, velocity*) and current (current*, iq*). Needs matplotlib: pip install 'servobus[plot]'.
+
+\b
+Examples:
+  servobus record --sim 4 --duration 5 -o run.csv && servobus plot run.csv -o run.png
+  servobus plot run.jsonl -o run.png --size 1600x1200 --title "bench run 3\""""
+
+#: panel -> column-name prefixes, in order of preference
+QUANTITIES = {
+    "position": ("position", "angle", "encoder"),
+    "speed": ("speed", "velocity"),
+    "current": ("current", "iq"),
+}
+INSTALL = "plot needs matplotlib: pip install 'servobus[plot]'"
+
+
+@click.command(epilog=EPILOG)
+@click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option(
+    "-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True, help="The PNG to write."
+)
+@click.option("--size", default="1200x900", show_default=True, metavar="WxH", help="Image size in pixels.")
+@click.option("--title", help="Figure title [default: the file name].")
+@click.option("--force", is_flag=True, help="Overwrite an existing output file.")
+def plot(file: Path, output: Path, size: str, title: str | None, force: bool) -> None:
+    """Plot position, speed and current against time per motor from a telemetry file."""
+    width, height = _size(size)
+    if output.suffix.lower() != ".png":
+        raise click.BadParameter(f"{output}: the plot is written as a .png", param_hint="-o")
+    if output.exists() and not force:
+        raise click.UsageError(f"{output} exists (--force overwrites it)")
+    try:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+    except ImportError:
+        raise click.ClickException(INSTALL) from None
+    rows = list(_rows(file))
+    if not rows:
+        raise click.ClickException(f"{file}: no telemetry rows")
+    columns = {panel: _column(rows, prefixes) for panel, prefixes in QUANTITIES.items()}
+    if not any(columns.values()):
+        raise click.ClickException(f"{file}: no position, speed or current column")
+    dpi = 100
+    figure = Figure(figsize=(width / dpi, height / dpi), dpi=dpi)
+    FigureCanvasAgg(figure)  # the Agg backend: no display needed
+    axes = figure.subplots(len(QUANTITIES), 1, sharex=True)
+    motors = sorted({row["motor_id"] for row in rows if isinstance(row.get("motor_id"), int)})
+    for ax, (panel, column) in zip(axes, columns.items(), strict=True):
+        ax.set_ylabel(column or f"{panel} (none)")
+        ax.grid(True, alpha=0.3)
+        if column is None:
+            continue
+        for motor in motors:
+            points = [
+                (row["time_s"], row[column])
+                for row in rows
+                if row.get("motor_id") == motor and _number(row.get(column)) and _number(row.get("time_s"))
+            ]
+            if points:
+                xs, ys = zip(*points, strict=True)
+                ax.plot(xs, ys, label=f"motor {motor}", linewidth=1)
+        if len(motors) > 1 and ax.has_data():
+            ax.legend(loc="upper right", fontsize="small")
+    axes[-1].set_xlabel("time_s")
+    figure.suptitle(title if title is not None else file.name)
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=dpi)
+    with output.open("wb" if force else "xb") as out:  # written whole: no half-drawn file on error
+        out.write(buffer.getvalue())
+    click.echo(f"plot: {len(rows)} rows, {len(motors)} motors -> {output}", err=True)
+
+
+def _size(text: str) -> tuple[int, int]:
+    width, sep, height = text.lower().partition("x")
+    try:
+        size = int(width), int(height)
+    except ValueError:
+        size = (0, 0)
+    if not sep or not all(16 <= s <= 10_000 for s in size):
+        raise click.BadParameter(f"{text!r}: expected WIDTHxHEIGHT in pixels, 16..10000", param_hint="--size")
+    return size
+
+
+def _rows(file: Path) -> Iterator[dict[str, Any]]:
+    """The rows of a record CSV or JSONL file, values as numbers where they are."""
+    try:
+        with file.open(encoding="utf-8", newline="") as f:
+            if file.suffix.lower() in (".jsonl", ".json"):
+                for line in f:
+                    if line.strip():
+                        row = json.loads(line)
+                        if not isinstance(row, dict):
+                            raise ValueError("a line is not a JSON object")
+                        yield row
+            else:
+                for raw in csv.DictReader(f):
+                    yield {key: _parse(value) for key, value in raw.items()}
+    except (ValueError, UnicodeDecodeError, csv.Error) as exc:
+        raise click.ClickException(f"{file}: not a record telemetry file ({exc})") from None
+
+
+def _parse(value: str | None) -> Any:
+    if value is None or value == "":
+        return None
+    for kind in (int, float):
+        try:
+            return kind(value)
+        except ValueError:
+            pass
+    return value
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _column(rows: list[dict[str, Any]], prefixes: tuple[str, ...]) -> str | None:
+    """The first column (in the rows' order) whose name starts with one of ``prefixes``, in the order
+    of ``prefixes``, and that holds a number."""
+    names = list(dict.fromkeys(name for row in rows for name in row))
+    for prefix in prefixes:
+        for name in names:
+            if name.startswith(prefix) and any(_number(row.get(name)) for row in rows):
+                return name
+    return None
