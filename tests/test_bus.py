@@ -8,7 +8,7 @@ from typing import Any, TypeVar
 
 import pytest
 
-from servobus.bus import Bus
+from servobus.bus import Bus, command_classes
 from servobus.errors import MotorTimeout
 from servobus.protocols import hollow as ho
 from servobus.protocols import lk
@@ -233,6 +233,12 @@ def test_a_lost_transport_fails_what_is_pending_at_once() -> None:
 
     with pytest.raises(TransportError, match="lost"):
         run(scenario)
+
+
+def test_command_classes_are_the_motor_methods_by_name() -> None:
+    classes = command_classes("myactuator")
+    assert classes["read_status2"] is ma.ReadStatus2 and classes["speed_control"] is ma.SpeedControl
+    assert command_classes("lk")["read_multi_turn_angle"] is lk.ReadMultiTurnAngle
 
 
 def test_unknown_commands_are_an_attribute_error() -> None:

@@ -43,7 +43,7 @@ from servobus.scheduler import Received, Request, RequestState, Scheduler, Traff
 from servobus.ticks import Tick, ticks
 from servobus.transports.events import StateChanged, TransportEvent, TransportState
 
-__all__ = ["Bus", "FrameLink", "Motor", "MotorFrames", "MotorStatus"]
+__all__ = ["Bus", "FrameLink", "Motor", "MotorFrames", "MotorStatus", "command_classes"]
 
 logger = logging.getLogger("servobus.bus")
 
@@ -97,8 +97,13 @@ def _snake(name: str) -> str:
     return re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", name).lower()
 
 
-def _command_classes(family: str) -> dict[str, type[Command]]:
-    """The family's command classes by snake_case name (``ReadStatus2`` -> ``read_status2``)."""
+def command_classes(family: str) -> dict[str, type[Command]]:
+    """The command classes of a built-in family by snake_case name (``ReadStatus2`` -> ``read_status2``):
+    the names :class:`Motor` offers as methods (``await motor.read_status2()``).
+
+    Raises:
+        ModuleNotFoundError: ``family`` is not a package under ``servobus.protocols``.
+    """
     module = __import__(f"servobus.protocols.{family}", fromlist=["__all__"])
     out: dict[str, type[Command]] = {}
     for name in getattr(module, "__all__", ()):
@@ -183,7 +188,7 @@ class Motor:
         self.online: bool | None = None
         self.fault: MotorFault | None = None
         self._misses = 0
-        self._commands = _command_classes(codec.family)
+        self._commands = command_classes(codec.family)
         self._watchers: list[MotorFrames] = []
 
     def metrics(self) -> Metrics:

@@ -12,7 +12,7 @@ from typing import Any
 import anyio
 import click
 
-from servobus.bus import Bus, Motor, _command_classes
+from servobus.bus import Bus, Motor, command_classes
 from servobus.cli._connect import Connection, connection_options
 from servobus.errors import MotorTimeout, TransportError
 from servobus.protocols import get_family
@@ -128,7 +128,7 @@ def record(
 def _poll_class(conn: Connection, name: str) -> type[Command]:
     """The command class ``name`` of the family, checked to be a read needing no arguments."""
     codec = get_family(conn.family).bind(conn.motor_ids[0], **conn.bind_options())
-    classes = _command_classes(conn.family)
+    classes = command_classes(conn.family)
 
     def read(cls: type[Command]) -> bool:
         try:
