@@ -181,8 +181,6 @@ class Watch:
     """A passive node: checks every host frame's age when its transmission ends (it reached the
     motors then) and records the stop frames."""
 
-    listens = None
-
     def __init__(self, name: str, soak: _Soak, bus_index: int) -> None:
         self.name = name
         self._soak = soak
