@@ -118,6 +118,28 @@ def test_one_shots_send_the_family_command(
         assert all(isinstance(m.plant.control, state) for m in devices.last)
 
 
+def test_one_shot_replies_are_shown_as_decode_and_record_show_them(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """One rendering of a reply's fields in the whole CLI: servobus.logs.message_values (flat scalars,
+    units in the names, flags as their int), under "fields" as in decode --json."""
+    rows = run_json(capsys, ["clear-errors", "--family", "lk", "--sim", "1"])
+    reply = rows[0]["replies"][0]
+    assert reply["type"] == "Status1Reply"
+    assert reply["fields"] == {
+        "command": 0x9B,
+        "temperature_c": 25,
+        "voltage_v": 24.0,
+        "current_a": 0.0,
+        "motor_state": "ON",
+        "error_state": 0,
+    }
+    out, _ = run(capsys, ["clear-errors", "--family", "lk", "--sim", "1"])
+    assert "voltage_v=24.0" in out and "error_state=0" in out
+    echo = run_json(capsys, ["brake", "--sim", "1", "--lock"])[0]["replies"][0]
+    assert echo == {"type": "Echo", "fields": {"command": "BrakeLock"}}
+
+
 def test_reset_gets_no_reply_by_the_manual(capsys: pytest.CaptureFixture[str]) -> None:
     out, _ = run(capsys, ["reset", "--sim", "1"])
     assert "no reply by the manual" in out

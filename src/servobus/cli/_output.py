@@ -18,7 +18,7 @@ import click
 from rich.console import Console
 from rich.table import Table
 
-from servobus.protocols._message import Command
+from servobus.protocols._message import Message
 
 __all__ = [
     "confirm",
@@ -27,7 +27,8 @@ __all__ = [
     "fmt",
     "json_option",
     "jsonable",
-    "reply_fields",
+    "message_fields",
+    "message_text",
     "table",
     "yes_option",
 ]
@@ -70,7 +71,8 @@ def confirm(question: str, yes: bool) -> None:
 
 
 def jsonable(value: Any) -> Any:
-    """``value`` as JSON data: enums by name, flags as a list of names, dataclasses as dicts."""
+    """``value`` as JSON data: enums by name, flags as a list of names, a command or reply as its
+    :func:`message_fields`, other dataclasses as dicts."""
     if isinstance(value, enum.Flag):
         return [member.name for member in type(value) if member.value and member in value and member.name]
     if isinstance(value, enum.Enum):
@@ -79,10 +81,10 @@ def jsonable(value: Any) -> Any:
         return value
     if isinstance(value, float):
         return value if math.isfinite(value) else str(value)
-    if isinstance(value, Command):  # an echo's command: its name says it
-        return type(value).__name__
+    if isinstance(value, Message):
+        return message_fields(value)
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return reply_fields(value)
+        return {f.name: jsonable(getattr(value, f.name)) for f in dataclasses.fields(value) if f.repr}
     if isinstance(value, dict):
         return {str(k): jsonable(v) for k, v in value.items()}
     if isinstance(value, Iterable) and not isinstance(value, bytes | bytearray):
@@ -92,11 +94,18 @@ def jsonable(value: Any) -> Any:
     return str(value)
 
 
-def reply_fields(reply: Any) -> dict[str, Any]:
-    """A reply's (or command's) shown fields as JSON data; fields hidden from its repr are left out."""
-    if not (dataclasses.is_dataclass(reply) and not isinstance(reply, type)):
-        return {}
-    return {f.name: jsonable(getattr(reply, f.name)) for f in dataclasses.fields(reply) if f.repr}
+def message_fields(message: Message) -> dict[str, Any]:
+    """A command's or reply's fields as :func:`servobus.logs.message_values` gives them (scalars, units
+    in the names: the shape ``decode``, ``record`` and ``plot`` share), non-finite floats as text."""
+    from servobus.logs import message_values  # (python-can loads with it: only when needed)
+
+    return {name: jsonable(value) for name, value in message_values(message).items()}
+
+
+def message_text(message: Message) -> str:
+    """A command or reply in a line: its class name, then ``name=value`` for each of its fields."""
+    fields = " ".join(f"{name}={value}" for name, value in message_fields(message).items())
+    return f"{type(message).__name__} {fields}".rstrip()
 
 
 def emit_json(data: Any) -> None:

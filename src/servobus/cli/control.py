@@ -30,7 +30,16 @@ from servobus.cli._motors import (
     run,
     status_of,
 )
-from servobus.cli._output import confirm, console, emit_json, json_option, reply_fields, table, yes_option
+from servobus.cli._output import (
+    confirm,
+    console,
+    emit_json,
+    json_option,
+    message_fields,
+    message_text,
+    table,
+    yes_option,
+)
 from servobus.errors import ServobusError
 from servobus.protocols._message import Command, Reply
 
@@ -85,7 +94,7 @@ def _print_results(outcomes: Sequence[Outcome], sent: Sequence[Sequence[Command]
                     "id": o.motor_id,
                     "sent": [type(c).__name__ for c in commands],
                     "replies": [
-                        None if r is None else {"type": type(r).__name__, **reply_fields(r)}
+                        None if r is None else {"type": type(r).__name__, "fields": message_fields(r)}
                         for r in o.replies
                     ],
                     "error": o.error,
@@ -102,7 +111,7 @@ def _print_results(outcomes: Sequence[Outcome], sent: Sequence[Sequence[Command]
         elif reply is None:
             result = "sent (no reply by the manual)"
         else:
-            result = type(reply).__name__ + " " + " ".join(f"{k}={v}" for k, v in reply_fields(reply).items())
+            result = message_text(reply)
         rows.append((o.motor_id, ", ".join(type(c).__name__ for c in commands), result, o.error))
     columns = ["id", "sent", "reply", "error"]
     if not any(r[3] for r in rows):
