@@ -4,10 +4,32 @@ commands a family lacks and ROM writes without confirmation send nothing (one li
 
 from __future__ import annotations
 
+import time
+from typing import Any
+
 import pytest
 
 from cli._bus_cli import Devices, keep_devices, one_line, pty_simulators, run, run_json
+from servobus.frame import Frame
+from servobus.protocols import lk
+from servobus.protocols import myactuator as ma
+from servobus.sim.devices.lk import LkMotor
+from servobus.sim.devices.myactuator import MyActuatorMotor
 from servobus.sim.plant import Brake, Off, PositionControl, SpeedControl
+
+
+@pytest.fixture
+def received(monkeypatch: pytest.MonkeyPatch) -> list[Frame]:
+    """Every frame the simulated MyActuator and LK motors receive."""
+    frames: list[Frame] = []
+    for cls in (MyActuatorMotor, LkMotor):
+
+        def receive(self: Any, frame: Frame, now_s: float, _original: Any = cls.receive) -> Any:
+            frames.append(frame)
+            return _original(self, frame, now_s)
+
+        monkeypatch.setattr(cls, "receive", receive)
+    return frames
 
 
 @pytest.fixture
@@ -63,6 +85,28 @@ def test_move_reaches_the_angle_then_the_motors_hold(
             isinstance(motor.plant.control, PositionControl)
             and abs(motor.plant.control.position_deg - 30) <= 1.5
         )
+
+
+@pytest.mark.parametrize("family", ["myactuator", "lk"])
+def test_a_relative_move_is_sent_once_and_ends_where_it_was_asked(
+    capsys: pytest.CaptureFixture[str], received: list[Frame], family: str
+) -> None:
+    """The increment goes out once: resent at --rate-hz, each resend would add another 10 degrees."""
+    start = time.monotonic()
+    args = ["move", "--family", family, "--sim", "1", "--angle-deg", "10", "--relative", "--duration", "3"]
+    rows = run_json(capsys, args)
+    assert abs(rows[0]["angle_deg"] - 10) <= 1, rows
+    assert time.monotonic() - start < 2.5  # it ended on arrival, not at --duration
+    code = {"myactuator": ma.IncrementalPositionControl.CODE, "lk": lk.IncrementalPositionSpeed.CODE}[family]
+    assert [f.data[0] for f in received].count(code) == 1
+
+
+def test_an_lk_move_reads_the_angle_and_ends_on_arrival(capsys: pytest.CaptureFixture[str]) -> None:
+    """LK's position set-point replies carry no angle: the move reads it, or it would never arrive."""
+    start = time.monotonic()
+    rows = run_json(capsys, ["move", "--family", "lk", "--sim", "1", "--angle-deg", "20", "--duration", "5"])
+    assert abs(rows[0]["angle_deg"] - 20) <= 1, rows
+    assert time.monotonic() - start < 4
 
 
 def test_speed_runs_for_the_duration_and_keep_leaves_it_running(

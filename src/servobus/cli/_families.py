@@ -1,7 +1,10 @@
 """Which command class each CLI command sends, one small table per family.
 
 A command the CLI offers maps to an :class:`Op`: the commands to send once, in order (``first``), and
-for set-points the one to resend at the command's rate (``repeat``). Every builder takes the motor's
+for set-points the ones to resend at the command's rate (``repeat``): the set-point again where
+resending it changes nothing (an absolute target, a speed, a current), and the reads that show where
+the motor is where the set-point's reply does not say (LK's angle) or where the set-point must not
+be resent (an increment, which every resend would add again). Every builder takes the motor's
 bound codec (revision, model, link) and the command line's values in the units their option names
 carry; the command classes check ranges and raise ValueError naming field and limit, before
 anything is sent. A command a family has no entry for is refused in one line (exit 2) by
@@ -23,7 +26,7 @@ __all__ = ["TABLES", "Op", "op", "status_reads"]
 
 Values = Mapping[str, Any]
 Build = Callable[[Any, Values], Sequence[Command]]
-Repeat = Callable[[Any, Values], Command]
+Repeat = Callable[[Any, Values], Sequence[Command]]
 
 
 @dataclass(frozen=True, slots=True)
@@ -32,7 +35,9 @@ class Op:
 
     Attributes:
         first: the commands sent once, in order (the reply to the last one is shown).
-        repeat: for set-points, the command resent at the command's rate (None: one-shot).
+        repeat: for set-points, the commands sent again at the command's rate, in order (None:
+            one-shot); their replies together are the motor's status. Only commands that may be
+            repeated: an absolute set-point, a read; never an increment.
         rom: it writes the motor's ROM or changes its id: ask first (``--yes`` skips).
         note: said after it succeeded (what else the user must do).
     """
@@ -48,7 +53,35 @@ def _once(make: Callable[[Any, Values], Command], **options: Any) -> Op:
 
 
 def _setpoint(make: Callable[[Any, Values], Command]) -> Op:
-    return Op(first=lambda codec, v: (make(codec, v),), repeat=make)
+    return Op(first=lambda codec, v: (make(codec, v),), repeat=lambda codec, v: (make(codec, v),))
+
+
+def _move(absolute: Callable[[Any, Values], Command], relative: Callable[[Any, Values], Command]) -> Op:
+    """An absolute move resends its target; a relative one reads the angle, sends the increment once,
+    then only reads (the reply to ``first[0]`` is the angle it started from)."""
+
+    def first(codec: Any, v: Values) -> Sequence[Command]:
+        if v["relative"]:
+            return (_angle_read(codec), relative(codec, v))
+        return (absolute(codec, v),)
+
+    def repeat(codec: Any, v: Values) -> Sequence[Command]:
+        if v["relative"]:
+            return (_angle_read(codec), *_reads(codec.family, ("ReadStatus2",)))
+        return (absolute(codec, v), *_angle_reads(codec))
+
+    return Op(first=first, repeat=repeat)
+
+
+def _angle_read(codec: Any) -> Command:
+    """The multi-turn angle read (MyActuator 0x92, LK 0x92: degrees, the position set-points' scale)."""
+    return _reads(codec.family, ("ReadMultiTurnAngle",))[0]
+
+
+def _angle_reads(codec: Any) -> Sequence[Command]:
+    """What an absolute move adds to its set-point to know the angle: nothing where the set-point's
+    reply carries it (MyActuator), the angle read where it does not (LK)."""
+    return (_angle_read(codec),) if codec.family == "lk" else ()
 
 
 def _safe(kind: str) -> Op:
@@ -61,9 +94,13 @@ def _safe(kind: str) -> Op:
 def _ma_move(codec: Any, v: Values) -> Command:
     from servobus.protocols import myactuator as ma
 
-    if v["relative"]:
-        return ma.IncrementalPositionControl(angle_deg=v["angle_deg"], max_speed_dps=v["max_speed_dps"])
     return ma.AbsolutePositionControl(angle_deg=v["angle_deg"], max_speed_dps=v["max_speed_dps"])
+
+
+def _ma_increment(codec: Any, v: Values) -> Command:
+    from servobus.protocols import myactuator as ma
+
+    return ma.IncrementalPositionControl(angle_deg=v["angle_deg"], max_speed_dps=v["max_speed_dps"])
 
 
 def _ma_mit(codec: Any, v: Values) -> Command:
@@ -97,7 +134,7 @@ def _ma_set_id(codec: Any, v: Values) -> Command:
 
 MYACTUATOR: dict[str, Op] = {
     "status": Op(first=lambda codec, v: _reads("myactuator", ("ReadStatus1", "ReadStatus2"))),
-    "move": _setpoint(_ma_move),
+    "move": _move(_ma_move, _ma_increment),
     "speed": _setpoint(_ma("SpeedControl", speed_dps="speed_dps")),
     "torque": _setpoint(_ma("TorqueControl", current_a="current_a")),
     "mit": _setpoint(_ma_mit),
@@ -124,9 +161,13 @@ def _lk_v235(codec: Any) -> bool:
 def _lk_move(codec: Any, v: Values) -> Command:
     from servobus.protocols import lk
 
-    if v["relative"]:
-        return lk.IncrementalPositionSpeed(increment_deg=v["angle_deg"], max_speed_dps=v["max_speed_dps"])
     return lk.MultiTurnPositionSpeed(angle_deg=v["angle_deg"], max_speed_dps=v["max_speed_dps"])
+
+
+def _lk_increment(codec: Any, v: Values) -> Command:
+    from servobus.protocols import lk
+
+    return lk.IncrementalPositionSpeed(increment_deg=v["angle_deg"], max_speed_dps=v["max_speed_dps"])
 
 
 def _lk_speed(codec: Any, v: Values) -> Command:
@@ -161,7 +202,7 @@ def _lk(name: str) -> Callable[[Any, Values], Command]:
 
 LK: dict[str, Op] = {
     "status": Op(first=lambda codec, v: _reads("lk", ("ReadStatus1", "ReadStatus2", "ReadMultiTurnAngle"))),
-    "move": _setpoint(_lk_move),
+    "move": _move(_lk_move, _lk_increment),
     "speed": _setpoint(_lk_speed),
     "torque": _setpoint(_lk_torque),
     "stop": _safe("stop"),
@@ -220,7 +261,7 @@ def _ho_setpoint(mode: str) -> Op:
         point = setpoint(codec, v)  # checked (and refused) before the mode changes
         return (ho.SelectMode(mode=ho.ControlMode[mode]), point, ho.Start())
 
-    return Op(first=first, repeat=setpoint)
+    return Op(first=first, repeat=lambda codec, v: (setpoint(codec, v),))
 
 
 def _ho_move_absolute(op: Op) -> Op:

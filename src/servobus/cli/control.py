@@ -4,7 +4,8 @@ one-shots (``stop``, ``off``, ``brake``, ``zero``, ``set-id``, ``clear-errors``,
 Which command class each sends is the family's table (:mod:`servobus.cli._families`); here are the
 options (units in their names), the confirmation of ROM writes and id changes, and the output.
 Set-points are resent at ``--rate-hz`` until ``--duration`` ends, a move arrives, or Ctrl-C; then
-the motors get the Bus's safe stop (``--keep`` sends once and leaves them running).
+the motors get the Bus's safe stop (``--keep`` sends once and leaves them running). A relative move
+sends its increment once and then only reads where the motor is.
 """
 
 from __future__ import annotations
@@ -60,6 +61,8 @@ __all__ = [
 ]
 
 _SETTINGS = {"max_content_width": 100}
+#: the replies to a set-point's first commands -> whether a status shows it arrived
+Arrival = Callable[[Sequence[Reply | None]], Callable[[dict[str, Any]], bool]]
 
 
 def _epilog(*examples: str) -> str:
@@ -235,15 +238,18 @@ def _drive(
     duration: float | None,
     keep: bool,
     as_json: bool,
-    arrived: Callable[[dict[str, Any]], bool] | None = None,
+    arrival: Arrival | None = None,
 ) -> None:
     entry = op(conn.family, name)
     planned = plan(conn, entry, values)
     repeat = entry.repeat
     assert repeat is not None
     repeats = [repeat(codec, values) for codec in codecs(conn)]
+    for codec, commands in zip(codecs(conn), repeats, strict=True):
+        for command in commands:
+            codec.encode(command)  # refused here (exit 2), not after the first set-point went out
     live = not as_json and console(stderr=True).is_terminal
-    outcomes = run(_run_setpoints(conn, planned, repeats, rate_hz, duration, keep, live, arrived))
+    outcomes = run(_run_setpoints(conn, planned, repeats, rate_hz, duration, keep, live, arrival))
     rows = _status_rows(outcomes)
     if as_json:
         emit_json(rows)
@@ -257,18 +263,22 @@ def _drive(
 async def _run_setpoints(
     conn: Connection,
     planned: Sequence[Sequence[Command]],
-    repeats: Sequence[Command],
+    repeats: Sequence[Sequence[Command]],
     rate_hz: float,
     duration: float | None,
     keep: bool,
     live: bool,
-    arrived: Callable[[dict[str, Any]], bool] | None,
+    arrival: Arrival | None,
 ) -> list[Outcome]:
     async with open_bus(conn, safe=None if keep else "stop") as (bus, motors):
         outcomes = await ask_all(motors, planned)
         if keep or any(o.error for o in outcomes):
             return outcomes
-        items: list[tuple[Motor, Command]] = list(zip(motors, repeats, strict=True))
+        arrived = None if arrival is None else [arrival(o.replies) for o in outcomes]
+        items: list[tuple[Motor, Command]] = [
+            (motor, command) for motor, commands in zip(motors, repeats, strict=True) for command in commands
+        ]
+        by_motor = {o.motor_id: o for o in outcomes}
         view = Live(console=console(stderr=True), auto_refresh=False) if live else None
         settled = 0
         start = time.monotonic()
@@ -280,21 +290,29 @@ async def _run_setpoints(
                 if duration is not None and elapsed >= duration:
                     break
                 results = await bus.cycle(items)
-                for outcome, result in zip(outcomes, results, strict=True):
+                fresh: dict[int, list[Reply | None]] = {o.motor_id: [] for o in outcomes}
+                errors: dict[int, str] = {}
+                for (motor, _), result in zip(items, results, strict=True):
                     if isinstance(result, ServobusError):
-                        outcome.error = str(result)
+                        errors.setdefault(motor.motor_id, str(result))
                     elif isinstance(result, BaseException):
                         raise result
                     else:
-                        outcome.error = None
-                        outcome.replies = [result]
+                        fresh[motor.motor_id].append(result)
+                for motor_id, outcome in by_motor.items():
+                    outcome.error = errors.get(motor_id)
+                    if fresh[motor_id]:
+                        outcome.replies = fresh[motor_id]
                 if arrived is not None:
-                    done = all(o.error is None and arrived(status_of(o.replies)) for o in outcomes)
+                    done = all(
+                        o.error is None and there(status_of(o.replies))
+                        for o, there in zip(outcomes, arrived, strict=True)
+                    )
                     settled = settled + 1 if done else 0
                     if settled >= 3:  # three ticks in a row at the target
                         break
                 if view is not None and tick.index % max(1, round(rate_hz / 4)) == 0:
-                    title = f"{type(repeats[0]).__name__}, {elapsed:.1f} s (Ctrl-C stops the motors)"
+                    title = f"{type(planned[0][-1]).__name__}, {elapsed:.1f} s (Ctrl-C stops the motors)"
                     view.update(_status_table(_status_rows(outcomes), title), refresh=True)
         finally:
             if view is not None:
@@ -361,15 +379,25 @@ def move(
 ) -> None:
     """Move to an angle (or by one, --relative) and hold it: position control.
 
-    An absolute move ends when every motor reports the target (within --tolerance-deg) three times
-    in a row, or after --duration, or at Ctrl-C; the motors then stop and hold where they are.
+    A move ends when every motor reports the target (within --tolerance-deg) three times in a row,
+    or after --duration, or at Ctrl-C; the motors then stop and hold where they are. An absolute
+    target is resent at --rate-hz; a relative move reads the angle, sends the increment once, and
+    its target is that angle plus the increment.
     """
     values = {"angle_deg": angle_deg, "max_speed_dps": None if no_speed_limit else max_speed_dps}
     values["relative"] = relative
 
-    def arrived(state: dict[str, Any]) -> bool:
-        angle = state.get("angle_deg")
-        return angle is not None and abs(angle - angle_deg) <= tolerance_deg
+    def arrival(first: Sequence[Reply | None]) -> Callable[[dict[str, Any]], bool]:
+        target: float | None = angle_deg
+        if relative:  # the reply to the read sent before the increment
+            start = status_of(first[:1])["angle_deg"]
+            target = None if start is None else start + angle_deg
+
+        def arrived(state: dict[str, Any]) -> bool:
+            angle = state.get("angle_deg")
+            return target is not None and angle is not None and abs(angle - target) <= tolerance_deg
+
+        return arrived
 
     _drive(
         conn,
@@ -379,7 +407,7 @@ def move(
         duration=duration,
         keep=keep,
         as_json=as_json,
-        arrived=None if relative else arrived,
+        arrival=arrival,
     )
 
 
