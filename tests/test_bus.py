@@ -197,6 +197,29 @@ def test_a_broadcast_gathers_each_motors_reply() -> None:
     assert sorted(results) == [1, 2, 3, 4] and all(isinstance(r, ma.StatusReply) for r in results.values())
 
 
+def test_a_broadcast_after_a_timeout_gets_the_reply_and_sends_only_its_frame() -> None:
+    """A motor that missed one broadcast (its key held for a late reply) answers the next: that reply
+    is its result, and nothing but the broadcast frames goes out (no request's placeholder frame)."""
+    motors = _motors(2)
+    sniffer = Sniffer()
+
+    async def scenario() -> list[dict[int, Any]]:
+        async with Bus(SimTransport(devices=[*motors, sniffer]), safe=None) as bus:
+            handles = [bus.motor("myactuator", m) for m in (1, 2)]
+            motors[1].unresponsive = True
+            first = await bus.broadcast(ma.ReadStatus2(), handles)
+            motors[1].unresponsive = False
+            second = await bus.broadcast(ma.ReadStatus2(), handles)
+            assert bus.scheduler.pending == 0
+            return [first, second]
+
+    first, second = run(scenario)
+    assert isinstance(first[2], MotorTimeout)
+    assert all(isinstance(r, ma.StatusReply) for r in second.values()), second
+    sent = [f.arbitration_id for _, f in sniffer.seen if not 0x241 <= f.arbitration_id <= 0x260]
+    assert sent == [0x280, 0x280]
+
+
 def test_state_and_subscribers_see_stream_frames() -> None:
     async def scenario() -> tuple[list[Traffic], Any]:
         seen: list[Traffic] = []

@@ -137,6 +137,27 @@ def test_after_a_timeout_the_key_is_held_for_the_late_reply_then_released_by_tim
     assert scheduler.next_to_send(0.0599) == [] and scheduler.next_to_send(0.0601) == [new]
 
 
+def test_a_broadcast_reply_waits_for_its_keys_and_then_goes_past_the_queue() -> None:
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec])
+    timed_out = scheduler.request(codec, ma.ReadStatus2(), timeout_s=0.01)
+    scheduler.submit(timed_out)
+    _send_all(scheduler, 0.0)
+    assert scheduler.blocking([timed_out.key], 0.005) == (None, [timed_out])  # in flight
+    scheduler.expire(0.01)
+    assert scheduler.blocking([timed_out.key], 0.015) == (0.02, [])  # held for its late reply
+    assert scheduler.blocking([timed_out.key], 0.02) == (None, [])
+    queued = scheduler.request(codec, ma.ReadMultiTurnAngle())
+    scheduler.submit(queued)  # the queue does not hold a broadcast's expectation back
+    expected = dataclasses.replace(scheduler.request(codec, ma.ReadStatus2()), frame=Frame(arbitration_id=0))
+    scheduler.expect(expected, 0.02)
+    assert expected.state is S.SENT and expected.deadline == 0.04 and queued.state is S.QUEUED
+    got = scheduler.receive(_reply(1, t=0.021), 0.021)
+    assert got.request is expected and expected.state is S.REPLIED and scheduler.counts["requests"] == 3
+    with pytest.raises(RuntimeError, match="submitted once"):
+        scheduler.expect(expected, 0.03)
+
+
 def test_a_reply_that_beats_its_send_report_answers_its_request() -> None:
     codec = MA.bind(1)
     scheduler = Scheduler([codec], min_reply_s=0.0002)

@@ -503,6 +503,9 @@ class Bus:
     ) -> dict[int, Result]:
         """One frame for several motors of one family; each motor's reply or timeout, by motor id.
 
+        The frame waits while a request with the key of one of its replies is in flight, or held for
+        a late reply (``late_hold_s``), as a request would; then it goes out at once, past the queue.
+
         Raises:
             ValueError: the family has no broadcast form for ``command``, or mixed families.
         """
@@ -511,6 +514,16 @@ class Bus:
             raise ValueError(f"a broadcast goes to motors of one family, not {sorted(families)}")
         plan = get_family(families.pop()).broadcast(command, [m.codec for m in motors])
         assert self._loop is not None
+        keys = list(plan.replies.values())
+        while True:
+            held_until, flying = self.scheduler.blocking(keys, self._loop.time())
+            if flying:
+                timeout = None if held_until is None else max(0.0, held_until - self._loop.time())
+                await asyncio.wait([r.context for r in flying], timeout=timeout)
+            elif held_until is not None:
+                await asyncio.sleep(max(0.0, held_until - self._loop.time()))
+            else:
+                break
         by_id = {m.motor_id: m for m in motors}
         timeout = timeout_s if timeout_s is not None else max(m.codec.timeout_s(command) for m in motors)
         expected = {
@@ -532,13 +545,9 @@ class Bus:
         """A request whose frame is sent by someone else (a broadcast): it only awaits ``key``."""
         assert self._loop is not None
         future: asyncio.Future[Any] = self._loop.create_future()
+        # (its frame is never sent: the request goes into flight directly, past the queue)
         request = Request(motor.codec, command, Frame(arbitration_id=0), key, timeout_s, context=future)
-        self.scheduler.submit(request)
-        for sent in self.scheduler.next_to_send(self._loop.time()):
-            if sent is request:
-                self.scheduler.sent(request, self._loop.time())
-            else:  # another queued request got its turn too: it goes out as usual
-                self._hand_over(sent)
+        self.scheduler.expect(request, self._loop.time())
         self._kick()
         return request
 

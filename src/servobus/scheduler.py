@@ -253,6 +253,37 @@ class Scheduler:
         self._queue.append(request)
         self.motor_counts[id(request.codec)]["requests"] += 1
 
+    def blocking(self, keys: Iterable[Hashable], now: float) -> tuple[float | None, list[Request]]:
+        """What a frame that skips the queue (a broadcast) waits for before it may go out: the requests
+        in flight with one of ``keys``, and when the last hold of one of them ends (None: none held).
+
+        Its replies come on ``keys``; while one is in flight or held for a late reply, a reply could
+        answer the wrong request, as for a queued request (:meth:`next_to_send`).
+        """
+        held = self._held
+        ends = [held[key] for key in keys if key in held and held[key] > now]
+        flying = [request for key in keys for request in self._pending.get(key, ())]
+        return (max(ends) if ends else None), flying
+
+    def expect(self, request: Request, at: float) -> None:
+        """``request``'s frame was sent by someone else at ``at`` (a broadcast): it is in flight from
+        then, past the queue and its pacing, and only awaits its reply. Nothing of :meth:`blocking`
+        may be left for its key (the caller waited).
+
+        Raises:
+            RuntimeError: the request was submitted before.
+        """
+        if request.submitted:
+            raise RuntimeError(f"{request.describe()} is {request.state.value}: a request is submitted once")
+        request.submitted = True
+        self.motor_counts[id(request.codec)]["requests"] += 1
+        self._move(request, S.SENDING)
+        request.attempts += 1
+        self._in_flight[request] = None
+        if request.key is not None:
+            self._pending.setdefault(request.key, deque()).append(request)
+        self.sent(request, at)
+
     def next_to_send(self, now: float) -> list[Request]:
         """The requests that may leave now, in order (they become SENDING; write their frames).
 
