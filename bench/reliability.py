@@ -339,10 +339,17 @@ def report() -> None:
                     ["stale commands sent (must be 0)", sk["stale_commands_sent"]],
                     ["most requests pending at once", sk["max_pending"]],
                     [
-                        f"memory growth after the warm-up ({sk['memory_measure']})",
-                        f"{sk['memory_growth_bytes']:,} B ({sk['memory_first_last']})",
+                        f"memory ({sk['memory_measure']}): high-water mark, 2nd half of the run minus 1st",
+                        f"{sk['memory_growth_bytes']:,} B",
                     ],
-                    ["live objects, first and last checkpoint", str(sk.get("live_objects_first_last", []))],
+                    [
+                        "memory (t s, bytes): first and last checkpoint; lowest and highest",
+                        f"{sk['memory_first_last']}; {sk.get('memory_min_max')}",
+                    ],
+                    [
+                        "live objects: first and last checkpoint; high-water growth",
+                        f"{sk.get('live_objects_first_last', [])}; {sk.get('live_objects_growth')}",
+                    ],
                     ["safe stops missing at the end", sk["safe_stops_missing"]],
                     ["problems", "; ".join(sk.get("problems", [])) or "none"],
                     ["recovery after an unplug (s)", ", ".join(f"{x:.3f}" for x in sk["unplug_recovery_s"])],
