@@ -9,7 +9,7 @@ from typing import Any, TypeVar
 import pytest
 
 from servobus.bus import Bus, command_classes
-from servobus.errors import MotorTimeout
+from servobus.errors import MotorTimeout, TransportError
 from servobus.protocols import hollow as ho
 from servobus.protocols import lk
 from servobus.protocols import myactuator as ma
@@ -140,6 +140,35 @@ def test_cancellation_stops_every_commanded_motor_too() -> None:
     assert _stops(sniffer, 0x80) == {1, 2}
 
 
+def test_leaving_the_block_fails_what_is_pending_and_nothing_follows_the_safe_stop() -> None:
+    """A task the block did not wait for keeps commanding: its set-points must not reach the motor
+    after the safe stop, and its pending request must end (TransportError), not hang."""
+    sniffer = Sniffer()
+    silent = MyActuatorMotor(2)
+    silent.unresponsive = True
+
+    async def scenario() -> tuple[BaseException | None, BaseException | None]:
+        async def control(motor: Any) -> None:
+            while True:
+                await motor.speed_control(speed_dps=30.0)
+
+        transport = SimTransport(devices=[*_motors(1), silent, sniffer])
+        await transport.open()  # the user's: the Bus leaves it open
+        async with Bus(transport) as bus:
+            loop = asyncio.create_task(control(bus.motor("myactuator", 1)))
+            waiting = asyncio.create_task(bus.motor("myactuator", 2).read_status2(timeout_s=5.0))
+            await asyncio.sleep(0.01)
+        done, _ = await asyncio.wait([loop, waiting], timeout=1.0)
+        await transport.close()
+        return tuple(t.exception() if t in done else None for t in (loop, waiting))  # type: ignore[return-value]
+
+    loop_error, waiting_error = run(scenario)
+    assert isinstance(loop_error, TransportError) and "closed" in str(loop_error)
+    assert isinstance(waiting_error, TransportError) and "closed" in str(waiting_error)
+    to_motor_1 = [f.data[0] for _, f in sniffer.seen if f.arbitration_id == 0x141]
+    assert to_motor_1[-1] == 0x81 and to_motor_1.count(0x81) == 1, to_motor_1[-5:]
+
+
 def test_out_of_range_values_raise_before_anything_is_sent() -> None:
     sniffer = Sniffer()
 
@@ -251,8 +280,6 @@ def test_a_lost_transport_fails_what_is_pending_at_once() -> None:
             await asyncio.sleep(0.01)
             transport.unplug()
             await task
-
-    from servobus.errors import TransportError
 
     with pytest.raises(TransportError, match="lost"):
         run(scenario)

@@ -14,6 +14,9 @@ link, an RS485 line, or the in-process simulator), and then:
 * ``await bus.broadcast(command, motors)``: MyActuator's 0x280/0xCD and LK's multi-motor torque.
 * Leaving the ``async with`` block, normally, by an exception or by cancellation, sends the safe
   command (stop by default) to every motor this Bus commanded, shielded, within ``safe_timeout_s``.
+  From then on nothing else is sent: requests not yet sent, and any made later (by a task the block
+  did not wait for), fail with TransportError, and so does every request still waiting for a reply
+  once the block is left.
 
 Inside, the sans-IO :class:`~servobus.scheduler.Scheduler` matches, paces and times out; the Bus only
 moves frames between it and the transport (push delivery and send reports, no polling) and keeps one
@@ -343,11 +346,13 @@ class Bus:
         # The silence watchdog's timer, at the earliest moment an online motor can turn silent.
         self._silence: asyncio.TimerHandle | None = None
         self._silence_at = 0.0
+        self._closing = False  # the block is being left: only the safe commands may still go out
 
     # ---- life cycle ----
 
     async def __aenter__(self) -> Self:
         self._loop = asyncio.get_running_loop()
+        self._closing = False
         if not self.transport.is_open:
             await self.transport.open()
             self._owns_transport = True
@@ -359,10 +364,15 @@ class Bus:
     async def __aexit__(
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> bool | None:
+        assert self._loop is not None
+        self._closing = True
         try:
+            # What is still queued would go out with the safe commands, or after them.
+            self._fail(self.scheduler.fail_queued(self._closed_error(), self._loop.time()))
             with anyio.CancelScope(shield=True):
                 await self._safe_stop()
         finally:
+            self._fail(self.scheduler.fail_all(self._closed_error(), self._loop.time()))
             for timer in (self._timer, self._silence):
                 if timer is not None:
                     timer.cancel()
@@ -376,6 +386,14 @@ class Bus:
                     await self.transport.close()
         return None
 
+    def _closed_error(self) -> TransportError:
+        return TransportError(f"{self.name}: the Bus is closed (its block was left)")
+
+    def _fail(self, requests: Iterable[Request]) -> None:
+        for request in requests:
+            self._by_frame.pop(id(request.frame), None)
+            self._settle(request, request.error)
+
     async def _safe_stop(self) -> None:
         """Send the safe command to every commanded motor; wait for the replies within the limit."""
         if self.safe is None or not self._commanded or not self.transport.is_open:
@@ -384,7 +402,9 @@ class Bus:
         for motor in list(self._commanded.values()):
             try:
                 command = motor.codec.safe_command(self.safe)
-                pending.append(self._submit(motor, command, timeout_s=self.safe_timeout_s, retries=0))
+                pending.append(
+                    self._submit(motor, command, timeout_s=self.safe_timeout_s, retries=0, safe=True)
+                )
             except (ValueError, TransportError):
                 continue
         try:
@@ -443,16 +463,26 @@ class Bus:
             raise
         return reply
 
-    def _submit(self, motor: Motor, command: Command, *, timeout_s: float | None, retries: int) -> Request:
-        request = self._prepare(motor, command, timeout_s=timeout_s, retries=retries)
+    def _submit(
+        self, motor: Motor, command: Command, *, timeout_s: float | None, retries: int, safe: bool = False
+    ) -> Request:
+        request = self._prepare(motor, command, timeout_s=timeout_s, retries=retries, safe=safe)
         self._enqueue(motor, request)
         self._pump()
         return request
 
-    def _prepare(self, motor: Motor, command: Command, *, timeout_s: float | None, retries: int) -> Request:
-        """The request for ``command``, encoded (ValueError here, before anything is queued)."""
+    def _prepare(
+        self, motor: Motor, command: Command, *, timeout_s: float | None, retries: int, safe: bool = False
+    ) -> Request:
+        """The request for ``command``, encoded (ValueError here, before anything is queued).
+
+        Raises:
+            TransportError: the block is being left (only the safe commands go out then), or was.
+        """
         if self._loop is None:
             raise RuntimeError(f"{self.name}: use the Bus inside 'async with'")
+        if self._closing and not safe:
+            raise self._closed_error()
         future: asyncio.Future[Any] = self._loop.create_future()
         return self.scheduler.request(
             motor.codec, command, timeout_s=timeout_s, retries=retries, context=future
@@ -524,6 +554,8 @@ class Bus:
                 await asyncio.sleep(max(0.0, held_until - self._loop.time()))
             else:
                 break
+        if self._closing:  # (the block was left while it waited)
+            raise self._closed_error()
         by_id = {m.motor_id: m for m in motors}
         timeout = timeout_s if timeout_s is not None else max(m.codec.timeout_s(command) for m in motors)
         expected = {

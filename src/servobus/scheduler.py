@@ -363,6 +363,14 @@ class Scheduler:
         if was_out and request.key is not None:
             self._expect_late(request, now)
 
+    def fail_queued(self, error: BaseException, now: float) -> list[Request]:
+        """Every request not yet handed to the transport fails with ``error`` (the Bus is closing)."""
+        failed = list(self._queue)
+        for request in failed:
+            request.error = error
+            self._finish(request, S.FAILED, now)
+        return failed
+
     def fail_all(self, error: BaseException, now: float) -> list[Request]:
         """The transport was lost: every request not yet answered fails with ``error``."""
         failed = [*self._in_flight, *self._queue]  # in the order they were sent or queued
