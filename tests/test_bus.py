@@ -120,6 +120,19 @@ def test_an_exception_in_the_block_stops_every_commanded_motor() -> None:
     assert _stops(sniffer) == {1, 2, 3}
 
 
+def test_the_bus_says_which_motors_it_commanded_and_which_got_the_safe_command() -> None:
+    async def scenario(safe: str | None) -> tuple[list[int], list[int]]:
+        async with Bus(SimTransport(devices=_motors(3)), safe=safe) as bus:
+            for m in (1, 3):
+                await bus.motor("myactuator", m).speed_control(speed_dps=30.0)
+            await bus.motor("myactuator", 2).read_status2()
+            assert bus.safe_sent == ()
+        return [m.motor_id for m in bus.commanded], [m.motor_id for m in bus.safe_sent]
+
+    assert run(lambda: scenario("stop")) == ([1, 3], [1, 3])
+    assert run(lambda: scenario(None)) == ([1, 3], [])
+
+
 def test_cancellation_stops_every_commanded_motor_too() -> None:
     sniffer = Sniffer()
 

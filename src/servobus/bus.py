@@ -294,6 +294,10 @@ class Bus:
         offline_after_misses: replies missed in a row after which a motor is marked offline.
         offline_after_s: silence after which a motor that answered before is marked offline (None:
             silence alone never does; set it when the motor streams or is polled steadily).
+
+    Attributes:
+        safe_sent: the motors whose safe command left (the transport reported it sent) when the
+            block was last left; empty before, and when ``safe`` is None or nothing was commanded.
     """
 
     def __init__(
@@ -347,12 +351,14 @@ class Bus:
         self._silence: asyncio.TimerHandle | None = None
         self._silence_at = 0.0
         self._closing = False  # the block is being left: only the safe commands may still go out
+        self.safe_sent: tuple[Motor, ...] = ()
 
     # ---- life cycle ----
 
     async def __aenter__(self) -> Self:
         self._loop = asyncio.get_running_loop()
         self._closing = False
+        self.safe_sent = ()
         if not self.transport.is_open:
             await self.transport.open()
             self._owns_transport = True
@@ -398,20 +404,21 @@ class Bus:
         """Send the safe command to every commanded motor; wait for the replies within the limit."""
         if self.safe is None or not self._commanded or not self.transport.is_open:
             return
-        pending = []
+        pending: dict[Motor, Request] = {}
         for motor in list(self._commanded.values()):
             try:
                 command = motor.codec.safe_command(self.safe)
-                pending.append(
-                    self._submit(motor, command, timeout_s=self.safe_timeout_s, retries=0, safe=True)
+                pending[motor] = self._submit(
+                    motor, command, timeout_s=self.safe_timeout_s, retries=0, safe=True
                 )
             except (ValueError, TransportError):
                 continue
         try:
             with anyio.move_on_after(self.safe_timeout_s):
-                await asyncio.gather(*(r.context for r in pending), return_exceptions=True)
+                await asyncio.gather(*(r.context for r in pending.values()), return_exceptions=True)
         finally:
-            self._abandon(pending)
+            self.safe_sent = tuple(m for m, r in pending.items() if r.sent_at is not None)
+            self._abandon(pending.values())
 
     # ---- motors ----
 
@@ -436,6 +443,11 @@ class Bus:
         self.motors[key] = motor
         self._by_codec[id(codec)] = motor
         return motor
+
+    @property
+    def commanded(self) -> tuple[Motor, ...]:
+        """The motors this Bus sent a command that is not a read: the safe command goes to them."""
+        return tuple(self._commanded.values())
 
     def subscribe(self, callback: Callable[[Motor, Traffic, Reply], object]) -> None:
         """Call ``callback(motor, traffic, reply)`` for every decoded frame of a motor on this bus."""

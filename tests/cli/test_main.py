@@ -4,10 +4,14 @@ comes through, and click's shell completion works (``_SERVOBUS_COMPLETE``)."""
 
 from __future__ import annotations
 
+import signal
+import subprocess
+import time
+
 import pytest
 from click.testing import CliRunner
 
-from cli._bus_cli import one_line, run
+from cli._bus_cli import SERVOBUS, one_line, run
 from servobus.cli import cli, main
 
 BUS_COMMANDS = [
@@ -79,3 +83,43 @@ def test_shell_completion_offers_the_subcommands() -> None:
     assert {"plain,status", "plain,stop"} <= set(result.output.split())
     script = CliRunner().invoke(cli, [], prog_name="servobus", env={"_SERVOBUS_COMPLETE": "bash_source"})
     assert script.exit_code == 0 and "_servobus_completion" in script.output
+
+
+def _interrupted(args: list[str], after_s: float) -> tuple[int, list[str]]:
+    """``servobus ARGS`` in its own process, Ctrl-C after ``after_s``: (exit code, stderr lines)."""
+    process = subprocess.Popen(
+        [*SERVOBUS, *args],
+        stdin=subprocess.PIPE,  # held open: decode - waits on it
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # (not ignored in a background job)
+    )
+    time.sleep(after_s)
+    process.send_signal(signal.SIGINT)
+    _, err = process.communicate(timeout=20)
+    return process.returncode, err.strip().splitlines()
+
+
+def test_ctrl_c_during_a_set_point_says_the_motors_were_sent_their_stop() -> None:
+    code, err = _interrupted(["speed", "--sim", "2", "--speed-dps", "30", "--json"], after_s=3.0)
+    assert code == 130 and err[-1] == "servobus: interrupted; stop sent to myactuator motors 1, 2", err
+
+
+@pytest.mark.parametrize(
+    "args", [["monitor", "--sim", "1", "--json"], ["decode", "-"]], ids=["reads only", "no bus"]
+)
+def test_ctrl_c_claims_no_stop_where_no_motor_was_commanded(args: list[str]) -> None:
+    code, err = _interrupted(args, after_s=3.0)
+    assert code == 130 and err[-1] == "servobus: interrupted", err
+
+
+def test_the_interrupted_line_names_the_motors_the_stop_did_not_reach(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import servobus.cli
+
+    monkeypatch.setattr(servobus.cli, "SAFE_EXITS", [("lk", "stop", (1,), (2, 3))])
+    assert servobus.cli._interrupted() == (
+        "servobus: interrupted; stop sent to lk motor 1; stop NOT sent to lk motors 2, 3"
+    )

@@ -10,7 +10,8 @@ exit code   meaning
 0           done
 1           the job failed: a motor did not answer, the adapter was lost, a file did not parse
 2           bad usage: an unknown option, a value out of range, a missing or contradictory flag
-130         interrupted (Ctrl-C); every commanded motor got its safe command first
+130         interrupted (Ctrl-C); a command that drives motors (move, speed, torque, mit, demo)
+            sends them its safe stop first, and the line says which motors it went to
 ==========  ==================================================================================
 """
 
@@ -25,7 +26,12 @@ import click
 from servobus import __version__
 from servobus.errors import ServobusError
 
-__all__ = ["cli", "main"]
+__all__ = ["SAFE_EXITS", "cli", "main"]
+
+#: What the Buses of this command sent their commanded motors when their blocks were left, for the
+#: line Ctrl-C prints (:func:`servobus.cli._connect.note_exit`): (family, safe command, the ids it
+#: left for, the ids it did not).
+SAFE_EXITS: list[tuple[str, str, tuple[int, ...], tuple[int, ...]]] = []
 
 #: subcommand -> "module:attribute" (imported on first use)
 COMMANDS: dict[str, str] = {
@@ -75,7 +81,8 @@ class LazyGroup(click.Group):
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
     epilog="Examples:\n\n\b\n  servobus demo --duration 5\n  servobus scan --sim 4\n"
     "  servobus status -i slcan -c /dev/ttyACM0 --ids 1-3\n  servobus decode candump.log\n\n"
-    "Exit codes: 0 done, 1 the job failed, 2 bad usage, 130 interrupted (motors stopped).",
+    "Exit codes: 0 done, 1 the job failed, 2 bad usage, 130 interrupted (Ctrl-C: motors being driven "
+    "are sent their stop first).",
 )
 @click.version_option(__version__, "--version", prog_name="servobus")
 @click.option("--debug", is_flag=True, help="Show the traceback of an error.")
@@ -90,9 +97,26 @@ def _one_line(message: str) -> str:
     return " ".join(message.split())
 
 
+def _ids(ids: Sequence[int]) -> str:
+    return ("motor " if len(ids) == 1 else "motors ") + ", ".join(map(str, ids))
+
+
+def _interrupted() -> str:
+    """The line for Ctrl-C: which motors were sent their safe command, and which were not (only what
+    the Buses reported; nothing is claimed for a command that commanded no motor)."""
+    line = "servobus: interrupted"
+    for family, safe, sent, missed in SAFE_EXITS:
+        if sent:
+            line += f"; {safe} sent to {family} {_ids(sent)}"
+        if missed:
+            line += f"; {safe} NOT sent to {family} {_ids(missed)}"
+    return line
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """The console script: run ``cli`` and turn every error into one line and an exit code."""
     args = list(sys.argv[1:] if argv is None else argv)
+    SAFE_EXITS.clear()
     debug = "--debug" in args
     try:
         # Without standalone mode click returns the code of a click.exceptions.Exit raised inside a
@@ -108,11 +132,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         where = f"{exc.ctx.command_path}: " if exc.ctx is not None else "servobus: "
         click.echo(f"{where}error: {_one_line(exc.format_message())}", err=True)
         return 2
-    except click.Abort:
-        click.echo("servobus: interrupted", err=True)
-        return 130
-    except KeyboardInterrupt:
-        click.echo("servobus: interrupted (motors stopped)", err=True)
+    except (click.Abort, KeyboardInterrupt):  # (click turns a KeyboardInterrupt into Abort)
+        click.echo(_interrupted(), err=True)
         return 130
     except ValueError as exc:  # a value the library refused (a set-point out of range, a bad id)
         if debug:

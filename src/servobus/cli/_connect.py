@@ -19,7 +19,7 @@ import click
 
 from servobus.bus import Bus, Motor
 
-__all__ = ["Connection", "connection_options", "open_bus", "parse_ids"]
+__all__ = ["Connection", "connection_options", "note_exit", "open_bus", "parse_ids"]
 
 FAMILIES = ("myactuator", "lk", "hollow")
 #: ``--interface`` value for servobus's own SLCAN transport (no python-can; no 2 s wait on open)
@@ -226,9 +226,28 @@ def connection_options(func: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
+def note_exit(bus: Bus) -> None:
+    """Remember which commanded motors ``bus`` sent its safe command when its block was left, for the
+    line Ctrl-C prints (nothing for a Bus without one: it claims no stop)."""
+    if bus.safe is None:
+        return
+    from servobus.cli import SAFE_EXITS
+
+    sent = {id(motor) for motor in bus.safe_sent}
+    by_family: dict[str, tuple[list[int], list[int]]] = {}
+    for motor in bus.commanded:
+        went, missed = by_family.setdefault(motor.codec.family, ([], []))
+        (went if id(motor) in sent else missed).append(motor.motor_id)
+    for family, (went, missed) in by_family.items():
+        SAFE_EXITS.append((family, bus.safe, tuple(sorted(went)), tuple(sorted(missed))))
+
+
 @contextlib.asynccontextmanager
 async def open_bus(conn: Connection, **bus_options: Any) -> AsyncIterator[tuple[Bus, list[Motor]]]:
     """The Bus on ``conn``'s transport with its motors bound; leaving it stops the commanded ones."""
-    async with Bus(conn.transport(), **bus_options) as bus:
-        motors = [bus.motor(conn.family, i, **conn.bind_options()) for i in conn.motor_ids]
-        yield bus, motors
+    bus = Bus(conn.transport(), **bus_options)
+    try:
+        async with bus:
+            yield bus, [bus.motor(conn.family, i, **conn.bind_options()) for i in conn.motor_ids]
+    finally:
+        note_exit(bus)

@@ -24,6 +24,7 @@ from typing import Any
 import click
 
 from servobus.bus import Bus, Motor
+from servobus.cli._connect import note_exit
 from servobus.cli._demo_report import Layout, Summary, layout, live_view, summary_lines
 from servobus.cli._output import console, emit_json, json_option
 from servobus.protocols import myactuator as ma
@@ -126,6 +127,12 @@ async def _run(plan: Layout, duration: float | None, *, live: bool) -> Summary:
     sim_clock = _SimClock()
     async with contextlib.AsyncExitStack() as stack:
         buses: list[tuple[Bus, list[Motor]]] = []
+
+        def noted() -> None:
+            for bus, _ in buses:
+                note_exit(bus)
+
+        stack.callback(noted)  # (first in, so it runs after every Bus was left)
         for b, count in enumerate(plan.per_bus):
             transport = SimTransport(
                 devices=[MyActuatorMotor(i) for i in range(1, count + 1)], name=f"sim{b + 1}"
