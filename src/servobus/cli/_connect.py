@@ -19,7 +19,15 @@ import click
 
 from servobus.bus import Bus, Motor
 
-__all__ = ["Connection", "connection_options", "note_exit", "open_bus", "parse_ids"]
+__all__ = [
+    "Connection",
+    "connection_options",
+    "family_option",
+    "note_exit",
+    "open_bus",
+    "parse_ids",
+    "revision_option",
+]
 
 FAMILIES = ("myactuator", "lk", "hollow")
 #: ``--interface`` value for servobus's own SLCAN transport (no python-can; no 2 s wait on open)
@@ -172,18 +180,24 @@ def _check(conn: Connection) -> Connection:
     return conn
 
 
+#: ``--family``/``-f``: the command receives ``family``
+family_option = click.option(
+    "--family",
+    "-f",
+    type=click.Choice(FAMILIES),
+    default="myactuator",
+    show_default=True,
+    help="Protocol family of the motors.",
+)
+#: ``--revision``: the command receives ``revision`` (None: the family's default)
+revision_option = click.option("--revision", help="Protocol revision (myactuator V4_3/V4_4; lk V2_35/V2_36).")
+
+
 def connection_options(func: F) -> F:
     """Add the connection options to a click command; it receives ``conn: Connection``."""
 
-    @click.option(
-        "--family",
-        "-f",
-        type=click.Choice(FAMILIES),
-        default="myactuator",
-        show_default=True,
-        help="Protocol family of the motors.",
-    )
-    @click.option("--revision", help="Protocol revision (myactuator V4_3/V4_4; lk V2_35/V2_36).")
+    @family_option
+    @revision_option
     @click.option(
         "--ids", "ids_text", metavar="IDS", help="Motor ids, e.g. 1-4,7 (default: 1, or 1..N with --sim N)."
     )

@@ -13,6 +13,8 @@ anything is sent. A command a family has no entry for is refused in one line (ex
 
 from __future__ import annotations
 
+import functools
+import importlib
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -84,23 +86,26 @@ def _angle_reads(codec: Any) -> Sequence[Command]:
     return (_angle_read(codec),) if codec.family == "lk" else ()
 
 
+def _build(family: str, name: str, **fields: str) -> Callable[[Any, Values], Command]:
+    """A builder of ``servobus.protocols.<family>.<name>``: each ``field="key"`` takes the command
+    line's value ``key`` (imported when it runs: the CLI loads no family it does not use)."""
+
+    def make(codec: Any, v: Values) -> Command:
+        cls: Callable[..., Command] = getattr(importlib.import_module(f"servobus.protocols.{family}"), name)
+        return cls(**{field: v[key] for field, key in fields.items()})
+
+    return make
+
+
+_ma = functools.partial(_build, "myactuator")
+_lk = functools.partial(_build, "lk")
+
+
 def _safe(kind: str) -> Op:
     return _once(lambda codec, v: codec.safe_command(kind))
 
 
 # ---- MyActuator (V4.3 / V4.4) ----
-
-
-def _ma_move(codec: Any, v: Values) -> Command:
-    from servobus.protocols import myactuator as ma
-
-    return ma.AbsolutePositionControl(angle_deg=v["angle_deg"], max_speed_dps=v["max_speed_dps"])
-
-
-def _ma_increment(codec: Any, v: Values) -> Command:
-    from servobus.protocols import myactuator as ma
-
-    return ma.IncrementalPositionControl(angle_deg=v["angle_deg"], max_speed_dps=v["max_speed_dps"])
 
 
 def _ma_mit(codec: Any, v: Values) -> Command:
@@ -116,16 +121,6 @@ def _ma_mit(codec: Any, v: Values) -> Command:
     )
 
 
-def _ma(name: str, **fields: Any) -> Callable[[Any, Values], Command]:
-    def make(codec: Any, v: Values) -> Command:
-        from servobus.protocols import myactuator as ma
-
-        cls: Callable[..., Command] = getattr(ma, name)
-        return cls(**{field: v[key] for field, key in fields.items()})
-
-    return make
-
-
 def _ma_set_id(codec: Any, v: Values) -> Command:
     from servobus.protocols.myactuator import FunctionControl
 
@@ -134,7 +129,10 @@ def _ma_set_id(codec: Any, v: Values) -> Command:
 
 MYACTUATOR: dict[str, Op] = {
     "status": Op(first=lambda codec, v: _reads("myactuator", ("ReadStatus1", "ReadStatus2"))),
-    "move": _move(_ma_move, _ma_increment),
+    "move": _move(
+        _ma("AbsolutePositionControl", angle_deg="angle_deg", max_speed_dps="max_speed_dps"),
+        _ma("IncrementalPositionControl", angle_deg="angle_deg", max_speed_dps="max_speed_dps"),
+    ),
     "speed": _setpoint(_ma("SpeedControl", speed_dps="speed_dps")),
     "torque": _setpoint(_ma("TorqueControl", current_a="current_a")),
     "mit": _setpoint(_ma_mit),
@@ -158,18 +156,6 @@ def _lk_v235(codec: Any) -> bool:
     return str(codec.revision.name) == "V2_35"
 
 
-def _lk_move(codec: Any, v: Values) -> Command:
-    from servobus.protocols import lk
-
-    return lk.MultiTurnPositionSpeed(angle_deg=v["angle_deg"], max_speed_dps=v["max_speed_dps"])
-
-
-def _lk_increment(codec: Any, v: Values) -> Command:
-    from servobus.protocols import lk
-
-    return lk.IncrementalPositionSpeed(increment_deg=v["angle_deg"], max_speed_dps=v["max_speed_dps"])
-
-
 def _lk_speed(codec: Any, v: Values) -> Command:
     from servobus.protocols import lk
 
@@ -190,19 +176,12 @@ def _lk_brake(codec: Any, v: Values) -> Command:
     return lk.BrakeControl(action=lk.BrakeAction.ENGAGE if v["lock"] else lk.BrakeAction.RELEASE)
 
 
-def _lk(name: str) -> Callable[[Any, Values], Command]:
-    def make(codec: Any, v: Values) -> Command:
-        from servobus.protocols import lk
-
-        cls: Callable[[], Command] = getattr(lk, name)
-        return cls()
-
-    return make
-
-
 LK: dict[str, Op] = {
     "status": Op(first=lambda codec, v: _reads("lk", ("ReadStatus1", "ReadStatus2", "ReadMultiTurnAngle"))),
-    "move": _move(_lk_move, _lk_increment),
+    "move": _move(
+        _lk("MultiTurnPositionSpeed", angle_deg="angle_deg", max_speed_dps="max_speed_dps"),
+        _lk("IncrementalPositionSpeed", increment_deg="angle_deg", max_speed_dps="max_speed_dps"),
+    ),
     "speed": _setpoint(_lk_speed),
     "torque": _setpoint(_lk_torque),
     "stop": _safe("stop"),
@@ -328,7 +307,5 @@ def status_reads(family: str) -> Op:
 
 
 def _reads(family: str, names: Sequence[str]) -> Sequence[Command]:
-    import importlib
-
     module = importlib.import_module(f"servobus.protocols.{family}")
     return tuple(getattr(module, name)() for name in names)

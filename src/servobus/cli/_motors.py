@@ -17,13 +17,13 @@ from typing import Any, TypeVar
 import click
 
 from servobus.bus import Motor
-from servobus.cli._connect import Connection
+from servobus.cli._connect import Connection, open_bus
 from servobus.cli._families import Op
 from servobus.errors import ServobusError
 from servobus.protocols import get_family
 from servobus.protocols._message import Command, Reply
 
-__all__ = ["Outcome", "ask_all", "codecs", "fail_if_any", "plan", "run", "status_of"]
+__all__ = ["Outcome", "ask", "ask_all", "codecs", "fail_if_any", "plan", "run", "status_of"]
 
 T = TypeVar("T")
 
@@ -87,6 +87,17 @@ async def ask_all(motors: Sequence[Motor], planned: Sequence[Sequence[Command]])
                 break
         outcomes.append(outcome)
     return outcomes
+
+
+def ask(conn: Connection, planned: Sequence[Sequence[Command]]) -> list[Outcome]:
+    """Open ``conn``'s bus, send each motor its planned commands (:func:`ask_all`), collect the
+    outcomes. No safe command on the way out: what was asked is all that is sent."""
+
+    async def go() -> list[Outcome]:
+        async with open_bus(conn, safe=None) as (_, motors):
+            return await ask_all(motors, planned)
+
+    return run(go())
 
 
 #: the columns of a status, and where each family's replies keep them: (field, factor) in order

@@ -21,9 +21,11 @@ from rich.table import Table
 from servobus.protocols._message import Message
 
 __all__ = [
+    "SETTINGS",
     "confirm",
     "console",
     "emit_json",
+    "examples",
     "fmt",
     "json_option",
     "jsonable",
@@ -34,6 +36,14 @@ __all__ = [
 ]
 
 F = TypeVar("F", bound=Callable[..., Any])
+
+#: every command's context settings (help text up to 100 columns wide)
+SETTINGS: dict[str, Any] = {"max_content_width": 100}
+
+
+def examples(*lines: str) -> str:
+    """A command's epilog: its example command lines, kept as written (``\b``: click does not rewrap)."""
+    return "Examples:\n\n\b\n" + "\n".join(f"  {line}" for line in lines)
 
 
 def console(*, stderr: bool = False) -> Console:

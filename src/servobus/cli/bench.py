@@ -18,7 +18,7 @@ from typing import Any
 
 import click
 
-from servobus.cli._output import console, emit_json, json_option, table
+from servobus.cli._output import SETTINGS, console, emit_json, examples, json_option, table
 
 __all__ = ["bench"]
 
@@ -33,9 +33,12 @@ def bench_dir() -> Path:
 
 
 @click.command(
-    context_settings={"max_content_width": 100},
-    epilog="Examples:\n\n\b\n  servobus bench                   # all three, ~30 s\n"
-    "  servobus bench --only bus        # ~3 s\n  servobus bench --only codec --json",
+    context_settings=SETTINGS,
+    epilog=examples(
+        "servobus bench                   # all three, ~30 s",
+        "servobus bench --only bus        # ~3 s",
+        "servobus bench --only codec --json",
+    ),
 )
 @click.option(
     "--only",

@@ -8,25 +8,34 @@ from typing import Any
 
 import click
 
-from servobus.cli._connect import FAMILIES, Connection, connection_options, open_bus
+from servobus.cli._connect import Connection, connection_options, family_option
 from servobus.cli._families import Op
-from servobus.cli._motors import Outcome, ask_all, fail_if_any, plan, run
-from servobus.cli._output import confirm, console, emit_json, json_option, jsonable, table, yes_option
+from servobus.cli._motors import Outcome, ask, fail_if_any, plan
+from servobus.cli._output import (
+    SETTINGS,
+    confirm,
+    console,
+    emit_json,
+    examples,
+    json_option,
+    jsonable,
+    table,
+    yes_option,
+)
 from servobus.cli._settings import Setting, setting, settings
-from servobus.protocols._message import Command
 
 __all__ = ["config"]
 
-_SETTINGS = {"max_content_width": 100}
-
 
 @click.group(
-    context_settings=_SETTINGS,
-    epilog="Examples:\n\n\b\n  servobus config list\n"
-    "  servobus config get --sim 2 pid.speed_kp pid.speed_ki\n"
-    "  servobus config set --sim 1 pid.speed_kp 0.25\n"
-    "  servobus config set -i slcan -c /dev/ttyACM0 --ids 3 comm_timeout_ms 200 --yes\n"
-    "  servobus config get --family lk --sim 1 pid.speed --json",
+    context_settings=SETTINGS,
+    epilog=examples(
+        "servobus config list",
+        "servobus config get --sim 2 pid.speed_kp pid.speed_ki",
+        "servobus config set --sim 1 pid.speed_kp 0.25",
+        "servobus config set -i slcan -c /dev/ttyACM0 --ids 3 comm_timeout_ms 200 --yes",
+        "servobus config get --family lk --sim 1 pid.speed --json",
+    ),
 )
 def config() -> None:
     """Read and write the motors' settings: PID, acceleration, communication timeout, CAN-id filter,
@@ -35,10 +44,10 @@ def config() -> None:
 
 @config.command(
     "list",
-    context_settings=_SETTINGS,
-    epilog="Examples:\n\n\b\n  servobus config list\n  servobus config list --family lk --json",
+    context_settings=SETTINGS,
+    epilog=examples("servobus config list", "servobus config list --family lk --json"),
 )
-@click.option("--family", "-f", type=click.Choice(FAMILIES), default="myactuator", show_default=True)
+@family_option
 @json_option
 def list_(family: str, as_json: bool) -> None:
     """The settings of a family: key, read/write, ROM, and what each is."""
@@ -62,20 +71,12 @@ def list_(family: str, as_json: bool) -> None:
     console().print(out)
 
 
-def _send(conn: Connection, commands: Op) -> tuple[list[Outcome], list[Sequence[Command]]]:
-    planned = plan(conn, commands, {})
-
-    async def go() -> list[Outcome]:
-        async with open_bus(conn, safe=None) as (_, motors):
-            return await ask_all(motors, planned)
-
-    return run(go()), planned
-
-
 @config.command(
-    context_settings=_SETTINGS,
-    epilog="Examples:\n\n\b\n  servobus config get --sim 2 pid.speed_kp position_acceleration_dps_s\n"
-    "  servobus config get -i socketcan -c can0 --family lk --ids 9 pid.speed --json",
+    context_settings=SETTINGS,
+    epilog=examples(
+        "servobus config get --sim 2 pid.speed_kp position_acceleration_dps_s",
+        "servobus config get -i socketcan -c can0 --family lk --ids 9 pid.speed --json",
+    ),
 )
 @connection_options
 @click.argument("keys", nargs=-1, required=True, metavar="KEY...")
@@ -89,7 +90,7 @@ def get(conn: Connection, keys: tuple[str, ...], as_json: bool) -> None:
                 f"{conn.family} motors cannot report {s.key} (it can only be written)", param_hint="KEY"
             )
     reads = [s.read for s in wanted if s.read is not None]
-    outcomes, _ = _send(conn, Op(first=lambda codec, v: tuple(read() for read in reads)))
+    outcomes = ask(conn, plan(conn, Op(first=lambda codec, v: tuple(read() for read in reads)), {}))
     rows = _rows(outcomes, wanted, lambda s, reply: s.value_of(reply))
     _show(rows, as_json)
     fail_if_any(outcomes)
@@ -97,11 +98,13 @@ def get(conn: Connection, keys: tuple[str, ...], as_json: bool) -> None:
 
 @config.command(
     "set",
-    context_settings=_SETTINGS,
-    epilog="Examples:\n\n\b\n  servobus config set --sim 1 pid.speed_kp 0.25            # RAM\n"
-    "  servobus config set --sim 1 pid.speed_kp 0.25 --rom --yes  # ROM, no question\n"
-    "  servobus config set --sim 1 comm_timeout_ms off --yes\n"
-    "  servobus config set --family lk --sim 1 pid.speed 100,20,0",
+    context_settings=SETTINGS,
+    epilog=examples(
+        "servobus config set --sim 1 pid.speed_kp 0.25            # RAM",
+        "servobus config set --sim 1 pid.speed_kp 0.25 --rom --yes  # ROM, no question",
+        "servobus config set --sim 1 comm_timeout_ms off --yes",
+        "servobus config set --family lk --sim 1 pid.speed 100,20,0",
+    ),
 )
 @connection_options
 @click.argument("key", metavar="KEY")
@@ -127,7 +130,7 @@ def set_(conn: Connection, key: str, value: str, rom: bool, yes: bool, as_json: 
     if s.rom or rom:
         ids = ", ".join(str(i) for i in conn.motor_ids)
         confirm(f"{s.key} = {value} is written to the ROM of {conn.family} motor(s) {ids}. Continue?", yes)
-    outcomes, _ = _send(conn, op)
+    outcomes = ask(conn, plan(conn, op, {}))
     rows = _rows(outcomes, [s], lambda s, reply: value if parsed is None else parsed)
     _show(rows, as_json)
     fail_if_any(outcomes)

@@ -24,6 +24,7 @@ from servobus.cli._families import Op, op, status_reads
 from servobus.cli._motors import (
     STATUS_COLUMNS,
     Outcome,
+    ask,
     ask_all,
     codecs,
     fail_if_any,
@@ -32,9 +33,11 @@ from servobus.cli._motors import (
     status_of,
 )
 from servobus.cli._output import (
+    SETTINGS,
     confirm,
     console,
     emit_json,
+    examples,
     json_option,
     message_fields,
     message_text,
@@ -60,13 +63,8 @@ __all__ = [
     "zero",
 ]
 
-_SETTINGS = {"max_content_width": 100}
 #: the replies to a set-point's first commands -> whether a status shows it arrived
 Arrival = Callable[[Sequence[Reply | None]], Callable[[dict[str, Any]], bool]]
-
-
-def _epilog(*examples: str) -> str:
-    return "Examples:\n\n\b\n" + "\n".join(f"  {e}" for e in examples)
 
 
 # ---- output ----
@@ -126,8 +124,8 @@ def _print_results(outcomes: Sequence[Outcome], sent: Sequence[Sequence[Command]
 
 
 @click.command(
-    context_settings=_SETTINGS,
-    epilog=_epilog(
+    context_settings=SETTINGS,
+    epilog=examples(
         "servobus status --sim 3",
         "servobus status -i slcan -c /dev/ttyACM0 --ids 1-3",
         "servobus status -i socketcan -c can0 --family lk --ids 9,10 --json",
@@ -138,13 +136,7 @@ def _print_results(outcomes: Sequence[Outcome], sent: Sequence[Sequence[Command]
 def status(conn: Connection, as_json: bool) -> None:
     """Read each motor's position, speed, current, temperature, voltage and errors once."""
     reads = status_reads(conn.family)
-    planned = plan(conn, reads, {})
-
-    async def go() -> list[Outcome]:
-        async with open_bus(conn, safe=None) as (_, motors):
-            return await ask_all(motors, planned)
-
-    outcomes = run(go())
+    outcomes = ask(conn, plan(conn, reads, {}))
     rows = _status_rows(outcomes)
     if as_json:
         emit_json(rows)
@@ -154,8 +146,8 @@ def status(conn: Connection, as_json: bool) -> None:
 
 
 @click.command(
-    context_settings=_SETTINGS,
-    epilog=_epilog(
+    context_settings=SETTINGS,
+    epilog=examples(
         "servobus monitor --sim 4                    # live table until Ctrl-C",
         "servobus monitor --sim 4 --rate-hz 50 --duration 10 --json > samples.jsonl",
     ),
@@ -336,8 +328,8 @@ _keep = click.option(
 
 
 @click.command(
-    context_settings=_SETTINGS,
-    epilog=_epilog(
+    context_settings=SETTINGS,
+    epilog=examples(
         "servobus move --sim 2 --angle-deg 90                   # until both are there, then hold",
         "servobus move --ids 1-3 -i slcan -c /dev/ttyACM0 --angle-deg -45 --max-speed-dps 60",
         "servobus move --sim 1 --angle-deg 30 --relative --duration 2",
@@ -411,65 +403,46 @@ def move(
     )
 
 
-@click.command(
-    context_settings=_SETTINGS,
-    epilog=_epilog(
-        "servobus speed --sim 2 --speed-dps 90 --duration 3",
-        "servobus speed --ids 1 -i socketcan -c can0 --speed-dps -30      # until Ctrl-C",
-    ),
+def _one_value(name: str, option: str, option_help: str, help_text: str, *lines: str) -> click.Command:
+    """A set-point command with one value (``--speed-dps``, ``--current-a``) and the set-point options."""
+    key = option.removeprefix("--").replace("-", "_")
+
+    @click.command(name, help=help_text, context_settings=SETTINGS, epilog=examples(*lines))
+    @connection_options
+    @click.option(option, key, type=float, required=True, help=option_help)
+    @_rate
+    @_duration
+    @_keep
+    @json_option
+    def command(
+        conn: Connection, rate_hz: float, duration: float | None, keep: bool, as_json: bool, **value: float
+    ) -> None:
+        _drive(conn, name, value, rate_hz=rate_hz, duration=duration, keep=keep, as_json=as_json)
+
+    return command
+
+
+speed = _one_value(
+    "speed",
+    "--speed-dps",
+    "Speed of the output shaft.",
+    "Turn at a speed: speed control, until --duration or Ctrl-C; then stop and hold.",
+    "servobus speed --sim 2 --speed-dps 90 --duration 3",
+    "servobus speed --ids 1 -i socketcan -c can0 --speed-dps -30      # until Ctrl-C",
 )
-@connection_options
-@click.option("--speed-dps", type=float, required=True, help="Speed of the output shaft.")
-@_rate
-@_duration
-@_keep
-@json_option
-def speed(
-    conn: Connection, speed_dps: float, rate_hz: float, duration: float | None, keep: bool, as_json: bool
-) -> None:
-    """Turn at a speed: speed control, until --duration or Ctrl-C; then stop and hold."""
-    _drive(
-        conn,
-        "speed",
-        {"speed_dps": speed_dps},
-        rate_hz=rate_hz,
-        duration=duration,
-        keep=keep,
-        as_json=as_json,
-    )
-
-
-@click.command(
-    context_settings=_SETTINGS,
-    epilog=_epilog(
-        "servobus torque --sim 1 --current-a 0.5 --duration 1",
-        "servobus torque --family lk --ids 9 -i socketcan -c can0 --current-a -1.2",
-    ),
+torque = _one_value(
+    "torque",
+    "--current-a",
+    "Torque (q-axis) current.",
+    "Drive a torque current: torque control, until --duration or Ctrl-C; then stop and hold.",
+    "servobus torque --sim 1 --current-a 0.5 --duration 1",
+    "servobus torque --family lk --ids 9 -i socketcan -c can0 --current-a -1.2",
 )
-@connection_options
-@click.option("--current-a", type=float, required=True, help="Torque (q-axis) current.")
-@_rate
-@_duration
-@_keep
-@json_option
-def torque(
-    conn: Connection, current_a: float, rate_hz: float, duration: float | None, keep: bool, as_json: bool
-) -> None:
-    """Drive a torque current: torque control, until --duration or Ctrl-C; then stop and hold."""
-    _drive(
-        conn,
-        "torque",
-        {"current_a": current_a},
-        rate_hz=rate_hz,
-        duration=duration,
-        keep=keep,
-        as_json=as_json,
-    )
 
 
 @click.command(
-    context_settings=_SETTINGS,
-    epilog=_epilog(
+    context_settings=SETTINGS,
+    epilog=examples(
         "servobus mit --sim 1 --position-rad 1.0 --kp 20 --kd 1 --duration 2",
         "servobus mit --ids 2 -i slcan -c /dev/ttyACM0 --position-rad 0 --kp 5 --kd 0.5 --torque-ff-nm 0.3",
     ),
@@ -520,42 +493,54 @@ def _one_shot(conn: Connection, name: str, values: Mapping[str, Any], *, yes: bo
         ids = ", ".join(str(i) for i in conn.motor_ids)
         confirm(f"{name} writes the ROM of {conn.family} motor(s) {ids}. Continue?", yes)
 
-    async def go() -> list[Outcome]:
-        async with open_bus(conn, safe=None) as (_, motors):
-            return await ask_all(motors, planned)
-
-    outcomes = run(go())
+    outcomes = ask(conn, planned)
     _print_results(outcomes, planned, as_json)
     fail_if_any(outcomes)
     if entry.note and not as_json:
         click.echo(f"note: {entry.note}", err=True)
 
 
-@click.command(
-    context_settings=_SETTINGS,
-    epilog=_epilog("servobus stop --sim 2", "servobus stop -i socketcan -c can0 --ids 1-8"),
+def _plain(name: str, help_text: str, *lines: str) -> click.Command:
+    """A one-shot with no options of its own: ``servobus NAME`` sends the family's NAME command."""
+
+    @click.command(name, help=help_text, context_settings=SETTINGS, epilog=examples(*lines))
+    @connection_options
+    @json_option
+    def command(conn: Connection, as_json: bool) -> None:
+        _one_shot(conn, name, {}, yes=True, as_json=as_json)
+
+    return command
+
+
+stop = _plain(
+    "stop",
+    "Stop and hold position (the loop stays active; hollow motors: output off).",
+    "servobus stop --sim 2",
+    "servobus stop -i socketcan -c can0 --ids 1-8",
 )
-@connection_options
-@json_option
-def stop(conn: Connection, as_json: bool) -> None:
-    """Stop and hold position (the loop stays active; hollow motors: output off)."""
-    _one_shot(conn, "stop", {}, yes=True, as_json=as_json)
-
-
-@click.command(
-    context_settings=_SETTINGS,
-    epilog=_epilog("servobus off --sim 2", "servobus off -i socketcan -c can0 --ids 1-8"),
+off = _plain(
+    "off",
+    "Switch the output off: the shaft is free (MyActuator 0x80, LK 0x80, hollow stop).",
+    "servobus off --sim 2",
+    "servobus off -i socketcan -c can0 --ids 1-8",
 )
-@connection_options
-@json_option
-def off(conn: Connection, as_json: bool) -> None:
-    """Switch the output off: the shaft is free (MyActuator 0x80, LK 0x80, hollow stop)."""
-    _one_shot(conn, "off", {}, yes=True, as_json=as_json)
+clear_errors = _plain(
+    "clear-errors",
+    "Clear the motors' error flags (where the family has a request for it).",
+    "servobus clear-errors --family lk --sim 2",
+    "servobus clear-errors --family lk -i socketcan -c can0",
+)
+reset = _plain(
+    "reset",
+    "Restart the motors' firmware (no reply comes: the motor reboots).",
+    "servobus reset --sim 1",
+    "servobus reset -i slcan -c /dev/ttyACM0 --ids 1-3",
+)
 
 
 @click.command(
-    context_settings=_SETTINGS,
-    epilog=_epilog(
+    context_settings=SETTINGS,
+    epilog=examples(
         "servobus brake --sim 1 --release", "servobus brake -i slcan -c /dev/ttyACM0 --ids 3 --lock"
     ),
 )
@@ -568,8 +553,8 @@ def brake(conn: Connection, lock: bool, as_json: bool) -> None:
 
 
 @click.command(
-    context_settings=_SETTINGS,
-    epilog=_epilog("servobus zero --sim 1 --yes", "servobus zero -i slcan -c /dev/ttyACM0 --ids 2"),
+    context_settings=SETTINGS,
+    epilog=examples("servobus zero --sim 1 --yes", "servobus zero -i slcan -c /dev/ttyACM0 --ids 2"),
 )
 @connection_options
 @yes_option
@@ -581,8 +566,8 @@ def zero(conn: Connection, yes: bool, as_json: bool) -> None:
 
 @click.command(
     "set-id",
-    context_settings=_SETTINGS,
-    epilog=_epilog(
+    context_settings=SETTINGS,
+    epilog=examples(
         "servobus set-id --sim 1 --ids 1 5 --yes", "servobus set-id -i slcan -c /dev/ttyACM0 --ids 1 2"
     ),
 )
@@ -595,28 +580,3 @@ def set_id(conn: Connection, new_id: int, yes: bool, as_json: bool) -> None:
     if len(conn.motor_ids) != 1:
         raise click.UsageError(f"set-id changes one motor: give one id with --ids, not {len(conn.motor_ids)}")
     _one_shot(conn, "set-id", {"new_id": new_id}, yes=yes, as_json=as_json)
-
-
-@click.command(
-    "clear-errors",
-    context_settings=_SETTINGS,
-    epilog=_epilog(
-        "servobus clear-errors --family lk --sim 2", "servobus clear-errors --family lk -i socketcan -c can0"
-    ),
-)
-@connection_options
-@json_option
-def clear_errors(conn: Connection, as_json: bool) -> None:
-    """Clear the motors' error flags (where the family has a request for it)."""
-    _one_shot(conn, "clear-errors", {}, yes=True, as_json=as_json)
-
-
-@click.command(
-    context_settings=_SETTINGS,
-    epilog=_epilog("servobus reset --sim 1", "servobus reset -i slcan -c /dev/ttyACM0 --ids 1-3"),
-)
-@connection_options
-@json_option
-def reset(conn: Connection, as_json: bool) -> None:
-    """Restart the motors' firmware (no reply comes: the motor reboots)."""
-    _one_shot(conn, "reset", {}, yes=True, as_json=as_json)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import click
 
-from servobus.cli._connect import FAMILIES, parse_ids
+from servobus.cli._connect import family_option, parse_ids, revision_option
 from servobus.frame import Frame
 from servobus.logs import Decoded, FrameDecoder, LogFrames, parse_frame, read_log
 
@@ -36,15 +36,8 @@ Frames that do not decode are printed as such; a summary line goes to stderr."""
 @click.command(epilog=EPILOG)
 @click.argument("sources", nargs=-1, metavar="[SOURCE]...")
 @click.option("--hex", "hex_frames", multiple=True, metavar='"ID B0 B1 ..."', help="A frame as hex bytes.")
-@click.option(
-    "--family",
-    "-f",
-    type=click.Choice(FAMILIES),
-    default="myactuator",
-    show_default=True,
-    help="Protocol family of the motors.",
-)
-@click.option("--revision", help="Protocol revision (myactuator V4_3/V4_4; lk V2_35/V2_36).")
+@family_option
+@revision_option
 @click.option("--ids", "ids_text", metavar="IDS", help="Motor ids to decode for, e.g. 1-4 (default: all).")
 @click.option("--json", "as_json", is_flag=True, help="One JSON object per frame (JSON lines).")
 def decode(

@@ -26,7 +26,7 @@ import click
 from servobus.bus import Bus, Motor
 from servobus.cli._connect import note_exit
 from servobus.cli._demo_report import Layout, Summary, layout, live_view, summary_lines
-from servobus.cli._output import console, emit_json, json_option
+from servobus.cli._output import SETTINGS, console, emit_json, examples, json_option
 from servobus.protocols import myactuator as ma
 from servobus.ticks import ticks
 
@@ -39,12 +39,13 @@ REFRESH_S = 0.25
 
 
 @click.command(
-    context_settings={"max_content_width": 100},
-    epilog="Examples:\n\n\b\n"
-    "  servobus demo                      # live view until Ctrl-C\n"
-    "  servobus demo --duration 5         # no live view: a summary after 5 s\n"
-    "  servobus demo --hz 100 --motors 8  # what this machine keeps up with\n"
-    "  servobus demo --duration 5 --json",
+    context_settings=SETTINGS,
+    epilog=examples(
+        "servobus demo                      # live view until Ctrl-C",
+        "servobus demo --duration 5         # no live view: a summary after 5 s",
+        "servobus demo --hz 100 --motors 8  # what this machine keeps up with",
+        "servobus demo --duration 5 --json",
+    ),
 )
 @click.option(
     "--duration",

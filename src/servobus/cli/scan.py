@@ -22,7 +22,7 @@ from servobus.bus import Bus, Motor
 from servobus.cli._connect import Connection, connection_options
 from servobus.cli._families import status_reads
 from servobus.cli._motors import run
-from servobus.cli._output import console, emit_json, json_option, jsonable, table
+from servobus.cli._output import SETTINGS, console, emit_json, examples, json_option, jsonable, table
 from servobus.errors import ServobusError
 
 __all__ = ["scan"]
@@ -79,9 +79,12 @@ DETAILS: dict[str, Details] = {
 
 
 @click.command(
-    context_settings={"max_content_width": 100},
-    epilog="Examples:\n\n\b\n  servobus scan --sim 4\n  servobus scan -i slcan -c /dev/ttyACM0\n"
-    "  servobus scan -i socketcan -c can0 --family lk --ids 1-8 --json",
+    context_settings=SETTINGS,
+    epilog=examples(
+        "servobus scan --sim 4",
+        "servobus scan -i slcan -c /dev/ttyACM0",
+        "servobus scan -i socketcan -c can0 --family lk --ids 1-8 --json",
+    ),
 )
 @connection_options
 @json_option
