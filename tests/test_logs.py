@@ -135,3 +135,17 @@ def test_logs_are_read_through_python_can(tmp_path: Path, suffix: str) -> None:
     assert log.skipped == 1  # the error frame
     if suffix in (".log", ".asc", ".blf"):  # the direction survives (CSV has no column for it)
         assert [f.is_rx for f in read] == [f.is_rx for f in frames]
+
+
+def test_a_damaged_blf_is_a_value_error_as_documented(tmp_path: Path) -> None:
+    """python-can's BLF reader raises zlib.error on a damaged object; LogFrames says ValueError."""
+    path = tmp_path / "trace.blf"
+    with can.BLFWriter(str(path)) as writer:
+        for i in range(200):
+            data = bytes([0x9C, 0, 0, 0, 0, 0, 0, i])
+            writer.on_message_received(can.Message(arbitration_id=0x141, data=data, is_extended_id=False))
+    raw = bytearray(path.read_bytes())
+    raw[200:260] = bytes((7 * i) % 256 for i in range(60))
+    path.write_bytes(bytes(raw))
+    with pytest.raises(ValueError, match=r"^error: Error -3 while decompressing"):
+        list(read_log(path))

@@ -18,6 +18,7 @@ the message classes spell them), the one shape ``decode --json``, ``record`` and
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import enum
 import inspect
@@ -236,7 +237,8 @@ class LogFrames:
     python-can's ``can.LogReader``; error and remote frames are skipped and counted in ``skipped``.
 
     Raises:
-        ValueError: a file python-can has no reader for, or a line it cannot parse (on iteration).
+        ValueError: a file python-can has no reader for, or one that does not parse (on iteration;
+            also for the readers' own errors, such as BLF's BLFParseError and zlib.error).
         OSError: the file cannot be read.
     """
 
@@ -245,16 +247,32 @@ class LogFrames:
         self.skipped = 0
 
     def __iter__(self) -> Iterator[Frame]:
-        if isinstance(self.source, str | Path):
-            reader: Any = can.LogReader(self.source)
-        else:  # an open text stream of candump lines (stdin)
-            reader = can.io.CanutilsLogReader(self.source)
+        with self._unparsed():
+            if isinstance(self.source, str | Path):
+                reader: Any = can.LogReader(self.source)
+            else:  # an open text stream of candump lines (stdin)
+                reader = can.io.CanutilsLogReader(self.source)
         with reader:
-            for message in reader:
+            messages = iter(reader)
+            while True:
+                with self._unparsed():
+                    message = next(messages, None)
+                if message is None:
+                    return
                 if message.is_error_frame or message.is_remote_frame:
                     self.skipped += 1
                     continue
                 yield frame_from_message(message, message.timestamp)
+
+    @contextlib.contextmanager
+    def _unparsed(self) -> Iterator[None]:
+        """A reader's error that is not ValueError or OSError, as ValueError naming the error."""
+        try:
+            yield
+        except (ValueError, OSError):
+            raise
+        except Exception as exc:
+            raise ValueError(f"{type(exc).__name__}: {exc}") from exc
 
 
 def read_log(source: str | Path | TextIO) -> LogFrames:

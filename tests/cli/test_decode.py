@@ -110,6 +110,30 @@ def test_a_log_that_does_not_parse_is_exit_1(tmp_path: Path, capsys: pytest.Capt
     assert "does not parse" in err
 
 
+def _blf(path: Path, *, damage: str) -> None:
+    with can.BLFWriter(str(path)) as writer:
+        for i in range(200):
+            data = bytes([0x9C, 0, 0, 0, 0, 0, 0, i])
+            writer.on_message_received(can.Message(arbitration_id=0x141, data=data, is_extended_id=False))
+    raw = bytearray(path.read_bytes())
+    if damage == "header":
+        raw[:64] = bytes(range(64))
+    else:  # the compressed objects after the file header
+        raw[200:260] = bytes((7 * i) % 256 for i in range(60))
+    path.write_bytes(bytes(raw))
+
+
+@pytest.mark.parametrize("damage", ["header", "objects"])
+def test_a_damaged_blf_is_one_line_and_exit_1(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], damage: str
+) -> None:
+    """python-can's BLF reader raises its own errors (BLFParseError, zlib.error), not ValueError."""
+    path = tmp_path / "trace.blf"
+    _blf(path, damage=damage)
+    err = one_line_error(capsys, ["decode", str(path)], code=1)
+    assert "does not parse" in err
+
+
 @pytest.mark.parametrize(
     ("args", "says"),
     [

@@ -86,6 +86,12 @@ def _source(text: str) -> tuple[str, LogFrames | Frame]:
         can.LogReader(path).stop()  # python-can refuses an unknown format here, before any output
     except ValueError as exc:
         raise click.BadParameter(f"{text}: {exc}", param_hint="SOURCE") from None
+    except OSError:
+        raise
+    except Exception as exc:  # a reader's own error on the file's head (BLF: BLFParseError)
+        raise click.ClickException(
+            f"{text}: does not parse as a CAN log ({type(exc).__name__}: {exc})"
+        ) from None
     return "log", read_log(path)
 
 
