@@ -236,6 +236,13 @@ def test_zero_asks_and_a_yes_sends(
         (["status", "--sim", "2", "--ids", "3-1"], "empty"),
         (["status", "-i", "servobus-slcan"], "-c"),
         (["monitor", "--sim", "1", "--rate-hz", "0"], "--rate-hz"),
+        # NaN passes click's ranges (every comparison is false): a --duration nan never ends
+        (["speed", "--sim", "1", "--speed-dps", "30", "--duration", "nan"], "--duration"),
+        (["speed", "--sim", "1", "--speed-dps", "30", "--rate-hz", "nan"], "--rate-hz"),
+        (["move", "--sim", "1", "--angle-deg", "5", "--tolerance-deg", "nan"], "--tolerance-deg"),
+        (["monitor", "--sim", "1", "--rate-hz", "nan"], "--rate-hz"),
+        (["record", "--sim", "1", "--log", "x.log", "--hz", "nan"], "--hz"),
+        (["demo", "--duration", "nan"], "--duration"),
     ],
 )
 def test_bad_arguments_are_one_line_and_exit_2_with_nothing_sent(

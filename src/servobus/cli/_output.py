@@ -22,6 +22,7 @@ from servobus.protocols._message import Message
 
 __all__ = [
     "SETTINGS",
+    "FloatRange",
     "confirm",
     "console",
     "emit_json",
@@ -52,6 +53,17 @@ def console(*, stderr: bool = False) -> Console:
     Made per call, so it writes to whatever ``sys.stdout`` is now (tests capture it).
     """
     return Console(stderr=stderr, highlight=False, soft_wrap=False)
+
+
+class FloatRange(click.FloatRange):
+    """click's FloatRange, refusing NaN: it passes every range check (each comparison is false), so a
+    ``--duration nan`` would never end and a ``--rate-hz nan`` would fail only after a set-point left."""
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
+        number = super().convert(value, param, ctx)
+        if isinstance(number, float) and math.isnan(number):
+            self.fail(f"{value!r} is not a number", param, ctx)
+        return number
 
 
 def json_option(func: F) -> F:

@@ -34,6 +34,7 @@ from servobus.cli._motors import (
 )
 from servobus.cli._output import (
     SETTINGS,
+    FloatRange,
     confirm,
     console,
     emit_json,
@@ -153,10 +154,8 @@ def status(conn: Connection, as_json: bool) -> None:
     ),
 )
 @connection_options
-@click.option("--rate-hz", type=click.FloatRange(min=0.1, max=1000), default=10.0, show_default=True)
-@click.option(
-    "--duration", type=click.FloatRange(min=0), help="Stop after this many seconds [default: Ctrl-C]."
-)
+@click.option("--rate-hz", type=FloatRange(min=0.1, max=1000), default=10.0, show_default=True)
+@click.option("--duration", type=FloatRange(min=0), help="Stop after this many seconds [default: Ctrl-C].")
 @json_option
 def monitor(conn: Connection, rate_hz: float, duration: float | None, as_json: bool) -> None:
     """Poll the motors' status at a fixed rate and show it live (JSON: one line per motor and sample).
@@ -314,13 +313,13 @@ async def _run_setpoints(
 
 _rate = click.option(
     "--rate-hz",
-    type=click.FloatRange(min=1, max=1000),
+    type=FloatRange(min=1, max=1000),
     default=50.0,
     show_default=True,
     help="How often the set-point is resent (each reply refreshes the status).",
 )
 _duration = click.option(
-    "--duration", type=click.FloatRange(min=0), help="Seconds to hold the set-point [default: Ctrl-C]."
+    "--duration", type=FloatRange(min=0), help="Seconds to hold the set-point [default: Ctrl-C]."
 )
 _keep = click.option(
     "--keep", is_flag=True, help="Send the set-point once and leave the motors running (no stop at the end)."
@@ -339,7 +338,7 @@ _keep = click.option(
 @click.option("--angle-deg", type=float, required=True, help="Target angle of the output shaft.")
 @click.option(
     "--max-speed-dps",
-    type=click.FloatRange(min=0, min_open=True),
+    type=FloatRange(min=0, min_open=True),
     default=180.0,
     show_default=True,
     help="Speed limit of the move.",
@@ -348,7 +347,7 @@ _keep = click.option(
 @click.option("--relative", is_flag=True, help="Move by --angle-deg from where the motor is.")
 @click.option(
     "--tolerance-deg",
-    type=click.FloatRange(min=0, min_open=True),
+    type=FloatRange(min=0, min_open=True),
     default=1.0,
     show_default=True,
     help="An absolute move ends when every motor reports its angle this close.",

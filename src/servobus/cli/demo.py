@@ -26,7 +26,7 @@ import click
 from servobus.bus import Bus, Motor
 from servobus.cli._connect import note_exit
 from servobus.cli._demo_report import Layout, Summary, layout, live_view, summary_lines
-from servobus.cli._output import SETTINGS, console, emit_json, examples, json_option
+from servobus.cli._output import SETTINGS, FloatRange, console, emit_json, examples, json_option
 from servobus.protocols import myactuator as ma
 from servobus.ticks import ticks
 
@@ -49,12 +49,10 @@ REFRESH_S = 0.25
 )
 @click.option(
     "--duration",
-    type=click.FloatRange(min=0, min_open=True),
+    type=FloatRange(min=0, min_open=True),
     help="Run this many seconds without the live view, then print a summary.",
 )
-@click.option(
-    "--hz", type=click.FloatRange(min=1, max=2000), default=1000.0, show_default=True, help="Tick rate."
-)
+@click.option("--hz", type=FloatRange(min=1, max=2000), default=1000.0, show_default=True, help="Tick rate.")
 @click.option(
     "--motors", type=click.IntRange(1, 320), default=32, show_default=True, help="Simulated motors."
 )

@@ -14,6 +14,7 @@ import click
 
 from servobus.bus import Bus, Motor, command_classes
 from servobus.cli._connect import Connection, connection_options
+from servobus.cli._output import FloatRange
 from servobus.errors import MotorTimeout, TransportError
 from servobus.protocols import get_family
 from servobus.protocols._message import Command, Reply
@@ -60,14 +61,14 @@ class Tally:
 )
 @click.option(
     "--hz",
-    type=click.FloatRange(min=0, min_open=True, max=10_000),
+    type=FloatRange(min=0, min_open=True, max=10_000),
     default=100.0,
     show_default=True,
     help="Polls per second.",
 )
 @click.option(
     "--duration",
-    type=click.FloatRange(min=0, min_open=True),
+    type=FloatRange(min=0, min_open=True),
     metavar="S",
     help="Seconds to record [default: until Ctrl-C].",
 )
