@@ -180,41 +180,78 @@ async def _monitor(
     live: bool,
 ) -> list[Outcome]:
     async with open_bus(conn, safe=None) as (bus, motors):
-        items = [(m, c) for m, commands in zip(motors, planned, strict=True) for c in commands]
+        items = _items(motors, planned)
         outcomes = [Outcome(m.motor_id) for m in motors]
-        by_id = {o.motor_id: o for o in outcomes}
         start = asyncio.get_running_loop().time()
-        view = Live(console=console(stderr=True), auto_refresh=False) if live else None
-        try:
-            if view is not None:
-                view.start()
+        with _LiveStatus(live, rate_hz) as view:
             async for tick in bus.ticks(rate_hz, spin_s=0.0):
                 elapsed = tick.started - start
                 if duration is not None and elapsed >= duration:
                     break
-                results = await bus.cycle(items)
-                fresh: dict[int, list[Reply | None]] = {}
-                errors: dict[int, str] = {}
-                for (motor, _), result in zip(items, results, strict=True):
-                    if isinstance(result, BaseException):
-                        errors[motor.motor_id] = str(result)
-                    else:
-                        fresh.setdefault(motor.motor_id, []).append(result)
-                for motor_id, outcome in by_id.items():
-                    outcome.error = errors.get(motor_id)
-                    if motor_id in fresh:
-                        outcome.replies = fresh[motor_id]
-                    if as_json:
-                        row = {"t": round(elapsed, 4), "id": motor_id, **status_of(fresh.get(motor_id, []))}
-                        row["error"] = outcome.error
-                        emit_json(row)
-                if view is not None and tick.index % max(1, round(rate_hz / 4)) == 0:
-                    title = f"{len(motors)} {conn.family} motor(s), {elapsed:.1f} s (Ctrl-C stops)"
-                    view.update(_status_table(_status_rows(outcomes), title), refresh=True)
-        finally:
-            if view is not None:
-                view.stop()
+                fresh = _take(outcomes, items, await bus.cycle(items))
+                if as_json:
+                    for o in outcomes:
+                        emit_json(
+                            {"t": round(elapsed, 4), "id": o.motor_id, **status_of(fresh[o.motor_id])}
+                            | {"error": o.error}
+                        )
+                view.show(
+                    tick.index,
+                    outcomes,
+                    f"{len(motors)} {conn.family} motor(s), {elapsed:.1f} s (Ctrl-C stops)",
+                )
         return outcomes
+
+
+def _items(motors: Sequence[Motor], commands: Sequence[Sequence[Command]]) -> list[tuple[Motor, Command]]:
+    """One tick's (motor, command) pairs: each motor's commands, in order."""
+    return [(motor, command) for motor, each in zip(motors, commands, strict=True) for command in each]
+
+
+def _take(
+    outcomes: Sequence[Outcome], items: Sequence[tuple[Motor, Command]], results: Sequence[Any]
+) -> dict[int, list[Reply | None]]:
+    """One tick's results into each motor's outcome: its error, or its replies of this tick (a motor
+    that failed keeps the replies of the last tick it answered). Returns this tick's replies by id.
+
+    Raises:
+        BaseException: a result that is not a motor's or the bus's failure (a bug, a refused frame).
+    """
+    fresh: dict[int, list[Reply | None]] = {o.motor_id: [] for o in outcomes}
+    errors: dict[int, str] = {}
+    for (motor, _), result in zip(items, results, strict=True):
+        if isinstance(result, ServobusError):
+            errors.setdefault(motor.motor_id, str(result))
+        elif isinstance(result, BaseException):
+            raise result
+        else:
+            fresh[motor.motor_id].append(result)
+    for outcome in outcomes:
+        outcome.error = errors.get(outcome.motor_id)
+        if fresh[outcome.motor_id]:
+            outcome.replies = fresh[outcome.motor_id]
+    return fresh
+
+
+class _LiveStatus:
+    """The live status table on stderr (a terminal only), redrawn about four times a second."""
+
+    def __init__(self, live: bool, rate_hz: float) -> None:
+        self._view = Live(console=console(stderr=True), auto_refresh=False) if live else None
+        self._every = max(1, round(rate_hz / 4))
+
+    def __enter__(self) -> _LiveStatus:
+        if self._view is not None:
+            self._view.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._view is not None:
+            self._view.stop()
+
+    def show(self, tick: int, outcomes: Sequence[Outcome], title: str) -> None:
+        if self._view is not None and tick % self._every == 0:
+            self._view.update(_status_table(_status_rows(outcomes), title), refresh=True)
 
 
 # ---- set-points ----
@@ -266,34 +303,15 @@ async def _run_setpoints(
         if keep or any(o.error for o in outcomes):
             return outcomes
         arrived = None if arrival is None else [arrival(o.replies) for o in outcomes]
-        items: list[tuple[Motor, Command]] = [
-            (motor, command) for motor, commands in zip(motors, repeats, strict=True) for command in commands
-        ]
-        by_motor = {o.motor_id: o for o in outcomes}
-        view = Live(console=console(stderr=True), auto_refresh=False) if live else None
+        items = _items(motors, repeats)
         settled = 0
         start = time.monotonic()
-        try:
-            if view is not None:
-                view.start()
+        with _LiveStatus(live, rate_hz) as view:
             async for tick in bus.ticks(rate_hz, spin_s=0.0):
                 elapsed = time.monotonic() - start
                 if duration is not None and elapsed >= duration:
                     break
-                results = await bus.cycle(items)
-                fresh: dict[int, list[Reply | None]] = {o.motor_id: [] for o in outcomes}
-                errors: dict[int, str] = {}
-                for (motor, _), result in zip(items, results, strict=True):
-                    if isinstance(result, ServobusError):
-                        errors.setdefault(motor.motor_id, str(result))
-                    elif isinstance(result, BaseException):
-                        raise result
-                    else:
-                        fresh[motor.motor_id].append(result)
-                for motor_id, outcome in by_motor.items():
-                    outcome.error = errors.get(motor_id)
-                    if fresh[motor_id]:
-                        outcome.replies = fresh[motor_id]
+                _take(outcomes, items, await bus.cycle(items))
                 if arrived is not None:
                     done = all(
                         o.error is None and there(status_of(o.replies))
@@ -302,12 +320,8 @@ async def _run_setpoints(
                     settled = settled + 1 if done else 0
                     if settled >= 3:  # three ticks in a row at the target
                         break
-                if view is not None and tick.index % max(1, round(rate_hz / 4)) == 0:
-                    title = f"{type(planned[0][-1]).__name__}, {elapsed:.1f} s (Ctrl-C stops the motors)"
-                    view.update(_status_table(_status_rows(outcomes), title), refresh=True)
-        finally:
-            if view is not None:
-                view.stop()
+                title = f"{type(planned[0][-1]).__name__}, {elapsed:.1f} s (Ctrl-C stops the motors)"
+                view.show(tick.index, outcomes, title)
         return outcomes
 
 
