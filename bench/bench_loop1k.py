@@ -362,10 +362,24 @@ MEDIAN_KEYS = (
 )  # fmt: skip
 
 
+def bus_bound_hz(layout: Layout) -> float:
+    """The most cycles/s one bus of ``layout`` can carry (its fullest bus): bench_efficiency's bound
+    (wire time of the cycle's frames and the motors' turnaround), computed on virtual time."""
+    import bench_efficiency as be
+    from servobus.sim import virtual
+
+    spec = be.CANFD if layout.fd else be.CAN
+    run = virtual.run(be.can_run(spec, max(layout.motors), 5))
+    return float(run["bound_cycles_s"])
+
+
 def summarise(layout: Layout, runs: list[dict[str, Any]], profile: dict[str, Any] | None) -> dict[str, Any]:
     med = {k: round(statistics.median(r[k] for r in runs), 2) for k in MEDIAN_KEYS}
+    bound = bus_bound_hz(layout)
     out: dict[str, Any] = {
         **med,
+        "bus_bound_hz": round(bound, 1),
+        "feasible_at_1khz": bound >= HZ,
         "layout": layout.label,
         "buses": len(layout.motors),
         "motors": sum(layout.motors),
@@ -388,9 +402,10 @@ def summarise(layout: Layout, runs: list[dict[str, Any]], profile: dict[str, Any
     else:
         targets = {"on_time_pct": {"min": ON_TIME_TARGET, "met": med["on_time_pct"] >= ON_TIME_TARGET}}
     out["targets"] = targets
+    infeasible = "" if bound >= HZ else f"; its bus can carry at most {bound:.0f} cycles/s, so no host can"
     out["targets_missed"] = [
         f"{layout.key}.{name} = {med[name]} (target "
-        f"{'>=' if 'min' in t else '<='} {t.get('min', t.get('max'))})"
+        f"{'>=' if 'min' in t else '<='} {t.get('min', t.get('max'))}{infeasible})"
         for name, t in targets.items()
         if not t["met"]
     ]
@@ -424,6 +439,7 @@ def render_markdown(figures: dict[str, dict[str, Any]], info: dict[str, Any]) ->
                 f["layout"],
                 f"**{f['on_time_pct']:.2f}**",
                 f"{f['achieved_hz']:,.0f}",
+                f"{f['bus_bound_hz']:,.0f}" if "bus_bound_hz" in f else "-",
                 f"{f['jitter_p50_us']:.0f} / **{f['jitter_p99_us']:.0f}** / {f['jitter_max_us']:,.0f}",
                 f"{f['latency_p50_us']:,.0f} / {f['latency_p99_us']:,.0f}",
                 f"{f['tick_done_p50_us']:,.0f} / {f['tick_done_p99_us']:,.0f}",
@@ -438,6 +454,7 @@ def render_markdown(figures: dict[str, dict[str, Any]], info: dict[str, Any]) ->
                 "layout",
                 "ticks on time %",
                 "ticks/s",
+                "one bus's bound, cycles/s",
                 "jitter p50 / p99 / max µs",
                 "reply latency p50 / p99 µs",
                 "tick done after deadline p50 / p99 µs",
@@ -445,8 +462,16 @@ def render_markdown(figures: dict[str, dict[str, Any]], info: dict[str, Any]) ->
                 "measured (UTC)",
             ],
             rows,
-            "llrrrrrrl",
+            "llrrrrrrrl",
         ),
+    ]
+    lines += [
+        "One bus's bound: the most cycles per second the layout's fullest bus can carry, from "
+        "bench_efficiency's bound (bit-exact wire time of the cycle's frames, the motors' turnaround), on "
+        "virtual time. Below 1,000 the layout cannot run at 1 kHz on any host: 8 hollow motors on CAN FD "
+        "1/5 Mbit/s are 16 frames of ~68 µs (16 data bytes with bit-rate switching) = ~1,090 µs of wire per "
+        "cycle, plus the 500 µs turnaround on the critical path.",
+        "",
     ]
     missed = [m for f in figures.values() for m in f["targets_missed"]]
     lines += [
