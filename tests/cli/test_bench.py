@@ -57,3 +57,19 @@ def test_a_failing_benchmark_is_one_line_and_exit_1(
 
 def test_an_unknown_benchmark_is_one_line_and_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
     assert "--only" in one_line(capsys, ["bench", "--only", "nope"])
+
+
+def test_verbose_json_keeps_stdout_for_the_json(
+    capfd: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """--verbose shows the scripts' own output on stderr: stdout is the JSON document alone."""
+    import json
+
+    from servobus.cli import main
+
+    (tmp_path / "bench_bus.py").write_text(FAKE)
+    monkeypatch.setattr(bench, "bench_dir", lambda: tmp_path)
+    assert main(["bench", "--only", "bus", "--verbose", "--json"]) == 0
+    out, err = capfd.readouterr()
+    assert json.loads(out)["bus"]["efficiency_can1m_32"] == 1.0
+    assert "progress that is not shown" in err

@@ -46,7 +46,7 @@ def bench_dir() -> Path:
     multiple=True,
     help="Run only this benchmark (repeatable) [default: all].",
 )
-@click.option("--verbose", "-v", is_flag=True, help="Show the scripts' own output as they run.")
+@click.option("--verbose", "-v", is_flag=True, help="Show the scripts' own output as they run (on stderr).")
 @json_option
 def bench(only: tuple[str, ...], verbose: bool, as_json: bool) -> None:
     """Run the benchmarks' quick mode and print their figures in one table."""
@@ -93,8 +93,8 @@ def _run(script: Path, name: str, verbose: bool) -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix="servobus-bench-") as out:
         command = [sys.executable, str(script), "--quick", "--output", out]
         shown = console(stderr=True)
-        if verbose:
-            done = subprocess.run(command, cwd=script.parent.parent, text=True, check=False)
+        if verbose:  # its output on stderr: stdout is the table or the JSON alone
+            done = subprocess.run(command, cwd=script.parent.parent, stdout=2, text=True, check=False)
         else:
             with shown.status(f"bench_{name}.py --quick", spinner="dots"):
                 done = subprocess.run(
