@@ -234,6 +234,7 @@ def test_zero_asks_and_a_yes_sends(
         (["status", "--sim", "0"], "--sim 0"),
         (["status", "--sim", "1", "--revision", "V9"], "no revision 'V9'"),
         (["status", "--sim", "2", "--ids", "3-1"], "empty"),
+        (["status", "--sim", "2", "--ids", "1-1000000000"], "--ids"),  # refused, not built
         (["status", "-i", "servobus-slcan"], "-c"),
         (["monitor", "--sim", "1", "--rate-hz", "0"], "--rate-hz"),
         # NaN passes click's ranges (every comparison is false): a --duration nan never ends

@@ -35,11 +35,16 @@ NATIVE_SLCAN = "servobus-slcan"
 F = TypeVar("F", bound=Callable[..., Any])
 
 
+#: more ids than any family has (hollow: 0-100; MyActuator, LK: 1-32); a longer list is a typo
+MAX_IDS = 256
+
+
 def parse_ids(text: str) -> tuple[int, ...]:
     """``"1-3,7"`` -> ``(1, 2, 3, 7)``.
 
     Raises:
-        ValueError: not a list of ids and ranges, or an empty range.
+        ValueError: not a list of ids and ranges, an empty range, or more than :data:`MAX_IDS` ids
+            (refused before the list is built: ``1-1000000000`` would take gigabytes).
     """
     ids: list[int] = []
     for part in text.split(","):
@@ -51,6 +56,8 @@ def parse_ids(text: str) -> tuple[int, ...]:
             raise ValueError(f"--ids {text!r}: expected ids and ranges like 1-4,7") from None
         if hi < lo:
             raise ValueError(f"--ids {text!r}: the range {part.strip()} is empty")
+        if len(ids) + (hi - lo + 1) > MAX_IDS:
+            raise ValueError(f"--ids {text!r}: more than {MAX_IDS} ids")
         ids.extend(range(lo, hi + 1))
     return tuple(dict.fromkeys(ids))
 
