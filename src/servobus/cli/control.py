@@ -573,7 +573,11 @@ def brake(conn: Connection, lock: bool, as_json: bool) -> None:
 @yes_option
 @json_option
 def zero(conn: Connection, yes: bool, as_json: bool) -> None:
-    """Make the present position the zero (MyActuator and LK: written to ROM; asks first)."""
+    """Make the present position the zero (MyActuator and LK: written to ROM; asks first).
+
+    Hollow motors take a zero only with the output off: their zero sends a stop first, which frees
+    the shaft (a loaded axis is no longer held), and the zero holds until power-off.
+    """
     _one_shot(conn, "zero", {}, yes=yes, as_json=as_json)
 
 
