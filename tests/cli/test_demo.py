@@ -112,4 +112,4 @@ def test_ctrl_c_stops_the_motors_prints_the_summary_and_exits_130() -> None:
     out, err = demo.communicate(timeout=20)
     assert demo.returncode == 130, (out, err)
     assert "stopped     Ctrl-C: every motor got its stop command" in out and "errors      0 " in out
-    assert err.strip().splitlines() == ["servobus: interrupted; stop sent to myactuator motors 1, 2, 3"]
+    assert err.strip().splitlines() == ["servobus: interrupted; stop sent to myactuator motors 1-3 on bus 1"]

@@ -103,7 +103,7 @@ def _interrupted(args: list[str], after_s: float) -> tuple[int, list[str]]:
 
 def test_ctrl_c_during_a_set_point_says_the_motors_were_sent_their_stop() -> None:
     code, err = _interrupted(["speed", "--sim", "2", "--speed-dps", "30", "--json"], after_s=3.0)
-    assert code == 130 and err[-1] == "servobus: interrupted; stop sent to myactuator motors 1, 2", err
+    assert code == 130 and err[-1] == "servobus: interrupted; stop sent to myactuator motors 1, 2 on sim", err
 
 
 @pytest.mark.parametrize(
@@ -119,7 +119,12 @@ def test_the_interrupted_line_names_the_motors_the_stop_did_not_reach(
 ) -> None:
     import servobus.cli
 
-    monkeypatch.setattr(servobus.cli, "SAFE_EXITS", [("lk", "stop", (1,), (2, 3))])
+    monkeypatch.setattr(
+        servobus.cli,
+        "SAFE_EXITS",
+        [("can0", "lk", "stop", (1, 5, 6, 7, 8), (2, 3)), ("sim", "lk", "off", (4,), ())],
+    )
     assert servobus.cli._interrupted() == (
-        "servobus: interrupted; stop sent to lk motor 1; stop NOT sent to lk motors 2, 3"
+        "servobus: interrupted; stop sent to lk motors 1, 5-8 on can0"
+        "; stop NOT sent to lk motors 2, 3 on can0; off sent to lk motor 4 on sim"
     )

@@ -29,9 +29,9 @@ from servobus.errors import ServobusError
 __all__ = ["SAFE_EXITS", "cli", "main"]
 
 #: What the Buses of this command sent their commanded motors when their blocks were left, for the
-#: line Ctrl-C prints (:func:`servobus.cli._connect.note_exit`): (family, safe command, the ids it
-#: left for, the ids it did not).
-SAFE_EXITS: list[tuple[str, str, tuple[int, ...], tuple[int, ...]]] = []
+#: line Ctrl-C prints (:func:`servobus.cli._connect.note_exit`): (bus name, family, safe command,
+#: the ids it left for, the ids it did not).
+SAFE_EXITS: list[tuple[str, str, str, tuple[int, ...], tuple[int, ...]]] = []
 
 #: subcommand -> "module:attribute" (imported on first use)
 COMMANDS: dict[str, str] = {
@@ -98,18 +98,26 @@ def _one_line(message: str) -> str:
 
 
 def _ids(ids: Sequence[int]) -> str:
-    return ("motor " if len(ids) == 1 else "motors ") + ", ".join(map(str, ids))
+    """``motor 3``, ``motors 1, 2``, ``motors 1-16, 20`` (runs of three or more as ranges)."""
+    runs: list[list[int]] = []
+    for i in sorted(ids):
+        if runs and i == runs[-1][-1] + 1:
+            runs[-1].append(i)
+        else:
+            runs.append([i])
+    parts = [f"{r[0]}-{r[-1]}" if len(r) >= 3 else ", ".join(map(str, r)) for r in runs]
+    return ("motor " if len(ids) == 1 else "motors ") + ", ".join(parts)
 
 
 def _interrupted() -> str:
     """The line for Ctrl-C: which motors were sent their safe command, and which were not (only what
     the Buses reported; nothing is claimed for a command that commanded no motor)."""
     line = "servobus: interrupted"
-    for family, safe, sent, missed in SAFE_EXITS:
+    for bus, family, safe, sent, missed in SAFE_EXITS:
         if sent:
-            line += f"; {safe} sent to {family} {_ids(sent)}"
+            line += f"; {safe} sent to {family} {_ids(sent)} on {bus}"
         if missed:
-            line += f"; {safe} NOT sent to {family} {_ids(missed)}"
+            line += f"; {safe} NOT sent to {family} {_ids(missed)} on {bus}"
     return line
 
 

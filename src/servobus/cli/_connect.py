@@ -260,7 +260,7 @@ def note_exit(bus: Bus) -> None:
         went, missed = by_family.setdefault(motor.codec.family, ([], []))
         (went if id(motor) in sent else missed).append(motor.motor_id)
     for family, (went, missed) in by_family.items():
-        SAFE_EXITS.append((family, bus.safe, tuple(sorted(went)), tuple(sorted(missed))))
+        SAFE_EXITS.append((bus.name, family, bus.safe, tuple(sorted(went)), tuple(sorted(missed))))
 
 
 @contextlib.asynccontextmanager
