@@ -1,6 +1,7 @@
-"""``servobus dbc``: the DBC it writes loads in cantools and decodes a simulator recording (MyActuator,
-LK) to the values servobus decodes, every field compared (``_dbc_check.check_frame``); bad arguments are
-one line, exit 2; without cantools, one line telling how to install it (exit 1)."""
+"""``servobus dbc``: the DBC it writes for each family loads in cantools and decodes frames (a simulator
+recording for MyActuator and LK, frames built by the hollow codec) to the values servobus decodes, every
+field compared (``_dbc_check.check_frame``); bad arguments are one line, exit 2; without cantools, one line
+telling how to install it (exit 1)."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from _dbc_check import check_frame
 from servobus.dbc import MessageSpec, Plan, plan
 from servobus.frame import Frame
 from servobus.logs import FrameDecoder, read_log
+from servobus.protocols import hollow as ho
 
 
 def _spec(p: Plan, frame: Frame) -> MessageSpec:
@@ -73,6 +75,85 @@ def test_the_lk_dbc_decodes_a_recording_as_servobus_does(tmp_path: Path) -> None
     assert {m for _, _, m in seen} == {1, 2, 3, 4}
 
 
+def test_the_lk_v235_dbc_holds_the_replies_unless_asked_for_the_requests(tmp_path: Path) -> None:
+    result = invoke(["dbc", "--family", "lk", "--revision", "V2_35", "--model", "MF", "--ids", "1-2"])
+    database = cantools.database.load_string(result.stdout, "dbc")
+    assert [m.name for m in database.messages] == ["lk_reply_1", "lk_reply_2", "lk_multi_motor"]
+    assert "requests on 0x140+ID" in result.stderr
+    assert (
+        database.get_message_by_name("lk_multi_motor").get_signal_by_name("currents_a_0").scale == 33 / 4096
+    )
+    out = tmp_path / "requests.dbc"
+    summary = json.loads(
+        invoke(
+            ["dbc", "-f", "lk", "--revision", "V2_35", "--direction", "request", "--json", "-o", str(out)]
+        ).stdout
+    )
+    assert summary["messages"] == ["lk_request_1", "lk_multi_motor"] and summary["left_out"] == []
+
+
+@pytest.mark.parametrize("mode", ["normal", "extended", "fd"])
+def test_the_hollow_dbc_decodes_frames_of_the_codec_as_servobus_does(tmp_path: Path, mode: str) -> None:
+    dbc = tmp_path / f"hollow-{mode}.dbc"
+    result = invoke(
+        ["dbc", "--family", "hollow", "--can-mode", mode, "--model", "3507", "--ids", "1-4", "-o", str(dbc)]
+    )
+    assert result.stderr.startswith("dbc: 9 messages -> ")
+    database = cantools.database.load_file(dbc)
+    model = ho.MODEL_3507
+    frames = []
+    for motor_id in range(1, 5):
+        x = motor_id / 8
+        if mode == "fd":
+            command: Any = ho.FdCommand(
+                position_deg=-720.5 * x,
+                velocity_rpm=30 * x,
+                current_raw=-100,
+                mode=ho.ControlMode.POSITION,
+                run=True,
+                kp=9,
+                kd=2,
+                model=model,
+            )
+            reply: Any = ho.FdReply(
+                position_deg=100 * x,
+                velocity_rpm=-12 * x,
+                temperature_c=-20,
+                running=True,
+                slave_id=motor_id,
+                model=model,
+            )
+        elif mode == "normal":
+            command = ho.Setpoint(
+                position_deg=90 * x, speed_rad_s=-5 * x, kp=100, kd=3, current_a=x, model=model
+            )
+            reply = ho.NormalReply(
+                motor_id=motor_id, position_deg=-45 * x, speed_rad_s=2 * x, current_a=-x, model=model
+            )
+        else:
+            command = ho.IncrementalSetpoint(
+                step_deg=-10 * x, speed_rad_s=5 * x, kp=1, kd=0, current_a=x, model=model
+            )
+            reply = ho.ExtendedReply(
+                motor_id=motor_id, position_deg=-5000.25 * x, speed_rad_s=x, current_a=2 * x, model=model
+            )
+        frames += [
+            ho.codec.request_frame(motor_id, command),
+            ho.codec.request_frame(motor_id, ho.PiMultiplier(gain=ho.PiGain.CURRENT_KI, multiplier=1.25)),
+            ho.codec.request_frame(motor_id, ho.CanModeSwitch(mode=ho.CanMode.EXTENDED)),
+            ho.codec.reply_frame(ho.DEFAULT_HOST_ID, reply),
+        ]
+    p = plan("hollow", range(1, 5), model="3507", can_mode=mode)
+    can_mode = ho.CanMode.EXTENDED if mode == "extended" else ho.CanMode.NORMAL
+    for frame in frames:
+        if frame.arbitration_id == ho.DEFAULT_HOST_ID:
+            ours: Any = ho.codec.decode_reply_frame(frame, model=model)
+        else:
+            ours = ho.codec.decode_request_frame(frame, model=model, can_mode=can_mode)
+        check_frame(_spec(p, frame), database, frame.data, ours)
+    assert database.get_message_by_frame_id(1).is_fd == (mode == "fd")
+
+
 def test_stdout_and_a_json_summary(tmp_path: Path) -> None:
     text = invoke(["dbc", "--revision", "V4_3"]).stdout
     database = cantools.database.load_string(text, "dbc")
@@ -94,6 +175,16 @@ def test_stdout_and_a_json_summary(tmp_path: Path) -> None:
     assert not any("motion" in reason for reason in summary["left_out"])
 
 
+def test_max_torque_sets_the_v44_motion_torque_range() -> None:
+    text = invoke(["dbc", "--max-torque", "60", "--ids", "3"]).stdout
+    torque = (
+        cantools.database.load_string(text, "dbc")
+        .get_message_by_frame_id(0x403)
+        .get_signal_by_name("torque_ff_nm")
+    )
+    assert (torque.minimum, torque.maximum, torque.scale) == (-60, 60, 120 / 4095)
+
+
 def test_without_cantools_one_line_says_how_to_install(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -113,6 +204,16 @@ def test_without_cantools_one_line_says_how_to_install(
         (["--family", "lk", "--ids", "33"], "motor_id"),
         (["--family", "hollow", "--ids", "99-101"], "motor_id"),
         (["--family", "hollow", "--ids", "1-4,100"], "host id"),
+        (["--family", "hollow", "--host-id", "2048"], "host_id"),
+        (["--family", "hollow", "--model", "HO9999"], "no model"),
+        (["--family", "lk", "--model", "XY"], "motor type"),
+        (["--family", "lk", "--encoder-bits", "13"], "encoder_bits"),
+        (["--family", "lk", "--can-mode", "fd"], "--can-mode is an option of hollow"),
+        (["--family", "myactuator", "--model", "MG"], "--model is an option of lk and hollow"),
+        (["--family", "hollow", "--max-torque", "3"], "--max-torque is an option of myactuator"),
+        (["--revision", "V4_3", "--max-torque", "3"], "V4.4"),
+        (["--family", "hollow", "--can-mode", "turbo"], "--can-mode"),
+        (["--direction", "sideways"], "--direction"),
         (["--ids", "x"], "--ids"),
         (["--json"], "give -o"),
         (["-o", "exists.dbc"], "exists"),

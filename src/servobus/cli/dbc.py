@@ -1,4 +1,4 @@
-"""``servobus dbc``: a DBC of a family's frames, generated from its codec's field tables (cantools)."""
+"""``servobus dbc``: a DBC of a family's CAN frames, generated from its codec's definitions (cantools)."""
 
 from __future__ import annotations
 
@@ -12,16 +12,24 @@ from servobus.cli._connect import FAMILIES, parse_ids
 __all__ = ["dbc"]
 
 EPILOG = """\b
-One message per motor for its requests (0x140+ID) and one for its replies (0x240+ID), plus the 0x280
-broadcast, each multiplexed on DATA[0]; each field a signal with the factor, range and unit of the
-codec's field table. What a DBC multiplexed on DATA[0] cannot carry is listed on stderr (motion-mode
-frames, text, layouts told apart by another byte). Only myactuator has field tables to generate
-from. Needs cantools: pip install 'servobus[dbc]'.
+myactuator: per motor its requests (0x140+ID) and replies (0x240+ID), multiplexed on DATA[0], and its
+motion-mode command (0x400+ID) and reply (0x500+ID); the 0x280 broadcast. lk: per motor its requests
+(0x140+ID) and replies (0x180+ID; V2.35 replies share 0x140+ID, so that DBC holds the replies unless
+--direction request), parameter frames multiplexed again on their parameter byte; V2.35's 0x280.
+hollow: per motor its requests (on the motor id; --can-mode normal, extended or fd: they share the
+ids) and the mode-switch/PI frames (extended id), and one reply message on the host id.
+
+\b
+Each field is a signal with the factor, range and unit of the codec's field tables or of the C core's
+bit layouts. What a DBC cannot carry is listed on stderr (text, layouts told apart by another byte,
+hollow's special commands). Needs cantools: pip install 'servobus[dbc]'.
 
 \b
 Examples:
   servobus dbc --family myactuator --ids 1-4 -o myactuator.dbc
   servobus dbc --revision V4_3 --ids 1 > v43.dbc
+  servobus dbc --family lk --model MF --encoder-bits 16 --ids 1-4 -o lk.dbc
+  servobus dbc --family hollow --can-mode fd --model 3507 --ids 1-4 -o hollow-fd.dbc
   servobus dbc --ids 1-2 --json -o ma.dbc     # the summary as JSON on stdout"""
 
 
@@ -34,15 +42,46 @@ Examples:
     show_default=True,
     help="Protocol family.",
 )
-@click.option("--revision", help="Protocol revision (myactuator V4_3/V4_4) [default: the newest].")
+@click.option(
+    "--revision",
+    help="Protocol revision (myactuator V4_3/V4_4, lk V2_36/V2_35, hollow HO_SERIES) [default: the newest].",
+)
 @click.option("--ids", "ids_text", default="1", show_default=True, metavar="IDS", help="Motor ids, e.g. 1-4.")
+@click.option(
+    "--model",
+    help="lk: motor type MS/MF/MH/MG [MG]; hollow: motor model (default, 3507) [default].",
+)
+@click.option("--encoder-bits", type=int, help="lk: encoder width, 14/15/16/18 [14].")
+@click.option(
+    "--can-mode",
+    type=click.Choice(["normal", "extended", "fd"]),
+    help="hollow: the frames on the motor and host ids [normal].",
+)
+@click.option("--host-id", type=int, help="hollow: the identifier replies go to [100].")
+@click.option("--max-torque", type=float, metavar="NM", help="myactuator V4.4: the motion-mode torque range.")
+@click.option(
+    "--direction",
+    type=click.Choice(["request", "reply"]),
+    help="Only the requests' or the replies' messages [default: both; lk V2.35: replies].",
+)
 @click.option(
     "-o", "--output", type=click.Path(dir_okay=False, path_type=Path), help="File [default: stdout]."
 )
 @click.option("--force", is_flag=True, help="Overwrite an existing output file.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON on stdout (needs -o).")
 def dbc(
-    family: str, revision: str | None, ids_text: str, output: Path | None, force: bool, as_json: bool
+    family: str,
+    revision: str | None,
+    ids_text: str,
+    model: str | None,
+    encoder_bits: int | None,
+    can_mode: str | None,
+    host_id: int | None,
+    max_torque: float | None,
+    direction: str | None,
+    output: Path | None,
+    force: bool,
+    as_json: bool,
 ) -> None:
     """Export a DBC of a family's frames (cantools loads and decodes it)."""
     try:
@@ -57,13 +96,36 @@ def dbc(
         import cantools  # noqa: F401
     except ImportError:
         raise click.ClickException("dbc needs cantools: pip install 'servobus[dbc]'") from None
-    from servobus.dbc import build_database, dbc_text
+    from servobus.dbc import FAMILIES as DBC_FAMILIES
+    from servobus.dbc import OPTIONS, database, dbc_text, plan
 
+    given: dict[tuple[str, str], object] = {
+        ("--model", "model"): model,
+        ("--encoder-bits", "encoder_bits"): encoder_bits,
+        ("--can-mode", "can_mode"): can_mode,
+        ("--host-id", "host_id"): host_id,
+        ("--max-torque", "max_torque_nm"): max_torque,
+    }
+    for (flag, option), value in given.items():
+        if value is not None and option not in OPTIONS[family]:
+            owners = " and ".join(f for f in DBC_FAMILIES if option in OPTIONS[f])
+            raise click.BadParameter(f"{flag} is an option of {owners}, not of {family}", param_hint=flag)
     try:
-        database, left_out = build_database(family, ids, revision)
+        p = plan(
+            family,
+            ids,
+            revision,
+            model=model,
+            encoder_bits=encoder_bits,
+            can_mode=can_mode,
+            host_id=host_id,
+            max_torque_nm=max_torque,
+            direction=direction,
+        )
     except ValueError as exc:
-        raise click.BadParameter(str(exc), param_hint="--family/--revision/--ids") from None
-    text = dbc_text(database)
+        raise click.BadParameter(str(exc), param_hint="--family/--revision/--ids/--model") from None
+    db = database(p)
+    text = dbc_text(db)
     if output is None:
         click.echo(text, nl=False)
     else:
@@ -71,13 +133,13 @@ def dbc(
             out.write(text)
     summary = {
         "output": str(output) if output is not None else None,
-        "messages": [m.name for m in database.messages],
-        "left_out": left_out,
+        "messages": [m.name for m in db.messages],
+        "left_out": list(p.left_out),
     }
     if as_json:
         click.echo(json.dumps(summary))
         return
     where = output if output is not None else "stdout"
-    click.echo(f"dbc: {len(database.messages)} messages -> {where}; left out:", err=True)
-    for reason in left_out:
+    click.echo(f"dbc: {len(db.messages)} messages -> {where}; left out:", err=True)
+    for reason in p.left_out:
         click.echo(f"  {reason}", err=True)
