@@ -277,7 +277,7 @@ def _drive(
         for command in commands:
             codec.encode(command)  # refused here (exit 2), not after the first set-point went out
     live = not as_json and console(stderr=True).is_terminal
-    outcomes = run(_run_setpoints(conn, planned, repeats, rate_hz, duration, keep, live, arrival))
+    outcomes = run(_run_setpoints(conn, name, planned, repeats, rate_hz, duration, keep, live, arrival))
     rows = _status_rows(outcomes)
     if as_json:
         emit_json(rows)
@@ -290,6 +290,7 @@ def _drive(
 
 async def _run_setpoints(
     conn: Connection,
+    name: str,
     planned: Sequence[Sequence[Command]],
     repeats: Sequence[Sequence[Command]],
     rate_hz: float,
@@ -320,7 +321,7 @@ async def _run_setpoints(
                     settled = settled + 1 if done else 0
                     if settled >= 3:  # three ticks in a row at the target
                         break
-                title = f"{type(planned[0][-1]).__name__}, {elapsed:.1f} s (Ctrl-C stops the motors)"
+                title = f"{name}, {elapsed:.1f} s (Ctrl-C stops the motors)"
                 view.show(tick.index, outcomes, title)
         return outcomes
 
