@@ -284,3 +284,23 @@ def test_motion_mode_through_the_bus_for_myactuator_and_hollow() -> None:
     assert isinstance(first, ma.MotionReply) and first.motor_id == 1
     assert isinstance(later, ma.MotionReply) and abs(later.position_rad - 0.5) < abs(first.position_rad - 0.5)
     assert isinstance(hollow, ho.NormalReply) and hollow.motor_id == 20
+
+
+def test_a_frame_iterator_ends_when_the_bus_closes_instead_of_hanging() -> None:
+    async def scenario() -> int:
+        got = 0
+
+        async def read(frames: Any) -> None:
+            nonlocal got
+            async for _ in frames:
+                got += 1
+
+        bus = Bus(SimTransport(devices=[MyActuatorMotor(1)]), safe=None)
+        async with bus:
+            frames = await bus.motor("myactuator", 1).frames().__aenter__()
+            reader = asyncio.ensure_future(read(frames))
+            await asyncio.sleep(0.01)
+        await asyncio.wait_for(reader, 1.0)  # ends once the Bus is closed
+        return got
+
+    assert run(scenario) == 0

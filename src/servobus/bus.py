@@ -149,6 +149,10 @@ class MotorFrames:
         return self
 
     async def __aexit__(self, *exc: object) -> None:
+        self._end()
+
+    def _end(self) -> None:
+        """No more frames (the block was left, or the Bus closed): the iteration ends."""
         self._closed = True
         with contextlib.suppress(ValueError):
             self.motor._watchers.remove(self)
@@ -383,6 +387,9 @@ class Bus:
                 if timer is not None:
                     timer.cancel()
             self._timer = self._silence = None
+            for motor in self.motors.values():  # iterators over its frames end, not hang
+                for watcher in list(motor._watchers):
+                    watcher._end()
             self.transport.set_consumer(None)
             self.transport.set_send_reporter(None)
             with contextlib.suppress(ValueError):
