@@ -1,6 +1,6 @@
 """The long reliability runs: fuzzing under ASan + UBSan, and the 10-minute fault soak.
 
-    python bench/reliability.py --long          # both, then RELIABILITY.md (about an hour on 2 cores)
+    python bench/reliability.py --long          # both, then RELIABILITY.md (1.5-2 h on 2 shared cores)
     python bench/reliability.py fuzz [--runs N] [--guided-runs N] [--jobs J] [--targets a,b]
     python bench/reliability.py soak [--minutes M] [--seed S]
     python bench/reliability.py report          # RELIABILITY.md again from bench/results.json
@@ -14,8 +14,10 @@ streams into real transports with a Bus on them, the scheduler's frame intake) r
 each in its own process:
 
 1. *guided*: atheris (libFuzzer) over servobus's instrumented Python code, in the normal build, for
-   ``--guided-runs`` inputs (default 1,000,000) or ``--guided-seconds``, whichever ends first; it
-   grows a corpus of inputs that reach new code;
+   ``--guided-runs`` inputs (default 1,000,000) or ``--guided-seconds`` (default 60), whichever ends
+   first; it grows a corpus of inputs that reach new code. It needs ``pip install atheris`` (a wheel
+   for CPython 3.11 on x86-64 Linux; not a dependency of servobus): without it this phase is
+   skipped and the next one starts from no corpus;
 2. *sanitized*: the C core built with AddressSanitizer + UndefinedBehaviorSanitizer (the venv
    ``.ci/sanitize`` builds: ``.venv-asan``, built first if it is missing), the sanitizer runtimes
    preloaded and ``PYTHONMALLOC=malloc``, runs every corpus input and then mutations of them,
@@ -406,7 +408,7 @@ def main() -> None:
     parser.add_argument(
         "--guided-runs", type=int, default=1_000_000, help="guided inputs per target (0: none)"
     )
-    parser.add_argument("--guided-seconds", type=int, default=300, help="guided time per target, at most")
+    parser.add_argument("--guided-seconds", type=int, default=60, help="guided time per target, at most")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--targets", default="", help="comma-separated (default: every target)")
     parser.add_argument("--corpus", default="", help="keep the corpora here (default: a temporary folder)")
