@@ -371,3 +371,19 @@ def test_answered_requests_under_a_long_timeout_do_not_pile_up_in_the_deadline_h
         assert request.state is S.REPLIED
     assert len(scheduler._deadlines) <= 64 + 4 * 2
     assert scheduler.next_deadline() == pytest.approx(60.0)
+
+
+def test_a_command_that_waited_too_long_for_its_turn_is_never_sent_but_a_read_is() -> None:
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec], one_at_a_time=True, stale_after_s=0.2)
+    first = scheduler.request(codec, ma.ReadStatus1(), timeout_s=0.5)
+    command = scheduler.request(codec, ma.SpeedControl(speed_dps=10.0))
+    read = scheduler.request(codec, ma.ReadStatus2())
+    command.queued_at = 0.0  # as the Bus stamps a command (a read has none: never stale)
+    for request in (first, command, read):
+        scheduler.submit(request)
+    _send_all(scheduler, 0.0)
+    assert scheduler.expire(0.5) == [first]  # the line was busy for 0.5 s
+    assert scheduler.next_to_send(0.5) == [read] and command.state is S.FAILED
+    assert scheduler.take_stale() == [command] and scheduler.take_stale() == []
+    assert scheduler.counts["not_sent_stale"] == 1

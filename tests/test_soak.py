@@ -193,13 +193,6 @@ async def test_a_stalled_serial_port_under_a_bus_delivers_no_stale_command_and_r
     assert after >= 18
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="bus.py/scheduler.py: a half-duplex line takes one request at a time, and the requests queued "
-    "behind it in the Scheduler have no freshness limit; the transport's stale_after_s counts only from "
-    "when the Bus handed a frame over, so with the port stalled, the later commands of a cycle() reach "
-    "the motor up to (n-1) x stale_after_s after they were made",
-)
 @pytest.mark.asyncio
 async def test_a_stalled_serial_port_under_cycles_delivers_no_stale_command() -> None:
     ages, outcomes, after = await _stalled_port_run(cycle=True)

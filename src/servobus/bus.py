@@ -79,6 +79,13 @@ class FrameLink(Protocol):
 Result = Reply | BaseException | None
 
 
+class _Default:
+    """The type of an argument whose default comes from elsewhere (the transport)."""
+
+
+_DEFAULT = _Default()
+
+
 @dataclass(frozen=True, slots=True)
 class MotorStatus:
     """A motor went offline (missed replies, or silent too long) or came back (it answered).
@@ -292,6 +299,9 @@ class Bus:
         min_reply_s: the least time a reply can take after its request left (default: two of the
             shortest frames at the transport's bit rate, where it has one): a frame with the reply's
             key that arrives sooner is not taken for it.
+        stale_after_s: a command (not a read) that waited longer than this for its turn, on a stalled
+            or slow half-duplex line, fails with TransportError instead of reaching the motor late
+            (default: the transport's own ``stale_after_s``; None for no limit).
         late_hold_s: how late a reply may come after its request timed out (default: that request's
             timeout); the next request with its key waits that long, or until the late reply came,
             because no reply carries a sequence number. A reply later still could answer it.
@@ -314,6 +324,7 @@ class Bus:
         name: str | None = None,
         min_reply_s: float | None = None,
         late_hold_s: float | None = None,
+        stale_after_s: float | _Default | None = _DEFAULT,
         offline_after_misses: int = 3,
         offline_after_s: float | None = None,
     ) -> None:
@@ -340,6 +351,9 @@ class Bus:
             gap_s=float(getattr(transport, "gap_s", 0.0) or 0.0) if half_duplex else 0.0,
             min_reply_s=min_reply_s,
             late_hold_s=late_hold_s,
+            stale_after_s=getattr(transport, "_stale_after_s", None)
+            if isinstance(stale_after_s, _Default)
+            else stale_after_s,
         )
         self.motors: dict[tuple[str, int], Motor] = {}
         self._by_codec: dict[int, Motor] = {}
@@ -510,6 +524,7 @@ class Bus:
     def _enqueue(self, motor: Motor, request: Request) -> None:
         if not motor.codec.retry_safe(request.command):
             self._commanded[id(motor.codec)] = motor
+            request.queued_at = self._loop.time()  # type: ignore[union-attr]
         motor.codec.note_sent(request.command)
         self.scheduler.submit(request)
 
@@ -607,8 +622,18 @@ class Bus:
     def _pump(self) -> None:
         """Hand the requests the scheduler lets go to the transport."""
         assert self._loop is not None
-        for request in self.scheduler.next_to_send(self._loop.time()):
+        scheduler = self.scheduler
+        for request in scheduler.next_to_send(self._loop.time()):
             self._hand_over(request)
+        if scheduler._stale:
+            for request in scheduler.take_stale():
+                self._settle(
+                    request,
+                    TransportError(
+                        f"{self.name}: {request.describe()} not sent (stale: waited its turn "
+                        f"longer than stale_after_s={scheduler.stale_after_s:g} s)"
+                    ),
+                )
         self._kick()
 
     def _hand_over(self, request: Request) -> None:

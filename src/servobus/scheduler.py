@@ -110,6 +110,7 @@ class Request:
     error: BaseException | None = None
     attempts: int = 0
     submitted: bool = False
+    queued_at: float | None = None  # when a command (not a read) was made: its freshness counts from here
 
     def describe(self) -> str:
         return f"{self.codec.family} motor {self.codec.motor_id} {type(self.command).__name__}"
@@ -147,6 +148,9 @@ class Scheduler:
             after a reply, as DUPLICATE) rather than UNSOLICITED.
         min_reply_s: the least time from a request leaving to its reply arriving (the two frames'
             wire time): a frame with the key that arrives sooner cannot be the reply.
+        stale_after_s: a request with ``queued_at`` set (a command; reads are never stale) that
+            waited longer than this for its turn (a stalled half-duplex line) fails ``not_sent_stale``
+            instead of leaving: for a motor, a stale command is worse than none (None: no limit).
         late_hold_s: after a request that left times out or is cancelled, the next request with its
             key waits until the late reply came or this long passed (None: the timed-out request's
             own timeout). These protocols carry no sequence numbers: a reply later than this could
@@ -166,6 +170,7 @@ class Scheduler:
         late_window_s: float = 1.0,
         min_reply_s: float = 0.0,
         late_hold_s: float | None = None,
+        stale_after_s: float | None = None,
     ) -> None:
         if (
             max_in_flight < 1
@@ -178,6 +183,8 @@ class Scheduler:
                 f"late_window_s={late_window_s} and late_hold_s={late_hold_s} >= 0"
             )
         self.late_hold_s = late_hold_s
+        self.stale_after_s = stale_after_s
+        self._stale: list[Request] = []
         self.max_in_flight = 1 if one_at_a_time else max_in_flight
         self.one_at_a_time = one_at_a_time
         self.gap_s = gap_s
@@ -304,8 +311,15 @@ class Scheduler:
             return out
         waiting: deque[Request] = deque()
         queue = self._queue
+        limit = self.stale_after_s
         while queue and len(self._in_flight) < self.max_in_flight:
             request = queue.popleft()
+            if limit is not None and request.queued_at is not None and now - request.queued_at > limit:
+                request.error = RuntimeError(f"{request.describe()}: frame not sent (stale)")
+                self._move(request, S.FAILED)
+                self._count(request.codec, "not_sent_stale")
+                self._stale.append(request)
+                continue
             if request.key is not None and (request.key in self._pending or request.key in held):
                 waiting.append(request)
                 continue
@@ -318,6 +332,11 @@ class Scheduler:
         waiting.extend(queue)
         self._queue = waiting
         return out
+
+    def take_stale(self) -> list[Request]:
+        """The requests :meth:`next_to_send` failed as stale since the last call (to tell their callers)."""
+        stale, self._stale = self._stale, []
+        return stale
 
     def sent(self, request: Request, at: float) -> Received | None:
         """The transport reports that ``request``'s frame left at ``at``: its deadline starts.
