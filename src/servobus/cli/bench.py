@@ -26,10 +26,12 @@ BENCHMARKS = ("codec", "transport", "bus")
 
 
 def bench_dir() -> Path:
-    """``bench/`` of the source tree servobus runs from (``src/servobus`` -> the repository root)."""
+    """``bench/`` of the source tree servobus runs from (``src/servobus`` -> the repository root), or,
+    for an installed wheel, of the source checkout in the current folder."""
     import servobus
 
-    return Path(servobus.__file__).resolve().parents[2] / "bench"
+    beside = Path(servobus.__file__).resolve().parents[2] / "bench"
+    return beside if beside.is_dir() else Path.cwd() / "bench"
 
 
 @click.command(
@@ -53,8 +55,8 @@ def bench(only: tuple[str, ...], verbose: bool, as_json: bool) -> None:
     folder = bench_dir()
     if not folder.is_dir():
         raise click.ClickException(
-            f"no bench/ folder beside the installed package ({folder}): the benchmarks run from a "
-            "source checkout (pip install -e . there)"
+            f"no bench/ folder beside the installed package or here ({folder}): the benchmarks run "
+            "from a source checkout"
         )
     results: dict[str, dict[str, Any]] = {}
     for name in only or BENCHMARKS:
