@@ -120,11 +120,14 @@ def summary_markdown(results: dict[str, Any], command: str, load: list[float], r
     lines = [
         "## Summary (`python -m bench`)",
         "",
-        f"- Command: `{command}` (from the repository root, servobus installed: `pip install -e .[test]`); "
-        f"the last full run took {runtime_s / 60:.0f} min",
+        "- Full suite: `python -m bench` (from the repository root, servobus installed: `pip install -e "
+        ".[test]`); parts can be rerun alone with `--only <part>`. This summary was last rewritten by "
+        f"`{command}` ({runtime_s / 60:.0f} min); each row's date says when its figure was measured",
         f"- Machine: {machine['platform']}; CPU {machine['cpu_model']}, {machine['cpu_count']} cores "
         f"(shared with other work); {machine['python']}",
-        "- Load average (1, 5, 15 min) when the run started: " + ", ".join(f"{x:.2f}" for x in load),
+        "- Load average (1, 5, 15 min) when that invocation started: "
+        + ", ".join(f"{x:.2f}" for x in load)
+        + " (each section gives the load at its own start; the machine is shared)",
         "- Each section below names its own command, date, load and method; figures are medians of >= 5 "
         "runs unless the section says it is deterministic (virtual time).",
         "",

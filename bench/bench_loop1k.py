@@ -47,6 +47,7 @@ import argparse
 import array
 import asyncio
 import contextlib
+import dataclasses
 import json
 import math
 import os
@@ -132,10 +133,29 @@ class Config:
     runs: int
     seconds: float
     profile_seconds: float  # 0: no profile run
+    sweep_seconds: float  # 0: no sweep
 
 
-FULL = Config("full", 5, 30.0, 10.0)
-QUICK = Config("quick", 1, 1.0, 0.0)
+FULL = Config("full", 5, 30.0, 10.0, 5.0)
+QUICK = Config("quick", 1, 1.0, 0.0, 0.0)
+
+#: the classic layout with fewer buses (and 11 buses of one motor): where 1 kHz stops being reachable
+SWEEP = ((3,), (3,) * 2, (3,) * 4, (3,) * 7, (1,) * 11)
+
+
+def sweep(layout: Layout, seconds: float) -> list[dict[str, Any]]:
+    """One run of ``seconds`` per smaller layout of the same motors (information, one run each)."""
+    out = []
+    for motors in SWEEP:
+        result = one_run(dataclasses.replace(layout, motors=motors), seconds)
+        out.append({"buses": len(motors), "motors_per_bus": motors[0], **result})
+        print(
+            f"  sweep {len(motors):>2} bus(es) x {motors[0]}: on time {result['on_time_pct']:6.2f} %, "
+            f"{result['achieved_hz']:6.1f} ticks/s, tick done p50 {result['tick_done_p50_us']:.0f} µs, "
+            f"CPU host {result['cpu_pct']:.0f} %",
+            flush=True,
+        )
+    return out
 
 
 # ============================================================================================== host
@@ -253,8 +273,12 @@ def host_main(argv: Sequence[str]) -> int:
     parser.add_argument("--paths", required=True, help="JSON list of pty paths, one per bus")
     parser.add_argument("--seconds", type=float, required=True)
     parser.add_argument("--device-pid", type=int, required=True)
+    parser.add_argument("--motors", help="motors per bus, comma-separated: overrides the layout's")
     args = parser.parse_args(argv)
-    result = asyncio.run(host(LAYOUTS[args.layout], json.loads(args.paths), args.seconds, args.device_pid))
+    layout = LAYOUTS[args.layout]
+    if args.motors:
+        layout = dataclasses.replace(layout, motors=tuple(int(n) for n in args.motors.split(",")))
+    result = asyncio.run(host(layout, json.loads(args.paths), args.seconds, args.device_pid))
     print(json.dumps(result), flush=True)
     return 0
 
@@ -313,7 +337,11 @@ def host_command(layout: Layout, paths: Sequence[str], seconds: float, device_pi
 def one_run(layout: Layout, seconds: float) -> dict[str, Any]:
     with devices(layout) as (process, paths):
         done = subprocess.run(
-            host_command(layout, paths, seconds, process.pid),
+            [
+                *host_command(layout, paths, seconds, process.pid),
+                "--motors",
+                ",".join(map(str, layout.motors)),
+            ],
             capture_output=True,
             text=True,
             timeout=seconds * 4 + 60,
@@ -473,6 +501,35 @@ def render_markdown(figures: dict[str, dict[str, Any]], info: dict[str, Any]) ->
         "cycle, plus the 500 µs turnaround on the critical path.",
         "",
     ]
+    swept = figures.get("loop1k", {}).get("sweep")
+    if swept:
+        lines += [
+            "Where 1 kHz stops being reachable (classic CAN, one run of "
+            f"{swept[0]['wall_s']:.0f} s each, information): the same set-up with fewer buses.",
+            "",
+            _results.markdown_table(
+                [
+                    "buses x motors",
+                    "on time %",
+                    "ticks/s",
+                    "tick done p50 / p99 µs",
+                    "reply latency p50 µs",
+                    "CPU % host / devices",
+                ],
+                [
+                    (
+                        f"{r['buses']} x {r['motors_per_bus']}",
+                        f"{r['on_time_pct']:.1f}",
+                        f"{r['achieved_hz']:,.0f}",
+                        f"{r['tick_done_p50_us']:,.0f} / {r['tick_done_p99_us']:,.0f}",
+                        f"{r['latency_p50_us']:,.0f}",
+                        f"{r['cpu_pct']:.0f} / {r['device_cpu_pct']:.0f}",
+                    )
+                    for r in swept
+                ],
+                "lrrrrr",
+            ),
+        ]
     missed = [m for f in figures.values() for m in f["targets_missed"]]
     lines += [
         f"Targets: `loop1k` >= {ON_TIME_TARGET} % on time and p99 jitter <= {JITTER_P99_TARGET_US:.0f} µs; "
@@ -531,6 +588,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.runs or base.runs,
         args.seconds or base.seconds,
         base.profile_seconds if args.profile_seconds is None else args.profile_seconds,
+        base.sweep_seconds,
     )
     out_dir: Path | None = args.output if args.output is not None else (None if args.quick else BENCH_DIR)
     keys = args.only or list(LAYOUTS)
@@ -558,6 +616,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 print(f"  {key:<14} profile run ({cfg.profile_seconds:g} s under py-spy)", flush=True)
                 profile = profile_run(layout, cfg.profile_seconds, Path(tmp))
             figures[key] = summarise(layout, runs, profile)
+            if key == "loop1k" and cfg.sweep_seconds > 0:
+                figures[key]["sweep"] = sweep(layout, cfg.sweep_seconds)
     info = _meta.meta(
         "bench/bench_loop1k.py",
         argv,
