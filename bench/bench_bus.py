@@ -909,8 +909,13 @@ def render_markdown(figures: dict[str, Any], meta: dict[str, Any]) -> str:
                 f"### Where the time goes: {title} ({profile['tool']})",
                 "",
                 "Shares of the profiled process's samples; µs = share x the measured CPU µs per transaction "
-                f"({unit_us:.2f}). The Bus's own frames (`Bus.cycle`, the Reflector's flush into "
-                "`Bus._on_frames`) split the send and the receive side.",
+                f"({unit_us:.2f})."
+                + (
+                    " `Bus.cycle` (the send side) and the Reflector's flush into `Bus._on_frames` (the "
+                    "receive side) are the two halves."
+                    if name == "cycle32"
+                    else ""
+                ),
                 "",
             ]
             lines += _profile.markdown(profile, 16, unit_us=unit_us, unit="transaction")
