@@ -24,7 +24,6 @@ efficiency bound is computed from.
 
 from __future__ import annotations
 
-import asyncio
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -32,7 +31,7 @@ from servobus.frame import Frame
 from servobus.protocols._bound import Framing
 from servobus.sim.device import SerialDevice, SerialEmission
 from servobus.timing import uart_time_s
-from servobus.transports.events import TransportEvent
+from servobus.transports.link_base import LinkBase
 from servobus.transports.rs485 import SerialTransport
 
 __all__ = ["LineUse", "SerialLine"]
@@ -50,7 +49,7 @@ class LineUse:
     n_bytes: int
 
 
-class SerialLine:
+class SerialLine(LinkBase):
     """A FrameLink: the host on one simulated half-duplex RS485 line with ``devices``.
 
     Args:
@@ -62,6 +61,7 @@ class SerialLine:
     name = "sim-rs485"
 
     def __init__(self, devices: Sequence[SerialDevice], framing: Framing, baud: int) -> None:
+        super().__init__()
         declared = SerialTransport("sim-rs485", framing=framing, baud=baud)  # never opened: its rules only
         self.devices = list(devices)
         self.framing = framing
@@ -74,21 +74,6 @@ class SerialLine:
         self.log: list[LineUse] = []
         self._deframer = framing.deframer()
         self._free_at = 0.0
-        self._open = False
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._consumer: Callable[[list[Frame]], object] | None = None
-        self._reporter: Callable[[Frame, float | None, str | None], object] | None = None
-
-    @property
-    def is_open(self) -> bool:
-        return self._open
-
-    async def open(self) -> None:
-        self._loop = asyncio.get_running_loop()
-        self._open = True
-
-    async def close(self) -> None:
-        self._open = False
 
     def send(self, frame: Frame) -> None:
         loop = self._loop
@@ -129,15 +114,3 @@ class SerialLine:
             _SET_TIMESTAMP(frame, now)
         if self._consumer is not None:
             self._consumer(frames)
-
-    def set_consumer(self, consumer: Callable[[list[Frame]], object] | None) -> None:
-        self._consumer = consumer
-
-    def set_send_reporter(self, reporter: Callable[[Frame, float | None, str | None], object] | None) -> None:
-        self._reporter = reporter
-
-    def add_listener(self, listener: Callable[[TransportEvent], object]) -> None:
-        pass
-
-    def remove_listener(self, listener: Callable[[TransportEvent], object]) -> None:
-        pass

@@ -99,7 +99,7 @@ from servobus.sim import virtual  # noqa: E402
 from servobus.sim.device import Emission  # noqa: E402
 from servobus.sim.devices.myactuator import MyActuatorMotor  # noqa: E402
 from servobus.transports import CanTransport  # noqa: E402
-from servobus.transports.events import TransportEvent  # noqa: E402
+from servobus.transports.link_base import LinkBase  # noqa: E402
 from servobus.transports.sim import SimTransport  # noqa: E402
 
 KEY = "bus"
@@ -243,7 +243,7 @@ def efficiency(cfg: Config, log: Callable[[str], None]) -> dict[str, Any]:
 # ================================================================ 2. zero-latency reflector
 
 
-class Reflector:
+class Reflector(LinkBase):
     """A FrameLink answering every frame with a prebuilt reply: all the cost measured is the Bus's.
 
     ``send`` reports the frame as sent (the loop's time) to the send reporter at once and puts the
@@ -254,24 +254,10 @@ class Reflector:
     name = "reflector"
 
     def __init__(self, replies: dict[int, Frame]) -> None:
+        super().__init__()
         self.replies = replies
-        self._open = False
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._consumer: Callable[[list[Frame]], object] | None = None
-        self._reporter: Callable[[Frame, float | None, str | None], object] | None = None
         self._out: list[Frame] = []
         self.sent = 0
-
-    @property
-    def is_open(self) -> bool:
-        return self._open
-
-    async def open(self) -> None:
-        self._loop = asyncio.get_running_loop()
-        self._open = True
-
-    async def close(self) -> None:
-        self._open = False
 
     def send(self, frame: Frame) -> None:
         loop = self._loop
@@ -289,18 +275,6 @@ class Reflector:
         out, self._out = self._out, []
         if self._consumer is not None:
             self._consumer(out)
-
-    def set_consumer(self, consumer: Callable[[list[Frame]], object] | None) -> None:
-        self._consumer = consumer
-
-    def set_send_reporter(self, reporter: Callable[[Frame, float | None, str | None], object] | None) -> None:
-        self._reporter = reporter
-
-    def add_listener(self, listener: Callable[[TransportEvent], object]) -> None:
-        pass
-
-    def remove_listener(self, listener: Callable[[TransportEvent], object]) -> None:
-        pass
 
 
 def _message(frame: Frame) -> can.Message:

@@ -43,7 +43,7 @@ from servobus.protocols._message import Command, Reply
 from servobus.scheduler import Request
 from servobus.sim import virtual
 from servobus.timing import frame_time_s
-from servobus.transports.events import TransportEvent
+from servobus.transports.link_base import LinkBase
 
 BITRATE = 1_000_000
 FRAME_S = frame_time_s(Frame(arbitration_id=0x241, data=bytes(8)), BITRATE)  # one 8-byte frame's wire time
@@ -78,7 +78,7 @@ class Sent:
     sent_at: float  # when the request frame left (the send report's time)
 
 
-class FaultyReflector:
+class FaultyReflector(LinkBase):
     """A FrameLink to 32 MyActuator motors (0x141..0x160) that answers in virtual time, with faults.
 
     One wire at ``BITRATE``: a request occupies it for its frame time and is reported sent when it
@@ -105,6 +105,7 @@ class FaultyReflector:
     bitrate = BITRATE
 
     def __init__(self, plan: FaultPlan, seed: int, *, report_after_reply: bool = False) -> None:
+        super().__init__()
         self.plan = plan
         self.report_after_reply = report_after_reply
         self.sent: dict[int, Sent] = {}
@@ -112,38 +113,10 @@ class FaultyReflector:
         self.counts: Counter[str] = Counter()
         self.scheduled = 0  # deliveries and reports not yet made
         self._random = random.Random(seed)
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._open = False
         self._free_at = 0.0
         self._next_token = 1
-        self._consumer: Callable[[list[Frame]], object] | None = None
-        self._reporter: Callable[[Frame, float | None, str | None], object] | None = None
-        self._listeners: list[Callable[[TransportEvent], object]] = []
 
     # ---- FrameLink ----
-
-    @property
-    def is_open(self) -> bool:
-        return self._open
-
-    async def open(self) -> None:
-        self._loop = asyncio.get_running_loop()
-        self._open = True
-
-    async def close(self) -> None:
-        self._open = False
-
-    def set_consumer(self, consumer: Callable[[list[Frame]], object] | None) -> None:
-        self._consumer = consumer
-
-    def set_send_reporter(self, reporter: Callable[[Frame, float | None, str | None], object] | None) -> None:
-        self._reporter = reporter
-
-    def add_listener(self, listener: Callable[[TransportEvent], object]) -> None:
-        self._listeners.append(listener)
-
-    def remove_listener(self, listener: Callable[[TransportEvent], object]) -> None:
-        self._listeners.remove(listener)
 
     def send(self, frame: Frame) -> None:
         if not self._open or self._loop is None:
