@@ -351,7 +351,7 @@ class Bus:
             gap_s=float(getattr(transport, "gap_s", 0.0) or 0.0) if half_duplex else 0.0,
             min_reply_s=min_reply_s,
             late_hold_s=late_hold_s,
-            stale_after_s=getattr(transport, "_stale_after_s", None)
+            stale_after_s=getattr(transport, "stale_after_s", None)
             if isinstance(stale_after_s, _Default)
             else stale_after_s,
         )

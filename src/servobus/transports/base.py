@@ -188,6 +188,11 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
         return self._state
 
     @property
+    def stale_after_s(self) -> float | None:
+        """How long a queued frame may wait before it is dropped as stale (None: no limit)."""
+        return self._stale_after_s
+
+    @property
     def is_open(self) -> bool:
         return self._state is TransportState.OPEN
 
