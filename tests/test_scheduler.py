@@ -61,6 +61,39 @@ def test_a_frame_that_comes_sooner_than_the_wire_allows_is_not_the_reply() -> No
     assert scheduler.receive(_reply(1, t=0.0103), 0.0103).request is request
 
 
+def _echo(motor: int, command: ma.MyActuatorCommand, t: float) -> Frame:
+    return _reply(motor, command.encode(), t)
+
+
+def test_a_stray_echo_never_answers_a_write_of_another_value() -> None:
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec])
+    one, two = ma.WriteEncoderZero(offset_counts=-1), ma.WriteEncoderZero(offset_counts=-2)
+    first, second = scheduler.request(codec, one), scheduler.request(codec, two)
+    assert first.key != second.key  # an echo's key holds the value written: both may be in flight
+    for request in (first, second):
+        scheduler.submit(request)
+    assert _send_all(scheduler, 0.0) == [first, second]
+    assert scheduler.receive(_echo(1, one, 0.001), 0.001).request is first
+    got = scheduler.receive(_echo(1, one, 0.002), 0.002)  # the first write, answered twice
+    assert got.traffic is Traffic.DUPLICATE and second.state is S.SENT
+    assert scheduler.receive(_echo(1, two, 0.003), 0.003).request is second
+    assert second.reply == ma.Echo(command=two)
+
+
+def test_the_late_and_duplicate_windows_forget_expired_keys() -> None:
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec], late_window_s=0.01)
+    for k in range(1000):  # a write of a new value every ms: a new key each time
+        now = k * 0.001
+        command = ma.WriteEncoderZero(offset_counts=k)
+        request = scheduler.request(codec, command)
+        scheduler.submit(request)
+        _send_all(scheduler, now)
+        assert scheduler.receive(_echo(1, command, now), now).request is request
+    assert len(scheduler._recent.replied) <= 64  # ~10 live in the window, pruned past 64
+
+
 def test_replies_of_other_commands_or_motors_never_resolve_the_wrong_request() -> None:
     one, two = MA.bind(1), MA.bind(2)
     scheduler = Scheduler([one, two])

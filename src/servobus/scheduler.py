@@ -130,10 +130,25 @@ class Received:
 
 @dataclass(slots=True)
 class _Recent:
-    """Keys that may still see a frame nobody waits for, and until when."""
+    """Keys that may still see a frame nobody waits for, and until when.
+
+    Keys come and go (an echo's key holds the value written), so the tables are pruned of what has
+    expired whenever they have grown past twice what the last pruning kept: amortised O(1), and
+    bounded by the keys answered or given up on within the late window.
+    """
 
     late: dict[Hashable, list[float]] = field(default_factory=dict)
     replied: dict[Hashable, float] = field(default_factory=dict)
+    limit: int = 64
+
+    def prune(self, now: float) -> None:
+        self.replied = {key: until for key, until in self.replied.items() if until >= now}
+        late: dict[Hashable, list[float]] = {}
+        for key, times in self.late.items():
+            if kept := [t for t in times if t >= now]:
+                late[key] = kept
+        self.late = late
+        self.limit = max(64, 2 * (len(self.replied) + len(late)))
 
 
 class Scheduler:
@@ -424,7 +439,10 @@ class Scheduler:
     def _expect_late(self, request: Request, now: float) -> None:
         """``request`` left and its reply may still come: count it LATE, and hold its key meanwhile."""
         key = request.key
-        self._recent.late.setdefault(key, []).append(now + self.late_window_s)
+        recent = self._recent
+        recent.late.setdefault(key, []).append(now + self.late_window_s)
+        if len(recent.late) > recent.limit:
+            recent.prune(now)
         hold = request.timeout_s if self.late_hold_s is None else self.late_hold_s
         if hold > 0:
             self._held[key] = now + hold
@@ -486,7 +504,10 @@ class Scheduler:
                 request.reply = reply
                 self._leave_flight(request, now)
                 request.state = S.REPLIED  # (SENT -> REPLIED, in TRANSITIONS; the hot path)
-                self._recent.replied[key] = now + self.late_window_s
+                recent = self._recent
+                recent.replied[key] = now + self.late_window_s
+                if len(recent.replied) > recent.limit:
+                    recent.prune(now)
                 counts = self.motor_counts[id(codec)]
                 counts["replies"] += 1
                 if kind is FrameKind.REPLY:

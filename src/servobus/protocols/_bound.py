@@ -9,7 +9,8 @@ member                              gives
 ==================================  ================================================================
 ``encode(command)``                 the Frame to send (values already checked by the command class)
 ``reply_key(command)``              the key the reply will carry, or None when no reply comes
-``classify(frame)``                 ``(FrameKind, key)`` from ids and DATA[0] only, no payload decode
+``classify(frame)``                 ``(FrameKind, key)`` from ids and DATA[0] (and the echoed bytes
+                                    of a reply that echoes a written value), no payload decode
 ``decode(frame)``                   the typed reply (``ProtocolError`` for bytes that do not decode)
 ``timeout_s(command)``              how long a reply may take (brake release, ROM writes: longer)
 ``retry_safe(command)``             True only for commands that change nothing (reads)
@@ -23,8 +24,12 @@ member                              gives
 ==================================  ================================================================
 
 A key is an opaque hashable (an ``int`` in the built-in families, cheap to hash): equal keys mean "this
-frame can answer that request". On serial links a Frame stands for one serial message: the address
-byte as ``arbitration_id`` and the message body as ``data`` (the framing adds headers and the CRC).
+frame can answer that request". The key of a reply that echoes the value its request wrote holds the
+echoed bytes (:func:`echo_key`): without sequence numbers, that is what keeps a stray echo (a request
+the motor received twice, a late reply) from answering the next write with another value.
+
+On serial links a Frame stands for one serial message: the address byte as ``arbitration_id`` and the
+message body as ``data`` (the framing adds headers and the CRC).
 
 Sans-IO like everything below the Bus: nothing here reads a clock, awaits or does I/O.
 """
@@ -48,6 +53,7 @@ __all__ = [
     "StreamDeframer",
     "check_bus",
     "describe_id",
+    "echo_key",
     "frame_key",
     "id_key",
 ]
@@ -77,6 +83,11 @@ def frame_key(arbitration_id: int, byte: int | None = None) -> int:
     ``(id << 9) | 0x100 | byte`` keeps "keyed by id and byte" apart from "keyed by id alone".
     """
     return arbitration_id << 9 if byte is None else (arbitration_id << 9) | 0x100 | byte
+
+
+def echo_key(key: int, data: bytes) -> int:
+    """``key`` (a :func:`frame_key`, below 2**40) narrowed by the bytes after DATA[0] of an echo reply."""
+    return key | int.from_bytes(data[1:], "little") << 40
 
 
 def describe_id(ident: int) -> str:

@@ -18,7 +18,15 @@ from typing import Any
 
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
-from servobus.protocols._bound import Broadcast, CodecBase, FrameKind, check_bus, frame_key, motor_ids_of
+from servobus.protocols._bound import (
+    Broadcast,
+    CodecBase,
+    FrameKind,
+    check_bus,
+    echo_key,
+    frame_key,
+    motor_ids_of,
+)
 from servobus.protocols._fast import Slow, maker
 from servobus.protocols._fields import round_half_away
 from servobus.protocols._message import Command, Reply
@@ -68,6 +76,9 @@ _READS: tuple[type, ...] = (
     p236.ReadSetting,
 )
 _V235_ALIASES = {0x9B: 0x9A}  # spec A4: [003] prints the 0x9B reply's DATA[0] as 0x9A
+#: Echo replies that carry the value their request wrote (0x34 acceleration, 0xC1 control parameter):
+#: keyed with it (``echo_key``), so a stray echo never answers another write.
+_VALUE_ECHO_CODES = frozenset({0x34, 0xC1})
 
 
 def _status2_decoder(model: LkModel) -> Callable[[bytes], Status2Reply]:
@@ -218,8 +229,11 @@ class LkCodec(CodecBase):
         Raises:
             ValueError: as :meth:`encode`.
         """
-        code = self._check(command).CODE
+        message = self._check(command)
+        code = message.CODE
         assert code is not None
+        if code in _VALUE_ECHO_CODES:
+            return echo_key(self._reply_base | code, message.encode())
         return self._reply_base | self._aliases.get(code, code)
 
     def timeout_s(self, command: Command) -> float:
@@ -240,6 +254,8 @@ class LkCodec(CodecBase):
         if not data:
             return FrameKind.REPLY, None
         code = data[0]
+        if code in _VALUE_ECHO_CODES:
+            return FrameKind.REPLY, echo_key(self._reply_base | code, data)
         return FrameKind.REPLY, self._reply_base | self._aliases.get(code, code)
 
     def decode(self, frame: Frame) -> Reply:

@@ -22,7 +22,15 @@ from typing import Any
 
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
-from servobus.protocols._bound import Broadcast, CodecBase, FrameKind, check_bus, frame_key, motor_ids_of
+from servobus.protocols._bound import (
+    Broadcast,
+    CodecBase,
+    FrameKind,
+    check_bus,
+    echo_key,
+    frame_key,
+    motor_ids_of,
+)
 from servobus.protocols._fast import Slow, maker
 from servobus.protocols._message import Command, Reply
 from servobus.protocols.myactuator import commands as cmd
@@ -104,6 +112,19 @@ _READS = (
 _IS_SLOW: dict[type, bool] = {}
 _IS_READ: dict[type, bool] = {}
 _ERROR_REPORT_CODE = cmd.ReadStatus1.CODE
+#: Echo replies that carry the value their request wrote (§0): keyed with it (``echo_key``). Not the
+#: fixed all-zero echoes (nothing to tell apart), 0xB3 (the manuals print an all-zero reply to it,
+#: §9 item 8) nor 0x79 (its reply comes on a shared identifier).
+_VALUE_ECHO_CODES = frozenset(
+    c.CODE
+    for c in (
+        cmd.FunctionControl,
+        cmd.WritePidRam,
+        cmd.WritePidRom,
+        cmd.WriteAcceleration,
+        cmd.WriteEncoderZero,
+    )
+)
 
 
 def _fast_table(revision: Revision) -> dict[int, Callable[[bytes], Any]]:
@@ -284,6 +305,8 @@ class MyActuatorCodec(CodecBase):
             return None
         if code == ID_SETTING_CODE:
             return frame_key(RS485_BROADCAST_ID if self._rs485 else ID_SETTING_ID, ID_SETTING_CODE)
+        if code in _VALUE_ECHO_CODES:
+            return echo_key(self._reply_base | code, message.encode())
         return self._reply_base | code
 
     def timeout_s(self, command: Command) -> float:
@@ -329,6 +352,8 @@ class MyActuatorCodec(CodecBase):
                 return FrameKind.STREAM, self._reply_base | code
             if code == _ERROR_REPORT_CODE and self._reports:
                 return FrameKind.REPORT, self._reply_base | code
+            if code in _VALUE_ECHO_CODES:
+                return FrameKind.REPLY, echo_key(self._reply_base | code, data)
             return FrameKind.REPLY, self._reply_base | code
         if ident == self._motion_reply_id:
             return FrameKind.REPLY, self._motion_key
