@@ -65,6 +65,57 @@ def test_a_cycle_returns_every_reply_in_order_and_a_silent_motor_only_costs_its_
     assert all(isinstance(r, ma.StatusReply) for i, r in enumerate(results) if i != 4)
 
 
+def test_a_cycle_wakes_once_and_each_requests_outcome_is_observable_on_its_own() -> None:
+    motors = _motors(3)
+    motors[1].unresponsive = True
+
+    async def scenario() -> tuple[list[Any], list[tuple[bool, Any]], list[Any]]:
+        async with Bus(SimTransport(devices=motors)) as bus:
+            handles = [bus.motor("myactuator", m) for m in (1, 2, 3)]
+            seen: list[tuple[bool, Any]] = []
+            make = bus.scheduler.request
+
+            def request(*args: Any, **kwargs: Any) -> Any:
+                made = make(*args, **kwargs)
+                made.context.add_done_callback(lambda c: seen.append((c.cancelled(), c.exception())))
+                return made
+
+            bus.scheduler.request = request  # type: ignore[method-assign]
+            results = await bus.cycle([(h, ma.ReadStatus2()) for h in handles], timeout_s=0.01)
+            await asyncio.sleep(0)  # (done callbacks run soon after, as a future's)
+            return results, seen, await bus.cycle([])
+
+    results, seen, empty = run(scenario)
+    assert [type(r) for r in results] == [ma.StatusReply, MotorTimeout, ma.StatusReply]
+    assert sorted((c, type(e).__name__) for c, e in seen) == [
+        (False, "MotorTimeout"),
+        (False, "NoneType"),
+        (False, "NoneType"),
+    ]
+    assert empty == []
+
+
+def test_a_cancelled_cycle_cancels_its_requests_and_leaves_nothing_pending() -> None:
+    async def scenario() -> tuple[int, dict[str, int]]:
+        async with Bus(SimTransport(devices=_motors(4)), safe=None) as bus:
+            handles = [bus.motor("myactuator", m) for m in range(1, 5)]
+            task = asyncio.create_task(bus.cycle([(h, ma.ReadStatus2()) for h in handles]))
+            await asyncio.sleep(0)  # the frames are on their way
+            task.cancel()
+            with pytest.raises(asyncio.CancelledError):
+                await task
+            pending = bus.scheduler.pending
+            await asyncio.sleep(0.01)  # the replies arrive, late
+            assert all(
+                isinstance(r, ma.StatusReply)
+                for r in await bus.cycle([(h, ma.ReadStatus2()) for h in handles])
+            )
+            return pending, bus.stats()
+
+    pending, stats = run(scenario)
+    assert pending == 0 and stats["replies"] == 4 and stats["late"] + stats["replies"] == 8
+
+
 def test_a_timeout_names_motor_command_and_time() -> None:
     motor = MyActuatorMotor(1)
     motor.unresponsive = True

@@ -51,3 +51,12 @@ def test_frozen_and_replace_checks_again() -> None:
         frame.data = b"x"  # type: ignore[misc]
     with pytest.raises(ValueError, match="standard range"):
         dataclasses.replace(frame, arbitration_id=0x800)
+
+
+def test_a_codecs_unchecked_request_frame_is_the_checked_one() -> None:
+    from servobus.frame import classic_request
+
+    fast = classic_request(0x141, bytes(range(8)))
+    slow = Frame(arbitration_id=0x141, data=bytes(range(8)), is_rx=False)
+    assert fast == slow and repr(fast) == repr(slow)
+    assert [getattr(fast, f) for f in Frame.__slots__] == [getattr(slow, f) for f in Frame.__slots__]

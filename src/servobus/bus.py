@@ -77,6 +77,94 @@ class FrameLink(Protocol):
 
 
 Result = Reply | BaseException | None
+# RequestState members as globals for the per-frame paths (an Enum member lookup is a metaclass call).
+_SENT, _REPLIED, _TIMED_OUT = RequestState.SENT, RequestState.REPLIED, RequestState.TIMED_OUT
+
+
+class _Tick:
+    """The outcomes of one :meth:`Bus.cycle`, gathered into one future: the cycle wakes once when its
+    last request ends, not once per motor (what ``asyncio.gather`` of one future per request costs)."""
+
+    __slots__ = ("future", "left", "results")
+
+    def __init__(self, future: asyncio.Future[list[Result]], size: int) -> None:
+        self.future = future
+        self.results: list[Result] = [None] * size
+        self.left = size
+
+
+class _Slot:
+    """One request's place in a :class:`_Tick`, with the part of a future's interface the Bus and
+    an observer of the request (``request.context``) use: its outcome is the tick's result there."""
+
+    __slots__ = ("_callbacks", "_state", "index", "tick")
+
+    def __init__(self, tick: _Tick, index: int) -> None:
+        self.tick = tick
+        self.index = index
+        self._state = 0  # 0 pending, 1 done, 2 cancelled
+        self._callbacks: list[Callable[[_Slot], object]] | None = None
+
+    def done(self) -> bool:
+        return self._state != 0
+
+    def cancelled(self) -> bool:
+        return self._state == 2
+
+    def set_result(self, value: Result) -> None:
+        self._state = 1
+        tick = self.tick
+        tick.results[self.index] = value
+        tick.left -= 1
+        if not tick.left and not tick.future.done():
+            tick.future.set_result(tick.results)
+        if self._callbacks:
+            self._run_callbacks()
+
+    set_exception = set_result  # an exception is the request's result, as a value
+
+    def cancel(self) -> bool:
+        """The cycle awaiting the tick was cancelled (its future is already)."""
+        if self._state:
+            return False
+        self._state = 2
+        if self._callbacks:
+            self._run_callbacks()
+        return True
+
+    def result(self) -> Result:
+        if self._state == 2:
+            raise asyncio.CancelledError
+        if not self._state:
+            raise asyncio.InvalidStateError("result is not set")
+        value = self.tick.results[self.index]
+        if isinstance(value, BaseException):
+            raise value
+        return value
+
+    def exception(self) -> BaseException | None:
+        if self._state == 2:
+            raise asyncio.CancelledError
+        value = self.tick.results[self.index]
+        return value if isinstance(value, BaseException) else None
+
+    def add_done_callback(self, callback: Callable[[_Slot], object]) -> None:
+        """As a future's: ``callback(slot)`` soon after the request ends."""
+        if self._state:
+            self.tick.future.get_loop().call_soon(callback, self)
+        else:
+            self._callbacks = [*(self._callbacks or ()), callback]
+
+    def _run_callbacks(self) -> None:
+        callbacks, self._callbacks = self._callbacks or [], None
+        loop = self.tick.future.get_loop()
+        for callback in callbacks:
+            loop.call_soon(callback, self)
+
+
+def _awaitable(context: asyncio.Future[Any] | _Slot) -> asyncio.Future[Any]:
+    """What to await for a request to end: its future, or its cycle's."""
+    return context.tick.future if isinstance(context, _Slot) else context
 
 
 class _Default:
@@ -505,9 +593,17 @@ class Bus:
         return request
 
     def _prepare(
-        self, motor: Motor, command: Command, *, timeout_s: float | None, retries: int, safe: bool = False
+        self,
+        motor: Motor,
+        command: Command,
+        *,
+        timeout_s: float | None,
+        retries: int,
+        safe: bool = False,
+        context: _Slot | None = None,
     ) -> Request:
-        """The request for ``command``, encoded (ValueError here, before anything is queued).
+        """The request for ``command``, encoded (ValueError here, before anything is queued), settled
+        into ``context`` (default: a future of its own).
 
         Raises:
             TransportError: the block is being left (only the safe commands go out then), or was.
@@ -516,9 +612,12 @@ class Bus:
             raise RuntimeError(f"{self.name}: use the Bus inside 'async with'")
         if self._closing and not safe:
             raise self._closed_error()
-        future: asyncio.Future[Any] = self._loop.create_future()
         return self.scheduler.request(
-            motor.codec, command, timeout_s=timeout_s, retries=retries, context=future
+            motor.codec,
+            command,
+            timeout_s=timeout_s,
+            retries=retries,
+            context=self._loop.create_future() if context is None else context,
         )
 
     def _enqueue(self, motor: Motor, request: Request) -> None:
@@ -552,12 +651,21 @@ class Bus:
             ValueError: a command is refused by its codec (nothing of the tick is sent then).
         """
         # Every command is encoded (and checked) before the first one is queued; then one pump.
-        prepared = [(m, self._prepare(m, c, timeout_s=timeout_s, retries=0)) for m, c in items]
+        items = list(items)
+        if self._loop is None:
+            raise RuntimeError(f"{self.name}: use the Bus inside 'async with'")
+        tick = _Tick(self._loop.create_future(), len(items))
+        prepared = [
+            (m, self._prepare(m, c, timeout_s=timeout_s, retries=0, context=_Slot(tick, i)))
+            for i, (m, c) in enumerate(items)
+        ]
+        if not prepared:
+            return []
         for motor, request in prepared:
             self._enqueue(motor, request)
         self._pump()
         try:
-            return list(await asyncio.gather(*[r.context for _, r in prepared], return_exceptions=True))
+            return await tick.future
         except BaseException:
             self._abandon(r for _, r in prepared)
             raise
@@ -583,7 +691,7 @@ class Bus:
             held_until, flying = self.scheduler.blocking(keys, self._loop.time())
             if flying:
                 timeout = None if held_until is None else max(0.0, held_until - self._loop.time())
-                await asyncio.wait([r.context for r in flying], timeout=timeout)
+                await asyncio.wait({_awaitable(r.context) for r in flying}, timeout=timeout)
             elif held_until is not None:
                 await asyncio.sleep(max(0.0, held_until - self._loop.time()))
             else:
@@ -654,17 +762,16 @@ class Bus:
             self.scheduler.not_sent(request, reason, self._loop.time())
             self._settle(request, TransportError(f"{self.name}: {request.describe()} not sent ({reason})"))
         else:
-            now = self._loop.time()
-            early = self.scheduler.sent(request, sent_at if sent_at is not None else now)
+            early = self.scheduler.sent(request, sent_at if sent_at is not None else self._loop.time())
             if early is not None and early.reply is not None:  # its reply came before this report
-                self._deliver(early, now)
-            if request.state is RequestState.SENT:
+                self._deliver(early, self._loop.time())
+            if request.state is _SENT:
                 timer = self._timer
                 if timer is not None and request.deadline is not None and timer.when() <= request.deadline:
                     return  # the timer already fires first (the common case: one per burst)
                 self._kick()
                 return
-            if request.state is RequestState.REPLIED:  # nothing to wait for, or the early reply
+            if request.state is _REPLIED:  # nothing to wait for, or the early reply
                 self._settle(request, None)
         self._pump()  # it left the wire's count: the next may go
 
@@ -709,14 +816,14 @@ class Bus:
                 self._settle(request, error)
 
     def _settle(self, request: Request, error: BaseException | None) -> None:
-        future: asyncio.Future[Any] = request.context
+        future: asyncio.Future[Any] | _Slot = request.context
         if future is None or future.done():
             return
         if error is not None:
             future.set_exception(error)
-        elif request.state is RequestState.REPLIED:
+        elif request.state is _REPLIED:
             future.set_result(request.reply)
-        elif request.state is RequestState.TIMED_OUT:
+        elif request.state is _TIMED_OUT:
             future.set_exception(
                 MotorTimeout(
                     f"{request.describe()}: no reply within {request.timeout_s:g} s"

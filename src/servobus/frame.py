@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-__all__ = ["Frame"]
+__all__ = ["Frame", "classic_request"]
 
 _CLASSIC_MAX = 8
 _SERIAL_MAX = 255
@@ -102,6 +102,25 @@ _SET_BRS = Frame.bitrate_switch.__set__  # type: ignore[attr-defined,misc]
 _SET_SERIAL = Frame.is_serial.__set__  # type: ignore[attr-defined,misc]
 _SET_TIMESTAMP = Frame.timestamp.__set__  # type: ignore[attr-defined,misc]
 _SET_RX = Frame.is_rx.__set__  # type: ignore[attr-defined,misc]
+
+
+_NEW = object.__new__
+
+
+def classic_request(arbitration_id: int, data: bytes) -> Frame:
+    """A classic 11-bit frame to send, as a codec's hot path builds it: the codec made the identifier
+    and the (at most 8) data bytes valid, so they are not checked again (``Frame()`` checks: twice
+    the cost, on every request)."""
+    frame: Frame = _NEW(Frame)
+    _SET_ID(frame, arbitration_id)
+    _SET_DATA(frame, data)
+    _SET_EXTENDED(frame, False)
+    _SET_FD(frame, False)
+    _SET_BRS(frame, False)
+    _SET_SERIAL(frame, False)
+    _SET_TIMESTAMP(frame, 0.0)
+    _SET_RX(frame, False)
+    return frame
 
 
 def _check_serial(address: int, data: bytes, can_flags: bool) -> None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 __all__ = ["Latency", "LatencyWindow", "Metrics"]
@@ -33,15 +33,14 @@ class Latency:
 class LatencyWindow:
     """The last ``size`` latencies, in seconds."""
 
-    __slots__ = ("_samples",)
+    __slots__ = ("_samples", "add")
 
     def __init__(self, size: int = 1024) -> None:
         if size < 1:
             raise ValueError(f"size={size} must be at least 1")
         self._samples: deque[float] = deque(maxlen=size)
-
-    def add(self, seconds: float) -> None:
-        self._samples.append(seconds)
+        #: Note one latency, in seconds (the deque's own append: once per reply, no Python call).
+        self.add: Callable[[float], None] = self._samples.append
 
     def extend(self, other: LatencyWindow) -> None:
         self._samples.extend(other._samples)

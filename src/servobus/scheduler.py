@@ -151,6 +151,28 @@ class _Recent:
         self.limit = max(64, 2 * (len(self.replied) + len(late)))
 
 
+# Enum members as module globals for the hot paths: in Python 3.11 ``RequestState.SENT`` is a
+# metaclass attribute lookup (~50 ns, a dozen per exchange), a global is one dict read.
+_K_NOT_OURS = FrameKind.NOT_OURS
+_K_REPLY = FrameKind.REPLY
+_K_REPORT = FrameKind.REPORT
+_K_STREAM = FrameKind.STREAM
+_CANCELLED = S.CANCELLED
+_FAILED = S.FAILED
+_QUEUED = S.QUEUED
+_REPLIED = S.REPLIED
+_SENDING = S.SENDING
+_SENT = S.SENT
+_TIMED_OUT = S.TIMED_OUT
+_T_DUPLICATE = Traffic.DUPLICATE
+_T_EARLY = Traffic.EARLY
+_T_FOREIGN = Traffic.FOREIGN
+_T_LATE = Traffic.LATE
+_T_MALFORMED = Traffic.MALFORMED
+_T_REPLY = Traffic.REPLY
+_T_UNSOLICITED = Traffic.UNSOLICITED
+
+
 class Scheduler:
     """Pending requests of one bus, matched by key, paced, timed out, counted.
 
@@ -269,7 +291,7 @@ class Scheduler:
     def submit(self, request: Request) -> None:
         """Queue ``request`` behind the others (FIFO)."""
         if request.submitted:
-            where = "already queued" if request.state is S.QUEUED else request.state.value
+            where = "already queued" if request.state is _QUEUED else request.state.value
             raise RuntimeError(f"{request.describe()} is {where}: a request is submitted once")
         request.submitted = True
         self._queue.append(request)
@@ -299,7 +321,7 @@ class Scheduler:
             raise RuntimeError(f"{request.describe()} is {request.state.value}: a request is submitted once")
         request.submitted = True
         self.motor_counts[id(request.codec)]["requests"] += 1
-        self._move(request, S.SENDING)
+        self._move(request, _SENDING)
         request.attempts += 1
         self._in_flight[request] = None
         if request.key is not None:
@@ -327,22 +349,24 @@ class Scheduler:
         waiting: deque[Request] = deque()
         queue = self._queue
         limit = self.stale_after_s
-        while queue and len(self._in_flight) < self.max_in_flight:
+        pending, in_flight = self._pending, self._in_flight
+        while queue and len(in_flight) < self.max_in_flight:
             request = queue.popleft()
             if limit is not None and request.queued_at is not None and now - request.queued_at > limit:
                 request.error = RuntimeError(f"{request.describe()}: frame not sent (stale)")
-                self._move(request, S.FAILED)
+                self._move(request, _FAILED)
                 self._count(request.codec, "not_sent_stale")
                 self._stale.append(request)
                 continue
-            if request.key is not None and (request.key in self._pending or request.key in held):
+            key = request.key
+            if key is not None and (key in pending or key in held):
                 waiting.append(request)
                 continue
-            self._move(request, S.SENDING)
+            request.state = _SENDING  # (QUEUED -> SENDING, in TRANSITIONS; the hot path)
             request.attempts += 1
-            self._in_flight[request] = None
-            if request.key is not None:
-                self._pending.setdefault(request.key, deque()).append(request)
+            in_flight[request] = None
+            if key is not None:
+                pending[key] = deque((request,))
             out.append(request)
         waiting.extend(queue)
         self._queue = waiting
@@ -360,40 +384,40 @@ class Scheduler:
             The verdict on a reply-shaped frame with its key that came before this report (EARLY),
             now that the send time is known: the reply, or a duplicate or late frame.
         """
-        if request.state is not S.SENDING:
+        if request.state is not _SENDING:
             return None  # cancelled while the frame was on its way
         request.sent_at = at
         if request.key is None:  # nothing to wait for
-            self._finish(request, S.REPLIED, at)
+            self._finish(request, _REPLIED, at)
             return None
-        self._move(request, S.SENT)
+        request.state = _SENT  # (SENDING -> SENT, in TRANSITIONS; the hot path)
         request.deadline = deadline = at + request.timeout_s
         self._sent_count += 1
         heap = self._deadlines
         heapq.heappush(heap, (deadline, self._sent_count, request))
         if len(heap) > 64 + 4 * len(self._in_flight):  # answered ones under a long timeout pile up
-            heap[:] = [e for e in heap if e[2].state is S.SENT and e[2].deadline == e[0]]
+            heap[:] = [e for e in heap if e[2].state is _SENT and e[2].deadline == e[0]]
             heapq.heapify(heap)
         early = self._early.pop(request.key, None) if self._early else None
         if early is None:
             return None
         codec, frame = early
-        return self._ours(codec, FrameKind.REPLY, request.key, frame, frame.timestamp or at)
+        return self._ours(codec, _K_REPLY, request.key, frame, frame.timestamp or at)
 
     def not_sent(self, request: Request, reason: str, now: float) -> None:
         """The transport dropped ``request``'s frame (stale, purged, ...): it fails."""
         if request.state in FINAL:
             return
         request.error = RuntimeError(f"{request.describe()}: frame not sent ({reason})")
-        self._finish(request, S.FAILED, now)
+        self._finish(request, _FAILED, now)
         self._count(request.codec, f"not_sent_{reason}")
 
     def cancel(self, request: Request, now: float) -> None:
         """The caller gave up on ``request``; a reply that still comes is counted LATE."""
         if request.state in FINAL:
             return
-        was_out = request.state in (S.SENDING, S.SENT)
-        self._finish(request, S.CANCELLED, now)
+        was_out = request.state in (_SENDING, _SENT)
+        self._finish(request, _CANCELLED, now)
         if was_out and request.key is not None:
             self._expect_late(request, now)
 
@@ -402,7 +426,7 @@ class Scheduler:
         failed = list(self._queue)
         for request in failed:
             request.error = error
-            self._finish(request, S.FAILED, now)
+            self._finish(request, _FAILED, now)
         return failed
 
     def fail_all(self, error: BaseException, now: float) -> list[Request]:
@@ -410,7 +434,7 @@ class Scheduler:
         failed = [*self._in_flight, *self._queue]  # in the order they were sent or queued
         for request in failed:
             request.error = error
-            self._finish(request, S.FAILED, now)
+            self._finish(request, _FAILED, now)
         self._queue.clear()
         return failed
 
@@ -422,14 +446,14 @@ class Scheduler:
         heap = self._deadlines
         while heap and heap[0][0] <= now:
             deadline, _, request = heapq.heappop(heap)
-            if request.state is S.SENT and request.deadline == deadline:
+            if request.state is _SENT and request.deadline == deadline:
                 self._leave_flight(request, now)
                 if request.attempts <= request.retries:
-                    self._move(request, S.QUEUED)
+                    self._move(request, _QUEUED)
                     self._queue.appendleft(request)
                     self._count(request.codec, "retries")
                     continue
-                self._move(request, S.TIMED_OUT)
+                self._move(request, _TIMED_OUT)
                 self._count(request.codec, "timeouts")
                 if request.key is not None:
                     self._expect_late(request, now)
@@ -450,7 +474,9 @@ class Scheduler:
     def next_deadline(self) -> float | None:
         """When :meth:`expire` or :meth:`next_to_send` next has something to do (None: nothing)."""
         heap = self._deadlines
-        while heap and (heap[0][2].state is not S.SENT or heap[0][2].deadline != heap[0][0]):
+        if not self._in_flight:
+            heap.clear()  # every entry is of a request that left (a whole tick answered: at once)
+        while heap and (heap[0][2].state is not _SENT or heap[0][2].deadline != heap[0][0]):
             heapq.heappop(heap)  # the request left (replied, cancelled) or was sent again
         times = [heap[0][0]] if heap else []
         if self._queue and len(self._in_flight) < self.max_in_flight:
@@ -466,10 +492,10 @@ class Scheduler:
         """Classify ``frame``, resolve the request it answers, count it."""
         for codec in self._by_id.get(frame.arbitration_id, ()):
             kind, key = codec.classify(frame)
-            if kind is not FrameKind.NOT_OURS:
+            if kind is not _K_NOT_OURS:
                 return self._ours(codec, kind, key, frame, now)
         self._bus_counts["foreign"] += 1
-        return Received(Traffic.FOREIGN, frame)
+        return Received(_T_FOREIGN, frame)
 
     def _ours(
         self, codec: BoundCodec, kind: FrameKind, key: Hashable | None, frame: Frame, now: float
@@ -478,47 +504,53 @@ class Scheduler:
             reply = codec.decode(frame)
         except ProtocolError as exc:
             self._count(codec, "malformed")
-            return Received(Traffic.MALFORMED, frame, codec, error=exc)
+            return Received(_T_MALFORMED, frame, codec, error=exc)
         waiting = self._pending.get(key) if key is not None else None
         if waiting:
             request = waiting[0]
             # A reply cannot arrive before its request left plus the two frames' wire time (an
             # unstamped frame is taken as it comes); a stream frame answers a read only if it came
             # after the request left (the same fact, fresh).
-            if request.state is S.SENDING and kind is FrameKind.REPLY:
+            if request.state is _SENDING and kind is _K_REPLY:
                 # It beat the transport's send report (a reader and a writer thread): judged when
                 # the report says when the request left.
                 if key in self._early:  # the same reply twice before the report
-                    self._count(codec, Traffic.DUPLICATE.value)
-                    return Received(Traffic.DUPLICATE, frame, codec, reply)
+                    self._count(codec, _T_DUPLICATE.value)
+                    return Received(_T_DUPLICATE, frame, codec, reply)
                 self._early[key] = (codec, frame)
-                return Received(Traffic.EARLY, frame, codec)
+                return Received(_T_EARLY, frame, codec)
             sent_at = request.sent_at
-            if kind is FrameKind.REPLY:
+            if kind is _K_REPLY:
                 fresh = (
                     sent_at is None or not frame.timestamp or frame.timestamp >= sent_at + self.min_reply_s
                 )
             else:
                 fresh = sent_at is not None and frame.timestamp >= sent_at
-            if request.state is S.SENT and fresh:
+            if request.state is _SENT and fresh:
                 request.reply = reply
-                self._leave_flight(request, now)
-                request.state = S.REPLIED  # (SENT -> REPLIED, in TRANSITIONS; the hot path)
+                # _leave_flight, written out for the hot path (a SENT request has no EARLY frame)
+                waiting.popleft()
+                if not waiting:
+                    del self._pending[key]
+                del self._in_flight[request]
+                if self.one_at_a_time:
+                    self._rest_until = now + self.gap_s
+                request.state = _REPLIED  # (SENT -> REPLIED, in TRANSITIONS; the hot path)
                 recent = self._recent
                 recent.replied[key] = now + self.late_window_s
                 if len(recent.replied) > recent.limit:
                     recent.prune(now)
                 counts = self.motor_counts[id(codec)]
                 counts["replies"] += 1
-                if kind is FrameKind.REPLY:
-                    traffic = Traffic.REPLY
+                if kind is _K_REPLY:
+                    traffic = _T_REPLY
                 else:
                     traffic = Traffic(kind.value)
                     counts[traffic.value] += 1
                 if sent_at is not None:
                     self.motor_latency[id(codec)].add((frame.timestamp or now) - sent_at)
                 return Received(traffic, frame, codec, reply, request)
-        if kind is FrameKind.STREAM or kind is FrameKind.REPORT:
+        if kind is _K_STREAM or kind is _K_REPORT:
             self._count(codec, kind.value)
             return Received(Traffic(kind.value), frame, codec, reply)
         traffic = self._unmatched(key, now)
@@ -534,11 +566,11 @@ class Scheduler:
                 late.pop(0)
                 if not late:  # the reply the key was held for came: the next exchange may go
                     self._held.pop(key, None)
-                return Traffic.LATE
+                return _T_LATE
         until = recent.replied.get(key)
         if until is not None and until >= now:
-            return Traffic.DUPLICATE
-        return Traffic.UNSOLICITED
+            return _T_DUPLICATE
+        return _T_UNSOLICITED
 
     # ---- bookkeeping ----
 
@@ -571,7 +603,7 @@ class Scheduler:
         request.state = state
 
     def _finish(self, request: Request, state: RequestState, now: float) -> None:
-        if request.state is S.QUEUED:
+        if request.state is _QUEUED:
             self._queue.remove(request)
         else:
             self._leave_flight(request, now)

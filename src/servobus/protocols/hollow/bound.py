@@ -139,6 +139,12 @@ def _fd_decoder(model: HollowModel) -> Callable[[bytes], FdReply]:
     return decode
 
 
+# FrameKind members as globals: classify runs per frame, and in Python 3.11 an Enum member
+# lookup (``FrameKind.REPLY``) is a metaclass call.
+_NOT_OURS = FrameKind.NOT_OURS
+_REPLY = FrameKind.REPLY
+
+
 class HollowCodec(CodecBase):
     """One hollow motor on one link. Build it with :func:`bind` (or ``FAMILY.bind``)."""
 
@@ -266,20 +272,20 @@ class HollowCodec(CodecBase):
     def classify(self, frame: Frame) -> tuple[FrameKind, Hashable | None]:
         """REPLY for a received reply naming this motor (by payload on CAN, by address on Modbus)."""
         if not frame.is_rx or frame.is_extended_id or frame.is_serial != (self.framing is not None):
-            return FrameKind.NOT_OURS, None
+            return _NOT_OURS, None
         data = frame.data
         if self.link == "modbus":
             if frame.arbitration_id == self.motor_id and data:
-                return FrameKind.REPLY, frame_key(self.motor_id, data[0] & 0x7F)
-            return FrameKind.NOT_OURS, None
+                return _REPLY, frame_key(self.motor_id, data[0] & 0x7F)
+            return _NOT_OURS, None
         if frame.arbitration_id != self.host_id:
-            return FrameKind.NOT_OURS, None
+            return _NOT_OURS, None
         if frame.is_fd or frame.is_serial:
             if len(data) == FD_PAYLOAD_SIZE and data[15] == self.motor_id:
-                return FrameKind.REPLY, self._key
+                return _REPLY, self._key
         elif len(data) in (6, 8) and data[0] == self.motor_id:
-            return FrameKind.REPLY, self._key
-        return FrameKind.NOT_OURS, None
+            return _REPLY, self._key
+        return _NOT_OURS, None
 
     def decode(self, frame: Frame) -> Reply:
         """The typed reply in ``frame``.

@@ -17,7 +17,7 @@ from operator import attrgetter
 from typing import Any
 
 from servobus.errors import ProtocolError
-from servobus.frame import Frame
+from servobus.frame import Frame, classic_request
 from servobus.protocols._bound import (
     Broadcast,
     CodecBase,
@@ -152,6 +152,12 @@ def _fast_encoders(model: LkModel) -> dict[type, Callable[[Any], bytes]]:
     }
 
 
+# FrameKind members as globals: classify runs per frame, and in Python 3.11 an Enum member
+# lookup (``FrameKind.REPLY``) is a metaclass call.
+_NOT_OURS = FrameKind.NOT_OURS
+_REPLY = FrameKind.REPLY
+
+
 class LkCodec(CodecBase):
     """One LK motor on CAN. Build it with :func:`bind` (or ``FAMILY.bind``)."""
 
@@ -220,8 +226,8 @@ class LkCodec(CodecBase):
         """
         message = self._check(command)
         fast = self._encoders.get(type(message))
-        data = fast(message) if fast is not None else message.encode()
-        return Frame(arbitration_id=self._request_id, data=data, is_rx=False)
+        data = fast(message) if fast is not None else message.encode()  # (8 bytes: LK's payload())
+        return classic_request(self._request_id, data)
 
     def reply_key(self, command: Command) -> Hashable | None:
         """The key of the reply to ``command`` (every single-motor LK command is answered).
@@ -249,14 +255,14 @@ class LkCodec(CodecBase):
     def classify(self, frame: Frame) -> tuple[FrameKind, Hashable | None]:
         """REPLY for a received frame on this motor's reply identifier, else NOT_OURS."""
         if frame.arbitration_id != self._reply_id or not frame.is_rx or frame.is_extended_id or frame.is_fd:
-            return FrameKind.NOT_OURS, None
+            return _NOT_OURS, None
         data = frame.data
         if not data:
-            return FrameKind.REPLY, None
+            return _REPLY, None
         code = data[0]
         if code in _VALUE_ECHO_CODES:
-            return FrameKind.REPLY, echo_key(self._reply_base | code, data)
-        return FrameKind.REPLY, self._reply_base | self._aliases.get(code, code)
+            return _REPLY, echo_key(self._reply_base | code, data)
+        return _REPLY, self._reply_base | self._aliases.get(code, code)
 
     def decode(self, frame: Frame) -> Reply:
         """The typed reply in ``frame``.

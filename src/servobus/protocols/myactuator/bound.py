@@ -21,7 +21,7 @@ from collections.abc import Callable, Hashable, Sequence
 from typing import Any
 
 from servobus.errors import ProtocolError
-from servobus.frame import Frame
+from servobus.frame import Frame, classic_request
 from servobus.protocols._bound import (
     Broadcast,
     CodecBase,
@@ -111,6 +111,9 @@ _READS = (
 # isinstance against those tuples, once per command class (the hot path asks per request)
 _IS_SLOW: dict[type, bool] = {}
 _IS_READ: dict[type, bool] = {}
+_IS_NOTED: dict[type, bool] = {}
+#: Commands that change how the motor talks (:meth:`MyActuatorCodec.note_sent`).
+_NOTED = (cmd.ActiveReply, cmd.FunctionControl, cmd.SystemReset)
 _ERROR_REPORT_CODE = cmd.ReadStatus1.CODE
 #: Echo replies that carry the value their request wrote (§0): keyed with it (``echo_key``). Not the
 #: fixed all-zero echoes (nothing to tell apart), 0xB3 (the manuals print an all-zero reply to it,
@@ -165,6 +168,13 @@ def _class_plan(cls: type, revision: Revision) -> tuple[bool, Callable[[Any], by
 
 
 _PLANS: dict[Revision, dict[type, tuple[bool, Callable[[Any], bytes] | None]]] = {}  # by revision, then class
+
+# FrameKind members as globals: classify runs per frame, and in Python 3.11 an Enum member
+# lookup (``FrameKind.REPLY``) is a metaclass call.
+_NOT_OURS = FrameKind.NOT_OURS
+_REPLY = FrameKind.REPLY
+_REPORT = FrameKind.REPORT
+_STREAM = FrameKind.STREAM
 
 
 class MyActuatorCodec(CodecBase):
@@ -270,7 +280,7 @@ class MyActuatorCodec(CodecBase):
             )
         always, fast = self._plan(command)
         if always and fast is not None and not self._rs485:
-            return Frame(arbitration_id=self._request_id, data=fast(command), is_rx=False)
+            return classic_request(self._request_id, fast(command))
         message = self._check(command)
         if self._rs485:
             if isinstance(message, cmd.ActiveReply):
@@ -325,6 +335,11 @@ class MyActuatorCodec(CodecBase):
 
     def note_sent(self, command: Command) -> None:
         """Track what ``command`` changes in how the motor talks (0xB6 streams, 0x9A reports, reset)."""
+        noted = _IS_NOTED.get(type(command))
+        if noted is None:
+            noted = _IS_NOTED[type(command)] = isinstance(command, _NOTED)
+        if not noted:
+            return
         if isinstance(command, cmd.ActiveReply):
             code = int(command.command)
             self._streams = self._streams | {code} if command.enabled else self._streams - {code}
@@ -341,28 +356,28 @@ class MyActuatorCodec(CodecBase):
         ``(REPLY, None)`` is a frame on this motor's reply identifier that can answer nothing (empty).
         """
         if not frame.is_rx or frame.is_extended_id or frame.is_fd or frame.is_serial is not self._rs485:
-            return FrameKind.NOT_OURS, None
+            return _NOT_OURS, None
         ident = frame.arbitration_id
         data = frame.data
         if ident == self._reply_id:
             if not data:
-                return FrameKind.REPLY, None
+                return _REPLY, None
             code = data[0]
             if code in self._streams:
-                return FrameKind.STREAM, self._reply_base | code
+                return _STREAM, self._reply_base | code
             if code == _ERROR_REPORT_CODE and self._reports:
-                return FrameKind.REPORT, self._reply_base | code
+                return _REPORT, self._reply_base | code
             if code in _VALUE_ECHO_CODES:
-                return FrameKind.REPLY, echo_key(self._reply_base | code, data)
-            return FrameKind.REPLY, self._reply_base | code
+                return _REPLY, echo_key(self._reply_base | code, data)
+            return _REPLY, self._reply_base | code
         if ident == self._motion_reply_id:
-            return FrameKind.REPLY, self._motion_key
+            return _REPLY, self._motion_key
         # 0x79 replies come on an identifier every motor shares, so one 0x79 exchange at a time per
         # bus; and only a revision that has 0x79 claims them.
         shared = RS485_BROADCAST_ID if self._rs485 else ID_SETTING_ID
         if ident == shared and data and data[0] == ID_SETTING_CODE and self._has_id_setting:
-            return FrameKind.REPLY, frame_key(shared, ID_SETTING_CODE)
-        return FrameKind.NOT_OURS, None
+            return _REPLY, frame_key(shared, ID_SETTING_CODE)
+        return _NOT_OURS, None
 
     def decode(self, frame: Frame) -> Reply:
         """The typed reply in ``frame`` (a frame :meth:`classify` did not call NOT_OURS).
