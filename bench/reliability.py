@@ -53,6 +53,7 @@ ROOT = BENCH.parent
 sys.path.insert(0, str(BENCH))
 sys.path.insert(0, str(ROOT / "tests"))
 
+from _meta import source_state  # noqa: E402
 from _results import machine_info, markdown_table, update_results_json  # noqa: E402
 
 RESULTS = BENCH / "results.json"
@@ -253,6 +254,7 @@ def soak(args: argparse.Namespace) -> dict[str, Any]:
     summary["wall_s"] = round(time.perf_counter() - started, 1)
     summary["command"] = " ".join(["python bench/reliability.py", *sys.argv[1:]])
     summary["machine"] = machine_info()
+    summary["source"] = source_state()
     summary["problems"] = problems
     headline = {
         "requests": summary["requests"],
@@ -322,8 +324,9 @@ def report() -> None:
             "## Soak",
             "",
             f"Command: `{sk['command']}`: {sk['virtual_s'] / 60:.1f} virtual minutes in {sk['wall_s']:.0f} s "
-            f"wall ({sk['machine']['date_utc']}); {sk['motors']} simulated motors on {sk['buses']} buses, "
-            f"seed {sk['seed']}.",
+            f"wall ({sk['machine']['date_utc']}"
+            + (f", commit {sk['source']['commit']}" if sk.get("source") else "")
+            + f"); {sk['motors']} simulated motors on {sk['buses']} buses, seed {sk['seed']}.",
             "",
             markdown_table(
                 ["figure", "value"],
@@ -372,17 +375,21 @@ def report() -> None:
 FINDINGS = """
 ## What the runs found
 
-* The soak's faults pointed at a Bus defect, now pinned alone by a strict xfail
-  (`tests/test_soak.py::test_a_request_the_motor_received_twice_never_answers_the_next_request_with_its_key`):
-  a request the motor receives twice (CAN double reception, the soak's `to_devices_duplicate`) is
-  answered twice, and when another request with the same key is queued, the scheduler sends it as
-  soon as the first answer came, so the second answer resolves it: a WriteEncoderZero then gets the
-  previous one's echo. Any mismatched reply in the soak above is this.
-* The stalled serial port under a Bus (`tests/test_soak.py`): one request at a time stays within
-  `stale_after_s`, but the commands of a `cycle()` on a half-duplex line wait in the Scheduler's
-  queue, which has no freshness limit, and reach the motor up to (n - 1) x `stale_after_s` after
-  they were made (strict xfail
-  `tests/test_soak.py::test_a_stalled_serial_port_under_cycles_delivers_no_stale_command`).
+* The soak's faults pointed at two Bus defects; each is fixed and pinned by a test of its own:
+  * a request the motor receives twice (CAN double reception, the soak's `to_devices_duplicate`) is
+    answered twice, and the scheduler sent the next request with the same key as soon as the first
+    answer came, so the second answer resolved it: a WriteEncoderZero got the previous one's echo
+    (one in 1,842,212 requests, in the 10-minute soak before the fix). An echo reply's key now holds
+    the value it echoes
+    (`tests/test_soak.py::test_a_write_the_motor_received_twice_never_answers_the_next_write_with_its_echo`
+    and its LK twin). A status reply carries nothing of its request, so a set-point or read answered
+    twice can still resolve the next request with the same key with a status one exchange old;
+    the soak's tokens are echoes, so its mismatch count covers writes only (README, "What these
+    wires cannot tell apart");
+  * on a stalled half-duplex serial port, the commands of a `cycle()` waited in the Scheduler's
+    queue without a freshness limit and reached the motor up to (n - 1) x `stale_after_s` after they
+    were made; queued commands now fail `not_sent_stale` instead
+    (`tests/test_soak.py::test_a_stalled_serial_port_under_cycles_delivers_no_stale_command`).
 * The fuzz targets found no input that breaks a promise (any that did would be in
   `tests/test_fuzz.py`'s `REGRESSIONS`).
 
