@@ -133,20 +133,21 @@ class _Slot:
         return True
 
     def result(self) -> Result:
-        if self._state == 2:
-            raise asyncio.CancelledError
-        if not self._state:
-            raise asyncio.InvalidStateError("result is not set")
-        value = self.tick.results[self.index]
+        value = self._outcome()
         if isinstance(value, BaseException):
             raise value
         return value
 
     def exception(self) -> BaseException | None:
+        value = self._outcome()
+        return value if isinstance(value, BaseException) else None
+
+    def _outcome(self) -> Result:
         if self._state == 2:
             raise asyncio.CancelledError
-        value = self.tick.results[self.index]
-        return value if isinstance(value, BaseException) else None
+        if not self._state:
+            raise asyncio.InvalidStateError("the request has not ended")
+        return self.tick.results[self.index]
 
     def add_done_callback(self, callback: Callable[[_Slot], object]) -> None:
         """As a future's: ``callback(slot)`` soon after the request ends."""
