@@ -1,42 +1,140 @@
-"""``servobus bench``: the benchmarks' quick mode from the source tree, as one table of their figures;
-without bench/ (an installed wheel) one line and exit 1."""
+"""``servobus bench``: the front of ``python -m bench``; its quick mode (by default) or its full run
+(``--full``, only with a fake runner here), as one table of every part's figures; without bench/ (an
+installed wheel) one line and exit 1."""
 
 from __future__ import annotations
 
+import ast
+import json
 from pathlib import Path
 
+import click
 import pytest
 
 import servobus.cli.bench as bench
 from cli._bus_cli import one_line, run, run_json
 
+RUNNER = Path(__file__).resolve().parents[2] / "bench" / "__main__.py"
+
+#: a stand-in for ``python -m bench``: records its arguments in $FAKE_ARGV, writes figures for the
+#: parts asked to --output (or to its own folder: the full run), a missed target when $FAKE_MISSED
 FAKE = """
-import json, sys
+import json, os, sys
 from pathlib import Path
-assert sys.argv[1:3] == ["--quick", "--output"], sys.argv
-Path(sys.argv[3], "results.json").write_text(json.dumps({"bus": {
-    "cycle32_transactions_s": 101436.0, "efficiency_can1m_32": 1.0, "meta": {"x": 1},
-    "targets_missed": ["cycle32_vs_naive = 4.7 (target >= 5.0)"]}}))
+args = sys.argv[1:]
+Path(os.environ["FAKE_ARGV"]).write_text(json.dumps(args))
+only = [args[i + 1] for i, a in enumerate(args) if a == "--only"] or ["codec", "bus", "loop1k"]
+out = Path(args[args.index("--output") + 1]) if "--output" in args else Path(__file__).parent
+missed = [os.environ["FAKE_MISSED"]] if os.environ.get("FAKE_MISSED") else []
+figures = {
+    "codec": {"crc16_mb_s": 512.25, "targets_missed": []},
+    "bus": {"cycle32_transactions_s": 101436.0, "efficiency_can1m_32": 1.0, "is_flagged": True,
+            "command": "python bench/bench_bus.py --quick", "sizes_list": [1, 4, 32],
+            "meta": {"runtime_s": 1.5}, "detail": {"read": {"turnaround_s": 0.00025}},
+            "targets_missed": missed},
+    "loop1k_fd": {"on_time_pct": 99.9, "layout": {"fd": {"targets_missed": ["deep = 1 (target 2)"]}}},
+}
+path = out / "results.json"
+data = json.loads(path.read_text()) if path.exists() else {}
+data.update({k: v for k, v in figures.items() if k.split("_")[0] in only})
+path.write_text(json.dumps(data))
 print("progress that is not shown")
+if "--check" in args and missed:
+    print("parts with a missed target (--check): bus")
+    sys.exit(1)
 """
 
 
-def test_the_figures_of_each_benchmark_in_one_table(
-    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
-) -> None:
+@pytest.fixture
+def fake(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> Path:
+    """A fake bench/ folder (``bench/__main__.py`` = FAKE) that ``servobus bench`` runs; the file its
+    arguments are recorded in is returned."""
     (tmp_path / "bench").mkdir()
-    (tmp_path / "bench" / "bench_bus.py").write_text(FAKE)
+    (tmp_path / "bench" / "__main__.py").write_text(FAKE)
     monkeypatch.setattr(bench, "bench_dir", lambda: tmp_path / "bench")
-    out, _ = run(capsys, ["bench", "--only", "bus"])
-    assert "cycle32_transactions_s" in out and "101,436" in out and "meta" not in out
-    assert "targets missed: bus: cycle32_vs_naive = 4.7" in out and "progress" not in out
-    assert run_json(capsys, ["bench", "--only", "bus"])["bus"]["efficiency_can1m_32"] == 1.0
-    assert sorted(p.name for p in (tmp_path / "bench").iterdir()) == ["bench_bus.py"]  # nothing written there
+    monkeypatch.setenv("FAKE_ARGV", str(tmp_path / "argv.json"))
+    monkeypatch.delenv("FAKE_MISSED", raising=False)
+    return tmp_path / "argv.json"
 
 
-def test_the_real_bus_benchmark_quick_mode(capsys: pytest.CaptureFixture[str]) -> None:
-    figures = run_json(capsys, ["bench", "--only", "bus"])["bus"]
+def test_the_only_choices_are_the_parts_of_the_runner() -> None:
+    """bench/ is no package of the installed servobus: the CLI keeps the parts' names, equal to PARTS."""
+    tree = ast.parse(RUNNER.read_text(encoding="utf-8"))
+    parts = next(
+        ast.literal_eval(node.value)
+        for node in tree.body
+        if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "PARTS" for t in node.targets)
+    )
+    assert tuple(parts) == bench.PARTS  # the same parts, in the runner's order
+    only = next(p for p in bench.bench.params if p.name == "only")
+    assert isinstance(only.type, click.Choice) and tuple(only.type.choices) == tuple(parts)
+
+
+def test_the_figures_of_each_part_in_one_table(capsys: pytest.CaptureFixture[str], fake: Path) -> None:
+    out, _ = run(capsys, ["bench", "--only", "bus", "--only", "loop1k"])
+    args = json.loads(fake.read_text())
+    assert args[:2] == ["--quick", "--output"] and args[3:] == ["--only", "bus", "--only", "loop1k"]
+    assert "cycle32_transactions_s" in out and "101,436" in out and "detail.read.turnaround_s" in out
+    assert "loop1k_fd" in out and "on_time_pct" in out and "99.9" in out and "crc16" not in out
+    for absent in ("meta", "runtime_s", "is_flagged", "sizes_list", "command", "progress"):
+        assert absent not in out, absent
+    assert out.rstrip().endswith("targets missed: loop1k_fd: layout: fd: deep = 1 (target 2)")
+    written = sorted(p.name for p in fake.parent.joinpath("bench").iterdir())
+    assert written == ["__main__.py"]  # nothing written in bench/
+
+
+def test_every_part_by_default_and_all_targets_met(capsys: pytest.CaptureFixture[str], fake: Path) -> None:
+    out, _ = run(capsys, ["bench", "--only", "codec"])
+    assert "512.2" in out and out.rstrip().endswith("all targets met")
+    run(capsys, ["bench"])
+    args = json.loads(fake.read_text())
+    assert args[:2] == ["--quick", "--output"] and len(args) == 3  # every part: no --only
+
+
+def test_json_has_the_dotted_figure_names_of_the_part_asked(
+    capsys: pytest.CaptureFixture[str], fake: Path
+) -> None:
+    figures = run_json(capsys, ["bench", "--only", "bus"])
+    bus = {"cycle32_transactions_s": 101436.0, "efficiency_can1m_32": 1.0}
+    bus["detail.read.turnaround_s"] = 0.00025  # nested: by its dotted name
+    assert figures == {"bus": bus}
+
+
+def test_check_exits_1_when_a_target_is_missed(
+    capsys: pytest.CaptureFixture[str], fake: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    run(capsys, ["bench", "--only", "bus", "--check"])  # met: 0
+    assert json.loads(fake.read_text())[-1] == "--check"
+    monkeypatch.setenv("FAKE_MISSED", "cycle32_vs_floor = 5.8 (target <= 4.0)")
+    out, err = run(capsys, ["bench", "--only", "bus", "--check"], code=1)  # the runner's status 1
+    assert "101,436" in out and "targets missed: bus: cycle32_vs_floor = 5.8 (target <= 4.0)" in out
+    assert err == ""
+    figures = run_json(capsys, ["bench", "--only", "bus", "--check"], code=1)
+    assert figures["bus"]["efficiency_can1m_32"] == 1.0
+    out, _ = run(capsys, ["bench", "--only", "bus"])  # without --check, a missed target is only shown
+    assert "targets missed: bus: cycle32_vs_floor" in out
+    out, _ = run(capsys, ["bench", "--only", "loop1k", "--check"], code=1)  # one the runner did not check
+    assert "targets missed: loop1k_fd: layout: fd: deep = 1" in out
+
+
+def test_full_writes_to_bench_and_shows_only_the_parts_it_ran(
+    capsys: pytest.CaptureFixture[str], fake: Path
+) -> None:
+    results = fake.parent / "bench" / "results.json"
+    results.write_text(json.dumps({"codec": {"crc16_mb_s": 1.0, "targets_missed": ["stale = 1"]}}))
+    out, _ = run(capsys, ["bench", "--full", "--only", "bus"])
+    assert json.loads(fake.read_text()) == ["--only", "bus"]  # no --quick, no --output: bench/ itself
+    assert "full run" in out and "101,436" in out and "crc16" not in out and "stale" not in out
+    assert out.rstrip().endswith("all targets met")
+    assert sorted(json.loads(results.read_text())) == ["bus", "codec"]  # the runner wrote into bench/
+
+
+def test_the_real_bus_part_quick_mode(capsys: pytest.CaptureFixture[str]) -> None:
+    results = run_json(capsys, ["bench", "--only", "bus"])
+    assert list(results) == ["bus"]
+    figures = results["bus"]
     assert figures["efficiency_can1m_32"] > 0.9 and figures["cycle32_transactions_s"] > 0
+    assert figures["cycle_sizes.32.transactions_s"] > 0 and not any(k.startswith("meta.") for k in figures)
 
 
 def test_without_bench_folder_one_line_and_exit_1(
@@ -44,31 +142,33 @@ def test_without_bench_folder_one_line_and_exit_1(
 ) -> None:
     monkeypatch.setattr(bench, "bench_dir", lambda: tmp_path / "nowhere")
     assert "source checkout" in one_line(capsys, ["bench"], code=1)
+    monkeypatch.setattr(bench, "bench_dir", lambda: tmp_path)  # a folder without the runner
+    assert "__main__.py is missing" in one_line(capsys, ["bench"], code=1)
 
 
-def test_a_failing_benchmark_is_one_line_and_exit_1(
+def test_a_failing_runner_is_one_line_and_exit_1(
     capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
-    (tmp_path / "bench_codec.py").write_text("raise SystemExit('broken on purpose')")
-    monkeypatch.setattr(bench, "bench_dir", lambda: tmp_path)
+    (tmp_path / "bench").mkdir()
+    (tmp_path / "bench" / "__main__.py").write_text("raise SystemExit('broken on purpose')")
+    monkeypatch.setattr(bench, "bench_dir", lambda: tmp_path / "bench")
     err = one_line(capsys, ["bench", "--only", "codec"], code=1)
-    assert "bench_codec.py --quick failed (exit 1): broken on purpose" in err
+    assert "python -m bench --quick failed (exit 1): broken on purpose" in err
+    err = one_line(capsys, ["bench", "--check"], code=1)  # status 1 without a missed target: a failure
+    assert "failed (exit 1): broken on purpose" in err
+    err = one_line(capsys, ["bench", "--full"], code=1)
+    assert "python -m bench failed (exit 1): broken on purpose" in err
 
 
-def test_an_unknown_benchmark_is_one_line_and_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
+def test_an_unknown_part_is_one_line_and_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
     assert "--only" in one_line(capsys, ["bench", "--only", "nope"])
+    assert "--quick" in one_line(capsys, ["bench", "--quick"])  # quick is the default, not an option
 
 
-def test_verbose_json_keeps_stdout_for_the_json(
-    capfd: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
-) -> None:
-    """--verbose shows the scripts' own output on stderr: stdout is the JSON document alone."""
-    import json
-
+def test_verbose_json_keeps_stdout_for_the_json(capfd: pytest.CaptureFixture[str], fake: Path) -> None:
+    """--verbose shows the runner's own output on stderr: stdout is the JSON document alone."""
     from servobus.cli import main
 
-    (tmp_path / "bench_bus.py").write_text(FAKE)
-    monkeypatch.setattr(bench, "bench_dir", lambda: tmp_path)
     assert main(["bench", "--only", "bus", "--verbose", "--json"]) == 0
     out, err = capfd.readouterr()
     assert json.loads(out)["bus"]["efficiency_can1m_32"] == 1.0

@@ -1,10 +1,14 @@
-"""``servobus bench``: the benchmark suite's quick mode, from the source tree, as one table.
+"""``servobus bench``: the front of the benchmark suite's one command, ``python -m bench``.
 
-Runs ``bench/bench_<name>.py --quick --output <temporary folder>`` for each benchmark (codec,
-transport, bus; ``--only`` picks), then prints the figures each wrote to its ``results.json`` key:
-every number it reports, and the targets it missed. Nothing in ``bench/`` is written (the scripts
-write only with ``--output``). The benchmarks live in the source tree, not in the installed package:
-from a wheel, the command says so and exits 1.
+By default it runs the suite's quick mode over every part (codec, transport, bus, efficiency, loop1k,
+scaling; ``--only`` picks): ``python -m bench --quick --output <temporary folder>`` from the repository
+root, then prints every numeric figure of the ``results.json`` written there in one table (nested
+figures by dotted names, ``detail.read_status2.turnaround_s``; the runner's ``meta`` and ``machine``
+records left out) and the targets missed. Nothing in ``bench/`` is written. ``--full`` is the full run,
+``python -m bench``: it rewrites ``bench/RESULTS.md`` and ``bench/results.json`` in the source tree
+(~15-20 min on 2 cores), then prints the same table for the parts it ran. ``--check`` is passed through:
+exit status 1 when a target is missed. The benchmarks live in the source tree, not in the installed
+package: from a wheel, the command says so and exits 1.
 """
 
 from __future__ import annotations
@@ -13,6 +17,7 @@ import json
 import subprocess
 import sys
 import tempfile
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +27,12 @@ from servobus.cli._output import SETTINGS, console, emit_json, examples, json_op
 
 __all__ = ["bench"]
 
-BENCHMARKS = ("codec", "transport", "bus")
+#: the parts of ``python -m bench``, in its order (``PARTS`` of bench/__main__.py; a test keeps them equal)
+PARTS = ("codec", "transport", "bus", "efficiency", "loop1k", "scaling")
+#: records of how a figure was measured, not figures
+SKIPPED = frozenset({"meta", "machine"})
+#: the line the runner ends on when ``--check`` found a missed target (its exit status is then 1)
+CHECK_FAILED = "parts with a missed target (--check)"
 
 
 def bench_dir() -> Path:
@@ -37,51 +47,73 @@ def bench_dir() -> Path:
 @click.command(
     context_settings=SETTINGS,
     epilog=examples(
-        "servobus bench                   # all three, ~30 s",
-        "servobus bench --only bus        # ~3 s",
+        "servobus bench                              # quick mode, every part, ~20 s here",
+        "servobus bench --only bus                   # ~2 s",
         "servobus bench --only codec --json",
+        "servobus bench --check                      # exit 1 when a target is missed",
+        "servobus bench --full --only efficiency     # rewrites its part of bench/RESULTS.md",
+        "servobus bench --full                       # every part, ~15-20 min on 2 cores",
     ),
 )
 @click.option(
     "--only",
-    type=click.Choice(BENCHMARKS),
+    type=click.Choice(PARTS),
     multiple=True,
-    help="Run only this benchmark (repeatable) [default: all].",
+    help="Run only this part of the suite (repeatable) [default: all].",
 )
-@click.option("--verbose", "-v", is_flag=True, help="Show the scripts' own output as they run (on stderr).")
+@click.option(
+    "--full",
+    is_flag=True,
+    help="The full run (python -m bench: medians of >= 5 runs, ~15-20 min on 2 cores for every part) "
+    "instead of the quick mode; writes bench/RESULTS.md and bench/results.json in the source tree.",
+)
+@click.option("--check", is_flag=True, help="Exit with status 1 when a target is missed.")
+@click.option("--verbose", "-v", is_flag=True, help="Show the runner's own output as it runs (on stderr).")
 @json_option
-def bench(only: tuple[str, ...], verbose: bool, as_json: bool) -> None:
-    """Run the benchmarks' quick mode and print their figures in one table."""
+def bench(only: tuple[str, ...], full: bool, check: bool, verbose: bool, as_json: bool) -> None:
+    """Run the benchmark suite (python -m bench) and print its figures in one table.
+
+    Quick mode by default (small sizes, ~20 s for every part here; writes nothing).
+    """
     folder = bench_dir()
     if not folder.is_dir():
         raise click.ClickException(
             f"no bench/ folder beside the installed package or here ({folder}): the benchmarks run "
             "from a source checkout"
         )
-    results: dict[str, dict[str, Any]] = {}
-    for name in only or BENCHMARKS:
-        script = folder / f"bench_{name}.py"
-        if not script.is_file():
-            raise click.ClickException(f"{script} is missing")
-        results[name] = _run(script, name, verbose)
+    runner = folder / "__main__.py"
+    if not runner.is_file():
+        raise click.ClickException(f"{runner} is missing")
+    parts = list(only or PARTS)
+    selection = [arg for part in only for arg in ("--only", part)] + (["--check"] if check else [])
+    if full:
+        said_missed = _run(selection, folder, "python -m bench", verbose, check)
+        data = _read(folder / "results.json")
+    else:
+        with tempfile.TemporaryDirectory(prefix="servobus-bench-") as out:
+            said_missed = _run(
+                ["--quick", "--output", out, *selection], folder, "python -m bench --quick", verbose, check
+            )
+            data = _read(Path(out) / "results.json")
+    results = {key: dict(_figures(data[key])) for key in _keys(data, parts)}
+    missed = [
+        f"{key}: {m}" if not m.startswith(f"{key}.") else m for key in results for m in _missed(data[key])
+    ]
     if as_json:
         emit_json(results)
-        return
-    rows = []
-    missed = []
-    for name, figures in results.items():
-        for key, value in figures.items():
-            if isinstance(value, int | float) and not isinstance(value, bool):
-                rows.append((name, key, _number(value)))
-        missed += [f"{name}: {m}" for m in figures.get("targets_missed", [])]
-    console().print(
-        table(
-            "quick mode (tiny sizes; see bench/RESULTS.md for full runs)",
-            ["benchmark", "figure", "value"],
-            rows,
+    else:
+        rows = [
+            (key, name, _number(value)) for key, figures in results.items() for name, value in figures.items()
+        ]
+        title = (
+            "full run (written to bench/RESULTS.md and bench/results.json)"
+            if full
+            else "quick mode (small sizes; --full for the full run)"
         )
-    )
-    click.echo("targets missed: " + "; ".join(missed) if missed else "all targets met")
+        console().print(table(title, ["part", "figure", "value"], rows))
+        click.echo("targets missed: " + "; ".join(missed) if missed else "all targets met")
+    if check and (missed or said_missed):
+        raise click.exceptions.Exit(1)
 
 
 def _number(value: float) -> str:
@@ -91,22 +123,66 @@ def _number(value: float) -> str:
     return f"{value:.4g}"
 
 
-def _run(script: Path, name: str, verbose: bool) -> dict[str, Any]:
-    with tempfile.TemporaryDirectory(prefix="servobus-bench-") as out:
-        command = [sys.executable, str(script), "--quick", "--output", out]
-        shown = console(stderr=True)
-        if verbose:  # its output on stderr: stdout is the table or the JSON alone
-            done = subprocess.run(command, cwd=script.parent.parent, stdout=2, text=True, check=False)
-        else:
-            with shown.status(f"bench_{name}.py --quick", spinner="dots"):
-                done = subprocess.run(
-                    command, cwd=script.parent.parent, capture_output=True, text=True, check=False
-                )
-        if done.returncode != 0:
-            last = (done.stderr or "").strip().splitlines()[-1:]
-            raise click.ClickException(
-                f"bench_{name}.py --quick failed (exit {done.returncode})" + (f": {last[0]}" if last else "")
-            )
-        data = json.loads((Path(out) / "results.json").read_text())
-    figures: dict[str, Any] = data.get(name, {})
-    return figures
+def _keys(data: dict[str, Any], parts: Sequence[str]) -> list[str]:
+    """The keys of results.json the parts write, in the parts' order: ``part`` and ``part_*`` (loop1k
+    writes ``loop1k``, ``loop1k_fd`` and ``loop1k_fd_4pb``); other keys (``reliability``) are not theirs."""
+    keys = []
+    for part in parts:
+        keys += [k for k in data if k == part and isinstance(data[k], dict)]
+        keys += [k for k in data if k.startswith(f"{part}_") and isinstance(data[k], dict) and k not in keys]
+    return keys
+
+
+def _figures(node: dict[str, Any], prefix: str = "") -> Iterator[tuple[str, float]]:
+    """Every number under ``node`` by its dotted name; bools, strings, lists and records skipped."""
+    for key, value in node.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            if key not in SKIPPED:
+                yield from _figures(value, f"{name}.")
+        elif isinstance(value, int | float) and not isinstance(value, bool):
+            yield name, value
+
+
+def _missed(node: dict[str, Any], prefix: str = "") -> Iterator[str]:
+    """The ``targets_missed`` entries wherever they are under ``node`` (nested ones named by where)."""
+    for key, value in node.items():
+        if key == "targets_missed" and isinstance(value, list):
+            yield from (f"{prefix}{m}" for m in value)
+        elif isinstance(value, dict) and key not in SKIPPED:
+            yield from _missed(value, f"{prefix}{key}: ")
+
+
+def _read(path: Path) -> dict[str, Any]:
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise click.ClickException(f"python -m bench wrote no readable {path}: {exc}") from None
+    if not isinstance(data, dict):
+        raise click.ClickException(f"{path} is not a JSON object")
+    return data
+
+
+def _run(args: list[str], folder: Path, what: str, verbose: bool, check: bool) -> bool:
+    """Run ``python -m bench ARGS`` from the repository root; whether it said a target was missed
+    (``--check``: status 1 and its last line says so); any other failure raises, with its last stderr line."""
+    command = [sys.executable, "-m", "bench", *args]
+    if verbose:  # its output on stderr, as it comes: stdout is the table or the JSON alone
+        with subprocess.Popen(command, cwd=folder.parent, stdout=subprocess.PIPE, text=True) as process:
+            assert process.stdout is not None
+            lines = []
+            for line in process.stdout:
+                sys.stderr.write(line)
+                sys.stderr.flush()
+                lines.append(line)
+        code, out, err = process.returncode, "".join(lines), ""  # (its stderr went to the terminal)
+    else:
+        with console(stderr=True).status(what, spinner="dots"):
+            done = subprocess.run(command, cwd=folder.parent, capture_output=True, text=True, check=False)
+        code, out, err = done.returncode, done.stdout or "", done.stderr or ""
+    if code == 0:
+        return False
+    if check and code == 1 and CHECK_FAILED in out:
+        return True
+    last = err.strip().splitlines()[-1:]
+    raise click.ClickException(f"{what} failed (exit {code})" + (f": {last[0]}" if last else ""))
