@@ -217,6 +217,9 @@ def fuzz(args: argparse.Namespace) -> dict[str, Any]:
             for name in names
         }
         targets = {name: future.result() for name, future in futures.items()}
+    provenance = {"date_utc": machine_info()["date_utc"], "commit": source_state()["commit"]}
+    for result in targets.values():
+        result.update(provenance)
     if not args.corpus:
         shutil.rmtree(work, ignore_errors=True)
     value = {
@@ -237,6 +240,19 @@ def fuzz(args: argparse.Namespace) -> dict[str, Any]:
         "fuzz_failures": failed,
     }
     if not args.no_store:
+        # A run over some targets updates theirs and keeps the others' last figures (each says when).
+        before = _load()
+        kept = before.get("fuzz", {}).get("targets", {})
+        value["targets"] = {**kept, **targets}
+        headline["fuzz_inputs_per_target"] = {
+            **before.get("fuzz_inputs_per_target", {}),
+            **headline["fuzz_inputs_per_target"],
+        }
+        headline["fuzz_failures"] = sorted(
+            n
+            for n, r in value["targets"].items()
+            if not all(p.get("passed", True) for p in r.values() if isinstance(p, dict))
+        )
         _store("fuzz", value, headline)
     return value
 
@@ -288,8 +304,11 @@ def report() -> None:
         lines += [
             "## Fuzzing",
             "",
-            f"Command: `{fz['command']}` ({fz['wall_s'] / 60:.0f} min wall, {fz['machine']['cpu_count']} "
-            f"cores, {fz['machine']['cpu_model']}, {fz['machine']['date_utc']}).",
+            f"Last command: `{fz['command']}` ({fz['wall_s'] / 60:.0f} min wall, "
+            f"{fz['machine']['cpu_count']} cores, {fz['machine']['cpu_model']}, "
+            f"{fz['machine']['date_utc']}); "
+            "a run over some targets (`--targets`) keeps the others' last figures: each row says when "
+            "and at which commit it ran.",
             "",
             "*guided*: atheris (libFuzzer) coverage-guided over the Python code, normal build. *sanitized*: "
             "the C core built with ASan + UBSan, the guided phase's corpus and then mutations of it (no "
@@ -309,13 +328,22 @@ def report() -> None:
                     f"{san['inputs']:,}",
                     f"{san['seconds']:.0f}",
                     "passed" if ok else "**failed**",
+                    f"{r.get('date_utc', fz['machine']['date_utc'])} {r.get('commit', '')}".strip(),
                 ]
             )
         lines.append(
             markdown_table(
-                ["target", "guided inputs", "corpus", "sanitized inputs", "sanitized s", "result"],
+                [
+                    "target",
+                    "guided inputs",
+                    "corpus",
+                    "sanitized inputs",
+                    "sanitized s",
+                    "result",
+                    "ran (UTC, commit)",
+                ],
                 rows,
-                "lrrrrl",
+                "lrrrrll",
             )
         )
     sk = data.get("soak")
