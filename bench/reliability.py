@@ -19,7 +19,8 @@ each in its own process:
    for CPython 3.11 on x86-64 Linux; not a dependency of servobus): without it this phase is
    skipped and the next one starts from no corpus;
 2. *sanitized*: the C core built with AddressSanitizer + UndefinedBehaviorSanitizer (the venv
-   ``.ci/sanitize`` builds: ``.venv-asan``, built first if it is missing), the sanitizer runtimes
+   ``.ci/sanitize --build-only`` builds: ``.venv-asan``, rebuilt from the tracked files at the start
+   of every fuzz run), the sanitizer runtimes
    preloaded and ``PYTHONMALLOC=malloc``, runs every corpus input and then mutations of them,
    ``--runs`` inputs in all (default 1,000,000). libFuzzer's coverage does not work in this process
    (gcc's libasan provides the coverage hooks in an uninstrumented Python, and atheris sees none), so
@@ -86,11 +87,13 @@ def _store(part: str, value: Any, headline: dict[str, Any]) -> None:
 _DONE = re.compile(r"Done (\d+) runs in (\d+) second")
 
 
-def _asan_python() -> Path:
+def _asan_python(*, build: bool = False) -> Path:
+    """The Python of the ASan + UBSan venv; ``build``: rebuilt first from the tracked files (its
+    servobus is a copy, not an editable install: one built before a change would fuzz the old code)."""
     venv = Path(os.environ.get("SERVOBUS_ASAN_VENV", ROOT / ".venv-asan"))
     python = venv / "bin" / "python"
-    if not python.exists():
-        subprocess.run(["bash", str(ROOT / ".ci" / "sanitize"), "--quick"], check=True)
+    if build or not python.exists():
+        subprocess.run(["bash", str(ROOT / ".ci" / "sanitize"), "--build-only"], check=True)
     return python
 
 
@@ -201,7 +204,7 @@ def fuzz(args: argparse.Namespace) -> dict[str, Any]:
     work = Path(args.corpus) if args.corpus else Path(tempfile.mkdtemp(prefix="servobus-fuzz-"))
     artifacts = Path(args.artifacts)
     artifacts.mkdir(parents=True, exist_ok=True)
-    _asan_python()  # build it once, before the workers start
+    _asan_python(build=True)  # build it once, from the code as it is now, before the workers start
     started = time.perf_counter()
     with ThreadPoolExecutor(args.jobs) as pool:
         futures = {
