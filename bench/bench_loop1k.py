@@ -536,6 +536,25 @@ def render_markdown(figures: dict[str, dict[str, Any]], info: dict[str, Any]) ->
         f"`loop1k_fd` >= {ON_TIME_TARGET} % on time. "
         + ("**Not met**: " + "; ".join(missed) + "." if missed else "Met."),
     ]
+    classic = figures.get("loop1k", {})
+    if classic.get("targets_missed") and classic.get("profile", {}).get("host"):
+        areas = {a["area"]: a["pct"] for a in classic["profile"]["host"]["by_area"]}
+        waiting = next((v for k, v in areas.items() if k.startswith("waiting")), 0.0)
+        syscalls = next((v for k, v in areas.items() if k.startswith("os.write")), 0.0)
+        wire_us = 1e6 / classic["bus_bound_hz"]
+        lines += [
+            "",
+            "Why, and what would close the gap: each classic bus's own cycle takes "
+            f"{wire_us:,.0f} µs of every 1,000 µs tick (its wire time and the motors' turnaround, the bound "
+            f"above), which leaves ~{1000 - wire_us:,.0f} µs for writing {classic['buses']} ptys, the tty "
+            "layer's hops to the device process and back, that process's own scheduling and the host's "
+            f"work; the replies took {classic['latency_p50_us']:,.0f} µs (p50) from send report to receipt. "
+            f"The host is not short of CPU for servobus itself ({classic['cpu_pct']:.0f} % of a core, "
+            f"{waiting:.0f} % of its samples waiting in epoll, {syscalls:.0f} % in pty system calls), and "
+            f"the device process takes {classic['device_cpu_pct']:.0f} % of the other core. Closing it "
+            "needs fewer hops per frame rather than a faster Bus: a kernel CAN socket (vcan or SocketCAN; "
+            "this machine's kernel has none) or one multi-channel adapter instead of a tty per bus.",
+        ]
     for key, f in figures.items():
         profile = f.get("profile")
         if not profile:
