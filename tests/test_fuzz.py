@@ -8,6 +8,7 @@ broke one are kept below as regression tests.
 
 from __future__ import annotations
 
+import base64
 from collections.abc import Iterator
 
 import pytest
@@ -18,7 +19,16 @@ import _fuzz
 from _fuzz import TARGETS
 
 # Inputs a fuzzer found, by target: each broke the target once (see the comment by it).
-REGRESSIONS: dict[str, list[bytes]] = {}
+REGRESSIONS: dict[str, list[bytes]] = {
+    # atheris, 2026-11-23: a reply stamped 0.0 (a virtual clock's first instant) was taken for an
+    # unstamped one and resolved a request sent at 0.0 sooner than min_reply_s allows.
+    "scheduler_intake": [
+        base64.b64decode(
+            "////l5MZk5MZAhkZJZeTGZMIGS6X+BX//+YZkQgZLpf4Ff//5uZd/ebm2peTGZMIAuoZGQIZGSX/////l5MZk+b95uZBQUFB"
+            "QUFB2peTGZMIAupBGRkCGRkl/////5eTGZOTGQIZGSWXkxmTCBkul/gV5ub95ubal5PebAgC6hkZAhkZJRkZApfm"
+        )
+    ],
+}
 
 
 @pytest.fixture(scope="module", autouse=True)

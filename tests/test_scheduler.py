@@ -94,6 +94,16 @@ def test_the_late_and_duplicate_windows_forget_expired_keys() -> None:
     assert len(scheduler._recent.replied) <= 64  # ~10 live in the window, pruned past 64
 
 
+def test_a_reply_stamped_at_a_virtual_clocks_first_instant_is_not_taken_for_an_unstamped_one() -> None:
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec], min_reply_s=0.0002)
+    request = scheduler.request(codec, ma.ReadStatus2())
+    scheduler.submit(request)
+    _send_all(scheduler, 0.0)  # sent at t = 0.0, as on a loop started at 0 (looptime)
+    assert scheduler.receive(_reply(1, t=0.0), 0.0).traffic is Traffic.UNSOLICITED
+    assert scheduler.receive(_reply(1, t=0.0003), 0.0003).request is request
+
+
 def test_replies_of_other_commands_or_motors_never_resolve_the_wrong_request() -> None:
     one, two = MA.bind(1), MA.bind(2)
     scheduler = Scheduler([one, two])

@@ -402,7 +402,8 @@ class Scheduler:
         if early is None:
             return None
         codec, frame = early
-        return self._ours(codec, _K_REPLY, request.key, frame, frame.timestamp or at)
+        # An unstamped early reply came after the request was handed over, at an unknown time: in time.
+        return self._ours(codec, _K_REPLY, request.key, frame, frame.timestamp or at + self.min_reply_s)
 
     def not_sent(self, request: Request, reason: str, now: float) -> None:
         """The transport dropped ``request``'s frame (stale, purged, ...): it fails."""
@@ -508,9 +509,8 @@ class Scheduler:
         waiting = self._pending.get(key) if key is not None else None
         if waiting:
             request = waiting[0]
-            # A reply cannot arrive before its request left plus the two frames' wire time (an
-            # unstamped frame is taken as it comes); a stream frame answers a read only if it came
-            # after the request left (the same fact, fresh).
+            # A reply cannot arrive before its request left plus the two frames' wire time; a stream
+            # frame answers a read only if it came after the request left (the same fact, fresh).
             if request.state is _SENDING and kind is _K_REPLY:
                 # It beat the transport's send report (a reader and a writer thread): judged when
                 # the report says when the request left.
@@ -521,9 +521,8 @@ class Scheduler:
                 return Received(_T_EARLY, frame, codec)
             sent_at = request.sent_at
             if kind is _K_REPLY:
-                fresh = (
-                    sent_at is None or not frame.timestamp or frame.timestamp >= sent_at + self.min_reply_s
-                )
+                # (an unstamped frame counts from ``now``, when it was taken in: 0.0 is no time)
+                fresh = sent_at is None or (frame.timestamp or now) >= sent_at + self.min_reply_s
             else:
                 fresh = sent_at is not None and frame.timestamp >= sent_at
             if request.state is _SENT and fresh:
