@@ -246,6 +246,8 @@ def fuzz(args: argparse.Namespace) -> dict[str, Any]:
         # A run over some targets updates theirs and keeps the others' last figures (each says when).
         before = _load()
         kept = before.get("fuzz", {}).get("targets", {})
+        for result in kept.values():  # (runs from before targets said when they ran: their run's date)
+            result.setdefault("date_utc", before["fuzz"].get("machine", {}).get("date_utc", ""))
         value["targets"] = {**kept, **targets}
         headline["fuzz_inputs_per_target"] = {
             **before.get("fuzz_inputs_per_target", {}),
@@ -331,7 +333,7 @@ def report() -> None:
                     f"{san['inputs']:,}",
                     f"{san['seconds']:.0f}",
                     "passed" if ok else "**failed**",
-                    f"{r.get('date_utc', fz['machine']['date_utc'])} {r.get('commit', '')}".strip(),
+                    f"{r.get('date_utc', '')} {r.get('commit', '')}".strip() or "-",
                 ]
             )
         lines.append(
@@ -421,8 +423,13 @@ FINDINGS = """
     queue without a freshness limit and reached the motor up to (n - 1) x `stale_after_s` after they
     were made; queued commands now fail `not_sent_stale` instead
     (`tests/test_soak.py::test_a_stalled_serial_port_under_cycles_delivers_no_stale_command`).
-* The fuzz targets found no input that breaks a promise (any that did would be in
-  `tests/test_fuzz.py`'s `REGRESSIONS`).
+* The fuzz targets found one input that broke a promise, in `scheduler_intake` (atheris, rerun after
+  the scheduler's hot-path changes; the bug was older): a reply stamped 0.0, a virtual clock's first
+  instant, was taken for an unstamped frame and resolved a request sent at 0.0 sooner than
+  `min_reply_s` allows. Fixed in e296f9e; the input is in `tests/test_fuzz.py`'s `REGRESSIONS`, and
+  `tests/test_scheduler.py::test_a_reply_stamped_at_a_virtual_clocks_first_instant_is_not_taken_for_an_unstamped_one`
+  pins it alone. Every target whose code this stop changed (codecs, scheduler, Bus) ran again after
+  the fix (rows with a commit); the four de-framers' last run is from before, their code unchanged.
 
 ## How to read these figures
 
