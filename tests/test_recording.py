@@ -33,7 +33,14 @@ def test_new_files_refuse_existing_ones_and_remove_only_their_own(tmp_path: Path
     forced = NewFiles(force=True)
     forced.open(old).write("overwritten")
     forced.discard()
-    assert old.read_text() == "overwritten"  # existed before: never removed
+    assert old.read_text() == "mine"  # a run that failed leaves an existing file whole
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["old.csv"]
+    kept = NewFiles(force=True)
+    kept.open(old).write("overwritten")
+    assert old.read_text() == "mine"  # not before the output is kept
+    kept.close()
+    assert old.read_text() == "overwritten"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["old.csv"]
 
 
 def test_telemetry_rows_and_writers() -> None:

@@ -6,8 +6,8 @@
   marking direction, so :class:`servobus.logs.FrameDecoder` tells requests from replies on reading.
 * :class:`TelemetryWriter` writes one row per decoded reply: ``time_s``, ``motor_id``, ``family``,
   ``reply`` and the reply's fields (:func:`servobus.logs.message_values`: units in the names).
-* :class:`NewFiles` opens outputs without overwriting what exists (unless told) and, on failure,
-  removes only the files it created.
+* :class:`NewFiles` opens outputs without overwriting what exists (unless told: then the old file is
+  replaced only when the new one is kept) and, on failure, removes only the files it created.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ import contextlib
 import csv
 import json
 import os
+import tempfile
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, TextIO
@@ -161,12 +162,17 @@ class TelemetryWriter:
 
 class NewFiles:
     """Output files opened for writing: an existing one only with ``force``; :meth:`discard` removes
-    the ones that did not exist before (never a file this object did not create)."""
+    the ones that did not exist before (never a file this object did not create).
+
+    With ``force``, an existing file is written as a temporary file beside it that replaces it when
+    :meth:`close` keeps the output: a run that fails (:meth:`discard`) leaves the old file whole.
+    """
 
     def __init__(self, *, force: bool = False) -> None:
         self.force = force
         self.created: list[Path] = []
         self._open: list[TextIO] = []
+        self._replacing: list[tuple[Path, Path]] = []  # (temporary file, the existing file it replaces)
 
     def check(self, paths: Iterable[Path]) -> None:
         """Refuse up front what :meth:`open` would refuse.
@@ -185,22 +191,33 @@ class NewFiles:
             FileExistsError: it exists and ``force`` is off.
             OSError: it cannot be created.
         """
-        existed = path.exists()
-        file = path.open("w" if self.force else "x", encoding="utf-8", newline="")
-        if not existed:
+        if self.force and path.exists():
+            fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+            self._replacing.append((Path(name), path))
+            file = open(fd, "w", encoding="utf-8", newline="")  # noqa: SIM115 - closed by close()
+        else:
+            file = path.open("x", encoding="utf-8", newline="")
             self.created.append(path)
         self._open.append(file)
         return file
 
     def close(self) -> None:
-        for file in self._open:
-            if not file.closed:
-                file.close()
+        """Close everything and keep it: the files written over existing ones replace them now."""
+        self._close()
+        for part, path in self._replacing:
+            os.replace(part, path)
+        self._replacing.clear()
 
     def discard(self) -> None:
-        """Close everything and remove the files this object created."""
-        self.close()
-        for path in self.created:
+        """Close everything and remove the files this object created; existing files stay as they were."""
+        self._close()
+        for path in [*self.created, *(part for part, _ in self._replacing)]:
             with contextlib.suppress(FileNotFoundError):
                 os.remove(path)
         self.created.clear()
+        self._replacing.clear()
+
+    def _close(self) -> None:
+        for file in self._open:
+            if not file.closed:
+                file.close()

@@ -101,7 +101,7 @@ def test_on_an_error_only_the_files_record_created_are_removed(
     args = ["record", "--sim", "1", "--duration", "0.1", "-o", str(new), "--log", str(old), "--force"]
     assert "no motor answered read_status2" in one_line_error(capsys, args, code=1)
     assert not new.exists()
-    assert old.exists()  # overwritten by consent (--force), but record did not create it: not removed
+    assert old.read_text() == "(0.0) can0 141#00 T\n"  # --force replaces it only with a kept recording
     assert "no motor answered" in one_line_error(
         capsys, ["record", "--sim", "1", "--duration", "0.05", "--log", str(tmp_path / "x.log")], code=1
     )

@@ -28,9 +28,10 @@ Polls every motor with a read (--poll, default read_status2: position, speed, cu
 Bus.cycle at --hz, and writes one row per reply: time_s, motor_id, family, reply and the reply's
 fields, units in the names (.csv or .jsonl by the suffix of -o). --log writes every frame, both
 directions, to a candump log (python-can), which `servobus decode` reads back. Reads only: no motor
-is commanded. Existing files are kept unless --force; on an error, only the files record created
-are removed. Without --duration it records until Ctrl-C (exit 0); Ctrl-C before --duration is
-up exits 130. Either way the files are kept, whole.
+is commanded. Existing files are kept unless --force, and even then an existing file is replaced
+only by a recording that is kept; on an error, only the files record created are removed.
+Without --duration it records until Ctrl-C (exit 0); Ctrl-C before --duration is up exits 130.
+Either way the files are kept, whole.
 
 \b
 Examples:
@@ -73,7 +74,7 @@ class Tally:
     help="Seconds to record [default: until Ctrl-C].",
 )
 @click.option("--poll", default="read_status2", show_default=True, help="The read command to poll.")
-@click.option("--force", is_flag=True, help="Overwrite existing files.")
+@click.option("--force", is_flag=True, help="Overwrite existing files (replaced when the recording is kept).")
 def record(
     conn: Connection,
     output: Path | None,
