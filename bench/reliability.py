@@ -220,46 +220,39 @@ def fuzz(args: argparse.Namespace) -> dict[str, Any]:
             for name in names
         }
         targets = {name: future.result() for name, future in futures.items()}
-    provenance = {"date_utc": machine_info()["date_utc"], "commit": source_state()["commit"]}
+    machine = machine_info()
+    provenance = {"date_utc": machine["date_utc"], "commit": source_state()["commit"]}
     for result in targets.values():
         result.update(provenance)
     if not args.corpus:
         shutil.rmtree(work, ignore_errors=True)
+    if not args.no_store:
+        # A run over some targets updates theirs and keeps the others' last figures (each says when).
+        before = _load().get("fuzz", {})
+        kept = before.get("targets", {})
+        for result in kept.values():  # (runs from before targets said when they ran: their run's date)
+            result.setdefault("date_utc", before.get("machine", {}).get("date_utc", ""))
+        targets = {**kept, **targets}
     value = {
         "targets": targets,
         "runs_asked": args.runs,
         "guided_runs_asked": args.guided_runs,
         "wall_s": round(time.perf_counter() - started, 1),
         "command": " ".join(["python bench/reliability.py", *sys.argv[1:]]),
-        "machine": machine_info(),
-    }
-    failed = [
-        n
-        for n, r in targets.items()
-        if not all(p.get("passed", True) for p in r.values() if isinstance(p, dict))
-    ]
-    headline = {
-        "fuzz_inputs_per_target": {n: r["sanitized"]["inputs"] for n, r in targets.items()},
-        "fuzz_failures": failed,
+        "machine": machine,
     }
     if not args.no_store:
-        # A run over some targets updates theirs and keeps the others' last figures (each says when).
-        before = _load()
-        kept = before.get("fuzz", {}).get("targets", {})
-        for result in kept.values():  # (runs from before targets said when they ran: their run's date)
-            result.setdefault("date_utc", before["fuzz"].get("machine", {}).get("date_utc", ""))
-        value["targets"] = {**kept, **targets}
-        headline["fuzz_inputs_per_target"] = {
-            **before.get("fuzz_inputs_per_target", {}),
-            **headline["fuzz_inputs_per_target"],
+        headline = {
+            "fuzz_inputs_per_target": {n: r["sanitized"]["inputs"] for n, r in sorted(targets.items())},
+            "fuzz_failures": sorted(n for n, r in targets.items() if not _passed(r)),
         }
-        headline["fuzz_failures"] = sorted(
-            n
-            for n, r in value["targets"].items()
-            if not all(p.get("passed", True) for p in r.values() if isinstance(p, dict))
-        )
         _store("fuzz", value, headline)
     return value
+
+
+def _passed(result: dict[str, Any]) -> bool:
+    """Whether every phase of one target's run passed."""
+    return all(phase.get("passed", True) for phase in result.values() if isinstance(phase, dict))
 
 
 # ---- soak ----
@@ -324,7 +317,6 @@ def report() -> None:
         for name, r in sorted(fz["targets"].items()):
             guided = r.get("guided", {})
             san = r["sanitized"]
-            ok = all(p.get("passed", True) for p in (guided, san))
             rows.append(
                 [
                     f"`{name}`",
@@ -332,7 +324,7 @@ def report() -> None:
                     r.get("corpus", 0),
                     f"{san['inputs']:,}",
                     f"{san['seconds']:.0f}",
-                    "passed" if ok else "**failed**",
+                    "passed" if _passed(r) else "**failed**",
                     f"{r.get('date_utc', '')} {r.get('commit', '')}".strip() or "-",
                 ]
             )
