@@ -38,6 +38,7 @@ from servobus.errors import ProtocolError
 from servobus.frame import Frame
 from servobus.metrics import LatencyWindow
 from servobus.protocols import BoundCodec, FrameKind, check_bus
+from servobus.protocols._bound import KIND_NOT_OURS, KIND_REPLY, KIND_REPORT, KIND_STREAM
 from servobus.protocols._message import Command, Reply
 
 __all__ = [
@@ -152,11 +153,7 @@ class _Recent:
 
 
 # Enum members as module globals for the hot paths: in Python 3.11 ``RequestState.SENT`` is a
-# metaclass attribute lookup (~50 ns, a dozen per exchange), a global is one dict read.
-_K_NOT_OURS = FrameKind.NOT_OURS
-_K_REPLY = FrameKind.REPLY
-_K_REPORT = FrameKind.REPORT
-_K_STREAM = FrameKind.STREAM
+# metaclass attribute lookup (~55 ns, several per exchange), a global is one dict read.
 _CANCELLED = S.CANCELLED
 _FAILED = S.FAILED
 _QUEUED = S.QUEUED
@@ -403,7 +400,7 @@ class Scheduler:
             return None
         codec, frame = early
         # An unstamped early reply came after the request was handed over, at an unknown time: in time.
-        return self._ours(codec, _K_REPLY, request.key, frame, frame.timestamp or at + self.min_reply_s)
+        return self._ours(codec, KIND_REPLY, request.key, frame, frame.timestamp or at + self.min_reply_s)
 
     def not_sent(self, request: Request, reason: str, now: float) -> None:
         """The transport dropped ``request``'s frame (stale, purged, ...): it fails."""
@@ -493,7 +490,7 @@ class Scheduler:
         """Classify ``frame``, resolve the request it answers, count it."""
         for codec in self._by_id.get(frame.arbitration_id, ()):
             kind, key = codec.classify(frame)
-            if kind is not _K_NOT_OURS:
+            if kind is not KIND_NOT_OURS:
                 return self._ours(codec, kind, key, frame, now)
         self._bus_counts["foreign"] += 1
         return Received(_T_FOREIGN, frame)
@@ -511,7 +508,7 @@ class Scheduler:
             request = waiting[0]
             # A reply cannot arrive before its request left plus the two frames' wire time; a stream
             # frame answers a read only if it came after the request left (the same fact, fresh).
-            if request.state is _SENDING and kind is _K_REPLY:
+            if request.state is _SENDING and kind is KIND_REPLY:
                 # It beat the transport's send report (a reader and a writer thread): judged when
                 # the report says when the request left.
                 if key in self._early:  # the same reply twice before the report
@@ -520,7 +517,7 @@ class Scheduler:
                 self._early[key] = (codec, frame)
                 return Received(_T_EARLY, frame, codec)
             sent_at = request.sent_at
-            if kind is _K_REPLY:
+            if kind is KIND_REPLY:
                 # (an unstamped frame counts from ``now``, when it was taken in: 0.0 is no time)
                 fresh = sent_at is None or (frame.timestamp or now) >= sent_at + self.min_reply_s
             else:
@@ -541,7 +538,7 @@ class Scheduler:
                     recent.prune(now)
                 counts = self.motor_counts[id(codec)]
                 counts["replies"] += 1
-                if kind is _K_REPLY:
+                if kind is KIND_REPLY:
                     traffic = _T_REPLY
                 else:
                     traffic = Traffic(kind.value)
@@ -549,7 +546,7 @@ class Scheduler:
                 if sent_at is not None:
                     self.motor_latency[id(codec)].add((frame.timestamp or now) - sent_at)
                 return Received(traffic, frame, codec, reply, request)
-        if kind is _K_STREAM or kind is _K_REPORT:
+        if kind is KIND_STREAM or kind is KIND_REPORT:
             self._count(codec, kind.value)
             return Received(Traffic(kind.value), frame, codec, reply)
         traffic = self._unmatched(key, now)

@@ -29,7 +29,15 @@ from typing import Any
 from servobus.core import HollowTransparentDeframer, ModbusRtuDeframer, crc16_modbus
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
-from servobus.protocols._bound import EXTENDED, Broadcast, CodecBase, FrameKind, frame_key
+from servobus.protocols._bound import (
+    EXTENDED,
+    KIND_NOT_OURS,
+    KIND_REPLY,
+    Broadcast,
+    CodecBase,
+    FrameKind,
+    frame_key,
+)
 from servobus.protocols._fast import Slow, maker
 from servobus.protocols._message import Command, Reply
 from servobus.protocols.hollow.codec import decode_reply
@@ -137,12 +145,6 @@ def _fd_decoder(model: HollowModel) -> Callable[[bytes], FdReply]:
         )
 
     return decode
-
-
-# FrameKind members as globals: classify runs per frame, and in Python 3.11 an Enum member
-# lookup (``FrameKind.REPLY``) is a metaclass call.
-_NOT_OURS = FrameKind.NOT_OURS
-_REPLY = FrameKind.REPLY
 
 
 class HollowCodec(CodecBase):
@@ -272,20 +274,20 @@ class HollowCodec(CodecBase):
     def classify(self, frame: Frame) -> tuple[FrameKind, Hashable | None]:
         """REPLY for a received reply naming this motor (by payload on CAN, by address on Modbus)."""
         if not frame.is_rx or frame.is_extended_id or frame.is_serial != (self.framing is not None):
-            return _NOT_OURS, None
+            return KIND_NOT_OURS, None
         data = frame.data
         if self.link == "modbus":
             if frame.arbitration_id == self.motor_id and data:
-                return _REPLY, frame_key(self.motor_id, data[0] & 0x7F)
-            return _NOT_OURS, None
+                return KIND_REPLY, frame_key(self.motor_id, data[0] & 0x7F)
+            return KIND_NOT_OURS, None
         if frame.arbitration_id != self.host_id:
-            return _NOT_OURS, None
+            return KIND_NOT_OURS, None
         if frame.is_fd or frame.is_serial:
             if len(data) == FD_PAYLOAD_SIZE and data[15] == self.motor_id:
-                return _REPLY, self._key
+                return KIND_REPLY, self._key
         elif len(data) in (6, 8) and data[0] == self.motor_id:
-            return _REPLY, self._key
-        return _NOT_OURS, None
+            return KIND_REPLY, self._key
+        return KIND_NOT_OURS, None
 
     def decode(self, frame: Frame) -> Reply:
         """The typed reply in ``frame``.

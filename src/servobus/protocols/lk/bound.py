@@ -19,6 +19,8 @@ from typing import Any
 from servobus.errors import ProtocolError
 from servobus.frame import Frame, classic_request
 from servobus.protocols._bound import (
+    KIND_NOT_OURS,
+    KIND_REPLY,
     Broadcast,
     CodecBase,
     FrameKind,
@@ -152,12 +154,6 @@ def _fast_encoders(model: LkModel) -> dict[type, Callable[[Any], bytes]]:
     }
 
 
-# FrameKind members as globals: classify runs per frame, and in Python 3.11 an Enum member
-# lookup (``FrameKind.REPLY``) is a metaclass call.
-_NOT_OURS = FrameKind.NOT_OURS
-_REPLY = FrameKind.REPLY
-
-
 class LkCodec(CodecBase):
     """One LK motor on CAN. Build it with :func:`bind` (or ``FAMILY.bind``)."""
 
@@ -255,14 +251,14 @@ class LkCodec(CodecBase):
     def classify(self, frame: Frame) -> tuple[FrameKind, Hashable | None]:
         """REPLY for a received frame on this motor's reply identifier, else NOT_OURS."""
         if frame.arbitration_id != self._reply_id or not frame.is_rx or frame.is_extended_id or frame.is_fd:
-            return _NOT_OURS, None
+            return KIND_NOT_OURS, None
         data = frame.data
         if not data:
-            return _REPLY, None
+            return KIND_REPLY, None
         code = data[0]
         if code in _VALUE_ECHO_CODES:
-            return _REPLY, echo_key(self._reply_base | code, data)
-        return _REPLY, self._reply_base | self._aliases.get(code, code)
+            return KIND_REPLY, echo_key(self._reply_base | code, data)
+        return KIND_REPLY, self._reply_base | self._aliases.get(code, code)
 
     def decode(self, frame: Frame) -> Reply:
         """The typed reply in ``frame``.

@@ -23,6 +23,10 @@ from typing import Any
 from servobus.errors import ProtocolError
 from servobus.frame import Frame, classic_request
 from servobus.protocols._bound import (
+    KIND_NOT_OURS,
+    KIND_REPLY,
+    KIND_REPORT,
+    KIND_STREAM,
     Broadcast,
     CodecBase,
     FrameKind,
@@ -168,13 +172,6 @@ def _class_plan(cls: type, revision: Revision) -> tuple[bool, Callable[[Any], by
 
 
 _PLANS: dict[Revision, dict[type, tuple[bool, Callable[[Any], bytes] | None]]] = {}  # by revision, then class
-
-# FrameKind members as globals: classify runs per frame, and in Python 3.11 an Enum member
-# lookup (``FrameKind.REPLY``) is a metaclass call.
-_NOT_OURS = FrameKind.NOT_OURS
-_REPLY = FrameKind.REPLY
-_REPORT = FrameKind.REPORT
-_STREAM = FrameKind.STREAM
 
 
 class MyActuatorCodec(CodecBase):
@@ -356,28 +353,28 @@ class MyActuatorCodec(CodecBase):
         ``(REPLY, None)`` is a frame on this motor's reply identifier that can answer nothing (empty).
         """
         if not frame.is_rx or frame.is_extended_id or frame.is_fd or frame.is_serial is not self._rs485:
-            return _NOT_OURS, None
+            return KIND_NOT_OURS, None
         ident = frame.arbitration_id
         data = frame.data
         if ident == self._reply_id:
             if not data:
-                return _REPLY, None
+                return KIND_REPLY, None
             code = data[0]
             if code in self._streams:
-                return _STREAM, self._reply_base | code
+                return KIND_STREAM, self._reply_base | code
             if code == _ERROR_REPORT_CODE and self._reports:
-                return _REPORT, self._reply_base | code
+                return KIND_REPORT, self._reply_base | code
             if code in _VALUE_ECHO_CODES:
-                return _REPLY, echo_key(self._reply_base | code, data)
-            return _REPLY, self._reply_base | code
+                return KIND_REPLY, echo_key(self._reply_base | code, data)
+            return KIND_REPLY, self._reply_base | code
         if ident == self._motion_reply_id:
-            return _REPLY, self._motion_key
+            return KIND_REPLY, self._motion_key
         # 0x79 replies come on an identifier every motor shares, so one 0x79 exchange at a time per
         # bus; and only a revision that has 0x79 claims them.
         shared = RS485_BROADCAST_ID if self._rs485 else ID_SETTING_ID
         if ident == shared and data and data[0] == ID_SETTING_CODE and self._has_id_setting:
-            return _REPLY, frame_key(shared, ID_SETTING_CODE)
-        return _NOT_OURS, None
+            return KIND_REPLY, frame_key(shared, ID_SETTING_CODE)
+        return KIND_NOT_OURS, None
 
     def decode(self, frame: Frame) -> Reply:
         """The typed reply in ``frame`` (a frame :meth:`classify` did not call NOT_OURS).
