@@ -65,7 +65,7 @@ def test_a_cycle_returns_every_reply_in_order_and_a_silent_motor_only_costs_its_
     assert all(isinstance(r, ma.StatusReply) for i, r in enumerate(results) if i != 4)
 
 
-def test_a_cycle_wakes_once_and_each_requests_outcome_is_observable_on_its_own() -> None:
+def test_each_request_of_a_cycle_has_its_own_observable_outcome() -> None:
     motors = _motors(3)
     motors[1].unresponsive = True
 

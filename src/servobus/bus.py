@@ -653,6 +653,8 @@ class Bus:
         """
         # Every command is encoded (and checked) before the first one is queued; then one pump.
         items = list(items)
+        if not items:
+            return []
         if self._loop is None:
             raise RuntimeError(f"{self.name}: use the Bus inside 'async with'")
         tick = _Tick(self._loop.create_future(), len(items))
@@ -660,8 +662,6 @@ class Bus:
             (m, self._prepare(m, c, timeout_s=timeout_s, retries=0, context=_Slot(tick, i)))
             for i, (m, c) in enumerate(items)
         ]
-        if not prepared:
-            return []
         for motor, request in prepared:
             self._enqueue(motor, request)
         self._pump()
