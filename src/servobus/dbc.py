@@ -591,10 +591,8 @@ def _muxed(layouts: tuple[Layout, ...]) -> Layout:
 def _iq(slot: Any, motor_type: Any, limits: tuple[int, int] | None = None) -> Any:
     """The field an LK ``IqSlot`` is for ``motor_type``: amperes (MF, MG) or raw counts under the slot's
     name for the type, within ``limits`` (default: the slot's); None if the type does not carry it."""
-    from servobus.protocols.lk.model import iq_field
-
     lo, hi = limits if limits is not None else slot.limits
-    amps = iq_field(slot.amps_name, motor_type, lo, hi)
+    amps = slot.field(motor_type, (lo, hi))
     if amps is not None:
         return amps
     name = slot.counts_names.get(motor_type)
@@ -708,12 +706,14 @@ def lk_fields(cls: type, code: int | None, model: Any) -> tuple[tuple[Any, ...],
         return [field] * count if isinstance(field, _NotCarried) else _items(field, count)
 
     direction = EnumByte("direction", states.SpinDirection)
-    # The status-2 shape's DATA[2..3] range depends on the command byte too (``replies.torque_range``).
+    # The status-2 shape's DATA[2..3] depends on the command byte too: what it is (0xA0's power on every
+    # motor type, ``replies.status2_slot``) and its range (``replies.torque_range``).
     status2_iq = rep.torque_range(model.revision, motor_type, code) if code is not None else None
+    status2_slot = rep.status2_slot(code) if code is not None else rep.REPLY_IQ
     table: dict[type, tuple[Any, ...] | Mux] = {
         rep.Status2Reply: (
             (1, rep.TEMPERATURE),
-            (2, iq(rep.REPLY_IQ, status2_iq)),
+            (2, iq(status2_slot, status2_iq)),
             (4, rep.REPLY_SPEED),
             (6, encoder("encoder_counts")),
         ),

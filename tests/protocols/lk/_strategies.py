@@ -95,9 +95,10 @@ def status2(draw: st.DrawFn) -> lk.Status2Reply:
         "speed_dps": draw(floats(*INT16)),
         "encoder_counts": draw(ints(0, (1 << min(bits, 16)) - 1)),
     }
-    if motor_type is MotorType.MS:
-        # Round trips decode under V2.36 (``model_for``), where MS power is -1000..1000 ([001] §3).
-        return lk.Status2Reply(**common, power_counts=draw(ints(-1000, 1000)))
+    if motor_type is MotorType.MS or common["command"] == 0xA0:
+        # Power, unitless: the raw int16 on both revisions (spec A24); in the 0xA0 reply on every motor
+        # type (spec §4.9).
+        return lk.Status2Reply(**common, power_counts=draw(ints(*INT16)))
     if motor_type is MotorType.MH:
         return lk.Status2Reply(**common, iq_counts=draw(ints(*INT16)))
     return lk.Status2Reply(**common, current_a=draw(amps_within(motor_type, *INT16)))

@@ -267,15 +267,6 @@ def test_reply_fields_are_validated(factory: Any, message: str) -> None:
 @pytest.mark.parametrize(
     ("revision", "motor_type", "command", "counts", "message"),
     [
-        # [001] §3: "MS motor power range -1000~1000".
-        (
-            Revision.V2_36,
-            MotorType.MS,
-            0x9C,
-            1001,
-            r"power_counts=1001 \(1001 counts\) is outside \[-1000, 1000\]",
-        ),
-        (Revision.V2_36, MotorType.MS, 0xA0, -1001, r"power_counts=-1001 .* outside \[-1000, 1000\]"),
         # [003] §4.14 / §5: iq "Range:-2048~2048" in the 0x9C and 0xA1..0xA8 replies.
         (
             Revision.V2_35,
@@ -292,8 +283,6 @@ def test_reply_fields_are_validated(factory: Any, message: str) -> None:
             r"current_a=.* \(-2049 counts\) is outside \[-2048, 2048\]",
         ),
         (Revision.V2_35, MotorType.MH, 0xA1, 4000, r"iq_counts=4000 .* outside \[-2048, 2048\]"),
-        # [003] §5.1: 0xA0 reply "Motor Power (int16_t type, Range:-850~850)".
-        (Revision.V2_35, MotorType.MS, 0xA0, 851, r"power_counts=851 .* outside \[-850, 850\]"),
     ],
 )
 def test_status2_torque_field_outside_the_stated_range_is_a_protocol_error(

@@ -18,6 +18,9 @@ Resolutions of the spec's open points (spec §10, §8.2):
 * Torque current: MF 33/4096 A, MG 66/4096 A per count on both revisions ([003]'s "±32 A" for MG
   is read as a rounding). MH has no stated scale: its values stay raw (``iq_counts``). MS reports
   power (``power_counts``, unitless) in status-2 replies and has no torque loop.
+* Power: the 0xA0 reply's DATA[2..3] is the output power on every motor type (§4.9, A20), so it is
+  ``power_counts`` there even for MF/MG/MH. Power is kept as the raw int16 without a range check on
+  both revisions (A24: the manuals state -1000..1000 and -850..850, and motors report beyond them).
 * 0xA8 maxSpeed: 1 dps/LSB (text of both manuals, A2/A6); worked examples W5/W6 label the same bytes
   0.01 dps/LSB — bytes agree, only the reading differs.
 * 0x9B on V2.35: a reply whose DATA[0] is 0x9A is accepted (A4; ``ids.request_keys``).

@@ -155,22 +155,28 @@ class IqSlot:
     MF and MG give it in amperes (``amps_name``); the motor types in ``counts_names`` give it as raw
     counts under a name of their own (MH ``iq_counts``: scale unknown; MS ``power_counts``: power,
     unitless); any other motor type is refused. Exactly the one field that belongs to the motor
-    type is set, the others are None, so each value has one representation.
+    type is set, the others are None, so each value has one representation. A slot with
+    ``in_amps=False`` is never a current (the 0xA0 reply's power, spec §4.9): every motor type
+    gives it as raw counts.
     """
 
     amps_name: str
     counts_names: Mapping[MotorType, str]
     max_counts: int
     min_counts: int | None = None  # default: -max_counts
+    in_amps: bool = True
 
     @property
     def limits(self) -> tuple[int, int]:
         """The int16 count range."""
         return (-self.max_counts if self.min_counts is None else self.min_counts, self.max_counts)
 
-    def field(self, motor_type: MotorType) -> ScaledField | None:
-        """The field in amperes for ``motor_type``, or None if it has no ampere scale."""
-        return iq_field(self.amps_name, motor_type, *self.limits)
+    def field(self, motor_type: MotorType, limits: tuple[int, int] | None = None) -> ScaledField | None:
+        """The field in amperes for ``motor_type`` within ``limits`` (counts; default: the slot's), or
+        None if it has no ampere scale."""
+        if not self.in_amps:
+            return None
+        return iq_field(self.amps_name, motor_type, *(limits if limits is not None else self.limits))
 
     def to_counts(self, motor_type: MotorType, values: Mapping[str, float | int | None]) -> int:
         """Validate ``values`` (field name -> value) for ``motor_type`` and return the int16 count.

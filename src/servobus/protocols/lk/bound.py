@@ -47,7 +47,14 @@ from servobus.protocols.lk.ids import (
     request_id,
 )
 from servobus.protocols.lk.model import LkModel, Revision, encoder_max_count
-from servobus.protocols.lk.replies import REPLY_IQ, REPLY_SPEED, STATUS2_CODES, TEMPERATURE, Status2Reply
+from servobus.protocols.lk.replies import (
+    REPLY_SPEED,
+    STATUS2_CODES,
+    TEMPERATURE,
+    Status2Reply,
+    status2_slot,
+    torque_range,
+)
 from servobus.protocols.lk.states import BrakeAction
 
 __all__ = ["LINKS", "LkCodec", "bind", "broadcast"]
@@ -83,23 +90,40 @@ _V235_ALIASES = {0x9B: 0x9A}  # spec A4: [003] prints the 0x9B reply's DATA[0] a
 _VALUE_ECHO_CODES = frozenset({0x34, 0xC1})
 
 
-def _status2_decoder(model: LkModel) -> Callable[[bytes], Status2Reply]:
-    """Status 2 (``<BbhhH``: 0x9C, 0xA0..0xA8) without re-validation; :class:`Slow` when in doubt."""
+def _status2_decoders(model: LkModel) -> dict[int, Callable[[bytes], Status2Reply]]:
+    """The fast status-2 decoder of each command byte (0x9C, 0xA0..0xA8).
+
+    What DATA[2..3] is (iq in A, raw iq, power) depends on the motor type and the command (0xA0's is
+    power on every type), its decode-time limits on the revision too (``torque_range``): codes that
+    agree on both share one decoder.
+    """
+    groups: dict[tuple[int, tuple[int, int] | None], set[int]] = {}
+    for code in sorted(STATUS2_CODES):
+        key = (id(status2_slot(code)), torque_range(model.revision, model.motor_type, code))
+        groups.setdefault(key, set()).add(code)
+    decoders: dict[int, Callable[[bytes], Status2Reply]] = {}
+    for codes in groups.values():
+        decoder = _status2_decoder(model, frozenset(codes))
+        decoders.update(dict.fromkeys(codes, decoder))
+    return decoders
+
+
+def _status2_decoder(model: LkModel, codes: frozenset[int]) -> Callable[[bytes], Status2Reply]:
+    """Status 2 (``<BbhhH``) for command bytes ``codes`` that agree on what DATA[2..3] is and its
+    limits, without re-validation; :class:`Slow` when in doubt."""
     unpack = struct.Struct("<BbhhH").unpack
-    iq = REPLY_IQ.field(model.motor_type)
-    counts_name = REPLY_IQ.counts_names.get(model.motor_type)
-    iq_name = "current_a" if iq is not None else counts_name
+    code = min(codes)
+    slot = status2_slot(code)
+    iq = slot.field(model.motor_type)
+    counts_name = slot.counts_names.get(model.motor_type)
+    iq_name = slot.amps_name if iq is not None else counts_name
     if iq_name is None:
         raise ValueError(f"no status-2 layout for {model.motor_type.name}")
-    # The decode-time limits of the torque/power field differ by revision, motor type and command
-    # (V2.35 ±2048, MS power ±1000, V2.35 0xA0 ±850): the fast path takes the window every one of
-    # them allows and leaves the rest to the full decoder.
-    iq_lo, iq_hi = max(REPLY_IQ.limits[0], -850), min(REPLY_IQ.limits[1], 850)
+    iq_lo, iq_hi = torque_range(model.revision, model.motor_type, code) or slot.limits
     cpu = iq.counts_per_unit if iq is not None else None
     t_lo, t_hi = TEMPERATURE.limits
     s_lo, s_hi = REPLY_SPEED.limits
     e_hi = encoder_max_count(model.encoder_bits)
-    codes = STATUS2_CODES
     make = maker(
         Status2Reply,
         ("command", "motor_type", "encoder_bits", "temperature_c", "speed_dps", "encoder_counts", iq_name),
@@ -190,8 +214,7 @@ class LkCodec(CodecBase):
         self.request_ids = frozenset({self._request_id})
         self.reply_ids = frozenset({self._reply_id})
         self.shared_ids = frozenset({MULTI_MOTOR_ID}) if model.revision is Revision.V2_35 else frozenset()
-        status2 = _status2_decoder(model)
-        self._fast: dict[int, Callable[[bytes], Any]] = dict.fromkeys(STATUS2_CODES, status2)
+        self._fast: dict[int, Callable[[bytes], Any]] = dict(_status2_decoders(model))
         self._encoders = _fast_encoders(model)
 
     def _check(self, command: Command) -> LkCommand:

@@ -10,9 +10,10 @@ suffix. Values whose scale depends on the motor type or encoder width carry ``mo
 
 Ranges are the wire types' ranges, narrowed where a manual states the range of the reported value:
 encoder counts must fit the declared encoder width (so a wrong ``encoder_bits`` shows up as a
-ProtocolError), and DATA[2..3] of the status-2 shape has the ranges of :func:`torque_range` (MS power
-±1000 in V2.36; iq ±2048 and 0xA0 power ±850 in V2.35). V2.36 states no range for a reported iq, so
-there it may go beyond the nominal ±2048 up to the int16 limits.
+ProtocolError), and DATA[2..3] of the status-2 shape has the ranges of :func:`torque_range`: iq ±2048
+in V2.35. V2.36 states no range for a reported iq, so there it may go beyond the nominal ±2048 up to
+the int16 limits. Power (the 0xA0 reply on every motor type, MS's status 2) is the raw int16 on both
+revisions (spec A24): the manuals give it three different ranges, and motors report beyond them.
 """
 
 from __future__ import annotations
@@ -47,6 +48,7 @@ from servobus.protocols.lk.states import BrakeState, ErrorState, ErrorStateV235,
 
 __all__ = [
     "ECHO_CODES",
+    "OPEN_LOOP_REPLY",
     "STATUS2_CODES",
     "BrakeReply",
     "EchoReply",
@@ -55,12 +57,14 @@ __all__ = [
     "Status2Reply",
     "Status3Reply",
     "Status3ReplyV235",
+    "status2_slot",
     "torque_range",
 ]
 
 ECHO_CODES = frozenset({0x80, 0x81, 0x88, 0x95})
 STATUS1_CODES = frozenset({0x9A, 0x9B})
 STATUS2_CODES = frozenset({0x9C, 0xA0, 0xA1, 0xA2, 0xA3, 0xA4, 0xA5, 0xA6, 0xA7, 0xA8})
+OPEN_LOOP_CODE = 0xA0
 
 TEMPERATURE = IntField("temperature_c", size=1, signed=True)  # int8, 1 °C/LSB (spec §2, A25)
 VOLTAGE = ScaledField("voltage_v", size=2, signed=True, counts_per_unit=100)  # V2.36 int16 0.01 V
@@ -74,6 +78,16 @@ REPLY_IQ = IqSlot(
     max_counts=0x7FFF,
     min_counts=-0x8000,
 )
+# Spec §4.9, A20, A24: the 0xA0 reply's DATA[2..3] is the output power, unitless, on every motor
+# type ([003]'s table labels the bytes "Torque current", its text says "Motor Power"; [001]: MS only,
+# power): the raw int16, never amperes.
+OPEN_LOOP_REPLY = IqSlot(
+    "current_a",
+    dict.fromkeys(MotorType, "power_counts"),
+    max_counts=0x7FFF,
+    min_counts=-0x8000,
+    in_amps=False,
+)
 # Spec §4.4 [001]: phase currents MG 66/4096, MF 33/4096 A/LSB (= the iq scales); MS "no effect",
 # MH not stated: raw.
 PHASE = IqSlot(
@@ -85,18 +99,26 @@ PHASE = IqSlot(
 PHASE_V235 = ScaledField("currents_a", size=2, signed=True, counts_per_unit=64)  # [003]: 1/64 A/LSB
 
 
-def torque_range(revision: Revision, motor_type: MotorType, command: int) -> tuple[int, int] | None:
-    """The stated count range of the status-2 shape's DATA[2..3] (iq or MS power), or None if unstated.
+def status2_slot(command: int) -> IqSlot:
+    """What the status-2 shape's DATA[2..3] is in the reply to ``command``: 0xA0's power
+    (:data:`OPEN_LOOP_REPLY`, raw counts on every motor type), else :data:`REPLY_IQ` (spec §8.2)."""
+    return OPEN_LOOP_REPLY if command == OPEN_LOOP_CODE else REPLY_IQ
 
-    * V2.36, MS: output power -1000..1000 ([001] §3, 0x9C reply: "MS motor power range -1000~1000").
-    * V2.35, 0xA0: motor power -850..850 ([003] §5.1, 0xA0 reply: "Motor Power ... Range:-850~850").
-    * V2.35, any other: iq -2048..2048 ([003] §4.14 0x9C and §5 0xA1..0xA8 replies: "Range:-2048~2048").
-    * V2.36, MF/MH/MG: not stated (only the resolution), so the int16 range.
+
+def torque_range(revision: Revision, motor_type: MotorType, command: int) -> tuple[int, int] | None:
+    """The count range a status-2 reply's DATA[2..3] is checked against, or None for the int16 range.
+
+    * Power, unitless (the 0xA0 reply on every motor type, spec §4.9/A20; MS's status 2): None. The
+      manuals give it three ranges ([001] 0x9C reply -1000..1000, 0xA0 request -850..850, [003] 0xA0
+      reply -850..850) and no unit; spec A24 keeps the raw int16. Motors do report beyond them
+      (issue 24: V2.35 ``A0 EC C2 FB 29 FE 34 3A``, power -1086).
+    * V2.35, iq: -2048..2048 ([003] §4.14 0x9C and §5 0xA1..0xA8 replies: "Range:-2048~2048").
+    * V2.36, iq (MF/MH/MG): not stated (only the resolution), so the int16 range.
     """
+    if command == OPEN_LOOP_CODE or motor_type is MotorType.MS:
+        return None
     if revision is Revision.V2_35:
-        return (-850, 850) if command == 0xA0 else (-2048, 2048)
-    if motor_type is MotorType.MS:
-        return (-1000, 1000)
+        return (-2048, 2048)
     return None
 
 
@@ -104,7 +126,8 @@ def _check_torque_range(data: bytes, model: LkModel, what: str) -> None:
     limits = torque_range(model.revision, model.motor_type, data[0])
     counts = _i16(data, 2)
     if limits is not None and not limits[0] <= counts <= limits[1]:
-        named = [(k, v) for k, v in REPLY_IQ.from_counts(model.motor_type, counts).items() if v is not None]
+        values = status2_slot(data[0]).from_counts(model.motor_type, counts)
+        named = [(k, v) for k, v in values.items() if v is not None]
         name, value = named[0] if named else ("iq_counts", counts)
         raise ProtocolError(
             f"{what}: {name}={value!r} ({counts} counts) is outside [{limits[0]}, {limits[1]}] counts "
@@ -255,7 +278,8 @@ class Status2Reply(LkReply):
 
     Also the reply of each motor to the 0x280 multi-motor frame (command 0xA1, on 0x140+ID).
     DATA[2..3] depends on the motor type (spec §8.2): exactly one of ``current_a`` (MF, MG),
-    ``power_counts`` (MS) or ``iq_counts`` (MH) is set.
+    ``power_counts`` (MS) or ``iq_counts`` (MH) is set. In the 0xA0 (open loop) reply it is the
+    output power on every motor type (spec §4.9, A20): ``power_counts`` is set, whatever the type.
 
     Attributes:
         command: 0x9C or 0xA0..0xA8.
@@ -265,7 +289,8 @@ class Status2Reply(LkReply):
         speed_dps: motor speed, 1 dps/LSB.
         encoder_counts: encoder position (uint16), 0..2**encoder_bits - 1 (18-bit: 0..65535).
         current_a: MF/MG torque current iq in A (MF 33/4096, MG 66/4096 A/LSB).
-        power_counts: MS output power, unitless ([001]: -1000..1000).
+        power_counts: output power as the raw int16, unitless (MS; every motor in the 0xA0 reply).
+            The manuals' ranges (-1000..1000, -850..850) are not enforced (spec A24).
         iq_counts: MH iq as raw counts (scale not stated, A23).
     """
 
@@ -290,7 +315,12 @@ class Status2Reply(LkReply):
 
     def _iq_counts(self) -> int:
         values = {"current_a": self.current_a, "power_counts": self.power_counts, "iq_counts": self.iq_counts}
-        return REPLY_IQ.to_counts(self.motor_type, values)
+        if self.command != OPEN_LOOP_CODE:
+            return REPLY_IQ.to_counts(self.motor_type, values)
+        try:
+            return OPEN_LOOP_REPLY.to_counts(self.motor_type, values)
+        except ValueError as exc:
+            raise ValueError(f"0xA0 reply (DATA[2..3] is power, spec §4.9): {exc}") from None
 
     @property
     def encoder_deg(self) -> float:
@@ -319,7 +349,7 @@ class Status2Reply(LkReply):
             temperature_c=TEMPERATURE.decode(data, 1),
             speed_dps=REPLY_SPEED.decode(data, 4),
             encoder_counts=_u16(data, 6),
-            **REPLY_IQ.from_counts(model.motor_type, _i16(data, 2)),
+            **status2_slot(command).from_counts(model.motor_type, _i16(data, 2)),
         )
 
 

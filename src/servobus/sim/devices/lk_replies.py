@@ -20,7 +20,7 @@ from servobus.protocols.lk import (
     MotorType,
     Revision,
 )
-from servobus.protocols.lk.replies import torque_range
+from servobus.protocols.lk.replies import status2_slot, torque_range
 from servobus.sim.devices.lk_state import AngleFrame, amps_per_count, single_turn_period_deg
 from servobus.sim.plant import Plant
 
@@ -67,11 +67,13 @@ def status2(code: int, model: LkModel, plant: Plant, *, encoder_counts: int) -> 
     """The status-2 shape (spec §8.1): temperature, iq (MS: power), motor speed, encoder."""
     motor_type = model.motor_type
     apc = amps_per_count(motor_type, plant.params)
-    # The manuals' stated range of the reply's iq / MS power (``torque_range``), else the int16 range.
+    # The manuals' stated range of the reply's iq (``torque_range``), else the int16 range.
     limits = torque_range(model.revision, motor_type, code) or _INT16
     counts = int(_clamp(round(plant.current_a / apc), *limits))
-    # Exactly the one DATA[2..3] field the motor type has (spec §8.2).
-    current_a = counts * lk.IQ_AMPS_PER_COUNT[motor_type] if motor_type in lk.IQ_AMPS_PER_COUNT else None
+    # Exactly the one DATA[2..3] field the motor type has (spec §8.2); the 0xA0 reply's is power on
+    # every motor type (spec §4.9): the plant's current in the counts 0xA0 drove it with.
+    slot = status2_slot(code)
+    values = slot.from_counts(motor_type, counts)
     return lk.Status2Reply(
         command=code,
         motor_type=motor_type,
@@ -79,10 +81,14 @@ def status2(code: int, model: LkModel, plant: Plant, *, encoder_counts: int) -> 
         temperature_c=_temperature(plant),
         speed_dps=_clamp(round(plant.speed_dps * plant.params.gear_ratio), *_INT16),
         encoder_counts=encoder_counts,
-        current_a=current_a,
-        power_counts=counts if motor_type is MotorType.MS else None,
-        iq_counts=counts if motor_type is MotorType.MH else None,
+        current_a=values.get("current_a"),
+        power_counts=_int_or_none(values.get("power_counts")),
+        iq_counts=_int_or_none(values.get("iq_counts")),
     )
+
+
+def _int_or_none(value: float | int | None) -> int | None:
+    return None if value is None else int(value)
 
 
 def status3(model: LkModel, plant: Plant) -> LkReply:
