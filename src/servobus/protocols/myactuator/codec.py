@@ -305,10 +305,16 @@ def _decode_in(
     error = next((e for e in errors if not isinstance(e, LayoutMismatch)), errors[0])
     if not isinstance(error, LayoutMismatch):
         # A value outside this revision's range may be another revision's frame read with the wrong
-        # layout (a V4.3 0x94 uint16 in DATA[6..7] reads as a V4.4 int32 of 655.36° and up): say so.
+        # layout (a V4.3 0x94 uint16 in DATA[6..7] reads as a V4.4 int32 of 655.36° and up): say so,
+        # naming both revisions, so a motor bound with the wrong one is told apart from bad bytes.
         other = _other_revision_reading(layouts, data, revision)
         if other is not None:
-            raise ProtocolError(f"{error.message}; looks like a {other} frame", raw=data, command=data[0])
+            raise ProtocolError(
+                f"{error.message}; looks like a {other} frame "
+                f"(revision mismatch: decoded as {revision_names(frozenset({revision}))})",
+                raw=data,
+                command=data[0],
+            )
     raise error
 
 
