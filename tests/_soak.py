@@ -54,7 +54,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from servobus.bus import Bus, Motor, MotorStatus
-from servobus.errors import MotorTimeout, TransportError
+from servobus.errors import MotorBusy, MotorOffline, MotorTimeout, ProtocolError, TransportError
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
 from servobus.scheduler import Request
@@ -256,9 +256,11 @@ class _Soak:
         self.open.pop(id(record), None)
         if future.cancelled():
             record.outcome = "cancelled"
-        elif isinstance(error := future.exception(), MotorTimeout):
+        elif isinstance(error := future.exception(), MotorOffline | MotorBusy):
+            record.outcome = "skipped"  # cycle() did not wait for it (an offline motor's may be a probe)
+        elif isinstance(error, MotorTimeout):
             record.outcome = "timed_out"
-        elif isinstance(error, TransportError):
+        elif isinstance(error, TransportError | ProtocolError):
             record.outcome = "failed"
         elif error is not None:
             record.outcome = "error"

@@ -36,7 +36,7 @@ from typing import Any
 import pytest
 
 from servobus.bus import Bus, Motor
-from servobus.errors import MotorTimeout, TransportError
+from servobus.errors import MotorBusy, MotorTimeout, ProtocolError, TransportError
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
 from servobus.protocols._message import Command, Reply
@@ -263,6 +263,12 @@ class Checker:
         request = record.request
         sent = self.link.sent.pop(id(request.frame), None)
         what = request.describe()
+        if not future.cancelled() and isinstance(future.exception(), MotorBusy):
+            # cycle() did not send it: the reply of the motor's last request with its key is due
+            self.outcomes["skipped"] += 1
+            if sent is not None or request.sent_at is not None:
+                self.wrong.append(f"{what}: MotorBusy, but it left")
+            return
         if sent is None or request.sent_at is None:
             self.wrong.append(f"{what}: resolved ({future!r}) but never left")
             return
@@ -281,6 +287,9 @@ class Checker:
             self.outcomes["timeout"] += 1
             if sent.fate not in LOST:
                 self.wrong.append(f"{what}: timed out although its reply came ({sent.fate})")
+            return
+        if isinstance(error, ProtocolError) and sent.fate == "corrupt":
+            self.outcomes["malformed"] += 1  # its reply came damaged: the request fails with why
             return
         if error is not None:
             self.wrong.append(f"{what}: {error!r}")
@@ -325,7 +334,8 @@ async def _scenario(n_requests: int, seed: int) -> tuple[Bus, FaultyReflector, C
     rng = random.Random(seed)
     link = FaultyReflector(FaultPlan(), seed=seed + 1)
     tokens = [0]
-    async with Bus(link, safe=None, late_hold_s=LATE_HOLD_S) as bus:
+    # (no motor is ever marked offline here: what is checked is which reply answers which request)
+    async with Bus(link, safe=None, late_hold_s=LATE_HOLD_S, offline_after_misses=10**9) as bus:
         checker = Checker(bus, link)
         motors = [bus.motor("myactuator", m) for m in MOTORS]
 
@@ -339,7 +349,7 @@ async def _scenario(n_requests: int, seed: int) -> tuple[Bus, FaultyReflector, C
                         result: object = await motor.read_multi_turn_angle(timeout_s=r.choice(READ_TIMEOUTS))
                     else:
                         result = await motor.request(command, timeout_s=r.choice(TIMEOUTS))
-                except MotorTimeout as exc:
+                except (MotorTimeout, ProtocolError) as exc:
                     result = exc
                 checker.caller_got(seq, result)
 
@@ -373,13 +383,14 @@ def _run(n_requests: int, seed: int) -> tuple[Counter[str], Counter[str], Checke
     assert checker.made >= n_requests
     assert checker.records == {} and link.sent == {} and link.scheduled == 0
     assert bus.scheduler.pending == 0
-    assert sum(checker.outcomes.values()) == checker.made == stats["requests"]
+    assert sum(checker.outcomes.values()) == checker.made == stats["requests"] + stats["skipped_busy"]
     assert checker.worst_s <= FRAME_S
     # The counters add up. Corrupt frames are counted and never delivered; every decodable frame
     # the reflector sent either resolved a request or was counted late, duplicate or unsolicited.
     assert min(faults[f] for f in ("drop", "duplicate", "corrupt", "delay")) > 0
-    assert stats["replies"] + stats["timeouts"] == stats["requests"]
+    assert stats["replies"] + stats["timeouts"] + stats["failed"] == stats["requests"]
     assert stats["timeouts"] == checker.outcomes["timeout"]
+    assert stats["failed"] == checker.outcomes["malformed"]
     assert stats["replies"] == checker.outcomes["reply"] + checker.outcomes["stale"]
     assert stats["malformed"] == faults["corrupt_malformed"] and stats["foreign"] == faults["corrupt_foreign"]
     decodable = faults["pass"] + 2 * faults["duplicate"] + faults["delay"]
@@ -399,7 +410,7 @@ def _check(n_requests: int, seed: int) -> None:
     timeout of its key is still in the late window is counted late)."""
     stats, faults, checker, _ = _run(n_requests, seed)
     assert not checker.stale
-    assert stats["timeouts"] == faults["drop"] + faults["corrupt"] + faults["delay"]
+    assert stats["timeouts"] + stats["failed"] == faults["drop"] + faults["corrupt"] + faults["delay"]
     assert stats["late"] + stats["duplicate"] == faults["delay"] + faults["duplicate"]
     assert stats["unsolicited"] == 0
 

@@ -138,10 +138,12 @@ def test_metrics_count_per_bus_and_per_motor_with_latency_from_the_wire() -> Non
     devices[1].unresponsive = True
 
     async def scenario() -> tuple[Any, Any, Any]:
-        async with Bus(SimTransport(devices=devices)) as bus:
+        # (never offline, and each tick after the silent motor's late hold: every tick asks both)
+        async with Bus(SimTransport(devices=devices), offline_after_misses=100) as bus:
             one, two = bus.motor("myactuator", 1), bus.motor("myactuator", 2)
             for _ in range(10):
                 await bus.cycle([(one, ma.ReadStatus2()), (two, ma.ReadStatus2())], timeout_s=0.01)
+                await asyncio.sleep(0.02)
             return bus.metrics(), one.metrics(), two.metrics()
 
     bus, one, two = run(scenario)

@@ -9,6 +9,7 @@ import random
 import pytest
 
 from servobus import Frame
+from servobus.errors import ProtocolError
 from servobus.protocols import get_family
 from servobus.protocols import myactuator as ma
 from servobus.scheduler import TRANSITIONS, Request, RequestState, Scheduler, Traffic
@@ -118,16 +119,24 @@ def test_replies_of_other_commands_or_motors_never_resolve_the_wrong_request() -
     assert scheduler.counts["unsolicited"] == 1 and scheduler.counts["foreign"] == 1
 
 
-def test_a_malformed_frame_is_counted_and_the_request_keeps_waiting() -> None:
+def test_a_malformed_reply_fails_its_request_with_the_codecs_error_not_a_timeout() -> None:
     codec = MA.bind(1)
     scheduler = Scheduler([codec])
     request = scheduler.request(codec, ma.ReadStatus2())
     scheduler.submit(request)
     _send_all(scheduler, 0.0)
     got = scheduler.receive(_reply(1, STATUS[:5]), 0.001)  # truncated: keyed 0x9C, does not decode
-    assert got.traffic is Traffic.MALFORMED and got.error is not None and request.state is S.SENT
-    scheduler.receive(_reply(1), 0.002)
-    assert request.state is S.REPLIED
+    assert got.traffic is Traffic.MALFORMED and got.request is request and request.state is S.FAILED
+    assert isinstance(request.error, ProtocolError) and request.error.motor_id == 1
+    assert scheduler.counts["malformed"] == 1 and scheduler.counts["failed"] == 1
+    assert scheduler.receive(_reply(1), 0.002).traffic is Traffic.DUPLICATE  # never the next request's
+
+
+def test_a_malformed_frame_with_no_request_waiting_fails_nothing() -> None:
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec])
+    got = scheduler.receive(_reply(1, STATUS[:5]), 0.001)
+    assert got.traffic is Traffic.MALFORMED and got.request is None and scheduler.counts["failed"] == 0
 
 
 def test_a_request_times_out_at_its_deadline_from_when_it_left_and_its_reply_is_late() -> None:
@@ -192,7 +201,9 @@ def test_a_broadcast_reply_waits_for_its_keys_and_then_goes_past_the_queue() -> 
     assert scheduler.blocking([timed_out.key], 0.02) == (None, [])
     queued = scheduler.request(codec, ma.ReadMultiTurnAngle())
     scheduler.submit(queued)  # the queue does not hold a broadcast's expectation back
-    expected = dataclasses.replace(scheduler.request(codec, ma.ReadStatus2()), frame=Frame(arbitration_id=0))
+    expected = dataclasses.replace(
+        scheduler.request(codec, ma.ReadStatus2(), timeout_s=0.02), frame=Frame(arbitration_id=0)
+    )
     scheduler.expect(expected, 0.02)
     assert expected.state is S.SENT and expected.deadline == 0.04 and queued.state is S.QUEUED
     got = scheduler.receive(_reply(1, t=0.021), 0.021)

@@ -40,9 +40,16 @@ def _check(result: _soak.SoakResult) -> None:
     assert set(result.faults) >= FAULT_KINDS, FAULT_KINDS - set(result.faults)
     # Counters add up: made = replied + timed out + cancelled + failed, and the Bus says the same.
     out, counts = result.outcomes, result.bus_counts
-    assert result.made == out["replied"] + out["timed_out"] + out["cancelled"] + out["failed"]
-    assert counts["requests"] == result.made
-    assert counts["replies"] == out["replied"] and counts["timeouts"] == out["timed_out"]
+    assert (
+        result.made == out["replied"] + out["timed_out"] + out["cancelled"] + out["failed"] + out["skipped"]
+    )
+    assert (
+        counts["requests"] == counts["replies"] + counts["timeouts"] + counts["cancelled"] + counts["failed"]
+    )
+    # cycle() did not wait for an offline or busy motor's command: not sent, or sent as a probe
+    skipped = counts["skipped_offline"] + counts["skipped_busy"]
+    assert counts["requests"] + skipped == result.made and out["skipped"] == skipped + counts["probes"]
+    assert counts["replies"] >= out["replied"] and counts["timeouts"] >= out["timed_out"]
     assert out["cancelled"] > 0 and out["failed"] > 0 and out["timed_out"] > 0
     # Bounded: no more pending than one tick and one single request per bus; the scheduler's tables
     # hold at most a few entries per motor and command, but its late and duplicate windows (keyed by

@@ -7,7 +7,16 @@ protocol families, the scheduler, transports, the simulator and the Bus build on
 from typing import TYPE_CHECKING
 
 from servobus._version import __version__
-from servobus.errors import MotorFault, MotorTimeout, ProtocolError, ServobusError, TransportError
+from servobus.errors import (
+    MotorBusy,
+    MotorFault,
+    MotorOffline,
+    MotorStreaming,
+    MotorTimeout,
+    ProtocolError,
+    ServobusError,
+    TransportError,
+)
 from servobus.frame import Frame
 
 if TYPE_CHECKING:
@@ -18,8 +27,11 @@ __all__ = [
     "Frame",
     "FrameLink",
     "Motor",
+    "MotorBusy",
     "MotorFault",
+    "MotorOffline",
     "MotorStatus",
+    "MotorStreaming",
     "MotorTimeout",
     "ProtocolError",
     "ServobusError",

@@ -10,10 +10,14 @@ link, an RS485 line, or the in-process simulator), and then:
   naming motor, command and timeout.
 * ``await bus.cycle([(motor, command), ...])``: one control tick, every request in flight at once,
   one result per item in order (a reply, or the exception as a value), so one silent motor never
-  costs the others their replies.
+  costs the others their replies; and a tick never waits on a motor that is not answering (an
+  offline motor's slot is MotorOffline at once, and the motor is probed aside until it answers).
+* Timeouts come from measured round trips (RFC 6298, per motor and command class), so a slow
+  adapter is waited for and a late reply is held for, never taken for the next request's.
 * ``await bus.broadcast(command, motors)``: MyActuator's 0x280/0xCD and LK's multi-motor torque.
 * Leaving the ``async with`` block, normally, by an exception or by cancellation, sends the safe
-  command (stop by default) to every motor this Bus commanded, shielded, within ``safe_timeout_s``.
+  command (stop by default) to every motor this Bus commanded, shielded, again and again until each
+  motor acknowledged it or ``safe_timeout_s`` ended.
   From then on nothing else is sent: requests not yet sent, and any made later (by a task the block
   did not wait for), fail with TransportError, and so does every request still waiting for a reply
   once the block is left.
@@ -37,7 +41,14 @@ from typing import Any, Protocol, Self
 
 import anyio
 
-from servobus.errors import MotorFault, MotorTimeout, TransportError
+from servobus.errors import (
+    MotorBusy,
+    MotorFault,
+    MotorOffline,
+    MotorStreaming,
+    MotorTimeout,
+    TransportError,
+)
 from servobus.frame import Frame
 from servobus.metrics import Metrics
 from servobus.protocols import BoundCodec, get_family
@@ -168,6 +179,14 @@ def _awaitable(context: asyncio.Future[Any] | _Slot) -> asyncio.Future[Any]:
     return context.tick.future if isinstance(context, _Slot) else context
 
 
+def _detached(loop: asyncio.AbstractEventLoop) -> asyncio.Future[Any]:
+    """A future for a request nobody awaits (a probe, a repeated stream "off"): its outcome is
+    taken when it ends, so an exception is never reported as "never retrieved"."""
+    future: asyncio.Future[Any] = loop.create_future()
+    future.add_done_callback(lambda f: f.cancelled() or f.exception())
+    return future
+
+
 class _Default:
     """The type of an argument whose default comes from elsewhere (the transport)."""
 
@@ -293,6 +312,9 @@ class Motor:
         self._misses = 0
         self._commands = command_classes(codec.family)
         self._watchers: list[MotorFrames] = []
+        self._probe_at = 0.0  # while offline: when cycle() may next send it a command, as a probe
+        # Streams switched off: the command byte -> (the "off" command, when it was last sent).
+        self._ending: dict[int, tuple[Command, float]] = {}
 
     def metrics(self) -> Metrics:
         """This motor's counters and request-to-reply latency (see :class:`~servobus.metrics.Metrics`)."""
@@ -317,16 +339,22 @@ class Motor:
         active_reply: Callable[..., Command] | None = self._commands.get("active_reply")
         if active_reply is None:
             raise ValueError(f"{self.codec.family} motors have no active-reply streams")
-        code = getattr(command, "CODE", command)
+        code = command if isinstance(command, int) else command.CODE
+        if code is None:
+            raise ValueError(f"{command!r} has no command byte to stream")
         on = active_reply(command=code, enabled=True, interval_ms=interval_ms)
         off = active_reply(command=code, enabled=False)
         async with self.frames(size=size, kinds=(Traffic.STREAM,)) as frames:
+            self._ending.pop(code, None)
             await self.request(on)
             try:
                 yield frames
             finally:
                 with anyio.CancelScope(shield=True), contextlib.suppress(TransportError, MotorTimeout):
                     await self.request(off)
+                    # "off" gets no reply: if it was lost, the frames that keep coming say so, and
+                    # the Bus sends it again (Bus._stream_goes_on).
+                    self._ending[code] = (off, self.bus._now())
 
     def frames(
         self, *, size: int = 64, kinds: Iterable[Traffic] = (Traffic.STREAM, Traffic.REPORT)
@@ -382,7 +410,8 @@ class Bus:
         transport: the link; opened (and closed on exit) by the Bus unless it is already open.
         safe: the command every commanded motor gets when the block is left: ``"stop"``,
             ``"shutdown"``, ``"brake"``, or None for nothing.
-        safe_timeout_s: how long the safe stop may take in all.
+        safe_timeout_s: how long the safe stop may take in all: it is sent again to each motor that
+            has not acknowledged it (0x81 and its kin are safe to repeat) until then.
         max_in_flight: requests in flight at once (default: 64; 1 on a half-duplex line).
         name: a label for errors and logs (default: the transport's).
         min_reply_s: the least time a reply can take after its request left (default: two of the
@@ -391,16 +420,26 @@ class Bus:
         stale_after_s: a command (not a read) that waited longer than this for its turn, on a stalled
             or slow half-duplex line, fails with TransportError instead of reaching the motor late
             (default: the transport's own ``stale_after_s``; None for no limit).
-        late_hold_s: how late a reply may come after its request timed out (default: that request's
-            timeout); the next request with its key waits that long, or until the late reply came,
-            because no reply carries a sequence number. A reply later still could answer it.
+        late_hold_s: how late a reply may come after its request timed out (default: from the
+            motor's measured round trips, at least twice the request's timeout, and 1.5 times the
+            longest recent round trip, late replies included); the next request with its key waits
+            that long, or until the late reply came, because no reply carries a sequence number. A
+            reply later still could answer it: such replies are counted ``ambiguous``.
+        initial_timeout_s: the timeout of a request sent before any round trip on this bus was
+            measured (the first exchange through a freshly opened adapter can take tens or hundreds
+            of ms); requests in flight get a measured one as soon as the first reply comes.
+        min_timeout_s, max_timeout_s: bounds of a timeout derived from measured round trips. A
+            request's own ``timeout_s`` overrides all of this.
         offline_after_misses: replies missed in a row after which a motor is marked offline.
         offline_after_s: silence after which a motor that answered before is marked offline (None:
             silence alone never does; set it when the motor streams or is polled steadily).
+        probe_interval_s: how often :meth:`cycle` still sends an offline motor its command (as a
+            probe the tick does not wait for) until it answers.
 
     Attributes:
         safe_sent: the motors whose safe command left (the transport reported it sent) when the
             block was last left; empty before, and when ``safe`` is None or nothing was commanded.
+        safe_acknowledged: those of them that answered it (the others are named in a warning).
     """
 
     def __init__(
@@ -416,6 +455,10 @@ class Bus:
         stale_after_s: float | _Default | None = _DEFAULT,
         offline_after_misses: int = 3,
         offline_after_s: float | None = None,
+        initial_timeout_s: float = 1.0,
+        min_timeout_s: float = 0.002,
+        max_timeout_s: float = 10.0,
+        probe_interval_s: float = 0.1,
     ) -> None:
         if safe_timeout_s <= 0:
             raise ValueError(f"safe_timeout_s={safe_timeout_s} must be positive")
@@ -423,6 +466,9 @@ class Bus:
             raise ValueError(f"offline_after_misses={offline_after_misses} must be at least 1")
         if offline_after_s is not None and offline_after_s <= 0:
             raise ValueError(f"offline_after_s={offline_after_s} must be positive (or None)")
+        if probe_interval_s <= 0:
+            raise ValueError(f"probe_interval_s={probe_interval_s} must be positive")
+        self.probe_interval_s = probe_interval_s
         self.offline_after_misses = offline_after_misses
         self.offline_after_s = offline_after_s
         self.transport = transport
@@ -443,6 +489,9 @@ class Bus:
             stale_after_s=getattr(transport, "stale_after_s", None)
             if isinstance(stale_after_s, _Default)
             else stale_after_s,
+            initial_timeout_s=initial_timeout_s,
+            min_timeout_s=min_timeout_s,
+            max_timeout_s=max_timeout_s,
         )
         self.motors: dict[tuple[str, int], Motor] = {}
         self._by_codec: dict[int, Motor] = {}
@@ -459,13 +508,15 @@ class Bus:
         self._silence_at = 0.0
         self._closing = False  # the block is being left: only the safe commands may still go out
         self.safe_sent: tuple[Motor, ...] = ()
+        self.safe_acknowledged: tuple[Motor, ...] = ()
+        self._warned: set[int] = set()  # motors (by codec id) whose undecodable reply was logged
 
     # ---- life cycle ----
 
     async def __aenter__(self) -> Self:
         self._loop = asyncio.get_running_loop()
         self._closing = False
-        self.safe_sent = ()
+        self.safe_sent = self.safe_acknowledged = ()
         if not self.transport.is_open:
             await self.transport.open()
             self._owns_transport = True
@@ -511,24 +562,45 @@ class Bus:
             self._settle(request, request.error)
 
     async def _safe_stop(self) -> None:
-        """Send the safe command to every commanded motor; wait for the replies within the limit."""
+        """Send the safe command to every commanded motor, again to each one that did not answer,
+        until all answered or ``safe_timeout_s`` ended."""
         if self.safe is None or not self._commanded or not self.transport.is_open:
             return
-        pending: dict[Motor, Request] = {}
+        commands: dict[Motor, Command] = {}
         for motor in list(self._commanded.values()):
-            try:
-                command = motor.codec.safe_command(self.safe)
-                pending[motor] = self._submit(
-                    motor, command, timeout_s=self.safe_timeout_s, retries=0, safe=True
-                )
-            except (ValueError, TransportError):
-                continue
+            with contextlib.suppress(ValueError):
+                commands[motor] = motor.codec.safe_command(self.safe)
+        attempts: dict[Motor, list[Request]] = {motor: [] for motor in commands}
+        acknowledged: set[Motor] = set()
+
+        async def stop(motor: Motor, command: Command) -> None:
+            while True:
+                request = self._submit(motor, command, timeout_s=None, retries=0, safe=True)
+                attempts[motor].append(request)
+                try:
+                    await _awaitable(request.context)
+                except MotorTimeout:
+                    continue  # lost on its way there or back: it is safe to repeat
+                if request.key is not None:  # (a command with no reply cannot be acknowledged)
+                    acknowledged.add(motor)
+                return
+
         try:
             with anyio.move_on_after(self.safe_timeout_s):
-                await asyncio.gather(*(r.context for r in pending.values()), return_exceptions=True)
+                await asyncio.gather(*(stop(m, c) for m, c in commands.items()), return_exceptions=True)
         finally:
-            self.safe_sent = tuple(m for m, r in pending.items() if r.sent_at is not None)
-            self._abandon(pending.values())
+            self._abandon(r for sent in attempts.values() for r in sent)
+            self.safe_sent = tuple(m for m, tried in attempts.items() if any(r.sent_at for r in tried))
+            self.safe_acknowledged = tuple(m for m in commands if m in acknowledged)
+            missing = [m for m in commands if m not in acknowledged]
+            if missing:
+                logger.warning(
+                    "%s: the %s command was not acknowledged by %s within %g s",
+                    self.name,
+                    self.safe,
+                    ", ".join(repr(m) for m in missing),
+                    self.safe_timeout_s,
+                )
 
     # ---- motors ----
 
@@ -601,7 +673,7 @@ class Bus:
         timeout_s: float | None,
         retries: int,
         safe: bool = False,
-        context: _Slot | None = None,
+        context: asyncio.Future[Any] | _Slot | None = None,
     ) -> Request:
         """The request for ``command``, encoded (ValueError here, before anything is queued), settled
         into ``context`` (default: a future of its own).
@@ -613,13 +685,20 @@ class Bus:
             raise RuntimeError(f"{self.name}: use the Bus inside 'async with'")
         if self._closing and not safe:
             raise self._closed_error()
-        return self.scheduler.request(
+        request = self.scheduler.request(
             motor.codec,
             command,
             timeout_s=timeout_s,
             retries=retries,
             context=self._loop.create_future() if context is None else context,
         )
+        if request.key is None and motor.codec.streams and motor.codec.retry_safe(command):
+            streams = ", ".join(f"0x{code:02X}" for code in sorted(motor.codec.streams))
+            raise MotorStreaming(
+                f"{motor!r} streams {streams} and answers no {type(command).__name__} until the "
+                "stream is off (a read of the streamed command is answered by its next frame)"
+            )
+        return request
 
     def _enqueue(self, motor: Motor, request: Request) -> None:
         if not motor.codec.retry_safe(request.command):
@@ -644,9 +723,15 @@ class Bus:
     ) -> list[Result]:
         """One control tick: send every command (pipelined, paced), await every reply.
 
+        A tick never waits on a motor that is not answering: the command of a motor the watchdog
+        marks offline is not sent (MotorOffline; every ``probe_interval_s`` it is sent as a probe
+        the tick does not wait for, until the motor answers), nor is one whose previous reply with
+        the same key is still due (MotorBusy: that late reply could answer it).
+
         Returns:
             One result per item, in order: the reply (None for commands without one), or the
-            exception that ended it (MotorTimeout, TransportError) as a value.
+            exception that ended it (MotorTimeout and its MotorOffline and MotorBusy,
+            MotorStreaming, ProtocolError, TransportError) as a value.
 
         Raises:
             ValueError: a command is refused by its codec (nothing of the tick is sent then).
@@ -655,15 +740,40 @@ class Bus:
         items = list(items)
         if not items:
             return []
-        if self._loop is None:
+        loop = self._loop
+        if loop is None:
             raise RuntimeError(f"{self.name}: use the Bus inside 'async with'")
-        tick = _Tick(self._loop.create_future(), len(items))
-        prepared = [
-            (m, self._prepare(m, c, timeout_s=timeout_s, retries=0, context=_Slot(tick, i)))
-            for i, (m, c) in enumerate(items)
-        ]
+        tick = _Tick(loop.create_future(), len(items))
+        prepared = []
+        skipped: list[tuple[_Slot, Motor, str, BaseException]] = []
+        now = loop.time()
+        busy = self.scheduler.busy
+        for i, (m, c) in enumerate(items):
+            slot = _Slot(tick, i)
+            try:
+                request = self._prepare(m, c, timeout_s=timeout_s, retries=0, context=slot)
+            except MotorStreaming as exc:
+                skipped.append((slot, m, "skipped_streaming", exc))
+                continue
+            if m.online is False:
+                why = f"{m!r} is offline ({m._misses} replies missed): the tick does not wait for it"
+                if now >= m._probe_at and not busy(request.key, now):  # sent, as a probe
+                    m._probe_at = now + self.probe_interval_s
+                    request.context = _detached(loop)
+                    prepared.append((m, request))
+                    skipped.append((slot, m, "probes", MotorOffline(why)))
+                else:
+                    skipped.append((slot, m, "skipped_offline", MotorOffline(why)))
+            elif busy(request.key, now):
+                why = f"{m!r}: the reply to its last {type(c).__name__} is still due: not sent this tick"
+                skipped.append((slot, m, "skipped_busy", MotorBusy(why)))
+            else:
+                prepared.append((m, request))
         for motor, request in prepared:
             self._enqueue(motor, request)
+        for slot, motor, counter, error in skipped:
+            self.scheduler.motor_counts[id(motor.codec)][counter] += 1
+            slot.set_result(error)
         self._pump()
         try:
             return await tick.future
@@ -782,9 +892,26 @@ class Bus:
         receive = self.scheduler.receive
         for frame in frames:
             got = receive(frame, now)
-            if got.codec is not None and got.reply is not None:
-                self._deliver(got, now)
+            if got.codec is not None:
+                if got.reply is not None:
+                    self._deliver(got, now)
+                elif got.request is not None:  # an undecodable reply: its request fails with why
+                    self._undecodable(got)
         self._pump()
+
+    def _undecodable(self, got: Received) -> None:
+        request = got.request
+        assert request is not None and got.codec is not None
+        if id(got.codec) not in self._warned:  # once per motor: a wrong revision repeats every frame
+            self._warned.add(id(got.codec))
+            logger.warning(
+                "%s: %s: the reply does not decode (%s); check the motor's revision and model (bound as %s)",
+                self.name,
+                request.describe(),
+                request.error,
+                got.codec.revision.name,
+            )
+        self._settle(request, request.error)
 
     def _deliver(self, got: Received, now: float) -> None:
         """A decoded frame of one of our motors: its state, watchdog, watchers, and its request."""
@@ -799,6 +926,8 @@ class Bus:
                 self._set_status(motor, True, now, "answered")
             if reply.FAULTS is not None:
                 self._note_faults(motor, getattr(reply, reply.FAULTS))
+            if motor._ending and got.request is None and got.traffic is not Traffic.STREAM:
+                self._stream_goes_on(motor, got.frame, now)
             for watcher in motor._watchers:
                 watcher._push(got.traffic, reply)
             for callback in self._subscribers:
@@ -808,6 +937,27 @@ class Bus:
                     logger.exception("%s: subscriber %r failed", self.name, callback)
         if got.request is not None:
             self._settle(got.request, None)
+
+    def _stream_goes_on(self, motor: Motor, frame: Frame, now: float) -> None:
+        """A frame of a stream that was switched off came: if later than a reply to the "off"
+        could take, the "off" was lost; it is sent again."""
+        if not frame.data or self._closing or self._loop is None:
+            return
+        code = frame.data[0]
+        ending = motor._ending.get(code)
+        if ending is None:
+            return
+        off, sent_at = ending
+        if (frame.timestamp or now) < sent_at + self.scheduler.motor_timeout_s(motor.codec):
+            return  # it may have left the motor before the "off" arrived
+        motor._ending[code] = (off, now)
+        self.scheduler.motor_counts[id(motor.codec)]["stream_off_resent"] += 1
+        logger.info("%s: %r still streams 0x%02X: switching it off again", self.name, motor, code)
+        request = self._prepare(motor, off, timeout_s=None, retries=0, context=_detached(self._loop))
+        self._enqueue(motor, request)
+
+    def _now(self) -> float:
+        return self._loop.time() if self._loop is not None else 0.0
 
     def _on_event(self, event: TransportEvent) -> None:
         if isinstance(event, StateChanged) and event.state is TransportState.LOST and self._loop is not None:

@@ -3,6 +3,9 @@
     ServobusError
      ├── ProtocolError      bytes that cannot be decoded (raw bytes in hex, motor id, command)
      ├── MotorTimeout       no reply in time (also a TimeoutError)
+     │    ├── MotorOffline  cycle(): the motor is offline, the tick did not wait for it
+     │    └── MotorBusy     cycle(): its last reply is still due, this tick's command was not sent
+     ├── MotorStreaming     the motor streams (0xB6) and answers no other request meanwhile
      ├── MotorFault         the motor reported error flags (decoded)
      └── TransportError     adapter lost, bus-off, port closed (raised from its cause)
           └── SendQueueFull  (servobus.transports) a send found the queue full; also asyncio.QueueFull
@@ -15,7 +18,16 @@ from __future__ import annotations
 
 import enum
 
-__all__ = ["MotorFault", "MotorTimeout", "ProtocolError", "ServobusError", "TransportError"]
+__all__ = [
+    "MotorBusy",
+    "MotorFault",
+    "MotorOffline",
+    "MotorStreaming",
+    "MotorTimeout",
+    "ProtocolError",
+    "ServobusError",
+    "TransportError",
+]
 
 
 class ServobusError(Exception):
@@ -68,6 +80,27 @@ class ProtocolError(ServobusError):
 
 class MotorTimeout(ServobusError, TimeoutError):
     """A motor did not answer within its deadline."""
+
+
+class MotorOffline(MotorTimeout):
+    """``Bus.cycle()`` did not wait for this motor: the watchdog marks it offline.
+
+    A tick never waits on a motor that is not answering. Its command is not sent, except at most
+    every ``probe_interval_s``, when it goes out as a probe whose reply the tick does not wait for;
+    once the motor answers it is online and in the tick again. A MotorTimeout too: no reply.
+    """
+
+
+class MotorBusy(MotorTimeout):
+    """``Bus.cycle()`` did not send this motor's command: the reply of its previous request with the
+    same key is still due (it timed out, and may come late). Sent now, that late reply could answer
+    it; waiting for it would delay the whole tick. A MotorTimeout too: no reply this tick.
+    """
+
+
+class MotorStreaming(ServobusError):
+    """The motor streams (MyActuator 0xB6) and answers no request but reads of the streamed command
+    until the stream is switched off; such a request is refused before it is sent."""
 
 
 class MotorFault(ServobusError):

@@ -68,11 +68,23 @@ class Metrics:
     """Counters since the Bus was created, the recent latency, and (for a bus) the line's load.
 
     Attributes:
-        requests: requests submitted (a retry is not a new request).
-        replies: requests answered (by a reply, or by a stream frame of the streamed command).
+        requests: requests submitted (a retry is not a new request). Each ends once, as one of
+            ``replies``, ``timeouts``, ``cancelled`` or ``failed``: while none is pending,
+            requests = replies + timeouts + cancelled + failed.
+        replies: requests answered (by a reply, or by a stream frame of the streamed command), and
+            requests for no reply that left.
         timeouts: requests that got no reply in time (after their retries).
+        cancelled: requests their caller stopped waiting for (a cancelled task, a timeout around it).
+        failed: requests that ended with an error: not sent (``not_sent``), a reply that does not
+            decode, the transport lost, the Bus closed.
         retries: automatic resends of retry-safe reads.
-        not_sent: requests the transport dropped (stale, purged, lost) or refused.
+        not_sent: requests the transport dropped (stale, purged, lost) or refused (part of ``failed``).
+        skipped: commands ``cycle()`` did not send, so never requests: the motor offline
+            (MotorOffline; but for the probes, which are requests), its last reply still due
+            (MotorBusy), or streaming (MotorStreaming).
+        ambiguous: replies that may have been the late reply of the request before (its key's hold
+            ended before that reply came, so the two could not be told apart).
+        stream_off_resent: 0xB6 "off" sent again because a stream kept coming after it.
         late: replies of requests that had timed out or were cancelled.
         duplicate: the same reply again, right after one answered its request.
         unsolicited: reply-shaped frames of a motor that nobody asked for.
@@ -87,8 +99,13 @@ class Metrics:
     requests: int
     replies: int
     timeouts: int
+    cancelled: int
+    failed: int
     retries: int
     not_sent: int
+    skipped: int
+    ambiguous: int
+    stream_off_resent: int
     late: int
     duplicate: int
     unsolicited: int
@@ -108,8 +125,13 @@ class Metrics:
             requests=c("requests", 0),
             replies=c("replies", 0),
             timeouts=c("timeouts", 0),
+            cancelled=c("cancelled", 0),
+            failed=c("failed", 0),
             retries=c("retries", 0),
             not_sent=not_sent,
+            skipped=c("skipped_offline", 0) + c("skipped_busy", 0) + c("skipped_streaming", 0),
+            ambiguous=c("ambiguous", 0),
+            stream_off_resent=c("stream_off_resent", 0),
             late=c("late", 0),
             duplicate=c("duplicate", 0),
             unsolicited=c("unsolicited", 0),

@@ -40,6 +40,7 @@ from servobus.metrics import LatencyWindow
 from servobus.protocols import BoundCodec, FrameKind, check_bus
 from servobus.protocols._bound import KIND_NOT_OURS, KIND_REPLY, KIND_REPORT, KIND_STREAM
 from servobus.protocols._message import Command, Reply
+from servobus.rtt import RoundTrip
 
 __all__ = [
     "TRANSITIONS",
@@ -112,6 +113,11 @@ class Request:
     attempts: int = 0
     submitted: bool = False
     queued_at: float | None = None  # when a command (not a read) was made: its freshness counts from here
+    # The round-trip estimate of its motor and command class; with ``adaptive`` its ``timeout_s`` is
+    # set from it when the frame leaves (``base_timeout_s``: the codec's own time for the command).
+    rtt: RoundTrip | None = None
+    adaptive: bool = False
+    base_timeout_s: float = 0.0
 
     def describe(self) -> str:
         return f"{self.codec.family} motor {self.codec.motor_id} {type(self.command).__name__}"
@@ -129,6 +135,9 @@ class Received:
     error: ProtocolError | None = None
 
 
+_Late = tuple[float, float | None, RoundTrip | None]
+
+
 @dataclass(slots=True)
 class _Recent:
     """Keys that may still see a frame nobody waits for, and until when.
@@ -138,15 +147,17 @@ class _Recent:
     bounded by the keys answered or given up on within the late window.
     """
 
-    late: dict[Hashable, list[float]] = field(default_factory=dict)
+    # key -> the requests whose reply may still come, oldest first: (until when, when it left, its
+    # round-trip estimate, to take the late reply's time as a sample)
+    late: dict[Hashable, list[_Late]] = field(default_factory=dict)
     replied: dict[Hashable, float] = field(default_factory=dict)
     limit: int = 64
 
     def prune(self, now: float) -> None:
         self.replied = {key: until for key, until in self.replied.items() if until >= now}
-        late: dict[Hashable, list[float]] = {}
-        for key, times in self.late.items():
-            if kept := [t for t in times if t >= now]:
+        late: dict[Hashable, list[_Late]] = {}
+        for key, entries in self.late.items():
+            if kept := [e for e in entries if e[0] >= now]:
                 late[key] = kept
         self.late = late
         self.limit = max(64, 2 * (len(self.replied) + len(late)))
@@ -186,9 +197,16 @@ class Scheduler:
             waited longer than this for its turn (a stalled half-duplex line) fails ``not_sent_stale``
             instead of leaving: for a motor, a stale command is worse than none (None: no limit).
         late_hold_s: after a request that left times out or is cancelled, the next request with its
-            key waits until the late reply came or this long passed (None: the timed-out request's
-            own timeout). These protocols carry no sequence numbers: a reply later than this could
-            answer the next request with the same key, so it bounds how late a reply may be.
+            key waits until the late reply came or this long passed (None: from the round-trip
+            estimate, :meth:`~servobus.rtt.RoundTrip.late_s` from when the request left, and at
+            least twice its timeout). These protocols carry no sequence numbers: a reply later than
+            the hold could answer the next request with the same key; such a reply is counted
+            ``ambiguous``.
+        initial_timeout_s: the timeout of a request (with no ``timeout_s`` of its own) sent before
+            anything on the bus was measured: conservative, since the first exchange through a
+            freshly opened adapter can be slow (RFC 6298's first RTO is 1 s). Requests sent with it
+            are timed again by the first round trip measured.
+        min_timeout_s, max_timeout_s: bounds of a timeout derived from measured round trips.
 
     Raises:
         ValueError: motors that cannot share a bus, or options out of range.
@@ -205,6 +223,9 @@ class Scheduler:
         min_reply_s: float = 0.0,
         late_hold_s: float | None = None,
         stale_after_s: float | None = None,
+        initial_timeout_s: float = 1.0,
+        min_timeout_s: float = 0.002,
+        max_timeout_s: float = 10.0,
     ) -> None:
         if (
             max_in_flight < 1
@@ -216,7 +237,19 @@ class Scheduler:
                 f"max_in_flight={max_in_flight} must be >= 1, gap_s={gap_s}, "
                 f"late_window_s={late_window_s} and late_hold_s={late_hold_s} >= 0"
             )
+        if not 0 < min_timeout_s <= max_timeout_s or not min_timeout_s <= initial_timeout_s <= max_timeout_s:
+            raise ValueError(
+                f"timeouts must be 0 < min_timeout_s={min_timeout_s} <= "
+                f"initial_timeout_s={initial_timeout_s} <= max_timeout_s={max_timeout_s}"
+            )
         self.late_hold_s = late_hold_s
+        self.initial_timeout_s = initial_timeout_s
+        self.min_timeout_s = min_timeout_s
+        self.max_timeout_s = max_timeout_s
+        self._rtts: dict[tuple[int, type], RoundTrip] = {}  # (id(codec), command class) -> estimate
+        self._any_measured = False
+        self._provisional: list[Request] = []  # sent before anything was measured: timed again then
+        self._doubtful: set[Hashable] = set()  # keys whose hold ended before their late reply came
         self.stale_after_s = stale_after_s
         self._stale: list[Request] = []
         self.max_in_flight = 1 if one_at_a_time else max_in_flight
@@ -283,7 +316,50 @@ class Scheduler:
             raise ValueError(f"timeout_s={timeout} must be > 0 and retries={retries} >= 0")
         if retries and not codec.retry_safe(command):
             raise ValueError(f"{type(command).__name__} changes the motor: it is never retried automatically")
-        return Request(codec, command, frame, codec.reply_key(command), timeout, retries, context)
+        rtt_key = (id(codec), type(command))
+        rtt = self._rtts.get(rtt_key)
+        if rtt is None:
+            rtt = self._rtts[rtt_key] = RoundTrip()
+        request = Request(codec, command, frame, codec.reply_key(command), timeout, retries, context)
+        request.rtt = rtt
+        request.adaptive = timeout_s is None
+        request.base_timeout_s = timeout
+        return request
+
+    def round_trip(self, codec: BoundCodec, command_class: type[Command]) -> RoundTrip | None:
+        """The round-trip estimate of ``codec``'s motor for ``command_class`` (None: never sent)."""
+        return self._rtts.get((id(codec), command_class))
+
+    def _timeout(self, request: Request) -> float:
+        """The timeout of an adaptive request leaving now (see the class docstring)."""
+        rtt = request.rtt
+        assert rtt is not None
+        if rtt.samples:
+            timeout = rtt.timeout_s()
+        elif self._any_measured:
+            # Not measured yet: the codec's own time for the command, or twice the slowest measured
+            # on this bus if that is longer (the adapter's and the host's share is the same for all).
+            link = max(r.timeout_s() for r in self._rtts.values() if r.samples)
+            timeout = max(request.base_timeout_s, 2.0 * link)
+        else:
+            self._provisional.append(request)
+            return max(request.base_timeout_s, self.initial_timeout_s)
+        return min(max(timeout, self.min_timeout_s), self.max_timeout_s)
+
+    def _first_measured(self) -> None:
+        """The bus's first round trip was measured."""
+        self._any_measured = True
+        if self._provisional:
+            # The first measurement: requests timed by the conservative first value get real ones.
+            for waiting in self._provisional:
+                if waiting.state is _SENT and waiting.adaptive and waiting.sent_at is not None:
+                    timeout = self._timeout(waiting)
+                    if timeout < waiting.timeout_s:
+                        waiting.timeout_s = timeout
+                        waiting.deadline = deadline = waiting.sent_at + timeout
+                        self._sent_count += 1
+                        heapq.heappush(self._deadlines, (deadline, self._sent_count, waiting))
+            self._provisional = []
 
     def submit(self, request: Request) -> None:
         """Queue ``request`` behind the others (FIFO)."""
@@ -305,6 +381,23 @@ class Scheduler:
         ends = [held[key] for key in keys if key in held and held[key] > now]
         flying = [request for key in keys for request in self._pending.get(key, ())]
         return (max(ends) if ends else None), flying
+
+    def busy(self, key: Hashable | None, now: float) -> bool:
+        """Would a request with ``key`` wait now: one with that key is in flight, or the key is held
+        for a late reply (:meth:`next_to_send`)?"""
+        if key is None:
+            return False
+        if key in self._pending:
+            return True
+        until = self._held.get(key)
+        return until is not None and until > now
+
+    def motor_timeout_s(self, codec: BoundCodec) -> float:
+        """The longest timeout measured round trips give any command class of ``codec``'s motor
+        (``min_timeout_s`` while none was measured)."""
+        mine = id(codec)
+        times = [r.timeout_s() for (owner, _), r in self._rtts.items() if owner == mine and r.samples]
+        return max([self.min_timeout_s, *times])
 
     def expect(self, request: Request, at: float) -> None:
         """``request``'s frame was sent by someone else at ``at`` (a broadcast): it is in flight from
@@ -337,6 +430,8 @@ class Scheduler:
         if held:
             for key in [k for k, until in held.items() if until <= now]:
                 del held[key]
+                if self._recent.late.get(key):  # its late reply never came: it may come yet
+                    self._doubtful.add(key)
         if self._rest_until:
             if now < self._rest_until:
                 return out
@@ -352,6 +447,7 @@ class Scheduler:
             if limit is not None and request.queued_at is not None and now - request.queued_at > limit:
                 request.error = RuntimeError(f"{request.describe()}: frame not sent (stale)")
                 self._move(request, _FAILED)
+                self._count(request.codec, "failed")
                 self._count(request.codec, "not_sent_stale")
                 self._stale.append(request)
                 continue
@@ -386,8 +482,11 @@ class Scheduler:
         request.sent_at = at
         if request.key is None:  # nothing to wait for
             self._finish(request, _REPLIED, at)
+            self.motor_counts[id(request.codec)]["replies"] += 1
             return None
         request.state = _SENT  # (SENDING -> SENT, in TRANSITIONS; the hot path)
+        if request.adaptive:
+            request.timeout_s = self._timeout(request)
         request.deadline = deadline = at + request.timeout_s
         self._sent_count += 1
         heap = self._deadlines
@@ -462,12 +561,21 @@ class Scheduler:
         """``request`` left and its reply may still come: count it LATE, and hold its key meanwhile."""
         key = request.key
         recent = self._recent
-        recent.late.setdefault(key, []).append(now + self.late_window_s)
+        recent.late.setdefault(key, []).append((now + self.late_window_s, request.sent_at, request.rtt))
         if len(recent.late) > recent.limit:
             recent.prune(now)
-        hold = request.timeout_s if self.late_hold_s is None else self.late_hold_s
-        if hold > 0:
-            self._held[key] = now + hold
+        if self.late_hold_s is not None:
+            until = now + self.late_hold_s
+        elif request.sent_at is None:  # (cancelled before its send report: its time is unknown)
+            until = now + request.timeout_s
+        else:
+            rtt = request.rtt
+            late = 2.0 * request.timeout_s
+            if rtt is not None and rtt.samples:
+                late = max(late, rtt.late_s())
+            until = request.sent_at + late
+        if until > now:
+            self._held[key] = max(until, self._held.get(key, until))
 
     def next_deadline(self) -> float | None:
         """When :meth:`expire` or :meth:`next_to_send` next has something to do (None: nothing)."""
@@ -502,7 +610,7 @@ class Scheduler:
             reply = codec.decode(frame)
         except ProtocolError as exc:
             self._count(codec, "malformed")
-            return Received(_T_MALFORMED, frame, codec, error=exc)
+            return Received(_T_MALFORMED, frame, codec, error=exc, request=self._spoilt(key, frame, exc, now))
         waiting = self._pending.get(key) if key is not None else None
         if waiting:
             request = waiting[0]
@@ -544,24 +652,55 @@ class Scheduler:
                     traffic = Traffic(kind.value)
                     counts[traffic.value] += 1
                 if sent_at is not None:
-                    self.motor_latency[id(codec)].add((frame.timestamp or now) - sent_at)
+                    rtt_s = (frame.timestamp or now) - sent_at
+                    self.motor_latency[id(codec)].add(rtt_s)
+                    rtt = request.rtt
+                    if rtt is not None and kind is KIND_REPLY:  # (a stream frame's time is not one)
+                        rtt.add(rtt_s)
+                        if not self._any_measured:
+                            self._first_measured()
+                if self._doubtful and key in self._doubtful:
+                    self._doubtful.discard(key)
+                    counts["ambiguous"] += 1  # it may be the reply of the request before
                 return Received(traffic, frame, codec, reply, request)
         if kind is KIND_STREAM or kind is KIND_REPORT:
             self._count(codec, kind.value)
             return Received(Traffic(kind.value), frame, codec, reply)
-        traffic = self._unmatched(key, now)
+        traffic = self._unmatched(key, now, frame.timestamp or now)
         self._count(codec, traffic.value)
         return Received(traffic, frame, codec, reply)
 
-    def _unmatched(self, key: Hashable | None, now: float) -> Traffic:
+    def _spoilt(self, key: Hashable | None, frame: Frame, error: ProtocolError, now: float) -> Request | None:
+        """A frame with ``key`` that does not decode came: the request waiting for it fails with the
+        codec's error (the motor answered it, in a way this codec cannot read: a revision mismatch,
+        a value out of the manual's range), instead of timing out as if nothing came."""
+        waiting = self._pending.get(key) if key is not None else None
+        if not waiting:
+            return None
+        request = waiting[0]
+        at = frame.timestamp or now
+        if request.state is not _SENT or request.sent_at is None or at < request.sent_at + self.min_reply_s:
+            return None
+        request.error = error.with_context(motor_id=request.codec.motor_id)
+        self._finish(request, _FAILED, now)
+        self._recent.replied[key] = now + self.late_window_s  # (the same frame again: a duplicate)
+        return request
+
+    def _unmatched(self, key: Hashable | None, now: float, at: float | None = None) -> Traffic:
+        """What a frame with ``key`` that answers no request is; ``at``: when it was received."""
         recent = self._recent
         late = recent.late.get(key)
         if late:
-            late[:] = [t for t in late if t >= now]
+            late[:] = [e for e in late if e[0] >= now]
             if late:
-                late.pop(0)
+                _, sent_at, rtt = late.pop(0)  # replies come in order: the oldest one's
+                if sent_at is not None and at is not None and rtt is not None:
+                    rtt.add(at - sent_at)
+                    if not self._any_measured:
+                        self._first_measured()
                 if not late:  # the reply the key was held for came: the next exchange may go
                     self._held.pop(key, None)
+                    self._doubtful.discard(key)
                 return _T_LATE
         until = recent.replied.get(key)
         if until is not None and until >= now:
@@ -604,6 +743,8 @@ class Scheduler:
         else:
             self._leave_flight(request, now)
         self._move(request, state)
+        if state is _CANCELLED or state is _FAILED:  # (replies and timeouts are counted where found)
+            self._count(request.codec, state.value)
 
     def _leave_flight(self, request: Request, now: float) -> None:
         if self._early and request.key in self._early:  # it never got its send report
