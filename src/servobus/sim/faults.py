@@ -10,12 +10,18 @@ then fails at the receiver, which must count it); a CAN frame with a flipped bit
 every controller's CRC check, answered with an error frame and retransmitted by the sender, so
 on CAN "corrupt" arrives late by one more frame time (``can_retransmit_s``), never altered.
 
+Latency (``latency_s``) is no fault of one item but a property of the path: every item arrives a
+uniform draw in ``latency_s`` late, and never before the item sent ahead of it (FIFO), as through a
+USB-CAN adapter polled every millisecond or a busy host: replies stay in order, each late, and a
+late one holds back the next. The faults apply on top of that arrival time.
+
 Device faults (reboot, unresponsive motor, error flags) and adapter unplug belong to the device
 models and attachments; this module is only the link.
 """
 
 from __future__ import annotations
 
+import math
 import random
 from collections import Counter
 from dataclasses import dataclass
@@ -29,10 +35,19 @@ Item = Frame | bytes
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class FaultPlan:
-    """Probability of each fault per item (0..1), and the delay and retransmission times.
+    """Probability of each fault per item (0..1), the delay and retransmission times, and the latency.
 
     Faults are drawn in this order and at most one applies to an item: drop, corrupt, duplicate,
     reorder, delay.
+
+    ``latency_s = (lo, hi)`` gives every item a latency drawn uniformly in [lo, hi] seconds; an item
+    never arrives before the item the injector was given ahead of it, however small its own draw
+    (FIFO: each arrives at ``max(sent + latency, previous arrival)``). A fault then applies from that
+    time: a delay or a CAN retransmission adds to it, a duplicate arrives twice at it, a reordered
+    item arrives right after the next item's (so those faults may still put an item behind later ones,
+    as they do without latency; the next item waits only for the previous one's latency, not for its
+    fault). The default ``(0.0, 0.0)`` is off: items arrive when sent, the generator is not drawn for
+    latency, and a seed gives the decisions it gave before latency existed.
     """
 
     drop: float = 0.0
@@ -42,6 +57,7 @@ class FaultPlan:
     delay: float = 0.0
     delay_s: tuple[float, float] = (0.001, 0.010)
     can_retransmit_s: float = 0.000135  # an error frame plus the retransmitted 8-byte frame at 1 Mbit/s
+    latency_s: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self) -> None:
         for name in ("drop", "corrupt", "duplicate", "reorder", "delay"):
@@ -53,6 +69,25 @@ class FaultPlan:
         lo, hi = self.delay_s
         if not 0.0 <= lo <= hi:
             raise ValueError(f"delay_s={self.delay_s!r} must be 0 <= low <= high")
+        lo, hi = _pair("latency_s", self.latency_s)
+        if not (0.0 <= lo <= hi and math.isfinite(hi)):
+            raise ValueError(f"latency_s={self.latency_s!r} must be 0 <= low <= high (finite seconds)")
+
+    @property
+    def has_latency(self) -> bool:
+        """True when items get a latency (``latency_s``'s high end is above 0)."""
+        return self.latency_s[1] > 0.0
+
+
+def _pair(name: str, value: object) -> tuple[float, float]:
+    """``value`` as a (low, high) pair of real numbers, or ValueError naming ``name``."""
+    if not isinstance(value, tuple) or len(value) != 2:
+        raise ValueError(f"{name}={value!r} is not a (low, high) pair of seconds")
+    lo, hi = value
+    for x in (lo, hi):
+        if isinstance(x, bool) or not isinstance(x, int | float):
+            raise ValueError(f"{name}={value!r} is not a (low, high) pair of seconds")
+    return float(lo), float(hi)
 
 
 class FaultInjector:
@@ -72,6 +107,8 @@ class FaultInjector:
         self.counts: Counter[str] = Counter()
         self._random = random.Random(seed)
         self._held: Item | None = None  # an item waiting to be delivered after the next one
+        self._held_s = 0.0  # the held item's own (latency'd) arrival time
+        self._last_s = -math.inf  # the latency'd arrival of the last item that arrives (FIFO)
 
     def apply(self, item: Item, now_s: float) -> list[tuple[float, Item]]:
         """Decide the fate of ``item`` sent at ``now_s``: the (arrival time, item) pairs to deliver.
@@ -81,29 +118,45 @@ class FaultInjector:
         """
         kind = self._draw()
         self.counts[kind] += 1
+        at = self._arrival(now_s, kind)
         out: list[tuple[float, Item]]
         if kind == "drop":
             out = []
         elif kind == "corrupt":
-            out = [self._corrupt(item, now_s)]
+            out = [self._corrupt(item, at)]
         elif kind == "duplicate":
-            out = [(now_s, item), (now_s, item)]
+            out = [(at, item), (at, item)]
         elif kind == "delay":
-            out = [(now_s + self._random.uniform(*self.plan.delay_s), item)]
+            out = [(at + self._random.uniform(*self.plan.delay_s), item)]
         elif kind == "reorder" and self._held is None:
-            self._held = item
+            self._held, self._held_s = item, at
             return []
         else:
-            out = [(now_s, item)]
+            out = [(at, item)]
         if self._held is not None and kind != "reorder":
-            out.append((now_s, self._held))
+            out.append((at, self._held))
             self._held = None
         return out
 
     def flush(self, now_s: float) -> list[tuple[float, Item]]:
-        """Release a held (reordered) item: the link went quiet."""
+        """Release a held (reordered) item: the link went quiet (not before its own latency)."""
         held, self._held = self._held, None
-        return [(now_s, held)] if held is not None else []
+        if held is None:
+            return []
+        return [(max(now_s, self._held_s) if self.plan.has_latency else now_s, held)]
+
+    def _arrival(self, now_s: float, kind: str) -> float:
+        """When an item sent at ``now_s`` comes out of the latency: ``now_s`` without latency, else
+        ``max(now_s + uniform(latency_s), the previous item's)``. A dropped item holds nothing back."""
+        plan = self.plan
+        if not plan.has_latency:
+            return now_s
+        at = now_s + self._random.uniform(*plan.latency_s)
+        if at < self._last_s:
+            at = self._last_s
+        if kind != "drop":
+            self._last_s = at
+        return at
 
     def _draw(self) -> str:
         plan = self.plan
