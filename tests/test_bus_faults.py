@@ -335,7 +335,16 @@ async def _scenario(n_requests: int, seed: int) -> tuple[Bus, FaultyReflector, C
     link = FaultyReflector(FaultPlan(), seed=seed + 1)
     tokens = [0]
     # (no motor is ever marked offline here: what is checked is which reply answers which request)
-    async with Bus(link, safe=None, late_hold_s=LATE_HOLD_S, offline_after_misses=10**9) as bus:
+    # (a read with no timeout_s gets one from measured round trips: bounded here by MAX_TIMEOUT_S, so
+    # that a delayed reply is always late)
+    async with Bus(
+        link,
+        safe=None,
+        late_hold_s=LATE_HOLD_S,
+        offline_after_misses=10**9,
+        initial_timeout_s=MAX_TIMEOUT_S,
+        max_timeout_s=MAX_TIMEOUT_S,
+    ) as bus:
         checker = Checker(bus, link)
         motors = [bus.motor("myactuator", m) for m in MOTORS]
 

@@ -139,7 +139,7 @@ def test_metrics_count_per_bus_and_per_motor_with_latency_from_the_wire() -> Non
 
     async def scenario() -> tuple[Any, Any, Any]:
         # (never offline, and each tick after the silent motor's late hold: every tick asks both)
-        async with Bus(SimTransport(devices=devices), offline_after_misses=100) as bus:
+        async with Bus(SimTransport(devices=devices), offline_after_misses=100, late_hold_s=0.01) as bus:
             one, two = bus.motor("myactuator", 1), bus.motor("myactuator", 2)
             for _ in range(10):
                 await bus.cycle([(one, ma.ReadStatus2()), (two, ma.ReadStatus2())], timeout_s=0.01)

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
+import math
 import random
 import statistics
 from collections.abc import Callable, Sequence
@@ -22,7 +24,10 @@ from servobus.protocols import hollow as ho
 from servobus.protocols import lk
 from servobus.protocols import myactuator as ma
 from servobus.protocols._message import Command
+from servobus.scheduler import Received
 from servobus.sim import plant, virtual
+from servobus.sim.canbus import CanBusModel
+from servobus.sim.device import Emission
 from servobus.sim.devices.hollow import HollowMotor
 from servobus.sim.devices.lk import LkMotor
 from servobus.sim.devices.myactuator import MyActuatorMotor
@@ -266,3 +271,90 @@ def test_while_a_stream_is_on_a_read_it_cannot_answer_fails_at_once() -> None:
     error, streamed = virtual.run(main())
     assert "ReadStatus1" in str(error)
     assert isinstance(streamed, ma.StatusReply)
+
+
+# ---- a slow adapter: replies late, in order, jittered, duplicated ----
+
+
+class _TaggedMotor(MyActuatorMotor):
+    """A simulated motor whose 0x9C replies carry, in the speed field, a token of the request frame
+    they answer (the frame object the host sent), so the test can tell which request a reply is for."""
+
+    def __init__(self, motor_id: int) -> None:
+        super().__init__(motor_id, turnaround_s=0.0001)
+        self.tokens: dict[int, int] = {}
+        self._frames: list[Frame] = []  # (kept alive: their ids stay theirs)
+
+    def receive(self, frame: Frame, now_s: float) -> list[Emission]:
+        out = super().receive(frame, now_s)
+        tagged = []
+        for emission in out:
+            data = emission.frame.data
+            if data[:1] == b"\x9c":
+                token = len(self._frames) % 30000 + 1
+                self.tokens[id(frame)] = token
+                self._frames.append(frame)
+                data = data[:4] + token.to_bytes(2, "little", signed=True) + data[6:]
+                emission = Emission(emission.ready_s, dataclasses.replace(emission.frame, data=data))
+            tagged.append(emission)
+        return tagged
+
+
+def _slow_adapter(
+    plan: FaultPlan, timeout_s: float | None, *, ticks: int = 100, seed: int = 1
+) -> tuple[int, int, Any]:
+    """``ticks`` cycles at 500 Hz of ReadStatus2 over 32 motors whose replies reach the host
+    through ``plan``: how many replies a request accepted, how many of them were another request's."""
+    devices = {i: _TaggedMotor(i) for i in range(1, 33)}
+    checked = [0, 0]  # accepted, wrong
+
+    async def main() -> Any:
+        # The wire takes no time (an infinitely fast bus): a reply is as late as the adapter makes it.
+        link = SimTransport(
+            devices=list(devices.values()),
+            bus=CanBusModel(bitrate=math.inf),
+            to_host=FaultInjector(plan, seed=seed),
+        )
+        async with Bus(link, safe=None) as bus:
+            receive = bus.scheduler.receive
+
+            def watch(frame: Frame, now: float) -> Received:
+                got = receive(frame, now)
+                if got.request is not None and isinstance(got.reply, ma.StatusReply):
+                    checked[0] += 1
+                    token = devices[got.request.codec.motor_id].tokens.get(id(got.request.frame))
+                    if got.reply.speed_dps != token:
+                        checked[1] += 1
+                return got
+
+            bus.scheduler.receive = watch  # type: ignore[method-assign]
+            motors = [bus.motor("myactuator", i) for i in devices]
+            async for _ in bus.ticks(500, spin_s=0.0, count=ticks):  # a late reply comes in the next tick
+                await bus.cycle([(m, ma.ReadStatus2()) for m in motors], timeout_s=timeout_s)
+            await asyncio.sleep(0.2)
+            return bus.metrics()
+
+    metrics = virtual.run(main())
+    return checked[0], checked[1], metrics
+
+
+# Each motor's replies in order, each 1 ms + uniform(0, 3 ms) late (a USB adapter polled every 1 ms,
+# a busy host), or up to 10 ms jitter; and 20% of them twice.
+SLOW = {
+    "late 1-4 ms": FaultPlan(latency_s=(0.001, 0.004), latency_order="sender"),
+    "late 1-11 ms": FaultPlan(latency_s=(0.001, 0.011), latency_order="sender"),
+    "late 1-4 ms, 20% twice": FaultPlan(latency_s=(0.001, 0.004), latency_order="sender", duplicate=0.2),
+    "late 1-11 ms, 20% twice": FaultPlan(latency_s=(0.001, 0.011), latency_order="sender", duplicate=0.2),
+}
+
+
+@pytest.mark.parametrize("timeout_s", [0.002, None], ids=["timeout 2 ms", "adaptive timeout"])
+@pytest.mark.parametrize("name", sorted(SLOW))
+def test_a_late_reply_never_answers_the_next_request(name: str, timeout_s: float | None) -> None:
+    accepted, wrong, metrics = _slow_adapter(SLOW[name], timeout_s)
+    assert wrong == 0, f"{wrong} of {accepted} accepted replies belonged to an earlier request"
+    assert metrics.replies + metrics.timeouts + metrics.failed + metrics.cancelled == metrics.requests
+    if timeout_s is None:  # the timeout follows the adapter: nearly every request is answered
+        assert accepted >= 0.9 * 100 * 32, (accepted, metrics)
+    else:  # most replies come after their request's 2 ms: each is late, and never the next one's
+        assert accepted >= 50 and metrics.late > 0.5 * metrics.timeouts, (accepted, metrics)

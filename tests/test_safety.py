@@ -76,7 +76,12 @@ async def test_host_side_offline_detection_fires_within_its_configured_time() ->
     transport, (motor, _other), _ = _bench()
     loop = asyncio.get_running_loop()
     statuses: list[MotorStatus] = []
-    async with transport, Bus(transport, offline_after_misses=3, offline_after_s=0.2) as bus:
+    # (late_hold_s: each poll goes out 10 ms after the last timed out, not after the hold a motor
+    # measured a few times gets, twice the codec's 20 ms)
+    async with (
+        transport,
+        Bus(transport, offline_after_misses=3, offline_after_s=0.2, late_hold_s=0.01) as bus,
+    ):
         bus.subscribe_status(statuses.append)
         m1, m2 = bus.motor("myactuator", 1), bus.motor("myactuator", 2)
         await m1.read_status1()

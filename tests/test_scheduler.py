@@ -197,16 +197,17 @@ def test_a_broadcast_reply_waits_for_its_keys_and_then_goes_past_the_queue() -> 
     _send_all(scheduler, 0.0)
     assert scheduler.blocking([timed_out.key], 0.005) == (None, [timed_out])  # in flight
     scheduler.expire(0.01)
-    assert scheduler.blocking([timed_out.key], 0.015) == (0.02, [])  # held for its late reply
-    assert scheduler.blocking([timed_out.key], 0.02) == (None, [])
+    # held for its late reply: twice the codec's 20 ms (no round trip measured yet to say otherwise)
+    assert scheduler.blocking([timed_out.key], 0.015) == (0.04, [])
+    assert scheduler.blocking([timed_out.key], 0.04) == (None, [])
     queued = scheduler.request(codec, ma.ReadMultiTurnAngle())
     scheduler.submit(queued)  # the queue does not hold a broadcast's expectation back
     expected = dataclasses.replace(
         scheduler.request(codec, ma.ReadStatus2(), timeout_s=0.02), frame=Frame(arbitration_id=0)
     )
-    scheduler.expect(expected, 0.02)
-    assert expected.state is S.SENT and expected.deadline == 0.04 and queued.state is S.QUEUED
-    got = scheduler.receive(_reply(1, t=0.021), 0.021)
+    scheduler.expect(expected, 0.04)
+    assert expected.state is S.SENT and expected.deadline == 0.06 and queued.state is S.QUEUED
+    got = scheduler.receive(_reply(1, t=0.041), 0.041)
     assert got.request is expected and expected.state is S.REPLIED and scheduler.counts["requests"] == 3
     with pytest.raises(RuntimeError, match="submitted once"):
         scheduler.expect(expected, 0.03)

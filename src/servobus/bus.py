@@ -428,7 +428,9 @@ class Bus:
         initial_timeout_s: the timeout of a request sent before any round trip on this bus was
             measured (the first exchange through a freshly opened adapter can take tens or hundreds
             of ms); requests in flight get a measured one as soon as the first reply comes.
-        min_timeout_s, max_timeout_s: bounds of a timeout derived from measured round trips. A
+        min_timeout_s, max_timeout_s: bounds of a timeout derived from measured round trips. The
+            floor (5 ms) is for the host, not the motor: a loaded event loop, or an adapter's reader
+            thread waiting for the GIL (switched every 5 ms), delays a reply that came in time. A
             request's own ``timeout_s`` overrides all of this.
         offline_after_misses: replies missed in a row after which a motor is marked offline.
         offline_after_s: silence after which a motor that answered before is marked offline (None:
@@ -456,7 +458,7 @@ class Bus:
         offline_after_misses: int = 3,
         offline_after_s: float | None = None,
         initial_timeout_s: float = 1.0,
-        min_timeout_s: float = 0.002,
+        min_timeout_s: float = 0.005,
         max_timeout_s: float = 10.0,
         probe_interval_s: float = 0.1,
     ) -> None:

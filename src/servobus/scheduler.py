@@ -163,6 +163,9 @@ class _Recent:
         self.limit = max(64, 2 * (len(self.replied) + len(late)))
 
 
+#: Round trips an estimate must rest on before it bounds how late a reply may come (a late hold).
+TRUSTED_SAMPLES = 16
+
 # Enum members as module globals for the hot paths: in Python 3.11 ``RequestState.SENT`` is a
 # metaclass attribute lookup (~55 ns, several per exchange), a global is one dict read.
 _CANCELLED = S.CANCELLED
@@ -224,7 +227,7 @@ class Scheduler:
         late_hold_s: float | None = None,
         stale_after_s: float | None = None,
         initial_timeout_s: float = 1.0,
-        min_timeout_s: float = 0.002,
+        min_timeout_s: float = 0.005,
         max_timeout_s: float = 10.0,
     ) -> None:
         if (
@@ -311,7 +314,8 @@ class Scheduler:
         if id(codec) not in self.motor_counts:
             raise ValueError(f"{codec!r} is not on this bus: add() it first")
         frame = codec.encode(command)
-        timeout = codec.timeout_s(command) if timeout_s is None else timeout_s
+        base = codec.timeout_s(command)
+        timeout = base if timeout_s is None else timeout_s
         if timeout <= 0 or retries < 0:
             raise ValueError(f"timeout_s={timeout} must be > 0 and retries={retries} >= 0")
         if retries and not codec.retry_safe(command):
@@ -323,7 +327,7 @@ class Scheduler:
         request = Request(codec, command, frame, codec.reply_key(command), timeout, retries, context)
         request.rtt = rtt
         request.adaptive = timeout_s is None
-        request.base_timeout_s = timeout
+        request.base_timeout_s = base
         return request
 
     def round_trip(self, codec: BoundCodec, command_class: type[Command]) -> RoundTrip | None:
@@ -569,13 +573,20 @@ class Scheduler:
         elif request.sent_at is None:  # (cancelled before its send report: its time is unknown)
             until = now + request.timeout_s
         else:
-            rtt = request.rtt
-            late = 2.0 * request.timeout_s
-            if rtt is not None and rtt.samples:
-                late = max(late, rtt.late_s())
-            until = request.sent_at + late
+            until = request.sent_at + max(2.0 * request.timeout_s, self._late_s(request))
         if until > now:
             self._held[key] = max(until, self._held.get(key, until))
+
+    def _late_s(self, request: Request) -> float:
+        """How late ``request``'s reply may come after it left: from its estimate once that rests
+        on ``TRUSTED_SAMPLES`` round trips; before, twice the codec's own time for the command, or
+        the bus's slowest trusted estimate if longer. A tail guessed from a few samples is too
+        short: the first replies through a jittery adapter said 1.1 ms where 11 ms came."""
+        rtt = request.rtt
+        if rtt is not None and rtt.samples >= TRUSTED_SAMPLES:
+            return rtt.late_s()
+        trusted = [r.late_s() for r in self._rtts.values() if r.samples >= TRUSTED_SAMPLES]
+        return max([2.0 * request.base_timeout_s, *trusted])
 
     def next_deadline(self) -> float | None:
         """When :meth:`expire` or :meth:`next_to_send` next has something to do (None: nothing)."""

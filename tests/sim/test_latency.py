@@ -261,3 +261,26 @@ def test_the_transport_delivers_late_replies_at_their_time_and_in_order() -> Non
         assert LO - 1e-9 <= stamp - end <= HI + 1e-9  # stamped with its (late) arrival time
         # Handed over then, not before (the virtual loop's clock has a 1 µs resolution).
         assert stamp - 1e-6 <= delivered <= stamp + 2e-6
+
+
+def test_in_sender_order_each_identifiers_frames_stay_in_order_and_no_other_holds_them_back() -> None:
+    injector = FaultInjector(FaultPlan(latency_s=(LO, HI), latency_order="sender"), seed=3)
+    arrivals: dict[int, list[float]] = {}
+    for i in range(2000):
+        frame = _frame(i)
+        ((at, item),) = injector.apply(frame, i * 0.0001)
+        assert at - i * 0.0001 >= LO - EPS and item is frame
+        arrivals.setdefault(frame.arbitration_id, []).append(at)
+    assert all(times == sorted(times) for times in arrivals.values())
+    # Unlike one queue, where every item waits for the slowest recent draw, each sender's frames
+    # keep the drawn spread: the median latency is lower.
+    link = FaultInjector(FaultPlan(latency_s=(LO, HI)), seed=3)
+    one_queue = [link.apply(_frame(i), i * 0.0001)[0][0] - i * 0.0001 for i in range(2000)]
+    sender = FaultInjector(FaultPlan(latency_s=(LO, HI), latency_order="sender"), seed=3)
+    per_sender = [sender.apply(_frame(i), i * 0.0001)[0][0] - i * 0.0001 for i in range(2000)]
+    assert sorted(per_sender)[1000] < sorted(one_queue)[1000]
+
+
+def test_latency_order_is_link_or_sender() -> None:
+    with pytest.raises(ValueError, match="latency_order"):
+        FaultPlan(latency_s=(LO, HI), latency_order="motor")

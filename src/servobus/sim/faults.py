@@ -48,6 +48,11 @@ class FaultPlan:
     as they do without latency; the next item waits only for the previous one's latency, not for its
     fault). The default ``(0.0, 0.0)`` is off: items arrive when sent, the generator is not drawn for
     latency, and a seed gives the decisions it gave before latency existed.
+
+    ``latency_order`` says what stays in order: ``"link"``, every item (one queue, as in an
+    adapter); ``"sender"``, the frames of each CAN identifier (each motor's replies in order, the
+    motors' among each other not: with independent draws a single queue holds every item back to
+    the slowest recent draw, so ``"sender"`` is the one whose latency is the drawn one).
     """
 
     drop: float = 0.0
@@ -58,6 +63,7 @@ class FaultPlan:
     delay_s: tuple[float, float] = (0.001, 0.010)
     can_retransmit_s: float = 0.000135  # an error frame plus the retransmitted 8-byte frame at 1 Mbit/s
     latency_s: tuple[float, float] = (0.0, 0.0)
+    latency_order: str = "link"
 
     def __post_init__(self) -> None:
         for name in ("drop", "corrupt", "duplicate", "reorder", "delay"):
@@ -69,6 +75,8 @@ class FaultPlan:
         lo, hi = self.delay_s
         if not 0.0 <= lo <= hi:
             raise ValueError(f"delay_s={self.delay_s!r} must be 0 <= low <= high")
+        if self.latency_order not in ("link", "sender"):
+            raise ValueError(f"latency_order={self.latency_order!r} must be 'link' or 'sender'")
         lo, hi = _pair("latency_s", self.latency_s)
         if not (0.0 <= lo <= hi and math.isfinite(hi)):
             raise ValueError(f"latency_s={self.latency_s!r} must be 0 <= low <= high (finite seconds)")
@@ -108,7 +116,8 @@ class FaultInjector:
         self._random = random.Random(seed)
         self._held: Item | None = None  # an item waiting to be delivered after the next one
         self._held_s = 0.0  # the held item's own (latency'd) arrival time
-        self._last_s = -math.inf  # the latency'd arrival of the last item that arrives (FIFO)
+        # the latency'd arrival of the last item that arrives (FIFO), of the link or by sender
+        self._last_s: dict[int | None, float] = {}
 
     def apply(self, item: Item, now_s: float) -> list[tuple[float, Item]]:
         """Decide the fate of ``item`` sent at ``now_s``: the (arrival time, item) pairs to deliver.
@@ -118,7 +127,7 @@ class FaultInjector:
         """
         kind = self._draw()
         self.counts[kind] += 1
-        at = self._arrival(now_s, kind)
+        at = self._arrival(now_s, kind, item)
         out: list[tuple[float, Item]]
         if kind == "drop":
             out = []
@@ -145,17 +154,19 @@ class FaultInjector:
             return []
         return [(max(now_s, self._held_s) if self.plan.has_latency else now_s, held)]
 
-    def _arrival(self, now_s: float, kind: str) -> float:
+    def _arrival(self, now_s: float, kind: str, item: Item) -> float:
         """When an item sent at ``now_s`` comes out of the latency: ``now_s`` without latency, else
         ``max(now_s + uniform(latency_s), the previous item's)``. A dropped item holds nothing back."""
         plan = self.plan
         if not plan.has_latency:
             return now_s
         at = now_s + self._random.uniform(*plan.latency_s)
-        if at < self._last_s:
-            at = self._last_s
+        queue = item.arbitration_id if plan.latency_order == "sender" and isinstance(item, Frame) else None
+        last = self._last_s.get(queue, -math.inf)
+        if at < last:
+            at = last
         if kind != "drop":
-            self._last_s = at
+            self._last_s[queue] = at
         return at
 
     def _draw(self) -> str:
