@@ -1,6 +1,6 @@
 """``servobus demo``: simulated motors at a fixed rate, a summary with the achieved rate, missed ticks and
 errors (and why, when the rate was not kept); the bus layout follows classic CAN's capacity; Ctrl-C
-stops the motors, prints the summary and exits 130."""
+(SIGTERM) stops the motors, prints the summary and exits 130 (143)."""
 
 from __future__ import annotations
 
@@ -101,15 +101,24 @@ def test_bad_arguments_are_one_line_and_exit_2(
     assert naming in one_line(capsys, args)
 
 
-def test_ctrl_c_stops_the_motors_prints_the_summary_and_exits_130() -> None:
+@pytest.mark.parametrize(
+    ("signum", "code", "by", "said"),
+    [
+        (signal.SIGINT, 130, "Ctrl-C", "interrupted"),
+        (signal.SIGTERM, 143, "SIGTERM", "interrupted by SIGTERM"),
+    ],
+)
+def test_ctrl_c_or_sigterm_stops_the_motors_prints_the_summary_and_exits_128_plus_it(
+    signum: signal.Signals, code: int, by: str, said: str
+) -> None:
     demo = subprocess.Popen(
         [*SERVOBUS, "demo", "--motors", "3"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
     )
     assert demo.stdout is not None
     assert demo.stdout.readline().startswith("servobus demo: 3 simulated")
     time.sleep(1.0)
-    demo.send_signal(signal.SIGINT)
+    demo.send_signal(signum)
     out, err = demo.communicate(timeout=20)
-    assert demo.returncode == 130, (out, err)
-    assert "stopped     Ctrl-C: every motor got its stop command" in out and "errors      0 " in out
-    assert err.strip().splitlines() == ["servobus: interrupted; stop sent to myactuator motors 1-3 on bus 1"]
+    assert demo.returncode == code, (out, err)
+    assert f"stopped     {by}: every motor got its stop command" in out and "errors      0 " in out
+    assert err.strip().splitlines() == [f"servobus: {said}; stop sent to myactuator motors 1-3 on bus 1"]

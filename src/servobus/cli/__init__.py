@@ -12,12 +12,14 @@ exit code   meaning
 2           bad usage: an unknown option, a value out of range, a missing or contradictory flag
 130         interrupted (Ctrl-C); a command that drives motors (move, speed, torque, mit, demo)
             sends them its safe stop first, and the line says which motors it went to
+143         terminated (SIGTERM: systemd, ``docker stop``, ``timeout``): as Ctrl-C, safe stop first
 ==========  ==================================================================================
 """
 
 from __future__ import annotations
 
 import importlib
+import signal
 import sys
 from collections.abc import Sequence
 
@@ -26,12 +28,16 @@ import click
 from servobus import __version__
 from servobus.errors import ServobusError
 
-__all__ = ["SAFE_EXITS", "cli", "main"]
+__all__ = ["SAFE_EXITS", "SIGNALLED", "cli", "main"]
 
 #: What the Buses of this command sent their commanded motors when their blocks were left, for the
 #: line Ctrl-C prints (:func:`servobus.cli._connect.note_exit`): (bus name, family, safe command,
 #: the ids it left for, the ids it did not).
 SAFE_EXITS: list[tuple[str, str, str, tuple[int, ...], tuple[int, ...]]] = []
+
+#: The signals other than Ctrl-C's that cancelled this command's run (SIGTERM:
+#: :func:`servobus.cli._motors.run`), for the line and the exit code (128 + the signal).
+SIGNALLED: list[signal.Signals] = []
 
 #: subcommand -> "module:attribute" (imported on first use)
 COMMANDS: dict[str, str] = {
@@ -82,7 +88,7 @@ class LazyGroup(click.Group):
     epilog="Examples:\n\n\b\n  servobus demo --duration 5\n  servobus scan --sim 4\n"
     "  servobus status -i slcan -c /dev/ttyACM0 --ids 1-3\n  servobus decode candump.log\n\n"
     "Exit codes: 0 done, 1 the job failed, 2 bad usage, 130 interrupted (Ctrl-C: motors being driven "
-    "are sent their stop first).",
+    "are sent their stop first), 143 terminated (SIGTERM: as Ctrl-C).",
 )
 @click.version_option(__version__, "--version", prog_name="servobus")
 @click.option("--debug", is_flag=True, help="Show the traceback of an error.")
@@ -109,10 +115,11 @@ def _ids(ids: Sequence[int]) -> str:
     return ("motor " if len(ids) == 1 else "motors ") + ", ".join(parts)
 
 
-def _interrupted() -> str:
-    """The line for Ctrl-C: which motors were sent their safe command, and which were not (only what
-    the Buses reported; nothing is claimed for a command that commanded no motor)."""
-    line = "servobus: interrupted"
+def _interrupted(by: signal.Signals = signal.SIGINT) -> str:
+    """The line for Ctrl-C (or another signal ``by``, named): which motors were sent their safe
+    command, and which were not (only what the Buses reported; nothing is claimed for a command that
+    commanded no motor)."""
+    line = "servobus: interrupted" if by == signal.SIGINT else f"servobus: interrupted by {by.name}"
     for bus, family, safe, sent, missed in SAFE_EXITS:
         if sent:
             line += f"; {safe} sent to {family} {_ids(sent)} on {bus}"
@@ -125,6 +132,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """The console script: run ``cli`` and turn every error into one line and an exit code."""
     args = list(sys.argv[1:] if argv is None else argv)
     SAFE_EXITS.clear()
+    SIGNALLED.clear()
     debug = "--debug" in args
     try:
         # Without standalone mode click returns the code of a click.exceptions.Exit raised inside a
@@ -141,8 +149,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         click.echo(f"{where}error: {_one_line(exc.format_message())}", err=True)
         return 2
     except (click.Abort, KeyboardInterrupt):  # (click turns a KeyboardInterrupt into Abort)
-        click.echo(_interrupted(), err=True)
-        return 130
+        by = SIGNALLED[0] if SIGNALLED else signal.SIGINT
+        click.echo(_interrupted(by), err=True)
+        return 128 + by
     except ValueError as exc:  # a value the library refused (a set-point out of range, a bad id)
         if debug:
             raise

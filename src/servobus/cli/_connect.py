@@ -4,7 +4,8 @@
 (``-i``/``-c``) opens a CAN adapter through python-can (its configuration file and ``CAN_*``
 environment variables are the defaults), or with ``-i servobus-slcan`` an SLCAN adapter through
 servobus's own transport; ``--port`` opens an RS485 line. ``--family``,
-``--revision`` and ``--ids`` say which motors are there.
+``--revision`` and ``--ids`` say which motors are there; ``--timeout-ms`` how long each request
+waits for its reply (default: the library's).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from typing import Any, TypeVar
 import click
 
 from servobus.bus import Bus, Motor
+from servobus.cli._output import FloatRange
 
 __all__ = [
     "Connection",
@@ -27,6 +29,7 @@ __all__ = [
     "open_bus",
     "parse_ids",
     "revision_option",
+    "timeout_option",
 ]
 
 FAMILIES = ("myactuator", "lk", "hollow")
@@ -77,6 +80,8 @@ class Connection:
     data_bitrate: int | None = None
     port: str | None = None
     baud: int | None = None
+    #: each request's reply timeout (``--timeout-ms``); None: the library's
+    timeout_s: float | None = None
 
     @property
     def link(self) -> str:
@@ -200,8 +205,31 @@ family_option = click.option(
 revision_option = click.option("--revision", help="Protocol revision (myactuator V4_3/V4_4; lk V2_35/V2_36).")
 
 
+#: the shortest ``--timeout-ms``: about the shortest request and reply there are on a 1 Mbit/s CAN bus
+#: (47 bits each), the least time a reply can take; the longest: a reply later than this is not coming
+#: (and the next request to the motor would wait as long again for a late one)
+MIN_TIMEOUT_MS, MAX_TIMEOUT_MS = 0.1, 10_000.0
+
+
+def _seconds(ctx: click.Context, param: click.Parameter, value: float | None) -> float | None:
+    return None if value is None else value / 1000.0
+
+
+#: ``--timeout-ms``: the command receives ``timeout_s`` (seconds; None: the library's timeout)
+timeout_option = click.option(
+    "--timeout-ms",
+    "timeout_s",
+    type=FloatRange(min=MIN_TIMEOUT_MS, max=MAX_TIMEOUT_MS),
+    callback=_seconds,
+    metavar="MS",
+    help="How long each request waits for its reply, in ms [default: the library's, per command]. "
+    "Raise it for a slow adapter.",
+)
+
+
 def connection_options(func: F) -> F:
-    """Add the connection options to a click command; it receives ``conn: Connection``."""
+    """Add the connection options (and ``--timeout-ms``) to a click command; it receives
+    ``conn: Connection``."""
 
     @family_option
     @revision_option
@@ -223,6 +251,7 @@ def connection_options(func: F) -> F:
     @click.option("--data-bitrate", type=click.IntRange(min=1), help="CAN FD data-phase bit rate.")
     @click.option("--port", help="Serial port of an RS485 line (/dev/ttyUSB0).")
     @click.option("--baud", type=click.IntRange(min=1), help="Serial baud rate [default: the family's].")
+    @timeout_option
     @functools.wraps(func)
     def wrapper(*args: Any, ids_text: str | None, **kwargs: Any) -> Any:
         names = (
@@ -236,6 +265,7 @@ def connection_options(func: F) -> F:
             "data_bitrate",
             "port",
             "baud",
+            "timeout_s",
         )
         fields = {name: kwargs.pop(name) for name in names}
         try:

@@ -179,7 +179,10 @@ def summary_lines(s: Summary) -> list[str]:
     if why:
         lines.append(f"why         {why}")
     if s.interrupted:
-        lines.append("stopped     Ctrl-C: every motor got its stop command")
+        from servobus.cli import SIGNALLED
+
+        by = SIGNALLED[0].name if SIGNALLED else "Ctrl-C"
+        lines.append(f"stopped     {by}: every motor got its stop command")
     return lines
 
 

@@ -9,8 +9,10 @@ the others still get theirs, and :func:`fail_if_any` turns the failures into one
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
-from collections.abc import Coroutine, Mapping, Sequence
+import signal
+from collections.abc import Callable, Coroutine, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
@@ -29,9 +31,60 @@ T = TypeVar("T")
 
 
 def run(coro: Coroutine[Any, Any, T]) -> T:
-    """Run ``coro`` on a fresh event loop. Ctrl-C cancels it (the Bus stops its motors on the way out)
-    and ends here as KeyboardInterrupt, which ``servobus.cli.main`` turns into exit 130."""
-    return asyncio.run(coro)
+    """Run ``coro`` on a fresh event loop, Ctrl-C and SIGTERM alike cancelling it: every ``async with
+    Bus`` in it is left through its safe stop, and the command ends here as KeyboardInterrupt, which
+    ``servobus.cli.main`` turns into the line naming the motors stopped and exit 130 (Ctrl-C) or 143
+    (SIGTERM: systemd, ``docker stop``, ``timeout``).
+
+    Ctrl-C is asyncio's own (the first cancels the main task); SIGTERM is turned into the same
+    cancellation by a handler on the loop while ``coro`` runs (the handler before is put back
+    after), and is noted in :data:`servobus.cli.SIGNALLED` for the exit code. A second SIGTERM while
+    the safe stop runs is ignored: the stop is bounded by the Bus's ``safe_timeout_s``.
+    """
+    from servobus.cli import SIGNALLED
+
+    terminated = False
+    task: asyncio.Task[Any] | None = None
+
+    def on_sigterm() -> None:
+        nonlocal terminated
+        if terminated or task is None:
+            return  # the safe stop is under way
+        terminated = True
+        SIGNALLED.append(signal.SIGTERM)
+        task.cancel("servobus: SIGTERM")
+
+    async def main() -> T:
+        nonlocal task
+        task = asyncio.current_task()
+        with _handled(signal.SIGTERM, on_sigterm):
+            return await coro
+
+    try:
+        return asyncio.run(main())
+    except asyncio.CancelledError:
+        if terminated:  # (a command that ends its own run on the cancellation, like demo, returns)
+            raise KeyboardInterrupt from None
+        raise
+
+
+@contextlib.contextmanager
+def _handled(signum: signal.Signals, callback: Callable[[], None]) -> Iterator[None]:
+    """``callback`` on the running loop for ``signum`` inside the block, the process's handler before
+    it put back after. Nothing where the loop cannot take signals (not the main thread, Windows)."""
+    loop = asyncio.get_running_loop()
+    previous = signal.getsignal(signum)
+    try:
+        loop.add_signal_handler(signum, callback)
+    except (NotImplementedError, RuntimeError):
+        yield
+        return
+    try:
+        yield
+    finally:
+        loop.remove_signal_handler(signum)
+        if previous is not None:  # (None: a handler not installed from Python; the default stays)
+            signal.signal(signum, previous)
 
 
 @dataclass(slots=True)
@@ -74,14 +127,17 @@ def plan(conn: Connection, op: Op, values: Mapping[str, Any]) -> list[Sequence[C
     return planned
 
 
-async def ask_all(motors: Sequence[Motor], planned: Sequence[Sequence[Command]]) -> list[Outcome]:
-    """Send each motor its commands in order (the motors one after the other); collect the replies."""
+async def ask_all(
+    motors: Sequence[Motor], planned: Sequence[Sequence[Command]], *, timeout_s: float | None = None
+) -> list[Outcome]:
+    """Send each motor its commands in order (the motors one after the other); collect the replies.
+    ``timeout_s``: each reply's timeout (None: the library's)."""
     outcomes = []
     for motor, commands in zip(motors, planned, strict=True):
         outcome = Outcome(motor.motor_id)
         for command in commands:
             try:
-                outcome.replies.append(await motor.request(command))
+                outcome.replies.append(await motor.request(command, timeout_s=timeout_s))
             except ServobusError as exc:
                 outcome.error = str(exc)
                 break
@@ -95,7 +151,7 @@ def ask(conn: Connection, planned: Sequence[Sequence[Command]]) -> list[Outcome]
 
     async def go() -> list[Outcome]:
         async with open_bus(conn, safe=None) as (_, motors):
-            return await ask_all(motors, planned)
+            return await ask_all(motors, planned, timeout_s=conn.timeout_s)
 
     return run(go())
 

@@ -3,9 +3,9 @@ one-shots (``stop``, ``off``, ``brake``, ``zero``, ``set-id``, ``clear-errors``,
 
 Which command class each sends is the family's table (:mod:`servobus.cli._families`); here are the
 options (units in their names), the confirmation of ROM writes and id changes, and the output.
-Set-points are resent at ``--rate-hz`` until ``--duration`` ends, a move arrives, or Ctrl-C; then
-the motors get the Bus's safe stop (``--keep`` sends once and leaves them running). A relative move
-sends its increment once and then only reads where the motor is.
+Set-points are resent at ``--rate-hz`` until ``--duration`` ends, a move arrives, or Ctrl-C (or
+SIGTERM); then the motors get the Bus's safe stop (``--keep`` sends once and leaves them running). A
+relative move sends its increment once and then only reads where the motor is.
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ import click
 from rich.live import Live
 
 from servobus.bus import Motor
+from servobus.cli import _ids
 from servobus.cli._connect import Connection, connection_options, open_bus
 from servobus.cli._families import Op, op, status_reads
 from servobus.cli._motors import (
@@ -188,7 +189,7 @@ async def _monitor(
                 elapsed = tick.started - start
                 if duration is not None and elapsed >= duration:
                     break
-                fresh = _take(outcomes, items, await bus.cycle(items))
+                fresh = _take(outcomes, items, await bus.cycle(items, timeout_s=conn.timeout_s))
                 if as_json:
                     for o in outcomes:
                         emit_json(
@@ -300,9 +301,18 @@ async def _run_setpoints(
     arrival: Arrival | None,
 ) -> list[Outcome]:
     async with open_bus(conn, safe=None if keep else "stop") as (bus, motors):
-        outcomes = await ask_all(motors, planned)
+        outcomes = await ask_all(motors, planned, timeout_s=conn.timeout_s)
         if keep or any(o.error for o in outcomes):
             return outcomes
+        if not live:  # (a terminal shows the live table instead)
+            ends = ["arrival"] if arrival is not None else []
+            ends += [f"{duration:g} s"] if duration is not None else []
+            until = ", ".join(ends) + (" or " if ends else "") + "Ctrl-C"
+            click.echo(
+                f"{name}: {conn.family} {_ids(conn.motor_ids)} driven at {rate_hz:g} Hz until {until}, "
+                "then stopped",
+                err=True,
+            )
         arrived = None if arrival is None else [arrival(o.replies) for o in outcomes]
         items = _items(motors, repeats)
         settled = 0
@@ -312,7 +322,7 @@ async def _run_setpoints(
                 elapsed = time.monotonic() - start
                 if duration is not None and elapsed >= duration:
                     break
-                _take(outcomes, items, await bus.cycle(items))
+                _take(outcomes, items, await bus.cycle(items, timeout_s=conn.timeout_s))
                 if arrived is not None:
                     done = all(
                         o.error is None and there(status_of(o.replies))

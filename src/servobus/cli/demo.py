@@ -9,7 +9,8 @@ current and temperature with the achieved rate, missed ticks, latency, bus load 
 kept, what was achieved and why (CPU time per tick, the simulator's share, the cores it would need).
 
 Real time, one process: the simulated motors run on the same event loop as the host side, so the
-machine's one core pays for both. Ctrl-C (or the end of ``--duration``) sends every motor its stop.
+machine's one core pays for both. Ctrl-C or SIGTERM (or the end of ``--duration``) sends every motor
+its stop.
 """
 
 from __future__ import annotations
@@ -24,8 +25,9 @@ from typing import Any
 import click
 
 from servobus.bus import Bus, Motor
-from servobus.cli._connect import note_exit
+from servobus.cli._connect import note_exit, timeout_option
 from servobus.cli._demo_report import Layout, Summary, layout, live_view, summary_lines
+from servobus.cli._motors import run
 from servobus.cli._output import SETTINGS, FloatRange, console, emit_json, examples, json_option
 from servobus.protocols import myactuator as ma
 from servobus.ticks import ticks
@@ -61,8 +63,11 @@ REFRESH_S = 0.25
     type=click.IntRange(1, 320),
     help="Simulated 1 Mbit/s buses [default: as few as carry the motors at --hz].",
 )
+@timeout_option
 @json_option
-def demo(duration: float | None, hz: float, motors: int, buses: int | None, as_json: bool) -> None:
+def demo(
+    duration: float | None, hz: float, motors: int, buses: int | None, timeout_s: float | None, as_json: bool
+) -> None:
     """Simulated MyActuator motors on simulated CAN buses following sine trajectories, in real time.
 
     No hardware and no arguments needed: 32 motors at 1 kHz by default, spread over as many
@@ -83,14 +88,14 @@ def demo(duration: float | None, hz: float, motors: int, buses: int | None, as_j
         click.echo(plan.why())
         if (warning := plan.overload()) is not None:
             click.echo(f"warning: {warning}")
-    summary = asyncio.run(_run(plan, duration, live=duration is None))
+    summary = run(_run(plan, duration, live=duration is None, timeout_s=timeout_s))
     if as_json:
         emit_json(summary.as_dict())
     else:
         for line in summary_lines(summary):
             click.echo(line)
     if summary.interrupted:
-        raise KeyboardInterrupt  # exit 130, after the summary (the motors were stopped)
+        raise KeyboardInterrupt  # exit 130 (SIGTERM: 143), after the summary (the motors were stopped)
     if summary.errors:
         raise click.ClickException(f"{summary.errors} request(s) failed during the demo")
 
@@ -118,7 +123,7 @@ class _SimClock:
         return timed
 
 
-async def _run(plan: Layout, duration: float | None, *, live: bool) -> Summary:
+async def _run(plan: Layout, duration: float | None, *, live: bool, timeout_s: float | None) -> Summary:
     from servobus.sim.devices.myactuator import MyActuatorMotor
     from servobus.transports.sim import SimTransport
 
@@ -174,7 +179,10 @@ async def _run(plan: Layout, duration: float | None, *, live: bool) -> Summary:
                     )
                     items_by_bus[b].append((motor, command))
                 tick_done = asyncio.gather(
-                    *(bus.cycle(items) for (bus, _), items in zip(buses, items_by_bus, strict=True))
+                    *(
+                        bus.cycle(items, timeout_s=timeout_s)
+                        for (bus, _), items in zip(buses, items_by_bus, strict=True)
+                    )
                 )
                 try:
                     while not tick_done.done():  # keep the loop turning: asyncio's timers fire up to 1 ms
@@ -197,7 +205,7 @@ async def _run(plan: Layout, duration: float | None, *, live: bool) -> Summary:
                     next_refresh = tick.started + REFRESH_S
                     header = _header(plan, buses, count, skipped, tick.started - start, failed)
                     view.update(live_view(header, _rows(flat, latest, targets)), refresh=True)
-        except asyncio.CancelledError:  # Ctrl-C: leave the loop; the Buses' exits stop the motors
+        except asyncio.CancelledError:  # Ctrl-C, SIGTERM: leave the loop; the Buses' exits stop the motors
             interrupted = True
             task = asyncio.current_task()
             if task is not None:

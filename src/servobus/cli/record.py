@@ -14,6 +14,7 @@ import click
 
 from servobus.bus import Bus, Motor, command_classes
 from servobus.cli._connect import Connection, connection_options
+from servobus.cli._motors import run
 from servobus.cli._output import FloatRange
 from servobus.errors import MotorTimeout, TransportError
 from servobus.protocols import get_family
@@ -30,8 +31,8 @@ fields, units in the names (.csv or .jsonl by the suffix of -o). --log writes ev
 directions, to a candump log (python-can), which `servobus decode` reads back. Reads only: no motor
 is commanded. Existing files are kept unless --force, and even then an existing file is replaced
 only by a recording that is kept; on an error, only the files record created are removed.
-Without --duration it records until Ctrl-C (exit 0); Ctrl-C before --duration is up exits 130.
-Either way the files are kept, whole.
+Without --duration it records until Ctrl-C or SIGTERM (exit 0); Ctrl-C before --duration is up
+exits 130 (SIGTERM: 143). Either way the files are kept, whole.
 
 \b
 Examples:
@@ -108,8 +109,8 @@ def record(
         frames_file = files.open(log) if log is not None else None
         tally = Tally()
         try:
-            asyncio.run(_record(conn, poll_class, hz, duration, telemetry, frames_file, tally))
-        except KeyboardInterrupt:
+            run(_record(conn, poll_class, hz, duration, telemetry, frames_file, tally))
+        except KeyboardInterrupt:  # Ctrl-C or SIGTERM
             interrupted = True
         if tally.replies == 0 and not interrupted:
             raise click.ClickException(
@@ -181,7 +182,7 @@ async def _record(
             scope = anyio.move_on_after(duration) if duration is not None else contextlib.nullcontext()
             with scope:
                 async for _ in bus.ticks(hz):
-                    for result in await bus.cycle(items):
+                    for result in await bus.cycle(items, timeout_s=conn.timeout_s):
                         if isinstance(result, MotorTimeout):
                             tally.timeouts += 1
                         elif isinstance(result, TransportError):

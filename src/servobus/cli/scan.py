@@ -31,44 +31,44 @@ COLUMNS = ("id", "family", "revision", "model", "firmware", "state", "errors")
 DEFAULT_IDS = tuple(range(1, 33))
 
 
-async def _myactuator_identify(motor: Motor) -> dict[str, Any]:
+async def _myactuator_identify(motor: Motor, timeout_s: float | None) -> dict[str, Any]:
     """Firmware date and the revision it implies (0xB2 reads the same in V4.3 and V4.4)."""
     from servobus.protocols import myactuator as ma
 
-    date = await motor.request(ma.ReadVersionDate())
+    date = await motor.request(ma.ReadVersionDate(), timeout_s=timeout_s)
     version = getattr(date, "version_date", None)
     if not version:
         return {}
     return {"firmware": str(version), "revision": ma.revision_from_version_date(version).name}
 
 
-async def _myactuator_describe(motor: Motor) -> dict[str, Any]:
+async def _myactuator_describe(motor: Motor, timeout_s: float | None) -> dict[str, Any]:
     """Model (0xB5, in the motor's revision's form) and operating mode (0x70)."""
     from servobus.protocols import myactuator as ma
 
     out: dict[str, Any] = {}
     if motor.codec.revision is ma.Revision.V4_4:
-        parts = [await motor.request(ma.ReadModelPart(part=part)) for part in (1, 2, 3)]
+        parts = [await motor.request(ma.ReadModelPart(part=part), timeout_s=timeout_s) for part in (1, 2, 3)]
         out["model"] = ma.join_model(p for p in parts if isinstance(p, ma.ModelPartReply))
     else:
-        out["model"] = getattr(await motor.request(ma.ReadModel()), "model", None)
-    mode = getattr(await motor.request(ma.ReadRunMode()), "mode", None)
+        out["model"] = getattr(await motor.request(ma.ReadModel(), timeout_s=timeout_s), "model", None)
+    mode = getattr(await motor.request(ma.ReadRunMode(), timeout_s=timeout_s), "mode", None)
     if mode is not None:
         out["state"] = jsonable(mode)
     return out
 
 
-async def _nothing(motor: Motor) -> dict[str, Any]:
+async def _nothing(motor: Motor, timeout_s: float | None) -> dict[str, Any]:
     return {}
 
 
 @dataclass(frozen=True, slots=True)
 class Details:
     """What to ask a motor that answered the probe: ``identify`` on the probe's binding (may name the
-    revision), then ``describe`` on a binding in that revision."""
+    revision), then ``describe`` on a binding in that revision; each given the reply timeout."""
 
-    identify: Callable[[Motor], Awaitable[dict[str, Any]]] = _nothing
-    describe: Callable[[Motor], Awaitable[dict[str, Any]]] = _nothing
+    identify: Callable[[Motor, float | None], Awaitable[dict[str, Any]]] = _nothing
+    describe: Callable[[Motor, float | None], Awaitable[dict[str, Any]]] = _nothing
 
 
 #: family -> what else a motor can say about itself
@@ -118,7 +118,7 @@ async def _scan(conn: Connection, ids: Sequence[int], probe: Any, quiet: bool) -
                 for motor_id in ids:
                     motor = bus.motor(conn.family, motor_id, **conn.bind_options())
                     try:
-                        reply = await motor.request(probe)
+                        reply = await motor.request(probe, timeout_s=conn.timeout_s)
                     except ServobusError:
                         progress.advance(task)
                         continue
@@ -128,7 +128,7 @@ async def _scan(conn: Connection, ids: Sequence[int], probe: Any, quiet: bool) -
                     row["errors"] = jsonable(getattr(reply, faults)) if faults else None
                     row["state"] = jsonable(getattr(reply, "motor_state", None))
                     with contextlib.suppress(ServobusError):
-                        row.update(await details.identify(motor))
+                        row.update(await details.identify(motor, conn.timeout_s))
                     rows.append(row)
                     progress.advance(task)
         async with Bus(transport, safe=None) as bus:  # a fresh Bus: each motor in its own revision
@@ -137,7 +137,8 @@ async def _scan(conn: Connection, ids: Sequence[int], probe: Any, quiet: bool) -
                 if conn.revision is None:
                     options["revision"] = row["revision"]
                 try:
-                    row.update(await details.describe(bus.motor(conn.family, row["id"], **options)))
+                    motor = bus.motor(conn.family, row["id"], **options)
+                    row.update(await details.describe(motor, conn.timeout_s))
                 except ServobusError as exc:
                     row["state"] = f"answered the probe, then: {exc}"
     return rows
