@@ -11,7 +11,8 @@ soak`` runs it for 10 virtual minutes and records the figures. One run (:func:`r
   given up on by their caller after a random wait: cancelled).
 * **Faults.** Both directions of every bus's link get a seeded
   :class:`~servobus.sim.faults.FaultInjector` (drops, corruption, which CAN turns into a
-  retransmission one frame later, duplicates, delayed frames); a random motor is power-cycled every
+  retransmission one frame later, duplicates, delayed frames; and towards the host every reply
+  0.5..3 ms late, each motor's in order: latency jitter); a random motor is power-cycled every
   few seconds (``reboot``); one motor stops answering for the middle third of the run
   (``unresponsive``) and answers again after; and one bus's adapter is unplugged for 0.3..1 s and
   plugged back (:meth:`SimTransport.unplug` / :meth:`~SimTransport.replug`) every
@@ -67,12 +68,19 @@ from servobus.transports.sim import SimTransport
 
 __all__ = ["SoakPlan", "SoakResult", "run"]
 
-TO_HOST = FaultPlan(drop=0.01, corrupt=0.005, duplicate=0.005, delay=0.005, delay_s=(0.001, 0.008))
+# Every reply also comes 0.5..3 ms late, each motor's in order (a USB adapter, a busy host): the
+# latency jitter of issue [control].
+TO_HOST = FaultPlan(
+    drop=0.01,
+    corrupt=0.005,
+    duplicate=0.005,
+    delay=0.005,
+    delay_s=(0.001, 0.008),
+    latency_s=(0.0005, 0.003),
+    latency_order="sender",
+)
 TO_DEVICES = FaultPlan(drop=0.005, corrupt=0.002, duplicate=0.002, delay=0.002, delay_s=(0.001, 0.008))
 TIMEOUT_S = 0.01
-# A reply is at most both links' longest delay, the turnaround and a few frames late: the Bus holds a
-# timed-out key that long (late_hold_s) so no late reply answers the next request with its key.
-LATE_HOLD_S = 2 * 0.008 + 0.001 + 0.002 + TIMEOUT_S
 
 
 @dataclass(frozen=True)
@@ -343,7 +351,9 @@ class _Soak:
                 transport = SimTransport(
                     network, name=f"sim{b}", stale_after_s=plan.fresh_s, reopen_backoff_s=(0.05, 0.4)
                 )
-                bus = Bus(transport, late_hold_s=LATE_HOLD_S, offline_after_misses=3, name=f"bus{b}")
+                # (how long a timed-out key is held for its late reply: the Bus's own, from the
+                # round trips it measured, late ones included)
+                bus = Bus(transport, offline_after_misses=3, name=f"bus{b}")
                 self.wrap(bus, b)
                 await stack.enter_async_context(transport)
                 await stack.enter_async_context(bus)
@@ -433,7 +443,7 @@ class _Soak:
             if x < 0.4:
                 coro = motor.request(ma.ReadStatus1(), timeout_s=TIMEOUT_S, retries=rng.choice((0, 1)))
             elif x < 0.7:
-                coro = motor.request(ma.ReadMultiTurnAngle(), timeout_s=TIMEOUT_S)
+                coro = motor.request(ma.ReadMultiTurnAngle())  # its timeout from the round trips
             else:
                 coro = motor.request(ma.WriteEncoderZero(offset_counts=self.token()), timeout_s=TIMEOUT_S)
             task = asyncio.ensure_future(coro)

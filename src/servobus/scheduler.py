@@ -135,7 +135,9 @@ class Received:
     error: ProtocolError | None = None
 
 
-_Late = tuple[float, float | None, RoundTrip | None]
+# A request whose reply may still come: until when a frame with its key counts as late (the late
+# window), when it left, its round-trip estimate, and until when its key is held for that reply.
+_Late = tuple[float, float | None, RoundTrip | None, float]
 
 
 @dataclass(slots=True)
@@ -147,8 +149,7 @@ class _Recent:
     bounded by the keys answered or given up on within the late window.
     """
 
-    # key -> the requests whose reply may still come, oldest first: (until when, when it left, its
-    # round-trip estimate, to take the late reply's time as a sample)
+    # key -> the requests whose reply may still come, oldest first (_Late)
     late: dict[Hashable, list[_Late]] = field(default_factory=dict)
     replied: dict[Hashable, float] = field(default_factory=dict)
     limit: int = 64
@@ -564,16 +565,18 @@ class Scheduler:
     def _expect_late(self, request: Request, now: float) -> None:
         """``request`` left and its reply may still come: count it LATE, and hold its key meanwhile."""
         key = request.key
-        recent = self._recent
-        recent.late.setdefault(key, []).append((now + self.late_window_s, request.sent_at, request.rtt))
-        if len(recent.late) > recent.limit:
-            recent.prune(now)
         if self.late_hold_s is not None:
             until = now + self.late_hold_s
         elif request.sent_at is None:  # (cancelled before its send report: its time is unknown)
             until = now + request.timeout_s
         else:
             until = request.sent_at + max(2.0 * request.timeout_s, self._late_s(request))
+        recent = self._recent
+        recent.late.setdefault(key, []).append(
+            (now + self.late_window_s, request.sent_at, request.rtt, until)
+        )
+        if len(recent.late) > recent.limit:
+            recent.prune(now)
         if until > now:
             self._held[key] = max(until, self._held.get(key, until))
 
@@ -704,12 +707,19 @@ class Scheduler:
         if late:
             late[:] = [e for e in late if e[0] >= now]
             if late:
-                _, sent_at, rtt = late.pop(0)  # replies come in order: the oldest one's
-                if sent_at is not None and at is not None and rtt is not None:
+                # Replies come in order: the oldest request still held for is answered. One whose
+                # hold ended was given up on (its reply lost, most likely): a frame now is not timed
+                # against it, since one wrong sample of a second would stretch every timeout and
+                # hold of the motor.
+                held = [e for e in late if e[3] >= now]
+                entry = held[0] if held else late[0]
+                late.remove(entry)
+                _, sent_at, rtt, _ = entry
+                if held and sent_at is not None and at is not None and rtt is not None:
                     rtt.add(at - sent_at)
                     if not self._any_measured:
                         self._first_measured()
-                if not late:  # the reply the key was held for came: the next exchange may go
+                if len(held) <= 1:  # the reply the key was held for came: the next exchange may go
                     self._held.pop(key, None)
                     self._doubtful.discard(key)
                 return _T_LATE
