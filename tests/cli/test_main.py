@@ -109,7 +109,7 @@ def test_ctrl_c_claims_no_stop_where_no_motor_was_commanded(args: list[str]) -> 
     assert code == 130 and err[-1] == "servobus: interrupted", err
 
 
-def test_the_interrupted_line_names_the_motors_the_stop_did_not_reach(
+def test_the_interrupted_line_names_the_motors_the_stop_did_not_reach_or_that_did_not_answer_it(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     import servobus.cli
@@ -117,9 +117,10 @@ def test_the_interrupted_line_names_the_motors_the_stop_did_not_reach(
     monkeypatch.setattr(
         servobus.cli,
         "SAFE_EXITS",
-        [("can0", "lk", "stop", (1, 5, 6, 7, 8), (2, 3)), ("sim", "lk", "off", (4,), ())],
+        [("can0", "lk", "stop", (1, 5, 6), (7, 8), (2, 3)), ("sim", "lk", "off", (4,), (), ())],
     )
     assert servobus.cli._interrupted() == (
-        "servobus: interrupted; stop sent to lk motors 1, 5-8 on can0"
+        "servobus: interrupted; stop sent to lk motors 1, 5, 6 on can0"
+        "; stop sent to lk motors 7, 8 on can0, NOT acknowledged"
         "; stop NOT sent to lk motors 2, 3 on can0; off sent to lk motor 4 on sim"
     )

@@ -32,8 +32,8 @@ __all__ = ["SAFE_EXITS", "SIGNALLED", "cli", "main"]
 
 #: What the Buses of this command sent their commanded motors when their blocks were left, for the
 #: line Ctrl-C prints (:func:`servobus.cli._connect.note_exit`): (bus name, family, safe command,
-#: the ids it left for, the ids it did not).
-SAFE_EXITS: list[tuple[str, str, str, tuple[int, ...], tuple[int, ...]]] = []
+#: the ids that acknowledged it, the ids it left for without an answer, the ids it did not leave for).
+SAFE_EXITS: list[tuple[str, str, str, tuple[int, ...], tuple[int, ...], tuple[int, ...]]] = []
 
 #: The signals other than Ctrl-C's that cancelled this command's run (SIGTERM:
 #: :func:`servobus.cli._motors.run`), for the line and the exit code (128 + the signal).
@@ -120,9 +120,18 @@ def _interrupted(by: signal.Signals = signal.SIGINT) -> str:
     command, and which were not (only what the Buses reported; nothing is claimed for a command that
     commanded no motor)."""
     line = "servobus: interrupted" if by == signal.SIGINT else f"servobus: interrupted by {by.name}"
-    for bus, family, safe, sent, missed in SAFE_EXITS:
-        if sent:
-            line += f"; {safe} sent to {family} {_ids(sent)} on {bus}"
+    return line + safe_exits()
+
+
+def safe_exits() -> str:
+    """``; stop sent to myactuator motors 1, 2 on can0`` for each Bus left, naming the motors that
+    did not acknowledge their safe command and those it never left for (empty: no Bus stopped any)."""
+    line = ""
+    for bus, family, safe, acknowledged, unanswered, missed in SAFE_EXITS:
+        if acknowledged:
+            line += f"; {safe} sent to {family} {_ids(acknowledged)} on {bus}"
+        if unanswered:
+            line += f"; {safe} sent to {family} {_ids(unanswered)} on {bus}, NOT acknowledged"
         if missed:
             line += f"; {safe} NOT sent to {family} {_ids(missed)} on {bus}"
     return line

@@ -278,19 +278,25 @@ def connection_options(func: F) -> F:
 
 
 def note_exit(bus: Bus) -> None:
-    """Remember which commanded motors ``bus`` sent its safe command when its block was left, for the
-    line Ctrl-C prints (nothing for a Bus without one: it claims no stop)."""
+    """Remember which commanded motors ``bus`` sent its safe command when its block was left, and
+    which of them answered it, for the line Ctrl-C prints (nothing for a Bus without one: it claims
+    no stop)."""
     if bus.safe is None:
         return
     from servobus.cli import SAFE_EXITS
 
     sent = {id(motor) for motor in bus.safe_sent}
-    by_family: dict[str, tuple[list[int], list[int]]] = {}
+    acknowledged = {id(motor) for motor in bus.safe_acknowledged}
+    by_family: dict[str, tuple[list[int], list[int], list[int]]] = {}
     for motor in bus.commanded:
-        went, missed = by_family.setdefault(motor.codec.family, ([], []))
-        (went if id(motor) in sent else missed).append(motor.motor_id)
-    for family, (went, missed) in by_family.items():
-        SAFE_EXITS.append((bus.name, family, bus.safe, tuple(sorted(went)), tuple(sorted(missed))))
+        answered, unanswered, missed = by_family.setdefault(motor.codec.family, ([], [], []))
+        if id(motor) in acknowledged:
+            answered.append(motor.motor_id)
+        else:
+            (unanswered if id(motor) in sent else missed).append(motor.motor_id)
+    for family, (answered, unanswered, missed) in by_family.items():
+        ids = tuple(sorted(answered)), tuple(sorted(unanswered)), tuple(sorted(missed))
+        SAFE_EXITS.append((bus.name, family, bus.safe, *ids))
 
 
 @contextlib.asynccontextmanager

@@ -179,10 +179,11 @@ def summary_lines(s: Summary) -> list[str]:
     if why:
         lines.append(f"why         {why}")
     if s.interrupted:
-        from servobus.cli import SIGNALLED
+        from servobus.cli import SIGNALLED, safe_exits
 
         by = SIGNALLED[0].name if SIGNALLED else "Ctrl-C"
-        lines.append(f"stopped     {by}: every motor got its stop command")
+        stops = safe_exits().removeprefix("; ") or "no motor was commanded"
+        lines.append(f"stopped     {by}: {stops}")
     return lines
 
 
