@@ -358,3 +358,44 @@ def test_a_late_reply_never_answers_the_next_request(name: str, timeout_s: float
         assert accepted >= 0.9 * 100 * 32, (accepted, metrics)
     else:  # most replies come after their request's 2 ms: each is late, and never the next one's
         assert accepted >= 50 and metrics.late > 0.5 * metrics.timeouts, (accepted, metrics)
+
+
+# ---- the first exchange through a freshly opened adapter ----
+
+
+class _SlowFirstReply(FaultInjector):
+    """Towards the host: the first frame comes ``first_s`` late (an adapter that has just been opened),
+    the others at once."""
+
+    def __init__(self, first_s: float) -> None:
+        super().__init__(FaultPlan())
+        self.first_s = first_s
+        self.seen = 0
+
+    def apply(self, item: Frame | bytes, now_s: float) -> list[tuple[float, Frame | bytes]]:
+        self.seen += 1
+        return [(now_s + self.first_s, item)] if self.seen == 1 else super().apply(item, now_s)
+
+
+@pytest.mark.parametrize("first_s", [0.025, 0.487])
+def test_the_first_exchange_may_be_slow_and_later_ones_get_a_measured_timeout(first_s: float) -> None:
+    """The first exchange through a fresh pty took 14-25 ms, once 487 ms: it must not fail on the
+    old 20 ms default; once round trips were measured, the timeout follows them."""
+    devices = [MyActuatorMotor(1), MyActuatorMotor(2)]
+
+    async def main() -> tuple[object, list[float]]:
+        async with Bus(SimTransport(devices=devices, to_host=_SlowFirstReply(first_s)), safe=None) as bus:
+            one, two = bus.motor("myactuator", 1), bus.motor("myactuator", 2)
+            first = await one.read_status1()
+            for _ in range(20):
+                await bus.cycle([(one, ma.ReadStatus2()), (two, ma.ReadStatus2())])
+            timeouts = []
+            for motor in (one, two):
+                estimate = bus.scheduler.round_trip(motor.codec, ma.ReadStatus2)
+                assert estimate is not None and estimate.samples >= 20
+                timeouts.append(max(bus.scheduler.min_timeout_s, estimate.timeout_s()))
+            return first, timeouts
+
+    first, timeouts = virtual.run(main())
+    assert isinstance(first, ma.Status1Reply)
+    assert all(0.005 <= t < 0.01 for t in timeouts), timeouts  # the 5 ms floor, not 20 ms, not 1 s

@@ -955,7 +955,11 @@ class Bus:
         motor._ending[code] = (off, now)
         self.scheduler.motor_counts[id(motor.codec)]["stream_off_resent"] += 1
         logger.info("%s: %r still streams 0x%02X: switching it off again", self.name, motor, code)
-        request = self._prepare(motor, off, timeout_s=None, retries=0, context=_detached(self._loop))
+        try:
+            request = self._prepare(motor, off, timeout_s=None, retries=0, context=_detached(self._loop))
+        except (ValueError, TransportError):  # (never out of the reader)
+            logger.exception("%s: %r: the stream's 'off' could not be sent again", self.name, motor)
+            return
         self._enqueue(motor, request)
 
     def _now(self) -> float:
