@@ -358,11 +358,17 @@ def report() -> None:
                 [
                     ["requests made", f"{sk['requests']:,}"],
                     [
-                        "replied / timed out / cancelled / failed",
+                        "replied / timed out / cancelled / failed / not waited for by `cycle()`"
+                        " (offline or busy motor)",
                         " / ".join(
                             f"{sk['outcomes'].get(k, 0):,}"
-                            for k in ("replied", "timed_out", "cancelled", "failed")
+                            for k in ("replied", "timed_out", "cancelled", "failed", "skipped")
                         ),
+                    ],
+                    [
+                        "replies that may have been an earlier request's (`ambiguous`: a hold "
+                        "ended before its late reply came, mostly a lost one)",
+                        f"{sk.get('bus_counts', {}).get('ambiguous', 0):,}",
                     ],
                     ["mismatched replies (must be 0)", sk["mismatched_replies"]],
                     ["leaked pending (must be 0)", sk["leaked_pending"]],
@@ -415,6 +421,12 @@ FINDINGS = """
     queue without a freshness limit and reached the motor up to (n - 1) x `stale_after_s` after they
     were made; queued commands now fail `not_sent_stale` instead
     (`tests/test_soak.py::test_a_stalled_serial_port_under_cycles_delivers_no_stale_command`).
+* The soak with latency jitter added (every reply 0.5..3 ms late, each motor's in order; issue
+  [control]) and the Bus's own late holds (from measured round trips) found one defect of the new
+  estimator in its short run: a request whose reply was lost left its late entry, the next
+  timed-out request's late reply was timed against it, and a round trip of half a second stretched
+  every hold on the bus, so a ReadStatus1 waited 625 ms for its turn (a stale command). A late reply
+  is now timed only against a request still held for it (0c66228).
 * The fuzz targets found one input that broke a promise, in `scheduler_intake` (atheris, rerun after
   the scheduler's hot-path changes; the bug was older): a reply stamped 0.0, a virtual clock's first
   instant, was taken for an unstamped frame and resolved a request sent at 0.0 sooner than
