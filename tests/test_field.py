@@ -18,7 +18,7 @@ from typing import Any
 import pytest
 
 from servobus.bus import Bus, Motor
-from servobus.errors import MotorStreaming, ProtocolError
+from servobus.errors import MotorStreaming, MotorTimeout, ProtocolError
 from servobus.frame import Frame
 from servobus.protocols import hollow as ho
 from servobus.protocols import lk
@@ -399,3 +399,25 @@ def test_the_first_exchange_may_be_slow_and_later_ones_get_a_measured_timeout(fi
     first, timeouts = virtual.run(main())
     assert isinstance(first, ma.Status1Reply)
     assert all(0.005 <= t < 0.01 for t in timeouts), timeouts  # the 5 ms floor, not 20 ms, not 1 s
+
+
+def test_after_a_stream_ended_cleanly_a_stray_frame_with_its_byte_sends_no_off() -> None:
+    """Late replies of reads of the streamed command, long after the stream ended, are not the stream."""
+    device = MyActuatorMotor(1)
+    slow = FaultInjector(FaultPlan(latency_s=(0.003, 0.003)))
+
+    async def main() -> Any:
+        async with Bus(SimTransport(devices=[device], to_host=slow), safe=None) as bus:
+            motor = bus.motor("myactuator", 1)
+            async with motor.stream(ma.ReadStatus2, interval_ms=10) as frames:
+                async for _ in frames:
+                    break
+            await asyncio.sleep(1.0)
+            for _ in range(5):  # each times out at 1 ms; its reply comes 3 ms late
+                with contextlib.suppress(MotorTimeout):
+                    await motor.read_status2(timeout_s=0.001)
+                await asyncio.sleep(0.05)
+            return motor.metrics()
+
+    metrics = virtual.run(main())
+    assert metrics.late >= 5 and metrics.stream_off_resent == 0, metrics

@@ -442,3 +442,80 @@ def test_a_command_that_waited_too_long_for_its_turn_is_never_sent_but_a_read_is
     assert scheduler.next_to_send(0.5) == [read] and command.state is S.FAILED
     assert scheduler.take_stale() == [command] and scheduler.take_stale() == []
     assert scheduler.counts["not_sent_stale"] == 1
+
+
+# ---- timeouts and holds from measured round trips (issue [control]) ----
+
+
+def _exchange(scheduler: Scheduler, codec: object, command: object, at: float, rtt_s: float) -> Request:
+    request = scheduler.request(codec, command)  # type: ignore[arg-type]
+    scheduler.submit(request)
+    _send_all(scheduler, at)
+    data = STATUS if isinstance(command, ma.ReadStatus2) else None
+    if data is not None:
+        scheduler.receive(_reply(1, data, t=at + rtt_s), at + rtt_s)
+    return request
+
+
+def test_a_measured_class_gets_its_estimate_and_a_slow_class_keeps_its_codecs_time() -> None:
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec])
+    first = _exchange(scheduler, codec, ma.ReadStatus2(), 0.0, 0.001)
+    assert first.timeout_s == 1.0  # nothing measured yet: the conservative first value
+    for i in range(1, 40):
+        _exchange(scheduler, codec, ma.ReadStatus2(), i * 0.01, 0.001)
+    later = _exchange(scheduler, codec, ma.ReadStatus2(), 1.0, 0.001)
+    assert later.timeout_s == scheduler.min_timeout_s  # ~1 ms + 4 x its deviation: the 5 ms floor
+    # WriteEncoderZero is a flash write: its codec gives it 0.5 s, and however fast it was measured,
+    # a timeout never goes below that (the next one may erase a sector).
+    write = scheduler.request(codec, ma.WriteEncoderZero(offset_counts=5))
+    assert write.base_timeout_s == 0.5
+    assert write.rtt is not None and write.rtt.floor_s == 0.5
+    write.rtt.add(0.001)
+    scheduler.submit(write)
+    _send_all(scheduler, 2.0)
+    assert write.timeout_s == 0.5
+
+
+def test_with_nothing_measured_the_requests_waiting_to_be_timed_again_stay_bounded() -> None:
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec], late_hold_s=0.0)
+    for i in range(1000):
+        request = scheduler.request(codec, ma.ReadStatus2())
+        scheduler.submit(request)
+        _send_all(scheduler, i * 2.0)
+        scheduler.expire(i * 2.0 + 1.5)  # the motor never answers
+    assert len(scheduler._provisional) <= 64
+
+
+def test_a_late_reply_after_a_given_up_one_keeps_the_key_ambiguous() -> None:
+    """A's hold ended without its reply; B went out and timed out too; a frame then comes: it may
+    be A's, so C's reply is counted ambiguous, not taken as plainly C's."""
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec])
+    a = scheduler.request(codec, ma.ReadStatus2(), timeout_s=0.01)
+    scheduler.submit(a)
+    _send_all(scheduler, 0.0)
+    scheduler.expire(0.01)  # held until twice the codec's 20 ms: 0.04
+    b = scheduler.request(codec, ma.ReadStatus2(), timeout_s=0.01)
+    scheduler.submit(b)
+    _send_all(scheduler, 0.05)  # A's hold ended: doubtful
+    scheduler.expire(0.065)
+    assert scheduler.receive(_reply(1, t=0.07), 0.07).traffic is Traffic.LATE  # B's, or A's
+    c = scheduler.request(codec, ma.ReadStatus2(), timeout_s=0.01)
+    scheduler.submit(c)
+    _send_all(scheduler, 0.08)
+    got = scheduler.receive(_reply(1, t=0.081), 0.081)
+    assert got.request is c and scheduler.counts["ambiguous"] == 1
+
+
+def test_an_undecodable_reply_before_the_send_report_fails_its_request_at_the_report() -> None:
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec])
+    request = scheduler.request(codec, ma.ReadStatus2())
+    scheduler.submit(request)
+    (sending,) = scheduler.next_to_send(0.0)
+    assert scheduler.receive(_reply(1, STATUS[:5], t=0.001), 0.001).traffic is Traffic.EARLY
+    early = scheduler.sent(sending, 0.0002)
+    assert early is not None and early.request is request and request.state is S.FAILED
+    assert isinstance(request.error, ProtocolError) and scheduler.counts["malformed"] == 1

@@ -13,7 +13,8 @@ link, an RS485 line, or the in-process simulator), and then:
   costs the others their replies; and a tick never waits on a motor that is not answering (an
   offline motor's slot is MotorOffline at once, and the motor is probed aside until it answers).
 * Timeouts come from measured round trips (RFC 6298, per motor and command class), so a slow
-  adapter is waited for and a late reply is held for, never taken for the next request's.
+  adapter is waited for and a late reply is held for, not taken for the next request's (one later
+  than its hold can be: such replies are counted ``ambiguous``).
 * ``await bus.broadcast(command, motors)``: MyActuator's 0x280/0xCD and LK's multi-motor torque.
 * Leaving the ``async with`` block, normally, by an exception or by cancellation, sends the safe
   command (stop by default) to every motor this Bus commanded, shielded, again and again until each
@@ -313,8 +314,9 @@ class Motor:
         self._commands = command_classes(codec.family)
         self._watchers: list[MotorFrames] = []
         self._probe_at = 0.0  # while offline: when cycle() may next send it a command, as a probe
-        # Streams switched off: the command byte -> (the "off" command, when it was last sent).
-        self._ending: dict[int, tuple[Command, float]] = {}
+        # Streams switched off: the command byte -> (the "off" command, when it was last sent, the
+        # stream's interval in s).
+        self._ending: dict[int, tuple[Command, float, float]] = {}
 
     def metrics(self) -> Metrics:
         """This motor's counters and request-to-reply latency (see :class:`~servobus.metrics.Metrics`)."""
@@ -354,7 +356,7 @@ class Motor:
                     await self.request(off)
                     # "off" gets no reply: if it was lost, the frames that keep coming say so, and
                     # the Bus sends it again (Bus._stream_goes_on).
-                    self._ending[code] = (off, self.bus._now())
+                    self._ending[code] = (off, self.bus._now(), interval_ms / 1000)
 
     def frames(
         self, *, size: int = 64, kinds: Iterable[Traffic] = (Traffic.STREAM, Traffic.REPORT)
@@ -420,11 +422,13 @@ class Bus:
         stale_after_s: a command (not a read) that waited longer than this for its turn, on a stalled
             or slow half-duplex line, fails with TransportError instead of reaching the motor late
             (default: the transport's own ``stale_after_s``; None for no limit).
-        late_hold_s: how late a reply may come after its request timed out (default: from the
-            motor's measured round trips, at least twice the request's timeout, and 1.5 times the
-            longest recent round trip, late replies included); the next request with its key waits
-            that long, or until the late reply came, because no reply carries a sequence number. A
-            reply later still could answer it: such replies are counted ``ambiguous``.
+        late_hold_s: how late a reply may come after its request timed out (default: at least
+            twice the request's timeout; once its motor and command class were measured 16 times,
+            twice the measured timeout and 1.5 times the longest recent late round trip; before,
+            twice the codec's own time for the command, or the bus's slowest measured if longer).
+            The next request with its key waits that long, or until the late reply came (in
+            :meth:`cycle`: MotorBusy at once), because no reply carries a sequence number. A reply
+            later still could answer it: such replies are counted ``ambiguous``.
         initial_timeout_s: the timeout of a request sent before any round trip on this bus was
             measured (the first exchange through a freshly opened adapter can take tens or hundreds
             of ms); requests in flight get a measured one as soon as the first reply comes.
@@ -583,6 +587,11 @@ class Bus:
                     await _awaitable(request.context)
                 except MotorTimeout:
                     continue  # lost on its way there or back: it is safe to repeat
+                except TransportError:
+                    if not self.transport.is_open:
+                        raise
+                    await asyncio.sleep(self.scheduler.min_timeout_s)  # refused (a full queue): again
+                    continue
                 if request.key is not None:  # (a command with no reply cannot be acknowledged)
                     acknowledged.add(motor)
                 return
@@ -592,7 +601,9 @@ class Bus:
                 await asyncio.gather(*(stop(m, c) for m, c in commands.items()), return_exceptions=True)
         finally:
             self._abandon(r for sent in attempts.values() for r in sent)
-            self.safe_sent = tuple(m for m, tried in attempts.items() if any(r.sent_at for r in tried))
+            self.safe_sent = tuple(
+                m for m, tried in attempts.items() if any(r.sent_at is not None for r in tried)
+            )
             self.safe_acknowledged = tuple(m for m in commands if m in acknowledged)
             missing = [m for m in commands if m not in acknowledged]
             if missing:
@@ -749,7 +760,8 @@ class Bus:
         prepared = []
         skipped: list[tuple[_Slot, Motor, str, BaseException]] = []
         now = loop.time()
-        busy = self.scheduler.busy
+        scheduler = self.scheduler
+        busy = None if scheduler.quiet else scheduler.busy  # (None, the common case: nothing waits)
         for i, (m, c) in enumerate(items):
             slot = _Slot(tick, i)
             try:
@@ -759,14 +771,14 @@ class Bus:
                 continue
             if m.online is False:
                 why = f"{m!r} is offline ({m._misses} replies missed): the tick does not wait for it"
-                if now >= m._probe_at and not busy(request.key, now):  # sent, as a probe
+                if now >= m._probe_at and (busy is None or not busy(request.key, now)):  # a probe
                     m._probe_at = now + self.probe_interval_s
                     request.context = _detached(loop)
                     prepared.append((m, request))
                     skipped.append((slot, m, "probes", MotorOffline(why)))
                 else:
                     skipped.append((slot, m, "skipped_offline", MotorOffline(why)))
-            elif busy(request.key, now):
+            elif busy is not None and busy(request.key, now):
                 why = f"{m!r}: the reply to its last {type(c).__name__} is still due: not sent this tick"
                 skipped.append((slot, m, "skipped_busy", MotorBusy(why)))
             else:
@@ -774,13 +786,13 @@ class Bus:
         for motor, request in prepared:
             self._enqueue(motor, request)
         for slot, motor, counter, error in skipped:
-            self.scheduler.motor_counts[id(motor.codec)][counter] += 1
+            scheduler.motor_counts[id(motor.codec)][counter] += 1
             slot.set_result(error)
         self._pump()
         try:
             return await tick.future
         except BaseException:
-            self._abandon(r for _, r in prepared)
+            self._abandon(r for _, r in prepared if r.context.__class__ is _Slot)  # (not the probes)
             raise
 
     async def broadcast(
@@ -878,6 +890,8 @@ class Bus:
             early = self.scheduler.sent(request, sent_at if sent_at is not None else self._loop.time())
             if early is not None and early.reply is not None:  # its reply came before this report
                 self._deliver(early, self._loop.time())
+            elif early is not None and early.request is not None:  # ... and did not decode
+                self._undecodable(early)
             if request.state is _SENT:
                 timer = self._timer
                 if timer is not None and request.deadline is not None and timer.when() <= request.deadline:
@@ -942,17 +956,23 @@ class Bus:
 
     def _stream_goes_on(self, motor: Motor, frame: Frame, now: float) -> None:
         """A frame of a stream that was switched off came: if later than a reply to the "off"
-        could take, the "off" was lost; it is sent again."""
+        could take, the "off" was lost; it is sent again. Once the stream was quiet for a few of its
+        intervals it ended: a frame with its command byte then is another (a read's late reply)."""
         if not frame.data or self._closing or self._loop is None:
             return
         code = frame.data[0]
         ending = motor._ending.get(code)
         if ending is None:
             return
-        off, sent_at = ending
-        if (frame.timestamp or now) < sent_at + self.scheduler.motor_timeout_s(motor.codec):
+        off, sent_at, interval_s = ending
+        at = frame.timestamp or now
+        reach_s = self.scheduler.motor_timeout_s(motor.codec)
+        if at < sent_at + reach_s:
             return  # it may have left the motor before the "off" arrived
-        motor._ending[code] = (off, now)
+        if at > sent_at + reach_s + 4 * interval_s:
+            del motor._ending[code]  # quiet since: the stream ended
+            return
+        motor._ending[code] = (off, now, interval_s)
         self.scheduler.motor_counts[id(motor.codec)]["stream_off_resent"] += 1
         logger.info("%s: %r still streams 0x%02X: switching it off again", self.name, motor, code)
         try:

@@ -92,9 +92,10 @@ class MotorOffline(MotorTimeout):
 
 
 class MotorBusy(MotorTimeout):
-    """``Bus.cycle()`` did not send this motor's command: the reply of its previous request with the
-    same key is still due (it timed out, and may come late). Sent now, that late reply could answer
-    it; waiting for it would delay the whole tick. A MotorTimeout too: no reply this tick.
+    """``Bus.cycle()`` did not send this motor's command: a reply with the same key is still due
+    (its last request timed out and the reply may come late, or another task's request with that
+    key is in flight). Sent now, that reply could answer it; waiting would delay the whole tick.
+    A MotorTimeout too: no reply this tick.
     """
 
 

@@ -105,6 +105,11 @@ class Request:
     timeout_s: float
     retries: int = 0
     context: Any = None  # the caller's (the Bus keeps its future here)
+    # The round-trip estimate of its motor and command class; with ``adaptive`` its ``timeout_s`` is
+    # set from it when the frame leaves (``base_timeout_s``: the codec's own time for the command).
+    rtt: RoundTrip | None = None
+    adaptive: bool = False
+    base_timeout_s: float = 0.0
     state: RequestState = RequestState.QUEUED
     sent_at: float | None = None
     deadline: float | None = None
@@ -113,11 +118,6 @@ class Request:
     attempts: int = 0
     submitted: bool = False
     queued_at: float | None = None  # when a command (not a read) was made: its freshness counts from here
-    # The round-trip estimate of its motor and command class; with ``adaptive`` its ``timeout_s`` is
-    # set from it when the frame leaves (``base_timeout_s``: the codec's own time for the command).
-    rtt: RoundTrip | None = None
-    adaptive: bool = False
-    base_timeout_s: float = 0.0
 
     def describe(self) -> str:
         return f"{self.codec.family} motor {self.codec.motor_id} {type(self.command).__name__}"
@@ -201,11 +201,12 @@ class Scheduler:
             waited longer than this for its turn (a stalled half-duplex line) fails ``not_sent_stale``
             instead of leaving: for a motor, a stale command is worse than none (None: no limit).
         late_hold_s: after a request that left times out or is cancelled, the next request with its
-            key waits until the late reply came or this long passed (None: from the round-trip
-            estimate, :meth:`~servobus.rtt.RoundTrip.late_s` from when the request left, and at
-            least twice its timeout). These protocols carry no sequence numbers: a reply later than
-            the hold could answer the next request with the same key; such a reply is counted
-            ``ambiguous``.
+            key waits until the late reply came or this long passed (None: from when the request
+            left, at least twice its timeout, and :meth:`_late_s`: the estimate's
+            :meth:`~servobus.rtt.RoundTrip.late_s` once it rests on ``TRUSTED_SAMPLES`` round
+            trips, before that twice the codec's own time). These protocols carry no sequence
+            numbers: a reply later than the hold could answer the next request with the same key;
+            such a reply is counted ``ambiguous``.
         initial_timeout_s: the timeout of a request (with no ``timeout_s`` of its own) sent before
             anything on the bus was measured: conservative, since the first exchange through a
             freshly opened adapter can be slow (RFC 6298's first RTO is 1 s). Requests sent with it
@@ -250,7 +251,7 @@ class Scheduler:
         self.initial_timeout_s = initial_timeout_s
         self.min_timeout_s = min_timeout_s
         self.max_timeout_s = max_timeout_s
-        self._rtts: dict[tuple[int, type], RoundTrip] = {}  # (id(codec), command class) -> estimate
+        self._rtts: dict[int, dict[type, RoundTrip]] = {}  # id(codec) -> command class -> estimate
         self._any_measured = False
         self._provisional: list[Request] = []  # sent before anything was measured: timed again then
         self._doubtful: set[Hashable] = set()  # keys whose hold ended before their late reply came
@@ -291,6 +292,7 @@ class Scheduler:
         check_bus([*self.codecs, codec])
         self.codecs.append(codec)
         self.motor_counts[id(codec)] = Counter()
+        self._rtts[id(codec)] = {}
         self.motor_latency[id(codec)] = LatencyWindow(1024)
         for ident in codec.reply_ids | codec.shared_ids:
             self._by_id.setdefault(ident & 0x1FFFFFFF, []).append(codec)
@@ -312,7 +314,8 @@ class Scheduler:
             ValueError: the command is refused by the codec (before any frame exists), a negative
                 timeout or retry count, or retries asked for a command that is not safe to repeat.
         """
-        if id(codec) not in self.motor_counts:
+        rtts = self._rtts.get(id(codec))
+        if rtts is None:
             raise ValueError(f"{codec!r} is not on this bus: add() it first")
         frame = codec.encode(command)
         base = codec.timeout_s(command)
@@ -321,33 +324,44 @@ class Scheduler:
             raise ValueError(f"timeout_s={timeout} must be > 0 and retries={retries} >= 0")
         if retries and not codec.retry_safe(command):
             raise ValueError(f"{type(command).__name__} changes the motor: it is never retried automatically")
-        rtt_key = (id(codec), type(command))
-        rtt = self._rtts.get(rtt_key)
+        rtt = rtts.get(type(command))
         if rtt is None:
-            rtt = self._rtts[rtt_key] = RoundTrip()
-        request = Request(codec, command, frame, codec.reply_key(command), timeout, retries, context)
-        request.rtt = rtt
-        request.adaptive = timeout_s is None
-        request.base_timeout_s = base
-        return request
+            rtt = rtts[type(command)] = RoundTrip(base)
+            self._set_floors(rtts)
+        key = codec.reply_key(command)
+        return Request(codec, command, frame, key, timeout, retries, context, rtt, timeout_s is None, base)
 
     def round_trip(self, codec: BoundCodec, command_class: type[Command]) -> RoundTrip | None:
         """The round-trip estimate of ``codec``'s motor for ``command_class`` (None: never sent)."""
-        return self._rtts.get((id(codec), command_class))
+        return self._rtts.get(id(codec), {}).get(command_class)
+
+    def _measured(self) -> list[RoundTrip]:
+        """Every estimate with a sample, of every motor and command class."""
+        return [r for rtts in self._rtts.values() for r in rtts.values() if r.samples]
+
+    def _set_floors(self, rtts: dict[type, RoundTrip]) -> None:
+        """The least timeout of each command class of one motor: ``min_timeout_s``, and for a class
+        its codec gives more time than its quickest class (a ROM write, the brake), that time."""
+        quickest = min(r.base_s for r in rtts.values())
+        for rtt in rtts.values():
+            rtt.floor_s = max(self.min_timeout_s, rtt.base_s if rtt.base_s > quickest else 0.0)
 
     def _timeout(self, request: Request) -> float:
         """The timeout of an adaptive request leaving now (see the class docstring)."""
         rtt = request.rtt
         assert rtt is not None
         if rtt.samples:
-            timeout = rtt.timeout_s()
+            timeout = max(rtt.timeout_s(), rtt.floor_s)
         elif self._any_measured:
             # Not measured yet: the codec's own time for the command, or twice the slowest measured
             # on this bus if that is longer (the adapter's and the host's share is the same for all).
-            link = max(r.timeout_s() for r in self._rtts.values() if r.samples)
+            link = max(r.timeout_s() for r in self._measured())
             timeout = max(request.base_timeout_s, 2.0 * link)
         else:
-            self._provisional.append(request)
+            provisional = self._provisional
+            if len(provisional) >= 64:  # (nothing answers: keep only those still waiting)
+                provisional[:] = [r for r in provisional if r.state is _SENT]
+            provisional.append(request)
             return max(request.base_timeout_s, self.initial_timeout_s)
         return min(max(timeout, self.min_timeout_s), self.max_timeout_s)
 
@@ -387,6 +401,11 @@ class Scheduler:
         flying = [request for key in keys for request in self._pending.get(key, ())]
         return (max(ends) if ends else None), flying
 
+    @property
+    def quiet(self) -> bool:
+        """Nothing is in flight with a key and no key is held: no request would wait (:meth:`busy`)."""
+        return not self._pending and not self._held
+
     def busy(self, key: Hashable | None, now: float) -> bool:
         """Would a request with ``key`` wait now: one with that key is in flight, or the key is held
         for a late reply (:meth:`next_to_send`)?"""
@@ -400,8 +419,7 @@ class Scheduler:
     def motor_timeout_s(self, codec: BoundCodec) -> float:
         """The longest timeout measured round trips give any command class of ``codec``'s motor
         (``min_timeout_s`` while none was measured)."""
-        mine = id(codec)
-        times = [r.timeout_s() for (owner, _), r in self._rtts.items() if owner == mine and r.samples]
+        times = [r.timeout_s() for r in self._rtts.get(id(codec), {}).values() if r.samples]
         return max([self.min_timeout_s, *times])
 
     def expect(self, request: Request, at: float) -> None:
@@ -491,7 +509,16 @@ class Scheduler:
             return None
         request.state = _SENT  # (SENDING -> SENT, in TRANSITIONS; the hot path)
         if request.adaptive:
-            request.timeout_s = self._timeout(request)
+            rtt = request.rtt
+            if rtt is not None and rtt.samples:  # (_timeout, written out for the hot path)
+                timeout = rtt.rto_s
+                if timeout < rtt.floor_s:
+                    timeout = rtt.floor_s
+                elif timeout > self.max_timeout_s:
+                    timeout = self.max_timeout_s
+                request.timeout_s = timeout
+            else:
+                request.timeout_s = self._timeout(request)
         request.deadline = deadline = at + request.timeout_s
         self._sent_count += 1
         heap = self._deadlines
@@ -572,9 +599,10 @@ class Scheduler:
         else:
             until = request.sent_at + max(2.0 * request.timeout_s, self._late_s(request))
         recent = self._recent
-        recent.late.setdefault(key, []).append(
-            (now + self.late_window_s, request.sent_at, request.rtt, until)
-        )
+        entries = recent.late.setdefault(key, [])
+        if entries and entries[0][0] < now:  # (a motor that never answers: its entries expire)
+            entries[:] = [e for e in entries if e[0] >= now]
+        entries.append((now + self.late_window_s, request.sent_at, request.rtt, until))
         if len(recent.late) > recent.limit:
             recent.prune(now)
         if until > now:
@@ -588,7 +616,7 @@ class Scheduler:
         rtt = request.rtt
         if rtt is not None and rtt.samples >= TRUSTED_SAMPLES:
             return rtt.late_s()
-        trusted = [r.late_s() for r in self._rtts.values() if r.samples >= TRUSTED_SAMPLES]
+        trusted = [r.late_s() for r in self._measured() if r.samples >= TRUSTED_SAMPLES]
         return max([2.0 * request.base_timeout_s, *trusted])
 
     def next_deadline(self) -> float | None:
@@ -623,6 +651,10 @@ class Scheduler:
         try:
             reply = codec.decode(frame)
         except ProtocolError as exc:
+            waiting = self._pending.get(key) if key is not None else None
+            if waiting and waiting[0].state is _SENDING and kind is KIND_REPLY and key not in self._early:
+                self._early[key] = (codec, frame)  # judged (and counted) when the send report comes
+                return Received(_T_EARLY, frame, codec)
             self._count(codec, "malformed")
             return Received(_T_MALFORMED, frame, codec, error=exc, request=self._spoilt(key, frame, exc, now))
         waiting = self._pending.get(key) if key is not None else None
@@ -716,12 +748,13 @@ class Scheduler:
                 late.remove(entry)
                 _, sent_at, rtt, _ = entry
                 if held and sent_at is not None and at is not None and rtt is not None:
-                    rtt.add(at - sent_at)
+                    rtt.add_late(at - sent_at)
                     if not self._any_measured:
                         self._first_measured()
                 if len(held) <= 1:  # the reply the key was held for came: the next exchange may go
                     self._held.pop(key, None)
-                    self._doubtful.discard(key)
+                    if not late:  # (a request given up on before it may still be answered)
+                        self._doubtful.discard(key)
                 return _T_LATE
         until = recent.replied.get(key)
         if until is not None and until >= now:
