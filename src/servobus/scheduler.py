@@ -9,13 +9,18 @@ every rule about matching and timing in this one file:
   classified, never dropped silently: a **late** reply (to a request that timed out or was
   cancelled), a **duplicate** (the same key again right after a reply), a **stream** or **report**
   frame of a motor, an **unsolicited** reply, a frame of **another** node, or a **malformed** one (it
-  claims to be a reply but does not decode). A malformed frame never resolves a request: the request
-  keeps waiting for a frame that decodes, or times out.
+  claims to be a reply but does not decode). A malformed frame never resolves a request with data:
+  the request waiting for its key FAILS with the codec's ProtocolError (the motor answered, in a way
+  this codec cannot read), instead of timing out as if nothing came.
 * **Life cycle** of a request (one table, :data:`TRANSITIONS`): QUEUED -> SENDING (handed to the
   transport) -> SENT (the transport reported when it left; the deadline starts there) -> REPLIED, or
   TIMED_OUT (deadline passed; a retry-safe read with retries left goes back to QUEUED), or CANCELLED,
-  or FAILED (the transport never sent it, or was lost). A request with no key (no reply expected) is
-  REPLIED as soon as it left.
+  or FAILED (the transport never sent it, or was lost, or its reply did not decode). A request with
+  no key (no reply expected) is REPLIED as soon as it left. Each is counted once, by its end.
+* **Timing**: with no ``timeout_s`` of its own, a request's timeout comes from the round trips
+  measured for its motor and command class (:class:`~servobus.rtt.RoundTrip`, RFC 6298); after a
+  timeout its key is held for the late reply (``late_hold_s``), and a reply that comes after a hold
+  ended without its late reply is counted ``ambiguous``.
 * **Pacing**: at most ``max_in_flight`` requests SENDING or SENT at once; a half-duplex line
   (``one_at_a_time``) allows one, and rests ``gap_s`` after each exchange before the next frame.
 * **Streams**: a request whose key a motor streams (0xB6) is answered by the first stream frame that
