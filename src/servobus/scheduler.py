@@ -586,6 +586,8 @@ class Scheduler:
                     self._move(request, _QUEUED)
                     self._queue.appendleft(request)
                     self._count(request.codec, "retries")
+                    if request.key is not None:  # the retry, too, waits out the late reply
+                        self._expect_late(request, now)
                     continue
                 self._move(request, _TIMED_OUT)
                 self._count(request.codec, "timeouts")
