@@ -68,6 +68,7 @@ def _check(result: _soak.SoakResult) -> None:
     assert result.unplug_recovery_s and max(result.unplug_recovery_s) < 1.0
 
 
+@pytest.mark.slow  # ~36 s: out of the default suite, a step of its own in CI (.ci/run)
 def test_soak_32_motors_4_buses_a_few_virtual_seconds() -> None:
     result = _soak.run(minutes=0.1, seed=7, warmup_s=1.0, checkpoint_s=1.0, reboot_every_s=1.5)
     _check(result)
