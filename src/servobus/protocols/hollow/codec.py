@@ -153,7 +153,7 @@ def decode_reply(
         can_id: the arbitration id the reply came on (the host id); any standard id is accepted,
             matching it is :func:`~servobus.protocols.hollow.ids.reply_key`'s job.
         data: the payload.
-        is_extended_id: the frame has a 29-bit identifier (no reply has: §3 [I][C]).
+        is_extended_id: the frame has a 29-bit identifier (no reply has: §3 `[I][C]`).
         is_fd: the frame is CAN FD.
         revision: the protocol revision (one so far).
         model: the motor model whose scales apply.
