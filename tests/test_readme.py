@@ -1,27 +1,121 @@
-"""The README's Bus examples run as written: the quick start on simulated motors, and the service."""
+"""The README runs as written: every ```python block as a script (those that need hardware on simulated
+devices behind ptys, their device paths swapped), every ```pycon block as a doctest; the quick start,
+the service and the signal example also for what they do; the CLI section shows every command and
+the Dependencies section names every runtime dependency."""
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
+import doctest
+import os
 import re
+import signal
 import subprocess
 import sys
+import tomllib
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import anyio
+import click
+import pytest
 
+from servobus.cli import cli
 from servobus.sim.devices.myactuator import MyActuatorMotor
 from servobus.sim.plant import PositionControl
 from servobus.transports.sim import SimTransport
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+TEXT = README.read_text(encoding="utf-8")
+#: how a block that needs hardware starts (its first line), naming each adapter and its path
+HARDWARE = "# needs hardware:"
+#: "an SLCAN adapter on /dev/ttyACM0", "an RS485 adapter on /dev/ttyUSB0" in that first line
+ADAPTER = re.compile(r"\b(SLCAN|RS485) adapter on (/dev/\S+?)(?=[\s,;]|$)")
+
+
+def _fenced(language: str) -> list[tuple[int, str]]:
+    """Every ```LANGUAGE block of the README: (the line its code starts on, its code)."""
+    return [
+        (TEXT.count("\n", 0, match.start(1)) + 1, match.group(1))
+        for match in re.finditer(rf"^```{language}\n(.*?)^```$", TEXT, re.S | re.M)
+    ]
+
+
+PYTHON = _fenced("python")
+PYCON = _fenced("pycon")
 
 
 def _block(marker: str) -> str:
     """The ```python block that follows the ``<!-- marker: ... -->`` comment."""
-    match = re.search(rf"<!-- {marker}:[^\n]*-->\n```python\n(.*?)```", README.read_text(), re.S)
+    match = re.search(rf"<!-- {marker}:[^\n]*-->\n```python\n(.*?)```", TEXT, re.S)
     assert match, f"README has no python block after a <!-- {marker}: ... --> comment"
     return match.group(1)
+
+
+def _section(title: str) -> str:
+    """The README's ``## TITLE`` section, up to the next ``## ``."""
+    match = re.search(rf"^## {re.escape(title)}\n(.*?)(?=^## |\Z)", TEXT, re.S | re.M)
+    assert match, f"README has no '## {title}' section"
+    return match.group(1)
+
+
+@contextlib.contextmanager
+def _simulated(code: str, folder: Path) -> Iterator[str]:
+    """The adapters a hardware block's first line names, simulated (one MyActuator motor behind each,
+    on a pty linked in ``folder``); the code with their device paths swapped for those links."""
+    adapters = ADAPTER.findall(code.splitlines()[0])
+    assert adapters, f"{code.splitlines()[0]!r} names no 'SLCAN|RS485 adapter on /dev/...'"
+    sims: list[subprocess.Popen[str]] = []
+    try:
+        for kind, device in adapters:
+            link = folder / Path(device).name
+            mode = "--slcan" if kind == "SLCAN" else "--rs485"
+            command = [sys.executable, "-m", "servobus.sim", "--family", "myactuator", mode]
+            sims.append(subprocess.Popen([*command, "--link", str(link)], stdout=subprocess.PIPE, text=True))
+            assert sims[-1].stdout is not None
+            assert sims[-1].stdout.readline().strip() == str(link)  # up: the first line is the pty
+            code = code.replace(device, str(link))
+        yield code
+    finally:
+        for sim in sims:
+            sim.terminate()
+            sim.wait(timeout=10)
+
+
+def test_the_readme_has_its_blocks() -> None:
+    assert len(PYTHON) >= 5 and len(PYCON) >= 2, (len(PYTHON), len(PYCON))
+
+
+def test_a_block_that_names_a_device_says_it_needs_hardware_in_its_first_line() -> None:
+    for line, code in PYTHON:
+        if "/dev/" in code:
+            assert code.startswith(HARDWARE), f"README.md:{line} names a device but not '{HARDWARE}'"
+
+
+@pytest.mark.parametrize(("line", "code"), PYTHON, ids=[f"README.md:{line}" for line, _ in PYTHON])
+def test_every_python_block_runs_as_written(line: int, code: str, tmp_path: Path) -> None:
+    """As a user would: the block alone, as a script, in a fresh interpreter (in an empty folder)."""
+    script = tmp_path / "block.py"
+    hardware = code.startswith(HARDWARE)
+    with _simulated(code, tmp_path) if hardware else contextlib.nullcontext(code) as runnable:
+        script.write_text(runnable, encoding="utf-8")
+        done = subprocess.run(
+            [sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=120
+        )
+    assert done.returncode == 0, f"README.md:{line}\n{done.stderr}"
+
+
+@pytest.mark.parametrize(("line", "text"), PYCON, ids=[f"README.md:{line}" for line, _ in PYCON])
+def test_every_pycon_block_passes_as_a_doctest(line: int, text: str) -> None:
+    test = doctest.DocTestParser().get_doctest(text, {}, f"README.md:{line}", str(README), line - 1)
+    assert test.examples
+    report: list[str] = []
+    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS)
+    runner.run(test, out=report.append, clear_globs=True)
+    assert runner.failures == 0, "".join(report)
 
 
 def test_the_quick_start_drives_simulated_motors_through_bus_and_motor() -> None:
@@ -46,3 +140,31 @@ def test_the_service_example_runs_in_a_task_group_and_stops_its_motors() -> None
     anyio.run(main)
     for device in devices:  # they ran at 30 dps; cancelled, the safe stop (0x81) made each hold
         assert isinstance(device.control, PositionControl), device.control
+
+
+def test_the_signal_example_stops_its_motor_and_exits_143_on_sigterm() -> None:
+    namespace: dict[str, Any] = {}
+    exec(compile(_block("signals"), "README signals", "exec"), namespace)
+    device = MyActuatorMotor(1)
+
+    async def main() -> None:
+        asyncio.get_running_loop().call_later(0.5, os.kill, os.getpid(), signal.SIGTERM)
+        await namespace["main"](SimTransport(devices=[device]))
+
+    with pytest.raises(SystemExit) as stopped:
+        asyncio.run(main())
+    assert stopped.value.code == 143
+    assert isinstance(device.control, PositionControl), device.control  # it turned; the stop made it hold
+
+
+def test_the_command_line_section_shows_every_command() -> None:
+    commands = cli.list_commands(click.Context(cli))
+    shown = set(re.findall(r"^servobus ([\w-]+)", _section("Command line"), re.M))
+    assert len(commands) >= 22 and not set(commands) - shown, sorted(set(commands) - shown)
+
+
+def test_the_dependencies_section_names_every_runtime_dependency() -> None:
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
+    names = [re.split(r"[\s<>=!~;\[]", spec)[0] for spec in project["dependencies"]]
+    section = _section("Dependencies").lower()
+    assert len(names) >= 6 and not [n for n in names if n.lower() not in section], names

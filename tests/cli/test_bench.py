@@ -1,6 +1,6 @@
 """``servobus bench``: the front of ``python -m bench``; its quick mode (by default) or its full run
-(``--full``, only with a fake runner here), as one table of every part's figures; without bench/ (an
-installed wheel) one line and exit 1."""
+(``--full``, only with a fake runner here), as one table of every part's figures; outside a clone of
+the repository (an installed wheel run elsewhere) one line saying to run it from a clone, and exit 2."""
 
 from __future__ import annotations
 
@@ -137,13 +137,36 @@ def test_the_real_bus_part_quick_mode(capsys: pytest.CaptureFixture[str]) -> Non
     assert figures["cycle_sizes.32.transactions_s"] > 0 and not any(k.startswith("meta.") for k in figures)
 
 
-def test_without_bench_folder_one_line_and_exit_1(
+def test_without_bench_folder_one_line_and_exit_2(
     capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
-    monkeypatch.setattr(bench, "bench_dir", lambda: tmp_path / "nowhere")
-    assert "source checkout" in one_line(capsys, ["bench"], code=1)
+    monkeypatch.setattr(bench, "bench_dir", lambda: None)
+    err = one_line(capsys, ["bench", "--only", "bus"], code=2)
+    assert err.startswith("servobus bench: error: ") and "from the root folder of a clone" in err
     monkeypatch.setattr(bench, "bench_dir", lambda: tmp_path)  # a folder without the runner
-    assert "__main__.py is missing" in one_line(capsys, ["bench"], code=1)
+    assert "clone of the servobus repository" in one_line(capsys, ["bench"], code=2)
+
+
+def test_an_installed_servobus_outside_a_clone_says_to_run_from_a_clone(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """The real look-up, as from a wheel (servobus in site-packages) run in a folder that is no clone:
+    one line, exit 2; a bench/ folder there that is not servobus's is never run."""
+    import servobus
+
+    installed = tmp_path / "lib" / "python3.11" / "site-packages" / "servobus" / "__init__.py"
+    monkeypatch.setattr(servobus, "__file__", str(installed))
+    elsewhere = tmp_path / "project"
+    (elsewhere / "bench").mkdir(parents=True)
+    ran = elsewhere / "ran"
+    (elsewhere / "bench" / "__main__.py").write_text(f"open({str(ran)!r}, 'w').close()")
+    monkeypatch.chdir(elsewhere)
+    assert bench.bench_dir() is None
+    err = one_line(capsys, ["bench", "--only", "bus"], code=2)
+    assert "run servobus bench from the root folder of a clone of the servobus repository" in err
+    assert not ran.exists()
+    monkeypatch.chdir(RUNNER.parents[1])  # the root of a clone: its bench/, with the installed servobus
+    assert bench.bench_dir() == RUNNER.parent
 
 
 def test_a_failing_runner_is_one_line_and_exit_1(

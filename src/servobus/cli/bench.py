@@ -8,7 +8,8 @@ records left out) and the targets missed. Nothing in ``bench/`` is written. ``--
 ``python -m bench``: it rewrites ``bench/RESULTS.md`` and ``bench/results.json`` in the source tree
 (~15-20 min on 2 cores), then prints the same table for the parts it ran. ``--check`` is passed through:
 exit status 1 when a target is missed. The benchmarks live in the source tree, not in the installed
-package: from a wheel, the command says so and exits 1.
+package: outside a clone of the repository (an installed wheel run from another folder) the command
+says in one line to run it from a clone's root folder, and exits 2.
 """
 
 from __future__ import annotations
@@ -35,13 +36,28 @@ SKIPPED = frozenset({"meta", "machine"})
 CHECK_FAILED = "parts with a missed target (--check)"
 
 
-def bench_dir() -> Path:
-    """``bench/`` of the source tree servobus runs from (``src/servobus`` -> the repository root), or,
-    for an installed wheel, of the source checkout in the current folder."""
+#: what to do when servobus runs outside a clone of its repository (bench/ is not installed)
+NOT_A_CLONE = (
+    "the benchmarks are not installed with servobus: run servobus bench from the root folder of a clone "
+    "of the servobus repository (pip install -e . there)"
+)
+
+
+def bench_dir() -> Path | None:
+    """``bench/`` of the clone servobus runs from (an editable install: ``src/servobus`` -> the
+    repository root), else of the clone whose root is the current folder; None outside a clone."""
     import servobus
 
-    beside = Path(servobus.__file__).resolve().parents[2] / "bench"
-    return beside if beside.is_dir() else Path.cwd() / "bench"
+    for root in (Path(servobus.__file__).resolve().parents[2], Path.cwd()):
+        if _is_clone(root):
+            return root / "bench"
+    return None
+
+
+def _is_clone(root: Path) -> bool:
+    """``root`` is a clone of servobus's repository: the suite's runner and the package's sources (a
+    ``bench/`` folder of something else is not run)."""
+    return (root / "bench" / "__main__.py").is_file() and (root / "src" / "servobus").is_dir()
 
 
 @click.command(
@@ -76,14 +92,8 @@ def bench(only: tuple[str, ...], full: bool, check: bool, verbose: bool, as_json
     Quick mode by default (small sizes, ~20 s for every part here; writes nothing).
     """
     folder = bench_dir()
-    if not folder.is_dir():
-        raise click.ClickException(
-            f"no bench/ folder beside the installed package or here ({folder}): the benchmarks run "
-            "from a source checkout"
-        )
-    runner = folder / "__main__.py"
-    if not runner.is_file():
-        raise click.ClickException(f"{runner} is missing")
+    if folder is None or not (folder / "__main__.py").is_file():
+        raise click.UsageError(NOT_A_CLONE)
     parts = list(only or PARTS)
     selection = [arg for part in only for arg in ("--only", part)] + (["--check"] if check else [])
     if full:
