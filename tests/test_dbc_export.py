@@ -26,6 +26,7 @@ import functools
 import json
 import math
 import random
+import re
 import struct
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -44,12 +45,15 @@ from servobus.dbc import (
     MUX,
     Layout,
     MessageSpec,
+    Placed,
     Plan,
     SignalSpec,
     build_database,
     database,
+    dbc_name,
     dbc_text,
     plan,
+    signal_table,
 )
 from servobus.errors import ProtocolError
 from servobus.protocols import hollow as ho
@@ -639,11 +643,11 @@ def test_lk_parameter_frames_are_multiplexed_again_on_the_parameter() -> None:
         "param_C1": "TORQUE_LIMIT",  # "param" alone is 0xC0's, a plain signal (ReadControlParam)
         "value_C1_1E": 1000,
     }
-    # 0xC0 and 0xC1 replies share one nested multiplexer (the same layouts), named after the first.
+    # 0xC0 and 0xC1 replies share one nested multiplexer (the same layouts): the only "param" there.
     assert db.decode_message(0x187, bytes.fromhex("C11E0000E8030000")) == {
         "code": "ControlParamReply_C1",
-        "param_C0": "TORQUE_LIMIT",
-        "value_C0_1E": 1000,
+        "param": "TORQUE_LIMIT",
+        "value_C0_1E": 1000,  # "value" is another parameter's (0x20, 0x26: an int32 0..600000)
     }
     setting = bytes.fromhex("4205B20000400D03")  # WriteSetting MAX_SPEED = 0x030D4000
     assert db.decode_message(0x147, setting) == {
@@ -656,9 +660,9 @@ def test_lk_parameter_frames_are_multiplexed_again_on_the_parameter() -> None:
     assert db.decode_message(0x187, pid_reply) == {
         "code": "SettingReply_40",
         "param_group": "POSITION_PID",
-        "value_kp_40_A0": 100,
-        "value_ki_40_A0": 50,
-        "value_kd_40_A0": 10,
+        "value_kp": 100,  # one multiplexer level up from 0xC0's PID values: the field's own name
+        "value_ki": 50,
+        "value_kd": 10,
     }
 
 
@@ -669,6 +673,51 @@ def test_every_signal_name_is_a_short_dbc_identifier() -> None:
             assert len(message.name) <= 32
             for signal in message.signals:
                 assert len(signal.name) <= 32 and signal.name.isidentifier(), signal.name
+
+
+def depth(table: dict[str, Placed], placed: Placed) -> int:
+    """How many multiplexers are above a signal."""
+    return 0 if placed.mux_signal is None else 1 + depth(table, table[placed.mux_signal])
+
+
+def test_every_signal_has_its_field_name_unless_another_signal_of_the_message_has_it() -> None:
+    """The naming rule of the module docstring: a signal is named after its servobus field
+    (``dbc_name``); only where another signal of the message already has that name (the field laid out
+    otherwise, or under another multiplexer) does it get its multiplexer values as a suffix, and the
+    signal keeping the name has no more multiplexer levels above it and no fewer values."""
+    renamed = 0
+    for family, revision, options in RAW_CONFIGS:
+        p, _ = dbc(family, revision, **options)
+        for spec in p.messages:
+            table = signal_table(spec)
+            for name, placed in table.items():
+                base = placed.spec.base_name
+                assert base == dbc_name(placed.spec.field) + (
+                    "" if placed.spec.part is None else f"_b{placed.spec.part}"
+                )
+                if name == base:
+                    continue
+                renamed += 1
+                assert re.fullmatch(re.escape(base) + r"(_[0-9A-F]{2})+", name), (spec.name, name)
+                keeper = table[base]
+                assert keeper.spec.base_name == base, (spec.name, name)
+                shape = (placed.spec, placed.layouts, placed.mux_signal)
+                assert (keeper.spec, keeper.layouts, keeper.mux_signal) != shape, (spec.name, name)
+                rank = (-depth(table, keeper), len(keeper.mux_ids))
+                assert rank >= (-depth(table, placed), len(placed.mux_ids)), (spec.name, name)
+    assert renamed > 0
+    _, db = dbc("myactuator", "V4_4")
+    reply = db.get_message_by_name("myactuator_reply_1")
+    assert db.decode_message(0x241, bytes.fromhex("9C326400F4012D00")) == {
+        "code": "StatusReply_9C",
+        "temperature_c": 50,
+        "current_a": 1.0,
+        "speed_dps": 500,
+        "angle_deg": 45,  # int16 1° in status 2 and the control replies; was angle_deg_72
+    }
+    shared = [0x72, 0x73, 0x9C, 0xA1, 0xA2, 0xA4, 0xA8, 0xA9]  # status 2 and the control replies
+    assert sorted(reply.get_signal_by_name("angle_deg").multiplexer_ids) == shared
+    assert reply.get_signal_by_name("angle_deg_92").scale == 0.01  # int32 0.01° under 0x92
 
 
 def test_build_database_and_bad_options() -> None:

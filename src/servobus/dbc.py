@@ -29,10 +29,39 @@ up to the field's.
 Messages are multiplexed on DATA[0] (the signal ``code``) where the family keys its frames by it;
 parameter frames whose value layout depends on a parameter byte are multiplexed again on that byte
 (extended multiplexing, ``SG_MUL_VAL_``). A multiplexer value's name is unique (``Status2Reply_A0``):
-cantools reads a decoded name back by the name. What a DBC cannot say is left out, and :func:`plan`
-names it with the reason: text fields, layouts decoded by rules of their own, two layouts under one
-identifier and DATA[0] (or, LK V2.35, requests and replies on one identifier), hollow's special
-commands (a 7-byte pattern, not a multiplexer value) and the frames of its other CAN modes.
+cantools reads a decoded name back by the name.
+
+**Signal names are servobus' field names** (what ``decode`` and ``servobus.logs`` call them), with two
+rules the DBC format forces, and :func:`signal_table` applies:
+
+* a DBC name is an identifier: an item of a tuple value or a field of a field is spelled with ``_``
+  (:func:`dbc_name`: ``currents_a[0]`` -> ``currents_a_0``, ``value.kp`` -> ``value_kp``,
+  ``command.speed_dps`` -> ``command_speed_dps``); a field split in bit runs is one signal per run
+  (``position_deg_b0``, ``position_deg_b16``, see above).
+* a DBC name is unique in its message, and one signal has one multiplexer, bit range, conversion,
+  choices, range and comment. A field described alike under several values of one multiplexer is one
+  signal, shared by them (``angle_deg`` of the 0x9C status reply and of the control replies). Where
+  layouts under one identifier describe a field differently (an int16 1° ``angle_deg`` in those
+  replies, an int32 0.01° one in 0x92's; 0xA9's ``max_torque_pct``, whose raw 0 is not 0xA2's "no
+  limit") or under different multiplexers (LK's ``value`` of 0xC1's parameters and of 0x42's
+  settings), only one signal can have the name: the one with the fewest multiplexer levels above it,
+  then the one the most multiplexer values carry (the first of a tie), keeps it; each other gets the
+  multiplexer values of its first layout as a suffix (``angle_deg_92``, ``value_C1_1E``: 0xC1's value
+  of parameter 0x1E). Neither extended multiplexing nor a message per multiplexer value avoids it: a
+  DBC has one message per identifier, and a signal's multiplexer values select its children under
+  every value of the multiplexer above it (cantools builds one subtree per value of the multiplexer
+  itself), so a byte that is a multiplexer in one layout (0xC1's ``param``) and a plain value in
+  another (0xC0's) must be two signals.
+
+The multiplexer on DATA[0], ``code``, is not a field: its value names the layout (the message class).
+A servobus field a multiplexer value stands for (the ``command`` byte of a reply layout several
+DATA[0] values share, a parameter's name) has no signal of its own: the multiplexer value selecting the
+layout gives it (the layout's ``implies``).
+
+What a DBC cannot say is left out, and :func:`plan` names it with the reason: text fields, layouts
+decoded by rules of their own, two layouts under one identifier and DATA[0] (or, LK V2.35, requests and
+replies on one identifier), hollow's special commands (a 7-byte pattern, not a multiplexer value) and
+the frames of its other CAN modes.
 """
 
 from __future__ import annotations
@@ -65,6 +94,7 @@ __all__ = [
     "SignalSpec",
     "build_database",
     "database",
+    "dbc_name",
     "dbc_text",
     "hollow_config",
     "lk_fields",
@@ -149,8 +179,15 @@ class SignalSpec:
     @property
     def base_name(self) -> str:
         """The DBC identifier this signal is named after (before any suffix that keeps it unique)."""
-        name = re.sub(r"[^0-9A-Za-z_]+", "_", self.field).strip("_")
+        name = dbc_name(self.field)
         return name if self.part is None else f"{name}_b{self.part}"
+
+
+def dbc_name(field: str) -> str:
+    """servobus' name of a value as a DBC identifier: each run of characters a DBC name cannot hold
+    becomes ``_`` (``currents_a[0]`` -> ``currents_a_0``, ``value.kp`` -> ``value_kp``); a plain field
+    name (``angle_deg``) is itself."""
+    return re.sub(r"[^0-9A-Za-z_]+", "_", field).strip("_")
 
 
 @dataclass(frozen=True, slots=True)
@@ -1125,9 +1162,11 @@ def signal_table(message: MessageSpec) -> dict[str, Placed]:
 
     A signal with one shape (spec) under one multiplexer is one DBC signal, shared by the multiplexer
     values that carry it; a multiplexer is shared by the values whose nested layouts are the same. A
-    name is the field's (``speed_dps``, ``currents_a_0``) when one signal has it, else the field's with
-    the multiplexer values of its first layout as a suffix (``angle_deg_92``: int32 0.01° under 0x92,
-    ``angle_deg_72``: int16 1° in the status replies; ``value_C1_1E``: 0xC1's value of parameter 0x1E).
+    name is the field's (``speed_dps``, ``currents_a_0``: :func:`dbc_name`). Where several signals have
+    one field name (described differently, or under different multiplexers), the one with the fewest
+    multiplexer levels above it, then the most multiplexer values, keeps the name (``angle_deg``: int16
+    1° in the status replies); each other gets the multiplexer values of its first layout as a suffix
+    (``angle_deg_92``: int32 0.01° under 0x92; ``value_C1_1E``: 0xC1's value of parameter 0x1E).
     """
     groups: list[_Group] = []
     by_spec: dict[tuple[int | None, SignalSpec], int] = {}
@@ -1159,19 +1198,27 @@ def signal_table(message: MessageSpec) -> dict[str, Placed]:
                 visit(sub, k, (*path, sub.code))
 
     visit(message.root, None, ())
-    counts: dict[str, int] = {}
-    for group in groups:
-        counts[group.spec.base_name] = counts.get(group.spec.base_name, 0) + 1
-    names: list[str] = []
-    for group in groups:
+    # The field's own name goes to one signal per name (see _rank; the first of a tie); any other shape
+    # of that field is suffixed.
+    owner: dict[str, int] = {}
+    for k, group in enumerate(groups):
         base = group.spec.base_name
-        name = base
-        if counts[base] > 1 and group.path:
-            name = base + "_" + "_".join(f"{c:02X}" for c in group.path)
+        best = owner.get(base)
+        if best is None or _rank(group) > _rank(groups[best]):
+            owner[base] = k
+    names: list[str] = [""] * len(groups)
+    taken = set(owner)
+    for base, k in owner.items():
+        names[k] = base
+    for k, group in enumerate(groups):
+        if names[k]:
+            continue
+        name = group.spec.base_name + "".join(f"_{c:02X}" for c in group.path)
         unique, n = name, 2
-        while unique in names:
+        while unique in taken:
             unique, n = f"{name}_{n}", n + 1
-        names.append(unique)
+        names[k] = unique
+        taken.add(unique)
     return {
         name: Placed(
             name,
@@ -1182,6 +1229,12 @@ def signal_table(message: MessageSpec) -> dict[str, Placed]:
         )
         for name, group in zip(names, groups, strict=True)
     }
+
+
+def _rank(group: _Group) -> tuple[int, int]:
+    """Which of the signals sharing a field name keeps it: the fewest multiplexer levels above it (a
+    root signal first), then the most multiplexer values selecting it."""
+    return (-len(group.path), len(group.ids))
 
 
 @dataclass(slots=True)

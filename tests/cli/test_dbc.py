@@ -6,6 +6,8 @@ telling how to install it (exit 1)."""
 from __future__ import annotations
 
 import json
+import math
+import re
 import sys
 from pathlib import Path
 from typing import Any
@@ -14,8 +16,8 @@ import cantools
 import pytest
 
 from _cli_run import invoke, moving_sim, one_line_error
-from _dbc_check import check_frame
-from servobus.dbc import MessageSpec, Plan, plan
+from _dbc_check import check_frame, values_of
+from servobus.dbc import Layout, MessageSpec, Plan, dbc_name, plan
 from servobus.frame import Frame
 from servobus.logs import FrameDecoder, read_log
 from servobus.protocols import hollow as ho
@@ -38,6 +40,129 @@ def _check_log(
         check_frame(_spec(p, frame), database, frame.data, ours.message)
         seen.add((ours.direction, ours.type, ours.motor_id))
     return seen
+
+
+def _implied(layout: Layout, data: bytes) -> dict[str, Any]:
+    """The fields the multiplexer values of ``data`` stand for, down ``layout``'s tree (every
+    multiplexer here is one little-endian byte)."""
+    out = dict(layout.implies)
+    if layout.mux is not None:
+        mux = layout.mux.signal
+        assert mux.length == 8 and mux.start % 8 == 0 and mux.byte_order == "little_endian"
+        chosen = [sub for sub in layout.mux.layouts if sub.code == data[mux.start // 8]]
+        assert len(chosen) == 1, (layout.mux.signal, data.hex())
+        out |= _implied(chosen[0], data)
+    return out
+
+
+def _same_names_and_values(database: Any, p: Plan, frame: Frame, ours: Any) -> dict[str, str]:
+    """cantools' decode of ``frame`` (by its identifier, from the DBC) against servobus' ``ours``, by
+    name: each signal is the servobus field of the same name (``dbc_name``), with its value (enums by
+    member name, numbers within 1e-9 of one LSB); each servobus field is a signal or stands for a
+    multiplexer value. Returns the fields the DBC names otherwise (field -> signal), each checked to be
+    the documented rule: a suffix of multiplexer values, while another signal of the message has the name.
+    """
+    message = database.get_message_by_frame_id(frame.arbitration_id)
+    decoded = message.decode(frame.data)
+    ours_values = {dbc_name(k): v for k, v in values_of(ours).items()}
+    fields = {dbc_name(k): k for k in values_of(ours)}
+    implied = {dbc_name(k): v for k, v in _implied(_spec(p, frame).root, frame.data).items()}
+    renamed: dict[str, str] = {}
+    seen: set[str] = set()
+    for name, value in decoded.items():
+        signal = message.get_signal_by_name(name)
+        field = name
+        if signal.is_multiplexer and name not in ours_values:
+            continue  # ``code`` (DATA[0]): its value names the layout, servobus' message class
+        if name not in ours_values:
+            m = re.fullmatch(r"(.+?)((?:_[0-9A-F]{2})+)", name)
+            assert m is not None and m[1] in ours_values, f"{type(ours).__name__}: no field {name}"
+            field = m[1]
+            assert field not in decoded and any(s.name == field for s in message.signals), name
+            renamed[fields[field]] = name
+        seen.add(field)
+        expected = ours_values[field]
+        if expected is None:
+            continue  # a raw value servobus reads as "none" (the value check is _dbc_check's)
+        if isinstance(expected, bool):
+            assert str(value) == str(expected) or value == int(expected), (name, value, expected)
+        elif isinstance(expected, str):
+            assert str(value) == expected, (name, value, expected)
+        else:
+            assert math.isclose(value, expected, rel_tol=1e-9, abs_tol=1e-9 * signal.scale), (
+                name,
+                value,
+                expected,
+            )
+    for field, value in ours_values.items():
+        if field not in seen and value is not None:  # None: a value the layout does not carry
+            assert field in implied and implied[field] == value, (
+                f"{type(ours).__name__}.{fields[field]} = {value!r}: no signal"
+            )
+    return renamed
+
+
+def _record(tmp_path: Path, family: str, polls: list[str], revision: str | None = None) -> list[Frame]:
+    frames = []
+    for poll in polls:
+        log = tmp_path / f"{family}-{revision}-{poll}.log"
+        args = ["record", "-f", family, "--sim", "4", "--duration", "0.1", "--poll", poll, "--log", str(log)]
+        invoke([*args, *(["--revision", revision] if revision else [])])
+        frames += read_log(log)
+    return frames
+
+
+@pytest.mark.parametrize(
+    ("family", "revision", "polls", "renamed"),
+    [
+        (
+            "myactuator",
+            "V4_4",
+            ["read_status2", "read_status1", "read_status3", "read_multi_turn_angle"],
+            {("MultiTurnAngleReply", "angle_deg"): "angle_deg_92"},
+        ),
+        ("myactuator", "V4_3", ["read_status2", "read_status1", "read_status3"], {}),
+        (
+            "lk",
+            "V2_36",
+            ["read_status2", "read_status1", "read_status3", "read_single_turn_angle"],
+            {
+                ("Status1Reply", "current_a"): "current_a_9A",  # 0.01 A, status 2's is the motor's iq
+                ("SingleTurnAngleReply", "angle_deg"): "angle_deg_94",
+            },
+        ),
+    ],
+)
+def test_a_recording_decodes_to_servobus_field_names_and_values_in_cantools(
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    family: str,
+    revision: str,
+    polls: list[str],
+    renamed: dict[tuple[str, str], str],
+) -> None:
+    """The DBC's signal names are servobus' field names (issue 25: cantools said ``angle_deg_72`` for
+    the 0x9C reply's ``angle_deg``): a simulator recording decoded by cantools from the DBC text and by
+    servobus, every field compared by name and value; the fields the DBC must name otherwise (a field
+    laid out two ways on one identifier) are named by the documented rule, and are exactly these."""
+    moving_sim(monkeypatch)
+    text = invoke(["dbc", "-f", family, "--revision", revision, "--ids", "1-4"]).stdout
+    database = cantools.database.load_string(text, "dbc")
+    p = plan(family, range(1, 5), revision)
+    decoder = FrameDecoder(family, revision=revision)
+    frames = _record(tmp_path, family, polls, revision)
+    seen_renamed: dict[tuple[str, str], str] = {}
+    types = set()
+    fields = 0
+    for frame in frames:
+        ours = decoder.decode(frame)
+        assert ours.message is not None, ours.error
+        names = _same_names_and_values(database, p, frame, ours.message)
+        seen_renamed |= {(type(ours.message).__name__, k): v for k, v in names.items()}
+        types.add((ours.direction, ours.type))
+        fields += len(values_of(ours.message))
+    assert seen_renamed == renamed
+    assert len(types) == 2 * len(polls) and fields > 200, (types, fields)
 
 
 def test_the_myactuator_dbc_decodes_a_recording_as_servobus_does(

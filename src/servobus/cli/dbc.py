@@ -20,9 +20,11 @@ hollow: per motor its requests (on the motor id; --can-mode normal, extended or 
 ids) and the mode-switch/PI frames (extended id), and one reply message on the host id.
 
 \b
-Each field is a signal with the factor, range and unit of the codec's field tables or of the C core's
-bit layouts. What a DBC cannot carry is listed on stderr (text, layouts told apart by another byte,
-hollow's special commands). Needs cantools: pip install 'servobus[dbc]'.
+Each field is a signal named as servobus names it (currents_a[0]: currents_a_0), with the factor, range
+and unit of the codec's field tables or of the C core's bit layouts; a field laid out two ways on one
+identifier keeps its name in one layout, and the others get their DATA[0] as a suffix (angle_deg_92).
+What a DBC cannot carry is listed on stderr (text, layouts told apart by another byte, hollow's special
+commands). Needs cantools: pip install 'servobus[dbc]'.
 
 \b
 Examples:
