@@ -3,6 +3,7 @@ through python-can's readers; frames typed on the command line."""
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import can
@@ -149,3 +150,64 @@ def test_a_damaged_blf_is_a_value_error_as_documented(tmp_path: Path) -> None:
     path.write_bytes(bytes(raw))
     with pytest.raises(ValueError, match=r"^error: Error -3 while decompressing"):
         list(read_log(path))
+
+
+#: a frame line of each text format, and the same line damaged (a byte that is not hex, bad base64)
+DAMAGE = {
+    ".log": ("141#9C00000000000002", "141#9C000000000000ZZ"),
+    ".asc": ("00 00 02\n", "00 00 ZZ\n"),
+    ".csv": ("nAAAAAAAAAI=", "nAAA!AAAAAI"),
+    ".trc": ("00 00 02\n", "00 00 ZZ\n"),
+}
+
+
+@pytest.mark.parametrize("suffix", DAMAGE)
+def test_a_damaged_line_of_a_text_log_is_skipped_with_its_line_number(tmp_path: Path, suffix: str) -> None:
+    """Reading goes on past it, with what the header said (ASC's and TRC's start time, CSV's columns)."""
+    path = tmp_path / f"trace{suffix}"
+    with can.Logger(path) as logger:
+        for i in range(6):
+            data = bytes([0x9C, 0, 0, 0, 0, 0, 0, i])
+            logger.on_message_received(
+                can.Message(timestamp=1000 + i / 1000, arbitration_id=0x141, data=data, is_extended_id=False)
+            )
+    good = list(read_log(path))
+    text = path.read_text()
+    line, damaged = DAMAGE[suffix]
+    number = text[: text.index(line)].count("\n") + 1
+    path.write_text(text.replace(line, damaged))
+    met: list[tuple[int, str, str]] = []
+    log = read_log(path, on_bad_line=lambda *bad: met.append(bad))
+    assert list(log) == good[:2] + good[3:]
+    assert log.bad_lines == met and len(met) == 1
+    assert met[0][0] == number and damaged.strip() in met[0][1]
+
+
+@pytest.mark.parametrize(
+    ("cut", "why"),
+    [("(1.003000) can0 241#9C32640", "odd number of data hex digits"), ("(1.003000) ca", "unpack")],
+)
+def test_a_candump_line_cut_short_is_a_bad_line(cut: str, why: str) -> None:
+    """What a killed candump leaves as its last line (python-can would read ``9C3`` as 9C 03)."""
+    lines = "(1.000000) can0 141#9C00000000000000 T\n(1.000400) can0 241#9C326400F4012D00 R\n" + cut
+    log = read_log(io.StringIO(lines), name="<stdin>")
+    assert len(list(log)) == 2
+    assert [(n, text) for n, text, _ in log.bad_lines] == [(3, cut)]
+    assert why in log.bad_lines[0][2]
+    assert log.name == str(log) == "<stdin>"
+
+
+def test_bad_lines_are_met_in_order_with_the_frames() -> None:
+    lines = "(1.0) can0 141#9C00000000000000\nnot candump\n(2.0) can0 141#9C00000000000000\nx\n"
+    events: list[object] = []
+    for frame in read_log(io.StringIO(lines), on_bad_line=lambda n, *_: events.append(n)):
+        events.append(frame.timestamp)
+    assert events == [1.0, 2, 2.0, 4]
+
+
+def test_a_log_is_named_by_its_path_or_stream(tmp_path: Path) -> None:
+    stream = io.StringIO()
+    stream.name = "<stdin>"
+    assert read_log(stream).name == "<stdin>"
+    assert read_log(io.StringIO()).name == "<stream>"
+    assert read_log(tmp_path / "x.log").name == str(tmp_path / "x.log")

@@ -19,10 +19,11 @@ the message classes spell them), the one shape ``decode --json``, ``record`` and
 from __future__ import annotations
 
 import contextlib
+import copy
 import dataclasses
 import enum
 import inspect
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
@@ -36,7 +37,16 @@ from servobus.protocols._bound import id_key
 from servobus.protocols._message import Message
 from servobus.transports.can import frame_from_message
 
-__all__ = ["Decoded", "FrameDecoder", "LogFrames", "Scalar", "message_values", "parse_frame", "read_log"]
+__all__ = [
+    "BadLine",
+    "Decoded",
+    "FrameDecoder",
+    "LogFrames",
+    "Scalar",
+    "message_values",
+    "parse_frame",
+    "read_log",
+]
 
 #: The ids tried when none are given: every id a family's ``bind`` accepts among these.
 ALL_IDS = range(256)
@@ -232,19 +242,52 @@ def _describe(ids: Sequence[int]) -> str:
     return f"{ids[0]}..{ids[-1]}" if ids and list(ids) == list(range(ids[0], ids[-1] + 1)) else str(ids)
 
 
+#: A line of a text log that did not parse: (its line number in the file, the line, why).
+BadLine = tuple[int, str, str]
+
+#: python-can's text readers whose reading can go on after a line that does not parse (they read one
+#: line at a time; what they learn from a header is kept): candump ``.log``, ``.asc``, ``.csv``, ``.trc``
+_RESUMABLE = (can.CanutilsLogReader, can.ASCReader, can.CSVReader, can.TRCReader)
+
+
 class LogFrames:
     """The data frames of a CAN log (candump ``.log``, ``.asc``, ``.blf``, ``.csv``, ...), read by
     python-can's ``can.LogReader``; error and remote frames are skipped and counted in ``skipped``.
 
+    A line of a text log (candump, ASC, CSV, TRC) that does not parse is skipped: it is recorded in
+    ``bad_lines`` with its line number (and passed to ``on_bad_line`` as it is met), and reading goes
+    on with the next line. A candump line with an odd number of data hex digits (a line cut short, as a
+    killed ``candump`` leaves its last one) is such a line.
+
+    Args:
+        source: a path, or an open text stream of candump lines (stdin).
+        name: what messages call the source (default: the path, or the stream's ``name``).
+        on_bad_line: called with ``(line number, line, why)`` for each line that does not parse.
+
     Raises:
-        ValueError: a file python-can has no reader for, or one that does not parse (on iteration;
-            also for the readers' own errors, such as BLF's BLFParseError and zlib.error).
+        ValueError: a file python-can has no reader for, or one that does not parse at a place it cannot
+            go on from (on iteration: a binary log's damaged part, such as BLF's BLFParseError and
+            zlib.error; a text log that is not text).
         OSError: the file cannot be read.
     """
 
-    def __init__(self, source: str | Path | TextIO) -> None:
+    def __init__(
+        self,
+        source: str | Path | TextIO,
+        *,
+        name: str | None = None,
+        on_bad_line: Callable[[int, str, str], None] | None = None,
+    ) -> None:
         self.source = source
+        if name is None:
+            name = str(source) if isinstance(source, str | Path) else getattr(source, "name", None)
+        self.name: str = name if isinstance(name, str) else "<stream>"
         self.skipped = 0
+        self.bad_lines: list[BadLine] = []
+        self._on_bad_line = on_bad_line
+
+    def __str__(self) -> str:
+        return self.name
 
     def __iter__(self) -> Iterator[Frame]:
         with self._unparsed():
@@ -252,17 +295,42 @@ class LogFrames:
                 reader: Any = can.LogReader(self.source)
             else:  # an open text stream of candump lines (stdin)
                 reader = can.io.CanutilsLogReader(self.source)
+        lines: _Lines | None = None
+        if isinstance(reader, _RESUMABLE):
+            lines = _Lines(reader.file, candump=isinstance(reader, can.CanutilsLogReader))
+            reader.file = lines  # type: ignore[assignment]  # (the readers only iterate and close it)
         with reader:
             messages = iter(reader)
             while True:
-                with self._unparsed():
-                    message = next(messages, None)
+                try:
+                    with self._unparsed():
+                        message = next(messages, None)
+                except ValueError as exc:
+                    if lines is None or isinstance(exc.__cause__ or exc, UnicodeError):
+                        raise
+                    self._bad(lines, exc)
+                    reader = _resumed(reader, lines)  # the reader's generator ended with its error
+                    messages = iter(reader)
+                    continue
                 if message is None:
                     return
                 if message.is_error_frame or message.is_remote_frame:
                     self.skipped += 1
                     continue
-                yield frame_from_message(message, message.timestamp)
+                try:
+                    frame = frame_from_message(message, message.timestamp)
+                except ValueError as exc:  # a frame that cannot exist (9 bytes in a classic frame)
+                    if lines is None:
+                        raise
+                    self._bad(lines, exc)
+                    continue
+                yield frame
+
+    def _bad(self, lines: _Lines, exc: BaseException) -> None:
+        bad = (lines.number, lines.last.strip(), str(exc))
+        self.bad_lines.append(bad)
+        if self._on_bad_line is not None:
+            self._on_bad_line(*bad)
 
     @contextlib.contextmanager
     def _unparsed(self) -> Iterator[None]:
@@ -275,9 +343,67 @@ class LogFrames:
             raise ValueError(f"{type(exc).__name__}: {exc}") from exc
 
 
-def read_log(source: str | Path | TextIO) -> LogFrames:
+class _Lines:
+    """A text log's lines as python-can's reader takes them, counted (and candump's checked)."""
+
+    def __init__(self, file: TextIO, *, candump: bool) -> None:
+        self.file = file
+        self.number = 0
+        self.last = ""
+        self._candump = candump
+        self._pending: list[str] = []
+
+    def __iter__(self) -> _Lines:
+        return self
+
+    def __next__(self) -> str:
+        if self._pending:
+            return self._pending.pop()
+        self.last = next(self.file)
+        self.number += 1
+        if self._candump:
+            _check_candump(self.last)
+        return self.last
+
+    def push(self, line: str) -> None:
+        """Give ``line`` next (not counted: not the file's)."""
+        self._pending.append(line)
+
+    def close(self) -> None:
+        self.file.close()
+
+
+def _check_candump(line: str) -> None:
+    """python-can reads a data field with an odd number of hex digits as if the last one were a byte
+    (``241#9C3`` as 9C 03): a cut line, refused."""
+    fields = line.split()
+    if len(fields) < 3 or "#" not in fields[2]:
+        return  # python-can refuses it itself
+    data = fields[2].split("#", 1)[1]
+    if data.startswith("#"):
+        data = data[2:]
+    if data[:1] not in ("R", "r") and len(data) % 2:
+        raise ValueError(f"{fields[2]}: an odd number of data hex digits (a line cut short?)")
+
+
+def _resumed(reader: Any, lines: _Lines) -> Any:
+    """A reader that goes on with ``lines`` where ``reader`` stopped, knowing what its header said."""
+    again = copy.copy(reader)
+    if isinstance(reader, can.CSVReader):
+        lines.push("")  # what CSVReader skips as its header line
+    elif isinstance(reader, can.ASCReader | can.TRCReader):
+        again._extract_header = lambda: None  # the header was read: base, start time, columns
+    return again
+
+
+def read_log(
+    source: str | Path | TextIO,
+    *,
+    name: str | None = None,
+    on_bad_line: Callable[[int, str, str], None] | None = None,
+) -> LogFrames:
     """:class:`LogFrames` of ``source`` (a path, or an open stream of candump lines)."""
-    return LogFrames(source)
+    return LogFrames(source, name=name, on_bad_line=on_bad_line)
 
 
 def parse_frame(text: str) -> Frame:

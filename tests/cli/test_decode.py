@@ -9,9 +9,11 @@ from pathlib import Path
 
 import can
 import pytest
+from click.testing import CliRunner
 
 from _cli_run import invoke, one_line_error
 from _log_samples import SAMPLES, Sample
+from servobus.cli import cli
 from servobus.logs import message_values
 from servobus.transports.can import message_from_frame
 
@@ -63,8 +65,11 @@ def test_frames_that_do_not_decode_are_printed_and_counted() -> None:
     assert lines[1].startswith("241#9C  not decoded: StatusReply: expected 8 data bytes, got 1")
     assert "reply from motor 1" in lines[2]
     assert result.stderr == "decode: 3 frames, 1 decoded, 2 not decoded\n"
-    records = _records(invoke(["decode", "--json", "123#0102"]).stdout)
+    result = CliRunner().invoke(cli, ["decode", "--json", "123#0102"])
+    records = _records(result.stdout)
     assert records[0]["error"] and "fields" not in records[0]
+    assert result.exit_code == 1  # nothing decoded
+    assert result.stderr.endswith("1 not decoded: nothing decoded (another --family or --revision?)\n")
 
 
 @pytest.mark.parametrize("suffix", [".log", ".asc", ".blf", ".csv"])
@@ -103,11 +108,82 @@ def test_a_log_recorded_from_the_simulator_decodes(tmp_path: Path) -> None:
     assert {r["motor_id"] for r in records} == {1, 2}
 
 
-def test_a_log_that_does_not_parse_is_exit_1(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    path = tmp_path / "bad.log"
-    path.write_text("(1.0) can0 141#9C00000000000000\nthis is not candump\n")
-    err = one_line_error(capsys, ["decode", str(path)], code=1)
-    assert "does not parse" in err
+def _candump_log(path: Path, frames: int) -> list[str]:
+    """``frames`` candump lines, requests and replies of motor 1 in turn, written to ``path``."""
+    lines = [
+        f"({1.0 + i / 1000:.6f}) can0 "
+        + ("141#9C00000000000000 T" if i % 2 == 0 else "241#9C326400F4012D00 R")
+        for i in range(frames)
+    ]
+    path.write_text("\n".join(lines) + "\n")
+    return lines
+
+
+def test_a_damaged_line_is_reported_with_its_line_number_and_decoding_goes_on(tmp_path: Path) -> None:
+    path = tmp_path / "candump.log"
+    lines = _candump_log(path, 1203)
+    lines.insert(100, "(1.1) can0 24#zz R")
+    path.write_text("\n".join(lines) + "\n")
+    result = invoke(["decode", str(path)])  # exit 0: it decoded what it could
+    assert len(result.stdout.splitlines()) == 1203
+    assert result.stderr.splitlines() == [
+        f"decode: {path}:101: not a CAN log line (invalid literal for int() with base 16: 'zz'): "
+        "'(1.1) can0 24#zz R'",
+        "decode: 1203 frames, 1203 decoded, 0 not decoded, 1 bad line skipped",
+    ]
+
+
+@pytest.mark.parametrize("cut", ["(1.203000) can0 241#9C32640", "(1.203000) ca"])
+def test_a_last_line_cut_short_is_reported_and_the_rest_decodes(tmp_path: Path, cut: str) -> None:
+    """What a killed candump leaves: its last line cut short, without its newline."""
+    path = tmp_path / "candump.log"
+    lines = _candump_log(path, 1203)
+    path.write_text("\n".join(lines) + "\n" + cut)
+    result = invoke(["decode", "--json", str(path)])
+    assert len(_records(result.stdout)) == 1203
+    assert result.stderr.startswith(f"decode: {path}:1204: not a CAN log line (")
+    assert result.stderr.endswith("decode: 1203 frames, 1203 decoded, 0 not decoded, 1 bad line skipped\n")
+
+
+def test_bad_lines_on_stdin_are_named_stdin() -> None:
+    lines = "(1.000000) can0 141#9C00000000000000 T\nnot candump\n(1.000400) can0 241#9C326400F4012D00 R\n"
+    result = invoke(["decode", "-"], input=lines)
+    assert len(result.stdout.splitlines()) == 2
+    assert result.stderr.splitlines()[0].startswith("decode: <stdin>:2: not a CAN log line (")
+    assert "TextIOWrapper" not in result.stderr
+
+
+@pytest.mark.parametrize(
+    ("name", "text", "says"),
+    [
+        ("garbage.asc", "hello world\nthis is garbage\n", "garbage.asc: no CAN frames in it"),
+        ("empty.log", "", "empty.log: no CAN frames in it"),
+        ("bad.log", "this is not candump\nnor this\n", "bad.log:2: not a CAN log line"),
+    ],
+)
+def test_a_log_with_nothing_to_decode_is_exit_1(tmp_path: Path, name: str, text: str, says: str) -> None:
+    path = tmp_path / name
+    path.write_text(text)
+    result = CliRunner().invoke(cli, ["decode", str(path)])
+    assert result.exit_code == 1 and not result.stdout
+    assert says in result.stderr and "Traceback" not in result.stderr
+    assert result.stderr.splitlines()[-1].endswith(": nothing decoded")
+
+
+def test_a_log_of_another_family_is_exit_1_with_its_frames_printed(tmp_path: Path) -> None:
+    path = tmp_path / "candump.log"
+    _candump_log(path, 4)
+    result = CliRunner().invoke(cli, ["decode", "--family", "hollow", str(path)])
+    assert result.exit_code == 1 and len(result.stdout.splitlines()) == 4
+    assert result.stderr == (
+        "decode: 4 frames, 0 decoded, 4 not decoded: nothing decoded (another --family or --revision?)\n"
+    )
+
+
+def test_the_help_says_what_decode_does_with_bad_lines_and_its_exit_status() -> None:
+    text = " ".join(invoke(["decode", "--help"]).stdout.split())
+    assert "reported on stderr with its line number and skipped; decoding goes on" in text
+    assert "0 when at least one frame decoded, 1 when none did" in text
 
 
 def _blf(path: Path, *, damage: str) -> None:
@@ -123,15 +199,25 @@ def _blf(path: Path, *, damage: str) -> None:
     path.write_bytes(bytes(raw))
 
 
-@pytest.mark.parametrize("damage", ["header", "objects"])
-def test_a_damaged_blf_is_one_line_and_exit_1(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], damage: str
+def test_a_blf_with_a_damaged_header_is_one_line_and_exit_1(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """python-can's BLF reader raises its own errors (BLFParseError, zlib.error), not ValueError."""
     path = tmp_path / "trace.blf"
-    _blf(path, damage=damage)
+    _blf(path, damage="header")
     err = one_line_error(capsys, ["decode", str(path)], code=1)
     assert "does not parse" in err
+
+
+def test_a_blf_with_damaged_objects_is_reported_and_decoding_goes_on(tmp_path: Path) -> None:
+    """A binary log cannot go on past its damaged part: it ends there, the other sources decode."""
+    path = tmp_path / "trace.blf"
+    _blf(path, damage="objects")
+    result = CliRunner().invoke(cli, ["decode", str(path), "141#9C00000000000000"])
+    assert result.exit_code == 0, result.stderr
+    first, summary = result.stderr.splitlines()
+    assert first.startswith(f"decode: {path}: does not parse as a CAN log after 0 frames (error: Error -3")
+    assert summary == "decode: 1 frames, 1 decoded, 0 not decoded, 1 log cut short by a damaged part"
 
 
 @pytest.mark.parametrize(

@@ -163,6 +163,7 @@ def sim_devices(family: str, ids: tuple[int, ...], revision: str | None = None) 
 
 
 def _check(conn: Connection) -> Connection:
+    """``conn``, or a click.UsageError naming the mistake and what to give (exit 2, one line)."""
     named = [
         flag
         for flag, on in (
@@ -178,18 +179,87 @@ def _check(conn: Connection) -> Connection:
         raise click.UsageError("--baud is for a serial --port")
     if (conn.fd or conn.data_bitrate) and conn.port is not None:
         raise click.UsageError("--fd and --data-bitrate are for CAN, not a serial --port")
+    if conn.bitrate is not None and conn.port is not None:
+        raise click.UsageError("--bitrate is for CAN; a serial --port takes --baud")
+    if conn.data_bitrate is not None and not conn.fd:
+        raise click.UsageError("--data-bitrate is the CAN FD data phase's bit rate: give --fd too")
     if conn.sim is not None and not 1 <= conn.sim <= 32:
         raise click.UsageError(f"--sim {conn.sim}: between 1 and 32 motors")
-    if not named:
-        import can
-
-        config = can.util.load_config()
-        if not config.get("interface"):
-            raise click.UsageError(
-                "no bus: give --sim N, --interface/--channel (python-can), or a serial --port "
-                "(or configure python-can: ~/.canrc or CAN_INTERFACE)"
-            )
+    if conn.sim is not None and conn.fd and conn.family != "hollow":
+        raise click.UsageError(
+            f"--fd: the simulated {conn.family} motors speak classic CAN (CAN FD: --family hollow)"
+        )
+    if conn.interface == NATIVE_SLCAN:
+        if not conn.channel:
+            raise click.UsageError(f"-i {NATIVE_SLCAN} needs the adapter's serial port: -c /dev/ttyACM0")
+    elif conn.sim is None and conn.port is None:
+        _check_python_can(conn)
     return conn
+
+
+#: -c examples for the interfaces a newcomer meets first
+_CHANNELS = {"slcan": "/dev/ttyACM0", "socketcan": "can0", "virtual": "test", "pcan": "PCAN_USBBUS1"}
+_NO_BUS = (
+    "give --sim N, --interface/--channel (python-can), or a serial --port "
+    "(or configure python-can: ~/.canrc or CAN_INTERFACE)"
+)
+
+
+def _check_python_can(conn: Connection) -> None:
+    """The python-can interface and channel ``conn`` names (with python-can's configuration: its
+    files and ``CAN_*`` variables) exist: a UsageError, not python-can's traceback, when they do not."""
+    import can
+
+    given = {"interface": conn.interface, "channel": conn.channel}
+    try:
+        config = can.util.load_config(config={k: v for k, v in given.items() if v is not None})
+    except can.CanInterfaceNotImplementedError:  # python-can's answer to a missing interface too
+        config = None
+    except ValueError as exc:  # a value python-can's configuration refused (a bit timing)
+        raise click.UsageError(f"python-can's configuration: {exc}") from None
+    interface = conn.interface if config is None else config.get("interface")
+    if config is None and conn.interface is None:
+        configured = (
+            can.util.load_environment_config().get("interface")
+            or can.util.load_file_config().get("interface")
+            or can.util.load_file_config().get("bustype")
+        )
+        if configured:  # not on the command line: python-can's own configuration names it
+            raise click.UsageError(
+                f"python-can's configuration (CAN_INTERFACE or ~/.canrc) names interface "
+                f"{configured!r}, which python-can does not have: give -i"
+            )
+        if conn.channel:
+            raise click.UsageError(
+                f"-c {conn.channel} needs -i: the python-can interface (slcan for a serial adapter, "
+                f"socketcan, pcan, ...) or {NATIVE_SLCAN}"
+            )
+        raise click.UsageError(f"no bus: {_NO_BUS}")
+    if config is None:
+        known = ", ".join(sorted(can.interfaces.VALID_INTERFACES))
+        raise click.UsageError(
+            f"-i {interface}: python-can has no such interface; one of {known}, or {NATIVE_SLCAN}"
+        )
+    if config.get("channel") is None and _needs_channel(str(interface)):
+        example = _CHANNELS.get(str(interface), "CHANNEL")
+        raise click.UsageError(f"-i {interface} needs -c: the adapter's channel (-c {example})")
+
+
+def _needs_channel(interface: str) -> bool:
+    """Whether python-can's ``interface`` has no default channel (slcan: the serial port); False when
+    its module does not import (python-can's own error says why, on opening)."""
+    import importlib
+    import inspect
+
+    import can
+
+    try:
+        module, name = can.interfaces.BACKENDS[interface]
+        bus_class = getattr(importlib.import_module(module), name)
+        channel = inspect.signature(bus_class.__init__).parameters.get("channel")
+    except Exception:
+        return False
+    return channel is not None and channel.default is inspect.Parameter.empty
 
 
 #: ``--family``/``-f``: the command receives ``family``

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
 import click
@@ -30,7 +30,10 @@ Examples:
   servobus decode --family lk --revision V2_35 --json trace.asc > trace.jsonl
   candump -L can0 | servobus decode -
 
-Frames that do not decode are printed as such; a summary line goes to stderr."""
+Frames that do not decode are printed as such. A log line that does not parse (a damaged line, a
+last line cut short) is reported on stderr with its line number and skipped; decoding goes on. A
+summary line goes to stderr. Exit status: 0 when at least one frame decoded, 1 when none did (no
+frames, or none of the family's), 2 for bad arguments."""
 
 
 @click.command(epilog=EPILOG)
@@ -59,22 +62,50 @@ def decode(
         decoder = FrameDecoder(family, ids=ids, **options)
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--revision/--ids") from None
-    total = failed = skipped = 0
+    total = failed = skipped = bad = broken = 0
     for kind, source in inputs:
         frames = source if isinstance(source, LogFrames) else [source]
-        for decoded in _decoded(decoder, frames, kind):
-            total += 1
-            failed += not decoded.ok
-            click.echo(json.dumps(decoded.as_dict()) if as_json else _text(decoded, timed=kind == "log"))
+        count = 0
+        cut = False
+        try:
+            for decoded in _decoded(decoder, frames):
+                count += 1
+                failed += not decoded.ok
+                click.echo(json.dumps(decoded.as_dict()) if as_json else _text(decoded, timed=kind == "log"))
+        except ValueError as exc:  # a binary log's damaged part: its reader cannot go on past it
+            broken += 1
+            cut = True
+            click.echo(
+                f"decode: {source}: does not parse as a CAN log after {count} frames ({exc})", err=True
+            )
+        total += count
         if isinstance(source, LogFrames):
             skipped += source.skipped
+            bad += len(source.bad_lines)
+            if not (count or cut or source.bad_lines or source.skipped):
+                click.echo(f"decode: {source}: no CAN frames in it", err=True)
     extra = f", {skipped} error or remote frames skipped" if skipped else ""
-    click.echo(f"decode: {total} frames, {total - failed} decoded, {failed} not decoded{extra}", err=True)
+    extra += f", {bad} bad {'line' if bad == 1 else 'lines'} skipped" if bad else ""
+    extra += f", {broken} {'log' if broken == 1 else 'logs'} cut short by a damaged part" if broken else ""
+    summary = f"decode: {total} frames, {total - failed} decoded, {failed} not decoded{extra}"
+    if total - failed == 0:
+        hint = " (another --family or --revision?)" if total else ""
+        click.echo(f"{summary}: nothing decoded{hint}", err=True)
+        raise click.exceptions.Exit(1)
+    click.echo(summary, err=True)
+
+
+def _bad_line(name: str) -> Callable[[int, str, str], None]:
+    def report(number: int, line: str, why: str) -> None:
+        shown = line if len(line) <= 60 else line[:57] + "..."
+        click.echo(f"decode: {name}:{number}: not a CAN log line ({why}): {shown!r}", err=True)
+
+    return report
 
 
 def _source(text: str) -> tuple[str, LogFrames | Frame]:
     if text == "-":
-        return "log", read_log(sys.stdin)
+        return "log", read_log(sys.stdin, name="<stdin>", on_bad_line=_bad_line("<stdin>"))
     path = Path(text)
     if "#" in text and not path.exists():
         return "frame", _frame(text, "SOURCE")
@@ -92,7 +123,7 @@ def _source(text: str) -> tuple[str, LogFrames | Frame]:
         raise click.ClickException(
             f"{text}: does not parse as a CAN log ({type(exc).__name__}: {exc})"
         ) from None
-    return "log", read_log(path)
+    return "log", read_log(path, on_bad_line=_bad_line(text))
 
 
 def _frame(text: str, hint: str) -> Frame:
@@ -102,16 +133,10 @@ def _frame(text: str, hint: str) -> Frame:
         raise click.BadParameter(str(exc), param_hint=hint) from None
 
 
-def _decoded(decoder: FrameDecoder, frames: Iterable[Frame], kind: str) -> Iterator[Decoded]:
-    iterator = iter(frames)
-    while True:
-        try:
-            frame = next(iterator)
-        except StopIteration:
-            return
-        except (ValueError, IndexError) as exc:  # a line python-can cannot parse: the file is bad
-            source = getattr(frames, "source", "the log")
-            raise click.ClickException(f"{source}: does not parse as a CAN log ({exc})") from None
+def _decoded(decoder: FrameDecoder, frames: Iterable[Frame]) -> Iterator[Decoded]:
+    """Each frame decoded; a log's part that does not parse (where its reader cannot go on) as
+    ValueError (a reader's own error included: :class:`LogFrames` turns those into ValueError)."""
+    for frame in frames:
         yield decoder.decode(frame)
 
 
