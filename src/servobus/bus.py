@@ -32,6 +32,8 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
+import inspect
 import logging
 import re
 from collections import deque
@@ -394,7 +396,11 @@ class Motor:
         except KeyError:
             raise AttributeError(f"{self.codec.family} motors have no command {name!r}") from None
 
-        async def call(*, timeout_s: float | None = None, retries: int = 0, **fields: Any) -> Reply | None:
+        async def call(
+            *args: Any, timeout_s: float | None = None, retries: int = 0, **fields: Any
+        ) -> Reply | None:
+            if args:  # the command's fields in their declaration order, as the command lists them
+                fields = _positional_fields(cls, name, args, fields)
             return await self.request(cls(**fields), timeout_s=timeout_s, retries=retries)
 
         call.__name__ = name
@@ -645,11 +651,22 @@ class Bus:
         return tuple(self._commanded.values())
 
     def subscribe(self, callback: Callable[[Motor, Traffic, Reply], object]) -> None:
-        """Call ``callback(motor, traffic, reply)`` for every decoded frame of a motor on this bus."""
+        """Call ``callback(motor, traffic, reply)`` for every decoded frame of a motor on this bus.
+
+        Raises:
+            TypeError: ``callback`` is a coroutine function (it is called on the receive path and
+                never awaited: wrap it, e.g. in ``lambda *a: loop.create_task(f(*a))``).
+        """
+        _refuse_coroutine(callback, "subscribe")
         self._subscribers.append(callback)
 
     def subscribe_status(self, callback: Callable[[MotorStatus], object]) -> None:
-        """Call ``callback(status)`` whenever the watchdog marks a motor offline or online."""
+        """Call ``callback(status)`` whenever the watchdog marks a motor offline or online.
+
+        Raises:
+            TypeError: ``callback`` is a coroutine function (see :meth:`subscribe`).
+        """
+        _refuse_coroutine(callback, "subscribe_status")
         self._status_listeners.append(callback)
 
     def ticks(self, hz: float, *, spin_s: float = 0.0012, count: int | None = None) -> AsyncIterator[Tick]:
@@ -1095,3 +1112,26 @@ class Bus:
         stats = getattr(self.transport, "stats", None)
         load = getattr(stats(), "bus_load_pct", None) if callable(stats) else None
         return Metrics.of(self.scheduler.counts, self.scheduler.latency().snapshot(), load)
+
+
+def _positional_fields(
+    cls: type[Command], name: str, args: tuple[Any, ...], fields: dict[str, Any]
+) -> dict[str, Any]:
+    """``args`` given to ``motor.<name>(...)`` as keyword fields of ``cls``, in declaration order."""
+    names = [f.name for f in dataclasses.fields(cls) if f.init]  # type: ignore[arg-type]
+    if len(args) > len(names):
+        listed = ", ".join(names) or "none"
+        raise TypeError(f"{name}() takes {len(names)} positional field(s) ({listed}), {len(args)} given")
+    for field_name, value in zip(names, args, strict=False):
+        if field_name in fields:
+            raise TypeError(f"{name}() got {field_name!r} both by position and by keyword")
+        fields[field_name] = value
+    return fields
+
+
+def _refuse_coroutine(callback: Callable[..., object], method: str) -> None:
+    if inspect.iscoroutinefunction(callback) or inspect.iscoroutinefunction(type(callback).__call__):
+        raise TypeError(
+            f"{method}() takes a plain function: {callback!r} is async and would never be awaited "
+            "(call it through loop.create_task() from a plain one)"
+        )

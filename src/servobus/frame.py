@@ -1,11 +1,17 @@
 """Frame: the one type that crosses layers (codecs, scheduler, transports, simulator).
 
 Transports convert to and from python-can's ``Message`` or serial bytes at their edge only.
+:meth:`Frame.from_message` reads a ``can.Message``'s attributes (no import of python-can);
+:meth:`Frame.to_message` defers to the CAN transport's module, which owns python-can.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # sans-IO: python-can is loaded by the transport edge, never with servobus.frame
+    from servobus.transports.can import CanMessage
 
 __all__ = ["Frame", "classic_request"]
 
@@ -25,6 +31,9 @@ class Frame:
     Equality ignores ``timestamp`` and ``is_rx``, so a frame from the simulator compares equal to
     the frame a test expects.
 
+    ``error_state_indicator`` is CAN FD's ESI bit as an adapter reports it (the sender is error
+    passive); like ``timestamp`` and ``is_rx`` it is not part of equality.
+
     ``is_rx`` follows python-can's ``Message.is_rx``: False marks our own transmitted frame coming
     back from an adapter that loops sent frames back. It matters where a reply uses the request's
     own identifier (LK V2.35: request and echo reply both on 0x140+ID), so our own request is never
@@ -42,6 +51,7 @@ class Frame:
     is_serial: bool = False
     timestamp: float = field(default=0.0, compare=False)
     is_rx: bool = field(default=True, compare=False)
+    error_state_indicator: bool = field(default=False, compare=False)
 
     # Every encoded and every received frame is built here, so __init__ is written out: the checks
     # in one pass and the slots set through their descriptors (a frozen dataclass's generated
@@ -57,6 +67,7 @@ class Frame:
         is_serial: bool = False,
         timestamp: float = 0.0,
         is_rx: bool = True,
+        error_state_indicator: bool = False,
     ) -> None:
         if type(data) is not bytes:
             data = bytes(data)
@@ -76,6 +87,8 @@ class Frame:
                 raise ValueError(f"classic CAN data length {len(data)} exceeds 8 bytes")
             elif bitrate_switch:
                 raise ValueError("bitrate_switch needs is_fd")
+            elif error_state_indicator:
+                raise ValueError("error_state_indicator needs is_fd")
         _SET_ID(self, arbitration_id)
         _SET_DATA(self, data)
         _SET_EXTENDED(self, bool(is_extended_id))
@@ -84,6 +97,44 @@ class Frame:
         _SET_SERIAL(self, bool(is_serial))
         _SET_TIMESTAMP(self, timestamp)
         _SET_RX(self, bool(is_rx))
+        _SET_ESI(self, bool(error_state_indicator))
+
+    @classmethod
+    def from_message(cls, message: CanMessage, timestamp: float | None = None) -> Frame:
+        """A python-can ``can.Message`` as a Frame: identifier, extended, FD, BRS, ESI, data,
+        ``is_rx`` and the timestamp (the message's own unless ``timestamp`` is given).
+
+        Raises:
+            ValueError: a remote or error frame (a Frame is neither), a DLC that disagrees with the
+                data (python-can's slcan reader builds such messages from short lines), or an
+                identifier or length out of range.
+        """
+        if message.is_remote_frame or message.is_error_frame:
+            kind = "remote" if message.is_remote_frame else "error"
+            raise ValueError(f"a {kind} frame (id 0x{message.arbitration_id:X}) is not a Frame")
+        if message.dlc != len(message.data):
+            raise ValueError(f"DLC {message.dlc} but {len(message.data)} data bytes")
+        return cls(
+            arbitration_id=message.arbitration_id,
+            data=bytes(message.data),
+            is_extended_id=message.is_extended_id,
+            is_fd=message.is_fd,
+            bitrate_switch=message.bitrate_switch,
+            timestamp=message.timestamp if timestamp is None else timestamp,
+            is_rx=message.is_rx,
+            error_state_indicator=message.error_state_indicator,
+        )
+
+    def to_message(self, **message: Any) -> CanMessage:
+        """This frame as a python-can ``can.Message``: identifier, extended, FD, BRS, ESI, data,
+        ``is_rx`` and timestamp (other ``can.Message`` arguments, such as ``channel``, may be given).
+
+        Raises:
+            ValueError: a serial-link message, which has no CAN form.
+        """
+        from servobus.transports.can import message_from_frame  # loads python-can: not at import
+
+        return message_from_frame(self, **message)
 
     def __repr__(self) -> str:
         width = 8 if self.is_extended_id else 3
@@ -102,6 +153,7 @@ _SET_BRS = Frame.bitrate_switch.__set__  # type: ignore[attr-defined,misc]
 _SET_SERIAL = Frame.is_serial.__set__  # type: ignore[attr-defined,misc]
 _SET_TIMESTAMP = Frame.timestamp.__set__  # type: ignore[attr-defined,misc]
 _SET_RX = Frame.is_rx.__set__  # type: ignore[attr-defined,misc]
+_SET_ESI = Frame.error_state_indicator.__set__  # type: ignore[attr-defined,misc]
 
 
 _NEW = object.__new__
@@ -120,6 +172,7 @@ def classic_request(arbitration_id: int, data: bytes) -> Frame:
     _SET_SERIAL(frame, False)
     _SET_TIMESTAMP(frame, 0.0)
     _SET_RX(frame, False)
+    _SET_ESI(frame, False)
     return frame
 
 

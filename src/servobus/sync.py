@@ -12,21 +12,32 @@ portal) and gives the same calls, blocking::
         bus.cycle([(motor, SpeedControl(speed_dps=90.0))])
 
 Leaving the ``with`` block, or :meth:`Bus.close`, stops every commanded motor exactly as leaving
-``async with`` does (an exception in the block too), then ends the background loop. Calls may come
-from any thread; they are run one at a time on the Bus's loop.
+``async with`` does (an exception in the block too), then ends the background loop. A Bus still open
+when the interpreter exits is closed the same way then (with a ``ResourceWarning``). Calls may come
+from any thread; they are run one at a time on the Bus's loop. Motor commands take their fields by
+position too, in the command's order: ``motor.set_comm_timeout(100)``.
 """
 
 from __future__ import annotations
 
+import atexit
 import functools
-from collections.abc import Callable, Iterable
+import logging
+import warnings
+import weakref
+from collections.abc import Callable, Iterable, Iterator
 from types import TracebackType
 from typing import Any, Self
 
 from anyio.from_thread import BlockingPortal, start_blocking_portal
 
 from servobus import bus as _bus
+from servobus.metrics import Metrics
 from servobus.protocols._message import Command, Reply
+from servobus.scheduler import Traffic
+from servobus.ticks import Tick
+
+_logger = logging.getLogger("servobus.sync")
 
 __all__ = ["Bus", "Motor"]
 
@@ -43,6 +54,29 @@ class Motor:
         """The latest reply, stream frame or error report of this motor."""
         return self.motor.state
 
+    @property
+    def motor_id(self) -> int:
+        return self.motor.motor_id
+
+    @property
+    def online(self) -> bool | None:
+        """The watchdog's verdict (see :class:`servobus.Motor`)."""
+        return self.motor.online
+
+    @property
+    def last_seen(self) -> float | None:
+        return self.motor.last_seen
+
+    @property
+    def fault(self) -> Any:
+        """The faults of its latest report, or None (see :class:`servobus.Motor`)."""
+        return self.motor.fault
+
+    def metrics(self) -> Metrics:
+        """This motor's counters and latency (see :meth:`servobus.Motor.metrics`)."""
+        result: Metrics = self._portal.call(self.motor.metrics)
+        return result
+
     def request(self, command: Command, *, timeout_s: float | None = None, retries: int = 0) -> Reply | None:
         """Send ``command`` and wait for its reply (see :meth:`servobus.Motor.request`)."""
         call = functools.partial(self.motor.request, command, timeout_s=timeout_s, retries=retries)
@@ -51,8 +85,8 @@ class Motor:
     def __getattr__(self, name: str) -> Callable[..., Reply | None]:
         method = getattr(self.__dict__["motor"], name)  # AttributeError for unknown commands
 
-        def call(**fields: Any) -> Reply | None:
-            result: Reply | None = self._portal.call(functools.partial(method, **fields))
+        def call(*args: Any, **fields: Any) -> Reply | None:
+            result: Reply | None = self._portal.call(functools.partial(method, *args, **fields))
             return result
 
         call.__name__ = name
@@ -82,6 +116,7 @@ class Bus:
             self._portal_cm.__exit__(None, None, None)
             raise
         self._open = True
+        _OPEN.add(self)
 
     @property
     def bus(self) -> _bus.Bus:
@@ -106,14 +141,72 @@ class Bus:
             functools.partial(self._bus.broadcast, command, handles, timeout_s=timeout_s)
         )
 
+    @property
+    def commanded(self) -> tuple[Motor, ...]:
+        """The motors this Bus sent a command that is not a read (see :attr:`servobus.Bus.commanded`)."""
+        return tuple(Motor(self._portal, m) for m in self._bus.commanded)
+
+    def request(
+        self, motor: Motor, command: Command, *, timeout_s: float | None = None, retries: int = 0
+    ) -> Reply | None:
+        """:meth:`Motor.request`."""
+        return motor.request(command, timeout_s=timeout_s, retries=retries)
+
+    def subscribe(self, callback: Callable[[_bus.Motor, Traffic, Reply], object]) -> None:
+        """Call ``callback(motor, traffic, reply)`` for every decoded frame (see
+        :meth:`servobus.Bus.subscribe`). It runs on the Bus's background thread: keep it short, and
+        hand work to your own thread if it blocks. ``motor`` is the asynchronous motor; its
+        ``motor_id`` and ``state`` may be read there.
+
+        Raises:
+            TypeError: ``callback`` is a coroutine function.
+        """
+        self._portal.call(self._bus.subscribe, callback)
+
+    def subscribe_status(self, callback: Callable[[_bus.MotorStatus], object]) -> None:
+        """Call ``callback(status)`` when a motor goes offline or online (see
+        :meth:`servobus.Bus.subscribe_status`); on the background thread, as :meth:`subscribe`.
+
+        Raises:
+            TypeError: ``callback`` is a coroutine function.
+        """
+        self._portal.call(self._bus.subscribe_status, callback)
+
+    def ticks(self, hz: float, *, spin_s: float = 0.0012, count: int | None = None) -> Iterator[Tick]:
+        """A fixed-rate pacer, blocking: ``for tick in bus.ticks(100): bus.cycle(...)`` (see
+        :func:`servobus.ticks.ticks`; the ticks are timed on the Bus's loop)."""
+        pacer = self._bus.ticks(hz, spin_s=spin_s, count=count)
+
+        async def next_tick() -> Tick | None:
+            try:
+                return await anext(pacer)
+            except StopAsyncIteration:
+                return None
+
+        try:
+            while (tick := self._portal.call(next_tick)) is not None:
+                yield tick
+        finally:
+            aclose = getattr(pacer, "aclose", None)
+            if self._open and aclose is not None:
+                self._portal.call(aclose)
+
     def stats(self) -> dict[str, int]:
-        return self._bus.stats()
+        """The scheduler's counters (see :meth:`servobus.Bus.stats`)."""
+        result: dict[str, int] = self._portal.call(self._bus.stats)
+        return result
+
+    def metrics(self) -> Metrics:
+        """This bus's counters, latency and load (see :meth:`servobus.Bus.metrics`)."""
+        result: Metrics = self._portal.call(self._bus.metrics)
+        return result
 
     def close(self, exc: BaseException | None = None) -> None:
         """Stop every commanded motor, close the transport if the Bus opened it, end the loop."""
         if not self._open:
             return
         self._open = False
+        _OPEN.discard(self)
         try:
             self._portal.call(self._bus.__aexit__, type(exc) if exc else None, exc, None)
         finally:
@@ -129,10 +222,28 @@ class Bus:
 
     def __del__(self) -> None:
         if getattr(self, "_open", False):
-            import warnings
-
             warnings.warn(
                 "servobus.sync.Bus was never closed: its motors were not stopped",
                 ResourceWarning,
                 stacklevel=1,
             )
+
+
+#: The Buses not yet closed. At interpreter exit their background loops would be stopped by garbage
+#: collection after the daemon threads that run them are frozen (a hang, or "Exception ignored in
+#: __del__"): they are closed first, motors stopped, here.
+_OPEN: weakref.WeakSet[Bus] = weakref.WeakSet()
+
+
+@atexit.register
+def _close_at_exit() -> None:
+    for bus in list(_OPEN):
+        warnings.warn(
+            "servobus.sync.Bus was never closed: closed at exit (its motors stopped)",
+            ResourceWarning,
+            stacklevel=1,
+        )
+        try:
+            bus.close()
+        except Exception as exc:  # the exit goes on; say why the stop did not complete
+            _logger.error("closing %r at exit failed: %s", bus.bus, exc)

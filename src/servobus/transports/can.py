@@ -46,7 +46,7 @@ from servobus.timing import nominal_frame_time_s
 from servobus.transports.base import Outgoing, Transport, logger
 from servobus.transports.events import BusOff, CanErrorClass, ErrorFrame
 
-__all__ = ["CanTransport", "frame_from_message", "message_from_frame"]
+__all__ = ["CanMessage", "CanTransport", "frame_from_message", "message_from_frame"]
 
 _THREAD_POLL_S = 0.05  # how long a reader thread blocks in recv(): bounds how fast close() is
 _THREAD_BATCH = 256  # frames a reader thread hands to the loop per wake-up, at most
@@ -54,35 +54,79 @@ _ENOBUFS_RETRY_S = 0.0005
 
 
 def frame_from_message(message: can.Message, timestamp: float) -> Frame:
-    """A received ``can.Message`` as a :class:`Frame` stamped ``timestamp`` (keeps ``is_rx``).
+    """A received ``can.Message`` as a :class:`Frame` stamped ``timestamp``: :meth:`Frame.from_message`.
 
     Raises:
-        ValueError: the message's DLC disagrees with its data (python-can's slcan reader builds such
-            messages from short lines), or its id or length is out of range.
+        ValueError: a remote or error frame, a DLC that disagrees with the data, or an id or length
+            out of range.
     """
-    if message.dlc != len(message.data):
-        raise ValueError(f"DLC {message.dlc} but {len(message.data)} data bytes")
-    return Frame(
-        arbitration_id=message.arbitration_id,
-        data=bytes(message.data),
-        is_extended_id=message.is_extended_id,
-        is_fd=message.is_fd,
-        bitrate_switch=message.bitrate_switch,
-        timestamp=timestamp,
-        is_rx=message.is_rx,
-    )
+    return Frame.from_message(message, timestamp)
 
 
-def message_from_frame(frame: Frame) -> can.Message:
-    """A :class:`Frame` as the ``can.Message`` python-can sends (already validated by Frame)."""
+def message_from_frame(frame: Frame, **message: Any) -> can.Message:
+    """A :class:`Frame` as a ``can.Message`` (:meth:`Frame.to_message`): identifier, extended, FD,
+    BRS, ESI, data, ``is_rx`` and timestamp; ``message`` adds other ``can.Message`` arguments.
+
+    Raises:
+        ValueError: a serial-link message, which has no CAN form.
+    """
+    if frame.is_serial:
+        raise ValueError(f"{frame!r} is a serial-link message, not a CAN frame")
     return can.Message(
+        timestamp=frame.timestamp,
         arbitration_id=frame.arbitration_id,
         data=frame.data,
         is_extended_id=frame.is_extended_id,
         is_fd=frame.is_fd,
         bitrate_switch=frame.bitrate_switch,
-        check=False,
+        error_state_indicator=frame.error_state_indicator,
+        is_rx=frame.is_rx,
+        check=False,  # a Frame is valid already
+        **message,
     )
+
+
+#: python-can's ``Message``, under a name :mod:`servobus.frame` can annotate with (it never imports can).
+CanMessage = can.Message
+
+
+class _NotifierListener(can.Listener):
+    """What a :class:`CanTransport` adds to an application's ``can.Notifier``: the frames the
+    notifier reads go to the transport's loop in batches; a reader failure is a lost device."""
+
+    def __init__(self, transport: CanTransport, loop: asyncio.AbstractEventLoop, generation: int) -> None:
+        self._transport = transport
+        self._loop = loop
+        self._generation = generation
+        self._pending: list[tuple[can.Message, float]] = []
+        self._lock = threading.Lock()
+
+    def on_message_received(self, msg: can.Message) -> None:
+        with self._lock:
+            self._pending.append((msg, time.monotonic()))  # the loop's clock on a plain asyncio loop
+            if len(self._pending) > 1:
+                return  # a hand-over is already on its way
+        if asyncio._get_running_loop() is self._loop:  # a notifier running on our own loop
+            self._flush()
+            return
+        with contextlib.suppress(RuntimeError):  # the loop is gone: nobody is left to take it
+            self._loop.call_soon_threadsafe(self._flush)
+
+    def _flush(self) -> None:
+        with self._lock:
+            batch, self._pending = self._pending, []
+        self._transport._take(batch, self._generation)
+
+    def on_error(self, exc: Exception) -> None:
+        transport, generation = self._transport, self._generation
+        with contextlib.suppress(RuntimeError):
+            if _device_failed(exc):
+                self._loop.call_soon_threadsafe(transport._lose, exc, generation)
+            else:  # a frame python-can could not parse
+                self._loop.call_soon_threadsafe(transport._count_bad, 1, generation)
+
+    def stop(self) -> None:
+        pass
 
 
 @dataclass(slots=True)
@@ -101,7 +145,14 @@ class CanTransport(Transport[Frame, Frame]):
     """A CAN or CAN FD bus through python-can.
 
     Args:
-        interface, channel: python-can's; None takes them from python-can's configuration.
+        interface, channel: python-can's; None takes them from python-can's configuration. Or
+            ``interface`` is a ``can.BusABC`` the application opened already: servobus sends and
+            receives through it, never changes its filters (``receive_ids`` filter in software)
+            and never shuts it down (closing the transport leaves it open; a lost one is not
+            reopened behind the application's back).
+        notifier: the application's ``can.Notifier`` on that bus: servobus adds itself to it as a
+            listener instead of reading the bus itself (a bus has one reader). Without it, a bus
+            that already has a notifier (``can.Notifier.find_instances``) is joined the same way.
         bitrate, data_bitrate: python-can's (nominal and CAN FD data rate). Also used for the
             bus-load estimate; without a bit rate from arguments or configuration the load is
             unknown (None).
@@ -123,9 +174,10 @@ class CanTransport(Transport[Frame, Frame]):
 
     def __init__(
         self,
-        interface: str | None = None,
+        interface: str | can.BusABC | None = None,
         channel: Any = None,
         *,
+        notifier: can.Notifier | None = None,
         bitrate: int | None = None,
         data_bitrate: int | None = None,
         fd: bool = False,
@@ -147,6 +199,28 @@ class CanTransport(Transport[Frame, Frame]):
             raise ValueError(f"enobufs={enobufs!r} must be 'wait' or 'drop'")
         if min_gap_s < 0 or enobufs_timeout_s < 0:
             raise ValueError(f"min_gap_s={min_gap_s} and enobufs_timeout_s={enobufs_timeout_s} must be >= 0")
+        if interface is None and notifier is not None:
+            buses = notifier.bus if isinstance(notifier.bus, tuple | list) else (notifier.bus,)
+            if len(buses) != 1:
+                raise ValueError(f"the notifier reads {len(buses)} buses: give the one to use")
+            interface = buses[0]
+        self._borrowed: can.BusABC | None = None
+        self._notifier = notifier
+        if isinstance(interface, can.BusABC):
+            if channel is not None or options or config_context is not None:
+                raise ValueError("an open can.BusABC takes no channel, configuration or python-can options")
+            self._borrowed = interface
+            interface = None
+            ignore_config = True
+            options = {"interface": _interface_name(self._borrowed)}
+            fd = fd or getattr(self._borrowed, "protocol", None) in _FD_PROTOCOLS
+            reopen = False
+        elif interface is not None and not isinstance(interface, str):
+            raise TypeError(
+                f"interface must be a python-can interface name or a can.BusABC, not {interface!r}"
+            )
+        elif notifier is not None:
+            raise ValueError("a notifier goes with the open can.BusABC it reads")
         given = {"interface": interface, "channel": channel, "bitrate": bitrate, "data_bitrate": data_bitrate}
         config: dict[str, Any] = {key: value for key, value in given.items() if value is not None}
         config.update(options)
@@ -163,8 +237,9 @@ class CanTransport(Transport[Frame, Frame]):
         self.fd = bool(config.get("fd", False))
         self.bitrate: int | None = config.get("bitrate")
         self.data_bitrate: int | None = config.get("data_bitrate")
+        channel_name = config.get("channel") if self._borrowed is None else self._borrowed.channel_info
         super().__init__(
-            name=f"can:{config['interface']}:{config.get('channel')}",
+            name=f"can:{config['interface']}:{channel_name}",
             queue_size=queue_size,
             rx_buffer=rx_buffer,
             stale_after_s=stale_after_s,
@@ -179,7 +254,11 @@ class CanTransport(Transport[Frame, Frame]):
         self._filters: list[can.typechecking.CanFilter] | None = None
         if receive_ids is not None:
             self._filters = _exact_filters(receive_ids, extended=False)
+        # An application's bus keeps its own filters: the identifiers are checked here instead.
+        self._wanted = _wanted(self._filters) if self._borrowed is not None else None
         self._bus: can.BusABC | None = None
+        self._listener: _NotifierListener | None = None
+        self._listening: can.Notifier | None = None
         self._reader_fd: int | None = None
         self._reader_thread: threading.Thread | None = None
         self._reader_stop = threading.Event()
@@ -209,7 +288,8 @@ class CanTransport(Transport[Frame, Frame]):
         The filters stay across reopens.
         """
         self._filters = None if ids is None else _exact_filters(ids, extended=extended)
-        if self._bus is not None:
+        self._wanted = _wanted(self._filters) if self._borrowed is not None else None
+        if self._bus is not None and self._borrowed is None:
             self._bus.set_filters(self._filters)
 
     @property
@@ -220,6 +300,9 @@ class CanTransport(Transport[Frame, Frame]):
     # ----------------------------------------------------------------- connection
 
     async def _connect(self) -> None:
+        if self._borrowed is not None:
+            self._attach(self._borrowed)
+            return
         opening = asyncio.get_running_loop().run_in_executor(
             None, functools.partial(can.Bus, ignore_config=True, **self.config)
         )
@@ -232,6 +315,12 @@ class CanTransport(Transport[Frame, Frame]):
             raise TransportError(f"{self.name}: cannot open: {exc}") from exc
         if self._filters is not None:
             bus.set_filters(self._filters)
+        self._attach(bus)
+
+    def _attach(self, bus: can.BusABC) -> None:
+        """Start sending to and receiving from the open ``bus``."""
+        if self._borrowed is not None and getattr(bus, "_is_shutdown", False):
+            raise TransportError(f"{self.name}: the application's bus is shut down")
         self._bus = bus
         self._send_abort = threading.Event()
         self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"{self.name} writer")
@@ -240,6 +329,16 @@ class CanTransport(Transport[Frame, Frame]):
         # python-can's virtual bus hands a sent frame to its peers' queues and never blocks; with no
         # gap to keep, send() writes it at once (the writer thread still serves a queue, if any).
         self._direct = self.config.get("interface") == "virtual" and not self._min_gap_s
+        notifier = self._notifier
+        if notifier is None and self._borrowed is not None:
+            find = getattr(can.Notifier, "find_instances", None)  # python-can >= 4.5
+            running = [n for n in (find(bus) if find else ()) if not n.stopped]
+            notifier = running[0] if running else None
+        if notifier is not None:  # the application's notifier reads the bus: listen to it
+            self._listener = _NotifierListener(self, loop, generation)
+            notifier.add_listener(self._listener)
+            self._listening = notifier
+            return
         fileno = -1
         with contextlib.suppress(NotImplementedError, can.CanError, OSError):
             fileno = bus.fileno()
@@ -258,6 +357,10 @@ class CanTransport(Transport[Frame, Frame]):
 
     async def _disconnect(self) -> None:
         bus, self._bus = self._bus, None
+        if self._listening is not None:
+            with contextlib.suppress(ValueError):  # the application removed it already
+                self._listening.remove_listener(self._listener)  # type: ignore[arg-type]
+            self._listening = self._listener = None
         if self._reader_fd is not None:
             with contextlib.suppress(Exception):
                 asyncio.get_running_loop().remove_reader(self._reader_fd)
@@ -271,7 +374,7 @@ class CanTransport(Transport[Frame, Frame]):
         executor, self._executor = self._executor, None
         if executor is not None:
             executor.shutdown(wait=False, cancel_futures=True)
-        if bus is not None:
+        if bus is not None and bus is not self._borrowed:
             try:
                 await asyncio.to_thread(bus.shutdown)
             except Exception as exc:  # a vanished adapter cannot be told goodbye
@@ -343,6 +446,11 @@ class CanTransport(Transport[Frame, Frame]):
             if message.is_remote_frame:
                 stats.ignored += 1
                 continue
+            if (
+                self._wanted is not None
+                and (message.arbitration_id, message.is_extended_id) not in self._wanted
+            ):
+                continue  # another identifier on the application's bus
             try:
                 frame = frame_from_message(message, timestamp)
             except ValueError:
@@ -482,6 +590,26 @@ class CanTransport(Transport[Frame, Frame]):
             self._load.add(now, self._frame_time_s(frame))
         self._sent(frame, now)
         return True
+
+
+_FD_PROTOCOLS = tuple(
+    getattr(can.CanProtocol, name) for name in ("CAN_FD", "CAN_FD_NON_ISO") if hasattr(can, "CanProtocol")
+)
+
+
+def _interface_name(bus: can.BusABC) -> str:
+    """python-can's name for the interface of an open bus ("virtual", "socketcan", ...)."""
+    kind = type(bus)
+    for name, (module, class_name) in can.interfaces.BACKENDS.items():
+        if class_name == kind.__name__ and module == kind.__module__:
+            return name
+    return kind.__name__
+
+
+def _wanted(filters: list[can.typechecking.CanFilter] | None) -> frozenset[tuple[int, bool]] | None:
+    if filters is None:
+        return None
+    return frozenset((f["can_id"], bool(f.get("extended"))) for f in filters)
 
 
 def _shutdown_when_opened(opening: asyncio.Future[can.BusABC]) -> None:
