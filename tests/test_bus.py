@@ -382,3 +382,48 @@ def test_a_motors_stream_frames_come_through_a_bounded_iterator() -> None:
     got, kept, dropped = run(scenario)
     assert all(isinstance(r, ma.StatusReply) for r in got)
     assert kept == 4 and dropped >= 5
+
+
+def test_motor_commands_take_their_fields_by_position_in_declaration_order() -> None:
+    sniffer = Sniffer()
+
+    async def scenario() -> None:
+        async with Bus(SimTransport(devices=[*_motors(1), sniffer])) as bus:
+            motor = bus.motor("myactuator", 1)
+            await motor.set_comm_timeout(100)
+            await motor.speed_control(45.0, 50, timeout_s=0.1)
+            with pytest.raises(TypeError, match="takes 2 positional field"):
+                await motor.speed_control(1.0, 2, 3)
+            with pytest.raises(TypeError, match="both by position and by keyword"):
+                await motor.speed_control(1.0, speed_dps=2.0)
+
+    run(scenario)
+    sent = [f.data for _, f in sniffer.seen if f.arbitration_id == 0x141]
+    assert sent[:2] == [  # then the safe stop on leaving the block
+        ma.SetCommTimeout(timeout_ms=100).encode(),
+        ma.SpeedControl(speed_dps=45.0, max_torque_pct=50).encode(),
+    ]
+
+
+class _AsyncCallable:
+    async def __call__(self, *args: object) -> None:
+        raise AssertionError("never awaited")
+
+
+def test_an_async_subscriber_is_refused_with_a_clear_type_error() -> None:
+    async def on_reply(*args: object) -> None:
+        raise AssertionError("never awaited")
+
+    async def scenario() -> None:
+        async with Bus(SimTransport(devices=_motors(1))) as bus:
+            for callback in (on_reply, _AsyncCallable()):
+                with pytest.raises(TypeError, match="subscribe\\(\\) takes a plain function"):
+                    bus.subscribe(callback)
+                with pytest.raises(TypeError, match="subscribe_status\\(\\) takes a plain function"):
+                    bus.subscribe_status(callback)
+            heard: list[object] = []
+            bus.subscribe(lambda motor, traffic, reply: heard.append(reply))  # a plain one still works
+            await bus.motor("myactuator", 1).read_status2()
+            assert len(heard) == 1
+
+    run(scenario)
