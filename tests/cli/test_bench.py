@@ -183,6 +183,26 @@ def test_a_failing_runner_is_one_line_and_exit_1(
     assert "python -m bench failed (exit 1): broken on purpose" in err
 
 
+def test_a_runner_that_died_of_an_exception_is_named_by_it_not_by_a_warning_after_it(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """A clone installed without the sim extra: the traceback ends in ModuleNotFoundError, then Python
+    warns of a coroutine never awaited; the line names the error, which says what to install."""
+    (tmp_path / "bench").mkdir()
+    (tmp_path / "bench" / "__main__.py").write_text(
+        "import sys\n"
+        "sys.stderr.write('Traceback (most recent call last):\\n  File x, line 1\\n')\n"
+        "sys.stderr.write('ModuleNotFoundError: virtual time needs looptime: pip install looptime\\n')\n"
+        "sys.stderr.write(\"sys:1: RuntimeWarning: coroutine 'efficiency_run' was never awaited\\n\")\n"
+        "sys.exit(1)\n"
+    )
+    monkeypatch.setattr(bench, "bench_dir", lambda: tmp_path / "bench")
+    err = one_line(capsys, ["bench", "--only", "bus"], code=1)
+    assert err.rstrip().endswith(
+        "failed (exit 1): ModuleNotFoundError: virtual time needs looptime: pip install looptime"
+    ), err
+
+
 def test_an_unknown_part_is_one_line_and_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
     assert "--only" in one_line(capsys, ["bench", "--only", "nope"])
     assert "--quick" in one_line(capsys, ["bench", "--quick"])  # quick is the default, not an option

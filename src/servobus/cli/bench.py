@@ -15,6 +15,7 @@ says in one line to run it from a clone's root folder, and exits 2.
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 import tempfile
@@ -194,5 +195,13 @@ def _run(args: list[str], folder: Path, what: str, verbose: bool, check: bool) -
         return False
     if check and code == 1 and CHECK_FAILED in out:
         return True
-    last = err.strip().splitlines()[-1:]
-    raise click.ClickException(f"{what} failed (exit {code})" + (f": {last[0]}" if last else ""))
+    why = _reason(err)
+    raise click.ClickException(f"{what} failed (exit {code})" + (f": {why}" if why else ""))
+
+
+def _reason(err: str) -> str:
+    """Why the runner failed, from its stderr: the last exception line of a traceback (a warning printed
+    after it, such as "coroutine ... was never awaited", is not the reason), else its last line."""
+    lines = [line.strip() for line in err.splitlines() if line.strip()]
+    errors = [line for line in lines if re.match(r"[A-Za-z_][\w.]*(Error|Exception)(: |$)", line)]
+    return (errors or lines or [""])[-1]
