@@ -14,6 +14,7 @@ from collections.abc import AsyncIterator, Iterator
 
 import can
 import pytest
+from can.interfaces.virtual import VirtualBus
 
 from servobus.bus import Bus
 from servobus.frame import Frame
@@ -170,3 +171,31 @@ async def test_a_servobus_bus_runs_on_the_applications_bus_and_notifier(
         app_bus.send(can.Message(arbitration_id=0x7, data=b"", is_extended_id=False))  # still open
     finally:
         notifier.stop()
+
+
+class _Vanishing(VirtualBus):
+    """A python-can bus whose device goes away on cue (recv raises an OS error, as socketcan does)."""
+
+    gone = False
+
+    def recv(self, timeout: float | None = None) -> can.Message | None:
+        if self.gone:
+            raise can.CanOperationError("device gone") from OSError(19, "No such device")
+        return super().recv(timeout)
+
+
+@pytest.mark.asyncio
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")
+async def test_a_device_lost_under_the_applications_notifier_is_a_loss_and_the_notifier_decides(
+    channel: str,
+) -> None:
+    bus = _Vanishing(channel=channel)
+    notifier = can.Notifier(bus, [], timeout=0.01)
+    try:
+        async with CanTransport(bus, notifier=notifier) as transport:
+            bus.gone = True
+            await _until(lambda: transport.state is TransportState.LOST)
+            await _until(lambda: notifier.exception is not None)  # not handled by servobus: it stops
+    finally:
+        notifier.stop()
+        bus.shutdown()

@@ -16,11 +16,16 @@
 * **Filters**: :meth:`CanTransport.set_receive_ids` installs exact-match filters for the reply
   identifiers in use; python-can puts them in the kernel or adapter where the interface can, and
   filters in software otherwise. They are re-applied after a reopen.
+* **An application's bus**: ``CanTransport(bus)`` takes a ``can.BusABC`` that is open already
+  (and ``notifier=``, the application's ``can.Notifier`` on it, when there is one; a bus with a
+  running notifier is joined by itself). servobus then listens through that notifier instead of
+  reading the bus, filters its reply identifiers in software, and never shuts the bus down.
 * **Error frames** become :class:`~servobus.transports.events.ErrorFrame` events (and
   :class:`~servobus.transports.events.BusOff` for bus-off); remote frames are counted and dropped.
 
-The conversions between :class:`~servobus.frame.Frame` and ``can.Message`` live here and nowhere
-else (:func:`frame_from_message`, :func:`message_from_frame`).
+The conversions between :class:`~servobus.frame.Frame` and ``can.Message`` are
+:meth:`Frame.from_message <servobus.frame.Frame.from_message>` and :func:`message_from_frame` (which
+:meth:`Frame.to_message <servobus.frame.Frame.to_message>` calls: servobus.frame never imports can).
 """
 
 from __future__ import annotations
@@ -118,12 +123,18 @@ class _NotifierListener(can.Listener):
         self._transport._take(batch, self._generation)
 
     def on_error(self, exc: Exception) -> None:
+        """A read failed in the notifier: a lost device (or one bad frame) for the transport.
+
+        Raises NotImplementedError, python-can's "not handled here", so whether the application's
+        notifier stops or reads on stays its own listeners' decision, as without servobus.
+        """
         transport, generation = self._transport, self._generation
         with contextlib.suppress(RuntimeError):
             if _device_failed(exc):
                 self._loop.call_soon_threadsafe(transport._lose, exc, generation)
             else:  # a frame python-can could not parse
                 self._loop.call_soon_threadsafe(transport._count_bad, 1, generation)
+        raise NotImplementedError
 
     def stop(self) -> None:
         pass
