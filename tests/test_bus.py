@@ -427,3 +427,59 @@ def test_an_async_subscriber_is_refused_with_a_clear_type_error() -> None:
             assert len(heard) == 1
 
     run(scenario)
+
+
+def test_a_bus_used_from_another_event_loop_says_so_at_once_and_logs_no_traceback(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """A Bus entered in a thread's own loop, called from a coroutine on another loop: request(),
+    cycle() and broadcast() raise one clear RuntimeError before anything is queued (it used to
+    be asyncio's "attached to a different loop", and the request's future, never awaited, was
+    logged as "Future exception was never retrieved" with its traceback when the block was left)."""
+    import gc
+    import threading
+
+    device = MyActuatorMotor(1)
+    device.unresponsive = True  # (a request let through fails when the block is left)
+    entered, leave = threading.Event(), threading.Event()
+    box: dict[str, Bus] = {}
+
+    async def owner() -> None:
+        async with Bus(SimTransport(devices=[device])) as bus:
+            box["bus"] = bus
+            entered.set()
+            while not leave.is_set():
+                await asyncio.sleep(0.002)
+
+    thread = threading.Thread(target=asyncio.run, args=(owner(),))
+    thread.start()
+    assert entered.wait(10)
+    bus = box["bus"]
+    motor = bus.motor("myactuator", 1)
+    calls: list[Callable[[], Awaitable[Any]]] = [
+        lambda: motor.read_status2(),
+        lambda: motor.request(ma.ReadStatus2()),
+        lambda: bus.cycle([(motor, ma.ReadStatus2())]),
+        lambda: bus.broadcast(ma.ReadStatus2(), [motor]),
+    ]
+
+    async def elsewhere() -> list[str]:
+        errors = []
+        for call in calls:
+            with pytest.raises(RuntimeError) as caught:
+                await call()
+            errors.append(str(caught.value))
+        return errors
+
+    try:
+        with caplog.at_level("ERROR"):
+            errors = asyncio.run(elsewhere())
+            assert bus.scheduler.pending == 0  # nothing went in
+    finally:
+        leave.set()
+        thread.join(10)
+    gc.collect()
+    for error in errors:
+        assert error.startswith("sim: this Bus runs on another event loop"), error
+        assert "use servobus.sync.Bus from other threads" in error
+    assert not [r for r in caplog.records if r.levelname == "ERROR"], caplog.text

@@ -40,7 +40,7 @@ from collections import deque
 from collections.abc import AsyncIterator, Awaitable, Callable, Hashable, Iterable, Sequence
 from dataclasses import dataclass
 from types import TracebackType
-from typing import Any, Protocol, Self
+from typing import Any, NoReturn, Protocol, Self
 
 import anyio
 
@@ -387,6 +387,7 @@ class Motor:
             ValueError: the command is refused by the codec (before any frame is sent).
             MotorTimeout: no reply within the timeout (the codec's default for the command).
             TransportError: the transport was lost or refused the frame.
+            RuntimeError: called from another event loop than the Bus's (servobus.sync.Bus is for threads).
         """
         return await self.bus.request(self, command, timeout_s=timeout_s, retries=retries)
 
@@ -679,6 +680,8 @@ class Bus:
         self, motor: Motor, command: Command, *, timeout_s: float | None = None, retries: int = 0
     ) -> Reply | None:
         """:meth:`Motor.request`."""
+        if asyncio.get_running_loop() is not self._loop:
+            self._not_our_loop()
         request = self._submit(motor, command, timeout_s=timeout_s, retries=retries)
         try:
             reply: Reply | None = await request.context
@@ -686,6 +689,23 @@ class Bus:
             self._abandon((request,))
             raise
         return reply
+
+    def _not_our_loop(self) -> NoReturn:
+        """A call from a coroutine on another event loop than the one the Bus was entered in (or
+        outside the block): refused at once, before anything is queued. (Let through, its future,
+        made on the Bus's loop, could not be awaited here, and asyncio would log its never-retrieved
+        exception as an ERROR traceback when the block is left.)
+
+        Raises:
+            RuntimeError: always.
+        """
+        if self._loop is None:
+            raise RuntimeError(f"{self.name}: use the Bus inside 'async with'")
+        raise RuntimeError(
+            f"{self.name}: this Bus runs on another event loop (the one its 'async with' entered); "
+            "a Bus is used from its own loop only: use servobus.sync.Bus from other threads, or "
+            "asyncio.run_coroutine_threadsafe(..., loop) to hand a call to the Bus's loop"
+        )
 
     def _submit(
         self, motor: Motor, command: Command, *, timeout_s: float | None, retries: int, safe: bool = False
@@ -765,8 +785,11 @@ class Bus:
 
         Raises:
             ValueError: a command is refused by its codec (nothing of the tick is sent then).
+            RuntimeError: called from another event loop than the Bus's (servobus.sync.Bus is for threads).
         """
         # Every command is encoded (and checked) before the first one is queued; then one pump.
+        if asyncio.get_running_loop() is not self._loop:
+            self._not_our_loop()
         items = list(items)
         if not items:
             return []
@@ -822,7 +845,10 @@ class Bus:
 
         Raises:
             ValueError: the family has no broadcast form for ``command``, or mixed families.
+            RuntimeError: called from another event loop than the Bus's (servobus.sync.Bus is for threads).
         """
+        if asyncio.get_running_loop() is not self._loop:
+            self._not_our_loop()
         families = {m.codec.family for m in motors}
         if len(families) != 1:
             raise ValueError(f"a broadcast goes to motors of one family, not {sorted(families)}")
