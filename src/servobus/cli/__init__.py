@@ -7,7 +7,7 @@ and ``dbc``). Errors are one line on stderr, without a traceback unless ``--debu
 ==========  ==================================================================================
 exit code   meaning
 ==========  ==================================================================================
-0           done
+0           done (also when stdout was closed early: ``servobus monitor --json | head``)
 1           the job failed: a motor did not answer, the adapter was lost, a file did not parse
 2           bad usage: an unknown option, a value out of range, a missing or contradictory flag
 130         interrupted (Ctrl-C); a command that drives motors (move, speed, torque, mit, demo)
@@ -137,6 +137,18 @@ def safe_exits() -> str:
     return line
 
 
+def _broken_pipe(exc: BaseException) -> bool:
+    """``exc`` was raised on the way out of a write to a closed pipe (EPIPE)."""
+    seen: BaseException | None = exc
+    for _ in range(16):  # (a chain, not a cycle)
+        if seen is None:
+            break
+        if isinstance(seen, BrokenPipeError):
+            return True
+        seen = seen.__cause__ or seen.__context__
+    return False
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """The console script: run ``cli`` and turn every error into one line and an exit code."""
     args = list(sys.argv[1:] if argv is None else argv)
@@ -151,21 +163,28 @@ def main(argv: Sequence[str] | None = None) -> int:
             return code
     except click.exceptions.Exit as done:
         return done.exit_code
+    except SystemExit as exc:  # click's and rich's answer to a closed stdout: exit 1
+        if _broken_pipe(exc):  # servobus monitor --json | head: the reader has what it wanted
+            return 0  # (the Buses were left through their safe stop on the way out)
+        raise
     except click.UsageError as exc:
-        if debug:
+        if debug:  # (a value the library refused: its own traceback)
+            if isinstance(exc.__cause__, ValueError):
+                raise exc.__cause__ from None
             raise
         where = f"{exc.ctx.command_path}: " if exc.ctx is not None else "servobus: "
         click.echo(f"{where}error: {_one_line(exc.format_message())}", err=True)
         return 2
-    except (click.Abort, KeyboardInterrupt):  # (click turns a KeyboardInterrupt into Abort)
+    except (click.Abort, KeyboardInterrupt) as exc:  # (click turns a KeyboardInterrupt into Abort)
         by = SIGNALLED[0] if SIGNALLED else signal.SIGINT
-        click.echo(_interrupted(by), err=True)
+        said = f": {exc}" if isinstance(exc, click.Abort) and str(exc) else ""  # (confirm's)
+        click.echo(_interrupted(by) + said, err=True)
         return 128 + by
-    except ValueError as exc:  # a value the library refused (a set-point out of range, a bad id)
-        if debug:
+    except ValueError as exc:  # the job failed (a reply or file that did not parse), not an argument:
+        if debug:  # the values from the command line are checked first (servobus.cli._output.refused)
             raise
-        click.echo(f"servobus: error: {_one_line(str(exc))}", err=True)
-        return 2
+        click.echo(f"servobus: error: {_one_line(str(exc)) or type(exc).__name__}", err=True)
+        return 1
     except (ServobusError, OSError, click.ClickException) as exc:
         if debug:
             raise

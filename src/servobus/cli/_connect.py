@@ -19,7 +19,7 @@ from typing import Any, TypeVar
 import click
 
 from servobus.bus import Bus, Motor
-from servobus.cli._output import FloatRange
+from servobus.cli._output import FloatRange, refused
 
 __all__ = [
     "Connection",
@@ -194,6 +194,12 @@ def _check(conn: Connection) -> Connection:
             raise click.UsageError(f"-i {NATIVE_SLCAN} needs the adapter's serial port: -c /dev/ttyACM0")
     elif conn.sim is None and conn.port is None:
         _check_python_can(conn)
+    from servobus.protocols import get_family
+
+    family = get_family(conn.family)
+    with refused():  # the ids and revision the family has, before any command builds on them
+        for motor_id in conn.motor_ids:
+            family.bind(motor_id, **conn.bind_options())
     return conn
 
 

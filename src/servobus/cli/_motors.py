@@ -21,6 +21,7 @@ import click
 from servobus.bus import Motor
 from servobus.cli._connect import Connection, open_bus
 from servobus.cli._families import Op
+from servobus.cli._output import refused
 from servobus.errors import ServobusError
 from servobus.protocols import get_family
 from servobus.protocols._message import Command, Reply
@@ -105,24 +106,26 @@ def codecs(conn: Connection) -> list[Any]:
     """The bound codecs of the motors ``conn`` names (no bus needed: for checks before opening one).
 
     Raises:
-        ValueError: a bad id or revision for the family.
+        click.UsageError: a bad id or revision for the family (exit 2).
     """
     family = get_family(conn.family)
-    return [family.bind(i, **conn.bind_options()) for i in conn.motor_ids]
+    with refused():
+        return [family.bind(i, **conn.bind_options()) for i in conn.motor_ids]
 
 
 def plan(conn: Connection, op: Op, values: Mapping[str, Any]) -> list[Sequence[Command]]:
     """Every motor's commands, in ``conn.motor_ids`` order, built and encoded now (nothing is sent).
 
     Raises:
-        ValueError: a value out of range, or a command the motor's revision or link lacks.
-        click.UsageError: a combination the family does not support.
+        click.UsageError: a value out of range, a command the motor's revision or link lacks, or a
+            combination the family does not support (exit 2).
     """
     planned = []
     for codec in codecs(conn):
-        commands = op.first(codec, values)
-        for command in commands:
-            codec.encode(command)  # the revision and link checks, before anything is sent
+        with refused():
+            commands = op.first(codec, values)
+            for command in commands:
+                codec.encode(command)  # the revision and link checks, before anything is sent
         planned.append(commands)
     return planned
 

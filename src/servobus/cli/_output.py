@@ -7,11 +7,13 @@ are raised (``click.ClickException``, ``click.UsageError``) and ``servobus.cli.m
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import enum
 import json
 import math
-from collections.abc import Callable, Iterable, Sequence
+import re
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import Any, TypeVar
 
 import click
@@ -23,6 +25,7 @@ from servobus.protocols._message import Message
 __all__ = [
     "SETTINGS",
     "FloatRange",
+    "NegativeNumbers",
     "confirm",
     "console",
     "emit_json",
@@ -32,6 +35,7 @@ __all__ = [
     "jsonable",
     "message_fields",
     "message_text",
+    "refused",
     "table",
     "yes_option",
 ]
@@ -66,6 +70,43 @@ class FloatRange(click.FloatRange):
         return number
 
 
+#: a negative number (``-5``, ``-0.5``, ``-.5``, ``-1e3``, ``-0x10``, ``-1,2,3``): no option looks like one
+_NEGATIVE = re.compile(r"-\.?\d")
+
+
+class NegativeNumbers(click.Command):
+    """A command whose arguments may be negative numbers: ``servobus config set KEY -5`` gives ``-5``
+    as the value, where click would look for an option ``-5`` (options already take ``--x -5``)."""
+
+    def make_parser(self, ctx: click.Context) -> Any:
+        parser = super().make_parser(ctx)
+        process_opts = parser._process_opts
+
+        def process(arg: str, state: Any) -> None:
+            if _NEGATIVE.match(arg):
+                state.largs.append(arg)  # a value in its place among the arguments
+            else:
+                process_opts(arg, state)
+
+        parser._process_opts = process  # type: ignore[method-assign]
+        return parser
+
+
+@contextlib.contextmanager
+def refused() -> Iterator[None]:
+    """Inside the block, a ValueError is a value from the command line the library refused (out of
+    range, a command the revision lacks): bad usage, one line, exit 2. Outside such blocks a
+    ValueError is the job failing (exit 1), not the user's argument.
+
+    Raises:
+        click.UsageError: the ValueError's message.
+    """
+    try:
+        yield
+    except ValueError as exc:
+        raise click.UsageError(str(exc)) from exc
+
+
 def json_option(func: F) -> F:
     """``--json``: machine-readable output on stdout; the command receives ``as_json``."""
     return click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")(func)
@@ -81,12 +122,18 @@ def confirm(question: str, yes: bool) -> None:
 
     Raises:
         click.ClickException: declined, or no answer (stdin closed): nothing is sent (exit 1).
+        click.Abort: Ctrl-C at the question: ``interrupted: nothing was sent`` (exit 130).
     """
     if yes:
         return
     try:
         answer = click.confirm(question, default=False, err=True)
-    except (click.Abort, OSError):  # stdin closed or unreadable: no answer
+    except click.Abort as exc:  # (click's answer to Ctrl-C and to a closed stdin alike)
+        if isinstance(exc.__context__, KeyboardInterrupt):
+            click.echo(err=True)  # (the line ends after the question's ^C)
+            raise click.Abort("nothing was sent") from None
+        answer = False  # stdin closed: no answer
+    except OSError:  # stdin unreadable: no answer
         answer = False
     if not answer:
         raise click.ClickException("not confirmed (give --yes to skip the question): nothing was sent")

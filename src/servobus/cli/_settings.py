@@ -56,7 +56,7 @@ def _float_or_none(text: str) -> float | None:
 
 
 def _int_or_none(text: str) -> int | None:
-    return None if text.lower() in ("none", "off") else int(text, 0)
+    return None if text.lower() in ("none", "off") else _int(text)
 
 
 def _bool(text: str) -> bool:
@@ -69,7 +69,19 @@ def _bool(text: str) -> bool:
 
 
 def _int(text: str) -> int:
-    return int(text, 0)
+    """A whole number: decimal, ``0x``/``0o``/``0b``, or a float that is one (``1e3``, ``200.0``: the
+    range check then names the limits, where int() would say "invalid literal")."""
+    try:
+        return int(text, 0)
+    except ValueError:
+        pass
+    try:
+        number = float(text)
+    except ValueError:
+        raise ValueError("not a number") from None
+    if not number.is_integer():
+        raise ValueError("not a whole number")
+    return int(number)
 
 
 # ---- MyActuator ----

@@ -13,6 +13,7 @@ from servobus.cli._families import Op
 from servobus.cli._motors import Outcome, ask, fail_if_any, plan
 from servobus.cli._output import (
     SETTINGS,
+    NegativeNumbers,
     confirm,
     console,
     emit_json,
@@ -98,12 +99,14 @@ def get(conn: Connection, keys: tuple[str, ...], as_json: bool) -> None:
 
 @config.command(
     "set",
+    cls=NegativeNumbers,  # config set KEY -5
     context_settings=SETTINGS,
     epilog=examples(
         "servobus config set --sim 1 pid.speed_kp 0.25            # RAM",
         "servobus config set --sim 1 pid.speed_kp 0.25 --rom --yes  # ROM, no question",
         "servobus config set --sim 1 comm_timeout_ms off --yes",
         "servobus config set --family lk --sim 1 pid.speed 100,20,0",
+        "servobus config set --sim 1 limit.max_negative_angle_raw -9000 --yes",
     ),
 )
 @connection_options
@@ -113,7 +116,7 @@ def get(conn: Connection, keys: tuple[str, ...], as_json: bool) -> None:
 @yes_option
 @json_option
 def set_(conn: Connection, key: str, value: str, rom: bool, yes: bool, as_json: bool) -> None:
-    """Write one setting to each motor."""
+    """Write one setting to each motor (a negative VALUE needs no ``--``)."""
     s = setting(conn.family, key)
     write = s.write
     if write is None:
@@ -124,8 +127,11 @@ def set_(conn: Connection, key: str, value: str, rom: bool, yes: bool, as_json: 
     try:
         parsed = s.parse(value)
     except ValueError as exc:
-        raise click.BadParameter(f"{value!r} for {s.key}: {exc}", param_hint="VALUE") from None
-    command = write(parsed, rom)  # range checks here: ValueError, exit 2, nothing sent
+        raise click.BadParameter(f"{s.key} {value}: {exc}", param_hint="VALUE") from None
+    try:
+        command = write(parsed, rom)  # the range checks, before anything is sent
+    except ValueError as exc:
+        raise click.BadParameter(f"{s.key} {value}: {exc}", param_hint="VALUE") from None
     op = Op(first=lambda codec, v: (command,))
     if s.rom or rom:
         ids = ", ".join(str(i) for i in conn.motor_ids)

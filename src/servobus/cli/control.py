@@ -43,6 +43,7 @@ from servobus.cli._output import (
     json_option,
     message_fields,
     message_text,
+    refused,
     table,
     yes_option,
 )
@@ -273,10 +274,11 @@ def _drive(
     planned = plan(conn, entry, values)
     repeat = entry.repeat
     assert repeat is not None
-    repeats = [repeat(codec, values) for codec in codecs(conn)]
-    for codec, commands in zip(codecs(conn), repeats, strict=True):
-        for command in commands:
-            codec.encode(command)  # refused here (exit 2), not after the first set-point went out
+    with refused():  # refused here (exit 2), not after the first set-point went out
+        repeats = [repeat(codec, values) for codec in codecs(conn)]
+        for codec, commands in zip(codecs(conn), repeats, strict=True):
+            for command in commands:
+                codec.encode(command)
     live = not as_json and console(stderr=True).is_terminal
     outcomes = run(_run_setpoints(conn, name, planned, repeats, rate_hz, duration, keep, live, arrival))
     rows = _status_rows(outcomes)
