@@ -98,3 +98,39 @@ def test_a_value_error_at_run_time_is_the_job_failing_exit_1(
     # a value from the command line the library refuses is still bad usage
     assert "speed_dps" in one_line(capsys, ["speed", "--sim", "1", "--speed-dps", "1e9"], code=2)
     assert "no revision" in one_line(capsys, ["status", "--sim", "1", "--revision", "V9"], code=2)
+
+
+def test_the_why_line_names_a_live_view_redraw_only_when_there_was_one() -> None:
+    from servobus.cli._demo_report import Summary
+
+    values = dict(
+        hz=1000.0, motors=3, buses=1, seconds=5.0, ticks=4000, missed_ticks=1000, late_p99_ms=5.0,
+        tick_p50_ms=0.3, wire_ms=0.75, pairs=12000, latency_p50_ms=0.2, latency_p99_ms=0.3,
+        bus_load_mean_pct=10.0, bus_load_max_pct=10.5, timeouts=0, not_sent=0, malformed=0, faults=0,
+        cpu_s=4.9, simulator_cpu_s=1.0,
+    )  # fmt: skip
+    under_duration = Summary(**values).why()  # type: ignore[arg-type]
+    assert under_duration is not None and "paused now and then" in under_duration
+    assert "live view" not in under_duration
+    live = Summary(**values, live=True).why()  # type: ignore[arg-type]
+    assert live is not None and "a redraw of the live view" in live
+    assert "live" not in Summary(**values).as_dict()  # type: ignore[arg-type]
+
+
+def test_lk_speed_is_sent_with_the_full_scale_current_limit_or_max_current_a(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    args = ["speed", "--family", "lk", "--sim", "1", "--speed-dps", "30", "--duration", "0.3"]
+    assert run_json(capsys, args)[0]["error"] is None  # was: current_limit_a is required for MG
+    assert run_json(capsys, [*args, "--max-current-a", "2"])[0]["error"] is None
+    assert "current_limit_a=200.0 is outside" in one_line(capsys, [*args, "--max-current-a", "200"])
+
+
+def test_max_current_a_limits_hollow_set_points_and_is_refused_where_nothing_carries_it(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    move = ["move", "--family", "hollow", "--sim", "1", "--angle-deg", "10", "--duration", "0.2"]
+    assert run_json(capsys, [*move, "--max-current-a", "1"])[0]["error"] is None
+    assert "current_a=1000.0 is outside" in one_line(capsys, [*move, "--max-current-a", "1000"])
+    speed = ["speed", "--sim", "1", "--speed-dps", "30", "--duration", "0.2", "--max-current-a", "2"]
+    assert "carries no current limit" in one_line(capsys, speed)

@@ -108,6 +108,7 @@ class Summary:
     cpu_s: float
     simulator_cpu_s: float
     interrupted: bool = False
+    live: bool = False  # the live view was drawn (not under --duration)
 
     @property
     def achieved_hz(self) -> float:
@@ -145,13 +146,14 @@ class Summary:
             )
         return (
             f"most ticks fit (median {self.tick_p50_ms:.2f} ms of {period_ms:.2f} ms, {sim_ms:.2f} ms of it "
-            f"simulating), but the loop paused now and then ({machine}): a redraw of the live view, or "
-            f"other processes"
+            f"simulating), but the loop paused now and then ({machine}): "
+            + ("a redraw of the live view, or other processes" if self.live else "other processes")
         )
 
     def as_dict(self) -> dict[str, Any]:
         out = asdict(self)
         out.update(achieved_hz=round(self.achieved_hz, 2), errors=self.errors, why=self.why())
+        del out["live"]  # (a summary in JSON comes of --duration: never live)
         return out
 
 

@@ -42,20 +42,27 @@ class Op:
             repeated: an absolute set-point, a read; never an increment.
         rom: it writes the motor's ROM or changes its id: ask first (``--yes`` skips).
         note: said after it succeeded (what else the user must do).
+        current_limit: its set-point carries a current limit (``--max-current-a``; without it, the
+            motor's full scale); a command without one refuses the option.
     """
 
     first: Build
     repeat: Repeat | None = None
     rom: bool = False
     note: str = ""
+    current_limit: bool = False
 
 
 def _once(make: Callable[[Any, Values], Command], **options: Any) -> Op:
     return Op(first=lambda codec, v: (make(codec, v),), **options)
 
 
-def _setpoint(make: Callable[[Any, Values], Command]) -> Op:
-    return Op(first=lambda codec, v: (make(codec, v),), repeat=lambda codec, v: (make(codec, v),))
+def _setpoint(make: Callable[[Any, Values], Command], *, current_limit: bool = False) -> Op:
+    return Op(
+        first=lambda codec, v: (make(codec, v),),
+        repeat=lambda codec, v: (make(codec, v),),
+        current_limit=current_limit,
+    )
 
 
 def _move(absolute: Callable[[Any, Values], Command], relative: Callable[[Any, Values], Command]) -> Op:
@@ -157,11 +164,26 @@ def _lk_v235(codec: Any) -> bool:
 
 
 def _lk_speed(codec: Any, v: Values) -> Command:
+    """0xA2 with ``--max-current-a``, or the motor type's full scale (MF/MG: 2048 counts in A; MH/MS,
+    which have no ampere scale: 2048 raw counts)."""
     from servobus.protocols import lk
+    from servobus.protocols.lk.commands_control import TORQUE_LIMIT
 
+    limit = v.get("max_current_a")
     if _lk_v235(codec):
+        if limit is not None:
+            raise click.UsageError("LK V2.35's speed command carries no current limit: drop --max-current-a")
         return lk.SpeedControlV235(speed_dps=v["speed_dps"])
-    return lk.SpeedControl(speed_dps=v["speed_dps"], motor_type=codec.model.motor_type)
+    motor_type = codec.model.motor_type
+    amps = TORQUE_LIMIT.field(motor_type)
+    if limit is None and amps is None:
+        return lk.SpeedControl(
+            speed_dps=v["speed_dps"], motor_type=motor_type, iq_limit_counts=TORQUE_LIMIT.max_counts
+        )
+    full = amps.hi if amps is not None else None
+    return lk.SpeedControl(
+        speed_dps=v["speed_dps"], motor_type=motor_type, current_limit_a=full if limit is None else limit
+    )
 
 
 def _lk_torque(codec: Any, v: Values) -> Command:
@@ -182,7 +204,7 @@ LK: dict[str, Op] = {
         _lk("MultiTurnPositionSpeed", angle_deg="angle_deg", max_speed_dps="max_speed_dps"),
         _lk("IncrementalPositionSpeed", increment_deg="angle_deg", max_speed_dps="max_speed_dps"),
     ),
-    "speed": _setpoint(_lk_speed),
+    "speed": _setpoint(_lk_speed, current_limit=True),
     "torque": _setpoint(_lk_torque),
     "stop": _safe("stop"),
     "off": _safe("shutdown"),
@@ -210,7 +232,9 @@ def _ho_setpoint(mode: str) -> Op:
 
         _classic(codec, "set-points")
         model = codec.model
-        full_speed, full_current = model.speed_full_scale_rad_s, model.current_full_scale_a
+        full_speed = model.speed_full_scale_rad_s
+        limit = v.get("max_current_a")  # move and speed: --max-current-a, or I_fs
+        full_current = model.current_full_scale_a if limit is None else limit
         if mode == "POSITION":
             speed = math.radians(v["max_speed_dps"]) if v["max_speed_dps"] is not None else full_speed
             return ho.Setpoint(
@@ -240,7 +264,7 @@ def _ho_setpoint(mode: str) -> Op:
         point = setpoint(codec, v)  # checked (and refused) before the mode changes
         return (ho.SelectMode(mode=ho.ControlMode[mode]), point, ho.Start())
 
-    return Op(first=first, repeat=lambda codec, v: (setpoint(codec, v),))
+    return Op(first=first, repeat=lambda codec, v: (setpoint(codec, v),), current_limit=mode != "TORQUE")
 
 
 def _ho_move_absolute(op: Op) -> Op:
@@ -249,7 +273,7 @@ def _ho_move_absolute(op: Op) -> Op:
             raise click.UsageError("hollow motors: --relative needs their extended CAN mode; give the angle")
         return op.first(codec, v)
 
-    return Op(first=first, repeat=op.repeat)
+    return Op(first=first, repeat=op.repeat, current_limit=op.current_limit)
 
 
 def _ho_zero(codec: Any, v: Values) -> Sequence[Command]:

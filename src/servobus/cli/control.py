@@ -13,7 +13,7 @@ from __future__ import annotations
 import asyncio
 import time
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import Any, TypeVar
 
 import click
 from rich.live import Live
@@ -65,6 +65,8 @@ __all__ = [
     "torque",
     "zero",
 ]
+
+F = TypeVar("F", bound=Callable[..., Any])
 
 #: the replies to a set-point's first commands -> whether a status shows it arrived
 Arrival = Callable[[Sequence[Reply | None]], Callable[[dict[str, Any]], bool]]
@@ -271,6 +273,11 @@ def _drive(
     arrival: Arrival | None = None,
 ) -> None:
     entry = op(conn.family, name)
+    if values.get("max_current_a") is not None and not entry.current_limit:
+        raise click.UsageError(
+            f"{conn.family} {name} carries no current limit: drop --max-current-a "
+            "(it is for hollow move and speed, LK speed)"
+        )
     planned = plan(conn, entry, values)
     repeat = entry.repeat
     assert repeat is not None
@@ -348,6 +355,12 @@ _rate = click.option(
 _duration = click.option(
     "--duration", type=FloatRange(min=0), help="Seconds to hold the set-point [default: Ctrl-C]."
 )
+_max_current = click.option(
+    "--max-current-a",
+    type=FloatRange(min=0, min_open=True),
+    help="Current limit the set-point carries (hollow move and speed, LK speed) "
+    "[default: the motor's full scale: hollow I_fs, LK 2048 counts].",
+)
 _keep = click.option(
     "--keep", is_flag=True, help="Send the set-point once and leave the motors running (no stop at the end)."
 )
@@ -379,6 +392,7 @@ _keep = click.option(
     show_default=True,
     help="An absolute move ends when every motor reports its angle this close.",
 )
+@_max_current
 @_rate
 @_duration
 @_keep
@@ -390,6 +404,7 @@ def move(
     no_speed_limit: bool,
     relative: bool,
     tolerance_deg: float,
+    max_current_a: float | None,
     rate_hz: float,
     duration: float | None,
     keep: bool,
@@ -404,6 +419,7 @@ def move(
     """
     values = {"angle_deg": angle_deg, "max_speed_dps": None if no_speed_limit else max_speed_dps}
     values["relative"] = relative
+    values["max_current_a"] = max_current_a
 
     def arrival(first: Sequence[Reply | None]) -> Callable[[dict[str, Any]], bool]:
         target: float | None = angle_deg
@@ -429,13 +445,21 @@ def move(
     )
 
 
-def _one_value(name: str, option: str, option_help: str, help_text: str, *lines: str) -> click.Command:
-    """A set-point command with one value (``--speed-dps``, ``--current-a``) and the set-point options."""
+def _same(func: F) -> F:
+    return func
+
+
+def _one_value(
+    name: str, option: str, option_help: str, help_text: str, *lines: str, limit: bool = False
+) -> click.Command:
+    """A set-point command with one value (``--speed-dps``, ``--current-a``) and the set-point options
+    (``limit``: ``--max-current-a`` too)."""
     key = option.removeprefix("--").replace("-", "_")
 
     @click.command(name, help=help_text, context_settings=SETTINGS, epilog=examples(*lines))
     @connection_options
     @click.option(option, key, type=float, required=True, help=option_help)
+    @(_max_current if limit else _same)
     @_rate
     @_duration
     @_keep
@@ -455,6 +479,8 @@ speed = _one_value(
     "Turn at a speed: speed control, until --duration or Ctrl-C; then stop and hold.",
     "servobus speed --sim 2 --speed-dps 90 --duration 3",
     "servobus speed --ids 1 -i socketcan -c can0 --speed-dps -30      # until Ctrl-C",
+    "servobus speed --family lk --sim 1 --speed-dps 30 --max-current-a 2 --duration 1",
+    limit=True,
 )
 torque = _one_value(
     "torque",

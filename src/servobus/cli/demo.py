@@ -216,6 +216,7 @@ async def _run(plan: Layout, duration: float | None, *, live: bool, timeout_s: f
         wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
         summary = _summarise(plan, buses, count, skipped, lateness, durations, wall, cpu, sim_clock.seconds)
         summary.interrupted = interrupted
+        summary.live = view is not None
     return summary
 
 
