@@ -134,3 +134,12 @@ def test_max_current_a_limits_hollow_set_points_and_is_refused_where_nothing_car
     assert "current_a=1000.0 is outside" in one_line(capsys, [*move, "--max-current-a", "1000"])
     speed = ["speed", "--sim", "1", "--speed-dps", "30", "--duration", "0.2", "--max-current-a", "2"]
     assert "carries no current limit" in one_line(capsys, speed)
+
+
+@pytest.mark.parametrize("family", ["myactuator", "lk", "hollow"])
+def test_a_move_is_stopped_at_rest_not_while_still_coming_in_within_the_tolerance(
+    capsys: pytest.CaptureFixture[str], family: str
+) -> None:
+    rows = run_json(capsys, ["move", "--family", family, "--sim", "1", "--angle-deg", "15"])
+    assert abs(rows[0]["speed_dps"]) <= 1.0  # (LK was stopped at 14.79°, 5 dps: frozen short)
+    assert rows[0]["angle_deg"] == pytest.approx(15.0, abs=0.1)

@@ -325,6 +325,7 @@ async def _run_setpoints(
         arrived = None if arrival is None else [arrival(o.replies) for o in outcomes]
         items = _items(motors, repeats)
         settled = 0
+        arrived_s: float | None = None
         start = time.monotonic()
         with _LiveStatus(live, rate_hz) as view:
             async for tick in bus.ticks(rate_hz, spin_s=0.0):
@@ -338,11 +339,24 @@ async def _run_setpoints(
                         for o, there in zip(outcomes, arrived, strict=True)
                     )
                     settled = settled + 1 if done else 0
-                    if settled >= 3:  # three ticks in a row at the target
-                        break
+                    if settled >= 3:  # three ticks in a row at the target, then still (or 1 s on):
+                        arrived_s = elapsed if arrived_s is None else arrived_s  # the stop holds
+                        if _still(outcomes) or elapsed - arrived_s >= SETTLE_S:  # where it is, so
+                            break  # a motor still moving in (14.7° of 15°) would be frozen short
                 title = f"{name}, {elapsed:.1f} s (Ctrl-C stops the motors)"
                 view.show(tick.index, outcomes, title)
         return outcomes
+
+
+#: after a move arrives (within --tolerance-deg), it is held until every motor turns at most this
+#: slowly, for at most SETTLE_S, before the stop (which holds where the motor is)
+STILL_DPS = 1.0
+SETTLE_S = 1.0
+
+
+def _still(outcomes: Sequence[Outcome]) -> bool:
+    speeds = [status_of(o.replies).get("speed_dps") for o in outcomes]
+    return all(speed is None or abs(speed) <= STILL_DPS for speed in speeds)
 
 
 _rate = click.option(
@@ -412,8 +426,9 @@ def move(
 ) -> None:
     """Move to an angle (or by one, --relative) and hold it: position control.
 
-    A move ends when every motor reports the target (within --tolerance-deg) three times in a row,
-    or after --duration, or at Ctrl-C; the motors then stop and hold where they are. An absolute
+    A move ends when every motor reports the target (within --tolerance-deg) three times in a row
+    and has come to rest (at most 1 dps, or 1 s after it arrived), or after --duration, or at Ctrl-C;
+    the motors then stop and hold where they are. An absolute
     target is resent at --rate-hz; a relative move reads the angle, sends the increment once, and
     its target is that angle plus the increment.
     """
