@@ -146,7 +146,9 @@ def _broken_pipe(exc: BaseException) -> bool:
         if isinstance(seen, BrokenPipeError):
             return True
         seen = seen.__cause__ or seen.__context__
-    return False
+    # click >= 8.5 exits outside its handler (no chain), having swapped stdout for its wrapper that
+    # silences the EPIPE on flush: that swap happens on a closed pipe and nowhere else.
+    return type(sys.stdout).__name__.lstrip("_") == "PacifyFlushWrapper"
 
 
 def main(argv: Sequence[str] | None = None) -> int:
