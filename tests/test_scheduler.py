@@ -473,8 +473,7 @@ def test_a_measured_class_gets_its_estimate_and_a_slow_class_keeps_its_codecs_ti
     # WriteEncoderZero is a flash write: its codec gives it 0.5 s, and however fast it was measured,
     # a timeout never goes below that (the next one may erase a sector).
     write = scheduler.request(codec, ma.WriteEncoderZero(offset_counts=5))
-    assert write.base_timeout_s == 0.5
-    assert write.rtt is not None and write.rtt.floor_s == 0.5
+    assert write.rtt is not None and write.rtt.base_s == 0.5 and write.rtt.floor_s == 0.5
     write.rtt.add(0.001)
     scheduler.submit(write)
     _send_all(scheduler, 2.0)

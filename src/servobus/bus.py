@@ -794,8 +794,7 @@ class Bus:
         if not items:
             return []
         loop = self._loop
-        if loop is None:
-            raise RuntimeError(f"{self.name}: use the Bus inside 'async with'")
+        assert loop is not None  # (the loop check above)
         tick = _Tick(loop.create_future(), len(items))
         prepared = []
         skipped: list[tuple[_Slot, Motor, str, BaseException]] = []

@@ -111,10 +111,9 @@ class Request:
     retries: int = 0
     context: Any = None  # the caller's (the Bus keeps its future here)
     # The round-trip estimate of its motor and command class; with ``adaptive`` its ``timeout_s`` is
-    # set from it when the frame leaves (``base_timeout_s``: the codec's own time for the command).
+    # set from it when the frame leaves (``rtt.base_s``: the codec's own time for the command).
     rtt: RoundTrip | None = None
     adaptive: bool = False
-    base_timeout_s: float = 0.0
     state: RequestState = RequestState.QUEUED
     sent_at: float | None = None
     deadline: float | None = None
@@ -334,7 +333,7 @@ class Scheduler:
             rtt = rtts[type(command)] = RoundTrip(base)
             self._set_floors(rtts)
         key = codec.reply_key(command)
-        return Request(codec, command, frame, key, timeout, retries, context, rtt, timeout_s is None, base)
+        return Request(codec, command, frame, key, timeout, retries, context, rtt, timeout_s is None)
 
     def round_trip(self, codec: BoundCodec, command_class: type[Command]) -> RoundTrip | None:
         """The round-trip estimate of ``codec``'s motor for ``command_class`` (None: never sent)."""
@@ -361,13 +360,13 @@ class Scheduler:
             # Not measured yet: the codec's own time for the command, or twice the slowest measured
             # on this bus if that is longer (the adapter's and the host's share is the same for all).
             link = max(r.timeout_s() for r in self._measured())
-            timeout = max(request.base_timeout_s, 2.0 * link)
+            timeout = max(rtt.base_s, 2.0 * link)
         else:
             provisional = self._provisional
             if len(provisional) >= 64:  # (nothing answers: keep only those still waiting)
                 provisional[:] = [r for r in provisional if r.state is _SENT]
             provisional.append(request)
-            return max(request.base_timeout_s, self.initial_timeout_s)
+            return max(rtt.base_s, self.initial_timeout_s)
         return min(max(timeout, self.min_timeout_s), self.max_timeout_s)
 
     def _first_measured(self) -> None:
@@ -624,7 +623,7 @@ class Scheduler:
         if rtt is not None and rtt.samples >= TRUSTED_SAMPLES:
             return rtt.late_s()
         trusted = [r.late_s() for r in self._measured() if r.samples >= TRUSTED_SAMPLES]
-        return max([2.0 * request.base_timeout_s, *trusted])
+        return max([2.0 * rtt.base_s if rtt is not None else 0.0, *trusted])
 
     def next_deadline(self) -> float | None:
         """When :meth:`expire` or :meth:`next_to_send` next has something to do (None: nothing)."""

@@ -29,13 +29,6 @@ from servobus.transports import (
 )
 from servobus.transports.can import frame_from_message, message_from_frame
 
-_channels = itertools.count()
-
-
-@pytest.fixture
-def channel() -> str:
-    return f"can-test-{next(_channels)}"
-
 
 @pytest.fixture
 def peer(channel: str) -> Iterator[can.BusABC]:

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import itertools
 import threading
 from collections.abc import AsyncIterator, Iterator
 
@@ -23,13 +22,6 @@ from servobus.sim.attach import serve_python_can
 from servobus.sim.devices.myactuator import MyActuatorMotor
 from servobus.sim.network import SimCanNetwork
 from servobus.transports import CanTransport, TransportState
-
-_channels = itertools.count()
-
-
-@pytest.fixture
-def channel() -> str:
-    return f"can-interop-{next(_channels)}"
 
 
 @pytest.fixture
