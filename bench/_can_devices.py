@@ -57,11 +57,11 @@ def _tight_timer_slack() -> None:
 
 def devices_for(family: str, ids: Sequence[int]) -> list[Device]:
     if family == "myactuator":
-        from servobus.sim.devices.myactuator import MyActuatorMotor
+        from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 
         return [MyActuatorMotor(i) for i in ids]
     if family == "hollow":
-        from servobus.sim.devices.hollow import HollowMotor
+        from servobus.protocols.hollow.sim.device import HollowMotor
 
         return [HollowMotor(i, fd_enabled=True) for i in ids]
     raise SystemExit(f"_can_devices: no family {family!r}")

@@ -3,7 +3,7 @@
 The simulator has no in-process serial path: :class:`~servobus.transports.sim.SimTransport` carries CAN
 frames only, and :func:`servobus.sim.attach.serve_rs485` needs a pty and real time. This FrameLink joins
 a :class:`~servobus.bus.Bus` to the simulator's serial devices (``SerialDevice``: bytes in, timed bytes
-out, e.g. :class:`~servobus.sim.devices.myactuator_rs485.MyActuatorRs485Motor`) with no I/O at all, so
+out, e.g. :class:`~servobus.protocols.myactuator.sim.rs485.MyActuatorRs485Motor`) with no I/O at all, so
 it runs on a virtual-time loop (:func:`servobus.sim.virtual.run`):
 
 * A frame the Bus sends is encoded by the family's framing (the bytes a real port would write) and

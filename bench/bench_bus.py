@@ -94,10 +94,10 @@ from servobus.bus import Bus  # noqa: E402
 from servobus.frame import Frame  # noqa: E402
 from servobus.protocols import BoundCodec, get_family  # noqa: E402
 from servobus.protocols import myactuator as ma  # noqa: E402
-from servobus.protocols._message import Command  # noqa: E402
+from servobus.protocols import Command  # noqa: E402
 from servobus.sim import virtual  # noqa: E402
 from servobus.sim.device import Emission  # noqa: E402
-from servobus.sim.devices.myactuator import MyActuatorMotor  # noqa: E402
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor  # noqa: E402
 from servobus.transports import CanTransport  # noqa: E402
 from servobus.transports.link_base import LinkBase  # noqa: E402
 from servobus.transports.sim import SimTransport  # noqa: E402

@@ -23,7 +23,7 @@ from collections import defaultdict
 from typing import Any
 
 from servobus.dbc import CONFIG_FIELDS, Layout, MessageSpec, SignalSpec, signal_table
-from servobus.protocols._message import Message
+from servobus.protocols import Message
 
 __all__ = ["check_frame", "values_of"]
 

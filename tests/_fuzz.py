@@ -54,7 +54,7 @@ from servobus.frame import Frame
 from servobus.protocols import FrameKind, get_family, lk
 from servobus.protocols import hollow as ho
 from servobus.protocols import myactuator as ma
-from servobus.protocols._message import Message
+from servobus.protocols import Message
 
 __all__ = ["TARGETS", "Input", "Target", "target"]
 

@@ -61,7 +61,7 @@ from servobus.protocols import myactuator as ma
 from servobus.scheduler import Request
 from servobus.sim import virtual
 from servobus.sim.device import Emission
-from servobus.sim.devices.myactuator import MyActuatorMotor
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.sim.faults import FaultInjector, FaultPlan
 from servobus.sim.network import SimCanNetwork
 from servobus.transports.sim import SimTransport

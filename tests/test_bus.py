@@ -15,9 +15,9 @@ from servobus.protocols import lk
 from servobus.protocols import myactuator as ma
 from servobus.scheduler import Traffic
 from servobus.sim import virtual
-from servobus.sim.devices.hollow import HollowMotor
-from servobus.sim.devices.lk import LkMotor
-from servobus.sim.devices.myactuator import MyActuatorMotor
+from servobus.protocols.hollow.sim.device import HollowMotor
+from servobus.protocols.lk.sim.device import LkMotor
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.transports.sim import SimTransport
 from sim._standins import Sniffer
 

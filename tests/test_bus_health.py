@@ -13,9 +13,9 @@ from servobus.metrics import LatencyWindow
 from servobus.protocols import hollow as ho
 from servobus.protocols import lk
 from servobus.protocols import myactuator as ma
-from servobus.sim.devices.hollow import HollowMotor
-from servobus.sim.devices.lk import LkMotor
-from servobus.sim.devices.myactuator import MyActuatorMotor
+from servobus.protocols.hollow.sim.device import HollowMotor
+from servobus.protocols.lk.sim.device import LkMotor
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.ticks import ticks
 from servobus.transports.sim import SimTransport
 from test_bus import run

@@ -26,17 +26,17 @@ from servobus.frame import Frame
 from servobus.protocols import get_family, lk
 from servobus.protocols import hollow as ho
 from servobus.protocols import myactuator as ma
-from servobus.protocols._message import Command
+from servobus.protocols import Command
 from servobus.protocols.myactuator.rs485 import decode_rs485_request, rs485_deframer
 from servobus.sim import virtual
 from servobus.sim.attach import serve_rs485, serve_slcan
 from servobus.sim.canbus import CanBusModel
 from servobus.sim.device import Device, SerialDevice, SerialEmission
-from servobus.sim.devices.hollow import HollowMotor
-from servobus.sim.devices.hollow_converter import ConverterMode, HollowConverter
-from servobus.sim.devices.lk import LkMotor, RunState
-from servobus.sim.devices.myactuator import MyActuatorMotor
-from servobus.sim.devices.myactuator_rs485 import MyActuatorRs485Motor
+from servobus.protocols.hollow.sim.device import HollowMotor
+from servobus.protocols.hollow.sim.converter import ConverterMode, HollowConverter
+from servobus.protocols.lk.sim.device import LkMotor, RunState
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+from servobus.protocols.myactuator.sim.rs485 import MyActuatorRs485Motor
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.plant import Off, PositionControl
 from servobus.sim.pty import PtyPort

@@ -23,14 +23,14 @@ from servobus.frame import Frame
 from servobus.protocols import hollow as ho
 from servobus.protocols import lk
 from servobus.protocols import myactuator as ma
-from servobus.protocols._message import Command
+from servobus.protocols import Command
 from servobus.scheduler import Received
 from servobus.sim import plant, virtual
 from servobus.sim.canbus import CanBusModel
 from servobus.sim.device import Emission
-from servobus.sim.devices.hollow import HollowMotor
-from servobus.sim.devices.lk import LkMotor
-from servobus.sim.devices.myactuator import MyActuatorMotor
+from servobus.protocols.hollow.sim.device import HollowMotor
+from servobus.protocols.lk.sim.device import LkMotor
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.sim.faults import FaultInjector, FaultPlan
 from servobus.transports.sim import SimTransport
 

@@ -25,7 +25,6 @@ SANS_IO = [
     "sim/faults.py",
     "sim/device.py",
     "sim/network.py",
-    "sim/devices",
 ]
 FORBIDDEN_MODULES = {"asyncio", "anyio", "time", "threading", "socket", "selectors", "serial", "can"}
 FORBIDDEN_CALLS = {("datetime", "now"), ("datetime", "utcnow")}

@@ -23,7 +23,7 @@ import click
 import pytest
 
 from servobus.cli import cli
-from servobus.sim.devices.myactuator import MyActuatorMotor
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.sim.plant import PositionControl
 from servobus.transports.sim import SimTransport
 

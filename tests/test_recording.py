@@ -15,7 +15,7 @@ from servobus.frame import Frame
 from servobus.logs import read_log
 from servobus.protocols import myactuator as ma
 from servobus.recording import CandumpWriter, NewFiles, TapLink, TelemetryWriter, telemetry_row
-from servobus.sim.devices.myactuator import MyActuatorMotor
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.transports.sim import SimTransport
 
 

@@ -13,7 +13,7 @@ import pytest
 
 from servobus.bus import Bus, MotorStatus
 from servobus.protocols import myactuator as ma
-from servobus.sim.devices.myactuator import MyActuatorMotor
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.sim.network import SimCanNetwork
 from servobus.transports import SimTransport
 from sim._standins import Sniffer

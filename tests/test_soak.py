@@ -21,8 +21,8 @@ from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.rs485 import decode_rs485_request
 from servobus.sim.attach import serve_rs485
 from servobus.sim.device import SerialEmission
-from servobus.sim.devices.myactuator import MyActuatorMotor
-from servobus.sim.devices.myactuator_rs485 import MyActuatorRs485Motor
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+from servobus.protocols.myactuator.sim.rs485 import MyActuatorRs485Motor
 from servobus.sim.pty import PtyPort
 from servobus.transports import SerialTransport
 
@@ -247,7 +247,7 @@ def test_a_write_the_motor_received_twice_never_answers_the_next_write_with_its_
 
 def test_an_lk_parameter_write_received_twice_never_answers_the_next_one() -> None:
     from servobus.protocols import lk
-    from servobus.sim.devices.lk import LkMotor
+    from servobus.protocols.lk.sim.device import LkMotor
 
     writes = [lk.WriteControlParam(param=lk.ControlParam.SPEED_LIMIT, value=v) for v in (9000, 9100, 9200)]
     results, counts = _twice_received("lk", LkMotor(1), writes)

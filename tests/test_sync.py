@@ -15,7 +15,7 @@ import pytest
 from servobus import sync
 from servobus.errors import MotorTimeout
 from servobus.protocols import myactuator as ma
-from servobus.sim.devices.myactuator import MyActuatorMotor
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.transports.sim import SimTransport
 from sim._standins import Sniffer
 
@@ -135,7 +135,7 @@ def test_a_sync_bus_left_open_exits_cleanly_and_stops_its_motors() -> None:
 
         from servobus import sync
         from servobus.protocols import myactuator as ma
-        from servobus.sim.devices.myactuator import MyActuatorMotor
+        from servobus.protocols.myactuator.sim.device import MyActuatorMotor
         from servobus.transports.sim import SimTransport
         from sim._standins import Sniffer
 

@@ -34,7 +34,7 @@ from servobus.errors import ProtocolError
 from servobus.frame import Frame
 from servobus.protocols import BoundCodec, FrameKind, get_family
 from servobus.protocols._bound import id_key
-from servobus.protocols._message import Message
+from servobus.protocols import Message
 from servobus.transports.can import frame_from_message
 
 __all__ = [

@@ -25,7 +25,7 @@ import can
 
 from servobus.frame import Frame
 from servobus.logs import Scalar, message_values
-from servobus.protocols._message import Reply
+from servobus.protocols import Reply
 from servobus.transports.can import message_from_frame
 from servobus.transports.events import TransportEvent
 

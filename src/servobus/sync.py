@@ -33,7 +33,7 @@ from anyio.from_thread import BlockingPortal, start_blocking_portal
 
 from servobus import bus as _bus
 from servobus.metrics import Metrics
-from servobus.protocols._message import Command, Reply
+from servobus.protocols import Command, Reply
 from servobus.scheduler import Traffic
 from servobus.ticks import Tick
 

@@ -13,8 +13,8 @@ from cli._bus_cli import Devices, keep_devices, one_line, pty_simulators, run, r
 from servobus.frame import Frame
 from servobus.protocols import lk
 from servobus.protocols import myactuator as ma
-from servobus.sim.devices.lk import LkMotor
-from servobus.sim.devices.myactuator import MyActuatorMotor
+from servobus.protocols.lk.sim.device import LkMotor
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.sim.plant import Brake, Off, PositionControl, SpeedControl
 
 

@@ -12,7 +12,7 @@ import pytest
 
 from cli._bus_cli import SERVOBUS, one_line, run, run_json
 from servobus.cli._demo_report import Summary, layout, summary_lines
-from servobus.sim.devices.myactuator import DEFAULT_TURNAROUND_S
+from servobus.protocols.myactuator.sim.device import DEFAULT_TURNAROUND_S
 
 
 def test_the_default_demo_runs_32_motors_on_11_buses_with_no_errors(

@@ -10,7 +10,7 @@ import pytest
 import servobus.cli._connect as connect
 from cli._bus_cli import one_line, pty_simulators, run, run_json
 from servobus.protocols.myactuator import Revision
-from servobus.sim.devices.myactuator import MyActuatorMotor
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 
 
 def test_scan_lists_the_motors_that_answer(capsys: pytest.CaptureFixture[str]) -> None:

@@ -25,11 +25,11 @@ from servobus.protocols import hollow as ho
 from servobus.protocols import myactuator as ma
 from servobus.protocols.hollow.rs485 import decode_modbus_reply
 from servobus.protocols.myactuator.rs485 import decode_rs485_reply, encode_rs485
-from servobus.sim.devices.hollow import HollowMotor
-from servobus.sim.devices.hollow_converter import ConverterMode, HollowConverter
-from servobus.sim.devices.lk import LkMotor
-from servobus.sim.devices.myactuator import MyActuatorMotor
-from servobus.sim.devices.myactuator_rs485 import MyActuatorRs485Motor
+from servobus.protocols.hollow.sim.device import HollowMotor
+from servobus.protocols.hollow.sim.converter import ConverterMode, HollowConverter
+from servobus.protocols.lk.sim.device import LkMotor
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+from servobus.protocols.myactuator.sim.rs485 import MyActuatorRs485Motor
 
 from .hollow import _strategies as hs
 from .lk import _strategies as ls

@@ -25,7 +25,7 @@ from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.ids import reply_id, request_id
 from servobus.sim.attach import serve_slcan
-from servobus.sim.devices.myactuator import MyActuatorMotor
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.pty import PtyPort
 from servobus.sim.slcan import SlcanAdapter

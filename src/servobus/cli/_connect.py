@@ -147,17 +147,17 @@ def sim_devices(family: str, ids: tuple[int, ...], revision: str | None = None) 
     if family == "myactuator":
         from servobus.protocols.myactuator import FAMILY as MA
         from servobus.protocols.myactuator import Revision as MaRevision
-        from servobus.sim.devices.myactuator import MyActuatorMotor
+        from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 
         rev: MaRevision = MA.revision(revision) if revision else MaRevision.V4_4
         return [MyActuatorMotor(i, revision=rev) for i in ids]
     if family == "lk":
         from servobus.protocols.lk import DEFAULT_MODEL, FAMILY, LkModel
-        from servobus.sim.devices.lk import LkMotor
+        from servobus.protocols.lk.sim.device import LkMotor
 
         model = LkModel(revision=FAMILY.revision(revision)) if revision else DEFAULT_MODEL
         return [LkMotor(i, model=model) for i in ids]
-    from servobus.sim.devices.hollow import HollowMotor
+    from servobus.protocols.hollow.sim.device import HollowMotor
 
     return [HollowMotor(i) for i in ids]
 

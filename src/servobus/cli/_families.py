@@ -22,7 +22,7 @@ from typing import Any
 
 import click
 
-from servobus.protocols._message import Command
+from servobus.protocols import Command
 
 __all__ = ["TABLES", "Op", "op", "status_reads"]
 

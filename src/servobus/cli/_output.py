@@ -20,7 +20,7 @@ import click
 from rich.console import Console
 from rich.table import Table
 
-from servobus.protocols._message import Message
+from servobus.protocols import Message
 
 __all__ = [
     "SETTINGS",

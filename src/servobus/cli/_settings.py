@@ -15,7 +15,7 @@ from typing import Any
 
 import click
 
-from servobus.protocols._message import Command, Reply
+from servobus.protocols import Command, Reply
 
 __all__ = ["SETTINGS", "Setting", "setting"]
 

@@ -48,7 +48,7 @@ from servobus.cli._output import (
     yes_option,
 )
 from servobus.errors import ServobusError
-from servobus.protocols._message import Command, Reply
+from servobus.protocols import Command, Reply
 
 __all__ = [
     "brake",

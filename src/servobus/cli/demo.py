@@ -73,7 +73,7 @@ def demo(
     No hardware and no arguments needed: 32 motors at 1 kHz by default, spread over as many
     simulated 1 Mbit/s buses as classic CAN needs for that rate. Ctrl-C stops the motors cleanly.
     """
-    from servobus.sim.devices.myactuator import DEFAULT_TURNAROUND_S
+    from servobus.protocols.myactuator.sim.device import DEFAULT_TURNAROUND_S
 
     if buses is not None and buses > motors:
         raise click.BadParameter(
@@ -124,7 +124,7 @@ class _SimClock:
 
 
 async def _run(plan: Layout, duration: float | None, *, live: bool, timeout_s: float | None) -> Summary:
-    from servobus.sim.devices.myactuator import MyActuatorMotor
+    from servobus.protocols.myactuator.sim.device import MyActuatorMotor
     from servobus.transports.sim import SimTransport
 
     loop = asyncio.get_running_loop()

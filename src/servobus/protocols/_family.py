@@ -7,20 +7,53 @@ family touches one folder and one registry line.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+import dataclasses
+import importlib
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
 from enum import Enum
-from typing import Any
+from typing import Any, Generic, TypeVar
 
-from servobus.protocols._bound import BoundCodec, Broadcast
+from servobus.protocols._bound import BoundCodec, Broadcast, Framing
 from servobus.protocols._message import Command, Reply
 
-__all__ = ["Family"]
+__all__ = ["Family", "SerialLine", "command_classes"]
+
+M = TypeVar("M")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class Family:
-    """A protocol family's codec surface.
+class SerialLine:
+    """One way a family's frames travel on a serial line (RS485): its framing and line settings.
+
+    Attributes:
+        name: the framing's name (``"myactuator-rs485"``), unique over all families.
+        framing: makes the framing (imported only when a serial line is opened).
+        bauds: the rates the manual allows, the default first.
+        parity: ``"N"``, ``"E"`` or ``"O"``.
+        aliases: other names a user may give for it (``SerialTransport(mode=...)``).
+    """
+
+    name: str
+    framing: Callable[[], Framing]
+    bauds: tuple[int, ...]
+    parity: str = "N"
+    aliases: tuple[str, ...] = ()
+
+
+def command_classes(namespace: Iterable[object]) -> tuple[type[Command], ...]:
+    """The concrete command classes among ``namespace`` (a family package's names): the dataclasses
+    deriving from :class:`Command`, each once, in order. A family passes ``globals().values()``."""
+    out: dict[type[Command], None] = {}
+    for obj in namespace:
+        if isinstance(obj, type) and issubclass(obj, Command) and dataclasses.is_dataclass(obj):
+            out[obj] = None
+    return tuple(out)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Family(Generic[M]):
+    """A protocol family: everything family-specific that the other layers use, in one plug-in.
 
     Attributes:
         name: registry name (``"myactuator"``, ``"lk"``, ``"hollow"``).
@@ -34,6 +67,15 @@ class Family:
             motor's codec on Frames, the only thing the Bus and the CLI use (protocols/_bound.py).
         broadcast: ``(command, motors) -> Broadcast``: one frame for several bound motors and the
             keys of the replies it collects; ValueError where the family has no such frame.
+        commands: every command class (the typed motor methods, the CLI, the simulator and the DBC
+            are derived from their declarations).
+        motor_ids: the motor ids the manuals allow.
+        serial: the serial framings the family's motors (or converters) speak; empty: CAN only.
+        motor: the typed :class:`~servobus.Motor` subclass with a method per command (made when
+            asked: it imports the Bus).
+        parts: ``"module:attribute"`` of the family's larger plug-in parts, imported only when
+            asked for with :meth:`part`: ``"sim"`` (simulated devices), ``"cli"`` (the command
+            line's operations and settings), ``"dbc"`` (the DBC description).
     """
 
     name: str
@@ -45,10 +87,27 @@ class Family:
     links: tuple[str, ...]
     bind: Callable[..., BoundCodec]
     broadcast: Callable[..., Broadcast]
+    commands: tuple[type[Command], ...] = ()
+    motor_ids: range = range(0, 256)
+    serial: tuple[SerialLine, ...] = ()
+    motor: Callable[[], type[M]] | None = None
+    parts: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.default_revision not in self.revisions:
             raise ValueError(f"{self.name}: default revision {self.default_revision!r} not in revisions")
+
+    def part(self, name: str) -> Any:
+        """The family's plug-in part ``name`` (``"sim"``, ``"cli"``, ``"dbc"``), imported now.
+
+        Raises:
+            LookupError: the family has no such part (the message names the family).
+        """
+        target = self.parts.get(name)
+        if target is None:
+            raise LookupError(f"the {self.name} family has no {name} part")
+        module, _, attribute = target.partition(":")
+        return getattr(importlib.import_module(module), attribute)
 
     def revision(self, name: str | Enum) -> Any:
         """The revision named ``name`` ("V4_3", "v4.3", or the enum member itself).

@@ -13,13 +13,15 @@ raw bytes. Never any other exception: a decoder checks lengths and enum values i
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import Any, ClassVar, TypeVar
+from types import NoneType, UnionType
+from typing import Any, ClassVar, Generic, TypeVar, Union, get_args, get_origin
 
 from servobus.errors import ProtocolError
 
 __all__ = ["Command", "Message", "Reply", "construct", "decode_by_code", "require_length"]
 
 M = TypeVar("M", bound="Message")
+R = TypeVar("R", covariant=True)
 
 
 class Message:
@@ -38,10 +40,70 @@ class Message:
         raise NotImplementedError(type(self).__name__)
 
 
-class Command(Message):
-    """A host -> motor message."""
+class Command(Message, Generic[R]):
+    """A host -> motor message, generic in the reply it gets: ``class ReadStatus2(Command[StatusReply])``.
+
+    A command class says everything about itself once, and the codec tables, the bound codec's
+    rules, the simulator's dispatch, the typed motor methods, the CLI and the DBC are derived from it
+    (design.md: "each command is said once"). Besides ``CODE``, its fields and the reply type in its
+    base, it declares:
+
+    ``READ``
+        It changes nothing on the motor: an automatic retry may resend it, and a motor that was
+        only read is not stopped when the Bus is left.
+    ``SLOW``
+        It writes ROM/flash or moves the brake: its reply may take the codec's longer time.
+    ``ECHO``
+        Its reply echoes the value it wrote, so the match key holds those bytes (a stray echo of
+        another value never answers it).
+    ``STREAMABLE``
+        The motor can stream its reply (MyActuator 0xB6).
+    ``NO_REPLY``
+        Why no reply comes (``"the program restarts"``), or None when one does. A class declared
+        ``Command[None]`` must say why.
+    ``NOTED``
+        It changes how the motor talks (streams, error reports): the bound codec is told when it
+        was sent (``BoundCodec.note_sent``).
+
+    ``REPLY`` is not written by hand: it is the type argument of the command's base, read when the
+    class is made (a union for a command answered by one of several layouts; None for no reply).
+    """
 
     __slots__ = ()
+    REPLY: ClassVar[Any]  # = Reply, below: a command whose base gives no reply type
+    READ: ClassVar[bool] = False
+    SLOW: ClassVar[bool] = False
+    ECHO: ClassVar[bool] = False
+    STREAMABLE: ClassVar[bool] = False
+    NO_REPLY: ClassVar[str | None] = None
+    NOTED: ClassVar[bool] = False
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        # ``dataclass(slots=True)`` makes the class a second time from this one's __dict__, which
+        # holds __orig_bases__ and the REPLY found the first time.
+        for base in cls.__dict__.get("__orig_bases__", ()):
+            origin = get_origin(base)
+            if isinstance(origin, type) and issubclass(origin, Command):
+                (reply,) = get_args(base)
+                if not isinstance(reply, TypeVar):
+                    cls.REPLY = None if reply is None or reply is NoneType else reply
+        if (
+            cls.REPLY is None
+            and cls.NO_REPLY is None
+            and cls.__dict__.get("__dataclass_fields__") is not None
+        ):
+            raise TypeError(f"{cls.__name__} is declared without a reply: say why in NO_REPLY")
+
+    @classmethod
+    def reply_types(cls) -> tuple[type[Reply], ...]:
+        """The reply classes that may answer this command (empty when none comes)."""
+        reply = cls.REPLY
+        if reply is None:
+            return ()
+        if get_origin(reply) in (Union, UnionType):
+            return tuple(t for t in get_args(reply) if t is not NoneType)
+        return (reply,)
 
 
 class Reply(Message):
@@ -53,6 +115,9 @@ class Reply(Message):
 
     __slots__ = ()
     FAULTS: ClassVar[str | None] = None
+
+
+Command.REPLY = Reply
 
 
 def require_length(data: bytes, length: int, *, what: str, command: int | None = None) -> None:

@@ -61,8 +61,8 @@ class Setup:
 
 
 def _hollow(args: argparse.Namespace) -> Setup:
-    from servobus.sim.devices.hollow import HollowMotor
-    from servobus.sim.devices.hollow_converter import ConverterMode, HollowConverter
+    from servobus.protocols.hollow.sim.device import HollowMotor
+    from servobus.protocols.hollow.sim.converter import ConverterMode, HollowConverter
 
     ids = range(args.first_id, args.first_id + args.motors)
     if not args.rs485:
@@ -74,7 +74,7 @@ def _hollow(args: argparse.Namespace) -> Setup:
 
 def _lk(args: argparse.Namespace) -> Setup:
     from servobus.protocols.lk import LkModel
-    from servobus.sim.devices.lk import LkMotor
+    from servobus.protocols.lk.sim.device import LkMotor
 
     model = LkModel(revision=args.revision)
     return Setup(
@@ -83,8 +83,8 @@ def _lk(args: argparse.Namespace) -> Setup:
 
 
 def _myactuator(args: argparse.Namespace) -> Setup:
-    from servobus.sim.devices.myactuator import MyActuatorMotor
-    from servobus.sim.devices.myactuator_rs485 import MyActuatorRs485Motor
+    from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+    from servobus.protocols.myactuator.sim.rs485 import MyActuatorRs485Motor
 
     motors = [
         MyActuatorMotor(i, revision=args.revision) for i in range(args.first_id, args.first_id + args.motors)

@@ -17,7 +17,7 @@ from servobus import Frame
 from servobus.errors import ProtocolError
 from servobus.protocols import get_family
 from servobus.protocols import myactuator as ma
-from servobus.sim.devices.myactuator import MyActuatorMotor
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 
 V43_FRAME = bytes.fromhex("94 00 00 00 00 00 24 23")
 MOTOR_ID = 5

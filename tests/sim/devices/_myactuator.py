@@ -6,9 +6,9 @@ from typing import Any, TypeVar
 
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
-from servobus.protocols._message import Reply
+from servobus.protocols import Reply
 from servobus.protocols.myactuator.codec import request_frame
-from servobus.sim.devices.myactuator import DEFAULT_TURNAROUND_S, MyActuatorMotor
+from servobus.protocols.myactuator.sim.device import DEFAULT_TURNAROUND_S, MyActuatorMotor
 
 R = TypeVar("R", bound=Reply)
 TURNAROUND = DEFAULT_TURNAROUND_S

@@ -1,4 +1,4 @@
-"""The simulated hollow-series motor (servobus.sim.devices.hollow) against hollow.md §3-§7 and §13.
+"""The simulated hollow-series motor (servobus.protocols.hollow.sim.device) against hollow.md §3-§7 and §13.
 
 Requests are built and replies read with the family codec (the host's side), so every test is also
 a round trip through the protocol's second implementation. Network tests run in virtual time.
@@ -40,8 +40,8 @@ from servobus.protocols.hollow import (
 from servobus.protocols.hollow.codec import decode_reply_frame, request_frame
 from servobus.protocols.hollow.rs485 import decode_modbus_reply
 from servobus.sim.canbus import CanBusModel
-from servobus.sim.devices.hollow import DEFAULT_TURNAROUND_S, HOLLOW_PLANT_PARAMS, HollowMotor
-from servobus.sim.devices.hollow_converter import ConverterMode, HollowConverter
+from servobus.protocols.hollow.sim.device import DEFAULT_TURNAROUND_S, HOLLOW_PLANT_PARAMS, HollowMotor
+from servobus.protocols.hollow.sim.converter import ConverterMode, HollowConverter
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.plant import CurrentControl, Off, PlantParams, PositionControl, SpeedControl
 from servobus.timing import frame_time_s
@@ -499,8 +499,8 @@ def test_defaults_follow_the_manual() -> None:
 
 
 def test_device_models_are_sans_io() -> None:
-    package = Path(__file__).resolve().parents[3] / "src" / "servobus" / "sim" / "devices"
+    package = Path(__file__).resolve().parents[3] / "src" / "servobus" / "protocols" / "hollow" / "sim"
     sources = sorted(package.glob("*.py"))
-    assert {p.name for p in sources} >= {"__init__.py", "hollow.py", "hollow_converter.py"}
+    assert {p.name for p in sources} >= {"__init__.py", "device.py", "converter.py"}
     for path in sources:
         assert violations(path.read_text()) == [], path.name

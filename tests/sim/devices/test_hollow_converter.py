@@ -1,4 +1,4 @@
-"""The simulated 485 -> CANFD converter (servobus.sim.devices.hollow_converter) against hollow.md §9.
+"""The simulated 485 -> CANFD converter (servobus.protocols.hollow.sim.converter) against hollow.md §9.
 
 Request bytes go in whole, byte by byte, and corrupted; replies are checked byte for byte against
 the manual's examples where it prints them, and decoded with the family codec otherwise.
@@ -30,8 +30,8 @@ from servobus.protocols.hollow import (
 from servobus.protocols.hollow.codec import request_frame
 from servobus.protocols.hollow.rs485 import decode_modbus_reply, encode_transparent
 from servobus.sim.device import SerialEmission
-from servobus.sim.devices.hollow import DEFAULT_TURNAROUND_S, HollowMotor
-from servobus.sim.devices.hollow_converter import (
+from servobus.protocols.hollow.sim.device import DEFAULT_TURNAROUND_S, HollowMotor
+from servobus.protocols.hollow.sim.converter import (
     DEFAULT_CONVERTER_TURNAROUND_S,
     ConverterMode,
     HollowConverter,

@@ -1,4 +1,4 @@
-"""The simulated LK motor (servobus.sim.devices.lk) against the LK spec, from the device side.
+"""The simulated LK motor (servobus.protocols.lk.sim.device) against the LK spec, from the device side.
 
 Replies are decoded with the codec's host-side ``decode_reply`` of the motor's revision, so every
 assertion is also a check that the simulator and the codec agree on the bytes (spec lk-v2.md).
@@ -32,9 +32,9 @@ from servobus.protocols.lk import (
 )
 from servobus.protocols.lk.codec import reply_class, request_frame
 from servobus.protocols.lk.ids import reply_id
-from servobus.sim.devices import lk as lk_device
-from servobus.sim.devices.lk import DEFAULT_CALIBRATION_S, DEFAULT_TURNAROUND_S, LkMotor, RunState
-from servobus.sim.devices.lk_state import LK_PLANT_PARAMS
+from servobus.protocols.lk.sim import device as lk_device
+from servobus.protocols.lk.sim.device import DEFAULT_CALIBRATION_S, DEFAULT_TURNAROUND_S, LkMotor, RunState
+from servobus.protocols.lk.sim.state import LK_PLANT_PARAMS
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.plant import CurrentControl, Off, PlantParams
 

@@ -1,4 +1,4 @@
-"""The simulated MyActuator motor (servobus.sim.devices.myactuator) against myactuator-v4.md and the manuals.
+"""The simulated MyActuator motor (servobus.protocols.myactuator.sim.device) against myactuator-v4.md and the manuals.
 
 Requests are built and replies read with the family codec (the host's side), so every test is also a
 round trip through the protocol's second implementation. Manual [000] is V4.4, [002] is V4.3.
@@ -24,8 +24,8 @@ from servobus.protocols.myactuator.ids import (
     reply_id,
 )
 from servobus.protocols.myactuator.rs485 import decode_rs485_reply, encode_rs485
-from servobus.sim.devices.myactuator import MyActuatorMotor
-from servobus.sim.devices.myactuator_rs485 import MyActuatorRs485Motor
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+from servobus.protocols.myactuator.sim.rs485 import MyActuatorRs485Motor
 from servobus.sim.plant import PlantParams
 from test_layering import violations
 

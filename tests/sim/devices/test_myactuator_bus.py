@@ -1,6 +1,6 @@
 """The simulated MyActuator motor on a SimCanNetwork, in virtual time: 0xB3, 0xB6, 0x280, error reports.
 
-The manuals' words each test follows are quoted in ``servobus.sim.devices.myactuator``'s docstring.
+The manuals' words each test follows are quoted in ``servobus.protocols.myactuator.sim.device``'s docstring.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import pytest
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.codec import request_frame
-from servobus.sim.devices.myactuator import MyActuatorMotor
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.plant import Brake, Off, SpeedControl
 from servobus.timing import frame_time_s

@@ -11,7 +11,7 @@ import math
 import pytest
 
 from servobus.protocols import myactuator as ma
-from servobus.sim.devices.myactuator import RUN_MODE_POWER_UP, MyActuatorMotor
+from servobus.protocols.myactuator.sim.device import RUN_MODE_POWER_UP, MyActuatorMotor
 from servobus.sim.plant import Brake, CurrentControl, Impedance, Off, PositionControl, SpeedControl
 
 from ._myactuator import angle, ask, frame_for, status, status1, tell

@@ -18,8 +18,9 @@ Scales that the manual leaves per motor model live in :class:`HollowModel`.
 
 from __future__ import annotations
 
-from servobus.protocols._family import Family
+from servobus.protocols._family import Family, command_classes
 from servobus.protocols.hollow import bound as _bound
+from servobus.protocols.hollow.ids import MOTOR_IDS as _MOTOR_IDS
 from servobus.protocols.hollow.codec import (
     Revision,
     decode_reply,
@@ -113,4 +114,11 @@ FAMILY = Family(
     links=_bound.LINKS,
     bind=_bound.bind,
     broadcast=_bound.broadcast,
+    commands=command_classes(globals().values()),
+    motor_ids=_MOTOR_IDS,
+    parts={
+        "sim": "servobus.protocols.hollow.sim:SIM",
+        "cli": "servobus.protocols.hollow.cli:CLI",
+        "dbc": "servobus.protocols.hollow.dbc:DBC",
+    },
 )

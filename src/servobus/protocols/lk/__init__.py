@@ -32,8 +32,9 @@ Resolutions of the spec's open points (spec §10, §8.2):
 
 from __future__ import annotations
 
-from servobus.protocols._family import Family
+from servobus.protocols._family import Family, command_classes
 from servobus.protocols.lk import bound as _bound
+from servobus.protocols.lk.ids import MOTOR_IDS as _MOTOR_IDS
 from servobus.protocols.lk._base import LkCommand, LkReply
 from servobus.protocols.lk.codec import (
     decode_reply,
@@ -226,4 +227,11 @@ FAMILY = Family(
     links=_bound.LINKS,
     bind=_bound.bind,
     broadcast=_bound.broadcast,
+    commands=command_classes(globals().values()),
+    motor_ids=_MOTOR_IDS,
+    parts={
+        "sim": "servobus.protocols.lk.sim:SIM",
+        "cli": "servobus.protocols.lk.cli:CLI",
+        "dbc": "servobus.protocols.lk.dbc:DBC",
+    },
 )

@@ -22,8 +22,9 @@ Usage::
 
 from __future__ import annotations
 
-from servobus.protocols._family import Family
+from servobus.protocols._family import Family, command_classes
 from servobus.protocols.myactuator import bound as _bound
+from servobus.protocols.myactuator.ids import MOTOR_IDS as _MOTOR_IDS
 from servobus.protocols.myactuator.codec import (
     decode_reply,
     decode_request,
@@ -240,4 +241,11 @@ FAMILY = Family(
     links=_bound.LINKS,
     bind=_bound.bind,
     broadcast=_bound.broadcast,
+    commands=command_classes(globals().values()),
+    motor_ids=_MOTOR_IDS,
+    parts={
+        "sim": "servobus.protocols.myactuator.sim:SIM",
+        "cli": "servobus.protocols.myactuator.cli:CLI",
+        "dbc": "servobus.protocols.myactuator.dbc:DBC",
+    },
 )

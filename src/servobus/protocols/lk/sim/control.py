@@ -1,6 +1,6 @@
 """How a simulated LK motor turns a control command (0xA0..0xA8, 0x280) into a plant control.
 
-The LK protocol speaks motor-shaft degrees and dps (see :mod:`~servobus.sim.devices.lk_state`); the
+The LK protocol speaks motor-shaft degrees and dps (see :mod:`~servobus.protocols.lk.sim.state`); the
 plant speaks output-shaft ones, so angles and speeds are divided by ``gear_ratio`` here.
 
 =============  ===========================================================================
@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 from servobus.protocols import lk
 from servobus.protocols.lk import LkCommand, Revision, SpinDirection
-from servobus.sim.devices.lk_state import Limits, single_turn_period_deg
+from servobus.protocols.lk.sim.state import Limits, single_turn_period_deg
 from servobus.sim.plant import Control, CurrentControl, PositionControl, SpeedControl
 
 __all__ = ["MotionContext", "plant_control"]

@@ -1,10 +1,10 @@
 """The simulated MyActuator motor's memory: ROM/RAM parameters, encoder frame, error latch and readings.
 
-Kept apart from the protocol handling in :mod:`~servobus.sim.devices.myactuator` so each part stays
+Kept apart from the protocol handling in :mod:`~servobus.protocols.myactuator.sim.device` so each part stays
 small. Everything here is sans-IO data and arithmetic over a :class:`~servobus.sim.plant.Plant`.
 
 * :class:`Settings`: one image of the parameters (the ROM, or the RAM copy the motor runs with).
-  Which command writes which image is :mod:`~servobus.sim.devices.myactuator`'s job (spec §4, §0).
+  Which command writes which image is :mod:`~servobus.protocols.myactuator.sim.device`'s job (spec §4, §0).
 * :class:`EncoderFrame`: the multi-turn encoder counts (0x60-0x64, 0x90) and the output angle they
   give (0x92, R2), over the plant's physical shaft angle.
 * :class:`ErrorLatch`: which fault conditions are present and which 0x9A flags are reported

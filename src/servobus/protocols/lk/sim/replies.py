@@ -2,7 +2,7 @@
 
 The codec's reply classes (spec §4.1..§4.4, §4.20, §4.24, §4.25, §8) filled from the
 :class:`~servobus.sim.plant.Plant` (output shaft) and the motor's angle frame (motor shaft, see
-:mod:`~servobus.sim.devices.lk_state`). Values are clamped to what their wire field holds, as a
+:mod:`~servobus.protocols.lk.sim.state`). Values are clamped to what their wire field holds, as a
 drive's firmware saturates a reading rather than wrapping it.
 """
 
@@ -21,7 +21,7 @@ from servobus.protocols.lk import (
     Revision,
 )
 from servobus.protocols.lk.replies import status2_slot, torque_range
-from servobus.sim.devices.lk_state import AngleFrame, amps_per_count, single_turn_period_deg
+from servobus.protocols.lk.sim.state import AngleFrame, amps_per_count, single_turn_period_deg
 from servobus.sim.plant import Plant
 
 __all__ = ["encoder_reply", "single_turn_deg", "status1", "status2", "status3"]

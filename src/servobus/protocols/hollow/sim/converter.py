@@ -46,7 +46,7 @@ from servobus.protocols.hollow import (
 )
 from servobus.protocols.hollow.rs485 import decode_modbus_request, decode_transparent, encode_transparent
 from servobus.sim.device import SerialEmission
-from servobus.sim.devices.hollow import HollowMotor
+from servobus.protocols.hollow.sim.device import HollowMotor
 from servobus.timing import frame_time_s, uart_time_s
 
 __all__ = [

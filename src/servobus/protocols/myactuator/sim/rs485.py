@@ -1,7 +1,7 @@
 """The RS485 front of a simulated MyActuator motor: ``3E`` frames in, timed ``3E`` replies out.
 
 Implements :class:`~servobus.sim.device.SerialDevice` around a
-:class:`~servobus.sim.devices.myactuator.MyActuatorMotor`, which keeps all state and acts on the
+:class:`~servobus.protocols.myactuator.sim.device.MyActuatorMotor`, which keeps all state and acts on the
 commands; this module only frames (spec ``myactuator-v4.md`` §1.2, §1.3, §4.38):
 
 * Input is cut into frames by the C core's de-framer (:func:`~servobus.protocols.myactuator.rs485_deframer`),
@@ -30,7 +30,7 @@ from servobus.protocols.myactuator import ReadCanId, SetCanId
 from servobus.protocols.myactuator.ids import RS485_BROADCAST_ID
 from servobus.protocols.myactuator.rs485 import decode_rs485_request, encode_rs485, rs485_deframer
 from servobus.sim.device import SerialEmission
-from servobus.sim.devices.myactuator import MyActuatorMotor
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 
 __all__ = ["MyActuatorRs485Motor"]
 

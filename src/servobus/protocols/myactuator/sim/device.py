@@ -4,8 +4,8 @@ Protocol model (spec ``myactuator-v4.md``; [000] = V4.4 manual, [002] = V4.3 man
 codec used in reverse: requests are decoded with :func:`~servobus.protocols.myactuator.decode_request`
 for the motor's revision, replies are built from the codec's reply classes with values from the
 :class:`~servobus.sim.plant.Plant`, and sent ``turnaround_s`` after the request. The RS485 front is
-:mod:`~servobus.sim.devices.myactuator_rs485`; the memory (ROM/RAM, encoder, error latch) and the
-reply builders are :mod:`~servobus.sim.devices.myactuator_state`.
+:mod:`~servobus.protocols.myactuator.sim.rs485`; the memory (ROM/RAM, encoder, error latch) and the
+reply builders are :mod:`~servobus.protocols.myactuator.sim.state`.
 
 Identifiers (§1.1): 0x140+ID requests and 0x400+ID motion commands of this motor are taken; 0x280
 and 0x300 (0x79, V4.3) only while the CAN-ID filter is off (0x20 index 2 value 0), otherwise they
@@ -97,7 +97,7 @@ from servobus.protocols.myactuator.ids import (
     request_id,
 )
 from servobus.sim.device import Emission, ListeningDevice
-from servobus.sim.devices.myactuator_state import (
+from servobus.protocols.myactuator.sim.state import (
     DEFAULT_ENCODER_COUNTS_PER_TURN,
     DEFAULT_MODEL,
     DEFAULT_POLE_PAIRS,

@@ -1,6 +1,6 @@
 """The memory of a simulated LK motor: ROM and RAM parameters, the limits they set, the angle frame.
 
-Kept apart from the protocol model (:mod:`servobus.sim.devices.lk`) so the persistence rules read
+Kept apart from the protocol model (:mod:`servobus.protocols.lk.sim.device`) so the persistence rules read
 in one place (spec §4.18..§4.31, §6):
 
 * V2.36 [001]: setting parameters (0x40/0x42, spec §6.2) have a RAM copy that 0x42 writes and 0x40

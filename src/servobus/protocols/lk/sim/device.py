@@ -5,7 +5,7 @@ reverse: requests are decoded with :func:`~servobus.protocols.lk.decode_request`
 from the codec's reply classes, sent on :func:`~servobus.protocols.lk.reply_id` (0x180+ID on V2.36,
 0x140+ID on V2.35, spec §1.1) ``turnaround_s`` after the request. The mechanics are a
 :class:`~servobus.sim.plant.Plant`; ROM/RAM and the angle frame are in
-:mod:`~servobus.sim.devices.lk_state`.
+:mod:`~servobus.protocols.lk.sim.state`.
 
 What the motor ignores (nothing sent, a key of :attr:`LkMotor.counters` counted): frames for other
 ids (``ignored_id``), extended or FD frames (``ignored_kind``), commands of the other revision
@@ -25,9 +25,9 @@ Run states (spec §4.5..§4.7, §9 D15):
   after 0x81 a new control command moves the motor (0x88 changes only OFF -> ON).
 * V2.35: 0x88 resumes the command held before 0x81; any control command runs the motor.
 
-Control commands map to plant controls as :mod:`~servobus.sim.devices.lk_control` tabulates; the
-parameter commands and the ROM/RAM rules are in :mod:`~servobus.sim.devices.lk_state`; replies are
-filled from the plant by :mod:`~servobus.sim.devices.lk_replies`.
+Control commands map to plant controls as :mod:`~servobus.protocols.lk.sim.control` tabulates; the
+parameter commands and the ROM/RAM rules are in :mod:`~servobus.protocols.lk.sim.state`; replies are
+filled from the plant by :mod:`~servobus.protocols.lk.sim.replies`.
 
 Errors: :meth:`LkMotor.inject_error` starts a fault condition; its flag latches, the output goes
 off and the held command is dropped (protection). 0x9B clears the latched flags whose condition has
@@ -65,9 +65,9 @@ from servobus.protocols.lk.ids import MULTI_MOTOR_ID, MULTI_MOTOR_IDS, MULTI_MOT
 from servobus.protocols.lk.model import encoder_counts_per_turn
 from servobus.protocols.lk.replies import STATUS2_CODES
 from servobus.sim.device import Emission, ListeningDevice
-from servobus.sim.devices.lk_control import MotionContext, plant_control
-from servobus.sim.devices.lk_replies import encoder_reply, single_turn_deg, status1, status2, status3
-from servobus.sim.devices.lk_state import (
+from servobus.protocols.lk.sim.control import MotionContext, plant_control
+from servobus.protocols.lk.sim.replies import encoder_reply, single_turn_deg, status1, status2, status3
+from servobus.protocols.lk.sim.state import (
     LK_PLANT_PARAMS,
     AngleFrame,
     LkMemory,
@@ -111,7 +111,7 @@ class LkMotor(ListeningDevice):
     Args:
         motor_id: 1..32; requests on 0x140+ID, replies on :func:`~servobus.protocols.lk.reply_id`.
         model: revision, motor type (iq/power units, spec §8.2) and encoder width.
-        plant_params: the mechanics (default :data:`~servobus.sim.devices.lk_state.LK_PLANT_PARAMS`).
+        plant_params: the mechanics (default :data:`~servobus.protocols.lk.sim.state.LK_PLANT_PARAMS`).
         turnaround_s: request received -> reply ready (default 200 µs, within [001]'s 0.25 ms).
         settings: ROM parameters overriding the factory ones (V2.36 :class:`SettingParam`,
             V2.35 :class:`ParamId`).

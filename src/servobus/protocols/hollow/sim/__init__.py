@@ -1,0 +1,6 @@
+"""The simulated hollow devices: the family's protocol spoken from the device side (sans-IO, see servobus.sim)."""
+
+from servobus.protocols.hollow.sim.converter import ConverterMode, HollowConverter
+from servobus.protocols.hollow.sim.device import HollowMotor
+
+__all__ = ["ConverterMode", "HollowConverter", "HollowMotor"]

@@ -1,0 +1,6 @@
+"""The simulated myactuator devices: the family's protocol spoken from the device side (sans-IO, see servobus.sim)."""
+
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+from servobus.protocols.myactuator.sim.rs485 import MyActuatorRs485Motor
+
+__all__ = ["MyActuatorMotor", "MyActuatorRs485Motor"]
