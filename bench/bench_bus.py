@@ -92,12 +92,15 @@ import _virtual  # noqa: E402
 import servobus  # noqa: E402
 from servobus.bus import Bus  # noqa: E402
 from servobus.frame import Frame  # noqa: E402
-from servobus.protocols import BoundCodec, get_family  # noqa: E402
+from servobus.protocols import (  # noqa: E402
+    BoundCodec,
+    Command,
+    get_family,
+)
 from servobus.protocols import myactuator as ma  # noqa: E402
-from servobus.protocols import Command  # noqa: E402
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor  # noqa: E402
 from servobus.sim import virtual  # noqa: E402
 from servobus.sim.device import Emission  # noqa: E402
-from servobus.protocols.myactuator.sim.device import MyActuatorMotor  # noqa: E402
 from servobus.transports import CanTransport  # noqa: E402
 from servobus.transports.link_base import LinkBase  # noqa: E402
 from servobus.transports.sim import SimTransport  # noqa: E402

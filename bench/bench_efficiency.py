@@ -73,17 +73,16 @@ import _results  # noqa: E402
 from _serial_line import SerialLine  # noqa: E402
 from servobus.bus import Bus  # noqa: E402
 from servobus.frame import Frame  # noqa: E402
-from servobus.protocols import get_family, hollow, lk  # noqa: E402
+from servobus.protocols import Command, Reply, get_family, hollow, lk  # noqa: E402  # noqa: E402
 from servobus.protocols import myactuator as ma  # noqa: E402
-from servobus.protocols import Command, Reply  # noqa: E402
-from servobus.scheduler import Traffic  # noqa: E402
-from servobus.sim import virtual  # noqa: E402
-from servobus.sim.canbus import CanBusModel  # noqa: E402
-from servobus.sim.device import Device, Emission  # noqa: E402
 from servobus.protocols.hollow.sim.device import HollowMotor  # noqa: E402
 from servobus.protocols.lk.sim.device import LkMotor  # noqa: E402
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor  # noqa: E402
 from servobus.protocols.myactuator.sim.rs485 import MyActuatorRs485Motor  # noqa: E402
+from servobus.scheduler import Traffic  # noqa: E402
+from servobus.sim import virtual  # noqa: E402
+from servobus.sim.canbus import CanBusModel  # noqa: E402
+from servobus.sim.device import Device, Emission  # noqa: E402
 from servobus.transports.sim import SimTransport  # noqa: E402
 
 KEY = "efficiency"

@@ -70,9 +70,12 @@ import _profile  # noqa: E402
 import _results  # noqa: E402
 from servobus.bus import Bus  # noqa: E402
 from servobus.metrics import LatencyWindow  # noqa: E402
-from servobus.protocols import hollow  # noqa: E402
+from servobus.protocols import (  # noqa: E402
+    Command,
+    Reply,
+    hollow,
+)
 from servobus.protocols import myactuator as ma  # noqa: E402
-from servobus.protocols import Command, Reply  # noqa: E402
 from servobus.ticks import ticks  # noqa: E402
 from servobus.transports import SlcanTransport  # noqa: E402
 

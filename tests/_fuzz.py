@@ -51,10 +51,9 @@ from servobus.core import (
 )
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
-from servobus.protocols import FrameKind, get_family, lk
+from servobus.protocols import FrameKind, Message, get_family, lk
 from servobus.protocols import hollow as ho
 from servobus.protocols import myactuator as ma
-from servobus.protocols import Message
 
 __all__ = ["TARGETS", "Input", "Target", "target"]
 

@@ -10,10 +10,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from servobus.frame import Frame
-from servobus.protocols import get_family, lk
+from servobus.protocols import Message, get_family, lk
 from servobus.protocols import hollow as ho
 from servobus.protocols import myactuator as ma
-from servobus.protocols import Message
 
 
 @dataclass(frozen=True)

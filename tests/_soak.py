@@ -58,10 +58,10 @@ from servobus.bus import Bus, Motor, MotorStatus
 from servobus.errors import MotorBusy, MotorOffline, MotorTimeout, ProtocolError, TransportError
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.scheduler import Request
 from servobus.sim import virtual
 from servobus.sim.device import Emission
-from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.sim.faults import FaultInjector, FaultPlan
 from servobus.sim.network import SimCanNetwork
 from servobus.transports.sim import SimTransport

@@ -15,8 +15,8 @@ import pytest
 
 from servobus.protocols import get_family
 from servobus.protocols import myactuator as ma
-from servobus.sim import virtual
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+from servobus.sim import virtual
 from servobus.timing import frame_time_s, uart_time_s
 
 BENCH = Path(__file__).resolve().parents[1] / "bench"

@@ -13,11 +13,11 @@ from servobus.errors import MotorTimeout, TransportError
 from servobus.protocols import hollow as ho
 from servobus.protocols import lk
 from servobus.protocols import myactuator as ma
-from servobus.scheduler import Traffic
-from servobus.sim import virtual
 from servobus.protocols.hollow.sim.device import HollowMotor
 from servobus.protocols.lk.sim.device import LkMotor
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+from servobus.scheduler import Traffic
+from servobus.sim import virtual
 from servobus.transports.sim import SimTransport
 from sim._standins import Sniffer
 

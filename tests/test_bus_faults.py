@@ -38,8 +38,8 @@ import pytest
 from servobus.bus import Bus, Motor
 from servobus.errors import MotorBusy, MotorTimeout, ProtocolError, TransportError
 from servobus.frame import Frame
-from servobus.protocols import myactuator as ma
 from servobus.protocols import Command, Reply
+from servobus.protocols import myactuator as ma
 from servobus.scheduler import Request
 from servobus.sim import virtual
 from servobus.timing import frame_time_s

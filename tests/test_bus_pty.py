@@ -23,20 +23,19 @@ from _serving import serving
 from servobus.bus import Bus, Motor
 from servobus.errors import MotorTimeout
 from servobus.frame import Frame
-from servobus.protocols import get_family, lk
+from servobus.protocols import Command, get_family, lk
 from servobus.protocols import hollow as ho
 from servobus.protocols import myactuator as ma
-from servobus.protocols import Command
+from servobus.protocols.hollow.sim.converter import ConverterMode, HollowConverter
+from servobus.protocols.hollow.sim.device import HollowMotor
+from servobus.protocols.lk.sim.device import LkMotor, RunState
 from servobus.protocols.myactuator.rs485 import decode_rs485_request, rs485_deframer
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+from servobus.protocols.myactuator.sim.rs485 import MyActuatorRs485Motor
 from servobus.sim import virtual
 from servobus.sim.attach import serve_rs485, serve_slcan
 from servobus.sim.canbus import CanBusModel
 from servobus.sim.device import Device, SerialDevice, SerialEmission
-from servobus.protocols.hollow.sim.device import HollowMotor
-from servobus.protocols.hollow.sim.converter import ConverterMode, HollowConverter
-from servobus.protocols.lk.sim.device import LkMotor, RunState
-from servobus.protocols.myactuator.sim.device import MyActuatorMotor
-from servobus.protocols.myactuator.sim.rs485 import MyActuatorRs485Motor
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.plant import Off, PositionControl
 from servobus.sim.pty import PtyPort

@@ -20,17 +20,16 @@ import pytest
 from servobus.bus import Bus, Motor
 from servobus.errors import MotorStreaming, MotorTimeout, ProtocolError
 from servobus.frame import Frame
+from servobus.protocols import Command, lk
 from servobus.protocols import hollow as ho
-from servobus.protocols import lk
 from servobus.protocols import myactuator as ma
-from servobus.protocols import Command
+from servobus.protocols.hollow.sim.device import HollowMotor
+from servobus.protocols.lk.sim.device import LkMotor
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.scheduler import Received
 from servobus.sim import plant, virtual
 from servobus.sim.canbus import CanBusModel
 from servobus.sim.device import Emission
-from servobus.protocols.hollow.sim.device import HollowMotor
-from servobus.protocols.lk.sim.device import LkMotor
-from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.sim.faults import FaultInjector, FaultPlan
 from servobus.transports.sim import SimTransport
 

@@ -14,8 +14,8 @@ from servobus.bus import Bus
 from servobus.frame import Frame
 from servobus.logs import read_log
 from servobus.protocols import myactuator as ma
-from servobus.recording import CandumpWriter, NewFiles, TapLink, TelemetryWriter, telemetry_row
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+from servobus.recording import CandumpWriter, NewFiles, TapLink, TelemetryWriter, telemetry_row
 from servobus.transports.sim import SimTransport
 
 

@@ -12,8 +12,8 @@ from servobus import Frame
 from servobus.errors import ProtocolError
 from servobus.protocols import get_family
 from servobus.protocols import myactuator as ma
-from servobus.scheduler import TRANSITIONS, Request, RequestState, Scheduler, Traffic
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+from servobus.scheduler import TRANSITIONS, Request, RequestState, Scheduler, Traffic
 from servobus.sim.faults import FaultInjector, FaultPlan
 from servobus.sim.network import SimCanNetwork
 

@@ -17,8 +17,8 @@ import pytest
 
 from _serving import serving
 from servobus.protocols import myactuator as ma
-from servobus.sim.attach import serve_slcan
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+from servobus.sim.attach import serve_slcan
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.pty import PtyPort
 from sim._standins import Sniffer

@@ -19,10 +19,10 @@ from servobus.bus import Bus
 from servobus.errors import MotorTimeout, TransportError
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.rs485 import decode_rs485_request
-from servobus.sim.attach import serve_rs485
-from servobus.sim.device import SerialEmission
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.protocols.myactuator.sim.rs485 import MyActuatorRs485Motor
+from servobus.sim.attach import serve_rs485
+from servobus.sim.device import SerialEmission
 from servobus.sim.pty import PtyPort
 from servobus.transports import SerialTransport
 

@@ -54,8 +54,7 @@ from servobus.errors import (
 )
 from servobus.frame import Frame
 from servobus.metrics import Metrics
-from servobus.protocols import BoundCodec, get_family
-from servobus.protocols import Command, Reply
+from servobus.protocols import BoundCodec, Command, Reply, get_family
 from servobus.scheduler import Received, Request, RequestState, Scheduler, Traffic
 from servobus.ticks import Tick, ticks
 from servobus.transports.events import StateChanged, TransportEvent, TransportState

@@ -32,9 +32,8 @@ import can
 
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
-from servobus.protocols import BoundCodec, FrameKind, get_family
+from servobus.protocols import BoundCodec, FrameKind, Message, get_family
 from servobus.protocols._bound import id_key
-from servobus.protocols import Message
 from servobus.transports.can import frame_from_message
 
 __all__ = [

@@ -42,9 +42,8 @@ from typing import Any
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
 from servobus.metrics import LatencyWindow
-from servobus.protocols import BoundCodec, FrameKind, check_bus
+from servobus.protocols import BoundCodec, Command, FrameKind, Reply, check_bus
 from servobus.protocols._bound import KIND_NOT_OURS, KIND_REPLY, KIND_REPORT, KIND_STREAM
-from servobus.protocols import Command, Reply
 from servobus.rtt import RoundTrip
 
 __all__ = [

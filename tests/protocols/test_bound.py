@@ -24,10 +24,10 @@ from servobus.protocols import FrameKind, check_bus, get_family, lk
 from servobus.protocols import hollow as ho
 from servobus.protocols import myactuator as ma
 from servobus.protocols.hollow.rs485 import decode_modbus_reply
-from servobus.protocols.myactuator.rs485 import decode_rs485_reply, encode_rs485
-from servobus.protocols.hollow.sim.device import HollowMotor
 from servobus.protocols.hollow.sim.converter import ConverterMode, HollowConverter
+from servobus.protocols.hollow.sim.device import HollowMotor
 from servobus.protocols.lk.sim.device import LkMotor
+from servobus.protocols.myactuator.rs485 import decode_rs485_reply, encode_rs485
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.protocols.myactuator.sim.rs485 import MyActuatorRs485Motor
 

@@ -16,8 +16,8 @@ import pytest
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.ids import BROADCAST_ID, reply_id, request_id
-from servobus.sim.attach import serve_slcan
 from servobus.protocols.myactuator.sim.device import DEFAULT_TURNAROUND_S, MyActuatorMotor
+from servobus.sim.attach import serve_slcan
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.pty import PtyPort
 

@@ -16,8 +16,8 @@ import pytest
 
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
-from servobus.sim import virtual
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+from servobus.sim import virtual
 from servobus.sim.faults import FaultInjector, FaultPlan, Item
 from servobus.sim.network import SimCanNetwork
 from servobus.transports import SimTransport

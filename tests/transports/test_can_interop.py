@@ -18,8 +18,8 @@ from can.interfaces.virtual import VirtualBus
 from servobus.bus import Bus
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
-from servobus.sim.attach import serve_python_can
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+from servobus.sim.attach import serve_python_can
 from servobus.sim.network import SimCanNetwork
 from servobus.transports import CanTransport, TransportState
 

@@ -31,14 +31,14 @@ from servobus.frame import Frame
 from servobus.protocols import hollow as ho
 from servobus.protocols import myactuator as ma
 from servobus.protocols.hollow.rs485 import ModbusRead, ModbusReadReply
+from servobus.protocols.hollow.sim.converter import ConverterMode, HollowConverter
+from servobus.protocols.hollow.sim.device import HollowMotor
 from servobus.protocols.myactuator.ids import RS485_BROADCAST_ID
 from servobus.protocols.myactuator.rs485 import encode_rs485
-from servobus.sim.attach import serve_rs485
-from servobus.sim.device import SerialDevice, SerialEmission
-from servobus.protocols.hollow.sim.device import HollowMotor
-from servobus.protocols.hollow.sim.converter import ConverterMode, HollowConverter
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.protocols.myactuator.sim.rs485 import MyActuatorRs485Motor
+from servobus.sim.attach import serve_rs485
+from servobus.sim.device import SerialDevice, SerialEmission
 from servobus.sim.pty import PtyPort
 from servobus.timing import uart_time_s
 from servobus.transports import SerialTransport

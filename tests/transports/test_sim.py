@@ -18,13 +18,13 @@ from servobus.frame import Frame
 from servobus.protocols import get_family, hollow, lk
 from servobus.protocols import myactuator as ma
 from servobus.protocols._bound import FrameKind
+from servobus.protocols.hollow.sim.device import HollowMotor
+from servobus.protocols.lk.sim.device import LkMotor
 from servobus.protocols.myactuator.ids import BROADCAST_ID, reply_id, request_id
+from servobus.protocols.myactuator.sim.device import DEFAULT_TURNAROUND_S, MyActuatorMotor
 from servobus.sim import virtual
 from servobus.sim.canbus import CanBusModel
 from servobus.sim.device import Device
-from servobus.protocols.hollow.sim.device import HollowMotor
-from servobus.protocols.lk.sim.device import LkMotor
-from servobus.protocols.myactuator.sim.device import DEFAULT_TURNAROUND_S, MyActuatorMotor
 from servobus.sim.faults import FaultInjector, FaultPlan
 from servobus.sim.network import SimCanNetwork
 from servobus.timing import frame_time_s

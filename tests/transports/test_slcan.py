@@ -24,8 +24,8 @@ from servobus.errors import TransportError
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.ids import reply_id, request_id
-from servobus.sim.attach import serve_slcan
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+from servobus.sim.attach import serve_slcan
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.pty import PtyPort
 from servobus.sim.slcan import SlcanAdapter

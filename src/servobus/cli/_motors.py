@@ -23,8 +23,7 @@ from servobus.cli._connect import Connection, open_bus
 from servobus.cli._families import Op
 from servobus.cli._output import refused
 from servobus.errors import ServobusError
-from servobus.protocols import get_family
-from servobus.protocols import Command, Reply
+from servobus.protocols import Command, Reply, get_family
 
 __all__ = ["Outcome", "ask", "ask_all", "codecs", "fail_if_any", "plan", "run", "status_of"]
 

@@ -17,8 +17,7 @@ from servobus.cli._connect import Connection, connection_options
 from servobus.cli._motors import run
 from servobus.cli._output import FloatRange
 from servobus.errors import MotorTimeout, TransportError
-from servobus.protocols import get_family
-from servobus.protocols import Command, Reply
+from servobus.protocols import Command, Reply, get_family
 from servobus.recording import CandumpWriter, NewFiles, TapLink, TelemetryWriter, telemetry_row
 from servobus.scheduler import Traffic
 

@@ -61,8 +61,8 @@ class Setup:
 
 
 def _hollow(args: argparse.Namespace) -> Setup:
-    from servobus.protocols.hollow.sim.device import HollowMotor
     from servobus.protocols.hollow.sim.converter import ConverterMode, HollowConverter
+    from servobus.protocols.hollow.sim.device import HollowMotor
 
     ids = range(args.first_id, args.first_id + args.motors)
     if not args.rs485:

@@ -5,8 +5,8 @@ from __future__ import annotations
 from typing import Any, TypeVar
 
 from servobus.frame import Frame
-from servobus.protocols import myactuator as ma
 from servobus.protocols import Reply
+from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.codec import request_frame
 from servobus.protocols.myactuator.sim.device import DEFAULT_TURNAROUND_S, MyActuatorMotor
 

@@ -39,9 +39,9 @@ from servobus.protocols.hollow import (
 )
 from servobus.protocols.hollow.codec import decode_reply_frame, request_frame
 from servobus.protocols.hollow.rs485 import decode_modbus_reply
-from servobus.sim.canbus import CanBusModel
-from servobus.protocols.hollow.sim.device import DEFAULT_TURNAROUND_S, HOLLOW_PLANT_PARAMS, HollowMotor
 from servobus.protocols.hollow.sim.converter import ConverterMode, HollowConverter
+from servobus.protocols.hollow.sim.device import DEFAULT_TURNAROUND_S, HOLLOW_PLANT_PARAMS, HollowMotor
+from servobus.sim.canbus import CanBusModel
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.plant import CurrentControl, Off, PlantParams, PositionControl, SpeedControl
 from servobus.timing import frame_time_s

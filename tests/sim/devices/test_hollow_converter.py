@@ -29,13 +29,13 @@ from servobus.protocols.hollow import (
 )
 from servobus.protocols.hollow.codec import request_frame
 from servobus.protocols.hollow.rs485 import decode_modbus_reply, encode_transparent
-from servobus.sim.device import SerialEmission
-from servobus.protocols.hollow.sim.device import DEFAULT_TURNAROUND_S, HollowMotor
 from servobus.protocols.hollow.sim.converter import (
     DEFAULT_CONVERTER_TURNAROUND_S,
     ConverterMode,
     HollowConverter,
 )
+from servobus.protocols.hollow.sim.device import DEFAULT_TURNAROUND_S, HollowMotor
+from servobus.sim.device import SerialEmission
 from servobus.sim.plant import PlantParams
 from servobus.timing import frame_time_s, uart_time_s
 

@@ -16,9 +16,9 @@ from _serving import serving
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.ids import RS485_BROADCAST_ID
 from servobus.protocols.myactuator.rs485 import decode_rs485_reply, encode_rs485
-from servobus.sim.attach import serve_rs485
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.protocols.myactuator.sim.rs485 import MyActuatorRs485Motor
+from servobus.sim.attach import serve_rs485
 from servobus.sim.plant import Brake, SpeedControl
 from servobus.sim.pty import PtyPort
 

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 from servobus.protocols._family import Family, command_classes
 from servobus.protocols.hollow import bound as _bound
-from servobus.protocols.hollow.ids import MOTOR_IDS as _MOTOR_IDS
 from servobus.protocols.hollow.codec import (
     Revision,
     decode_reply,
@@ -50,6 +49,7 @@ from servobus.protocols.hollow.converter import (
 from servobus.protocols.hollow.ids import (
     DEFAULT_HOST_ID,
 )
+from servobus.protocols.hollow.ids import MOTOR_IDS as _MOTOR_IDS
 from servobus.protocols.hollow.model import DEFAULT_MODEL, MODEL_3507, MODELS, HollowModel
 from servobus.protocols.hollow.replies import ExtendedReply, FdReply, HollowReply, NormalReply
 from servobus.protocols.hollow.rs485 import (

@@ -34,7 +34,6 @@ from __future__ import annotations
 
 from servobus.protocols._family import Family, command_classes
 from servobus.protocols.lk import bound as _bound
-from servobus.protocols.lk.ids import MOTOR_IDS as _MOTOR_IDS
 from servobus.protocols.lk._base import LkCommand, LkReply
 from servobus.protocols.lk.codec import (
     decode_reply,
@@ -74,6 +73,7 @@ from servobus.protocols.lk.commands_control import (
     SpeedControlV235,
     TorqueControl,
 )
+from servobus.protocols.lk.ids import MOTOR_IDS as _MOTOR_IDS
 from servobus.protocols.lk.model import DEFAULT_MODEL, IQ_AMPS_PER_COUNT, LkModel, MotorType, Revision
 from servobus.protocols.lk.params import (
     BusType,

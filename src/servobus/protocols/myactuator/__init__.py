@@ -24,7 +24,6 @@ from __future__ import annotations
 
 from servobus.protocols._family import Family, command_classes
 from servobus.protocols.myactuator import bound as _bound
-from servobus.protocols.myactuator.ids import MOTOR_IDS as _MOTOR_IDS
 from servobus.protocols.myactuator.codec import (
     decode_reply,
     decode_request,
@@ -93,6 +92,7 @@ from servobus.protocols.myactuator.enums import (
     StatusCommand,
     StreamableCommand,
 )
+from servobus.protocols.myactuator.ids import MOTOR_IDS as _MOTOR_IDS
 from servobus.protocols.myactuator.ids import (
     IdKind,
 )

@@ -45,8 +45,8 @@ from servobus.protocols.hollow import (
     ModbusWriteAck,
 )
 from servobus.protocols.hollow.rs485 import decode_modbus_request, decode_transparent, encode_transparent
-from servobus.sim.device import SerialEmission
 from servobus.protocols.hollow.sim.device import HollowMotor
+from servobus.sim.device import SerialEmission
 from servobus.timing import frame_time_s, uart_time_s
 
 __all__ = [

@@ -64,7 +64,6 @@ from servobus.protocols.lk.codec import REQUESTS, check_available, reply_frame
 from servobus.protocols.lk.ids import MULTI_MOTOR_ID, MULTI_MOTOR_IDS, MULTI_MOTOR_REPLY_CODE, request_id
 from servobus.protocols.lk.model import encoder_counts_per_turn
 from servobus.protocols.lk.replies import STATUS2_CODES
-from servobus.sim.device import Emission, ListeningDevice
 from servobus.protocols.lk.sim.control import MotionContext, plant_control
 from servobus.protocols.lk.sim.replies import encoder_reply, single_turn_deg, status1, status2, status3
 from servobus.protocols.lk.sim.state import (
@@ -74,6 +73,7 @@ from servobus.protocols.lk.sim.state import (
     amps_per_count,
     default_settings,
 )
+from servobus.sim.device import Emission, ListeningDevice
 from servobus.sim.plant import (
     Brake,
     Control,

@@ -96,7 +96,6 @@ from servobus.protocols.myactuator.ids import (
     reply_id,
     request_id,
 )
-from servobus.sim.device import Emission, ListeningDevice
 from servobus.protocols.myactuator.sim.state import (
     DEFAULT_ENCODER_COUNTS_PER_TURN,
     DEFAULT_MODEL,
@@ -116,6 +115,7 @@ from servobus.protocols.myactuator.sim.state import (
     status3_reply,
     status_reply,
 )
+from servobus.sim.device import Emission, ListeningDevice
 from servobus.sim.plant import (
     Brake,
     Control,

@@ -29,8 +29,8 @@ from servobus.errors import ProtocolError
 from servobus.protocols.myactuator import ReadCanId, SetCanId
 from servobus.protocols.myactuator.ids import RS485_BROADCAST_ID
 from servobus.protocols.myactuator.rs485 import decode_rs485_request, encode_rs485, rs485_deframer
-from servobus.sim.device import SerialEmission
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+from servobus.sim.device import SerialEmission
 
 __all__ = ["MyActuatorRs485Motor"]
 
