@@ -1,4 +1,4 @@
-"""The simulated MyActuator motor (servobus.protocols.myactuator.sim.device) against myactuator-v4.md and the manuals.
+"""The simulated MyActuator motor against myactuator-v4.md and the manuals.
 
 Requests are built and replies read with the family codec (the host's side), so every test is also a
 round trip through the protocol's second implementation. Manual [000] is V4.4, [002] is V4.3.

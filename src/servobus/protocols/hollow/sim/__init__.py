@@ -1,4 +1,4 @@
-"""The simulated hollow devices: the family's protocol spoken from the device side (sans-IO, see servobus.sim)."""
+"""The simulated hollow devices: the family's protocol from the device side (sans-IO)."""
 
 from servobus.protocols.hollow.sim.converter import ConverterMode, HollowConverter
 from servobus.protocols.hollow.sim.device import HollowMotor
