@@ -35,7 +35,6 @@ import contextlib
 import dataclasses
 import inspect
 import logging
-import re
 from collections import deque
 from collections.abc import AsyncIterator, Awaitable, Callable, Hashable, Iterable, Sequence
 from dataclasses import dataclass
@@ -213,24 +212,14 @@ class MotorStatus:
     reason: str
 
 
-def _snake(name: str) -> str:
-    return re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", name).lower()
-
-
 def command_classes(family: str) -> dict[str, type[Command]]:
-    """The command classes of a built-in family by snake_case name (``ReadStatus2`` -> ``read_status2``):
-    the names :class:`Motor` offers as methods (``await motor.read_status2()``).
+    """The command classes of ``family`` by method name (``ReadStatus2`` -> ``read_status2``): the
+    names :class:`Motor` offers as methods (``await motor.read_status2()``).
 
     Raises:
-        ModuleNotFoundError: ``family`` is not a package under ``servobus.protocols``.
+        ValueError: no family has that name.
     """
-    module = __import__(f"servobus.protocols.{family}", fromlist=["__all__"])
-    out: dict[str, type[Command]] = {}
-    for name in getattr(module, "__all__", ()):
-        obj = getattr(module, name, None)
-        if isinstance(obj, type) and issubclass(obj, Command) and obj.__module__.startswith("servobus."):
-            out[_snake(name)] = obj
-    return out
+    return get_family(family).methods()
 
 
 class MotorFrames:

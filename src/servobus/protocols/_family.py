@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
+import re
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from enum import Enum
@@ -17,7 +18,7 @@ from typing import Any, Generic, TypeVar
 from servobus.protocols._bound import BoundCodec, Broadcast, Framing
 from servobus.protocols._message import Command, Reply
 
-__all__ = ["Family", "SerialLine", "command_classes"]
+__all__ = ["Family", "SerialLine", "command_classes", "method_name"]
 
 M = TypeVar("M")
 
@@ -39,6 +40,11 @@ class SerialLine:
     bauds: tuple[int, ...]
     parity: str = "N"
     aliases: tuple[str, ...] = ()
+
+
+def method_name(cls: type) -> str:
+    """A command class's motor method name: ``ReadStatus2`` -> ``read_status2``."""
+    return re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", cls.__name__).lower()
 
 
 def command_classes(namespace: Iterable[object]) -> tuple[type[Command], ...]:
@@ -96,6 +102,11 @@ class Family(Generic[M]):
     def __post_init__(self) -> None:
         if self.default_revision not in self.revisions:
             raise ValueError(f"{self.name}: default revision {self.default_revision!r} not in revisions")
+
+    def methods(self) -> dict[str, type[Command]]:
+        """The command classes by method name, ``ReadStatus2`` -> ``read_status2``: what a
+        :class:`~servobus.Motor` of this family offers as ``await motor.read_status2()``."""
+        return {method_name(cls): cls for cls in self.commands}
 
     def part(self, name: str) -> Any:
         """The family's plug-in part ``name`` (``"sim"``, ``"cli"``, ``"dbc"``), imported now.
