@@ -10,17 +10,23 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import re
+import sys
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import Any, Generic, TypeVar
+from typing import Any, Generic
+
+if sys.version_info >= (3, 13):
+    from typing import TypeVar
+else:
+    from typing_extensions import TypeVar
 
 from servobus.protocols._bound import BoundCodec, Broadcast, Framing
 from servobus.protocols._message import Command, Reply
 
 __all__ = ["Family", "SerialLine", "command_classes", "method_name"]
 
-M = TypeVar("M")
+M = TypeVar("M", default=Any)  # the typed Motor class (servobus.Motor for a family without one)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

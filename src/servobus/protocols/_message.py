@@ -12,16 +12,22 @@ raw bytes. Never any other exception: a decoder checks lengths and enum values i
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable, Mapping
 from types import NoneType, UnionType
-from typing import Any, ClassVar, Generic, TypeVar, Union, get_args, get_origin
+from typing import Any, ClassVar, Generic, Union, get_args, get_origin
+
+if sys.version_info >= (3, 13):
+    from typing import TypeVar
+else:  # a default for the reply type: a bare ``Command`` is ``Command[Reply]``
+    from typing_extensions import TypeVar
 
 from servobus.errors import ProtocolError
 
 __all__ = ["Command", "Message", "Reply", "construct", "decode_by_code", "require_length"]
 
 M = TypeVar("M", bound="Message")
-R = TypeVar("R", covariant=True)
+R = TypeVar("R", covariant=True, default="Reply")
 
 
 class Message:
