@@ -39,7 +39,7 @@ from collections import deque
 from collections.abc import AsyncIterator, Awaitable, Callable, Hashable, Iterable, Sequence
 from dataclasses import dataclass
 from types import TracebackType
-from typing import Any, NoReturn, Protocol, Self
+from typing import TYPE_CHECKING, Any, NoReturn, Protocol, Self, TypeVar, cast, overload
 
 import anyio
 
@@ -53,12 +53,15 @@ from servobus.errors import (
 )
 from servobus.frame import Frame
 from servobus.metrics import Metrics
-from servobus.protocols import BoundCodec, Command, Reply, get_family
+from servobus.protocols import BoundCodec, Command, Family, Reply, get_family
 from servobus.scheduler import Received, Request, RequestState, Scheduler, Traffic
 from servobus.ticks import Tick, ticks
 from servobus.transports.events import StateChanged, TransportEvent, TransportState
 
 __all__ = ["Bus", "FrameLink", "Motor", "MotorFrames", "MotorStatus", "command_classes"]
+
+R = TypeVar("R")
+M = TypeVar("M", bound="Motor")
 
 logger = logging.getLogger("servobus.bus")
 
@@ -366,10 +369,10 @@ class Motor:
     def __repr__(self) -> str:
         return f"<Motor {self.codec.family} {self.codec.motor_id} on {self.bus.name}>"
 
-    async def request(
-        self, command: Command, *, timeout_s: float | None = None, retries: int = 0
-    ) -> Reply | None:
-        """Send ``command`` and await its reply (None for commands that get none).
+    async def request(self, command: Command[R], *, timeout_s: float | None = None, retries: int = 0) -> R:
+        """Send ``command`` and await its reply: the type its class declares (``Command[StatusReply]``),
+        None for commands that get none. A command to a motor that streams gets no reply either
+        (MyActuator §4.36): then it is None too, whatever its class declares.
 
         Raises:
             ValueError: the command is refused by the codec (before any frame is sent).
@@ -379,22 +382,24 @@ class Motor:
         """
         return await self.bus.request(self, command, timeout_s=timeout_s, retries=retries)
 
-    def __getattr__(self, name: str) -> Callable[..., Awaitable[Reply | None]]:
-        try:
-            cls = self.__dict__["_commands"][name]
-        except KeyError:
-            raise AttributeError(f"{self.codec.family} motors have no command {name!r}") from None
+    if not TYPE_CHECKING:  # the typed subclass (Family.motor) spells each method; this is for the rest
 
-        async def call(
-            *args: Any, timeout_s: float | None = None, retries: int = 0, **fields: Any
-        ) -> Reply | None:
-            if args:  # the command's fields in their declaration order, as the command lists them
-                fields = _positional_fields(cls, name, args, fields)
-            return await self.request(cls(**fields), timeout_s=timeout_s, retries=retries)
+        def __getattr__(self, name: str) -> Callable[..., Awaitable[Reply | None]]:
+            try:
+                cls = self.__dict__["_commands"][name]
+            except KeyError:
+                raise AttributeError(f"{self.codec.family} motors have no command {name!r}") from None
 
-        call.__name__ = name
-        call.__doc__ = f"Send {cls.__name__} and await its reply.\n\n{cls.__doc__ or ''}"
-        return call
+            async def call(
+                *args: Any, timeout_s: float | None = None, retries: int = 0, **fields: Any
+            ) -> Reply | None:
+                if args:  # the command's fields in their declaration order, as the command lists them
+                    fields = _positional_fields(cls, name, args, fields)
+                return await self.request(cls(**fields), timeout_s=timeout_s, retries=retries)
+
+            call.__name__ = name
+            call.__doc__ = f"Send {cls.__name__} and await its reply.\n\n{cls.__doc__ or ''}"
+            return call
 
     def __dir__(self) -> list[str]:
         return [*super().__dir__(), *self._commands]
@@ -612,11 +617,22 @@ class Bus:
 
     # ---- motors ----
 
-    def motor(self, family: str, motor_id: int, **options: Any) -> Motor:
+    @overload
+    def motor(self, family: Family[M], motor_id: int, **options: Any) -> M: ...
+
+    @overload
+    def motor(self, family: str, motor_id: int, **options: Any) -> Motor: ...
+
+    def motor(self, family: Family[Any] | str, motor_id: int, **options: Any) -> Motor:
         """The motor ``motor_id`` of ``family`` on this bus (bound once; the same object after).
 
+        Given the family object (``from servobus.protocols import myactuator as ma``;
+        ``bus.motor(ma.FAMILY, 3)``), the motor is typed: each command is a method a type checker
+        knows, returning the command's reply type. Given the name, the methods are the same but
+        untyped.
+
         Args:
-            family: ``"myactuator"``, ``"lk"``, ``"hollow"`` or a plug-in family.
+            family: the Family, or its name: ``"myactuator"``, ``"lk"``, ``"hollow"`` or a plug-in's.
             motor_id: the motor's id.
             **options: ``revision``, ``model``, ``link`` and family options, as ``Family.bind``.
 
@@ -624,12 +640,13 @@ class Bus:
             ValueError: a bad id or option, or a motor whose identifiers collide with one already on
                 this bus (both named).
         """
-        key = (family, motor_id)
+        found = get_family(family) if isinstance(family, str) else family
+        key = (found.name, motor_id)
         if key in self.motors:
             return self.motors[key]
-        codec = get_family(family).bind(motor_id, **options)
+        codec = found.bind(motor_id, **options)
         self.scheduler.add(codec)
-        motor = Motor(self, codec)
+        motor = (Motor if found.motor is None else found.motor())(self, codec)
         self.motors[key] = motor
         self._by_codec[id(codec)] = motor
         return motor
@@ -665,8 +682,8 @@ class Bus:
     # ---- requests ----
 
     async def request(
-        self, motor: Motor, command: Command, *, timeout_s: float | None = None, retries: int = 0
-    ) -> Reply | None:
+        self, motor: Motor, command: Command[R], *, timeout_s: float | None = None, retries: int = 0
+    ) -> R:
         """:meth:`Motor.request`."""
         if asyncio.get_running_loop() is not self._loop:
             self._not_our_loop()
@@ -676,7 +693,7 @@ class Bus:
         except asyncio.CancelledError:
             self._abandon((request,))
             raise
-        return reply
+        return cast(R, reply)
 
     def _not_our_loop(self) -> NoReturn:
         """A call from a coroutine on another event loop than the one the Bus was entered in (or

@@ -27,7 +27,7 @@ import warnings
 import weakref
 from collections.abc import Callable, Iterable, Iterator
 from types import TracebackType
-from typing import Any, Self
+from typing import Any, Self, TypeVar
 
 from anyio.from_thread import BlockingPortal, start_blocking_portal
 
@@ -40,6 +40,8 @@ from servobus.ticks import Tick
 _logger = logging.getLogger("servobus.sync")
 
 __all__ = ["Bus", "Motor"]
+
+R = TypeVar("R")
 
 
 class Motor:
@@ -77,10 +79,11 @@ class Motor:
         result: Metrics = self._portal.call(self.motor.metrics)
         return result
 
-    def request(self, command: Command, *, timeout_s: float | None = None, retries: int = 0) -> Reply | None:
+    def request(self, command: Command[R], *, timeout_s: float | None = None, retries: int = 0) -> R:
         """Send ``command`` and wait for its reply (see :meth:`servobus.Motor.request`)."""
         call = functools.partial(self.motor.request, command, timeout_s=timeout_s, retries=retries)
-        return self._portal.call(call)
+        result: R = self._portal.call(call)
+        return result
 
     def __getattr__(self, name: str) -> Callable[..., Reply | None]:
         method = getattr(self.__dict__["motor"], name)  # AttributeError for unknown commands
@@ -147,8 +150,8 @@ class Bus:
         return tuple(Motor(self._portal, m) for m in self._bus.commanded)
 
     def request(
-        self, motor: Motor, command: Command, *, timeout_s: float | None = None, retries: int = 0
-    ) -> Reply | None:
+        self, motor: Motor, command: Command[R], *, timeout_s: float | None = None, retries: int = 0
+    ) -> R:
         """:meth:`Motor.request`."""
         return motor.request(command, timeout_s=timeout_s, retries=retries)
 

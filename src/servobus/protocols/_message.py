@@ -19,7 +19,7 @@ from typing import Any, ClassVar, Generic, Union, get_args, get_origin
 
 if sys.version_info >= (3, 13):
     from typing import TypeVar
-else:  # a default for the reply type: a bare ``Command`` is ``Command[Reply]``
+else:  # a default for the reply type: a bare ``Command`` is ``Command[Any]``
     from typing_extensions import TypeVar
 
 from servobus.errors import ProtocolError
@@ -27,7 +27,7 @@ from servobus.errors import ProtocolError
 __all__ = ["Command", "Message", "Reply", "construct", "decode_by_code", "require_length"]
 
 M = TypeVar("M", bound="Message")
-R = TypeVar("R", covariant=True, default="Reply")
+R = TypeVar("R", covariant=True, default=Any)
 
 
 class Message:

@@ -18,6 +18,8 @@ Scales that the manual leaves per motor model live in :class:`HollowModel`.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from servobus.protocols._family import Family, command_classes
 from servobus.protocols.hollow import bound as _bound
 from servobus.protocols.hollow.codec import (
@@ -104,7 +106,18 @@ __all__ = [
     "decode_request",
 ]
 
-FAMILY = Family(
+if TYPE_CHECKING:
+    from servobus.protocols.hollow._motor import Motor
+
+
+def _motor() -> type[Motor]:
+    """The typed motor class (it imports the Bus, so only when a Bus asks)."""
+    from servobus.protocols.hollow._motor import Motor
+
+    return Motor
+
+
+FAMILY: Family[Motor] = Family(
     name="hollow",
     description="hollow-series joint motors: CAN normal/extended, CAN FD, RS-485 transparent and Modbus RTU",
     revisions=(Revision.HO_SERIES,),
@@ -115,6 +128,7 @@ FAMILY = Family(
     bind=_bound.bind,
     broadcast=_bound.broadcast,
     commands=command_classes(globals().values()),
+    motor=_motor,
     motor_ids=_MOTOR_IDS,
     parts={
         "sim": "servobus.protocols.hollow.sim:SIM",

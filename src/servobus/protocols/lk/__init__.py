@@ -32,6 +32,8 @@ Resolutions of the spec's open points (spec §10, §8.2):
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from servobus.protocols._family import Family, command_classes
 from servobus.protocols.lk import bound as _bound
 from servobus.protocols.lk._base import LkCommand, LkReply
@@ -217,7 +219,18 @@ __all__ = [
     "decode_request",
 ]
 
-FAMILY = Family(
+if TYPE_CHECKING:
+    from servobus.protocols.lk._motor import Motor
+
+
+def _motor() -> type[Motor]:
+    """The typed motor class (it imports the Bus, so only when a Bus asks)."""
+    from servobus.protocols.lk._motor import Motor
+
+    return Motor
+
+
+FAMILY: Family[Motor] = Family(
     name="lk",
     description="LK-TECH MS/MF/MH/MG CAN V2.36 and RMD-S/RMD-F V2.35 (0x140+ID -> 0x180+ID / 0x140+ID)",
     revisions=(Revision.V2_36, Revision.V2_35),
@@ -228,6 +241,7 @@ FAMILY = Family(
     bind=_bound.bind,
     broadcast=_bound.broadcast,
     commands=command_classes(globals().values()),
+    motor=_motor,
     motor_ids=_MOTOR_IDS,
     parts={
         "sim": "servobus.protocols.lk.sim:SIM",

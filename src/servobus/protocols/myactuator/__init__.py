@@ -22,6 +22,8 @@ Usage::
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from servobus.protocols._family import Family, command_classes
 from servobus.protocols.myactuator import bound as _bound
 from servobus.protocols.myactuator.codec import (
@@ -231,7 +233,18 @@ __all__ = [
     "revision_from_version_date",
 ]
 
-FAMILY = Family(
+if TYPE_CHECKING:
+    from servobus.protocols.myactuator._motor import Motor
+
+
+def _motor() -> type[Motor]:
+    """The typed motor class (it imports the Bus, so only when a Bus asks)."""
+    from servobus.protocols.myactuator._motor import Motor
+
+    return Motor
+
+
+FAMILY: Family[Motor] = Family(
     name="myactuator",
     description="MyActuator RMD-X and similar on V3 drivers, protocol V4.3/V4.4 (CAN, RS485, motion mode)",
     revisions=(Revision.V4_4, Revision.V4_3),
@@ -242,6 +255,7 @@ FAMILY = Family(
     bind=_bound.bind,
     broadcast=_bound.broadcast,
     commands=command_classes(globals().values()),
+    motor=_motor,
     motor_ids=_MOTOR_IDS,
     parts={
         "sim": "servobus.protocols.myactuator.sim:SIM",

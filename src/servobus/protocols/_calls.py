@@ -1,0 +1,204 @@
+"""The typed motor methods of a family, generated from its command declarations.
+
+``await motor.read_status2()`` is a method of the family's :class:`~servobus.Motor` subclass, one per
+command class, its parameters the command's fields and its return type the command's declared reply
+(``Command[StatusReply]``), so a type checker knows what comes back and refuses a misspelt name. The
+subclass is written into ``protocols/<family>/_motor.py`` by ::
+
+    python -m servobus.protocols._calls            # rewrite the built-in families' files
+    python -m servobus.protocols._calls --check    # exit 1 if one is not current
+
+and checked in; a test runs the check, so a command added without regenerating fails CI. The file is
+generated rather than built at run time because a type checker reads files, not run-time classes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import enum
+import importlib
+import sys
+import types
+import typing
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from servobus.protocols._family import Family
+from servobus.protocols._message import Command
+
+__all__ = ["module_path", "render"]
+
+_BUILTINS = {int, float, bool, str, bytes, type(None), object}
+_NO_DEFAULT = dataclasses.MISSING
+
+
+class _Imports:
+    """The names a generated module imports, by module."""
+
+    def __init__(self) -> None:
+        self.names: dict[str, set[str]] = {}
+
+    def name(self, obj: Any) -> str:
+        """``obj``'s name in the generated module (imported from where it is defined)."""
+        module: str = obj.__module__
+        qualname: str = obj.__qualname__
+        top = qualname.split(".")[0]
+        self.names.setdefault(module, set()).add(top)
+        return qualname
+
+    def lines(self) -> list[str]:
+        return [
+            f"from {module} import {', '.join(sorted(names))}" for module, names in sorted(self.names.items())
+        ]
+
+
+def _annotation(tp: Any, imports: _Imports) -> str:
+    """Source text for the type ``tp``."""
+    if tp is None or tp is type(None):
+        return "None"
+    if tp is Any:
+        return "Any"
+    origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        return " | ".join(_annotation(arg, imports) for arg in typing.get_args(tp))
+    if origin is typing.Literal:
+        return f"Literal[{', '.join(repr(a) for a in typing.get_args(tp))}]"
+    if origin is typing.ClassVar:
+        raise TypeError("a ClassVar is not a field")
+    if origin is not None:
+        args = typing.get_args(tp)
+        inner = ", ".join("..." if a is Ellipsis else _annotation(a, imports) for a in args)
+        base = str(origin.__name__) if origin.__module__ == "builtins" else imports.name(origin)
+        return f"{base}[{inner}]" if args else base
+    if tp in _BUILTINS:
+        return str(tp.__name__)
+    if isinstance(tp, type):
+        return imports.name(tp)
+    raise TypeError(f"cannot write the annotation {tp!r}")
+
+
+def _default(value: Any, imports: _Imports) -> str | None:
+    """Source text for a field's default value, or None where it cannot be written (an object):
+    the method then leaves the field out unless it is given, and the class fills its default."""
+    if isinstance(value, enum.Enum):
+        return f"{imports.name(type(value))}.{value.name}"
+    if value is None or isinstance(value, bool | int | float | str | bytes):
+        return repr(value)
+    if isinstance(value, tuple) and all(isinstance(v, int | float | str) for v in value):
+        return repr(value)
+    return None
+
+
+def _parameters(cls: type[Command], imports: _Imports) -> tuple[list[str], list[str]]:
+    """The method's parameters (fields in declaration order; keyword-only once a field without a
+    default follows one with a default) and the command's keyword arguments."""
+    hints = typing.get_type_hints(cls)
+    params: list[str] = []
+    args: list[str] = []
+    keyword_only = False
+    seen_default = False
+    for f in dataclasses.fields(cls):  # type: ignore[arg-type]
+        if not f.init:
+            continue
+        text = f"{f.name}: {_annotation(hints[f.name], imports)}"
+        arg = f"{f.name}={f.name}"
+        if f.default is not _NO_DEFAULT or f.default_factory is not _NO_DEFAULT:
+            written = _default(f.default, imports) if f.default is not _NO_DEFAULT else None
+            if written is None:
+                written, arg = "_DEFAULT", f"**_given({f.name}={f.name})"
+            text += f" = {written}"
+            seen_default = True
+        elif seen_default and not keyword_only:
+            params.append("*")
+            keyword_only = True
+        params.append(text)
+        args.append(arg)
+    if not keyword_only:
+        params.append("*")
+    return params, args
+
+
+def _summary(cls: type) -> str:
+    doc = (cls.__doc__ or "").strip().splitlines()
+    line = doc[0].strip() if doc else cls.__name__
+    return line.replace('"""', "'''").replace("\\", "\\\\")
+
+
+def render(family: Family[Any]) -> str:
+    """The source of ``family``'s typed Motor subclass."""
+    imports = _Imports()
+    methods: list[str] = []
+    for name, cls in sorted(family.methods().items()):
+        params, args = _parameters(cls, imports)
+        reply = _annotation(cls.REPLY, imports)
+        command = imports.name(cls)
+        signature = ", ".join(["self", *params, "timeout_s: float | None = None", "retries: int = 0"])
+        methods.append(
+            f"    async def {name}({signature}) -> {reply}:\n"
+            f'        """{_summary(cls)}"""\n'
+            f"        return await self.request({command}({', '.join(args)}), timeout_s=timeout_s, "
+            "retries=retries)\n"
+        )
+    head = [
+        f'"""The typed methods of a {family.name} motor, one per command class. Generated by\n'
+        '``python -m servobus.protocols._calls`` from the command declarations: do not edit."""\n',
+        "# ruff: noqa: E501",
+        "",
+        "from __future__ import annotations",
+        "",
+        "from typing import Any, Literal  # noqa: F401",
+        "",
+        "from servobus.bus import Motor as _Motor",
+        *imports.lines(),
+        "",
+        '__all__ = ["Motor"]',
+        "",
+        "#: a field left to the command's own default (one a signature cannot spell)",
+        "_DEFAULT: Any = object()",
+        "",
+        "",
+        "def _given(**fields: Any) -> dict[str, Any]:",
+        "    return {name: value for name, value in fields.items() if value is not _DEFAULT}",
+        "",
+        "",
+        "class Motor(_Motor):",
+        f'    """A {family.name} motor on a Bus (``bus.motor(FAMILY, id)``): a typed method per command."""',
+        "",
+    ]
+    return "\n".join(head) + "\n" + "\n".join(methods)
+
+
+def module_path(package: str) -> Path:
+    """Where the generated module of the family package ``package`` lives (beside its ``__init__``)."""
+    module = importlib.import_module(package)
+    assert module.__file__ is not None
+    return Path(module.__file__).parent / "_motor.py"
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    from servobus.protocols import FAMILIES, get_family
+
+    parser = argparse.ArgumentParser(
+        prog="python -m servobus.protocols._calls", description=__doc__.split("\n")[0]
+    )
+    parser.add_argument("--check", action="store_true", help="exit 1 if a generated file is not current")
+    args = parser.parse_args(argv)
+    stale = []
+    for name, target in FAMILIES.items():
+        family = get_family(name)
+        path = module_path(target.partition(":")[0])
+        text = render(family)
+        if path.exists() and path.read_text() == text:
+            continue
+        stale.append(path)
+        if not args.check:
+            path.write_text(text)
+    for path in stale:
+        print(f"{'not current' if args.check else 'written'}: {path}", file=sys.stderr)
+    return 1 if stale and args.check else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
