@@ -32,6 +32,7 @@ __all__ = ["module_path", "render"]
 
 _BUILTINS = {int, float, bool, str, bytes, type(None), object}
 _NO_DEFAULT = dataclasses.MISSING
+_LINE_LENGTH = 110  # pyproject.toml's, which ruff's import sorting keeps to even where E501 is off
 
 
 class _Imports:
