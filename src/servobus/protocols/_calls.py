@@ -33,6 +33,7 @@ __all__ = ["module_path", "render"]
 _BUILTINS = {int, float, bool, str, bytes, type(None), object}
 _NO_DEFAULT = dataclasses.MISSING
 _LINE_LENGTH = 110  # pyproject.toml's, which ruff's import sorting keeps to even where E501 is off
+_LINE_LENGTH = 110  # pyproject.toml's, which ruff's import sorting keeps to even where E501 is off
 
 
 class _Imports:
@@ -50,9 +51,20 @@ class _Imports:
         return qualname
 
     def lines(self) -> list[str]:
-        return [
-            f"from {module} import {', '.join(sorted(names))}" for module, names in sorted(self.names.items())
-        ]
+        """The import statements, sorted and wrapped the way ruff's isort writes them."""
+        out = []
+        for module in sorted(self.names, key=str.lower):
+            names = sorted(self.names[module], key=_isort_key)
+            line = f"from {module} import {', '.join(names)}"
+            if len(line) > _LINE_LENGTH:
+                line = f"from {module} import (\n" + "".join(f"    {n},\n" for n in names) + ")"
+            out.append(line)
+        return out
+
+
+def _isort_key(name: str) -> tuple[int, str]:
+    """isort's order by type: CONSTANTS, then Classes, then the rest; case-insensitive within."""
+    return (0 if name.isupper() else 1 if name[:1].isupper() else 2, name.lower())
 
 
 def _annotation(tp: Any, imports: _Imports) -> str:

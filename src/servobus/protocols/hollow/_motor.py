@@ -9,7 +9,19 @@ from typing import Any, Literal  # noqa: F401
 
 from servobus.bus import Motor as _Motor
 from servobus.protocols._message import Reply
-from servobus.protocols.hollow.commands import CanMode, CanModeSwitch, ControlMode, IncrementalSetpoint, PiGain, PiMultiplier, SelectMode, SetZero, Setpoint, Start, Stop
+from servobus.protocols.hollow.commands import (
+    CanMode,
+    CanModeSwitch,
+    ControlMode,
+    IncrementalSetpoint,
+    PiGain,
+    PiMultiplier,
+    SelectMode,
+    Setpoint,
+    SetZero,
+    Start,
+    Stop,
+)
 from servobus.protocols.hollow.commands_fd import FdCommand
 from servobus.protocols.hollow.converter import ConverterGain, ConverterPdGains, ConverterPiMultiplier
 from servobus.protocols.hollow.model import HollowModel

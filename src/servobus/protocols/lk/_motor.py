@@ -9,12 +9,50 @@ from typing import Any, Literal  # noqa: F401
 
 from servobus.bus import Motor as _Motor
 from servobus.protocols._message import Reply
-from servobus.protocols.lk.commands import BrakeControl, CalibrateEncoder, ClearErrors, MotorOff, MotorRun, MotorStop, ReadAcceleration, ReadEncoder, ReadMultiTurnAngle, ReadSingleTurnAngle, ReadStatus1, ReadStatus2, ReadStatus3, SetZeroRam, SetZeroRom, WriteAcceleration, WriteEncoderOffset
-from servobus.protocols.lk.commands_control import IncrementalPosition, IncrementalPositionSpeed, MultiMotorTorque, MultiTurnPosition, MultiTurnPositionSpeed, OpenLoopControl, SingleTurnPosition, SingleTurnPositionSpeed, SingleTurnPositionSpeedV235, SingleTurnPositionV235, SpeedControl, SpeedControlV235, TorqueControl
+from servobus.protocols.lk.commands import (
+    BrakeControl,
+    CalibrateEncoder,
+    ClearErrors,
+    MotorOff,
+    MotorRun,
+    MotorStop,
+    ReadAcceleration,
+    ReadEncoder,
+    ReadMultiTurnAngle,
+    ReadSingleTurnAngle,
+    ReadStatus1,
+    ReadStatus2,
+    ReadStatus3,
+    SetZeroRam,
+    SetZeroRom,
+    WriteAcceleration,
+    WriteEncoderOffset,
+)
+from servobus.protocols.lk.commands_control import (
+    IncrementalPosition,
+    IncrementalPositionSpeed,
+    MultiMotorTorque,
+    MultiTurnPosition,
+    MultiTurnPositionSpeed,
+    OpenLoopControl,
+    SingleTurnPosition,
+    SingleTurnPositionSpeed,
+    SingleTurnPositionSpeedV235,
+    SingleTurnPositionV235,
+    SpeedControl,
+    SpeedControlV235,
+    TorqueControl,
+)
 from servobus.protocols.lk.model import MotorType
 from servobus.protocols.lk.params import ControlParam, ParamId, PidGains, SettingParam
 from servobus.protocols.lk.params_v235 import ReadParam, WriteParamRam, WriteParamRom
-from servobus.protocols.lk.params_v236 import ReadControlParam, ReadSetting, SaveSettings, WriteControlParam, WriteSetting
+from servobus.protocols.lk.params_v236 import (
+    ReadControlParam,
+    ReadSetting,
+    SaveSettings,
+    WriteControlParam,
+    WriteSetting,
+)
 from servobus.protocols.lk.states import BrakeAction, SpinDirection
 
 __all__ = ["Motor"]

@@ -9,9 +9,58 @@ from typing import Any, Literal  # noqa: F401
 
 from servobus.bus import Motor as _Motor
 from servobus.protocols._message import Reply
-from servobus.protocols.myactuator.commands import ActiveReply, BrakeLock, BrakeRelease, FunctionControl, MotorShutdown, MotorStop, ReadAcceleration, ReadCanId, ReadEncoderOffset, ReadEncoderPosition, ReadEncoderRaw, ReadModel, ReadModelPart, ReadMultiTurnAngle, ReadPid, ReadRunMode, ReadRunTime, ReadSingleTurnAngle, ReadSingleTurnEncoder, ReadStatus1, ReadStatus2, ReadStatus3, ReadVersionDate, SetBaudRate, SetCanId, SetCommTimeout, SystemReset, WriteAcceleration, WriteCurrentPositionAsZero, WriteEncoderZero, WritePidRam, WritePidRom
-from servobus.protocols.myactuator.commands_control import AbsolutePositionControl, ForcePositionControl, IncrementalPositionControl, PositionSpeedFeedforward, PositionTorqueFeedforward, SingleTurnPositionControl, SpeedControl, TorqueControl
-from servobus.protocols.myactuator.enums import AccelIndex, FunctionIndex, PidIndex, Rs485MotionMode, SpinDirection, StreamableCommand
+from servobus.protocols.myactuator.commands import (
+    ActiveReply,
+    BrakeLock,
+    BrakeRelease,
+    FunctionControl,
+    MotorShutdown,
+    MotorStop,
+    ReadAcceleration,
+    ReadCanId,
+    ReadEncoderOffset,
+    ReadEncoderPosition,
+    ReadEncoderRaw,
+    ReadModel,
+    ReadModelPart,
+    ReadMultiTurnAngle,
+    ReadPid,
+    ReadRunMode,
+    ReadRunTime,
+    ReadSingleTurnAngle,
+    ReadSingleTurnEncoder,
+    ReadStatus1,
+    ReadStatus2,
+    ReadStatus3,
+    ReadVersionDate,
+    SetBaudRate,
+    SetCanId,
+    SetCommTimeout,
+    SystemReset,
+    WriteAcceleration,
+    WriteCurrentPositionAsZero,
+    WriteEncoderZero,
+    WritePidRam,
+    WritePidRom,
+)
+from servobus.protocols.myactuator.commands_control import (
+    AbsolutePositionControl,
+    ForcePositionControl,
+    IncrementalPositionControl,
+    PositionSpeedFeedforward,
+    PositionTorqueFeedforward,
+    SingleTurnPositionControl,
+    SpeedControl,
+    TorqueControl,
+)
+from servobus.protocols.myactuator.enums import (
+    AccelIndex,
+    FunctionIndex,
+    PidIndex,
+    Rs485MotionMode,
+    SpinDirection,
+    StreamableCommand,
+)
 from servobus.protocols.myactuator.motion import MotionCommand, MotionScales
 from servobus.protocols.myactuator.rs485_motion import Rs485MotionCommand
 
