@@ -13,10 +13,11 @@ from __future__ import annotations
 
 from servobus import _plugins
 from servobus.protocols._bound import BoundCodec, Broadcast, FrameKind, Framing, check_bus
-from servobus.protocols._family import Family
+from servobus.protocols._family import Family, SerialLine
 from servobus.protocols._message import Command, Message, Reply
 
 __all__ = [
+    "DEFAULT_FAMILY",
     "FAMILIES",
     "BoundCodec",
     "Broadcast",
@@ -26,6 +27,7 @@ __all__ = [
     "Framing",
     "Message",
     "Reply",
+    "SerialLine",
     "available_families",
     "check_bus",
     "get_family",
@@ -38,6 +40,9 @@ FAMILIES: dict[str, str] = {
 }
 
 ENTRY_POINT_GROUP = "servobus.families"
+
+#: The family a command line uses when none is named (the registry's first).
+DEFAULT_FAMILY = next(iter(FAMILIES))
 
 
 def available_families() -> dict[str, str]:
