@@ -20,6 +20,7 @@ manual section); ``docs/special-values.md`` is :func:`render_markdown` of them, 
 
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -181,12 +182,14 @@ class SpecialValue:
 
 
 def all_special_values() -> tuple[SpecialValue, ...]:
-    """Every family's rows, in family order."""
-    from servobus.protocols.hollow.special import SPECIAL_VALUES as hollow
-    from servobus.protocols.lk.special import SPECIAL_VALUES as lk
-    from servobus.protocols.myactuator.special import SPECIAL_VALUES as myactuator
+    """Every built-in family's rows (its ``special`` module's ``SPECIAL_VALUES``), in registry order."""
+    from servobus.protocols import FAMILIES
 
-    return (*myactuator, *lk, *hollow)
+    rows: list[SpecialValue] = []
+    for target in FAMILIES.values():
+        package = target.partition(":")[0]
+        rows += importlib.import_module(f"{package}.special").SPECIAL_VALUES
+    return tuple(rows)
 
 
 _HEADER = """\
