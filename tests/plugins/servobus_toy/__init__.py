@@ -2,7 +2,8 @@
 
 It is the example of the family contract (``servobus.protocols.Family``): a package that declares its
 commands once (:mod:`.messages`), binds one motor's codec on Frames (:mod:`.codec`), simulates its
-motors (:mod:`.device`), and exposes one ``FAMILY``. Its distribution registers it::
+motors (:mod:`.device`), has its typed motor methods generated from the declarations (:mod:`._motor`),
+and exposes one ``FAMILY``. Its distribution registers it::
 
     [servobus.families]
     toy = servobus_toy:FAMILY
@@ -12,6 +13,8 @@ parts of servobus use it without a line of servobus changed.
 """
 
 from __future__ import annotations
+
+from typing import TYPE_CHECKING
 
 from servobus.protocols import Family
 from servobus_toy.codec import COMMANDS, LINKS, MOTOR_IDS, bind, broadcast, decode_reply, decode_request
@@ -40,7 +43,19 @@ __all__ = [
     "WriteSpeedLimit",
 ]
 
-FAMILY: Family = Family(
+if TYPE_CHECKING:
+    from servobus_toy._motor import Motor
+
+
+def _motor() -> type[Motor]:
+    """The typed motor class, generated from the declarations by ``servobus.protocols._calls.render``
+    (imported only when a Bus asks: it imports the Bus)."""
+    from servobus_toy._motor import Motor
+
+    return Motor
+
+
+FAMILY: Family[Motor] = Family(
     name="toy",
     description="an invented servo protocol: the example of a family packaged apart from servobus",
     revisions=tuple(Revision),
@@ -52,5 +67,6 @@ FAMILY: Family = Family(
     broadcast=broadcast,
     commands=COMMANDS,
     motor_ids=MOTOR_IDS,
+    motor=_motor,
     parts={},
 )
