@@ -101,3 +101,17 @@ def test_the_check_finds_a_stale_file(tmp_path: Path, monkeypatch: pytest.Monkey
     assert _calls.main(["--check"]) == 1
     assert stale.read_text() == "# an older version\n"
     assert _calls.main([]) == 0 and _calls.main(["--check"]) == 1  # all three write the one path
+
+
+def test_the_readme_s_bus_examples_pass_mypy_strict(tmp_path: Path) -> None:
+    import re
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    blocks = re.findall(r"<!-- (?:quickstart|service|signals):[^\n]*-->\n```python\n(.*?)```", readme, re.S)
+    assert len(blocks) == 3
+    for index, code in enumerate(blocks):
+        (tmp_path / f"block{index}.py").write_text(code)
+    stdout, stderr, status = mypy_api.run(
+        ["--strict", "--no-incremental", "--cache-dir", str(tmp_path / ".cache"), str(tmp_path)]
+    )
+    assert status == 0, stdout + stderr
