@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import math
 import signal
 from collections.abc import Callable, Coroutine, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -20,8 +19,8 @@ import click
 
 from servobus.bus import Motor
 from servobus.cli._connect import Connection, open_bus
-from servobus.cli._families import Op
 from servobus.cli._output import refused
+from servobus.cli.plugin import STATUS_SOURCES, Op
 from servobus.errors import ServobusError
 from servobus.protocols import Command, Reply, get_family
 
@@ -158,17 +157,8 @@ def ask(conn: Connection, planned: Sequence[Sequence[Command]]) -> list[Outcome]
     return run(go())
 
 
-#: the columns of a status, and where each family's replies keep them: (field, factor) in order
+#: the columns of a status (where the replies keep them: :data:`servobus.cli.plugin.STATUS_SOURCES`)
 STATUS_COLUMNS = ("angle_deg", "speed_dps", "current_a", "torque_nm", "temperature_c", "voltage_v", "errors")
-_DEG_PER_RAD = 180.0 / math.pi
-_SOURCES: dict[str, tuple[tuple[str, float], ...]] = {
-    "angle_deg": (("angle_deg", 1.0), ("position_deg", 1.0), ("position_rad", _DEG_PER_RAD)),
-    "speed_dps": (("speed_dps", 1.0), ("speed_rad_s", _DEG_PER_RAD), ("velocity_rad_s", _DEG_PER_RAD)),
-    "current_a": (("current_a", 1.0),),
-    "torque_nm": (("torque_nm", 1.0),),
-    "temperature_c": (("temperature_c", 1.0),),
-    "voltage_v": (("voltage_v", 1.0),),
-}
 
 
 def status_of(replies: Sequence[Reply | None]) -> dict[str, Any]:
@@ -183,7 +173,7 @@ def status_of(replies: Sequence[Reply | None]) -> dict[str, Any]:
     for reply in replies:
         if reply is None:
             continue
-        for column, sources in _SOURCES.items():
+        for column, sources in STATUS_SOURCES.items():
             if out[column] is not None:
                 continue
             for name, factor in sources:

@@ -1,5 +1,5 @@
 """``servobus config list|get|set``: the motors' settings (PID, acceleration, communication timeout,
-CAN-id filter, limits), by key, per family (:mod:`servobus.cli._settings`)."""
+CAN-id filter, limits), by key: the family's ``cli`` part says which (:mod:`servobus.cli.plugin`)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from typing import Any
 import click
 
 from servobus.cli._connect import Connection, connection_options, family_option
-from servobus.cli._families import Op
+from servobus.cli._families import setting, settings
 from servobus.cli._motors import Outcome, ask, fail_if_any, plan
 from servobus.cli._output import (
     SETTINGS,
@@ -23,7 +23,7 @@ from servobus.cli._output import (
     table,
     yes_option,
 )
-from servobus.cli._settings import Setting, setting, settings
+from servobus.cli.plugin import Op, Setting
 
 __all__ = ["config"]
 

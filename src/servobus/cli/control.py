@@ -1,7 +1,7 @@
 """The motor commands: ``status``, ``monitor``, set-points (``move``, ``speed``, ``torque``, ``mit``) and
 one-shots (``stop``, ``off``, ``brake``, ``zero``, ``set-id``, ``clear-errors``, ``reset``).
 
-Which command class each sends is the family's table (:mod:`servobus.cli._families`); here are the
+Which command class each sends is the family's ``cli`` part (:mod:`servobus.cli.plugin`); here are the
 options (units in their names), the confirmation of ROM writes and id changes, and the output.
 Set-points are resent at ``--rate-hz`` until ``--duration`` ends, a move arrives, or Ctrl-C (or
 SIGTERM); then the motors get the Bus's safe stop (``--keep`` sends once and leaves them running). A
@@ -21,7 +21,7 @@ from rich.live import Live
 from servobus.bus import Motor
 from servobus.cli import _ids
 from servobus.cli._connect import Connection, connection_options, open_bus
-from servobus.cli._families import Op, op, status_reads
+from servobus.cli._families import current_limit_users, op, status_reads
 from servobus.cli._motors import (
     STATUS_COLUMNS,
     Outcome,
@@ -276,7 +276,7 @@ def _drive(
     if values.get("max_current_a") is not None and not entry.current_limit:
         raise click.UsageError(
             f"{conn.family} {name} carries no current limit: drop --max-current-a "
-            "(it is for hollow move and speed, LK speed)"
+            f"(it is for {current_limit_users()})"
         )
     planned = plan(conn, entry, values)
     repeat = entry.repeat
@@ -554,7 +554,7 @@ def mit(
 
 
 def _one_shot(conn: Connection, name: str, values: Mapping[str, Any], *, yes: bool, as_json: bool) -> None:
-    entry: Op = op(conn.family, name)
+    entry = op(conn.family, name)
     planned = plan(conn, entry, values)
     if entry.rom:
         ids = ", ".join(str(i) for i in conn.motor_ids)

@@ -1,18 +1,18 @@
 """``servobus scan``: which motors answer, and what they are.
 
-Each id is probed with the family's status read (a read changes nothing on a motor), with a progress
-bar; the motors that answered are then asked what the family can tell: revision, model (MyActuator
-0xB5), firmware date (0xB2), state and error flags. A per-family table (:data:`DETAILS`) says how.
-MyActuator motors are probed as the revision given (V4.4 by default) and then asked for their model
-in the revision their firmware date implies.
+Each id is probed with the family's first status read (a read changes nothing on a motor), with a
+progress bar; the motors that answered are then asked what the family can tell: revision, model,
+firmware date, state and error flags. The family's ``cli`` part says how (``identify`` and
+``describe``, :class:`servobus.cli.plugin.Query`): a motor is probed as the revision given (the
+family's default) and then described in the revision its ``identify`` named (MyActuator: the one its
+firmware date implies).
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
-from collections.abc import Awaitable, Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Sequence
 from typing import Any
 
 import click
@@ -20,62 +20,16 @@ from rich.progress import Progress
 
 from servobus.bus import Bus, Motor
 from servobus.cli._connect import Connection, connection_options
-from servobus.cli._families import status_reads
-from servobus.cli._motors import run
+from servobus.cli._families import cli_part, status_reads
+from servobus.cli._motors import codecs, run
 from servobus.cli._output import SETTINGS, console, emit_json, examples, json_option, jsonable, table
+from servobus.cli.plugin import Query
 from servobus.errors import ServobusError
 
 __all__ = ["scan"]
 
 COLUMNS = ("id", "family", "revision", "model", "firmware", "state", "errors")
 DEFAULT_IDS = tuple(range(1, 33))
-
-
-async def _myactuator_identify(motor: Motor, timeout_s: float | None) -> dict[str, Any]:
-    """Firmware date and the revision it implies (0xB2 reads the same in V4.3 and V4.4)."""
-    from servobus.protocols import myactuator as ma
-
-    date = await motor.request(ma.ReadVersionDate(), timeout_s=timeout_s)
-    version = getattr(date, "version_date", None)
-    if not version:
-        return {}
-    return {"firmware": str(version), "revision": ma.revision_from_version_date(version).name}
-
-
-async def _myactuator_describe(motor: Motor, timeout_s: float | None) -> dict[str, Any]:
-    """Model (0xB5, in the motor's revision's form) and operating mode (0x70)."""
-    from servobus.protocols import myactuator as ma
-
-    out: dict[str, Any] = {}
-    if motor.codec.revision is ma.Revision.V4_4:
-        parts = [await motor.request(ma.ReadModelPart(part=part), timeout_s=timeout_s) for part in (1, 2, 3)]
-        out["model"] = ma.join_model(p for p in parts if isinstance(p, ma.ModelPartReply))
-    else:
-        out["model"] = getattr(await motor.request(ma.ReadModel(), timeout_s=timeout_s), "model", None)
-    mode = getattr(await motor.request(ma.ReadRunMode(), timeout_s=timeout_s), "mode", None)
-    if mode is not None:
-        out["state"] = jsonable(mode)
-    return out
-
-
-async def _nothing(motor: Motor, timeout_s: float | None) -> dict[str, Any]:
-    return {}
-
-
-@dataclass(frozen=True, slots=True)
-class Details:
-    """What to ask a motor that answered the probe: ``identify`` on the probe's binding (may name the
-    revision), then ``describe`` on a binding in that revision; each given the reply timeout."""
-
-    identify: Callable[[Motor, float | None], Awaitable[dict[str, Any]]] = _nothing
-    describe: Callable[[Motor, float | None], Awaitable[dict[str, Any]]] = _nothing
-
-
-#: family -> what else a motor can say about itself
-DETAILS: dict[str, Details] = {
-    "myactuator": Details(_myactuator_identify, _myactuator_describe),
-    "lk": Details(),
-}
 
 
 @click.command(
@@ -93,7 +47,7 @@ def scan(conn: Connection, as_json: bool) -> None:
     state and error flags of those that answer. (With --sim N the simulated motors are 1..N.)"""
     reads = status_reads(conn.family)  # refused here for a family without a read-only request
     ids = conn.ids or DEFAULT_IDS
-    rows = run(_scan(conn, ids, reads.first(None, {})[0], as_json))
+    rows = run(_scan(conn, ids, reads.first(codecs(conn)[0], {})[0], as_json))
     if as_json:
         emit_json(rows)
     elif rows:
@@ -108,7 +62,7 @@ def _span(ids: Sequence[int]) -> str:
 
 async def _scan(conn: Connection, ids: Sequence[int], probe: Any, quiet: bool) -> list[dict[str, Any]]:
     transport = dataclasses.replace(conn, ids=()).transport()  # --sim N: motors 1..N, whatever is probed
-    details = DETAILS[conn.family]
+    part = cli_part(conn.family)
     rows: list[dict[str, Any]] = []
     async with transport:
         async with Bus(transport, safe=None) as bus:
@@ -128,7 +82,7 @@ async def _scan(conn: Connection, ids: Sequence[int], probe: Any, quiet: bool) -
                     row["errors"] = jsonable(getattr(reply, faults)) if faults else None
                     row["state"] = jsonable(getattr(reply, "motor_state", None))
                     with contextlib.suppress(ServobusError):
-                        row.update(await details.identify(motor, conn.timeout_s))
+                        row.update(await _ask(motor, part.identify, conn.timeout_s))
                     rows.append(row)
                     progress.advance(task)
         async with Bus(transport, safe=None) as bus:  # a fresh Bus: each motor in its own revision
@@ -138,7 +92,19 @@ async def _scan(conn: Connection, ids: Sequence[int], probe: Any, quiet: bool) -
                     options["revision"] = row["revision"]
                 try:
                     motor = bus.motor(conn.family, row["id"], **options)
-                    row.update(await details.describe(motor, conn.timeout_s))
+                    row.update(await _ask(motor, part.describe, conn.timeout_s))
                 except ServobusError as exc:
                     row["state"] = f"answered the probe, then: {exc}"
     return rows
+
+
+async def _ask(motor: Motor, query: Query | None, timeout_s: float | None) -> dict[str, Any]:
+    """The columns ``query`` makes of the motor's replies to its reads (nothing without a query).
+
+    Raises:
+        ServobusError: a read was not answered.
+    """
+    if query is None:
+        return {}
+    replies = [await motor.request(read, timeout_s=timeout_s) for read in query.reads(motor.codec)]
+    return {key: jsonable(value) for key, value in query.columns(motor.codec, replies).items()}
