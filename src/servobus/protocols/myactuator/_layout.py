@@ -25,7 +25,7 @@ from servobus.protocols._layout import (
     check_payload,
     construct,
 )
-from servobus.protocols._message import Message
+from servobus.protocols._message import Command, Message, R
 from servobus.protocols.myactuator.revision import ALL_REVISIONS, Revision, revision_names
 
 __all__ = [
@@ -39,6 +39,7 @@ __all__ = [
     "FlagsField",
     "Float32Field",
     "LayoutMismatch",
+    "MyActuatorCommand",
     "MyActuatorMessage",
     "OpenEnumField",
     "StepField",
@@ -84,5 +85,14 @@ class MyActuatorMessage(Message):
 
 class Fixed(Layout, MyActuatorMessage):
     """A MyActuator payload of 8 bytes (:class:`~servobus.protocols._layout.Layout`)."""
+
+    __slots__ = ()
+
+
+class MyActuatorCommand(Fixed, Command[R]):
+    """A MyActuator request with the standard 8-byte layout, generic in its reply:
+    ``class ReadStatus2(MyActuatorCommand[StatusReply])``. Its declarations (``READ``, ``SLOW``, ...,
+    see :class:`~servobus.protocols._message.Command`) are the only place the codec tables, the bound
+    codec's rules and the simulator's dispatch learn them from."""
 
     __slots__ = ()

@@ -46,13 +46,14 @@ from servobus.protocols.myactuator._fast import (
 )
 from servobus.protocols.myactuator._layout import PAYLOAD_SIZE, Fixed, MyActuatorMessage
 from servobus.protocols.myactuator.codec import (
+    COMMANDS,
     NO_REPLY,
     REPLIES,
     check_available,
     decode_reply,
     decode_standard_reply,
 )
-from servobus.protocols.myactuator.enums import STATUS_COMMAND_REVISIONS, FunctionIndex, StatusCommand
+from servobus.protocols.myactuator.enums import FunctionIndex
 from servobus.protocols.myactuator.ids import (
     BROADCAST_ID,
     ID_SETTING_CODE,
@@ -82,56 +83,16 @@ LINKS = ("can", "rs485")
 #: bus. Writes to ROM/flash and the brake take longer (tens of ms on the bench, not stated in the manual).
 DEFAULT_TIMEOUT_S = {"can": 0.02, "rs485": 0.05}
 SLOW_TIMEOUT_S = 0.5
-_SLOW = (
-    cmd.WritePidRom,
-    cmd.WriteEncoderZero,
-    cmd.WriteCurrentPositionAsZero,
-    cmd.FunctionControl,
-    cmd.SetCanId,
-    cmd.SetCommTimeout,
-    cmd.BrakeRelease,
-    cmd.BrakeLock,
-)
-#: Commands that only read: the only ones an automatic retry may resend.
-_READS = (
-    cmd.ReadPid,
-    cmd.ReadAcceleration,
-    cmd.ReadEncoderPosition,
-    cmd.ReadEncoderRaw,
-    cmd.ReadEncoderOffset,
-    cmd.ReadRunMode,
-    cmd.ReadSingleTurnEncoder,
-    cmd.ReadMultiTurnAngle,
-    cmd.ReadSingleTurnAngle,
-    cmd.ReadStatus1,
-    cmd.ReadStatus2,
-    cmd.ReadStatus3,
-    cmd.ReadRunTime,
-    cmd.ReadVersionDate,
-    cmd.ReadCanId,
-    cmd.ReadModel,
-    cmd.ReadModelPart,
-)
-# isinstance against those tuples, once per command class (the hot path asks per request)
+# Each command class declares READ, SLOW, ECHO and NOTED once (protocols/_message.py); the bound codec
+# reads them per class, and caches the answer (the hot path asks per request).
 _IS_SLOW: dict[type, bool] = {}
 _IS_READ: dict[type, bool] = {}
 _IS_NOTED: dict[type, bool] = {}
-#: Commands that change how the motor talks (:meth:`MyActuatorCodec.note_sent`).
-_NOTED = (cmd.ActiveReply, cmd.FunctionControl, cmd.SystemReset)
 _ERROR_REPORT_CODE = cmd.ReadStatus1.CODE
-#: Echo replies that carry the value their request wrote (§0): keyed with it (``echo_key``). Not the
-#: fixed all-zero echoes (nothing to tell apart), 0xB3 (the manuals print an all-zero reply to it,
-#: §9 item 8) nor 0x79 (its reply comes on a shared identifier).
-_VALUE_ECHO_CODES = frozenset(
-    c.CODE
-    for c in (
-        cmd.FunctionControl,
-        cmd.WritePidRam,
-        cmd.WritePidRom,
-        cmd.WriteAcceleration,
-        cmd.WriteEncoderZero,
-    )
-)
+#: Echo replies that carry the value their request wrote (§0, declared ``ECHO``): keyed with it
+#: (``echo_key``). Not the fixed all-zero echoes (nothing to tell apart), 0xB3 (the manuals print an
+#: all-zero reply to it, §9 item 8) nor 0x79 (its reply comes on a shared identifier).
+_VALUE_ECHO_CODES = frozenset(c.CODE for c in COMMANDS if c.ECHO)
 
 
 def _fast_table(revision: Revision) -> dict[int, Callable[[bytes], Any]]:
@@ -145,10 +106,6 @@ def _fast_table(revision: Revision) -> dict[int, Callable[[bytes], Any]]:
             candidates[0].message.decode, "__func__", 0
         ):
             continue  # echoes decode through their command class
-        if code in StatusCommand.__members__.values() and revision not in STATUS_COMMAND_REVISIONS.get(
-            StatusCommand(code), frozenset(Revision)
-        ):
-            continue
         fast = compile_fixed(candidates[0].message)
         if fast is not None:
             table[code] = fast
@@ -320,21 +277,21 @@ class MyActuatorCodec(CodecBase):
         """How long to wait for the reply to ``command``."""
         slow = _IS_SLOW.get(type(command))
         if slow is None:
-            slow = _IS_SLOW[type(command)] = isinstance(command, _SLOW)
+            slow = _IS_SLOW[type(command)] = command.SLOW
         return SLOW_TIMEOUT_S if slow else DEFAULT_TIMEOUT_S[self.link]
 
     def retry_safe(self, command: Command) -> bool:
         """True for reads: resending them changes nothing on the motor."""
         read = _IS_READ.get(type(command))
         if read is None:
-            read = _IS_READ[type(command)] = isinstance(command, _READS)
+            read = _IS_READ[type(command)] = command.READ
         return read
 
     def note_sent(self, command: Command) -> None:
         """Track what ``command`` changes in how the motor talks (0xB6 streams, 0x9A reports, reset)."""
         noted = _IS_NOTED.get(type(command))
         if noted is None:
-            noted = _IS_NOTED[type(command)] = isinstance(command, _NOTED)
+            noted = _IS_NOTED[type(command)] = command.NOTED
         if not noted:
             return
         if isinstance(command, cmd.ActiveReply):
@@ -473,6 +430,16 @@ class _Rs485FrameDeframer:
 
     def idle(self) -> list[Frame]:
         return [Frame(arbitration_id=raw[1], data=raw[3:-2], is_serial=True) for raw in self._inner.idle()]
+
+    @property
+    def discarded_bytes(self) -> int:
+        """Bytes dropped as noise (the serial transport's ``stats()`` reads it)."""
+        return self._inner.discarded_bytes
+
+    @property
+    def crc_errors(self) -> int:
+        """Frames that failed their check (the serial transport's ``stats()`` reads it)."""
+        return self._inner.crc_errors
 
 
 def bind(

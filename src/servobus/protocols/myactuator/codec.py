@@ -18,16 +18,20 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from enum import IntEnum
+from types import ModuleType
 from typing import Any, cast
 
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
+from servobus.protocols._family import command_classes
 from servobus.protocols._message import Command, Reply
 from servobus.protocols.myactuator import commands as cmd
 from servobus.protocols.myactuator import commands_control as ctl
+from servobus.protocols.myactuator import motion, rs485_motion
 from servobus.protocols.myactuator import replies as rep
-from servobus.protocols.myactuator._layout import LayoutMismatch, MyActuatorMessage
-from servobus.protocols.myactuator.enums import STATUS_COMMAND_REVISIONS, StatusCommand
+from servobus.protocols.myactuator._layout import LayoutMismatch, MyActuatorCommand, MyActuatorMessage
+from servobus.protocols.myactuator.enums import StatusCommand, StreamableCommand
 from servobus.protocols.myactuator.ids import (
     BROADCAST_ID,
     ID_SETTING_CODE,
@@ -38,13 +42,15 @@ from servobus.protocols.myactuator.ids import (
     request_id,
 )
 from servobus.protocols.myactuator.motion import MOTION_SCALES, MotionCommand, MotionReply, MotionScales
-from servobus.protocols.myactuator.revision import ALL_REVISIONS, Revision, revision_names
+from servobus.protocols.myactuator.revision import Revision, revision_names
 
 __all__ = [
+    "COMMANDS",
     "ECHO_COMMANDS",
     "NO_REPLY",
     "REPLIES",
     "REQUESTS",
+    "STATUS_COMMAND_REVISIONS",
     "Candidate",
     "arbitration_id",
     "check_available",
@@ -75,7 +81,7 @@ def _layout(message: Any) -> tuple[int, Candidate]:
     return message.CODE, Candidate(message, message.decode, message.REVISIONS)
 
 
-def _echo(command: type[cmd.MyActuatorCommand]) -> tuple[int, Candidate]:
+def _echo(command: type[MyActuatorCommand]) -> tuple[int, Candidate]:
     def decode(data: bytes) -> MyActuatorMessage:
         return rep.Echo.decode(data, command)
 
@@ -83,54 +89,30 @@ def _echo(command: type[cmd.MyActuatorCommand]) -> tuple[int, Candidate]:
     return command.CODE, Candidate(command, decode, command.REVISIONS)
 
 
-_REQUEST_CLASSES: tuple[type[cmd.MyActuatorCommand], ...] = (
-    cmd.FunctionControl,
-    cmd.ReadPid,
-    cmd.WritePidRam,
-    cmd.WritePidRom,
-    cmd.ReadAcceleration,
-    cmd.WriteAcceleration,
-    cmd.ReadEncoderPosition,
-    cmd.ReadEncoderRaw,
-    cmd.ReadEncoderOffset,
-    cmd.WriteEncoderZero,
-    cmd.WriteCurrentPositionAsZero,
-    cmd.ReadRunMode,
-    ctl.PositionSpeedFeedforward,
-    ctl.PositionTorqueFeedforward,
-    cmd.SystemReset,
-    cmd.BrakeRelease,
-    cmd.BrakeLock,
-    cmd.SetCanId,
-    cmd.ReadCanId,
-    cmd.MotorShutdown,
-    cmd.MotorStop,
-    cmd.ReadSingleTurnEncoder,
-    cmd.ReadMultiTurnAngle,
-    cmd.ReadSingleTurnAngle,
-    cmd.ReadStatus1,
-    cmd.ReadStatus2,
-    cmd.ReadStatus3,
-    ctl.TorqueControl,
-    ctl.SpeedControl,
-    ctl.AbsolutePositionControl,
-    ctl.SingleTurnPositionControl,
-    ctl.IncrementalPositionControl,
-    ctl.ForcePositionControl,
-    cmd.ReadRunTime,
-    cmd.ReadVersionDate,
-    cmd.SetCommTimeout,
-    cmd.SetBaudRate,
-    cmd.ReadModel,
-    cmd.ReadModelPart,
-    cmd.ActiveReply,
+def _declared(*modules: ModuleType) -> tuple[type[Command], ...]:
+    """The command classes defined in ``modules``, in the order they are written there."""
+    return command_classes(
+        value
+        for module in modules
+        for value in vars(module).values()
+        if getattr(value, "__module__", None) == module.__name__
+    )
+
+
+#: Every MyActuator command class. Each declares its facts once (reply type, READ, SLOW, ECHO,
+#: STREAMABLE, NO_REPLY, NOTED, REVISIONS); the tables below and the bound codec's rules follow.
+COMMANDS: tuple[type[Command], ...] = _declared(cmd, ctl, motion, rs485_motion)
+#: The standard 8-byte requests (the ones with a command byte).
+_REQUEST_CLASSES: tuple[type[MyActuatorCommand], ...] = tuple(
+    c for c in COMMANDS if issubclass(c, MyActuatorCommand)
 )
 
 
 def _table(layouts: list[tuple[int, Candidate]]) -> dict[int, tuple[Candidate, ...]]:
     table: dict[int, tuple[Candidate, ...]] = {}
     for code, layout in layouts:
-        table[code] = (*table.get(code, ()), layout)
+        if layout not in table.get(code, ()):  # two commands answered by one layout list it once
+            table[code] = (*table.get(code, ()), layout)
     return table
 
 
@@ -138,65 +120,49 @@ def _table(layouts: list[tuple[int, Candidate]]) -> dict[int, tuple[Candidate, .
 REQUESTS: Mapping[int, tuple[Candidate, ...]] = _table([_layout(c) for c in _REQUEST_CLASSES])
 
 #: Commands answered by an echo of their own data (§0); their replies decode to ``Echo(command=...)``.
-ECHO_COMMANDS: tuple[type[cmd.MyActuatorCommand], ...] = (
-    cmd.FunctionControl,
-    cmd.WritePidRam,
-    cmd.WritePidRom,
-    cmd.WriteAcceleration,
-    cmd.WriteEncoderZero,
-    cmd.BrakeRelease,
-    cmd.BrakeLock,
-    cmd.SetCanId,
-    cmd.MotorShutdown,
-    cmd.MotorStop,
-    cmd.SetCommTimeout,  # §9 item 8: the examples print an all-zero reply, which decodes as timeout 0
+ECHO_COMMANDS: tuple[type[MyActuatorCommand], ...] = tuple(
+    c for c in _REQUEST_CLASSES if rep.Echo in c.reply_types()
 )
 
-#: Reply layouts by DATA[0].
+
+def _reply_layout(command: type[MyActuatorCommand], reply: type[Reply]) -> tuple[int, Candidate]:
+    if reply is rep.Echo:
+        return _echo(command)
+    if reply.CODE is None:  # a layout shared by several commands (R2): DATA[0] is the command's byte
+        assert command.CODE is not None
+        return command.CODE, Candidate(reply, reply.decode, command.REVISIONS)  # type: ignore[arg-type, attr-defined]
+    return _layout(reply)
+
+
+#: Reply layouts by DATA[0]: each command's declared reply types.
 REPLIES: Mapping[int, tuple[Candidate, ...]] = _table(
-    [_echo(c) for c in ECHO_COMMANDS]
-    # One R2 layout for eight command bytes; 0x72/0x73 exist only in V4.4.
-    + [
-        (
-            int(code),
-            Candidate(
-                rep.StatusReply, rep.StatusReply.decode, STATUS_COMMAND_REVISIONS.get(code, ALL_REVISIONS)
-            ),
-        )
-        for code in StatusCommand
-    ]
-    + [
-        _layout(c)
-        for c in (
-            rep.PidReply,
-            rep.AccelerationReply,
-            rep.EncoderPositionReply,
-            rep.EncoderRawReply,
-            rep.EncoderOffsetReply,
-            rep.ZeroOffsetReply,
-            rep.RunModeReply,
-            rep.CanIdReply,
-            rep.SingleTurnEncoderReply,
-            rep.MultiTurnAngleReply,
-            rep.SingleTurnAngleReply,
-            rep.CircleAngleReply,
-            rep.Status1Reply,
-            rep.SingleTurnStatusReply,
-            rep.Status3Reply,
-            rep.RunTimeReply,
-            rep.VersionDateReply,
-            rep.ModelReply,
-            rep.ModelPartReply,
-        )
-    ]
+    [_reply_layout(c, reply) for c in _REQUEST_CLASSES for reply in c.reply_types()]
 )
 
 #: Requests without a reply to wait for, and why (the command table's "none"/"random").
 NO_REPLY: Mapping[int, str] = {
-    0x76: "system reset: the program restarts and sends no reply (§4.28)",
-    0xB4: "the reply is random because the baud rate changes; discard it (§4.34)",
-    0xB6: "the 0xB6 frame gets no reply; the motor then streams the chosen command's replies (§4.36)",
+    c.CODE: c.NO_REPLY for c in _REQUEST_CLASSES if c.NO_REPLY is not None and c.CODE is not None
 }
+
+#: The revisions of each command answered with the shared R2 layout (its reply's availability).
+STATUS_COMMAND_REVISIONS: Mapping[StatusCommand, frozenset[Revision]] = {
+    StatusCommand(c.CODE): c.REVISIONS
+    for c in _REQUEST_CLASSES
+    if rep.StatusReply in c.reply_types() and c.CODE is not None
+}
+
+
+def _check_enum(enum: type[IntEnum], codes: set[int | None], declaration: str) -> None:
+    # The enums stay classes with members, so a user's mypy knows them; they must list what is declared.
+    if codes != {int(m) for m in enum}:
+        raise TypeError(
+            f"{enum.__name__} must list exactly the commands declared {declaration}: "
+            f"{', '.join(f'0x{c:02X}' for c in sorted(c for c in codes if c is not None))}"
+        )
+
+
+_check_enum(StatusCommand, set(STATUS_COMMAND_REVISIONS), "MyActuatorCommand[StatusReply]")
+_check_enum(StreamableCommand, {c.CODE for c in _REQUEST_CLASSES if c.STREAMABLE}, "STREAMABLE")
 
 
 def expects_reply(command: MyActuatorMessage) -> bool:

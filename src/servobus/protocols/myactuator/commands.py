@@ -16,18 +16,20 @@ from typing import ClassVar, Self
 
 from servobus.errors import ProtocolError
 from servobus.protocols._fields import IntField, ScaledField, check_range, round_half_away
-from servobus.protocols._message import Command
+from servobus.protocols._message import R
 from servobus.protocols._special import SpecialZero
 from servobus.protocols.myactuator._layout import (
     BoolField,
     EnumField,
     Fixed,
     Float32Field,
+    MyActuatorCommand,
     StepField,
     check_payload,
     construct,
 )
 from servobus.protocols.myactuator.enums import (
+    ACCELERATION_MIN_DPS_S,
     BAUD_RATE_INDEXES,
     FUNCTION_VALUES,
     AccelIndex,
@@ -35,6 +37,28 @@ from servobus.protocols.myactuator.enums import (
     FunctionIndex,
     PidIndex,
     StreamableCommand,
+)
+from servobus.protocols.myactuator.replies import (
+    AccelerationReply,
+    CanIdReply,
+    CircleAngleReply,
+    Echo,
+    EncoderOffsetReply,
+    EncoderPositionReply,
+    EncoderRawReply,
+    ModelPartReply,
+    ModelReply,
+    MultiTurnAngleReply,
+    PidReply,
+    RunModeReply,
+    RunTimeReply,
+    SingleTurnAngleReply,
+    SingleTurnEncoderReply,
+    Status1Reply,
+    Status3Reply,
+    StatusReply,
+    VersionDateReply,
+    ZeroOffsetReply,
 )
 from servobus.protocols.myactuator.revision import ONLY_V4_3, ONLY_V4_4, Revision, revision_names
 
@@ -75,12 +99,6 @@ __all__ = [
 ]
 
 
-class MyActuatorCommand(Fixed, Command):
-    """A MyActuator request with the standard 8-byte layout."""
-
-    __slots__ = ()
-
-
 # ---- 0x20 function control (§4.37) ----
 
 _FUNCTION_INDEX = EnumField("index", 1, FunctionIndex)
@@ -89,7 +107,7 @@ _INT32 = IntField("value", 4, signed=True)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class FunctionControl(MyActuatorCommand):
+class FunctionControl(MyActuatorCommand[Echo]):
     """0x20 function control: ``index`` selects the function, ``value`` is its 32-bit argument.
 
     What each index accepts is :data:`enums.FUNCTION_VALUES` (1: 0; 2, 3, 4, 8: 0/1; 5: motor id 1..32;
@@ -99,6 +117,7 @@ class FunctionControl(MyActuatorCommand):
 
     CODE: ClassVar[int] = 0x20
     TITLE: ClassVar[str] = "function control"
+    SLOW = ECHO = NOTED = True
     FIELDS = ((1, _FUNCTION_INDEX),)
     index: FunctionIndex
     value: int = 0
@@ -187,33 +206,36 @@ _PID_VALUE = Float32Field("value")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadPid(MyActuatorCommand):
+class ReadPid(MyActuatorCommand[PidReply]):
     """0x30 read one PID parameter. Reply: ``PidReply``."""
 
     CODE: ClassVar[int] = 0x30
     TITLE: ClassVar[str] = "read PID parameter"
+    READ = True
     FIELDS = ((1, _PID_INDEX),)
     index: PidIndex
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class WritePidRam(MyActuatorCommand):
+class WritePidRam(MyActuatorCommand[Echo]):
     """0x31 write one PID parameter (float32) to RAM, lost at power-off. Reply: echo."""
 
     CODE: ClassVar[int] = 0x31
     TITLE: ClassVar[str] = "write PID parameter to RAM"
+    ECHO = True
     FIELDS = ((1, _PID_INDEX), (4, _PID_VALUE))
     index: PidIndex
     value: float
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class WritePidRom(MyActuatorCommand):
+class WritePidRom(MyActuatorCommand[Echo]):
     """0x32 write one PID parameter (float32) to ROM. [000]: saved only while the motor is disabled.
     Reply: echo."""
 
     CODE: ClassVar[int] = 0x32
     TITLE: ClassVar[str] = "write PID parameter to ROM"
+    SLOW = ECHO = True
     FIELDS = ((1, _PID_INDEX), (4, _PID_VALUE))
     index: PidIndex
     value: float
@@ -232,27 +254,28 @@ _ACCEL_WRITE = SpecialZero(
     ),
     unit="dps/s",
 )
-ACCELERATION_MIN_DPS_S = 100
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadAcceleration(MyActuatorCommand):
+class ReadAcceleration(MyActuatorCommand[AccelerationReply]):
     """0x42 read one acceleration value. Reply: ``AccelerationReply``."""
 
     CODE: ClassVar[int] = 0x42
     TITLE: ClassVar[str] = "read acceleration"
+    READ = True
     FIELDS = ((1, _ACCEL_INDEX),)
     index: AccelIndex
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class WriteAcceleration(MyActuatorCommand):
+class WriteAcceleration(MyActuatorCommand[Echo]):
     """0x43 write one acceleration (1 dps/s) to RAM and ROM: 100..60000, or ``None`` for 0 on the wire
     (no planning: direct tracking, §4.21). The number 0 is refused: ask for "no planning" with None.
     Reply: echo."""
 
     CODE: ClassVar[int] = 0x43
     TITLE: ClassVar[str] = "write acceleration"
+    ECHO = True
     FIELDS = ((1, _ACCEL_INDEX), (4, _ACCEL_WRITE))
     index: AccelIndex
     acceleration_dps_s: float | None
@@ -271,90 +294,100 @@ class WriteAcceleration(MyActuatorCommand):
 # ---- commands without arguments ----
 
 
-class _NoArgs(MyActuatorCommand):
+class _NoArgs(MyActuatorCommand[R]):
     """A request whose DATA[1..7] are all NULL."""
 
     __slots__ = ()
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadEncoderPosition(_NoArgs):
+class ReadEncoderPosition(_NoArgs[EncoderPositionReply]):
     """0x60 read the multi-turn encoder position (raw - zero offset). Reply: ``EncoderPositionReply``."""
 
     CODE: ClassVar[int] = 0x60
     TITLE: ClassVar[str] = "read multi-turn encoder position"
+    READ = STREAMABLE = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadEncoderRaw(_NoArgs):
+class ReadEncoderRaw(_NoArgs[EncoderRawReply]):
     """0x61 read the raw multi-turn encoder position. Reply: ``EncoderRawReply``."""
 
     CODE: ClassVar[int] = 0x61
     TITLE: ClassVar[str] = "read multi-turn encoder raw position"
+    READ = STREAMABLE = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadEncoderOffset(_NoArgs):
+class ReadEncoderOffset(_NoArgs[EncoderOffsetReply]):
     """0x62 read the multi-turn encoder zero offset. Reply: ``EncoderOffsetReply``."""
 
     CODE: ClassVar[int] = 0x62
     TITLE: ClassVar[str] = "read multi-turn encoder zero offset"
+    READ = STREAMABLE = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class WriteEncoderZero(MyActuatorCommand):
+class WriteEncoderZero(MyActuatorCommand[Echo]):
     """0x63 write an encoder value (int32 counts) to ROM as the zero; effective after restart. Reply:
     echo. (§9 item 11: the manuals' ``>>8`` for DATA[6..7] is a typo; the value is int32 LE.)"""
 
     CODE: ClassVar[int] = 0x63
     TITLE: ClassVar[str] = "write encoder value to ROM as zero"
+    SLOW = ECHO = True
     FIELDS = ((4, IntField("offset_counts", 4, signed=True)),)
     offset_counts: int
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class WriteCurrentPositionAsZero(_NoArgs):
+class WriteCurrentPositionAsZero(_NoArgs[ZeroOffsetReply]):
     """0x64 write the current position to ROM as the zero (effective after 0x76). Reply:
     ``ZeroOffsetReply``."""
 
     CODE: ClassVar[int] = 0x64
     TITLE: ClassVar[str] = "write current position to ROM as zero"
+    SLOW = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadRunMode(_NoArgs):
+class ReadRunMode(_NoArgs[RunModeReply]):
     """0x70 read the operating mode. Reply: ``RunModeReply``."""
 
     CODE: ClassVar[int] = 0x70
     TITLE: ClassVar[str] = "read operating mode"
+    READ = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class SystemReset(_NoArgs):
+class SystemReset(_NoArgs[None]):
     """0x76 reset the system. **No reply**: the program restarts."""
 
     CODE: ClassVar[int] = 0x76
     TITLE: ClassVar[str] = "system reset"
+    NO_REPLY = "system reset: the program restarts and sends no reply (§4.28)"
+    NOTED = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class BrakeRelease(_NoArgs):
+class BrakeRelease(_NoArgs[Echo]):
     """0x77 open the holding brake. Reply: echo."""
 
     CODE: ClassVar[int] = 0x77
     TITLE: ClassVar[str] = "brake release"
+    SLOW = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class BrakeLock(_NoArgs):
+class BrakeLock(_NoArgs[Echo]):
     """0x78 close the holding brake. Reply: echo."""
 
     CODE: ClassVar[int] = 0x78
     TITLE: ClassVar[str] = "brake lock"
+    SLOW = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class MotorShutdown(_NoArgs):
+class MotorShutdown(_NoArgs[Echo]):
     """0x80 motor off: output off, running state cleared. Reply: echo."""
 
     CODE: ClassVar[int] = 0x80
@@ -362,7 +395,7 @@ class MotorShutdown(_NoArgs):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class MotorStop(_NoArgs):
+class MotorStop(_NoArgs[Echo]):
     """0x81 stop and hold; the closed loop stays active. Reply: echo."""
 
     CODE: ClassVar[int] = 0x81
@@ -370,82 +403,91 @@ class MotorStop(_NoArgs):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadSingleTurnEncoder(_NoArgs):
+class ReadSingleTurnEncoder(_NoArgs[SingleTurnEncoderReply]):
     """0x90 read the single-turn encoder (V4.3 only; removed in V4.4). Reply: ``SingleTurnEncoderReply``."""
 
     CODE: ClassVar[int] = 0x90
     TITLE: ClassVar[str] = "read single-turn encoder"
+    READ = True
     REVISIONS = ONLY_V4_3
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadMultiTurnAngle(_NoArgs):
+class ReadMultiTurnAngle(_NoArgs[MultiTurnAngleReply]):
     """0x92 read the multi-turn angle. Reply: ``MultiTurnAngleReply``."""
 
     CODE: ClassVar[int] = 0x92
     TITLE: ClassVar[str] = "read multi-turn angle"
+    READ = STREAMABLE = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadSingleTurnAngle(_NoArgs):
+class ReadSingleTurnAngle(_NoArgs[SingleTurnAngleReply | CircleAngleReply]):
     """0x94 read the single-turn angle. The reply layout differs by revision: ``SingleTurnAngleReply``
     (V4.4, int32 ±180°) or ``CircleAngleReply`` (V4.3, uint16 0..359.99°)."""
 
     CODE: ClassVar[int] = 0x94
     TITLE: ClassVar[str] = "read single-turn angle"
+    READ = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadStatus1(_NoArgs):
+class ReadStatus1(_NoArgs[Status1Reply]):
     """0x9A read temperature, brake, voltage and error flags. Reply: ``Status1Reply``."""
 
     CODE: ClassVar[int] = 0x9A
     TITLE: ClassVar[str] = "read status 1 and error flags"
+    READ = STREAMABLE = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadStatus2(_NoArgs):
+class ReadStatus2(_NoArgs[StatusReply]):
     """0x9C read temperature, torque current, speed, angle. Reply: ``StatusReply`` (R2)."""
 
     CODE: ClassVar[int] = 0x9C
     TITLE: ClassVar[str] = "read status 2"
+    READ = STREAMABLE = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadStatus3(_NoArgs):
+class ReadStatus3(_NoArgs[Status3Reply]):
     """0x9D read temperature and phase currents. Reply: ``Status3Reply``."""
 
     CODE: ClassVar[int] = 0x9D
     TITLE: ClassVar[str] = "read status 3"
+    READ = STREAMABLE = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadRunTime(_NoArgs):
+class ReadRunTime(_NoArgs[RunTimeReply]):
     """0xB1 read the time since power-up or reset. Reply: ``RunTimeReply``."""
 
     CODE: ClassVar[int] = 0xB1
     TITLE: ClassVar[str] = "read system run time"
+    READ = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadVersionDate(_NoArgs):
+class ReadVersionDate(_NoArgs[VersionDateReply]):
     """0xB2 read the firmware version date. Reply: ``VersionDateReply`` (see
     ``revision_from_version_date``)."""
 
     CODE: ClassVar[int] = 0xB2
     TITLE: ClassVar[str] = "read software version date"
+    READ = True
 
 
 # ---- 0x79 CAN-ID / RS485-ID setting (V4.3, §4.38) ----
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class SetCanId(MyActuatorCommand):
+class SetCanId(MyActuatorCommand[Echo]):
     """0x79 write the motor id (V4.3 only). Sent on CAN 0x300 or RS485 ID byte 0xCD: **every motor on the
     bus takes it**, so connect one motor. DATA[2] = 0 (write), DATA[7] = new id. Reply: echo."""
 
     CODE: ClassVar[int] = 0x79
     TITLE: ClassVar[str] = "CAN-ID setting"
+    SLOW = True
     REVISIONS = ONLY_V4_3
     CONSTANTS = ((2, 0),)
     FIELDS = ((7, IntField("motor_id", 1, lo=1, hi=32)),)
@@ -453,11 +495,12 @@ class SetCanId(MyActuatorCommand):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadCanId(MyActuatorCommand):
+class ReadCanId(MyActuatorCommand[CanIdReply]):
     """0x79 read the motor id (V4.3 only; DATA[2] = 1). Sent like ``SetCanId``. Reply: ``CanIdReply``."""
 
     CODE: ClassVar[int] = 0x79
     TITLE: ClassVar[str] = "CAN-ID setting"
+    READ = True
     REVISIONS = ONLY_V4_3
     CONSTANTS = ((2, 1),)
 
@@ -482,7 +525,7 @@ _STREAM_INTERVAL = SpecialZero(
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class SetCommTimeout(MyActuatorCommand):
+class SetCommTimeout(MyActuatorCommand[Echo]):
     """0xB3 communication-interruption protection: without traffic for ``timeout_ms`` the motor cuts its
     output and locks the brake. Saved in ROM. Reply: echo (or all zero, §9 item 8).
 
@@ -492,6 +535,7 @@ class SetCommTimeout(MyActuatorCommand):
 
     CODE: ClassVar[int] = 0xB3
     TITLE: ClassVar[str] = "communication-interruption protection time"
+    SLOW = True
     FIELDS = ((4, _COMM_TIMEOUT),)
     timeout_ms: int | None
 
@@ -502,13 +546,14 @@ class SetCommTimeout(MyActuatorCommand):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class SetBaudRate(MyActuatorCommand):
+class SetBaudRate(MyActuatorCommand[None]):
     """0xB4 set the link rate by raw index (DATA[7]), used from the next power-up. The index meaning
     differs between the manuals (§4.34); :attr:`setting` gives [002]'s mapping. The reply is garbage at
     the changing rate: none is decoded."""
 
     CODE: ClassVar[int] = 0xB4
     TITLE: ClassVar[str] = "set communication baud rate"
+    NO_REPLY = "the reply is random because the baud rate changes; discard it (§4.34)"
     FIELDS = ((7, IntField("baud_index", 1)),)
     baud_index: int
 
@@ -519,21 +564,23 @@ class SetBaudRate(MyActuatorCommand):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadModel(_NoArgs):
+class ReadModel(_NoArgs[ModelReply]):
     """0xB5 read the motor model, V4.3 form: all-zero request, 7 characters back (``ModelReply``)."""
 
     CODE: ClassVar[int] = 0xB5
     TITLE: ClassVar[str] = "read motor model (single frame)"
+    READ = True
     REVISIONS = ONLY_V4_3
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadModelPart(MyActuatorCommand):
+class ReadModelPart(MyActuatorCommand[ModelPartReply]):
     """0xB5 read the motor model, V4.4 form: DATA[1] = 0x01, DATA[2] = ``part`` (1: characters 1-5, 2:
     6-10, 3: 11-15). Reply: ``ModelPartReply``; join the three with ``replies.join_model``."""
 
     CODE: ClassVar[int] = 0xB5
     TITLE: ClassVar[str] = "read motor model (indexed)"
+    READ = True
     REVISIONS = ONLY_V4_4
     CONSTANTS = ((1, 0x01),)
     FIELDS = ((2, IntField("part", 1, lo=1, hi=3)),)
@@ -541,7 +588,7 @@ class ReadModelPart(MyActuatorCommand):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ActiveReply(MyActuatorCommand):
+class ActiveReply(MyActuatorCommand[None]):
     """0xB6 active reply (CAN only): stream ``command``'s reply every ``interval_ms`` (10 ms/LSB).
 
     ``interval_ms`` is rounded to 10 ms half away from zero; one that rounds to 0 (1..4 ms) is refused,
@@ -554,6 +601,8 @@ class ActiveReply(MyActuatorCommand):
 
     CODE: ClassVar[int] = 0xB6
     TITLE: ClassVar[str] = "active reply"
+    NO_REPLY = "the 0xB6 frame gets no reply; the motor then streams the chosen command's replies (§4.36)"
+    NOTED = True
     FIELDS = (
         (1, EnumField("command", 1, StreamableCommand)),
         (2, BoolField("enabled")),

@@ -13,9 +13,9 @@ from typing import ClassVar
 
 from servobus.protocols._fields import IntField, ScaledField
 from servobus.protocols._special import SpecialZero
-from servobus.protocols.myactuator._layout import EnumField
-from servobus.protocols.myactuator.commands import MyActuatorCommand
+from servobus.protocols.myactuator._layout import EnumField, MyActuatorCommand
 from servobus.protocols.myactuator.enums import SpinDirection
+from servobus.protocols.myactuator.replies import SingleTurnStatusReply, StatusReply
 from servobus.protocols.myactuator.revision import ONLY_V4_4
 
 __all__ = [
@@ -60,7 +60,7 @@ _FF_TORQUE = IntField("feedforward_torque_pct", 1, signed=True)  # 1 % of rated 
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class TorqueControl(MyActuatorCommand):
+class TorqueControl(MyActuatorCommand[StatusReply]):
     """0xA1 torque (q-axis current) closed loop. It cannot release a brake: send 0x77 first."""
 
     CODE: ClassVar[int] = 0xA1
@@ -70,7 +70,7 @@ class TorqueControl(MyActuatorCommand):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class SpeedControl(MyActuatorCommand):
+class SpeedControl(MyActuatorCommand[StatusReply]):
     """0xA2 speed closed loop (output shaft), with the optional force-control limit of V4.3+.
 
     ``max_torque_pct`` (DATA[1], % of rated current) above the stall current, or ``None`` (sent as 0, the
@@ -86,7 +86,7 @@ class SpeedControl(MyActuatorCommand):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class AbsolutePositionControl(MyActuatorCommand):
+class AbsolutePositionControl(MyActuatorCommand[StatusReply]):
     """0xA4 absolute multi-turn position. With position acceleration 0 (0x43 index 0), a PI tracks the
     target limited to ``max_speed_dps``; otherwise a trapezoidal profile peaks at it.
 
@@ -102,7 +102,7 @@ class AbsolutePositionControl(MyActuatorCommand):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class SingleTurnPositionControl(MyActuatorCommand):
+class SingleTurnPositionControl(MyActuatorCommand[SingleTurnStatusReply]):
     """0xA6 single-turn position 0..360° in ``direction``. Reply: ``SingleTurnStatusReply`` (encoder).
     ``max_speed_dps=None`` asks for no speed limit (see :class:`AbsolutePositionControl`)."""
 
@@ -115,7 +115,7 @@ class SingleTurnPositionControl(MyActuatorCommand):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class IncrementalPositionControl(MyActuatorCommand):
+class IncrementalPositionControl(MyActuatorCommand[StatusReply]):
     """0xA8 move by ``angle_deg`` from the current position (its sign gives the direction).
     ``max_speed_dps=None`` asks for no speed limit (see :class:`AbsolutePositionControl`)."""
 
@@ -127,7 +127,7 @@ class IncrementalPositionControl(MyActuatorCommand):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ForcePositionControl(MyActuatorCommand):
+class ForcePositionControl(MyActuatorCommand[StatusReply]):
     """0xA9 absolute position with a torque limit (% of rated current; above the stall current the stall
     current limits instead). ``max_torque_pct`` 0 is not described by the manuals, so it is refused
     (1..255). ``max_speed_dps=None`` asks for no speed limit (see :class:`AbsolutePositionControl`)."""
@@ -141,7 +141,7 @@ class ForcePositionControl(MyActuatorCommand):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class PositionSpeedFeedforward(MyActuatorCommand):
+class PositionSpeedFeedforward(MyActuatorCommand[StatusReply]):
     """0x72 SF (V4.4 only): absolute position with speed feed-forward in % of rated speed. The
     feed-forward acts only in direct tracking mode (position acceleration 0); otherwise it is 0xA4.
 
@@ -159,7 +159,7 @@ class PositionSpeedFeedforward(MyActuatorCommand):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class PositionTorqueFeedforward(MyActuatorCommand):
+class PositionTorqueFeedforward(MyActuatorCommand[StatusReply]):
     """0x73 TF (V4.4 only): absolute position with torque feed-forward in % of rated current.
     ``max_speed_dps=None`` asks for no speed limit (see :class:`AbsolutePositionControl`)."""
 

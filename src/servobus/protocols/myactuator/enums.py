@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from servobus.protocols.myactuator.revision import ALL_REVISIONS, ONLY_V4_4, Revision
 
 __all__ = [
+    "ACCELERATION_MIN_DPS_S",
     "BAUD_RATE_INDEXES",
     "ERROR_FLAG_INFO",
     "FAULTS",
@@ -43,6 +44,10 @@ class PidIndex(enum.IntEnum):
     POSITION_KP = 0x07
     POSITION_KI = 0x08
     POSITION_KD = 0x09
+
+
+# §4.4: the manuals' acceleration range is 100..60000 dps/s (0, "no planning", is asked for apart).
+ACCELERATION_MIN_DPS_S = 100
 
 
 class AccelIndex(enum.IntEnum):
@@ -125,7 +130,10 @@ class RunMode(enum.IntEnum):
 
 
 class StatusCommand(enum.IntEnum):
-    """Commands whose reply is the shared "status 2" layout R2 (§3.1)."""
+    """Commands whose reply is the shared "status 2" layout R2 (§3.1).
+
+    Its members are the commands declared ``MyActuatorCommand[StatusReply]``: ``codec.py`` checks at
+    import that the two agree (an enum keeps its members typed for a user's mypy)."""
 
     READ_STATUS_2 = 0x9C
     TORQUE_CONTROL = 0xA1
@@ -137,15 +145,10 @@ class StatusCommand(enum.IntEnum):
     POSITION_TORQUE_FEEDFORWARD = 0x73  # V4.4 only
 
 
-STATUS_COMMAND_REVISIONS: dict[StatusCommand, frozenset[Revision]] = {
-    StatusCommand.POSITION_SPEED_FEEDFORWARD: ONLY_V4_4,
-    StatusCommand.POSITION_TORQUE_FEEDFORWARD: ONLY_V4_4,
-}
-
-
 class StreamableCommand(enum.IntEnum):
     """Commands 0xB6 can stream (§4.36). 0x9E is listed by the manuals but never defined, so it is
-    left out (§9 item 18: do not stream it)."""
+    left out (§9 item 18: do not stream it). Its members are the commands declared ``STREAMABLE``
+    (checked at import by ``codec.py``)."""
 
     ENCODER_POSITION = 0x60
     ENCODER_RAW = 0x61

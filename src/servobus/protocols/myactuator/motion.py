@@ -154,7 +154,59 @@ def _check(names_values: tuple[tuple[str, float], ...], scales: tuple[FieldScale
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class MotionCommand(MyActuatorMessage, Command):
+class MotionReply(MyActuatorMessage, Reply):
+    """Motion (MIT) mode reply on 0x500 + ID (§5.3): DATA[0] motor id, then position, velocity and
+    torque packed with the command's ranges. DATA[6..7] are NULL (ignored on decode)."""
+
+    CODE: ClassVar[int | None] = None
+    TITLE: ClassVar[str] = "motion mode reply"
+    motor_id: int
+    position_rad: float
+    velocity_rad_s: float
+    torque_nm: float
+    scales: MotionScales = field(default=MOTION_SCALES[Revision.V4_4])
+
+    def __post_init__(self) -> None:
+        if isinstance(self.motor_id, bool) or not isinstance(self.motor_id, int):
+            raise ValueError(f"motor_id={self.motor_id!r} is not an integer")
+        _check(self._named(), self.scales.reply_scales())
+
+    def _named(self) -> tuple[tuple[str, float], ...]:
+        return (
+            ("motor_id", self.motor_id),
+            ("position_rad", self.position_rad),
+            ("velocity_rad_s", self.velocity_rad_s),
+            ("torque_nm", self.torque_nm),
+        )
+
+    def encode(self) -> bytes:
+        return reply_packer(self.scales).pack([v for _, v in self._named()])
+
+    @classmethod
+    def decode(cls, data: bytes, scales: MotionScales | None = None) -> Self:
+        """Decode 8 bytes with ``scales`` (default V4.4's).
+
+        Raises:
+            ProtocolError: not 8 bytes, or DATA[0] not a motor id 1..32.
+        """
+        scales = scales or MOTION_SCALES[Revision.V4_4]
+        require_length(data, PAYLOAD_SIZE, what="motion reply", command=None)
+        if data[0] not in MOTOR_IDS:
+            raise ProtocolError(f"motion reply: DATA[0]={data[0]} is not a motor id 1..32", raw=data)
+        packer = reply_packer(scales)
+        motor_id, p, v, t = _clamped(packer.unpack(data), packer)
+        values = {
+            "motor_id": int(motor_id),
+            "position_rad": p,
+            "velocity_rad_s": v,
+            "torque_nm": t,
+            "scales": scales,
+        }
+        return construct(cls, data, values)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class MotionCommand(MyActuatorMessage, Command[MotionReply]):
     """Motion (MIT) mode setpoint, sent on 0x400 + ID (§5.1):
     ``IqRef = [kp·(p_des - p) + kd·(v_des - v) + t_ff] / KT``, all on the output side.
 
@@ -203,58 +255,6 @@ class MotionCommand(MyActuatorMessage, Command):
             "kp": kp,
             "kd": kd,
             "torque_ff_nm": t,
-            "scales": scales,
-        }
-        return construct(cls, data, values)
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class MotionReply(MyActuatorMessage, Reply):
-    """Motion (MIT) mode reply on 0x500 + ID (§5.3): DATA[0] motor id, then position, velocity and
-    torque packed with the command's ranges. DATA[6..7] are NULL (ignored on decode)."""
-
-    CODE: ClassVar[int | None] = None
-    TITLE: ClassVar[str] = "motion mode reply"
-    motor_id: int
-    position_rad: float
-    velocity_rad_s: float
-    torque_nm: float
-    scales: MotionScales = field(default=MOTION_SCALES[Revision.V4_4])
-
-    def __post_init__(self) -> None:
-        if isinstance(self.motor_id, bool) or not isinstance(self.motor_id, int):
-            raise ValueError(f"motor_id={self.motor_id!r} is not an integer")
-        _check(self._named(), self.scales.reply_scales())
-
-    def _named(self) -> tuple[tuple[str, float], ...]:
-        return (
-            ("motor_id", self.motor_id),
-            ("position_rad", self.position_rad),
-            ("velocity_rad_s", self.velocity_rad_s),
-            ("torque_nm", self.torque_nm),
-        )
-
-    def encode(self) -> bytes:
-        return reply_packer(self.scales).pack([v for _, v in self._named()])
-
-    @classmethod
-    def decode(cls, data: bytes, scales: MotionScales | None = None) -> Self:
-        """Decode 8 bytes with ``scales`` (default V4.4's).
-
-        Raises:
-            ProtocolError: not 8 bytes, or DATA[0] not a motor id 1..32.
-        """
-        scales = scales or MOTION_SCALES[Revision.V4_4]
-        require_length(data, PAYLOAD_SIZE, what="motion reply", command=None)
-        if data[0] not in MOTOR_IDS:
-            raise ProtocolError(f"motion reply: DATA[0]={data[0]} is not a motor id 1..32", raw=data)
-        packer = reply_packer(scales)
-        motor_id, p, v, t = _clamped(packer.unpack(data), packer)
-        values = {
-            "motor_id": int(motor_id),
-            "position_rad": p,
-            "velocity_rad_s": v,
-            "torque_nm": t,
             "scales": scales,
         }
         return construct(cls, data, values)

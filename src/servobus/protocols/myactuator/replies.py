@@ -18,10 +18,16 @@ ignored on decode.
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Iterable
 from dataclasses import dataclass
 from enum import Enum
-from typing import ClassVar, Generic, Self, TypeVar
+from typing import Any, ClassVar, Generic, Self
+
+if sys.version_info >= (3, 13):
+    from typing import TypeVar
+else:  # a default, so a command declares its reply as a bare ``Echo``
+    from typing_extensions import TypeVar
 
 from servobus.errors import ProtocolError
 from servobus.protocols._fields import IntField, ScaledField
@@ -35,12 +41,12 @@ from servobus.protocols.myactuator._layout import (
     FlagsField,
     Float32Field,
     LayoutMismatch,
+    MyActuatorCommand,
     MyActuatorMessage,
     check_payload,
 )
-from servobus.protocols.myactuator.commands import ACCELERATION_MIN_DPS_S, MyActuatorCommand
 from servobus.protocols.myactuator.enums import (
-    STATUS_COMMAND_REVISIONS,
+    ACCELERATION_MIN_DPS_S,
     AccelIndex,
     ErrorFlags,
     PidIndex,
@@ -48,7 +54,6 @@ from servobus.protocols.myactuator.enums import (
     StatusCommand,
 )
 from servobus.protocols.myactuator.revision import (
-    ALL_REVISIONS,
     ONLY_V4_3,
     ONLY_V4_4,
     V4_4_MANUAL_DATE,
@@ -85,7 +90,7 @@ __all__ = [
     "join_model",
 ]
 
-C = TypeVar("C", bound=MyActuatorCommand)
+C = TypeVar("C", bound=MyActuatorCommand[Any], default=MyActuatorCommand[Any])
 
 
 class MyActuatorReply(Fixed, Reply):
@@ -431,7 +436,10 @@ class StatusReply(MyActuatorReply):
         return int(self.command)
 
     def unavailable_reason(self, revision: Revision) -> str | None:
-        revisions = STATUS_COMMAND_REVISIONS.get(self.command, ALL_REVISIONS)
+        # The revisions of the command it answers (its declaration): known once every command exists.
+        from servobus.protocols.myactuator.codec import STATUS_COMMAND_REVISIONS
+
+        revisions = STATUS_COMMAND_REVISIONS[self.command]
         if revision in revisions:
             return None
         names = revision_names(revisions)

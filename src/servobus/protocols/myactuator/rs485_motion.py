@@ -147,7 +147,32 @@ _MOTOR_ID_OR_BROADCAST = IntField("motor_id", 1, lo=1, hi=RS485_MOTION_BROADCAST
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class Rs485MotionCommand(_Rs485MotionFrame, Command):
+class Rs485MotionReply(_Rs485MotionFrame, Reply):
+    """RS485 motion-mode reply (V4.4 only). ``errors`` uses the 0x9A bit names (see the module notes on
+    0x0080); ``mode`` keeps undefined values as ints."""
+
+    TITLE: ClassVar[str] = "RS485 motion mode reply"
+    SIZE = REPLY_SIZE
+    FIELDS = (
+        (2, IntField("motor_id", 1, lo=1, hi=32)),
+        (3, OpenEnumField("mode", 1, Rs485MotionMode)),
+        (4, IntField("temperature_c", 1, signed=True)),
+        (5, FlagsField("errors", 2, ErrorFlags)),
+        (8, Float32Field("torque_nm")),
+        (12, Float32Field("speed_rad_s")),
+        (16, Float32Field("position_rad")),
+    )
+    motor_id: int
+    mode: Rs485MotionMode | int
+    temperature_c: int
+    torque_nm: float
+    speed_rad_s: float
+    position_rad: float
+    errors: ErrorFlags = ErrorFlags.NONE
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Rs485MotionCommand(_Rs485MotionFrame, Command[Rs485MotionReply]):
     """RS485 motion-mode request (V4.4 only): the CAN motion mode's control law with float32 values.
 
     ``motor_id`` 1..32, or 0xBB to address every motor (they do not reply). Values are any finite
@@ -177,31 +202,6 @@ class Rs485MotionCommand(_Rs485MotionFrame, Command):
         _Rs485MotionFrame.__post_init__(self)
         if self.motor_id not in MOTOR_IDS and self.motor_id != RS485_MOTION_BROADCAST_ID:
             raise ValueError(f"motor_id={self.motor_id!r} is outside [1, 32] and is not the broadcast 0xBB")
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class Rs485MotionReply(_Rs485MotionFrame, Reply):
-    """RS485 motion-mode reply (V4.4 only). ``errors`` uses the 0x9A bit names (see the module notes on
-    0x0080); ``mode`` keeps undefined values as ints."""
-
-    TITLE: ClassVar[str] = "RS485 motion mode reply"
-    SIZE = REPLY_SIZE
-    FIELDS = (
-        (2, IntField("motor_id", 1, lo=1, hi=32)),
-        (3, OpenEnumField("mode", 1, Rs485MotionMode)),
-        (4, IntField("temperature_c", 1, signed=True)),
-        (5, FlagsField("errors", 2, ErrorFlags)),
-        (8, Float32Field("torque_nm")),
-        (12, Float32Field("speed_rad_s")),
-        (16, Float32Field("position_rad")),
-    )
-    motor_id: int
-    mode: Rs485MotionMode | int
-    temperature_c: int
-    torque_nm: float
-    speed_rad_s: float
-    position_rad: float
-    errors: ErrorFlags = ErrorFlags.NONE
 
 
 def float32(value: float) -> float:

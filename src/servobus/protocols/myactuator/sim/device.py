@@ -78,14 +78,16 @@ from __future__ import annotations
 import functools
 import math
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any, TypeVar, cast
 
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
 from servobus.protocols._message import Command, Reply
 from servobus.protocols.myactuator import ErrorFlags, IdKind, MotionCommand, Revision, StreamableCommand
-from servobus.protocols.myactuator.codec import decode_standard_request
+from servobus.protocols.myactuator.codec import COMMANDS, decode_standard_request
 from servobus.protocols.myactuator.ids import (
     BROADCAST_ID,
     ID_SETTING_ID,
@@ -136,23 +138,32 @@ DEFAULT_TURNAROUND_S = 200e-6
 ERROR_REPORT_PERIOD_S = 0.1  # 0x20 index 3: "every 100 ms" (§4.37)
 STREAM_STEP_S = 0.01  # 0xB6 interval unit: 10 ms/LSB (§4.36, §9 item 29)
 
-_CONTROL_COMMANDS = (
-    ma.TorqueControl,
-    ma.SpeedControl,
-    ma.AbsolutePositionControl,
-    ma.SingleTurnPositionControl,
-    ma.IncrementalPositionControl,
-    ma.ForcePositionControl,
-    ma.PositionSpeedFeedforward,
-    ma.PositionTorqueFeedforward,
-)
-_ANY_CONTROL = (*_CONTROL_COMMANDS, MotionCommand)
+# The commands answered with R2 (declared ``[StatusReply]``) all run a closed loop.
+_STATUS_CONTROL = tuple(c for c in COMMANDS if c.REPLY is ma.StatusReply and not c.READ)
 _POSITION_ABSOLUTE = (
     ma.AbsolutePositionControl,
     ma.ForcePositionControl,
     ma.PositionSpeedFeedforward,
     ma.PositionTorqueFeedforward,
 )
+_Handler = Callable[[Any, Any, float, bool], "Reply | None"]
+#: What the simulated motor does on each command class: the device model registers its handlers here
+#: (``@_handles``); the reply's form (none, an echo, a reply) is the command's declaration.
+_HANDLERS: dict[type[Command], _Handler] = {}
+H = TypeVar("H", bound=Callable[..., Any])
+
+
+def _handles(*classes: type[Command]) -> Callable[[H], H]:
+    def register(handler: H) -> H:
+        for cls in classes:
+            if cls in _HANDLERS:
+                raise TypeError(f"two simulator handlers for {cls.__name__}")
+            _HANDLERS[cls] = handler
+        return handler
+
+    return register
+
+
 # [I] The manuals define three run modes and no other (§4.27: "has the following 3 states"), so 0x70
 # always reports one: after 0x80 (or a fault or comm trip) the last loop's mode stays; at power-up,
 # before any control command, the position loop (the manuals' only 0x70 example reads 0x03). In motion
@@ -590,14 +601,22 @@ class MyActuatorMotor(ListeningDevice):
         return [ma.ModelPartReply(part=p, text=self.model[5 * (p - 1) : 5 * p]) for p in (1, 2, 3)]
 
     def _execute(self, command: Command, now_s: float, *, rs485: bool) -> Reply | None:
-        if isinstance(command, _ANY_CONTROL):
-            return self._control_command(command)
-        reply = self._read(command, now_s, rs485=rs485)
-        if reply is not None:
-            return reply
-        return self._write(command, now_s)
+        # The handler acts; what comes back follows the command's declaration: nothing for NO_REPLY,
+        # an echo of the request for ``[Echo]``, otherwise the reply the handler built.
+        cls = type(command)
+        handler = _HANDLERS.get(cls)
+        if handler is None:
+            raise TypeError(f"the simulated motor has no handler for {cls.__name__}")
+        reply = handler(self, command, now_s, rs485)
+        if cls.NO_REPLY is not None:
+            return None
+        if cls.REPLY is ma.Echo:
+            return ma.Echo(command=cast(ma.MyActuatorCommand[Any], command))
+        assert reply is not None, cls
+        return reply
 
-    def _control_command(self, command: Command) -> Reply:
+    @_handles(*_STATUS_CONTROL, ma.SingleTurnPositionControl, MotionCommand)
+    def _control_command(self, command: Command, _now_s: float, _rs485: bool) -> Reply:
         if self.errors.flags:
             self._counters["refused_fault"] += 1
         else:
@@ -607,7 +626,7 @@ class MyActuatorMotor(ListeningDevice):
             return motion_reply(self.motor_id, readings, self.plant.torque_nm, self.motion_scales)
         if isinstance(command, ma.SingleTurnPositionControl):
             return single_turn_status_reply(readings)
-        assert isinstance(command, _CONTROL_COMMANDS)
+        assert command.CODE is not None
         return status_reply(ma.StatusCommand(command.CODE), readings)
 
     def _run(self, command: Command) -> None:
@@ -638,7 +657,7 @@ class MyActuatorMotor(ListeningDevice):
                 ma.RunMode.SPEED_LOOP,
             )
             return
-        assert isinstance(command, _CONTROL_COMMANDS)
+        assert isinstance(command, (*_STATUS_CONTROL, ma.SingleTurnPositionControl))
         max_speed = getattr(command, "max_speed_dps", None)  # None (maxSpeed 0): no limit (§4.21)
         limit = None
         if isinstance(command, _POSITION_ABSOLUTE):
@@ -663,103 +682,75 @@ class MyActuatorMotor(ListeningDevice):
         control = PositionControl(position_deg=target, max_speed_dps=max_speed, max_current_a=limit)
         self._set_control(control, position)
 
-    def _read(self, command: Command, now_s: float, *, rs485: bool) -> Reply | None:
-        if isinstance(command, ma.ReadStatus1):  # the most polled: before anything else is computed
-            return self._status1()
-        r = self.readings
-        rotor = self.plant.motor_position_deg
-        if isinstance(command, ma.ReadStatus2):
-            return status_reply(ma.StatusCommand.READ_STATUS_2, r())
-        if isinstance(command, ma.ReadStatus3):
-            return status3_reply(r(), self.pole_pairs)
-        if isinstance(command, ma.ReadMultiTurnAngle):
-            return ma.MultiTurnAngleReply(angle_deg=int32(self.angle_deg * 100) / 100)
-        if isinstance(command, ma.ReadSingleTurnAngle):
-            return single_turn_reply(r(), self.revision)
+    # ---- reads ----
+
+    @_handles(ma.ReadStatus1)
+    def _on_status1(self, _command: Command, _now_s: float, _rs485: bool) -> Reply:
+        return self._status1()
+
+    @_handles(ma.ReadStatus2)
+    def _on_status2(self, _command: Command, _now_s: float, _rs485: bool) -> Reply:
+        return status_reply(ma.StatusCommand.READ_STATUS_2, self.readings())
+
+    @_handles(ma.ReadStatus3)
+    def _on_status3(self, _command: Command, _now_s: float, _rs485: bool) -> Reply:
+        return status3_reply(self.readings(), self.pole_pairs)
+
+    @_handles(ma.ReadMultiTurnAngle)
+    def _on_multi_turn_angle(self, _command: Command, _now_s: float, _rs485: bool) -> Reply:
+        return ma.MultiTurnAngleReply(angle_deg=int32(self.angle_deg * 100) / 100)
+
+    @_handles(ma.ReadSingleTurnAngle)
+    def _on_single_turn_angle(self, _command: Command, _now_s: float, _rs485: bool) -> Reply:
+        return single_turn_reply(self.readings(), self.revision)
+
+    @_handles(ma.ReadEncoderPosition, ma.ReadEncoderRaw, ma.ReadEncoderOffset, ma.ReadSingleTurnEncoder)
+    def _on_encoder(self, command: Command, _now_s: float, _rs485: bool) -> Reply:
+        encoder, rotor = self.encoder, self.plant.motor_position_deg
         if isinstance(command, ma.ReadEncoderPosition):
-            return ma.EncoderPositionReply(encoder_counts=int32(self.encoder.position_counts(rotor)))
+            return ma.EncoderPositionReply(encoder_counts=int32(encoder.position_counts(rotor)))
         if isinstance(command, ma.ReadEncoderRaw):
-            return ma.EncoderRawReply(raw_counts=int32(self.encoder.raw_counts(rotor)))
+            return ma.EncoderRawReply(raw_counts=int32(encoder.raw_counts(rotor)))
         if isinstance(command, ma.ReadEncoderOffset):
-            return ma.EncoderOffsetReply(offset_counts=int32(self.encoder.offset_counts))
-        if isinstance(command, ma.ReadSingleTurnEncoder):
-            raw = self.encoder.raw_counts(rotor)
-            return single_turn_encoder_reply(r(), raw, self.encoder.offset_counts)
-        if isinstance(command, ma.ReadPid):
-            return ma.PidReply(index=command.index, value=self.ram.pid[command.index])
-        if isinstance(command, ma.ReadAcceleration):
-            value = self.ram.acceleration_dps_s[command.index]
-            return ma.AccelerationReply(index=command.index, acceleration_dps_s=value)
-        if isinstance(command, ma.ReadRunMode):
-            return ma.RunModeReply(mode=self.run_mode)
-        if isinstance(command, ma.ReadRunTime):
-            return ma.RunTimeReply(run_time_ms=math.floor((now_s - self._boot_s) * 1000 + 1e-6) % (1 << 32))
-        if isinstance(command, ma.ReadVersionDate):
-            return ma.VersionDateReply(version_date=self.version_date)
-        if isinstance(command, ma.ReadModel):
-            return self._model_replies()[0]
-        if isinstance(command, ma.ReadModelPart):
-            return self._model_replies()[command.part - 1]
-        if isinstance(command, ma.ReadCanId):
-            # The RS485 example puts the id in DATA[7]; the CAN example sends 0x240+ID (§4.38).
-            layout = ma.CanIdLayout.DATA7 if rs485 else ma.CanIdLayout.REPLY_IDENTIFIER
-            return ma.CanIdReply(motor_id=self.motor_id, layout=layout)
-        return None
+            return ma.EncoderOffsetReply(offset_counts=int32(encoder.offset_counts))
+        return single_turn_encoder_reply(self.readings(), encoder.raw_counts(rotor), encoder.offset_counts)
 
-    def _write(self, command: Command, now_s: float) -> Reply | None:
-        ram, rom = self.ram, self.rom
-        if isinstance(command, ma.FunctionControl):
-            self._function(command, now_s)
-        elif isinstance(command, ma.WritePidRam):
-            ram.pid[command.index] = command.value
-        elif isinstance(command, ma.WritePidRom):
-            ram.pid[command.index] = command.value
-            if self._rom_ok():
-                rom.pid[command.index] = command.value
-        elif isinstance(command, ma.WriteAcceleration):
-            accel = 0.0 if command.acceleration_dps_s is None else command.acceleration_dps_s  # None: 0
-            ram.acceleration_dps_s[command.index] = accel
-            if self._rom_ok():
-                rom.acceleration_dps_s[command.index] = accel
-            self._apply_plant()
-        elif isinstance(command, ma.WriteEncoderZero):
-            if self._rom_ok():  # takes effect after a restart (§4.9)
-                rom.encoder_offset_counts = command.offset_counts
-        elif isinstance(command, ma.WriteCurrentPositionAsZero):
-            offset = int32(self.encoder.raw_counts(self.plant.motor_position_deg))
-            if self._rom_ok():  # takes effect after 0x76 (§4.10)
-                rom.encoder_offset_counts = offset
-            return ma.ZeroOffsetReply(offset_counts=offset)
-        elif isinstance(command, ma.SetCommTimeout):
-            # ROM, and not in [000]'s "only when disabled" list (§8 item 15).
-            timeout = 0 if command.timeout_ms is None else command.timeout_ms  # None: protection off
-            ram.comm_timeout_ms = rom.comm_timeout_ms = timeout
-        elif isinstance(command, ma.SetCanId):
-            rom.motor_id = command.motor_id  # V4.3 only, which has no "only when disabled" rule
-        elif isinstance(command, ma.SetBaudRate):
-            if self._rom_ok():  # used from the next power-up (§4.34); no reply
-                rom.baud_index = command.baud_index
-            return None
-        elif isinstance(command, ma.SystemReset):
-            self._counters["resets"] += 1
-            self._power_up(now_s)  # §4.28: no reply, the program restarts
-            return None
-        elif isinstance(command, ma.ActiveReply):
-            self._active_reply(command, now_s)
-            return None
-        elif isinstance(command, ma.MotorShutdown):
-            self._set_control(Off(), self.run_mode)
-        elif isinstance(command, ma.MotorStop):
-            if self.enabled and not self.errors.flags:  # hold where it is; the loop stays (§4.18)
-                self._set_control(PositionControl(position_deg=self.plant.position_deg), self.run_mode)
-        elif isinstance(command, ma.BrakeRelease | ma.BrakeLock):
-            self.brake_released = isinstance(command, ma.BrakeRelease)
-            self._apply_plant()
-        else:
-            raise AssertionError(f"no handler for {command!r}")  # every request class is handled above
-        return ma.Echo(command=command)
+    @_handles(ma.ReadPid)
+    def _on_read_pid(self, command: ma.ReadPid, _now_s: float, _rs485: bool) -> Reply:
+        return ma.PidReply(index=command.index, value=self.ram.pid[command.index])
 
-    def _function(self, command: ma.FunctionControl, now_s: float) -> None:
+    @_handles(ma.ReadAcceleration)
+    def _on_read_acceleration(self, command: ma.ReadAcceleration, _now_s: float, _rs485: bool) -> Reply:
+        value = self.ram.acceleration_dps_s[command.index]
+        return ma.AccelerationReply(index=command.index, acceleration_dps_s=value)
+
+    @_handles(ma.ReadRunMode)
+    def _on_run_mode(self, _command: Command, _now_s: float, _rs485: bool) -> Reply:
+        return ma.RunModeReply(mode=self.run_mode)
+
+    @_handles(ma.ReadRunTime)
+    def _on_run_time(self, _command: Command, now_s: float, _rs485: bool) -> Reply:
+        return ma.RunTimeReply(run_time_ms=math.floor((now_s - self._boot_s) * 1000 + 1e-6) % (1 << 32))
+
+    @_handles(ma.ReadVersionDate)
+    def _on_version_date(self, _command: Command, _now_s: float, _rs485: bool) -> Reply:
+        return ma.VersionDateReply(version_date=self.version_date)
+
+    @_handles(ma.ReadModel, ma.ReadModelPart)
+    def _on_model(self, command: Command, _now_s: float, _rs485: bool) -> Reply:
+        part = command.part if isinstance(command, ma.ReadModelPart) else 1
+        return self._model_replies()[part - 1]
+
+    @_handles(ma.ReadCanId)
+    def _on_read_can_id(self, _command: Command, _now_s: float, rs485: bool) -> Reply:
+        # The RS485 example puts the id in DATA[7]; the CAN example sends 0x240+ID (§4.38).
+        layout = ma.CanIdLayout.DATA7 if rs485 else ma.CanIdLayout.REPLY_IDENTIFIER
+        return ma.CanIdReply(motor_id=self.motor_id, layout=layout)
+
+    # ---- writes (their echo or silence follows the declaration) ----
+
+    @_handles(ma.FunctionControl)
+    def _function(self, command: ma.FunctionControl, now_s: float, _rs485: bool = False) -> None:
         index, value = command.index, command.value
         saved = self._rom_ok()
         if index is ma.FunctionIndex.CLEAR_MULTI_TURN:
@@ -776,7 +767,68 @@ class MyActuatorMotor(ListeningDevice):
                 setattr(image, attribute, typed(value))
         self._update_reports(now_s)
 
-    def _active_reply(self, command: ma.ActiveReply, now_s: float) -> None:
+    @_handles(ma.WritePidRam, ma.WritePidRom)
+    def _on_write_pid(self, command: ma.WritePidRam | ma.WritePidRom, _now_s: float, _rs485: bool) -> None:
+        self.ram.pid[command.index] = command.value
+        if isinstance(command, ma.WritePidRom) and self._rom_ok():
+            self.rom.pid[command.index] = command.value
+
+    @_handles(ma.WriteAcceleration)
+    def _on_write_acceleration(self, command: ma.WriteAcceleration, _now_s: float, _rs485: bool) -> None:
+        accel = 0.0 if command.acceleration_dps_s is None else command.acceleration_dps_s  # None: 0
+        self.ram.acceleration_dps_s[command.index] = accel
+        if self._rom_ok():
+            self.rom.acceleration_dps_s[command.index] = accel
+        self._apply_plant()
+
+    @_handles(ma.WriteEncoderZero)
+    def _on_encoder_zero(self, command: ma.WriteEncoderZero, _now_s: float, _rs485: bool) -> None:
+        if self._rom_ok():  # takes effect after a restart (§4.9)
+            self.rom.encoder_offset_counts = command.offset_counts
+
+    @_handles(ma.WriteCurrentPositionAsZero)
+    def _on_position_as_zero(self, _command: Command, _now_s: float, _rs485: bool) -> Reply:
+        offset = int32(self.encoder.raw_counts(self.plant.motor_position_deg))
+        if self._rom_ok():  # takes effect after 0x76 (§4.10)
+            self.rom.encoder_offset_counts = offset
+        return ma.ZeroOffsetReply(offset_counts=offset)
+
+    @_handles(ma.SetCommTimeout)
+    def _on_comm_timeout(self, command: ma.SetCommTimeout, _now_s: float, _rs485: bool) -> None:
+        # ROM, and not in [000]'s "only when disabled" list (§8 item 15).
+        timeout = 0 if command.timeout_ms is None else command.timeout_ms  # None: protection off
+        self.ram.comm_timeout_ms = self.rom.comm_timeout_ms = timeout
+
+    @_handles(ma.SetCanId)
+    def _on_set_can_id(self, command: ma.SetCanId, _now_s: float, _rs485: bool) -> None:
+        self.rom.motor_id = command.motor_id  # V4.3 only, which has no "only when disabled" rule
+
+    @_handles(ma.SetBaudRate)
+    def _on_baud_rate(self, command: ma.SetBaudRate, _now_s: float, _rs485: bool) -> None:
+        if self._rom_ok():  # used from the next power-up (§4.34)
+            self.rom.baud_index = command.baud_index
+
+    @_handles(ma.SystemReset)
+    def _on_reset(self, _command: Command, now_s: float, _rs485: bool) -> None:
+        self._counters["resets"] += 1
+        self._power_up(now_s)  # §4.28: the program restarts
+
+    @_handles(ma.MotorShutdown)
+    def _on_shutdown(self, _command: Command, _now_s: float, _rs485: bool) -> None:
+        self._set_control(Off(), self.run_mode)
+
+    @_handles(ma.MotorStop)
+    def _on_stop(self, _command: Command, _now_s: float, _rs485: bool) -> None:
+        if self.enabled and not self.errors.flags:  # hold where it is; the loop stays (§4.18)
+            self._set_control(PositionControl(position_deg=self.plant.position_deg), self.run_mode)
+
+    @_handles(ma.BrakeRelease, ma.BrakeLock)
+    def _on_brake(self, command: Command, _now_s: float, _rs485: bool) -> None:
+        self.brake_released = isinstance(command, ma.BrakeRelease)
+        self._apply_plant()
+
+    @_handles(ma.ActiveReply)
+    def _active_reply(self, command: ma.ActiveReply, now_s: float, _rs485: bool = False) -> None:
         if not command.enabled:
             self.streams.pop(command.command, None)
             return
@@ -850,11 +902,5 @@ _IMMEDIATE: dict[ma.FunctionIndex, tuple[str, type[bool] | type[int]]] = {
 }
 # What each streamable command's frames carry: its normal reply (§4.36).
 _STREAMED: dict[StreamableCommand, type[Command]] = {
-    StreamableCommand.ENCODER_POSITION: ma.ReadEncoderPosition,
-    StreamableCommand.ENCODER_RAW: ma.ReadEncoderRaw,
-    StreamableCommand.ENCODER_OFFSET: ma.ReadEncoderOffset,
-    StreamableCommand.MULTI_TURN_ANGLE: ma.ReadMultiTurnAngle,
-    StreamableCommand.STATUS_1: ma.ReadStatus1,
-    StreamableCommand.STATUS_2: ma.ReadStatus2,
-    StreamableCommand.STATUS_3: ma.ReadStatus3,
+    StreamableCommand(c.CODE): c for c in COMMANDS if c.STREAMABLE and c.CODE is not None
 }
