@@ -181,6 +181,44 @@ def test_the_typed_motor_methods_are_generated_from_the_declarations(toy: Module
     assert set(toy.FAMILY.methods()) <= set(vars(motor_class))
 
 
+USER_FILE = """\
+from servobus import Bus
+import servobus_toy as toy
+
+
+async def main(bus: Bus) -> None:
+    motor = bus.motor(toy.FAMILY, 1)
+    reveal_type(await motor.read_state())
+    reveal_type(await motor.request(toy.WriteSpeedLimit(limit_dps=5.0)))
+    reveal_type(await motor.restart())
+    await motor.read_stat()
+    await motor.set_speed(speed_rpm=3.0)
+"""
+
+
+def test_a_plug_in_motor_is_typed_for_a_user_s_type_checker(
+    toy: ModuleType, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    mypy_api = pytest.importorskip("mypy.api")
+    user = tmp_path / "user.py"
+    user.write_text(USER_FILE)
+    monkeypatch.setenv("MYPYPATH", str(PLUGINS))
+    stdout, stderr, _ = mypy_api.run(
+        ["--strict", "--no-incremental", "--cache-dir", str(tmp_path / ".cache"), str(user)]
+    )
+    assert not stderr, stderr
+    lines = [line.split(": ", 1)[1] for line in stdout.splitlines() if line.startswith(str(user))]
+    assert [line for line in lines if line.startswith("note: Revealed")] == [
+        'note: Revealed type is "servobus_toy.messages.StateReply"',
+        'note: Revealed type is "servobus_toy.messages.SpeedLimitEcho"',
+        'note: Revealed type is "None"',
+    ]
+    errors = [line for line in lines if line.startswith("error:")]
+    assert len(errors) == 2, errors
+    assert 'has no attribute "read_stat"' in errors[0]
+    assert 'Unexpected keyword argument "speed_rpm"' in errors[1]
+
+
 # ---- through the Bus ----
 
 
