@@ -1,30 +1,28 @@
-"""A DBC of a family's CAN frames, generated from the codecs' own definitions (cantools: ``servobus[dbc]``).
+"""A DBC of a family's CAN frames, derived from its classes' declarations (cantools: ``servobus[dbc]``).
 
 A DBC signal is a bit range with a byte order, a sign, ``value = raw * factor + offset``, a range and a
-unit. Each family's frames are described from what its codec already states, never retyped:
+unit. The exporter never names a family: it asks the :class:`~servobus.protocols.Family` (built-in or
+registered by entry point) and derives every signal from what the codec already states.
 
-* **MyActuator** (0x140/0x240 + ID, 0x280): the ``FIELDS`` tables of ``(offset, field)`` pairs
-  (``protocols/myactuator/_layout.py``) that the decoder tables ``REQUESTS``/``REPLIES`` list per DATA[0]
-  and revision; factor, range and unit come from the field object (``ScaledField`` 0.01 A/LSB: factor
-  0.01, unit ``A``). **Motion mode** (0x400/0x500 + ID): the C core's ``MIT_COMMAND``/``MIT_REPLY``
-  packers with the revision's :class:`~servobus.protocols.myactuator.MotionScales` (``--max-torque``
-  for V4.4's model-specific torque range).
-* **hollow**: the C core's packers of the motor model (``hollow.model.packers``): ``HOLLOW_SETPOINT``
-  and ``MIT_REPLY`` (normal mode), ``HOLLOW_SETPOINT`` and ``HOLLOW_EXT_REPLY`` (extended mode),
-  ``HOLLOW_FD_COMMAND``/``HOLLOW_FD_REPLY`` (CAN FD, 16 bytes). The extended-id frames (CAN mode switch,
-  PI multiplier) are laid out in their classes' code; :func:`hollow_config` states them here.
-* **LK** (V2.36 and V2.35): the field objects of ``protocols/lk`` (``SPEED``, ``TEMPERATURE``, the
-  ``IqSlot`` of the motor type, the parameter ``*_LAYOUTS``) at the offsets their classes write in
-  ``encode``/``decode``. Those offsets are in code, not tables, so :func:`lk_fields` states them once;
-  ``tests/test_dbc_export.py`` decodes frames of every LK class both ways and compares every field.
+**From the declarations.** A message class with a fixed layout (``protocols/_layout.py``: ``CODE`` in
+DATA[0], ``FIELDS`` of ``(offset, field)`` pairs, ``CONSTANTS``, ``SIZE``) gives one DBC layout:
+each field is a little-endian signal whose factor, range and unit come from the field object
+(:func:`signal_spec`: a ``ScaledField`` of 100 counts per ampere is factor 0.01, unit ``A`` from the name
+``current_a``), an enum field's members are its choices. :func:`fields_layout` makes that layout; a class
+decoded by a rule of its own or holding text is left out with the reason. A C-core field is bit-packed
+(MIT: a float in [lo, hi] onto an n-bit code, ``code = (x - lo) * (2**n - 1) / (hi - lo)``, i.e. factor
+``(hi - lo) / (2**n - 1)``, offset ``lo``). Its bit positions are not copied from the C source:
+:func:`packed_signals` packs one bit of one field at a time through the C core and reads where it lands,
+so the DBC places every bit where ``servobus._core`` does. A field whose bits are not one big-endian run
+becomes one signal per run (``position_deg_b0``, ``position_deg_b16``), whose values add up to the
+field's.
 
-A C-core field is bit-packed (MIT: a float in [lo, hi] onto an n-bit code, ``code = (x - lo) *
-(2**n - 1) / (hi - lo)``, i.e. factor ``(hi - lo) / (2**n - 1)``, offset ``lo``). Its bit positions are
-not copied from the C source: :func:`packed_signals` packs one bit of one field at a time through the
-C core and reads where it lands, so the DBC places every bit where ``servobus._core`` does. A field
-whose bits are not one big-endian run (hollow's extended-mode position: DATA[1..2] low half, DATA[6..7]
-high half) becomes one signal per run, ``position_deg_b0`` and ``position_deg_b16``, whose values add
-up to the field's.
+**From the family** (what declarations cannot say): which identifiers carry which frames per motor,
+which byte multiplexes them, comments, bit-packed layouts, options (a motor model, a CAN mode). A family
+states it in its ``dbc`` part (``Family.part("dbc")``, a :class:`DbcFamily`), whose ``describe`` builds
+the messages with the helpers here. A family without a ``dbc`` part gets :func:`derived`: per motor,
+the identifiers its bound codec lists (``request_ids``, ``reply_ids``), the commands of the revision
+multiplexed on DATA[0] by their ``CODE``, their replies (``reply_types()``) likewise.
 
 Messages are multiplexed on DATA[0] (the signal ``code``) where the family keys its frames by it;
 parameter frames whose value layout depends on a parameter byte are multiplexed again on that byte
@@ -58,10 +56,9 @@ A servobus field a multiplexer value stands for (the ``command`` byte of a reply
 DATA[0] values share, a parameter's name) has no signal of its own: the multiplexer value selecting the
 layout gives it (the layout's ``implies``).
 
-What a DBC cannot say is left out, and :func:`plan` names it with the reason: text fields, layouts
-decoded by rules of their own, two layouts under one identifier and DATA[0] (or, LK V2.35, requests and
-replies on one identifier), hollow's special commands (a 7-byte pattern, not a multiplexer value) and
-the frames of its other CAN modes.
+What a DBC cannot say is left out, and :func:`plan` names it with the reason (text fields, layouts
+decoded by rules of their own, two layouts under one identifier and DATA[0], what the family's part
+adds).
 """
 
 from __future__ import annotations
@@ -72,32 +69,55 @@ import functools
 import re
 import typing
 from collections import OrderedDict
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, TypeAlias
 
 from servobus.core import FieldScale, Packer
+from servobus.protocols import Family, available_families, get_family
+from servobus.protocols._bound import EXTENDED
 from servobus.protocols._fields import IntField, ScaledField
+from servobus.protocols._layout import (
+    BoolField,
+    EnumField,
+    FlagsField,
+    Float32Field,
+    OpenEnumField,
+    StepField,
+)
+from servobus.protocols._layout import (
+    Layout as FixedLayout,
+)
 from servobus.protocols._special import SpecialZero
 
 __all__ = [
+    "CONFIG_FIELDS",
     "DIRECTIONS",
-    "FAMILIES",
-    "HOLLOW_CAN_MODES",
     "MUX",
-    "OPTIONS",
+    "DbcFamily",
+    "DbcOption",
+    "DbcQuery",
+    "Described",
+    "EnumByte",
+    "FlagsByte",
     "Layout",
     "MessageSpec",
     "Mux",
     "Placed",
     "Plan",
+    "ResultByte",
     "SignalSpec",
     "build_database",
     "database",
     "dbc_name",
+    "dbc_part",
     "dbc_text",
-    "hollow_config",
-    "lk_fields",
+    "derived",
+    "enum_choices",
+    "fields_layout",
+    "le_signal",
+    "muxed",
+    "option_owners",
     "packed_signals",
     "plan",
     "signal_spec",
@@ -108,15 +128,8 @@ ByteOrder: TypeAlias = Literal["little_endian", "big_endian"]
 
 #: The multiplexer signal on DATA[0].
 MUX = "code"
-FAMILIES = ("myactuator", "lk", "hollow")
 DIRECTIONS = ("request", "reply")
-HOLLOW_CAN_MODES = ("normal", "extended", "fd")
-#: The options of :func:`plan` each family takes.
-OPTIONS: Mapping[str, frozenset[str]] = {
-    "myactuator": frozenset({"max_torque_nm"}),
-    "lk": frozenset({"model", "encoder_bits"}),
-    "hollow": frozenset({"model", "can_mode", "host_id"}),
-}
+_PLURAL = {"request": "requests", "reply": "replies"}
 #: Fields a message carries to be self-contained, not values of its frame.
 CONFIG_FIELDS = frozenset({"model", "scales", "motor_type", "encoder_bits"})
 
@@ -266,8 +279,9 @@ def _unit(name: str) -> str:
     return next((unit for suffix, unit in UNITS if name.endswith(suffix)), "")
 
 
-def _le(field: str, offset: int, size: int, **kwargs: Any) -> SignalSpec:
-    """A little-endian signal of ``size`` bytes at DATA[offset]."""
+def le_signal(field: str, offset: int, size: int, **kwargs: Any) -> SignalSpec:
+    """A little-endian signal of ``size`` bytes at DATA[offset], its unit from the field's name
+    (``kwargs``: the other :class:`SignalSpec` attributes)."""
     return SignalSpec(field, 8 * offset, 8 * size, unit=_unit(field), **kwargs)
 
 
@@ -275,7 +289,8 @@ def _bool_choices() -> tuple[tuple[int, str], ...]:
     return ((0, "False"), (1, "True"))
 
 
-def _enum_choices(enum_cls: type[enum.Enum]) -> tuple[tuple[int, str], ...]:
+def enum_choices(enum_cls: type[enum.Enum]) -> tuple[tuple[int, str], ...]:
+    """An enum's members as DBC choices: ``(value, name)``."""
     return tuple((int(member.value), member.name) for member in enum_cls)
 
 
@@ -284,7 +299,7 @@ def _enum_choices(enum_cls: type[enum.Enum]) -> tuple[tuple[int, str], ...]:
 
 @dataclass(frozen=True, slots=True)
 class EnumByte:
-    """An IntEnum carried as an unsigned integer of ``size`` bytes (LK's state and selector bytes)."""
+    """An IntEnum carried as an unsigned integer of ``size`` bytes, for a class without ``FIELDS``."""
 
     name: str
     enum: type[enum.IntEnum]
@@ -301,7 +316,7 @@ class FlagsByte:
 
 @dataclass(frozen=True, slots=True)
 class ResultByte:
-    """A status byte whose values map to named results (LK's opposite write/save polarities)."""
+    """A status byte whose values map to named results (a family's write/save result polarities)."""
 
     name: str
     table: Mapping[int, enum.Enum]
@@ -310,8 +325,6 @@ class ResultByte:
 def signal_spec(offset: int, field: Any, name: str | None = None) -> SignalSpec | None:
     """The little-endian signal of a field object at DATA[offset] (``name`` renames it), or None if a DBC
     signal cannot carry it (text)."""
-    from servobus.protocols.myactuator import _layout as lay
-
     comment = ""
     none_raw = None
     if isinstance(field, SpecialZero):
@@ -320,16 +333,18 @@ def signal_spec(offset: int, field: Any, name: str | None = None) -> SignalSpec 
         field = field.inner
     name = name or field.name
     if isinstance(field, EnumByte):
-        return _le(name, offset, field.size, choices=_enum_choices(field.enum))
+        return le_signal(name, offset, field.size, choices=enum_choices(field.enum))
     if isinstance(field, FlagsByte):
         flags = ", ".join(f"{m.name}=0x{int(m):X}" for m in field.flags if m.name and int(m))
-        return _le(name, offset, 1, minimum=0, maximum=255, comment=f"flags: {flags}")
+        return le_signal(name, offset, 1, minimum=0, maximum=255, comment=f"flags: {flags}")
     if isinstance(field, ResultByte):
-        return _le(name, offset, 1, choices=tuple((raw, r.name) for raw, r in sorted(field.table.items())))
+        return le_signal(
+            name, offset, 1, choices=tuple((raw, r.name) for raw, r in sorted(field.table.items()))
+        )
     common: dict[str, Any] = {"comment": comment, "none_raw": none_raw}
     if isinstance(field, ScaledField):
         lo, hi = field.limits
-        return _le(
+        return le_signal(
             name,
             offset,
             field.size,
@@ -339,20 +354,22 @@ def signal_spec(offset: int, field: Any, name: str | None = None) -> SignalSpec 
             maximum=hi,
             **common,
         )
-    if isinstance(field, IntField | lay.StepField):
+    if isinstance(field, IntField | StepField):
         lo, hi = field.limits
-        scale = float(field.step) if isinstance(field, lay.StepField) else 1.0
+        scale = float(field.step) if isinstance(field, StepField) else 1.0
         signed = isinstance(field, IntField) and field.signed
-        return _le(name, offset, field.size, signed=signed, scale=scale, minimum=lo, maximum=hi, **common)
-    if isinstance(field, lay.EnumField | lay.OpenEnumField):
-        return _le(name, offset, field.size, choices=tuple((int(m), m.name) for m in field.enum))
-    if isinstance(field, lay.FlagsField):
+        return le_signal(
+            name, offset, field.size, signed=signed, scale=scale, minimum=lo, maximum=hi, **common
+        )
+    if isinstance(field, EnumField | OpenEnumField):
+        return le_signal(name, offset, field.size, choices=tuple((int(m), m.name) for m in field.enum))
+    if isinstance(field, FlagsField):
         flags = ", ".join(f"{m.name}=0x{int(m):X}" for m in field.flags if m.name and int(m))
-        return _le(name, offset, field.size, comment=f"flags: {flags}")
-    if isinstance(field, lay.BoolField):
-        return _le(name, offset, field.size, choices=_bool_choices(), minimum=0, maximum=1)
-    if isinstance(field, lay.Float32Field):
-        return _le(name, offset, field.size, signed=True, is_float=True)
+        return le_signal(name, offset, field.size, comment=f"flags: {flags}")
+    if isinstance(field, BoolField):
+        return le_signal(name, offset, field.size, choices=_bool_choices(), minimum=0, maximum=1)
+    if isinstance(field, Float32Field):
+        return le_signal(name, offset, field.size, signed=True, is_float=True)
     return None  # AsciiField: text
 
 
@@ -435,7 +452,7 @@ def packed_signals(packer: Packer, message: type) -> tuple[SignalSpec, ...]:
         if kind is bool:
             choices = _bool_choices()
         elif isinstance(kind, type) and issubclass(kind, enum.IntEnum):
-            choices = _enum_choices(kind)
+            choices = enum_choices(kind)
         runs = _runs(positions)
         for first, length in runs:
             msb = positions[first + length - 1]
@@ -470,128 +487,48 @@ def packed_signals(packer: Packer, message: type) -> tuple[SignalSpec, ...]:
     return tuple(signals)
 
 
-# ---- MyActuator ---------------------------------------------------------------------------------
+# ---- declared layouts -> DBC layouts ------------------------------------------------------------
 
 
-def _myactuator(
-    ids: Sequence[int], revision: Any, max_torque_nm: float | None, direction: str | None
-) -> Plan:
-    from servobus.protocols.myactuator import FAMILY, MotionCommand, MotionReply, MotionScales
-    from servobus.protocols.myactuator.codec import REPLIES, REQUESTS
-    from servobus.protocols.myactuator.ids import (
-        BROADCAST_ID,
-        motion_reply_id,
-        motion_request_id,
-        reply_id,
-        request_id,
-    )
-    from servobus.protocols.myactuator.motion import command_packer, reply_packer
+def fields_layout(
+    cls: type,
+    code: int | None,
+    what: str,
+    left_out: list[str],
+    *,
+    name: str | None = None,
+    prefix: str = "",
+    implies: Iterable[tuple[str, Any]] = (),
+    message: str | None = None,
+) -> Layout | None:
+    """The DBC layout of a fixed-layout class (``FIELDS``, ``CONSTANTS``) under the DATA[0] value
+    ``code`` (None: a frame without a command byte), or None with the reason added to ``left_out``: a
+    class decoded by a rule of its own (not its field table), or one with a text field.
 
-    rev = FAMILY.revision(revision) if revision is not None else FAMILY.default_revision
-    scales = MotionScales.for_revision(typing.cast(Any, rev), max_torque_nm=max_torque_nm)
-    left_out: list[str] = []
-    requests = _myactuator_table(REQUESTS, rev, "request", left_out)
-    replies = _myactuator_table(REPLIES, rev, "reply", left_out)
-    command = Layout(None, "", packed_signals(command_packer(scales), MotionCommand), message="MotionCommand")
-    reply = Layout(None, "", packed_signals(reply_packer(scales), MotionReply), message="MotionReply")
-    ranges = (
-        f"p ±{scales.p_max_rad} rad, v ±{scales.v_max_rad_s} rad/s, kp 0..{scales.kp_max}, "
-        f"kd 0..{scales.kd_max}, t ±{scales.t_max_nm} Nm"
-    )
-    messages = []
-    for motor_id in ids:
-        motor = f"motor_{motor_id}"
-        # DATA[0] of a motion reply is the motor's id, the one of its identifier (checked on decode).
-        own = tuple(
-            dataclasses.replace(s, minimum=motor_id, maximum=motor_id) if s.field == "motor_id" else s
-            for s in reply.signals
-        )
-        for ident, name, kind, root, sender, comment in (
-            (request_id(motor_id), "request", "request", _muxed(requests), "host", "requests"),
-            (reply_id(motor_id), "reply", "reply", _muxed(replies), motor, "replies"),
-            (motion_request_id(motor_id), "motion_command", "request", command, "host", "motion commands"),
-            (
-                motion_reply_id(motor_id),
-                "motion_reply",
-                "reply",
-                dataclasses.replace(reply, signals=own),
-                motor,
-                "motion replies",
-            ),
-        ):
-            text = f"MyActuator {rev.name} {comment} of motor {motor_id}"
-            text += f" ({ranges})" if name.startswith("motion") else ", multiplexed on DATA[0]"
-            messages.append(
-                MessageSpec(
-                    ident, f"myactuator_{name}_{motor_id}", 8, kind, root, (sender,), text, motor_id=motor_id
-                )
-            )
-    messages.append(
-        MessageSpec(
-            BROADCAST_ID,
-            "myactuator_broadcast",
-            8,
-            "request",
-            _muxed(requests),
-            ("host",),
-            f"MyActuator {rev.name} multi-motor requests (every motor replies on 0x240 + ID)",
-        )
-    )
-    return _finish("myactuator", rev, messages, left_out, ids, direction)
-
-
-def _myactuator_table(
-    table: Mapping[int, Iterable[Any]], revision: enum.Enum, what: str, left_out: list[str]
-) -> tuple[Layout, ...]:
-    from servobus.protocols.myactuator._layout import Fixed
-
-    out: list[Layout] = []
-    for code, candidates in sorted(table.items()):
-        here = [c for c in candidates if revision in c.revisions]
-        if not here:
+    A field at offset 0 is the multiplexer's byte: the value ``code`` implies it (an R2 status reply's
+    ``command``). Args: ``name``, the multiplexer value's name (default the class's); ``prefix``,
+    before each field name (``command.`` for an echoed command); ``implies``, more fields the value
+    stands for; ``message``, the class the frame decodes to (default ``name``).
+    """
+    name = name or cls.__name__
+    where = f"{what} 0x{code:02X} ({name})" if code is not None else f"{what} {name}"
+    decode = getattr(getattr(cls, "decode", None), "__func__", None)
+    if decode is not FixedLayout.decode.__func__:  # type: ignore[attr-defined]
+        left_out.append(f"{where}: decoded by a rule of its own, not its field table")
+        return None
+    signals: list[SignalSpec] = []
+    implied = list(implies)
+    for offset, field in getattr(cls, "FIELDS", ()):
+        if offset == 0 and code is not None:
+            implied.append((prefix + field.name, _scalar(field.decode(bytes([code]), 0))))
             continue
-        names = [_myactuator_name(c, what) for c in here]
-        if len(here) > 1:
-            left_out.append(
-                f"{what} 0x{code:02X} ({', '.join(names)}): {len(here)} layouts under one DATA[0], told "
-                "apart by another byte"
-            )
-            continue
-        cls, name = here[0].message, names[0]
-        if getattr(cls.decode, "__func__", None) is not Fixed.decode.__func__:  # type: ignore[attr-defined]
-            left_out.append(
-                f"{what} 0x{code:02X} ({name}): decoded by a rule of its own, not its field table"
-            )
-            continue
-        echo = name.startswith("Echo_")
-        prefix = "command." if echo else ""
-        signals: list[SignalSpec] = []
-        implies: list[tuple[str, Any]] = [("command", cls.__name__)] if echo else []
-        for offset, field in cls.FIELDS:
-            if offset == 0:  # DATA[0] is the multiplexer (the R2 status reply's ``command``)
-                implies.append((prefix + field.name, _scalar(field.decode(bytes([code]), 0))))
-                continue
-            spec = signal_spec(offset, field, prefix + field.name)
-            if spec is None:
-                left_out.append(
-                    f"{what} 0x{code:02X} ({name}): field {field.name!r} is ASCII text, not a number"
-                )
-                break
-            signals.append(spec)
-        else:
-            message = "Echo" if echo else cls.__name__
-            out.append(
-                Layout(
-                    code, name, tuple(signals), tuple(cls.CONSTANTS), message=message, implies=tuple(implies)
-                )
-            )
-    return tuple(out)
-
-
-def _myactuator_name(candidate: Any, what: str) -> str:
-    cls = candidate.message
-    is_echo = what == "reply" and getattr(candidate.decode, "__func__", None) is None
-    return f"Echo_{cls.__name__}" if is_echo else str(cls.__name__)
+        spec = signal_spec(offset, field, prefix + field.name)
+        if spec is None:
+            left_out.append(f"{where}: field {field.name!r} is ASCII text, not a number")
+            return None
+        signals.append(spec)
+    constants = tuple(getattr(cls, "CONSTANTS", ()))
+    return Layout(code, name, tuple(signals), constants, message=message or name, implies=tuple(implied))
 
 
 def _scalar(value: Any) -> Any:
@@ -603,8 +540,8 @@ def _scalar(value: Any) -> Any:
     return value
 
 
-def _muxed(layouts: tuple[Layout, ...]) -> Layout:
-    """A root whose DATA[0] multiplexes ``layouts``.
+def muxed(layouts: tuple[Layout, ...]) -> Layout:
+    """A root whose DATA[0] (the signal ``code``) multiplexes ``layouts``.
 
     A layout name several values share (LK's ``Status2Reply`` of 0x9C and 0xA0..0xA8) gets the value as
     a suffix (``Status2Reply_A0``): cantools turns a decoded multiplexer name back into its value by the
@@ -622,539 +559,267 @@ def _muxed(layouts: tuple[Layout, ...]) -> Layout:
     return Layout(None, "", mux=Mux(SignalSpec(MUX, 0, 8), named))
 
 
-# ---- LK -----------------------------------------------------------------------------------------
+# ---- what a family tells the exporter -----------------------------------------------------------
 
 
-def _iq(slot: Any, motor_type: Any, limits: tuple[int, int] | None = None) -> Any:
-    """The field an LK ``IqSlot`` is for ``motor_type``: amperes (MF, MG) or raw counts under the slot's
-    name for the type, within ``limits`` (default: the slot's); None if the type does not carry it."""
-    lo, hi = limits if limits is not None else slot.limits
-    amps = slot.field(motor_type, (lo, hi))
-    if amps is not None:
-        return amps
-    name = slot.counts_names.get(motor_type)
-    return None if name is None else IntField(name, size=2, signed=True, lo=lo, hi=hi)
+@dataclass(frozen=True, slots=True, kw_only=True)
+class DbcOption:
+    """An option of a family's DBC: ``plan(family, ids, name=value)``, on the command line ``--option
+    name=value`` (or a flag of its own, ``--model``).
 
-
-def _items(field: Any, count: int) -> list[Any]:
-    """``field`` as the items of a tuple value: ``currents_a[0]``, ``currents_a[1]``..."""
-    return [dataclasses.replace(field, name=f"{field.name}[{i}]") for i in range(count)]
-
-
-def _param_layouts(params: type[enum.IntEnum], layouts: Mapping[Any, Any] | None) -> tuple[Layout, ...]:
-    """One layout per parameter of ``params`` (the value signals of its ``ValueLayout``)."""
-    return tuple(
-        Layout(int(p), p.name, _value_signals(layouts[p]) if layouts else (), implies=(("param", p.name),))
-        for p in params
-    )
-
-
-def _value_signals(layout: Any) -> tuple[SignalSpec, ...]:
-    """The signals of an LK parameter ``ValueLayout`` (``params.py``): PID gains, an integer, a choice."""
-    from servobus.protocols.lk import params as lkp
-
-    if isinstance(layout, lkp._Pid):
-        return tuple(
-            _le(f"value.{gain}", offset, 2, minimum=0, maximum=layout.hi)
-            for gain, offset in (("kp", 2), ("ki", 4), ("kd", 6))
-        )
-    if isinstance(layout, lkp._Int):
-        field = IntField("value", size=layout.size, signed=layout.signed, lo=layout.lo, hi=layout.hi)
-        spec = signal_spec(layout.offset, field)
-    elif isinstance(layout, lkp._Choice):
-        spec = signal_spec(layout.offset, EnumByte("value", layout.enum_cls))
-    else:  # pragma: no cover - a new ValueLayout kind: describe it here
-        raise TypeError(f"no signal for the LK parameter layout {layout!r}")
-    assert spec is not None
-    return (spec,)
-
-
-def _setting_mux(with_values: bool) -> Mux:
-    """V2.36 setting parameters: DATA[1] is a group (0x05: single values, addressed by DATA[2]; 0xA0,
-    0xA4, 0xA8: PID groups, values from DATA[2]) (spec §6.2, ``params.decode_setting_address``)."""
-    from servobus.protocols.lk.params import SETTING_LAYOUTS, SettingParam
-
-    singles = [p for p in SettingParam if p >> 8 == 0x05]
-    single_layouts = tuple(
-        Layout(
-            p & 0xFF,
-            p.name,
-            _value_signals(SETTING_LAYOUTS[p]) if with_values else (),
-            implies=(("param", p.name),),
-        )
-        for p in singles
-    )
-    groups = [
-        Layout(
-            0x05,
-            "SINGLE_VALUE",
-            mux=Mux(_le("param", 2, 1, choices=_choices(single_layouts)), single_layouts),
-        )
-    ]
-    for p in SettingParam:
-        if p >> 8 != 0x05:
-            signals = _value_signals(SETTING_LAYOUTS[p]) if with_values else ()
-            groups.append(Layout(p >> 8, p.name, signals, implies=(("param", p.name),)))
-    layouts = tuple(groups)
-    return Mux(_le("param_group", 1, 1, choices=_choices(layouts)), layouts)
-
-
-def _param_mux(params: type[enum.IntEnum], layouts: Mapping[Any, Any] | None) -> Mux:
-    """A parameter byte at DATA[1] multiplexing each parameter's value layout."""
-    subs = _param_layouts(params, layouts)
-    return Mux(_le("param", 1, 1, choices=_choices(subs)), subs)
-
-
-def _choices(layouts: Iterable[Layout]) -> tuple[tuple[int, str], ...]:
-    return tuple((layout.code, layout.name) for layout in layouts if layout.code is not None)
-
-
-def lk_fields(cls: type, code: int | None, model: Any) -> tuple[tuple[Any, ...], Mux | None, str | None]:
-    """Where an LK message class puts its fields, for ``model``: ``(offset, field object)`` pairs, a
-    parameter multiplexer under DATA[0] (or None), and why the class cannot be described (or None).
-
-    The offsets are those the classes' ``encode``/``decode`` write (spec §4, §6, §8); the field objects
-    are the LK modules' own, so scales and ranges are the codec's.
+    Attributes:
+        name: the keyword (``can_mode``), an identifier.
+        help: one line for the user: what it sets and its default.
+        parse: the value from command-line text (``int``; default: the text itself).
     """
-    from servobus.protocols.lk import commands as cmd
-    from servobus.protocols.lk import commands_control as ctl
-    from servobus.protocols.lk import params as lkp
-    from servobus.protocols.lk import params_v235 as p235
-    from servobus.protocols.lk import params_v236 as p236
-    from servobus.protocols.lk import replies as rep
-    from servobus.protocols.lk import replies_position as rpos
-    from servobus.protocols.lk import states
-    from servobus.protocols.lk.model import encoder_max_count
 
-    motor_type = model.motor_type
-
-    def encoder(name: str) -> IntField:
-        return IntField(name, size=2, hi=encoder_max_count(model.encoder_bits))
-
-    def iq(slot: Any, limits: tuple[int, int] | None = None) -> Any:
-        field = _iq(slot, motor_type, limits)
-        return (
-            _NotCarried(f"{slot.amps_name}: {motor_type.name} motors do not carry it")
-            if field is None
-            else field
-        )
-
-    def items(field: Any, count: int) -> list[Any]:
-        return [field] * count if isinstance(field, _NotCarried) else _items(field, count)
-
-    direction = EnumByte("direction", states.SpinDirection)
-    # The status-2 shape's DATA[2..3] depends on the command byte too: what it is (0xA0's power on every
-    # motor type, ``replies.status2_slot``) and its range (``replies.torque_range``).
-    status2_iq = rep.torque_range(model.revision, motor_type, code) if code is not None else None
-    status2_slot = rep.status2_slot(code) if code is not None else rep.REPLY_IQ
-    table: dict[type, tuple[Any, ...] | Mux] = {
-        rep.Status2Reply: (
-            (1, rep.TEMPERATURE),
-            (2, iq(status2_slot, status2_iq)),
-            (4, rep.REPLY_SPEED),
-            (6, encoder("encoder_counts")),
-        ),
-        cmd.BrakeControl: ((1, EnumByte("action", states.BrakeAction)),),
-        cmd.WriteEncoderOffset: ((cmd.ENCODER_OFFSET_AT, encoder("offset_counts")),),
-        cmd.WriteAcceleration: ((4, cmd.ACCELERATION),),
-        ctl.OpenLoopControl: ((4, ctl.POWER),),
-        ctl.TorqueControl: ((4, iq(ctl.TORQUE)),),
-        ctl.SpeedControl: ((2, iq(ctl.TORQUE_LIMIT)), (4, ctl.SPEED)),
-        ctl.SpeedControlV235: ((4, ctl.SPEED),),
-        ctl.MultiTurnPosition: ((4, ctl.ANGLE),),
-        ctl.MultiTurnPositionSpeed: ((2, ctl.MAX_SPEED), (4, ctl.ANGLE)),
-        ctl.SingleTurnPosition: ((1, direction), (4, ctl.SINGLE_TURN)),
-        ctl.SingleTurnPositionV235: ((1, direction), (4, ctl.SINGLE_TURN_V235)),
-        ctl.SingleTurnPositionSpeed: ((1, direction), (2, ctl.MAX_SPEED), (4, ctl.SINGLE_TURN)),
-        ctl.SingleTurnPositionSpeedV235: ((1, direction), (2, ctl.MAX_SPEED), (4, ctl.SINGLE_TURN_V235)),
-        ctl.IncrementalPosition: ((4, ctl.INCREMENT),),
-        ctl.IncrementalPositionSpeed: ((2, ctl.MAX_SPEED), (4, ctl.INCREMENT)),
-        ctl.MultiMotorTorque: tuple(zip((0, 2, 4, 6), items(iq(ctl.MULTI_TORQUE), 4), strict=True)),
-        p236.ReadControlParam: ((1, EnumByte("param", lkp.ControlParam)),),
-        p236.WriteControlParam: _param_mux(lkp.ControlParam, lkp.CONTROL_LAYOUTS),
-        p236.ControlParamReply: _param_mux(lkp.ControlParam, lkp.CONTROL_LAYOUTS),
-        p236.ReadSetting: _setting_mux(with_values=False),
-        p236.WriteSetting: _setting_mux(with_values=True),
-        p236.SettingReply: _setting_mux(with_values=True),
-        p236.SaveSettingsReply: ((2, ResultByte("result", lkp.SAVE_RESULT)),),
-        p235.ReadParam: ((1, EnumByte("param", lkp.ParamId)),),
-        p235.WriteParamRam: _param_mux(lkp.ParamId, lkp.PARAM_LAYOUTS),
-        p235.WriteParamRom: _param_mux(lkp.ParamId, lkp.PARAM_LAYOUTS),
-        p235.ParamReply: _param_mux(lkp.ParamId, lkp.PARAM_LAYOUTS),
-        p235.ParamWriteReply: (
-            (1, EnumByte("param", lkp.ParamId)),
-            (2, ResultByte("result", lkp.WRITE_RESULT_V235)),
-        ),
-        rep.Status1Reply: (
-            (1, rep.TEMPERATURE),
-            (2, rep.VOLTAGE),
-            (4, rep.BUS_CURRENT),
-            (6, EnumByte("motor_state", states.MotorState)),
-            (7, FlagsByte("error_state", states.ErrorState)),
-        ),
-        rep.Status1ReplyV235: (
-            (1, rep.TEMPERATURE),
-            (3, rep.VOLTAGE_V235),
-            (7, FlagsByte("error_state", states.ErrorStateV235)),
-        ),
-        rep.Status3Reply: ((1, rep.TEMPERATURE), *zip((2, 4, 6), items(iq(rep.PHASE), 3), strict=True)),
-        rep.Status3ReplyV235: tuple(zip((2, 4, 6), _items(rep.PHASE_V235, 3), strict=True)),
-        rep.BrakeReply: ((1, EnumByte("state", states.BrakeState)),),
-        rpos.EncoderReply: (
-            (2, encoder("encoder_counts")),
-            (4, encoder("raw_counts")),
-            (6, encoder("offset_counts")),
-        ),
-        rpos.CalibrationReply: (
-            (1, rpos.ALIGN_VALUE),
-            (5, rpos.ALIGN_RATIO),
-            (7, FlagsByte("align_state", states.AlignState)),
-        ),
-        rpos.EncoderOffsetReply: ((6, encoder("offset_counts")),),
-        rpos.MultiTurnAngleReply: ((1, rpos.MULTI_TURN),),
-        rpos.SingleTurnAngleReply: ((4, rpos.CIRCLE),),
-        rpos.SingleTurnAngleReplyV235: ((6, rpos.CIRCLE_V235),),
-        rpos.AccelerationReply: ((4, rpos.ACCELERATION),),
-    }
-    entry = table.get(cls, ())
-    if isinstance(entry, Mux):
-        return (), entry, None
-    missing = next((f for _, f in entry if isinstance(f, _NotCarried)), None)
-    if missing is not None:
-        return (), None, missing.why
-    return entry, None, None
+    name: str
+    help: str
+    parse: Callable[[str], Any] = str
 
 
-@dataclass(frozen=True, slots=True)
-class _NotCarried:
-    """A field the motor type does not carry (MS has no torque loop): the class is left out."""
+@dataclass(frozen=True, slots=True, kw_only=True)
+class DbcQuery:
+    """What a DBC is asked for, as a family's :attr:`DbcFamily.describe` gets it.
 
-    why: str
+    Attributes:
+        family: the family.
+        ids: the motors' ids (each once, in the order given).
+        revision: the revision asked for (a member of ``family.revisions``), or None: the family's
+            choice (its default, or what an option implies).
+        options: the family's options that were given, by name (never None values).
+        direction: ``"request"`` or ``"reply"`` when only those messages are wanted (the exporter
+            drops the others; a family may use it to choose what shares an identifier), or None.
+    """
 
-
-#: Fixed bytes of LK layouts (spec §4.29): 0x44 ``05 FA`` (request) and ``05 flag`` (reply).
-LK_CONSTANTS: Mapping[str, tuple[tuple[int, int], ...]] = {
-    "SaveSettings": ((1, 0x05), (2, 0xFA)),
-    "SaveSettingsReply": ((1, 0x05),),
-}
-
-
-def _lk_layout(cls: type, code: int, model: Any, what: str, left_out: list[str]) -> Layout | None:
-    fields, mux, why = lk_fields(cls, code, model)
-    name = cls.__name__
-    if why is not None:
-        left_out.append(f"{what} 0x{code:02X} ({name}): {why}")
-        return None
-    signals = []
-    for offset, field in fields:
-        spec = signal_spec(offset, field)
-        assert spec is not None  # LK has no text fields
-        signals.append(spec)
-    implies = (("command", code),) if "command" in {f.name for f in dataclasses.fields(cls)} else ()
-    return Layout(code, name, tuple(signals), LK_CONSTANTS.get(name, ()), mux, message=name, implies=implies)
+    family: Family
+    ids: tuple[int, ...]
+    revision: enum.Enum | None
+    options: Mapping[str, Any]
+    direction: str | None
 
 
-def _lk(
-    ids: Sequence[int], revision: Any, model: Any, encoder_bits: int | None, direction: str | None
-) -> Plan:
-    from servobus.protocols.lk import FAMILY
-    from servobus.protocols.lk import commands_control as ctl
-    from servobus.protocols.lk.codec import REPLY_CLASSES, REQUESTS, resolve_model
-    from servobus.protocols.lk.ids import MULTI_MOTOR_ID, reply_id, request_id
-    from servobus.protocols.lk.model import LkModel, MotorType, Revision
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Described:
+    """A family's answer: the revision described, every message (both directions), what is left out."""
 
-    rev = FAMILY.revision(revision) if revision is not None else None
-    if isinstance(model, str):
-        try:
-            motor_type = MotorType[model.upper()]
-        except KeyError:
-            raise ValueError(f"lk has no motor type {model!r} (known: MS, MF, MH, MG)") from None
-        model = LkModel(
-            revision=rev or Revision.V2_36, motor_type=motor_type, encoder_bits=encoder_bits or 14
-        )
-    elif model is None:
-        model = LkModel(revision=rev or Revision.V2_36, encoder_bits=encoder_bits or 14)
-    elif encoder_bits is not None and encoder_bits != model.encoder_bits:
-        raise ValueError(f"encoder_bits={encoder_bits} contradicts model.encoder_bits={model.encoder_bits}")
-    model = resolve_model(rev, model)
-    rev = model.revision
+    revision: enum.Enum
+    messages: tuple[MessageSpec, ...]
+    left_out: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class DbcFamily:
+    """A family's DBC part (``Family.parts["dbc"]``, ``protocols/<family>/dbc.py`` ``DBC``): what its
+    classes' declarations do not say.
+
+    Attributes:
+        options: the options its ``describe`` takes (validated by name before it is called).
+        describe: the messages of a :class:`DbcQuery`: identifiers per motor, layouts (from the
+            declarations with :func:`fields_layout` and :func:`muxed`, bit-packed ones with
+            :func:`packed_signals`), comments. Raises ValueError naming a bad id or option value.
+            Default :func:`derived`.
+    """
+
+    options: tuple[DbcOption, ...] = ()
+    describe: Callable[[DbcQuery], Described] = dataclasses.field(default_factory=lambda: derived)
+
+    def option(self, name: str) -> DbcOption | None:
+        """The option called ``name``, or None."""
+        return next((o for o in self.options if o.name == name), None)
+
+
+def dbc_part(family: Family) -> DbcFamily:
+    """The family's DBC part, or the default (:func:`derived`, no options) if it has none.
+
+    Raises:
+        TypeError: the family's ``dbc`` part is not a :class:`DbcFamily`.
+    """
+    if "dbc" not in family.parts:
+        return DbcFamily()
+    part = family.part("dbc")
+    if not isinstance(part, DbcFamily):
+        raise TypeError(f"the {family.name} family's dbc part is {type(part).__name__}, not a DbcFamily")
+    return part
+
+
+def derived(query: DbcQuery) -> Described:
+    """The DBC of a family from its declarations alone (a family without a ``dbc`` part).
+
+    Per motor, the bound codec's identifiers (``Family.bind(motor_id, revision=...)``): a request
+    message on each of its ``request_ids``, the family's commands of the revision (``REVISIONS``, if
+    declared) multiplexed on DATA[0] by ``CODE``; a reply message on each of its ``reply_ids``, the
+    commands' ``reply_types()`` likewise. A direction of one class whose ``CODE`` is None is that
+    class's layout, unmultiplexed. An identifier several motors share (one reply id for all) is one
+    message; an identifier in both lists carries the replies unless ``direction="request"``. A message
+    is as long as its longest ``SIZE`` (CAN FD beyond 8 bytes); an identifier in ``EXTENDED`` is
+    29-bit.
+
+    Raises:
+        ValueError: a motor id outside ``family.motor_ids``, or one its ``bind`` refuses.
+    """
+    family = query.family
+    rev = query.revision if query.revision is not None else family.default_revision
     left_out: list[str] = []
-    requests = tuple(
-        layout
-        for code, cls in sorted(REQUESTS[rev].items())
-        if (layout := _lk_layout(cls, code, model, "request", left_out)) is not None
-    )
-    replies = tuple(
-        layout
-        for code, cls in sorted(REPLY_CLASSES[rev].items())
-        if (layout := _lk_layout(cls, code, model, "reply", left_out)) is not None
-    )
-    what = f"LK {rev.name} ({model.motor_type.name}, {model.encoder_bits}-bit encoder)"
-    # V2.35 replies come on the request's identifier (spec §1.1): one DBC holds one of the two.
-    shared = rev is Revision.V2_35 and direction is None
-    if shared:
+    commands = [c for c in family.commands if rev in getattr(c, "REVISIONS", (rev,))]
+    replies = list(dict.fromkeys(r for c in commands for r in c.reply_types()))
+    roots = {
+        "request": _derived_root(commands, "request", left_out),
+        "reply": _derived_root(replies, "reply", left_out),
+    }
+    sizes = {
+        "request": max((getattr(c, "SIZE", 8) for c in commands), default=8),
+        "reply": max((getattr(r, "SIZE", 8) for r in replies), default=8),
+    }
+    carried: dict[tuple[str, int], list[int]] = {}
+    shared_any = False
+    for motor_id in query.ids:
+        if motor_id not in family.motor_ids:
+            first, last = family.motor_ids[0], family.motor_ids[-1]
+            raise ValueError(f"motor_id={motor_id} is outside {family.name}'s ids {first}..{last}")
+        codec = family.bind(motor_id, revision=rev)
+        shared = codec.request_ids & codec.reply_ids
+        shared_any = shared_any or bool(shared)
+        for kind, idents in (("request", codec.request_ids), ("reply", codec.reply_ids)):
+            for ident in sorted(idents):
+                # An identifier both ways carries the replies, unless the requests are asked for.
+                if ident in shared and (kind == "request") != (query.direction == "request"):
+                    continue
+                carried.setdefault((kind, ident), []).append(motor_id)
+    if shared_any and query.direction != "request":
         left_out.append(
-            "requests on 0x140+ID: V2.35 motors reply on the request's identifier and a DBC has one message "
-            "per identifier, so 0x140+ID describes the replies (a request frame there decodes as a reply); "
-            "--direction request gives the requests' DBC"
+            "requests on the identifiers replies come on: a DBC has one message per identifier, so those "
+            "describe the replies; direction 'request' gives the requests' DBC"
         )
+    names = {
+        key: f"{family.name}_{key[0]}" + (f"_{m[0]}" if len(m) == 1 else "") for key, m in carried.items()
+    }
     messages = []
-    for motor_id in ids:
-        motor = f"motor_{motor_id}"
-        if not shared:
-            messages.append(
-                MessageSpec(
-                    request_id(motor_id),
-                    f"lk_request_{motor_id}",
-                    8,
-                    "request",
-                    _muxed(requests),
-                    ("host",),
-                    f"{what} requests to motor {motor_id}, multiplexed on DATA[0]",
-                    motor_id=motor_id,
-                )
-            )
+    for (kind, ident), motors in carried.items():
+        root = roots[kind]
+        if root is None:
+            continue
+        frame_id = ident & ~EXTENDED
+        name = names[(kind, ident)]
+        if list(names.values()).count(name) > 1:  # a motor with several identifiers one way
+            name += f"_{frame_id:X}"
+        senders = ("host",) if kind == "request" else tuple(f"motor_{m}" for m in motors)
+        whose = f"motor {motors[0]}" if len(motors) == 1 else "motors " + ", ".join(map(str, motors))
+        multiplexed = ", multiplexed on DATA[0]" if root.mux is not None else ""
         messages.append(
             MessageSpec(
-                reply_id(motor_id, rev),
-                f"lk_reply_{motor_id}",
-                8,
-                "reply",
-                _muxed(replies),
-                (motor,),
-                f"{what} replies of motor {motor_id}, multiplexed on DATA[0]",
-                motor_id=motor_id,
+                frame_id,
+                name,
+                sizes[kind],
+                kind,
+                root,
+                senders,
+                f"{family.name} {rev.name} {_PLURAL[kind]} of {whose}{multiplexed}",
+                extended=bool(ident & EXTENDED),
+                fd=sizes[kind] > 8,
+                motor_id=motors[0] if len(motors) == 1 else None,
             )
         )
-    if rev in ctl.MultiMotorTorque.REVISIONS:
-        fields, _, why = lk_fields(ctl.MultiMotorTorque, None, model)
-        if why is not None:
-            left_out.append(f"request id 0x280 (MultiMotorTorque): {why}")
-        else:
-            signals = tuple(s for offset, f in fields if (s := signal_spec(offset, f)) is not None)
-            messages.append(
-                MessageSpec(
-                    MULTI_MOTOR_ID,
-                    "lk_multi_motor",
-                    8,
-                    "request",
-                    Layout(None, "", signals, message="MultiMotorTorque"),
-                    ("host",),
-                    f"{what} torque set-points of motors 1..4 (layout inferred, spec §5); each replies "
-                    "on 0x140+ID with a 0xA1 status-2 reply",
-                )
-            )
-    return _finish("lk", rev, messages, left_out, ids, direction)
+    return Described(revision=rev, messages=tuple(messages), left_out=tuple(left_out))
 
 
-# ---- hollow -------------------------------------------------------------------------------------
-
-
-@functools.cache
-def hollow_config() -> Mux:
-    """The hollow extended-id frames (§5.1, §6), laid out in ``CanModeSwitch``/``PiMultiplier`` code:
-    DATA[1] tells them apart (0: the mode switch, whose D0 bit 1 is the mode; 1..4: the PI gain whose
-    multiplier is a big-endian float32 at DATA[2..5]), as ``commands.decode_extended_request`` does."""
-    from servobus.protocols.hollow import CanMode, PiGain
-
-    mode = SignalSpec("mode", 1, 1, choices=_enum_choices(CanMode))  # D0 bit 1 (§5.1, A4)
-    multiplier = SignalSpec("multiplier", 8 * 2 + 7, 32, "big_endian", signed=True, is_float=True, minimum=0)
-    layouts = [Layout(0, "CanModeSwitch", (mode,), message="CanModeSwitch")]
-    layouts += [
-        Layout(
-            int(g),
-            f"PiMultiplier_{g.name}",
-            (multiplier,),
-            message="PiMultiplier",
-            implies=(("gain", g.name),),
-        )
-        for g in PiGain
-    ]
-    return Mux(SignalSpec("gain", 8, 8), tuple(layouts))
-
-
-def _hollow(
-    ids: Sequence[int],
-    revision: Any,
-    model: Any,
-    can_mode: str | None,
-    host_id: int | None,
-    direction: str | None,
-) -> Plan:
-    from servobus.protocols import hollow as ho
-    from servobus.protocols.hollow.ids import check_host_id, check_motor_id
-    from servobus.protocols.hollow.model import packers
-
-    rev = ho.FAMILY.revision(revision) if revision is not None else ho.FAMILY.default_revision
-    if model is None:
-        model = ho.DEFAULT_MODEL
-    elif isinstance(model, str):
-        if model not in ho.MODELS:
-            raise ValueError(f"hollow has no model {model!r} (known: {', '.join(ho.MODELS)})")
-        model = ho.MODELS[model]
-    mode = can_mode or "normal"
-    if mode not in HOLLOW_CAN_MODES:
-        raise ValueError(f"can_mode={mode!r} is not one of {', '.join(HOLLOW_CAN_MODES)}")
-    host = check_host_id(ho.DEFAULT_HOST_ID if host_id is None else host_id)
-    for motor_id in ids:
-        check_motor_id(motor_id)
-    if host in ids:
-        raise ValueError(f"motor id {host} is the host id the replies go to: give another --host-id")
-    p = packers(model)
-    left_out = [
-        "RS-485 converter frames (transparent, Modbus RTU, configuration): serial frames, not CAN",
-    ]
-    if mode == "fd":
-        request = ("fd_command", 16, packed_signals(p.fd_command, ho.FdCommand), "FdCommand")
-        reply = ("fd_reply", 16, packed_signals(p.fd_reply, ho.FdReply), "FdReply")
-    else:
-        left_out.append(
-            "special commands FF x7 + F9..FE (Start, Stop, SelectMode, SetZero): told apart from a setpoint "
-            "by a 7-byte pattern, not a multiplexer value; the DBC reads them as setpoints"
-        )
-        if mode == "normal":
-            request = ("setpoint", 8, packed_signals(p.setpoint, ho.Setpoint), "Setpoint")
-            reply = ("reply", 6, packed_signals(p.normal_reply, ho.NormalReply), "NormalReply")
-        else:
-            request = (
-                "increment",
-                8,
-                packed_signals(p.setpoint, ho.IncrementalSetpoint),
-                "IncrementalSetpoint",
-            )
-            reply = ("ext_reply", 8, packed_signals(p.extended_reply, ho.ExtendedReply), "ExtendedReply")
+def _derived_root(classes: Sequence[type], what: str, left_out: list[str]) -> Layout | None:
+    """One direction's layout tree from its classes: multiplexed on DATA[0] by ``CODE``; a lone class
+    without a ``CODE``, as it is; None (and why, in ``left_out``) when nothing is describable."""
+    if not classes:
+        return None
+    if len(classes) == 1 and classes[0].CODE is None:  # type: ignore[attr-defined]
+        cls = classes[0]
+        layout = fields_layout(cls, None, what, left_out)
+        return None if layout is None else dataclasses.replace(layout, name="")
+    by_code: dict[int, list[type]] = {}
+    for cls in classes:
+        code = getattr(cls, "CODE", None)
+        if code is None:
+            left_out.append(f"{what} {cls.__name__}: no CODE (DATA[0]) to be told apart by")
+            continue
+        by_code.setdefault(code, []).append(cls)
+    layouts = []
+    for code, here in sorted(by_code.items()):
+        if len(here) > 1:
+            names = ", ".join(c.__name__ for c in here)
             left_out.append(
-                "ExtendedReply position_deg as one signal: its 32-bit code is split (low half DATA[1..2], "
-                "high half DATA[6..7]), so it is two signals whose values add up to it (position_deg_b0 + "
-                "position_deg_b16)"
+                f"{what} 0x{code:02X} ({names}): {len(here)} layouts under one DATA[0], told apart by "
+                "another byte"
             )
-    others = [m for m in HOLLOW_CAN_MODES if m != mode]
-    left_out.append(
-        f"the {' and '.join(others)} frames: they use the same identifiers (the motor id for requests, the "
-        "host id for replies) and a DBC has one message per identifier; --can-mode gives their DBC"
-    )
-    what = f"hollow {rev.name} ({model.name} model"
-    if mode != "fd":
-        what += f": ±{model.position_full_scale_deg} deg, ±{model.speed_full_scale_rad_s} rad/s, "
-        what += f"±{model.current_full_scale_a} A)"
-    else:
-        what += f", {model.pole_pairs} pole pairs)"
-    fd = mode == "fd"
-    messages = []
-    config = Layout(None, "", mux=hollow_config())
-    for motor_id in ids:
-        name, length, signals, message = request
-        messages.append(
-            MessageSpec(
-                motor_id,
-                f"hollow_{name}_{motor_id}",
-                length,
-                "request",
-                Layout(None, "", signals, message=message),
-                ("host",),
-                f"{what} {mode}-mode {message} to motor {motor_id}",
-                fd=fd,
-                motor_id=motor_id,
-            )
-        )
-        messages.append(
-            MessageSpec(
-                motor_id,
-                f"hollow_config_{motor_id}",
-                8,
-                "request",
-                config,
-                ("host",),
-                f"hollow CAN mode switch and PI multiplier frames to motor {motor_id} (extended id), "
-                "multiplexed on DATA[1]",
-                extended=True,
-                motor_id=motor_id,
-            )
-        )
-    name, length, signals, message = reply
-    messages.append(
-        MessageSpec(
-            host,
-            f"hollow_{name}",
-            length,
-            "reply",
-            Layout(None, "", signals, message=message),
-            tuple(f"motor_{i}" for i in ids),
-            f"{what} {mode}-mode replies of every motor, on the host id (the motor id is in the frame)",
-            fd=fd,
-        )
-    )
-    return _finish("hollow", rev, messages, left_out, ids, direction)
+            continue
+        layout = fields_layout(here[0], code, what, left_out)
+        if layout is not None:
+            layouts.append(layout)
+    return muxed(tuple(layouts)) if layouts else None
 
 
 # ---- plans and databases ------------------------------------------------------------------------
 
 
-def _finish(
-    family: str,
-    revision: enum.Enum,
-    messages: list[MessageSpec],
-    left_out: list[str],
-    ids: Sequence[int],
-    direction: str | None,
-) -> Plan:
-    if direction is not None:
-        messages = [m for m in messages if m.kind == direction]
-    nodes = ("host", *(f"motor_{i}" for i in ids))
-    return Plan(family, revision, tuple(messages), tuple(left_out), nodes)
+def option_owners(option: str) -> list[str]:
+    """The families (built-in and plug-in) whose DBC takes ``option``; a family whose part does not
+    load is skipped (an error message is being built)."""
+    owners = []
+    for name in available_families():
+        try:
+            part = dbc_part(get_family(name))
+        except (ImportError, LookupError, TypeError, ValueError):
+            continue
+        if part.option(option) is not None:
+            owners.append(name)
+    return owners
 
 
 def plan(
-    family: str,
+    family: str | Family,
     ids: Iterable[int],
     revision: str | enum.Enum | None = None,
     *,
-    model: Any = None,
-    encoder_bits: int | None = None,
-    can_mode: str | None = None,
-    host_id: int | None = None,
-    max_torque_nm: float | None = None,
     direction: str | None = None,
+    **options: Any,
 ) -> Plan:
     """What the DBC of ``family``'s motors ``ids`` holds, and what it leaves out.
 
     Args:
-        family: ``myactuator``, ``lk`` or ``hollow``.
+        family: a registered family's name (``myactuator``, ``lk``, ``hollow``, a plug-in's), or the
+            Family.
         ids: the motors' ids.
-        revision: the protocol revision (default: the family's).
-        model: LK: an ``LkModel`` or a motor type name (MS, MF, MH, MG; default MG); hollow: a
-            ``HollowModel`` or a name of ``hollow.MODELS`` (default ``default``).
-        encoder_bits: LK: the encoder width (14, 15, 16, 18; default 14).
-        can_mode: hollow: ``normal`` (default), ``extended`` or ``fd``: which frames share the ids.
-        host_id: hollow: the identifier replies go to (default 100).
-        max_torque_nm: MyActuator V4.4: the motor's max torque, the motion-mode torque range.
-        direction: ``request`` or ``reply`` for only those messages (default both; LK V2.35: replies).
+        revision: the protocol revision (default: the family's choice).
+        direction: ``request`` or ``reply`` for only those messages (default both).
+        options: the family's DBC options (its ``DbcFamily.options``); None is "not given". The
+            built-in ones: ``model`` (LK: an ``LkModel`` or a motor type MS, MF, MH, MG; hollow: a
+            ``HollowModel`` or a name of ``hollow.MODELS``), ``encoder_bits`` (LK), ``can_mode`` and
+            ``host_id`` (hollow), ``max_torque_nm`` (MyActuator V4.4's motion torque range).
 
     Raises:
-        ValueError: an unknown family, revision, model or option, an option of another family, or a
-            motor id the family does not accept.
+        ValueError: an unknown family, revision, direction or option, an option of another family, a
+            bad option value, or a motor id the family does not accept.
     """
-    if family not in FAMILIES:
-        raise ValueError(f"no family {family!r} (known: {', '.join(FAMILIES)})")
+    if isinstance(family, str):
+        known = available_families()
+        if family not in known:
+            raise ValueError(f"no family {family!r} (known: {', '.join(known)})")
+        family = get_family(family)
     if direction is not None and direction not in DIRECTIONS:
         raise ValueError(f"direction={direction!r} is not one of {', '.join(DIRECTIONS)}")
-    given = {
-        "model": model,
-        "encoder_bits": encoder_bits,
-        "can_mode": can_mode,
-        "host_id": host_id,
-        "max_torque_nm": max_torque_nm,
-    }
-    for option, value in given.items():
-        if value is not None and option not in OPTIONS[family]:
-            owners = " and ".join(f for f in FAMILIES if option in OPTIONS[f])
-            raise ValueError(f"{option} is an option of {owners}, not of {family}")
-    ids = list(dict.fromkeys(ids))
-    if family == "myactuator":
-        return _myactuator(ids, revision, max_torque_nm, direction)
-    if family == "lk":
-        return _lk(ids, revision, model, encoder_bits, direction)
-    return _hollow(ids, revision, model, can_mode, host_id, direction)
+    part = dbc_part(family)
+    given = {name: value for name, value in options.items() if value is not None}
+    for name in given:
+        if part.option(name) is None:
+            owners = " and ".join(option_owners(name)) or "no family"
+            raise ValueError(f"{name} is an option of {owners}, not of {family.name}")
+    query = DbcQuery(
+        family=family,
+        ids=tuple(dict.fromkeys(ids)),
+        revision=family.revision(revision) if revision is not None else None,
+        options=given,
+        direction=direction,
+    )
+    described = part.describe(query)
+    messages = [m for m in described.messages if direction is None or m.kind == direction]
+    nodes = ("host", *(f"motor_{i}" for i in query.ids))
+    return Plan(family.name, described.revision, tuple(messages), tuple(described.left_out), nodes)
 
 
 def signal_table(message: MessageSpec) -> dict[str, Placed]:

@@ -1,4 +1,9 @@
-"""``servobus dbc``: a DBC of a family's CAN frames, generated from its codec's definitions (cantools)."""
+"""``servobus dbc``: a DBC of a family's CAN frames, generated from its codec's definitions (cantools).
+
+The family is any registered one (built-in or by entry point); its DBC options are its dbc part's
+(``servobus.dbc.DbcFamily.options``): the flags below for the built-in ones, ``--option NAME=VALUE``
+for any.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +12,7 @@ from pathlib import Path
 
 import click
 
-from servobus.cli._connect import FAMILIES, parse_ids
+from servobus.cli._connect import parse_ids
 
 __all__ = ["dbc"]
 
@@ -24,7 +29,9 @@ Each field is a signal named as servobus names it (currents_a[0]: currents_a_0),
 and unit of the codec's field tables or of the C core's bit layouts; a field laid out two ways on one
 identifier keeps its name in one layout, and the others get their DATA[0] as a suffix (angle_deg_92).
 What a DBC cannot carry is listed on stderr (text, layouts told apart by another byte, hollow's special
-commands). Needs cantools: pip install 'servobus[dbc]'.
+commands). A family of a plug-in takes its options as --option NAME=VALUE; without a dbc part of its
+own, its DBC is derived from its classes' FIELDS and its bound codec's identifiers.
+Needs cantools: pip install 'servobus[dbc]'.
 
 \b
 Examples:
@@ -39,10 +46,9 @@ Examples:
 @click.option(
     "--family",
     "-f",
-    type=click.Choice(FAMILIES),
     default="myactuator",
     show_default=True,
-    help="Protocol family.",
+    help="Protocol family (myactuator, lk, hollow, or a plug-in's).",
 )
 @click.option(
     "--revision",
@@ -62,6 +68,14 @@ Examples:
 @click.option("--host-id", type=int, help="hollow: the identifier replies go to [100].")
 @click.option("--max-torque", type=float, metavar="NM", help="myactuator V4.4: the motion-mode torque range.")
 @click.option(
+    "--option",
+    "-O",
+    "extra",
+    multiple=True,
+    metavar="NAME=VALUE",
+    help="A DBC option of the family by its name (repeatable), e.g. -O can_mode=fd.",
+)
+@click.option(
     "--direction",
     type=click.Choice(["request", "reply"]),
     help="Only the requests' or the replies' messages [default: both; lk V2.35: replies].",
@@ -80,6 +94,7 @@ def dbc(
     can_mode: str | None,
     host_id: int | None,
     max_torque: float | None,
+    extra: tuple[str, ...],
     direction: str | None,
     output: Path | None,
     force: bool,
@@ -98,32 +113,47 @@ def dbc(
         import cantools  # noqa: F401
     except ImportError:
         raise click.ClickException("dbc needs cantools: pip install 'servobus[dbc]'") from None
-    from servobus.dbc import FAMILIES as DBC_FAMILIES
-    from servobus.dbc import OPTIONS, database, dbc_text, plan
+    from servobus.dbc import database, dbc_part, dbc_text, option_owners, plan
+    from servobus.protocols import available_families, get_family
 
-    given: dict[tuple[str, str], object] = {
-        ("--model", "model"): model,
-        ("--encoder-bits", "encoder_bits"): encoder_bits,
-        ("--can-mode", "can_mode"): can_mode,
-        ("--host-id", "host_id"): host_id,
-        ("--max-torque", "max_torque_nm"): max_torque,
+    known = available_families()
+    if family not in known:
+        raise click.BadParameter(f"no family {family!r} (known: {', '.join(known)})", param_hint="--family")
+    part = dbc_part(get_family(family))
+    given: dict[str, tuple[str, object]] = {
+        "model": ("--model", model),
+        "encoder_bits": ("--encoder-bits", encoder_bits),
+        "can_mode": ("--can-mode", can_mode),
+        "host_id": ("--host-id", host_id),
+        "max_torque_nm": ("--max-torque", max_torque),
     }
-    for (flag, option), value in given.items():
-        if value is not None and option not in OPTIONS[family]:
-            owners = " and ".join(f for f in DBC_FAMILIES if option in OPTIONS[f])
-            raise click.BadParameter(f"{flag} is an option of {owners}, not of {family}", param_hint=flag)
+    options: dict[str, object] = {}
+    for option, (_flag, value) in given.items():
+        if value is not None:
+            options[option] = value
+    for text in extra:
+        option, sep, value_text = text.partition("=")
+        option = option.strip()
+        if not sep or not option:
+            raise click.BadParameter(f"{text!r} is not NAME=VALUE", param_hint="--option")
+        wanted = part.option(option)
+        if wanted is None:
+            given[option] = ("--option", value_text)
+            options[option] = value_text
+            continue
+        try:
+            options[option] = wanted.parse(value_text)
+        except ValueError as exc:
+            raise click.BadParameter(f"{option}: {exc}", param_hint="--option") from None
+    for option in options:
+        if part.option(option) is None:
+            flag = given[option][0]
+            owners = " and ".join(option_owners(option))
+            name = flag if flag != "--option" else option
+            says = f"is an option of {owners}, not of {family}" if owners else f"is not an option of {family}"
+            raise click.BadParameter(f"{name} {says}", param_hint=flag)
     try:
-        p = plan(
-            family,
-            ids,
-            revision,
-            model=model,
-            encoder_bits=encoder_bits,
-            can_mode=can_mode,
-            host_id=host_id,
-            max_torque_nm=max_torque,
-            direction=direction,
-        )
+        p = plan(family, ids, revision, direction=direction, **options)
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--family/--revision/--ids/--model") from None
     db = database(p)
@@ -142,6 +172,7 @@ def dbc(
         click.echo(json.dumps(summary))
         return
     where = output if output is not None else "stdout"
-    click.echo(f"dbc: {len(db.messages)} messages -> {where}; left out:", err=True)
+    said = "left out:" if p.left_out else "nothing left out"
+    click.echo(f"dbc: {len(db.messages)} messages -> {where}; {said}", err=True)
     for reason in p.left_out:
         click.echo(f"  {reason}", err=True)

@@ -1,0 +1,171 @@
+"""The hollow DBC part (``FAMILY.part("dbc")``): its frames are C-core bit layouts, not field tables.
+
+Per motor its requests on the motor id and one reply message on the host id, in one CAN mode (option
+``can_mode``: ``normal``, ``extended`` or ``fd``; they share the identifiers): the C core's packers of
+the motor model (``hollow.model.packers``): ``HOLLOW_SETPOINT`` and ``MIT_REPLY`` (normal mode),
+``HOLLOW_SETPOINT`` and ``HOLLOW_EXT_REPLY`` (extended mode), ``HOLLOW_FD_COMMAND``/``HOLLOW_FD_REPLY``
+(CAN FD, 16 bytes), bit positions from :func:`servobus.dbc.packed_signals`. The extended-id frames (CAN
+mode switch, PI multiplier) are laid out in their classes' code; :func:`hollow_config` states them.
+Options: ``model`` (a ``HollowModel`` or a name of ``hollow.MODELS``), ``host_id`` (default 100).
+"""
+
+from __future__ import annotations
+
+import functools
+
+from servobus.dbc import (
+    DbcFamily,
+    DbcOption,
+    DbcQuery,
+    Described,
+    Layout,
+    MessageSpec,
+    Mux,
+    SignalSpec,
+    enum_choices,
+    packed_signals,
+)
+from servobus.protocols import hollow as ho
+from servobus.protocols.hollow import CanMode, PiGain
+from servobus.protocols.hollow.ids import check_host_id, check_motor_id
+from servobus.protocols.hollow.model import packers
+
+__all__ = ["CAN_MODES", "DBC", "hollow_config"]
+
+CAN_MODES = ("normal", "extended", "fd")
+
+
+@functools.cache
+def hollow_config() -> Mux:
+    """The hollow extended-id frames (§5.1, §6), laid out in ``CanModeSwitch``/``PiMultiplier`` code:
+    DATA[1] tells them apart (0: the mode switch, whose D0 bit 1 is the mode; 1..4: the PI gain whose
+    multiplier is a big-endian float32 at DATA[2..5]), as ``commands.decode_extended_request`` does."""
+    mode = SignalSpec("mode", 1, 1, choices=enum_choices(CanMode))  # D0 bit 1 (§5.1, A4)
+    multiplier = SignalSpec("multiplier", 8 * 2 + 7, 32, "big_endian", signed=True, is_float=True, minimum=0)
+    layouts = [Layout(0, "CanModeSwitch", (mode,), message="CanModeSwitch")]
+    layouts += [
+        Layout(
+            int(g),
+            f"PiMultiplier_{g.name}",
+            (multiplier,),
+            message="PiMultiplier",
+            implies=(("gain", g.name),),
+        )
+        for g in PiGain
+    ]
+    return Mux(SignalSpec("gain", 8, 8), tuple(layouts))
+
+
+def _describe(query: DbcQuery) -> Described:
+    ids = query.ids
+    model, can_mode, host_id = (query.options.get(k) for k in ("model", "can_mode", "host_id"))
+    rev = query.revision if query.revision is not None else ho.FAMILY.default_revision
+    if model is None:
+        model = ho.DEFAULT_MODEL
+    elif isinstance(model, str):
+        if model not in ho.MODELS:
+            raise ValueError(f"hollow has no model {model!r} (known: {', '.join(ho.MODELS)})")
+        model = ho.MODELS[model]
+    mode = can_mode or "normal"
+    if mode not in CAN_MODES:
+        raise ValueError(f"can_mode={mode!r} is not one of {', '.join(CAN_MODES)}")
+    host = check_host_id(ho.DEFAULT_HOST_ID if host_id is None else host_id)
+    for motor_id in ids:
+        check_motor_id(motor_id)
+    if host in ids:
+        raise ValueError(f"motor id {host} is the host id the replies go to: give another --host-id")
+    p = packers(model)
+    left_out = [
+        "RS-485 converter frames (transparent, Modbus RTU, configuration): serial frames, not CAN",
+    ]
+    if mode == "fd":
+        request = ("fd_command", 16, packed_signals(p.fd_command, ho.FdCommand), "FdCommand")
+        reply = ("fd_reply", 16, packed_signals(p.fd_reply, ho.FdReply), "FdReply")
+    else:
+        left_out.append(
+            "special commands FF x7 + F9..FE (Start, Stop, SelectMode, SetZero): told apart from a setpoint "
+            "by a 7-byte pattern, not a multiplexer value; the DBC reads them as setpoints"
+        )
+        if mode == "normal":
+            request = ("setpoint", 8, packed_signals(p.setpoint, ho.Setpoint), "Setpoint")
+            reply = ("reply", 6, packed_signals(p.normal_reply, ho.NormalReply), "NormalReply")
+        else:
+            request = (
+                "increment",
+                8,
+                packed_signals(p.setpoint, ho.IncrementalSetpoint),
+                "IncrementalSetpoint",
+            )
+            reply = ("ext_reply", 8, packed_signals(p.extended_reply, ho.ExtendedReply), "ExtendedReply")
+            left_out.append(
+                "ExtendedReply position_deg as one signal: its 32-bit code is split (low half DATA[1..2], "
+                "high half DATA[6..7]), so it is two signals whose values add up to it (position_deg_b0 + "
+                "position_deg_b16)"
+            )
+    others = [m for m in CAN_MODES if m != mode]
+    left_out.append(
+        f"the {' and '.join(others)} frames: they use the same identifiers (the motor id for requests, the "
+        "host id for replies) and a DBC has one message per identifier; --can-mode gives their DBC"
+    )
+    what = f"hollow {rev.name} ({model.name} model"
+    if mode != "fd":
+        what += f": ±{model.position_full_scale_deg} deg, ±{model.speed_full_scale_rad_s} rad/s, "
+        what += f"±{model.current_full_scale_a} A)"
+    else:
+        what += f", {model.pole_pairs} pole pairs)"
+    fd = mode == "fd"
+    messages = []
+    config = Layout(None, "", mux=hollow_config())
+    for motor_id in ids:
+        name, length, signals, message = request
+        messages.append(
+            MessageSpec(
+                motor_id,
+                f"hollow_{name}_{motor_id}",
+                length,
+                "request",
+                Layout(None, "", signals, message=message),
+                ("host",),
+                f"{what} {mode}-mode {message} to motor {motor_id}",
+                fd=fd,
+                motor_id=motor_id,
+            )
+        )
+        messages.append(
+            MessageSpec(
+                motor_id,
+                f"hollow_config_{motor_id}",
+                8,
+                "request",
+                config,
+                ("host",),
+                f"hollow CAN mode switch and PI multiplier frames to motor {motor_id} (extended id), "
+                "multiplexed on DATA[1]",
+                extended=True,
+                motor_id=motor_id,
+            )
+        )
+    name, length, signals, message = reply
+    messages.append(
+        MessageSpec(
+            host,
+            f"hollow_{name}",
+            length,
+            "reply",
+            Layout(None, "", signals, message=message),
+            tuple(f"motor_{i}" for i in ids),
+            f"{what} {mode}-mode replies of every motor, on the host id (the motor id is in the frame)",
+            fd=fd,
+        )
+    )
+    return Described(revision=rev, messages=tuple(messages), left_out=tuple(left_out))
+
+
+DBC = DbcFamily(
+    options=(
+        DbcOption(name="model", help="the motor model, a name of hollow.MODELS (default, 3507) [default]"),
+        DbcOption(name="can_mode", help="normal, extended or fd: which frames share the ids [normal]"),
+        DbcOption(name="host_id", help="the identifier replies go to [100]", parse=int),
+    ),
+    describe=_describe,
+)

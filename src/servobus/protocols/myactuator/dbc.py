@@ -1,0 +1,149 @@
+"""The MyActuator DBC part (``FAMILY.part("dbc")``): what its classes' declarations do not say.
+
+* **Standard frames** (0x140 + ID requests, 0x240 + ID replies, the 0x280 broadcast): multiplexed on
+  DATA[0]; each layout is its class's ``FIELDS`` (:func:`servobus.dbc.fields_layout`), the classes
+  being the decoder tables ``REQUESTS``/``REPLIES`` per DATA[0] and revision. A reply that echoes its
+  command (``Echo``) is the command's fields, named ``command.<field>``.
+* **Motion mode** (0x400/0x500 + ID): the C core's ``MIT_COMMAND``/``MIT_REPLY`` packers with the
+  revision's :class:`~servobus.protocols.myactuator.MotionScales` (option ``max_torque_nm`` for V4.4's
+  model-specific torque range), bit positions from :func:`servobus.dbc.packed_signals`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Iterable, Mapping
+from typing import Any, cast
+
+from servobus.dbc import (
+    DbcFamily,
+    DbcOption,
+    DbcQuery,
+    Described,
+    Layout,
+    MessageSpec,
+    fields_layout,
+    muxed,
+    packed_signals,
+)
+from servobus.protocols.myactuator import FAMILY, MotionCommand, MotionReply, MotionScales
+from servobus.protocols.myactuator.codec import REPLIES, REQUESTS
+from servobus.protocols.myactuator.ids import (
+    BROADCAST_ID,
+    motion_reply_id,
+    motion_request_id,
+    reply_id,
+    request_id,
+)
+from servobus.protocols.myactuator.motion import command_packer, reply_packer
+from servobus.protocols.myactuator.revision import Revision
+
+__all__ = ["DBC"]
+
+
+def _describe(query: DbcQuery) -> Described:
+    rev = cast(Revision, query.revision if query.revision is not None else FAMILY.default_revision)
+    scales = MotionScales.for_revision(rev, max_torque_nm=query.options.get("max_torque_nm"))
+    left_out: list[str] = []
+    requests = _table(REQUESTS, rev, "request", left_out)
+    replies = _table(REPLIES, rev, "reply", left_out)
+    command = Layout(None, "", packed_signals(command_packer(scales), MotionCommand), message="MotionCommand")
+    reply = Layout(None, "", packed_signals(reply_packer(scales), MotionReply), message="MotionReply")
+    ranges = (
+        f"p ±{scales.p_max_rad} rad, v ±{scales.v_max_rad_s} rad/s, kp 0..{scales.kp_max}, "
+        f"kd 0..{scales.kd_max}, t ±{scales.t_max_nm} Nm"
+    )
+    messages = []
+    for motor_id in query.ids:
+        motor = f"motor_{motor_id}"
+        # DATA[0] of a motion reply is the motor's id, the one of its identifier (checked on decode).
+        own = tuple(
+            dataclasses.replace(s, minimum=motor_id, maximum=motor_id) if s.field == "motor_id" else s
+            for s in reply.signals
+        )
+        for ident, name, kind, root, sender, comment in (
+            (request_id(motor_id), "request", "request", muxed(requests), "host", "requests"),
+            (reply_id(motor_id), "reply", "reply", muxed(replies), motor, "replies"),
+            (motion_request_id(motor_id), "motion_command", "request", command, "host", "motion commands"),
+            (
+                motion_reply_id(motor_id),
+                "motion_reply",
+                "reply",
+                dataclasses.replace(reply, signals=own),
+                motor,
+                "motion replies",
+            ),
+        ):
+            text = f"MyActuator {rev.name} {comment} of motor {motor_id}"
+            text += f" ({ranges})" if name.startswith("motion") else ", multiplexed on DATA[0]"
+            messages.append(
+                MessageSpec(
+                    ident, f"myactuator_{name}_{motor_id}", 8, kind, root, (sender,), text, motor_id=motor_id
+                )
+            )
+    messages.append(
+        MessageSpec(
+            BROADCAST_ID,
+            "myactuator_broadcast",
+            8,
+            "request",
+            muxed(requests),
+            ("host",),
+            f"MyActuator {rev.name} multi-motor requests (every motor replies on 0x240 + ID)",
+        )
+    )
+    return Described(revision=rev, messages=tuple(messages), left_out=tuple(left_out))
+
+
+def _table(
+    table: Mapping[int, Iterable[Any]], revision: Revision, what: str, left_out: list[str]
+) -> tuple[Layout, ...]:
+    """The layouts of a decoder table (DATA[0] -> candidates) in ``revision``; a DATA[0] with several
+    candidates there is left out (told apart by another byte)."""
+    out: list[Layout] = []
+    for code, candidates in sorted(table.items()):
+        here = [c for c in candidates if revision in c.revisions]
+        if not here:
+            continue
+        names = [_name(c, what) for c in here]
+        if len(here) > 1:
+            left_out.append(
+                f"{what} 0x{code:02X} ({', '.join(names)}): {len(here)} layouts under one DATA[0], told "
+                "apart by another byte"
+            )
+            continue
+        cls, name = here[0].message, names[0]
+        if name.startswith("Echo_"):  # the command's own fields, echoed
+            layout = fields_layout(
+                cls,
+                code,
+                what,
+                left_out,
+                name=name,
+                prefix="command.",
+                implies=(("command", cls.__name__),),
+                message="Echo",
+            )
+        else:
+            layout = fields_layout(cls, code, what, left_out)
+        if layout is not None:
+            out.append(layout)
+    return tuple(out)
+
+
+def _name(candidate: Any, what: str) -> str:
+    cls = candidate.message
+    is_echo = what == "reply" and getattr(candidate.decode, "__func__", None) is None
+    return f"Echo_{cls.__name__}" if is_echo else str(cls.__name__)
+
+
+DBC = DbcFamily(
+    options=(
+        DbcOption(
+            name="max_torque_nm",
+            help="V4.4: the motor's max torque, the motion-mode torque range [the revision's]",
+            parse=float,
+        ),
+    ),
+    describe=_describe,
+)

@@ -1,0 +1,163 @@
+"""servobus.dbc on a family it has never heard of: ``servobus_toy`` (tests/plugins/, registered by entry
+point) has no dbc part, so its DBC is derived from its classes' declarations (``CODE``, ``FIELDS``,
+``reply_types()``) and its bound codec's identifiers; cantools decodes every frame of its codec as
+servobus does. The contract a family's dbc part meets (``DbcFamily``) is checked on the built-in ones.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import os
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import cantools
+import pytest
+
+from _dbc_check import check_frame
+from servobus.dbc import DbcFamily, DbcOption, DbcQuery, Described, database, dbc_part, dbc_text, plan
+from servobus.protocols import get_family
+
+PLUGINS = Path(__file__).resolve().parent / "plugins"
+SERVOBUS = [sys.executable, "-c", "import sys; from servobus.cli import main; sys.exit(main())"]
+
+
+@pytest.fixture(scope="module")
+def toy() -> Iterator[ModuleType]:
+    """The ``servobus_toy`` package, its folder on ``sys.path`` (what installing it would do)."""
+    sys.path.insert(0, str(PLUGINS))
+    try:
+        yield importlib.import_module("servobus_toy")
+    finally:
+        sys.path.remove(str(PLUGINS))
+        for name in [n for n in sys.modules if n.partition(".")[0] == "servobus_toy"]:
+            del sys.modules[name]
+
+
+def toy_commands(toy: ModuleType) -> list[Any]:
+    return [
+        toy.ReadState(),
+        toy.SetSpeed(speed_dps=-12.34),
+        toy.SetSpeed(speed_dps=1000.0),
+        toy.Stop(),
+        toy.WriteSpeedLimit(limit_dps=50.0),
+        toy.Restart(),
+    ]
+
+
+def toy_replies(toy: ModuleType) -> list[Any]:
+    return [
+        toy.StateReply(position_deg=-1234.56, speed_dps=99.9, faults=toy.ToyFaults.STALL),
+        toy.StateReply(position_deg=0.0, speed_dps=-3276.8),
+        toy.SpeedLimitEcho(limit_dps=1000.0),
+    ]
+
+
+def test_a_plug_in_family_without_a_dbc_part_gets_one_derived_from_its_declarations(toy: ModuleType) -> None:
+    family = get_family("toy")
+    assert "dbc" not in family.parts and dbc_part(family) == DbcFamily()
+    p = plan("toy", [1, 2])
+    assert [(m.name, m.kind, m.frame_id) for m in p.messages] == [
+        ("toy_request_1", "request", 0x601),
+        ("toy_reply_1", "reply", 0x681),
+        ("toy_request_2", "request", 0x602),
+        ("toy_reply_2", "reply", 0x682),
+    ]
+    assert p.left_out == () and p.nodes == ("host", "motor_1", "motor_2")
+    db = cantools.database.load_string(dbc_text(database(p)), "dbc")
+    request = db.get_message_by_name("toy_request_2")
+    assert request.get_signal_by_name("code").choices[0x20] == "SetSpeed"
+    speed = request.get_signal_by_name("speed_dps")  # SetSpeed's ScaledField: int32 0.01 dps, ±1000
+    assert (speed.start, speed.length, speed.is_signed, speed.scale, speed.unit) == (
+        8,
+        32,
+        True,
+        0.01,
+        "deg/s",
+    )
+    assert (speed.minimum, speed.maximum) == (-1000, 1000)
+    codec = family.bind(2)
+    checked = 0
+    for command in toy_commands(toy):
+        frame = codec.encode(command)
+        spec = next(m for m in p.messages if m.frame_id == frame.arbitration_id)
+        check_frame(spec, db, frame.data, family.decode_request(frame.arbitration_id, frame.data))
+        checked += 1
+    reply_spec = next(m for m in p.messages if m.name == "toy_reply_2")
+    for reply in toy_replies(toy):
+        data = reply.encode()
+        check_frame(reply_spec, db, data, family.decode_reply(reply_spec.frame_id, data))
+        checked += 1
+    assert checked == 9
+    assert [m.kind for m in plan("toy", [3], direction="reply").messages] == ["reply"]
+
+
+def test_a_plug_in_family_takes_no_option_of_another_and_no_id_outside_its_own(toy: ModuleType) -> None:
+    with pytest.raises(ValueError, match="can_mode is an option of hollow, not of toy"):
+        plan("toy", [1], can_mode="fd")
+    family = get_family("toy")
+    with pytest.raises(ValueError, match="motor_id"):
+        plan("toy", [family.motor_ids[-1] + 1])
+
+
+def test_a_dbc_part_gets_its_options_and_the_query(toy: ModuleType) -> None:
+    """A part's ``describe`` gets the family, the ids once each, the revision asked for (None: its
+    choice), the options given (parsed by the command line's ``-O``) and the direction."""
+    family = get_family("toy")
+    seen: list[DbcQuery] = []
+
+    def describe(query: DbcQuery) -> Described:
+        seen.append(query)
+        return dataclasses.replace(DbcFamily().describe(query), left_out=("because",))
+
+    part = DbcFamily(options=(DbcOption(name="gain", help="a gain", parse=float),), describe=describe)
+    module = ModuleType("toy_dbc_part")
+    module.DBC = part  # type: ignore[attr-defined]
+    sys.modules["toy_dbc_part"] = module
+    try:
+        with_part = dataclasses.replace(family, parts={**family.parts, "dbc": "toy_dbc_part:DBC"})
+        p = plan(with_part, [2, 1, 2], "V1", direction="request", gain=2.5, absent=None)
+        assert seen[0].ids == (2, 1) and seen[0].revision is family.revisions[0]
+        assert seen[0].options == {"gain": 2.5} and seen[0].direction == "request"
+        assert [m.name for m in p.messages] == ["toy_request_2", "toy_request_1"] and p.left_out == (
+            "because",
+        )
+        with pytest.raises(ValueError, match="max_torque_nm is an option of myactuator, not of toy"):
+            plan(with_part, [1], max_torque_nm=3.0)
+    finally:
+        del sys.modules["toy_dbc_part"]
+
+
+@pytest.mark.parametrize("name", ["myactuator", "lk", "hollow"])
+def test_the_built_in_families_state_their_dbc_in_their_dbc_part(name: str) -> None:
+    part = dbc_part(get_family(name))
+    assert isinstance(part, DbcFamily) and part.describe is not DbcFamily().describe
+    assert all(option.name.isidentifier() and option.help for option in part.options)
+
+
+def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
+    path = os.pathsep.join(p for p in (str(PLUGINS), os.environ.get("PYTHONPATH")) if p)
+    return subprocess.run(
+        [*SERVOBUS, *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={**os.environ, "PYTHONPATH": path},
+        check=False,
+    )
+
+
+def test_servobus_dbc_family_toy_writes_the_derived_dbc(tmp_path: Path) -> None:
+    out = tmp_path / "toy.dbc"
+    done = run_cli("dbc", "--family", "toy", "--ids", "1-3", "-o", str(out))
+    assert done.returncode == 0, done.stderr
+    assert done.stderr == "dbc: 6 messages -> " + str(out) + "; nothing left out\n"
+    db = cantools.database.load_file(str(out))
+    assert [m.name for m in db.messages][:2] == ["toy_request_1", "toy_reply_1"]
+    done = run_cli("dbc", "--family", "toy", "-O", "can_mode=fd")
+    assert done.returncode == 2 and "can_mode is an option of hollow, not of toy" in done.stderr
