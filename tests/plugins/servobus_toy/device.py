@@ -14,13 +14,14 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Callable
+from typing import Any
 
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
 from servobus.protocols._family import method_name
 from servobus.sim.device import Emission, ListeningDevice
 from servobus.sim.plant import Off, Plant, PlantParams, PositionControl, SpeedControl
-from servobus_toy.codec import BROADCAST_ID, decode_request, reply_id, request_id
+from servobus_toy.codec import BROADCAST_ID, COMMANDS, decode_request, reply_id, request_id
 from servobus_toy.messages import (
     MAX_SPEED_DPS,
     ReadState,
@@ -137,14 +138,12 @@ class ToyMotor(ListeningDevice):
         """Act on ``command`` (already received) and return its reply, None when none is sent.
 
         Raises:
-            NotImplementedError: a command class this model has no ``_on_<name>`` method for.
+            ValueError: not a toy command.
         """
-        handler: Callable[[ToyCommand[ToyReply | None]], ToyReply | None] | None = getattr(
-            self, f"_on_{method_name(type(command))}", None
-        )
+        handler = _HANDLERS.get(type(command))
         if handler is None:
-            raise NotImplementedError(f"the simulated toy motor does not handle {type(command).__name__}")
-        return handler(command)
+            raise ValueError(f"{command!r} is not a toy command")
+        return handler(self, command)
 
     def inject_fault(self, flags: ToyFaults) -> None:
         """A fault latches: the output goes off and set-points are refused until a :class:`Restart`."""
@@ -192,3 +191,22 @@ class ToyMotor(ListeningDevice):
         if self._speed_set_dps is not None:
             limit = self.speed_limit_dps
             self._plant.set_control(SpeedControl(speed_dps=max(-limit, min(limit, self._speed_set_dps))))
+
+
+def _handlers() -> dict[type, Callable[[ToyMotor, Any], ToyReply | None]]:
+    """Each declared command class -> the method of :class:`ToyMotor` named after it.
+
+    Raises:
+        TypeError: a declared command the model has no method for (found on import, not on the bus).
+    """
+    found = {}
+    for cls in COMMANDS:
+        name = f"_on_{method_name(cls)}"
+        handler = getattr(ToyMotor, name, None)
+        if handler is None:
+            raise TypeError(f"ToyMotor has no {name} for {cls.__name__}")
+        found[cls] = handler
+    return found
+
+
+_HANDLERS = _handlers()
