@@ -614,6 +614,7 @@ class DbcFamily:
     classes' declarations do not say.
 
     Attributes:
+        summary: what its DBC holds, in a few lines (``servobus dbc --help`` shows it).
         options: the options its ``describe`` takes (validated by name before it is called).
         describe: the messages of a :class:`DbcQuery`: identifiers per motor, layouts (from the
             declarations with :func:`fields_layout` and :func:`muxed`, bit-packed ones with
@@ -621,6 +622,7 @@ class DbcFamily:
             Default :func:`derived`.
     """
 
+    summary: str = ""
     options: tuple[DbcOption, ...] = ()
     describe: Callable[[DbcQuery], Described] = dataclasses.field(default_factory=lambda: derived)
 

@@ -310,6 +310,18 @@ def test_max_torque_sets_the_v44_motion_torque_range() -> None:
     assert (torque.minimum, torque.maximum, torque.scale) == (-60, 60, 120 / 4095)
 
 
+def test_an_option_by_name_is_the_same_as_its_flag_and_the_help_lists_each_familys() -> None:
+    by_flag = invoke(["dbc", "--family", "hollow", "--can-mode", "fd", "--host-id", "5", "--ids", "1-2"])
+    by_name = invoke(["dbc", "--family", "hollow", "-O", "can_mode=fd", "-O", "host_id=5", "--ids", "1-2"])
+    assert by_flag.stdout == by_name.stdout and "BusType" in by_name.stdout
+    torque = invoke(["dbc", "-O", "max_torque_nm=60"]).stdout
+    assert torque == invoke(["dbc", "--max-torque", "60"]).stdout
+    help_text = invoke(["dbc", "--help"]).stdout
+    for family, option in (("myactuator", "max_torque_nm"), ("lk", "encoder_bits"), ("hollow", "can_mode")):
+        section = help_text.split(f"--family {family}:")[1]
+        assert f"-O {option}=..." in section.split("--family ")[0]
+
+
 def test_without_cantools_one_line_says_how_to_install(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -339,6 +351,10 @@ def test_without_cantools_one_line_says_how_to_install(
         (["--revision", "V4_3", "--max-torque", "3"], "V4.4"),
         (["--family", "hollow", "--can-mode", "turbo"], "--can-mode"),
         (["--direction", "sideways"], "--direction"),
+        (["--family", "hollow", "-O", "host_id=x"], "host_id: invalid literal"),
+        (["-O", "nonsense"], "is not NAME=VALUE"),
+        (["-O", "speed=3"], "speed is not an option of myactuator"),
+        (["-O", "can_mode=fd"], "can_mode is an option of hollow, not of myactuator"),
         (["--ids", "x"], "--ids"),
         (["--json"], "give -o"),
         (["-o", "exists.dbc"], "exists"),

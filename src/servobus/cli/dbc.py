@@ -13,25 +13,18 @@ from pathlib import Path
 import click
 
 from servobus.cli._connect import parse_ids
+from servobus.protocols import DEFAULT_FAMILY
 
 __all__ = ["dbc"]
 
 EPILOG = """\b
-myactuator: per motor its requests (0x140+ID) and replies (0x240+ID), multiplexed on DATA[0], and its
-motion-mode command (0x400+ID) and reply (0x500+ID); the 0x280 broadcast. lk: per motor its requests
-(0x140+ID) and replies (0x180+ID; V2.35 replies share 0x140+ID, so that DBC holds the replies unless
---direction request), parameter frames multiplexed again on their parameter byte; V2.35's 0x280.
-hollow: per motor its requests (on the motor id; --can-mode normal, extended or fd: they share the
-ids) and the mode-switch/PI frames (extended id), and one reply message on the host id.
-
-\b
 Each field is a signal named as servobus names it (currents_a[0]: currents_a_0), with the factor, range
 and unit of the codec's field tables or of the C core's bit layouts; a field laid out two ways on one
 identifier keeps its name in one layout, and the others get their DATA[0] as a suffix (angle_deg_92).
-What a DBC cannot carry is listed on stderr (text, layouts told apart by another byte, hollow's special
-commands). A family of a plug-in takes its options as --option NAME=VALUE; without a dbc part of its
-own, its DBC is derived from its classes' FIELDS and its bound codec's identifiers.
-Needs cantools: pip install 'servobus[dbc]'.
+What a DBC cannot carry is listed on stderr (text, layouts told apart by another byte, frames that
+share an identifier). What each family's DBC holds, and its options (-O NAME=VALUE, or the flags above
+for the options they name), is its dbc part's; a family without one (a plug-in's) gets a DBC derived
+from its classes' FIELDS and its bound codec's identifiers. Needs cantools: pip install 'servobus[dbc]'.
 
 \b
 Examples:
@@ -41,32 +34,54 @@ Examples:
   servobus dbc --family hollow --can-mode fd --model 3507 --ids 1-4 -o hollow-fd.dbc
   servobus dbc --ids 1-2 --json -o ma.dbc     # the summary as JSON on stdout"""
 
+#: The flags of options several families' DBCs take, by option name (any option: -O NAME=VALUE).
+FLAGS = {
+    "model": "--model",
+    "encoder_bits": "--encoder-bits",
+    "can_mode": "--can-mode",
+    "host_id": "--host-id",
+    "max_torque_nm": "--max-torque",
+}
 
-@click.command(epilog=EPILOG)
+
+class _DbcCommand(click.Command):
+    """``servobus dbc``, whose help ends with each registered family's DBC and options (read from the
+    families' dbc parts when the help is shown)."""
+
+    def format_epilog(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        super().format_epilog(ctx, formatter)
+        from servobus.dbc import dbc_part
+        from servobus.protocols import available_families, get_family
+
+        for name in available_families():
+            try:
+                part = dbc_part(get_family(name))
+            except (ImportError, LookupError, TypeError, ValueError) as exc:
+                summary, rows = f"(not loaded: {exc})", []
+            else:
+                summary = part.summary or "derived from its classes' declarations and its bound codec's ids"
+                rows = [(f"-O {o.name}=...", o.help) for o in part.options]
+            with formatter.section(f"--family {name}"):
+                formatter.write_text(summary)
+                if rows:
+                    formatter.write_dl(rows)
+
+
+@click.command(cls=_DbcCommand, epilog=EPILOG)
 @click.option(
     "--family",
     "-f",
-    default="myactuator",
+    default=DEFAULT_FAMILY,
     show_default=True,
-    help="Protocol family (myactuator, lk, hollow, or a plug-in's).",
+    help="Protocol family (a registered name, see below).",
 )
-@click.option(
-    "--revision",
-    help="Protocol revision (myactuator V4_3/V4_4, lk V2_36/V2_35, hollow HO_SERIES) [default: the newest].",
-)
+@click.option("--revision", help="Protocol revision [default: the family's].")
 @click.option("--ids", "ids_text", default="1", show_default=True, metavar="IDS", help="Motor ids, e.g. 1-4.")
-@click.option(
-    "--model",
-    help="lk: motor type MS/MF/MH/MG [MG]; hollow: motor model (default, 3507) [default].",
-)
-@click.option("--encoder-bits", type=int, help="lk: encoder width, 14/15/16/18 [14].")
-@click.option(
-    "--can-mode",
-    type=click.Choice(["normal", "extended", "fd"]),
-    help="hollow: the frames on the motor and host ids [normal].",
-)
-@click.option("--host-id", type=int, help="hollow: the identifier replies go to [100].")
-@click.option("--max-torque", type=float, metavar="NM", help="myactuator V4.4: the motion-mode torque range.")
+@click.option("--model", help="The family's model option (-O model=...).")
+@click.option("--encoder-bits", type=int, help="The family's encoder_bits option.")
+@click.option("--can-mode", help="The family's can_mode option.")
+@click.option("--host-id", type=int, help="The family's host_id option.")
+@click.option("--max-torque", type=float, metavar="NM", help="The family's max_torque_nm option.")
 @click.option(
     "--option",
     "-O",
@@ -78,7 +93,7 @@ Examples:
 @click.option(
     "--direction",
     type=click.Choice(["request", "reply"]),
-    help="Only the requests' or the replies' messages [default: both; lk V2.35: replies].",
+    help="Only the requests' or the replies' messages [default: both, or the family's choice].",
 )
 @click.option(
     "-o", "--output", type=click.Path(dir_okay=False, path_type=Path), help="File [default: stdout]."
@@ -120,42 +135,39 @@ def dbc(
     if family not in known:
         raise click.BadParameter(f"no family {family!r} (known: {', '.join(known)})", param_hint="--family")
     part = dbc_part(get_family(family))
-    given: dict[str, tuple[str, object]] = {
-        "model": ("--model", model),
-        "encoder_bits": ("--encoder-bits", encoder_bits),
-        "can_mode": ("--can-mode", can_mode),
-        "host_id": ("--host-id", host_id),
-        "max_torque_nm": ("--max-torque", max_torque),
+    given = {
+        "model": model,
+        "encoder_bits": encoder_bits,
+        "can_mode": can_mode,
+        "host_id": host_id,
+        "max_torque_nm": max_torque,
     }
-    options: dict[str, object] = {}
-    for option, (_flag, value) in given.items():
-        if value is not None:
-            options[option] = value
+    options = {option: value for option, value in given.items() if value is not None}
+    flags = {option: FLAGS[option] for option in options}
     for text in extra:
         option, sep, value_text = text.partition("=")
         option = option.strip()
         if not sep or not option:
             raise click.BadParameter(f"{text!r} is not NAME=VALUE", param_hint="--option")
         wanted = part.option(option)
-        if wanted is None:
-            given[option] = ("--option", value_text)
-            options[option] = value_text
-            continue
+        flags[option] = "--option"
         try:
-            options[option] = wanted.parse(value_text)
+            options[option] = value_text if wanted is None else wanted.parse(value_text)
         except ValueError as exc:
             raise click.BadParameter(f"{option}: {exc}", param_hint="--option") from None
-    for option in options:
+    for option, flag in flags.items():
         if part.option(option) is None:
-            flag = given[option][0]
             owners = " and ".join(option_owners(option))
-            name = flag if flag != "--option" else option
             says = f"is an option of {owners}, not of {family}" if owners else f"is not an option of {family}"
+            name = option if flag == "--option" else flag
             raise click.BadParameter(f"{name} {says}", param_hint=flag)
     try:
         p = plan(family, ids, revision, direction=direction, **options)
     except ValueError as exc:
-        raise click.BadParameter(str(exc), param_hint="--family/--revision/--ids/--model") from None
+        # A bad option value names the option (``can_mode='turbo' is not ...``): blame its flag.
+        said = str(exc)
+        hint = next((flag for o, flag in flags.items() if said.startswith(f"{o}=")), None)
+        raise click.BadParameter(said, param_hint=hint or "--family/--revision/--ids/--model") from None
     db = database(p)
     text = dbc_text(db)
     if output is None:

@@ -162,6 +162,10 @@ def _describe(query: DbcQuery) -> Described:
 
 
 DBC = DbcFamily(
+    summary=(
+        "per motor its requests (on the motor id; can_mode normal, extended or fd: they share the ids) "
+        "and the mode-switch/PI frames (extended id), and one reply message on the host id"
+    ),
     options=(
         DbcOption(name="model", help="the motor model, a name of hollow.MODELS (default, 3507) [default]"),
         DbcOption(name="can_mode", help="normal, extended or fd: which frames share the ids [normal]"),

@@ -356,6 +356,11 @@ def _describe(query: DbcQuery) -> Described:
 
 
 DBC = DbcFamily(
+    summary=(
+        "per motor its requests (0x140+ID) and replies (0x180+ID; V2.35 replies share 0x140+ID, so that "
+        "DBC holds the replies unless --direction request), parameter frames multiplexed again on their "
+        "parameter byte; V2.35's 0x280"
+    ),
     options=(
         DbcOption(name="model", help="the motor type MS, MF, MH or MG (or an LkModel) [MG]"),
         DbcOption(name="encoder_bits", help="the encoder width, 14, 15, 16 or 18 [14]", parse=int),

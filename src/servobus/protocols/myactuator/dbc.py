@@ -138,6 +138,10 @@ def _name(candidate: Any, what: str) -> str:
 
 
 DBC = DbcFamily(
+    summary=(
+        "per motor its requests (0x140+ID) and replies (0x240+ID), multiplexed on DATA[0], and its "
+        "motion-mode command (0x400+ID) and reply (0x500+ID); the 0x280 broadcast"
+    ),
     options=(
         DbcOption(
             name="max_torque_nm",
