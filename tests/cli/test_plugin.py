@@ -15,7 +15,7 @@ import pytest
 import servobus.cli._families as families
 from cli._bus_cli import one_line, run_json
 from servobus.cli import COMMANDS, main
-from servobus.cli.plugin import CliFamily, derived_status, parse_int, safe, setting_of
+from servobus.cli.plugin import CliFamily, build, derived_status, parse_int, safe, setting_of
 from servobus.protocols import FAMILIES, Command, Family, Reply, get_family
 from servobus.protocols import myactuator as ma
 
@@ -88,6 +88,21 @@ def test_every_readable_setting_reads_back_from_the_simulated_motor(
         assert [r["key"] for r in rows] == readable
         assert all(r["value"] is not None and r["error"] is None for r in rows), rows
     assert len(readable) == 1  # LK V2.35: its acceleration only
+
+
+# ---- ops said by their commands ----
+
+
+def test_build_gives_the_values_to_the_fields_of_the_same_name() -> None:
+    codec = get_family("myactuator").bind(1)
+    values = {"speed_dps": 30.0, "max_current_a": None, "relative": False}
+    assert build(ma.SpeedControl)(codec, values) == ma.SpeedControl(speed_dps=30.0)  # max_torque_pct: default
+    moved = build(ma.IncrementalPositionControl, angle_deg="step_deg")(
+        codec, {"step_deg": 5.0, "max_speed_dps": 9.0}
+    )
+    assert moved == ma.IncrementalPositionControl(angle_deg=5.0, max_speed_dps=9.0)
+    with pytest.raises(TypeError, match="SpeedControl has no field speed_rpm"):
+        build(ma.SpeedControl, speed_rpm="speed_dps")
 
 
 # ---- settings said by their commands ----

@@ -14,7 +14,8 @@ The contract, as the CLI uses it:
     CLI command name -> :class:`Op`: what the command sends. The names the CLI offers are
     ``move``, ``speed``, ``torque``, ``mit``, ``stop``, ``off``, ``brake``, ``zero``, ``set-id``,
     ``clear-errors``, ``reset``. Each builder takes the motor's bound codec (``revision``,
-    ``model``, ``link``) and the command line's values, keyed in the units their options carry:
+    ``model``, ``link``) and the command line's values, keyed in the units their options carry
+    (:func:`build` gives them to the command's fields of the same names):
 
     ========  ==================================================================================
     move      ``angle_deg``, ``max_speed_dps`` (None: no limit), ``relative`` (bool),
@@ -111,12 +112,22 @@ class Op:
     current_limit: bool = False
 
 
-def build(cls: Callable[..., Command], **fields: str) -> Make:
-    """A builder of ``cls``: each ``field="key"`` takes the command line's value ``key``
-    (``build(SpeedControl, speed_dps="speed_dps")``)."""
+def build(cls: type[Command], **renamed: str) -> Make:
+    """A builder of ``cls`` from the command line's values: each field takes the value of the same
+    name (units in both names: ``build(SpeedControl)`` takes ``speed_dps``), or of the name
+    ``renamed`` gives it (``build(IncrementalPositionSpeed, increment_deg="angle_deg")``); a field the
+    command line has no value for keeps its default.
+
+    Raises:
+        TypeError: ``renamed`` names a field ``cls`` does not have.
+    """
+    fields = [(f.name, renamed.get(f.name, f.name)) for f in dataclasses.fields(cls) if f.init]  # type: ignore[arg-type]
+    unknown = set(renamed) - {name for name, _ in fields}
+    if unknown:
+        raise TypeError(f"{cls.__name__} has no field {', '.join(sorted(unknown))}")
 
     def make(codec: BoundCodec, v: Values) -> Command:
-        return cls(**{name: v[key] for name, key in fields.items()})
+        return cls(**{name: v[key] for name, key in fields if key in v})
 
     return make
 

@@ -79,8 +79,8 @@ def _brake(codec: BoundCodec, v: Values) -> Command:
 
 OPS: dict[str, Op] = {
     "move": move(
-        build(MultiTurnPositionSpeed, angle_deg="angle_deg", max_speed_dps="max_speed_dps"),
-        build(IncrementalPositionSpeed, increment_deg="angle_deg", max_speed_dps="max_speed_dps"),
+        build(MultiTurnPositionSpeed),
+        build(IncrementalPositionSpeed, increment_deg="angle_deg"),
         angle=ReadMultiTurnAngle,
         reads=(ReadStatus2,),
         angle_in_reply=False,  # the set-points' replies carry the encoder, not the angle

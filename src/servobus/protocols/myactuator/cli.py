@@ -79,13 +79,13 @@ _RESET_NOTE = "takes effect after a reset (servobus reset)"
 
 OPS: dict[str, Op] = {
     "move": move(
-        build(AbsolutePositionControl, angle_deg="angle_deg", max_speed_dps="max_speed_dps"),
-        build(IncrementalPositionControl, angle_deg="angle_deg", max_speed_dps="max_speed_dps"),
+        build(AbsolutePositionControl),
+        build(IncrementalPositionControl),
         angle=ReadMultiTurnAngle,
         reads=(ReadStatus2,),
     ),
-    "speed": setpoint(build(SpeedControl, speed_dps="speed_dps")),
-    "torque": setpoint(build(TorqueControl, current_a="current_a")),
+    "speed": setpoint(build(SpeedControl)),
+    "torque": setpoint(build(TorqueControl)),
     "mit": setpoint(_mit),
     "brake": once(_brake),
     "zero": once(build(WriteCurrentPositionAsZero), rom=True, note=f"the new zero {_RESET_NOTE}"),
