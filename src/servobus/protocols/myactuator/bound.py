@@ -74,6 +74,7 @@ from servobus.protocols.myactuator.motion import (
 )
 from servobus.protocols.myactuator.revision import Revision
 from servobus.protocols.myactuator.rs485 import RS485_FRAME_SIZE, encode_rs485, rs485_deframer
+from servobus.protocols.myactuator.rs485_motion import Rs485MotionCommand
 
 __all__ = ["LINKS", "MyActuatorCodec", "Rs485Framing", "bind", "broadcast"]
 
@@ -203,6 +204,8 @@ class MyActuatorCodec(CodecBase):
         if plan is None:
             if not isinstance(command, MyActuatorMessage) or not isinstance(command, Command):
                 raise ValueError(f"{command!r} is not a MyActuator command")
+            if isinstance(command, Rs485MotionCommand):
+                raise ValueError("the RS485 motion frame (FE EE) goes on no bound link (myactuator-v4.md §6)")
             plan = self._plans[type(command)] = _class_plan(type(command), self.revision)
         return plan
 

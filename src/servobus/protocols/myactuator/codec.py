@@ -131,6 +131,8 @@ def _reply_layout(command: type[MyActuatorCommand], reply: type[Reply]) -> tuple
     if reply.CODE is None:  # a layout shared by several commands (R2): DATA[0] is the command's byte
         assert command.CODE is not None
         return command.CODE, Candidate(reply, reply.decode, command.REVISIONS)  # type: ignore[arg-type, attr-defined]
+    if reply.CODE != command.CODE:
+        raise TypeError(f"{command.__name__} is answered by {reply.__name__}, whose DATA[0] is another")
     return _layout(reply)
 
 
