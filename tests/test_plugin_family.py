@@ -356,6 +356,88 @@ def test_a_plug_in_is_looked_up_once_not_per_motor_or_broadcast(
     assert len(scans) <= 1, scans
 
 
+# ---- the command line ----
+
+#: the CLI commands a family's cli part offers or refuses (status: its status reads)
+DRIVEN = (
+    "status",
+    "move",
+    "speed",
+    "torque",
+    "mit",
+    "stop",
+    "off",
+    "brake",
+    "zero",
+    "set-id",
+    "clear-errors",
+    "reset",
+)
+
+
+def test_the_cli_part_says_what_each_command_sends_or_why_not(toy: ModuleType) -> None:
+    from servobus.cli.plugin import CliFamily
+
+    part = toy.FAMILY.part("cli")
+    assert isinstance(part, CliFamily)
+    assert tuple(part.status_reads(toy.FAMILY)) == (toy.ReadState,)  # derived from the declarations
+    for command in DRIVEN[1:]:
+        assert part.op(command) is not None or part.why_not[command], command
+    codec = toy.FAMILY.bind(1)
+    assert part.op("speed").first(codec, {"speed_dps": 12.5}) == (toy.SetSpeed(speed_dps=12.5),)
+    assert part.op("stop").first(codec, {}) == (toy.Stop(),)  # the bound codec's safe command
+    assert part.op("reset").first(codec, {}) == (toy.Restart(),)
+    (limit,) = part.settings
+    assert limit.key == "speed_limit_dps" and limit.read is None and limit.rom is True
+    assert limit.write is not None
+    assert limit.write(limit.parse("50"), True) == toy.WriteSpeedLimit(limit_dps=50)
+
+
+# ---- DBC ----
+
+
+def _toy_frames(toy: ModuleType) -> list[tuple[int, Any]]:
+    """(identifier, message) of every command and reply class, motors 1 and 2."""
+    replies = [
+        toy.StateReply(position_deg=-1234.56, speed_dps=321.4, faults=toy.ToyFaults.STALL),
+        toy.SpeedLimitEcho(limit_dps=999.9),
+    ]
+    return [(0x602, command) for command in examples(toy).values()] + [(0x681, reply) for reply in replies]
+
+
+def test_the_dbc_of_a_plug_in_is_derived_from_its_declarations(toy: ModuleType) -> None:
+    pytest.importorskip("cantools")
+    from _dbc_check import check_frame
+    from servobus.dbc import database, plan
+
+    p = plan("toy", [1, 2])
+    assert not p.left_out
+    assert sorted(m.frame_id for m in p.messages) == [0x601, 0x602, 0x681, 0x682]
+    db = database(p)
+    specs = {m.frame_id: m for m in p.messages}
+    for frame_id, message in _toy_frames(toy):
+        check_frame(specs[frame_id], db, message.encode(), message)
+
+
+def test_servobus_dbc_family_toy(toy: ModuleType, tmp_path: Path) -> None:
+    cantools = pytest.importorskip("cantools")
+    out = tmp_path / "toy.dbc"
+    result = run_cli("dbc", "--family", "toy", "--ids", "1-2", "-o", str(out))
+    assert result.returncode == 0, result.stderr
+    db = cantools.database.load_file(str(out))
+    assert sorted(m.frame_id for m in db.messages) == [0x601, 0x602, 0x681, 0x682]
+    assert db.decode_message(0x681, bytes.fromhex("81 28 23 00 00 7D 00 02")) == {
+        "code": "StateReply",
+        "position_deg": 90.0,
+        "speed_dps": 12.5,
+        "faults": 2,
+    }
+    assert db.decode_message(0x602, toy.SetSpeed(speed_dps=12.34).encode()) == {
+        "code": "SetSpeed",
+        "speed_dps": 12.34,
+    }
+
+
 # ---- decoding logs ----
 
 LOG = """\

@@ -3,7 +3,8 @@
 It is the example of the family contract (``servobus.protocols.Family``): a package that declares its
 commands once (:mod:`.messages`), binds one motor's codec on Frames (:mod:`.codec`), simulates its
 motors (:mod:`.device`), has its typed motor methods generated from the declarations (:mod:`._motor`),
-and exposes one ``FAMILY``. Its distribution registers it::
+says what the command line sends (:mod:`.cli`, imported only by the CLI) and exposes one ``FAMILY``.
+It has no ``dbc`` part: its DBC is derived from the declarations. Its distribution registers it::
 
     [servobus.families]
     toy = servobus_toy:FAMILY
@@ -68,5 +69,5 @@ FAMILY: Family[Motor] = Family(
     commands=COMMANDS,
     motor_ids=MOTOR_IDS,
     motor=_motor,
-    parts={},
+    parts={"cli": "servobus_toy.cli:CLI"},
 )
