@@ -238,6 +238,9 @@ def test_a_cli_part_of_another_kind_is_named(
     monkeypatch.setattr(families, "get_family", lambda name: dataclasses.replace(real(name), parts=parts))
     err = one_line(capsys, ["stop", "--sim", "1"], code=1)
     assert "cli part (servobus.protocols:FAMILIES) is dict, not a servobus.cli.plugin.CliFamily" in err
+    parts = {"cli": "servobus.protocols.nowhere:CLI"}
+    err = one_line(capsys, ["stop", "--sim", "1"], code=1)
+    assert "cli part (servobus.protocols.nowhere:CLI): No module named 'servobus.protocols.nowhere'" in err
 
 
 # ---- layering ----

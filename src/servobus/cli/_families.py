@@ -26,13 +26,18 @@ def cli_part(family: str | Family) -> CliFamily:
     """The family's ``cli`` part; a family without one gets the commands that need no table.
 
     Raises:
-        click.ClickException: the family's ``cli`` part is not a :class:`CliFamily` (exit 1).
+        click.ClickException: the family's ``cli`` part does not import or is not a
+            :class:`CliFamily` (exit 1).
     """
     found = get_family(family) if isinstance(family, str) else family
     try:
         part = found.part("cli")
     except LookupError:
         return CliFamily()
+    except (ImportError, AttributeError) as exc:  # a plug-in's broken part: its error, in one line
+        raise click.ClickException(
+            f"the {found.name} family's cli part ({found.parts['cli']}): {exc}"
+        ) from exc
     if not isinstance(part, CliFamily):
         raise click.ClickException(
             f"the {found.name} family's cli part ({found.parts['cli']}) is {type(part).__name__}, "
