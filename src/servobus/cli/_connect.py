@@ -14,25 +14,31 @@ import contextlib
 import functools
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
 from servobus.bus import Bus, Motor
 from servobus.cli._output import FloatRange, refused
+from servobus.protocols import DEFAULT_FAMILY, FAMILIES, available_families, get_family
+
+if TYPE_CHECKING:
+    from servobus.sim.family import SimFamily
 
 __all__ = [
     "Connection",
+    "FamilyChoice",
     "connection_options",
     "family_option",
     "note_exit",
     "open_bus",
     "parse_ids",
     "revision_option",
+    "sim_devices",
+    "sim_part",
     "timeout_option",
 ]
 
-FAMILIES = ("myactuator", "lk", "hollow")
 #: ``--interface`` value for servobus's own SLCAN transport (no python-can; no 2 s wait on open)
 NATIVE_SLCAN = "servobus-slcan"
 F = TypeVar("F", bound=Callable[..., Any])
@@ -69,7 +75,7 @@ def parse_ids(text: str) -> tuple[int, ...]:
 class Connection:
     """Where the motors are (from the command line)."""
 
-    family: str = "myactuator"
+    family: str = DEFAULT_FAMILY
     revision: str | None = None
     ids: tuple[int, ...] = ()
     sim: int | None = None
@@ -88,7 +94,7 @@ class Connection:
         """The family's link name: ``"rs485"`` on a serial port, ``"canfd"``/``"can"`` otherwise."""
         if self.port is not None:
             return "rs485"
-        return "canfd" if self.fd and self.family == "hollow" else "can"
+        return "canfd" if self.fd and "canfd" in get_family(self.family).links else "can"
 
     @property
     def motor_ids(self) -> tuple[int, ...]:
@@ -112,9 +118,11 @@ class Connection:
         if self.sim is not None:
             from servobus.transports.sim import SimTransport
 
-            return SimTransport(devices=sim_devices(self.family, self.motor_ids, self.revision), name="sim")
+            where = (self.family, self.motor_ids, self.revision)
+            # fd only when given: the plain three-argument call is the one test doubles stand in for
+            devices = sim_devices(*where, fd=True) if self.fd else sim_devices(*where)
+            return SimTransport(devices=devices, name="sim")
         if self.port is not None:
-            from servobus.protocols import get_family
             from servobus.transports.rs485 import SerialTransport
 
             framing = get_family(self.family).bind(self.motor_ids[0], **self.bind_options()).framing
@@ -138,28 +146,38 @@ class Connection:
         )
 
 
-def sim_devices(family: str, ids: tuple[int, ...], revision: str | None = None) -> list[Any]:
-    """Simulated motors of ``family`` with ``ids``, in ``revision`` (the family's own parser reads it).
+def sim_part(family: str) -> SimFamily:
+    """The simulator part of ``family`` (``FAMILY.part("sim")``).
 
     Raises:
-        ValueError: a revision the family does not have.
+        ValueError: the family has none, or it is not a :class:`~servobus.sim.family.SimFamily`.
     """
-    if family == "myactuator":
-        from servobus.protocols.myactuator import FAMILY as MA
-        from servobus.protocols.myactuator import Revision as MaRevision
-        from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+    from servobus.sim.family import SimFamily
 
-        rev: MaRevision = MA.revision(revision) if revision else MaRevision.V4_4
-        return [MyActuatorMotor(i, revision=rev) for i in ids]
-    if family == "lk":
-        from servobus.protocols.lk import DEFAULT_MODEL, FAMILY, LkModel
-        from servobus.protocols.lk.sim.device import LkMotor
+    try:
+        sim = get_family(family).part("sim")
+    except LookupError as exc:
+        raise ValueError(f"--sim: {exc}") from None
+    if not isinstance(sim, SimFamily):
+        raise ValueError(f"--sim: the {family} family's sim part is {type(sim).__name__}, not a SimFamily")
+    return sim
 
-        model = LkModel(revision=FAMILY.revision(revision)) if revision else DEFAULT_MODEL
-        return [LkMotor(i, model=model) for i in ids]
-    from servobus.protocols.hollow.sim.device import HollowMotor
 
-    return [HollowMotor(i) for i in ids]
+def sim_devices(
+    family: str, ids: tuple[int, ...], revision: str | None = None, *, fd: bool = False
+) -> list[Any]:
+    """Simulated motors of ``family`` with ``ids``, in ``revision`` (the family's own parser reads it),
+    on CAN FD with ``fd``: what the family's simulator part builds for the in-process bus.
+
+    Raises:
+        ValueError: a revision the family does not have, or options its simulator refuses.
+    """
+    from servobus.sim.family import SimOptions
+
+    protocol = get_family(family)
+    rev = protocol.revision(revision) if revision else protocol.default_revision
+    setup = sim_part(family).devices(ids, rev, SimOptions(fd=fd))
+    return list(setup.can_devices)
 
 
 def _check(conn: Connection) -> Connection:
@@ -185,17 +203,18 @@ def _check(conn: Connection) -> Connection:
         raise click.UsageError("--data-bitrate is the CAN FD data phase's bit rate: give --fd too")
     if conn.sim is not None and not 1 <= conn.sim <= 32:
         raise click.UsageError(f"--sim {conn.sim}: between 1 and 32 motors")
-    if conn.sim is not None and conn.fd and conn.family != "hollow":
-        raise click.UsageError(
-            f"--fd: the simulated {conn.family} motors speak classic CAN (CAN FD: --family hollow)"
-        )
+    if conn.sim is not None:  # what the family's simulator serves: its one-line refusals
+        from servobus.sim.family import SimOptions
+
+        try:
+            sim_part(conn.family).check(SimOptions(fd=conn.fd))
+        except ValueError as exc:
+            raise click.UsageError(str(exc)) from None
     if conn.interface == NATIVE_SLCAN:
         if not conn.channel:
             raise click.UsageError(f"-i {NATIVE_SLCAN} needs the adapter's serial port: -c /dev/ttyACM0")
     elif conn.sim is None and conn.port is None:
         _check_python_can(conn)
-    from servobus.protocols import get_family
-
     family = get_family(conn.family)
     with refused():  # the ids and revision the family has, before any command builds on them
         for motor_id in conn.motor_ids:
@@ -268,12 +287,29 @@ def _needs_channel(interface: str) -> bool:
     return channel is not None and channel.default is inspect.Parameter.empty
 
 
+class FamilyChoice(click.Choice[str]):
+    """The registered families' names, read when a command line is checked (not when this module is
+    imported), so a family a plug-in registers by entry point is offered too: the built-ins in
+    registry order, then the plug-ins'."""
+
+    def __init__(self) -> None:
+        super().__init__((), case_sensitive=True)
+
+    @property
+    def choices(self) -> tuple[str, ...]:
+        return (*FAMILIES, *(name for name in available_families() if name not in FAMILIES))
+
+    @choices.setter
+    def choices(self, value: object) -> None:
+        """click.Choice sets its choices once; these are read each time instead."""
+
+
 #: ``--family``/``-f``: the command receives ``family``
 family_option = click.option(
     "--family",
     "-f",
-    type=click.Choice(FAMILIES),
-    default="myactuator",
+    type=FamilyChoice(),
+    default=DEFAULT_FAMILY,
     show_default=True,
     help="Protocol family of the motors.",
 )

@@ -1,12 +1,16 @@
-"""``servobus demo``: simulated MyActuator motors following smooth trajectories at 1 kHz, no hardware.
+"""``servobus demo``: simulated motors following smooth trajectories at 1 kHz, no hardware.
 
-Each simulated 1 Mbit/s CAN bus is a :class:`~servobus.transports.sim.SimTransport` with its motors,
-driven by its own :class:`~servobus.bus.Bus`; one pacer (:func:`servobus.ticks.ticks`) drives every
-bus: at each tick every motor gets an absolute position command (0xA4) along a sine, and the buses'
-``cycle()``\\ s run together (``asyncio.gather``). A live view shows each motor's position, speed,
-current and temperature with the achieved rate, missed ticks, latency, bus load and errors; with
-``--duration`` the demo runs without it and prints a summary, including, when the rate was not
-kept, what was achieved and why (CPU time per tick, the simulator's share, the cores it would need).
+The motors are ``--family``'s (default: the registry's first, MyActuator), asked of the family
+itself: its simulator part (``FAMILY.part("sim")``) builds them and says their turnaround, its
+command-line part's ``move`` (``FAMILY.part("cli")``) makes the absolute position set-point (0xA4
+for MyActuator). Each simulated 1 Mbit/s CAN bus is a :class:`~servobus.transports.sim.SimTransport`
+with its motors, driven by its own :class:`~servobus.bus.Bus`; one pacer
+(:func:`servobus.ticks.ticks`) drives every bus: at each tick every motor gets its set-point along a
+sine, and the buses' ``cycle()``\\ s run together (``asyncio.gather``). A live view
+shows each motor's position, speed, current and temperature with the achieved rate, missed ticks,
+latency, bus load and errors; with ``--duration`` the demo runs without it and prints a summary,
+including, when the rate was not kept, what was achieved and why (CPU time per tick, the
+simulator's share, the cores it would need).
 
 Real time, one process: the simulated motors run on the same event loop as the host side, so the
 machine's one core pays for both. Ctrl-C or SIGTERM (or the end of ``--duration``) sends every motor
@@ -20,17 +24,22 @@ import contextlib
 import math
 import time
 from collections.abc import Callable
-from typing import Any
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import click
 
 from servobus.bus import Bus, Motor
-from servobus.cli._connect import note_exit, timeout_option
+from servobus.cli._connect import FamilyChoice, note_exit, sim_part, timeout_option
 from servobus.cli._demo_report import Layout, Summary, layout, live_view, summary_lines
 from servobus.cli._motors import run
 from servobus.cli._output import SETTINGS, FloatRange, console, emit_json, examples, json_option
-from servobus.protocols import myactuator as ma
+from servobus.protocols import DEFAULT_FAMILY, Command, get_family
+from servobus.sim.family import SimFamily, SimOptions
 from servobus.ticks import ticks
+
+if TYPE_CHECKING:
+    from servobus.cli.plugin import CliFamily, Op
 
 __all__ = ["demo"]
 
@@ -63,32 +72,45 @@ REFRESH_S = 0.25
     type=click.IntRange(1, 320),
     help="Simulated 1 Mbit/s buses [default: as few as carry the motors at --hz].",
 )
+@click.option(
+    "--family",
+    "-f",
+    type=FamilyChoice(),
+    default=DEFAULT_FAMILY,
+    show_default=True,
+    help="Protocol family of the simulated motors (one with a simulator and a move).",
+)
 @timeout_option
 @json_option
 def demo(
-    duration: float | None, hz: float, motors: int, buses: int | None, timeout_s: float | None, as_json: bool
+    duration: float | None,
+    hz: float,
+    motors: int,
+    buses: int | None,
+    family: str,
+    timeout_s: float | None,
+    as_json: bool,
 ) -> None:
-    """Simulated MyActuator motors on simulated CAN buses following sine trajectories, in real time.
+    """Simulated motors on simulated CAN buses following sine trajectories, in real time.
 
-    No hardware and no arguments needed: 32 motors at 1 kHz by default, spread over as many
-    simulated 1 Mbit/s buses as classic CAN needs for that rate. Ctrl-C stops the motors cleanly.
+    No hardware and no arguments needed: 32 MyActuator motors at 1 kHz by default, spread over as
+    many simulated 1 Mbit/s buses as classic CAN needs for that rate. Ctrl-C stops the motors cleanly.
     """
-    from servobus.protocols.myactuator.sim.device import DEFAULT_TURNAROUND_S
-
+    parts = _parts(family)
     if buses is not None and buses > motors:
         raise click.BadParameter(
             f"{buses} buses for {motors} motors: at most one bus per motor", param_hint="--buses"
         )
     if as_json and duration is None:
         raise click.UsageError("--json prints the summary of a run: give --duration")
-    plan = layout(hz, motors, buses, DEFAULT_TURNAROUND_S)
+    plan = layout(hz, motors, buses, parts.sim.turnaround_s)
     if not as_json:
         where = f"{plan.buses} simulated CAN bus" + ("es" if plan.buses > 1 else "")
-        click.echo(f"servobus demo: {motors} simulated myactuator motor(s) on {where}, {hz:g} Hz")
+        click.echo(f"servobus demo: {motors} simulated {family} motor(s) on {where}, {hz:g} Hz")
         click.echo(plan.why())
         if (warning := plan.overload()) is not None:
             click.echo(f"warning: {warning}")
-    summary = run(_run(plan, duration, live=duration is None, timeout_s=timeout_s))
+    summary = run(_run(plan, parts, duration, live=duration is None, timeout_s=timeout_s))
     if as_json:
         emit_json(summary.as_dict())
     else:
@@ -98,6 +120,48 @@ def demo(
         raise KeyboardInterrupt  # exit 130 (SIGTERM: 143), after the summary (the motors were stopped)
     if summary.errors:
         raise click.ClickException(f"{summary.errors} request(s) failed during the demo")
+
+
+@dataclass(frozen=True, slots=True)
+class _Parts:
+    """What the demo asks of the family: its simulator and its ``move`` set-point."""
+
+    family: str
+    sim: SimFamily
+    move: Op
+
+    def setpoint(self, motor: Motor, angle_deg: float) -> Command:
+        """The absolute position set-point to ``angle_deg`` for ``motor``."""
+        values = {
+            "angle_deg": angle_deg,
+            "max_speed_dps": MAX_SPEED_DPS,
+            "relative": False,
+            "max_current_a": None,
+        }
+        return self.move.first(motor.codec, values)[-1]
+
+
+def _parts(family: str) -> _Parts:
+    """The family's simulator and ``move``, or a one-line refusal (exit 2) saying which it lacks."""
+    try:
+        sim = sim_part(family)
+        sim.check(SimOptions())
+    except ValueError as exc:
+        raise click.BadParameter(str(exc).removeprefix("--sim: "), param_hint="--family") from None
+    try:
+        cli: CliFamily = get_family(family).part("cli")
+    except LookupError as exc:
+        raise click.BadParameter(
+            f"{exc}: the demo moves motors with its move", param_hint="--family"
+        ) from None
+    move = cli.op("move")
+    if move is None:
+        why = cli.why_not.get("move", "")
+        raise click.BadParameter(
+            f"the demo moves motors, and {family} motors have no move" + (f": {why}" if why else ""),
+            param_hint="--family",
+        )
+    return _Parts(family, sim, move)
 
 
 class _SimClock:
@@ -123,9 +187,12 @@ class _SimClock:
         return timed
 
 
-async def _run(plan: Layout, duration: float | None, *, live: bool, timeout_s: float | None) -> Summary:
-    from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+async def _run(
+    plan: Layout, parts: _Parts, duration: float | None, *, live: bool, timeout_s: float | None
+) -> Summary:
     from servobus.transports.sim import SimTransport
+
+    revision = get_family(parts.family).default_revision
 
     loop = asyncio.get_running_loop()
     sim_clock = _SimClock()
@@ -138,12 +205,12 @@ async def _run(plan: Layout, duration: float | None, *, live: bool, timeout_s: f
 
         stack.callback(noted)  # (first in, so it runs after every Bus was left)
         for b, count in enumerate(plan.per_bus):
-            transport = SimTransport(
-                devices=[MyActuatorMotor(i) for i in range(1, count + 1)], name=f"sim{b + 1}"
-            )
+            ids = range(1, count + 1)
+            setup = parts.sim.devices(ids, revision, SimOptions())
+            transport = SimTransport(devices=setup.can_devices, name=f"sim{b + 1}")
             sim_clock.wrap(transport.network)
             bus = await stack.enter_async_context(Bus(transport, name=f"bus {b + 1}"))
-            buses.append((bus, [bus.motor("myactuator", i) for i in range(1, count + 1)]))
+            buses.append((bus, [bus.motor(parts.family, i) for i in ids]))
         flat = [(b, m) for b, (_, motors) in enumerate(buses) for m in motors]
         phases = [2 * math.pi * n / len(flat) for n in range(len(flat))]
         latest: list[Any] = [None] * len(flat)
@@ -171,13 +238,10 @@ async def _run(plan: Layout, duration: float | None, *, live: bool, timeout_s: f
                 count += 1
                 skipped += tick.skipped
                 lateness.append(tick.late_s)
-                items_by_bus: list[list[tuple[Motor, ma.AbsolutePositionControl]]] = [[] for _ in buses]
+                items_by_bus: list[list[tuple[Motor, Command]]] = [[] for _ in buses]
                 for n, (b, motor) in enumerate(flat):
                     targets[n] = AMPLITUDE_DEG * math.sin(2 * math.pi * t / PERIOD_S + phases[n])
-                    command = ma.AbsolutePositionControl(
-                        angle_deg=round(targets[n], 2), max_speed_dps=MAX_SPEED_DPS
-                    )
-                    items_by_bus[b].append((motor, command))
+                    items_by_bus[b].append((motor, parts.setpoint(motor, round(targets[n], 2))))
                 tick_done = asyncio.gather(
                     *(
                         bus.cycle(items, timeout_s=timeout_s)
@@ -226,18 +290,17 @@ def _retrieve(future: asyncio.Future[Any]) -> None:
         future.exception()
 
 
+#: the reply fields the live view shows, where the set-point's reply has them
+_COLUMNS = (("angle_deg", "8.2f"), ("speed_dps", "8.1f"), ("current_a", "6.2f"), ("temperature_c", ""))
+
+
 def _rows(flat: list[tuple[int, Motor]], latest: list[Any], targets: list[float]) -> list[tuple[Any, ...]]:
     rows = []
     for n, ((b, motor), reply) in enumerate(zip(flat, latest, strict=True)):
-        if reply is None:
-            values = ("", "", "", "")
-        else:
-            values = (
-                f"{reply.angle_deg:8.2f}",
-                f"{reply.speed_dps:8.1f}",
-                f"{reply.current_a:6.2f}",
-                f"{reply.temperature_c}",
-            )
+        values = tuple(
+            "" if (value := getattr(reply, name, None)) is None else format(value, spec)
+            for name, spec in _COLUMNS
+        )
         rows.append((str(n + 1), f"{b + 1}/{motor.motor_id}", values[0], f"{targets[n]:8.2f}", *values[1:]))
     return rows
 

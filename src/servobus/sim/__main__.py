@@ -26,80 +26,22 @@ import contextlib
 import os
 import signal
 import sys
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Sequence
 from pathlib import Path
 from typing import NoReturn
 
-from servobus.protocols import get_family
+from servobus.protocols import available_families, get_family
 from servobus.sim.attach import serve_rs485, serve_slcan
-from servobus.sim.device import Device, SerialDevice
+from servobus.sim.family import Setup, SimFamily, SimOptions
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.pty import PtyPort
 
 ERROR_PREFIX = "servobus.sim: error: "
 EXIT_USAGE = 2
 
-#: Motor ids each family's manuals allow (myactuator and lk: 1..32; hollow: 0..100, hollow.md §2.4).
-MOTOR_IDS: dict[str, range] = {"hollow": range(0, 101), "lk": range(1, 33), "myactuator": range(1, 33)}
-#: The MyActuator RS485 rates (myactuator-v4.md §1.2); the manuals name no default, 1 Mbit/s here.
-MYACTUATOR_BAUDS = (115_200, 500_000, 1_000_000, 1_500_000, 2_500_000)
-MYACTUATOR_DEFAULT_BAUD = 1_000_000
-
 
 class UsageError(Exception):
     """An argument the simulator refuses; the message is the one line the user sees."""
-
-
-@dataclass(frozen=True, slots=True)
-class Setup:
-    """What to serve: CAN devices (behind SLCAN) or serial devices (on an RS485 line at ``baud``)."""
-
-    can_devices: Sequence[Device] = ()
-    serial_devices: Sequence[SerialDevice] = ()
-    baud: int = 0
-
-
-def _hollow(args: argparse.Namespace) -> Setup:
-    from servobus.protocols.hollow.sim.converter import ConverterMode, HollowConverter
-    from servobus.protocols.hollow.sim.device import HollowMotor
-
-    ids = range(args.first_id, args.first_id + args.motors)
-    if not args.rs485:
-        return Setup(can_devices=[HollowMotor(i, fd_enabled=args.fd) for i in ids])
-    mode = ConverterMode.MODBUS if args.modbus else ConverterMode.TRANSPARENT
-    converter = HollowConverter([HollowMotor(i, fd_enabled=True) for i in ids], mode=mode)
-    return Setup(serial_devices=[converter], baud=converter.baud)
-
-
-def _lk(args: argparse.Namespace) -> Setup:
-    from servobus.protocols.lk import LkModel
-    from servobus.protocols.lk.sim.device import LkMotor
-
-    model = LkModel(revision=args.revision)
-    return Setup(
-        can_devices=[LkMotor(i, model=model) for i in range(args.first_id, args.first_id + args.motors)]
-    )
-
-
-def _myactuator(args: argparse.Namespace) -> Setup:
-    from servobus.protocols.myactuator.sim.device import MyActuatorMotor
-    from servobus.protocols.myactuator.sim.rs485 import MyActuatorRs485Motor
-
-    motors = [
-        MyActuatorMotor(i, revision=args.revision) for i in range(args.first_id, args.first_id + args.motors)
-    ]
-    if args.rs485:
-        baud = args.baud or MYACTUATOR_DEFAULT_BAUD
-        return Setup(serial_devices=[MyActuatorRs485Motor(m) for m in motors], baud=baud)
-    return Setup(can_devices=motors)
-
-
-FAMILIES: dict[str, Callable[[argparse.Namespace], Setup]] = {
-    "hollow": _hollow,
-    "lk": _lk,
-    "myactuator": _myactuator,
-}
 
 
 class _Parser(argparse.ArgumentParser):
@@ -112,19 +54,26 @@ class _Parser(argparse.ArgumentParser):
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     """Parse and check ``argv``; on a bad argument print one line and exit 2 (``SystemExit(2)``).
 
-    ``args.revision`` comes back as the family's revision enum member (the default filled in).
+    ``args.revision`` comes back as the family's revision enum member (the default filled in),
+    ``args.sim`` as the family's simulator part and ``args.options`` as its :class:`SimOptions`.
     """
     parser = _Parser(prog="python -m servobus.sim", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--family", choices=sorted(FAMILIES), required=True)
+    parser.add_argument("--family", choices=sorted(available_families()), required=True)
     parser.add_argument("--motors", type=int, default=1, help="how many motors (default 1)")
     parser.add_argument("--first-id", type=int, default=1, help="id of the first motor (default 1)")
     medium = parser.add_mutually_exclusive_group()
     medium.add_argument("--slcan", action="store_true", help="a simulated SLCAN USB-CAN adapter (default)")
     medium.add_argument("--rs485", action="store_true", help="the family's RS485 line")
-    parser.add_argument("--baud", type=int, help="RS485 baud rate (myactuator; default 1000000)")
+    parser.add_argument(
+        "--baud", type=int, help="RS485 baud rate, where the line has several (default: the family's)"
+    )
     parser.add_argument("--revision", help="protocol revision, e.g. V2_35 (default: the family's newest)")
-    parser.add_argument("--fd", action="store_true", help="CAN FD motors (hollow, over SLCAN)")
-    parser.add_argument("--modbus", action="store_true", help="hollow converter in Modbus RTU mode")
+    parser.add_argument(
+        "--fd", action="store_true", help="CAN FD motors, over SLCAN (where the family has them)"
+    )
+    parser.add_argument(
+        "--modbus", action="store_true", help="the RS485 line in Modbus RTU mode (where the family has it)"
+    )
     parser.add_argument("--link", help="also create this symlink to the pty (the path must not exist)")
     args = parser.parse_args(argv)
     try:
@@ -135,40 +84,28 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
 
 
 def check_args(args: argparse.Namespace) -> None:
-    """Refuse what cannot be served, before anything is opened; fills in ``args.revision``.
+    """Refuse what cannot be served, before anything is opened; fills in ``args.revision``,
+    ``args.sim`` (the family's simulator part) and ``args.options``.
 
     Raises:
         UsageError: a bad value or contradictory flags (the message names the argument).
     """
-    family = args.family
-    # the medium first: the flags that only make sense on one of them
-    if args.rs485 and family == "lk":
-        raise UsageError("--rs485: neither LK manual defines an RS485 framing (lk-v2.md §1.3); use --slcan")
-    if args.modbus and family != "hollow":
-        raise UsageError(f"--modbus: only the hollow converter speaks Modbus RTU, not {family}")
-    if args.modbus and not args.rs485:
-        raise UsageError("--modbus: the hollow converter's RS485 mode; it needs --rs485")
-    if args.fd and family != "hollow":
-        raise UsageError(f"--fd: only hollow motors speak CAN FD, not {family}")
-    if args.fd and args.rs485:
-        raise UsageError("--fd: behind --rs485 the hollow converter always talks CAN FD; drop --fd")
-    if args.baud is not None:
-        if not args.rs485:
-            raise UsageError(f"--baud {args.baud}: the rate of an RS485 line; it needs --rs485")
-        if family == "hollow":
-            raise UsageError(
-                f"--baud {args.baud}: the hollow converter fixes its own rate "
-                "(1000000 transparent, 19200 with --modbus); drop --baud"
-            )
-        if args.baud not in MYACTUATOR_BAUDS:
-            rates = ", ".join(str(b) for b in MYACTUATOR_BAUDS)
-            raise UsageError(f"--baud {args.baud}: the {family} RS485 line runs at one of {rates}")
-    # the motors
+    family = get_family(args.family)
+    try:
+        sim = family.part("sim")
+    except LookupError as exc:
+        raise UsageError(f"--family {args.family}: {exc}") from None
+    if not isinstance(sim, SimFamily):
+        raise UsageError(f"--family {args.family}: its sim part is {type(sim).__name__}, not a SimFamily")
+    options = SimOptions(rs485=args.rs485, fd=args.fd, modbus=args.modbus, baud=args.baud)
+    # the medium and its flags first, then the motors
+    try:
+        sim.check(options)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
     if args.motors < 1:
         raise UsageError(f"--motors {args.motors}: need at least 1 motor")
-    ids = MOTOR_IDS[family]
-    if args.modbus:
-        ids = range(1, ids.stop)  # hollow.md §9.5: Modbus address 0 is the broadcast, never answered
+    ids = sim.motor_ids(options)
     last = args.first_id + args.motors - 1
     if args.first_id not in ids or last not in ids:
         given = f"--first-id {args.first_id}"
@@ -176,20 +113,19 @@ def check_args(args: argparse.Namespace) -> None:
             given += f" --motors {args.motors}: ids {args.first_id}..{last}, but"
         else:
             given += ":"
-        rule = " (Modbus address 0 is the broadcast)" if args.modbus else ""
-        with_modbus = " with --modbus" if args.modbus else ""
-        raise UsageError(f"{given} {family} motor ids{with_modbus} are {ids.start}..{ids.stop - 1}{rule}")
+        note = sim.motor_ids_note(options)
+        raise UsageError(f"{given} {args.family} motor ids are {ids.start}..{ids.stop - 1}{note}")
     # the revision: the family's own parser, case-insensitive ("v2.35", "V2_35")
-    protocol = get_family(family)
     if args.revision is None:
-        args.revision = protocol.default_revision
+        args.revision = family.default_revision
     else:
         try:
-            args.revision = protocol.revision(args.revision)
+            args.revision = family.revision(args.revision)
         except ValueError as exc:
             raise UsageError(f"--revision {args.revision}: {exc}") from None
     if args.link is not None:
         _check_link(args.link)
+    args.sim, args.options = sim, options
 
 
 def _check_link(text: str) -> None:
@@ -216,10 +152,12 @@ def build(args: argparse.Namespace) -> Setup:
     Raises:
         UsageError: a device refused its settings (a check above missed a rule).
     """
+    ids = range(args.first_id, args.first_id + args.motors)
     try:
-        return FAMILIES[args.family](args)
+        setup: Setup = args.sim.devices(ids, args.revision, args.options)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+    return setup
 
 
 def make_link(link: Path, target: str) -> None:

@@ -9,7 +9,8 @@ One interface (:class:`Transport`: ``open``/``close``, ``send``, ``drain``, ``re
   (pyserial-asyncio-fast and the C line de-framer, no python-can), carrying
   :class:`~servobus.frame.Frame`.
 * ``"rs485"``: :class:`SerialTransport`, an RS485 port through pyserial-asyncio-fast, carrying
-  serial :class:`~servobus.frame.Frame` messages in the framing its family supplies.
+  serial :class:`~servobus.frame.Frame` messages in the framing its family supplies (the family's
+  declared serial lines, ``Family.serial``, give the framing by name, its baud rates and parity).
 * ``"sim"``: :class:`SimTransport`, the in-process bus onto a simulated CAN network
   (:class:`~servobus.sim.network.SimCanNetwork`), on the event loop's clock (virtual time under
   ``looptime`` or :func:`servobus.sim.virtual.run`), carrying :class:`~servobus.frame.Frame`.
@@ -37,7 +38,7 @@ from servobus.transports.stats import TransportStats
 
 if TYPE_CHECKING:
     from servobus.transports.can import CanTransport
-    from servobus.transports.rs485 import SerialMode, SerialTransport
+    from servobus.transports.rs485 import SerialTransport
     from servobus.transports.sim import SimTransport
     from servobus.transports.slcan import SlcanTransport
 
@@ -49,7 +50,6 @@ __all__ = [
     "ErrorFrame",
     "FramesDropped",
     "SendQueueFull",
-    "SerialMode",
     "SerialTransport",
     "SimTransport",
     "SlcanTransport",
@@ -73,7 +73,6 @@ ENTRY_POINT_GROUP = "servobus.transports"
 
 _LAZY = {
     "CanTransport": "servobus.transports.can",
-    "SerialMode": "servobus.transports.rs485",
     "SerialTransport": "servobus.transports.rs485",
     "SimTransport": "servobus.transports.sim",
     "SlcanTransport": "servobus.transports.slcan",

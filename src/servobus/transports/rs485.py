@@ -9,8 +9,14 @@ One :class:`SerialTransport` is one port and one half-duplex line:
   as Frames stamped with the event loop's clock. The **framing** is a plug-in the family supplies
   (``FAMILY.bind(id, link="rs485").framing``), not something the transport knows: any object with
   ``encode(frame) -> bytes`` and ``deframer()`` (:class:`~servobus.protocols._bound.Framing`) works.
-  ``mode="myactuator"``, ``"hollow-transparent"`` and ``"modbus-rtu"`` remain as shorthands that
-  pick the family's framing and the baud rates its manual allows.
+  The rest comes from the family's declaration of the line (``Family.serial``, a
+  :class:`~servobus.protocols.SerialLine`): the baud rates its manual allows, the default first,
+  and the parity. ``mode=`` names a serial line by its name or an alias, found by asking the
+  registered families (:func:`~servobus.protocols.available_families`; a plug-in family's lines
+  too), so ``mode="myactuator"``, ``"hollow-transparent"`` and ``"modbus-rtu"`` keep working.
+* **The de-framer's counters** (``discarded_bytes``, ``crc_errors``) are read from the family's
+  de-framer where it has them as public ``int`` attributes, and kept over reconnections in
+  :meth:`~SerialTransport.stats`; a de-framer without them counts 0.
 * **The line's rules are declared**, read-only, for the orchestrator to schedule by:
   :attr:`~SerialTransport.half_duplex` (True), :attr:`~SerialTransport.max_outstanding` (one
   request per port), :attr:`~SerialTransport.char_time_s`, :attr:`~SerialTransport.gap_s` (rest
@@ -57,23 +63,24 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import enum
 import errno
 import fcntl
 import os
 import struct
+import sys
 import termios
 from collections.abc import Callable
 from typing import Any
 
 from servobus.frame import Frame
+from servobus.protocols import SerialLine, available_families, get_family
 from servobus.protocols._bound import Framing, StreamDeframer
 from servobus.timing import uart_time_s
 from servobus.transports._serialport import LineProtocol, close_port, open_port
 from servobus.transports.base import Outgoing, Transport
 from servobus.transports.stats import TransportStats
 
-__all__ = ["SerialMode", "SerialTransport"]
+__all__ = ["SerialTransport", "find_serial_line", "serial_line_names"]
 
 _IDLE_CHARS = 3.5  # Modbus RTU's inter-frame silence, in character times
 _READ_SIZE = 16384  # bytes taken from the port per wake-up, at most
@@ -87,46 +94,52 @@ _TIOCOUTQ_ARG = bytes(4)
 _SET_TIMESTAMP: Callable[[Frame, float], None] = Frame.timestamp.__set__  # type: ignore[attr-defined,misc]
 
 
-class SerialMode(enum.Enum):
-    """Shorthands for the built-in families' framings (``mode=`` of :class:`SerialTransport`)."""
-
-    MYACTUATOR = "myactuator"
-    HOLLOW_TRANSPARENT = "hollow-transparent"
-    MODBUS_RTU = "modbus-rtu"
-
-
-#: baud rates each manual allows, the first the default; by mode and by the framing's name
-_MODE_BAUDS: dict[SerialMode, tuple[int, ...]] = {
-    SerialMode.MYACTUATOR: (115_200, 500_000, 1_000_000, 1_500_000, 2_500_000),
-    SerialMode.HOLLOW_TRANSPARENT: (1_000_000,),
-    SerialMode.MODBUS_RTU: (19_200,),
-}
-_FRAMING_BAUDS: dict[str, tuple[int, ...]] = {
-    "myactuator-rs485": _MODE_BAUDS[SerialMode.MYACTUATOR],
-    "hollow-transparent": _MODE_BAUDS[SerialMode.HOLLOW_TRANSPARENT],
-    "hollow-modbus-rtu": _MODE_BAUDS[SerialMode.MODBUS_RTU],
-}
-
 _PARITY_BITS = {"N": 0, "E": 1, "O": 1}
 
 
-def _mode_framing(mode: SerialMode) -> Framing:
-    """The family's framing for a ``mode=`` shorthand (the families load only here)."""
-    if mode is SerialMode.MYACTUATOR:
-        from servobus.protocols.myactuator.bound import Rs485Framing
-
-        return Rs485Framing()
-    from servobus.protocols.hollow.bound import ModbusFraming, TransparentFraming
-
-    return TransparentFraming() if mode is SerialMode.HOLLOW_TRANSPARENT else ModbusFraming()
+def _families_loaded_first() -> list[str]:
+    """The registered families' names, those already imported first: a framing in hand means its
+    family is loaded, so finding its serial line seldom imports another family."""
+    names = available_families()
+    loaded = [n for n, target in names.items() if target.partition(":")[0] in sys.modules]
+    return loaded + [n for n in names if n not in loaded]
 
 
-def _deframer_attr(deframer: StreamDeframer, name: str) -> Any:
-    """A counter or flag of a de-framer, or of the byte de-framer a family's wrapper holds."""
-    for obj in (deframer, getattr(deframer, "_inner", None)):
-        if obj is not None and (value := getattr(obj, name, None)) is not None:
-            return value
+def find_serial_line(name: str) -> SerialLine | None:
+    """The registered families' serial line named ``name`` (or with ``name`` among its aliases).
+
+    Families are imported one at a time, the loaded ones first, until one declares it; a plug-in
+    family that fails to load is passed over (with the registry's warning).
+    """
+    for family in _families_loaded_first():
+        try:
+            lines = get_family(family).serial
+        except ValueError:
+            continue
+        for line in lines:
+            if name == line.name or name in line.aliases:
+                return line
     return None
+
+
+def serial_line_names() -> list[str]:
+    """Every serial line's name and aliases over the registered families (imports them all)."""
+    names: list[str] = []
+    for family in available_families():
+        try:
+            lines = get_family(family).serial
+        except ValueError:
+            continue
+        for line in lines:
+            names += [line.name, *line.aliases]
+    return names
+
+
+def _count(deframer: StreamDeframer, name: str) -> int:
+    """A de-framer's counter (``discarded_bytes``, ``crc_errors``): an optional public attribute of
+    the family's de-framer; 0 where it keeps none."""
+    value = getattr(deframer, name, 0)
+    return value if isinstance(value, int) else 0
 
 
 class SerialTransport(Transport[Frame, Frame]):
@@ -136,13 +149,15 @@ class SerialTransport(Transport[Frame, Frame]):
         port: the serial device (``/dev/ttyUSB0``, a pty, or any pyserial URL).
         framing: how Frames look on the wire, from the family:
             ``FAMILY.bind(motor_id, link="rs485").framing``.
-        mode: a shorthand for a built-in family's framing and baud rates: ``"myactuator"``,
-            ``"hollow-transparent"`` or ``"modbus-rtu"``. With ``framing`` too, the mode gives
-            only the allowed baud rates.
-        baud: the line's rate; one the manual allows (default: the first). A framing the
-            transport does not know takes any rate (its ``bauds`` attribute, if it has one,
-            lists the allowed ones) and then needs ``baud``.
-        parity: ``"N"``, ``"E"`` or ``"O"`` (Modbus devices differ; the others use none).
+        mode: the name or an alias of a registered family's serial line (``Family.serial``):
+            ``"myactuator"``, ``"hollow-transparent"``, ``"modbus-rtu"``, or a plug-in family's.
+            It gives the framing, the baud rates and the parity; with ``framing`` too, only the
+            rates and the parity.
+        baud: the line's rate; one its serial line allows (default: the first). A framing that
+            no family declares takes any rate (its ``bauds`` attribute, if it has one, lists the
+            allowed ones) and then needs ``baud``.
+        parity: ``"N"``, ``"E"`` or ``"O"`` (default: the serial line's, else ``"N"``; Modbus
+            devices differ).
         gap_s: rest between two frames of ours on the line (default: 3.5 character times).
         turnaround_s: rest after the far end's last byte before we send (default: ``gap_s``).
         idle_s: silence after which buffered partial bytes are dropped (default: 20 ms, or 3.5
@@ -166,9 +181,9 @@ class SerialTransport(Transport[Frame, Frame]):
         port: str,
         *,
         framing: Framing | None = None,
-        mode: SerialMode | str | None = None,
+        mode: str | None = None,
         baud: int | None = None,
-        parity: str = "N",
+        parity: str | None = None,
         gap_s: float | None = None,
         turnaround_s: float | None = None,
         idle_s: float | None = None,
@@ -181,27 +196,28 @@ class SerialTransport(Transport[Frame, Frame]):
         reopen_backoff_s: tuple[float, float] = (0.05, 2.0),
         **options: Any,
     ) -> None:
-        self.mode: SerialMode | None = None
+        self.mode: str | None = mode
+        #: the family's serial line this transport runs (None: a framing no family declares)
+        self.line: SerialLine | None = None
         if mode is not None:
-            try:
-                self.mode = SerialMode(mode)
-            except ValueError:
-                known = ", ".join(m.value for m in SerialMode)
-                raise ValueError(f"mode={mode!r} is not one of {known}") from None
+            self.line = find_serial_line(mode)
+            if self.line is None:
+                known = ", ".join(serial_line_names())
+                raise ValueError(f"mode={mode!r} is not one of {known}")
         if framing is None:
-            if self.mode is None:
+            if self.line is None:
                 raise ValueError(
                     "give framing= (the family's: FAMILY.bind(1, link='rs485').framing) or mode="
                 )
-            framing = _mode_framing(self.mode)
+            framing = self.line.framing()
         elif not isinstance(framing, Framing):
             raise ValueError(f"framing={framing!r} has no encode(frame) and deframer()")
+        elif self.line is None:
+            self.line = find_serial_line(framing.name)
         self._framing = framing
-        label = self.mode.value if self.mode is not None else framing.name
+        label = mode if mode is not None else framing.name
         bauds: tuple[int, ...] | None = (
-            _MODE_BAUDS[self.mode]
-            if self.mode is not None
-            else _FRAMING_BAUDS.get(framing.name) or getattr(framing, "bauds", None)
+            self.line.bauds if self.line is not None else getattr(framing, "bauds", None)
         )
         if baud is None:
             if not bauds:
@@ -209,6 +225,8 @@ class SerialTransport(Transport[Frame, Frame]):
             baud = bauds[0]
         if bauds and baud not in bauds:
             raise ValueError(f"baud={baud} is not one of {label}'s rates {tuple(bauds)}")
+        if parity is None:
+            parity = self.line.parity if self.line is not None else "N"
         if baud <= 0:
             raise ValueError(f"baud={baud} must be positive")
         if parity not in _PARITY_BITS:
@@ -324,10 +342,8 @@ class SerialTransport(Transport[Frame, Frame]):
 
     def stats(self) -> TransportStats:
         snapshot = super().stats()
-        snapshot.discarded_bytes = self._old_counts[0] + (
-            _deframer_attr(self._deframer, "discarded_bytes") or 0
-        )
-        snapshot.crc_errors = self._old_counts[1] + (_deframer_attr(self._deframer, "crc_errors") or 0)
+        snapshot.discarded_bytes = self._old_counts[0] + _count(self._deframer, "discarded_bytes")
+        snapshot.crc_errors = self._old_counts[1] + _count(self._deframer, "crc_errors")
         return snapshot
 
     # ----------------------------------------------------------------- connection
@@ -354,8 +370,8 @@ class SerialTransport(Transport[Frame, Frame]):
                 fd = port.fileno()
                 os.set_blocking(fd, False)
         # Bytes of a frame cut by the loss cannot be completed: a fresh de-framer, counts kept.
-        self._old_counts[0] += _deframer_attr(self._deframer, "discarded_bytes") or 0
-        self._old_counts[1] += _deframer_attr(self._deframer, "crc_errors") or 0
+        self._old_counts[0] += _count(self._deframer, "discarded_bytes")
+        self._old_counts[1] += _count(self._deframer, "crc_errors")
         self._deframer = self._framing.deframer()
         self._line, self._protocol, self._fd = line, protocol, fd
         self._written_at = loop.time()
@@ -379,7 +395,7 @@ class SerialTransport(Transport[Frame, Frame]):
         self._load.add(now, uart_time_s(len(data), self.baud, bits_per_byte=self.bits_per_char))
         self._last_rx = self._rx_quiet_at = now
         self._take(self._deframer.feed(data), now)
-        if self._idle_timer is None and _deframer_attr(self._deframer, "pending") is not False:
+        if self._idle_timer is None:
             self._idle_timer = asyncio.get_running_loop().call_later(self.idle_s, self._on_quiet, generation)
 
     def _on_quiet(self, generation: int) -> None:

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from servobus.protocols._family import Family, command_classes
+from servobus.protocols._family import Family, SerialLine, command_classes
 from servobus.protocols.hollow import bound as _bound
 from servobus.protocols.hollow.codec import (
     Revision,
@@ -130,6 +130,17 @@ FAMILY: Family[Motor] = Family(
     commands=command_classes(globals().values()),
     motor=_motor,
     motor_ids=_MOTOR_IDS,
+    serial=(  # the converter's two RS-485 modes, each at its fixed rate, 8N1 (hollow.md §9.4, §9.5, A36)
+        SerialLine(
+            name=_bound.TransparentFraming.name, framing=_bound.TransparentFraming, bauds=(1_000_000,)
+        ),
+        SerialLine(
+            name=_bound.ModbusFraming.name,
+            framing=_bound.ModbusFraming,
+            bauds=(19_200,),
+            aliases=("modbus-rtu",),
+        ),
+    ),
     parts={
         "sim": "servobus.protocols.hollow.sim:SIM",
         "cli": "servobus.protocols.hollow.cli:CLI",

@@ -367,6 +367,16 @@ class _SerialFrames:
     def idle(self) -> list[Frame]:
         return self._frames(self._inner.idle())
 
+    @property
+    def discarded_bytes(self) -> int:
+        """Bytes dropped as noise (the serial transport's ``stats()`` reads it)."""
+        return int(self._inner.discarded_bytes)
+
+    @property
+    def crc_errors(self) -> int:
+        """Frames that failed their check (the serial transport's ``stats()`` reads it)."""
+        return int(self._inner.crc_errors)
+
 
 def bind(
     motor_id: int,

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from servobus.protocols._family import Family, command_classes
+from servobus.protocols._family import Family, SerialLine, command_classes
 from servobus.protocols.myactuator import bound as _bound
 from servobus.protocols.myactuator.codec import (
     decode_reply,
@@ -257,6 +257,14 @@ FAMILY: Family[Motor] = Family(
     commands=command_classes(globals().values()),
     motor=_motor,
     motor_ids=_MOTOR_IDS,
+    serial=(  # 8N1 at the rates the manuals list, none named the default (myactuator-v4.md §1.2)
+        SerialLine(
+            name=_bound.Rs485Framing.name,
+            framing=_bound.Rs485Framing,
+            bauds=(115_200, 500_000, 1_000_000, 1_500_000, 2_500_000),
+            aliases=("myactuator",),
+        ),
+    ),
     parts={
         "sim": "servobus.protocols.myactuator.sim:SIM",
         "cli": "servobus.protocols.myactuator.cli:CLI",

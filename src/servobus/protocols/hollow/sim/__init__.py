@@ -2,5 +2,6 @@
 
 from servobus.protocols.hollow.sim.converter import ConverterMode, HollowConverter
 from servobus.protocols.hollow.sim.device import HollowMotor
+from servobus.protocols.hollow.sim.setup import SIM
 
-__all__ = ["ConverterMode", "HollowConverter", "HollowMotor"]
+__all__ = ["SIM", "ConverterMode", "HollowConverter", "HollowMotor"]

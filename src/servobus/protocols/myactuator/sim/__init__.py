@@ -2,5 +2,6 @@
 
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.protocols.myactuator.sim.rs485 import MyActuatorRs485Motor
+from servobus.protocols.myactuator.sim.setup import SIM
 
-__all__ = ["MyActuatorMotor", "MyActuatorRs485Motor"]
+__all__ = ["SIM", "MyActuatorMotor", "MyActuatorRs485Motor"]
