@@ -209,6 +209,23 @@ def test_a_family_without_a_cli_part_gets_status_scan_stop_and_off(
         assert [r["sent"] for r in run_json(capsys, [command, "--sim", "1"])] == [[sent]]
 
 
+def test_record_polls_the_first_status_read_of_a_family_without_read_status2(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import servobus.cli.record as record
+    from servobus.cli._connect import Connection
+
+    real = get_family
+    monkeypatch.setattr(ma.ReadStatus1, "READ", True)
+    monkeypatch.setattr(ma.ReadStatus1, "REPLY", ma.Status1Reply)
+    lean = dataclasses.replace(real("myactuator"), parts={}, commands=(ma.SpeedControl, ma.ReadStatus1))
+    for module in (record, families):
+        monkeypatch.setattr(module, "get_family", lambda name: lean)
+    assert record._default_poll(Connection()) == "read_status1"
+    monkeypatch.setattr(record, "get_family", real)
+    assert record._default_poll(Connection()) == "read_status2"
+
+
 @pytest.mark.usefixtures("without_cli_part")
 def test_a_family_without_a_cli_part_refuses_the_rest_in_one_line(capsys: pytest.CaptureFixture[str]) -> None:
     err = one_line(capsys, ["speed", "--sim", "1", "--speed-dps", "10"])

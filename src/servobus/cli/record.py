@@ -14,6 +14,7 @@ import click
 
 from servobus.bus import Bus, Motor, command_classes
 from servobus.cli._connect import Connection, connection_options
+from servobus.cli._families import cli_part
 from servobus.cli._motors import run
 from servobus.cli._output import FloatRange
 from servobus.errors import MotorTimeout, TransportError
@@ -22,6 +23,9 @@ from servobus.recording import CandumpWriter, NewFiles, TapLink, TelemetryWriter
 from servobus.scheduler import Traffic
 
 __all__ = ["record"]
+
+#: the read ``--poll`` sends unless told (position, speed and current in one reply, where it exists)
+DEFAULT_POLL = "read_status2"
 
 EPILOG = """\b
 Polls every motor with a read (--poll, default read_status2: position, speed, current) through
@@ -73,7 +77,11 @@ class Tally:
     metavar="S",
     help="Seconds to record [default: until Ctrl-C].",
 )
-@click.option("--poll", default="read_status2", show_default=True, help="The read command to poll.")
+@click.option(
+    "--poll",
+    help=f"The read command to poll [default: {DEFAULT_POLL}, or the family's first status read "
+    "where it has none of that name].",
+)
 @click.option("--force", is_flag=True, help="Overwrite existing files (replaced when the recording is kept).")
 def record(
     conn: Connection,
@@ -82,7 +90,7 @@ def record(
     fmt: str | None,
     hz: float,
     duration: float | None,
-    poll: str,
+    poll: str | None,
     force: bool,
 ) -> None:
     """Record telemetry and raw frames from the motors."""
@@ -96,6 +104,7 @@ def record(
             raise click.BadParameter(f"{output}: a .csv or .jsonl file (or give --format)", param_hint="-o")
     if log is not None and log.suffix.lower() != ".log":
         raise click.BadParameter(f"{log}: frames are written as a candump .log", param_hint="--log")
+    poll = poll or _default_poll(conn)
     poll_class = _poll_class(conn, poll)
     files = NewFiles(force=force)
     try:
@@ -125,6 +134,19 @@ def record(
     _summary(tally, telemetry, output, log, interrupted)
     if interrupted and duration is not None:
         raise KeyboardInterrupt  # cut short: exit 130, the files kept as far as they got
+
+
+def _default_poll(conn: Connection) -> str:
+    """:data:`DEFAULT_POLL` where the family has it, else the method of its first status read (the
+    family's ``cli`` part names them, or they are derived from its declarations)."""
+    family = get_family(conn.family)
+    methods = family.methods()
+    if DEFAULT_POLL not in methods:
+        names = {cls: name for name, cls in methods.items()}
+        for read in cli_part(family).status_reads(family):
+            if read in names:
+                return names[read]
+    return DEFAULT_POLL
 
 
 def _poll_class(conn: Connection, name: str) -> type[Command]:
