@@ -292,6 +292,7 @@ class WriteAcceleration(MyActuatorCommand[Echo]):
 
 
 # ---- commands without arguments ----
+# One declaration a line: code and title, then what the command is (its reply type is in its base).
 
 
 class _NoArgs(MyActuatorCommand[R]):
@@ -302,29 +303,24 @@ class _NoArgs(MyActuatorCommand[R]):
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ReadEncoderPosition(_NoArgs[EncoderPositionReply]):
-    """0x60 read the multi-turn encoder position (raw - zero offset). Reply: ``EncoderPositionReply``."""
+    """0x60 read the multi-turn encoder position: the raw position (0x61) minus the zero offset
+    (0x62), in encoder counts."""
 
-    CODE: ClassVar[int] = 0x60
-    TITLE: ClassVar[str] = "read multi-turn encoder position"
-    READ = STREAMABLE = True
+    CODE, TITLE, READ, STREAMABLE = 0x60, "read multi-turn encoder position", True, True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ReadEncoderRaw(_NoArgs[EncoderRawReply]):
-    """0x61 read the raw multi-turn encoder position. Reply: ``EncoderRawReply``."""
+    """0x61 read the raw multi-turn encoder position."""
 
-    CODE: ClassVar[int] = 0x61
-    TITLE: ClassVar[str] = "read multi-turn encoder raw position"
-    READ = STREAMABLE = True
+    CODE, TITLE, READ, STREAMABLE = 0x61, "read multi-turn encoder raw position", True, True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ReadEncoderOffset(_NoArgs[EncoderOffsetReply]):
-    """0x62 read the multi-turn encoder zero offset. Reply: ``EncoderOffsetReply``."""
+    """0x62 read the multi-turn encoder zero offset."""
 
-    CODE: ClassVar[int] = 0x62
-    TITLE: ClassVar[str] = "read multi-turn encoder zero offset"
-    READ = STREAMABLE = True
+    CODE, TITLE, READ, STREAMABLE = 0x62, "read multi-turn encoder zero offset", True, True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -341,84 +337,66 @@ class WriteEncoderZero(MyActuatorCommand[Echo]):
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class WriteCurrentPositionAsZero(_NoArgs[ZeroOffsetReply]):
-    """0x64 write the current position to ROM as the zero (effective after 0x76). Reply:
-    ``ZeroOffsetReply``."""
+    """0x64 write the current position to ROM as the zero (effective after 0x76)."""
 
-    CODE: ClassVar[int] = 0x64
-    TITLE: ClassVar[str] = "write current position to ROM as zero"
-    SLOW = True
+    CODE, TITLE, SLOW = 0x64, "write current position to ROM as zero", True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ReadRunMode(_NoArgs[RunModeReply]):
-    """0x70 read the operating mode. Reply: ``RunModeReply``."""
+    """0x70 read the operating mode."""
 
-    CODE: ClassVar[int] = 0x70
-    TITLE: ClassVar[str] = "read operating mode"
-    READ = True
+    CODE, TITLE, READ = 0x70, "read operating mode", True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class SystemReset(_NoArgs[None]):
     """0x76 reset the system. **No reply**: the program restarts."""
 
-    CODE: ClassVar[int] = 0x76
-    TITLE: ClassVar[str] = "system reset"
+    CODE, TITLE, NOTED = 0x76, "system reset", True
     NO_REPLY = "system reset: the program restarts and sends no reply (§4.28)"
-    NOTED = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class BrakeRelease(_NoArgs[Echo]):
-    """0x77 open the holding brake. Reply: echo."""
+    """0x77 open the holding brake."""
 
-    CODE: ClassVar[int] = 0x77
-    TITLE: ClassVar[str] = "brake release"
-    SLOW = True
+    CODE, TITLE, SLOW = 0x77, "brake release", True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class BrakeLock(_NoArgs[Echo]):
-    """0x78 close the holding brake. Reply: echo."""
+    """0x78 close the holding brake."""
 
-    CODE: ClassVar[int] = 0x78
-    TITLE: ClassVar[str] = "brake lock"
-    SLOW = True
+    CODE, TITLE, SLOW = 0x78, "brake lock", True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class MotorShutdown(_NoArgs[Echo]):
-    """0x80 motor off: output off, running state cleared. Reply: echo."""
+    """0x80 motor off: output off, running state cleared."""
 
-    CODE: ClassVar[int] = 0x80
-    TITLE: ClassVar[str] = "motor shutdown"
+    CODE, TITLE = 0x80, "motor shutdown"
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class MotorStop(_NoArgs[Echo]):
-    """0x81 stop and hold; the closed loop stays active. Reply: echo."""
+    """0x81 stop and hold; the closed loop stays active."""
 
-    CODE: ClassVar[int] = 0x81
-    TITLE: ClassVar[str] = "motor stop"
+    CODE, TITLE = 0x81, "motor stop"
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ReadSingleTurnEncoder(_NoArgs[SingleTurnEncoderReply]):
-    """0x90 read the single-turn encoder (V4.3 only; removed in V4.4). Reply: ``SingleTurnEncoderReply``."""
+    """0x90 read the single-turn encoder (V4.3 only; removed in V4.4)."""
 
-    CODE: ClassVar[int] = 0x90
-    TITLE: ClassVar[str] = "read single-turn encoder"
-    READ = True
-    REVISIONS = ONLY_V4_3
+    CODE, TITLE, READ, REVISIONS = 0x90, "read single-turn encoder", True, ONLY_V4_3
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ReadMultiTurnAngle(_NoArgs[MultiTurnAngleReply]):
-    """0x92 read the multi-turn angle. Reply: ``MultiTurnAngleReply``."""
+    """0x92 read the multi-turn angle."""
 
-    CODE: ClassVar[int] = 0x92
-    TITLE: ClassVar[str] = "read multi-turn angle"
-    READ = STREAMABLE = True
+    CODE, TITLE, READ, STREAMABLE = 0x92, "read multi-turn angle", True, True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -426,55 +404,43 @@ class ReadSingleTurnAngle(_NoArgs[SingleTurnAngleReply | CircleAngleReply]):
     """0x94 read the single-turn angle. The reply layout differs by revision: ``SingleTurnAngleReply``
     (V4.4, int32 ±180°) or ``CircleAngleReply`` (V4.3, uint16 0..359.99°)."""
 
-    CODE: ClassVar[int] = 0x94
-    TITLE: ClassVar[str] = "read single-turn angle"
-    READ = True
+    CODE, TITLE, READ = 0x94, "read single-turn angle", True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ReadStatus1(_NoArgs[Status1Reply]):
-    """0x9A read temperature, brake, voltage and error flags. Reply: ``Status1Reply``."""
+    """0x9A read temperature, brake, voltage and error flags."""
 
-    CODE: ClassVar[int] = 0x9A
-    TITLE: ClassVar[str] = "read status 1 and error flags"
-    READ = STREAMABLE = True
+    CODE, TITLE, READ, STREAMABLE = 0x9A, "read status 1 and error flags", True, True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ReadStatus2(_NoArgs[StatusReply]):
-    """0x9C read temperature, torque current, speed, angle. Reply: ``StatusReply`` (R2)."""
+    """0x9C read temperature, torque current, speed and angle: the R2 layout, which the closed-loop
+    commands answer with too (its angle is whole degrees; 0x92 reads the multi-turn angle exactly)."""
 
-    CODE: ClassVar[int] = 0x9C
-    TITLE: ClassVar[str] = "read status 2"
-    READ = STREAMABLE = True
+    CODE, TITLE, READ, STREAMABLE = 0x9C, "read status 2", True, True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ReadStatus3(_NoArgs[Status3Reply]):
-    """0x9D read temperature and phase currents. Reply: ``Status3Reply``."""
+    """0x9D read temperature and phase currents."""
 
-    CODE: ClassVar[int] = 0x9D
-    TITLE: ClassVar[str] = "read status 3"
-    READ = STREAMABLE = True
+    CODE, TITLE, READ, STREAMABLE = 0x9D, "read status 3", True, True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ReadRunTime(_NoArgs[RunTimeReply]):
-    """0xB1 read the time since power-up or reset. Reply: ``RunTimeReply``."""
+    """0xB1 read the time since power-up or reset."""
 
-    CODE: ClassVar[int] = 0xB1
-    TITLE: ClassVar[str] = "read system run time"
-    READ = True
+    CODE, TITLE, READ = 0xB1, "read system run time", True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ReadVersionDate(_NoArgs[VersionDateReply]):
-    """0xB2 read the firmware version date. Reply: ``VersionDateReply`` (see
-    ``revision_from_version_date``)."""
+    """0xB2 read the firmware version date (see ``revision_from_version_date``)."""
 
-    CODE: ClassVar[int] = 0xB2
-    TITLE: ClassVar[str] = "read software version date"
-    READ = True
+    CODE, TITLE, READ = 0xB2, "read software version date", True
 
 
 # ---- 0x79 CAN-ID / RS485-ID setting (V4.3, §4.38) ----

@@ -186,23 +186,27 @@ class AccelerationReply(MyActuatorReply):
 # ---- 0x60..0x64 encoder ----
 
 
+def _int32_counts(name: str) -> tuple[tuple[int, IntField], ...]:
+    """The one field of the encoder replies: int32 counts in DATA[4..7]."""
+    return ((4, IntField(name, 4, signed=True)),)
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class EncoderPositionReply(MyActuatorReply):
     """0x60 reply: multi-turn encoder position = raw - zero offset, int32 counts (§4.6)."""
 
-    CODE: ClassVar[int] = 0x60
-    TITLE: ClassVar[str] = "read multi-turn encoder position"
-    FIELDS = ((4, IntField("encoder_counts", 4, signed=True)),)
+    CODE, TITLE = 0x60, "read multi-turn encoder position"
+    FIELDS = _int32_counts("encoder_counts")
     encoder_counts: int
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class EncoderRawReply(MyActuatorReply):
-    """0x61 reply: raw multi-turn encoder position, int32 counts (§4.7)."""
+    """0x61 reply: raw multi-turn encoder position, int32 counts, the zero offset not taken off
+    (§4.7)."""
 
-    CODE: ClassVar[int] = 0x61
-    TITLE: ClassVar[str] = "read multi-turn encoder raw position"
-    FIELDS = ((4, IntField("raw_counts", 4, signed=True)),)
+    CODE, TITLE = 0x61, "read multi-turn encoder raw position"
+    FIELDS = _int32_counts("raw_counts")
     raw_counts: int
 
 
@@ -210,19 +214,18 @@ class EncoderRawReply(MyActuatorReply):
 class EncoderOffsetReply(MyActuatorReply):
     """0x62 reply: multi-turn encoder zero offset, int32 counts (§4.8)."""
 
-    CODE: ClassVar[int] = 0x62
-    TITLE: ClassVar[str] = "read multi-turn encoder zero offset"
-    FIELDS = ((4, IntField("offset_counts", 4, signed=True)),)
+    CODE, TITLE = 0x62, "read multi-turn encoder zero offset"
+    FIELDS = _int32_counts("offset_counts")
     offset_counts: int
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ZeroOffsetReply(MyActuatorReply):
-    """0x64 reply: the zero offset written to ROM, int32 counts (effective after 0x76; §4.10)."""
+    """0x64 reply: the zero offset written to ROM, int32 counts (§4.10). It takes effect after 0x76:
+    until then 0x62 reads the offset in use."""
 
-    CODE: ClassVar[int] = 0x64
-    TITLE: ClassVar[str] = "write current position to ROM as zero"
-    FIELDS = ((4, IntField("offset_counts", 4, signed=True)),)
+    CODE, TITLE = 0x64, "write current position to ROM as zero"
+    FIELDS = _int32_counts("offset_counts")
     offset_counts: int
 
 
