@@ -2,13 +2,13 @@
 
 Identifiers (11-bit, classic CAN, none used by a built-in family):
 
-=============  ==========  ======================================================
-identifier     direction   carries
-=============  ==========  ======================================================
-0x600 + ID     host->motor  a request to motor ID (1..31)
-0x600          host->all    the same request to every motor (each answers as to its own)
-0x680 + ID     motor->host  motor ID's reply; DATA[0] tells which reply it is
-=============  ==========  ======================================================
+==========  ===========  ==============================================================
+identifier  direction    carries
+==========  ===========  ==============================================================
+0x600 + ID  host->motor  a request to motor ID (1..31)
+0x600       host->all    the same request to every motor (each answers as to its own)
+0x680 + ID  motor->host  motor ID's reply; DATA[0] tells which reply it is
+==========  ===========  ==============================================================
 
 A reply is matched to its request by its identifier and DATA[0] (the reply class's ``CODE``); the echo
 of a written value (``ECHO``) is matched by its bytes too, so a late echo of another value never
@@ -47,7 +47,8 @@ LINKS = ("can",)
 MOTOR_IDS = range(1, 32)
 BROADCAST_ID = 0x600
 _REPLY_BASE = 0x680
-#: How long a reply may take: the drive answers within a millisecond; a flash write within 100 ms.
+#: How long a reply may take: the drive answers within a millisecond, a flash write (``SLOW``) within
+#: 100 ms; both with room for a loaded bus.
 TIMEOUT_S = 0.02
 SLOW_TIMEOUT_S = 0.2
 

@@ -6,15 +6,9 @@ reply it gets (the type argument of its base) and what kind of command it is (``
 ``ECHO``, ``NO_REPLY``); the codec, the bound codec and the simulated device read those declarations
 and keep no list of their own.
 
-======  ==========================  ====================================================
-byte    command                     reply
-======  ==========================  ====================================================
-0x10    :class:`ReadState`          :class:`StateReply` (0x81)
-0x20    :class:`SetSpeed`           :class:`StateReply` (0x81)
-0x21    :class:`Stop`               :class:`StateReply` (0x81)
-0x30    :class:`WriteSpeedLimit`    :class:`SpeedLimitEcho` (0x30, its request's bytes)
-0x7F    :class:`Restart`            none: the device restarts
-======  ==========================  ====================================================
+Five commands: a read (:class:`ReadState`), a set-point with a unit and a range (:class:`SetSpeed`),
+the stop the Bus sends on leaving (:class:`Stop`), a flash write answered by an echo
+(:class:`WriteSpeedLimit`) and a command without a reply (:class:`Restart`).
 """
 
 from __future__ import annotations
@@ -28,6 +22,7 @@ from servobus.protocols._fields import ScaledField
 from servobus.protocols._layout import FlagsField, Layout
 
 __all__ = [
+    "MAX_SPEED_DPS",
     "ReadState",
     "Restart",
     "Revision",
