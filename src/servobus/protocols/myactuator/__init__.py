@@ -26,212 +26,36 @@ from typing import TYPE_CHECKING
 
 from servobus.protocols._family import Family, SerialLine, command_classes
 from servobus.protocols.myactuator import bound as _bound
-from servobus.protocols.myactuator.codec import (
-    decode_reply,
-    decode_request,
-)
-from servobus.protocols.myactuator.commands import (
-    ActiveReply,
-    BrakeLock,
-    BrakeRelease,
-    FunctionControl,
-    MotorShutdown,
-    MotorStop,
-    MyActuatorCommand,
-    ReadAcceleration,
-    ReadCanId,
-    ReadEncoderOffset,
-    ReadEncoderPosition,
-    ReadEncoderRaw,
-    ReadModel,
-    ReadModelPart,
-    ReadMultiTurnAngle,
-    ReadPid,
-    ReadRunMode,
-    ReadRunTime,
-    ReadSingleTurnAngle,
-    ReadSingleTurnEncoder,
-    ReadStatus1,
-    ReadStatus2,
-    ReadStatus3,
-    ReadVersionDate,
-    SetBaudRate,
-    SetCanId,
-    SetCommTimeout,
-    SystemReset,
-    WriteAcceleration,
-    WriteCurrentPositionAsZero,
-    WriteEncoderZero,
-    WritePidRam,
-    WritePidRom,
-)
-from servobus.protocols.myactuator.commands_control import (
-    AbsolutePositionControl,
-    ForcePositionControl,
-    IncrementalPositionControl,
-    PositionSpeedFeedforward,
-    PositionTorqueFeedforward,
-    SingleTurnPositionControl,
-    SpeedControl,
-    TorqueControl,
-)
-from servobus.protocols.myactuator.enums import (
-    BAUD_RATE_INDEXES,
-    ERROR_FLAG_INFO,
-    FAULTS,
-    FUNCTION_VALUES,
-    AccelIndex,
-    BaudRateSetting,
-    ErrorFlagInfo,
-    ErrorFlags,
-    Fault,
-    FunctionIndex,
-    IndicatorLevel,
-    PidIndex,
-    Rs485MotionMode,
-    RunMode,
-    SpinDirection,
-    StatusCommand,
-    StreamableCommand,
-)
+from servobus.protocols.myactuator import commands, commands_control, enums, motion, replies, revision
+from servobus.protocols.myactuator.codec import decode_reply, decode_request
+
+# Each module's __all__ is the package's: a class is exported where it is written, not listed again.
+from servobus.protocols.myactuator.commands import *  # noqa: F403
+from servobus.protocols.myactuator.commands_control import *  # noqa: F403
+from servobus.protocols.myactuator.enums import *  # noqa: F403
 from servobus.protocols.myactuator.ids import MOTOR_IDS as _MOTOR_IDS
-from servobus.protocols.myactuator.ids import (
-    IdKind,
-)
-from servobus.protocols.myactuator.motion import MOTION_SCALES, MotionCommand, MotionReply, MotionScales
-from servobus.protocols.myactuator.replies import (
-    AccelerationReply,
-    CanIdLayout,
-    CanIdReply,
-    CircleAngleReply,
-    Echo,
-    EncoderOffsetReply,
-    EncoderPositionReply,
-    EncoderRawReply,
-    ModelPartReply,
-    ModelReply,
-    MultiTurnAngleReply,
-    MyActuatorReply,
-    PidReply,
-    RunModeReply,
-    RunTimeReply,
-    SingleTurnAngleReply,
-    SingleTurnEncoderReply,
-    SingleTurnStatusReply,
-    Status1Reply,
-    Status3Reply,
-    StatusReply,
-    VersionDateReply,
-    ZeroOffsetReply,
-    guess_single_turn_revision,
-    join_model,
-)
-from servobus.protocols.myactuator.revision import V4_4_MANUAL_DATE, Revision, revision_from_version_date
-from servobus.protocols.myactuator.rs485_motion import (
-    Crc32Rule,
-    Rs485MotionCommand,
-    Rs485MotionReply,
-)
+from servobus.protocols.myactuator.ids import IdKind
+from servobus.protocols.myactuator.motion import *  # noqa: F403
+from servobus.protocols.myactuator.replies import *  # noqa: F403
+from servobus.protocols.myactuator.revision import *  # noqa: F403
+from servobus.protocols.myactuator.revision import Revision
+from servobus.protocols.myactuator.rs485_motion import Crc32Rule, Rs485MotionCommand, Rs485MotionReply
 
 __all__ = [
-    "BAUD_RATE_INDEXES",
-    "ERROR_FLAG_INFO",
     "FAMILY",
-    "FAULTS",
-    "FUNCTION_VALUES",
-    "MOTION_SCALES",
-    "V4_4_MANUAL_DATE",
-    "AbsolutePositionControl",
-    "AccelIndex",
-    "AccelerationReply",
-    "ActiveReply",
-    "BaudRateSetting",
-    "BrakeLock",
-    "BrakeRelease",
-    "CanIdLayout",
-    "CanIdReply",
-    "CircleAngleReply",
     "Crc32Rule",
-    "Echo",
-    "EncoderOffsetReply",
-    "EncoderPositionReply",
-    "EncoderRawReply",
-    "ErrorFlagInfo",
-    "ErrorFlags",
-    "Fault",
-    "ForcePositionControl",
-    "FunctionControl",
-    "FunctionIndex",
     "IdKind",
-    "IncrementalPositionControl",
-    "IndicatorLevel",
-    "ModelPartReply",
-    "ModelReply",
-    "MotionCommand",
-    "MotionReply",
-    "MotionScales",
-    "MotorShutdown",
-    "MotorStop",
-    "MultiTurnAngleReply",
-    "MyActuatorCommand",
-    "MyActuatorReply",
-    "PidIndex",
-    "PidReply",
-    "PositionSpeedFeedforward",
-    "PositionTorqueFeedforward",
-    "ReadAcceleration",
-    "ReadCanId",
-    "ReadEncoderOffset",
-    "ReadEncoderPosition",
-    "ReadEncoderRaw",
-    "ReadModel",
-    "ReadModelPart",
-    "ReadMultiTurnAngle",
-    "ReadPid",
-    "ReadRunMode",
-    "ReadRunTime",
-    "ReadSingleTurnAngle",
-    "ReadSingleTurnEncoder",
-    "ReadStatus1",
-    "ReadStatus2",
-    "ReadStatus3",
-    "ReadVersionDate",
-    "Revision",
     "Rs485MotionCommand",
-    "Rs485MotionMode",
     "Rs485MotionReply",
-    "RunMode",
-    "RunModeReply",
-    "RunTimeReply",
-    "SetBaudRate",
-    "SetCanId",
-    "SetCommTimeout",
-    "SingleTurnAngleReply",
-    "SingleTurnEncoderReply",
-    "SingleTurnPositionControl",
-    "SingleTurnStatusReply",
-    "SpeedControl",
-    "SpinDirection",
-    "Status1Reply",
-    "Status3Reply",
-    "StatusCommand",
-    "StatusReply",
-    "StreamableCommand",
-    "SystemReset",
-    "TorqueControl",
-    "VersionDateReply",
-    "WriteAcceleration",
-    "WriteCurrentPositionAsZero",
-    "WriteEncoderZero",
-    "WritePidRam",
-    "WritePidRom",
-    "ZeroOffsetReply",
     "decode_reply",
     "decode_request",
-    "guess_single_turn_revision",
-    "join_model",
-    "revision_from_version_date",
 ]
+__all__ += commands.__all__
+__all__ += commands_control.__all__
+__all__ += enums.__all__
+__all__ += motion.__all__
+__all__ += replies.__all__
+__all__ += revision.__all__
 
 if TYPE_CHECKING:
     from servobus.protocols.myactuator._motor import Motor
