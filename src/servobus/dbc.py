@@ -74,7 +74,7 @@ from dataclasses import dataclass
 from typing import Any, Literal, TypeAlias
 
 from servobus.core import FieldScale, Packer
-from servobus.protocols import Family, available_families, get_family
+from servobus.protocols import Command, Family, available_families, get_family
 from servobus.protocols._bound import EXTENDED
 from servobus.protocols._fields import IntField, ScaledField
 from servobus.protocols._layout import (
@@ -100,6 +100,7 @@ __all__ = [
     "Described",
     "EnumByte",
     "FlagsByte",
+    "Keyed",
     "Layout",
     "MessageSpec",
     "Mux",
@@ -115,11 +116,14 @@ __all__ = [
     "derived",
     "enum_choices",
     "fields_layout",
+    "keyed_layouts",
     "le_signal",
     "muxed",
     "option_owners",
     "packed_signals",
     "plan",
+    "reply_keys",
+    "request_keys",
     "signal_spec",
     "signal_table",
 ]
@@ -559,6 +563,91 @@ def muxed(layouts: tuple[Layout, ...]) -> Layout:
     return Layout(None, "", mux=Mux(SignalSpec(MUX, 0, 8), named))
 
 
+@dataclass(frozen=True, slots=True)
+class Keyed:
+    """One class a DATA[0] value selects, as the family's codec reads it.
+
+    Attributes:
+        code: the DATA[0] value.
+        cls: the class whose ``FIELDS`` lay the frame out (for an echo: the command echoed).
+        name: the multiplexer value's name (``Echo_SetCanId`` for an echo).
+        echo: the frame is the command's own bytes echoed back: its fields are ``command.<field>``,
+            and the value implies ``command`` (the class's name).
+    """
+
+    code: int
+    cls: type
+    name: str
+    echo: bool = False
+
+
+def _in(cls: type, revision: enum.Enum) -> bool:
+    """Whether ``cls`` exists in ``revision``: its declared ``REVISIONS``, or every revision."""
+    return revision in getattr(cls, "REVISIONS", (revision,))
+
+
+def request_keys(commands: Iterable[type[Command]], revision: enum.Enum) -> list[Keyed]:
+    """The commands of ``revision`` that have a ``CODE``, each under it."""
+    return [Keyed(c.CODE, c, c.__name__) for c in commands if c.CODE is not None and _in(c, revision)]
+
+
+def reply_keys(
+    commands: Iterable[type[Command]], revision: enum.Enum, *, echo: type | None = None
+) -> list[Keyed]:
+    """The replies of ``revision``'s commands (``reply_types()``), each under its DATA[0], once: its own
+    ``CODE``; a reply without one is a layout several commands share, under each command's byte; the
+    class ``echo`` (a family's "the request's bytes echoed") is the command itself, echoed."""
+    out: list[Keyed] = []
+    for command in commands:
+        code = command.CODE
+        if code is None or not _in(command, revision):
+            continue
+        for reply in command.reply_types():
+            if echo is not None and reply is echo:
+                key = Keyed(code, command, f"Echo_{command.__name__}", echo=True)
+            elif not _in(reply, revision):
+                continue
+            else:
+                key = Keyed(code if reply.CODE is None else reply.CODE, reply, reply.__name__)
+            if key not in out:
+                out.append(key)
+    return out
+
+
+def keyed_layouts(keys: Iterable[Keyed], what: str, left_out: list[str]) -> tuple[Layout, ...]:
+    """The layouts of ``keys`` by DATA[0] (:func:`fields_layout`); a DATA[0] several classes share is
+    left out (told apart by another byte), as is a class :func:`fields_layout` cannot describe."""
+    by_code: dict[int, list[Keyed]] = {}
+    for key in keys:
+        by_code.setdefault(key.code, []).append(key)
+    out: list[Layout] = []
+    for code, here in sorted(by_code.items()):
+        if len(here) > 1:
+            names = ", ".join(k.name for k in here)
+            left_out.append(
+                f"{what} 0x{code:02X} ({names}): {len(here)} layouts under one DATA[0], told apart by "
+                "another byte"
+            )
+            continue
+        key = here[0]
+        if key.echo:
+            layout = fields_layout(
+                key.cls,
+                code,
+                what,
+                left_out,
+                name=key.name,
+                prefix="command.",
+                implies=(("command", key.cls.__name__),),
+                message="Echo",
+            )
+        else:
+            layout = fields_layout(key.cls, code, what, left_out, name=key.name)
+        if layout is not None:
+            out.append(layout)
+    return tuple(out)
+
+
 # ---- what a family tells the exporter -----------------------------------------------------------
 
 
@@ -663,11 +752,11 @@ def derived(query: DbcQuery) -> Described:
     family = query.family
     rev = query.revision if query.revision is not None else family.default_revision
     left_out: list[str] = []
-    commands = [c for c in family.commands if rev in getattr(c, "REVISIONS", (rev,))]
-    replies = list(dict.fromkeys(r for c in commands for r in c.reply_types()))
+    commands = [c for c in family.commands if _in(c, rev)]
+    replies = list(dict.fromkeys(r for c in commands for r in c.reply_types() if _in(r, rev)))
     roots = {
-        "request": _derived_root(commands, "request", left_out),
-        "reply": _derived_root(replies, "reply", left_out),
+        "request": _derived_root(commands, request_keys(commands, rev), "request", left_out),
+        "reply": _derived_root(replies, reply_keys(commands, rev), "reply", left_out),
     }
     sizes = {
         "request": max((getattr(c, "SIZE", 8) for c in commands), default=8),
@@ -725,35 +814,20 @@ def derived(query: DbcQuery) -> Described:
     return Described(revision=rev, messages=tuple(messages), left_out=tuple(left_out))
 
 
-def _derived_root(classes: Sequence[type], what: str, left_out: list[str]) -> Layout | None:
-    """One direction's layout tree from its classes: multiplexed on DATA[0] by ``CODE``; a lone class
-    without a ``CODE``, as it is; None (and why, in ``left_out``) when nothing is describable."""
-    if not classes:
-        return None
-    if len(classes) == 1 and classes[0].CODE is None:  # type: ignore[attr-defined]
-        cls = classes[0]
-        layout = fields_layout(cls, None, what, left_out)
+def _derived_root(
+    classes: Sequence[type], keys: list[Keyed], what: str, left_out: list[str]
+) -> Layout | None:
+    """One direction's layout tree: ``keys`` multiplexed on DATA[0]; a lone class without a ``CODE``,
+    as it is; None (and why, in ``left_out``) when nothing is describable."""
+    if len(classes) == 1 and getattr(classes[0], "CODE", None) is None:
+        layout = fields_layout(classes[0], None, what, left_out)
         return None if layout is None else dataclasses.replace(layout, name="")
-    by_code: dict[int, list[type]] = {}
+    keyed = {key.cls for key in keys}
     for cls in classes:
-        code = getattr(cls, "CODE", None)
-        if code is None:
+        if cls not in keyed and getattr(cls, "CODE", None) is None:
             left_out.append(f"{what} {cls.__name__}: no CODE (DATA[0]) to be told apart by")
-            continue
-        by_code.setdefault(code, []).append(cls)
-    layouts = []
-    for code, here in sorted(by_code.items()):
-        if len(here) > 1:
-            names = ", ".join(c.__name__ for c in here)
-            left_out.append(
-                f"{what} 0x{code:02X} ({names}): {len(here)} layouts under one DATA[0], told apart by "
-                "another byte"
-            )
-            continue
-        layout = fields_layout(here[0], code, what, left_out)
-        if layout is not None:
-            layouts.append(layout)
-    return muxed(tuple(layouts)) if layouts else None
+    layouts = keyed_layouts(keys, what, left_out)
+    return muxed(layouts) if layouts else None
 
 
 # ---- plans and databases ------------------------------------------------------------------------

@@ -1,9 +1,10 @@
 """The MyActuator DBC part (``FAMILY.part("dbc")``): what its classes' declarations do not say.
 
 * **Standard frames** (0x140 + ID requests, 0x240 + ID replies, the 0x280 broadcast): multiplexed on
-  DATA[0]; each layout is its class's ``FIELDS`` (:func:`servobus.dbc.fields_layout`), the classes
-  being the decoder tables ``REQUESTS``/``REPLIES`` per DATA[0] and revision. A reply that echoes its
-  command (``Echo``) is the command's fields, named ``command.<field>``.
+  DATA[0]; each layout is its class's ``FIELDS`` (:func:`servobus.dbc.keyed_layouts`): the family's
+  commands of the revision by ``CODE``, their declared replies (``reply_types()``) by theirs, the R2
+  status layout under each command's byte. A command answered by ``Echo`` (its request's bytes) is
+  its own fields, named ``command.<field>``.
 * **Motion mode** (0x400/0x500 + ID): the C core's ``MIT_COMMAND``/``MIT_REPLY`` packers with the
   revision's :class:`~servobus.protocols.myactuator.MotionScales` (option ``max_torque_nm`` for V4.4's
   model-specific torque range), bit positions from :func:`servobus.dbc.packed_signals`.
@@ -12,8 +13,7 @@
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterable, Mapping
-from typing import Any, cast
+from typing import cast
 
 from servobus.dbc import (
     DbcFamily,
@@ -22,12 +22,13 @@ from servobus.dbc import (
     Described,
     Layout,
     MessageSpec,
-    fields_layout,
+    keyed_layouts,
     muxed,
     packed_signals,
+    reply_keys,
+    request_keys,
 )
-from servobus.protocols.myactuator import FAMILY, MotionCommand, MotionReply, MotionScales
-from servobus.protocols.myactuator.codec import REPLIES, REQUESTS
+from servobus.protocols.myactuator import FAMILY, Echo, MotionCommand, MotionReply, MotionScales
 from servobus.protocols.myactuator.ids import (
     BROADCAST_ID,
     motion_reply_id,
@@ -45,8 +46,8 @@ def _describe(query: DbcQuery) -> Described:
     rev = cast(Revision, query.revision if query.revision is not None else FAMILY.default_revision)
     scales = MotionScales.for_revision(rev, max_torque_nm=query.options.get("max_torque_nm"))
     left_out: list[str] = []
-    requests = _table(REQUESTS, rev, "request", left_out)
-    replies = _table(REPLIES, rev, "reply", left_out)
+    requests = keyed_layouts(request_keys(FAMILY.commands, rev), "request", left_out)
+    replies = keyed_layouts(reply_keys(FAMILY.commands, rev, echo=Echo), "reply", left_out)
     command = Layout(None, "", packed_signals(command_packer(scales), MotionCommand), message="MotionCommand")
     reply = Layout(None, "", packed_signals(reply_packer(scales), MotionReply), message="MotionReply")
     ranges = (
@@ -93,48 +94,6 @@ def _describe(query: DbcQuery) -> Described:
         )
     )
     return Described(revision=rev, messages=tuple(messages), left_out=tuple(left_out))
-
-
-def _table(
-    table: Mapping[int, Iterable[Any]], revision: Revision, what: str, left_out: list[str]
-) -> tuple[Layout, ...]:
-    """The layouts of a decoder table (DATA[0] -> candidates) in ``revision``; a DATA[0] with several
-    candidates there is left out (told apart by another byte)."""
-    out: list[Layout] = []
-    for code, candidates in sorted(table.items()):
-        here = [c for c in candidates if revision in c.revisions]
-        if not here:
-            continue
-        names = [_name(c, what) for c in here]
-        if len(here) > 1:
-            left_out.append(
-                f"{what} 0x{code:02X} ({', '.join(names)}): {len(here)} layouts under one DATA[0], told "
-                "apart by another byte"
-            )
-            continue
-        cls, name = here[0].message, names[0]
-        if name.startswith("Echo_"):  # the command's own fields, echoed
-            layout = fields_layout(
-                cls,
-                code,
-                what,
-                left_out,
-                name=name,
-                prefix="command.",
-                implies=(("command", cls.__name__),),
-                message="Echo",
-            )
-        else:
-            layout = fields_layout(cls, code, what, left_out)
-        if layout is not None:
-            out.append(layout)
-    return tuple(out)
-
-
-def _name(candidate: Any, what: str) -> str:
-    cls = candidate.message
-    is_echo = what == "reply" and getattr(candidate.decode, "__func__", None) is None
-    return f"Echo_{cls.__name__}" if is_echo else str(cls.__name__)
 
 
 DBC = DbcFamily(
