@@ -11,15 +11,11 @@ from collections.abc import Iterator
 
 import click
 
+from servobus.cli._connect import FamilyChoice
 from servobus.cli.plugin import CliFamily, Op, Setting
-from servobus.protocols import FAMILIES, Family, available_families, get_family
+from servobus.protocols import Family, get_family
 
-__all__ = ["cli_part", "current_limit_users", "family_names", "op", "setting", "settings", "status_reads"]
-
-
-def family_names() -> list[str]:
-    """The families ``--family`` takes: the built-in ones first, then those registered by plug-ins."""
-    return [*FAMILIES, *(name for name in available_families() if name not in FAMILIES)]
+__all__ = ["cli_part", "current_limit_users", "op", "setting", "settings", "status_reads"]
 
 
 def cli_part(family: str | Family) -> CliFamily:
@@ -111,7 +107,7 @@ def current_limit_users() -> str:
 
 
 def _limit_users() -> Iterator[str]:
-    for name in family_names():
+    for name in FamilyChoice().choices:  # the built-ins first, then the plug-ins'
         try:
             ops = cli_part(name).ops
         except Exception:  # a plug-in that does not load is not this command's error

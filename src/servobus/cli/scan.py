@@ -25,10 +25,12 @@ from servobus.cli._motors import codecs, run
 from servobus.cli._output import SETTINGS, console, emit_json, examples, json_option, jsonable, table
 from servobus.cli.plugin import Query
 from servobus.errors import ServobusError
+from servobus.protocols import get_family
 
 __all__ = ["scan"]
 
 COLUMNS = ("id", "family", "revision", "model", "firmware", "state", "errors")
+#: the ids probed without --ids (those of them the family allows)
 DEFAULT_IDS = tuple(range(1, 33))
 
 
@@ -43,10 +45,11 @@ DEFAULT_IDS = tuple(range(1, 33))
 @connection_options
 @json_option
 def scan(conn: Connection, as_json: bool) -> None:
-    """Probe ids 1-32 (or --ids) for motors of the family; list id, revision, model, firmware date,
-    state and error flags of those that answer. (With --sim N the simulated motors are 1..N.)"""
+    """Probe ids 1-32 (those of them the family allows; or --ids) for motors of the family; list id,
+    revision, model, firmware date, state and error flags of those that answer. (With --sim N the
+    simulated motors are 1..N.)"""
     reads = status_reads(conn.family)  # refused here for a family without a read-only request
-    ids = conn.ids or DEFAULT_IDS
+    ids = conn.ids or tuple(i for i in DEFAULT_IDS if i in get_family(conn.family).motor_ids)
     rows = run(_scan(conn, ids, reads.first(codecs(conn)[0], {})[0], as_json))
     if as_json:
         emit_json(rows)
