@@ -3,6 +3,8 @@ exit 2, and no bus opened (not python-can's traceback, nor its ``Unknown interfa
 
 from __future__ import annotations
 
+import dataclasses
+from importlib.metadata import EntryPoint
 from pathlib import Path
 from typing import Any
 
@@ -11,6 +13,8 @@ import pytest
 
 import servobus.cli._connect as connect
 from _cli_run import one_line_error
+from servobus import _plugins
+from servobus.protocols import ENTRY_POINT_GROUP, get_family
 
 
 @pytest.fixture(autouse=True)
@@ -25,7 +29,13 @@ def no_python_can_configuration(tmp_path: Path, monkeypatch: pytest.MonkeyPatch)
         raise AssertionError("a bus was opened for a connection mistake")
 
     monkeypatch.setattr(connect.Connection, "transport", opened)
+    found = [EntryPoint("bare", f"{__name__}:BARE", ENTRY_POINT_GROUP)]  # a plug-in family, by entry point
+    monkeypatch.setattr(_plugins, "entry_points", lambda group: found if group == ENTRY_POINT_GROUP else [])
     return canrc
+
+
+#: a family a plug-in registers, without a simulator part (its codec is LK's under another name)
+BARE = dataclasses.replace(get_family("lk"), name="bare", parts={})
 
 
 COMMANDS = [["status"], ["scan"], ["monitor"], ["stop"], ["record", "--log", "x.log"]]
@@ -39,7 +49,9 @@ COMMANDS = [["status"], ["scan"], ["monitor"], ["stop"], ["record", "--log", "x.
     (["-i", "servobus-slcan"], "-i servobus-slcan needs the adapter's serial port: -c"),
     (["-i", "virtual", "-c", "x", "--data-bitrate", "2000000"], "--data-bitrate"),
     (["--port", "/dev/ttyUSB0", "--bitrate", "1000000"], "a serial --port takes --baud"),
-    (["--sim", "1", "--fd"], "--fd: the simulated myactuator motors speak classic CAN"),
+    (["--sim", "1", "--fd"], "myactuator motors speak classic CAN only (CAN FD: --family hollow)"),
+    (["--sim", "1", "--family", "lk", "--fd"], "--fd: the simulated lk motors speak classic CAN only"),
+    (["--sim", "1", "--family", "bare"], "--sim: the bare family has no sim part"),
     (["--sim", "1", "-i", "slcan"], "name different buses"),
 ])  # fmt: skip
 @pytest.mark.parametrize("command", COMMANDS, ids=lambda c: c[0])
@@ -80,3 +92,16 @@ def _main(args: list[str]) -> int:
     from servobus.cli import main
 
     return main(args)
+
+
+def test_the_family_choices_are_the_registry_s_read_when_asked() -> None:
+    """The built-ins in registry order, then the plug-ins' (here ``bare``, by entry point)."""
+    assert connect.FamilyChoice().choices == ("myactuator", "lk", "hollow", "bare")
+
+
+def test_the_in_process_simulator_builds_the_family_s_devices() -> None:
+    motors = connect.sim_devices("lk", (3, 4), "v2.35")
+    assert [(m.motor_id, m.model.revision.name) for m in motors] == [(3, "V2_35"), (4, "V2_35")]
+    assert [m.fd_enabled for m in connect.sim_devices("hollow", (1,), fd=True)] == [True]
+    with pytest.raises(ValueError, match="--sim: the bare family has no sim part"):
+        connect.sim_devices("bare", (1,))

@@ -4,14 +4,19 @@ errors (and why, when the rate was not kept); the bus layout follows classic CAN
 
 from __future__ import annotations
 
+import dataclasses
 import signal
 import subprocess
 import time
+from importlib.metadata import EntryPoint
 
 import pytest
 
 from cli._bus_cli import SERVOBUS, one_line, run, run_json
+from servobus import _plugins
 from servobus.cli._demo_report import Summary, layout, summary_lines
+from servobus.cli.plugin import CliFamily
+from servobus.protocols import ENTRY_POINT_GROUP, get_family
 from servobus.protocols.myactuator.sim.device import DEFAULT_TURNAROUND_S
 
 
@@ -122,3 +127,40 @@ def test_ctrl_c_or_sigterm_stops_the_motors_prints_the_summary_and_exits_128_plu
     assert demo.returncode == code, (out, err)
     assert f"stopped     {by}: stop sent to myactuator motors 1-3 on bus 1" in out and "errors      0 " in out
     assert err.strip().splitlines() == [f"servobus: {said}; stop sent to myactuator motors 1-3 on bus 1"]
+
+
+@pytest.mark.parametrize("family", ["lk", "hollow"])
+def test_another_familys_motors_follow_its_own_move(capsys: pytest.CaptureFixture[str], family: str) -> None:
+    """The family's simulator part builds the motors and its cli part's move makes the set-point."""
+    summary = run_json(
+        capsys, ["demo", "--family", family, "--duration", "0.3", "--motors", "2", "--hz", "100", "--json"]
+    )
+    assert summary["motors"] == 2 and summary["errors"] == 0 and summary["timeouts"] == 0
+    assert summary["ticks"] > 0 and summary["pairs"] == 2 * summary["ticks"]
+
+
+#: plug-in families (LK's codec under other names): one without a simulator, one without a move
+NO_MOVE = CliFamily(why_not={"move": "it has no position loop"})
+BARE = dataclasses.replace(get_family("lk"), name="bare", parts={})
+STILL = dataclasses.replace(
+    get_family("lk"),
+    name="still",
+    parts={"sim": "servobus.protocols.lk.sim:SIM", "cli": f"{__name__}:NO_MOVE"},
+)
+
+
+@pytest.mark.parametrize(
+    ("family", "says"),
+    [
+        ("bare", "the bare family has no sim part"),
+        ("still", "still motors have no move: it has no position loop"),
+        ("nope", "'nope' is not one of"),
+    ],
+)
+def test_a_family_the_demo_cannot_drive_is_one_line_and_exit_2(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, family: str, says: str
+) -> None:
+    found = [EntryPoint(name, f"{__name__}:{name.upper()}", ENTRY_POINT_GROUP) for name in ("bare", "still")]
+    monkeypatch.setattr(_plugins, "entry_points", lambda group: found if group == ENTRY_POINT_GROUP else [])
+    err = one_line(capsys, ["demo", "--family", family, "--duration", "0.1"])
+    assert "--family" in err and says in err, err

@@ -4,12 +4,21 @@ the first line is the pty to open and motors answer there; bad arguments are one
 
 from __future__ import annotations
 
+import asyncio
+import dataclasses
 import subprocess
+from importlib.metadata import EntryPoint
 from pathlib import Path
 
 import pytest
 
 from cli._bus_cli import SERVOBUS, one_line, pty_simulators, run, run_json
+from servobus import _plugins
+from servobus.bus import Bus
+from servobus.protocols import ENTRY_POINT_GROUP, get_family
+from servobus.protocols import hollow as ho
+from servobus.sim import __main__ as server
+from servobus.transports.slcan import SlcanTransport
 
 
 def test_served_motors_answer_the_cli_through_the_pty(capsys: pytest.CaptureFixture[str]) -> None:
@@ -59,3 +68,39 @@ def test_help_has_examples_and_the_simulator_options(capsys: pytest.CaptureFixtu
 def test_the_console_script_exits_with_the_servers_status() -> None:
     done = subprocess.run([*SERVOBUS, "sim", "--family", "nope"], capture_output=True, text=True, timeout=30)
     assert done.returncode == 2 and len(done.stderr.splitlines()) == 1
+
+
+def test_can_fd_motors_answer_can_fd_frames_through_the_slcan_pty() -> None:
+    """``--fd`` reaches the family's simulator part: its motors answer 16-byte CAN FD requests."""
+
+    async def poll(path: str) -> list[object]:
+        async with Bus(SlcanTransport(path, fd=True, data_bitrate=5_000_000)) as bus:
+            motors = [bus.motor("hollow", i, link="canfd") for i in (1, 2)]
+            return list(await asyncio.gather(*(m.request(ho.FdCommand()) for m in motors)))
+
+    with pty_simulators() as start:
+        path = start("--family", "hollow", "--motors", "2", "--fd")
+        replies = asyncio.run(poll(path))
+    assert [type(r) for r in replies] == [ho.FdReply, ho.FdReply]
+
+
+#: a family a plug-in registers, without a simulator part (its codec is LK's under another name)
+BARE = dataclasses.replace(get_family("lk"), name="bare", parts={})
+
+
+@pytest.fixture
+def bare(monkeypatch: pytest.MonkeyPatch) -> None:
+    """:data:`BARE` registered under ``servobus.families`` by entry point, as a plug-in would be."""
+    found = [EntryPoint("bare", f"{__name__}:BARE", ENTRY_POINT_GROUP)]
+    monkeypatch.setattr(_plugins, "entry_points", lambda group: found if group == ENTRY_POINT_GROUP else [])
+
+
+@pytest.mark.usefixtures("bare")
+def test_a_plug_in_family_is_offered_and_one_without_a_simulator_is_one_line(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    err = one_line(capsys, ["sim", "--family", "bare"])
+    assert err.startswith("servobus.sim: error: --family bare: the bare family has no sim part"), err
+    with pytest.raises(SystemExit):
+        server.parse_args(["--family", "nope"])
+    assert "'bare'" in capsys.readouterr().err  # the choices listed with the refusal

@@ -14,20 +14,27 @@ import itertools
 import os
 import select
 import struct
+import subprocess
+import sys
 import threading
 import time
 import tty
 from collections import Counter
 from collections.abc import AsyncIterator, Callable, Sequence
 from dataclasses import dataclass, field
+from enum import Enum
+from importlib.metadata import EntryPoint
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from _serving import serving
+from servobus import _plugins
 from servobus.core import crc16_modbus
 from servobus.errors import TransportError
 from servobus.frame import Frame
+from servobus.protocols import ENTRY_POINT_GROUP, Family, SerialLine
 from servobus.protocols import hollow as ho
 from servobus.protocols import myactuator as ma
 from servobus.protocols.hollow.rs485 import ModbusRead, ModbusReadReply
@@ -88,7 +95,9 @@ class Scripted:
 
 
 def test_modes_baud_rates_and_parity_are_checked() -> None:
-    with pytest.raises(ValueError, match="mode='can'"):
+    # every family's serial lines, by name and alias, are what a mode may name
+    known = "myactuator-rs485, myactuator, hollow-transparent, hollow-modbus-rtu, modbus-rtu"
+    with pytest.raises(ValueError, match=f"mode='can' is not one of {known}"):
         SerialTransport("/dev/null", mode="can")
     with pytest.raises(ValueError, match=r"baud=2000000 is not one of myactuator's rates"):
         SerialTransport("/dev/null", mode="myactuator", baud=2_000_000)
@@ -105,7 +114,8 @@ def test_modes_baud_rates_and_parity_are_checked() -> None:
 def test_the_framing_is_the_familys_and_the_mode_a_shorthand_for_it() -> None:
     by_framing = SerialTransport("/dev/null", framing=MOTOR1.framing, baud=1_000_000)
     by_mode = SerialTransport("/dev/null", mode="myactuator", baud=1_000_000)
-    assert by_framing.framing is MOTOR1.framing and by_mode.mode is not None
+    assert by_framing.framing is MOTOR1.framing and by_mode.mode == "myactuator"
+    assert by_framing.line is by_mode.line is ma.FAMILY.serial[0]  # the family's declaration of the line
     assert type(by_mode.framing) is type(MOTOR1.framing)
     hollow = ho.FAMILY.bind(1, link="rs485").framing
     modbus = ho.FAMILY.bind(5, link="modbus").framing
@@ -347,6 +357,74 @@ async def test_a_framing_the_transport_does_not_know_is_a_plug_in() -> None:
         Frame(arbitration_id=8, data=b"", is_serial=True),
     ]
     assert (stats.frames_out, stats.frames_in, stats.discarded_bytes) == (2, 2, 0)
+
+
+class StxRevision(Enum):
+    V1 = 1
+
+
+def _serial_only(*args: object, **kwargs: object) -> Any:
+    raise NotImplementedError("the stx test family declares a serial line and nothing else")
+
+
+#: a family from another package, as an entry point registers it: its one serial line is Stx
+STX_FAMILY = Family(
+    name="stx",
+    description="a serial line only, for the transport's tests",
+    revisions=(StxRevision.V1,),
+    default_revision=StxRevision.V1,
+    decode_request=_serial_only,
+    decode_reply=_serial_only,
+    links=("rs485",),
+    bind=_serial_only,
+    broadcast=_serial_only,
+    serial=(SerialLine(name=Stx.name, framing=Stx, bauds=(57_600, 9_600), parity="E", aliases=("stx",)),),
+)
+
+
+@pytest.fixture
+def stx_family(monkeypatch: pytest.MonkeyPatch) -> Family:
+    """:data:`STX_FAMILY` registered under ``servobus.families`` as a plug-in would be."""
+    found = [EntryPoint("stx", f"{__name__}:STX_FAMILY", ENTRY_POINT_GROUP)]
+    monkeypatch.setattr(_plugins, "entry_points", lambda group: found if group == ENTRY_POINT_GROUP else [])
+    return STX_FAMILY
+
+
+@pytest.mark.asyncio
+async def test_a_plug_in_familys_serial_line_gives_framing_rates_parity_and_counters(
+    stx_family: Family,
+) -> None:
+    by_alias = SerialTransport("/dev/null", mode="stx")
+    assert isinstance(by_alias.framing, Stx) and by_alias.line is stx_family.serial[0]
+    assert (by_alias.baud, by_alias.parity, by_alias.bits_per_char) == (57_600, "E", 11)
+    by_framing = SerialTransport("/dev/null", framing=Stx())  # no baud= needed: the line names its rates
+    assert (by_framing.baud, by_framing.parity) == (57_600, "E")
+    with pytest.raises(ValueError, match=r"baud=115200 is not one of stx's rates \(57600, 9600\)"):
+        SerialTransport("/dev/null", mode="stx", baud=115_200)
+    with pytest.raises(ValueError, match="test-stx, stx"):
+        SerialTransport("/dev/null", mode="xts")
+    reply = Frame(arbitration_id=3, data=b"\x10\x20", is_serial=True)
+    noisy = Scripted(script=[(0.0, b"\xff\xfe\xfd" + Stx().encode(reply))])
+    async with line([noisy], baud=9_600, mode="stx", parity="N") as transport:  # a pty refuses parity
+        transport.send(Frame(arbitration_id=3, data=b"", is_serial=True), reply_timeout_s=0.5)
+        got = await asyncio.wait_for(transport.receive(), 1.0)
+        stats = transport.stats()
+    assert got == reply and transport.baud == 9_600
+    assert (stats.discarded_bytes, stats.crc_errors) == (3, 0)  # the de-framer's public counter
+
+
+def test_a_framing_in_hand_finds_its_line_without_importing_another_family() -> None:
+    code = (
+        "import sys; from servobus.protocols.hollow.bound import TransparentFraming; "
+        "from servobus.transports import SerialTransport; "
+        "t = SerialTransport('/dev/null', framing=TransparentFraming()); "
+        "print(t.baud, t.line.name, [m for m in ('servobus.protocols.myactuator', "
+        "'servobus.protocols.lk') if m in sys.modules])"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True
+    )
+    assert done.stdout.split() == ["1000000", "hollow-transparent", "[]"], done.stderr
 
 
 @pytest.mark.asyncio
