@@ -127,7 +127,9 @@ FAMILY: Family[Motor] = Family(
     links=_bound.LINKS,
     bind=_bound.bind,
     broadcast=_bound.broadcast,
-    commands=command_classes(globals().values()),
+    # The requests a link of the bound codec carries; the whole serial frames (TransparentRequest) and
+    # the converter's configuration frames (no stated port) are encoded directly, not sent by a Motor.
+    commands=tuple(cls for cls in command_classes(globals().values()) if getattr(cls, "LINKS", ())),
     motor=_motor,
     motor_ids=_MOTOR_IDS,
     serial=(  # the converter's two RS-485 modes, each at its fixed rate, 8N1 (hollow.md §9.4, §9.5, A36)

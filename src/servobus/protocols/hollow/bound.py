@@ -40,8 +40,9 @@ from servobus.protocols._bound import (
 )
 from servobus.protocols._fast import Slow, maker
 from servobus.protocols._message import Command, Reply
+from servobus.protocols.hollow._packed import OnLinks
 from servobus.protocols.hollow.codec import decode_reply
-from servobus.protocols.hollow.commands import CanModeSwitch, HollowCommand, Stop
+from servobus.protocols.hollow.commands import HollowCommand, Stop
 from servobus.protocols.hollow.commands_fd import (
     FD_PAYLOAD_SIZE,
     FdCommand,
@@ -55,34 +56,31 @@ from servobus.protocols.hollow.ids import (
     check_motor_id,
 )
 from servobus.protocols.hollow.model import DEFAULT_MODEL, HollowModel, packers
-from servobus.protocols.hollow.replies import _TEMPERATURE_LIMITS as FD_TEMPERATURE_LIMITS
-from servobus.protocols.hollow.replies import ExtendedReply, FdReply, NormalReply
-from servobus.protocols.hollow.rs485 import (
-    ModbusFunction,
-    ModbusRead,
-    ModbusWrite,
-    decode_modbus_reply,
-    encode_transparent,
-)
+from servobus.protocols.hollow.replies import FD_TEMPERATURE_LIMITS_C as FD_TEMPERATURE_LIMITS
+from servobus.protocols.hollow.replies import ExtendedReply, FdReply, NormalReply, reply_classes
+from servobus.protocols.hollow.rs485 import ModbusWrite, decode_modbus_reply, encode_transparent
 
 __all__ = ["LINKS", "HollowCodec", "ModbusFraming", "TransparentFraming", "bind", "broadcast"]
 
 LINKS = ("can", "canfd", "rs485", "modbus")
 MODBUS_BROADCAST = 0  # §9.5: address 0 reaches every slave and is never answered
-_WRITE = ModbusFunction.WRITE_MULTIPLE_REGISTERS
 
 #: §3: the motor answers within 500 µs; the converter adds a serial round trip at 1 Mbaud.
 DEFAULT_TIMEOUT_S = {"can": 0.01, "canfd": 0.01, "rs485": 0.02, "modbus": 0.1}
+#: A command declared ``SLOW`` (none of the manual's is) waits this many times longer.
+SLOW_FACTOR = 10.0
+#: The payload sizes of the classic-CAN replies (6 in normal mode, 8 in extended mode).
+_CLASSIC_SIZES = frozenset(cls.SIZE for cls in reply_classes() if not cls.FD)
 _MOTOR_IDS = range(0, 101)
 _TEMPERATURE = (-128, 127)
 
 
 def _classic_decoder(model: HollowModel, extended: bool) -> Callable[[bytes], Any]:
     """Normal (6 B) or extended (8 B) reply through the model's packer, unvalidated; Slow when in doubt."""
-    packer = packers(model).extended_reply if extended else packers(model).normal_reply
-    unpack = packer.unpack
-    size = 8 if extended else 6
     cls = ExtendedReply if extended else NormalReply
+    packer = getattr(packers(model), cls.PACKER)
+    unpack = packer.unpack
+    size = cls.SIZE
     make = maker(cls, ("motor_id", "position_deg", "speed_rad_s", "current_a", "model"))
     v_max, i_max = model.speed_full_scale_rad_s, model.current_full_scale_a
     p_lo, p_hi = packer.scales[1].lo, packer.scales[1].hi
@@ -195,27 +193,29 @@ class HollowCodec(CodecBase):
     def __repr__(self) -> str:
         return f"<hollow motor {self.motor_id} {self.link}, host id {self.host_id}>"
 
-    def _check(self, command: Command) -> Command:
-        if self.link == "modbus":
-            if isinstance(command, ModbusWrite | ModbusRead):
-                if command.slave_id != self.motor_id:
-                    raise ValueError(f"{command!r} addresses slave {command.slave_id}, not {self.motor_id}")
-                command = command.command if isinstance(command, ModbusWrite) else command
-            if isinstance(command, ModbusRead):
-                return command
-        if not isinstance(command, HollowCommand):
+    def wire(self, command: Command) -> Command:
+        """The message that goes out for ``command`` on this link: the command itself, or on
+        ``modbus`` an FdCommand as the 0x10 write of its bytes (:class:`ModbusWrite`).
+
+        Raises:
+            ValueError: not a hollow command, a class whose ``LINKS`` do not include this link, another
+                slave, or another motor model.
+        """
+        if not isinstance(command, OnLinks):
             raise ValueError(f"{command!r} is not a hollow command")
-        if self.link != "can":
-            if not command.FD and (self.link != "canfd" or not command.EXTENDED_ID):
-                raise ValueError(
-                    f"{type(command).__name__} is a classic-CAN frame; link={self.link!r} carries the "
-                    "16-byte FD control frame" + (" and the PI frames" if self.link == "canfd" else "")
-                )
-            if isinstance(command, CanModeSwitch):
-                raise ValueError("a CAN FD motor has no normal/extended mode to switch (§5)")
-        elif command.FD:
-            raise ValueError(f"{type(command).__name__} is a CAN FD frame; link='can' is classic CAN")
-        model = getattr(command, "model", None)
+        links = type(command).LINKS
+        if self.link not in links:
+            carried = f"travels on link {', '.join(map(repr, links))}" if links else "is sent outside a link"
+            raise ValueError(
+                f"{type(command).__name__} {carried}, not on link={self.link!r} (hollow.md §3-§9)"
+            )
+        if self.link == "modbus" and isinstance(command, FdCommand):
+            command = ModbusWrite(slave_id=self.motor_id, command=command)
+        slave = getattr(command, "slave_id", self.motor_id)
+        if slave != self.motor_id:
+            raise ValueError(f"{command!r} addresses slave {slave}, not {self.motor_id}")
+        carried_command = getattr(command, "command", command)
+        model = getattr(carried_command, "model", None)
         if model is not None and model is not self.model and model != self.model:
             raise ValueError(f"the command's model {model.name} is not this motor's {self.model.name}")
         return command
@@ -229,12 +229,9 @@ class HollowCodec(CodecBase):
         Raises:
             ValueError: not a hollow command, or a frame kind this link does not carry.
         """
-        message = self._check(command)
-        if self.link == "modbus":
-            if isinstance(message, ModbusRead):
-                wire = message.encode()
-            else:
-                wire = ModbusWrite(slave_id=self.motor_id, command=message).encode()  # type: ignore[arg-type]
+        message = self.wire(command)
+        if self.link == "modbus":  # the serial Frame: slave id, then function .. up to the CRC
+            wire = message.encode()
             return Frame(arbitration_id=self.motor_id, data=wire[1:-2], is_serial=True, is_rx=False)
         assert isinstance(message, HollowCommand)
         if self.link == "rs485":
@@ -256,20 +253,21 @@ class HollowCodec(CodecBase):
         Raises:
             ValueError: as :meth:`encode`.
         """
-        message = self._check(command)
+        message = self.wire(command)
+        if type(message).NO_REPLY is not None:
+            return None
         if self.link == "modbus":
-            return frame_key(
-                self.motor_id, int(message.FUNCTION if isinstance(message, ModbusRead) else _WRITE)
-            )
+            return frame_key(self.motor_id, int(message.FUNCTION))  # type: ignore[attr-defined]
         return self._key
 
     def timeout_s(self, command: Command) -> float:
-        """How long to wait for the reply to ``command``."""
-        return DEFAULT_TIMEOUT_S[self.link]
+        """How long to wait for the reply to ``command``: longer for a command declared ``SLOW``."""
+        return DEFAULT_TIMEOUT_S[self.link] * (SLOW_FACTOR if type(command).SLOW else 1.0)
 
     def retry_safe(self, command: Command) -> bool:
-        """True only for a Modbus read: every other hollow request is a set-point or a mode change."""
-        return isinstance(command, ModbusRead)
+        """True for a command declared ``READ`` (the Modbus read): every other hollow request is a
+        set-point or a mode change."""
+        return type(command).READ
 
     def classify(self, frame: Frame) -> tuple[FrameKind, Hashable | None]:
         """REPLY for a received reply naming this motor (by payload on CAN, by address on Modbus)."""
@@ -285,7 +283,7 @@ class HollowCodec(CodecBase):
         if frame.is_fd or frame.is_serial:
             if len(data) == FD_PAYLOAD_SIZE and data[15] == self.motor_id:
                 return KIND_REPLY, self._key
-        elif len(data) in (6, 8) and data[0] == self.motor_id:
+        elif len(data) in _CLASSIC_SIZES and data[0] == self.motor_id:
             return KIND_REPLY, self._key
         return KIND_NOT_OURS, None
 

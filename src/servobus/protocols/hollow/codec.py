@@ -33,19 +33,15 @@ The RS-485 converter's framings live in :mod:`servobus.protocols.hollow.rs485`.
 from __future__ import annotations
 
 from enum import Enum
+from functools import cache
 
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
-from servobus.protocols.hollow.commands import (
-    CanMode,
-    HollowCommand,
-    decode_extended_request,
-    decode_setpoint_frame,
-)
-from servobus.protocols.hollow.commands_fd import FD_PAYLOAD_SIZE, FdCommand
+from servobus.protocols.hollow.commands import CanMode, HollowCommand, claimant
+from servobus.protocols.hollow.commands_fd import FD_PAYLOAD_SIZE
 from servobus.protocols.hollow.ids import MOTOR_IDS, check_host_id, request_id
 from servobus.protocols.hollow.model import DEFAULT_MODEL, HollowModel
-from servobus.protocols.hollow.replies import ExtendedReply, FdReply, HollowReply, NormalReply
+from servobus.protocols.hollow.replies import HollowReply, reply_classes
 
 __all__ = [
     "DEFAULT_REVISION",
@@ -114,17 +110,15 @@ def decode_request(
     data = bytes(data)
     if can_id not in MOTOR_IDS:
         raise ProtocolError(f"request id {can_id} is not a motor id (0..100)", raw=data)
-    if is_extended_id:
-        # A17: PI frames may come as classic or FD extended frames; only 6..8 bytes exist.
-        return decode_extended_request(data)
-    if is_fd:
-        if len(data) != FD_PAYLOAD_SIZE:
-            raise ProtocolError(f"CAN FD request: expected 16 data bytes, got {len(data)}", raw=data)
-        return FdCommand.decode(data, model=model)
-    if len(data) != _SETPOINT_SIZE:
+    can_mode = to_can_mode(can_mode)
+    # A17: PI frames may come as classic or FD extended frames; their classes check the length.
+    if not is_extended_id and is_fd and len(data) != FD_PAYLOAD_SIZE:
+        raise ProtocolError(f"CAN FD request: expected 16 data bytes, got {len(data)}", raw=data)
+    if not is_extended_id and not is_fd and len(data) != _SETPOINT_SIZE:
         # §3: standard-id requests have DLC 8; the motor ignores others.
         raise ProtocolError(f"standard-id request: expected 8 data bytes, got {len(data)}", raw=data)
-    return decode_setpoint_frame(data, model=model, can_mode=to_can_mode(can_mode))
+    cls = claimant(data, extended_id=is_extended_id, fd=is_fd, can_mode=can_mode)
+    return cls.decode(data, model=model)
 
 
 def to_can_mode(can_mode: object) -> CanMode:
@@ -171,15 +165,19 @@ def decode_reply(
     data = bytes(data)
     if is_extended_id or not 0 <= can_id <= 0x7FF:
         raise ProtocolError(f"reply id {can_id:#x} is not a standard identifier", raw=data)
-    if is_fd:
-        if len(data) != FD_PAYLOAD_SIZE:
-            raise ProtocolError(f"CAN FD reply: expected 16 data bytes, got {len(data)}", raw=data)
-        return FdReply.decode(data, model=model)
-    if len(data) == 6:
-        return NormalReply.decode(data, model=model)
-    if len(data) == 8:
-        return ExtendedReply.decode(data, model=model)
-    raise ProtocolError(f"classic reply: expected 6 or 8 data bytes, got {len(data)}", raw=data)
+    layouts = _reply_layouts(bool(is_fd))
+    layout = layouts.get(len(data))
+    if layout is None:
+        sizes = " or ".join(str(size) for size in sorted(layouts))
+        kind = "CAN FD" if is_fd else "classic"
+        raise ProtocolError(f"{kind} reply: expected {sizes} data bytes, got {len(data)}", raw=data)
+    return layout.decode(data, model=model)
+
+
+@cache
+def _reply_layouts(fd: bool) -> dict[int, type[HollowReply]]:
+    """The reply classes of CAN FD or classic frames by payload size (§3: the size tells them apart)."""
+    return {cls.SIZE: cls for cls in reply_classes() if fd == cls.FD}
 
 
 def decode_request_frame(

@@ -10,29 +10,39 @@ Frames are told apart by identifier kind and content, not by a DATA[0] command b
 * extended id, otherwise: the normal/extended mode switch (§5.1).
 
 Each class says which identifier kind and frame type it travels in (``EXTENDED_ID``, ``FD``), so a
-transport can build the frame (:func:`servobus.protocols.hollow.codec.request_frame`).
+transport can build the frame (:func:`servobus.protocols.hollow.codec.request_frame`); the links of
+the bound codec that carry it (``LINKS``); its reply type (the argument of its base); and, in
+:meth:`HollowCommand.claims`, which bytes of its frame kind are it. The codec's decoders and the
+bound codec's checks are derived from these classes, so a new request is one class.
 """
 
 from __future__ import annotations
 
 import struct
 from dataclasses import dataclass, field
-from enum import IntEnum
-from typing import ClassVar, Self
+from typing import Any, ClassVar, Self
 
 from servobus.errors import ProtocolError
-from servobus.protocols._message import Command
+from servobus.protocols._message import Command, R
 from servobus.protocols.hollow._checks import (
     FLOAT32_MAX,
     build,
-    check_int,
     check_real,
     decode_enum,
     require_size,
     to_enum,
     unpack_float32_be,
 )
-from servobus.protocols.hollow.model import DEFAULT_MODEL, HollowModel, packers
+from servobus.protocols.hollow._packed import Int, OnLinks, Packed, check_model
+from servobus.protocols.hollow.enums import CanMode, ControlMode, PiGain
+from servobus.protocols.hollow.model import DEFAULT_MODEL, HollowModel
+from servobus.protocols.hollow.replies import (
+    ClassicReply,
+    ExtendedReply,
+    FdReply,
+    NormalReply,
+    classic_fields,
+)
 
 __all__ = [
     "SETPOINT_GAIN_MAX",
@@ -52,36 +62,13 @@ __all__ = [
     "Start",
     "Stop",
     "check_model",
+    "claimant",
     "decode_extended_request",
     "decode_setpoint_frame",
     "decode_special",
     "is_special_command",
+    "request_classes",
 ]
-
-
-class ControlMode(IntEnum):
-    """The control mode (hollow.md §0): CAN FD Mode Sel / Mode byte, and F9 + value in classic CAN."""
-
-    TORQUE = 0  # "Moment": current loop, F9
-    VELOCITY = 1  # speed-torque, FA
-    POSITION = 2  # position-velocity-torque triple closed loop, FB
-
-
-class CanMode(IntEnum):
-    """Classic-CAN addressing mode; the value is D0 bit 1 of the mode-switch frame (§5.1, A4)."""
-
-    EXTENDED = 0  # incremental position, 8-byte replies
-    NORMAL = 1  # absolute position, 6-byte replies; the power-on default (§3)
-
-
-class PiGain(IntEnum):
-    """D1 of the motor's PI multiplier frame (§6). The converter numbers them one higher (A18)."""
-
-    SPEED_KP = 0x01
-    SPEED_KI = 0x02
-    CURRENT_KP = 0x03
-    CURRENT_KI = 0x04
-
 
 # §4.1: D0..D6 = 0xFF, D7 = the command code (A1, A2).
 SPECIAL_PREFIX = b"\xff" * 7
@@ -95,20 +82,20 @@ _MODE_SWITCH_BIT = 0x02
 _PI_SIZES = range(6, 9)  # A17: DLC 6 or 8; we send 8
 _PI_PADDING = b"\x00\x00"
 
+_REQUESTS: list[type[HollowCommand[Any]]] = []
+
 
 def is_special_command(data: bytes) -> bool:
     """True for the special-command pattern ``FF FF FF FF FF FF FF F9..FE`` (§4.1, A35)."""
     return len(data) == _SETPOINT_SIZE and data[:7] == SPECIAL_PREFIX and data[7] in SPECIAL_CODES
 
 
-def check_model(model: object) -> None:
-    """Raise ValueError unless ``model`` is a :class:`HollowModel`."""
-    if not isinstance(model, HollowModel):
-        raise ValueError(f"model={model!r} is not a HollowModel")
-
-
-class HollowCommand(Command):
+class HollowCommand(OnLinks, Command[R]):
     """A host -> motor CAN or CAN FD request of the hollow family, with the frame kind it travels in.
+
+    ``EXTENDED_ID`` (29-bit identifier) and ``FD`` (CAN FD frame) give the frame; ``LINKS`` the
+    bound codec's links that carry it; :meth:`claims` which payloads of that frame kind are this
+    request, so :func:`claimant` finds the class of a received frame from the classes alone.
 
     The RS-485 converter's frames (:mod:`~servobus.protocols.hollow.rs485`,
     :mod:`~servobus.protocols.hollow.converter`) are serial frames, not CAN requests, so they derive
@@ -118,16 +105,52 @@ class HollowCommand(Command):
     __slots__ = ()
     EXTENDED_ID: ClassVar[bool] = False  # 29-bit identifier (mode switch, PI frames)
     FD: ClassVar[bool] = False  # CAN FD frame (16-byte control frames)
+    LINKS: ClassVar[tuple[str, ...]] = ("can",)
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if "__dataclass_fields__" in cls.__dict__:  # the finished (slotted) dataclass, once
+            _REQUESTS.append(cls)
+
+    @classmethod
+    def claims(cls, data: bytes, can_mode: CanMode) -> bool:
+        """Whether ``data``, in a frame of this class's kind to a motor in ``can_mode``, is this request."""
+        return True
+
+    @classmethod
+    def decode(cls, data: bytes, *, model: HollowModel = DEFAULT_MODEL) -> Self:
+        """Decode the payload (``model``: the scales, for the classes whose bytes depend on them)."""
+        raise NotImplementedError(cls.__name__)
+
+
+def request_classes() -> tuple[type[HollowCommand[Any]], ...]:
+    """Every concrete request class, in definition order (the codec's dispatch is derived from them)."""
+    return tuple(_REQUESTS)
+
+
+def claimant(data: bytes, *, extended_id: bool, fd: bool, can_mode: CanMode) -> type[HollowCommand[Any]]:
+    """The request class of a received payload: the first of its frame kind that claims it.
+
+    An extended identifier is enough for the extended-id frames, which may come classic or FD (A17).
+
+    Raises:
+        ProtocolError: no class of that frame kind claims the bytes.
+    """
+    for cls in _REQUESTS:
+        if extended_id == cls.EXTENDED_ID and (extended_id or fd == cls.FD) and cls.claims(data, can_mode):
+            return cls
+    raise ProtocolError("no hollow request has this frame kind and content", raw=data)
 
 
 # ---- special commands (§4.1) ----
 
 
-class SpecialCommand(HollowCommand):
+class SpecialCommand(HollowCommand[ClassicReply]):
     """An 8-byte ``FF x7 + code`` command, the same in normal and extended mode (§4.1, §5.2)."""
 
     __slots__ = ()
     SPECIAL_CODE: ClassVar[int]
+    SPECIAL_COUNT: ClassVar[int] = 1  # how many codes from SPECIAL_CODE on are this command
 
     @property
     def special_code(self) -> int:
@@ -138,7 +161,16 @@ class SpecialCommand(HollowCommand):
         return SPECIAL_PREFIX + bytes([self.special_code])
 
     @classmethod
-    def decode(cls, data: bytes) -> Self:
+    def claims(cls, data: bytes, can_mode: CanMode) -> bool:
+        return is_special_command(data) and 0 <= data[7] - cls.SPECIAL_CODE < cls.SPECIAL_COUNT
+
+    @classmethod
+    def from_code(cls, code: int) -> Self:
+        """The command whose D7 is ``code`` (one of its codes)."""
+        return cls()
+
+    @classmethod
+    def decode(cls, data: bytes, *, model: HollowModel = DEFAULT_MODEL) -> Self:
         """Decode ``data`` as this special command.
 
         Raises:
@@ -188,6 +220,7 @@ class SelectMode(SpecialCommand):
     """
 
     SPECIAL_CODE: ClassVar[int] = 0xF9  # + mode
+    SPECIAL_COUNT: ClassVar[int] = len(ControlMode)
     mode: ControlMode
 
     def __post_init__(self) -> None:
@@ -197,11 +230,9 @@ class SelectMode(SpecialCommand):
     def special_code(self) -> int:
         return self.SPECIAL_CODE + self.mode
 
-
-def _require_special(data: bytes) -> None:
-    require_size(data, _SETPOINT_SIZE, what="special command")
-    if not is_special_command(data):
-        raise ProtocolError("not a special command (FF x7 + F9..FE)", raw=data)
+    @classmethod
+    def from_code(cls, code: int) -> Self:
+        return cls(mode=ControlMode(code - cls.SPECIAL_CODE))
 
 
 def decode_special(data: bytes) -> SpecialCommand:
@@ -210,43 +241,44 @@ def decode_special(data: bytes) -> SpecialCommand:
     Raises:
         ProtocolError: ``data`` is not 8 bytes of the special pattern.
     """
-    _require_special(data)
-    code = data[7]
-    if code == Start.SPECIAL_CODE:
-        return Start()
-    if code == Stop.SPECIAL_CODE:
-        return Stop()
-    if code == SetZero.SPECIAL_CODE:
-        return SetZero()
-    return SelectMode(mode=ControlMode(code - SelectMode.SPECIAL_CODE))
+    require_size(data, _SETPOINT_SIZE, what="special command")
+    if not is_special_command(data):
+        raise ProtocolError("not a special command (FF x7 + F9..FE)", raw=data)
+    cls = claimant(data, extended_id=False, fd=False, can_mode=CanMode.NORMAL)
+    assert issubclass(cls, SpecialCommand)  # the special pattern is claimed by a special command
+    return cls.from_code(data[7])
 
 
 # ---- setpoints (§4.2-§4.4, §5.2) ----
 
 
-def _check_setpoint(
-    model: HollowModel, position_name: str, position: float, values: tuple[object, ...]
-) -> None:
-    check_model(model)
-    speed, kp, kd, current = values
-    check_real(position_name, position, -model.position_full_scale_deg, model.position_full_scale_deg)
-    check_real("speed_rad_s", speed, -model.speed_full_scale_rad_s, model.speed_full_scale_rad_s)
-    check_int("kp", kp, 0, SETPOINT_GAIN_MAX)
-    check_int("kd", kd, 0, SETPOINT_GAIN_MAX)
-    check_real("current_a", current, -model.current_full_scale_a, model.current_full_scale_a)
+def _setpoint_fields(position: str) -> tuple[Any, ...]:
+    # HOLLOW_SETPOINT's order: P (position or step), V, KP, KD, T (§4.2).
+    p, v, t = classic_fields(position)
+    return (p, v, Int("kp", 0, SETPOINT_GAIN_MAX), Int("kd", 0, SETPOINT_GAIN_MAX), t)
 
 
-def _unpack_setpoint(data: bytes, model: HollowModel, what: str) -> tuple[float, float, int, int, float]:
-    require_size(data, _SETPOINT_SIZE, what=what)
-    if is_special_command(data):
-        # §4.1 / A35: the special pattern is checked first, so it is never a setpoint.
-        raise ProtocolError(f"{what}: the frame is a special command", raw=data, command=data[7])
-    position, speed, kp, kd, current = packers(model).setpoint.unpack(data)
-    return position, speed, int(kp), int(kd), current
+class _SetpointFrame(Packed, HollowCommand[ClassicReply]):
+    """The 8-byte setpoint bytes (§4.2): the motor's CAN mode tells which class they are (§5.2)."""
+
+    __slots__ = ()
+    PACKER: ClassVar[str] = "setpoint"
+    SIZE: ClassVar[int] = _SETPOINT_SIZE
+    CAN_MODE: ClassVar[CanMode]
+
+    @classmethod
+    def claims(cls, data: bytes, can_mode: CanMode) -> bool:
+        return can_mode is cls.CAN_MODE and not is_special_command(data)
+
+    @classmethod
+    def refuse(cls, data: bytes) -> None:
+        if is_special_command(data):
+            # §4.1 / A35: the special pattern is checked first, so it is never a setpoint.
+            raise ProtocolError(f"{cls.WHAT}: the frame is a special command", raw=data, command=data[7])
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class Setpoint(HollowCommand):
+class Setpoint(_SetpointFrame):
     """The normal-mode setpoint frame: absolute position plus limits and gains (§4.2-§4.4).
 
     What the motor does with each field depends on its control mode (§4.4): in position mode P is
@@ -266,6 +298,9 @@ class Setpoint(HollowCommand):
         model: the scaling of the motor (:data:`~servobus.protocols.hollow.model.DEFAULT_MODEL`).
     """
 
+    WHAT: ClassVar[str] = "setpoint"
+    CAN_MODE: ClassVar[CanMode] = CanMode.NORMAL
+    FIELDS = _setpoint_fields("position_deg")
     position_deg: float
     speed_rad_s: float
     kp: int
@@ -273,34 +308,9 @@ class Setpoint(HollowCommand):
     current_a: float
     model: HollowModel = field(default=DEFAULT_MODEL, repr=False)
 
-    def __post_init__(self) -> None:
-        _check_setpoint(
-            self.model,
-            "position_deg",
-            self.position_deg,
-            (self.speed_rad_s, self.kp, self.kd, self.current_a),
-        )
-
-    def encode(self) -> bytes:
-        return packers(self.model).setpoint.pack(
-            [self.position_deg, self.speed_rad_s, self.kp, self.kd, self.current_a]
-        )
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: HollowModel = DEFAULT_MODEL) -> Self:
-        """Decode an 8-byte setpoint frame with ``model``'s scales.
-
-        Raises:
-            ProtocolError: wrong length, or the special-command pattern.
-        """
-        position, speed, kp, kd, current = _unpack_setpoint(data, model, "setpoint")
-        return build(
-            cls, data, position_deg=position, speed_rad_s=speed, kp=kp, kd=kd, current_a=current, model=model
-        )
-
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class IncrementalSetpoint(HollowCommand):
+class IncrementalSetpoint(_SetpointFrame):
     """The extended-mode setpoint: the same bytes as :class:`Setpoint`, but P is a step (§5.2).
 
     Each frame moves the target by ``step_deg`` once (A11); a step of 0 moves nothing and polls.
@@ -310,6 +320,9 @@ class IncrementalSetpoint(HollowCommand):
         speed_rad_s, kp, kd, current_a, model: as in :class:`Setpoint`.
     """
 
+    WHAT: ClassVar[str] = "incremental setpoint"
+    CAN_MODE: ClassVar[CanMode] = CanMode.EXTENDED
+    FIELDS = _setpoint_fields("step_deg")
     step_deg: float
     speed_rad_s: float
     kp: int
@@ -317,34 +330,17 @@ class IncrementalSetpoint(HollowCommand):
     current_a: float
     model: HollowModel = field(default=DEFAULT_MODEL, repr=False)
 
-    def __post_init__(self) -> None:
-        _check_setpoint(
-            self.model, "step_deg", self.step_deg, (self.speed_rad_s, self.kp, self.kd, self.current_a)
-        )
-
-    def encode(self) -> bytes:
-        return packers(self.model).setpoint.pack(
-            [self.step_deg, self.speed_rad_s, self.kp, self.kd, self.current_a]
-        )
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: HollowModel = DEFAULT_MODEL) -> Self:
-        """Decode an 8-byte extended-mode setpoint frame with ``model``'s scales.
-
-        Raises:
-            ProtocolError: wrong length, or the special-command pattern.
-        """
-        step, speed, kp, kd, current = _unpack_setpoint(data, model, "incremental setpoint")
-        return build(
-            cls, data, step_deg=step, speed_rad_s=speed, kp=kp, kd=kd, current_a=current, model=model
-        )
-
 
 # ---- extended-id frames (§5.1, §6) ----
 
 
+def _is_pi_frame(data: bytes) -> bool:
+    # §5.1 [I]: both frames are extended with D0 = 0; a PI frame names its gain in D1 = 1..4.
+    return len(data) >= 2 and data[0] == 0x00 and data[1] in PiGain._value2member_map_
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
-class CanModeSwitch(HollowCommand):
+class CanModeSwitch(HollowCommand[ClassicReply]):
     """Select normal (absolute) or extended (incremental) CAN mode: extended id, DLC 8 (§5.1).
 
     D0 bit 1 is the mode (1 = normal, 0 = extended, A4); every other bit and byte is zero.
@@ -364,7 +360,11 @@ class CanModeSwitch(HollowCommand):
         return bytes([_MODE_SWITCH_BIT if self.mode is CanMode.NORMAL else 0x00]) + bytes(7)
 
     @classmethod
-    def decode(cls, data: bytes) -> Self:
+    def claims(cls, data: bytes, can_mode: CanMode) -> bool:
+        return not _is_pi_frame(data)
+
+    @classmethod
+    def decode(cls, data: bytes, *, model: HollowModel = DEFAULT_MODEL) -> Self:
         """Decode the 8-byte mode switch.
 
         Raises:
@@ -379,17 +379,13 @@ class CanModeSwitch(HollowCommand):
         return cls(mode=CanMode.NORMAL if data[0] & _MODE_SWITCH_BIT else CanMode.EXTENDED)
 
 
-def _is_pi_frame(data: bytes) -> bool:
-    # §5.1 [I]: both frames are extended with D0 = 0; a PI frame names its gain in D1 = 1..4.
-    return len(data) >= 2 and data[0] == 0x00 and data[1] in PiGain._value2member_map_
-
-
 @dataclass(frozen=True, slots=True, kw_only=True)
-class PiMultiplier(HollowCommand):
+class PiMultiplier(HollowCommand[NormalReply | ExtendedReply | FdReply]):
     """Scale one speed- or current-loop PI gain at runtime: extended id (§6).
 
     ``D0 = 0x00, D1 = gain, D2..D5 = float32 big-endian``, padded with two zero bytes to DLC 8 (A17).
-    The actual gain is the preset gain times ``multiplier``; not persisted.
+    The actual gain is the preset gain times ``multiplier``; not persisted. A classic motor answers
+    with the reply of its CAN mode, a CAN FD motor with its FD reply.
 
     Attributes:
         gain: which gain to scale.
@@ -398,6 +394,7 @@ class PiMultiplier(HollowCommand):
     """
 
     EXTENDED_ID: ClassVar[bool] = True
+    LINKS: ClassVar[tuple[str, ...]] = ("can", "canfd")
     gain: PiGain
     multiplier: float
 
@@ -409,7 +406,11 @@ class PiMultiplier(HollowCommand):
         return bytes([0x00, self.gain]) + struct.pack(">f", self.multiplier) + _PI_PADDING
 
     @classmethod
-    def decode(cls, data: bytes) -> Self:
+    def claims(cls, data: bytes, can_mode: CanMode) -> bool:
+        return _is_pi_frame(data)
+
+    @classmethod
+    def decode(cls, data: bytes, *, model: HollowModel = DEFAULT_MODEL) -> Self:
         """Decode a PI multiplier frame of 6 to 8 bytes (D6/D7, when present, are not defined: ignored).
 
         Raises:
@@ -424,25 +425,19 @@ class PiMultiplier(HollowCommand):
         return build(cls, data, gain=gain, multiplier=unpack_float32_be(data, 2))
 
 
-def decode_extended_request(data: bytes) -> HollowCommand:
+def decode_extended_request(data: bytes) -> HollowCommand[Any]:
     """Decode an extended-id request: a PI multiplier frame or the CAN mode switch (§5.1 rule).
 
     Raises:
         ProtocolError: neither layout fits.
     """
-    if _is_pi_frame(data):
-        return PiMultiplier.decode(data)
-    return CanModeSwitch.decode(data)
+    return claimant(data, extended_id=True, fd=False, can_mode=CanMode.NORMAL).decode(data)
 
 
-def decode_setpoint_frame(data: bytes, *, model: HollowModel, can_mode: CanMode) -> HollowCommand:
+def decode_setpoint_frame(data: bytes, *, model: HollowModel, can_mode: CanMode) -> HollowCommand[Any]:
     """Decode a standard-id 8-byte frame: special command first, else a setpoint of ``can_mode``.
 
     Raises:
         ProtocolError: wrong length.
     """
-    if is_special_command(data):
-        return decode_special(data)
-    if can_mode is CanMode.EXTENDED:
-        return IncrementalSetpoint.decode(data, model=model)
-    return Setpoint.decode(data, model=model)
+    return claimant(data, extended_id=False, fd=False, can_mode=can_mode).decode(data, model=model)

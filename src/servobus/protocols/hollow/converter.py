@@ -2,7 +2,8 @@
 
 It sets the stiffness (P, D: the CAN FD Kp/Kd bytes the module fills into its pulse-generated frames)
 or one PI multiplier. The manual states neither the port nor the baud rate it travels on (most likely
-the module's RS-485 port), so this module only turns the frame into bytes and back.
+the module's RS-485 port), so this module only turns the frame into bytes and back: no link of the
+bound codec carries it, and no answer is described (``NO_REPLY``).
 
 Byte 0 is contradictory in the manual (A19): the prose says it is fixed to 0x00, the one example has
 0x01. Encoders take it as ``header`` (default 0x00, the prose); decoders accept both.
@@ -13,7 +14,7 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import Self
+from typing import ClassVar, Self
 
 from servobus.errors import ProtocolError
 from servobus.protocols._message import Command
@@ -28,6 +29,7 @@ from servobus.protocols.hollow._checks import (
     to_enum,
     unpack_float32_be,
 )
+from servobus.protocols.hollow._packed import OnLinks
 
 __all__ = [
     "CONVERTER_CONFIG_SIZE",
@@ -40,6 +42,7 @@ __all__ = [
 
 CONVERTER_CONFIG_SIZE = 6
 CONVERTER_HEADERS = (0x00, 0x01)  # A19: 0x00 in the prose, 0x01 in the example [H22]
+_NO_REPLY = "the manual describes no answer to the module's configuration frame (§9.3)"
 _PD_SELECTOR = 0x01
 
 
@@ -54,7 +57,7 @@ class ConverterGain(IntEnum):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ConverterPdGains(Command):
+class ConverterPdGains(OnLinks, Command[None]):
     """Set the module's position-loop P and D: ``header 01 P D 00 00`` (§9.3) [H22].
 
     Attributes:
@@ -63,6 +66,7 @@ class ConverterPdGains(Command):
         header: byte 0, 0x00 or 0x01 (A19).
     """
 
+    NO_REPLY: ClassVar[str | None] = _NO_REPLY
     p: int
     d: int
     header: int = 0x00
@@ -91,7 +95,7 @@ class ConverterPdGains(Command):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ConverterPiMultiplier(Command):
+class ConverterPiMultiplier(OnLinks, Command[None]):
     """Scale one of the motor's PI gains through the module: ``header gain float32-BE`` (§9.3).
 
     Attributes:
@@ -100,6 +104,7 @@ class ConverterPiMultiplier(Command):
         header: byte 0, 0x00 or 0x01 (A19).
     """
 
+    NO_REPLY: ClassVar[str | None] = _NO_REPLY
     gain: ConverterGain
     multiplier: float
     header: int = 0x00

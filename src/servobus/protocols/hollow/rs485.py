@@ -20,12 +20,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import IntEnum
-from typing import ClassVar, Self
+from typing import Any, ClassVar, Self
 
 from servobus.core import crc16_modbus, crc32_ieee
 from servobus.errors import ProtocolError
-from servobus.protocols._message import Command, Reply
+from servobus.protocols._message import Command, Message, Reply
 from servobus.protocols.hollow._checks import build, check_int, decode_enum, require_size, to_enum
+from servobus.protocols.hollow._packed import OnLinks
 from servobus.protocols.hollow.commands_fd import FD_PAYLOAD_SIZE, FdCommand
 from servobus.protocols.hollow.ids import DEFAULT_HOST_ID, check_modbus_slave_id, check_motor_id
 from servobus.protocols.hollow.model import DEFAULT_MODEL, HollowModel
@@ -55,9 +56,6 @@ _TRANSPARENT_CRC_SPAN = 1 + FD_PAYLOAD_SIZE
 MODBUS_REGISTER_START = 0x0000  # §9.5: holding registers 40001..40016
 MODBUS_REGISTER_COUNT = 16
 _MODBUS_BYTE_COUNT = 2 * MODBUS_REGISTER_COUNT
-_WRITE_SIZE = 7 + _MODBUS_BYTE_COUNT + 2  # 41
-_READ_REPLY_SIZE = 3 + _MODBUS_BYTE_COUNT + 2  # 37
-_SHORT_SIZE = 8  # write ack and read request
 _EXCEPTION_SIZE = 5
 _EXCEPTION_BIT = 0x80
 
@@ -102,39 +100,58 @@ def decode_transparent(frame: bytes) -> tuple[int, bytes]:
     return frame[0], bytes(frame[1:_TRANSPARENT_CRC_SPAN])
 
 
-@dataclass(frozen=True, slots=True, kw_only=True)
-class TransparentRequest(Command):
-    """A CAN FD request to one motor through the converter in transparent mode [H12].
+class _Carrier(Message):
+    """A serial frame around the 16 CAN FD bytes of the message in its attribute ``CARRIES``.
 
-    Attributes:
-        motor_id: the target motor's CAN id (byte 0), 0..100.
-        command: the 16-byte CAN FD request (default: the all-zero poll).
+    ``ADDRESS`` names the attribute of the address byte, :meth:`check_address` checks it; the carried
+    message must be a ``CARRIED`` (its class decodes the 16 bytes with the model's scales).
     """
 
-    motor_id: int
-    command: FdCommand = field(default_factory=FdCommand)
+    __slots__ = ()
+    ADDRESS: ClassVar[str]
+    CARRIES: ClassVar[str]
+    CARRIED: ClassVar[type[FdCommand] | type[FdReply]]
+
+    @staticmethod
+    def check_address(value: Any) -> object:
+        """Raise ValueError unless ``value`` is a valid address byte of this frame."""
+        raise NotImplementedError
 
     def __post_init__(self) -> None:
-        check_motor_id(self.motor_id)
-        if not isinstance(self.command, FdCommand):
-            raise ValueError(f"command={self.command!r} is not an FdCommand")
+        self.check_address(getattr(self, self.ADDRESS))
+        carried = getattr(self, self.CARRIES)
+        if not isinstance(carried, self.CARRIED):
+            raise ValueError(f"{self.CARRIES}={carried!r} is not an {self.CARRIED.__name__}")
+
+    def carried_bytes(self) -> bytes:
+        """The 16 CAN FD bytes carried."""
+        payload: bytes = getattr(self, self.CARRIES).encode()
+        return payload
+
+
+class _Transparent(_Carrier):
+    """A transparent frame (§9.4): ``address | 16 bytes | CRC32``."""
+
+    __slots__ = ()
 
     def encode(self) -> bytes:
-        return encode_transparent(self.motor_id, self.command.encode())
+        return encode_transparent(getattr(self, self.ADDRESS), self.carried_bytes())
 
     @classmethod
     def decode(cls, frame: bytes, *, model: HollowModel = DEFAULT_MODEL) -> Self:
-        """Decode a 21-byte transparent request.
+        """Decode a 21-byte transparent frame.
 
         Raises:
-            ProtocolError: length, CRC, a motor id outside 0..100, or an invalid CAN FD request.
+            ProtocolError: length, CRC, an address outside the class's range, or 16 bytes that are
+                not a valid CAN FD message.
         """
         address, payload = decode_transparent(frame)
-        return build(cls, frame, motor_id=address, command=FdCommand.decode(payload, model=model))
+        carried = cls.CARRIED.decode(payload, model=model)
+        return build(cls, frame, **{cls.ADDRESS: address, cls.CARRIES: carried})
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class TransparentReply(Reply):
+class TransparentReply(_Transparent, Reply):
     """A CAN FD reply forwarded by the converter in transparent mode [H13], or the hollow encoder's
     answer [H19].
 
@@ -144,31 +161,45 @@ class TransparentReply(Reply):
         reply: the 16-byte CAN FD reply; its ``slave_id`` names the motor.
     """
 
+    ADDRESS: ClassVar[str] = "header_id"
+    CARRIES: ClassVar[str] = "reply"
+    CARRIED: ClassVar[type[FdReply]] = FdReply
     header_id: int = DEFAULT_HOST_ID
     reply: FdReply
 
-    def __post_init__(self) -> None:
-        check_int("header_id", self.header_id, 0, 0xFF)
-        if not isinstance(self.reply, FdReply):
-            raise ValueError(f"reply={self.reply!r} is not an FdReply")
+    @staticmethod
+    def check_address(value: Any) -> object:
+        check_int("header_id", value, 0, 0xFF)
+        return value
 
     @property
     def motor_id(self) -> int:
         """The motor that sent the reply (the CAN FD Slave ID byte)."""
         return self.reply.slave_id
 
-    def encode(self) -> bytes:
-        return encode_transparent(self.header_id, self.reply.encode())
 
-    @classmethod
-    def decode(cls, frame: bytes, *, model: HollowModel = DEFAULT_MODEL) -> Self:
-        """Decode a 21-byte transparent reply.
+@dataclass(frozen=True, slots=True, kw_only=True)
+class TransparentRequest(_Transparent, OnLinks, Command[TransparentReply]):
+    """A CAN FD request to one motor through the converter in transparent mode [H12].
 
-        Raises:
-            ProtocolError: length, CRC, or an invalid CAN FD reply.
-        """
-        address, payload = decode_transparent(frame)
-        return cls(header_id=address, reply=FdReply.decode(payload, model=model))
+    A whole serial frame: the bound codec's ``rs485`` link sends the :class:`FdCommand` itself and
+    adds this framing, so this class travels on no link of its own (``LINKS`` empty).
+
+    Attributes:
+        motor_id: the target motor's CAN id (byte 0), 0..100.
+        command: the 16-byte CAN FD request (default: the all-zero poll).
+    """
+
+    ADDRESS: ClassVar[str] = "motor_id"
+    CARRIES: ClassVar[str] = "command"
+    CARRIED: ClassVar[type[FdCommand]] = FdCommand
+
+    @staticmethod
+    def check_address(value: Any) -> object:
+        return check_motor_id(value)
+
+    motor_id: int
+    command: FdCommand = field(default_factory=FdCommand)
 
 
 # ---- Modbus RTU mode (§9.5) ----
@@ -192,69 +223,87 @@ _REGISTER_RANGE = MODBUS_REGISTER_START.to_bytes(2, "big") + MODBUS_REGISTER_COU
 )  # start 0x0000, quantity 0x0010
 
 
-def _require_register_range(body: bytes, what: str) -> None:
-    if body[2:6] != _REGISTER_RANGE:
-        raise ProtocolError(
-            f"{what}: only registers 0x0000..0x000F as one transfer are supported", raw=body, motor_id=body[0]
-        )
-
-
 def _registers(payload: bytes) -> bytes:
     return b"".join(bytes([0x00, b]) for b in payload)
 
 
-class _ModbusFrame:
-    """Mixin of the Modbus frames: the function code they carry."""
+class _Modbus(Message):
+    """A Modbus RTU frame of the converter: ``slave_id | FUNCTION | ... | CRC-16`` (§9.5).
+
+    ``HEAD`` is what follows the function code: the register range (requests and the write's
+    acknowledgement) and/or the byte count; a class that carries CAN FD bytes (``CARRIES``) adds them
+    one per register, high byte 0x00. ``WHAT`` names the frame in errors; ``STRICT`` refuses a
+    register whose high byte is not 0x00 (requests; replies are decoded leniently).
+    """
 
     __slots__ = ()
     FUNCTION: ClassVar[ModbusFunction]
+    HEAD: ClassVar[bytes]
+    WHAT: ClassVar[str]
+    STRICT: ClassVar[bool] = True
+    ADDRESS: ClassVar[str] = "slave_id"
 
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class ModbusWrite(Command, _ModbusFrame):
-    """Function 0x10: write the 16 CAN FD request bytes to registers 0x0000..0x000F [H14].
-
-    Attributes:
-        slave_id: the Modbus address = motor CAN id, 1..100.
-        command: the CAN FD request.
-    """
-
-    FUNCTION: ClassVar[ModbusFunction] = ModbusFunction.WRITE_MULTIPLE_REGISTERS
-    slave_id: int
-    command: FdCommand = field(default_factory=FdCommand)
-
-    def __post_init__(self) -> None:
-        check_modbus_slave_id(self.slave_id)
-        if not isinstance(self.command, FdCommand):
-            raise ValueError(f"command={self.command!r} is not an FdCommand")
+    @staticmethod
+    def check_address(value: Any) -> object:
+        return check_modbus_slave_id(value)
 
     def encode(self) -> bytes:
-        head = bytes([self.slave_id, self.FUNCTION]) + _REGISTER_RANGE + bytes([_MODBUS_BYTE_COUNT])
-        return _with_crc16(head + _registers(self.command.encode()))
+        head = bytes([getattr(self, self.ADDRESS), self.FUNCTION]) + self.HEAD
+        if isinstance(self, _Carrier):
+            head += _registers(self.carried_bytes())
+        return _with_crc16(head)
 
     @classmethod
     def decode(cls, frame: bytes, *, model: HollowModel = DEFAULT_MODEL) -> Self:
-        """Decode a 41-byte write request.
+        """Decode one whole frame of this class (CRC included).
 
         Raises:
-            ProtocolError: length, CRC, function, register range, byte count, a register whose
-                high byte is not 0x00, or an invalid CAN FD request.
+            ProtocolError: length, CRC, function, register range, byte count, slave address, a
+                register's high byte (requests), or carried bytes that are not a valid CAN FD message.
         """
-        require_size(frame, _WRITE_SIZE, what="Modbus write request")
-        body = _checked_body(frame, "Modbus write request")
+        carried = issubclass(cls, _Carrier)
+        count = len(cls.HEAD) + (_MODBUS_BYTE_COUNT if carried else 0)
+        require_size(frame, 4 + count, what=cls.WHAT)
+        body = _checked_body(frame, cls.WHAT)
         _require_function(body, cls.FUNCTION)
-        _require_register_range(body, "Modbus write request")
-        if body[6] != _MODBUS_BYTE_COUNT:
-            raise ProtocolError("Modbus write request: byte count is not 32", raw=frame, motor_id=body[0])
-        registers = body[7:]
-        if any(registers[0::2]):
-            raise ProtocolError("Modbus write request: a register's high byte is not 0x00", raw=frame)
-        command = FdCommand.decode(registers[1::2], model=model)
-        return build(cls, frame, slave_id=body[0], command=command)
+        head = body[2 : 2 + len(cls.HEAD)]
+        if len(cls.HEAD) >= len(_REGISTER_RANGE) and head[:4] != _REGISTER_RANGE:
+            raise ProtocolError(
+                f"{cls.WHAT}: only registers 0x0000..0x000F as one transfer are supported",
+                raw=body,
+                motor_id=body[0],
+            )
+        if head != cls.HEAD:
+            raise ProtocolError(f"{cls.WHAT}: byte count is not 32", raw=frame, motor_id=body[0])
+        values: dict[str, Any] = {cls.ADDRESS: body[0]}
+        if issubclass(cls, _Carrier):
+            registers = body[2 + len(cls.HEAD) :]
+            if cls.STRICT and any(registers[0::2]):
+                raise ProtocolError(f"{cls.WHAT}: a register's high byte is not 0x00", raw=frame)
+            values[cls.CARRIES] = cls.CARRIED.decode(registers[1::2], model=model)
+        return build(cls, frame, **values)
+
+
+class _ModbusCarrier(_Modbus, _Carrier):
+    """A Modbus frame that carries the 16 CAN FD bytes in its registers."""
+
+    __slots__ = ()
+
+    def __post_init__(self) -> None:
+        _Carrier.__post_init__(self)
+
+
+class _ModbusShort(_Modbus):
+    """A Modbus frame of address, function and head only."""
+
+    __slots__ = ()
+
+    def __post_init__(self) -> None:
+        self.check_address(getattr(self, self.ADDRESS))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ModbusWriteAck(Reply, _ModbusFrame):
+class ModbusWriteAck(_ModbusShort, Reply):
     """The 0x10 response: slave, function, start 0x0000, quantity 16, CRC [H15].
 
     Attributes:
@@ -262,61 +311,13 @@ class ModbusWriteAck(Reply, _ModbusFrame):
     """
 
     FUNCTION: ClassVar[ModbusFunction] = ModbusFunction.WRITE_MULTIPLE_REGISTERS
+    HEAD: ClassVar[bytes] = _REGISTER_RANGE
+    WHAT: ClassVar[str] = "Modbus write response"
     slave_id: int
-
-    def __post_init__(self) -> None:
-        check_modbus_slave_id(self.slave_id)
-
-    def encode(self) -> bytes:
-        return _with_crc16(bytes([self.slave_id, self.FUNCTION]) + _REGISTER_RANGE)
-
-    @classmethod
-    def decode(cls, frame: bytes) -> Self:
-        """Decode an 8-byte write response.
-
-        Raises:
-            ProtocolError: length, CRC, function, register range or slave address.
-        """
-        require_size(frame, _SHORT_SIZE, what="Modbus write response")
-        body = _checked_body(frame, "Modbus write response")
-        _require_function(body, cls.FUNCTION)
-        _require_register_range(body, "Modbus write response")
-        return build(cls, frame, slave_id=body[0])
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ModbusRead(Command, _ModbusFrame):
-    """Function 0x03: read the 16 CAN FD reply bytes from registers 0x0000..0x000F [H16].
-
-    Attributes:
-        slave_id: the Modbus address = motor CAN id, 1..100.
-    """
-
-    FUNCTION: ClassVar[ModbusFunction] = ModbusFunction.READ_HOLDING_REGISTERS
-    slave_id: int
-
-    def __post_init__(self) -> None:
-        check_modbus_slave_id(self.slave_id)
-
-    def encode(self) -> bytes:
-        return _with_crc16(bytes([self.slave_id, self.FUNCTION]) + _REGISTER_RANGE)
-
-    @classmethod
-    def decode(cls, frame: bytes) -> Self:
-        """Decode an 8-byte read request.
-
-        Raises:
-            ProtocolError: length, CRC, function, register range or slave address.
-        """
-        require_size(frame, _SHORT_SIZE, what="Modbus read request")
-        body = _checked_body(frame, "Modbus read request")
-        _require_function(body, cls.FUNCTION)
-        _require_register_range(body, "Modbus read request")
-        return build(cls, frame, slave_id=body[0])
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class ModbusReadReply(Reply, _ModbusFrame):
+class ModbusReadReply(_ModbusCarrier, Reply):
     """The 0x03 response: the 16 CAN FD reply bytes, one per register (§9.5; layout of [H17]).
 
     Decoding ignores the registers' high bytes (they should be 0x00; lenient, as for every reply).
@@ -327,33 +328,13 @@ class ModbusReadReply(Reply, _ModbusFrame):
     """
 
     FUNCTION: ClassVar[ModbusFunction] = ModbusFunction.READ_HOLDING_REGISTERS
+    HEAD: ClassVar[bytes] = bytes([_MODBUS_BYTE_COUNT])
+    WHAT: ClassVar[str] = "Modbus read response"
+    STRICT: ClassVar[bool] = False
+    CARRIES: ClassVar[str] = "reply"
+    CARRIED: ClassVar[type[FdReply]] = FdReply
     slave_id: int
     reply: FdReply
-
-    def __post_init__(self) -> None:
-        check_modbus_slave_id(self.slave_id)
-        if not isinstance(self.reply, FdReply):
-            raise ValueError(f"reply={self.reply!r} is not an FdReply")
-
-    def encode(self) -> bytes:
-        head = bytes([self.slave_id, self.FUNCTION, _MODBUS_BYTE_COUNT])
-        return _with_crc16(head + _registers(self.reply.encode()))
-
-    @classmethod
-    def decode(cls, frame: bytes, *, model: HollowModel = DEFAULT_MODEL) -> Self:
-        """Decode a 37-byte read response.
-
-        Raises:
-            ProtocolError: length, CRC, function, byte count, slave address, or an invalid CAN FD
-                reply.
-        """
-        require_size(frame, _READ_REPLY_SIZE, what="Modbus read response")
-        body = _checked_body(frame, "Modbus read response")
-        _require_function(body, cls.FUNCTION)
-        if body[2] != _MODBUS_BYTE_COUNT:
-            raise ProtocolError("Modbus read response: byte count is not 32", raw=frame, motor_id=body[0])
-        reply = FdReply.decode(body[3:][1::2], model=model)
-        return build(cls, frame, slave_id=body[0], reply=reply)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -396,6 +377,45 @@ class ModbusException(Reply):
             raise ProtocolError("Modbus exception response: function lacks 0x80", raw=frame)
         function = decode_enum("Modbus function", body[1] & ~_EXCEPTION_BIT, ModbusFunction, frame)
         return build(cls, frame, slave_id=body[0], function=function, exception_code=body[2])
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ModbusWrite(_ModbusCarrier, OnLinks, Command[ModbusWriteAck | ModbusException]):
+    """Function 0x10: write the 16 CAN FD request bytes to registers 0x0000..0x000F [H14].
+
+    Acknowledged once the motor has answered; a request the converter refuses gets an exception.
+
+    Attributes:
+        slave_id: the Modbus address = motor CAN id, 1..100.
+        command: the CAN FD request.
+    """
+
+    LINKS: ClassVar[tuple[str, ...]] = ("modbus",)
+    FUNCTION: ClassVar[ModbusFunction] = ModbusFunction.WRITE_MULTIPLE_REGISTERS
+    HEAD: ClassVar[bytes] = _REGISTER_RANGE + bytes([_MODBUS_BYTE_COUNT])
+    WHAT: ClassVar[str] = "Modbus write request"
+    CARRIES: ClassVar[str] = "command"
+    CARRIED: ClassVar[type[FdCommand]] = FdCommand
+    slave_id: int
+    command: FdCommand = field(default_factory=FdCommand)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ModbusRead(_ModbusShort, OnLinks, Command[ModbusReadReply | ModbusException]):
+    """Function 0x03: read the 16 CAN FD reply bytes from registers 0x0000..0x000F [H16].
+
+    It changes nothing (the converter answers from its cache, §9.5), so it may be resent.
+
+    Attributes:
+        slave_id: the Modbus address = motor CAN id, 1..100.
+    """
+
+    READ: ClassVar[bool] = True
+    LINKS: ClassVar[tuple[str, ...]] = ("modbus",)
+    FUNCTION: ClassVar[ModbusFunction] = ModbusFunction.READ_HOLDING_REGISTERS
+    HEAD: ClassVar[bytes] = _REGISTER_RANGE
+    WHAT: ClassVar[str] = "Modbus read request"
+    slave_id: int
 
 
 def _require_function(body: bytes, function: ModbusFunction) -> None:

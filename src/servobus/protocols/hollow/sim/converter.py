@@ -30,8 +30,9 @@ for a slave with no motor behind the module (``no_motor``), or for a motor that 
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from enum import Enum
+from typing import Any
 
 from servobus.core import HollowTransparentDeframer, ModbusRtuDeframer
 from servobus.errors import ProtocolError
@@ -42,6 +43,7 @@ from servobus.protocols.hollow import (
     ModbusFunction,
     ModbusRead,
     ModbusReadReply,
+    ModbusWrite,
     ModbusWriteAck,
 )
 from servobus.protocols.hollow.rs485 import decode_modbus_request, decode_transparent, encode_transparent
@@ -68,6 +70,20 @@ _MAX_HEADER_ID = 0xFF  # the transparent reply's header is one byte
 _REGISTER_RANGE = bytes([0x00, 0x00, 0x00, 0x10])
 _ILLEGAL_DATA_ADDRESS = 0x02
 _ILLEGAL_DATA_VALUE = 0x03
+
+
+_Behaviour = Callable[["HollowConverter", Any, bytes, float, float], list[SerialEmission]]
+_MODBUS_BEHAVIOUR: dict[type[ModbusRead | ModbusWrite], _Behaviour] = {}
+
+
+def _does(cls: type[ModbusRead | ModbusWrite]) -> Callable[[_Behaviour], _Behaviour]:
+    """Register the decorated method as what the module does on a ``cls`` request (the dispatch)."""
+
+    def register(method: _Behaviour) -> _Behaviour:
+        _MODBUS_BEHAVIOUR[cls] = method
+        return method
+
+    return register
 
 
 class ConverterMode(Enum):
@@ -227,19 +243,29 @@ class HollowConverter:
             self._events["exceptions"] += 1
             exception = ModbusException(slave_id=slave, function=function, exception_code=code)
             return self._emit(earliest_s, exception.encode())
-        if isinstance(request, ModbusRead):
-            self._events["reads"] += 1
-            cached = self._cache.get(slave)
-            reply = FdReply.decode(cached) if cached is not None else FdReply(slave_id=0)
-            return self._emit(earliest_s, ModbusReadReply(slave_id=slave, reply=reply).encode())
+        return _MODBUS_BEHAVIOUR[type(request)](self, request, frame, now_s, earliest_s)
+
+    @_does(ModbusRead)
+    def _modbus_read(
+        self, request: ModbusRead, frame: bytes, now_s: float, earliest_s: float
+    ) -> list[SerialEmission]:
+        self._events["reads"] += 1
+        cached = self._cache.get(request.slave_id)
+        reply = FdReply.decode(cached) if cached is not None else FdReply(slave_id=0)
+        return self._emit(earliest_s, ModbusReadReply(slave_id=request.slave_id, reply=reply).encode())
+
+    @_does(ModbusWrite)
+    def _modbus_write(
+        self, request: ModbusWrite, frame: bytes, now_s: float, earliest_s: float
+    ) -> list[SerialEmission]:
         self._events["writes"] += 1
         # The registers' low bytes are forwarded as they came (the module does not re-encode).
-        exchanged = self._exchange(slave, frame[7:39][1::2], now_s)
+        exchanged = self._exchange(request.slave_id, frame[7:39][1::2], now_s)
         if exchanged is None:
             return []
         reply_end_s, reply_can = exchanged
-        self._cache[slave] = reply_can.data
-        return self._emit(max(reply_end_s, earliest_s), ModbusWriteAck(slave_id=slave).encode())
+        self._cache[request.slave_id] = reply_can.data
+        return self._emit(max(reply_end_s, earliest_s), ModbusWriteAck(slave_id=request.slave_id).encode())
 
     def _exchange(self, motor_id: int, payload: bytes, now_s: float) -> tuple[float, Frame] | None:
         """Send ``payload`` to ``motor_id`` over CAN FD; (time the reply was received, reply)."""

@@ -40,7 +40,9 @@ from __future__ import annotations
 import math
 import random
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
@@ -86,6 +88,7 @@ __all__ = [
     "HOLLOW_PLANT_PARAMS",
     "HeldSetpoint",
     "HollowMotor",
+    "implemented",
 ]
 
 # §3 / A13: "from receipt of commands to the answer the module requires 500 µs"; §3's simulator
@@ -116,6 +119,26 @@ _DPS_PER_RAD_S = 180.0 / math.pi
 _DPS_PER_RPM = 6.0
 _TEMPERATURE_LIMITS_C = (-125, 125)  # §7.3
 _INT16 = (-(1 << 15), (1 << 15) - 1)
+
+
+_BEHAVIOUR: dict[type[HollowCommand[Any]], Callable[[HollowMotor, Any], None]] = {}
+C = TypeVar("C", bound=HollowCommand[Any])
+
+
+def _does(cls: type[C]) -> Callable[[Callable[[HollowMotor, C], None]], Callable[[HollowMotor, C], None]]:
+    """Register the decorated method as what the motor does on a ``cls`` request: the dispatch is this
+    registry, filled by the behaviour itself (no second list of the commands)."""
+
+    def register(method: Callable[[HollowMotor, C], None]) -> Callable[[HollowMotor, C], None]:
+        _BEHAVIOUR[cls] = method
+        return method
+
+    return register
+
+
+def implemented() -> frozenset[type[HollowCommand[Any]]]:
+    """The request classes the simulated motor has a behaviour for."""
+    return frozenset(_BEHAVIOUR)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -345,41 +368,60 @@ class HollowMotor(ListeningDevice):
             return self.fd_enabled or not frame.is_fd
         return frame.is_fd == self.fd_enabled
 
-    def _apply(self, command: HollowCommand) -> None:
-        if isinstance(command, Start):
-            self._start()
-        elif isinstance(command, Stop):
-            self.enabled = False
-        elif isinstance(command, SelectMode):
-            self.ctrl_mode = command.mode  # temporary, not persisted (§4.1)
-        elif isinstance(command, SetZero):
-            self._set_zero()
-        elif isinstance(command, Setpoint):
-            self.setpoint = HeldSetpoint(
-                target_deg=command.position_deg,
-                speed_dps=command.speed_rad_s * _DPS_PER_RAD_S,
-                current_a=command.current_a,
-                kp=command.kp,
-                kd=command.kd,
+    def _apply(self, command: HollowCommand[Any]) -> None:
+        handler = _BEHAVIOUR.get(type(command))
+        if handler is None:  # a request class without behaviour here: a gap of the model, not noise
+            raise NotImplementedError(
+                f"the simulated hollow motor does not implement {type(command).__name__}"
             )
-        elif isinstance(command, IncrementalSetpoint):
-            # §5.2 / A11: each frame moves the target once; the first one starts from where the
-            # motor is.
-            base = self.setpoint.target_deg if self.setpoint is not None else self.position_deg
-            self.setpoint = HeldSetpoint(
-                target_deg=base + command.step_deg,
-                speed_dps=command.speed_rad_s * _DPS_PER_RAD_S,
-                current_a=command.current_a,
-                kp=command.kp,
-                kd=command.kd,
-            )
-        elif isinstance(command, CanModeSwitch):
-            self.can_mode = command.mode  # until power-off (§5.1)
-        elif isinstance(command, PiMultiplier):
-            # §6: stored and reported by the simulator; the plant's loops have no gain knob.
-            self.pi_multipliers[command.gain] = command.multiplier
-        elif isinstance(command, FdCommand):
-            self._apply_fd(command)
+        handler(self, command)
+
+    @_does(Start)
+    def _start_command(self, command: Start) -> None:
+        self._start()
+
+    @_does(Stop)
+    def _stop(self, command: Stop) -> None:
+        self.enabled = False
+
+    @_does(SelectMode)
+    def _select_mode(self, command: SelectMode) -> None:
+        self.ctrl_mode = command.mode  # temporary, not persisted (§4.1)
+
+    @_does(SetZero)
+    def _set_zero_command(self, command: SetZero) -> None:
+        self._set_zero()
+
+    @_does(Setpoint)
+    def _setpoint(self, command: Setpoint) -> None:
+        self.setpoint = HeldSetpoint(
+            target_deg=command.position_deg,
+            speed_dps=command.speed_rad_s * _DPS_PER_RAD_S,
+            current_a=command.current_a,
+            kp=command.kp,
+            kd=command.kd,
+        )
+
+    @_does(IncrementalSetpoint)
+    def _incremental_setpoint(self, command: IncrementalSetpoint) -> None:
+        # §5.2 / A11: each frame moves the target once; the first one starts from where the motor is.
+        base = self.setpoint.target_deg if self.setpoint is not None else self.position_deg
+        self.setpoint = HeldSetpoint(
+            target_deg=base + command.step_deg,
+            speed_dps=command.speed_rad_s * _DPS_PER_RAD_S,
+            current_a=command.current_a,
+            kp=command.kp,
+            kd=command.kd,
+        )
+
+    @_does(CanModeSwitch)
+    def _can_mode_switch(self, command: CanModeSwitch) -> None:
+        self.can_mode = command.mode  # until power-off (§5.1)
+
+    @_does(PiMultiplier)
+    def _pi_multiplier(self, command: PiMultiplier) -> None:
+        # §6: stored and reported by the simulator; the plant's loops have no gain knob.
+        self.pi_multipliers[command.gain] = command.multiplier
 
     def _start(self) -> None:
         self.enabled = True
@@ -403,6 +445,7 @@ class HollowMotor(ListeningDevice):
             return
         self.zero_offset_deg = self.plant.position_deg
 
+    @_does(FdCommand)
     def _apply_fd(self, command: FdCommand) -> None:
         # §7.2 / §13: Mode Sel, Run Cmd, Kp, Kd, then Zero, which acts only if the motor is not
         # running once this frame's Run Cmd is applied ("only while not enabled").
