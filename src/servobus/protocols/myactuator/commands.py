@@ -18,6 +18,7 @@ from servobus.errors import ProtocolError
 from servobus.protocols._fields import IntField, ScaledField, check_range, round_half_away
 from servobus.protocols._message import R
 from servobus.protocols._special import SpecialZero
+from servobus.protocols.myactuator import replies as rep
 from servobus.protocols.myactuator._layout import (
     BoolField,
     EnumField,
@@ -37,28 +38,6 @@ from servobus.protocols.myactuator.enums import (
     FunctionIndex,
     PidIndex,
     StreamableCommand,
-)
-from servobus.protocols.myactuator.replies import (
-    AccelerationReply,
-    CanIdReply,
-    CircleAngleReply,
-    Echo,
-    EncoderOffsetReply,
-    EncoderPositionReply,
-    EncoderRawReply,
-    ModelPartReply,
-    ModelReply,
-    MultiTurnAngleReply,
-    PidReply,
-    RunModeReply,
-    RunTimeReply,
-    SingleTurnAngleReply,
-    SingleTurnEncoderReply,
-    Status1Reply,
-    Status3Reply,
-    StatusReply,
-    VersionDateReply,
-    ZeroOffsetReply,
 )
 from servobus.protocols.myactuator.revision import ONLY_V4_3, ONLY_V4_4, Revision, revision_names
 
@@ -107,7 +86,7 @@ _INT32 = IntField("value", 4, signed=True)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class FunctionControl(MyActuatorCommand[Echo]):
+class FunctionControl(MyActuatorCommand[rep.Echo]):
     """0x20 function control: ``index`` selects the function, ``value`` is its 32-bit argument.
 
     What each index accepts is :data:`enums.FUNCTION_VALUES` (1: 0; 2, 3, 4, 8: 0/1; 5: motor id 1..32;
@@ -206,7 +185,7 @@ _PID_VALUE = Float32Field("value")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadPid(MyActuatorCommand[PidReply]):
+class ReadPid(MyActuatorCommand[rep.PidReply]):
     """0x30 read one PID parameter. Reply: ``PidReply``."""
 
     CODE: ClassVar[int] = 0x30
@@ -217,7 +196,7 @@ class ReadPid(MyActuatorCommand[PidReply]):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class WritePidRam(MyActuatorCommand[Echo]):
+class WritePidRam(MyActuatorCommand[rep.Echo]):
     """0x31 write one PID parameter (float32) to RAM, lost at power-off. Reply: echo."""
 
     CODE: ClassVar[int] = 0x31
@@ -229,7 +208,7 @@ class WritePidRam(MyActuatorCommand[Echo]):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class WritePidRom(MyActuatorCommand[Echo]):
+class WritePidRom(MyActuatorCommand[rep.Echo]):
     """0x32 write one PID parameter (float32) to ROM. [000]: saved only while the motor is disabled.
     Reply: echo."""
 
@@ -257,7 +236,7 @@ _ACCEL_WRITE = SpecialZero(
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadAcceleration(MyActuatorCommand[AccelerationReply]):
+class ReadAcceleration(MyActuatorCommand[rep.AccelerationReply]):
     """0x42 read one acceleration value. Reply: ``AccelerationReply``."""
 
     CODE: ClassVar[int] = 0x42
@@ -268,7 +247,7 @@ class ReadAcceleration(MyActuatorCommand[AccelerationReply]):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class WriteAcceleration(MyActuatorCommand[Echo]):
+class WriteAcceleration(MyActuatorCommand[rep.Echo]):
     """0x43 write one acceleration (1 dps/s) to RAM and ROM: 100..60000, or ``None`` for 0 on the wire
     (no planning: direct tracking, §4.21). The number 0 is refused: ask for "no planning" with None.
     Reply: echo."""
@@ -302,7 +281,7 @@ class _NoArgs(MyActuatorCommand[R]):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadEncoderPosition(_NoArgs[EncoderPositionReply]):
+class ReadEncoderPosition(_NoArgs[rep.EncoderPositionReply]):
     """0x60 read the multi-turn encoder position: the raw position (0x61) minus the zero offset
     (0x62), in encoder counts."""
 
@@ -310,21 +289,21 @@ class ReadEncoderPosition(_NoArgs[EncoderPositionReply]):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadEncoderRaw(_NoArgs[EncoderRawReply]):
+class ReadEncoderRaw(_NoArgs[rep.EncoderRawReply]):
     """0x61 read the raw multi-turn encoder position."""
 
     CODE, TITLE, READ, STREAMABLE = 0x61, "read multi-turn encoder raw position", True, True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadEncoderOffset(_NoArgs[EncoderOffsetReply]):
+class ReadEncoderOffset(_NoArgs[rep.EncoderOffsetReply]):
     """0x62 read the multi-turn encoder zero offset."""
 
     CODE, TITLE, READ, STREAMABLE = 0x62, "read multi-turn encoder zero offset", True, True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class WriteEncoderZero(MyActuatorCommand[Echo]):
+class WriteEncoderZero(MyActuatorCommand[rep.Echo]):
     """0x63 write an encoder value (int32 counts) to ROM as the zero; effective after restart. Reply:
     echo. (§9 item 11: the manuals' ``>>8`` for DATA[6..7] is a typo; the value is int32 LE.)"""
 
@@ -336,14 +315,14 @@ class WriteEncoderZero(MyActuatorCommand[Echo]):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class WriteCurrentPositionAsZero(_NoArgs[ZeroOffsetReply]):
+class WriteCurrentPositionAsZero(_NoArgs[rep.ZeroOffsetReply]):
     """0x64 write the current position to ROM as the zero (effective after 0x76)."""
 
     CODE, TITLE, SLOW = 0x64, "write current position to ROM as zero", True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadRunMode(_NoArgs[RunModeReply]):
+class ReadRunMode(_NoArgs[rep.RunModeReply]):
     """0x70 read the operating mode."""
 
     CODE, TITLE, READ = 0x70, "read operating mode", True
@@ -358,49 +337,49 @@ class SystemReset(_NoArgs[None]):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class BrakeRelease(_NoArgs[Echo]):
+class BrakeRelease(_NoArgs[rep.Echo]):
     """0x77 open the holding brake."""
 
     CODE, TITLE, SLOW = 0x77, "brake release", True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class BrakeLock(_NoArgs[Echo]):
+class BrakeLock(_NoArgs[rep.Echo]):
     """0x78 close the holding brake."""
 
     CODE, TITLE, SLOW = 0x78, "brake lock", True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class MotorShutdown(_NoArgs[Echo]):
+class MotorShutdown(_NoArgs[rep.Echo]):
     """0x80 motor off: output off, running state cleared."""
 
     CODE, TITLE = 0x80, "motor shutdown"
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class MotorStop(_NoArgs[Echo]):
+class MotorStop(_NoArgs[rep.Echo]):
     """0x81 stop and hold; the closed loop stays active."""
 
     CODE, TITLE = 0x81, "motor stop"
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadSingleTurnEncoder(_NoArgs[SingleTurnEncoderReply]):
+class ReadSingleTurnEncoder(_NoArgs[rep.SingleTurnEncoderReply]):
     """0x90 read the single-turn encoder (V4.3 only; removed in V4.4)."""
 
     CODE, TITLE, READ, REVISIONS = 0x90, "read single-turn encoder", True, ONLY_V4_3
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadMultiTurnAngle(_NoArgs[MultiTurnAngleReply]):
+class ReadMultiTurnAngle(_NoArgs[rep.MultiTurnAngleReply]):
     """0x92 read the multi-turn angle."""
 
     CODE, TITLE, READ, STREAMABLE = 0x92, "read multi-turn angle", True, True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadSingleTurnAngle(_NoArgs[SingleTurnAngleReply | CircleAngleReply]):
+class ReadSingleTurnAngle(_NoArgs[rep.SingleTurnAngleReply | rep.CircleAngleReply]):
     """0x94 read the single-turn angle. The reply layout differs by revision: ``SingleTurnAngleReply``
     (V4.4, int32 ±180°) or ``CircleAngleReply`` (V4.3, uint16 0..359.99°)."""
 
@@ -408,14 +387,14 @@ class ReadSingleTurnAngle(_NoArgs[SingleTurnAngleReply | CircleAngleReply]):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadStatus1(_NoArgs[Status1Reply]):
+class ReadStatus1(_NoArgs[rep.Status1Reply]):
     """0x9A read temperature, brake, voltage and error flags."""
 
     CODE, TITLE, READ, STREAMABLE = 0x9A, "read status 1 and error flags", True, True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadStatus2(_NoArgs[StatusReply]):
+class ReadStatus2(_NoArgs[rep.StatusReply]):
     """0x9C read temperature, torque current, speed and angle: the R2 layout, which the closed-loop
     commands answer with too (its angle is whole degrees; 0x92 reads the multi-turn angle exactly)."""
 
@@ -423,21 +402,21 @@ class ReadStatus2(_NoArgs[StatusReply]):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadStatus3(_NoArgs[Status3Reply]):
+class ReadStatus3(_NoArgs[rep.Status3Reply]):
     """0x9D read temperature and phase currents."""
 
     CODE, TITLE, READ, STREAMABLE = 0x9D, "read status 3", True, True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadRunTime(_NoArgs[RunTimeReply]):
+class ReadRunTime(_NoArgs[rep.RunTimeReply]):
     """0xB1 read the time since power-up or reset."""
 
     CODE, TITLE, READ = 0xB1, "read system run time", True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadVersionDate(_NoArgs[VersionDateReply]):
+class ReadVersionDate(_NoArgs[rep.VersionDateReply]):
     """0xB2 read the firmware version date (see ``revision_from_version_date``)."""
 
     CODE, TITLE, READ = 0xB2, "read software version date", True
@@ -447,7 +426,7 @@ class ReadVersionDate(_NoArgs[VersionDateReply]):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class SetCanId(MyActuatorCommand[Echo]):
+class SetCanId(MyActuatorCommand[rep.Echo]):
     """0x79 write the motor id (V4.3 only). Sent on CAN 0x300 or RS485 ID byte 0xCD: **every motor on the
     bus takes it**, so connect one motor. DATA[2] = 0 (write), DATA[7] = new id. Reply: echo."""
 
@@ -461,7 +440,7 @@ class SetCanId(MyActuatorCommand[Echo]):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadCanId(MyActuatorCommand[CanIdReply]):
+class ReadCanId(MyActuatorCommand[rep.CanIdReply]):
     """0x79 read the motor id (V4.3 only; DATA[2] = 1). Sent like ``SetCanId``. Reply: ``CanIdReply``."""
 
     CODE: ClassVar[int] = 0x79
@@ -491,7 +470,7 @@ _STREAM_INTERVAL = SpecialZero(
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class SetCommTimeout(MyActuatorCommand[Echo]):
+class SetCommTimeout(MyActuatorCommand[rep.Echo]):
     """0xB3 communication-interruption protection: without traffic for ``timeout_ms`` the motor cuts its
     output and locks the brake. Saved in ROM. Reply: echo (or all zero, §9 item 8).
 
@@ -530,7 +509,7 @@ class SetBaudRate(MyActuatorCommand[None]):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadModel(_NoArgs[ModelReply]):
+class ReadModel(_NoArgs[rep.ModelReply]):
     """0xB5 read the motor model, V4.3 form: all-zero request, 7 characters back (``ModelReply``)."""
 
     CODE: ClassVar[int] = 0xB5
@@ -540,7 +519,7 @@ class ReadModel(_NoArgs[ModelReply]):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadModelPart(MyActuatorCommand[ModelPartReply]):
+class ReadModelPart(MyActuatorCommand[rep.ModelPartReply]):
     """0xB5 read the motor model, V4.4 form: DATA[1] = 0x01, DATA[2] = ``part`` (1: characters 1-5, 2:
     6-10, 3: 11-15). Reply: ``ModelPartReply``; join the three with ``replies.join_model``."""
 
