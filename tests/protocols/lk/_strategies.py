@@ -171,7 +171,7 @@ angle32 = floats(INT32[0] / 100, INT32[1] / 100)
 max_speed = st.one_of(st.none(), floats(0.5, 0xFFFF))
 single_turn_v236 = floats(0, (2**32 - 1) / 100)
 single_turn_v235 = floats(0, 359.99)
-fixed = {cls: Case(st.just(cls())) for cls in COMMAND_CLASSES if issubclass(cls, lk.commands.FixedCommand)}
+fixed = {cls: Case(st.just(cls())) for cls in COMMAND_CLASSES if not fields(cls)}
 
 COMMANDS: dict[type[Message], Case] = {
     **fixed,

@@ -145,10 +145,10 @@ def test_opposite_success_bytes_decode_to_the_same_named_result(
     ("cls", "data", "message"),
     [
         (lk.SaveSettingsReply, "44 05 02 00 00 00 00 00", "neither success nor failure"),
-        (lk.SaveSettingsReply, "44 06 01 00 00 00 00 00", r"DATA\[1\] must be 0x05"),
+        (lk.SaveSettingsReply, "44 06 01 00 00 00 00 00", r"DATA\[1\] is not 0x05"),
         (lk.ParamWriteReply, "42 96 FF 00 00 00 00 00", "neither success nor failure"),
         (lk.ParamWriteReply, "42 95 00 00 00 00 00 00", r"DATA\[1\]=0x95 is not a ParamId"),
-        (lk.SaveSettings, "44 05 FB 00 00 00 00 00", "must be 05 FA"),
+        (lk.SaveSettings, "44 05 FB 00 00 00 00 00", r"DATA\[2\] is not 0xFA"),
         (lk.ReadSetting, "40 05 0E 00 00 00 00 00", "05 0E is not a setting parameter"),
         (lk.ReadSetting, "40 A1 00 00 00 00 00 00", "A1 00 is not a setting parameter"),
         (lk.SettingReply, "40 05 0B 00 03 00 00 00", r"DATA\[4\]=0x03 is not a BusType"),

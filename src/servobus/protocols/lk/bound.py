@@ -34,10 +34,8 @@ from servobus.protocols._fields import round_half_away
 from servobus.protocols._message import Command, Reply
 from servobus.protocols.lk import commands as cmd
 from servobus.protocols.lk import commands_control as ctl
-from servobus.protocols.lk import params_v235 as p235
-from servobus.protocols.lk import params_v236 as p236
 from servobus.protocols.lk._base import LkCommand
-from servobus.protocols.lk.codec import check_available, decode_reply, resolve_model
+from servobus.protocols.lk.codec import COMMAND_CLASSES, check_available, decode_reply, resolve_model
 from servobus.protocols.lk.commands_control import MultiMotorTorque
 from servobus.protocols.lk.ids import (
     MULTI_MOTOR_ID,
@@ -49,7 +47,6 @@ from servobus.protocols.lk.ids import (
 from servobus.protocols.lk.model import LkModel, Revision, encoder_max_count
 from servobus.protocols.lk.replies import (
     REPLY_SPEED,
-    STATUS2_CODES,
     TEMPERATURE,
     Status2Reply,
     status2_slot,
@@ -62,32 +59,24 @@ __all__ = ["LINKS", "LkCodec", "bind", "broadcast"]
 LINKS = ("can",)
 
 DEFAULT_TIMEOUT_S = 0.02
-#: ROM writes and the encoder calibration (0x18 turns the motor for seconds) take longer.
+#: ROM writes and the brake (a class declaring ``SLOW``) take longer; 0x18 declares its own TIMEOUT_S.
 SLOW_TIMEOUT_S = 0.5
-CALIBRATION_TIMEOUT_S = 10.0
-_SLOW: tuple[type, ...] = (
-    cmd.SetZeroRom,
-    cmd.WriteEncoderOffset,
-    cmd.BrakeControl,
-    p235.WriteParamRom,
-    p236.SaveSettings,
-)
-_READS: tuple[type, ...] = (
-    cmd.ReadStatus1,
-    cmd.ReadStatus2,
-    cmd.ReadStatus3,
-    cmd.ReadEncoder,
-    cmd.ReadMultiTurnAngle,
-    cmd.ReadSingleTurnAngle,
-    cmd.ReadAcceleration,
-    p235.ReadParam,
-    p236.ReadControlParam,
-    p236.ReadSetting,
-)
+CALIBRATION_TIMEOUT_S = cmd.CALIBRATION_TIMEOUT_S
 _V235_ALIASES = {0x9B: 0x9A}  # spec A4: [003] prints the 0x9B reply's DATA[0] as 0x9A
-#: Echo replies that carry the value their request wrote (0x34 acceleration, 0xC1 control parameter):
-#: keyed with it (``echo_key``), so a stray echo never answers another write.
-_VALUE_ECHO_CODES = frozenset({0x34, 0xC1})
+#: Echo replies that carry the value their request wrote (the classes declaring ``ECHO``: 0x34
+#: acceleration, 0xC1 control parameter): keyed with it (``echo_key``), so a stray echo never answers
+#: another write. Known from DATA[0] alone, as :meth:`LkCodec.classify` has nothing else.
+_VALUE_ECHO_CODES = frozenset(cls.CODE for cls in COMMAND_CLASSES if cls.ECHO and cls.CODE is not None)
+#: Per command class: (timeout_s, retry_safe), from its declarations (SLOW, TIMEOUT_S, READ).
+_RULES: dict[type, tuple[float, bool]] = {}
+
+
+def _rules(cls: type) -> tuple[float, bool]:
+    timeout = getattr(cls, "TIMEOUT_S", None)
+    if timeout is None:
+        timeout = SLOW_TIMEOUT_S if getattr(cls, "SLOW", False) else DEFAULT_TIMEOUT_S
+    rules = _RULES[cls] = (timeout, bool(getattr(cls, "READ", False)))
+    return rules
 
 
 def _status2_decoders(model: LkModel) -> dict[int, Callable[[bytes], Status2Reply]]:
@@ -98,7 +87,7 @@ def _status2_decoders(model: LkModel) -> dict[int, Callable[[bytes], Status2Repl
     agree on both share one decoder.
     """
     groups: dict[tuple[int, tuple[int, int] | None], set[int]] = {}
-    for code in sorted(STATUS2_CODES):
+    for code in sorted(Status2Reply.answers()):
         key = (id(status2_slot(code)), torque_range(model.revision, model.motor_type, code))
         groups.setdefault(key, set()).add(code)
     decoders: dict[int, Callable[[bytes], Status2Reply]] = {}
@@ -257,19 +246,19 @@ class LkCodec(CodecBase):
         message = self._check(command)
         code = message.CODE
         assert code is not None
-        if code in _VALUE_ECHO_CODES:
+        if message.ECHO:
             return echo_key(self._reply_base | code, message.encode())
         return self._reply_base | self._aliases.get(code, code)
 
     def timeout_s(self, command: Command) -> float:
-        """How long to wait for the reply to ``command``."""
-        if isinstance(command, cmd.CalibrateEncoder):
-            return CALIBRATION_TIMEOUT_S
-        return SLOW_TIMEOUT_S if isinstance(command, _SLOW) else DEFAULT_TIMEOUT_S
+        """How long to wait for the reply to ``command`` (longer for a class declaring ``SLOW``)."""
+        rules = _RULES.get(type(command)) or _rules(type(command))
+        return rules[0]
 
     def retry_safe(self, command: Command) -> bool:
-        """True for reads: resending them changes nothing on the motor."""
-        return isinstance(command, _READS)
+        """True for reads (``READ``): resending them changes nothing on the motor."""
+        rules = _RULES.get(type(command)) or _rules(type(command))
+        return rules[1]
 
     def classify(self, frame: Frame) -> tuple[FrameKind, Hashable | None]:
         """REPLY for a received frame on this motor's reply identifier, else NOT_OURS."""

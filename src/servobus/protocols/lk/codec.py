@@ -26,12 +26,11 @@ from typing import TypeVar
 
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
+from servobus.protocols._family import command_classes
 from servobus.protocols.lk import commands as cmd
 from servobus.protocols.lk import commands_control as ctl
 from servobus.protocols.lk import params_v235 as p235
 from servobus.protocols.lk import params_v236 as p236
-from servobus.protocols.lk import replies as rep
-from servobus.protocols.lk import replies_position as rpos
 from servobus.protocols.lk._base import LkCommand, LkReply
 from servobus.protocols.lk.ids import (
     MULTI_MOTOR_ID,
@@ -59,69 +58,21 @@ __all__ = [
     "resolve_model",
 ]
 
-COMMAND_CLASSES: tuple[type[LkCommand], ...] = (
-    cmd.ReadStatus1,
-    cmd.ClearErrors,
-    cmd.ReadStatus2,
-    cmd.ReadStatus3,
-    cmd.MotorOff,
-    cmd.MotorStop,
-    cmd.MotorRun,
-    cmd.BrakeControl,
-    ctl.OpenLoopControl,
-    ctl.TorqueControl,
-    ctl.SpeedControl,
-    ctl.SpeedControlV235,
-    ctl.MultiTurnPosition,
-    ctl.MultiTurnPositionSpeed,
-    ctl.SingleTurnPosition,
-    ctl.SingleTurnPositionV235,
-    ctl.SingleTurnPositionSpeed,
-    ctl.SingleTurnPositionSpeedV235,
-    ctl.IncrementalPosition,
-    ctl.IncrementalPositionSpeed,
-    p236.ReadControlParam,
-    p236.WriteControlParam,
-    cmd.ReadEncoder,
-    cmd.CalibrateEncoder,
-    cmd.SetZeroRom,
-    cmd.WriteEncoderOffset,
-    cmd.ReadMultiTurnAngle,
-    cmd.ReadSingleTurnAngle,
-    cmd.SetZeroRam,
-    p236.ReadSetting,
-    p236.WriteSetting,
-    p236.SaveSettings,
-    p235.ReadParam,
-    p235.WriteParamRam,
-    p235.WriteParamRom,
-    cmd.ReadAcceleration,
-    cmd.WriteAcceleration,
-    ctl.MultiMotorTorque,
+# Every command class of the family's modules, in their order (the classes state everything else).
+COMMAND_CLASSES: tuple[type[LkCommand], ...] = tuple(
+    cls
+    for cls in command_classes(value for module in (cmd, ctl, p236, p235) for value in vars(module).values())
+    if issubclass(cls, LkCommand)
 )
 
-# Reply layouts and the command bytes each serves (shared layouts serve several).
-REPLY_LAYOUTS: tuple[tuple[type[LkReply], frozenset[int]], ...] = (
-    (rep.EchoReply, rep.ECHO_CODES),
-    (rep.Status1Reply, frozenset({0x9A, 0x9B})),
-    (rep.Status1ReplyV235, frozenset({0x9A, 0x9B})),
-    (rep.Status2Reply, rep.STATUS2_CODES),
-    (rep.Status3Reply, frozenset({0x9D})),
-    (rep.Status3ReplyV235, frozenset({0x9D})),
-    (rep.BrakeReply, frozenset({0x8C})),
-    (rpos.EncoderReply, frozenset({0x90})),
-    (rpos.CalibrationReply, frozenset({0x18})),
-    (rpos.EncoderOffsetReply, frozenset({0x19, 0x91})),
-    (rpos.MultiTurnAngleReply, frozenset({0x92})),
-    (rpos.SingleTurnAngleReply, frozenset({0x94})),
-    (rpos.SingleTurnAngleReplyV235, frozenset({0x94})),
-    (rpos.AccelerationReply, frozenset({0x33, 0x34})),
-    (p236.ControlParamReply, frozenset({0xC0, 0xC1})),
-    (p236.SettingReply, frozenset({0x40, 0x42})),
-    (p236.SaveSettingsReply, frozenset({0x44})),
-    (p235.ParamReply, frozenset({0x40})),
-    (p235.ParamWriteReply, frozenset({0x42, 0x44})),
-)
+
+def _reply_layouts() -> tuple[tuple[type[LkReply], frozenset[int]], ...]:
+    replies = dict.fromkeys(reply for cls in COMMAND_CLASSES for reply in cls.reply_types())
+    return tuple((reply, reply.answers()) for reply in replies if issubclass(reply, LkReply))
+
+
+# Reply layouts and the command bytes each serves (from the commands that declare it their reply).
+REPLY_LAYOUTS: tuple[tuple[type[LkReply], frozenset[int]], ...] = _reply_layouts()
 
 # Layouts no manual prints; implemented from the spec's inference (listed in the package docstring).
 INFERRED_LAYOUTS: Mapping[int, str] = MappingProxyType(
@@ -148,16 +99,14 @@ REQUESTS: Mapping[Revision, Mapping[int, type[LkCommand]]] = MappingProxyType(
 
 
 def _reply_table(revision: Revision) -> dict[int, type[LkReply]]:
+    # The reply of each request of the revision: the one of its declared reply types the revision has.
     # 0x280's replies are 0xA1 replies (spec §5), and 0xA1 is a request of both revisions.
-    answered = set(REQUESTS[revision])
     table: dict[int, type[LkReply]] = {}
-    for cls, codes in REPLY_LAYOUTS:
-        if revision not in cls.REVISIONS:
-            continue
-        for code in codes & answered:
-            if code in table:  # pragma: no cover - a table error, caught at import
-                raise AssertionError(f"0x{code:02X}: {table[code].__name__} and {cls.__name__}")
-            table[code] = cls
+    for code, cls in REQUESTS[revision].items():
+        replies = [r for r in cls.reply_types() if issubclass(r, LkReply) and revision in r.REVISIONS]
+        if len(replies) != 1:  # pragma: no cover - a declaration error, caught at import
+            raise AssertionError(f"{cls.__name__}: {len(replies)} reply layouts in {revision.name}")
+        table[code] = replies[0]
     return table
 
 

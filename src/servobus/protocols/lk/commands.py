@@ -2,33 +2,48 @@
 
 Set-point commands (0xA0..0xA8, 0x280) are in :mod:`~servobus.protocols.lk.commands_control`,
 parameter commands (0x40/0x42/0x44, 0xC0/0xC1) in :mod:`~servobus.protocols.lk.params`.
-Spec sections are cited per class; [001] = V2.36 manual, [003] = V2.35 manual.
+Spec sections are cited per class; [001] = V2.36 manual, [003] = V2.35 manual. Each class states its
+reply (the type argument), whether it only reads (``READ``), writes ROM or moves the brake
+(``SLOW``), and the revisions that have it; everything else is derived from that.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar, Self
+from typing import ClassVar
 
 from servobus.protocols._fields import ScaledField
 from servobus.protocols.lk._base import (
     V2_35_ONLY,
     V2_36_ONLY,
+    EncoderCountField,
     LkCommand,
-    build,
-    check_encoder_count,
-    enum_byte,
-    expect,
-    payload,
+    MemberField,
 )
-from servobus.protocols.lk.model import DEFAULT_MODEL, LkModel, check_encoder_bits, check_member
+from servobus.protocols.lk.replies import (
+    BrakeReply,
+    EchoReply,
+    Status1Reply,
+    Status1ReplyV235,
+    Status2Reply,
+    Status3Reply,
+    Status3ReplyV235,
+)
+from servobus.protocols.lk.replies_position import (
+    AccelerationReply,
+    CalibrationReply,
+    EncoderOffsetReply,
+    EncoderReply,
+    MultiTurnAngleReply,
+    SingleTurnAngleReply,
+    SingleTurnAngleReplyV235,
+)
 from servobus.protocols.lk.states import BrakeAction
 
 __all__ = [
     "BrakeControl",
     "CalibrateEncoder",
     "ClearErrors",
-    "FixedCommand",
     "MotorOff",
     "MotorRun",
     "MotorStop",
@@ -47,117 +62,126 @@ __all__ = [
 
 ENCODER_OFFSET_AT = 6  # 0x91 / 0x19: uint16 LE in DATA[6..7] (spec §4.22, §4.23)
 ACCELERATION = ScaledField("acceleration_dps2", size=4, signed=True, counts_per_unit=1)  # spec §4.31
-
-
-class FixedCommand(LkCommand):
-    """A request whose 8 bytes are fixed: the command byte and seven NULL bytes."""
-
-    __slots__ = ()
-    CODE: ClassVar[int]
-
-    def encode(self) -> bytes:
-        return payload(self.CODE)
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        expect(data, cls.CODE, cls.__name__)
-        return cls()
+#: [001] §21: 0x18 turns the motor "for several seconds" before it replies.
+CALIBRATION_TIMEOUT_S = 10.0
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadStatus1(FixedCommand):
+class ReadStatus1(LkCommand[Status1Reply | Status1ReplyV235]):
     """0x9A: read temperature, voltage (V2.36: bus current, motor state) and error flags (spec §4.1)."""
 
     CODE: ClassVar[int] = 0x9A
+    READ = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ClearErrors(FixedCommand):
-    """0x9B: clear the error flags; they stay set while the fault persists (spec §4.2)."""
+class ClearErrors(LkCommand[Status1Reply | Status1ReplyV235]):
+    """0x9B: clear the error flags; they stay set while the fault persists (spec §4.2).
+
+    The reply is the status-1 layout; [003] prints its DATA[0] as 0x9A (A4), which V2.35 accepts.
+    """
 
     CODE: ClassVar[int] = 0x9B
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadStatus2(FixedCommand):
+class ReadStatus2(LkCommand[Status2Reply]):
     """0x9C: read temperature, iq (MS: power), speed and encoder (spec §4.3)."""
 
     CODE: ClassVar[int] = 0x9C
+    READ = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadStatus3(FixedCommand):
+class ReadStatus3(LkCommand[Status3Reply | Status3ReplyV235]):
     """0x9D: read the phase currents ([001]: no effect on MS) (spec §4.4)."""
 
     CODE: ClassVar[int] = 0x9D
+    READ = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class MotorOff(FixedCommand):
-    """0x80: motor off; clears the turn count and the last control command; reply is an echo (spec §4.5)."""
+class MotorOff(LkCommand[EchoReply]):
+    """0x80: motor off; clears the turn count and the last control command; reply is an echo (spec §4.5).
+
+    [001]: control commands sent while OFF are answered but not executed until 0x88.
+    """
 
     CODE: ClassVar[int] = 0x80
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class MotorStop(FixedCommand):
+class MotorStop(LkCommand[EchoReply]):
     """0x81: stop the motor without clearing its state; reply is an echo (spec §4.6)."""
 
     CODE: ClassVar[int] = 0x81
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class MotorRun(FixedCommand):
-    """0x88: V2.36 OFF -> ON; V2.35 resume after 0x81; reply is an echo (spec §4.7)."""
+class MotorRun(LkCommand[EchoReply]):
+    """0x88: V2.36 OFF -> ON; V2.35 resume after 0x81; reply is an echo (spec §4.7, D15).
+
+    The revisions differ in what it resumes: [001] only leaves OFF, [003] restarts the control
+    command that 0x81 stopped.
+    """
 
     CODE: ClassVar[int] = 0x88
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadEncoder(FixedCommand):
+class ReadEncoder(LkCommand[EncoderReply]):
     """0x90: read encoder position, raw position and zero offset (spec §4.20)."""
 
     CODE: ClassVar[int] = 0x90
+    READ = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class CalibrateEncoder(FixedCommand):
+class CalibrateEncoder(LkCommand[CalibrationReply]):
     """0x18, V2.36 only: calibrate the encoder (writes ROM; replies after several seconds) (spec §4.21)."""
 
     CODE: ClassVar[int] = 0x18
     REVISIONS = V2_36_ONLY
+    SLOW = True
+    TIMEOUT_S = CALIBRATION_TIMEOUT_S
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class SetZeroRom(FixedCommand):
-    """0x19: current position becomes the zero after the next power cycle (writes ROM) (spec §4.22)."""
+class SetZeroRom(LkCommand[EncoderOffsetReply]):
+    """0x19: current position becomes the zero after the next power cycle (writes ROM) (spec §4.22).
+
+    The reply carries the new offset; it takes effect only after a power cycle.
+    """
 
     CODE: ClassVar[int] = 0x19
+    SLOW = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadMultiTurnAngle(FixedCommand):
+class ReadMultiTurnAngle(LkCommand[MultiTurnAngleReply]):
     """0x92: read the multi-turn angle (spec §4.24)."""
 
     CODE: ClassVar[int] = 0x92
+    READ = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadSingleTurnAngle(FixedCommand):
-    """0x94: read the single-turn angle (reply layout differs per revision) (spec §4.25)."""
+class ReadSingleTurnAngle(LkCommand[SingleTurnAngleReply | SingleTurnAngleReplyV235]):
+    """0x94: read the single-turn angle (the reply layout differs per revision, D9) (spec §4.25)."""
 
     CODE: ClassVar[int] = 0x94
+    READ = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class SetZeroRam(FixedCommand):
+class SetZeroRam(LkCommand[EchoReply]):
     """0x95: current position becomes zero in RAM ([001]: then motor-stop state); echo (spec §4.26)."""
 
     CODE: ClassVar[int] = 0x95
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadAcceleration(FixedCommand):
+class ReadAcceleration(LkCommand[AccelerationReply]):
     """0x33, V2.35 only: read acceleration. **Inferred layout** (spec §4.30, A18).
 
     [003] lists 0x33 but its section 4.4 is missing from the OCR text. We send the fixed request
@@ -167,10 +191,11 @@ class ReadAcceleration(FixedCommand):
 
     CODE: ClassVar[int] = 0x33
     REVISIONS = V2_35_ONLY
+    READ = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class BrakeControl(LkCommand):
+class BrakeControl(LkCommand[BrakeReply]):
     """0x8C, V2.36 only: engage or release the holding brake, or read its state (spec §4.8).
 
     Attributes:
@@ -179,22 +204,13 @@ class BrakeControl(LkCommand):
 
     CODE: ClassVar[int] = 0x8C
     REVISIONS = V2_36_ONLY
+    SLOW = True
+    FIELDS = ((1, MemberField("action", BrakeAction)),)
     action: BrakeAction
-
-    def __post_init__(self) -> None:
-        check_member("action", self.action, BrakeAction)
-
-    def encode(self) -> bytes:
-        return payload(self.CODE, (1, bytes([self.action])))
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        expect(data, cls.CODE, cls.__name__)
-        return build(cls, data, action=enum_byte(BrakeAction, data, 1, what=cls.__name__))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class WriteEncoderOffset(LkCommand):
+class WriteEncoderOffset(LkCommand[EncoderOffsetReply]):
     """0x91, V2.35 only: set the encoder zero offset (spec §4.23; RAM or ROM not stated, A21).
 
     Attributes:
@@ -204,25 +220,15 @@ class WriteEncoderOffset(LkCommand):
 
     CODE: ClassVar[int] = 0x91
     REVISIONS = V2_35_ONLY
+    SLOW = True
+    MODEL = ("encoder_bits",)
+    MODEL_FIELDS = ((ENCODER_OFFSET_AT, EncoderCountField("offset_counts")),)
     offset_counts: int
     encoder_bits: int
 
-    def __post_init__(self) -> None:
-        check_encoder_bits(self.encoder_bits)
-        check_encoder_count("offset_counts", self.offset_counts, self.encoder_bits)
-
-    def encode(self) -> bytes:
-        return payload(self.CODE, (ENCODER_OFFSET_AT, self.offset_counts.to_bytes(2, "little")))
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        expect(data, cls.CODE, cls.__name__)
-        offset = int.from_bytes(data[ENCODER_OFFSET_AT : ENCODER_OFFSET_AT + 2], "little")
-        return build(cls, data, offset_counts=offset, encoder_bits=model.encoder_bits)
-
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class WriteAcceleration(LkCommand):
+class WriteAcceleration(LkCommand[AccelerationReply]):
     """0x34, V2.35 only: write the acceleration limit to RAM; reply is an echo (spec §4.31).
 
     Attributes:
@@ -231,15 +237,6 @@ class WriteAcceleration(LkCommand):
 
     CODE: ClassVar[int] = 0x34
     REVISIONS = V2_35_ONLY
+    ECHO = True
+    FIELDS = ((4, ACCELERATION),)
     acceleration_dps2: float
-
-    def __post_init__(self) -> None:
-        ACCELERATION.check(self.acceleration_dps2)
-
-    def encode(self) -> bytes:
-        return payload(self.CODE, (4, ACCELERATION.encode(self.acceleration_dps2)))
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        expect(data, cls.CODE, cls.__name__)
-        return build(cls, data, acceleration_dps2=ACCELERATION.decode(data, 4))

@@ -25,8 +25,8 @@ from typing import Any, ClassVar, Self, TypeAlias
 
 from servobus.errors import ProtocolError
 from servobus.protocols._fields import IntField
-from servobus.protocols._message import Message
-from servobus.protocols.lk._base import build, check_command, enum_byte, expect, payload
+from servobus.protocols._message import Message, require_length
+from servobus.protocols.lk._base import FRAME_LENGTH, MemberField, check_command
 from servobus.protocols.lk.model import DEFAULT_MODEL, LkModel, check_member
 from servobus.protocols.lk.states import ParamResult
 
@@ -43,15 +43,14 @@ __all__ = [
     "ParamMessage",
     "ParamValue",
     "PidGains",
+    "ResultField",
     "Rs485Baud",
     "SettingParam",
     "ValueLayout",
     "check_value",
-    "decode_result",
     "decode_setting_address",
     "max_angle_from_halves",
     "max_angle_halves",
-    "result_byte",
     "setting_address",
 ]
 
@@ -242,7 +241,8 @@ class _Choice(ValueLayout):
         return self.offset, bytes([value])
 
     def decode(self, data: bytes, *, what: str) -> ParamValue:
-        return enum_byte(self.enum_cls, data, self.offset, what=what)
+        member: ParamValue = MemberField(what, self.enum_cls).decode(data, self.offset)
+        return member
 
 
 _INT32_MAX = 2**31 - 1
@@ -340,49 +340,59 @@ SAVE_RESULT = {0x01: ParamResult.SUCCESS, 0x00: ParamResult.FAILURE}
 WRITE_RESULT_V235 = {0x00: ParamResult.SUCCESS, 0x01: ParamResult.FAILURE}
 
 
-def result_byte(table: Mapping[int, ParamResult], result: ParamResult) -> bytes:
-    """The status byte that means ``result`` under ``table`` (SAVE_RESULT or WRITE_RESULT_V235)."""
-    return bytes([next(byte for byte, r in table.items() if r is result)])
+@dataclass(frozen=True, slots=True)
+class ResultField:
+    """A status byte read through ``table`` (SAVE_RESULT or WRITE_RESULT_V235) as a ParamResult."""
 
+    name: str
+    table: Mapping[int, ParamResult]
+    size: int = 1
 
-def decode_result(table: Mapping[int, ParamResult], data: bytes, *, what: str) -> ParamResult:
-    """DATA[2] as a named result under ``table``.
+    def check(self, value: Any) -> None:
+        check_member(self.name, value, ParamResult)
 
-    Raises:
-        ProtocolError: DATA[2] is neither of the table's two bytes.
-    """
-    try:
-        return table[data[2]]
-    except KeyError:
-        raise ProtocolError(
-            f"{what}: status byte DATA[2]=0x{data[2]:02X} is neither success nor failure",
-            raw=data,
-            command=data[0],
-        ) from None
+    def encode(self, value: Any) -> bytes:
+        return bytes([next(byte for byte, r in self.table.items() if r is value)])
+
+    def decode(self, data: bytes, offset: int = 0) -> ParamResult:
+        try:
+            return self.table[data[offset]]
+        except KeyError:
+            raise ValueError(
+                f"status byte DATA[{offset}]=0x{data[offset]:02X} is neither success nor failure"
+            ) from None
 
 
 class ParamMessage(Message):
     """The shared body of every parameter frame: ``cmd | key [| value]`` (spec §13).
 
-    The three parameter schemes (V2.36 control parameters, V2.36 settings, V2.35 ParamIDs) differ
-    only in their key enum (``PARAMS``), how the key is written (:meth:`_encode_key` and
-    :meth:`_decode_key`, overridden for two-byte keys) and their value layouts (``LAYOUTS``; None
-    for a read request, which carries the key alone). The command byte is the class's ``CODE``, or
-    for a reply that answers several requests its ``command`` field, one of ``COMMANDS``.
-    A message class sets these and declares its fields; checking, encoding and decoding are here.
+    Not a fixed layout: where the value sits and what it is depends on the parameter named in the
+    frame, so the value layouts are tables by parameter (``LAYOUTS``) instead of ``FIELDS``. The three
+    parameter schemes (V2.36 control parameters, V2.36 settings, V2.35 ParamIDs) differ only in their
+    key enum (``PARAMS``), how the key is written (:meth:`_encode_key` and :meth:`_decode_key`,
+    overridden for two-byte keys) and their value layouts (``LAYOUTS``; None for a read request, which
+    carries the key alone). The command byte is the class's ``CODE``, or for a reply that answers
+    several requests (``CODE`` None) its ``command`` field, one of the bytes of the commands that
+    declare it as their reply. A message class sets these and declares its fields; checking,
+    encoding and decoding are here.
     """
 
     __slots__ = ()
-    COMMANDS: ClassVar[tuple[int, ...]] = ()
     PARAMS: ClassVar[type[enum.IntEnum]]
     LAYOUTS: ClassVar[Mapping[Any, ValueLayout] | None] = None
     command: int
     param: Any
     value: ParamValue
 
+    @classmethod
+    def _codes(cls) -> frozenset[int]:
+        if cls.CODE is not None:
+            return frozenset({cls.CODE})
+        return cls.answers()  # type: ignore[attr-defined, no-any-return]
+
     def __post_init__(self) -> None:
-        if self.COMMANDS:
-            check_command(self.command, self.COMMANDS)
+        if self.CODE is None:
+            check_command(self.command, self._codes())
         check_member("param", self.param, self.PARAMS)
         if self.LAYOUTS is not None:
             check_value(self.param, self.value, self.LAYOUTS)
@@ -393,26 +403,32 @@ class ParamMessage(Message):
 
     @classmethod
     def _decode_key(cls, data: bytes, what: str) -> Any:
-        return enum_byte(cls.PARAMS, data, 1, what=what)
+        return MemberField("param", cls.PARAMS).decode(data, 1)
 
     def encode(self) -> bytes:
-        code = self.command if self.COMMANDS else self.CODE
-        assert code is not None  # every parameter message has a command byte
-        key = (1, self._encode_key(self.param))
-        if self.LAYOUTS is None:
-            return payload(code, key)
-        return payload(code, key, self.LAYOUTS[self.param].encode(self.value))
+        buf = bytearray(FRAME_LENGTH)
+        buf[0] = self.command if self.CODE is None else self.CODE
+        key = self._encode_key(self.param)
+        buf[1 : 1 + len(key)] = key
+        if self.LAYOUTS is not None:  # a PID layout from DATA[2] overwrites a setting's zero 2nd key byte
+            offset, value = self.LAYOUTS[self.param].encode(self.value)
+            buf[offset : offset + len(value)] = value
+        return bytes(buf)
 
     @classmethod
     def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
         what = cls.__name__
-        codes = cls.COMMANDS if cls.COMMANDS else cls.CODE
-        assert codes is not None
-        command = expect(data, codes, what)
-        param = cls._decode_key(data, what)
-        fields: dict[str, object] = {"param": param}
-        if cls.COMMANDS:
-            fields["command"] = command
-        if cls.LAYOUTS is not None:
-            fields["value"] = cls.LAYOUTS[param].decode(data, what=what)
-        return build(cls, data, **fields)
+        require_length(data, FRAME_LENGTH, what=what)
+        codes = cls._codes()
+        if data[0] not in codes:
+            expected = " or ".join(f"0x{c:02X}" for c in sorted(codes))
+            raise ProtocolError(f"{what}: command byte is not {expected}", raw=data, command=data[0])
+        try:
+            fields: dict[str, object] = {"param": cls._decode_key(data, what)}
+            if cls.CODE is None:
+                fields["command"] = data[0]
+            if cls.LAYOUTS is not None:
+                fields["value"] = cls.LAYOUTS[fields["param"]].decode(data, what=what)
+            return cls(**fields)
+        except ValueError as exc:
+            raise ProtocolError(f"{what}: {exc}", raw=data, command=data[0]) from None

@@ -7,27 +7,16 @@ written, 0x01 = failed (the opposite of V2.36's save flag; spec §7.7).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar, Self
+from typing import ClassVar
 
-from servobus.protocols.lk._base import (
-    V2_35_ONLY,
-    LkCommand,
-    LkReply,
-    build,
-    check_command,
-    enum_byte,
-    expect,
-    payload,
-)
-from servobus.protocols.lk.model import DEFAULT_MODEL, LkModel, check_member
+from servobus.protocols.lk._base import V2_35_ONLY, CommandField, LkCommand, LkReply, MemberField
 from servobus.protocols.lk.params import (
     PARAM_LAYOUTS,
     WRITE_RESULT_V235,
     ParamId,
     ParamMessage,
     ParamValue,
-    decode_result,
-    result_byte,
+    ResultField,
 )
 from servobus.protocols.lk.states import ParamResult
 
@@ -40,25 +29,12 @@ __all__ = [
 ]
 
 
-# ---- V2.35 ParamID (0x40 / 0x42 / 0x44) ------------------------------------------------------
-
-
 class _ParamMessage(ParamMessage):
     """V2.35 0x40 replies and 0x42/0x44 requests: ``cmd | ParamID | value``."""
 
     __slots__ = ()
     PARAMS = ParamId
     LAYOUTS = PARAM_LAYOUTS
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class ReadParam(ParamMessage, LkCommand):
-    """0x40, V2.35 layout: read a parameter, ``40 | ParamID | 00..`` (spec §4.27; worked example W4)."""
-
-    CODE: ClassVar[int] = 0x40
-    REVISIONS = V2_35_ONLY
-    PARAMS = ParamId
-    param: ParamId
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -77,26 +53,6 @@ class ParamReply(_ParamMessage, LkReply):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class WriteParamRam(_ParamMessage, LkCommand):
-    """0x42, V2.35 layout: write one parameter to RAM, lost at power-off (spec §4.28, §6.3)."""
-
-    CODE: ClassVar[int] = 0x42
-    REVISIONS = V2_35_ONLY
-    param: ParamId
-    value: ParamValue
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class WriteParamRom(_ParamMessage, LkCommand):
-    """0x44, V2.35 layout: write one parameter to ROM, kept over power-off (spec §4.29, §6.3)."""
-
-    CODE: ClassVar[int] = 0x44
-    REVISIONS = V2_35_ONLY
-    param: ParamId
-    value: ParamValue
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
 class ParamWriteReply(LkReply):
     """0x42/0x44 reply, V2.35 layout ``cmd | ParamID | status``: 0x00 = written, 0x01 = failed (spec §7.7).
 
@@ -107,29 +63,41 @@ class ParamWriteReply(LkReply):
     """
 
     REVISIONS = V2_35_ONLY
+    FIELDS = ((1, MemberField("param", ParamId)), (2, ResultField("result", WRITE_RESULT_V235)))
+    MODEL_FIELDS = ((0, CommandField()),)
     command: int
     param: ParamId
     result: ParamResult
-
-    def __post_init__(self) -> None:
-        check_command(self.command, (0x42, 0x44))
-        check_member("param", self.param, ParamId)
-        check_member("result", self.result, ParamResult)
 
     @property
     def ok(self) -> bool:
         return self.result is ParamResult.SUCCESS
 
-    def encode(self) -> bytes:
-        return payload(self.command, (1, bytes([self.param]) + result_byte(WRITE_RESULT_V235, self.result)))
 
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        command = expect(data, (0x42, 0x44), cls.__name__)
-        return build(
-            cls,
-            data,
-            command=command,
-            param=enum_byte(ParamId, data, 1, what=cls.__name__),
-            result=decode_result(WRITE_RESULT_V235, data, what=cls.__name__),
-        )
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReadParam(ParamMessage, LkCommand[ParamReply]):
+    """0x40, V2.35 layout: read a parameter, ``40 | ParamID | 00..`` (spec §4.27; worked example W4)."""
+
+    CODE: ClassVar[int] = 0x40
+    REVISIONS = V2_35_ONLY
+    READ = True
+    PARAMS = ParamId
+    param: ParamId
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class WriteParamRam(_ParamMessage, LkCommand[ParamWriteReply]):
+    """0x42, V2.35 layout: write one parameter to RAM, lost at power-off (spec §4.28, §6.3)."""
+
+    CODE: ClassVar[int] = 0x42
+    REVISIONS = V2_35_ONLY
+    param: ParamId
+    value: ParamValue
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class WriteParamRom(WriteParamRam):
+    """0x44, V2.35 layout: write one parameter to ROM, kept over power-off (spec §4.29, §6.3)."""
+
+    CODE: ClassVar[int] = 0x44
+    SLOW = True

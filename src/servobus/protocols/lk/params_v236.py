@@ -7,18 +7,9 @@ address bytes, saved all at once by ``44 05 FA``, whose reply says 0x01 = saved;
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar, Self
+from typing import ClassVar
 
-from servobus.errors import ProtocolError
-from servobus.protocols.lk._base import (
-    V2_36_ONLY,
-    LkCommand,
-    LkReply,
-    build,
-    expect,
-    payload,
-)
-from servobus.protocols.lk.model import DEFAULT_MODEL, LkModel, check_member
+from servobus.protocols.lk._base import V2_36_ONLY, LkCommand, LkReply
 from servobus.protocols.lk.params import (
     CONTROL_LAYOUTS,
     SAVE_RESULT,
@@ -26,10 +17,9 @@ from servobus.protocols.lk.params import (
     ControlParam,
     ParamMessage,
     ParamValue,
+    ResultField,
     SettingParam,
-    decode_result,
     decode_setting_address,
-    result_byte,
     setting_address,
 )
 from servobus.protocols.lk.states import ParamResult
@@ -58,31 +48,6 @@ class _ControlMessage(ParamMessage):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadControlParam(ParamMessage, LkCommand):
-    """0xC0, V2.36 only: read a control parameter from RAM (spec §4.18)."""
-
-    CODE: ClassVar[int] = 0xC0
-    REVISIONS = V2_36_ONLY
-    PARAMS = ControlParam
-    param: ControlParam
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class WriteControlParam(_ControlMessage, LkCommand):
-    """0xC1, V2.36 only: write a control parameter to RAM, effective at once (spec §4.19, §6.1).
-
-    Attributes:
-        param: which parameter.
-        value: :class:`PidGains` for the PID entries, an int for the others (ranges per spec §6.1).
-    """
-
-    CODE: ClassVar[int] = 0xC1
-    REVISIONS = V2_36_ONLY
-    param: ControlParam
-    value: ParamValue
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
 class ControlParamReply(_ControlMessage, LkReply):
     """0xC0 reply (the value read) and 0xC1 reply (the value written), V2.36 only (spec §4.18, §4.19).
 
@@ -93,8 +58,36 @@ class ControlParamReply(_ControlMessage, LkReply):
     """
 
     REVISIONS = V2_36_ONLY
-    COMMANDS = (0xC0, 0xC1)
     command: int
+    param: ControlParam
+    value: ParamValue
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReadControlParam(ParamMessage, LkCommand[ControlParamReply]):
+    """0xC0, V2.36 only: read a control parameter from RAM (spec §4.18)."""
+
+    CODE: ClassVar[int] = 0xC0
+    REVISIONS = V2_36_ONLY
+    READ = True
+    PARAMS = ControlParam
+    param: ControlParam
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class WriteControlParam(_ControlMessage, LkCommand[ControlParamReply]):
+    """0xC1, V2.36 only: write a control parameter to RAM, effective at once (spec §4.19, §6.1).
+
+    The reply echoes the value written, which keys it (``ECHO``).
+
+    Attributes:
+        param: which parameter.
+        value: :class:`PidGains` for the PID entries, an int for the others (ranges per spec §6.1).
+    """
+
+    CODE: ClassVar[int] = 0xC1
+    REVISIONS = V2_36_ONLY
+    ECHO = True
     param: ControlParam
     value: ParamValue
 
@@ -128,16 +121,33 @@ class _SettingMessage(_SettingKey):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadSetting(_SettingKey, LkCommand):
+class SettingReply(_SettingMessage, LkReply):
+    """0x40 reply (value read) and 0x42 reply (value written), V2.36 layout (spec §4.27, §4.28).
+
+    Attributes:
+        command: 0x40 or 0x42.
+        param: which parameter.
+        value: as for :class:`WriteSetting`.
+    """
+
+    REVISIONS = V2_36_ONLY
+    command: int
+    param: SettingParam
+    value: ParamValue
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ReadSetting(_SettingKey, LkCommand[SettingReply]):
     """0x40, V2.36 layout: read a setting parameter, ``40 | addr1 | addr2 | 00..`` (spec §4.27)."""
 
     CODE: ClassVar[int] = 0x40
     REVISIONS = V2_36_ONLY
+    READ = True
     param: SettingParam
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class WriteSetting(_SettingMessage, LkCommand):
+class WriteSetting(_SettingMessage, LkCommand[SettingReply]):
     """0x42, V2.36 layout: write a setting parameter; saved to ROM only by 0x44 (spec §4.28).
 
     Attributes:
@@ -152,47 +162,6 @@ class WriteSetting(_SettingMessage, LkCommand):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class SettingReply(_SettingMessage, LkReply):
-    """0x40 reply (value read) and 0x42 reply (value written), V2.36 layout (spec §4.27, §4.28).
-
-    Attributes:
-        command: 0x40 or 0x42.
-        param: which parameter.
-        value: as for :class:`WriteSetting`.
-    """
-
-    REVISIONS = V2_36_ONLY
-    COMMANDS = (0x40, 0x42)
-    command: int
-    param: SettingParam
-    value: ParamValue
-
-
-_SAVE_ADDRESS = bytes([0x05, 0xFA])  # spec §4.29: request 44 05 FA, reply 44 05 flag
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class SaveSettings(LkCommand):
-    """0x44, V2.36 layout: save every written setting to ROM, ``44 05 FA 00 ..`` (spec §4.29).
-
-    The drive needs a power cycle (or the restart command [001] mentions but does not document).
-    """
-
-    CODE: ClassVar[int] = 0x44
-    REVISIONS = V2_36_ONLY
-
-    def encode(self) -> bytes:
-        return payload(self.CODE, (1, _SAVE_ADDRESS))
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        expect(data, cls.CODE, cls.__name__)
-        if data[1:3] != _SAVE_ADDRESS:
-            raise ProtocolError(f"{cls.__name__}: DATA[1..2] must be 05 FA", raw=data, command=data[0])
-        return cls()
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
 class SaveSettingsReply(LkReply):
     """0x44 reply, V2.36 layout ``44 05 flag``: 0x01 = saved, 0x00 = failed (spec §4.29, §7.7).
 
@@ -204,21 +173,23 @@ class SaveSettingsReply(LkReply):
 
     CODE: ClassVar[int] = 0x44
     REVISIONS = V2_36_ONLY
+    CONSTANTS = ((1, 0x05),)
+    FIELDS = ((2, ResultField("result", SAVE_RESULT)),)
     result: ParamResult
-
-    def __post_init__(self) -> None:
-        check_member("result", self.result, ParamResult)
 
     @property
     def ok(self) -> bool:
         return self.result is ParamResult.SUCCESS
 
-    def encode(self) -> bytes:
-        return payload(self.CODE, (1, b"\x05" + result_byte(SAVE_RESULT, self.result)))
 
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        expect(data, cls.CODE, cls.__name__)
-        if data[1] != 0x05:
-            raise ProtocolError(f"{cls.__name__}: DATA[1] must be 0x05", raw=data, command=data[0])
-        return build(cls, data, result=decode_result(SAVE_RESULT, data, what=cls.__name__))
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SaveSettings(LkCommand[SaveSettingsReply]):
+    """0x44, V2.36 layout: save every written setting to ROM, ``44 05 FA 00 ..`` (spec §4.29).
+
+    The drive needs a power cycle (or the restart command [001] mentions but does not document).
+    """
+
+    CODE: ClassVar[int] = 0x44
+    REVISIONS = V2_36_ONLY
+    SLOW = True
+    CONSTANTS = ((1, 0x05), (2, 0xFA))

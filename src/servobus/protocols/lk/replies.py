@@ -3,7 +3,8 @@
 Encoder, zero, angle and acceleration replies are in :mod:`~servobus.protocols.lk.replies_position`,
 parameter replies in :mod:`~servobus.protocols.lk.params_v236` / ``params_v235``. Where
 several command bytes share a layout (echoes; the status-2 shape of 0x9C and 0xA0..0xA8; 0x9A and
-0x9B; 0x19 and 0x91; 0x33 and 0x34) one class serves them and carries the byte as ``command``.
+0x9B; 0x19 and 0x91; 0x33 and 0x34) one class serves them and carries the byte as ``command``; the
+bytes it accepts are those of the commands that declare it as their reply (:meth:`LkReply.answers`).
 Where a layout differs between revisions (0x9A/0x9B, 0x9D, 0x94) the V2.35 class has the ``V235``
 suffix. Values whose scale depends on the motor type or encoder width carry ``motor_type`` /
 ``encoder_bits`` as fields, so every reply encodes by itself (the simulator encodes replies).
@@ -19,37 +20,28 @@ revisions (spec A24): the manuals give it three different ranges, and motors rep
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar, Self
+from types import MappingProxyType
+from typing import ClassVar
 
 from servobus.errors import ProtocolError
 from servobus.protocols._fields import IntField, ScaledField
 from servobus.protocols.lk._base import (
     V2_35_ONLY,
     V2_36_ONLY,
+    CommandField,
+    EncoderCountField,
+    FlagByteField,
+    IqField,
     IqSlot,
     LkReply,
-    build,
-    check_command,
-    check_encoder_count,
-    enum_byte,
-    expect,
-    payload,
+    MemberField,
+    TupleField,
 )
-from servobus.protocols.lk.model import (
-    DEFAULT_MODEL,
-    LkModel,
-    MotorType,
-    Revision,
-    check_encoder_bits,
-    check_member,
-    encoder_counts_per_turn,
-)
+from servobus.protocols.lk.model import LkModel, MotorType, Revision, encoder_counts_per_turn
 from servobus.protocols.lk.states import BrakeState, ErrorState, ErrorStateV235, MotorState
 
 __all__ = [
-    "ECHO_CODES",
     "OPEN_LOOP_REPLY",
-    "STATUS2_CODES",
     "BrakeReply",
     "EchoReply",
     "Status1Reply",
@@ -61,9 +53,6 @@ __all__ = [
     "torque_range",
 ]
 
-ECHO_CODES = frozenset({0x80, 0x81, 0x88, 0x95})
-STATUS1_CODES = frozenset({0x9A, 0x9B})
-STATUS2_CODES = frozenset({0x9C, 0xA0, 0xA1, 0xA2, 0xA3, 0xA4, 0xA5, 0xA6, 0xA7, 0xA8})
 OPEN_LOOP_CODE = 0xA0
 
 TEMPERATURE = IntField("temperature_c", size=1, signed=True)  # int8, 1 °C/LSB (spec §2, A25)
@@ -87,6 +76,7 @@ OPEN_LOOP_REPLY = IqSlot(
     max_counts=0x7FFF,
     min_counts=-0x8000,
     in_amps=False,
+    note="0xA0 reply (DATA[2..3] is power, spec §4.9)",
 )
 # Spec §4.4 [001]: phase currents MG 66/4096, MF 33/4096 A/LSB (= the iq scales); MS "no effect",
 # MH not stated: raw.
@@ -97,6 +87,7 @@ PHASE = IqSlot(
     min_counts=-0x8000,
 )
 PHASE_V235 = ScaledField("currents_a", size=2, signed=True, counts_per_unit=64)  # [003]: 1/64 A/LSB
+_PHASES = ("A", "B", "C")
 
 
 def status2_slot(command: int) -> IqSlot:
@@ -122,33 +113,6 @@ def torque_range(revision: Revision, motor_type: MotorType, command: int) -> tup
     return None
 
 
-def _check_torque_range(data: bytes, model: LkModel, what: str) -> None:
-    limits = torque_range(model.revision, model.motor_type, data[0])
-    counts = _i16(data, 2)
-    if limits is not None and not limits[0] <= counts <= limits[1]:
-        values = status2_slot(data[0]).from_counts(model.motor_type, counts)
-        named = [(k, v) for k, v in values.items() if v is not None]
-        name, value = named[0] if named else ("iq_counts", counts)
-        raise ProtocolError(
-            f"{what}: {name}={value!r} ({counts} counts) is outside [{limits[0]}, {limits[1]}] counts "
-            f"({model.revision.name}, {model.motor_type.name})",
-            raw=data,
-            command=data[0],
-        )
-
-
-def _u16(data: bytes, offset: int) -> int:
-    return int.from_bytes(data[offset : offset + 2], "little")
-
-
-def _i16(data: bytes, offset: int) -> int:
-    return int.from_bytes(data[offset : offset + 2], "little", signed=True)
-
-
-def _check_command(value: int, codes: frozenset[int]) -> None:
-    check_command(value, codes)
-
-
 @dataclass(frozen=True, slots=True, kw_only=True)
 class EchoReply(LkReply):
     """Reply to 0x80, 0x81, 0x88, 0x95: the request's bytes echoed (spec §1.1 rule 3).
@@ -157,17 +121,8 @@ class EchoReply(LkReply):
         command: 0x80 (off), 0x81 (stop), 0x88 (run) or 0x95 (zero in RAM).
     """
 
+    MODEL_FIELDS = ((0, CommandField()),)
     command: int
-
-    def __post_init__(self) -> None:
-        _check_command(self.command, ECHO_CODES)
-
-    def encode(self) -> bytes:
-        return payload(self.command)
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        return build(cls, data, command=expect(data, ECHO_CODES, cls.__name__))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -185,43 +140,20 @@ class Status1Reply(LkReply):
 
     REVISIONS = V2_36_ONLY
     FAULTS: ClassVar[str | None] = "error_state"
+    FIELDS = (
+        (1, TEMPERATURE),
+        (2, VOLTAGE),
+        (4, BUS_CURRENT),
+        (6, MemberField("motor_state", MotorState)),
+        (7, FlagByteField("error_state", ErrorState)),
+    )
+    MODEL_FIELDS = ((0, CommandField()),)
     command: int
     temperature_c: int
     voltage_v: float
     current_a: float
     motor_state: MotorState
     error_state: ErrorState
-
-    def __post_init__(self) -> None:
-        _check_command(self.command, STATUS1_CODES)
-        TEMPERATURE.check(self.temperature_c)
-        VOLTAGE.check(self.voltage_v)
-        BUS_CURRENT.check(self.current_a)
-        check_member("motor_state", self.motor_state, MotorState)
-        check_member("error_state", self.error_state, ErrorState)
-
-    def encode(self) -> bytes:
-        return payload(
-            self.command,
-            (1, TEMPERATURE.encode(self.temperature_c)),
-            (2, VOLTAGE.encode(self.voltage_v)),
-            (4, BUS_CURRENT.encode(self.current_a)),
-            (6, bytes([self.motor_state, self.error_state])),
-        )
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        command = expect(data, STATUS1_CODES, cls.__name__)
-        return build(
-            cls,
-            data,
-            command=command,
-            temperature_c=TEMPERATURE.decode(data, 1),
-            voltage_v=VOLTAGE.decode(data, 2),
-            current_a=BUS_CURRENT.decode(data, 4),
-            motor_state=enum_byte(MotorState, data, 6, what=cls.__name__),
-            error_state=ErrorState(data[7]),
-        )
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -240,36 +172,12 @@ class Status1ReplyV235(LkReply):
 
     REVISIONS = V2_35_ONLY
     FAULTS: ClassVar[str | None] = "error_state"
+    FIELDS = ((1, TEMPERATURE), (3, VOLTAGE_V235), (7, FlagByteField("error_state", ErrorStateV235)))
+    MODEL_FIELDS = ((0, CommandField()),)
     command: int
     temperature_c: int
     voltage_v: float
     error_state: ErrorStateV235
-
-    def __post_init__(self) -> None:
-        _check_command(self.command, STATUS1_CODES)
-        TEMPERATURE.check(self.temperature_c)
-        VOLTAGE_V235.check(self.voltage_v)
-        check_member("error_state", self.error_state, ErrorStateV235)
-
-    def encode(self) -> bytes:
-        return payload(
-            self.command,
-            (1, TEMPERATURE.encode(self.temperature_c)),
-            (3, VOLTAGE_V235.encode(self.voltage_v)),
-            (7, bytes([self.error_state])),
-        )
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        command = expect(data, STATUS1_CODES, cls.__name__)
-        return build(
-            cls,
-            data,
-            command=command,
-            temperature_c=TEMPERATURE.decode(data, 1),
-            voltage_v=VOLTAGE_V235.decode(data, 3),
-            error_state=ErrorStateV235(data[7]),
-        )
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -294,6 +202,13 @@ class Status2Reply(LkReply):
         iq_counts: MH iq as raw counts (scale not stated, A23).
     """
 
+    MODEL = ("motor_type", "encoder_bits")
+    FIELDS = ((1, TEMPERATURE), (4, REPLY_SPEED))
+    MODEL_FIELDS = (
+        (0, CommandField()),
+        (2, IqField(REPLY_IQ, by_command=MappingProxyType({OPEN_LOOP_CODE: OPEN_LOOP_REPLY}))),
+        (6, EncoderCountField("encoder_counts")),
+    )
     command: int
     motor_type: MotorType
     encoder_bits: int
@@ -304,53 +219,26 @@ class Status2Reply(LkReply):
     power_counts: int | None = None
     iq_counts: int | None = None
 
-    def __post_init__(self) -> None:
-        _check_command(self.command, STATUS2_CODES)
-        check_member("motor_type", self.motor_type, MotorType)
-        check_encoder_bits(self.encoder_bits)
-        TEMPERATURE.check(self.temperature_c)
-        REPLY_SPEED.check(self.speed_dps)
-        check_encoder_count("encoder_counts", self.encoder_counts, self.encoder_bits)
-        self._iq_counts()
-
-    def _iq_counts(self) -> int:
-        values = {"current_a": self.current_a, "power_counts": self.power_counts, "iq_counts": self.iq_counts}
-        if self.command != OPEN_LOOP_CODE:
-            return REPLY_IQ.to_counts(self.motor_type, values)
-        try:
-            return OPEN_LOOP_REPLY.to_counts(self.motor_type, values)
-        except ValueError as exc:
-            raise ValueError(f"0xA0 reply (DATA[2..3] is power, spec §4.9): {exc}") from None
-
     @property
     def encoder_deg(self) -> float:
         """The encoder position as an angle of the motor shaft in degrees (0..360)."""
         return self.encoder_counts * 360.0 / encoder_counts_per_turn(self.encoder_bits)
 
-    def encode(self) -> bytes:
-        return payload(
-            self.command,
-            (1, TEMPERATURE.encode(self.temperature_c)),
-            (2, self._iq_counts().to_bytes(2, "little", signed=True)),
-            (4, REPLY_SPEED.encode(self.speed_dps)),
-            (6, self.encoder_counts.to_bytes(2, "little")),
-        )
-
     @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        command = expect(data, STATUS2_CODES, cls.__name__)
-        _check_torque_range(data, model, cls.__name__)
-        return build(
-            cls,
-            data,
-            command=command,
-            motor_type=model.motor_type,
-            encoder_bits=model.encoder_bits,
-            temperature_c=TEMPERATURE.decode(data, 1),
-            speed_dps=REPLY_SPEED.decode(data, 4),
-            encoder_counts=_u16(data, 6),
-            **status2_slot(command).from_counts(model.motor_type, _i16(data, 2)),
-        )
+    def check_bytes(cls, data: bytes, model: LkModel) -> None:
+        """DATA[2..3] within the range the revision's manual states for it (:func:`torque_range`)."""
+        limits = torque_range(model.revision, model.motor_type, data[0])
+        counts = int.from_bytes(data[2:4], "little", signed=True)
+        if limits is not None and not limits[0] <= counts <= limits[1]:
+            values = status2_slot(data[0]).from_counts(model.motor_type, counts)
+            named = [(k, v) for k, v in values.items() if v is not None]
+            name, value = named[0] if named else ("iq_counts", counts)
+            raise ProtocolError(
+                f"{cls.__name__}: {name}={value!r} ({counts} counts) is outside [{limits[0]}, {limits[1]}]"
+                f" counts ({model.revision.name}, {model.motor_type.name})",
+                raw=data,
+                command=data[0],
+            )
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -367,46 +255,13 @@ class Status3Reply(LkReply):
 
     CODE: ClassVar[int] = 0x9D
     REVISIONS = V2_36_ONLY
+    MODEL = ("motor_type",)
+    FIELDS = ((1, TEMPERATURE),)
+    MODEL_FIELDS = ((2, IqField(PHASE, "phase", _PHASES)),)
     motor_type: MotorType
     temperature_c: int
     currents_a: tuple[float, float, float] | None = None
     currents_counts: tuple[int, int, int] | None = None
-
-    def __post_init__(self) -> None:
-        check_member("motor_type", self.motor_type, MotorType)
-        TEMPERATURE.check(self.temperature_c)
-        self._counts()
-
-    def _counts(self) -> list[int]:
-        for name in ("currents_a", "currents_counts"):
-            value = getattr(self, name)
-            if value is not None and (not isinstance(value, tuple) or len(value) != 3):
-                raise ValueError(f"{name}={value!r} is not a tuple of 3 values (iA, iB, iC)")
-        amps = self.currents_a or (None, None, None)
-        raw = self.currents_counts or (None, None, None)
-        counts = []
-        for phase, (current, count) in zip("ABC", zip(amps, raw, strict=True), strict=True):
-            try:
-                counts.append(
-                    PHASE.to_counts(self.motor_type, {"currents_a": current, "currents_counts": count})
-                )
-            except ValueError as exc:
-                raise ValueError(f"phase {phase}: {exc}") from None
-        return counts
-
-    def encode(self) -> bytes:
-        currents = b"".join(c.to_bytes(2, "little", signed=True) for c in self._counts())
-        return payload(self.CODE, (1, TEMPERATURE.encode(self.temperature_c)), (2, currents))
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        expect(data, cls.CODE, cls.__name__)
-        phases = [PHASE.from_counts(model.motor_type, _i16(data, i)) for i in (2, 4, 6)]
-        fields = {name: tuple(p[name] for p in phases) for name in ("currents_a", "currents_counts")}
-        values = {name: None if None in value else value for name, value in fields.items()}
-        return build(
-            cls, data, motor_type=model.motor_type, temperature_c=TEMPERATURE.decode(data, 1), **values
-        )
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -419,25 +274,8 @@ class Status3ReplyV235(LkReply):
 
     CODE: ClassVar[int] = 0x9D
     REVISIONS = V2_35_ONLY
+    FIELDS = ((2, TupleField(PHASE_V235, "phase", _PHASES)),)
     currents_a: tuple[float, float, float]
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.currents_a, tuple) or len(self.currents_a) != 3:
-            raise ValueError(f"currents_a={self.currents_a!r} is not a tuple of 3 values (iA, iB, iC)")
-        for phase, current in zip("ABC", self.currents_a, strict=True):
-            try:
-                PHASE_V235.check(current)
-            except ValueError as exc:
-                raise ValueError(f"phase {phase}: {exc}") from None
-
-    def encode(self) -> bytes:
-        return payload(self.CODE, (2, b"".join(PHASE_V235.encode(c) for c in self.currents_a)))
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        expect(data, cls.CODE, cls.__name__)
-        a, b, c = (PHASE_V235.decode(data, i) for i in (2, 4, 6))
-        return build(cls, data, currents_a=(a, b, c))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -450,15 +288,5 @@ class BrakeReply(LkReply):
 
     CODE: ClassVar[int] = 0x8C
     REVISIONS = V2_36_ONLY
+    FIELDS = ((1, MemberField("state", BrakeState)),)
     state: BrakeState
-
-    def __post_init__(self) -> None:
-        check_member("state", self.state, BrakeState)
-
-    def encode(self) -> bytes:
-        return payload(self.CODE, (1, bytes([self.state])))
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        expect(data, cls.CODE, cls.__name__)
-        return build(cls, data, state=enum_byte(BrakeState, data, 1, what=cls.__name__))

@@ -7,25 +7,20 @@ class has the ``V235`` suffix. Encoder counts must fit the declared ``encoder_bi
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar, Self
+from typing import ClassVar
 
 from servobus.protocols._fields import IntField, ScaledField
 from servobus.protocols.lk._base import (
     V2_35_ONLY,
     V2_36_ONLY,
+    CommandField,
+    EncoderCountField,
+    FlagByteField,
     LkReply,
-    build,
-    check_command,
-    check_encoder_count,
-    expect,
-    payload,
 )
-from servobus.protocols.lk.model import DEFAULT_MODEL, LkModel, check_encoder_bits, check_member
 from servobus.protocols.lk.states import AlignState
 
 __all__ = [
-    "ACCELERATION_CODES",
-    "OFFSET_CODES",
     "AccelerationReply",
     "CalibrationReply",
     "EncoderOffsetReply",
@@ -35,8 +30,6 @@ __all__ = [
     "SingleTurnAngleReplyV235",
 ]
 
-OFFSET_CODES = frozenset({0x19, 0x91})
-ACCELERATION_CODES = frozenset({0x33, 0x34})
 # int64 sent as 7 bytes (A7). A float angle round-trips through its count (count / 100 * 100) only
 # while the count stays well inside 2**53, so the range stops at ±2**48 counts (±2.8e12 degrees,
 # 7.8e9 turns); a 56-bit count beyond it is a ProtocolError rather than a silently rounded angle.
@@ -48,14 +41,6 @@ CIRCLE_V235 = ScaledField("angle_deg", size=2, signed=False, counts_per_unit=100
 ALIGN_VALUE = IntField("align_value", size=4)
 ALIGN_RATIO = IntField("align_ratio", size=2)
 ACCELERATION = ScaledField("acceleration_dps2", size=4, signed=True, counts_per_unit=1)
-
-
-def _u16(data: bytes, offset: int) -> int:
-    return int.from_bytes(data[offset : offset + 2], "little")
-
-
-def _check_command(value: int, codes: frozenset[int]) -> None:
-    check_command(value, codes)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -70,31 +55,16 @@ class EncoderReply(LkReply):
     """
 
     CODE: ClassVar[int] = 0x90
+    MODEL = ("encoder_bits",)
+    MODEL_FIELDS = (
+        (2, EncoderCountField("encoder_counts")),
+        (4, EncoderCountField("raw_counts")),
+        (6, EncoderCountField("offset_counts")),
+    )
     encoder_bits: int
     encoder_counts: int
     raw_counts: int
     offset_counts: int
-
-    def __post_init__(self) -> None:
-        check_encoder_bits(self.encoder_bits)
-        for name in ("encoder_counts", "raw_counts", "offset_counts"):
-            check_encoder_count(name, getattr(self, name), self.encoder_bits)
-
-    def encode(self) -> bytes:
-        counts = (self.encoder_counts, self.raw_counts, self.offset_counts)
-        return payload(self.CODE, (2, b"".join(c.to_bytes(2, "little") for c in counts)))
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        expect(data, cls.CODE, cls.__name__)
-        return build(
-            cls,
-            data,
-            encoder_bits=model.encoder_bits,
-            encoder_counts=_u16(data, 2),
-            raw_counts=_u16(data, 4),
-            offset_counts=_u16(data, 6),
-        )
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -109,15 +79,10 @@ class CalibrationReply(LkReply):
 
     CODE: ClassVar[int] = 0x18
     REVISIONS = V2_36_ONLY
+    FIELDS = ((1, ALIGN_VALUE), (5, ALIGN_RATIO), (7, FlagByteField("align_state", AlignState)))
     align_value: int
     align_ratio: int
     align_state: AlignState
-
-    def __post_init__(self) -> None:
-        ALIGN_VALUE.check(self.align_value)
-        ALIGN_RATIO.check(self.align_ratio)
-        check_member("align_state", self.align_state, AlignState)
-        IntField("align_state", size=1).check(int(self.align_state))
 
     @property
     def succeeded(self) -> bool:
@@ -126,25 +91,6 @@ class CalibrationReply(LkReply):
     @property
     def phase_inverted(self) -> bool:
         return AlignState.PHASE_INVERTED in self.align_state
-
-    def encode(self) -> bytes:
-        return payload(
-            self.CODE,
-            (1, ALIGN_VALUE.encode(self.align_value)),
-            (5, ALIGN_RATIO.encode(self.align_ratio)),
-            (7, bytes([self.align_state])),
-        )
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        expect(data, cls.CODE, cls.__name__)
-        return build(
-            cls,
-            data,
-            align_value=ALIGN_VALUE.decode(data, 1),
-            align_ratio=ALIGN_RATIO.decode(data, 5),
-            align_state=AlignState(data[7]),
-        )
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -157,22 +103,11 @@ class EncoderOffsetReply(LkReply):
         offset_counts: encoderOffset.
     """
 
+    MODEL = ("encoder_bits",)
+    MODEL_FIELDS = ((0, CommandField()), (6, EncoderCountField("offset_counts")))
     command: int
     encoder_bits: int
     offset_counts: int
-
-    def __post_init__(self) -> None:
-        _check_command(self.command, OFFSET_CODES)
-        check_encoder_bits(self.encoder_bits)
-        check_encoder_count("offset_counts", self.offset_counts, self.encoder_bits)
-
-    def encode(self) -> bytes:
-        return payload(self.command, (6, self.offset_counts.to_bytes(2, "little")))
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        command = expect(data, OFFSET_CODES, cls.__name__)
-        return build(cls, data, command=command, encoder_bits=model.encoder_bits, offset_counts=_u16(data, 6))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -184,18 +119,8 @@ class MultiTurnAngleReply(LkReply):
     """
 
     CODE: ClassVar[int] = 0x92
+    FIELDS = ((1, MULTI_TURN),)
     angle_deg: float
-
-    def __post_init__(self) -> None:
-        MULTI_TURN.check(self.angle_deg)
-
-    def encode(self) -> bytes:
-        return payload(self.CODE, (1, MULTI_TURN.encode(self.angle_deg)))
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        expect(data, cls.CODE, cls.__name__)
-        return build(cls, data, angle_deg=MULTI_TURN.decode(data, 1))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -208,42 +133,19 @@ class SingleTurnAngleReply(LkReply):
 
     CODE: ClassVar[int] = 0x94
     REVISIONS = V2_36_ONLY
+    FIELDS = ((4, CIRCLE),)
     angle_deg: float
-
-    def __post_init__(self) -> None:
-        CIRCLE.check(self.angle_deg)
-
-    def encode(self) -> bytes:
-        return payload(self.CODE, (4, CIRCLE.encode(self.angle_deg)))
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        expect(data, cls.CODE, cls.__name__)
-        return build(cls, data, angle_deg=CIRCLE.decode(data, 4))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class SingleTurnAngleReplyV235(LkReply):
-    """0x94 reply, V2.35 layout ``<BxxxxxH``: circleAngle uint16 in DATA[6..7] (spec §4.25, D9).
-
-    Attributes:
-        angle_deg: single-turn angle from the encoder zero, 0.01 °/LSB.
-    """
+    """0x94 reply, V2.35 layout ``<BxxxxxH``: circleAngle uint16 in DATA[6..7], one motor turn
+    (spec §4.25, D9)."""
 
     CODE: ClassVar[int] = 0x94
     REVISIONS = V2_35_ONLY
+    FIELDS = ((6, CIRCLE_V235),)
     angle_deg: float
-
-    def __post_init__(self) -> None:
-        CIRCLE_V235.check(self.angle_deg)
-
-    def encode(self) -> bytes:
-        return payload(self.CODE, (6, CIRCLE_V235.encode(self.angle_deg)))
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        expect(data, cls.CODE, cls.__name__)
-        return build(cls, data, angle_deg=CIRCLE_V235.decode(data, 6))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -256,17 +158,7 @@ class AccelerationReply(LkReply):
     """
 
     REVISIONS = V2_35_ONLY
+    FIELDS = ((4, ACCELERATION),)
+    MODEL_FIELDS = ((0, CommandField()),)
     command: int
     acceleration_dps2: float
-
-    def __post_init__(self) -> None:
-        _check_command(self.command, ACCELERATION_CODES)
-        ACCELERATION.check(self.acceleration_dps2)
-
-    def encode(self) -> bytes:
-        return payload(self.command, (4, ACCELERATION.encode(self.acceleration_dps2)))
-
-    @classmethod
-    def decode(cls, data: bytes, *, model: LkModel = DEFAULT_MODEL) -> Self:
-        command = expect(data, ACCELERATION_CODES, cls.__name__)
-        return build(cls, data, command=command, acceleration_dps2=ACCELERATION.decode(data, 4))

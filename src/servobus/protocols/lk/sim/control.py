@@ -29,16 +29,19 @@ the response: the plant's loops have fixed bandwidths.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
 from servobus.protocols import lk
 from servobus.protocols.lk import LkCommand, Revision, SpinDirection
 from servobus.protocols.lk.sim.state import Limits, single_turn_period_deg
 from servobus.sim.plant import Control, CurrentControl, PositionControl, SpeedControl
 
-__all__ = ["MotionContext", "plant_control"]
+__all__ = ["CONTROL_COMMANDS", "MotionContext", "plant_control"]
 
 _NO_SPEED_DPS = 1e-9
+_C = TypeVar("_C", bound=Callable[..., Control])
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -66,50 +69,111 @@ class MotionContext:
     held_target_deg: float | None
 
 
+#: How each set-point command class maps to a plant control (the module's table), registered by class.
+_CONTROLS: dict[type, Callable[[Any, MotionContext], Control]] = {}
+
+
+def _controls(*classes: type[LkCommand]) -> Callable[[_C], _C]:
+    def register(mapping: _C) -> _C:
+        _CONTROLS.update(dict.fromkeys(classes, mapping))
+        return mapping
+
+    return register
+
+
 def plant_control(command: LkCommand, ctx: MotionContext) -> Control:
     """The plant control that ``command`` asks for (see the module's table).
 
     Raises:
-        TypeError: ``command`` is not a control command.
+        TypeError: ``command`` is not a control command (0x280 is: the device picks its own set-point).
     """
-    limits, ratio, apc = ctx.limits, ctx.gear_ratio, ctx.amps_per_count
-    match command:
-        case lk.OpenLoopControl():
-            return CurrentControl(current_a=command.power_counts * apc)
-        case lk.TorqueControl():
-            return CurrentControl(current_a=_amps(command.current_a, command.iq_counts, apc))
-        case lk.MultiMotorTorque():
-            raise TypeError("0x280 carries four set-points: the device picks its own")
-        case lk.SpeedControl():
-            speed = max(-limits.speed_dps, min(limits.speed_dps, command.speed_dps))
-            limit = abs(_amps(command.current_limit_a, command.iq_limit_counts, apc))
-            return SpeedControl(speed_dps=speed / ratio, max_current_a=limit)
-        case lk.SpeedControlV235():
-            return SpeedControl(speed_dps=command.speed_dps / ratio, max_current_a=limits.torque_counts * apc)
-        case lk.MultiTurnPosition():
-            target, speed = _multi_turn(command.angle_deg, ctx), limits.speed_dps
-        case lk.MultiTurnPositionSpeed():
-            target, speed = _multi_turn(command.angle_deg, ctx), _speed_limit(command.max_speed_dps, limits)
-        case lk.SingleTurnPosition() | lk.SingleTurnPositionV235():
-            target, speed = _single_turn(command.angle_deg, command.direction, ctx), limits.speed_dps
-        case lk.SingleTurnPositionSpeed() | lk.SingleTurnPositionSpeedV235():
-            target = _single_turn(command.angle_deg, command.direction, ctx)
-            speed = _speed_limit(command.max_speed_dps, limits)
-        case lk.IncrementalPosition() | lk.IncrementalPositionSpeed():
-            # Increments add to the running target, so a host streaming them does not accumulate
-            # the tracking error; the first one starts from where the shaft is.
-            base = ctx.position_deg if ctx.held_target_deg is None else ctx.held_target_deg
-            target = base + command.increment_deg / ratio
-            if isinstance(command, lk.IncrementalPositionSpeed):
-                speed = _speed_limit(command.max_speed_dps, limits)
-            else:
-                speed = limits.speed_dps if ctx.revision is Revision.V2_36 else math.inf
-        case _:
-            raise TypeError(f"{type(command).__name__} is not a control command")
-    max_speed = max(speed / ratio, _NO_SPEED_DPS) if math.isfinite(speed) else None
-    return PositionControl(
-        position_deg=target, max_speed_dps=max_speed, max_current_a=limits.torque_counts * apc
+    mapping = _CONTROLS.get(type(command))
+    if mapping is None:
+        raise TypeError(f"{type(command).__name__} is not a control command")
+    return mapping(command, ctx)
+
+
+@_controls(lk.OpenLoopControl)
+def _open_loop(command: lk.OpenLoopControl, ctx: MotionContext) -> Control:
+    return CurrentControl(current_a=command.power_counts * ctx.amps_per_count)
+
+
+@_controls(lk.TorqueControl)
+def _torque(command: lk.TorqueControl, ctx: MotionContext) -> Control:
+    return CurrentControl(current_a=_amps(command.current_a, command.iq_counts, ctx.amps_per_count))
+
+
+@_controls(lk.SpeedControl)
+def _speed(command: lk.SpeedControl, ctx: MotionContext) -> Control:
+    limits = ctx.limits
+    speed = max(-limits.speed_dps, min(limits.speed_dps, command.speed_dps))
+    limit = abs(_amps(command.current_limit_a, command.iq_limit_counts, ctx.amps_per_count))
+    return SpeedControl(speed_dps=speed / ctx.gear_ratio, max_current_a=limit)
+
+
+@_controls(lk.SpeedControlV235)
+def _speed_v235(command: lk.SpeedControlV235, ctx: MotionContext) -> Control:
+    return SpeedControl(
+        speed_dps=command.speed_dps / ctx.gear_ratio,
+        max_current_a=ctx.limits.torque_counts * ctx.amps_per_count,
     )
+
+
+@_controls(lk.MultiTurnPosition)
+def _multi_turn_position(command: lk.MultiTurnPosition, ctx: MotionContext) -> Control:
+    return _position(_multi_turn(command.angle_deg, ctx), ctx.limits.speed_dps, ctx)
+
+
+@_controls(lk.MultiTurnPositionSpeed)
+def _multi_turn_position_speed(command: lk.MultiTurnPositionSpeed, ctx: MotionContext) -> Control:
+    target = _multi_turn(command.angle_deg, ctx)
+    return _position(target, _speed_limit(command.max_speed_dps, ctx.limits), ctx)
+
+
+@_controls(lk.SingleTurnPosition, lk.SingleTurnPositionV235)
+def _single_turn_position(command: lk.SingleTurnPosition, ctx: MotionContext) -> Control:
+    return _position(_single_turn(command.angle_deg, command.direction, ctx), ctx.limits.speed_dps, ctx)
+
+
+@_controls(lk.SingleTurnPositionSpeed, lk.SingleTurnPositionSpeedV235)
+def _single_turn_position_speed(command: lk.SingleTurnPositionSpeed, ctx: MotionContext) -> Control:
+    target = _single_turn(command.angle_deg, command.direction, ctx)
+    return _position(target, _speed_limit(command.max_speed_dps, ctx.limits), ctx)
+
+
+@_controls(lk.IncrementalPosition)
+def _incremental(command: lk.IncrementalPosition, ctx: MotionContext) -> Control:
+    # D17: 0xA7 runs at Max Speed on V2.36 and unlimited on V2.35.
+    speed = ctx.limits.speed_dps if ctx.revision is Revision.V2_36 else math.inf
+    return _position(_increment(command.increment_deg, ctx), speed, ctx)
+
+
+@_controls(lk.IncrementalPositionSpeed)
+def _incremental_speed(command: lk.IncrementalPositionSpeed, ctx: MotionContext) -> Control:
+    speed = _speed_limit(command.max_speed_dps, ctx.limits)
+    return _position(_increment(command.increment_deg, ctx), speed, ctx)
+
+
+#: The set-point commands the device maps to plant controls (0x280 picks its own set-point).
+CONTROL_COMMANDS: tuple[type[LkCommand], ...] = tuple(_CONTROLS)
+
+
+def _position(target_deg: float, speed_dps: float, ctx: MotionContext) -> Control:
+    """A position control to the output target at the motor-shaft speed limit (inf: none)."""
+    ratio = ctx.gear_ratio
+    max_speed = max(speed_dps / ratio, _NO_SPEED_DPS) if math.isfinite(speed_dps) else None
+    return PositionControl(
+        position_deg=target_deg,
+        max_speed_dps=max_speed,
+        max_current_a=ctx.limits.torque_counts * ctx.amps_per_count,
+    )
+
+
+def _increment(increment_deg: float, ctx: MotionContext) -> float:
+    """The output target of an increment. Increments add to the running target, so a host streaming
+    them does not accumulate the tracking error; the first one starts from where the shaft is."""
+    base = ctx.position_deg if ctx.held_target_deg is None else ctx.held_target_deg
+    return base + increment_deg / ctx.gear_ratio
 
 
 def _speed_limit(max_speed_dps: float | None, limits: Limits) -> float:

@@ -40,7 +40,8 @@ from __future__ import annotations
 import enum
 import math
 from collections import Counter
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from typing import Any, TypeVar
 
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
@@ -63,11 +64,11 @@ from servobus.protocols.lk import (
 from servobus.protocols.lk.codec import REQUESTS, check_available, reply_frame
 from servobus.protocols.lk.ids import MULTI_MOTOR_ID, MULTI_MOTOR_IDS, MULTI_MOTOR_REPLY_CODE, request_id
 from servobus.protocols.lk.model import encoder_counts_per_turn
-from servobus.protocols.lk.replies import STATUS2_CODES
-from servobus.protocols.lk.sim.control import MotionContext, plant_control
+from servobus.protocols.lk.sim.control import CONTROL_COMMANDS, MotionContext, plant_control
 from servobus.protocols.lk.sim.replies import encoder_reply, single_turn_deg, status1, status2, status3
 from servobus.protocols.lk.sim.state import (
     LK_PLANT_PARAMS,
+    MEMORY_COMMANDS,
     AngleFrame,
     LkMemory,
     amps_per_count,
@@ -91,10 +92,27 @@ __all__ = ["DEFAULT_CALIBRATION_S", "DEFAULT_TURNAROUND_S", "LkMotor", "RunState
 DEFAULT_TURNAROUND_S = 200e-6
 # [001] §21: 0x18 rotates the motor "for several seconds" and replies when done.
 DEFAULT_CALIBRATION_S = 3.0
+_H = TypeVar("_H", bound=Callable[..., LkReply])
 _ERROR_BITS = {
     Revision.V2_36: 0xFF,
     Revision.V2_35: int(ErrorStateV235.LOW_VOLTAGE | ErrorStateV235.OVER_TEMPERATURE),
 }
+
+
+#: The motor's behaviour per command class: each handler registers the classes it answers, so
+#: the command list is the codec's, never a second one here (the declarations test sends each).
+_HANDLERS: dict[type, Callable[[LkMotor, Any, float], LkReply]] = {}
+
+
+def _handles(*classes: type[LkCommand]) -> Callable[[_H], _H]:
+    def register(handler: _H) -> _H:
+        for cls in classes:
+            if cls in _HANDLERS:  # pragma: no cover - a wiring error, caught at import
+                raise AssertionError(f"{cls.__name__} has two handlers")
+            _HANDLERS[cls] = handler
+        return handler
+
+    return register
 
 
 class RunState(enum.Enum):
@@ -380,64 +398,123 @@ class LkMotor(ListeningDevice):
     # ---- commands ----
 
     def _handle(self, command: LkCommand, now_s: float) -> LkReply:
-        code = type(command).CODE
-        match command:
-            case lk.ReadStatus1() | lk.ClearErrors():
-                if isinstance(command, lk.ClearErrors):
-                    self._latched &= self._conditions  # spec §4.2: persisting faults stay set
-                return status1(
-                    command.CODE, self.model, self.plant, off=self.state is RunState.OFF, errors=self._latched
-                )
-            case lk.ReadStatus2():
-                return self._status2(command.CODE)
-            case lk.ReadStatus3():
-                return status3(self.model, self.plant)
-            case lk.MotorOff() | lk.MotorStop() | lk.MotorRun() | lk.SetZeroRam():
-                self._mode(command)
-                return lk.EchoReply(command=command.CODE)
-            case lk.BrakeControl():
-                if command.action is not BrakeAction.READ:
-                    self.brake_engaged = command.action is BrakeAction.ENGAGE
-                return lk.BrakeReply(state=BrakeState.ENGAGED if self.brake_engaged else BrakeState.RELEASED)
-            case lk.MultiMotorTorque():
-                slot = self.motor_id - 1
-                if command.currents_a is not None:
-                    current = command.currents_a[slot]
-                else:
-                    current = (command.iq_counts or (0, 0, 0, 0))[slot] * self._amps_per_count
-                self._execute(command, CurrentControl(current_a=current))
-                return self._status2(MULTI_MOTOR_REPLY_CODE)
-            case lk.CalibrateEncoder():
-                # [001] §21: busy for several seconds, then the result (ROM). The sim does not
-                # rotate the shaft; the calibration always succeeds.
-                self._busy_until_s = now_s + self.calibration_s
-                self.held = None
-                raw = self.angles.raw(self._total())
-                return lk.CalibrationReply(
-                    align_value=raw, align_ratio=1000, align_state=lk.AlignState.SUCCESS
-                )
-        if code is not None and code in STATUS2_CODES:
-            self._execute(command, plant_control(command, self._motion_context()))
-            return self._status2(code)
-        return self._handle_data(command)
+        handler = _HANDLERS.get(type(command))
+        if handler is None:  # pragma: no cover - the declarations test sends every command class
+            raise AssertionError(f"no handler for {type(command).__name__}")
+        return handler(self, command, now_s)
 
-    def _mode(self, command: LkCommand) -> None:
-        v236 = self.revision is Revision.V2_36
-        if isinstance(command, lk.MotorOff):
-            self.state, self.held = RunState.OFF, None
-            if v236:
-                self.angles.clear_turns(self._total())  # [001] §5: "clear the number of turns"
-        elif isinstance(command, lk.MotorStop):
-            if self.state is RunState.ON:
-                self.state = RunState.STOPPED
-        elif isinstance(command, lk.MotorRun):
-            # [001]: OFF -> ON only; [003]: resume the mode held before 0x81 (or after 0x80: idle).
-            if self.state is RunState.OFF or not v236:
-                self.state = RunState.ON
-        else:  # 0x95
-            self.angles.zero_here(self._total())
-            if v236 and self.state is RunState.ON:
-                self.state = RunState.STOPPED  # [001] §25, A30
+    @_handles(lk.ReadStatus1, lk.ClearErrors)
+    def _status1(self, command: LkCommand, now_s: float) -> LkReply:
+        if isinstance(command, lk.ClearErrors):
+            self._latched &= self._conditions  # spec §4.2: persisting faults stay set
+        code = type(command).CODE
+        assert code is not None
+        return status1(code, self.model, self.plant, off=self.state is RunState.OFF, errors=self._latched)
+
+    @_handles(lk.ReadStatus2)
+    def _read_status2(self, command: LkCommand, now_s: float) -> LkReply:
+        return self._status2(0x9C)
+
+    @_handles(lk.ReadStatus3)
+    def _read_status3(self, command: LkCommand, now_s: float) -> LkReply:
+        return status3(self.model, self.plant)
+
+    @_handles(lk.MotorOff)
+    def _off(self, command: LkCommand, now_s: float) -> LkReply:
+        self.state, self.held = RunState.OFF, None
+        if self.revision is Revision.V2_36:
+            self.angles.clear_turns(self._total())  # [001] §5: "clear the number of turns"
+        return lk.EchoReply(command=0x80)
+
+    @_handles(lk.MotorStop)
+    def _stop(self, command: LkCommand, now_s: float) -> LkReply:
+        if self.state is RunState.ON:
+            self.state = RunState.STOPPED
+        return lk.EchoReply(command=0x81)
+
+    @_handles(lk.MotorRun)
+    def _run(self, command: LkCommand, now_s: float) -> LkReply:
+        # [001]: OFF -> ON only; [003]: resume the mode held before 0x81 (or after 0x80: idle).
+        if self.state is RunState.OFF or self.revision is Revision.V2_35:
+            self.state = RunState.ON
+        return lk.EchoReply(command=0x88)
+
+    @_handles(lk.SetZeroRam)
+    def _zero_ram(self, command: LkCommand, now_s: float) -> LkReply:
+        self.angles.zero_here(self._total())
+        if self.revision is Revision.V2_36 and self.state is RunState.ON:
+            self.state = RunState.STOPPED  # [001] §25, A30
+        return lk.EchoReply(command=0x95)
+
+    @_handles(lk.BrakeControl)
+    def _brake(self, command: lk.BrakeControl, now_s: float) -> LkReply:
+        if command.action is not BrakeAction.READ:
+            self.brake_engaged = command.action is BrakeAction.ENGAGE
+        return lk.BrakeReply(state=BrakeState.ENGAGED if self.brake_engaged else BrakeState.RELEASED)
+
+    @_handles(lk.MultiMotorTorque)
+    def _multi_motor(self, command: lk.MultiMotorTorque, now_s: float) -> LkReply:
+        slot = self.motor_id - 1
+        if command.currents_a is not None:
+            current = command.currents_a[slot]
+        else:
+            current = (command.iq_counts or (0, 0, 0, 0))[slot] * self._amps_per_count
+        self._execute(command, CurrentControl(current_a=current))
+        return self._status2(MULTI_MOTOR_REPLY_CODE)
+
+    @_handles(*CONTROL_COMMANDS)
+    def _set_point(self, command: LkCommand, now_s: float) -> LkReply:
+        code = type(command).CODE
+        assert code is not None
+        self._execute(command, plant_control(command, self._motion_context()))
+        return self._status2(code)
+
+    @_handles(lk.CalibrateEncoder)
+    def _calibrate(self, command: LkCommand, now_s: float) -> LkReply:
+        # [001] §21: busy for several seconds, then the result (ROM). The sim does not rotate the
+        # shaft; the calibration always succeeds.
+        self._busy_until_s = now_s + self.calibration_s
+        self.held = None
+        raw = self.angles.raw(self._total())
+        return lk.CalibrationReply(align_value=raw, align_ratio=1000, align_state=lk.AlignState.SUCCESS)
+
+    @_handles(lk.ReadEncoder)
+    def _read_encoder(self, command: LkCommand, now_s: float) -> LkReply:
+        return encoder_reply(self.model, self.angles, self._total())
+
+    @_handles(lk.SetZeroRom)
+    def _zero_rom(self, command: LkCommand, now_s: float) -> LkReply:
+        # spec §4.22: ROM only, "needs to be powered on again before it can take effect".
+        offset = self.memory.rom_encoder_offset_counts = self.angles.raw(self._total())
+        return lk.EncoderOffsetReply(command=0x19, encoder_bits=self.model.encoder_bits, offset_counts=offset)
+
+    @_handles(lk.WriteEncoderOffset)
+    def _write_offset(self, command: lk.WriteEncoderOffset, now_s: float) -> LkReply:
+        self.memory.rom_encoder_offset_counts = command.offset_counts  # A21: read as RAM and ROM
+        self.angles.set_offset(command.offset_counts)
+        return lk.EncoderOffsetReply(
+            command=0x91, encoder_bits=self.model.encoder_bits, offset_counts=command.offset_counts
+        )
+
+    @_handles(lk.ReadMultiTurnAngle)
+    def _read_multi_turn(self, command: LkCommand, now_s: float) -> LkReply:
+        return lk.MultiTurnAngleReply(angle_deg=self.multi_turn_deg)
+
+    @_handles(lk.ReadSingleTurnAngle)
+    def _read_single_turn(self, command: LkCommand, now_s: float) -> LkReply:
+        angle = single_turn_deg(self.revision, self.plant.params.gear_ratio, self.multi_turn_deg)
+        if self.revision is Revision.V2_36:
+            return lk.SingleTurnAngleReply(angle_deg=angle)
+        return lk.SingleTurnAngleReplyV235(angle_deg=angle)
+
+    @_handles(*MEMORY_COMMANDS)
+    def _parameter(self, command: LkCommand, now_s: float) -> LkReply:
+        reply = self.memory.answer(command)
+        assert reply is not None  # registered for MEMORY_COMMANDS only
+        if isinstance(reply, lk.ParamWriteReply) and not reply.ok:
+            self._counters["refused"] += 1
+        self._apply_acceleration()  # 0xC1, 0x42/0x44 (V2.35) and 0x34 may change it
+        return reply
 
     def _execute(self, command: LkCommand, control: Control) -> None:
         try:
@@ -468,35 +545,3 @@ class LkMotor(ListeningDevice):
             position_deg=self.plant.position_deg,
             held_target_deg=held.position_deg if isinstance(held, PositionControl) else None,
         )
-
-    def _handle_data(self, command: LkCommand) -> LkReply:
-        total = self._total()
-        match command:
-            case lk.ReadEncoder():
-                return encoder_reply(self.model, self.angles, total)
-            case lk.SetZeroRom():
-                # spec §4.22: ROM only, "needs to be powered on again before it can take effect".
-                offset = self.memory.rom_encoder_offset_counts = self.angles.raw(total)
-                return lk.EncoderOffsetReply(
-                    command=0x19, encoder_bits=self.model.encoder_bits, offset_counts=offset
-                )
-            case lk.WriteEncoderOffset():
-                self.memory.rom_encoder_offset_counts = command.offset_counts  # A21: read as RAM and ROM
-                self.angles.set_offset(command.offset_counts)
-                return lk.EncoderOffsetReply(
-                    command=0x91, encoder_bits=self.model.encoder_bits, offset_counts=command.offset_counts
-                )
-            case lk.ReadMultiTurnAngle():
-                return lk.MultiTurnAngleReply(angle_deg=self.multi_turn_deg)
-            case lk.ReadSingleTurnAngle():
-                angle = single_turn_deg(self.revision, self.plant.params.gear_ratio, self.multi_turn_deg)
-                if self.revision is Revision.V2_36:
-                    return lk.SingleTurnAngleReply(angle_deg=angle)
-                return lk.SingleTurnAngleReplyV235(angle_deg=angle)
-        reply = self.memory.answer(command)
-        if reply is None:  # pragma: no cover - every request class has a handler
-            raise AssertionError(f"no handler for {type(command).__name__}")
-        if isinstance(reply, lk.ParamWriteReply) and not reply.ok:
-            self._counters["refused"] += 1
-        self._apply_acceleration()  # 0xC1, 0x42/0x44 (V2.35) and 0x34 may change it
-        return reply

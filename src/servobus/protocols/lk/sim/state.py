@@ -30,8 +30,9 @@ from __future__ import annotations
 
 import enum
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
 from servobus.protocols import lk
 from servobus.protocols.lk import (
@@ -64,6 +65,7 @@ from servobus.sim.plant import PlantParams
 __all__ = [
     "ANGLE_DEG_PER_COUNT",
     "LK_PLANT_PARAMS",
+    "MEMORY_COMMANDS",
     "MH_AMPS_PER_COUNT",
     "RAMP_DPS2_PER_COUNT",
     "SPEED_DPS_PER_COUNT",
@@ -85,6 +87,7 @@ MH_AMPS_PER_COUNT = 66 / 4096
 MS_FULL_SCALE_COUNTS = 1000
 
 _INT32_MAX = 2**31 - 1
+_A = TypeVar("_A", bound=Callable[..., LkReply])
 _SETTING_LIMIT = 600_000  # Max Speed / Speed Ramp range (spec §6.2)
 
 # An MG-class direct-drive motor (no gear: the LK MF/MG bodies without "-i" reducer): 33 A, the
@@ -179,6 +182,18 @@ _V235_NON_NEGATIVE = frozenset(
         ParamId.SPEED_RAMP,
     }
 )
+
+
+#: The parameter commands' behaviour by command class (registered by the LkMemory methods below).
+_ANSWERS: dict[type, Callable[[LkMemory, Any], LkReply]] = {}
+
+
+def _answers(*classes: type[LkCommand]) -> Callable[[_A], _A]:
+    def register(handler: _A) -> _A:
+        _ANSWERS.update(dict.fromkeys(classes, handler))
+        return handler
+
+    return register
 
 
 @dataclass(frozen=True, slots=True)
@@ -276,36 +291,52 @@ class LkMemory:
         """Apply a parameter command (0xC0/0xC1, 0x40/0x42/0x44, 0x33/0x34) and build its reply.
 
         Returns:
-            The reply, or None if ``command`` is not a parameter command.
+            The reply, or None if ``command`` is not a parameter command (:data:`MEMORY_COMMANDS`).
         """
-        match command:
-            case lk.ReadControlParam():
-                return lk.ControlParamReply(
-                    command=0xC0, param=command.param, value=self.control[command.param]
-                )
-            case lk.WriteControlParam():
-                self.control[command.param] = command.value  # RAM, effective at once (spec §4.19)
-                return lk.ControlParamReply(command=0xC1, param=command.param, value=command.value)
-            case lk.ReadSetting():
-                return lk.SettingReply(command=0x40, param=command.param, value=self.ram[command.param])
-            case lk.WriteSetting():
-                self.ram[command.param] = command.value
-                return lk.SettingReply(command=0x42, param=command.param, value=command.value)
-            case lk.SaveSettings():
-                self.rom = dict(self.ram)  # spec §4.29: every written setting at once
-                return lk.SaveSettingsReply(result=ParamResult.SUCCESS)
-            case lk.ReadParam():
-                return lk.ParamReply(param=command.param, value=self.ram[command.param])
-            case lk.WriteParamRam() | lk.WriteParamRom():
-                ok = self._write_v235(command.param, command.value, rom=isinstance(command, lk.WriteParamRom))
-                result = ParamResult.SUCCESS if ok else ParamResult.FAILURE
-                return lk.ParamWriteReply(command=command.CODE, param=command.param, result=result)
-            case lk.ReadAcceleration():
-                return lk.AccelerationReply(command=0x33, acceleration_dps2=self.acceleration_dps2)
-            case lk.WriteAcceleration():
-                self.acceleration_dps2 = command.acceleration_dps2  # RAM (spec §4.31)
-                return lk.AccelerationReply(command=0x34, acceleration_dps2=command.acceleration_dps2)
-        return None
+        handler = _ANSWERS.get(type(command))
+        return None if handler is None else handler(self, command)
+
+    @_answers(lk.ReadControlParam)
+    def _read_control(self, command: lk.ReadControlParam) -> LkReply:
+        return lk.ControlParamReply(command=0xC0, param=command.param, value=self.control[command.param])
+
+    @_answers(lk.WriteControlParam)
+    def _write_control(self, command: lk.WriteControlParam) -> LkReply:
+        self.control[command.param] = command.value  # RAM, effective at once (spec §4.19)
+        return lk.ControlParamReply(command=0xC1, param=command.param, value=command.value)
+
+    @_answers(lk.ReadSetting)
+    def _read_setting(self, command: lk.ReadSetting) -> LkReply:
+        return lk.SettingReply(command=0x40, param=command.param, value=self.ram[command.param])
+
+    @_answers(lk.WriteSetting)
+    def _write_setting(self, command: lk.WriteSetting) -> LkReply:
+        self.ram[command.param] = command.value
+        return lk.SettingReply(command=0x42, param=command.param, value=command.value)
+
+    @_answers(lk.SaveSettings)
+    def _save_settings(self, command: lk.SaveSettings) -> LkReply:
+        self.rom = dict(self.ram)  # spec §4.29: every written setting at once
+        return lk.SaveSettingsReply(result=ParamResult.SUCCESS)
+
+    @_answers(lk.ReadParam)
+    def _read_param(self, command: lk.ReadParam) -> LkReply:
+        return lk.ParamReply(param=command.param, value=self.ram[command.param])
+
+    @_answers(lk.WriteParamRam, lk.WriteParamRom)
+    def _write_param(self, command: lk.WriteParamRam) -> LkReply:
+        ok = self._write_v235(command.param, command.value, rom=isinstance(command, lk.WriteParamRom))
+        result = ParamResult.SUCCESS if ok else ParamResult.FAILURE
+        return lk.ParamWriteReply(command=type(command).CODE, param=command.param, result=result)
+
+    @_answers(lk.ReadAcceleration)
+    def _read_acceleration(self, command: lk.ReadAcceleration) -> LkReply:
+        return lk.AccelerationReply(command=0x33, acceleration_dps2=self.acceleration_dps2)
+
+    @_answers(lk.WriteAcceleration)
+    def _write_acceleration(self, command: lk.WriteAcceleration) -> LkReply:
+        self.acceleration_dps2 = command.acceleration_dps2  # RAM (spec §4.31)
+        return lk.AccelerationReply(command=0x34, acceleration_dps2=command.acceleration_dps2)
 
     def limits(self) -> Limits:
         """The limits in effect now (motor-shaft units)."""
@@ -332,6 +363,10 @@ class LkMemory:
             angle_deg=(-max_angle * ANGLE_DEG_PER_COUNT, max_angle * ANGLE_DEG_PER_COUNT),
             acceleration_dps2=self.acceleration_dps2 if self.acceleration_dps2 > 0 else None,
         )
+
+
+#: The commands :meth:`LkMemory.answer` answers (the parameter, acceleration and setting commands).
+MEMORY_COMMANDS: tuple[type[LkCommand], ...] = tuple(_ANSWERS)
 
 
 def _as_int(value: ParamValue) -> int:
