@@ -325,13 +325,6 @@ def test_a_plug_in_motor_shares_a_bus_with_the_built_in_families(toy: ModuleType
     assert isinstance(first, toy.StateReply) and isinstance(second, ma.StatusReply)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="src/servobus/_plugins.py:33 load() scans every installed distribution's metadata (about "
-    "10 ms here) each time a plug-in family is asked for by name, and the Bus asks per motor "
-    "(bus.py:307 Motor.__init__ -> command_classes(codec.family)) and per broadcast (bus.py:859): "
-    "a loaded plug-in is not kept",
-)
 def test_a_plug_in_is_looked_up_once_not_per_motor_or_broadcast(
     toy: ModuleType, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -391,6 +384,63 @@ def test_the_cli_part_says_what_each_command_sends_or_why_not(toy: ModuleType) -
     assert limit.key == "speed_limit_dps" and limit.read is None and limit.rom is True
     assert limit.write is not None
     assert limit.write(limit.parse("50"), True) == toy.WriteSpeedLimit(limit_dps=50)
+
+
+def _records(result: subprocess.CompletedProcess[str]) -> list[dict[str, Any]]:
+    assert result.returncode == 0, result.stderr
+    return [json.loads(line) for line in result.stdout.splitlines()]
+
+
+def test_servobus_status_monitor_and_speed_with_simulated_toy_motors() -> None:
+    (status,) = _records(run_cli("status", "--family", "toy", "--sim", "2", "--json"))
+    assert [(r["id"], r["angle_deg"], r["speed_dps"], r["errors"]) for r in status] == [
+        (1, 0.0, 0.0, []),
+        (2, 0.0, 0.0, []),
+    ]
+    samples = _records(
+        run_cli("monitor", "-f", "toy", "--sim", "2", "--rate-hz", "20", "--duration", "0.2", "--json")
+    )
+    assert {r["id"] for r in samples} == {1, 2} and len(samples) >= 4
+    (turned,) = _records(
+        run_cli("speed", "-f", "toy", "--sim", "1", "--speed-dps", "90", "--duration", "1", "--json")
+    )
+    assert turned[0]["speed_dps"] == pytest.approx(90.0, abs=1.0) and 80 < turned[0]["angle_deg"] < 90
+
+
+def test_servobus_refuses_what_the_toy_cli_part_refuses_in_one_line() -> None:
+    result = run_cli("move", "--family", "toy", "--sim", "1", "--angle-deg", "10")
+    assert result.returncode == 2 and result.stdout == ""
+    assert result.stderr == (
+        "servobus move: error: toy motors have no move command: the toy protocol has no position "
+        "set-point; servobus speed, then stop\n"
+    )
+
+
+def test_servobus_scan_finds_simulated_toy_motors() -> None:
+    result = run_cli("scan", "--family", "toy", "--sim", "3", "--json")
+    assert [r["id"] for r in _records(result)[0]] == [1, 2, 3]
+
+
+def test_servobus_sim_family_toy_serves_an_slcan_adapter() -> None:
+    path = os.pathsep.join(p for p in (str(PLUGINS), os.environ.get("PYTHONPATH")) if p)
+    server = subprocess.Popen(
+        [*SERVOBUS, "sim", "--family", "toy", "--motors", "2"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONPATH": path},
+    )
+    try:
+        assert server.stdout is not None
+        pty = server.stdout.readline().strip()
+        assert pty.startswith("/"), (pty, server.stderr.read() if server.poll() is not None else "")
+        (status,) = _records(
+            run_cli("status", "-f", "toy", "-i", "servobus-slcan", "-c", pty, "--ids", "1-2", "--json")
+        )
+        assert [(r["id"], r["error"]) for r in status] == [(1, None), (2, None)]
+    finally:
+        server.terminate()
+        assert server.wait(timeout=5) == 0
 
 
 # ---- DBC ----
@@ -479,12 +529,6 @@ def test_a_candump_log_decodes_for_the_plug_in(toy: ModuleType, tmp_path: Path) 
     assert [_expected(decoder.decode(frame).as_dict()) for frame in read_log(log)] == DECODED
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="[families] cli part (H5): src/servobus/cli/_connect.py:275 family_option is "
-    "click.Choice(FAMILIES) with FAMILIES the three built-in names (line 35), so --family toy is "
-    "refused before the registry is asked",
-)
 def test_servobus_decode_family_toy(tmp_path: Path) -> None:
     log = tmp_path / "toy.log"
     log.write_text(LOG)

@@ -8,11 +8,18 @@ pays for the others; a third-party plug-in that fails to load warns instead of b
 from __future__ import annotations
 
 import importlib
+import sys
 import warnings
 from collections.abc import Mapping
 from importlib.metadata import entry_points
+from types import ModuleType
 
 __all__ = ["available", "load"]
+
+#: (group, name) -> (its module, the loaded object): a Bus asks for a motor's family per motor and
+#: per broadcast, and finding a plug-in scans every installed distribution's metadata (milliseconds).
+#: Kept while its module is the one imported (a module removed from sys.modules is looked up again).
+_LOADED: dict[tuple[str, str], tuple[ModuleType, object]] = {}
 
 
 def available(group: str, builtins: Mapping[str, str]) -> dict[str, str]:
@@ -28,8 +35,10 @@ def load(group: str, builtins: Mapping[str, str], name: str, what: str) -> objec
         ValueError: nothing has that name, or a third-party plug-in failed to import (with a
             warning naming it); a failing built-in raises its own ImportError.
     """
-    # Built-ins win, so their names need no scan of the installed packages' metadata (which costs
-    # milliseconds, and a Bus binds every motor through here).
+    loaded = _LOADED.get((group, name))
+    if loaded is not None and sys.modules.get(loaded[0].__name__) is loaded[0]:
+        return loaded[1]
+    # Built-ins win, so their names need no scan of the installed packages' metadata.
     known = builtins if name in builtins else available(group, builtins)
     try:
         target = known[name]
@@ -37,9 +46,12 @@ def load(group: str, builtins: Mapping[str, str], name: str, what: str) -> objec
         raise ValueError(f"unknown {what} {name!r} (known: {', '.join(sorted(known))})") from None
     module_name, _, attribute = target.partition(":")
     try:
-        return getattr(importlib.import_module(module_name), attribute)
+        module = importlib.import_module(module_name)
+        target_object = getattr(module, attribute)
     except (ImportError, AttributeError) as exc:
         if name in builtins:
             raise
         warnings.warn(f"{what} plug-in {name!r} ({target}) failed to load: {exc}", stacklevel=3)
         raise ValueError(f"{what} {name!r} failed to load") from exc
+    _LOADED[(group, name)] = (module, target_object)
+    return target_object
