@@ -148,11 +148,11 @@ class Motor(_Motor):
         return await self.request(PositionTorqueFeedforward(angle_deg=angle_deg, max_speed_dps=max_speed_dps, feedforward_torque_pct=feedforward_torque_pct), timeout_s=timeout_s, retries=retries)
 
     async def read_acceleration(self, index: AccelIndex, *, timeout_s: float | None = None, retries: int = 0) -> AccelerationReply:
-        """0x42 read one acceleration value. Reply: ``AccelerationReply``."""
+        """0x42 read one acceleration value."""
         return await self.request(ReadAcceleration(index=index), timeout_s=timeout_s, retries=retries)
 
     async def read_can_id(self, *, timeout_s: float | None = None, retries: int = 0) -> CanIdReply:
-        """0x79 read the motor id (V4.3 only; DATA[2] = 1). Sent like ``SetCanId``. Reply: ``CanIdReply``."""
+        """0x79 read the motor id (V4.3 only; DATA[2] = 1). Sent like ``SetCanId``."""
         return await self.request(ReadCanId(), timeout_s=timeout_s, retries=retries)
 
     async def read_encoder_offset(self, *, timeout_s: float | None = None, retries: int = 0) -> EncoderOffsetReply:
@@ -180,7 +180,7 @@ class Motor(_Motor):
         return await self.request(ReadMultiTurnAngle(), timeout_s=timeout_s, retries=retries)
 
     async def read_pid(self, index: PidIndex, *, timeout_s: float | None = None, retries: int = 0) -> PidReply:
-        """0x30 read one PID parameter. Reply: ``PidReply``."""
+        """0x30 read one PID parameter."""
         return await self.request(ReadPid(index=index), timeout_s=timeout_s, retries=retries)
 
     async def read_run_mode(self, *, timeout_s: float | None = None, retries: int = 0) -> RunModeReply:
@@ -260,7 +260,7 @@ class Motor(_Motor):
         return await self.request(WriteEncoderZero(offset_counts=offset_counts), timeout_s=timeout_s, retries=retries)
 
     async def write_pid_ram(self, index: PidIndex, value: float, *, timeout_s: float | None = None, retries: int = 0) -> Echo:
-        """0x31 write one PID parameter (float32) to RAM, lost at power-off. Reply: echo."""
+        """0x31 write one PID parameter (float32) to RAM, lost at power-off."""
         return await self.request(WritePidRam(index=index, value=value), timeout_s=timeout_s, retries=retries)
 
     async def write_pid_rom(self, index: PidIndex, value: float, *, timeout_s: float | None = None, retries: int = 0) -> Echo:

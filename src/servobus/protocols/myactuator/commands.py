@@ -186,7 +186,7 @@ _PID_VALUE = Float32Field("value")
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ReadPid(MyActuatorCommand[rep.PidReply]):
-    """0x30 read one PID parameter. Reply: ``PidReply``."""
+    """0x30 read one PID parameter."""
 
     CODE: ClassVar[int] = 0x30
     TITLE: ClassVar[str] = "read PID parameter"
@@ -197,7 +197,7 @@ class ReadPid(MyActuatorCommand[rep.PidReply]):
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class WritePidRam(MyActuatorCommand[rep.Echo]):
-    """0x31 write one PID parameter (float32) to RAM, lost at power-off. Reply: echo."""
+    """0x31 write one PID parameter (float32) to RAM, lost at power-off."""
 
     CODE: ClassVar[int] = 0x31
     TITLE: ClassVar[str] = "write PID parameter to RAM"
@@ -237,7 +237,7 @@ _ACCEL_WRITE = SpecialZero(
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ReadAcceleration(MyActuatorCommand[rep.AccelerationReply]):
-    """0x42 read one acceleration value. Reply: ``AccelerationReply``."""
+    """0x42 read one acceleration value."""
 
     CODE: ClassVar[int] = 0x42
     TITLE: ClassVar[str] = "read acceleration"
@@ -441,7 +441,7 @@ class SetCanId(MyActuatorCommand[rep.Echo]):
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ReadCanId(MyActuatorCommand[rep.CanIdReply]):
-    """0x79 read the motor id (V4.3 only; DATA[2] = 1). Sent like ``SetCanId``. Reply: ``CanIdReply``."""
+    """0x79 read the motor id (V4.3 only; DATA[2] = 1). Sent like ``SetCanId``."""
 
     CODE: ClassVar[int] = 0x79
     TITLE: ClassVar[str] = "CAN-ID setting"
@@ -521,7 +521,7 @@ class ReadModel(_NoArgs[rep.ModelReply]):
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ReadModelPart(MyActuatorCommand[rep.ModelPartReply]):
     """0xB5 read the motor model, V4.4 form: DATA[1] = 0x01, DATA[2] = ``part`` (1: characters 1-5, 2:
-    6-10, 3: 11-15). Reply: ``ModelPartReply``; join the three with ``replies.join_model``."""
+    6-10, 3: 11-15). Join the three replies with ``replies.join_model``."""
 
     CODE: ClassVar[int] = 0xB5
     TITLE: ClassVar[str] = "read motor model (indexed)"

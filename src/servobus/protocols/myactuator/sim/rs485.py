@@ -26,7 +26,7 @@ from __future__ import annotations
 from collections import Counter
 
 from servobus.errors import ProtocolError
-from servobus.protocols.myactuator import ReadCanId, SetCanId
+from servobus.protocols.myactuator import ActiveReply, ReadCanId, SetCanId
 from servobus.protocols.myactuator.ids import RS485_BROADCAST_ID
 from servobus.protocols.myactuator.rs485 import decode_rs485_request, encode_rs485, rs485_deframer
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
@@ -34,7 +34,7 @@ from servobus.sim.device import SerialEmission
 
 __all__ = ["MyActuatorRs485Motor"]
 
-_ACTIVE_REPLY_CODE = 0xB6
+_ACTIVE_REPLY_CODE = ActiveReply.CODE  # CAN only (§4.36)
 
 
 class MyActuatorRs485Motor:
