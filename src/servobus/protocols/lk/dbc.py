@@ -6,9 +6,10 @@ parameter frames are multiplexed again on their parameter byte (V2.36 settings: 
 parameter); V2.35's 0x280 multi-motor torque frame. Options: ``model`` (an ``LkModel`` or a motor type
 MS, MF, MH, MG; default MG) and ``encoder_bits`` (14, 15, 16, 18; default 14).
 
-A class's fields are its ``FIELDS`` where it declares them; for the others :func:`lk_fields` states
-them: the field objects of ``protocols/lk`` (``SPEED``, ``TEMPERATURE``, the ``IqSlot`` of the motor
-type, the parameter ``*_LAYOUTS``) at the offsets their classes write in ``encode``/``decode``.
+The DATA[0] values are the family's commands and their declared replies (``request_keys``,
+``reply_keys``); a class's fields are its declarations (``FIELDS`` and the model-dependent
+``MODEL_FIELDS``) read for the motor type and encoder width (:func:`lk_fields`); only the parameter
+frames, whose value sits where their key says, are stated here (``params.py``'s ``*_LAYOUTS``).
 ``tests/test_dbc_export.py`` decodes frames of every LK class both ways and compares every field.
 """
 
@@ -16,8 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
-from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any, cast
 
 from servobus.dbc import (
@@ -27,6 +27,7 @@ from servobus.dbc import (
     Described,
     EnumByte,
     FlagsByte,
+    Keyed,
     Layout,
     MessageSpec,
     Mux,
@@ -34,21 +35,29 @@ from servobus.dbc import (
     SignalSpec,
     le_signal,
     muxed,
+    reply_keys,
+    request_keys,
     signal_spec,
 )
 from servobus.protocols._fields import IntField
-from servobus.protocols.lk import commands as cmd
+from servobus.protocols.lk import FAMILY
 from servobus.protocols.lk import commands_control as ctl
 from servobus.protocols.lk import params as lkp
 from servobus.protocols.lk import params_v235 as p235
 from servobus.protocols.lk import params_v236 as p236
 from servobus.protocols.lk import replies as rep
-from servobus.protocols.lk import replies_position as rpos
-from servobus.protocols.lk import states
-from servobus.protocols.lk.codec import REPLY_CLASSES, REQUESTS, resolve_model
+from servobus.protocols.lk._base import (
+    CommandField,
+    EncoderCountField,
+    FlagByteField,
+    IqField,
+    MemberField,
+    TupleField,
+)
+from servobus.protocols.lk.codec import resolve_model
 from servobus.protocols.lk.ids import MULTI_MOTOR_ID, reply_id, request_id
 from servobus.protocols.lk.model import LkModel, MotorType, Revision, encoder_max_count
-from servobus.protocols.lk.params import SETTING_LAYOUTS, SettingParam
+from servobus.protocols.lk.params import SETTING_LAYOUTS, ResultField, SettingParam
 
 __all__ = ["DBC", "lk_fields"]
 
@@ -133,124 +142,65 @@ def _choices(layouts: Iterable[Layout]) -> tuple[tuple[int, str], ...]:
     return tuple((layout.code, layout.name) for layout in layouts if layout.code is not None)
 
 
+#: Classes whose payload is not a fixed layout (a parameter frame's value sits where its key says):
+#: a parameter multiplexer under DATA[0], or their fields.
+_PARAMETERS: Mapping[type, Callable[[], tuple[tuple[int, Any], ...] | Mux]] = {
+    p236.ReadControlParam: lambda: ((1, EnumByte("param", lkp.ControlParam)),),
+    p236.WriteControlParam: lambda: _param_mux(lkp.ControlParam, lkp.CONTROL_LAYOUTS),
+    p236.ControlParamReply: lambda: _param_mux(lkp.ControlParam, lkp.CONTROL_LAYOUTS),
+    p236.ReadSetting: lambda: _setting_mux(with_values=False),
+    p236.WriteSetting: lambda: _setting_mux(with_values=True),
+    p236.SettingReply: lambda: _setting_mux(with_values=True),
+    p235.ReadParam: lambda: ((1, EnumByte("param", lkp.ParamId)),),
+    p235.WriteParamRam: lambda: _param_mux(lkp.ParamId, lkp.PARAM_LAYOUTS),
+    p235.WriteParamRom: lambda: _param_mux(lkp.ParamId, lkp.PARAM_LAYOUTS),
+    p235.ParamReply: lambda: _param_mux(lkp.ParamId, lkp.PARAM_LAYOUTS),
+}
+
+
 def lk_fields(cls: type, code: int | None, model: Any) -> tuple[tuple[Any, ...], Mux | None, str | None]:
     """Where an LK message class puts its fields, for ``model``: ``(offset, field object)`` pairs, a
     parameter multiplexer under DATA[0] (or None), and why the class cannot be described (or None).
 
-    The offsets are those the classes' ``encode``/``decode`` write (spec §4, §6, §8); the field objects
-    are the LK modules' own, so scales and ranges are the codec's.
+    A fixed layout's fields are its declarations (``all_fields()``: ``FIELDS`` and ``MODEL_FIELDS``),
+    each as the field the motor needs: an encoder count within ``model.encoder_bits``; an iq value
+    (``IqField``) in amperes or counts by ``model.motor_type``, the status-2 reply's range by its command
+    byte (``replies.torque_range``), a motor type without it leaving the class out; a tuple value as its
+    items. The ``command`` byte of a shared reply layout is the multiplexer's (implied). Parameter frames
+    are :data:`_PARAMETERS`.
     """
-    motor_type = model.motor_type
-
-    def encoder(name: str) -> IntField:
-        return IntField(name, size=2, hi=encoder_max_count(model.encoder_bits))
-
-    def iq(slot: Any, limits: tuple[int, int] | None = None) -> Any:
-        field = _iq(slot, motor_type, limits)
-        return (
-            _NotCarried(f"{slot.amps_name}: {motor_type.name} motors do not carry it")
-            if field is None
-            else field
-        )
-
-    def items(field: Any, count: int) -> list[Any]:
-        return [field] * count if isinstance(field, _NotCarried) else _items(field, count)
-
-    direction = EnumByte("direction", states.SpinDirection)
-    # The status-2 shape's DATA[2..3] depends on the command byte too: what it is (0xA0's power on every
-    # motor type, ``replies.status2_slot``) and its range (``replies.torque_range``).
-    status2_iq = rep.torque_range(model.revision, motor_type, code) if code is not None else None
-    status2_slot = rep.status2_slot(code) if code is not None else rep.REPLY_IQ
-    table: dict[type, tuple[Any, ...] | Mux] = {
-        rep.Status2Reply: (
-            (1, rep.TEMPERATURE),
-            (2, iq(status2_slot, status2_iq)),
-            (4, rep.REPLY_SPEED),
-            (6, encoder("encoder_counts")),
-        ),
-        cmd.BrakeControl: ((1, EnumByte("action", states.BrakeAction)),),
-        cmd.WriteEncoderOffset: ((cmd.ENCODER_OFFSET_AT, encoder("offset_counts")),),
-        cmd.WriteAcceleration: ((4, cmd.ACCELERATION),),
-        ctl.OpenLoopControl: ((4, ctl.POWER),),
-        ctl.TorqueControl: ((4, iq(ctl.TORQUE)),),
-        ctl.SpeedControl: ((2, iq(ctl.TORQUE_LIMIT)), (4, ctl.SPEED)),
-        ctl.SpeedControlV235: ((4, ctl.SPEED),),
-        ctl.MultiTurnPosition: ((4, ctl.ANGLE),),
-        ctl.MultiTurnPositionSpeed: ((2, ctl.MAX_SPEED), (4, ctl.ANGLE)),
-        ctl.SingleTurnPosition: ((1, direction), (4, ctl.SINGLE_TURN)),
-        ctl.SingleTurnPositionV235: ((1, direction), (4, ctl.SINGLE_TURN_V235)),
-        ctl.SingleTurnPositionSpeed: ((1, direction), (2, ctl.MAX_SPEED), (4, ctl.SINGLE_TURN)),
-        ctl.SingleTurnPositionSpeedV235: ((1, direction), (2, ctl.MAX_SPEED), (4, ctl.SINGLE_TURN_V235)),
-        ctl.IncrementalPosition: ((4, ctl.INCREMENT),),
-        ctl.IncrementalPositionSpeed: ((2, ctl.MAX_SPEED), (4, ctl.INCREMENT)),
-        ctl.MultiMotorTorque: tuple(zip((0, 2, 4, 6), items(iq(ctl.MULTI_TORQUE), 4), strict=True)),
-        p236.ReadControlParam: ((1, EnumByte("param", lkp.ControlParam)),),
-        p236.WriteControlParam: _param_mux(lkp.ControlParam, lkp.CONTROL_LAYOUTS),
-        p236.ControlParamReply: _param_mux(lkp.ControlParam, lkp.CONTROL_LAYOUTS),
-        p236.ReadSetting: _setting_mux(with_values=False),
-        p236.WriteSetting: _setting_mux(with_values=True),
-        p236.SettingReply: _setting_mux(with_values=True),
-        p236.SaveSettingsReply: ((2, ResultByte("result", lkp.SAVE_RESULT)),),
-        p235.ReadParam: ((1, EnumByte("param", lkp.ParamId)),),
-        p235.WriteParamRam: _param_mux(lkp.ParamId, lkp.PARAM_LAYOUTS),
-        p235.WriteParamRom: _param_mux(lkp.ParamId, lkp.PARAM_LAYOUTS),
-        p235.ParamReply: _param_mux(lkp.ParamId, lkp.PARAM_LAYOUTS),
-        p235.ParamWriteReply: (
-            (1, EnumByte("param", lkp.ParamId)),
-            (2, ResultByte("result", lkp.WRITE_RESULT_V235)),
-        ),
-        rep.Status1Reply: (
-            (1, rep.TEMPERATURE),
-            (2, rep.VOLTAGE),
-            (4, rep.BUS_CURRENT),
-            (6, EnumByte("motor_state", states.MotorState)),
-            (7, FlagsByte("error_state", states.ErrorState)),
-        ),
-        rep.Status1ReplyV235: (
-            (1, rep.TEMPERATURE),
-            (3, rep.VOLTAGE_V235),
-            (7, FlagsByte("error_state", states.ErrorStateV235)),
-        ),
-        rep.Status3Reply: ((1, rep.TEMPERATURE), *zip((2, 4, 6), items(iq(rep.PHASE), 3), strict=True)),
-        rep.Status3ReplyV235: tuple(zip((2, 4, 6), _items(rep.PHASE_V235, 3), strict=True)),
-        rep.BrakeReply: ((1, EnumByte("state", states.BrakeState)),),
-        rpos.EncoderReply: (
-            (2, encoder("encoder_counts")),
-            (4, encoder("raw_counts")),
-            (6, encoder("offset_counts")),
-        ),
-        rpos.CalibrationReply: (
-            (1, rpos.ALIGN_VALUE),
-            (5, rpos.ALIGN_RATIO),
-            (7, FlagsByte("align_state", states.AlignState)),
-        ),
-        rpos.EncoderOffsetReply: ((6, encoder("offset_counts")),),
-        rpos.MultiTurnAngleReply: ((1, rpos.MULTI_TURN),),
-        rpos.SingleTurnAngleReply: ((4, rpos.CIRCLE),),
-        rpos.SingleTurnAngleReplyV235: ((6, rpos.CIRCLE_V235),),
-        rpos.AccelerationReply: ((4, rpos.ACCELERATION),),
-    }
-    entry = table.get(cls, ())
-    if isinstance(entry, Mux):
-        return (), entry, None
-    missing = next((f for _, f in entry if isinstance(f, _NotCarried)), None)
-    if missing is not None:
-        return (), None, missing.why
-    return entry, None, None
-
-
-@dataclass(frozen=True, slots=True)
-class _NotCarried:
-    """A field the motor type does not carry (MS has no torque loop): the class is left out."""
-
-    why: str
-
-
-#: Fixed bytes of LK layouts (spec §4.29): 0x44 ``05 FA`` (request) and ``05 flag`` (reply).
-LK_CONSTANTS: Mapping[str, tuple[tuple[int, int], ...]] = {
-    "SaveSettings": ((1, 0x05), (2, 0xFA)),
-    "SaveSettingsReply": ((1, 0x05),),
-}
+    parameters = _PARAMETERS.get(cls)
+    if parameters is not None:
+        entry = parameters()
+        return ((), entry, None) if isinstance(entry, Mux) else (entry, None, None)
+    out: list[tuple[int, Any]] = []
+    for offset, field in cls.all_fields():  # type: ignore[attr-defined]
+        if isinstance(field, CommandField):
+            continue
+        if isinstance(field, EncoderCountField):
+            out.append((offset, IntField(field.name, size=2, hi=encoder_max_count(model.encoder_bits))))
+        elif isinstance(field, IqField):
+            slot = field.slot_of(code)
+            limits = None
+            if cls is rep.Status2Reply and code is not None:
+                limits = rep.torque_range(model.revision, model.motor_type, code)
+            iq = _iq(slot, model.motor_type, limits)
+            if iq is None:
+                return (), None, f"{slot.amps_name}: {model.motor_type.name} motors do not carry it"
+            items = _items(iq, len(field.labels)) if field.labels else [iq]
+            out += [(offset + 2 * i, item) for i, item in enumerate(items)]
+        elif isinstance(field, TupleField):
+            items = _items(field.item, len(field.labels))
+            out += [(offset + i * field.item.size, item) for i, item in enumerate(items)]
+        elif isinstance(field, MemberField):
+            out.append((offset, EnumByte(field.name, field.members, field.size)))
+        elif isinstance(field, FlagByteField):
+            out.append((offset, FlagsByte(field.name, field.flags)))
+        elif isinstance(field, ResultField):
+            out.append((offset, ResultByte(field.name, field.table)))
+        else:
+            out.append((offset, field))
+    return tuple(out), None, None
 
 
 def _lk_layout(cls: type, code: int, model: Any, what: str, left_out: list[str]) -> Layout | None:
@@ -265,7 +215,18 @@ def _lk_layout(cls: type, code: int, model: Any, what: str, left_out: list[str])
         assert spec is not None  # LK has no text fields
         signals.append(spec)
     implies = (("command", code),) if "command" in {f.name for f in dataclasses.fields(cls)} else ()
-    return Layout(code, name, tuple(signals), LK_CONSTANTS.get(name, ()), mux, message=name, implies=implies)
+    constants = tuple(getattr(cls, "CONSTANTS", ()))
+    return Layout(code, name, tuple(signals), constants, mux, message=name, implies=implies)
+
+
+def _layouts(keys: list[Keyed], model: Any, what: str, left_out: list[str]) -> tuple[Layout, ...]:
+    """The layouts of the classes each DATA[0] value selects (one per value in LK)."""
+    out = []
+    for key in sorted(keys, key=lambda k: k.code):
+        layout = _lk_layout(key.cls, key.code, model, what, left_out)
+        if layout is not None:
+            out.append(layout)
+    return tuple(out)
 
 
 def _describe(query: DbcQuery) -> Described:
@@ -287,16 +248,8 @@ def _describe(query: DbcQuery) -> Described:
     model = resolve_model(rev, model)
     rev = model.revision
     left_out: list[str] = []
-    requests = tuple(
-        layout
-        for code, cls in sorted(REQUESTS[rev].items())
-        if (layout := _lk_layout(cls, code, model, "request", left_out)) is not None
-    )
-    replies = tuple(
-        layout
-        for code, cls in sorted(REPLY_CLASSES[rev].items())
-        if (layout := _lk_layout(cls, code, model, "reply", left_out)) is not None
-    )
+    requests = _layouts(request_keys(FAMILY.commands, rev), model, "request", left_out)
+    replies = _layouts(reply_keys(FAMILY.commands, rev), model, "reply", left_out)
     what = f"LK {rev.name} ({model.motor_type.name}, {model.encoder_bits}-bit encoder)"
     # V2.35 replies come on the request's identifier (spec §1.1): one DBC holds one of the two.
     shared = rev is Revision.V2_35 and direction is None
