@@ -69,5 +69,5 @@ FAMILY: Family[Motor] = Family(
     commands=COMMANDS,
     motor_ids=MOTOR_IDS,
     motor=_motor,
-    parts={"cli": "servobus_toy.cli:CLI"},
+    parts={"cli": "servobus_toy.cli:CLI", "sim": "servobus_toy.sim:SIM"},
 )
