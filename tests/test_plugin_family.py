@@ -443,6 +443,24 @@ def test_servobus_sim_family_toy_serves_an_slcan_adapter() -> None:
         assert server.wait(timeout=5) == 0
 
 
+def test_servobus_record_and_decode_round_trip_a_toy_bus(tmp_path: Path) -> None:
+    rows, log = tmp_path / "toy.jsonl", tmp_path / "toy.log"
+    args = ("-f", "toy", "--sim", "2", "--duration", "0.3", "--hz", "20", "-o", str(rows), "--log", str(log))
+    result = run_cli("record", *args)
+    assert result.returncode == 0, result.stderr
+    recorded = [json.loads(line) for line in rows.read_text().splitlines()]
+    assert {(r["motor_id"], r["family"], r["reply"]) for r in recorded} == {
+        (1, "toy", "StateReply"),
+        (2, "toy", "StateReply"),
+    }
+    decoded = _records(run_cli("decode", "-f", "toy", "--json", str(log)))
+    assert decoded and all("error" not in r for r in decoded)
+    assert {(r["direction"], r["type"]) for r in decoded} == {
+        ("request", "ReadState"),
+        ("reply", "StateReply"),
+    }
+
+
 # ---- DBC ----
 
 
