@@ -432,8 +432,19 @@ def message_fields(message: type) -> list[tuple[str, Any]]:
     return [(f.name, hints[f.name]) for f in dataclasses.fields(message) if f.name not in CONFIG_FIELDS]
 
 
+def _packed_fields(message: type) -> list[tuple[str, Any]]:
+    """The fields a packer carries for ``message``, with their types: its declared ``FIELDS`` (named
+    field objects in the packer's order), else its value fields (:func:`message_fields`)."""
+    declared = getattr(message, "FIELDS", ())
+    if declared and all(isinstance(getattr(f, "name", None), str) for f in declared):
+        hints = typing.get_type_hints(message)
+        return [(f.name, hints.get(f.name)) for f in declared]
+    return message_fields(message)
+
+
 def packed_signals(packer: Packer, message: type) -> tuple[SignalSpec, ...]:
-    """The signals of a C-core packer's frame, named after ``message``'s fields (in layout order).
+    """The signals of a C-core packer's frame, named after ``message``'s fields in the packer's order
+    (its declared ``FIELDS``, or its dataclass fields but :data:`CONFIG_FIELDS`).
 
     Factor and offset come from each field's :class:`~servobus.core.FieldScale` (``span / codes`` and
     ``origin``), the range from its limits and code range, choices from the message field's type (an
@@ -443,7 +454,7 @@ def packed_signals(packer: Packer, message: type) -> tuple[SignalSpec, ...]:
         ValueError: the message's fields do not match the layout's.
     """
     layout = packer.layout
-    fields = message_fields(message)
+    fields = _packed_fields(message)
     if len(fields) != len(layout.fields):
         raise ValueError(f"{message.__name__} has {len(fields)} fields, {layout.name} {len(layout.fields)}")
     signals: list[SignalSpec] = []

@@ -2,9 +2,10 @@
 
 Per motor its requests on the motor id and one reply message on the host id, in one CAN mode (option
 ``can_mode``: ``normal``, ``extended`` or ``fd``; they share the identifiers): the C core's packers of
-the motor model (``hollow.model.packers``): ``HOLLOW_SETPOINT`` and ``MIT_REPLY`` (normal mode),
-``HOLLOW_SETPOINT`` and ``HOLLOW_EXT_REPLY`` (extended mode), ``HOLLOW_FD_COMMAND``/``HOLLOW_FD_REPLY``
-(CAN FD, 16 bytes), bit positions from :func:`servobus.dbc.packed_signals`. The extended-id frames (CAN
+the motor model (``hollow.model.packers``) each frame's class names as its ``PACKER``, with its
+``FIELDS`` and ``SIZE``: ``Setpoint``/``NormalReply`` (normal mode), ``IncrementalSetpoint``/
+``ExtendedReply`` (extended mode), ``FdCommand``/``FdReply`` (CAN FD, 16 bytes); bit positions from
+:func:`servobus.dbc.packed_signals`. The extended-id frames (CAN
 mode switch, PI multiplier) are laid out in their classes' code; :func:`hollow_config` states them.
 Options: ``model`` (a ``HollowModel`` or a name of ``hollow.MODELS``), ``host_id`` (default 100).
 """
@@ -12,6 +13,7 @@ Options: ``model`` (a ``HollowModel`` or a name of ``hollow.MODELS``), ``host_id
 from __future__ import annotations
 
 import functools
+from typing import Any
 
 from servobus.dbc import (
     DbcFamily,
@@ -33,6 +35,12 @@ from servobus.protocols.hollow.model import packers
 __all__ = ["CAN_MODES", "DBC", "hollow_config"]
 
 CAN_MODES = ("normal", "extended", "fd")
+#: The request and the reply on the motor and host ids in each CAN mode: DBC message name and class.
+_FRAMES: dict[str, tuple[tuple[str, type[Any]], tuple[str, type[Any]]]] = {
+    "normal": (("setpoint", ho.Setpoint), ("reply", ho.NormalReply)),
+    "extended": (("increment", ho.IncrementalSetpoint), ("ext_reply", ho.ExtendedReply)),
+    "fd": (("fd_command", ho.FdCommand), ("fd_reply", ho.FdReply)),
+}
 
 
 @functools.cache
@@ -78,30 +86,22 @@ def _describe(query: DbcQuery) -> Described:
     left_out = [
         "RS-485 converter frames (transparent, Modbus RTU, configuration): serial frames, not CAN",
     ]
-    if mode == "fd":
-        request = ("fd_command", 16, packed_signals(p.fd_command, ho.FdCommand), "FdCommand")
-        reply = ("fd_reply", 16, packed_signals(p.fd_reply, ho.FdReply), "FdReply")
-    else:
+    if mode != "fd":
         left_out.append(
             "special commands FF x7 + F9..FE (Start, Stop, SelectMode, SetZero): told apart from a setpoint "
             "by a 7-byte pattern, not a multiplexer value; the DBC reads them as setpoints"
         )
-        if mode == "normal":
-            request = ("setpoint", 8, packed_signals(p.setpoint, ho.Setpoint), "Setpoint")
-            reply = ("reply", 6, packed_signals(p.normal_reply, ho.NormalReply), "NormalReply")
-        else:
-            request = (
-                "increment",
-                8,
-                packed_signals(p.setpoint, ho.IncrementalSetpoint),
-                "IncrementalSetpoint",
-            )
-            reply = ("ext_reply", 8, packed_signals(p.extended_reply, ho.ExtendedReply), "ExtendedReply")
-            left_out.append(
-                "ExtendedReply position_deg as one signal: its 32-bit code is split (low half DATA[1..2], "
-                "high half DATA[6..7]), so it is two signals whose values add up to it (position_deg_b0 + "
-                "position_deg_b16)"
-            )
+    if mode == "extended":
+        left_out.append(
+            "ExtendedReply position_deg as one signal: its 32-bit code is split (low half DATA[1..2], "
+            "high half DATA[6..7]), so it is two signals whose values add up to it (position_deg_b0 + "
+            "position_deg_b16)"
+        )
+    # Each frame: its message name, and its class's declared packer (PACKER), fields and SIZE.
+    request, reply = (
+        (name, cls.SIZE, packed_signals(getattr(p, cls.PACKER), cls), cls.__name__)
+        for name, cls in _FRAMES[mode]
+    )
     others = [m for m in CAN_MODES if m != mode]
     left_out.append(
         f"the {' and '.join(others)} frames: they use the same identifiers (the motor id for requests, the "
