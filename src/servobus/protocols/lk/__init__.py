@@ -36,45 +36,17 @@ from typing import TYPE_CHECKING
 
 from servobus.protocols._family import Family, command_classes
 from servobus.protocols.lk import bound as _bound
+from servobus.protocols.lk import commands as _commands
+from servobus.protocols.lk import commands_control as _commands_control
+from servobus.protocols.lk import params_v235 as _params_v235
+from servobus.protocols.lk import params_v236 as _params_v236
+from servobus.protocols.lk import replies as _replies
+from servobus.protocols.lk import replies_position as _replies_position
+from servobus.protocols.lk import states as _states
 from servobus.protocols.lk._base import LkCommand, LkReply
-from servobus.protocols.lk.codec import (
-    decode_reply,
-    decode_request,
-)
-from servobus.protocols.lk.commands import (
-    BrakeControl,
-    CalibrateEncoder,
-    ClearErrors,
-    MotorOff,
-    MotorRun,
-    MotorStop,
-    ReadAcceleration,
-    ReadEncoder,
-    ReadMultiTurnAngle,
-    ReadSingleTurnAngle,
-    ReadStatus1,
-    ReadStatus2,
-    ReadStatus3,
-    SetZeroRam,
-    SetZeroRom,
-    WriteAcceleration,
-    WriteEncoderOffset,
-)
-from servobus.protocols.lk.commands_control import (
-    IncrementalPosition,
-    IncrementalPositionSpeed,
-    MultiMotorTorque,
-    MultiTurnPosition,
-    MultiTurnPositionSpeed,
-    OpenLoopControl,
-    SingleTurnPosition,
-    SingleTurnPositionSpeed,
-    SingleTurnPositionSpeedV235,
-    SingleTurnPositionV235,
-    SpeedControl,
-    SpeedControlV235,
-    TorqueControl,
-)
+from servobus.protocols.lk.codec import decode_reply, decode_request
+from servobus.protocols.lk.commands import *  # noqa: F403 - the commands, exported by their module's __all__
+from servobus.protocols.lk.commands_control import *  # noqa: F403
 from servobus.protocols.lk.ids import MOTOR_IDS as _MOTOR_IDS
 from servobus.protocols.lk.model import DEFAULT_MODEL, IQ_AMPS_PER_COUNT, LkModel, MotorType, Revision
 from servobus.protocols.lk.params import (
@@ -87,138 +59,33 @@ from servobus.protocols.lk.params import (
     Rs485Baud,
     SettingParam,
 )
-from servobus.protocols.lk.params_v235 import (
-    ParamReply,
-    ParamWriteReply,
-    ReadParam,
-    WriteParamRam,
-    WriteParamRom,
-)
-from servobus.protocols.lk.params_v236 import (
-    ControlParamReply,
-    ReadControlParam,
-    ReadSetting,
-    SaveSettings,
-    SaveSettingsReply,
-    SettingReply,
-    WriteControlParam,
-    WriteSetting,
-)
-from servobus.protocols.lk.replies import (
-    BrakeReply,
-    EchoReply,
-    Status1Reply,
-    Status1ReplyV235,
-    Status2Reply,
-    Status3Reply,
-    Status3ReplyV235,
-)
-from servobus.protocols.lk.replies_position import (
-    AccelerationReply,
-    CalibrationReply,
-    EncoderOffsetReply,
-    EncoderReply,
-    MultiTurnAngleReply,
-    SingleTurnAngleReply,
-    SingleTurnAngleReplyV235,
-)
-from servobus.protocols.lk.states import (
-    AlignState,
-    BrakeAction,
-    BrakeState,
-    ErrorState,
-    ErrorStateV235,
-    MotorState,
-    ParamResult,
-    SpinDirection,
-)
+from servobus.protocols.lk.params_v235 import *  # noqa: F403
+from servobus.protocols.lk.params_v236 import *  # noqa: F403
+from servobus.protocols.lk.replies import *  # noqa: F403
+from servobus.protocols.lk.replies_position import *  # noqa: F403
+from servobus.protocols.lk.states import *  # noqa: F403
 
+# What this package adds to the message modules' classes (appended at the end of the module).
 __all__ = [
     "DEFAULT_MODEL",
     "FAMILY",
     "IQ_AMPS_PER_COUNT",
-    "AccelerationReply",
-    "AlignState",
-    "BrakeAction",
-    "BrakeControl",
-    "BrakeReply",
-    "BrakeState",
     "BusType",
-    "CalibrateEncoder",
-    "CalibrationReply",
     "CanBaud",
-    "ClearErrors",
     "ControlParam",
-    "ControlParamReply",
-    "EchoReply",
-    "EncoderOffsetReply",
-    "EncoderReply",
-    "ErrorState",
-    "ErrorStateV235",
-    "IncrementalPosition",
-    "IncrementalPositionSpeed",
     "LkCommand",
     "LkModel",
     "LkReply",
-    "MotorOff",
-    "MotorRun",
-    "MotorState",
-    "MotorStop",
     "MotorType",
-    "MultiMotorTorque",
-    "MultiTurnAngleReply",
-    "MultiTurnPosition",
-    "MultiTurnPositionSpeed",
-    "OpenLoopControl",
     "ParamId",
-    "ParamReply",
-    "ParamResult",
     "ParamValue",
-    "ParamWriteReply",
     "PidGains",
-    "ReadAcceleration",
-    "ReadControlParam",
-    "ReadEncoder",
-    "ReadMultiTurnAngle",
-    "ReadParam",
-    "ReadSetting",
-    "ReadSingleTurnAngle",
-    "ReadStatus1",
-    "ReadStatus2",
-    "ReadStatus3",
     "Revision",
     "Rs485Baud",
-    "SaveSettings",
-    "SaveSettingsReply",
-    "SetZeroRam",
-    "SetZeroRom",
     "SettingParam",
-    "SettingReply",
-    "SingleTurnAngleReply",
-    "SingleTurnAngleReplyV235",
-    "SingleTurnPosition",
-    "SingleTurnPositionSpeed",
-    "SingleTurnPositionSpeedV235",
-    "SingleTurnPositionV235",
-    "SpeedControl",
-    "SpeedControlV235",
-    "SpinDirection",
-    "Status1Reply",
-    "Status1ReplyV235",
-    "Status2Reply",
-    "Status3Reply",
-    "Status3ReplyV235",
-    "TorqueControl",
-    "WriteAcceleration",
-    "WriteControlParam",
-    "WriteEncoderOffset",
-    "WriteParamRam",
-    "WriteParamRom",
-    "WriteSetting",
     "decode_reply",
     "decode_request",
 ]
-
 if TYPE_CHECKING:
     from servobus.protocols.lk._motor import Motor
 
@@ -249,3 +116,12 @@ FAMILY: Family[Motor] = Family(
         "dbc": "servobus.protocols.lk.dbc:DBC",
     },
 )
+
+# The message classes: each module's own __all__ (a new class is exported where it is written).
+__all__ += _commands.__all__
+__all__ += _commands_control.__all__
+__all__ += _params_v235.__all__
+__all__ += _params_v236.__all__
+__all__ += _replies.__all__
+__all__ += _replies_position.__all__
+__all__ += _states.__all__

@@ -384,6 +384,19 @@ class ParamMessage(Message):
     param: Any
     value: ParamValue
 
+    def __init_subclass__(
+        cls,
+        params: type[enum.IntEnum] | None = None,
+        layouts: Mapping[Any, ValueLayout] | None = None,
+        **kwargs: Any,
+    ) -> None:
+        """``class _Control(ParamMessage, params=ControlParam, layouts=CONTROL_LAYOUTS)``: a scheme."""
+        super().__init_subclass__(**kwargs)
+        if params is not None:
+            cls.PARAMS = params
+        if layouts is not None:
+            cls.LAYOUTS = layouts
+
     @classmethod
     def _codes(cls) -> frozenset[int]:
         if cls.CODE is not None:

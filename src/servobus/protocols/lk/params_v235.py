@@ -29,12 +29,10 @@ __all__ = [
 ]
 
 
-class _ParamMessage(ParamMessage):
+class _ParamMessage(ParamMessage, params=ParamId, layouts=PARAM_LAYOUTS):
     """V2.35 0x40 replies and 0x42/0x44 requests: ``cmd | ParamID | value``."""
 
     __slots__ = ()
-    PARAMS = ParamId
-    LAYOUTS = PARAM_LAYOUTS
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -75,13 +73,12 @@ class ParamWriteReply(LkReply):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadParam(ParamMessage, LkCommand[ParamReply]):
+class ReadParam(ParamMessage, LkCommand[ParamReply], params=ParamId):
     """0x40, V2.35 layout: read a parameter, ``40 | ParamID | 00..`` (spec §4.27; worked example W4)."""
 
     CODE: ClassVar[int] = 0x40
     REVISIONS = V2_35_ONLY
     READ = True
-    PARAMS = ParamId
     param: ParamId
 
 

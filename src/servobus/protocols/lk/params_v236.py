@@ -39,12 +39,10 @@ __all__ = [
 # ---- V2.36 control parameters (0xC0 / 0xC1) --------------------------------------------------
 
 
-class _ControlMessage(ParamMessage):
+class _ControlMessage(ParamMessage, params=ControlParam, layouts=CONTROL_LAYOUTS):
     """0xC0/0xC1 frames with a value: ``cmd | id | byte1..6``."""
 
     __slots__ = ()
-    PARAMS = ControlParam
-    LAYOUTS = CONTROL_LAYOUTS
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -64,13 +62,12 @@ class ControlParamReply(_ControlMessage, LkReply):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ReadControlParam(ParamMessage, LkCommand[ControlParamReply]):
+class ReadControlParam(ParamMessage, LkCommand[ControlParamReply], params=ControlParam):
     """0xC0, V2.36 only: read a control parameter from RAM (spec §4.18)."""
 
     CODE: ClassVar[int] = 0xC0
     REVISIONS = V2_36_ONLY
     READ = True
-    PARAMS = ControlParam
     param: ControlParam
 
 
@@ -95,11 +92,10 @@ class WriteControlParam(_ControlMessage, LkCommand[ControlParamReply]):
 # ---- V2.36 setting parameters (0x40 / 0x42 / 0x44) ---------------------------------------------
 
 
-class _SettingKey(ParamMessage):
+class _SettingKey(ParamMessage, params=SettingParam):
     """Setting frames are keyed by two address bytes (spec §6.2)."""
 
     __slots__ = ()
-    PARAMS = SettingParam
 
     @classmethod
     def _encode_key(cls, param: SettingParam) -> bytes:
@@ -110,14 +106,13 @@ class _SettingKey(ParamMessage):
         return decode_setting_address(data, what=what)
 
 
-class _SettingMessage(_SettingKey):
+class _SettingMessage(_SettingKey, layouts=SETTING_LAYOUTS):
     """0x40 replies and 0x42 frames: ``cmd | address | value`` (spec §6.2, §13).
 
     The PID layout starts at DATA[2] and overwrites the (zero) second address byte with Kp.
     """
 
     __slots__ = ()
-    LAYOUTS = SETTING_LAYOUTS
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
