@@ -132,7 +132,10 @@ def _reply_layout(command: type[MyActuatorCommand], reply: type[Reply]) -> tuple
         assert command.CODE is not None
         return command.CODE, Candidate(reply, reply.decode, command.REVISIONS)  # type: ignore[arg-type, attr-defined]
     if reply.CODE != command.CODE:
-        raise TypeError(f"{command.__name__} is answered by {reply.__name__}, whose DATA[0] is another")
+        raise TypeError(
+            f"{command.__name__} (0x{command.CODE:02X}) is declared to be answered by {reply.__name__}, "
+            f"whose DATA[0] is 0x{reply.CODE:02X}"
+        )
     return _layout(reply)
 
 
@@ -146,25 +149,26 @@ NO_REPLY: Mapping[int, str] = {
     c.CODE: c.NO_REPLY for c in _REQUEST_CLASSES if c.NO_REPLY is not None and c.CODE is not None
 }
 
-#: The revisions of each command answered with the shared R2 layout (its reply's availability).
-STATUS_COMMAND_REVISIONS: Mapping[StatusCommand, frozenset[Revision]] = {
-    StatusCommand(c.CODE): c.REVISIONS
-    for c in _REQUEST_CLASSES
-    if rep.StatusReply in c.reply_types() and c.CODE is not None
-}
 
-
-def _check_enum(enum: type[IntEnum], codes: set[int | None], declaration: str) -> None:
+def _check_enum(enum: type[IntEnum], codes: set[int], declaration: str) -> None:
     # The enums stay classes with members, so a user's mypy knows them; they must list what is declared.
     if codes != {int(m) for m in enum}:
         raise TypeError(
             f"{enum.__name__} must list exactly the commands declared {declaration}: "
-            f"{', '.join(f'0x{c:02X}' for c in sorted(c for c in codes if c is not None))}"
+            f"{', '.join(f'0x{c:02X}' for c in sorted(codes))}"
         )
 
 
-_check_enum(StatusCommand, set(STATUS_COMMAND_REVISIONS), "MyActuatorCommand[StatusReply]")
-_check_enum(StreamableCommand, {c.CODE for c in _REQUEST_CLASSES if c.STREAMABLE}, "STREAMABLE")
+_STATUS_CODES = {
+    c.CODE: c.REVISIONS for c in _REQUEST_CLASSES if rep.StatusReply in c.reply_types() and c.CODE is not None
+}
+_check_enum(StatusCommand, set(_STATUS_CODES), "MyActuatorCommand[StatusReply]")
+_check_enum(StreamableCommand, {c.CODE for c in _REQUEST_CLASSES if c.STREAMABLE and c.CODE}, "STREAMABLE")
+
+#: The revisions of each command answered with the shared R2 layout (its reply's availability).
+STATUS_COMMAND_REVISIONS: Mapping[StatusCommand, frozenset[Revision]] = {
+    StatusCommand(code): revisions for code, revisions in _STATUS_CODES.items()
+}
 
 
 def expects_reply(command: MyActuatorMessage) -> bool:
