@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import os
+import re
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -20,7 +21,7 @@ import cantools
 import pytest
 
 from _dbc_check import check_frame
-from servobus.dbc import DbcFamily, DbcOption, DbcQuery, Described, database, dbc_part, dbc_text, plan
+from servobus.dbc import DbcFamily, DbcOption, DbcQuery, Described, Layout, database, dbc_part, dbc_text, plan
 from servobus.protocols import get_family
 
 PLUGINS = Path(__file__).resolve().parent / "plugins"
@@ -138,6 +139,47 @@ def test_the_built_in_families_state_their_dbc_in_their_dbc_part(name: str) -> N
     part = dbc_part(get_family(name))
     assert isinstance(part, DbcFamily) and part.describe is not DbcFamily().describe
     assert all(option.name.isidentifier() and option.help for option in part.options)
+
+
+def _messages(layout: Layout, out: set[str]) -> set[str]:
+    if layout.message:
+        out.add(layout.message)
+    for sub in layout.mux.layouts if layout.mux else ():
+        _messages(sub, out)
+    return out
+
+
+#: The DBCs that together hold every frame a family has on CAN (one per CAN mode, per direction where
+#: a revision's requests and replies share an identifier).
+ALL_FRAMES: dict[str, list[dict[str, Any]]] = {
+    "lk": [{"direction": "request"}, {"direction": "reply"}],
+    "hollow": [{"can_mode": mode} for mode in ("normal", "extended", "fd")],
+}
+
+
+@pytest.mark.usefixtures("toy")
+@pytest.mark.parametrize("name", ["myactuator", "lk", "hollow", "toy"])
+def test_every_declared_command_and_reply_is_in_the_dbc_or_left_out_by_name(name: str) -> None:
+    """Each command class of each revision, and each reply it declares, is the class a layout of the
+    DBC decodes to (Echo for an echoed command), or the left-out list names it with the reason."""
+    family = get_family(name)
+    for revision in family.revisions:
+        found: set[str] = set()
+        left_out: list[str] = []
+        for options in ALL_FRAMES.get(name, [{}]):
+            p = plan(family, [1], revision, **options)
+            for message in p.messages:
+                _messages(message.root, found)
+            left_out += p.left_out
+        commands = [c for c in family.commands if revision in getattr(c, "REVISIONS", (revision,))]
+        replies = [r for c in commands for r in c.reply_types()]
+        for cls in dict.fromkeys((*commands, *replies)):
+            if revision not in getattr(cls, "REVISIONS", (revision,)) or cls.__name__ in found:
+                continue
+            if cls.__name__ == "Echo":  # a command's echo: in the DBC as Echo_<command>
+                continue
+            named = [r for r in left_out if re.search(rf"\b{cls.__name__}\b", r)]
+            assert named, f"{name} {revision.name}: {cls.__name__} is neither in the DBC nor left out"
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess[str]:

@@ -43,6 +43,19 @@ _FRAMES: dict[str, tuple[tuple[str, type[Any]], tuple[str, type[Any]]]] = {
 }
 
 
+def _serial_only() -> list[str]:
+    """The commands no CAN link carries (their ``LINKS``), and their replies: the DBC has none of them."""
+    commands = [c for c in ho.FAMILY.commands if not any(link.startswith("can") for link in _links(c))]
+    return list(
+        dict.fromkeys(c.__name__ for c in (*commands, *(r for c in commands for r in c.reply_types())))
+    )
+
+
+def _links(cls: type) -> tuple[str, ...]:
+    links: tuple[str, ...] = getattr(cls, "LINKS", ()) or ho.FAMILY.links
+    return links
+
+
 @functools.cache
 def hollow_config() -> Mux:
     """The hollow extended-id frames (§5.1, §6), laid out in ``CanModeSwitch``/``PiMultiplier`` code:
@@ -84,7 +97,8 @@ def _describe(query: DbcQuery) -> Described:
         raise ValueError(f"motor id {host} is the host id the replies go to: give another --host-id")
     p = packers(model)
     left_out = [
-        "RS-485 converter frames (transparent, Modbus RTU, configuration): serial frames, not CAN",
+        f"RS-485 converter frames (transparent, Modbus RTU, configuration: {', '.join(_serial_only())}): "
+        "serial frames, not CAN",
     ]
     if mode != "fd":
         left_out.append(

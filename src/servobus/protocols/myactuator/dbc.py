@@ -28,7 +28,14 @@ from servobus.dbc import (
     reply_keys,
     request_keys,
 )
-from servobus.protocols.myactuator import FAMILY, Echo, MotionCommand, MotionReply, MotionScales
+from servobus.protocols.myactuator import (
+    FAMILY,
+    Echo,
+    MotionCommand,
+    MotionReply,
+    MotionScales,
+    Rs485MotionCommand,
+)
 from servobus.protocols.myactuator.ids import (
     BROADCAST_ID,
     motion_reply_id,
@@ -48,6 +55,9 @@ def _describe(query: DbcQuery) -> Described:
     left_out: list[str] = []
     requests = keyed_layouts(request_keys(FAMILY.commands, rev), "request", left_out)
     replies = keyed_layouts(reply_keys(FAMILY.commands, rev, echo=Echo), "reply", left_out)
+    if rev in Rs485MotionCommand.REVISIONS:
+        serial = [Rs485MotionCommand.__name__, *(r.__name__ for r in Rs485MotionCommand.reply_types())]
+        left_out.append(f"RS485 MIT frames ({', '.join(serial)}): serial frames, not CAN")
     command = Layout(None, "", packed_signals(command_packer(scales), MotionCommand), message="MotionCommand")
     reply = Layout(None, "", packed_signals(reply_packer(scales), MotionReply), message="MotionReply")
     ranges = (
