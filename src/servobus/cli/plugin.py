@@ -32,7 +32,8 @@ The contract, as the CLI uses it:
     and its limit, or what to drop); the CLI reports it as bad usage (exit 2) before anything is
     sent. ``stop`` and ``off`` need no entry: :func:`safe` of the bound codec is the default.
 ``CliFamily.why_not``
-    CLI command name -> why the family has no such command (said with the exit-2 refusal).
+    CLI command name -> why the family has no such command (said with the exit-2 refusal); a
+    command named here is refused even where there is a default (``off`` without a shutdown).
 ``CliFamily.status``
     The reads ``status``, ``monitor`` and ``scan`` send, in order (classes or other callables that
     make a command with no arguments; the first is scan's probe). None: derived from the family's
@@ -63,11 +64,15 @@ from typing import Any, Union
 from servobus.protocols import BoundCodec, Command, Family, Reply
 
 __all__ = [
+    "DEFAULT_OPS",
     "STATUS_SOURCES",
+    "Build",
     "CliFamily",
+    "Make",
     "Op",
     "Query",
     "Setting",
+    "Values",
     "build",
     "derived_status",
     "move",
