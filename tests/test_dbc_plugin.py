@@ -23,6 +23,7 @@ import pytest
 from _dbc_check import check_frame
 from servobus.dbc import DbcFamily, DbcOption, DbcQuery, Described, Layout, database, dbc_part, dbc_text, plan
 from servobus.protocols import get_family
+from servobus.protocols._bound import EXTENDED
 
 PLUGINS = Path(__file__).resolve().parent / "plugins"
 SERVOBUS = [sys.executable, "-c", "import sys; from servobus.cli import main; sys.exit(main())"]
@@ -104,6 +105,45 @@ def test_a_plug_in_family_takes_no_option_of_another_and_no_id_outside_its_own(t
     family = get_family("toy")
     with pytest.raises(ValueError, match="motor_id"):
         plan("toy", [family.motor_ids[-1] + 1])
+
+
+class _Ids:
+    """What :func:`servobus.dbc.derived` reads of a bound codec: its identifiers."""
+
+    def __init__(self, request_ids: set[int], reply_ids: set[int]) -> None:
+        self.request_ids, self.reply_ids = frozenset(request_ids), frozenset(reply_ids)
+
+
+def test_derived_messages_follow_the_bound_codecs_identifiers(toy: ModuleType) -> None:
+    """One reply identifier for every motor is one message sent by all; an identifier both ways holds
+    the replies unless the requests are asked for (and says so); a 29-bit identifier is extended."""
+    family = get_family("toy")
+    host = dataclasses.replace(family, bind=lambda motor_id, **_: _Ids({motor_id}, {100}))
+    p = plan(host, [1, 2])
+    assert [(m.name, m.frame_id, m.senders) for m in p.messages] == [
+        ("toy_request_1", 1, ("host",)),
+        ("toy_reply", 100, ("motor_1", "motor_2")),
+        ("toy_request_2", 2, ("host",)),
+    ]
+    same = dataclasses.replace(family, bind=lambda motor_id, **_: _Ids({motor_id}, {motor_id}))
+    p = plan(same, [3])
+    assert [(m.name, m.kind) for m in p.messages] == [("toy_reply_3", "reply")]
+    assert p.left_out and "direction 'request'" in p.left_out[0]
+    assert [(m.name, m.kind) for m in plan(same, [3], direction="request").messages] == [
+        ("toy_request_3", "request")
+    ]
+    extended = dataclasses.replace(
+        family, bind=lambda motor_id, **_: _Ids({EXTENDED | 0x1000 | motor_id}, {0x700 + motor_id})
+    )
+    request, reply = plan(extended, [4]).messages
+    assert (request.frame_id, request.extended, reply.frame_id, reply.extended) == (
+        0x1004,
+        True,
+        0x704,
+        False,
+    )
+    db = cantools.database.load_string(dbc_text(database(plan(extended, [4]))), "dbc")
+    assert db.get_message_by_frame_id(0x1004).is_extended_frame
 
 
 def test_a_dbc_part_gets_its_options_and_the_query(toy: ModuleType) -> None:
