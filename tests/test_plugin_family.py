@@ -414,6 +414,10 @@ def test_servobus_refuses_what_the_toy_cli_part_refuses_in_one_line() -> None:
         "servobus move: error: toy motors have no move command: the toy protocol has no position "
         "set-point; servobus speed, then stop\n"
     )
+    result = run_cli("demo", "--family", "toy", "--motors", "2", "--duration", "0.5")
+    assert result.returncode == 2 and result.stderr.endswith(
+        "toy motors have no move: the toy protocol has no position set-point; servobus speed, then stop\n"
+    )
 
 
 def test_servobus_scan_finds_simulated_toy_motors() -> None:
