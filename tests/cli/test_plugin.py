@@ -90,6 +90,21 @@ def test_every_readable_setting_reads_back_from_the_simulated_motor(
     assert len(readable) == 1  # LK V2.35: its acceleration only
 
 
+@pytest.mark.parametrize("name", list(FAMILIES))
+def test_what_the_cli_sends_to_look_is_declared_a_read(name: str) -> None:
+    """status, monitor, scan and config get change nothing on a motor: every command they send is
+    declared READ (so it is retried, and a Bus left after them stops no motor)."""
+    family = get_family(name)
+    part = families.cli_part(name)
+    sent = [read() for read in part.status_reads(family)]
+    sent += [s.read() for s in part.settings if s.read is not None]
+    for revision in family.revisions:
+        codec = family.bind(min(i for i in family.motor_ids if i > 0), revision=revision)
+        for query in (part.identify, part.describe):
+            sent += [] if query is None else list(query.reads(codec))
+    assert [type(c).__name__ for c in sent if not type(c).READ] == []
+
+
 # ---- ops said by their commands ----
 
 
