@@ -145,6 +145,15 @@ def _fd_decoder(model: HollowModel) -> Callable[[bytes], FdReply]:
     return decode
 
 
+def _frame_kind(cls: type[OnLinks]) -> str:
+    """What frame ``cls`` is, for a refusal: its kind tells the user which link it needs."""
+    if not issubclass(cls, HollowCommand):
+        return "a serial frame"
+    if cls.EXTENDED_ID:
+        return "an extended-id frame"
+    return "a CAN FD frame" if cls.FD else "a classic-CAN frame"
+
+
 class HollowCodec(CodecBase):
     """One hollow motor on one link. Build it with :func:`bind` (or ``FAMILY.bind``)."""
 
@@ -203,12 +212,12 @@ class HollowCodec(CodecBase):
         """
         if not isinstance(command, OnLinks):
             raise ValueError(f"{command!r} is not a hollow command")
-        links = type(command).LINKS
-        if self.link not in links:
-            carried = f"travels on link {', '.join(map(repr, links))}" if links else "is sent outside a link"
-            raise ValueError(
-                f"{type(command).__name__} {carried}, not on link={self.link!r} (hollow.md §3-§9)"
+        cls = type(command)
+        if self.link not in cls.LINKS:
+            carried = (
+                f"carried on link {', '.join(map(repr, cls.LINKS))}" if cls.LINKS else "sent outside a link"
             )
+            raise ValueError(f"{cls.__name__} is {_frame_kind(cls)} {carried}, not on link={self.link!r}")
         if self.link == "modbus" and isinstance(command, FdCommand):
             command = ModbusWrite(slave_id=self.motor_id, command=command)
         slave = getattr(command, "slave_id", self.motor_id)
