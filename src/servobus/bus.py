@@ -646,7 +646,7 @@ class Bus:
             return self.motors[key]
         codec = found.bind(motor_id, **options)
         self.scheduler.add(codec)
-        motor = (Motor if found.motor is None else found.motor())(self, codec)
+        motor = _motor_class(found)(self, codec)
         self.motors[key] = motor
         self._by_codec[id(codec)] = motor
         return motor
@@ -1142,6 +1142,21 @@ class Bus:
         stats = getattr(self.transport, "stats", None)
         load = getattr(stats(), "bus_load_pct", None) if callable(stats) else None
         return Metrics.of(self.scheduler.counts, self.scheduler.latency().snapshot(), load)
+
+
+def _motor_class(family: Family[Any]) -> type[Motor]:
+    """The family's typed Motor class (Motor itself where it has none), its methods documented
+    with their commands' docstrings (the generated file keeps one line a method)."""
+    if family.motor is None:
+        return Motor
+    cls: type[Motor] = family.motor()
+    if "_documented" not in cls.__dict__:
+        for name, command in family.methods().items():
+            method = cls.__dict__.get(name)
+            if method is not None and method.__doc__ is None:
+                method.__doc__ = f"Send {command.__name__} and await its reply.\n\n{command.__doc__ or ''}"
+        cls._documented = True  # type: ignore[attr-defined]
+    return cls
 
 
 def _positional_fields(
