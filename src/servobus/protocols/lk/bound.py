@@ -30,12 +30,25 @@ from servobus.protocols._bound import (
     motor_ids_of,
 )
 from servobus.protocols._fast import Slow, maker
-from servobus.protocols._fields import round_half_away
+from servobus.protocols._fields import IntField, ScaledField, round_half_away
 from servobus.protocols._message import Command, Reply
 from servobus.protocols.lk import commands as cmd
 from servobus.protocols.lk import commands_control as ctl
-from servobus.protocols.lk._base import LkCommand
-from servobus.protocols.lk.codec import COMMAND_CLASSES, check_available, decode_reply, resolve_model
+from servobus.protocols.lk._base import (
+    CommandField,
+    EncoderCountField,
+    FlagByteField,
+    LkCommand,
+    LkReply,
+    MemberField,
+)
+from servobus.protocols.lk.codec import (
+    COMMAND_CLASSES,
+    REPLY_CLASSES,
+    check_available,
+    decode_reply,
+    resolve_model,
+)
 from servobus.protocols.lk.commands_control import MultiMotorTorque
 from servobus.protocols.lk.ids import (
     MULTI_MOTOR_ID,
@@ -45,6 +58,7 @@ from servobus.protocols.lk.ids import (
     request_id,
 )
 from servobus.protocols.lk.model import LkModel, Revision, encoder_max_count
+from servobus.protocols.lk.params import ParamMessage
 from servobus.protocols.lk.replies import (
     REPLY_SPEED,
     TEMPERATURE,
@@ -137,6 +151,66 @@ def _status2_decoder(model: LkModel, codes: frozenset[int]) -> Callable[[bytes],
     return decode
 
 
+def _layout_decoders(model: LkModel) -> dict[int, Callable[[bytes], Reply]]:
+    """A fast decoder, derived from the declared layout, for each reply of the revision whose fields
+    are plain integers, scaled values, enum or flag bytes, encoder counts or the command byte (every
+    reply but status 2, which has its own, status 3 and the parameter replies)."""
+    decoders: dict[int, Callable[[bytes], Reply]] = {}
+    for code, cls in REPLY_CLASSES[model.revision].items():
+        decoder = _layout_decoder(cls, model, code)
+        if decoder is not None:
+            decoders[code] = decoder
+    return decoders
+
+
+def _layout_decoder(cls: type[LkReply], model: LkModel, code: int) -> Callable[[bytes], Reply] | None:
+    """The reply ``cls`` from bytes whose DATA[0] is ``code`` (checked: a shared layout's other
+    bytes have their own decoder), values checked against the field limits only; None for a layout
+    with a field kind it does not know. :class:`Slow` for anything the full decoder must judge."""
+    if cls.CONSTANTS or not cls.HAS_CODE or issubclass(cls, ParamMessage):
+        return None
+    names = list(cls.MODEL)
+    model_values = [getattr(model, name) for name in cls.MODEL]
+    readers: list[tuple[int, int, bool, Callable[[int], Any] | None, float, float]] = []
+    for offset, spec in cls.all_fields():
+        if isinstance(spec, CommandField):
+            names.append("command")
+            readers.append((0, 1, False, None, code, code))
+            continue
+        if isinstance(spec, EncoderCountField):
+            readers.append((offset, 2, False, None, 0, encoder_max_count(model.encoder_bits)))
+        elif isinstance(spec, IntField):
+            readers.append((offset, spec.size, spec.signed, None, *spec.limits))
+        elif isinstance(spec, ScaledField):
+            readers.append((offset, spec.size, spec.signed, spec.from_code, *spec.limits))
+        elif isinstance(spec, MemberField):
+            readers.append((offset, 1, False, spec.members, 0, 0xFF))
+        elif isinstance(spec, FlagByteField):
+            readers.append((offset, 1, False, spec.flags, 0, 0xFF))
+        else:
+            return None
+        names.append(spec.name)
+    make = maker(cls, tuple(names))
+
+    def decode(data: bytes) -> Reply:
+        if len(data) != 8 or data[0] != code:
+            raise Slow
+        values = list(model_values)
+        for offset, size, signed, convert, lo, hi in readers:
+            value = int.from_bytes(data[offset : offset + size], "little", signed=signed)
+            if convert is not None:
+                try:
+                    value = convert(value)
+                except ValueError:  # an enum byte the manual does not list
+                    raise Slow from None
+            if not lo <= value <= hi:
+                raise Slow
+            values.append(value)
+        return make(*values)  # type: ignore[no-any-return]
+
+    return decode
+
+
 def _iq_code(slot: Any, motor_type: Any) -> Callable[[Any], int]:
     """The int16 count of an already validated message's torque field (amperes or raw counts)."""
     field = slot.field(motor_type)
@@ -203,7 +277,7 @@ class LkCodec(CodecBase):
         self.request_ids = frozenset({self._request_id})
         self.reply_ids = frozenset({self._reply_id})
         self.shared_ids = frozenset({MULTI_MOTOR_ID}) if model.revision is Revision.V2_35 else frozenset()
-        self._fast: dict[int, Callable[[bytes], Any]] = dict(_status2_decoders(model))
+        self._fast: dict[int, Callable[[bytes], Any]] = _layout_decoders(model) | _status2_decoders(model)
         self._encoders = _fast_encoders(model)
 
     def _check(self, command: Command) -> LkCommand:
