@@ -204,11 +204,13 @@ class LkCommand(LkMessage, Command[R], Generic[R]):
     restricts them ([001]: 0xA0 MS only, 0xA1 MF/MH/MG only);
     :func:`servobus.protocols.lk.codec.check_available` enforces it and ``REVISIONS``.
     ``TIMEOUT_S`` overrides the bound codec's timeout where even ``SLOW`` is too short (0x18).
+    ``REPLY_ALIASES`` maps a revision to another DATA[0] its reply may carry (V2.35 0x9B: 0x9A, A4).
     """
 
     __slots__ = ()
     MOTOR_TYPES: ClassVar[Mapping[Revision, frozenset[MotorType]]] = {}
     TIMEOUT_S: ClassVar[float | None] = None
+    REPLY_ALIASES: ClassVar[Mapping[Revision, int]] = {}
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)

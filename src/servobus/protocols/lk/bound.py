@@ -76,7 +76,6 @@ DEFAULT_TIMEOUT_S = 0.02
 #: ROM writes and the brake (a class declaring ``SLOW``) take longer; 0x18 declares its own TIMEOUT_S.
 SLOW_TIMEOUT_S = 0.5
 CALIBRATION_TIMEOUT_S = cmd.CALIBRATION_TIMEOUT_S
-_V235_ALIASES = {0x9B: 0x9A}  # spec A4: [003] prints the 0x9B reply's DATA[0] as 0x9A
 #: Echo replies that carry the value their request wrote (the classes declaring ``ECHO``: 0x34
 #: acceleration, 0xC1 control parameter): keyed with it (``echo_key``), so a stray echo never answers
 #: another write. Known from DATA[0] alone, as :meth:`LkCodec.classify` has nothing else.
@@ -273,7 +272,12 @@ class LkCodec(CodecBase):
         self.revision = model.revision
         self._reply_id = reply_id(motor_id, model.revision)
         self._reply_base = frame_key(self._reply_id, 0)
-        self._aliases = _V235_ALIASES if model.revision is Revision.V2_35 else {}
+        # A reply byte another command's reply may carry (V2.35 0x9B -> 0x9A, A4) keys as that one.
+        self._aliases = {
+            cls.CODE: alias
+            for cls in COMMAND_CLASSES
+            if cls.CODE is not None and (alias := cls.REPLY_ALIASES.get(model.revision)) is not None
+        }
         self.request_ids = frozenset({self._request_id})
         self.reply_ids = frozenset({self._reply_id})
         self.shared_ids = frozenset({MULTI_MOTOR_ID}) if model.revision is Revision.V2_35 else frozenset()

@@ -10,6 +10,7 @@ reply (the type argument), whether it only reads (``READ``), writes ROM or moves
 from __future__ import annotations
 
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import ClassVar
 
 from servobus.protocols._fields import ScaledField
@@ -20,6 +21,7 @@ from servobus.protocols.lk._base import (
     LkCommand,
     MemberField,
 )
+from servobus.protocols.lk.model import Revision
 from servobus.protocols.lk.replies import (
     BrakeReply,
     EchoReply,
@@ -82,6 +84,7 @@ class ClearErrors(LkCommand[Status1Reply | Status1ReplyV235]):
     """
 
     CODE: ClassVar[int] = 0x9B
+    REPLY_ALIASES = MappingProxyType({Revision.V2_35: 0x9A})
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -50,8 +50,6 @@ MULTI_MOTOR_ID = 0x280
 MULTI_MOTOR_IDS = range(1, 5)
 MULTI_MOTOR_REPLY_CODE = 0xA1  # spec §5: "same as the single motor torque closed-loop reply"
 
-# Spec §4.2, A4: [003]'s 0x9B reply table prints DATA[0] = 0x9A. Accept either on V2.35.
-_EXTRA_REPLY_CODES = {(Revision.V2_35, 0x9B): (0x9A,)}
 
 
 def _check_motor_id(motor_id: int) -> None:
@@ -113,13 +111,18 @@ def match_key(motor_id: int, command: int, revision: Revision) -> tuple[int, int
 def request_keys(motor_id: int, command: int, revision: Revision) -> tuple[tuple[int, int], ...]:
     """Every key the reply to request ``command`` sent to ``motor_id`` may carry.
 
-    Normally one key, ``(reply id, command)``; on V2.35 the reply to 0x9B may say 0x9A (spec A4),
-    so that request waits for either. The caller registers these keys before the frame is written.
+    Normally one key, ``(reply id, command)``; a command class declaring ``REPLY_ALIASES`` for the
+    revision adds the other byte (V2.35: the reply to 0x9B may say 0x9A, spec A4), so that request
+    waits for either. The caller registers these keys before the frame is written.
 
     Raises:
         ValueError: ``motor_id`` is not 1..32.
     """
-    codes = (command, *_EXTRA_REPLY_CODES.get((revision, command), ()))
+    from servobus.protocols.lk.codec import REQUESTS  # the codec's tables import this module
+
+    cls = REQUESTS[revision].get(command)
+    alias = cls.REPLY_ALIASES.get(revision) if cls is not None else None
+    codes = (command,) if alias is None else (command, alias)
     return tuple(match_key(motor_id, code, revision) for code in codes)
 
 
