@@ -31,6 +31,7 @@ __all__ = [
     "EnumField",
     "FieldCodec",
     "FlagsField",
+    "Float32BEField",
     "Float32Field",
     "Layout",
     "LayoutMismatch",
@@ -221,6 +222,35 @@ class Float32Field:
 
     def decode(self, data: bytes, offset: int = 0) -> float:
         value: float = struct.unpack_from("<f", data, offset)[0]
+        if not math.isfinite(value):
+            raise ValueError(f"{self.name}={value!r} is not finite")
+        return value
+
+
+@dataclass(frozen=True, slots=True)
+class Float32BEField:
+    """An IEEE-754 binary32, big-endian (hollow.md §6, §9.3: the PI multipliers), within
+    [``lo``, FLOAT32_MAX]; NaN and infinities do not decode."""
+
+    name: str
+    lo: float = -FLOAT32_MAX
+    size: int = 4
+
+    @property
+    def limits(self) -> tuple[float, float]:
+        return (self.lo, FLOAT32_MAX)
+
+    def check(self, value: Any) -> None:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ValueError(f"{self.name}={value!r} is not a number")
+        check_range(self.name, value, self.lo, FLOAT32_MAX)
+
+    def encode(self, value: Any) -> bytes:
+        self.check(value)
+        return struct.pack(">f", value)
+
+    def decode(self, data: bytes, offset: int = 0) -> float:
+        value: float = struct.unpack_from(">f", data, offset)[0]
         if not math.isfinite(value):
             raise ValueError(f"{self.name}={value!r} is not finite")
         return value

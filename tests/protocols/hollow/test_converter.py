@@ -34,8 +34,8 @@ def test_pi_numbering_is_one_higher_than_the_motors() -> None:
     [
         ("01 01 10 10 00", "expected 6 data bytes, got 5"),
         ("02 01 10 10 00 00", "byte 0 is not 0x00 or 0x01"),
-        ("00 06 3F 80 00 00", "converter gain: unknown value 6"),
-        ("00 01 10 10 00 01", "D4, D5 are not zero"),
+        ("00 06 3F 80 00 00", "gain=0x06 is not one of ConverterGain"),
+        ("00 01 10 10 00 01", r"DATA\[5\] is not 0x00"),
         ("00 02 FF 80 00 00", "multiplier="),
     ],
 )
@@ -47,11 +47,11 @@ def test_converter_config_decode_errors(frame: str, message: str) -> None:
 def test_converter_config_validation() -> None:
     with pytest.raises(ValueError, match=r"p=256 is outside \[0, 255\]"):
         ConverterPdGains(p=256, d=0)
-    with pytest.raises(ValueError, match="header=2 is not one of 0, 1"):
+    with pytest.raises(ValueError, match=r"header=2 is outside \[0, 1\]"):
         ConverterPdGains(p=0, d=0, header=2)
     with pytest.raises(ValueError, match=r"multiplier=-1\.0 is outside"):
         ConverterPiMultiplier(gain=ConverterGain.CURRENT_KI, multiplier=-1.0)
-    with pytest.raises(ProtocolError, match="D1 is not 0x01"):
+    with pytest.raises(ProtocolError, match=r"DATA\[1\] is not 0x01"):
         ConverterPdGains.decode(bytes.fromhex("00 02 3F 80 00 00"))
 
 

@@ -12,13 +12,12 @@ from enum import IntEnum
 from typing import Any, TypeVar
 
 from servobus.errors import ProtocolError
-from servobus.protocols._fields import check_choice, check_range
+from servobus.protocols._fields import check_range
 from servobus.protocols._message import Message, construct
 
 __all__ = [
     "FLOAT32_MAX",
     "build",
-    "check_choice_int",
     "check_flag",
     "check_int",
     "check_real",
@@ -47,13 +46,6 @@ def check_int(name: str, value: object, lo: int, hi: int) -> None:
     if isinstance(value, bool) or not isinstance(value, int):
         raise ValueError(f"{name}={value!r} is not an integer")
     check_range(name, value, lo, hi)
-
-
-def check_choice_int(name: str, value: object, choices: tuple[int, ...]) -> None:
-    """Raise ValueError unless ``value`` is an int (not bool) among ``choices``."""
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise ValueError(f"{name}={value!r} is not an integer")
-    check_choice(name, value, choices)
 
 
 def check_flag(name: str, value: object) -> bool:

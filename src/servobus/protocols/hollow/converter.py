@@ -11,24 +11,15 @@ Byte 0 is contradictory in the manual (A19): the prose says it is fixed to 0x00,
 
 from __future__ import annotations
 
-import struct
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import ClassVar, Self
+from typing import ClassVar
 
 from servobus.errors import ProtocolError
+from servobus.protocols._fields import IntField
+from servobus.protocols._layout import EnumField, Float32BEField, Layout
 from servobus.protocols._message import Command
-from servobus.protocols.hollow._checks import (
-    FLOAT32_MAX,
-    build,
-    check_choice_int,
-    check_int,
-    check_real,
-    decode_enum,
-    require_size,
-    to_enum,
-    unpack_float32_be,
-)
+from servobus.protocols.hollow._checks import require_size
 from servobus.protocols.hollow._packed import OnLinks
 
 __all__ = [
@@ -42,8 +33,9 @@ __all__ = [
 
 CONVERTER_CONFIG_SIZE = 6
 CONVERTER_HEADERS = (0x00, 0x01)  # A19: 0x00 in the prose, 0x01 in the example [H22]
-_NO_REPLY = "the manual describes no answer to the module's configuration frame (§9.3)"
+_HEADER = IntField("header", 1, lo=0x00, hi=0x01)
 _PD_SELECTOR = 0x01
+_NO_REPLY = "the manual describes no answer to the module's configuration frame (§9.3)"
 
 
 class ConverterGain(IntEnum):
@@ -57,7 +49,7 @@ class ConverterGain(IntEnum):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ConverterPdGains(OnLinks, Command[None]):
+class ConverterPdGains(Layout, OnLinks, Command[None]):
     """Set the module's position-loop P and D: ``header 01 P D 00 00`` (§9.3) [H22].
 
     Attributes:
@@ -67,35 +59,16 @@ class ConverterPdGains(OnLinks, Command[None]):
     """
 
     NO_REPLY: ClassVar[str | None] = _NO_REPLY
+    SIZE: ClassVar[int] = CONVERTER_CONFIG_SIZE
+    CONSTANTS: ClassVar[tuple[tuple[int, int], ...]] = ((1, _PD_SELECTOR), (4, 0x00), (5, 0x00))
+    FIELDS = ((0, _HEADER), (2, IntField("p", 1)), (3, IntField("d", 1)))
     p: int
     d: int
     header: int = 0x00
 
-    def __post_init__(self) -> None:
-        check_int("p", self.p, 0, 0xFF)
-        check_int("d", self.d, 0, 0xFF)
-        check_choice_int("header", self.header, CONVERTER_HEADERS)
-
-    def encode(self) -> bytes:
-        return bytes([self.header, _PD_SELECTOR, self.p, self.d, 0x00, 0x00])
-
-    @classmethod
-    def decode(cls, data: bytes) -> Self:
-        """Decode a P/D frame.
-
-        Raises:
-            ProtocolError: wrong length or header, D1 not 0x01, or D4/D5 not zero.
-        """
-        _require_config(data)
-        if data[1] != _PD_SELECTOR:
-            raise ProtocolError("converter P/D frame: D1 is not 0x01", raw=data)
-        if data[4] or data[5]:
-            raise ProtocolError("converter P/D frame: D4, D5 are not zero", raw=data)
-        return cls(p=data[2], d=data[3], header=data[0])
-
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ConverterPiMultiplier(OnLinks, Command[None]):
+class ConverterPiMultiplier(Layout, OnLinks, Command[None]):
     """Scale one of the motor's PI gains through the module: ``header gain float32-BE`` (§9.3).
 
     Attributes:
@@ -105,28 +78,15 @@ class ConverterPiMultiplier(OnLinks, Command[None]):
     """
 
     NO_REPLY: ClassVar[str | None] = _NO_REPLY
+    SIZE: ClassVar[int] = CONVERTER_CONFIG_SIZE
+    FIELDS = (
+        (0, _HEADER),
+        (1, EnumField("gain", 1, ConverterGain)),
+        (2, Float32BEField("multiplier", lo=0.0)),
+    )
     gain: ConverterGain
     multiplier: float
     header: int = 0x00
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "gain", to_enum("gain", self.gain, ConverterGain))
-        check_real("multiplier", self.multiplier, 0.0, FLOAT32_MAX)
-        check_choice_int("header", self.header, CONVERTER_HEADERS)
-
-    def encode(self) -> bytes:
-        return bytes([self.header, self.gain]) + struct.pack(">f", self.multiplier)
-
-    @classmethod
-    def decode(cls, data: bytes) -> Self:
-        """Decode a PI multiplier frame of the module.
-
-        Raises:
-            ProtocolError: wrong length or header, unknown gain, or a NaN/infinite/negative multiplier.
-        """
-        _require_config(data)
-        gain = decode_enum("converter gain", data[1], ConverterGain, data)
-        return build(cls, data, gain=gain, multiplier=unpack_float32_be(data, 2), header=data[0])
 
 
 def _require_config(data: bytes) -> None:
