@@ -8,15 +8,7 @@ from __future__ import annotations
 from typing import Any, Literal  # noqa: F401
 
 from servobus.bus import Motor as _Motor
-from servobus_toy.messages import (
-    ReadState,
-    Restart,
-    SetSpeed,
-    SpeedLimitEcho,
-    StateReply,
-    Stop,
-    WriteSpeedLimit,
-)
+from servobus_toy import messages
 
 __all__ = ["Motor"]
 
@@ -31,22 +23,13 @@ def _given(**fields: Any) -> dict[str, Any]:
 class Motor(_Motor):
     """A toy motor on a Bus (``bus.motor(FAMILY, id)``): a typed method per command."""
 
-    async def read_state(self, *, timeout_s: float | None = None, retries: int = 0) -> StateReply:
-        """0x10: read the state; changes nothing."""
-        return await self.request(ReadState(), timeout_s=timeout_s, retries=retries)
-
-    async def restart(self, *, timeout_s: float | None = None, retries: int = 0) -> None:
-        """0x7F: restart the drive: output off, latched faults cleared (the speed limit is kept in flash)."""
-        return await self.request(Restart(), timeout_s=timeout_s, retries=retries)
-
-    async def set_speed(self, speed_dps: float, *, timeout_s: float | None = None, retries: int = 0) -> StateReply:
-        """0x20: turn at ``speed_dps`` (-1000..1000 dps, 0.01 dps steps), within the speed limit."""
-        return await self.request(SetSpeed(speed_dps=speed_dps), timeout_s=timeout_s, retries=retries)
-
-    async def stop(self, *, timeout_s: float | None = None, retries: int = 0) -> StateReply:
-        """0x21: brake to a halt and hold the position reached (the Bus's safe command)."""
-        return await self.request(Stop(), timeout_s=timeout_s, retries=retries)
-
-    async def write_speed_limit(self, limit_dps: float, *, timeout_s: float | None = None, retries: int = 0) -> SpeedLimitEcho:
-        """0x30: the highest speed any set-point runs at (0..1000 dps, 0.1 dps steps), kept in flash."""
-        return await self.request(WriteSpeedLimit(limit_dps=limit_dps), timeout_s=timeout_s, retries=retries)
+    # 0x10: read the state; changes nothing.
+    async def read_state(self, *, timeout_s: float | None = None, retries: int = 0) -> messages.StateReply: return await self.request(messages.ReadState(), timeout_s=timeout_s, retries=retries)
+    # 0x20: turn at ``speed_dps`` (-1000..1000 dps, 0.01 dps steps), within the speed limit.
+    async def set_speed(self, speed_dps: float, *, timeout_s: float | None = None, retries: int = 0) -> messages.StateReply: return await self.request(messages.SetSpeed(speed_dps=speed_dps), timeout_s=timeout_s, retries=retries)
+    # 0x21: brake to a halt and hold the position reached (the Bus's safe command).
+    async def stop(self, *, timeout_s: float | None = None, retries: int = 0) -> messages.StateReply: return await self.request(messages.Stop(), timeout_s=timeout_s, retries=retries)
+    # 0x30: the highest speed any set-point runs at (0..1000 dps, 0.1 dps steps), kept in flash.
+    async def write_speed_limit(self, limit_dps: float, *, timeout_s: float | None = None, retries: int = 0) -> messages.SpeedLimitEcho: return await self.request(messages.WriteSpeedLimit(limit_dps=limit_dps), timeout_s=timeout_s, retries=retries)
+    # 0x7F: restart the drive: output off, latched faults cleared (the speed limit is kept in flash).
+    async def restart(self, *, timeout_s: float | None = None, retries: int = 0) -> None: return await self.request(messages.Restart(), timeout_s=timeout_s, retries=retries)
