@@ -12,8 +12,12 @@ from hypothesis import strategies as st
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
 from servobus.protocols import get_family, lk
+from servobus.protocols.lk._base import LkMessage
+from servobus.protocols.lk.bound import _fast_encoders
 from servobus.protocols.lk.codec import REPLY_CLASSES
 from servobus.protocols.lk.ids import reply_id
+
+from ._strategies import COMMANDS
 
 MODELS = [
     lk.LkModel(),
@@ -52,3 +56,19 @@ def test_fast_decode_agrees_with_the_full_decoder(
     got = _outcome(codec.decode, frame)
     assert got == expected
     assert type(got) is type(expected)
+
+
+@pytest.mark.parametrize("cls", sorted(COMMANDS, key=lambda c: c.__name__), ids=lambda c: c.__name__)
+@given(data=st.data())
+def test_fast_encode_is_the_declared_encode(cls: type[lk.LkCommand], data: st.DataObject) -> None:
+    command = data.draw(COMMANDS[cls].strategy)
+    model = lk.LkModel(
+        revision=min(cls.REVISIONS, key=lambda r: r.name),
+        motor_type=getattr(command, "motor_type", lk.MotorType.MG),
+        encoder_bits=getattr(command, "encoder_bits", 14),
+    )
+    fast = _fast_encoders(model).get(cls)
+    if fast is None:
+        assert cls.CODE is None or cls.CONSTANTS or cls.encode is not LkMessage.encode or cls.MODEL_FIELDS
+        return
+    assert fast(command) == command.encode()

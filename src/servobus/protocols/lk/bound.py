@@ -32,13 +32,15 @@ from servobus.protocols._bound import (
 from servobus.protocols._fast import Slow, maker
 from servobus.protocols._fields import IntField, ScaledField, round_half_away
 from servobus.protocols._message import Command, Reply
+from servobus.protocols._special import SpecialZero
 from servobus.protocols.lk import commands as cmd
-from servobus.protocols.lk import commands_control as ctl
 from servobus.protocols.lk._base import (
     CommandField,
     EncoderCountField,
     FlagByteField,
+    IqField,
     LkCommand,
+    LkMessage,
     LkReply,
     MemberField,
 )
@@ -224,20 +226,54 @@ def _no_iq(message: Any) -> int:
 
 
 def _fast_encoders(model: LkModel) -> dict[type, Callable[[Any], bytes]]:
-    """``command.encode()`` by one ``struct.pack`` for the control-loop commands (validated on build)."""
-    torque = _iq_code(ctl.TORQUE, model.motor_type)
-    limit = _iq_code(ctl.TORQUE_LIMIT, model.motor_type)
-    a1, a2, a3, a4 = (struct.Struct(f).pack for f in ("<B3xh2x", "<Bxhi", "<B3xi", "<BxHi"))
-    return {
-        ctl.TorqueControl: lambda m: a1(0xA1, torque(m)),
-        ctl.SpeedControl: lambda m: a2(0xA2, limit(m), round_half_away(m.speed_dps * 100)),
-        ctl.SpeedControlV235: lambda m: a3(0xA2, round_half_away(m.speed_dps * 100)),
-        ctl.MultiTurnPosition: lambda m: a3(0xA3, round_half_away(m.angle_deg * 100)),
-        ctl.MultiTurnPositionSpeed: lambda m: a4(
-            0xA4, ctl.MAX_SPEED.to_code(m.max_speed_dps), round_half_away(m.angle_deg * 100)
-        ),
-        ctl.IncrementalPosition: lambda m: a3(0xA7, round_half_away(m.increment_deg * 100)),
-    }
+    """``command.encode()`` by one ``struct.pack``, generated from each command's declared layout
+    (its values were validated when it was built); commands with another layout keep ``encode()``."""
+    encoders: dict[type, Callable[[Any], bytes]] = {}
+    for cls in COMMAND_CLASSES:
+        encoder = _fast_encoder(cls, model)
+        if encoder is not None:
+            encoders[cls] = encoder
+    return encoders
+
+
+_STRUCT_CODES = {
+    (1, False): "B",
+    (1, True): "b",
+    (2, False): "H",
+    (2, True): "h",
+    (4, False): "I",
+    (4, True): "i",
+}
+
+
+def _fast_encoder(cls: type[LkCommand], model: LkModel) -> Callable[[Any], bytes] | None:
+    if cls.CODE is None or cls.CONSTANTS or cls.encode is not LkMessage.encode:
+        return None  # 0x280, fixed constants, or a layout chosen by a value (the parameter frames)
+    fmt, position, args = "<B", 1, []
+    namespace: dict[str, Any] = {"rha": round_half_away}
+    for i, (offset, spec) in enumerate(cls.all_fields()):
+        if isinstance(spec, IqField) and not spec.labels:
+            namespace[f"f{i}"] = _iq_code(spec.slot, model.motor_type)
+            arg, signed = f"f{i}(m)", True
+        elif isinstance(spec, ScaledField):
+            arg, signed = f"rha(m.{spec.name} * {spec.counts_per_unit!r})", spec.signed
+        elif isinstance(spec, SpecialZero):
+            namespace[f"f{i}"] = spec.to_code
+            arg, signed = f"f{i}(m.{spec.name})", spec.signed
+        elif isinstance(spec, IntField | MemberField):
+            arg, signed = f"m.{spec.name}", isinstance(spec, IntField) and spec.signed
+        else:
+            return None
+        code = _STRUCT_CODES.get((spec.size, signed))
+        if code is None or offset < position:
+            return None
+        fmt += "x" * (offset - position) + code
+        position = offset + spec.size
+        args.append(arg)
+    namespace["pack"] = struct.Struct(fmt + "x" * (8 - position)).pack
+    exec(f"def encode(m):\n    return pack({cls.CODE}, {', '.join(args)})\n", namespace)
+    encode: Callable[[Any], bytes] = namespace["encode"]
+    return encode
 
 
 class LkCodec(CodecBase):
