@@ -308,8 +308,8 @@ def test_pi_multiplier_range(value: float) -> None:
     [
         ("00 01 3F 80 00", "expected 6 to 8 data bytes, got 5"),
         ("00 01 3F 80 00 00 00 00 00", "expected 6 to 8 data bytes, got 9"),
-        ("01 01 3F 80 00 00", "D0 is not 0x00"),
-        ("00 05 3F 80 00 00", "PI gain: unknown value 5"),
+        ("01 01 3F 80 00 00", r"DATA\[0\] is not 0x00"),
+        ("00 05 3F 80 00 00", "gain=0x05 is not one of PiGain"),
         ("00 01 7F C0 00 00", "multiplier=nan"),
         ("00 01 BF 80 00 00", r"multiplier=-1\.0 is outside"),
     ],

@@ -7,7 +7,6 @@ received value that the constructor refuses becomes a ProtocolError carrying the
 
 from __future__ import annotations
 
-import struct
 from enum import IntEnum
 from typing import Any, TypeVar
 
@@ -16,7 +15,6 @@ from servobus.protocols._fields import check_range
 from servobus.protocols._message import Message, construct
 
 __all__ = [
-    "FLOAT32_MAX",
     "build",
     "check_flag",
     "check_int",
@@ -24,14 +22,10 @@ __all__ = [
     "decode_enum",
     "require_size",
     "to_enum",
-    "unpack_float32_be",
 ]
 
 E = TypeVar("E", bound=IntEnum)
 M = TypeVar("M", bound=Message)
-
-# The largest finite IEEE-754 single: a bigger multiplier would not fit the PI frames' float32.
-FLOAT32_MAX = struct.unpack(">f", b"\x7f\x7f\xff\xff")[0]
 
 
 def check_real(name: str, value: object, lo: float, hi: float) -> None:
@@ -91,12 +85,6 @@ def decode_enum(name: str, value: int, enum: type[E], data: bytes, *, motor_id: 
         return enum(value)
     except ValueError:
         raise ProtocolError(f"{name}: unknown value {value}", raw=data, motor_id=motor_id) from None
-
-
-def unpack_float32_be(data: bytes, offset: int) -> float:
-    """The big-endian IEEE-754 single at ``data[offset:offset + 4]`` (hollow.md §6)."""
-    value: float = struct.unpack_from(">f", data, offset)[0]
-    return value
 
 
 def require_size(data: bytes, size: int, *, what: str) -> None:

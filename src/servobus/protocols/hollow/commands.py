@@ -18,21 +18,13 @@ bound codec's checks are derived from these classes, so a new request is one cla
 
 from __future__ import annotations
 
-import struct
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Self
 
 from servobus.errors import ProtocolError
+from servobus.protocols._layout import EnumField, Float32BEField, Layout
 from servobus.protocols._message import Command, R
-from servobus.protocols.hollow._checks import (
-    FLOAT32_MAX,
-    build,
-    check_real,
-    decode_enum,
-    require_size,
-    to_enum,
-    unpack_float32_be,
-)
+from servobus.protocols.hollow._checks import require_size, to_enum
 from servobus.protocols.hollow._packed import Int, OnLinks, Packed, check_model
 from servobus.protocols.hollow.enums import CanMode, ControlMode, PiGain
 from servobus.protocols.hollow.model import DEFAULT_MODEL, HollowModel
@@ -380,7 +372,7 @@ class CanModeSwitch(HollowCommand[ClassicReply]):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class PiMultiplier(HollowCommand[NormalReply | ExtendedReply | FdReply]):
+class PiMultiplier(Layout, HollowCommand[NormalReply | ExtendedReply | FdReply]):
     """Scale one speed- or current-loop PI gain at runtime: extended id (§6).
 
     ``D0 = 0x00, D1 = gain, D2..D5 = float32 big-endian``, padded with two zero bytes to DLC 8 (A17).
@@ -395,15 +387,10 @@ class PiMultiplier(HollowCommand[NormalReply | ExtendedReply | FdReply]):
 
     EXTENDED_ID: ClassVar[bool] = True
     LINKS: ClassVar[tuple[str, ...]] = ("can", "canfd")
+    CODE: ClassVar[int | None] = 0x00
+    FIELDS = ((1, EnumField("gain", 1, PiGain)), (2, Float32BEField("multiplier", lo=0.0)))
     gain: PiGain
     multiplier: float
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "gain", to_enum("gain", self.gain, PiGain))
-        check_real("multiplier", self.multiplier, 0.0, FLOAT32_MAX)
-
-    def encode(self) -> bytes:
-        return bytes([0x00, self.gain]) + struct.pack(">f", self.multiplier) + _PI_PADDING
 
     @classmethod
     def claims(cls, data: bytes, can_mode: CanMode) -> bool:
@@ -419,10 +406,7 @@ class PiMultiplier(HollowCommand[NormalReply | ExtendedReply | FdReply]):
         """
         if len(data) not in _PI_SIZES:
             raise ProtocolError(f"PI multiplier: expected 6 to 8 data bytes, got {len(data)}", raw=data)
-        if data[0] != 0x00:
-            raise ProtocolError("PI multiplier: D0 is not 0x00", raw=data, command=data[0])
-        gain = decode_enum("PI gain", data[1], PiGain, data)
-        return build(cls, data, gain=gain, multiplier=unpack_float32_be(data, 2))
+        return super(PiMultiplier, cls).decode(bytes(data[:6]) + _PI_PADDING)
 
 
 def decode_extended_request(data: bytes) -> HollowCommand[Any]:
