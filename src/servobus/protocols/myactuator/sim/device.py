@@ -138,19 +138,13 @@ DEFAULT_TURNAROUND_S = 200e-6
 ERROR_REPORT_PERIOD_S = 0.1  # 0x20 index 3: "every 100 ms" (§4.37)
 STREAM_STEP_S = 0.01  # 0xB6 interval unit: 10 ms/LSB (§4.36, §9 item 29)
 
-# The commands answered with R2 (declared ``[StatusReply]``) all run a closed loop.
-_STATUS_CONTROL = tuple(c for c in COMMANDS if c.REPLY is ma.StatusReply and not c.READ)
-_POSITION_ABSOLUTE = (
-    ma.AbsolutePositionControl,
-    ma.ForcePositionControl,
-    ma.PositionSpeedFeedforward,
-    ma.PositionTorqueFeedforward,
-)
 _Handler = Callable[[Any, Any, float, bool], "Reply | None"]
 #: What the simulated motor does on each command class: the device model registers its handlers here
-#: (``@_handles``); the reply's form (none, an echo, a reply) is the command's declaration.
+#: (``@_handles``, or ``@_loop`` for a closed-loop command); the reply's form (none, an echo, a reply)
+#: is the command's declaration.
 _HANDLERS: dict[type[Command], _Handler] = {}
 H = TypeVar("H", bound=Callable[..., Any])
+_Loop = Callable[[Any, Any], "tuple[Control, ma.RunMode]"]
 
 
 def _handles(*classes: type[Command]) -> Callable[[H], H]:
@@ -160,6 +154,20 @@ def _handles(*classes: type[Command]) -> Callable[[H], H]:
                 raise TypeError(f"two simulator handlers for {cls.__name__}")
             _HANDLERS[cls] = handler
         return handler
+
+    return register
+
+
+def _loop(*classes: type[Command], releases_brake: bool = True) -> Callable[[_Loop], _Loop]:
+    """Register closed-loop commands: ``loop(motor, command)`` gives the plant control and run mode;
+    the motor runs it unless a fault is latched, and answers with its status either way."""
+
+    def register(loop: _Loop) -> _Loop:
+        def handler(motor: MyActuatorMotor, command: Command, _now_s: float, _rs485: bool) -> Reply:
+            return motor._control_command(command, loop, releases_brake=releases_brake)
+
+        _handles(*classes)(handler)
+        return loop
 
     return register
 
@@ -615,72 +623,85 @@ class MyActuatorMotor(ListeningDevice):
         assert reply is not None, cls
         return reply
 
-    @_handles(*_STATUS_CONTROL, ma.SingleTurnPositionControl, MotionCommand)
-    def _control_command(self, command: Command, _now_s: float, _rs485: bool) -> Reply:
+    def _control_command(self, command: Command, loop: _Loop, *, releases_brake: bool) -> Reply:
         if self.errors.flags:
             self._counters["refused_fault"] += 1
         else:
-            self._run(command)
+            # Every control command but 0xA1 releases the brake: the manuals name only 0xA1 as unable [I].
+            self.brake_released = self.brake_released or releases_brake
+            self._set_control(*loop(self, command))
         readings = self.readings()
-        if isinstance(command, MotionCommand):
+        reply = type(command).REPLY
+        if reply is ma.MotionReply:
             return motion_reply(self.motor_id, readings, self.plant.torque_nm, self.motion_scales)
-        if isinstance(command, ma.SingleTurnPositionControl):
+        if reply is ma.SingleTurnStatusReply:
             return single_turn_status_reply(readings)
-        assert command.CODE is not None
+        assert reply is ma.StatusReply and command.CODE is not None, command
         return status_reply(ma.StatusCommand(command.CODE), readings)
 
-    def _run(self, command: Command) -> None:
-        control: Control
-        position = ma.RunMode.POSITION_LOOP
-        if isinstance(command, ma.TorqueControl):
-            # §4.19: 0xA1 cannot release the brake; a locked brake keeps the shaft held.
-            if self.has_brake and not self.brake_released:
-                self._counters["brake_locked"] += 1
-            self._set_control(CurrentControl(current_a=command.current_a), ma.RunMode.CURRENT_LOOP)
-            return
-        self.brake_released = True
-        if isinstance(command, MotionCommand):
-            p_des_deg = self._target(math.degrees(command.position_rad))
-            control = Impedance(
-                position_rad=math.radians(p_des_deg),
-                velocity_rad_s=command.velocity_rad_s,
-                kp=command.kp,
-                kd=command.kd,
-                torque_ff_nm=command.torque_ff_nm,
-            )
-            self._set_control(control, _RUN_MODE_MOTION)
-            return
-        if isinstance(command, ma.SpeedControl):
-            limit = self._current_limit(command.max_torque_pct)
-            self._set_control(
-                PlantSpeedControl(speed_dps=command.speed_dps, max_current_a=limit),
-                ma.RunMode.SPEED_LOOP,
-            )
-            return
-        assert isinstance(command, (*_STATUS_CONTROL, ma.SingleTurnPositionControl))
-        max_speed = getattr(command, "max_speed_dps", None)  # None (maxSpeed 0): no limit (§4.21)
+    # ---- closed loops (§4.19-§4.26, §5) ----
+
+    @_loop(ma.TorqueControl, releases_brake=False)
+    def _torque(self, command: ma.TorqueControl) -> tuple[Control, ma.RunMode]:
+        # §4.19: 0xA1 cannot release the brake; a locked brake keeps the shaft held.
+        if self.has_brake and not self.brake_released:
+            self._counters["brake_locked"] += 1
+        return CurrentControl(current_a=command.current_a), ma.RunMode.CURRENT_LOOP
+
+    @_loop(MotionCommand)
+    def _impedance(self, command: MotionCommand) -> tuple[Control, ma.RunMode]:
+        p_des_deg = self._target(math.degrees(command.position_rad))
+        control = Impedance(
+            position_rad=math.radians(p_des_deg),
+            velocity_rad_s=command.velocity_rad_s,
+            kp=command.kp,
+            kd=command.kd,
+            torque_ff_nm=command.torque_ff_nm,
+        )
+        return control, _RUN_MODE_MOTION
+
+    @_loop(ma.SpeedControl)
+    def _speed(self, command: ma.SpeedControl) -> tuple[Control, ma.RunMode]:
+        limit = self._current_limit(command.max_torque_pct)
+        return PlantSpeedControl(speed_dps=command.speed_dps, max_current_a=limit), ma.RunMode.SPEED_LOOP
+
+    @_loop(
+        ma.AbsolutePositionControl,
+        ma.ForcePositionControl,
+        ma.PositionSpeedFeedforward,
+        ma.PositionTorqueFeedforward,
+    )
+    def _absolute(self, command: Any) -> tuple[Control, ma.RunMode]:
         limit = None
-        if isinstance(command, _POSITION_ABSOLUTE):
-            target = self._target(command.angle_deg)
-            if isinstance(command, ma.ForcePositionControl):
-                limit = self._current_limit(command.max_torque_pct)
-            if isinstance(command, ma.PositionSpeedFeedforward):
-                self.feedforward_pct = command.feedforward_speed_pct
-            elif isinstance(command, ma.PositionTorqueFeedforward):
-                self.feedforward_pct = command.feedforward_torque_pct
-        elif isinstance(command, ma.IncrementalPositionControl):
-            target = self.plant.position_deg + command.angle_deg
+        if isinstance(command, ma.ForcePositionControl):
+            limit = self._current_limit(command.max_torque_pct)
+        if isinstance(command, ma.PositionSpeedFeedforward):
+            self.feedforward_pct = command.feedforward_speed_pct
+        elif isinstance(command, ma.PositionTorqueFeedforward):
+            self.feedforward_pct = command.feedforward_torque_pct
+        return self._position(self._target(command.angle_deg), command.max_speed_dps, limit)
+
+    @_loop(ma.IncrementalPositionControl)
+    def _incremental(self, command: ma.IncrementalPositionControl) -> tuple[Control, ma.RunMode]:
+        return self._position(self.plant.position_deg + command.angle_deg, command.max_speed_dps)
+
+    @_loop(ma.SingleTurnPositionControl)
+    def _single_turn(self, command: ma.SingleTurnPositionControl) -> tuple[Control, ma.RunMode]:
+        here = self.angle_deg % 360.0
+        wanted = command.angle_deg % 360.0
+        if command.direction is ma.SpinDirection.CLOCKWISE:
+            delta = (wanted - here) % 360.0
         else:
-            assert isinstance(command, ma.SingleTurnPositionControl)
-            here = self.angle_deg % 360.0
-            wanted = command.angle_deg % 360.0
-            if command.direction is ma.SpinDirection.CLOCKWISE:
-                delta = (wanted - here) % 360.0
-            else:
-                delta = -((here - wanted) % 360.0)
-            target = self.plant.position_deg + delta
-        control = PositionControl(position_deg=target, max_speed_dps=max_speed, max_current_a=limit)
-        self._set_control(control, position)
+            delta = -((here - wanted) % 360.0)
+        return self._position(self.plant.position_deg + delta, command.max_speed_dps)
+
+    @staticmethod
+    def _position(
+        target_deg: float, max_speed_dps: float | None, limit_a: float | None = None
+    ) -> tuple[Control, ma.RunMode]:
+        # max_speed_dps None (maxSpeed 0): no limit (§4.21).
+        control = PositionControl(position_deg=target_deg, max_speed_dps=max_speed_dps, max_current_a=limit_a)
+        return control, ma.RunMode.POSITION_LOOP
 
     # ---- reads ----
 
