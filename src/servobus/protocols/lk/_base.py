@@ -205,12 +205,14 @@ class LkCommand(LkMessage, Command[R], Generic[R]):
     :func:`servobus.protocols.lk.codec.check_available` enforces it and ``REVISIONS``.
     ``TIMEOUT_S`` overrides the bound codec's timeout where even ``SLOW`` is too short (0x18).
     ``REPLY_ALIASES`` maps a revision to another DATA[0] its reply may carry (V2.35 0x9B: 0x9A, A4).
+    ``INFERRED`` says why the layout is the spec's inference where no manual prints it.
     """
 
     __slots__ = ()
     MOTOR_TYPES: ClassVar[Mapping[Revision, frozenset[MotorType]]] = {}
     TIMEOUT_S: ClassVar[float | None] = None
     REPLY_ALIASES: ClassVar[Mapping[Revision, int]] = {}
+    INFERRED: ClassVar[str | None] = None
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)

@@ -77,8 +77,9 @@ REPLY_LAYOUTS: tuple[tuple[type[LkReply], frozenset[int]], ...] = _reply_layouts
 # Layouts no manual prints; implemented from the spec's inference (listed in the package docstring).
 INFERRED_LAYOUTS: Mapping[int, str] = MappingProxyType(
     {
-        0x33: "V2.35 lists 0x33 but its section is missing (spec §4.30, A18): fixed request, reply as 0x34",
-        MULTI_MOTOR_ID: "0x280 byte table missing (spec §5, A17): 4 x int16 LE, motors 1..4",
+        MULTI_MOTOR_ID if cls.CODE is None else cls.CODE: cls.INFERRED
+        for cls in COMMAND_CLASSES
+        if cls.INFERRED
     }
 )
 

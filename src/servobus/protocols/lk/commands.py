@@ -195,6 +195,7 @@ class ReadAcceleration(LkCommand[AccelerationReply]):
     CODE: ClassVar[int] = 0x33
     REVISIONS = V2_35_ONLY
     READ = True
+    INFERRED = "V2.35 lists 0x33 but its section is missing (spec §4.30, A18): fixed request, reply as 0x34"
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

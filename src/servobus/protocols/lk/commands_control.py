@@ -294,6 +294,7 @@ class MultiMotorTorque(LkCommand[Status2Reply]):
     CODE: ClassVar[int | None] = None
     HAS_CODE = False
     REVISIONS = V2_35_ONLY
+    INFERRED = "0x280 byte table missing (spec §5, A17): 4 x int16 LE, motors 1..4"
     MODEL = ("motor_type",)
     MODEL_FIELDS = (
         (0, IqField(MULTI_TORQUE, "motor", tuple(str(m) for m in range(1, MULTI_MOTOR_SLOTS + 1)))),
