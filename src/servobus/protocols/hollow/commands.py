@@ -98,11 +98,15 @@ class HollowCommand(OnLinks, Command[R]):
     EXTENDED_ID: ClassVar[bool] = False  # 29-bit identifier (mode switch, PI frames)
     FD: ClassVar[bool] = False  # CAN FD frame (16-byte control frames)
     LINKS: ClassVar[tuple[str, ...]] = ("can",)
+    # Claims what no other class of its frame kind claims, so its decoder says what is wrong with
+    # bytes that are no request (the setpoints, the mode switch); asked after the others.
+    FALLBACK: ClassVar[bool] = False
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
         if "__dataclass_fields__" in cls.__dict__:  # the finished (slotted) dataclass, once
-            _REQUESTS.append(cls)
+            specific = sum(1 for other in _REQUESTS if not other.FALLBACK)
+            _REQUESTS.insert(len(_REQUESTS) if cls.FALLBACK else specific, cls)
 
     @classmethod
     def claims(cls, data: bytes, can_mode: CanMode) -> bool:
@@ -116,12 +120,14 @@ class HollowCommand(OnLinks, Command[R]):
 
 
 def request_classes() -> tuple[type[HollowCommand[Any]], ...]:
-    """Every concrete request class, in definition order (the codec's dispatch is derived from them)."""
+    """Every concrete request class, in the order :func:`claimant` asks them: in definition order, the
+    fallbacks last (the codec's dispatch is derived from them)."""
     return tuple(_REQUESTS)
 
 
 def claimant(data: bytes, *, extended_id: bool, fd: bool, can_mode: CanMode) -> type[HollowCommand[Any]]:
-    """The request class of a received payload: the first of its frame kind that claims it.
+    """The request class of a received payload: the first of its frame kind that claims it, a
+    ``FALLBACK`` class only if no other does.
 
     An extended identifier is enough for the extended-id frames, which may come classic or FD (A17).
 
@@ -257,6 +263,7 @@ class _SetpointFrame(Packed, HollowCommand[ClassicReply]):
     PACKER: ClassVar[str] = "setpoint"
     SIZE: ClassVar[int] = _SETPOINT_SIZE
     CAN_MODE: ClassVar[CanMode]
+    FALLBACK: ClassVar[bool] = True
 
     @classmethod
     def claims(cls, data: bytes, can_mode: CanMode) -> bool:
@@ -343,6 +350,7 @@ class CanModeSwitch(HollowCommand[ClassicReply]):
     """
 
     EXTENDED_ID: ClassVar[bool] = True
+    FALLBACK: ClassVar[bool] = True
     mode: CanMode
 
     def __post_init__(self) -> None:
