@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
+import importlib.util
 import re
 import sys
 from collections.abc import Callable, Iterable
@@ -46,6 +47,19 @@ class SerialLine:
     bauds: tuple[int, ...]
     parity: str = "N"
     aliases: tuple[str, ...] = ()
+
+
+_PARTS = ("sim", "cli", "dbc")
+
+
+def _exists(module: str) -> bool:
+    """True if ``module`` can be imported (found, not imported)."""
+    return importlib.util.find_spec(module) is not None
+
+
+def _lazy(module: str, attribute: str) -> Callable[[], Any]:
+    """A function that imports ``module`` when called and returns its ``attribute``."""
+    return lambda: getattr(importlib.import_module(module), attribute)
 
 
 def method_name(cls: type) -> str:
@@ -88,6 +102,9 @@ class Family(Generic[M]):
         parts: ``"module:attribute"`` of the family's larger plug-in parts, imported only when
             asked for with :meth:`part`: ``"sim"`` (simulated devices), ``"cli"`` (the command
             line's operations and settings), ``"dbc"`` (the DBC description).
+        package: the family's package, where what is not given is found by name: the typed motor
+            in ``<package>._motor`` (class ``Motor``) and the parts in ``<package>.sim``,
+            ``.cli`` and ``.dbc`` (objects ``SIM``, ``CLI``, ``DBC``), those modules that exist.
     """
 
     name: str
@@ -104,10 +121,19 @@ class Family(Generic[M]):
     serial: tuple[SerialLine, ...] = ()
     motor: Callable[[], type[M]] | None = None
     parts: dict[str, str] = field(default_factory=dict)
+    package: str | None = None
 
     def __post_init__(self) -> None:
         if self.default_revision not in self.revisions:
             raise ValueError(f"{self.name}: default revision {self.default_revision!r} not in revisions")
+        package = self.package
+        if package is None:
+            return
+        if self.motor is None and _exists(f"{package}._motor"):
+            object.__setattr__(self, "motor", _lazy(f"{package}._motor", "Motor"))
+        for part in _PARTS:
+            if part not in self.parts and _exists(f"{package}.{part}"):
+                self.parts[part] = f"{package}.{part}:{part.upper()}"
 
     def methods(self) -> dict[str, type[Command]]:
         """The command classes by method name, ``ReadStatus2`` -> ``read_status2``: what a
