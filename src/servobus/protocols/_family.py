@@ -131,9 +131,8 @@ class Family(Generic[M]):
             return
         if self.motor is None and _exists(f"{package}._motor"):
             object.__setattr__(self, "motor", _lazy(f"{package}._motor", "Motor"))
-        for part in _PARTS:
-            if part not in self.parts and _exists(f"{package}.{part}"):
-                self.parts[part] = f"{package}.{part}:{part.upper()}"
+        found = {p: f"{package}.{p}:{p.upper()}" for p in _PARTS if _exists(f"{package}.{p}")}
+        object.__setattr__(self, "parts", {**found, **self.parts})  # given ones win; the caller's dict kept
 
     def methods(self) -> dict[str, type[Command]]:
         """The command classes by method name, ``ReadStatus2`` -> ``read_status2``: what a
