@@ -345,7 +345,10 @@ def _build_family_targets() -> None:
         )
     )
     lk_codecs = _bound_codecs("lk", (1, 2, 32)) + _bound_codecs("lk", (1,), revision=lk.Revision.V2_35)
-    target(_family_target("lk", lk, _lk_options(), lk_codecs))
+    # LK's messages inherit their decode from the declared layout: the codec's classes are the list.
+    lk_classes = (*lk.codec.COMMAND_CLASSES, *(reply for reply, _ in lk.codec.REPLY_LAYOUTS))
+    lk_decoders = [cls.decode for cls in lk_classes]
+    target(_family_target("lk", lk, _lk_options(), lk_codecs, class_decoders=lk_decoders))
     ho_mods = _mods_of("servobus.protocols.hollow", "servobus.protocols.hollow.converter")
     ho_codecs = _bound_codecs("hollow", (0, 1, 100))
     target(
