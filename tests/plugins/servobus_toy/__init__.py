@@ -2,9 +2,9 @@
 
 It is the example of the family contract (``servobus.protocols.Family``): a package that declares its
 commands once (:mod:`.messages`), binds one motor's codec on Frames (:mod:`.codec`), simulates its
-motors (:mod:`.device`), has its typed motor methods generated from the declarations (:mod:`._motor`),
-says what the command line sends (:mod:`.cli`, imported only by the CLI) and exposes one ``FAMILY``.
-It has no ``dbc`` part: its DBC is derived from the declarations. Its distribution registers it::
+motors (:mod:`.device`, and :mod:`.sim`, the simulator's part), has its typed motor methods generated
+from the declarations (:mod:`._motor`), says what the command line sends (:mod:`.cli`) and exposes one
+``FAMILY``. It has no ``dbc`` part: its DBC is derived from the declarations. Its distribution registers it::
 
     [servobus.families]
     toy = servobus_toy:FAMILY
@@ -47,15 +47,6 @@ __all__ = [
 if TYPE_CHECKING:
     from servobus_toy._motor import Motor
 
-
-def _motor() -> type[Motor]:
-    """The typed motor class, generated from the declarations by ``servobus.protocols._calls.render``
-    (imported only when a Bus asks: it imports the Bus)."""
-    from servobus_toy._motor import Motor
-
-    return Motor
-
-
 FAMILY: Family[Motor] = Family(
     name="toy",
     description="an invented servo protocol: the example of a family packaged apart from servobus",
@@ -68,6 +59,7 @@ FAMILY: Family[Motor] = Family(
     broadcast=broadcast,
     commands=COMMANDS,
     motor_ids=MOTOR_IDS,
-    motor=_motor,
-    parts={"cli": "servobus_toy.cli:CLI", "sim": "servobus_toy.sim:SIM"},
+    # the typed motor (._motor: Motor) and the parts (.sim: SIM, .cli: CLI) are found here by name,
+    # each imported only when asked for
+    package=__name__,
 )
