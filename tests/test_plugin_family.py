@@ -447,6 +447,22 @@ def test_servobus_sim_family_toy_serves_an_slcan_adapter() -> None:
         assert server.wait(timeout=5) == 0
 
 
+@pytest.mark.parametrize(
+    ("args", "error"),
+    [
+        (("--rs485",), "--rs485: the toy protocol is CAN only; use --slcan"),
+        (("--fd",), "--fd: the simulated toy motors speak classic CAN only (CAN FD: --family hollow)"),
+        (
+            ("--motors", "2", "--first-id", "31"),
+            "--first-id 31 --motors 2: ids 31..32, but toy motor ids are 1..31",
+        ),
+    ],
+)
+def test_servobus_sim_refuses_what_the_toy_sim_part_cannot_serve(args: tuple[str, ...], error: str) -> None:
+    result = run_cli("sim", "--family", "toy", *args, timeout_s=20)
+    assert (result.returncode, result.stdout, result.stderr) == (2, "", f"servobus.sim: error: {error}\n")
+
+
 def test_servobus_record_and_decode_round_trip_a_toy_bus(tmp_path: Path) -> None:
     rows, log = tmp_path / "toy.jsonl", tmp_path / "toy.log"
     args = ("-f", "toy", "--sim", "2", "--duration", "0.3", "--hz", "20", "-o", str(rows), "--log", str(log))
