@@ -35,7 +35,7 @@ def no_python_can_configuration(tmp_path: Path, monkeypatch: pytest.MonkeyPatch)
 
 
 #: a family a plug-in registers, without a simulator part (its codec is LK's under another name)
-BARE = dataclasses.replace(get_family("lk"), name="bare", parts={})
+BARE = dataclasses.replace(get_family("lk"), name="bare", parts={}, package=None)
 
 
 COMMANDS = [["status"], ["scan"], ["monitor"], ["stop"], ["record", "--log", "x.log"]]

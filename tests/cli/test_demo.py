@@ -141,7 +141,7 @@ def test_another_familys_motors_follow_its_own_move(capsys: pytest.CaptureFixtur
 
 #: plug-in families (LK's codec under other names): one without a simulator, one without a move
 NO_MOVE = CliFamily(why_not={"move": "it has no position loop"})
-BARE = dataclasses.replace(get_family("lk"), name="bare", parts={})
+BARE = dataclasses.replace(get_family("lk"), name="bare", parts={}, package=None)
 STILL = dataclasses.replace(
     get_family("lk"),
     name="still",

@@ -191,7 +191,10 @@ class _Move(Command[_State]):
 
 def test_status_reads_are_derived_from_the_read_declarations() -> None:
     family = dataclasses.replace(
-        get_family("myactuator"), commands=(_Move, _ReadOther, _ReadIndexed, _ReadState), parts={}
+        get_family("myactuator"),
+        commands=(_Move, _ReadOther, _ReadIndexed, _ReadState),
+        parts={},
+        package=None,
     )
     # only a read, without arguments, whose reply shows a status column
     assert derived_status(family) == (_ReadState,)
@@ -205,7 +208,9 @@ def without_cli_part(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
     def family(name: str | Family) -> Family:
         found = real(name) if isinstance(name, str) else name
         parts = {k: v for k, v in found.parts.items() if k != "cli"}
-        return dataclasses.replace(found, parts=parts, commands=(ma.ReadStatus2, ma.SpeedControl))
+        return dataclasses.replace(
+            found, parts=parts, package=None, commands=(ma.ReadStatus2, ma.SpeedControl)
+        )
 
     monkeypatch.setattr(families, "get_family", family)
     monkeypatch.setattr(ma.ReadStatus2, "READ", True)
@@ -233,7 +238,9 @@ def test_record_polls_the_first_status_read_of_a_family_without_read_status2(
     real = get_family
     monkeypatch.setattr(ma.ReadStatus1, "READ", True)
     monkeypatch.setattr(ma.ReadStatus1, "REPLY", ma.Status1Reply)
-    lean = dataclasses.replace(real("myactuator"), parts={}, commands=(ma.SpeedControl, ma.ReadStatus1))
+    lean = dataclasses.replace(
+        real("myactuator"), parts={}, package=None, commands=(ma.SpeedControl, ma.ReadStatus1)
+    )
     for module in (record, families):
         monkeypatch.setattr(module, "get_family", lambda name: lean)
     assert record._default_poll(Connection()) == "read_status1"
@@ -256,7 +263,7 @@ def test_a_family_without_status_reads_says_so(
     monkeypatch.setattr(
         families,
         "get_family",
-        lambda name: dataclasses.replace(real(name), parts={}, commands=(ma.SpeedControl,)),
+        lambda name: dataclasses.replace(real(name), parts={}, package=None, commands=(ma.SpeedControl,)),
     )
     err = one_line(capsys, ["status", "--sim", "1"])
     assert "myactuator motors have no status command: none of its commands is declared a read" in err
@@ -267,7 +274,9 @@ def test_a_cli_part_of_another_kind_is_named(
 ) -> None:
     real = get_family
     parts = {"cli": "servobus.protocols:FAMILIES"}
-    monkeypatch.setattr(families, "get_family", lambda name: dataclasses.replace(real(name), parts=parts))
+    monkeypatch.setattr(
+        families, "get_family", lambda name: dataclasses.replace(real(name), parts=parts, package=None)
+    )
     err = one_line(capsys, ["stop", "--sim", "1"], code=1)
     assert "cli part (servobus.protocols:FAMILIES) is dict, not a servobus.cli.plugin.CliFamily" in err
     parts = {"cli": "servobus.protocols.nowhere:CLI"}

@@ -85,7 +85,7 @@ def test_can_fd_motors_answer_can_fd_frames_through_the_slcan_pty() -> None:
 
 
 #: a family a plug-in registers, without a simulator part (its codec is LK's under another name)
-BARE = dataclasses.replace(get_family("lk"), name="bare", parts={})
+BARE = dataclasses.replace(get_family("lk"), name="bare", parts={}, package=None)
 
 
 @pytest.fixture

@@ -105,6 +105,7 @@ class Family(Generic[M]):
         package: the family's package, where what is not given is found by name: the typed motor
             in ``<package>._motor`` (class ``Motor``) and the parts in ``<package>.sim``,
             ``.cli`` and ``.dbc`` (objects ``SIM``, ``CLI``, ``DBC``), those modules that exist.
+            (``dataclasses.replace`` keeps it: a copy without a part gives ``package=None``.)
     """
 
     name: str

@@ -65,6 +65,35 @@ from servobus.protocols.hollow.rs485 import (
     TransparentRequest,
 )
 
+if TYPE_CHECKING:  # the typed motor class; imported when a Bus asks (it imports the Bus)
+    from servobus.protocols.hollow._motor import Motor
+
+
+# A declaration: related arguments share a line.
+# fmt: off
+FAMILY: Family[Motor] = Family(
+    name="hollow", package=__name__,  # the typed Motor (_motor.py) and the sim, cli, dbc parts are there
+    description="hollow-series joint motors: CAN normal/extended, CAN FD, RS-485 transparent and Modbus RTU",
+    revisions=(Revision.HO_SERIES,), default_revision=Revision.HO_SERIES,
+    decode_request=decode_request, decode_reply=decode_reply,
+    links=_bound.LINKS, bind=_bound.bind, broadcast=_bound.broadcast, motor_ids=_MOTOR_IDS,
+    # The requests a link of the bound codec carries; the whole serial frames (TransparentRequest) and
+    # the converter's configuration frames (no stated port) are encoded directly, not sent by a Motor.
+    commands=tuple(cls for cls in command_classes(globals().values()) if getattr(cls, "LINKS", ())),
+    serial=(  # the converter's two RS-485 modes, each at its fixed rate, 8N1 (hollow.md §9.4, §9.5, A36)
+        SerialLine(
+            name=_bound.TransparentFraming.name, framing=_bound.TransparentFraming, bauds=(1_000_000,)
+        ),
+        SerialLine(
+            name=_bound.ModbusFraming.name,
+            framing=_bound.ModbusFraming,
+            bauds=(19_200,),
+            aliases=("modbus-rtu",),
+        ),
+    ),
+)
+# fmt: on
+
 __all__ = [
     "DEFAULT_HOST_ID",
     "DEFAULT_MODEL",
@@ -105,47 +134,3 @@ __all__ = [
     "decode_reply",
     "decode_request",
 ]
-
-if TYPE_CHECKING:
-    from servobus.protocols.hollow._motor import Motor
-
-
-def _motor() -> type[Motor]:
-    """The typed motor class (it imports the Bus, so only when a Bus asks)."""
-    from servobus.protocols.hollow._motor import Motor
-
-    return Motor
-
-
-FAMILY: Family[Motor] = Family(
-    name="hollow",
-    description="hollow-series joint motors: CAN normal/extended, CAN FD, RS-485 transparent and Modbus RTU",
-    revisions=(Revision.HO_SERIES,),
-    default_revision=Revision.HO_SERIES,
-    decode_request=decode_request,
-    decode_reply=decode_reply,
-    links=_bound.LINKS,
-    bind=_bound.bind,
-    broadcast=_bound.broadcast,
-    # The requests a link of the bound codec carries; the whole serial frames (TransparentRequest) and
-    # the converter's configuration frames (no stated port) are encoded directly, not sent by a Motor.
-    commands=tuple(cls for cls in command_classes(globals().values()) if getattr(cls, "LINKS", ())),
-    motor=_motor,
-    motor_ids=_MOTOR_IDS,
-    serial=(  # the converter's two RS-485 modes, each at its fixed rate, 8N1 (hollow.md §9.4, §9.5, A36)
-        SerialLine(
-            name=_bound.TransparentFraming.name, framing=_bound.TransparentFraming, bauds=(1_000_000,)
-        ),
-        SerialLine(
-            name=_bound.ModbusFraming.name,
-            framing=_bound.ModbusFraming,
-            bauds=(19_200,),
-            aliases=("modbus-rtu",),
-        ),
-    ),
-    parts={
-        "sim": "servobus.protocols.hollow.sim:SIM",
-        "cli": "servobus.protocols.hollow.cli:CLI",
-        "dbc": "servobus.protocols.hollow.dbc:DBC",
-    },
-)

@@ -86,36 +86,21 @@ __all__ = [
     "decode_reply",
     "decode_request",
 ]
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # the typed motor class; imported when a Bus asks (it imports the Bus)
     from servobus.protocols.lk._motor import Motor
 
 
-def _motor() -> type[Motor]:
-    """The typed motor class (it imports the Bus, so only when a Bus asks)."""
-    from servobus.protocols.lk._motor import Motor
-
-    return Motor
-
-
+# A declaration: related arguments share a line.
+# fmt: off
 FAMILY: Family[Motor] = Family(
-    name="lk",
+    name="lk", package=__name__,  # the typed Motor (_motor.py) and the sim, cli, dbc parts are there
     description="LK-TECH MS/MF/MH/MG CAN V2.36 and RMD-S/RMD-F V2.35 (0x140+ID -> 0x180+ID / 0x140+ID)",
-    revisions=(Revision.V2_36, Revision.V2_35),
-    default_revision=Revision.V2_36,
-    decode_request=decode_request,
-    decode_reply=decode_reply,
-    links=_bound.LINKS,
-    bind=_bound.bind,
-    broadcast=_bound.broadcast,
-    commands=command_classes(globals().values()),
-    motor=_motor,
-    motor_ids=_MOTOR_IDS,
-    parts={
-        "sim": "servobus.protocols.lk.sim:SIM",
-        "cli": "servobus.protocols.lk.cli:CLI",
-        "dbc": "servobus.protocols.lk.dbc:DBC",
-    },
+    revisions=(Revision.V2_36, Revision.V2_35), default_revision=Revision.V2_36,
+    decode_request=decode_request, decode_reply=decode_reply,
+    links=_bound.LINKS, bind=_bound.bind, broadcast=_bound.broadcast,
+    commands=command_classes(globals().values()), motor_ids=_MOTOR_IDS,
 )
+# fmt: on
 
 # The message classes: each module's own __all__ (a new class is exported where it is written).
 __all__ += _commands.__all__

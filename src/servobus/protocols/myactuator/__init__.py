@@ -57,30 +57,19 @@ __all__ += motion.__all__
 __all__ += replies.__all__
 __all__ += revision.__all__
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # the typed motor class; imported when a Bus asks (it imports the Bus)
     from servobus.protocols.myactuator._motor import Motor
 
 
-def _motor() -> type[Motor]:
-    """The typed motor class (it imports the Bus, so only when a Bus asks)."""
-    from servobus.protocols.myactuator._motor import Motor
-
-    return Motor
-
-
+# A declaration: related arguments share a line.
+# fmt: off
 FAMILY: Family[Motor] = Family(
-    name="myactuator",
+    name="myactuator", package=__name__,  # the typed Motor (_motor.py) and the sim, cli, dbc parts are there
     description="MyActuator RMD-X and similar on V3 drivers, protocol V4.3/V4.4 (CAN, RS485, motion mode)",
-    revisions=(Revision.V4_4, Revision.V4_3),
-    default_revision=Revision.V4_4,
-    decode_request=decode_request,
-    decode_reply=decode_reply,
-    links=_bound.LINKS,
-    bind=_bound.bind,
-    broadcast=_bound.broadcast,
-    commands=command_classes(globals().values()),
-    motor=_motor,
-    motor_ids=_MOTOR_IDS,
+    revisions=(Revision.V4_4, Revision.V4_3), default_revision=Revision.V4_4,
+    decode_request=decode_request, decode_reply=decode_reply,
+    links=_bound.LINKS, bind=_bound.bind, broadcast=_bound.broadcast,
+    commands=command_classes(globals().values()), motor_ids=_MOTOR_IDS,
     serial=(  # 8N1 at the rates the manuals list, none named the default (myactuator-v4.md §1.2)
         SerialLine(
             name=_bound.Rs485Framing.name,
@@ -89,9 +78,5 @@ FAMILY: Family[Motor] = Family(
             aliases=("myactuator",),
         ),
     ),
-    parts={
-        "sim": "servobus.protocols.myactuator.sim:SIM",
-        "cli": "servobus.protocols.myactuator.cli:CLI",
-        "dbc": "servobus.protocols.myactuator.dbc:DBC",
-    },
 )
+# fmt: on

@@ -10,58 +10,15 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from servobus.cli.plugin import (
-    CliFamily,
-    Op,
-    Query,
-    Setting,
-    Values,
-    build,
-    move,
-    once,
-    parse_bool,
-    parse_int,
-    setpoint,
-    setting_of,
-)
+from servobus.cli import plugin
 from servobus.protocols import BoundCodec, Command, Reply
-from servobus.protocols.myactuator import (
-    AbsolutePositionControl,
-    AccelIndex,
-    BrakeLock,
-    BrakeRelease,
-    FunctionControl,
-    IncrementalPositionControl,
-    ModelPartReply,
-    MotionCommand,
-    PidIndex,
-    ReadAcceleration,
-    ReadModel,
-    ReadModelPart,
-    ReadMultiTurnAngle,
-    ReadPid,
-    ReadRunMode,
-    ReadStatus1,
-    ReadStatus2,
-    ReadVersionDate,
-    Revision,
-    SetCommTimeout,
-    SpeedControl,
-    SystemReset,
-    TorqueControl,
-    WriteAcceleration,
-    WriteCurrentPositionAsZero,
-    WritePidRam,
-    WritePidRom,
-    join_model,
-    revision_from_version_date,
-)
+from servobus.protocols import myactuator as ma
 
 __all__ = ["CLI"]
 
 
-def _mit(codec: BoundCodec, v: Values) -> Command:
-    return MotionCommand(
+def _mit(codec: BoundCodec, v: plugin.Values) -> Command:
+    return ma.MotionCommand(
         position_rad=v["position_rad"],
         velocity_rad_s=v["velocity_rad_s"],
         kp=v["kp"],
@@ -71,28 +28,32 @@ def _mit(codec: BoundCodec, v: Values) -> Command:
     )
 
 
-def _brake(codec: BoundCodec, v: Values) -> Command:
-    return BrakeLock() if v["lock"] else BrakeRelease()
+def _brake(codec: BoundCodec, v: plugin.Values) -> Command:
+    return ma.BrakeLock() if v["lock"] else ma.BrakeRelease()
 
 
 _RESET_NOTE = "takes effect after a reset (servobus reset)"
 
-OPS: dict[str, Op] = {
-    "move": move(
-        build(AbsolutePositionControl),
-        build(IncrementalPositionControl),
-        angle=ReadMultiTurnAngle,
-        reads=(ReadStatus2,),
+OPS: dict[str, plugin.Op] = {
+    "move": plugin.move(
+        plugin.build(ma.AbsolutePositionControl),
+        plugin.build(ma.IncrementalPositionControl),
+        angle=ma.ReadMultiTurnAngle,
+        reads=(ma.ReadStatus2,),
     ),
-    "speed": setpoint(build(SpeedControl)),
-    "torque": setpoint(build(TorqueControl)),
-    "mit": setpoint(_mit),
-    "brake": once(_brake),
-    "zero": once(build(WriteCurrentPositionAsZero), rom=True, note=f"the new zero {_RESET_NOTE}"),
-    "set-id": once(
-        lambda codec, v: FunctionControl.set_can_id(v["new_id"]), rom=True, note=f"the new id {_RESET_NOTE}"
+    "speed": plugin.setpoint(plugin.build(ma.SpeedControl)),
+    "torque": plugin.setpoint(plugin.build(ma.TorqueControl)),
+    "mit": plugin.setpoint(_mit),
+    "brake": plugin.once(_brake),
+    "zero": plugin.once(
+        plugin.build(ma.WriteCurrentPositionAsZero), rom=True, note=f"the new zero {_RESET_NOTE}"
     ),
-    "reset": once(build(SystemReset)),
+    "set-id": plugin.once(
+        lambda codec, v: ma.FunctionControl.set_can_id(v["new_id"]),
+        rom=True,
+        note=f"the new id {_RESET_NOTE}",
+    ),
+    "reset": plugin.once(plugin.build(ma.SystemReset)),
 }
 
 WHY_NOT = {
@@ -101,67 +62,67 @@ WHY_NOT = {
 }
 
 
-def _settings() -> list[Setting]:
+def _settings() -> list[plugin.Setting]:
     out = [
-        setting_of(
+        plugin.setting_of(
             f"pid.{index.name.lower()}",
             f"PID parameter {index.name} (float32; RAM, or ROM with --rom)",
-            read=ReadPid,
-            write=WritePidRam,
-            rom_write=WritePidRom,
+            read=ma.ReadPid,
+            write=ma.WritePidRam,
+            rom_write=ma.WritePidRom,
             keys={"index": index},
         )
-        for index in PidIndex
+        for index in ma.PidIndex
     ]
     out += [
-        setting_of(
+        plugin.setting_of(
             f"{accel.name.lower()}_dps_s",
             f"{accel.name.lower().replace('_', ' ')}, 100..60000 dps/s or 'none' (no planning)",
-            read=ReadAcceleration,
-            write=WriteAcceleration,
+            read=ma.ReadAcceleration,
+            write=ma.WriteAcceleration,
             keys={"index": accel},
             rom=True,
         )
-        for accel in AccelIndex
+        for accel in ma.AccelIndex
     ]
     out.append(
-        setting_of(
+        plugin.setting_of(
             "comm_timeout_ms",
             "communication-interruption protection (0xB3): output off after this silence; 'off' disables it",
-            write=SetCommTimeout,
+            write=ma.SetCommTimeout,
             rom=True,
         )
     )
     # 0x20 function control: one command for several settings, each index its own meaning
-    f = FunctionControl
+    f = ma.FunctionControl
     functions: tuple[tuple[str, str, Any, Any], ...] = (
         (
             "can_id_filter",
             "CAN-id filter on/off (0x20 index 2; off lets 0x280 broadcasts in)",
-            parse_bool,
+            plugin.parse_bool,
             f.can_id_filter,
         ),
         (
             "error_reporting",
             "send 0x9A every 100 ms while an error is present, on/off (0x20 index 3)",
-            parse_bool,
+            plugin.parse_bool,
             f.error_reporting,
         ),
         (
             "limit.max_positive_angle_raw",
             "maximum positive angle, raw int32 (0x20 index 6; no unit stated, likely 0.01 deg)",
-            parse_int,
+            plugin.parse_int,
             f.max_positive_angle,
         ),
         (
             "limit.max_negative_angle_raw",
             "maximum negative angle, raw int32 (0x20 index 7; as index 6)",
-            parse_int,
+            plugin.parse_int,
             f.max_negative_angle,
         ),
     )
     for key, text, parse, make in functions:
-        out.append(Setting(key=key, help=text, parse=parse, write=_function(make), rom=True))
+        out.append(plugin.Setting(key=key, help=text, parse=parse, write=_function(make), rom=True))
     return out
 
 
@@ -178,21 +139,21 @@ def _identify_columns(codec: BoundCodec, replies: Sequence[Reply | None]) -> dic
     version = getattr(replies[0], "version_date", None)
     if not version:
         return {}
-    return {"firmware": str(version), "revision": revision_from_version_date(version).name}
+    return {"firmware": str(version), "revision": ma.revision_from_version_date(version).name}
 
 
 def _describe_reads(codec: BoundCodec) -> Sequence[Command]:
     """Model (0xB5, in the motor's revision's form) and operating mode (0x70)."""
-    if codec.revision is Revision.V4_4:
-        return (*(ReadModelPart(part=part) for part in (1, 2, 3)), ReadRunMode())
-    return (ReadModel(), ReadRunMode())
+    if codec.revision is ma.Revision.V4_4:
+        return (*(ma.ReadModelPart(part=part) for part in (1, 2, 3)), ma.ReadRunMode())
+    return (ma.ReadModel(), ma.ReadRunMode())
 
 
 def _describe_columns(codec: BoundCodec, replies: Sequence[Reply | None]) -> dict[str, Any]:
     *model, mode = replies
     out: dict[str, Any] = {}
-    if codec.revision is Revision.V4_4:
-        out["model"] = join_model(p for p in model if isinstance(p, ModelPartReply))
+    if codec.revision is ma.Revision.V4_4:
+        out["model"] = ma.join_model(p for p in model if isinstance(p, ma.ModelPartReply))
     else:
         out["model"] = getattr(model[0], "model", None)
     run_mode = getattr(mode, "mode", None)
@@ -201,11 +162,11 @@ def _describe_columns(codec: BoundCodec, replies: Sequence[Reply | None]) -> dic
     return out
 
 
-CLI = CliFamily(
+CLI = plugin.CliFamily(
     ops=OPS,
     why_not=WHY_NOT,
-    status=(ReadStatus1, ReadStatus2),
+    status=(ma.ReadStatus1, ma.ReadStatus2),
     settings=_settings(),
-    identify=Query(reads=lambda codec: (ReadVersionDate(),), columns=_identify_columns),
-    describe=Query(reads=_describe_reads, columns=_describe_columns),
+    identify=plugin.Query(reads=lambda codec: (ma.ReadVersionDate(),), columns=_identify_columns),
+    describe=plugin.Query(reads=_describe_reads, columns=_describe_columns),
 )
