@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from servobus.protocols import FAMILIES, Reply, get_family
+from servobus.protocols import FAMILIES, get_family
 from servobus.protocols._calls import module_path, render
 
 mypy_api = pytest.importorskip("mypy.api")
@@ -75,8 +75,6 @@ def test_a_typed_motor_returns_each_command_s_declared_reply(mypy_output: list[s
     from servobus.protocols import myactuator as ma
 
     status = _reply_name(ma.ReadStatus2.REPLY)
-    if ma.ReadStatus2.REPLY is Reply:  # TEMPORARY (lead): until the MyActuator declarations land
-        pytest.xfail("ReadStatus2 does not declare its reply yet")
     notes = [line for line in mypy_output if line.startswith("note: Revealed type")]
     assert notes[0] == f'note: Revealed type is "{status}"'
     assert notes[1] == f'note: Revealed type is "{status}"'

@@ -8,8 +8,9 @@ in the classes. ::
 
     python -m servobus.protocols._tables myactuator > myactuator.json
 
-Fields whose bytes are not an integer (text, IEEE floats) are described by kind and width only; a
-generator that needs them falls back to the Python model for that message.
+Fields whose bytes are not a plain integer (text, IEEE floats, a family's own kinds such as LK's
+motor-type-dependent currents, which live in ``MODEL_FIELDS`` and are not listed) are described by
+kind and width only; a generator that needs them falls back to the Python model for that message.
 """
 
 from __future__ import annotations
@@ -95,18 +96,14 @@ def _field(offset: int, spec: Any) -> FieldTable:
         Float32Field: "float32",
         AsciiField: "ascii",
     }
-    kind = kinds.get(type(spec))
-    if kind is None:
-        raise TypeError(f"{type(spec).__name__} ({spec.name}) has no table form")
+    # A kind of its own (a family's: LK's motor-type-dependent current, a big-endian float) is
+    # named by its class: a generator that does not know it leaves the message to Python.
+    kind = kinds.get(type(spec), type(spec).__name__)
     return FieldTable(spec.name, offset, spec.size, kind, special=special)
 
 
 def layout_table(cls: type[Layout]) -> LayoutTable:
-    """The table of one declared message class.
-
-    Raises:
-        TypeError: a field kind with no table form.
-    """
+    """The table of one declared message class."""
     is_command = issubclass(cls, Command)
     replies = tuple(r.__name__ for r in cls.reply_types()) if issubclass(cls, Command) else ()
     return LayoutTable(
