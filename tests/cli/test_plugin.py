@@ -5,7 +5,6 @@ each command with a reason, its settings are said by their command classes, and 
 
 from __future__ import annotations
 
-import ast
 import dataclasses
 from collections.abc import Iterator
 from pathlib import Path
@@ -282,62 +281,3 @@ def test_a_cli_part_of_another_kind_is_named(
     parts = {"cli": "servobus.protocols.nowhere:CLI"}
     err = one_line(capsys, ["stop", "--sim", "1"], code=1)
     assert "cli part (servobus.protocols.nowhere:CLI): No module named 'servobus.protocols.nowhere'" in err
-
-
-# ---- layering ----
-
-
-def _code_strings(tree: ast.AST) -> Iterator[tuple[int, str]]:
-    """The string constants of ``tree`` that are not docstrings."""
-    docstrings = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Module | ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
-            body = node.body
-            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
-                docstrings.add(id(body[0].value))
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings:
-            yield node.lineno, node.value
-
-
-def _imports(tree: ast.AST) -> Iterator[tuple[int, str]]:
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            yield from ((node.lineno, alias.name) for alias in node.names)
-        elif isinstance(node, ast.ImportFrom) and node.module:
-            yield node.lineno, node.module
-            yield from ((node.lineno, f"{node.module}.{alias.name}") for alias in node.names)
-
-
-#: the CLI modules that ask the families' parts (cli/sim.py, cli/demo.py and cli/dbc.py are checked
-#: by their own areas' tests)
-ASKING = (
-    "__init__",
-    "_families",
-    "_motors",
-    "_output",
-    "config",
-    "control",
-    "decode",
-    "plot",
-    "plugin",
-    "record",
-    "scan",
-)
-
-
-@pytest.mark.parametrize("module", ASKING)
-def test_the_cli_names_no_family_and_imports_none(module: str) -> None:
-    tree = ast.parse((CLI_SRC / f"{module}.py").read_text())
-    names = set(FAMILIES)
-    imported = [(line, name) for line, name in _imports(tree) if set(name.split(".")) & names]
-    assert imported == []
-    # a family's name as a whole string is a table key or a comparison; help texts only mention one
-    named = [(line, text) for line, text in _code_strings(tree) if text.strip().lower() in names]
-    assert named == []
-
-
-def test_the_check_finds_a_table_key_and_an_import() -> None:
-    tree = ast.parse('"""lk in a docstring"""\nimport servobus.protocols.lk\nTABLES = {"hollow": 1}\n')
-    assert list(_imports(tree)) == [(2, "servobus.protocols.lk")]
-    assert list(_code_strings(tree)) == [(3, "hollow")]
