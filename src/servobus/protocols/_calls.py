@@ -7,6 +7,7 @@ subclass is written into ``protocols/<family>/_motor.py`` by ::
 
     python -m servobus.protocols._calls            # rewrite the built-in families' files
     python -m servobus.protocols._calls --check    # exit 1 if one is not current
+    python -m servobus.protocols._calls my_family  # a plug-in family's package (its FAMILY)
 
 and checked in; a test runs the check, so a command added without regenerating fails CI. The file is
 generated rather than built at run time because a type checker reads files, not run-time classes.
@@ -204,11 +205,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         prog="python -m servobus.protocols._calls", description=__doc__.split("\n")[0]
     )
     parser.add_argument("--check", action="store_true", help="exit 1 if a generated file is not current")
+    parser.add_argument(
+        "packages", nargs="*", help="a plug-in family's package (its FAMILY); default: the built-in families"
+    )
     args = parser.parse_args(argv)
+    if args.packages:
+        targets = [(importlib.import_module(p).FAMILY, p) for p in args.packages]
+    else:
+        targets = [(get_family(name), target.partition(":")[0]) for name, target in FAMILIES.items()]
     stale = []
-    for name, target in FAMILIES.items():
-        family = get_family(name)
-        path = module_path(target.partition(":")[0])
+    for family, package in targets:
+        path = module_path(package)
         text = render(family)
         if path.exists() and path.read_text() == text:
             continue

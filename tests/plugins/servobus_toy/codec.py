@@ -23,9 +23,15 @@ from typing import Any
 from servobus.errors import ProtocolError
 from servobus.frame import Frame, classic_request
 from servobus.protocols import Broadcast, Command, FrameKind, Reply, check_bus
-from servobus.protocols._bound import CodecBase, echo_key, frame_key, motor_ids_of
-from servobus.protocols._family import command_classes
-from servobus.protocols._message import Message, decode_by_code
+from servobus.protocols.authoring import (
+    CodecBase,
+    Message,
+    command_classes,
+    decode_by_code,
+    echo_key,
+    frame_key,
+    motor_ids_of,
+)
 from servobus_toy import messages
 from servobus_toy.messages import Revision, Stop, ToyCommand, ToyReply
 

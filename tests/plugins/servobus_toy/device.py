@@ -18,7 +18,7 @@ from typing import Any
 
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
-from servobus.protocols._family import method_name
+from servobus.protocols.authoring import method_name
 from servobus.sim.device import Emission, ListeningDevice
 from servobus.sim.plant import Off, Plant, PlantParams, PositionControl, SpeedControl
 from servobus_toy.codec import BROADCAST_ID, COMMANDS, decode_request, reply_id, request_id

@@ -18,8 +18,7 @@ from dataclasses import dataclass
 from typing import ClassVar, TypeVar
 
 from servobus.protocols import Command, Reply
-from servobus.protocols._fields import ScaledField
-from servobus.protocols._layout import FlagsField, Layout
+from servobus.protocols.authoring import FlagsField, Layout, ScaledField
 
 __all__ = [
     "MAX_SPEED_DPS",
