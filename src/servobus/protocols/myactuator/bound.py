@@ -232,9 +232,8 @@ class MyActuatorCodec(CodecBase):
                 motion scales other than the motor's.
         """
         if type(command) is MotionCommand and command.scales is self.model and not self._rs485:
-            return Frame(
-                arbitration_id=self._motion_request_id, data=self._motion_encode(command), is_rx=False
-            )
+            # 8 bytes the encoder made, on the motor's own identifier: nothing for Frame() to check
+            return classic_request(self._motion_request_id, self._motion_encode(command))
         always, fast = self._plan(command)
         if always and fast is not None and not self._rs485:
             return classic_request(self._request_id, fast(command))
@@ -246,9 +245,8 @@ class MyActuatorCodec(CodecBase):
             address = RS485_BROADCAST_ID if is_id else self.motor_id
             return Frame(arbitration_id=address, data=message.encode(), is_serial=True, is_rx=False)
         if isinstance(message, MotionCommand):
-            return Frame(
-                arbitration_id=self._motion_request_id, data=self._motion_encode(message), is_rx=False
-            )
+            # 8 bytes the encoder made, on the motor's own identifier: nothing for Frame() to check
+            return classic_request(self._motion_request_id, self._motion_encode(message))
         elif isinstance(message, cmd.SetCanId | cmd.ReadCanId):
             ident = ID_SETTING_ID
         else:
