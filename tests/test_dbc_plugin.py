@@ -7,12 +7,10 @@ servobus does. The contract a family's dbc part meets (``DbcFamily``) is checked
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import os
 import re
 import subprocess
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -21,24 +19,10 @@ import cantools
 import pytest
 
 from _dbc_check import check_frame
+from _toy import PLUGINS, SERVOBUS
 from servobus.dbc import DbcFamily, DbcOption, DbcQuery, Described, Layout, database, dbc_part, dbc_text, plan
 from servobus.protocols import get_family
 from servobus.protocols._bound import EXTENDED
-
-PLUGINS = Path(__file__).resolve().parent / "plugins"
-SERVOBUS = [sys.executable, "-c", "import sys; from servobus.cli import main; sys.exit(main())"]
-
-
-@pytest.fixture(scope="module")
-def toy() -> Iterator[ModuleType]:
-    """The ``servobus_toy`` package, its folder on ``sys.path`` (what installing it would do)."""
-    sys.path.insert(0, str(PLUGINS))
-    try:
-        yield importlib.import_module("servobus_toy")
-    finally:
-        sys.path.remove(str(PLUGINS))
-        for name in [n for n in sys.modules if n.partition(".")[0] == "servobus_toy"]:
-            del sys.modules[name]
 
 
 def toy_commands(toy: ModuleType) -> list[Any]:

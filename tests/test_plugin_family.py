@@ -10,20 +10,20 @@ servobus of it.
 from __future__ import annotations
 
 import asyncio
-import importlib
 import json
 import os
 import subprocess
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
 from typing import Any
 
 import pytest
 
+from _toy import PLUGINS, SERVOBUS
 from servobus import _plugins
 from servobus.bus import Bus
+from servobus.cli.plugin import OPERATIONS
 from servobus.errors import MotorFault
 from servobus.frame import Frame
 from servobus.logs import FrameDecoder, read_log
@@ -35,22 +35,7 @@ from servobus.sim import virtual
 from servobus.sim.plant import Off, PositionControl
 from servobus.transports.sim import SimTransport
 
-PLUGINS = Path(__file__).resolve().parent / "plugins"
 SRC = Path(__file__).resolve().parents[1] / "src" / "servobus"
-#: ``servobus`` in a subprocess that finds the plug-in as an installed distribution would be found
-SERVOBUS = [sys.executable, "-c", "import sys; from servobus.cli import main; sys.exit(main())"]
-
-
-@pytest.fixture(scope="module")
-def toy() -> Iterator[ModuleType]:
-    """The ``servobus_toy`` package, its folder on ``sys.path`` for the tests of this module."""
-    sys.path.insert(0, str(PLUGINS))
-    try:
-        yield importlib.import_module("servobus_toy")
-    finally:
-        sys.path.remove(str(PLUGINS))
-        for name in [n for n in sys.modules if n.partition(".")[0] == "servobus_toy"]:
-            del sys.modules[name]
 
 
 def run_cli(*args: str, timeout_s: float = 60.0) -> subprocess.CompletedProcess[str]:
@@ -352,21 +337,6 @@ def test_a_plug_in_is_looked_up_once_not_per_motor_or_broadcast(
 
 # ---- the command line ----
 
-#: the CLI commands a family's cli part offers or refuses (status: its status reads)
-DRIVEN = (
-    "status",
-    "move",
-    "speed",
-    "torque",
-    "mit",
-    "stop",
-    "off",
-    "brake",
-    "zero",
-    "set-id",
-    "clear-errors",
-    "reset",
-)
 
 
 def test_the_cli_part_says_what_each_command_sends_or_why_not(toy: ModuleType) -> None:
@@ -375,7 +345,7 @@ def test_the_cli_part_says_what_each_command_sends_or_why_not(toy: ModuleType) -
     part = toy.FAMILY.part("cli")
     assert isinstance(part, CliFamily)
     assert tuple(part.status_reads(toy.FAMILY)) == (toy.ReadState,)  # derived from the declarations
-    for command in DRIVEN[1:]:
+    for command in OPERATIONS[1:]:
         assert part.op(command) is not None or part.why_not[command], command
     codec = toy.FAMILY.bind(1)
     assert part.op("speed").first(codec, {"speed_dps": 12.5}) == (toy.SetSpeed(speed_dps=12.5),)

@@ -14,43 +14,28 @@ import pytest
 import servobus.cli._families as families
 from cli._bus_cli import one_line, run_json
 from servobus.cli import COMMANDS, main
-from servobus.cli.plugin import CliFamily, build, derived_status, parse_int, safe, setting_of
+from servobus.cli.plugin import OPERATIONS, CliFamily, build, derived_status, parse_int, safe, setting_of
 from servobus.protocols import FAMILIES, Command, Family, Reply, get_family
 from servobus.protocols import myactuator as ma
 
-#: the CLI commands whose sending a family's part says (status: its status reads)
-DRIVEN = (
-    "status",
-    "move",
-    "speed",
-    "torque",
-    "mit",
-    "stop",
-    "off",
-    "brake",
-    "zero",
-    "set-id",
-    "clear-errors",
-    "reset",
-)
 CLI_SRC = Path(families.__file__).parent
 
 
 def test_the_driven_commands_are_the_clis() -> None:
-    assert set(DRIVEN) <= set(COMMANDS)
+    assert set(OPERATIONS) <= set(COMMANDS)
 
 
 @pytest.mark.parametrize("name", list(FAMILIES))
 def test_each_built_in_family_offers_or_refuses_every_command_with_a_reason(name: str) -> None:
     part = families.cli_part(name)
     assert isinstance(part, CliFamily)
-    for command in DRIVEN:
+    for command in OPERATIONS:
         if command == "status":
             offered = bool(part.status_reads(get_family(name)))
         else:
             offered = part.op(command) is not None
         assert offered or part.why_not.get(command), (name, command)
-    assert set(part.ops) | set(part.why_not) <= set(DRIVEN)
+    assert set(part.ops) | set(part.why_not) <= set(OPERATIONS)
 
 
 @pytest.mark.parametrize("name", list(FAMILIES))

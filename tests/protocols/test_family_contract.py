@@ -12,29 +12,16 @@ values, the simulated motor's answers).
 from __future__ import annotations
 
 import dataclasses
-import sys
-from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import pytest
 
 from servobus.protocols import FAMILIES, Command, Family, Reply, get_family
 
-PLUGINS = Path(__file__).resolve().parents[1] / "plugins"
 NAMES = [*sorted(FAMILIES), "toy"]
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _toy_installed() -> Iterator[None]:
-    """The toy family's package and dist-info on sys.path (what installing it would do)."""
-    sys.path.insert(0, str(PLUGINS))
-    try:
-        yield
-    finally:
-        sys.path.remove(str(PLUGINS))
-        for name in [n for n in sys.modules if n.partition(".")[0] == "servobus_toy"]:
-            del sys.modules[name]
+pytestmark = pytest.mark.usefixtures("toy")  # the plug-in installed (tests/_toy.py)
 
 
 @pytest.fixture(params=NAMES)

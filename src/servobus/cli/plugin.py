@@ -65,6 +65,7 @@ from servobus.protocols import BoundCodec, Command, Family, Reply
 
 __all__ = [
     "DEFAULT_OPS",
+    "OPERATIONS",
     "STATUS_SOURCES",
     "Build",
     "CliFamily",
@@ -447,6 +448,22 @@ class CliFamily:
         """:attr:`status`, or the reads derived from ``family``'s commands where it is None."""
         return derived_status(family) if self.status is None else self.status
 
+
+#: the CLI commands a family's part offers (``ops``, ``status``) or refuses (``why_not``)
+OPERATIONS = (
+    "status",
+    "move",
+    "speed",
+    "torque",
+    "mit",
+    "stop",
+    "off",
+    "brake",
+    "zero",
+    "set-id",
+    "clear-errors",
+    "reset",
+)
 
 #: the CLI commands every family has without a table: its bound codec's safe commands
 DEFAULT_OPS: Mapping[str, Op] = {"stop": safe("stop"), "off": safe("shutdown")}

@@ -29,7 +29,16 @@ from typing import Any
 from servobus.protocols._family import Family
 from servobus.protocols._message import Command
 
-__all__ = ["module_path", "render"]
+__all__ = ["DEFAULT", "given", "module_path", "render"]
+
+#: a generated method's default for a field whose own default a signature cannot spell (an object):
+#: the field is then left out, and the command fills it in
+DEFAULT: Any = object()
+
+
+def given(**fields: Any) -> dict[str, Any]:
+    """The fields a generated method was given (those not left at :data:`DEFAULT`)."""
+    return {name: value for name, value in fields.items() if value is not DEFAULT}
 
 _BUILTINS = {int, float, bool, str, bytes, type(None), object}
 _NO_DEFAULT = dataclasses.MISSING
@@ -127,7 +136,7 @@ def _parameters(cls: type[Command], imports: _Imports) -> tuple[list[str], list[
         if f.default is not _NO_DEFAULT or f.default_factory is not _NO_DEFAULT:
             written = _default(f.default, imports) if f.default is not _NO_DEFAULT else None
             if written is None:
-                written, arg = "_DEFAULT", f"**_given({f.name}={f.name})"
+                written, arg = "DEFAULT", f"**given({f.name}={f.name})"
             text += f" = {written}"
             seen_default = True
         elif seen_default and not keyword_only:
@@ -172,16 +181,10 @@ def render(family: Family[Any]) -> str:
         "from typing import Any, Literal  # noqa: F401",
         "",
         "from servobus.bus import Motor as _Motor",
+        *(["from servobus.protocols._calls import DEFAULT, given"] if "**given(" in "".join(methods) else []),
         *imports.lines(),
         "",
         '__all__ = ["Motor"]',
-        "",
-        "#: a field left to the command's own default (one a signature cannot spell)",
-        "_DEFAULT: Any = object()",
-        "",
-        "",
-        "def _given(**fields: Any) -> dict[str, Any]:",
-        "    return {name: value for name, value in fields.items() if value is not _DEFAULT}",
         "",
         "",
         "class Motor(_Motor):",

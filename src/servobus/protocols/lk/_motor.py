@@ -22,13 +22,6 @@ from servobus.protocols.lk import (
 
 __all__ = ["Motor"]
 
-#: a field left to the command's own default (one a signature cannot spell)
-_DEFAULT: Any = object()
-
-
-def _given(**fields: Any) -> dict[str, Any]:
-    return {name: value for name, value in fields.items() if value is not _DEFAULT}
-
 
 class Motor(_Motor):
     """A lk motor on a Bus (``bus.motor(FAMILY, id)``): a typed method per command."""

@@ -8,16 +8,10 @@ from __future__ import annotations
 from typing import Any, Literal  # noqa: F401
 
 from servobus.bus import Motor as _Motor
+from servobus.protocols._calls import DEFAULT, given
 from servobus.protocols.myactuator import commands, commands_control, enums, motion, replies, rs485_motion
 
 __all__ = ["Motor"]
-
-#: a field left to the command's own default (one a signature cannot spell)
-_DEFAULT: Any = object()
-
-
-def _given(**fields: Any) -> dict[str, Any]:
-    return {name: value for name, value in fields.items() if value is not _DEFAULT}
 
 
 class Motor(_Motor):
@@ -104,6 +98,6 @@ class Motor(_Motor):
     # 0xA1 torque (q-axis current) closed loop. It cannot release a brake: send 0x77 first.
     async def torque_control(self, current_a: float, *, timeout_s: float | None = None, retries: int = 0) -> replies.StatusReply: return await self.request(commands_control.TorqueControl(current_a=current_a), timeout_s=timeout_s, retries=retries)
     # Motion (MIT) mode setpoint, sent on 0x400 + ID (§5.1):
-    async def motion_command(self, position_rad: float, velocity_rad_s: float, kp: float, kd: float, torque_ff_nm: float, scales: motion.MotionScales = _DEFAULT, *, timeout_s: float | None = None, retries: int = 0) -> motion.MotionReply: return await self.request(motion.MotionCommand(position_rad=position_rad, velocity_rad_s=velocity_rad_s, kp=kp, kd=kd, torque_ff_nm=torque_ff_nm, **_given(scales=scales)), timeout_s=timeout_s, retries=retries)
+    async def motion_command(self, position_rad: float, velocity_rad_s: float, kp: float, kd: float, torque_ff_nm: float, scales: motion.MotionScales = DEFAULT, *, timeout_s: float | None = None, retries: int = 0) -> motion.MotionReply: return await self.request(motion.MotionCommand(position_rad=position_rad, velocity_rad_s=velocity_rad_s, kp=kp, kd=kd, torque_ff_nm=torque_ff_nm, **given(scales=scales)), timeout_s=timeout_s, retries=retries)
     # RS485 motion-mode request (V4.4 only): the CAN motion mode's control law with float32 values.
     async def rs485_motion_command(self, motor_id: int, position_rad: float, velocity_rad_s: float, kp: float, kd: float, torque_ff_nm: float, mode: enums.Rs485MotionMode = enums.Rs485MotionMode.SERVO, *, timeout_s: float | None = None, retries: int = 0) -> rs485_motion.Rs485MotionReply: return await self.request(rs485_motion.Rs485MotionCommand(motor_id=motor_id, position_rad=position_rad, velocity_rad_s=velocity_rad_s, kp=kp, kd=kd, torque_ff_nm=torque_ff_nm, mode=mode), timeout_s=timeout_s, retries=retries)
