@@ -54,3 +54,18 @@ def test_a_broken_plug_in_warns_and_the_built_ins_still_work(plugins: dict[str, 
     with pytest.raises(ValueError, match="not a servobus Transport"):
         create_transport("wrong")
     assert isinstance(create_transport("can", "virtual", "x", ignore_config=True), CanTransport)
+
+
+def test_a_loaded_plug_in_is_read_again_from_its_module(plugins: dict[str, list[EntryPoint]]) -> None:
+    import dataclasses
+
+    from servobus.protocols import lk
+
+    plugins["servobus.families"] = [EntryPoint("mine", "servobus.protocols.lk:FAMILY", "servobus.families")]
+    assert get_family("mine") is lk.FAMILY
+    original = lk.FAMILY
+    try:
+        lk.FAMILY = dataclasses.replace(original, description="rebound")
+        assert get_family("mine").description == "rebound"  # the module's attribute, not a stale copy
+    finally:
+        lk.FAMILY = original

@@ -52,6 +52,8 @@ USER_FILE = """
         reveal_type(other)
         await motor.read_statuss2()
         await motor.speed_control(speed_rpm=3.0)
+        named = bus.motor("myactuator", 3)
+        reveal_type(await named.read_status2())
 """
 
 
@@ -81,6 +83,7 @@ def test_a_typed_motor_returns_each_command_s_declared_reply(mypy_output: list[s
     assert notes[2] == f'note: Revealed type is "{_reply_name(ma.SpeedControl.REPLY)}"'
     assert notes[3] == 'note: Revealed type is "None"'
     assert notes[4] == 'note: Revealed type is "servobus.protocols.lk._motor.Motor"'
+    assert notes[5] == 'note: Revealed type is "Any"'  # by name: the methods exist, untyped
 
 
 def test_a_misspelt_command_or_field_is_a_type_error(mypy_output: list[str]) -> None:

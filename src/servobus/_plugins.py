@@ -19,7 +19,7 @@ __all__ = ["available", "load"]
 #: (group, name) -> (its module, the loaded object): a Bus asks for a motor's family per motor and
 #: per broadcast, and finding a plug-in scans every installed distribution's metadata (milliseconds).
 #: Kept while its module is the one imported (a module removed from sys.modules is looked up again).
-_LOADED: dict[tuple[str, str], tuple[ModuleType, object]] = {}
+_LOADED: dict[tuple[str, str], tuple[ModuleType, str]] = {}
 
 
 def available(group: str, builtins: Mapping[str, str]) -> dict[str, str]:
@@ -37,7 +37,7 @@ def load(group: str, builtins: Mapping[str, str], name: str, what: str) -> objec
     """
     loaded = _LOADED.get((group, name))
     if loaded is not None and sys.modules.get(loaded[0].__name__) is loaded[0]:
-        return loaded[1]
+        return getattr(loaded[0], loaded[1])  # read again: a rebound attribute is never stale
     # Built-ins win, so their names need no scan of the installed packages' metadata.
     known = builtins if name in builtins else available(group, builtins)
     try:
@@ -53,5 +53,5 @@ def load(group: str, builtins: Mapping[str, str], name: str, what: str) -> objec
             raise
         warnings.warn(f"{what} plug-in {name!r} ({target}) failed to load: {exc}", stacklevel=3)
         raise ValueError(f"{what} {name!r} failed to load") from exc
-    _LOADED[(group, name)] = (module, target_object)
+    _LOADED[(group, name)] = (module, attribute)
     return target_object

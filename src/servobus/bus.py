@@ -296,7 +296,7 @@ class Motor:
             before either happened. A motor that answers again is online again.
     """
 
-    def __init__(self, bus: Bus, codec: BoundCodec) -> None:
+    def __init__(self, bus: Bus, codec: BoundCodec, commands: dict[str, type[Command]] | None = None) -> None:
         self.bus = bus
         self.codec = codec
         self.state: Reply | None = None
@@ -304,7 +304,8 @@ class Motor:
         self.online: bool | None = None
         self.fault: MotorFault | None = None
         self._misses = 0
-        self._commands = command_classes(codec.family)
+        # by method name; from the Family the Bus bound it with (a plug-in may be unregistered)
+        self._commands = command_classes(codec.family) if commands is None else commands
         self._watchers: list[MotorFrames] = []
         self._probe_at = 0.0  # while offline: when cycle() may next send it a command, as a probe
         # Streams switched off: the command byte -> (the "off" command, when it was last sent, the
@@ -621,7 +622,7 @@ class Bus:
     def motor(self, family: Family[M], motor_id: int, **options: Any) -> M: ...
 
     @overload
-    def motor(self, family: str, motor_id: int, **options: Any) -> Motor: ...
+    def motor(self, family: str, motor_id: int, **options: Any) -> NamedMotor: ...
 
     def motor(self, family: Family[Any] | str, motor_id: int, **options: Any) -> Motor:
         """The motor ``motor_id`` of ``family`` on this bus (bound once; the same object after).
@@ -646,7 +647,7 @@ class Bus:
             return self.motors[key]
         codec = found.bind(motor_id, **options)
         self.scheduler.add(codec)
-        motor = _motor_class(found)(self, codec)
+        motor = _motor_class(found)(self, codec, found.methods())
         self.motors[key] = motor
         self._by_codec[id(codec)] = motor
         return motor
@@ -1144,6 +1145,18 @@ class Bus:
         return Metrics.of(self.scheduler.counts, self.scheduler.latency().snapshot(), load)
 
 
+if TYPE_CHECKING:
+
+    class NamedMotor(Motor):
+        """What a type checker knows of a motor bound by its family's name: its methods exist,
+        untyped (``bus.motor(FAMILY, id)`` gives the typed ones)."""
+
+        def __getattr__(self, name: str) -> Callable[..., Awaitable[Any]]: ...
+
+else:
+    NamedMotor = Motor
+
+
 def _motor_class(family: Family[Any]) -> type[Motor]:
     """The family's typed Motor class (Motor itself where it has none), its methods documented
     with their commands' docstrings (the generated file keeps one line a method)."""
@@ -1152,6 +1165,8 @@ def _motor_class(family: Family[Any]) -> type[Motor]:
     cls: type[Motor] = family.motor()
     if "_documented" not in cls.__dict__:
         for name, command in family.methods().items():
+            if name in Motor.__dict__:
+                raise TypeError(f"{family.name}: command {command.__name__} would hide Motor.{name}")
             method = cls.__dict__.get(name)
             if method is not None and method.__doc__ is None:
                 method.__doc__ = f"Send {command.__name__} and await its reply.\n\n{command.__doc__ or ''}"

@@ -33,7 +33,7 @@ from anyio.from_thread import BlockingPortal, start_blocking_portal
 
 from servobus import bus as _bus
 from servobus.metrics import Metrics
-from servobus.protocols import Command, Reply
+from servobus.protocols import Command, Family, Reply
 from servobus.scheduler import Traffic
 from servobus.ticks import Tick
 
@@ -126,7 +126,7 @@ class Bus:
         """The asynchronous Bus underneath (use its methods only through this object)."""
         return self._bus
 
-    def motor(self, family: str, motor_id: int, **options: Any) -> Motor:
+    def motor(self, family: Family[Any] | str, motor_id: int, **options: Any) -> Motor:
         """The motor ``motor_id`` of ``family`` (see :meth:`servobus.Bus.motor`)."""
         return Motor(self._portal, self._bus.motor(family, motor_id, **options))
 

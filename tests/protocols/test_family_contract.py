@@ -87,3 +87,47 @@ def test_the_parts_load_as_their_contracts(family: Family[Any]) -> None:
         assert isinstance(family.part(part), kinds[part]), (family.name, part)
     if family.name in FAMILIES:  # every built-in family has all three
         assert set(family.parts) == set(kinds)
+
+
+def test_a_command_says_its_reply_or_why_none_comes_not_both_or_neither() -> None:
+    from dataclasses import dataclass
+
+    from servobus.protocols.authoring import command_classes
+
+    @dataclass(frozen=True)  # no slots: checked where the family lists its commands
+    class Silent(Command[None]):
+        pass
+
+    @dataclass(frozen=True)
+    class Both(Command[Reply]):
+        NO_REPLY = "it restarts"
+
+    for cls in (Silent, Both):
+        with pytest.raises(TypeError, match=f"{cls.__name__}: a command declares a reply type or"):
+            command_classes([cls])
+
+
+def test_two_commands_with_one_method_name_are_refused() -> None:
+    lk = get_family("lk")
+    twin = type("ReadStatus1", (lk.commands[0],), {})  # another class, the same name
+    copy = dataclasses.replace(lk, commands=(*lk.commands, twin), package=None)
+    with pytest.raises(ValueError, match=r"lk: ReadStatus1 and ReadStatus1 are read_status1\(\)"):
+        copy.methods()
+
+
+def test_a_family_object_binds_without_being_registered() -> None:
+    import asyncio
+
+    from servobus import Bus
+    from servobus.protocols import myactuator as ma
+    from servobus.protocols.myactuator.sim import MyActuatorMotor
+    from servobus.transports.sim import SimTransport
+
+    unregistered = dataclasses.replace(ma.FAMILY, name="elsewhere")
+
+    async def scenario() -> object:
+        async with Bus(SimTransport(devices=[MyActuatorMotor(1)])) as bus:
+            motor = bus.motor(unregistered, 1)
+            return await motor.read_status1()
+
+    assert isinstance(asyncio.run(scenario()), ma.Status1Reply)

@@ -43,7 +43,6 @@ def given(**fields: Any) -> dict[str, Any]:
 _BUILTINS = {int, float, bool, str, bytes, type(None), object}
 _NO_DEFAULT = dataclasses.MISSING
 _LINE_LENGTH = 110  # pyproject.toml's, which ruff's import sorting keeps to even where E501 is off
-_LINE_LENGTH = 110  # pyproject.toml's, which ruff's import sorting keeps to even where E501 is off
 
 
 class _Imports:
@@ -164,7 +163,7 @@ def render(family: Family[Any]) -> str:
         reply = _annotation(cls.REPLY, imports)
         command = imports.name(cls)
         signature = ", ".join(["self", *params, "timeout_s: float | None = None", "retries: int = 0"])
-        # One line a method (its docstring is the command's, set by Family.motor_class): the
+        # One line a method (its docstring is the command's, set by the Bus (bus._motor_class)): the
         # methods differ only by name and types, and a block of them would read as repeated code.
         methods.append(
             f"    # {_summary(cls)}\n"

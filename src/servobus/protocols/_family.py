@@ -73,6 +73,11 @@ def command_classes(namespace: Iterable[object]) -> tuple[type[Command], ...]:
     out: dict[type[Command], None] = {}
     for obj in namespace:
         if isinstance(obj, type) and issubclass(obj, Command) and dataclasses.is_dataclass(obj):
+            if (obj.REPLY is None) != (obj.NO_REPLY is not None):
+                raise TypeError(
+                    f"{obj.__name__}: a command declares a reply type or, with Command[None], why none "
+                    f"comes (NO_REPLY), not both or neither (REPLY={obj.REPLY!r}, NO_REPLY={obj.NO_REPLY!r})"
+                )
             out[obj] = None
     return tuple(out)
 
@@ -138,7 +143,13 @@ class Family(Generic[M]):
     def methods(self) -> dict[str, type[Command]]:
         """The command classes by method name, ``ReadStatus2`` -> ``read_status2``: what a
         :class:`~servobus.Motor` of this family offers as ``await motor.read_status2()``."""
-        return {method_name(cls): cls for cls in self.commands}
+        methods: dict[str, type[Command]] = {}
+        for cls in self.commands:
+            name = method_name(cls)
+            if name in methods:
+                raise ValueError(f"{self.name}: {methods[name].__name__} and {cls.__name__} are {name}()")
+            methods[name] = cls
+        return methods
 
     def part(self, name: str) -> Any:
         """The family's plug-in part ``name`` (``"sim"``, ``"cli"``, ``"dbc"``), imported now.

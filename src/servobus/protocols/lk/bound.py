@@ -360,7 +360,7 @@ class LkCodec(CodecBase):
         message = self._check(command)
         code = message.CODE
         assert code is not None
-        if message.ECHO:
+        if code in _VALUE_ECHO_CODES:  # by code, as classify() must: the two keys always agree
             return echo_key(self._reply_base | code, message.encode())
         return self._reply_base | self._aliases.get(code, code)
 
