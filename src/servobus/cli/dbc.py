@@ -12,7 +12,7 @@ from pathlib import Path
 
 import click
 
-from servobus.cli._connect import parse_ids
+from servobus.cli._connect import FamilyChoice, parse_ids
 from servobus.protocols import DEFAULT_FAMILY
 
 __all__ = ["dbc"]
@@ -71,6 +71,7 @@ class _DbcCommand(click.Command):
 @click.option(
     "--family",
     "-f",
+    type=FamilyChoice(),
     default=DEFAULT_FAMILY,
     show_default=True,
     help="Protocol family (a registered name, see below).",
@@ -129,11 +130,8 @@ def dbc(
     except ImportError:
         raise click.ClickException("dbc needs cantools: pip install 'servobus[dbc]'") from None
     from servobus.dbc import database, dbc_part, dbc_text, option_owners, plan
-    from servobus.protocols import available_families, get_family
+    from servobus.protocols import get_family
 
-    known = available_families()
-    if family not in known:
-        raise click.BadParameter(f"no family {family!r} (known: {', '.join(known)})", param_hint="--family")
     part = dbc_part(get_family(family))
     given = {
         "model": model,
