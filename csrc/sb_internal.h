@@ -4,6 +4,14 @@
 #include <stddef.h>
 #include <stdint.h>
 #include "servobus_core.h"
+/* The simulator's headers, in the order the cdef reads them (src/servobus/_build_core.py: HEADERS). */
+#include "sim_plant.h"
+#include "sim_timing.h"
+#include "sim_core.h"
+#include "sim_myactuator.h"
+#include "sim_lk.h"
+#include "sim_hollow.h"
+#include "sim_net.h"
 
 /* The CRC loops without the public functions' argument checks, for callers inside csrc/ that own
  * their buffers (the de-framers). Same conventions as sb_crc16_modbus / sb_crc32_ieee. */

@@ -1,6 +1,7 @@
 """cffi builder for servobus._core (a build input only: runtime code never imports it).
 
-The public header csrc/servobus_core.h is the cdef; csrc/*.c are compiled in. Switches:
+The public headers (HEADERS: csrc/servobus_core.h, then the simulator's) are the cdef; csrc/*.c are
+compiled in. Switches:
   SERVOBUS_SANITIZE=1   build with -fsanitize=address,undefined (see README, "Sanitizers")
   SERVOBUS_DEBUG=1      build with -O0 -g
 """
@@ -16,7 +17,20 @@ from cffi import FFI
 
 ROOT = Path(__file__).resolve().parents[2]
 CSRC = ROOT / "csrc"
-HEADER = CSRC / "servobus_core.h"
+# In this order: each may use the types of those before it (csrc/sb_internal.h includes the same).
+HEADERS = [
+    CSRC / name
+    for name in (
+        "servobus_core.h",
+        "sim_plant.h",
+        "sim_timing.h",
+        "sim_core.h",
+        "sim_myactuator.h",
+        "sim_lk.h",
+        "sim_hollow.h",
+        "sim_net.h",
+    )
+]
 SOURCES = sorted(CSRC.glob("*.c"))
 
 
@@ -46,7 +60,7 @@ def compile_args(env: Mapping[str, str] = os.environ) -> tuple[list[str], list[s
 
 
 ffibuilder = FFI()
-ffibuilder.cdef(HEADER.read_text())
+ffibuilder.cdef("\n".join(header.read_text() for header in HEADERS))
 _cflags, _ldflags = compile_args()
 ffibuilder.set_source(
     "servobus._core",

@@ -1,0 +1,1 @@
+/* ---- simulator: the engine, one simulated CAN network (sim_net.c) ---- */
