@@ -12,13 +12,11 @@ properties are plain attributes and the model behaves exactly as without C.
 from __future__ import annotations
 
 import math
-from collections import Counter
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from servobus.core._lib import ffi, lib
 from servobus.protocols.hollow import CanMode, ControlMode, HollowModel
-from servobus.sim.device import BusLink
-from servobus.sim.plant import Plant
+from servobus.sim.device import BusLink, ListeningDevice
 
 if TYPE_CHECKING:
     from servobus.protocols.hollow.sim.device import HeldSetpoint
@@ -38,13 +36,13 @@ COUNTER_KEYS = (
 )
 
 
-class HollowCore:
+class HollowCore(ListeningDevice):
     """The C-twin half of :class:`~servobus.protocols.hollow.sim.device.HollowMotor` (the engine's
     contract: ``CORE_FAMILY``, :meth:`core_attach`, :meth:`core_detach`, :meth:`core_push`)."""
 
     CORE_FAMILY: ClassVar[int] = lib.SB_FAMILY_HOLLOW
 
-    # What HollowMotor defines (its __init__ and ListeningDevice).
+    # What HollowMotor's __init__ sets.
     motor_id: int
     host_id: int
     model: HollowModel
@@ -52,9 +50,6 @@ class HollowCore:
     turnaround_s: float
     turnaround_jitter_s: float
     fd_current_a_per_count: float
-    _plant: Plant
-    _counters: Counter[str]
-    _link: BusLink | None
 
     # The C twin (cdata sb_simmotor *) and its sb_hollow_state, while attached.
     _core: Any = None
@@ -122,7 +117,9 @@ class HollowCore:
 
     def settle(self) -> None:
         """Settle up with the network, then take the counters C moved."""
-        super().settle()  # type: ignore[misc]
+        link = self._link
+        if link is not None and link.behind:
+            ListeningDevice.settle(self)
         motor = self._core
         if motor is None:
             return
