@@ -16,8 +16,11 @@ from collections.abc import Callable
 from typing import Any
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from servobus.core._lib import ffi, lib
+from servobus.errors import ProtocolError
 from servobus.frame import Frame
 from servobus.protocols.hollow import (
     DEFAULT_MODEL,
@@ -361,6 +364,59 @@ def test_jitter_keeps_the_motor_in_python() -> None:
     frame = request_frame(MOTOR_ID, Setpoint(position_deg=1.0, speed_rad_s=1.0, kp=1, kd=1, current_a=1.0))
     assert twin.receive(frame, 0.1) == _sent(py.receive(frame, 0.1))
     assert twin.cold == 1
+
+
+_FD_LENGTHS = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
+
+
+def fuzz_receive(blob: bytes) -> None:
+    """Any frame C may be handed (flags, length and bytes from ``blob``) into a classic or FD twin in
+    either CAN mode: C answers or goes cold, never touches memory past the frame; a frame a
+    Frame can carry gets the Python model's answer."""
+    if len(blob) < 3:
+        return
+    fd_motor, can_mode, flags, length = blob[0] & 1, (blob[0] >> 1) & 1, blob[1] & 7, blob[2] % 65
+    data = (blob[3:] + bytes(64))[:length]
+    py, twin = HollowMotor(MOTOR_ID, fd_enabled=bool(fd_motor)), Twin(fd_enabled=bool(fd_motor))
+    for motor in (py, twin.device):
+        motor.can_mode = CanMode(can_mode)
+    c_frame = ffi.new("sb_simframe *", {"id": MOTOR_ID, "flags": flags, "len": length})
+    c_frame.data[0:length] = data
+    try:
+        frame = Frame(
+            arbitration_id=MOTOR_ID,
+            data=data,
+            is_extended_id=bool(flags & lib.SB_FRAME_EXT),
+            is_fd=bool(flags & lib.SB_FRAME_FD),
+            bitrate_switch=bool(flags & lib.SB_FRAME_BRS),
+        )
+    except (ValueError, ProtocolError):
+        frame = None
+    if (
+        frame is None
+        or (not frame.is_fd and frame.bitrate_switch)
+        or (frame.is_fd and length not in _FD_LENGTHS)
+    ):
+        status = lib.sb_hollow_receive(twin.motor, c_frame, 0.01, twin.out, CAP, twin.n_out)
+        assert status in (lib.SB_HOT_DONE, lib.SB_HOT_COLD) and twin.n_out[0] <= 1
+        return
+    assert twin.receive(frame, 0.01) == _sent(py.receive(frame, 0.01))
+    _same_state(py, twin.device)
+
+
+@settings(deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.binary(max_size=70))
+def test_fuzz_random_frames_into_the_c_path(blob: bytes) -> None:
+    fuzz_receive(blob)
+
+
+def test_fuzz_the_set_point_shapes() -> None:
+    """Every flag combination and length, with the bytes that reach the decoders' edges."""
+    for head in range(4):
+        for flags in range(8):
+            for length in (0, 6, 8, 9, 16, 64):
+                for fill in (b"\x00", b"\xff", b"\x02", b"\x01"):
+                    fuzz_receive(bytes([head, flags, length]) + fill * 64)
 
 
 def test_the_c_functions_check_their_arguments() -> None:
