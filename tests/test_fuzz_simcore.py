@@ -57,8 +57,8 @@ _PY_DEADLINE = ffi.offsetof("sb_simmotor", "py_deadline_s")
 # it decides to leave a frame cold. Everything else of the motor must stay as it was.
 _PLANT = ffi.offsetof("sb_simmotor", "plant")
 _PLANT_GRID = [
-    (_PLANT + ffi.offsetof("sb_plant", name), _PLANT + ffi.offsetof("sb_plant", name) + ffi.sizeof(kind))
-    for name, kind in ((name, field.type) for name, field in ffi.typeof("sb_plant").fields)
+    (_PLANT + field.offset, _PLANT + field.offset + ffi.sizeof(field.type))
+    for name, field in ffi.typeof("sb_plant").fields
     if name in ("steps", "resting", "committed", "now_s", "now")
 ]
 
@@ -172,6 +172,8 @@ def random_frame(rng: random.Random, ids: list[int], codes: tuple[int, ...] = CO
         rest = bytes(rng.choice([0x00, 0x01, 0x7F, 0x80, 0xFF]) for _ in range(63))
     pick = rng.random()
     code = rng.choice(codes) if pick < 0.6 else rng.choice(CODES) if pick < 0.85 else rng.randrange(256)
+    if rng.random() < 0.05:  # hollow's special commands: FF x7 + F9..FE (and a byte next to them)
+        code, rest = 0xFF, b"\xff" * 6 + bytes([rng.randint(0xF8, 0xFF)]) + rest[7:]
     return Frame(
         arbitration_id=_ident(rng, ids) & (0x1FFFFFFF if extended else 0x7FF),
         data=(bytes([code]) + rest)[:length],
