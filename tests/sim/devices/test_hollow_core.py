@@ -539,7 +539,7 @@ def test_motors_on_the_c_engine_answer_as_on_the_python_network(fd: bool) -> Non
         _same_state(a, b)
 
 
-# ---- cost: python -m tests.sim.devices.test_hollow_core (or see the report) ----
+# ---- cost: PYTHONPATH=src python tests/sim/devices/test_hollow_core.py ----
 
 
 def measure(n: int = 20000) -> dict[str, float]:
