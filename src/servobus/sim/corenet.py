@@ -21,7 +21,7 @@ import itertools
 import math
 import struct
 from collections.abc import Collection, Hashable, Iterable
-from typing import Any, cast
+from typing import Any, NoReturn, cast
 
 from servobus.core._lib import ffi, lib
 from servobus.frame import Frame
@@ -56,6 +56,7 @@ _SET_SERIAL, _SET_TS, _SET_RX, _SET_ESI = (
     _SETTERS["is_rx"],
     _SETTERS["error_state_indicator"],
 )
+_SEND = lib.sb_simnet_send
 _MADE_CACHE = 4096  # frames made in C kept by content (replies repeat; a Frame is immutable)
 
 
@@ -227,7 +228,9 @@ class CoreCanNetwork:
 
     Args:
         devices: the simulated devices on this bus (unique ``name``\\ s).
-        bus: a bus model whose bit rates this network takes (1 Mbit/s classic by default).
+        bus: a bus model whose bit rates this network takes (1 Mbit/s classic by default); its
+            ``busy_s`` and ``frames`` then follow this network's after every run, so a caller that
+            kept the model reads the bus load from it as from SimCanNetwork's.
         to_devices, to_host: fault injectors on each direction (None: a perfect link).
 
     Raises:
@@ -243,6 +246,7 @@ class CoreCanNetwork:
         to_host: FaultInjector | None = None,
     ) -> None:
         model = bus or CanBusModel()
+        self._model = bus
         self._net = ffi.new("sb_simnet *")
         if lib.sb_simnet_init(self._net, model.bitrate, model.data_bitrate or 0.0) != lib.SB_OK:
             raise ValueError(f"bad bit rates (bitrate={model.bitrate}, data_bitrate={model.data_bitrate})")
@@ -352,8 +356,21 @@ class CoreCanNetwork:
             for when, item in self.to_devices.apply(frame, at):
                 assert isinstance(item, Frame)
                 self._schedule(item, when, 0)
-        else:
-            self._schedule(frame, at, 0)
+            return
+        data = frame.data  # _schedule inlined: the host's path, once per request
+        slot = _SEND(
+            self._net,
+            0,
+            frame.arbitration_id,
+            frame.is_extended_id | frame.is_fd << 1 | frame.bitrate_switch << 2,
+            data,
+            len(data),
+            at,
+            1,
+        )
+        if slot < 0:
+            self._refused(slot, frame, at)
+        self._frames[slot] = frame
 
     def next_event_s(self) -> float | None:
         """The earliest time anything happens on this network (None: nothing will)."""
@@ -405,19 +422,21 @@ class CoreCanNetwork:
 
     def _schedule(self, frame: Frame, ready_s: float, node: int) -> None:
         data = frame.data
-        slot = lib.sb_simnet_send(
-            self._net, node, frame.arbitration_id, _flags(frame), data, len(data), ready_s, 1
-        )
+        flags = frame.is_extended_id | frame.is_fd << 1 | frame.bitrate_switch << 2
+        slot = _SEND(self._net, node, frame.arbitration_id, flags, data, len(data), ready_s, 1)
         if slot < 0:
-            if slot == lib.SB_E_RANGE:
-                now = float(self._net.bus_now_s)
-                raise ValueError(f"ready_s={ready_s} is before the bus time {now} (time runs forward)")
-            if slot == lib.SB_E_FULL:
-                raise RuntimeError(
-                    f"the simulated bus holds {lib.SB_NET_FRAMES} queued frames: {frame!r} is one too many"
-                )
-            raise ValueError(f"the simulated bus cannot queue {frame!r} at {ready_s}")
+            self._refused(slot, frame, ready_s)
         self._frames[slot] = frame
+
+    def _refused(self, status: int, frame: Frame, ready_s: float) -> NoReturn:
+        if status == lib.SB_E_RANGE:
+            now = float(self._net.bus_now_s)
+            raise ValueError(f"ready_s={ready_s} is before the bus time {now} (time runs forward)")
+        if status == lib.SB_E_FULL:
+            raise RuntimeError(
+                f"the simulated bus holds {lib.SB_NET_FRAMES} queued frames: {frame!r} is one too many"
+            )
+        raise ValueError(f"the simulated bus cannot queue {frame!r} at {ready_s}")
 
     def _run(
         self, until_s: float, mode: int, host_time_s: float, received: list[tuple[float, Frame]]
@@ -445,8 +464,9 @@ class CoreCanNetwork:
                     continue
                 return
             if status == _LOG_FULL:
+                base = net.log_base
                 self._drop_log()
-                if net.log_count - net.log_base + 1 >= lib.SB_NET_LOG:
+                if net.log_base == base:
                     raise RuntimeError("a device on the simulated bus does not settle up with its link")
             elif status < 0:
                 raise RuntimeError(
@@ -542,6 +562,9 @@ class CoreCanNetwork:
 
     def _tidy(self) -> None:
         net = self._net
+        if (model := self._model) is not None:
+            model.busy_s = float(net.busy_s)
+            model.frames = int(net.frames)
         if net.log_count - net.log_base >= LOG_LIMIT:
             self._drop_log()
 
