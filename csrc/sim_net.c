@@ -108,8 +108,8 @@ static double family_deadline(const sb_simmotor *m)
     case SB_FAMILY_MYACTUATOR: return sb_ma_next_deadline(m);
     case SB_FAMILY_LK: return sb_lk_next_deadline(m);
     case SB_FAMILY_HOLLOW: return sb_hollow_next_deadline(m);
-    default: return INFINITY;
     }
+    return INFINITY;
 }
 
 static void node_deadline(sb_simnet *net, int node)
@@ -477,8 +477,8 @@ static int family_receive(sb_simnet *net, int node, const sb_simframe *in, doubl
     case SB_FAMILY_MYACTUATOR: return sb_ma_receive(m, in, t, net->out, SB_NET_OUT, n_out);
     case SB_FAMILY_LK: return sb_lk_receive(m, in, t, net->out, SB_NET_OUT, n_out);
     case SB_FAMILY_HOLLOW: return sb_hollow_receive(m, in, t, net->out, SB_NET_OUT, n_out);
-    default: return SB_HOT_COLD;
     }
+    return SB_HOT_COLD;
 }
 
 static int family_poll(sb_simnet *net, int node, double t, int *n_out)
@@ -489,8 +489,8 @@ static int family_poll(sb_simnet *net, int node, double t, int *n_out)
     case SB_FAMILY_MYACTUATOR: return sb_ma_poll(m, t, net->out, SB_NET_OUT, n_out);
     case SB_FAMILY_LK: return sb_lk_poll(m, t, net->out, SB_NET_OUT, n_out);
     case SB_FAMILY_HOLLOW: return sb_hollow_poll(m, t, net->out, SB_NET_OUT, n_out);
-    default: return SB_HOT_COLD;
     }
+    return SB_HOT_COLD;
 }
 
 /* The due nodes of a step, polled in the order they were added (SimCanNetwork._due and _step). */
