@@ -127,24 +127,52 @@ static void node_deadline(sb_simnet *net, int node)
 
 /* ---- the bus: CanBusModel ---- */
 
+/* A frame's wire time, from the cache of recent frames by content (CanBusModel.frame_time_s keeps one
+ * too: a control loop sends the same requests, and gets the same replies, over and over). */
+static double frame_time(sb_simnet *net, const sb_simframe *f)
+{
+    uint32_t h = 2166136261u ^ f->id;
+    h = (h ^ f->flags) * 16777619u;
+    h = (h ^ f->len) * 16777619u;
+    for (int i = 0; i < f->len; i++)
+        h = (h ^ f->data[i]) * 16777619u;
+    sb_nettime *c = &net->times[h & (SB_NET_TIMES - 1)];
+    if (c->epoch == net->rate_epoch + 1 && c->id == f->id && c->flags == f->flags && c->len == f->len
+        && memcmp(c->data, f->data, f->len) == 0)
+        return c->dur_s;
+    double dur = sb_can_frame_time(f->id, f->flags, f->data, f->len, net->bitrate, net->data_bitrate);
+    c->epoch = net->rate_epoch + 1;  /* 0: an empty entry */
+    c->id = f->id;
+    c->flags = f->flags;
+    c->len = f->len;
+    memcpy(c->data, f->data, f->len);
+    c->dur_s = dur;
+    return dur;
+}
+
 static double slot_duration(sb_simnet *net, sb_netslot *s)
 {
     if (s->dur_epoch != net->rate_epoch || s->dur_s < 0) {
-        s->dur_s = sb_can_frame_time(s->f.id, s->f.flags, s->f.data, s->f.len, net->bitrate, net->data_bitrate);
+        s->dur_s = frame_time(net, &s->f);
         s->dur_epoch = net->rate_epoch;
     }
     return s->dur_s;
 }
 
-/* arbitration_priority() and the node's first (joined_s, seq): negative if a ranks before b. */
+/* arbitration_priority() as one number: base id, then standard before extended, then the extension. */
+static uint32_t priority_key(const sb_simframe *f)
+{
+    if (f->flags & SB_FRAME_EXT)
+        return ((f->id >> 18) << 19) | (1u << 18) | (f->id & 0x3FFFF);
+    return f->id << 19;
+}
+
+/* The node's head's priority, then the node's first (joined_s, seq): negative if a ranks before b. */
 static int rank_cmp(const sb_simnet *net, int a, int b)
 {
-    const sb_simframe *fa = &net->slots[net->nodes[a].head].f, *fb = &net->slots[net->nodes[b].head].f;
-    uint32_t ka = (fa->flags & SB_FRAME_EXT) ? ((fa->id >> 18) << 19) | (1u << 18) | (fa->id & 0x3FFFF) : fa->id << 19;
-    uint32_t kb = (fb->flags & SB_FRAME_EXT) ? ((fb->id >> 18) << 19) | (1u << 18) | (fb->id & 0x3FFFF) : fb->id << 19;
-    if (ka != kb)
-        return ka < kb ? -1 : 1;
     const sb_netnode *na = &net->nodes[a], *nb = &net->nodes[b];
+    if (na->head_key != nb->head_key)
+        return na->head_key < nb->head_key ? -1 : 1;
     if (na->first_joined_s != nb->first_joined_s)
         return na->first_joined_s < nb->first_joined_s ? -1 : 1;
     return na->first_seq < nb->first_seq ? -1 : (na->first_seq > nb->first_seq);
@@ -157,26 +185,23 @@ static void arbitrate(sb_simnet *net)
         return;
     int best = -1;
     double start = net->free_at_s;
-    for (int k = 0; k < SB_NET_NODES; k++) {
-        int h = net->nodes[k].head;
-        if (h >= 0 && net->slots[h].f.t <= start && (best < 0 || rank_cmp(net, k, best) < 0))
+    for (uint64_t m = net->active; m; m &= m - 1) {
+        int k = __builtin_ctzll(m);
+        if (net->slots[net->nodes[k].head].f.t <= start && (best < 0 || rank_cmp(net, k, best) < 0))
             best = k;
     }
-    if (best < 0) {  /* none ready while the wire is busy: idle until the first is ready */
-        int any = 0;
-        for (int k = 0; k < SB_NET_NODES; k++) {
-            int h = net->nodes[k].head;
-            if (h >= 0 && (!any || net->slots[h].f.t < start)) {
-                start = net->slots[h].f.t;
-                any = 1;
-            }
+    if (best < 0 && net->active) {  /* none ready while the wire is busy: idle until the first is ready */
+        start = INFINITY;
+        for (uint64_t m = net->active; m; m &= m - 1) {
+            double ready = net->slots[net->nodes[__builtin_ctzll(m)].head].f.t;
+            if (ready < start)
+                start = ready;
         }
-        if (any)
-            for (int k = 0; k < SB_NET_NODES; k++) {
-                int h = net->nodes[k].head;
-                if (h >= 0 && net->slots[h].f.t <= start && (best < 0 || rank_cmp(net, k, best) < 0))
-                    best = k;
-            }
+        for (uint64_t m = net->active; m; m &= m - 1) {
+            int k = __builtin_ctzll(m);
+            if (net->slots[net->nodes[k].head].f.t <= start && (best < 0 || rank_cmp(net, k, best) < 0))
+                best = k;
+        }
     }
     net->choice_node = best;
     if (best >= 0) {
@@ -193,8 +218,12 @@ static void start_choice(sb_simnet *net)
     sb_netnode *n = &net->nodes[k];
     int s = n->head;
     n->head = net->slots[s].next;
-    if (n->head < 0)
+    if (n->head < 0) {
         n->tail = -1;
+        net->active &= ~((uint64_t)1 << k);
+    } else {
+        n->head_key = priority_key(&net->slots[n->head].f);
+    }
     n->queued--;
     net->slots[s].next = -1;
     net->chosen = 0;
@@ -275,6 +304,8 @@ static int join(sb_simnet *net, int node, uint32_t id, int flags, const uint8_t 
     n->queued++;
     if (n->tail < 0) {
         n->head = n->tail = s;
+        n->head_key = priority_key(&slot->f);
+        net->active |= (uint64_t)1 << node;
         net->chosen = 0;
     } else if (net->slots[n->tail].joined_s <= ready_s) {  /* the usual case: behind every other */
         net->slots[n->tail].next = s;
@@ -282,6 +313,7 @@ static int join(sb_simnet *net, int node, uint32_t id, int flags, const uint8_t 
     } else if (ready_s < net->slots[n->head].joined_s) {  /* the new head: arbitration changes */
         slot->next = n->head;
         n->head = s;
+        n->head_key = priority_key(&slot->f);
         net->chosen = 0;
     } else {
         int p = n->head;
@@ -740,8 +772,8 @@ double sb_simnet_last_ready(const sb_simnet *net, double limit_s)
     if (!net)
         return NAN;
     double found = -INFINITY;
-    for (int k = 0; k < SB_NET_NODES; k++)
-        for (int s = net->nodes[k].head; s >= 0; s = net->slots[s].next) {
+    for (uint64_t m = net->active; m; m &= m - 1)
+        for (int s = net->nodes[__builtin_ctzll(m)].head; s >= 0; s = net->slots[s].next) {
             double r = net->slots[s].f.t;
             if (r > net->now_s && r <= limit_s && r > found)
                 found = r;

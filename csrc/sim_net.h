@@ -11,6 +11,7 @@
 #define SB_NET_LOG 16384     /* frame ends kept for the links (dropped once every link settled up) */
 #define SB_NET_ROUTES 512    /* identifiers whose recipients are remembered */
 #define SB_NET_OUT 16        /* frames a family's C path may answer with at once */
+#define SB_NET_TIMES 256     /* wire times kept by frame content */
 
 #define SB_E_FULL -5         /* a fixed capacity is exhausted (frames queued, nodes) */
 
@@ -59,6 +60,7 @@ typedef struct {
     int32_t head;            /* its queue, ordered by (joined_s, seq): first and last slot, -1: empty */
     int32_t tail;
     int32_t queued;
+    uint32_t head_key;       /* the head frame's arbitration priority as one number */
     int32_t has_first;
     double first_joined_s;   /* the node's first (joined_s, seq) ever: ties between nodes' equal ids */
     int64_t first_seq;
@@ -77,6 +79,15 @@ typedef struct {
     int32_t used;
     uint64_t mask;           /* recipients by node */
 } sb_netroute;
+
+typedef struct {
+    int32_t epoch;           /* the rate epoch + 1 it was computed at (0: empty) */
+    uint32_t id;
+    uint8_t flags;
+    uint8_t len;
+    uint8_t data[64];
+    double dur_s;
+} sb_nettime;
 
 typedef struct {
     double now_s;            /* the network's time (SimCanNetwork.now_s) */
@@ -101,6 +112,7 @@ typedef struct {
     int32_t done_head, done_tail;   /* completed transmissions still to deliver */
     int32_t free_slot;
     int32_t used_slots;
+    uint64_t active;         /* nodes with frames queued */
     int32_t n_order;
     int16_t order[64];       /* live device nodes, in the order they were added */
     int32_t n_routes;
@@ -109,6 +121,7 @@ typedef struct {
     int16_t log_src[16384];
     sb_netnode nodes[64];
     sb_netroute routes[512];
+    sb_nettime times[256];
     sb_netslot slots[4096];
     sb_simframe out[16];
     sb_simmotor motors[64];

@@ -475,18 +475,23 @@ class CoreCanNetwork:
 
     def _handle(self, n: int, received: list[tuple[float, Frame]]) -> None:
         unpack, view, size = _EVENT.unpack_from, self._event_bytes, _EVENT.size
-        frames, made = self._frames, self._made
+        frames, made, to_host, append = self._frames, self._made, self.to_host, received.append
         for i in range(n):
             kind, node, t, _, can_id, flags, length, _source, tag, data = unpack(view, i * size)
             if kind == _POLL:
                 self._poll(node, t)
                 continue
-            frame = frames[tag - 1] if tag else _made(made, can_id, flags, data[:length])
+            if tag:
+                frame = frames[tag - 1]
+            else:  # made in C: one Frame per distinct content (_made, inlined for the replies' sake)
+                key = (can_id, flags, data[:length])
+                frame = made.get(key)
+                if frame is None:
+                    frame = _made(made, *key)
             assert frame is not None
             if kind == _RX:
-                to_host = self.to_host
                 if to_host is None:
-                    received.append((t, frame))
+                    append((t, frame))
                     continue
                 for at, item in to_host.apply(frame, t):
                     assert isinstance(item, Frame)
