@@ -237,6 +237,17 @@ def test_names_are_unique_and_the_host_is_taken() -> None:
         network.add(Sniffer(name="host"))
 
 
+def test_a_device_on_another_network_is_refused_and_leaves_nothing_behind() -> None:
+    motor = MyActuatorMotor(1)
+    CoreCanNetwork([motor])
+    network = CoreCanNetwork([Responder(2)])
+    with pytest.raises(ValueError, match="already on a network"):
+        network.add(motor)
+    assert list(network.devices) == ["motor2"]
+    network.send(Frame(arbitration_id=0x142, data=b"\x01"), 0.0)
+    assert [f.arbitration_id for _, f in network.run_until_idle()] == [0x242]
+
+
 def test_more_devices_than_the_c_network_holds_is_a_clear_error() -> None:
     network = CoreCanNetwork([Sniffer(name=f"s{i}") for i in range(lib.SB_NET_NODES - 1)])
     with pytest.raises(ValueError, match="holds 63 devices"):

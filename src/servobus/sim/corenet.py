@@ -323,6 +323,7 @@ class CoreCanNetwork:
                 self._unlinked.append((node, device))
         except BaseException:
             lib.sb_simnet_remove(self._net, node)
+            self._first[name] = (has_first, first_joined, first_seq)
             raise
         self.devices[name] = device
         self._names[node] = name
