@@ -140,7 +140,7 @@ def serve(ports: list[Port], clock: Callable[[], float], stop_fd: int) -> None:
                 port.next_s = _next_visible(network, at)
 
 
-def _next_visible(network: SimCanNetwork, now: float) -> float:
+def _next_visible(network: CoreCanNetwork, now: float) -> float:
     """When ``network`` next has a frame for the host: it first runs over what the host can neither
     see nor change (its own requests ending, the motors' turnaround), so the process wakes once per
     reply instead of once per frame on the wire."""
