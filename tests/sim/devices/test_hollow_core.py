@@ -8,7 +8,7 @@ plant's grid rule makes its state depend only on those, and the C side scales, c
 the codec and the model do (``-ffp-contract=off``). So no tolerance is used anywhere.
 
 The same holds a level up: hollow motors on the C engine (``CoreCanNetwork``, classic and CAN FD
-buses) against the same motors on ``SimCanNetwork`` (skipped until servobus.sim.corenet exists).
+buses) against the same motors on ``SimCanNetwork``.
 """
 
 from __future__ import annotations
@@ -47,6 +47,7 @@ from servobus.protocols.hollow.codec import request_frame
 from servobus.protocols.hollow.sim.core import COUNTER_KEYS, HollowCore
 from servobus.protocols.hollow.sim.device import HollowMotor
 from servobus.sim.canbus import CanBusModel
+from servobus.sim.corenet import CoreCanNetwork
 from servobus.sim.device import Emission
 from servobus.sim.network import SimCanNetwork
 
@@ -508,13 +509,12 @@ def _network_trace(seed: int, ids: list[int], fd: bool, ticks: int) -> list[tupl
 
 @pytest.mark.parametrize("fd", [False, True], ids=["classic", "fd"])
 def test_motors_on_the_c_engine_answer_as_on_the_python_network(fd: bool) -> None:
-    corenet = pytest.importorskip("servobus.sim.corenet")
     ids = list(range(1, 7))
     bus: dict[str, Any] = {"bitrate": 1_000_000, "data_bitrate": 5_000_000 if fd else None}
     python = [HollowMotor(i, fd_enabled=fd) for i in ids]
     core = [HollowMotor(i, fd_enabled=fd) for i in ids]
     py_net = SimCanNetwork(python, bus=CanBusModel(**bus))
-    c_net = corenet.CoreCanNetwork(core, bus=CanBusModel(**bus))
+    c_net = CoreCanNetwork(core, bus=CanBusModel(**bus))
     for now, kind, what in _network_trace(7 + fd, ids, fd, ticks=400):
         if kind == "frame":
             py_net.send(what, now)
