@@ -1,0 +1,265 @@
+"""The simulated MyActuator motor's C twin: the glue between the model and csrc/sim_myactuator.c.
+
+A network that runs its motors in C (``servobus.sim.corenet``) gives each model an ``sb_simmotor``
+(:meth:`~servobus.protocols.myactuator.sim.device.MyActuatorMotor.core_attach`). The C path then
+answers the control-loop traffic itself (set-points, status reads, motion mode, 0xB6 streams) while
+the model's guards allow it (:func:`c_may_act`), and hands everything else to the model
+(``SB_HOT_COLD``). Both sides keep one state:
+
+* **push** (:meth:`MaCore.push`, after every call into the model): everything the C path reads, the
+  guard (``motor.hot``) and the model's own next deadline (``motor.py_deadline_s``);
+* **pull** (:meth:`MaCore.pull`, before the model reads anything, see :class:`Pulled`): what the C
+  path changed, flagged in ``sb_ma_state.dirty``: counters, control and run mode, brake,
+  feed-forward, the time last heard (0xB3) and the streams.
+
+The plant lives in ``motor.plant`` (a :class:`~servobus.sim.coreplant.CorePlant` over it), so both
+sides integrate the same state. A model without a C twin never touches any of this.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, Generic, TypeVar, cast, overload
+
+from servobus.core._lib import ffi, lib
+from servobus.protocols.myactuator.enums import AccelIndex, RunMode, StreamableCommand
+from servobus.protocols.myactuator.revision import Revision
+from servobus.sim.coreplant import CorePlant, _control, _control_fields
+
+if TYPE_CHECKING:
+    from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+    from servobus.sim.plant import Plant
+
+__all__ = ["COUNTER_NAMES", "MaCore", "Pulled", "c_may_act"]
+
+#: The model's Counter keys the C path counts, by their index in ``motor.counters`` (SB_MA_CTR_*).
+COUNTER_NAMES = (
+    "received",
+    "ignored_kind",
+    "ignored_id",
+    "filtered",
+    "accepted",
+    "replied",
+    "silenced_by_active_reply",
+    "brake_locked",
+    "stream_frames",
+    "stream_skipped",
+)
+assert len(COUNTER_NAMES) == lib.SB_MA_N_COUNTERS
+
+_INT64 = 1 << 62  # encoder counts the C path takes (sim_myactuator.c COUNT_LIMIT is 4e18 < 2**62)
+_COUNT_LIMIT = 4 * 10**18
+_INT32 = 1 << 31
+
+T = TypeVar("T")
+
+
+class Pulled(Generic[T]):
+    """An attribute of the model that its C twin may change: reading or writing it pulls first.
+
+    The value lives in the instance's ``__dict__`` under ``_c_<name>``; :meth:`MaCore.pull` writes
+    there directly. On a model without a C twin it is a plain attribute (one check more).
+    """
+
+    __slots__ = ("key",)
+
+    def __init__(self) -> None:
+        self.key = ""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.key = f"_c_{name}"
+
+    @overload
+    def __get__(self, obj: None, owner: type | None = None) -> Pulled[T]: ...
+
+    @overload
+    def __get__(self, obj: object, owner: type | None = None) -> T: ...
+
+    def __get__(self, obj: object | None, owner: type | None = None) -> T | Pulled[T]:
+        if obj is None:
+            return self
+        core = obj._core  # type: ignore[attr-defined]
+        if core is not None:
+            core.pull()
+        value: T = obj.__dict__[self.key]
+        return value
+
+    def __set__(self, obj: object, value: T) -> None:
+        core = obj._core  # type: ignore[attr-defined]
+        if core is not None:
+            core.pull()  # C's changes first, or a later pull would undo this write
+        obj.__dict__[self.key] = value
+
+
+# Methods whose behaviour the C path reproduces: a subclass that overrides one (a test's tagged
+# motor) keeps the Python path for everything.
+_MODELLED = (
+    "receive",
+    "poll",
+    "handle",
+    "spontaneous",
+    "advance",
+    "readings",
+    "next_deadline_s",
+    "listen_ids",
+    "_route",
+    "_decode",
+    "_execute",
+    "_control_command",
+    "_set_control",
+    "_apply_plant",
+    "_heard",
+    "_current_limit",
+    "_target",
+    "_status1",
+)
+_CLASS_OK: dict[type, bool] = {}
+
+
+def _class_ok(cls: type) -> bool:
+    found = _CLASS_OK.get(cls)
+    if found is None:
+        from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+
+        found = _CLASS_OK[cls] = all(getattr(cls, n) is getattr(MyActuatorMotor, n) for n in _MODELLED)
+    return found
+
+
+def c_may_act(device: MyActuatorMotor) -> bool:
+    """The model's guards: the C path reproduces the model in this state (no error flag latched or
+    reported, not unresponsive, not cut off by 0xB3, an encoder and ids the C state holds)."""
+    encoder = device.encoder
+    return (
+        not device._unresponsive
+        and not device.errors.flags
+        and not device.comm_tripped
+        and device._next_report_s is None
+        and 1 <= encoder.counts_per_turn <= 65536
+        and -_COUNT_LIMIT < encoder.base_counts < _COUNT_LIMIT
+        and -_COUNT_LIMIT < encoder.offset_counts < _COUNT_LIMIT
+        and 0 <= device.ram.comm_timeout_ms < _INT64
+        and -_INT32 <= device.pole_pairs < _INT32
+        and _class_ok(type(device))
+    )
+
+
+def _fields(scales: Any) -> list[tuple[float, float, float, float, float]]:
+    return [(s.lo, s.hi, s.origin, s.codes, s.span) for s in scales]
+
+
+class MaCore:
+    """One model's C twin (``sb_simmotor`` of family MYACTUATOR): push, pull, and whether C runs now.
+
+    Args:
+        device: the model.
+        motor: its ``sb_simmotor *`` (owned by the network; zeroed).
+    """
+
+    __slots__ = ("_scales", "_stream", "device", "motor", "state")
+
+    def __init__(self, device: MyActuatorMotor, motor: Any) -> None:
+        from servobus.protocols.myactuator.sim.device import Stream
+
+        self.device = device
+        self.motor = motor
+        self.state = ffi.cast("sb_ma_state *", motor.state)
+        self._scales: Any = None
+        self._stream: Callable[..., Any] = Stream
+
+    def runs_streams(self) -> bool:
+        """The C path runs the 0xB6 streams (sb_ma_next_deadline / sb_ma_poll), not the model."""
+        return c_may_act(self.device)
+
+    def pull(self) -> None:
+        """Take what the C path changed into the model (cheap when it changed nothing)."""
+        st = self.state
+        dirty = st.dirty
+        if not dirty:
+            return
+        st.dirty = 0
+        values = self.device.__dict__
+        if dirty & lib.SB_MA_DIRTY_COUNTERS:
+            counts, counters = self.motor.counters, self.device._counters
+            for i, name in enumerate(COUNTER_NAMES):
+                n = counts[i]
+                if n:
+                    counters[name] += n
+                    counts[i] = 0
+            if "stream_frames" in counters and "stream_skipped" not in counters:
+                counters["stream_skipped"] += 0  # the model adds its (often 0) skips with every frame
+        if dirty & lib.SB_MA_DIRTY_CONTROL:
+            values["_c_control"] = _control(st.control)
+            values["_c_run_mode"] = RunMode(st.run_mode)
+            values["_c_brake_released"] = bool(st.brake_released)
+            values["_c_feedforward_pct"] = int(st.feedforward_pct) if st.has_feedforward else None
+        if dirty & lib.SB_MA_DIRTY_HEARD:
+            values["_c__last_heard_s"] = float(st.last_heard_s)
+        if dirty & lib.SB_MA_DIRTY_STREAMS:
+            make = self._stream
+            values["_c_streams"] = {
+                StreamableCommand(s.command): make(
+                    interval_s=s.interval_s, origin_s=s.origin_s, count=int(s.count)
+                )
+                for s in st.streams[0 : st.n_streams]
+            }
+
+    def push(self) -> None:
+        """Write everything the C path reads, the guard and the model's own next deadline."""
+        self.pull()
+        device, motor, st = self.device, self.motor, self.state
+        values = device.__dict__
+        hot = c_may_act(device)
+        ram, encoder = device.ram, device.encoder
+        motor.family = lib.SB_FAMILY_MYACTUATOR
+        motor.turnaround_s = device.turnaround_s
+        ids = sorted(device.listen_ids())
+        motor.listen_all = 0
+        motor.n_listen = len(ids)
+        motor.listen[0 : len(ids)] = ids
+        st.motor_id = ram.motor_id
+        st.revision = lib.SB_MA_V4_4 if device.revision is Revision.V4_4 else lib.SB_MA_V4_3
+        st.can_id_filter = int(bool(ram.can_id_filter))
+        st.has_brake = int(bool(device.has_brake))
+        st.pole_pairs = device.pole_pairs if hot else 1
+        st.counts_per_turn = encoder.counts_per_turn if hot else 1
+        st.base_counts = encoder.base_counts if hot else 0
+        st.offset_counts = encoder.offset_counts if hot else 0
+        st.comm_timeout_ms = ram.comm_timeout_ms if hot else 0
+        st.encoder_gear_ratio = encoder.gear_ratio
+        st.rated_current_a = device.rated_current_a
+        accel = ram.acceleration_dps_s
+        st.position_acceleration_dps_s = accel[AccelIndex.POSITION_ACCELERATION]
+        st.speed_acceleration_dps_s = accel[AccelIndex.SPEED_ACCELERATION]
+        scales = device.motion_scales
+        if scales is not self._scales:
+            st.motion_command = _fields(scales.command_scales())
+            st.motion_reply = _fields(scales.reply_scales())
+            self._scales = scales
+        st.brake_released = int(bool(values["_c_brake_released"]))
+        st.run_mode = int(values["_c_run_mode"])
+        feedforward = values["_c_feedforward_pct"]
+        st.has_feedforward = int(feedforward is not None)
+        st.feedforward_pct = 0 if feedforward is None else feedforward
+        st.control = _control_fields(values["_c_control"])
+        st.last_heard_s = values["_c__last_heard_s"]
+        streams = values["_c_streams"]
+        st.n_streams = len(streams)
+        for i, (command, stream) in enumerate(streams.items()):
+            st.streams[i] = (int(command), stream.count, stream.interval_s, stream.origin_s)
+        motor.hot = int(hot)
+        deadline = device.next_deadline_s()
+        motor.py_deadline_s = math.inf if deadline is None else deadline
+
+    def attach_plant(self) -> None:
+        """Move the model's plant into ``motor.plant`` (grid and all)."""
+        device = self.device
+        # CorePlant is Plant's API over C memory (not a subclass): the model uses it as its Plant
+        device._plant = cast("Plant", CorePlant.adopt(device._plant, self.motor.plant, self.motor))
+
+    def detach_plant(self) -> None:
+        """Copy the plant back into a Python Plant."""
+        device = self.device
+        plant: object = device._plant
+        if isinstance(plant, CorePlant):
+            device._plant = plant.to_python()
