@@ -156,7 +156,7 @@ class MaCore:
         motor: its ``sb_simmotor *`` (owned by the network; zeroed).
     """
 
-    __slots__ = ("_scales", "_stream", "device", "motor", "state")
+    __slots__ = ("_config", "_control", "_stream", "device", "motor", "state")
 
     def __init__(self, device: MyActuatorMotor, motor: Any) -> None:
         from servobus.protocols.myactuator.sim.device import Stream
@@ -164,7 +164,8 @@ class MaCore:
         self.device = device
         self.motor = motor
         self.state = ffi.cast("sb_ma_state *", motor.state)
-        self._scales: Any = None
+        self._config: tuple[Any, ...] | None = None  # the configuration last written
+        self._control: object = None  # the control object last written or pulled
         self._stream: Callable[..., Any] = Stream
 
     def runs_streams(self) -> bool:
@@ -189,7 +190,7 @@ class MaCore:
             if "stream_frames" in counters and "stream_skipped" not in counters:
                 counters["stream_skipped"] += 0  # the model adds its (often 0) skips with every frame
         if dirty & lib.SB_MA_DIRTY_CONTROL:
-            values["_c_control"] = _control(st.control)
+            values["_c_control"] = self._control = _control(st.control)
             values["_c_run_mode"] = RunMode(st.run_mode)
             values["_c_brake_released"] = bool(st.brake_released)
             values["_c_feedforward_pct"] = int(st.feedforward_pct) if st.has_feedforward else None
@@ -211,37 +212,37 @@ class MaCore:
         values = device.__dict__
         hot = c_may_act(device)
         ram, encoder = device.ram, device.encoder
-        motor.family = lib.SB_FAMILY_MYACTUATOR
-        motor.turnaround_s = device.turnaround_s
-        ids = sorted(device.listen_ids())
-        motor.listen_all = 0
-        motor.n_listen = len(ids)
-        motor.listen[0 : len(ids)] = ids
-        st.motor_id = ram.motor_id
-        st.revision = lib.SB_MA_V4_4 if device.revision is Revision.V4_4 else lib.SB_MA_V4_3
-        st.can_id_filter = int(bool(ram.can_id_filter))
-        st.has_brake = int(bool(device.has_brake))
-        st.pole_pairs = device.pole_pairs if hot else 1
-        st.counts_per_turn = encoder.counts_per_turn if hot else 1
-        st.base_counts = encoder.base_counts if hot else 0
-        st.offset_counts = encoder.offset_counts if hot else 0
-        st.comm_timeout_ms = ram.comm_timeout_ms if hot else 0
-        st.encoder_gear_ratio = encoder.gear_ratio
-        st.rated_current_a = device.rated_current_a
         accel = ram.acceleration_dps_s
-        st.position_acceleration_dps_s = accel[AccelIndex.POSITION_ACCELERATION]
-        st.speed_acceleration_dps_s = accel[AccelIndex.SPEED_ACCELERATION]
-        scales = device.motion_scales
-        if scales is not self._scales:
-            st.motion_command = _fields(scales.command_scales())
-            st.motion_reply = _fields(scales.reply_scales())
-            self._scales = scales
+        # The configuration changes rarely (0x20, 0x43, 0xB3, a zero, a restart): written when it did.
+        config = (
+            hot,
+            ram.motor_id,
+            device.revision,
+            ram.can_id_filter,
+            device.has_brake,
+            device.pole_pairs,
+            encoder.counts_per_turn,
+            encoder.base_counts,
+            encoder.offset_counts,
+            encoder.gear_ratio,
+            ram.comm_timeout_ms,
+            device.rated_current_a,
+            accel[AccelIndex.POSITION_ACCELERATION],
+            accel[AccelIndex.SPEED_ACCELERATION],
+            device.turnaround_s,
+            device.motion_scales,
+        )
+        if config != self._config:
+            self._write_config(config)
+        control = values["_c_control"]
+        if control is not self._control:  # the model set a control of its own (or pulled C's)
+            st.control = _control_fields(control)
+            self._control = control
         st.brake_released = int(bool(values["_c_brake_released"]))
         st.run_mode = int(values["_c_run_mode"])
         feedforward = values["_c_feedforward_pct"]
         st.has_feedforward = int(feedforward is not None)
         st.feedforward_pct = 0 if feedforward is None else feedforward
-        st.control = _control_fields(values["_c_control"])
         st.last_heard_s = values["_c__last_heard_s"]
         streams = values["_c_streams"]
         st.n_streams = len(streams)
@@ -250,6 +251,34 @@ class MaCore:
         motor.hot = int(hot)
         deadline = device.next_deadline_s()
         motor.py_deadline_s = math.inf if deadline is None else deadline
+
+    def _write_config(self, config: tuple[Any, ...]) -> None:
+        (hot, motor_id, revision, can_id_filter, has_brake, pole_pairs, cpt, base, offset, gear,
+         timeout_ms, rated_a, accel_position, accel_speed, turnaround_s, scales) = config  # fmt: skip
+        motor, st = self.motor, self.state
+        motor.family = lib.SB_FAMILY_MYACTUATOR
+        motor.turnaround_s = turnaround_s
+        ids = sorted(self.device.listen_ids())
+        motor.listen_all = 0
+        motor.n_listen = len(ids)
+        motor.listen[0 : len(ids)] = ids
+        st.motor_id = motor_id
+        st.revision = lib.SB_MA_V4_4 if revision is Revision.V4_4 else lib.SB_MA_V4_3
+        st.can_id_filter = int(bool(can_id_filter))
+        st.has_brake = int(bool(has_brake))
+        # c_may_act() checked that these fit; a state C cannot take is never read (not hot)
+        st.pole_pairs = pole_pairs if hot else 1
+        st.counts_per_turn = cpt if hot else 1
+        st.base_counts = base if hot else 0
+        st.offset_counts = offset if hot else 0
+        st.comm_timeout_ms = timeout_ms if hot else 0
+        st.encoder_gear_ratio = gear
+        st.rated_current_a = rated_a
+        st.position_acceleration_dps_s = accel_position
+        st.speed_acceleration_dps_s = accel_speed
+        st.motion_command = _fields(scales.command_scales())
+        st.motion_reply = _fields(scales.reply_scales())
+        self._config = config
 
     def attach_plant(self) -> None:
         """Move the model's plant into ``motor.plant`` (grid and all)."""
