@@ -545,7 +545,7 @@ int sb_ma_receive(sb_simmotor *m, const sb_simframe *in, double now_s, sb_simfra
         return SB_E_ARG;
     *n_out = 0;
     s = state_of(m);
-    if (!m->hot || !state_ok(s))
+    if (!m->hot || !state_ok(s) || sb_plant_check(&m->plant) != SB_OK)
         return SB_HOT_COLD;
     if (m->py_deadline_s <= now_s)
         return SB_HOT_COLD; /* the 0xB3 trip (or anything else of the model's) comes first */
@@ -636,7 +636,7 @@ int sb_ma_poll(sb_simmotor *m, double now_s, sb_simframe *out, int cap, int *n_o
         return SB_E_ARG;
     *n_out = 0;
     s = state_of(m);
-    if (!m->hot || !state_ok(s) || m->py_deadline_s <= now_s)
+    if (!m->hot || !state_ok(s) || sb_plant_check(&m->plant) != SB_OK || m->py_deadline_s <= now_s)
         return SB_HOT_COLD;
     for (int i = 0; i < s->n_streams; i++) {
         const sb_ma_stream *st = &s->streams[i];

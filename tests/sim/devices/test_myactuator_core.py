@@ -22,7 +22,6 @@ from typing import Any
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from servobus.sim.coreplant import CorePlant
 
 from servobus.core._lib import ffi, lib
 from servobus.frame import Frame
@@ -30,6 +29,7 @@ from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator import ErrorFlags, Revision
 from servobus.protocols.myactuator.codec import request_frame
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+from servobus.sim.coreplant import CorePlant
 from servobus.sim.device import Emission
 from servobus.sim.plant import Plant
 
@@ -430,6 +430,9 @@ def test_c_entry_points_refuse_bad_arguments() -> None:
     state.counts_per_turn, state.n_streams = 16384, 99
     assert lib.sb_ma_receive(m, frame, 0.1, out, 4, n) == lib.SB_HOT_COLD
     assert lib.sb_ma_next_deadline(m) == math.inf
+    state.n_streams, m.plant.max_step_s = 0, 0.0
+    assert lib.sb_ma_receive(m, frame, 0.1, out, 4, n) == lib.SB_HOT_COLD
+    assert lib.sb_ma_poll(m, 0.1, out, 4, n) == lib.SB_HOT_COLD
 
 
 def test_fuzz_random_frames_into_the_c_path_match_the_model() -> None:
