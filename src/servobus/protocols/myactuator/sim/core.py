@@ -8,12 +8,17 @@ the model's guards allow it (:func:`c_may_act`), and hands everything else to th
 
 * **push** (:meth:`MaCore.push`, after every call into the model): everything the C path reads, the
   guard (``motor.hot``) and the model's own next deadline (``motor.py_deadline_s``);
-* **pull** (:meth:`MaCore.pull`, before the model reads anything, see :class:`Pulled`): what the C
-  path changed, flagged in ``sb_ma_state.dirty``: counters, control and run mode, brake,
-  feed-forward, the time last heard (0xB3) and the streams.
+* **pull** (:meth:`MaCore.pull`, before the model reads anything): what the C path changed, flagged
+  in ``sb_ma_state.dirty``: counters, control and run mode, brake, feed-forward, the time last heard
+  (0xB3) and the streams.
 
-The plant lives in ``motor.plant`` (a :class:`~servobus.sim.coreplant.CorePlant` over it), so both
-sides integrate the same state. A model without a C twin never touches any of this.
+While attached, the model's class is its "attached" subclass (:func:`attached_class`): the same
+class but for :class:`Pulled` attributes (``control``, ``run_mode``, ``brake_released``,
+``feedforward_pct``, ``streams``, ``_last_heard_s``: a read or a write pulls first), a ``settle``
+that pulls, and an ``unresponsive`` whose change reaches C at once. Detached, it is its own class
+again, with plain attributes: a model without a C twin runs exactly the reference code. The plant
+lives in ``motor.plant`` (a :class:`~servobus.sim.coreplant.CorePlant` over it), so both sides
+integrate the same state.
 """
 
 from __future__ import annotations
@@ -29,9 +34,10 @@ from servobus.sim.coreplant import CorePlant, _control, _control_fields
 
 if TYPE_CHECKING:
     from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+    from servobus.sim.device import BusLink
     from servobus.sim.plant import Plant
 
-__all__ = ["COUNTER_NAMES", "MaCore", "Pulled", "c_may_act"]
+__all__ = ["COUNTER_NAMES", "MaCore", "Pulled", "attached_class", "c_may_act"]
 
 #: The model's Counter keys the C path counts, by their index in ``motor.counters`` (SB_MA_CTR_*).
 COUNTER_NAMES = (
@@ -53,22 +59,23 @@ _COUNT_LIMIT = 4 * 10**18
 _INT32 = 1 << 31
 
 T = TypeVar("T")
+M = TypeVar("M", bound="MyActuatorMotor")
 
 
 class Pulled(Generic[T]):
-    """An attribute of the model that its C twin may change: reading or writing it pulls first.
+    """An attribute of an attached model that its C twin may change: a read or a write pulls first.
 
-    The value lives in the instance's ``__dict__`` under ``_c_<name>``; :meth:`MaCore.pull` writes
-    there directly. On a model without a C twin it is a plain attribute (one check more).
+    The value stays in the instance's ``__dict__`` under its own name (where the plain attribute of
+    a detached model keeps it); :meth:`MaCore.pull` writes there directly.
     """
 
-    __slots__ = ("key",)
+    __slots__ = ("name",)
 
     def __init__(self) -> None:
-        self.key = ""
+        self.name = ""
 
     def __set_name__(self, owner: type, name: str) -> None:
-        self.key = f"_c_{name}"
+        self.name = name
 
     @overload
     def __get__(self, obj: None, owner: type | None = None) -> Pulled[T]: ...
@@ -79,17 +86,50 @@ class Pulled(Generic[T]):
     def __get__(self, obj: object | None, owner: type | None = None) -> T | Pulled[T]:
         if obj is None:
             return self
-        core = obj._core  # type: ignore[attr-defined]
-        if core is not None:
-            core.pull()
-        value: T = obj.__dict__[self.key]
+        obj._core.pull()  # type: ignore[attr-defined]
+        value: T = obj.__dict__[self.name]
         return value
 
     def __set__(self, obj: object, value: T) -> None:
-        core = obj._core  # type: ignore[attr-defined]
-        if core is not None:
-            core.pull()  # C's changes first, or a later pull would undo this write
-        obj.__dict__[self.key] = value
+        obj._core.pull()  # type: ignore[attr-defined]  # C's changes first, or a later pull would undo this
+        obj.__dict__[self.name] = value
+
+
+_PULLED = ("control", "run_mode", "brake_released", "feedforward_pct", "streams", "_last_heard_s")
+_ATTACHED: dict[type, type] = {}
+
+
+def attached_class(cls: type[M]) -> type[M]:
+    """``cls`` as a model attached to a C twin sees it (built once per class; see the module)."""
+    found = _ATTACHED.get(cls)
+    if found is not None:
+        return found
+    base_settle = cls.settle
+
+    def settle(self: Any) -> None:
+        self._core.pull()
+        base_settle(self)
+
+    def get_unresponsive(self: Any) -> bool:
+        value: bool = self.__dict__["unresponsive"]
+        return value
+
+    def set_unresponsive(self: Any, value: bool) -> None:
+        self.__dict__["unresponsive"] = value
+        self._core.push()  # set from outside the network's calls: C stops (or starts) answering now
+        self._changed()
+
+    namespace: dict[str, Any] = {name: Pulled() for name in _PULLED}
+    namespace.update(
+        __module__=cls.__module__,
+        __qualname__=cls.__qualname__,
+        __doc__=cls.__doc__,
+        _core_base=cls,
+        settle=settle,
+        unresponsive=property(get_unresponsive, set_unresponsive),
+    )
+    found = _ATTACHED[cls] = cast("type[M]", type(cls.__name__, (cls,), namespace))
+    return found
 
 
 # Methods whose behaviour the C path reproduces: a subclass that overrides one (a test's tagged
@@ -113,11 +153,13 @@ _MODELLED = (
     "_current_limit",
     "_target",
     "_status1",
+    "settle",
 )
 _CLASS_OK: dict[type, bool] = {}
 
 
 def _class_ok(cls: type) -> bool:
+    cls = getattr(cls, "_core_base", cls)  # an attached class: the model's own
     found = _CLASS_OK.get(cls)
     if found is None:
         from servobus.protocols.myactuator.sim.device import MyActuatorMotor
@@ -131,7 +173,7 @@ def c_may_act(device: MyActuatorMotor) -> bool:
     reported, not unresponsive, not cut off by 0xB3, an encoder and ids the C state holds)."""
     encoder = device.encoder
     return (
-        not device._unresponsive
+        not device.__dict__["unresponsive"]
         and not device.errors.flags
         and not device.comm_tripped
         and device._next_report_s is None
@@ -190,15 +232,15 @@ class MaCore:
             if "stream_frames" in counters and "stream_skipped" not in counters:
                 counters["stream_skipped"] += 0  # the model adds its (often 0) skips with every frame
         if dirty & lib.SB_MA_DIRTY_CONTROL:
-            values["_c_control"] = self._control = _control(st.control)
-            values["_c_run_mode"] = RunMode(st.run_mode)
-            values["_c_brake_released"] = bool(st.brake_released)
-            values["_c_feedforward_pct"] = int(st.feedforward_pct) if st.has_feedforward else None
+            values["control"] = self._control = _control(st.control)
+            values["run_mode"] = RunMode(st.run_mode)
+            values["brake_released"] = bool(st.brake_released)
+            values["feedforward_pct"] = int(st.feedforward_pct) if st.has_feedforward else None
         if dirty & lib.SB_MA_DIRTY_HEARD:
-            values["_c__last_heard_s"] = float(st.last_heard_s)
+            values["_last_heard_s"] = float(st.last_heard_s)
         if dirty & lib.SB_MA_DIRTY_STREAMS:
             make = self._stream
-            values["_c_streams"] = {
+            values["streams"] = {
                 StreamableCommand(s.command): make(
                     interval_s=s.interval_s, origin_s=s.origin_s, count=int(s.count)
                 )
@@ -234,17 +276,17 @@ class MaCore:
         )
         if config != self._config:
             self._write_config(config)
-        control = values["_c_control"]
+        control = values["control"]
         if control is not self._control:  # the model set a control of its own (or pulled C's)
             st.control = _control_fields(control)
             self._control = control
-        st.brake_released = int(bool(values["_c_brake_released"]))
-        st.run_mode = int(values["_c_run_mode"])
-        feedforward = values["_c_feedforward_pct"]
+        st.brake_released = int(bool(values["brake_released"]))
+        st.run_mode = int(values["run_mode"])
+        feedforward = values["feedforward_pct"]
         st.has_feedforward = int(feedforward is not None)
         st.feedforward_pct = 0 if feedforward is None else feedforward
-        st.last_heard_s = values["_c__last_heard_s"]
-        streams = values["_c_streams"]
+        st.last_heard_s = values["_last_heard_s"]
+        streams = values["streams"]
         st.n_streams = len(streams)
         for i, (command, stream) in enumerate(streams.items()):
             st.streams[i] = (int(command), stream.count, stream.interval_s, stream.origin_s)
@@ -280,15 +322,28 @@ class MaCore:
         st.motion_reply = _fields(scales.reply_scales())
         self._config = config
 
-    def attach_plant(self) -> None:
-        """Move the model's plant into ``motor.plant`` (grid and all)."""
-        device = self.device
+    @classmethod
+    def attach(cls, device: MyActuatorMotor, motor: Any, link: BusLink | None) -> None:
+        """Attach ``device`` to ``motor`` (MyActuatorMotor.core_attach): settled, its class the
+        attached one, its plant moved into ``motor.plant``, its link set, its state pushed."""
+        device.settle()
+        core = cls(device, motor)
         # CorePlant is Plant's API over C memory (not a subclass): the model uses it as its Plant
-        device._plant = cast("Plant", CorePlant.adopt(device._plant, self.motor.plant, self.motor))
+        device._plant = cast("Plant", CorePlant.adopt(device._plant, motor.plant, motor))
+        device._core = core
+        device.__class__ = attached_class(type(device))
+        if link is not None:
+            device._link = link
+        core.push()
 
-    def detach_plant(self) -> None:
-        """Copy the plant back into a Python Plant."""
+    def detach(self) -> None:
+        """Leave the twin and its network (MyActuatorMotor.core_detach): settled and pulled, the
+        plant copied back into a Python Plant, the model's own class again."""
         device = self.device
+        device.settle()
         plant: object = device._plant
         if isinstance(plant, CorePlant):
             device._plant = plant.to_python()
+        device.__class__ = device._core_base  # type: ignore[attr-defined]
+        device._core = None
+        device._link = None

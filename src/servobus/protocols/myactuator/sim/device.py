@@ -99,7 +99,7 @@ from servobus.protocols.myactuator.ids import (
     reply_id,
     request_id,
 )
-from servobus.protocols.myactuator.sim.core import MaCore, Pulled
+from servobus.protocols.myactuator.sim.core import MaCore
 from servobus.protocols.myactuator.sim.state import (
     DEFAULT_ENCODER_COUNTS_PER_TURN,
     DEFAULT_MODEL,
@@ -244,13 +244,6 @@ class MyActuatorMotor(ListeningDevice):
     #: The family's C path (csrc/sim_myactuator.c), run by a network that has one (core.py).
     CORE_FAMILY: ClassVar[int] = lib.SB_FAMILY_MYACTUATOR
     _core: MaCore | None = None
-    # What the C twin may change: read and written after a pull (plain attributes without a twin).
-    control = Pulled[Control]()
-    run_mode = Pulled[ma.RunMode]()
-    brake_released = Pulled[bool]()
-    streams = Pulled[dict[StreamableCommand, Stream]]()
-    feedforward_pct = Pulled[int | None]()
-    _last_heard_s = Pulled[float]()
 
     def __init__(
         self,
@@ -303,12 +296,12 @@ class MyActuatorMotor(ListeningDevice):
         self._decoded: dict[tuple[int, bytes] | None, Command | tuple[Revision, ma.MotionScales]] = {}
         self._status1_key: tuple[float, float, bool, ErrorFlags] | None = None  # the last 0x9A's inputs
         self._status1_reply: Reply | None = None
-        self.control = Off()
+        self.control: Control = Off()
         self.run_mode = RUN_MODE_POWER_UP
         self.brake_released = False
         self.comm_tripped = False
-        self.streams = {}
-        self.feedforward_pct = None
+        self.streams: dict[StreamableCommand, Stream] = {}
+        self.feedforward_pct: int | None = None
         self._boot_s = now_s
         self._last_heard_s = now_s
         self._next_report_s: float | None = None
@@ -385,7 +378,9 @@ class MyActuatorMotor(ListeningDevice):
     def next_deadline_s(self) -> float | None:
         """The earliest of: the 0xB3 trip, the next stream frame, the next error report."""
         protection, report = self.protection_deadline_s(), self._next_report_s
-        streams = self._python_streams()
+        streams = self.streams
+        if streams and self._core is not None and self._core.runs_streams():
+            streams = {}  # its C twin runs them (sb_ma_next_deadline)
         if not streams and (protection is None or report is None):
             return report if protection is None else protection  # the network asks after every frame
         times = [protection, report]
@@ -393,64 +388,28 @@ class MyActuatorMotor(ListeningDevice):
         found = [t for t in times if t is not None]
         return min(found) if found else None
 
-    @property
-    def unresponsive(self) -> bool:
-        """A simulator fault knob: the motor still acts on frames but never transmits."""
-        return self._unresponsive
-
-    @unresponsive.setter
-    def unresponsive(self, value: bool) -> None:
-        self._unresponsive = value
-        if self._core is not None:  # set from outside the network's calls: the C path stops now
-            self._core.push()
-            self._changed()
-
     # ---- the C twin (core.py; the network calls these) ----
 
     def core_attach(self, motor: Any, link: BusLink | None) -> None:
-        """Run on ``motor`` (an ``sb_simmotor *``): its plant becomes this model's, its C path answers
-        what :func:`~.core.c_may_act` allows. ``link`` as :meth:`attach`.
+        """Run on ``motor`` (an ``sb_simmotor *``): its plant moves there and its C path answers what
+        :func:`~.core.c_may_act` allows; ``link`` as :meth:`attach` (see core.py).
 
         Raises:
             ValueError: already attached to a C twin, or on another network.
         """
         if self._core is not None or (link is not None and self._link not in (None, link)):
             raise ValueError(f"{self!r} is already on a network: remove it from that one first")
-        self.settle()
-        core = MaCore(self, motor)
-        core.attach_plant()
-        self._core = core
-        if link is not None:
-            self._link = link
-        core.push()
+        MaCore.attach(self, motor, link)
 
     def core_detach(self) -> None:
-        """Leave the C twin (and its network): its changes pulled, the plant back in Python."""
-        core = self._core
-        if core is None:
-            return
-        self.settle()
-        core.detach_plant()
-        self._core = None
-        self._link = None
+        """Leave the C twin and its network: its changes pulled, the plant back in Python."""
+        if self._core is not None:
+            self._core.detach()
 
     def core_push(self) -> None:
         """Write what the C path reads into the twin (the network calls this after each call in)."""
         if self._core is not None:
             self._core.push()
-
-    def settle(self) -> None:
-        """:meth:`ListeningDevice.settle`, and what the C twin changed pulled first."""
-        if self._core is not None:
-            self._core.pull()
-        super().settle()
-
-    def _python_streams(self) -> dict[StreamableCommand, Stream]:
-        """The streams the model runs itself: none while its C twin runs them."""
-        streams = self.streams
-        if streams and self._core is not None and self._core.runs_streams():
-            return {}
-        return streams
 
     def listen_ids(self) -> frozenset[int]:
         """0x140+ID, 0x400+ID, 0x280 and 0x300 (filtered or not, it counts them): any other
@@ -482,7 +441,10 @@ class MyActuatorMotor(ListeningDevice):
         """Advance to ``now_s`` and return the stream frames and error reports due, with their times."""
         self.advance(now_s)
         out: list[tuple[float, Reply]] = []
-        for command, stream in self._python_streams().items():
+        streams = self.streams
+        if streams and self._core is not None and self._core.runs_streams():
+            streams = {}  # its C twin runs them (sb_ma_poll)
+        for command, stream in streams.items():
             if stream.next_s <= now_s:
                 self._counters["stream_skipped"] += stream.advance_past(now_s)
                 self._counters["stream_frames"] += 1
