@@ -537,3 +537,86 @@ def test_cost_of_a_set_point_and_a_status_read(capsys: pytest.CaptureFixture[str
             f"Python model: 0xA2 {py_speed / 1000:.1f} µs, 0x9C {py_status / 1000:.1f} µs"
         )
     assert c_speed < py_speed and c_status < py_status
+
+
+# ---- through the engine: 32 C motors on CoreCanNetwork against 32 Python ones on SimCanNetwork ----
+
+
+def _bus_trace(make: Callable[..., Any], seed: int, ticks: int) -> tuple[list[tuple[float, Frame]], Any, int]:
+    """A 1 kHz loop over 32 motors (both revisions, 4 a tick) with cold commands, streams and faults
+    mixed in; the host's trace, the motors' states at the end and how many frames Python received."""
+    from servobus.sim.canbus import CanBusModel
+
+    rng = random.Random(seed)
+    motors = [
+        MyActuatorMotor(i, revision=Revision.V4_3 if i % 3 == 0 else Revision.V4_4, has_brake=i % 4 != 0)
+        for i in range(1, 33)
+    ]
+    python_calls = [0]
+    for motor in motors:  # counts the frames the model itself receives (an instance wrapper: C stays on)
+
+        def counted(frame: Frame, now_s: float, _receive: Any = motor.receive) -> Any:
+            python_calls[0] += 1
+            return _receive(frame, now_s)
+
+        motor.receive = counted  # type: ignore[method-assign]
+    network = make(motors, bus=CanBusModel(bitrate=1_000_000))
+    trace: list[tuple[float, Frame]] = []
+    for tick in range(ticks):
+        t = tick * 1e-3
+        trace += network.advance(t)
+        now = max(t, network.now_s)
+        for motor in motors[tick % 8 :: 8]:  # 4 a tick: the 1 Mbit/s bus keeps up
+            i, revision = motor.motor_id, motor.revision
+            roll = rng.random()
+            if roll < 0.35:
+                command: Any = ma.SpeedControl(
+                    speed_dps=rng.uniform(-400, 400), max_torque_pct=rng.choice((None, 50))
+                )
+            elif roll < 0.6:
+                command = ma.ReadStatus2()
+            elif roll < 0.7:
+                command = ma.AbsolutePositionControl(angle_deg=rng.uniform(-720, 720), max_speed_dps=500.0)
+            elif roll < 0.8:
+                position = rng.uniform(-3, 3)
+                command = ma.MotionCommand(
+                    position_rad=position, velocity_rad_s=0.0, kp=20.0, kd=1.0, torque_ff_nm=0.0,
+                    scales=motor.motion_scales,
+                )  # fmt: skip
+            elif roll < 0.85:
+                command = rng.choice((ma.ReadStatus1(), ma.ReadEncoderPosition(), ma.ReadMultiTurnAngle()))
+            elif roll < 0.87:
+                command = ma.ActiveReply(
+                    command=ma.StreamableCommand.STATUS_2, enabled=rng.random() < 0.5, interval_ms=20
+                )
+            else:
+                command = _cold_command(rng, revision)
+            network.send(request_frame(command, i, revision=revision), now)
+        if tick % 97 == 50:
+            motor = motors[rng.randrange(32)]
+            fault = rng.randrange(4)
+            if fault == 0:
+                motor.inject_error(ErrorFlags.LOW_VOLTAGE, now)
+            elif fault == 1:
+                motor.clear_error(ErrorFlags.LOW_VOLTAGE, now)
+            elif fault == 2:
+                motor.reboot(now)
+            else:
+                motor.unresponsive = not motor.unresponsive
+        network.run_ahead(t)
+    trace += network.run_until_idle(0.05)
+    states = [(dict(m.counters), _model_state(m), _plant_state(m.plant)) for m in motors]
+    return trace, states, python_calls[0]
+
+
+def test_thirty_two_c_motors_through_the_engine_give_the_python_trace() -> None:
+    corenet = pytest.importorskip("servobus.sim.corenet")
+    from servobus.sim.network import SimCanNetwork
+
+    expected, expected_states, python_frames = _bus_trace(SimCanNetwork, 27, 2000)
+    got, got_states, c_python_frames = _bus_trace(corenet.CoreCanNetwork, 27, 2000)
+    assert [t for t, _ in got] == [t for t, _ in expected]  # bit for bit
+    assert got == expected
+    for i, (g, e) in enumerate(zip(got_states, expected_states, strict=True)):
+        assert g == e, f"motor {i + 1}"
+    assert c_python_frames < python_frames / 4  # the C path answered most of them
