@@ -521,8 +521,7 @@ static int state_ok(const sb_ma_state *s)
            s->n_streams >= 0 && s->n_streams <= SB_MA_MAX_STREAMS && s->base_counts > -(int64_t)COUNT_LIMIT &&
            s->base_counts < (int64_t)COUNT_LIMIT && s->offset_counts > -(int64_t)COUNT_LIMIT &&
            s->offset_counts < (int64_t)COUNT_LIMIT && s->comm_timeout_ms >= 0 &&
-           isfinite(s->encoder_gear_ratio) && s->encoder_gear_ratio != 0.0 && fields_ok(s->motion_command, 5) &&
-           fields_ok(s->motion_reply, 4) && streams_ok(s);
+           isfinite(s->encoder_gear_ratio) && s->encoder_gear_ratio != 0.0 && streams_ok(s);
 }
 
 static int stream_due(const sb_ma_stream *st, double now_s)
@@ -556,7 +555,8 @@ int sb_ma_receive(sb_simmotor *m, const sb_simframe *in, double now_s, sb_simfra
             if (in->len != 8 || !decode_standard(s, in->data, &q))
                 return SB_HOT_COLD;
         } else if (id == MOTION_REQUEST_BASE + (uint32_t)motor_id) {
-            if (in->len != 8 || !decode_motion(s, in->data, &q))
+            /* (sb_unpack checks the command's scales; the reply's are checked here) */
+            if (in->len != 8 || !fields_ok(s->motion_reply, 4) || !decode_motion(s, in->data, &q))
                 return SB_HOT_COLD;
             motion = 1;
         } else if (id == ID_SETTING_ID && !s->can_id_filter) {
@@ -596,11 +596,8 @@ int sb_ma_receive(sb_simmotor *m, const sb_simframe *in, double now_s, sb_simfra
         active_reply(s, &q, now_s);
         return SB_HOT_DONE; /* NO_REPLY */
     }
-    if (q.kind != K_READ) {
-        control_command(m, s, &q, &r);
-        if (!read_plant(m, s, &r))
-            return SB_HOT_DONE; /* unreachable: setting a control does not move the observed state */
-    }
+    if (q.kind != K_READ)
+        control_command(m, s, &q, &r); /* the model reads after this: the observed state is the same */
     if (s->n_streams > 0) {
         m->counters[SB_MA_CTR_SILENCED] += 1;
         return SB_HOT_DONE;
