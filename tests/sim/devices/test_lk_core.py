@@ -204,7 +204,10 @@ def cold_command(rng: random.Random, model: LkModel) -> LkCommand:
 def odd_frame(rng: random.Random, model: LkModel, motor_id: int) -> Frame:
     """A frame the model ignores or cannot decode: other ids, kinds, revisions, unknown bytes."""
     other = (motor_id % 32) + 1
-    choice = rng.randrange(5)
+    choice = rng.randrange(6)
+    if choice == 5:  # anything at all on its identifiers
+        can_id = rng.choice([0x140 + motor_id, 0x280])
+        return Frame(arbitration_id=can_id, data=rng.randbytes(rng.choice([8, 8, 8, rng.randint(0, 8)])))
     if choice == 0:
         return Frame(arbitration_id=0x140 + other, data=bytes([0x9C] + [0] * 7))
     if choice == 1:

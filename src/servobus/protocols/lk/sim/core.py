@@ -12,7 +12,7 @@ origin) before Python reads any of it.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 from servobus.core._lib import ffi, lib
 from servobus.protocols.lk.model import IQ_AMPS_PER_COUNT, MotorType, Revision
@@ -176,7 +176,8 @@ def adopt_plant(plant: Plant, motor: Any) -> Plant:
     """The plant moved into ``motor.plant``: the same API, its state in C from now on."""
     from servobus.sim.coreplant import CorePlant
 
-    return CorePlant.adopt(plant, ffi.addressof(motor, "plant"), motor)
+    # CorePlant has Plant's API (duck-typed): the model keeps reading it as its Plant.
+    return cast(Plant, CorePlant.adopt(plant, ffi.addressof(motor, "plant"), motor))
 
 
 def release_plant(plant: Plant) -> Plant:

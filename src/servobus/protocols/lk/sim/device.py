@@ -127,6 +127,12 @@ class RunState(enum.Enum):
 class LkMotor(ListeningDevice):
     """One LK motor on a CAN bus (implements :class:`~servobus.sim.device.Device`).
 
+    On a network that runs the C core (issue 27), the motor gets a C twin (:meth:`core_attach`,
+    :mod:`~servobus.protocols.lk.sim.core`) that answers the control-loop traffic; the attributes C
+    changes (:attr:`state`, :attr:`held`, the counters, the angle frame) are taken back before
+    Python reads them, and the knobs C reads (:attr:`unresponsive`, :attr:`turnaround_s`) are
+    pushed when they are set.
+
     Args:
         motor_id: 1..32; requests on 0x140+ID, replies on :func:`~servobus.protocols.lk.reply_id`.
         model: revision, motor type (iq/power units, spec §8.2) and encoder width.
@@ -149,12 +155,6 @@ class LkMotor(ListeningDevice):
 
     Raises:
         ValueError: ``motor_id`` outside 1..32, a negative time, or a setting of the wrong scheme.
-
-    On a network that runs the C core (issue 27), the motor gets a C twin (:meth:`core_attach`,
-    :mod:`~servobus.protocols.lk.sim.core`) that answers the control-loop traffic; the attributes C
-    changes (:attr:`state`, :attr:`held`, the counters, the angle frame) are taken back before
-    Python reads them, and the knobs C reads (:attr:`unresponsive`, :attr:`turnaround_s`) are
-    pushed when they are set.
     """
 
     CORE_FAMILY: ClassVar[int] = CORE_FAMILY
