@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import ctypes
 import json
+import math
 import os
 import select
 import signal
@@ -79,28 +80,28 @@ class Port:
         self.partial = b""
         self.frames_in = 0
         self.frames_out = 0
+        self.next_s = 0.0  # when the network next has something for the host (run it then)
 
 
 def serve(ports: list[Port], clock: Callable[[], float], stop_fd: int) -> None:
     parsed: dict[bytes, Frame | None] = {}
     by_fd = {port.master: port for port in ports}
     fds = [*by_fd, stop_fd]
+    inf = math.inf
     while True:
         now = clock()
-        wake: float | None = None
+        wake = inf
         for port in ports:
-            network = port.network
-            event = network.next_event_s()
-            if event is not None and event <= now:
+            if port.next_s <= now:
+                network = port.network
                 received = network.advance(now)
                 if received:
                     port.frames_out += len(received)
                     _write(port, b"".join(encode_line(frame) for _, frame in received))
-                event = network.next_event_s()
-            if event is not None and (wake is None or event < wake):
-                wake = event
-        timeout = None if wake is None else max(0.0, wake - clock())
-        readable, _, _ = select.select(fds, [], [], timeout)
+                port.next_s = _next_visible(network, now)
+            if port.next_s < wake:
+                wake = port.next_s
+        readable, _, _ = select.select(fds, [], [], None if wake == inf else max(0.0, wake - clock()))
         if not readable:
             continue
         now = clock()
@@ -121,6 +122,7 @@ def serve(ports: list[Port], clock: Callable[[], float], stop_fd: int) -> None:
             answers = 0
             network = port.network
             at = max(network.now_s, now)
+            sent = False
             for line in lines:
                 if not line or line[0] not in _FRAME_PREFIXES:
                     answers += bool(line.strip(b"\n"))
@@ -131,8 +133,20 @@ def serve(ports: list[Port], clock: Callable[[], float], stop_fd: int) -> None:
                 if frame is not None:
                     network.send(frame, at)
                     port.frames_in += 1
+                    sent = True
             if answers:
                 _write(port, b"\r" * answers)
+            if sent:
+                port.next_s = _next_visible(network, at)
+
+
+def _next_visible(network: SimCanNetwork, now: float) -> float:
+    """When ``network`` next has a frame for the host: it first runs over what the host can neither
+    see nor change (its own requests ending, the motors' turnaround), so the process wakes once per
+    reply instead of once per frame on the wire."""
+    network.run_ahead(now)
+    at = network.next_event_s()
+    return math.inf if at is None else at
 
 
 def _parse(line: bytes) -> Frame | None:

@@ -2,17 +2,22 @@
 
 Sans-IO arithmetic for the simulator's bus model, the transports' bus-load estimate and for
 benchmarks that state which bus they assume. Classic CAN times are exact: the frame's real bit
-stream is built (including its CRC-15) and stuff bits are counted where ISO 11898-1 inserts them,
+stream is followed (including its CRC-15) and stuff bits are counted where ISO 11898-1 inserts them,
 so an 8-byte standard frame costs between 111 and 135 bit times (design.md, "Environment facts")
 depending on its bytes.
 
 CAN FD (ISO variant) is exact for dynamic stuffing up to the end of the data field; the stuff
 count and CRC field use fixed stuff bits, counted by rule, so no CRC is needed. Bits from the BRS
 sample point to the CRC delimiter run at the data bit rate when bit-rate switching is on.
+
+The counting runs in the C core (csrc/sim_timing.c: one pass over the bits, nothing built), since
+the simulator times every frame; tests/reference/timing.py keeps the bit-list version it is checked
+against.
 """
 
 from __future__ import annotations
 
+from servobus.core._lib import ffi, lib
 from servobus.frame import Frame
 
 __all__ = [
@@ -30,15 +35,11 @@ INTERFRAME_BITS = 3  # intermission: the bus is idle for 3 recessive bits betwee
 # An 8-byte standard data frame: 111 bits unstuffed (incl. intermission), 24 stuff bits at most.
 CLASSIC_8_BYTE_STANDARD_BITS = (111, 135)
 
-_FD_DLC_BYTES = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
-
-
-def _bits(value: int, width: int) -> list[int]:
-    return [(value >> (width - 1 - i)) & 1 for i in range(width)]
-
-
-def _data_bits(data: bytes) -> list[int]:
-    return [bit for byte in data for bit in _bits(byte, 8)]
+_FLAG_EXT = lib.SB_FRAME_EXT
+_FLAG_FD = lib.SB_FRAME_FD
+_FLAG_BRS = lib.SB_FRAME_BRS
+_frame_bits = lib.sb_can_frame_bits
+_frame_time = lib.sb_can_frame_time
 
 
 def can_crc15(bits: list[int]) -> int:
@@ -52,34 +53,25 @@ def can_crc15(bits: list[int]) -> int:
     return crc
 
 
-def _stuff_bit_count(bits: list[int]) -> int:
-    """Stuff bits a transmitter inserts: one after every run of five equal bits (stuff bits included)."""
-    count = 0
-    run_bit, run_length = -1, 0
-    for bit in bits:
-        if bit == run_bit:
-            run_length += 1
-        else:
-            run_bit, run_length = bit, 1
-        if run_length == 5:
-            count += 1
-            run_bit, run_length = 1 - bit, 1  # the complementary stuff bit starts the next run
-    return count
+def _flags(frame: Frame) -> int:
+    return (
+        (_FLAG_EXT if frame.is_extended_id else 0)
+        | (_FLAG_FD if frame.is_fd else 0)
+        | (_FLAG_BRS if frame.bitrate_switch else 0)
+    )
 
 
-def _arbitration_and_control(frame: Frame, dlc: int) -> list[int]:
-    """SOF .. DLC of a data frame (classic or FD), in transmission order."""
-    ident = frame.arbitration_id
-    if frame.is_extended_id:
-        # SOF, base id, SRR (recessive), IDE (recessive), id extension, then RTR/RRS.
-        head = [0, *_bits(ident >> 18, 11), 1, 1, *_bits(ident & 0x3FFFF, 18), 0]
-    else:
-        head = [0, *_bits(ident, 11), 0, 0]  # SOF, id, RTR/RRS, IDE
-    if frame.is_fd:
-        # FDF (recessive), res, BRS, ESI (error-active), DLC
-        return [*head, 1, 0, int(frame.bitrate_switch), 0, *_bits(dlc, 4)]
-    # classic: r1 (extended frames only), r0, DLC
-    return [*head, *([0] if frame.is_extended_id else []), 0, *_bits(dlc, 4)]
+def _no_wire_time(frame: Frame) -> ValueError:
+    # Frame's own checks leave only a serial message too long for a CAN frame to get here.
+    return ValueError(f"{frame!r} cannot be a CAN data frame: it has no CAN wire time")
+
+
+def _counted(frame: Frame) -> tuple[int, int]:
+    out = ffi.new("int[2]")
+    data = frame.data
+    if _frame_bits(frame.arbitration_id, _flags(frame), data, len(data), out, out + 1) != 0:
+        raise _no_wire_time(frame)
+    return out[0], out[1]
 
 
 def classic_frame_bits(frame: Frame) -> int:
@@ -90,10 +82,7 @@ def classic_frame_bits(frame: Frame) -> int:
     """
     if frame.is_fd:
         raise ValueError("classic_frame_bits() needs a classic frame; use fd_frame_bits()")
-    stuffed = _arbitration_and_control(frame, len(frame.data)) + _data_bits(frame.data)
-    stuffed += _bits(can_crc15(stuffed), 15)
-    # CRC delimiter, ACK slot, ACK delimiter, EOF (7), intermission: fixed form, never stuffed.
-    return len(stuffed) + _stuff_bit_count(stuffed) + 1 + 2 + 7 + INTERFRAME_BITS
+    return _counted(frame)[0]
 
 
 def fd_frame_bits(frame: Frame) -> tuple[int, int]:
@@ -106,25 +95,7 @@ def fd_frame_bits(frame: Frame) -> tuple[int, int]:
     """
     if not frame.is_fd:
         raise ValueError("fd_frame_bits() needs a CAN FD frame; use classic_frame_bits()")
-    dlc = _FD_DLC_BYTES.index(len(frame.data))
-    head = _arbitration_and_control(frame, dlc)
-    body = _data_bits(frame.data)
-    dynamic = head + body
-    stuff = _stuff_bit_count(dynamic)
-    crc_bits = 17 if len(frame.data) <= 16 else 21
-    # Stuff count (4 bits) + CRC, with a fixed stuff bit before the stuff count and after every
-    # fourth bit of the two (ISO 11898-1:2015, 10.5).
-    crc_field = 4 + crc_bits + 1 + (4 + crc_bits) // 4
-    trailer = 1 + 2 + 7 + INTERFRAME_BITS  # CRC delimiter, ACK slot + delimiter, EOF, intermission
-    # Phases: the nominal rate runs up to and including BRS; the data rate from ESI to the CRC.
-    brs_index = len(head) - 6  # head ends with BRS, ESI, DLC(4)
-    nominal_head = brs_index + 1
-    stuffed_in_nominal = _stuff_bit_count(dynamic[:nominal_head])
-    data_phase = len(dynamic) - nominal_head + (stuff - stuffed_in_nominal) + crc_field
-    nominal = nominal_head + stuffed_in_nominal + trailer
-    if not frame.bitrate_switch:
-        return nominal + data_phase, 0
-    return nominal, data_phase
+    return _counted(frame)
 
 
 def frame_time_s(frame: Frame, bitrate: float = 1_000_000, data_bitrate: float | None = None) -> float:
@@ -135,10 +106,18 @@ def frame_time_s(frame: Frame, bitrate: float = 1_000_000, data_bitrate: float |
     """
     if bitrate <= 0 or (data_bitrate is not None and data_bitrate <= 0):
         raise ValueError(f"bit rates must be positive (bitrate={bitrate}, data_bitrate={data_bitrate})")
-    if not frame.is_fd:
-        return classic_frame_bits(frame) / bitrate
-    nominal_bits, data_bits = fd_frame_bits(frame)
-    return nominal_bits / bitrate + data_bits / (data_bitrate or bitrate)
+    data = frame.data
+    flags = 0
+    if frame.is_extended_id:
+        flags = _FLAG_EXT
+    if frame.is_fd:
+        flags |= _FLAG_FD | (_FLAG_BRS if frame.bitrate_switch else 0)
+    seconds: float = _frame_time(frame.arbitration_id, flags, data, len(data), bitrate, data_bitrate or 0.0)
+    if seconds < 0:  # the core's status: a NaN rate (C refuses it) or a frame no CAN bus carries
+        if bitrate != bitrate or data_bitrate != data_bitrate:
+            raise ValueError(f"bit rates must be positive (bitrate={bitrate}, data_bitrate={data_bitrate})")
+        raise _no_wire_time(frame)
+    return seconds
 
 
 def nominal_frame_time_s(frame: Frame, bitrate: float, data_bitrate: float | None = None) -> float:
