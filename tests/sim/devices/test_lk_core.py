@@ -24,6 +24,8 @@ from collections import Counter
 from typing import Any
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from servobus.core._lib import ffi, lib
 from servobus.frame import Frame
@@ -461,6 +463,56 @@ def measure(repeat: int = 20000) -> dict[str, float]:
 if __name__ == "__main__":
     for key, value in measure(int(sys.argv[1]) if len(sys.argv) > 1 else 20000).items():
         print(f"{key:20s} {value:10.1f}")
+
+
+# ---- fuzz: any frame into any state the glue can push ----
+
+
+@settings(deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    revision=st.sampled_from([V236, V235]),
+    motor_type=st.sampled_from(list(MotorType)),
+    run_state=st.integers(0, 2),
+    held=st.integers(0, 4),
+    brake=st.booleans(),
+    frames=st.lists(
+        st.tuples(
+            st.sampled_from([0x141, 0x280, 0x142, 0x7FF]),
+            st.integers(0, 7),  # flags: extended, FD, BRS
+            st.binary(min_size=0, max_size=64),
+            st.floats(0.0, 10.0),
+        ),
+        max_size=20,
+    ),
+)
+def test_random_frames_into_the_c_path(
+    revision: Revision,
+    motor_type: MotorType,
+    run_state: int,
+    held: int,
+    brake: bool,
+    frames: list[tuple[int, int, bytes, float]],
+) -> None:
+    """C answers a status (DONE with at most one reply, COLD leaving every byte as it was, or
+    SB_E_ARG) for any frame in any pushed state; .ci/sanitize runs this under ASan + UBSan."""
+    motor = ffi.new("sb_simmotor *")
+    device = LkMotor(1, model=LkModel(revision=revision, motor_type=motor_type), brake_engaged=brake)
+    device.core_attach(motor, None)
+    state = ffi.cast("sb_lk_state *", motor.state)
+    state.run_state, state.has_held = run_state, held > 0
+    state.held.mode, state.held.a, state.held.b = held, 1.0, math.nan
+    f, out, n = ffi.new("sb_simframe *"), ffi.new("sb_simframe[1]"), ffi.new("int *")
+    for can_id, flags, data, now in sorted(frames, key=lambda x: x[3]):
+        f.id, f.flags, f.len, f.t = can_id, flags, len(data), now
+        ffi.memmove(f.data, data, len(data))
+        before = bytes(ffi.buffer(motor))
+        status = lib.sb_lk_receive(motor, f, now, out, 1, n)
+        assert status in (lib.SB_HOT_DONE, lib.SB_HOT_COLD) and 0 <= n[0] <= 1
+        if status == lib.SB_HOT_COLD:
+            assert bytes(ffi.buffer(motor)) == before and n[0] == 0
+        elif n[0]:
+            assert out[0].len == 8 and out[0].id == (0x181 if revision is V236 else 0x141)
+            assert out[0].t == now + motor.turnaround_s
 
 
 # ---- through the engine (CoreCanNetwork) against the reference network ----
