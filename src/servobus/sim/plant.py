@@ -6,9 +6,10 @@ impedance) are cascaded loops around it with the motor's limits; the winding hea
 cools towards ambient. Everything is given at the **output shaft** (after the gear), as the
 manuals report angles and speeds; ``gear_ratio`` only converts to motor-side values (encoders).
 
-Sans-IO: :meth:`Plant.advance` takes the simulated time, integrates in fixed sub-steps
-(semi-implicit Euler, so the reported position is exactly the integral of the reported speed), and
-never reads a clock. Device models own a Plant and set its :class:`Control`.
+Sans-IO: :meth:`Plant.advance` takes the simulated time, integrates in fixed sub-steps on a grid
+from the last change (semi-implicit Euler, so the reported position is exactly the integral of the
+reported speed; see :class:`Plant`), and never reads a clock. Device models own a Plant and set
+its :class:`Control`.
 """
 
 from __future__ import annotations
@@ -129,8 +130,40 @@ class Impedance:
 Control = Off | Brake | CurrentControl | SpeedControl | PositionControl | Impedance
 
 
+class _State:
+    """The integrated quantities (csrc/sim_plant.h ``sb_plant_state``), committed or observed."""
+
+    __slots__ = ("current_a", "position_deg", "speed_dps", "speed_integral", "speed_ref", "temperature_c")
+
+    def __init__(self, temperature_c: float) -> None:
+        self.position_deg = 0.0
+        self.speed_dps = 0.0
+        self.current_a = 0.0
+        self.temperature_c = temperature_c
+        self.speed_integral = 0.0  # A, the speed loop's integral term
+        self.speed_ref = 0.0  # dps, the slew-limited reference the speed loop follows
+
+    def copy_from(self, other: _State) -> None:
+        self.position_deg = other.position_deg
+        self.speed_dps = other.speed_dps
+        self.current_a = other.current_a
+        self.temperature_c = other.temperature_c
+        self.speed_integral = other.speed_integral
+        self.speed_ref = other.speed_ref
+
+
 class Plant:
     """State and dynamics of one actuator; the device model reads it to fill its replies.
+
+    Integration runs on a grid: whole steps of ``max_step_s`` from the **anchor**, the time of the
+    last change (:meth:`set_control`, a write of ``external_torque_nm``, ``acceleration_dps2`` or a
+    state attribute), are committed; the state read at :attr:`now_s` is the last committed one plus
+    one partial step, which is not committed. So the state at a time depends only on the changes
+    and their times, never on when (or how often) the plant was advanced: a device may advance it
+    only when it is addressed or observed. A change first commits the state observed at
+    :attr:`now_s` and starts a new grid there. Once a committed step leaves the plant at rest
+    (unpowered and still, or braked) stepping stops, and the temperature read later is one
+    exponential cooling from that step's time. csrc/sim_plant.c is the same, bit for bit.
 
     Args:
         params: physical constants.
@@ -140,90 +173,182 @@ class Plant:
     """
 
     def __init__(self, params: PlantParams | None = None, *, now_s: float = 0.0, max_step_s: float = 5e-4):
+        if not max_step_s > 0:
+            raise ValueError(f"max_step_s={max_step_s!r} must be > 0")
+        if not math.isfinite(now_s):
+            raise ValueError(f"now_s={now_s!r} must be finite")
         self.params = params or PlantParams()
-        self.control: Control = Off()
-        self.position_deg = 0.0
-        self.speed_dps = 0.0
-        self.current_a = 0.0
-        self.temperature_c = self.params.ambient_c
-        self.external_torque_nm = 0.0  # a load the test or user applies to the shaft
-        self._now = now_s
+        self._control: Control = Off()
+        self._load = 0.0  # N·m, a load the test or user applies to the shaft
+        self._accel = self.params.max_acceleration_dps2
         self._max_step = max_step_s
-        self.acceleration_dps2 = self.params.max_acceleration_dps2
-        self._speed_integral = 0.0  # A, the speed loop's integral term
-        self._speed_ref = 0.0  # dps, the slew-limited reference the speed loop follows
+        self._anchor = now_s  # the grid's origin: the last change
+        self._steps = 0  # whole steps committed since the anchor
+        self._committed = _State(self.params.ambient_c)  # at anchor + steps * max_step
+        self._resting = True  # the committed state is at rest: no more steps, only cooling
+        self._now = now_s
+        self._obs = _State(self.params.ambient_c)  # the state at _now
+
+    # ---- what the device model reads (the state at now_s) ----
 
     @property
     def now_s(self) -> float:
         return self._now
 
     @property
+    def control(self) -> Control:
+        """What the drive is asked to do (change it with :meth:`set_control`)."""
+        return self._control
+
+    @property
+    def position_deg(self) -> float:
+        return self._obs.position_deg
+
+    @position_deg.setter
+    def position_deg(self, value: float) -> None:
+        self._write("position_deg", value)
+
+    @property
+    def speed_dps(self) -> float:
+        return self._obs.speed_dps
+
+    @speed_dps.setter
+    def speed_dps(self, value: float) -> None:
+        self._write("speed_dps", value)
+
+    @property
+    def current_a(self) -> float:
+        return self._obs.current_a
+
+    @current_a.setter
+    def current_a(self, value: float) -> None:
+        self._write("current_a", value)
+
+    @property
+    def temperature_c(self) -> float:
+        return self._obs.temperature_c
+
+    @temperature_c.setter
+    def temperature_c(self, value: float) -> None:
+        self._write("temperature_c", value)
+
+    @property
+    def external_torque_nm(self) -> float:
+        """A load applied to the shaft (tests, users)."""
+        return self._load
+
+    @external_torque_nm.setter
+    def external_torque_nm(self, value: float) -> None:
+        self._commit()
+        self._load = value
+
+    @property
+    def acceleration_dps2(self) -> float:
+        """Slew limit of the speed reference (``math.inf``: limited by the current only)."""
+        return self._accel
+
+    @acceleration_dps2.setter
+    def acceleration_dps2(self, value: float) -> None:
+        self._commit()
+        self._accel = value
+
+    @property
     def torque_nm(self) -> float:
-        return self.current_a * self.params.torque_constant_nm_per_a
+        return self._obs.current_a * self.params.torque_constant_nm_per_a
 
     @property
     def voltage_v(self) -> float:
-        return self.params.supply_v - abs(self.current_a) * self.params.supply_resistance_ohm
+        return self.params.supply_v - abs(self._obs.current_a) * self.params.supply_resistance_ohm
 
     @property
     def motor_position_deg(self) -> float:
         """Rotor angle (before the gear), what a motor-side encoder counts."""
-        return self.position_deg * self.params.gear_ratio
+        return self._obs.position_deg * self.params.gear_ratio
 
     @property
     def resting(self) -> bool:
-        """Unpowered, still and at ambient temperature: :meth:`advance` only moves its clock.
+        """Unpowered, still and at ambient temperature: :meth:`advance` only moves its clock."""
+        obs = self._obs
+        return self._at_rest(obs) and obs.speed_dps == 0.0 and obs.temperature_c == self.params.ambient_c
 
-        Until its control changes such a plant reaches the same state however its time is cut into
-        steps, so a device may advance it over many frames at once.
-        """
-        return self._at_rest() and self.speed_dps == 0.0 and self.temperature_c == self.params.ambient_c
+    # ---- changes ----
 
     def set_control(self, control: Control) -> None:
-        if type(control) is not type(self.control):
-            self._speed_integral = 0.0  # a new mode starts its loops fresh, from the present speed
-            self._speed_ref = self.speed_dps
-        self.control = control
+        self._commit()
+        if type(control) is not type(self._control):
+            state = self._committed  # a new mode starts its loops fresh, from the present speed
+            state.speed_integral = 0.0
+            state.speed_ref = state.speed_dps
+            self._obs.copy_from(state)
+        self._control = control
+        self._resting = self._at_rest(self._committed)
 
     def advance(self, now_s: float) -> None:
-        """Integrate up to ``now_s`` (no-op if it is not later than the plant's time)."""
-        remaining = now_s - self._now
-        if remaining <= 0:
+        """Integrate up to ``now_s`` (no-op if it is not later than the plant's time).
+
+        Raises:
+            ValueError: ``now_s`` is infinite (the grid would never get there).
+        """
+        if not now_s > self._now:
             return
-        if self._at_rest():
-            if self.temperature_c != self.params.ambient_c or self.speed_dps != 0.0:
-                self._cool(remaining)  # idle motors cost one step however long they idle
-            self._now = now_s  # (and nothing at all once cooled to ambient: the step would change nothing)
-            return
-        while remaining > 1e-12:
-            dt = min(self._max_step, remaining)
-            self._step(dt)
-            remaining -= dt
+        if now_s == math.inf:
+            raise ValueError("now_s=inf: a plant cannot advance to infinity")
         self._now = now_s
+        state = self._committed
+        if not self._resting:
+            anchor, step, steps = self._anchor, self._max_step, self._steps
+            while anchor + (steps + 1) * step <= now_s:
+                self._step(state, step)
+                steps += 1
+                if self._at_rest(state):
+                    self._resting = True
+                    break
+            self._steps = steps
+        obs = self._obs
+        obs.copy_from(state)
+        dt = now_s - (self._anchor + self._steps * self._max_step)
+        if dt > 1e-12:
+            if self._resting:
+                if obs.temperature_c != self.params.ambient_c or obs.speed_dps != 0.0:
+                    self._cool(obs, dt)  # (at ambient and still, cooling would change nothing)
+            else:
+                self._step(obs, dt)
 
-    # ---- dynamics ----
+    def _commit(self) -> None:
+        """Make the state at now_s the committed one and start a new grid there."""
+        self._committed.copy_from(self._obs)
+        self._anchor = self._now
+        self._steps = 0
 
-    def _at_rest(self) -> bool:
-        unpowered = isinstance(self.control, Off | Brake) and self.current_a == 0.0
-        return unpowered and (self.speed_dps == 0.0 or isinstance(self.control, Brake))
+    def _write(self, name: str, value: float) -> None:
+        self._commit()
+        setattr(self._committed, name, value)
+        self._obs.copy_from(self._committed)
+        self._resting = self._at_rest(self._committed)
 
-    def _cool(self, dt: float) -> None:
+    # ---- dynamics (csrc/sim_plant.c: the same operations in the same order) ----
+
+    def _at_rest(self, s: _State) -> bool:
+        unpowered = isinstance(self._control, Off | Brake) and s.current_a == 0.0
+        return unpowered and (s.speed_dps == 0.0 or isinstance(self._control, Brake))
+
+    def _cool(self, s: _State, dt: float) -> None:
         p = self.params
         tau = p.thermal_resistance_c_per_w * p.thermal_capacity_j_per_c
-        self.temperature_c = p.ambient_c + (self.temperature_c - p.ambient_c) * math.exp(-dt / tau)
-        if isinstance(self.control, Brake):
-            self.speed_dps = 0.0
+        s.temperature_c = p.ambient_c + (s.temperature_c - p.ambient_c) * math.exp(-dt / tau)
+        if isinstance(self._control, Brake):
+            s.speed_dps = 0.0
 
-    def _current_command(self, dt: float) -> float:
+    def _current_command(self, s: _State, dt: float) -> float:
         p = self.params
-        control = self.control
+        control = self._control
         if isinstance(control, Off | Brake):
             return 0.0
         if isinstance(control, CurrentControl):
             return _clamp(control.current_a, p.max_current_a)
         if isinstance(control, Impedance):
-            error = control.position_rad - self.position_deg * _RAD_PER_DEG
-            speed_error = control.velocity_rad_s - self.speed_dps * _RAD_PER_DEG
+            error = control.position_rad - s.position_deg * _RAD_PER_DEG
+            speed_error = control.velocity_rad_s - s.speed_dps * _RAD_PER_DEG
             torque = control.kp * error + control.kd * speed_error + control.torque_ff_nm
             return _clamp(torque / p.torque_constant_nm_per_a, p.max_current_a)
         if isinstance(control, PositionControl):
@@ -233,48 +358,52 @@ class Plant:
                 if control.max_speed_dps is None
                 else min(control.max_speed_dps, p.max_speed_dps)
             )
-            error = control.position_deg - self.position_deg
+            error = control.position_deg - s.position_deg
             wanted = 2 * math.pi * p.position_bandwidth_hz * error
             # never ask for more speed than the acceleration limit can brake to zero within the error:
             # v = sqrt(2·a·|e|), or long fast moves overshoot and ring
-            limit = min(limit, math.sqrt(2 * self.acceleration_dps2 * abs(error)))
-            return self._speed_loop(_clamp(wanted, limit), control.max_current_a, dt)
-        return self._speed_loop(control.speed_dps, control.max_current_a, dt)
+            limit = min(limit, math.sqrt(2 * self._accel * abs(error)))
+            return self._speed_loop(s, _clamp(wanted, limit), control.max_current_a, dt)
+        return self._speed_loop(s, control.speed_dps, control.max_current_a, dt)
 
-    def _speed_loop(self, target_dps: float, max_current_a: float | None, dt: float) -> float:
+    def _speed_loop(self, s: _State, target_dps: float, max_current_a: float | None, dt: float) -> float:
         p = self.params
         limit = min(max_current_a, p.max_current_a) if max_current_a is not None else p.max_current_a
-        step = _clamp(target_dps - self._speed_ref, self.acceleration_dps2 * dt)
-        self._speed_ref += step
+        step = _clamp(target_dps - s.speed_ref, self._accel * dt)
+        s.speed_ref += step
         # inertia feed-forward of the reference's acceleration: the loop follows ramps without lag
         feed_forward = p.inertia_kgm2 * step / dt * _RAD_PER_DEG / p.torque_constant_nm_per_a
         omega = 2 * math.pi * p.speed_bandwidth_hz
         gain = p.inertia_kgm2 * omega / p.torque_constant_nm_per_a  # A per rad/s: closes at the bandwidth
-        error = (self._speed_ref - self.speed_dps) * _RAD_PER_DEG
-        command = gain * error + self._speed_integral + feed_forward
+        error = (s.speed_ref - s.speed_dps) * _RAD_PER_DEG
+        command = gain * error + s.speed_integral + feed_forward
         if abs(command) < limit:  # anti-windup: integrate only while not saturated
-            self._speed_integral += gain * (omega / 4) * error * dt
+            s.speed_integral += gain * (omega / 4) * error * dt
         return _clamp(command, limit)
 
-    def _step(self, dt: float) -> None:
+    def _step(self, s: _State, dt: float) -> None:
         p = self.params
-        command = self._current_command(dt)
-        self.current_a += (command - self.current_a) * min(1.0, dt / p.current_time_constant_s)
-        if command == 0.0 and abs(self.current_a) < 1e-6:
-            self.current_a = 0.0  # settled: lets an unpowered motor reach the at-rest fast path
-        if isinstance(self.control, Brake):
-            self.speed_dps = 0.0
+        command = self._current_command(s, dt)
+        s.current_a += (command - s.current_a) * min(1.0, dt / p.current_time_constant_s)
+        if command == 0.0 and abs(s.current_a) < 1e-6:
+            s.current_a = 0.0  # settled: lets an unpowered motor reach the at-rest fast path
+        if isinstance(self._control, Brake):
+            s.speed_dps = 0.0
         else:
-            speed_rad = self.speed_dps * _RAD_PER_DEG
-            torque = self.torque_nm + self.external_torque_nm - p.viscous_friction_nm_s_per_rad * speed_rad
+            speed_rad = s.speed_dps * _RAD_PER_DEG
+            torque = (
+                s.current_a * p.torque_constant_nm_per_a
+                + self._load
+                - p.viscous_friction_nm_s_per_rad * speed_rad
+            )
             speed_rad += torque / p.inertia_kgm2 * dt
-            self.speed_dps = speed_rad / _RAD_PER_DEG
-            if self.current_a == 0.0 and self.external_torque_nm == 0.0 and abs(self.speed_dps) < 1e-6:
-                self.speed_dps = 0.0  # friction has stopped it (the exponential tail never would)
-        self.position_deg += self.speed_dps * dt  # semi-implicit: integrates the speed just reported
-        heat_w = self.current_a**2 * p.winding_resistance_ohm
-        cooling_w = (self.temperature_c - p.ambient_c) / p.thermal_resistance_c_per_w
-        self.temperature_c += (heat_w - cooling_w) / p.thermal_capacity_j_per_c * dt
+            s.speed_dps = speed_rad / _RAD_PER_DEG
+            if s.current_a == 0.0 and self._load == 0.0 and abs(s.speed_dps) < 1e-6:
+                s.speed_dps = 0.0  # friction has stopped it (the exponential tail never would)
+        s.position_deg += s.speed_dps * dt  # semi-implicit: integrates the speed just reported
+        heat_w = s.current_a * s.current_a * p.winding_resistance_ohm  # x*x, not x**2: C's pow may differ
+        cooling_w = (s.temperature_c - p.ambient_c) / p.thermal_resistance_c_per_w
+        s.temperature_c += (heat_w - cooling_w) / p.thermal_capacity_j_per_c * dt
 
 
 def _clamp(value: float, limit: float) -> float:
