@@ -464,7 +464,8 @@ static sb_control effective_control(const sb_lk_state *s, double now_s)
 
 static int args_ok(const sb_simmotor *m, double now_s, const sb_simframe *out, int cap, const int *n_out)
 {
-    return m && n_out && out && cap >= 1 && m->family == SB_FAMILY_LK && !isnan(now_s);
+    return m && n_out && out && cap >= 1 && m->family == SB_FAMILY_LK && !isnan(now_s) &&
+           sb_plant_check(&m->plant) == SB_OK;  /* the plant functions would do nothing with it */
 }
 
 int sb_lk_receive(sb_simmotor *m, const sb_simframe *in, double now_s, sb_simframe *out, int cap, int *n_out)

@@ -378,6 +378,9 @@ def test_the_c_functions_check_their_arguments() -> None:
     motor.family = lib.SB_FAMILY_MYACTUATOR
     assert receive(motor, f, 0.0, out, 1, n) == lib.SB_E_ARG
     motor.family = lib.SB_FAMILY_LK
+    step, motor.plant.max_step_s = motor.plant.max_step_s, 0.0  # a plant sb_plant_check refuses
+    assert receive(motor, f, 0.0, out, 1, n) == lib.SB_E_ARG and poll(motor, 0.0, out, 1, n) == lib.SB_E_ARG
+    motor.plant.max_step_s = step
     assert receive(motor, f, 0.0, out, 1, n) == lib.SB_HOT_DONE and n[0] == 1
     assert lib.sb_lk_next_deadline(motor) == math.inf and lib.sb_lk_next_deadline(null) == math.inf
 
