@@ -127,7 +127,7 @@ class LkCore:
         s.revision = _REVISIONS[model.revision]
         s.motor_type = _MOTOR_TYPES[model.motor_type]
         s.motor_id = device.motor_id
-        angles = device.angles
+        angles = device._angles
         s.per_turn = angles.per_turn
         s.amps_per_count = device._amps_per_count
         iq_amps = IQ_AMPS_PER_COUNT.get(model.motor_type)
@@ -169,7 +169,7 @@ class LkCore:
                 counts[i] = 0
         device._state = self._run_states[s.run_state]
         device._held = control_from_c(s.held) if s.has_held else None
-        device.angles.origin = s.angle_origin
+        device._angles.origin = s.angle_origin
 
 
 def adopt_plant(plant: Plant, motor: Any) -> Plant:

@@ -201,7 +201,7 @@ class LkMotor(ListeningDevice):
             if acceleration_dps2 is not None
             else params.max_acceleration_dps2 * params.gear_ratio,
         )
-        self.angles = AngleFrame(per_turn)
+        self._angles = AngleFrame(per_turn)
         self.brake_at_power_up = brake_engaged
         self.unresponsive = False  # a fault knob, not motor RAM: a reboot keeps it
         self._counters: Counter[str] = Counter()
@@ -241,6 +241,13 @@ class LkMotor(ListeningDevice):
         if self._twin is not None:
             self._twin.pull()
         self._held = value
+
+    @property
+    def angles(self) -> AngleFrame:
+        """The encoder counts' zero points (V2.36 0x80 moves the multi-turn origin, in C too)."""
+        if self._twin is not None:
+            self._twin.pull()
+        return self._angles
 
     @property
     def unresponsive(self) -> bool:
