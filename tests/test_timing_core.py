@@ -10,6 +10,9 @@ from __future__ import annotations
 
 import math
 import struct
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -21,6 +24,7 @@ from servobus import timing
 from servobus.core._lib import ffi, lib
 from servobus.frame import Frame
 
+CSRC = Path(__file__).resolve().parents[1] / "csrc"
 FD_LENGTHS = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
 EXT, FD, BRS = lib.SB_FRAME_EXT, lib.SB_FRAME_FD, lib.SB_FRAME_BRS
 
@@ -147,6 +151,31 @@ def test_infinite_bitrate_takes_no_time_and_a_missing_data_rate_is_the_nominal_o
     nominal, data = timing.fd_frame_bits(frame)
     for no_rate in (0.0, -1.0, -math.inf):
         assert lib.sb_can_frame_time(5, FD | BRS, bytes(16), 16, 1e6, no_rate) == nominal / 1e6 + data / 1e6
+
+
+def test_byte_tables_are_generated() -> None:
+    """csrc/sim_timing_tables.h is exactly what csrc/gen_timing_tables.py prints (no hand edits)."""
+    generated = subprocess.run(
+        [sys.executable, str(CSRC / "gen_timing_tables.py")], check=True, capture_output=True, text=True
+    ).stdout
+    assert (CSRC / "sim_timing_tables.h").read_text() == generated
+
+
+@pytest.mark.parametrize("state", range(8))
+def test_every_byte_from_every_run_state_matches_the_reference(state: int) -> None:
+    """The stuffing table's every entry through C: a standard frame whose identifier ends in the run
+    state (bit, length) before each data byte value, compared with the reference."""
+    run_bit, run_length = state >> 2, (state & 3) + 1
+    # The first data byte ends in `run_length` bits of `run_bit` after alternating bits (runs of one),
+    # so the second byte starts in exactly that run state.
+    lead = 0
+    for position in range(7, -1, -1):
+        alternate = (position - run_length) % 2 == 0
+        bit = run_bit if position < run_length else (1 - run_bit if alternate else run_bit)
+        lead |= bit << position
+    for byte in range(256):
+        frame = Frame(arbitration_id=0x2A5, data=bytes([lead, byte]))
+        assert _c_bits(0x2A5, 0, frame.data)[1] == ref.classic_frame_bits(frame)
 
 
 # ---- 2. argument checks ----
