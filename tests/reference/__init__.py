@@ -7,6 +7,7 @@ de-framers as plain state machines over a growing buffer. The package never impo
 * ``reference.crc``: CRC-16/MODBUS and CRC-32/ISO-HDLC (csrc/crc.c).
 * ``reference.packing``: field scaling and the six frame layouts (csrc/bitpack.c).
 * ``reference.deframe``: the three stream de-framers (csrc/deframe.c).
+* ``reference.timing``: CAN / CAN FD bit counts, stuffing and CRC-15 built bit by bit (csrc/sim_timing.c).
 * ``reference.settings``: the Hypothesis settings of tests/test_oracle_*.py.
 
 tests/ is on sys.path (tests/conftest.py makes sure), so test modules import it as ``reference``.

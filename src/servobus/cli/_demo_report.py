@@ -118,6 +118,17 @@ class Summary:
     def errors(self) -> int:
         return self.timeouts + self.not_sent + self.malformed + self.faults
 
+    @property
+    def run_pct(self) -> float:
+        """Ticks run, in % of the ticks due (run + missed)."""
+        due = self.ticks + self.missed_ticks
+        return 100.0 * self.ticks / due if due else 0.0
+
+    def machine(self) -> str:
+        """This machine and its load, as the summary states them beside its figures."""
+        load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+        return f"this machine: {os.cpu_count() or 1} cores, load average {load:.1f}"
+
     def why(self) -> str | None:
         """Why the target rate was not kept (None when it was, within 2 %)."""
         if self.ticks == 0 or self.achieved_hz >= 0.98 * self.hz:
@@ -127,16 +138,15 @@ class Summary:
         sim_ms = self.simulator_cpu_s / self.ticks * 1e3
         cores = os.cpu_count() or 1
         load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-        machine = f"this machine: {cores} cores, load average {load:.1f}"
+        machine = self.machine()
         if cpu_share < 0.8:
             machine += f"; the process got only {cpu_share:.0%} of a core, other work held the rest"
         if self.tick_p50_ms > period_ms:
             return (
                 f"CPU-bound: a tick took {self.tick_p50_ms:.2f} ms (median, start to last reply; the wire "
-                f"needs {self.wire_ms:.2f} ms), {sim_ms:.2f} ms of it simulating {self.motors} motors (the "
-                f"simulator integrates each motor's mechanics at every frame on its bus); simulator and host "
-                f"share one core in one process, and {self.hz:g} Hz leaves {period_ms:.2f} ms per tick "
-                f"({machine}). Fewer --motors or a lower --hz keep up."
+                f"needs {self.wire_ms:.2f} ms), {sim_ms:.2f} ms of it simulating {self.motors} motors; "
+                f"simulator and host share one core in one process, and {self.hz:g} Hz leaves "
+                f"{period_ms:.2f} ms per tick ({machine}). Fewer --motors or a lower --hz keep up."
             )
         if cpu_share < 0.8:
             return (
@@ -152,7 +162,12 @@ class Summary:
 
     def as_dict(self) -> dict[str, Any]:
         out = asdict(self)
-        out.update(achieved_hz=round(self.achieved_hz, 2), errors=self.errors, why=self.why())
+        out.update(
+            achieved_hz=round(self.achieved_hz, 2),
+            run_pct=round(self.run_pct, 2),
+            errors=self.errors,
+            why=self.why(),
+        )
         del out["live"]  # (a summary in JSON comes of --duration: never live)
         return out
 
@@ -171,6 +186,8 @@ def summary_lines(s: Summary) -> list[str]:
         f"achieved    {s.achieved_hz:,.1f} ticks/s of {s.hz:g} Hz over {s.seconds:.2f} s "
         f"({s.ticks:,} ticks, {s.pairs:,} request/reply pairs, {s.pairs / max(s.seconds, 1e-9):,.0f}/s)",
         f"missed      {s.missed_ticks:,} ticks (pacer lateness p99 {s.late_p99_ms:.2f} ms)",
+        f"ran         {s.run_pct:.2f} % of the {s.ticks + s.missed_ticks:,} ticks due; simulating the motors "
+        f"took {s.simulator_cpu_s / max(s.ticks, 1) * 1e3:.3f} ms of CPU per tick ({s.machine()})",
         f"latency     p50 {_ms(s.latency_p50_ms)}, p99 {_ms(s.latency_p99_ms)} "
         "(request left -> reply in; worst bus)",
         f"bus load    mean {_pct(s.bus_load_mean_pct)}, max {_pct(s.bus_load_max_pct)}",

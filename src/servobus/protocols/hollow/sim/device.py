@@ -71,7 +71,8 @@ from servobus.protocols.hollow import (
 from servobus.protocols.hollow.codec import decode_request_frame, reply_frame
 from servobus.protocols.hollow.ids import check_host_id, check_motor_id
 from servobus.protocols.hollow.replies import EXTENDED_POSITION_LIMITS_DEG
-from servobus.sim.device import Emission, ListeningDevice
+from servobus.protocols.hollow.sim.core import HollowCore
+from servobus.sim.device import Emission
 from servobus.sim.plant import (
     Control,
     CurrentControl,
@@ -160,7 +161,7 @@ class HeldSetpoint:
     kd: int
 
 
-class HollowMotor(ListeningDevice):
+class HollowMotor(HollowCore):
     """One hollow-series motor on a CAN or CAN FD bus (implements :class:`~servobus.sim.device.Device`).
 
     Args:
