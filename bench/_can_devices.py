@@ -144,8 +144,7 @@ def _next_visible(network: CoreCanNetwork, now: float) -> float:
     """When ``network`` next has a frame for the host: it first runs over what the host can neither
     see nor change (its own requests ending, the motors' turnaround), so the process wakes once per
     reply instead of once per frame on the wire."""
-    network.run_ahead(now)
-    at = network.next_event_s()
+    at = network.run_ahead(now)
     return math.inf if at is None else at
 
 

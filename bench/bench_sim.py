@@ -137,12 +137,12 @@ def drive(
             for frame in batch:
                 net.send(frame, t)
             want = received.count + len(batch)
+            at = net.next_event_s()
             while received.count < want:
-                at = net.next_event_s()
                 if at is None:
                     raise RuntimeError(f"{type(net).__name__}: {want - received.count} replies never came")
                 received.add(net.advance(at))
-                net.run_ahead(at)
+                at = net.run_ahead(at)
             t = net.now_s
             if t >= until_s:
                 break

@@ -418,15 +418,16 @@ class CoreCanNetwork:
         self._tidy()
         return received
 
-    def run_ahead(self, host_time_s: float) -> None:
+    def run_ahead(self, host_time_s: float) -> float | None:
         """Run on, past ``host_time_s``, over what the host can neither see nor change
-        (:meth:`SimCanNetwork.run_ahead <servobus.sim.network.SimCanNetwork.run_ahead>`)."""
-        if self.to_devices is not None or not math.isfinite(self._net.bitrate):
-            return
-        received: list[tuple[float, Frame]] = []
-        self._run(_INF, _AHEAD, host_time_s, received)
-        assert not received, "run_ahead() went past a frame the host receives"
-        self._tidy()
+        (:meth:`SimCanNetwork.run_ahead <servobus.sim.network.SimCanNetwork.run_ahead>`); return
+        :meth:`next_event_s` after it (one call where a driver wants both)."""
+        if self.to_devices is None and math.isfinite(self._net.bitrate):
+            received: list[tuple[float, Frame]] = []
+            self._run(_INF, _AHEAD, host_time_s, received)
+            assert not received, "run_ahead() went past a frame the host receives"
+            self._tidy()
+        return self.next_event_s()
 
     def run_until_idle(self, limit_s: float = 1.0) -> list[tuple[float, Frame]]:
         """Advance until nothing is pending or ``limit_s`` of virtual time has passed."""

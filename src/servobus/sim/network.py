@@ -176,7 +176,7 @@ class SimCanNetwork:
         if len(self._log.ends) >= LOG_LIMIT:
             self._drop_log()
 
-    def run_ahead(self, host_time_s: float) -> None:
+    def run_ahead(self, host_time_s: float) -> float | None:
         """Run on, past ``host_time_s``, over what the host can neither see nor change.
 
         The host (whose clock reads ``host_time_s``) only sees frames the devices send, and only
@@ -190,10 +190,13 @@ class SimCanNetwork:
 
         Nothing is run with faults towards the devices (their delays reorder the host's frames) or
         on a zero-latency bus (a device frame could end at the same instant a host frame does).
+
+        Returns:
+            :meth:`next_event_s` after it (one call where a driver wants both).
         """
         bus = self.bus
         if self.to_devices is not None or not math.isfinite(bus.bitrate):
-            return
+            return self.next_event_s()
         received: list[tuple[float, Frame]] = []
         while (head := bus.head(HOST)) is not None and head[0] <= host_time_s:
             t = self.next_event_s()
@@ -205,6 +208,7 @@ class SimCanNetwork:
             self._step(t, received)
             assert not received, "run_ahead() went past a frame the host receives"
         self._tidy()
+        return self.next_event_s()
 
     def run_until_idle(self, limit_s: float = 1.0) -> list[tuple[float, Frame]]:
         """Advance until nothing is pending or ``limit_s`` of virtual time has passed."""

@@ -232,8 +232,9 @@ class SimTransport(Transport[Frame, Frame]):
             self._deliver(frames)  # a consumer may send (and arm) from here
         if generation == self._generation:
             # Events the host can neither see nor change need no timer of their own.
-            network.run_ahead(until)
-            self._rearm(generation)
+            at = network.run_ahead(until)
+            if at is not None:
+                self._arm(at, generation)
 
 
 # A received frame is the sender's own object: the host gets a copy stamped with the time it ended.
