@@ -7,7 +7,7 @@ Prints a JSON list of pty paths (one per bus, an SLCAN adapter each) on its firs
 serves until stdin closes or SIGTERM. Motor ids run 1, 2, 3, ... across the buses (32 motors keep
 distinct ids).
 
-Each bus is the simulator's own sans-IO model: a :class:`~servobus.sim.network.SimCanNetwork` with the
+Each bus is the simulator's own sans-IO model: a :class:`~servobus.sim.corenet.CoreCanNetwork` with the
 bit-exact :class:`~servobus.sim.canbus.CanBusModel` (1 Mbit/s; with ``--fd`` a 5 Mbit/s data phase) and
 the simulator's device models (``MyActuatorMotor``, ``HollowMotor(fd_enabled=True)``, with their
 turnaround), clocked by ``time.monotonic()``. What differs from ``python -m servobus.sim --slcan`` is only
@@ -38,8 +38,8 @@ from collections.abc import Callable, Sequence
 
 from servobus.frame import Frame
 from servobus.sim.canbus import CanBusModel
+from servobus.sim.corenet import CoreCanNetwork
 from servobus.sim.device import Device
-from servobus.sim.network import SimCanNetwork
 from servobus.sim.slcan import parse_frame
 from servobus.transports.slcan import encode_line
 
@@ -71,7 +71,7 @@ def devices_for(family: str, ids: Sequence[int]) -> list[Device]:
 class Port:
     """One pty (the adapter end) and the simulated bus behind it."""
 
-    def __init__(self, network: SimCanNetwork) -> None:
+    def __init__(self, network: CoreCanNetwork) -> None:
         self.master, self.slave = os.openpty()
         tty.setraw(self.slave)
         os.set_blocking(self.master, False)
@@ -140,7 +140,7 @@ def serve(ports: list[Port], clock: Callable[[], float], stop_fd: int) -> None:
                 port.next_s = _next_visible(network, at)
 
 
-def _next_visible(network: SimCanNetwork, now: float) -> float:
+def _next_visible(network: CoreCanNetwork, now: float) -> float:
     """When ``network`` next has a frame for the host: it first runs over what the host can neither
     see nor change (its own requests ending, the motors' turnaround), so the process wakes once per
     reply instead of once per frame on the wire."""
@@ -182,7 +182,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         ids = range(first, first + n)
         first += n
         bus = CanBusModel(bitrate=1_000_000, data_bitrate=5_000_000 if args.fd else None)
-        ports.append(Port(SimCanNetwork(devices_for(args.family, ids), bus=bus)))
+        ports.append(Port(CoreCanNetwork(devices_for(args.family, ids), bus=bus)))
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
     t0 = time.monotonic()
     print(json.dumps([port.path for port in ports]), flush=True)

@@ -32,8 +32,8 @@ from typing import NoReturn
 
 from servobus.protocols import available_families, get_family
 from servobus.sim.attach import serve_rs485, serve_slcan
+from servobus.sim.corenet import CoreCanNetwork
 from servobus.sim.family import Setup, SimFamily, SimOptions
-from servobus.sim.network import SimCanNetwork
 from servobus.sim.pty import PtyPort
 
 ERROR_PREFIX = "servobus.sim: error: "
@@ -186,7 +186,7 @@ async def serve(setup: Setup, port: PtyPort) -> None:
     if setup.serial_devices:
         await serve_rs485(setup.serial_devices, port, baud=setup.baud)
     else:
-        await serve_slcan(SimCanNetwork(setup.can_devices), port)
+        await serve_slcan(CoreCanNetwork(setup.can_devices), port)
 
 
 async def run(args: argparse.Namespace, setup: Setup) -> None:

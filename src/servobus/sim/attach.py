@@ -25,6 +25,7 @@ from typing import Any
 import can
 
 from servobus.frame import Frame
+from servobus.sim.corenet import CoreCanNetwork
 from servobus.sim.device import SerialDevice, SerialEmission
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.pty import PtyPort
@@ -47,7 +48,7 @@ class SimClock:
 
 
 async def _run_network(
-    network: SimCanNetwork,
+    network: SimCanNetwork | CoreCanNetwork,
     inbox: asyncio.Queue[Frame],
     deliver: Callable[[Frame], None],
     clock: SimClock,
@@ -66,7 +67,9 @@ async def _run_network(
             deliver(received)
 
 
-async def serve_slcan(network: SimCanNetwork, port: PtyPort, adapter: SlcanAdapter | None = None) -> None:
+async def serve_slcan(
+    network: SimCanNetwork | CoreCanNetwork, port: PtyPort, adapter: SlcanAdapter | None = None
+) -> None:
     """Serve ``network`` to a host that opens ``port.name`` as an SLCAN adapter.
 
     The adapter's bit rates (``S``/``Y`` commands) set the network's bus model, as a real adapter's
@@ -95,7 +98,7 @@ async def serve_slcan(network: SimCanNetwork, port: PtyPort, adapter: SlcanAdapt
     await _run_together(_run_network(network, inbox, deliver, clock), read_host())
 
 
-async def serve_python_can(network: SimCanNetwork, bus: can.BusABC) -> None:
+async def serve_python_can(network: SimCanNetwork | CoreCanNetwork, bus: can.BusABC) -> None:
     """Serve ``network`` on a python-can bus (typically ``virtual``): its frames in, replies out."""
     loop = asyncio.get_running_loop()
     clock = SimClock()

@@ -1,7 +1,8 @@
 """The in-process bus: a transport straight onto a simulated CAN network, on the event loop's clock.
 
-:class:`SimTransport` joins the orchestrator to a :class:`~servobus.sim.network.SimCanNetwork` with
-no pty, adapter or thread between them:
+:class:`SimTransport` joins the orchestrator to a simulated CAN network with no pty, adapter or
+thread between them: a :class:`~servobus.sim.corenet.CoreCanNetwork` (the C engine) unless it is
+given a network, or a :class:`~servobus.sim.network.SimCanNetwork` (the Python reference) given.
 
 * **Zero-copy out**: :meth:`SimTransport.send` hands the caller's own :class:`~servobus.frame.Frame`
   to the network (``network.send(frame, now)``) from the caller's stack, with no queue hop; the
@@ -38,6 +39,7 @@ from collections.abc import Iterable
 from servobus.errors import TransportError
 from servobus.frame import Frame
 from servobus.sim.canbus import CanBusModel
+from servobus.sim.corenet import CoreCanNetwork
 from servobus.sim.device import Device
 from servobus.sim.faults import FaultInjector
 from servobus.sim.network import SimCanNetwork
@@ -50,7 +52,8 @@ class SimTransport(Transport[Frame, Frame]):
     """A host on a simulated CAN (FD) bus, in the same process.
 
     Args:
-        network: the simulated network to join; None builds one from the next four arguments.
+        network: the simulated network to join; None builds a CoreCanNetwork from the next four
+            arguments.
         devices: the simulated devices of a new network.
         bus: its bus model (1 Mbit/s classic CAN by default).
         to_devices, to_host: fault injectors on each direction of a new network's link.
@@ -65,7 +68,7 @@ class SimTransport(Transport[Frame, Frame]):
 
     def __init__(
         self,
-        network: SimCanNetwork | None = None,
+        network: SimCanNetwork | CoreCanNetwork | None = None,
         *,
         devices: Iterable[Device] = (),
         bus: CanBusModel | None = None,
@@ -79,7 +82,7 @@ class SimTransport(Transport[Frame, Frame]):
         reopen_backoff_s: tuple[float, float] = (0.05, 2.0),
     ) -> None:
         if network is None:
-            network = SimCanNetwork(devices, bus=bus, to_devices=to_devices, to_host=to_host)
+            network = CoreCanNetwork(devices, bus=bus, to_devices=to_devices, to_host=to_host)
         elif devices or bus is not None or to_devices is not None or to_host is not None:
             raise ValueError("give a network, or the devices, bus and faults of a new one, not both")
         super().__init__(

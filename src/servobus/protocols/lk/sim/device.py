@@ -41,7 +41,7 @@ import enum
 import math
 from collections import Counter
 from collections.abc import Callable, Mapping
-from typing import Any, TypeVar
+from typing import Any, ClassVar, TypeVar
 
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
@@ -65,6 +65,7 @@ from servobus.protocols.lk.codec import REQUESTS, check_available, reply_frame
 from servobus.protocols.lk.ids import MULTI_MOTOR_ID, MULTI_MOTOR_IDS, MULTI_MOTOR_REPLY_CODE, request_id
 from servobus.protocols.lk.model import encoder_counts_per_turn
 from servobus.protocols.lk.sim.control import CONTROL_COMMANDS, MotionContext, plant_control
+from servobus.protocols.lk.sim.core import CORE_FAMILY, LkCore, adopt_plant, release_plant
 from servobus.protocols.lk.sim.replies import encoder_reply, single_turn_deg, status1, status2, status3
 from servobus.protocols.lk.sim.state import (
     LK_PLANT_PARAMS,
@@ -74,7 +75,7 @@ from servobus.protocols.lk.sim.state import (
     amps_per_count,
     default_settings,
 )
-from servobus.sim.device import Emission, ListeningDevice
+from servobus.sim.device import BusLink, Emission, ListeningDevice
 from servobus.sim.plant import (
     Brake,
     Control,
@@ -126,6 +127,12 @@ class RunState(enum.Enum):
 class LkMotor(ListeningDevice):
     """One LK motor on a CAN bus (implements :class:`~servobus.sim.device.Device`).
 
+    On a network that runs the C core (issue 27), the motor gets a C twin (:meth:`core_attach`,
+    :mod:`~servobus.protocols.lk.sim.core`) that answers the control-loop traffic; the attributes C
+    changes (:attr:`state`, :attr:`held`, the counters, the angle frame) are taken back before
+    Python reads them, and the knobs C reads (:attr:`unresponsive`, :attr:`turnaround_s`) are
+    pushed when they are set.
+
     Args:
         motor_id: 1..32; requests on 0x140+ID, replies on :func:`~servobus.protocols.lk.reply_id`.
         model: revision, motor type (iq/power units, spec §8.2) and encoder width.
@@ -149,6 +156,9 @@ class LkMotor(ListeningDevice):
     Raises:
         ValueError: ``motor_id`` outside 1..32, a negative time, or a setting of the wrong scheme.
     """
+
+    CORE_FAMILY: ClassVar[int] = CORE_FAMILY
+    _twin: LkCore | None = None  # the C twin while on a C-core network
 
     def __init__(
         self,
@@ -191,18 +201,105 @@ class LkMotor(ListeningDevice):
             if acceleration_dps2 is not None
             else params.max_acceleration_dps2 * params.gear_ratio,
         )
-        self.angles = AngleFrame(per_turn)
+        self._angles = AngleFrame(per_turn)
         self.brake_at_power_up = brake_engaged
         self.unresponsive = False  # a fault knob, not motor RAM: a reboot keeps it
         self._counters: Counter[str] = Counter()
         self._conditions = 0  # fault conditions present now (bits of ErrorState)
         # RAM state, set by _power_up.
-        self.state = RunState.ON
-        self.held: Control | None = None
+        self._state = RunState.ON
+        self._held: Control | None = None
         self.brake_engaged = brake_engaged
         self._latched = 0
         self._busy_until_s = -math.inf
         self._power_up()
+
+    # ---- what the C twin changes or reads (issue 27: see the class docstring) ----
+
+    @property
+    def state(self) -> RunState:
+        """The run state (spec §4.5..§4.7)."""
+        if self._twin is not None:
+            self._twin.pull()
+        return self._state
+
+    @state.setter
+    def state(self, value: RunState) -> None:
+        if self._twin is not None:
+            self._twin.pull()
+        self._state = value
+
+    @property
+    def held(self) -> Control | None:
+        """The control command held (run while ON; 0x80 and protection drop it)."""
+        if self._twin is not None:
+            self._twin.pull()
+        return self._held
+
+    @held.setter
+    def held(self, value: Control | None) -> None:
+        if self._twin is not None:
+            self._twin.pull()
+        self._held = value
+
+    @property
+    def angles(self) -> AngleFrame:
+        """The encoder counts' zero points (V2.36 0x80 moves the multi-turn origin, in C too)."""
+        if self._twin is not None:
+            self._twin.pull()
+        return self._angles
+
+    @property
+    def unresponsive(self) -> bool:
+        """A simulator fault knob: the motor still acts on requests but never replies."""
+        return self._unresponsive
+
+    @unresponsive.setter
+    def unresponsive(self, value: bool) -> None:
+        self._unresponsive = value
+        self.core_push()
+
+    @property
+    def turnaround_s(self) -> float:
+        """Request received -> reply ready."""
+        return self._turnaround_s
+
+    @turnaround_s.setter
+    def turnaround_s(self, value: float) -> None:
+        self._turnaround_s = value
+        self.core_push()
+
+    def core_attach(self, motor: Any, link: BusLink | None) -> None:
+        """Take the C twin ``motor`` (a zeroed ``sb_simmotor *``) and ``link`` from a C-core network:
+        the plant moves into ``motor.plant`` and C answers the control-loop traffic from now on."""
+        if link is not None and link is not self._link:
+            self.attach(link)
+        self.settle()
+        self._plant = adopt_plant(self._plant, motor)
+        self._twin = LkCore(self, motor)
+        self._twin.push()
+
+    def core_detach(self) -> None:
+        """Leave the C-core network: take C's last changes and the plant back into Python."""
+        twin = self._twin
+        if twin is None:
+            return
+        self.settle()
+        self._twin = None
+        self._plant = release_plant(self._plant)
+        if self._link is not None:
+            self.attach(None)
+
+    def core_push(self) -> None:
+        """Write into the C twin everything it reads (nothing without one)."""
+        if self._twin is not None:
+            self._twin.push()
+
+    def settle(self) -> None:
+        """Take what the C twin changed, then settle up with the network (ListeningDevice)."""
+        if self._twin is not None:
+            self._twin.pull()
+        super().settle()
 
     # ---- Device protocol ----
 
@@ -271,6 +368,7 @@ class LkMotor(ListeningDevice):
         self.plant.advance(now_s)
         self._counters["reboots"] += 1
         self._power_up()
+        self.core_push()
 
     def inject_error(
         self, flags: ErrorState | ErrorStateV235, now_s: float, *, persistent: bool = True
@@ -293,11 +391,13 @@ class LkMotor(ListeningDevice):
         self._latched |= bits
         self.held = None
         self.plant.set_control(self._control(now_s))
+        self.core_push()  # a latched flag: C leaves every frame to Python
 
     def end_error(self, flags: ErrorState | ErrorStateV235, now_s: float) -> None:
         """The fault condition ``flags`` is gone at ``now_s``; the latched flags wait for 0x9B."""
         self.plant.advance(now_s)
         self._conditions &= ~int(flags)
+        self.core_push()
 
     @property
     def error_state(self) -> ErrorState | ErrorStateV235:

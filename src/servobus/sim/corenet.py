@@ -1,0 +1,606 @@
+"""Simulated devices on one simulated CAN bus, run by the C core: :class:`CoreCanNetwork`.
+
+The same network as :class:`~servobus.sim.network.SimCanNetwork` (the reference: same public API,
+same traces, same device counters and plant states), with the bus model, the routing, the link
+counts and the frame log in C (``csrc/sim_net.c``). A device with a C path (``CORE_FAMILY``,
+``core_attach``, ``core_push``, ``core_detach``) gets its C twin, ``motors[node]``, and frames and
+deadlines its family handles in C never reach Python. Everything else (a Python model, a frame the
+C path leaves cold, a frame the host receives) comes back from one C call as an event: the network
+then acts on it in Python exactly as the reference does, and calls C again to go on.
+
+Python :class:`~servobus.frame.Frame` objects the host or a Python device sends are kept by their
+slot in C and handed back as the same objects; frames made in C become Frame objects only when the
+host or a Python model receives them. Fault injectors act in Python, in the reference's order, so a
+seed gives the same trace.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import math
+import struct
+from collections.abc import Collection, Hashable, Iterable
+from typing import Any, NoReturn, cast
+
+from servobus.core._lib import ffi, lib
+from servobus.frame import Frame
+from servobus.sim.canbus import CanBusModel
+from servobus.sim.device import Device, Emission, Listener
+from servobus.sim.faults import FaultInjector
+from servobus.sim.network import HOST, LOG_LIMIT
+
+__all__ = ["CoreBus", "CoreCanNetwork", "CoreLink"]
+
+#: events one C call may return before Python takes them
+EVENTS = 256
+_INF = math.inf
+# sb_netevent as bytes: kind, node, t, then the sb_simframe (t, id, flags, len, node, tag, data).
+_EVENT = struct.Struct("<iiddIBBhI64s4x")
+assert _EVENT.size == ffi.sizeof("sb_netevent") and ffi.offsetof("sb_netevent", "frame") == 16
+assert ffi.offsetof("sb_simframe", "data") == 20
+
+_RX, _DELIVER, _POLL = lib.SB_EV_RX, lib.SB_EV_DELIVER, lib.SB_EV_POLL
+_IDLE, _LOG_FULL = lib.SB_RUN_IDLE, lib.SB_RUN_LOG_FULL
+_ADVANCE, _AHEAD, _STOP_RX = lib.SB_RUN_ADVANCE, lib.SB_RUN_AHEAD, lib.SB_RUN_STOP_RX
+_MAX_LISTEN = lib.SB_SIM_MAX_LISTEN
+
+# A frame made in C, built without Frame's checks (C checked it): through the slot descriptors.
+_NEW = object.__new__
+_SETTERS = {name: getattr(Frame, name).__set__ for name in Frame.__slots__}
+_SET_ID, _SET_DATA = _SETTERS["arbitration_id"], _SETTERS["data"]
+_SET_EXT, _SET_FD, _SET_BRS = _SETTERS["is_extended_id"], _SETTERS["is_fd"], _SETTERS["bitrate_switch"]
+_SET_SERIAL, _SET_TS, _SET_RX, _SET_ESI = (
+    _SETTERS["is_serial"],
+    _SETTERS["timestamp"],
+    _SETTERS["is_rx"],
+    _SETTERS["error_state_indicator"],
+)
+_SEND = lib.sb_simnet_send
+_MADE_CACHE = 4096  # frames made in C kept by content (replies repeat; a Frame is immutable)
+
+
+def _flags(frame: Frame) -> int:
+    return frame.is_extended_id | (frame.is_fd << 1) | (frame.bitrate_switch << 2)
+
+
+def _made(cache: dict[tuple[int, int, bytes], Frame], can_id: int, flags: int, data: bytes) -> Frame:
+    key = (can_id, flags, data)
+    frame = cache.get(key)
+    if frame is None:
+        if len(cache) >= _MADE_CACHE:
+            cache.clear()
+        frame = cache[key] = _NEW(Frame)
+        _SET_ID(frame, can_id)
+        _SET_DATA(frame, data)
+        _SET_EXT(frame, bool(flags & 1))
+        _SET_FD(frame, bool(flags & 2))
+        _SET_BRS(frame, bool(flags & 4))
+        _SET_SERIAL(frame, False)
+        _SET_TS(frame, 0.0)
+        _SET_RX(frame, True)
+        _SET_ESI(frame, False)
+    return frame
+
+
+def _handles_frames_as_its_model(device: object) -> bool:
+    """The device's ``receive`` and ``poll`` are its family model's own, which the C path reproduces.
+
+    A subclass of the model that overrides either (a user's custom device), or one replaced on the
+    class (a test that records every frame a motor receives), wants to see the frames itself: C
+    would bypass it, so such a device stays in Python. Told apart by where the methods were written:
+    in the package that also writes ``core_attach``, under the name of the class that holds them.
+    """
+    cls = type(device)
+    attach = next((k for k in cls.__mro__ if "core_attach" in vars(k)), None)
+    if attach is None:
+        return False
+    package = attach.__module__.rpartition(".")[0]
+    for name in ("receive", "poll"):
+        owner = next((k for k in cls.__mro__ if name in vars(k)), None)
+        method = vars(owner).get(name) if owner is not None else None
+        if (
+            owner is None
+            or owner.__module__.rpartition(".")[0] != package
+            or getattr(method, "__qualname__", None) != f"{owner.__qualname__}.{name}"
+        ):
+            return False
+    return True
+
+
+class _CoreLog:
+    """What :class:`~servobus.sim.device.ListeningDevice` reads of a link's log: its frame count."""
+
+    __slots__ = ("_net",)
+
+    def __init__(self, net: Any) -> None:
+        self._net = net
+
+    @property
+    def count(self) -> int:
+        return int(self._net.log_count)
+
+
+class CoreLink:
+    """One device's account with a :class:`CoreCanNetwork`: :class:`~servobus.sim.device.BusLink`'s
+    interface over the counts the C engine keeps for the node."""
+
+    __slots__ = ("_count", "_ends", "_lib_net", "_log", "_missed", "_node", "_notify", "_state", "name")
+
+    def __init__(self, network: CoreCanNetwork, node: int, name: str) -> None:
+        self._lib_net = network._net
+        self._node = node
+        self._state = network._net.nodes + node
+        self._log = _CoreLog(network._net)
+        self._ends = network._ends
+        self._missed = network._missed
+        self._count = network._count
+        self._notify = network._dirty.append
+        self.name = name
+
+    @property
+    def cursor(self) -> int:
+        return int(self._state.cursor)
+
+    @property
+    def own(self) -> int:
+        return int(self._state.own)
+
+    @property
+    def taken(self) -> int:
+        return int(self._state.taken)
+
+    @property
+    def behind(self) -> bool:
+        """Frames have gone by since the last :meth:`catch_up`."""
+        return bool(self._state.cursor != self._lib_net.log_count)
+
+    def catch_up(self, *, every_end: bool) -> tuple[int, int, list[float]]:
+        """Settle up: (frames missed, of which odd, end times) since the last call (BusLink.catch_up)."""
+        missed, ends, count_out = self._missed, self._ends, self._count
+        status = lib.sb_simnet_catch_up(
+            self._lib_net, self._node, every_end, missed, missed + 1, ends, lib.SB_NET_LOG, count_out
+        )
+        if status != lib.SB_OK:
+            raise RuntimeError(f"{self.name}: the network dropped frames this link had not settled up for")
+        count = count_out[0]
+        return int(missed[0]), int(missed[1]), ffi.unpack(ends, count) if count else []
+
+    def changed(self) -> None:
+        """The device's identifiers or deadline changed outside the network's calls: ask again."""
+        self._notify(self.name)
+
+
+class CoreBus:
+    """The bus model of a :class:`CoreCanNetwork` as :class:`~servobus.sim.canbus.CanBusModel` reads."""
+
+    def __init__(self, network: CoreCanNetwork) -> None:
+        self._network = network
+        self._net = network._net
+
+    @property
+    def busy_s(self) -> float:
+        """Total time the wire carried frames."""
+        return float(self._net.busy_s)
+
+    @property
+    def frames(self) -> int:
+        return int(self._net.frames)
+
+    @property
+    def bitrate(self) -> float:
+        """Nominal bit rate, bit/s. Settable: later frames use it."""
+        return float(self._net.bitrate)
+
+    @bitrate.setter
+    def bitrate(self, value: float) -> None:
+        self._set_rates(value, self.data_bitrate)
+
+    @property
+    def data_bitrate(self) -> float | None:
+        """CAN FD data-phase bit rate (None: the nominal rate). Settable."""
+        rate = float(self._net.data_bitrate)
+        return rate if rate > 0 else None
+
+    @data_bitrate.setter
+    def data_bitrate(self, value: float | None) -> None:
+        self._set_rates(self.bitrate, value)
+
+    def _set_rates(self, bitrate: float, data_bitrate: float | None) -> None:
+        if lib.sb_simnet_set_rates(self._net, bitrate, data_bitrate or 0.0) != lib.SB_OK:
+            raise ValueError(f"bit rates must be positive (bitrate={bitrate}, data_bitrate={data_bitrate})")
+
+    def frame_time_s(self, frame: Frame) -> float:
+        """Seconds ``frame`` occupies this bus (:func:`servobus.timing.frame_time_s`)."""
+        data = frame.data
+        return float(
+            lib.sb_simnet_frame_time(self._net, frame.arbitration_id, _flags(frame), data, len(data))
+        )
+
+    @property
+    def pending(self) -> int:
+        """Frames queued and not yet on the wire."""
+        return sum(int(self._net.nodes[k].queued) for k in range(lib.SB_NET_NODES))
+
+    def queued(self, source: Hashable) -> int:
+        """Frames node ``source`` has queued and not yet on the wire."""
+        node = self._network._source_node(source)
+        return 0 if node is None else int(self._net.nodes[node].queued)
+
+    def head(self, source: Hashable) -> tuple[float, float] | None:
+        """(joined_s, ready_s) of the frame node ``source`` sends next, or None if it has none queued."""
+        node = self._network._source_node(source)
+        if node is None or self._net.nodes[node].head < 0:
+            return None
+        slot = self._net.slots[self._net.nodes[node].head]
+        return float(slot.joined_s), float(slot.f.t)
+
+    def next_completion(self) -> tuple[float, Hashable] | None:
+        """(end_s, node) of the transmission that completes next, or None if the bus is idle."""
+        out = ffi.new("double *"), ffi.new("int *")
+        if lib.sb_simnet_next_completion(self._net, out[0], out[1]) != 1:
+            return None
+        return float(out[0][0]), self._network._names[out[1][0]]
+
+    def next_event_s(self) -> float | None:
+        """When the next transmission will complete, as far as the bus knows now (None: idle)."""
+        t = lib.sb_simnet_next_event(self._net, 1)
+        return None if t == _INF else float(t)
+
+
+class CoreCanNetwork:
+    """Devices, a bus and the pending frames between them, run in C (see the module docstring).
+
+    Args:
+        devices: the simulated devices on this bus (unique ``name``\\ s).
+        bus: a bus model whose bit rates this network takes (1 Mbit/s classic by default); its
+            ``busy_s`` and ``frames`` then follow this network's after every run, so a caller that
+            kept the model reads the bus load from it as from SimCanNetwork's.
+        to_devices, to_host: fault injectors on each direction (None: a perfect link).
+
+    Raises:
+        ValueError: two devices share a name; more devices than the C network holds (63).
+    """
+
+    def __init__(
+        self,
+        devices: Iterable[Device] = (),
+        *,
+        bus: CanBusModel | None = None,
+        to_devices: FaultInjector | None = None,
+        to_host: FaultInjector | None = None,
+    ) -> None:
+        model = bus or CanBusModel()
+        self._model = bus
+        self._net = ffi.new("sb_simnet *")
+        if lib.sb_simnet_init(self._net, model.bitrate, model.data_bitrate or 0.0) != lib.SB_OK:
+            raise ValueError(f"bad bit rates (bitrate={model.bitrate}, data_bitrate={model.data_bitrate})")
+        self._events = ffi.new("sb_netevent[]", EVENTS)
+        self._event_bytes = ffi.buffer(self._events)
+        self._n_events = ffi.new("int *")
+        self._ends = ffi.new("double[]", lib.SB_NET_LOG)
+        self._missed = ffi.new("int64_t[]", 2)  # a link's catch_up: missed, missed odd
+        self._count = ffi.new("int *")
+        self.bus = CoreBus(self)
+        self.devices: dict[str, Device] = {}
+        self.to_devices = to_devices
+        self.to_host = to_host
+        self._seq = itertools.count()
+        self._host_pending: list[tuple[float, int, Frame]] = []  # faults can delay delivery to the host
+        self._frames: list[Frame | None] = [None] * lib.SB_NET_FRAMES  # Python frames by C slot
+        self._made: dict[tuple[int, int, bytes], Frame] = {}
+        self._names: list[str | None] = [None] * lib.SB_NET_NODES
+        self._names[0] = HOST
+        self._node_of: dict[str, int] = {}
+        self._by_node: list[Device | None] = [None] * lib.SB_NET_NODES
+        self._core: list[bool] = [False] * lib.SB_NET_NODES  # the device has a C path
+        self._filter: dict[int, frozenset[int]] = {}  # listeners with more identifiers than C holds
+        self._listeners: dict[str, Listener] = {}
+        self._unlinked: list[tuple[int, Device]] = []  # asked for their deadline before every run
+        self._first: dict[str, tuple[int, float, int]] = {}  # a removed node's first (joined, seq)
+        self._dirty: list[str] = []
+        for device in devices:
+            self.add(device)
+
+    # ---- the public API of SimCanNetwork ----
+
+    @property
+    def now_s(self) -> float:
+        """The network's time."""
+        return float(self._net.now_s)
+
+    @now_s.setter
+    def now_s(self, value: float) -> None:
+        self._net.now_s = value
+
+    def add(self, device: Device) -> None:
+        """Put ``device`` on the bus.
+
+        Raises:
+            ValueError: another device has the same name, the device is on another network, or the
+                network is full.
+        """
+        name = device.name
+        if name in self.devices or name == HOST:
+            raise ValueError(f"a device named {name!r} is already on this bus")
+        linked = all(hasattr(device, method) for method in ("listen_ids", "attach", "settle"))
+        core = linked and hasattr(device, "CORE_FAMILY") and _handles_frames_as_its_model(device)
+        has_first, first_joined, first_seq = self._first.pop(name, (0, 0.0, 0))
+        kind = lib.SB_NODE_CORE if core else lib.SB_NODE_PYTHON
+        node = lib.sb_simnet_add(self._net, kind, linked, has_first, first_joined, first_seq)
+        if node < 0:
+            self._first[name] = (has_first, first_joined, first_seq)
+            raise ValueError(
+                f"no room for {name!r}: a simulated CAN network holds {lib.SB_NET_NODES - 1} devices"
+            )
+        try:
+            if linked:
+                link = CoreLink(self, node, name)
+                if core:
+                    cast(Any, device).core_attach(self._net.motors + node, link)
+                else:
+                    cast(Listener, device).attach(cast(Any, link))
+                self._listeners[name] = cast(Listener, device)
+                self._dirty.append(name)
+            else:
+                self._net.motors[node].listen_all = 1
+                lib.sb_simnet_touch(self._net, node)
+                self._unlinked.append((node, device))
+        except BaseException:
+            lib.sb_simnet_remove(self._net, node)
+            self._first[name] = (has_first, first_joined, first_seq)
+            raise
+        self.devices[name] = device
+        self._names[node] = name
+        self._node_of[name] = node
+        self._by_node[node] = device
+        self._core[node] = core
+
+    def remove(self, name: str) -> Device:
+        """Take a device off the bus (unplugged, powered off)."""
+        device = self.devices.pop(name)
+        node = self._node_of.pop(name)
+        if self._listeners.pop(name, None) is not None:
+            if self._core[node]:
+                cast(Any, device).core_detach()  # settles up first
+            else:
+                cast(Listener, device).attach(None)  # settles up first
+            self._filter.pop(node, None)
+        else:
+            self._unlinked.remove((node, device))
+        state = self._net.nodes[node]
+        self._first[name] = (int(state.has_first), float(state.first_joined_s), int(state.first_seq))
+        lib.sb_simnet_remove(self._net, node)
+        self._by_node[node] = None
+        self._core[node] = False
+        return device
+
+    def send(self, frame: Frame, now_s: float | None = None) -> None:
+        """The host queues ``frame`` for transmission at ``now_s`` (default: the network's time)."""
+        at = self._net.now_s if now_s is None else now_s
+        if self.to_devices is not None:
+            for when, item in self.to_devices.apply(frame, at):
+                assert isinstance(item, Frame)
+                self._schedule(item, when, 0)
+            return
+        data = frame.data  # _schedule inlined: the host's path, once per request
+        slot = _SEND(
+            self._net,
+            0,
+            frame.arbitration_id,
+            frame.is_extended_id | frame.is_fd << 1 | frame.bitrate_switch << 2,
+            data,
+            len(data),
+            at,
+            1,
+        )
+        if slot < 0:
+            self._refused(slot, frame, at)
+        self._frames[slot] = frame
+
+    def next_event_s(self) -> float | None:
+        """The earliest time anything happens on this network (None: nothing will)."""
+        if self._dirty or self._unlinked:
+            self._refresh()
+        t = lib.sb_simnet_next_event(self._net, 0)
+        pending = self._host_pending
+        if pending and pending[0][0] < t:
+            t = pending[0][0]
+        return None if t == _INF else float(t)
+
+    def advance(self, until_s: float) -> list[tuple[float, Frame]]:
+        """Run the network to ``until_s``; return (time, frame) the host received, in order."""
+        received: list[tuple[float, Frame]] = []
+        self._run(until_s, _ADVANCE, _INF, received)
+        net = self._net
+        if until_s > net.now_s:
+            net.now_s = until_s
+        self._tidy()
+        return received
+
+    def run_ahead(self, host_time_s: float) -> None:
+        """Run on, past ``host_time_s``, over what the host can neither see nor change
+        (:meth:`SimCanNetwork.run_ahead <servobus.sim.network.SimCanNetwork.run_ahead>`)."""
+        if self.to_devices is not None or not math.isfinite(self._net.bitrate):
+            return
+        received: list[tuple[float, Frame]] = []
+        self._run(_INF, _AHEAD, host_time_s, received)
+        assert not received, "run_ahead() went past a frame the host receives"
+        self._tidy()
+
+    def run_until_idle(self, limit_s: float = 1.0) -> list[tuple[float, Frame]]:
+        """Advance until nothing is pending or ``limit_s`` of virtual time has passed."""
+        received: list[tuple[float, Frame]] = []
+        deadline = self.now_s + limit_s
+        while (t := self.next_event_s()) is not None and t <= deadline:
+            received += self.advance(t)
+        last = lib.sb_simnet_last_ready(self._net, deadline)
+        if last > self._net.now_s:
+            self._net.now_s = last
+        return received
+
+    # ---- the C calls and their events ----
+
+    def _source_node(self, source: Hashable) -> int | None:
+        if source == HOST:
+            return 0
+        return self._node_of.get(source) if isinstance(source, str) else None
+
+    def _schedule(self, frame: Frame, ready_s: float, node: int) -> None:
+        data = frame.data
+        flags = frame.is_extended_id | frame.is_fd << 1 | frame.bitrate_switch << 2
+        slot = _SEND(self._net, node, frame.arbitration_id, flags, data, len(data), ready_s, 1)
+        if slot < 0:
+            self._refused(slot, frame, ready_s)
+        self._frames[slot] = frame
+
+    def _refused(self, status: int, frame: Frame, ready_s: float) -> NoReturn:
+        if status == lib.SB_E_RANGE:
+            now = float(self._net.bus_now_s)
+            raise ValueError(f"ready_s={ready_s} is before the bus time {now} (time runs forward)")
+        if status == lib.SB_E_FULL:
+            raise RuntimeError(
+                f"the simulated bus holds {lib.SB_NET_FRAMES} queued frames: {frame!r} is one too many"
+            )
+        raise ValueError(f"the simulated bus cannot queue {frame!r} at {ready_s}")
+
+    def _run(
+        self, until_s: float, mode: int, host_time_s: float, received: list[tuple[float, Frame]]
+    ) -> None:
+        net, events, n_events = self._net, self._events, self._n_events
+        run = lib.sb_simnet_run
+        pending = self._host_pending
+        if self.to_host is not None:
+            mode |= _STOP_RX
+        while True:
+            if self._dirty or self._unlinked:
+                self._refresh()
+            before = pending[0][0] if pending else _INF
+            status = run(net, until_s, before, host_time_s, mode, events, EVENTS, n_events)
+            n = n_events[0]
+            if n:
+                self._handle(n, received)
+            if status == _IDLE:
+                # SimCanNetwork._step: a frame delayed towards the host arrives before anything else at t
+                if mode & _AHEAD == 0 and pending and pending[0][0] <= until_s:
+                    at, _, frame = heapq.heappop(pending)
+                    if at > net.now_s:
+                        net.now_s = at
+                    received.append((at, frame))
+                    continue
+                return
+            if status == _LOG_FULL:
+                base = net.log_base
+                self._drop_log()
+                if net.log_base == base:
+                    raise RuntimeError("a device on the simulated bus does not settle up with its link")
+            elif status < 0:
+                raise RuntimeError(
+                    f"the simulated network failed (status {status}): a C family path answered badly"
+                )
+
+    def _handle(self, n: int, received: list[tuple[float, Frame]]) -> None:
+        unpack, view, size = _EVENT.unpack_from, self._event_bytes, _EVENT.size
+        frames, made, to_host, append = self._frames, self._made, self.to_host, received.append
+        for i in range(n):
+            kind, node, t, _, can_id, flags, length, _source, tag, data = unpack(view, i * size)
+            if kind == _POLL:
+                self._poll(node, t)
+                continue
+            if tag:
+                frame = frames[tag - 1]
+            else:  # made in C: one Frame per distinct content (_made, inlined for the replies' sake)
+                key = (can_id, flags, data[:length])
+                frame = made.get(key)
+                if frame is None:
+                    frame = _made(made, *key)
+            assert frame is not None
+            if kind == _RX:
+                if to_host is None:
+                    append((t, frame))
+                    continue
+                for at, item in to_host.apply(frame, t):
+                    assert isinstance(item, Frame)
+                    if at <= t:
+                        received.append((t, item))
+                    else:
+                        heapq.heappush(self._host_pending, (at, next(self._seq), item))
+            else:
+                self._receive(node, frame, t, flags)
+
+    def _receive(self, node: int, frame: Frame, t: float, flags: int) -> None:
+        only = self._filter.get(node)
+        if only is not None and frame.arbitration_id not in only:
+            # more identifiers than C routes by: C handed it every frame; this one it missed
+            state = self._net.nodes[node]
+            state.taken -= 1
+            state.taken_odd -= bool(flags & 3)
+            return
+        device = self._by_node[node]
+        assert device is not None
+        for emission in device.receive(frame, t):
+            self._schedule(emission.frame, emission.ready_s, node)  # a device's frames: no faults
+        self._called(node, device)
+
+    def _poll(self, node: int, t: float) -> None:
+        device = self._by_node[node]
+        assert device is not None
+        emissions: list[Emission] = device.poll(t)
+        for emission in emissions:
+            self._schedule(emission.frame, emission.ready_s, node)
+        self._called(node, device)
+
+    def _called(self, node: int, device: Device) -> None:
+        """After a call into a device: its deadline (and a core device's state) into C again."""
+        if self._core[node]:
+            cast(Any, device).core_push()
+        else:
+            deadline = device.next_deadline_s()
+            self._net.motors[node].py_deadline_s = _INF if deadline is None else deadline
+        lib.sb_simnet_touch(self._net, node)
+
+    def _refresh(self) -> None:
+        """Ask the devices that said they changed for their identifiers and deadline again, and the
+        unlinked devices for their deadline (SimCanNetwork asks those at every event)."""
+        net = self._net
+        if self._dirty:
+            names, self._dirty[:] = set(self._dirty), []
+            for name in names:
+                node = self._node_of.get(name)
+                device = self._listeners.get(name)
+                if node is None or device is None:
+                    continue
+                self._write_listen(node, device.listen_ids())
+                self._called(node, device)
+        for node, unlinked in self._unlinked:
+            deadline = unlinked.next_deadline_s()
+            net.motors[node].py_deadline_s = _INF if deadline is None else deadline
+            lib.sb_simnet_touch(net, node)
+
+    def _write_listen(self, node: int, ids: Collection[int] | None) -> None:
+        motor = self._net.motors[node]
+        self._filter.pop(node, None)
+        if ids is None or len(ids) > _MAX_LISTEN:
+            if ids is not None:
+                self._filter[node] = frozenset(ids)
+            motor.listen_all = 1
+            motor.n_listen = 0
+            return
+        ordered = sorted(ids)
+        motor.listen_all = 0
+        motor.n_listen = len(ordered)
+        motor.listen[0 : len(ordered)] = ordered
+
+    def _tidy(self) -> None:
+        net = self._net
+        if (model := self._model) is not None:
+            model.busy_s = float(net.busy_s)
+            model.frames = int(net.frames)
+        if net.log_count - net.log_base >= LOG_LIMIT:
+            self._drop_log()
+
+    def _drop_log(self) -> None:
+        """Settle every listening device up and forget the frame ends they have all settled for."""
+        for device in self._listeners.values():
+            device.settle()
+        lib.sb_simnet_drop_log(self._net)
