@@ -389,6 +389,23 @@ def test_a_subclass_that_overrides_the_model_keeps_the_python_path() -> None:
     assert len(twin.receive(request_frame(ma.ReadStatus2(), 1), 0.1)) == 1 and twin.cold == 1
 
 
+def test_a_class_patched_to_watch_the_model_keeps_the_python_path(monkeypatch: pytest.MonkeyPatch) -> None:
+    """As tests/cli/test_control.py watches every frame a motor receives: C must not answer past it."""
+    seen: list[Frame] = []
+
+    def receive(self: Any, frame: Frame, now_s: float, _original: Any = MyActuatorMotor.receive) -> Any:
+        seen.append(frame)
+        return _original(self, frame, now_s)
+
+    monkeypatch.setattr(MyActuatorMotor, "receive", receive)
+    twin = Twin(MyActuatorMotor(1))
+    status = request_frame(ma.ReadStatus2(), 1)
+    assert len(twin.receive(status, 0.1)) == 1 and seen == [status] and twin.cold == 1
+    monkeypatch.undo()
+    twin.device.core_push()
+    assert len(twin.receive(status, 0.2)) == 1 and seen == [status] and twin.hot == 1
+
+
 def test_unresponsive_set_from_outside_stops_the_c_path_at_once() -> None:
     twin = Twin(MyActuatorMotor(2))
     status = request_frame(ma.ReadStatus2(), 2)

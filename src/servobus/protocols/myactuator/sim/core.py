@@ -37,7 +37,7 @@ if TYPE_CHECKING:
     from servobus.sim.device import BusLink
     from servobus.sim.plant import Plant
 
-__all__ = ["COUNTER_NAMES", "MaCore", "Pulled", "attached_class", "c_may_act"]
+__all__ = ["COUNTER_NAMES", "MaCore", "Pulled", "attached_class", "c_may_act", "register_model"]
 
 #: The model's Counter keys the C path counts, by their index in ``motor.counters`` (SB_MA_CTR_*).
 COUNTER_NAMES = (
@@ -132,8 +132,8 @@ def attached_class(cls: type[M]) -> type[M]:
     return found
 
 
-# Methods whose behaviour the C path reproduces: a subclass that overrides one (a test's tagged
-# motor) keeps the Python path for everything.
+# Methods whose behaviour the C path reproduces. While any of them is not the model's own as written
+# (a subclass overrides it, a test patches the class to watch it), the Python path does everything.
 _MODELLED = (
     "receive",
     "poll",
@@ -143,6 +143,7 @@ _MODELLED = (
     "readings",
     "next_deadline_s",
     "listen_ids",
+    "settle",
     "_route",
     "_decode",
     "_execute",
@@ -153,19 +154,18 @@ _MODELLED = (
     "_current_limit",
     "_target",
     "_status1",
-    "settle",
 )
-_CLASS_OK: dict[type, bool] = {}
+_ORIGINALS: list[tuple[str, object]] = []
+
+
+def register_model(cls: type) -> None:
+    """Record the model's methods as written (device.py calls this as it defines the class)."""
+    _ORIGINALS[:] = [(name, getattr(cls, name)) for name in _MODELLED]
 
 
 def _class_ok(cls: type) -> bool:
     cls = getattr(cls, "_core_base", cls)  # an attached class: the model's own
-    found = _CLASS_OK.get(cls)
-    if found is None:
-        from servobus.protocols.myactuator.sim.device import MyActuatorMotor
-
-        found = _CLASS_OK[cls] = all(getattr(cls, n) is getattr(MyActuatorMotor, n) for n in _MODELLED)
-    return found
+    return bool(_ORIGINALS) and all(getattr(cls, name) is method for name, method in _ORIGINALS)
 
 
 def c_may_act(device: MyActuatorMotor) -> bool:

@@ -99,7 +99,7 @@ from servobus.protocols.myactuator.ids import (
     reply_id,
     request_id,
 )
-from servobus.protocols.myactuator.sim.core import MaCore
+from servobus.protocols.myactuator.sim.core import MaCore, register_model
 from servobus.protocols.myactuator.sim.state import (
     DEFAULT_ENCODER_COUNTS_PER_TURN,
     DEFAULT_MODEL,
@@ -897,6 +897,7 @@ class MyActuatorMotor(ListeningDevice):
         return f"MyActuatorMotor(id={self.motor_id}, {self.revision.name}, {state}, errors={errors!r})"
 
 
+register_model(MyActuatorMotor)  # what the C path reproduces (core.py), before anything can patch it
 _classify_id = functools.lru_cache(maxsize=None)(classify_id)  # at most 0x800 standard identifiers
 _reply_id = functools.lru_cache(maxsize=None)(reply_id)  # a bad id still raises (errors are not cached)
 
