@@ -16,6 +16,9 @@ Parts, in order (each is also a script of its own, ``python bench/bench_<part>.p
   naive python-can loop and the bare asyncio floor (``bench_bus.py``; ``bus.cycle32_vs_floor``).
 * ``efficiency``: bus efficiency on virtual time, CAN, CAN FD and RS485, 1-32 motors, broadcast, LK
   multi-motor torque, 0xB6 streams (``bench_efficiency.py``; ``efficiency.<bus>_<motors>``).
+* ``sim``: the simulator's own cost, the C engine against the Python models in the same run: CPU per
+  request/reply pair of 32 motors on one bus, and a 10-second virtual scenario's speed-up
+  (``bench_sim.py``; ``sim.us_per_exchange``, ``sim.vs_python``, ``sim.virtual_speedup``).
 * ``loop1k``: 32 motors at 1 kHz in real time, the simulated devices in another process
   (``bench_loop1k.py``; ``loop1k.*``, ``loop1k_fd.*``).
 * ``scaling``: cost per tick against motors per bus, buses per process and processes, with a plot
@@ -52,6 +55,7 @@ PARTS = {
     "transport": "bench_transport",
     "bus": "bench_bus",
     "efficiency": "bench_efficiency",
+    "sim": "bench_sim",
     "loop1k": "bench_loop1k",
     "scaling": "bench_scaling",
 }
@@ -93,16 +97,21 @@ HEADLINES: tuple[tuple[str, str, str, str], ...] = (
     ("efficiency.canfd1m5m_32", "efficiency, CAN FD 1/5 Mbit/s, 32 motors", "{:.4f}", ">= 0.95"),
     ("efficiency.rs485_115200_32", "efficiency, RS485 115200, 32 motors", "{:.4f}", ">= 0.95"),
     ("efficiency.rs485_2500k_32", "efficiency, RS485 2.5 Mbaud, 32 motors", "{:.4f}", ">= 0.95"),
+    ("sim.us_per_exchange", "simulator: CPU per request/reply pair, 32 motors (C)", "{:.2f} µs", "<= 3 µs"),
+    ("sim.vs_python", "simulator: Python models / C engine", "{:.1f}x", ">= 20x"),
+    ("sim.virtual_speedup", "simulator: 10 virtual s, 32 motors, saturated bus", "{:.1f}x real time",
+     ">= 50x"),
     ("loop1k.on_time_pct", "1 kHz x 32 (CAN, 11 buses): ticks on time", "{:.2f} %", ">= 99.5 %"),
     ("loop1k.jitter_p99_us", "1 kHz x 32 (CAN): tick jitter p99", "{:,.0f} µs", "<= 200 µs"),
     ("loop1k.cpu_pct", "1 kHz x 32 (CAN): host CPU", "{:.0f} %", "-"),
+    ("loop1k.device_cpu_pct", "1 kHz x 32 (CAN): simulated devices' CPU", "{:.0f} %", "< 25 %"),
     ("loop1k_fd.on_time_pct", "1 kHz x 32 (CAN FD, 8 per bus): ticks on time", "{:.2f} %", ">= 99.5 %"),
     ("loop1k_fd_4pb.on_time_pct", "1 kHz x 32 (CAN FD, 4 per bus): ticks on time", "{:.2f} %", "(info)"),
     ("scaling.buses_per_process.64.cpu_us_per_transaction", "64 buses x 4 motors: CPU per transaction",
      "{:.2f} µs", "-"),
 )  # fmt: skip
 
-MISSED_KEYS = ("codec", "bus", "efficiency", "loop1k", "loop1k_fd")
+MISSED_KEYS = ("codec", "bus", "efficiency", "sim", "loop1k", "loop1k_fd")
 
 
 def summary_markdown(results: dict[str, Any], command: str, load: list[float], runtime_s: float) -> str:

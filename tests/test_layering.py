@@ -25,6 +25,8 @@ SANS_IO = [
     "sim/faults.py",
     "sim/device.py",
     "sim/network.py",
+    "sim/corenet.py",
+    "sim/coreplant.py",
     "sim/family.py",
 ]
 FORBIDDEN_MODULES = {"asyncio", "anyio", "time", "threading", "socket", "selectors", "serial", "can"}

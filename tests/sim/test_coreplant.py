@@ -19,8 +19,12 @@ from hypothesis import strategies as st
 
 from servobus.core._lib import ffi, lib
 from servobus.frame import Frame
+from servobus.protocols import hollow, lk
 from servobus.protocols import myactuator as ma
-from servobus.protocols.hollow.sim.device import HOLLOW_PLANT_PARAMS
+from servobus.protocols.hollow.codec import request_frame as hollow_request_frame
+from servobus.protocols.hollow.sim.device import HOLLOW_PLANT_PARAMS, HollowMotor
+from servobus.protocols.lk.codec import request_frame as lk_request_frame
+from servobus.protocols.lk.sim.device import LkMotor
 from servobus.protocols.lk.sim.state import LK_PLANT_PARAMS
 from servobus.protocols.myactuator.codec import request_frame
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
@@ -67,7 +71,7 @@ def grid(plant: Plant | CorePlant) -> tuple[Any, ...]:
     params=st.sampled_from(PARAMS),
     max_step_s=st.sampled_from([5e-4, 1e-4, 1e-3, 3.3e-4]),
 )
-@settings(deadline=None, max_examples=300)
+@settings(deadline=None)  # the profile's count: this is the differential test
 def test_the_c_plant_is_the_python_plant_bit_for_bit(
     trace: list[Segment], start_s: float, params: PlantParams, max_step_s: float
 ) -> None:
@@ -91,6 +95,8 @@ def test_adopt_and_to_python_carry_the_whole_state_grid_included(
     assert snapshot(core) == snapshot(python) and grid(core) == grid(python)
     end_s = python.now_s  # where run() left it: the end of the first part
     assert run(core, rest, end_s, lambda i, j: True) == run(python, rest, end_s, lambda i, j: True)
+    moved = CorePlant.adopt(core)  # a CorePlant copied into another sb_plant
+    assert snapshot(moved) == snapshot(core) and grid(moved) == grid(core)
     back = core.to_python()
     assert snapshot(back) == snapshot(python) and grid(back) == grid(python)
     later = python.now_s + 0.0123
@@ -345,3 +351,97 @@ def test_a_myactuator_motor_on_a_core_plant_answers_byte_for_byte(seed: int) -> 
     assert _answers(core, trace) == _answers(python, trace)
     assert snapshot(core.plant) == snapshot(python.plant)
     assert core.counters == python.counters
+
+
+def _lk_commands(rng: random.Random) -> list[tuple[float, Any]]:
+    mg = lk.MotorType.MG
+    t, out = 0.0, []
+    for _ in range(400):
+        t += rng.choice([1e-4, 2.5e-4, 1e-3, 1e-3, 3.7e-3, 0.02])
+        pick = rng.randrange(11)
+        if pick == 0:
+            command: Any = lk.TorqueControl(motor_type=mg, current_a=round(rng.uniform(-5, 5), 2))
+        elif pick == 1:
+            command = lk.SpeedControl(
+                speed_dps=round(rng.uniform(-3000, 3000), 2),
+                motor_type=mg,
+                current_limit_a=rng.choice([1.0, 8.0]),
+            )
+        elif pick == 2:
+            command = lk.MultiTurnPositionSpeed(
+                angle_deg=round(rng.uniform(-2000, 2000), 2), max_speed_dps=rng.choice([None, 600.0, 3000.0])
+            )
+        elif pick == 3:
+            command = lk.IncrementalPositionSpeed(
+                increment_deg=round(rng.uniform(-500, 500), 2), max_speed_dps=900.0
+            )
+        elif pick == 4:
+            command = rng.choice([lk.MotorOff(), lk.MotorStop(), lk.MotorRun()])
+        elif pick == 5:
+            command = lk.BrakeControl(action=rng.choice([lk.BrakeAction.ENGAGE, lk.BrakeAction.RELEASE]))
+        else:
+            command = rng.choice(
+                [lk.ReadStatus1(), lk.ReadStatus2(), lk.ReadStatus3(), lk.ReadMultiTurnAngle()]
+            )
+        out.append((t, command))
+    return out
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_an_lk_motor_on_a_core_plant_answers_byte_for_byte(seed: int) -> None:
+    trace = _lk_commands(random.Random(seed))
+    python, core = LkMotor(1, calibration_s=0.0), LkMotor(1, calibration_s=0.0)
+    core._plant = CorePlant.adopt(core._plant)
+
+    def answers(motor: LkMotor) -> list[tuple[str, int, bytes]]:
+        seen = []
+        for t, command in trace:
+            frame = lk_request_frame(command, motor_id=1, model=motor.model)
+            for emission in motor.receive(frame, t):
+                seen.append(
+                    (emission.ready_s.hex(), emission.frame.arbitration_id, bytes(emission.frame.data))
+                )
+        return seen
+
+    assert answers(core) == answers(python)
+    assert snapshot(core.plant) == snapshot(python.plant)
+
+
+def _hollow_commands(rng: random.Random) -> list[tuple[float, Any]]:
+    t, out = 0.0, []
+    for _ in range(400):
+        t += rng.choice([1e-4, 2.5e-4, 1e-3, 1e-3, 3.7e-3, 0.02])
+        pick = rng.randrange(6)
+        if pick < 3:
+            command: Any = hollow.Setpoint(
+                position_deg=round(rng.uniform(-300, 300), 2),
+                speed_rad_s=round(rng.uniform(-50, 50), 2),
+                kp=rng.randrange(0, 100),
+                kd=rng.randrange(0, 100),
+                current_a=round(rng.uniform(-3, 3), 2),
+            )
+        elif pick == 3:
+            command = hollow.SelectMode(mode=rng.choice(list(hollow.ControlMode)))
+        else:
+            command = rng.choice([hollow.Start(), hollow.Stop()])
+        out.append((t, command))
+    return out
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_hollow_motor_on_a_core_plant_answers_byte_for_byte(seed: int) -> None:
+    trace = _hollow_commands(random.Random(seed))
+    python, core = HollowMotor(1), HollowMotor(1)
+    core._plant = CorePlant.adopt(core._plant)
+
+    def answers(motor: HollowMotor) -> list[tuple[str, int, bytes]]:
+        seen = []
+        for t, command in trace:
+            for emission in motor.receive(hollow_request_frame(1, command), t):
+                seen.append(
+                    (emission.ready_s.hex(), emission.frame.arbitration_id, bytes(emission.frame.data))
+                )
+        return seen
+
+    assert answers(core) == answers(python)
+    assert snapshot(core.plant) == snapshot(python.plant)

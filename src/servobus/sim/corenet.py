@@ -83,6 +83,31 @@ def _made(cache: dict[tuple[int, int, bytes], Frame], can_id: int, flags: int, d
     return frame
 
 
+def _handles_frames_as_its_model(device: object) -> bool:
+    """The device's ``receive`` and ``poll`` are its family model's own, which the C path reproduces.
+
+    A subclass of the model that overrides either (a user's custom device), or one replaced on the
+    class (a test that records every frame a motor receives), wants to see the frames itself: C
+    would bypass it, so such a device stays in Python. Told apart by where the methods were written:
+    in the package that also writes ``core_attach``, under the name of the class that holds them.
+    """
+    cls = type(device)
+    attach = next((k for k in cls.__mro__ if "core_attach" in vars(k)), None)
+    if attach is None:
+        return False
+    package = attach.__module__.rpartition(".")[0]
+    for name in ("receive", "poll"):
+        owner = next((k for k in cls.__mro__ if name in vars(k)), None)
+        method = vars(owner).get(name) if owner is not None else None
+        if (
+            owner is None
+            or owner.__module__.rpartition(".")[0] != package
+            or getattr(method, "__qualname__", None) != f"{owner.__qualname__}.{name}"
+        ):
+            return False
+    return True
+
+
 class _CoreLog:
     """What :class:`~servobus.sim.device.ListeningDevice` reads of a link's log: its frame count."""
 
@@ -299,7 +324,7 @@ class CoreCanNetwork:
         if name in self.devices or name == HOST:
             raise ValueError(f"a device named {name!r} is already on this bus")
         linked = all(hasattr(device, method) for method in ("listen_ids", "attach", "settle"))
-        core = linked and hasattr(device, "CORE_FAMILY") and hasattr(device, "core_attach")
+        core = linked and hasattr(device, "CORE_FAMILY") and _handles_frames_as_its_model(device)
         has_first, first_joined, first_seq = self._first.pop(name, (0, 0.0, 0))
         kind = lib.SB_NODE_CORE if core else lib.SB_NODE_PYTHON
         node = lib.sb_simnet_add(self._net, kind, linked, has_first, first_joined, first_seq)

@@ -154,10 +154,13 @@ class CorePlant(Plant):
     @classmethod
     def adopt(cls, plant: Plant, ptr: Any = None, owner: Any = None) -> CorePlant:
         """A CorePlant in ``ptr`` (None: its own) with ``plant``'s whole state, grid included: it
-        goes on exactly as ``plant`` would have."""
+        goes on exactly as ``plant`` would have. ``plant`` may be a CorePlant (its struct is copied)."""
         core = cls.__new__(cls)
         core._bind(plant.params, ptr, owner)
         pl = core._pl
+        if isinstance(plant, CorePlant):
+            pl[0] = plant._pl[0]
+            return core
         if lib.sb_plant_init(pl, _params(plant.params), plant._anchor, plant._max_step) != lib.SB_OK:
             raise ValueError(f"sb_plant_init refused {plant.params!r}")  # pragma: no cover
         pl.control = _control_fields(plant.control)

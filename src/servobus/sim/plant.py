@@ -295,7 +295,10 @@ class Plant:
             raise ValueError("now_s=inf: a plant cannot advance to infinity")
         self._now = now_s
         state = self._committed
-        if not self._resting:
+        if self._resting:
+            if state.speed_dps == 0.0 and state.temperature_c == self.params.ambient_c:
+                return  # still and at ambient: the observed state is the committed one, as it was
+        else:
             anchor, step, steps = self._anchor, self._max_step, self._steps
             while anchor + (steps + 1) * step <= now_s:
                 self._step(state, step)

@@ -6,6 +6,9 @@ engine drives it (``lib.sb_hollow_receive`` first; on SB_HOT_COLD the Python ``r
 plant must be identical, bit for bit: both sides make the same changes at the same times and the
 plant's grid rule makes its state depend only on those, and the C side scales, clamps and rounds as
 the codec and the model do (``-ffp-contract=off``). So no tolerance is used anywhere.
+
+The same holds a level up: hollow motors on the C engine (``CoreCanNetwork``, classic and CAN FD
+buses) against the same motors on ``SimCanNetwork``.
 """
 
 from __future__ import annotations
@@ -43,7 +46,10 @@ from servobus.protocols.hollow import (
 from servobus.protocols.hollow.codec import request_frame
 from servobus.protocols.hollow.sim.core import COUNTER_KEYS, HollowCore
 from servobus.protocols.hollow.sim.device import HollowMotor
+from servobus.sim.canbus import CanBusModel
+from servobus.sim.corenet import CoreCanNetwork
 from servobus.sim.device import Emission
+from servobus.sim.network import SimCanNetwork
 
 MOTOR_ID = 5
 CAP = 4
@@ -463,7 +469,77 @@ def test_detach_hands_the_state_back_to_python() -> None:
     _same_state(py, twin.device)
 
 
-# ---- cost: python -m tests.sim.devices.test_hollow_core (or see the report) ----
+# ---- through the C engine (servobus.sim.corenet) against SimCanNetwork ----
+
+
+def _network_trace(seed: int, ids: list[int], fd: bool, ticks: int) -> list[tuple[float, str, Any]]:
+    """A 500 Hz control loop (six classic pairs fill 1.5 of its 2 ms): a set-point to every motor each
+    tick, cold commands, reboots and silent motors in between (time, kind, what)."""
+    rng = random.Random(seed)
+    out: list[tuple[float, str, Any]] = []
+    modes = dict.fromkeys(ids, CanMode.NORMAL)
+    silent_until = dict.fromkeys(ids, -1)
+    for tick in range(ticks):
+        now = tick * 2e-3
+        for motor_id in ids:
+            if silent_until[motor_id] == tick:
+                out.append((now, "unresponsive", (motor_id, False)))
+            pick = rng.random()
+            if pick < 0.06:
+                command = _cold(rng)
+                if isinstance(command, CanModeSwitch) and not fd:
+                    modes[motor_id] = command.mode
+                out.append((now, "frame", request_frame(motor_id, command)))
+            elif pick < 0.07:
+                out.append((now, "reboot", motor_id))
+                modes[motor_id] = CanMode.NORMAL
+            elif pick < 0.075 and silent_until[motor_id] < tick:
+                out.append((now, "unresponsive", (motor_id, True)))
+                silent_until[motor_id] = tick + rng.randrange(1, 20)
+            else:
+                command = (
+                    _fd_command(rng, DEFAULT_MODEL)
+                    if fd
+                    else _setpoint(rng, DEFAULT_MODEL, modes[motor_id] is CanMode.EXTENDED)
+                )
+                out.append((now, "frame", request_frame(motor_id, command)))
+        out.append((now + 1.9e-3, "advance", None))
+    return out
+
+
+@pytest.mark.parametrize("fd", [False, True], ids=["classic", "fd"])
+def test_motors_on_the_c_engine_answer_as_on_the_python_network(fd: bool) -> None:
+    ids = list(range(1, 7))
+    bus: dict[str, Any] = {"bitrate": 1_000_000, "data_bitrate": 5_000_000 if fd else None}
+    python = [HollowMotor(i, fd_enabled=fd) for i in ids]
+    core = [HollowMotor(i, fd_enabled=fd) for i in ids]
+    py_net = SimCanNetwork(python, bus=CanBusModel(**bus))
+    c_net = CoreCanNetwork(core, bus=CanBusModel(**bus))
+    for now, kind, what in _network_trace(7 + fd, ids, fd, ticks=400):
+        if kind == "frame":
+            py_net.send(what, now)
+            c_net.send(what, now)
+        elif kind == "reboot":
+            python[what - 1].reboot(now)
+            core[what - 1].reboot(now)
+        elif kind == "unresponsive":
+            motor_id, silent = what
+            python[motor_id - 1].unresponsive = core[motor_id - 1].unresponsive = silent
+        else:
+            assert c_net.advance(now) == py_net.advance(now), now
+    assert c_net.run_until_idle() == py_net.run_until_idle()
+    for a, b in zip(python, core, strict=True):
+        _same_state(a, b)
+        assert b._core is not None and a.counters["replied"] > 100
+    assert c_net.bus.busy_s == py_net.bus.busy_s
+    for motor in core:  # leaving the C network hands the state back
+        c_net.remove(motor.name)
+        assert motor._core is None
+    for a, b in zip(python, core, strict=True):
+        _same_state(a, b)
+
+
+# ---- cost: PYTHONPATH=src python tests/sim/devices/test_hollow_core.py ----
 
 
 def measure(n: int = 20000) -> dict[str, float]:

@@ -68,10 +68,15 @@ class HollowCore(ListeningDevice):
         """Take ``motor`` (cdata ``sb_simmotor *``, zeroed, the network's) as this motor's C twin.
 
         The plant moves into ``motor.plant`` and the RAM state into its ``sb_hollow_state``; from
-        now on both are read there.
+        now on both are read there. ``link`` is the network's account (as :meth:`attach`).
+
+        Raises:
+            ValueError: the motor is already on a network or has a C twin.
         """
         from servobus.sim.coreplant import CorePlant  # here: only a C network needs it
 
+        if self._core is not None or (link is not None and self._link is not None):
+            raise ValueError(f"{self!r} is already on a network: remove it from that one first")
         self.settle()
         ram = (self.enabled, self.can_mode, self.ctrl_mode, self.setpoint, self.zero_offset_deg)
         motor.family = lib.SB_FAMILY_HOLLOW
@@ -83,14 +88,16 @@ class HollowCore(ListeningDevice):
         self.core_push()
 
     def core_detach(self) -> None:
-        """Leave the C twin: take what C changed, copy the plant and the RAM state back."""
+        """Leave the C twin and the network: take what C changed, copy the plant and the RAM state back."""
         if self._core is None:
+            self.attach(None)
             return
         self.settle()
         ram = (self.enabled, self.can_mode, self.ctrl_mode, self.setpoint, self.zero_offset_deg)
         plant: CorePlant = self._plant  # type: ignore[assignment]
         self._plant = plant.to_python()
         self._core = self._core_state = None
+        self._link = None
         self.enabled, self.can_mode, self.ctrl_mode, self.setpoint, self.zero_offset_deg = ram
 
     def core_push(self) -> None:

@@ -30,6 +30,10 @@ only if something else moves it) and counts ``start_without_setpoint``. The exce
 the manual defines: FC in extended position mode locks at the present position (§5.2), with the
 last setpoint's limits or, if there is none, the model's full scales.
 
+On a C network (:class:`~servobus.sim.corenet.CoreCanNetwork`) the set-point frames and their replies
+run in C (csrc/sim_hollow.c, glue in :mod:`~servobus.protocols.hollow.sim.core`); this model is
+their reference and handles everything else.
+
 Faults: the hollow replies carry no error or fault field (§4.5, §5.3, §7.3; the manual describes
 no error state at all), so there is nothing to inject beyond :meth:`HollowMotor.reboot` and
 :attr:`HollowMotor.unresponsive`.

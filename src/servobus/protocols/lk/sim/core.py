@@ -107,14 +107,12 @@ class LkCore:
         motor: the zeroed ``sb_simmotor *`` the network gave it.
     """
 
-    __slots__ = ("_device", "_own_receive", "_run_states", "motor", "state")
+    __slots__ = ("_device", "_run_states", "motor", "state")
 
     def __init__(self, device: LkMotor, motor: Any) -> None:
-        # device.py imports this module
-        from servobus.protocols.lk.sim.device import MODEL_RECEIVE, RunState
+        from servobus.protocols.lk.sim.device import RunState  # device.py imports this module
 
         self._device = device
-        self._own_receive = MODEL_RECEIVE
         self._run_states = tuple(RunState(value) for value in _RUN_STATES)
         self.motor = motor
         self.state = ffi.cast("sb_lk_state *", motor.state)
@@ -122,8 +120,7 @@ class LkCore:
         motor.listen_all = 0
 
     def push(self) -> None:
-        """Write everything C reads; ``hot`` says whether C may act (no latched error, and the
-        model's own ``receive``: a replaced one must see every frame)."""
+        """Write everything C reads; ``hot`` says whether C may act (no latched error)."""
         self.pull()  # C's changes first, or the model's stale copy would overwrite them
         device, motor, s = self._device, self.motor, self.state
         model = device.model
@@ -155,8 +152,7 @@ class LkCore:
         motor.listen[1] = _MULTI_MOTOR_ID
         motor.n_listen = 2
         motor.py_deadline_s = math.inf  # the model has no deadlines of its own
-        # C may act unless an error is latched, or receive is not the model's (see device.MODEL_RECEIVE)
-        motor.hot = not device._latched and type(device).receive is self._own_receive
+        motor.hot = not device._latched
 
     def pull(self) -> None:
         """Take what C changed since the last pull (nothing to do unless it acted)."""

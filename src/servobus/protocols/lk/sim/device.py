@@ -645,8 +645,3 @@ class LkMotor(ListeningDevice):
             position_deg=self.plant.position_deg,
             held_target_deg=held.position_deg if isinstance(held, PositionControl) else None,
         )
-
-
-#: The model's own ``receive``. A subclass or a patch that replaces it expects to see every frame, so
-#: the C twin then leaves every frame to Python (:meth:`~servobus.protocols.lk.sim.core.LkCore.push`).
-MODEL_RECEIVE = LkMotor.receive

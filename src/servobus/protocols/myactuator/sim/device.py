@@ -80,8 +80,9 @@ import math
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, TypeVar, cast
+from typing import Any, ClassVar, TypeVar, cast
 
+from servobus.core._lib import lib
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
@@ -98,6 +99,7 @@ from servobus.protocols.myactuator.ids import (
     reply_id,
     request_id,
 )
+from servobus.protocols.myactuator.sim.core import MaCore
 from servobus.protocols.myactuator.sim.state import (
     DEFAULT_ENCODER_COUNTS_PER_TURN,
     DEFAULT_MODEL,
@@ -117,7 +119,7 @@ from servobus.protocols.myactuator.sim.state import (
     status3_reply,
     status_reply,
 )
-from servobus.sim.device import Emission, ListeningDevice
+from servobus.sim.device import BusLink, Emission, ListeningDevice
 from servobus.sim.plant import (
     Brake,
     Control,
@@ -238,6 +240,10 @@ class MyActuatorMotor(ListeningDevice):
     Raises:
         ValueError: bad id, revision, turnaround, model string, version date or ratings.
     """
+
+    #: The family's C path (csrc/sim_myactuator.c), run by a network that has one (core.py).
+    CORE_FAMILY: ClassVar[int] = lib.SB_FAMILY_MYACTUATOR
+    _core: MaCore | None = None
 
     def __init__(
         self,
@@ -372,12 +378,38 @@ class MyActuatorMotor(ListeningDevice):
     def next_deadline_s(self) -> float | None:
         """The earliest of: the 0xB3 trip, the next stream frame, the next error report."""
         protection, report = self.protection_deadline_s(), self._next_report_s
-        if not self.streams and (protection is None or report is None):
+        streams = self.streams
+        if streams and self._core is not None and self._core.runs_streams():
+            streams = {}  # its C twin runs them (sb_ma_next_deadline)
+        if not streams and (protection is None or report is None):
             return report if protection is None else protection  # the network asks after every frame
         times = [protection, report]
-        times += [stream.next_s for stream in self.streams.values()]
+        times += [stream.next_s for stream in streams.values()]
         found = [t for t in times if t is not None]
         return min(found) if found else None
+
+    # ---- the C twin (core.py; the network calls these) ----
+
+    def core_attach(self, motor: Any, link: BusLink | None) -> None:
+        """Run on ``motor`` (an ``sb_simmotor *``): its plant moves there and its C path answers what
+        :func:`~.core.c_may_act` allows; ``link`` as :meth:`attach` (see core.py).
+
+        Raises:
+            ValueError: already attached to a C twin, or on another network.
+        """
+        if self._core is not None or (link is not None and self._link not in (None, link)):
+            raise ValueError(f"{self!r} is already on a network: remove it from that one first")
+        MaCore.attach(self, motor, link)
+
+    def core_detach(self) -> None:
+        """Leave the C twin and its network: its changes pulled, the plant back in Python."""
+        if self._core is not None:
+            self._core.detach()
+
+    def core_push(self) -> None:
+        """Write what the C path reads into the twin (the network calls this after each call in)."""
+        if self._core is not None:
+            self._core.push()
 
     def listen_ids(self) -> frozenset[int]:
         """0x140+ID, 0x400+ID, 0x280 and 0x300 (filtered or not, it counts them): any other
@@ -409,7 +441,10 @@ class MyActuatorMotor(ListeningDevice):
         """Advance to ``now_s`` and return the stream frames and error reports due, with their times."""
         self.advance(now_s)
         out: list[tuple[float, Reply]] = []
-        for command, stream in self.streams.items():
+        streams = self.streams
+        if streams and self._core is not None and self._core.runs_streams():
+            streams = {}  # its C twin runs them (sb_ma_poll)
+        for command, stream in streams.items():
             if stream.next_s <= now_s:
                 self._counters["stream_skipped"] += stream.advance_past(now_s)
                 self._counters["stream_frames"] += 1

@@ -1,0 +1,311 @@
+"""The simulator's own cost: the C engine against the Python models, in the same run (issue [simcore]).
+
+What is measured (both networks get the same seeded trace, repeats alternated, medians):
+
+* ``sim.us_per_exchange``: CPU (``time.process_time``) per simulated request/reply pair through
+  :class:`~servobus.sim.corenet.CoreCanNetwork`: 32 MyActuator motors on one 1 Mbit/s bus, a control
+  loop's traffic: every cycle each motor gets a position set-point (0xA4, a sine with seeded noise and
+  speed limit) or, every fourth cycle, a status read (0x9C), and the next cycle starts when the 32 replies
+  are in (the bus saturated). The network is driven the way :class:`~servobus.transports.sim.SimTransport`
+  drives it: ``next_event_s`` -> ``advance`` -> ``run_ahead``, request frames built before the clock
+  starts, reply :class:`~servobus.frame.Frame` objects made by the network counted in.
+  ``sim.python_us_per_exchange``: the same through the Python reference
+  (:class:`~servobus.sim.network.SimCanNetwork` and the device models alone); ``sim.vs_python`` = the ratio.
+  Every run's replies (time, id, bytes) must be identical between the two, or the run fails.
+* ``sim.virtual_speedup``: 10 virtual seconds of that scenario (32 motors saturating the bus, ~4,000
+  pairs per virtual second) / the wall time it took, through CoreCanNetwork; the trace is the same for
+  the same seed (checked: two runs, one digest). ``sim.virtual_speedup_python``: the same through the
+  Python models. ``sim.virtual_speedup_transport``: the same scenario through ``SimTransport`` on a
+  virtual-time asyncio loop (``servobus.sim.virtual``), for the cost the event loop adds (info).
+
+Usage (from the repository root)::
+
+    python bench/bench_sim.py            # full: 7 repeats, writes bench/RESULTS.md and results.json
+    python bench/bench_sim.py --quick    # CI smoke run, writes nothing
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import gc
+import hashlib
+import math
+import random
+import statistics
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+BENCH_DIR = Path(__file__).resolve().parent
+if str(BENCH_DIR) not in sys.path:
+    sys.path.insert(0, str(BENCH_DIR))
+
+import _meta  # noqa: E402
+import _results  # noqa: E402
+from servobus.frame import Frame  # noqa: E402
+from servobus.protocols import myactuator as ma  # noqa: E402
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor  # noqa: E402
+from servobus.sim import virtual  # noqa: E402
+from servobus.sim.corenet import CoreCanNetwork  # noqa: E402
+from servobus.sim.network import SimCanNetwork  # noqa: E402
+
+KEY = "sim"
+MOTORS = 32
+TARGETS = {"us_per_exchange": 3.0, "vs_python": 20.0, "virtual_speedup": 50.0}
+
+Network = SimCanNetwork | CoreCanNetwork
+
+
+@dataclass(frozen=True, slots=True)
+class Config:
+    mode: str
+    repeats: int
+    cycles: int  # cycles of 32 pairs per repeat (exchange figure)
+    virtual_s: float  # virtual seconds of the speed-up scenario
+
+
+FULL = Config("full", repeats=7, cycles=400, virtual_s=10.0)
+QUICK = Config("quick", repeats=1, cycles=20, virtual_s=0.2)
+
+
+def trace(seed: int, cycles: int) -> list[list[Frame]]:
+    """The host's requests, cycle by cycle: position set-points (a sine, seeded noise and speed limits),
+    every fourth cycle a status read; the same list for the same seed."""
+    rng = random.Random(seed)
+    codecs = [ma.FAMILY.bind(i) for i in range(1, MOTORS + 1)]
+    out: list[list[Frame]] = []
+    for c in range(cycles):
+        if c % 4 == 3:
+            out.append([codec.encode(ma.ReadStatus2()) for codec in codecs])
+            continue
+        batch = []
+        for n, codec in enumerate(codecs):
+            angle = 90.0 * math.sin(2 * math.pi * (c / 200 + n / MOTORS)) + rng.uniform(-1.0, 1.0)
+            speed = rng.choice((None, 360.0, 720.0, 1800.0))
+            batch.append(
+                codec.encode(ma.AbsolutePositionControl(angle_deg=round(angle, 2), max_speed_dps=speed))
+            )
+        out.append(batch)
+    return out
+
+
+def network(kind: type[Network]) -> Network:
+    return kind([MyActuatorMotor(i) for i in range(1, MOTORS + 1)])
+
+
+def drive(
+    net: Network, cycles: Sequence[Sequence[Frame]], until_s: float = math.inf
+) -> list[tuple[float, Frame]]:
+    """Run ``cycles`` (repeated from the start while virtual time is below ``until_s``, once if it is
+    infinite) the way SimTransport does; return what the host received."""
+    received: list[tuple[float, Frame]] = []
+    t = net.now_s
+    first = True
+    while first or net.now_s < until_s:
+        first = False
+        for batch in cycles:
+            for frame in batch:
+                net.send(frame, t)
+            want = len(received) + len(batch)
+            while len(received) < want:
+                at = net.next_event_s()
+                if at is None:
+                    raise RuntimeError(f"{type(net).__name__}: {want - len(received)} replies never came")
+                received += net.advance(at)
+                net.run_ahead(at)
+            t = net.now_s
+            if t >= until_s:
+                break
+        if until_s == math.inf:
+            break
+    return received
+
+
+def digest(received: Sequence[tuple[float, Frame]]) -> str:
+    h = hashlib.sha256()
+    for at, frame in received:
+        h.update(f"{at!r} {frame.arbitration_id} ".encode() + frame.data)
+    return h.hexdigest()[:16]
+
+
+def exchange_us(kind: type[Network], cycles: list[list[Frame]]) -> tuple[float, str]:
+    """CPU µs per request/reply pair over ``cycles`` on a fresh network (a warm-up cycle first)."""
+    net = network(kind)
+    drive(net, cycles[:1])
+    gc.collect()
+    start = time.process_time()
+    received = drive(net, cycles[1:])
+    cpu = time.process_time() - start
+    return cpu / len(received) * 1e6, digest(received)
+
+
+def speedup(kind: type[Network], seconds: float, seed: int) -> tuple[float, int, str]:
+    """(virtual seconds per wall second, pairs, trace digest) of ``seconds`` of the saturating scenario."""
+    cycles = trace(seed, 200)
+    net = network(kind)
+    gc.collect()
+    start = time.perf_counter()
+    received = drive(net, cycles, until_s=seconds)
+    wall = time.perf_counter() - start
+    return net.now_s / wall, len(received), digest(received)
+
+
+def transport_speedup(seconds: float, seed: int) -> tuple[float, int]:
+    """The scenario through SimTransport on a virtual-time loop: (speed-up, pairs)."""
+    from servobus.transports.sim import SimTransport
+
+    cycles = trace(seed, 200)
+
+    async def scenario() -> int:
+        done = asyncio.Event()
+        state = {"got": 0, "want": 0, "cycle": 0}
+
+        async with SimTransport(devices=[MyActuatorMotor(i) for i in range(1, MOTORS + 1)]) as bus:
+            loop = asyncio.get_running_loop()
+
+            def send_next() -> None:
+                batch = cycles[state["cycle"] % len(cycles)]
+                state["cycle"] += 1
+                state["want"] += len(batch)
+                for frame in batch:
+                    bus.send(frame)
+
+            def consume(frames: list[Frame]) -> None:
+                state["got"] += len(frames)
+                if state["got"] >= state["want"]:
+                    if loop.time() >= seconds:
+                        done.set()
+                    else:
+                        send_next()
+
+            bus.set_consumer(consume)
+            send_next()
+            await done.wait()
+        return state["got"]
+
+    virtual.run(scenario())  # warm-up: imports, first calls
+    start = time.perf_counter()
+    pairs = virtual.run(scenario())
+    return seconds / (time.perf_counter() - start), pairs
+
+
+def measure(cfg: Config, log: Callable[[str], None]) -> dict[str, Any]:
+    cycles = trace(1, cfg.cycles + 1)
+    core_us: list[float] = []
+    py_us: list[float] = []
+    for r in range(cfg.repeats):
+        order = (CoreCanNetwork, SimCanNetwork) if r % 2 == 0 else (SimCanNetwork, CoreCanNetwork)
+        got: dict[type[Network], tuple[float, str]] = {kind: exchange_us(kind, cycles) for kind in order}
+        (c_us, c_digest), (p_us, p_digest) = got[CoreCanNetwork], got[SimCanNetwork]
+        if c_digest != p_digest:
+            raise SystemExit(f"bench_sim: the C engine's replies differ from the Python models' (repeat {r})")
+        core_us.append(c_us)
+        py_us.append(p_us)
+        log(f"  repeat {r + 1}: C {c_us:.2f} µs/pair, Python {p_us:.2f} µs/pair ({p_us / c_us:.1f}x)")
+    c_speed, c_pairs, c_digest = speedup(CoreCanNetwork, cfg.virtual_s, seed=7)
+    again = speedup(CoreCanNetwork, cfg.virtual_s, seed=7)
+    p_speed, _, p_digest = speedup(SimCanNetwork, cfg.virtual_s, seed=7)
+    t_speed, t_pairs = transport_speedup(cfg.virtual_s, seed=7)
+    log(f"  {cfg.virtual_s:g} virtual s: C {c_speed:.1f}x ({c_pairs} pairs), Python {p_speed:.1f}x, "
+        f"through SimTransport {t_speed:.1f}x")  # fmt: skip
+    c_med, p_med = statistics.median(core_us), statistics.median(py_us)
+    figures: dict[str, Any] = {
+        "us_per_exchange": round(c_med, 3),
+        "python_us_per_exchange": round(p_med, 2),
+        "vs_python": round(p_med / c_med, 1),
+        "us_per_exchange_runs": [round(x, 3) for x in core_us],
+        "python_us_per_exchange_runs": [round(x, 2) for x in py_us],
+        "virtual_speedup": round(c_speed, 1),
+        "virtual_speedup_python": round(p_speed, 1),
+        "virtual_speedup_transport": round(t_speed, 1),
+        "virtual_pairs": c_pairs,
+        "virtual_pairs_per_s": round(c_pairs / cfg.virtual_s),
+        "virtual_same_trace": again[2] == c_digest and p_digest == c_digest and again[1] == c_pairs,
+        "transport_pairs": t_pairs,
+    }
+    missed = [
+        f"sim.{name} {figures[name]} (target {'<=' if name == 'us_per_exchange' else '>='} {target})"
+        for name, target in TARGETS.items()
+        if (figures[name] > target if name == "us_per_exchange" else figures[name] < target)
+    ]
+    if not figures["virtual_same_trace"]:
+        missed.append("sim.virtual_same_trace: the same seed gave another trace")
+    figures["targets_missed"] = missed
+    return figures
+
+
+def render_markdown(f: dict[str, Any], info: dict[str, Any]) -> str:
+    rows = [
+        ("CPU per request/reply pair, C engine (`sim.us_per_exchange`)", f"{f['us_per_exchange']:.2f} µs",
+         "<= 3 µs"),
+        ("the same, Python models (`sim.python_us_per_exchange`)",
+         f"{f['python_us_per_exchange']:.2f} µs", "-"),
+        ("Python / C (`sim.vs_python`)", f"{f['vs_python']:.1f}x", ">= 20x"),
+        ("virtual scenario, C engine (`sim.virtual_speedup`)", f"{f['virtual_speedup']:.1f}x real time",
+         ">= 50x"),
+        ("the same, Python models (`sim.virtual_speedup_python`)",
+         f"{f['virtual_speedup_python']:.1f}x", "-"),
+        ("the same through `SimTransport` on a virtual-time loop (`sim.virtual_speedup_transport`)",
+         f"{f['virtual_speedup_transport']:.1f}x", "(info)"),
+    ]  # fmt: skip
+    lines = [
+        "## The simulator's cost (`bench/bench_sim.py`)",
+        "",
+        *_meta.header_lines("bench_sim", info),
+        "",
+        (__doc__ or "").split("\n\n")[1].replace("\n", " ").strip(),
+        "",
+        _results.markdown_table(["figure", "value", "target"], rows, "lrl"),
+        f"Runs (µs per pair, C): {', '.join(f'{x:.2f}' for x in f['us_per_exchange_runs'])}; "
+        f"Python: {', '.join(f'{x:.2f}' for x in f['python_us_per_exchange_runs'])}. "
+        f"Virtual scenario: {f['virtual_pairs']:,} pairs ({f['virtual_pairs_per_s']:,} per virtual second); "
+        f"same trace for the same seed, and the same as the Python models': {f['virtual_same_trace']}.",
+        "",
+        "Targets missed: " + ("; ".join(f["targets_missed"]) if f["targets_missed"] else "none."),
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="a few cycles (CI smoke run), writes nothing")
+    parser.add_argument("--output", type=Path, help="write RESULTS.md and results.json to this directory")
+    parser.add_argument("--check", action="store_true", help="exit with status 1 when a target is missed")
+    args = parser.parse_args(argv)
+    started = time.perf_counter()
+    load = _meta.load_average()
+    cfg = QUICK if args.quick else FULL
+    out_dir: Path | None = args.output if args.output is not None else (None if args.quick else BENCH_DIR)
+    print(
+        f"bench_sim ({cfg.mode}): {cfg.repeats} repeats of {cfg.cycles} cycles x {MOTORS} motors", flush=True
+    )
+    figures = measure(cfg, lambda line: print(line, flush=True))
+    arguments = list(sys.argv[1:] if argv is None else argv)
+    info = _meta.meta(
+        "bench/bench_sim.py",
+        arguments,
+        mode=cfg.mode,
+        load_average_at_start=load,
+        statistic=f"median of {cfg.repeats} repeats, C and Python alternated",
+        runtime_s=round(time.perf_counter() - started, 1),
+    )
+    missed = figures["targets_missed"]
+    print("TARGETS MISSED: " + "; ".join(missed) if missed else "All sim targets met.")
+    print(
+        f"sim.us_per_exchange {figures['us_per_exchange']} µs, vs_python {figures['vs_python']}x, "
+        f"virtual_speedup {figures['virtual_speedup']}x"
+    )
+    if out_dir is not None:
+        _results.replace_markdown_section(out_dir / "RESULTS.md", KEY, render_markdown(figures, info))
+        _results.update_results_json(out_dir / "results.json", KEY, {**figures, "meta": info})
+        print(f"Wrote {out_dir / 'RESULTS.md'} and {out_dir / 'results.json'} (key {KEY!r}).")
+    print(f"Total runtime: {time.perf_counter() - started:.1f} s")
+    return 1 if args.check and missed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
