@@ -11,6 +11,7 @@
 #include <math.h>
 #include <string.h>
 #include "sb_internal.h"
+#include "sim_pymath.h"
 
 _Static_assert(sizeof(sb_lk_state) <= sizeof(((sb_simmotor *)0)->state), "sb_lk_state must fit sb_simmotor.state");
 
@@ -27,21 +28,7 @@ static const double LK_NO_SPEED_DPS = 1e-9;          /* control.py _NO_SPEED_DPS
 
 /* ---- Python's arithmetic ---- */
 
-static double py_min(double a, double b) { return b < a ? b : a; }   /* min(a, b): the first of equals */
-static double py_max(double a, double b) { return b > a ? b : a; }
 static double py_clamp(double x, double lo, double hi) { return py_max(lo, py_min(hi, x)); }
-
-static double py_fmod(double x, double y)  /* float % float (CPython float_rem) */
-{
-    double mod = fmod(x, y);
-    if (mod != 0.0) {
-        if ((y < 0) != (mod < 0))
-            mod += y;
-    } else {
-        mod = copysign(0.0, y);
-    }
-    return mod;
-}
 
 static int64_t py_imod(int64_t a, int64_t b)  /* int % int, b > 0 */
 {
@@ -386,7 +373,7 @@ static double single_turn_target(const sb_simmotor *m, const sb_lk_state *s, con
     double ratio = m->plant.p.gear_ratio;
     double period = s->revision == SB_LK_V2_36 ? 360.0 * ratio : 360.0;
     double here = a->multi_turn_deg;
-    double delta = py_fmod(r->value - here, period);
+    double delta = py_mod(r->value - here, period);
     if (r->ccw && delta != 0.0)
         delta -= period;
     return (here + delta + origin_deg) / ratio;

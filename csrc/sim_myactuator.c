@@ -10,6 +10,7 @@
 #include <string.h>
 
 #include "sb_internal.h"
+#include "sim_pymath.h"
 
 _Static_assert(sizeof(sb_ma_state) <= sizeof(((sb_simmotor *)0)->state),
                "sb_ma_state must fit sb_simmotor.state");
@@ -46,18 +47,6 @@ static const sb_ma_state *cstate_of(const sb_simmotor *m)
 
 /* ---- Python's number rules ---- */
 
-/* x % y for floats (Objects/floatobject.c float_rem): the result has the sign of y. */
-static double py_mod(double x, double y)
-{
-    double mod = fmod(x, y);
-    if (mod != 0.0) {
-        if ((y < 0) != (mod < 0))
-            mod += y;
-    } else {
-        mod = copysign(0.0, y);
-    }
-    return mod;
-}
 
 /* The integer round(x, n) * 10**n stands for, scale = 10**n: the exact product x * scale rounded half
  * to even (round() rounds the exact binary value; the float product may round onto a tie). */

@@ -8,13 +8,12 @@
 #include <math.h>
 
 #include "sb_internal.h"
+#include "sim_pymath.h"
 
 #define SB_PI 3.141592653589793 /* math.pi: the double nearest pi */
 
 static const double RAD_PER_DEG = SB_PI / 180.0;
 
-static inline double py_min(double a, double b) { return b < a ? b : a; }
-static inline double py_max(double a, double b) { return b > a ? b : a; }
 /* plant.py _clamp: max(-limit, min(limit, value)) */
 static inline double clamp(double value, double limit) { return py_max(-limit, py_min(limit, value)); }
 
