@@ -11,7 +11,9 @@ What is measured (both networks get the same seeded trace, repeats alternated, m
   starts, reply :class:`~servobus.frame.Frame` objects made by the network counted in.
   ``sim.python_us_per_exchange``: the same through the Python reference
   (:class:`~servobus.sim.network.SimCanNetwork` and the device models alone); ``sim.vs_python`` = the ratio.
-  Every run's replies (time, id, bytes) must be identical between the two, or the run fails.
+  The replies (time, id, bytes) of an untimed run of the trace must be identical between the two, or
+  the bench stops; the timed runs only count replies, with the start-up objects frozen out of the
+  garbage collector (``gc.freeze``) as a long-running control process would have them.
 * ``sim.virtual_speedup``: 10 virtual seconds of that scenario (32 motors saturating the bus, ~4,000
   pairs per virtual second) / the wall time it took, through CoreCanNetwork; the trace is the same for
   the same seed (checked: two runs, one digest). ``sim.virtual_speedup_python``: the same through the
@@ -296,12 +298,11 @@ def render_markdown(f: dict[str, Any], info: dict[str, Any]) -> str:
         ("the same through `SimTransport` on a virtual-time loop (`sim.virtual_speedup_transport`)",
          f"{f['virtual_speedup_transport']:.1f}x", "(info)"),
     ]  # fmt: skip
+    doc = (__doc__ or "").split("What is measured", 1)[1].split("\n\nUsage", 1)[0]
     lines = [
-        "## The simulator's cost (`bench/bench_sim.py`)",
+        *_meta.header_lines("## The simulator's cost (`bench/bench_sim.py`)", info),
         "",
-        *_meta.header_lines("bench_sim", info),
-        "",
-        (__doc__ or "").split("\n\n")[1].replace("\n", " ").strip(),
+        "What is measured" + doc.rstrip(),
         "",
         _results.markdown_table(["figure", "value", "target"], rows, "lrl"),
         f"Runs (µs per pair, C): {', '.join(f'{x:.2f}' for x in f['us_per_exchange_runs'])}; "
