@@ -325,17 +325,12 @@ static int join(sb_simnet *net, int node, uint32_t id, int flags, const uint8_t 
     return s;
 }
 
+/* A frame the wire can carry: flags, id width and length (CAN FD's eleven sizes only) as the frame
+ * timing counts them, so every queued frame has a positive wire time. */
 static int check_frame(uint32_t id, int flags, const uint8_t *data, size_t len)
 {
-    if (flags & ~(SB_FRAME_EXT | SB_FRAME_FD | SB_FRAME_BRS))
-        return 0;
-    if (id > ((flags & SB_FRAME_EXT) ? 0x1FFFFFFFu : 0x7FFu))
-        return 0;
-    if (len > ((flags & SB_FRAME_FD) ? 64u : 8u) || (len && !data))
-        return 0;
-    if ((flags & SB_FRAME_BRS) && !(flags & SB_FRAME_FD))
-        return 0;
-    return 1;
+    int nominal_bits, data_bits;
+    return sb_can_frame_bits(id, flags, data, len, &nominal_bits, &data_bits) == SB_OK;
 }
 
 int sb_simnet_send(sb_simnet *net, int node, uint32_t id, int flags, const uint8_t *data, size_t len,

@@ -54,3 +54,14 @@ def test_a_model_whose_method_is_replaced_on_the_class_stays_in_python(
     network = CoreCanNetwork([MyActuatorMotor(1)])
     assert not network._core[1]
     assert len(_read_status(network, 1)) == 1
+
+
+def test_the_c_network_refuses_a_frame_the_wire_cannot_carry() -> None:
+    """A CAN FD length between the eleven sizes has no wire time: refused, never queued."""
+    from servobus.core._lib import ffi, lib
+
+    net = ffi.new("sb_simnet *")
+    assert lib.sb_simnet_init(net, 1_000_000.0, 5_000_000.0) == lib.SB_OK
+    for length, status in ((9, lib.SB_E_ARG), (12, None), (13, lib.SB_E_ARG), (8, None)):
+        got = lib.sb_simnet_send(net, 0, 1, lib.SB_FRAME_FD, bytes(64), length, 0.0, 0)
+        assert got == status if status is not None else got >= 0, (length, got)

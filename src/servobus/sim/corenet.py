@@ -357,7 +357,14 @@ class CoreCanNetwork:
         self._core[node] = core
 
     def remove(self, name: str) -> Device:
-        """Take a device off the bus (unplugged, powered off)."""
+        """Take a device off the bus (unplugged, powered off).
+
+        Raises:
+            KeyError: no device of that name.
+            RuntimeError: called from inside the network's own run (a device's receive or poll).
+        """
+        if self._net.phase != 0:  # C refuses while a step is half done: refuse before anything changes
+            raise RuntimeError(f"cannot remove {name!r} while the network is handing it a frame or a poll")
         device = self.devices.pop(name)
         node = self._node_of.pop(name)
         if self._listeners.pop(name, None) is not None:
@@ -370,7 +377,8 @@ class CoreCanNetwork:
             self._unlinked.remove((node, device))
         state = self._net.nodes[node]
         self._first[name] = (int(state.has_first), float(state.first_joined_s), int(state.first_seq))
-        lib.sb_simnet_remove(self._net, node)
+        if lib.sb_simnet_remove(self._net, node) != lib.SB_OK:  # (checked above: cannot happen)
+            raise RuntimeError(f"the simulated network refused to remove {name!r}")
         self._by_node[node] = None
         self._core[node] = False
         return device
