@@ -71,7 +71,7 @@ void sb_plant_set_external_torque(sb_plant *pl, double torque_nm);
 void sb_plant_set_state(sb_plant *pl, const sb_plant_state *state);
 /* SB_OK if every function above would act on *pl: not NULL, max_step_s > 0, a known control mode,
  * 0 <= steps < 2^53, finite anchor_s and now_s with anchor_s + steps * max_step_s <= now_s (the
- * functions above leave a plant that fails this untouched). Added by H-plant. */
+ * functions above leave a plant that fails this untouched). */
 int sb_plant_check(const sb_plant *pl);
 /* Advance n plants to now_s in one call. */
 void sb_plants_advance(sb_plant *plants, size_t n, double now_s);

@@ -16,8 +16,7 @@ The network part puts 32 motors of the families with a C path on one CoreCanNetw
 32 Python-only motors on a SimCanNetwork (the reference), sends both the same random frames and
 compares what the host receives (times and frames) and every device's counters.
 
-A family whose C path has not landed (its device has no ``core_attach``) is skipped, with the
-reason; so is the network part until ``servobus.sim.corenet`` exists.
+Every family's device must have its C path (``core_attach``): one without fails, never skips.
 """
 
 from __future__ import annotations
@@ -135,8 +134,7 @@ FAMILIES = {
 
 
 def _require_c_path(family: FamilyPath) -> None:
-    if not family.has_c_path():
-        pytest.skip(f"{family.name}: the C path has not landed ({family.device} has no core_attach)")
+    assert family.has_c_path(), f"{family.name}: {family.device} has no core_attach (its C path is gone)"
 
 
 # ---- frames ----
@@ -376,10 +374,7 @@ def test_c_path_refuses_bad_arguments(name: str) -> None:
 
 
 def _corenet() -> Any:
-    try:
-        return importlib.import_module("servobus.sim.corenet")
-    except ModuleNotFoundError:
-        pytest.skip("the engine (servobus.sim.corenet, csrc/sim_net.c) has not landed")
+    return importlib.import_module("servobus.sim.corenet")
 
 
 def _fleet(draw: st.DrawFn, families: list[FamilyPath]) -> Iterator[tuple[FamilyPath, int, dict[str, Any]]]:
@@ -400,9 +395,9 @@ def test_fuzz_network_of_32_c_motors() -> None:
     corenet = _corenet()
     from servobus.sim.network import SimCanNetwork
 
-    families = [f for f in FAMILIES.values() if f.has_c_path()]
-    if not families:
-        pytest.skip("no family's C path has landed")
+    families = list(FAMILIES.values())
+    for family in families:
+        _require_c_path(family)
 
     @settings(
         deadline=None,

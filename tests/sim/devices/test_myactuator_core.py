@@ -627,7 +627,7 @@ def _bus_trace(make: Callable[..., Any], seed: int, ticks: int) -> tuple[list[tu
 
 
 def test_thirty_two_c_motors_through_the_engine_give_the_python_trace() -> None:
-    corenet = pytest.importorskip("servobus.sim.corenet")
+    from servobus.sim import corenet
     from servobus.sim.network import SimCanNetwork
 
     expected, expected_states, python_frames = _bus_trace(SimCanNetwork, 27, 2000)
