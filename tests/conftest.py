@@ -39,6 +39,15 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(skip)
 
 
+@pytest.fixture(params=["asyncio", "trio"])
+def anyio_backend(request: pytest.FixtureRequest) -> tuple[str, dict[str, object]]:
+    """Every ``@pytest.mark.anyio`` test runs on asyncio and on trio (real time; tests/_backends.py
+    has the virtual-time form a module can override this with)."""
+    from _backends import real
+
+    return real(request.param)
+
+
 @pytest.fixture(scope="module")
 def toy() -> Iterator[ModuleType]:
     """The toy plug-in family's package, installed for the tests of one module (tests/_toy.py)."""
