@@ -228,7 +228,7 @@ def current() -> Runtime:
     """
     loop = asyncio._get_running_loop()
     if loop is not None:
-        return _AsyncioRuntime(loop)
+        return _AsyncioRuntime(loop)  # type: ignore[return-value]
     trio = sys.modules.get("trio")
     if trio is not None and trio.lowlevel.in_trio_run():
         return _TrioRuntime()  # type: ignore[return-value]
