@@ -2,7 +2,8 @@
 
 Transports convert to and from python-can's ``Message`` or serial bytes at their edge only.
 :meth:`Frame.from_message` reads a ``can.Message``'s attributes (no import of python-can);
-:meth:`Frame.to_message` defers to the CAN transport's module, which owns python-can.
+:meth:`Frame.to_message` builds one, loading python-can only when it is called (the frame layer
+imports no other servobus layer).
 """
 
 from __future__ import annotations
@@ -10,8 +11,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-if TYPE_CHECKING:  # sans-IO: python-can is loaded by the transport edge, never with servobus.frame
-    from servobus.transports.can import CanMessage
+if TYPE_CHECKING:  # sans-IO: python-can is never loaded with servobus.frame
+    from can import Message as CanMessage
 
 __all__ = ["Frame", "classic_request"]
 
@@ -132,9 +133,22 @@ class Frame:
         Raises:
             ValueError: a serial-link message, which has no CAN form.
         """
-        from servobus.transports.can import message_from_frame  # loads python-can: not at import
+        import can  # (python-can is loaded by the first frame that needs it, not at import)
 
-        return message_from_frame(self, **message)
+        if self.is_serial:
+            raise ValueError(f"{self!r} is a serial-link message, not a CAN frame")
+        return can.Message(
+            timestamp=self.timestamp,
+            arbitration_id=self.arbitration_id,
+            data=self.data,
+            is_extended_id=self.is_extended_id,
+            is_fd=self.is_fd,
+            bitrate_switch=self.bitrate_switch,
+            error_state_indicator=self.error_state_indicator,
+            is_rx=self.is_rx,
+            check=False,  # a Frame is valid already
+            **message,
+        )
 
     def __repr__(self) -> str:
         width = 8 if self.is_extended_id else 3
