@@ -10,6 +10,7 @@ import can
 import pytest
 
 from servobus import Frame
+from servobus.transports.can import message_from_frame
 
 
 @pytest.mark.parametrize(
@@ -91,7 +92,7 @@ _MESSAGE_FIELDS = (
     ids=["classic-tx", "empty", "extended", "fd-brs", "fd-esi"],
 )
 def test_a_frame_converts_to_a_python_can_message_and_back_exactly(frame: Frame) -> None:
-    message = frame.to_message()
+    message = message_from_frame(frame)
     assert isinstance(message, can.Message)
     expected = {
         "arbitration_id": frame.arbitration_id,
@@ -138,7 +139,7 @@ def test_a_python_can_message_converts_with_its_own_flags() -> None:
         7.5,
         False,
     )
-    assert frame.to_message(channel="can0").equals(message)
+    assert message_from_frame(frame, channel="can0").equals(message)
 
 
 @pytest.mark.parametrize(
@@ -158,7 +159,7 @@ def test_a_message_that_is_no_frame_does_not_convert(message: can.Message, match
 
 def test_a_serial_message_has_no_python_can_form_and_esi_needs_fd() -> None:
     with pytest.raises(ValueError, match="serial-link"):
-        Frame(arbitration_id=1, data=b"\x9c", is_serial=True).to_message()
+        message_from_frame(Frame(arbitration_id=1, data=b"\x9c", is_serial=True))
     with pytest.raises(ValueError, match="error_state_indicator needs is_fd"):
         Frame(arbitration_id=1, error_state_indicator=True)
 

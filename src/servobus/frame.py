@@ -1,18 +1,54 @@
 """Frame: the one type that crosses layers (codecs, scheduler, transports, simulator).
 
 Transports convert to and from python-can's ``Message`` or serial bytes at their edge only.
-:meth:`Frame.from_message` reads a ``can.Message``'s attributes (no import of python-can);
-:meth:`Frame.to_message` builds one, loading python-can only when it is called (the frame layer
-imports no other servobus layer).
+:meth:`Frame.from_message` reads a ``can.Message``'s attributes (no import of python-can); the
+other way, :func:`servobus.transports.can.message_from_frame` builds one at python-can's edge (the
+frame layer imports no other servobus layer and no I/O library).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Protocol
 
-if TYPE_CHECKING:  # sans-IO: python-can is never loaded with servobus.frame
-    from can import Message as CanMessage
+
+class CanMessage(Protocol):
+    """What :meth:`Frame.from_message` reads of a python-can ``can.Message`` (the frame layer is
+    sans-IO: it never imports python-can)."""
+
+    @property
+    def arbitration_id(self) -> int: ...
+
+    @property
+    def data(self) -> bytes | bytearray: ...
+
+    @property
+    def dlc(self) -> int: ...
+
+    @property
+    def is_extended_id(self) -> bool: ...
+
+    @property
+    def is_remote_frame(self) -> bool: ...
+
+    @property
+    def is_error_frame(self) -> bool: ...
+
+    @property
+    def is_fd(self) -> bool: ...
+
+    @property
+    def bitrate_switch(self) -> bool: ...
+
+    @property
+    def error_state_indicator(self) -> bool: ...
+
+    @property
+    def is_rx(self) -> bool: ...
+
+    @property
+    def timestamp(self) -> float: ...
+
 
 __all__ = ["Frame", "classic_request"]
 
@@ -124,30 +160,6 @@ class Frame:
             timestamp=message.timestamp if timestamp is None else timestamp,
             is_rx=message.is_rx,
             error_state_indicator=message.error_state_indicator,
-        )
-
-    def to_message(self, **message: Any) -> CanMessage:
-        """This frame as a python-can ``can.Message``: identifier, extended, FD, BRS, ESI, data,
-        ``is_rx`` and timestamp (other ``can.Message`` arguments, such as ``channel``, may be given).
-
-        Raises:
-            ValueError: a serial-link message, which has no CAN form.
-        """
-        import can  # (python-can is loaded by the first frame that needs it, not at import)
-
-        if self.is_serial:
-            raise ValueError(f"{self!r} is a serial-link message, not a CAN frame")
-        return can.Message(
-            timestamp=self.timestamp,
-            arbitration_id=self.arbitration_id,
-            data=self.data,
-            is_extended_id=self.is_extended_id,
-            is_fd=self.is_fd,
-            bitrate_switch=self.bitrate_switch,
-            error_state_indicator=self.error_state_indicator,
-            is_rx=self.is_rx,
-            check=False,  # a Frame is valid already
-            **message,
         )
 
     def __repr__(self) -> str:
