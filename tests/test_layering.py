@@ -65,7 +65,24 @@ def _sans_io_files() -> list[Path]:
     return files
 
 
-@pytest.mark.parametrize("path", _sans_io_files(), ids=lambda p: str(p.relative_to(SRC)))
+#: sans-IO violations in modules this test does not own, reported to the coordinator: file -> reason
+SANS_IO_KNOWN: dict[str, str] = {
+    "frame.py": "frame.py:15 (TYPE_CHECKING) and :136 (Frame.to_message) import python-can (main"
+    " 22462b4): an I/O library in the sans-IO base layer; to fix in frame.py",
+}
+
+
+def _sans_io_params() -> list[object]:
+    params: list[object] = []
+    for path in _sans_io_files():
+        name = str(path.relative_to(SRC))
+        known = SANS_IO_KNOWN.get(name)
+        marks = [pytest.mark.xfail(reason=known, strict=True)] if known else []
+        params.append(pytest.param(path, id=name, marks=marks))
+    return params
+
+
+@pytest.mark.parametrize("path", _sans_io_params())
 def test_sans_io_module_imports_no_io_or_clock(path: Path) -> None:
     assert violations(path.read_text()) == []
 
@@ -194,10 +211,7 @@ TRANSPORT_SIM = {
     "servobus.sim.device",
 }
 #: violations in modules this test does not own, reported to the coordinator: module -> reason
-KNOWN: dict[str, str] = {
-    "servobus.frame": "frame.py:14 (TYPE_CHECKING) and :135 (Frame.to_message) import"
-    " servobus.transports.can: the base layer points at a transport; to fix in frame.py",
-}
+KNOWN: dict[str, str] = {}
 
 
 def _prefixes() -> list[tuple[str, str]]:
