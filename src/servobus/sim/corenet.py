@@ -8,6 +8,8 @@ deadlines its family handles in C never reach Python. Everything else (a Python 
 C path leaves cold, a frame the host receives) comes back from one C call as an event: the network
 then acts on it in Python exactly as the reference does, and calls C again to go on.
 
+Which device is on which C node, and what C knows of each, is :mod:`~servobus.sim.corenodes`.
+
 Python :class:`~servobus.frame.Frame` objects the host or a Python device sends are kept by their
 slot in C and handed back as the same objects; frames made in C become Frame objects only when the
 host or a Python model receives them. Fault injectors act in Python, in the reference's order, so a
@@ -20,15 +22,16 @@ import heapq
 import itertools
 import math
 import struct
-from collections.abc import Collection, Hashable, Iterable
-from typing import Any, NoReturn, cast
+from collections.abc import Hashable, Iterable
+from typing import Any, NoReturn
 
 from servobus.core._lib import ffi, lib
 from servobus.frame import Frame
 from servobus.sim.canbus import CanBusModel
-from servobus.sim.device import Device, Emission, Listener
+from servobus.sim.corenodes import CoreNodes
+from servobus.sim.device import Device, Emission
 from servobus.sim.faults import FaultInjector
-from servobus.sim.network import HOST, LOG_LIMIT
+from servobus.sim.network import LOG_LIMIT
 
 __all__ = ["CoreBus", "CoreCanNetwork", "CoreLink"]
 
@@ -43,7 +46,6 @@ assert ffi.offsetof("sb_simframe", "data") == 20
 _RX, _DELIVER, _POLL = lib.SB_EV_RX, lib.SB_EV_DELIVER, lib.SB_EV_POLL
 _IDLE, _LOG_FULL = lib.SB_RUN_IDLE, lib.SB_RUN_LOG_FULL
 _ADVANCE, _AHEAD, _STOP_RX = lib.SB_RUN_ADVANCE, lib.SB_RUN_AHEAD, lib.SB_RUN_STOP_RX
-_MAX_LISTEN = lib.SB_SIM_MAX_LISTEN
 
 # A frame made in C, built without Frame's checks (C checked it): through the slot descriptors.
 _NEW = object.__new__
@@ -83,31 +85,6 @@ def _made(cache: dict[tuple[int, int, bytes], Frame], can_id: int, flags: int, d
     return frame
 
 
-def _handles_frames_as_its_model(device: object) -> bool:
-    """The device's ``receive`` and ``poll`` are its family model's own, which the C path reproduces.
-
-    A subclass of the model that overrides either (a user's custom device), or one replaced on the
-    class (a test that records every frame a motor receives), wants to see the frames itself: C
-    would bypass it, so such a device stays in Python. Told apart by where the methods were written:
-    in the package that also writes ``core_attach``, under the name of the class that holds them.
-    """
-    cls = type(device)
-    attach = next((k for k in cls.__mro__ if "core_attach" in vars(k)), None)
-    if attach is None:
-        return False
-    package = attach.__module__.rpartition(".")[0]
-    for name in ("receive", "poll"):
-        owner = next((k for k in cls.__mro__ if name in vars(k)), None)
-        method = vars(owner).get(name) if owner is not None else None
-        if (
-            owner is None
-            or owner.__module__.rpartition(".")[0] != package
-            or getattr(method, "__qualname__", None) != f"{owner.__qualname__}.{name}"
-        ):
-            return False
-    return True
-
-
 class _CoreLog:
     """What :class:`~servobus.sim.device.ListeningDevice` reads of a link's log: its frame count."""
 
@@ -135,7 +112,7 @@ class CoreLink:
         self._ends = network._ends
         self._missed = network._missed
         self._count = network._count
-        self._notify = network._dirty.append
+        self._notify = network._nodes.dirty.append
         self.name = name
 
     @property
@@ -224,12 +201,12 @@ class CoreBus:
 
     def queued(self, source: Hashable) -> int:
         """Frames node ``source`` has queued and not yet on the wire."""
-        node = self._network._source_node(source)
+        node = self._network._nodes.source_node(source)
         return 0 if node is None else int(self._net.nodes[node].queued)
 
     def head(self, source: Hashable) -> tuple[float, float] | None:
         """(joined_s, ready_s) of the frame node ``source`` sends next, or None if it has none queued."""
-        node = self._network._source_node(source)
+        node = self._network._nodes.source_node(source)
         if node is None or self._net.nodes[node].head < 0:
             return None
         slot = self._net.slots[self._net.nodes[node].head]
@@ -240,7 +217,7 @@ class CoreBus:
         out = ffi.new("double *"), ffi.new("int *")
         if lib.sb_simnet_next_completion(self._net, out[0], out[1]) != 1:
             return None
-        return float(out[0][0]), self._network._names[out[1][0]]
+        return float(out[0][0]), self._network._nodes.names[out[1][0]]
 
     def next_event_s(self) -> float | None:
         """When the next transmission will complete, as far as the bus knows now (None: idle)."""
@@ -282,23 +259,16 @@ class CoreCanNetwork:
         self._missed = ffi.new("int64_t[]", 2)  # a link's catch_up: missed, missed odd
         self._count = ffi.new("int *")
         self.bus = CoreBus(self)
-        self.devices: dict[str, Device] = {}
+        self._nodes = nodes = CoreNodes(self._net, lambda node, name: CoreLink(self, node, name))
+        self.devices: dict[str, Device] = nodes.devices
+        self._core = nodes.core  # which nodes run a C path (the tests read it)
+        self._by_node, self._filter = nodes.by_node, nodes.filter  # the event handlers' lookups
         self.to_devices = to_devices
         self.to_host = to_host
         self._seq = itertools.count()
         self._host_pending: list[tuple[float, int, Frame]] = []  # faults can delay delivery to the host
         self._frames: list[Frame | None] = [None] * lib.SB_NET_FRAMES  # Python frames by C slot
         self._made: dict[tuple[int, int, bytes], Frame] = {}
-        self._names: list[str | None] = [None] * lib.SB_NET_NODES
-        self._names[0] = HOST
-        self._node_of: dict[str, int] = {}
-        self._by_node: list[Device | None] = [None] * lib.SB_NET_NODES
-        self._core: list[bool] = [False] * lib.SB_NET_NODES  # the device has a C path
-        self._filter: dict[int, frozenset[int]] = {}  # listeners with more identifiers than C holds
-        self._listeners: dict[str, Listener] = {}
-        self._unlinked: list[tuple[int, Device]] = []  # asked for their deadline before every run
-        self._first: dict[str, tuple[int, float, int]] = {}  # a removed node's first (joined, seq)
-        self._dirty: list[str] = []
         for device in devices:
             self.add(device)
 
@@ -314,47 +284,13 @@ class CoreCanNetwork:
         self._net.now_s = value
 
     def add(self, device: Device) -> None:
-        """Put ``device`` on the bus.
+        """Put ``device`` on the bus (:meth:`CoreNodes.add <servobus.sim.corenodes.CoreNodes.add>`).
 
         Raises:
             ValueError: another device has the same name, the device is on another network, or the
                 network is full.
         """
-        name = device.name
-        if name in self.devices or name == HOST:
-            raise ValueError(f"a device named {name!r} is already on this bus")
-        linked = all(hasattr(device, method) for method in ("listen_ids", "attach", "settle"))
-        core = linked and hasattr(device, "CORE_FAMILY") and _handles_frames_as_its_model(device)
-        has_first, first_joined, first_seq = self._first.pop(name, (0, 0.0, 0))
-        kind = lib.SB_NODE_CORE if core else lib.SB_NODE_PYTHON
-        node = lib.sb_simnet_add(self._net, kind, linked, has_first, first_joined, first_seq)
-        if node < 0:
-            self._first[name] = (has_first, first_joined, first_seq)
-            raise ValueError(
-                f"no room for {name!r}: a simulated CAN network holds {lib.SB_NET_NODES - 1} devices"
-            )
-        try:
-            if linked:
-                link = CoreLink(self, node, name)
-                if core:
-                    cast(Any, device).core_attach(self._net.motors + node, link)
-                else:
-                    cast(Listener, device).attach(cast(Any, link))
-                self._listeners[name] = cast(Listener, device)
-                self._dirty.append(name)
-            else:
-                self._net.motors[node].listen_all = 1
-                lib.sb_simnet_touch(self._net, node)
-                self._unlinked.append((node, device))
-        except BaseException:
-            lib.sb_simnet_remove(self._net, node)
-            self._first[name] = (has_first, first_joined, first_seq)
-            raise
-        self.devices[name] = device
-        self._names[node] = name
-        self._node_of[name] = node
-        self._by_node[node] = device
-        self._core[node] = core
+        self._nodes.add(device)
 
     def remove(self, name: str) -> Device:
         """Take a device off the bus (unplugged, powered off).
@@ -363,25 +299,7 @@ class CoreCanNetwork:
             KeyError: no device of that name.
             RuntimeError: called from inside the network's own run (a device's receive or poll).
         """
-        if self._net.phase != 0:  # C refuses while a step is half done: refuse before anything changes
-            raise RuntimeError(f"cannot remove {name!r} while the network is handing it a frame or a poll")
-        device = self.devices.pop(name)
-        node = self._node_of.pop(name)
-        if self._listeners.pop(name, None) is not None:
-            if self._core[node]:
-                cast(Any, device).core_detach()  # settles up first
-            else:
-                cast(Listener, device).attach(None)  # settles up first
-            self._filter.pop(node, None)
-        else:
-            self._unlinked.remove((node, device))
-        state = self._net.nodes[node]
-        self._first[name] = (int(state.has_first), float(state.first_joined_s), int(state.first_seq))
-        if lib.sb_simnet_remove(self._net, node) != lib.SB_OK:  # (checked above: cannot happen)
-            raise RuntimeError(f"the simulated network refused to remove {name!r}")
-        self._by_node[node] = None
-        self._core[node] = False
-        return device
+        return self._nodes.remove(name)
 
     def send(self, frame: Frame, now_s: float | None = None) -> None:
         """The host queues ``frame`` for transmission at ``now_s`` (default: the network's time)."""
@@ -408,8 +326,9 @@ class CoreCanNetwork:
 
     def next_event_s(self) -> float | None:
         """The earliest time anything happens on this network (None: nothing will)."""
-        if self._dirty or self._unlinked:
-            self._refresh()
+        nodes = self._nodes
+        if nodes.dirty or nodes.unlinked:
+            nodes.refresh()
         t = lib.sb_simnet_next_event(self._net, 0)
         pending = self._host_pending
         if pending and pending[0][0] < t:
@@ -450,11 +369,6 @@ class CoreCanNetwork:
 
     # ---- the C calls and their events ----
 
-    def _source_node(self, source: Hashable) -> int | None:
-        if source == HOST:
-            return 0
-        return self._node_of.get(source) if isinstance(source, str) else None
-
     def _schedule(self, frame: Frame, ready_s: float, node: int) -> None:
         data = frame.data
         flags = frame.is_extended_id | frame.is_fd << 1 | frame.bitrate_switch << 2
@@ -478,12 +392,12 @@ class CoreCanNetwork:
     ) -> None:
         net, events, n_events = self._net, self._events, self._n_events
         run = lib.sb_simnet_run
-        pending = self._host_pending
+        pending, nodes = self._host_pending, self._nodes
         if self.to_host is not None:
             mode |= _STOP_RX
         while True:
-            if self._dirty or self._unlinked:
-                self._refresh()
+            if nodes.dirty or nodes.unlinked:
+                nodes.refresh()
             before = pending[0][0] if pending else _INF
             status = run(net, until_s, before, host_time_s, mode, events, EVENTS, n_events)
             n = n_events[0]
@@ -549,7 +463,7 @@ class CoreCanNetwork:
         assert device is not None
         for emission in device.receive(frame, t):
             self._schedule(emission.frame, emission.ready_s, node)  # a device's frames: no faults
-        self._called(node, device)
+        self._nodes.called(node, device)
 
     def _poll(self, node: int, t: float) -> None:
         device = self._by_node[node]
@@ -557,48 +471,7 @@ class CoreCanNetwork:
         emissions: list[Emission] = device.poll(t)
         for emission in emissions:
             self._schedule(emission.frame, emission.ready_s, node)
-        self._called(node, device)
-
-    def _called(self, node: int, device: Device) -> None:
-        """After a call into a device: its deadline (and a core device's state) into C again."""
-        if self._core[node]:
-            cast(Any, device).core_push()
-        else:
-            deadline = device.next_deadline_s()
-            self._net.motors[node].py_deadline_s = _INF if deadline is None else deadline
-        lib.sb_simnet_touch(self._net, node)
-
-    def _refresh(self) -> None:
-        """Ask the devices that said they changed for their identifiers and deadline again, and the
-        unlinked devices for their deadline (SimCanNetwork asks those at every event)."""
-        net = self._net
-        if self._dirty:
-            names, self._dirty[:] = set(self._dirty), []
-            for name in names:
-                node = self._node_of.get(name)
-                device = self._listeners.get(name)
-                if node is None or device is None:
-                    continue
-                self._write_listen(node, device.listen_ids())
-                self._called(node, device)
-        for node, unlinked in self._unlinked:
-            deadline = unlinked.next_deadline_s()
-            net.motors[node].py_deadline_s = _INF if deadline is None else deadline
-            lib.sb_simnet_touch(net, node)
-
-    def _write_listen(self, node: int, ids: Collection[int] | None) -> None:
-        motor = self._net.motors[node]
-        self._filter.pop(node, None)
-        if ids is None or len(ids) > _MAX_LISTEN:
-            if ids is not None:
-                self._filter[node] = frozenset(ids)
-            motor.listen_all = 1
-            motor.n_listen = 0
-            return
-        ordered = sorted(ids)
-        motor.listen_all = 0
-        motor.n_listen = len(ordered)
-        motor.listen[0 : len(ordered)] = ordered
+        self._nodes.called(node, device)
 
     def _tidy(self) -> None:
         net = self._net
@@ -610,6 +483,6 @@ class CoreCanNetwork:
 
     def _drop_log(self) -> None:
         """Settle every listening device up and forget the frame ends they have all settled for."""
-        for device in self._listeners.values():
+        for device in self._nodes.listeners.values():
             device.settle()
         lib.sb_simnet_drop_log(self._net)

@@ -27,6 +27,7 @@ from typing import cast
 
 from servobus.frame import Frame
 from servobus.sim.canbus import CanBusModel, Transmission
+from servobus.sim.deadlines import DeadlineHeap
 from servobus.sim.device import BusLink, Device, Emission, FrameLog, Listener
 from servobus.sim.faults import FaultInjector
 
@@ -69,8 +70,7 @@ class SimCanNetwork:
         self._unlinked: list[Device] = []  # devices asked for their deadline at every event
         self._routes: dict[int, list[tuple[str, Device, BusLink | None]]] = {}  # by id, built lazily
         self._listen: dict[str, frozenset[int] | None] = {}  # what each listening device said
-        self._deadlines: dict[str, tuple[float, int]] = {}  # listening device -> (deadline, seq)
-        self._deadline_heap: list[tuple[float, int, str]] = []  # stale entries are skipped
+        self._deadlines = DeadlineHeap()  # of the listening devices
         self._dirty: list[str] = []  # listening devices that said they changed
         # Ready times of queued frames still ahead of now_s: a frame becoming ready is no event of
         # its own, but run_until_idle() still runs the clock to the last one within its limit.
@@ -107,7 +107,7 @@ class SimCanNetwork:
         if self._links.pop(name, None) is not None:
             self._listeners.pop(name).attach(None)  # settles up first
             self._listen.pop(name, None)
-            self._deadlines.pop(name, None)
+            self._deadlines.discard(name)
         else:
             self._unlinked.remove(device)
         self._routes.clear()
@@ -127,7 +127,7 @@ class SimCanNetwork:
             at = self._host_pending[0][0]
             if found is None or at < found:
                 found = at
-        deadline = self._next_deadline()
+        deadline = self._deadlines.earliest()
         if deadline is not None and (found is None or deadline < found):
             found = deadline
         for device in self._unlinked:
@@ -282,37 +282,12 @@ class SimCanNetwork:
     # ---- deadlines ----
 
     def _set_deadline(self, device: Device) -> None:
-        name = device.name
-        deadline = device.next_deadline_s()
-        current = self._deadlines.get(name)
-        if deadline is None:
-            if current is not None:
-                del self._deadlines[name]
-        elif current is None or current[0] != deadline:
-            seq = next(self._seq)
-            self._deadlines[name] = (deadline, seq)
-            heapq.heappush(self._deadline_heap, (deadline, seq, name))
-
-    def _next_deadline(self) -> float | None:
-        heap, deadlines = self._deadline_heap, self._deadlines
-        while heap:
-            deadline, seq, name = heap[0]
-            current = deadlines.get(name)
-            if current is not None and current[1] == seq:
-                return deadline
-            heapq.heappop(heap)
-        return None
+        self._deadlines.set(device.name, device.next_deadline_s())
 
     def _due(self, t: float) -> list[Device]:
         """The devices whose deadline has come by ``t``, in the order they were added."""
-        due: list[Device] = []
-        heap, deadlines = self._deadline_heap, self._deadlines
-        while heap and heap[0][0] <= t:
-            _, seq, name = heapq.heappop(heap)
-            current = deadlines.get(name)
-            if current is not None and current[1] == seq:
-                del deadlines[name]  # asked again after its poll
-                due.append(self.devices[name])
+        devices = self.devices
+        due = [devices[name] for name in self._deadlines.pop_due(t)]  # asked again after their poll
         for device in self._unlinked:
             if (when := device.next_deadline_s()) is not None and when <= t:
                 due.append(device)

@@ -30,6 +30,7 @@ only if something else moves it) and counts ``start_without_setpoint``. The exce
 the manual defines: FC in extended position mode locks at the present position (§5.2), with the
 last setpoint's limits or, if there is none, the model's full scales.
 
+What each request does to the motor's state is :mod:`~servobus.protocols.hollow.sim.behaviour`.
 On a C network (:class:`~servobus.sim.corenet.CoreCanNetwork`) the set-point frames and their replies
 run in C (csrc/sim_hollow.c, glue in :mod:`~servobus.protocols.hollow.sim.core`); this model is
 their reference and handles everything else.
@@ -41,12 +42,8 @@ no error state at all), so there is nothing to inject beyond :meth:`HollowMotor.
 
 from __future__ import annotations
 
-import math
 import random
 from collections import Counter
-from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Any, TypeVar
 
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
@@ -57,24 +54,22 @@ from servobus.protocols.hollow import (
     CanModeSwitch,
     ControlMode,
     ExtendedReply,
-    FdCommand,
     FdReply,
-    HollowCommand,
     HollowModel,
     HollowReply,
-    IncrementalSetpoint,
     NormalReply,
     PiGain,
-    PiMultiplier,
-    SelectMode,
-    Setpoint,
-    SetZero,
-    Start,
-    Stop,
 )
 from servobus.protocols.hollow.codec import decode_request_frame, reply_frame
 from servobus.protocols.hollow.ids import check_host_id, check_motor_id
 from servobus.protocols.hollow.replies import EXTENDED_POSITION_LIMITS_DEG
+from servobus.protocols.hollow.sim.behaviour import (
+    DPS_PER_RAD_S,
+    DPS_PER_RPM,
+    HeldSetpoint,
+    apply,
+    implemented,
+)
 from servobus.protocols.hollow.sim.core import HollowCore
 from servobus.sim.device import Emission
 from servobus.sim.plant import (
@@ -120,49 +115,8 @@ HOLLOW_PLANT_PARAMS = PlantParams(
     thermal_capacity_j_per_c=30.0,
 )
 
-_DPS_PER_RAD_S = 180.0 / math.pi
-_DPS_PER_RPM = 6.0
 _TEMPERATURE_LIMITS_C = (-125, 125)  # §7.3
 _INT16 = (-(1 << 15), (1 << 15) - 1)
-
-
-_BEHAVIOUR: dict[type[HollowCommand[Any]], Callable[[HollowMotor, Any], None]] = {}
-C = TypeVar("C", bound=HollowCommand[Any])
-
-
-def _does(cls: type[C]) -> Callable[[Callable[[HollowMotor, C], None]], Callable[[HollowMotor, C], None]]:
-    """Register the decorated method as what the motor does on a ``cls`` request: the dispatch is this
-    registry, filled by the behaviour itself (no second list of the commands)."""
-
-    def register(method: Callable[[HollowMotor, C], None]) -> Callable[[HollowMotor, C], None]:
-        _BEHAVIOUR[cls] = method
-        return method
-
-    return register
-
-
-def implemented() -> frozenset[type[HollowCommand[Any]]]:
-    """The request classes the simulated motor has a behaviour for."""
-    return frozenset(_BEHAVIOUR)
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class HeldSetpoint:
-    """The motor's last setpoint, in the plant's units (one form for normal, extended and FD frames).
-
-    Attributes:
-        target_deg: position target from the mechanical zero: absolute (normal mode, CAN FD, A29)
-            or the sum of the increments (extended mode, A11).
-        speed_dps: V / Vel: target speed (speed mode) or speed limit (position mode).
-        current_a: T / Cur: target current (torque mode) or current limit (speed, position).
-        kp, kd: the position gains as received (CAN 0..4095, CAN FD 0..255, A16).
-    """
-
-    target_deg: float
-    speed_dps: float
-    current_a: float
-    kp: int
-    kd: int
 
 
 class HollowMotor(HollowCore):
@@ -274,7 +228,7 @@ class HollowMotor(HollowCore):
             self._counters["ignored_kind"] += 1
             return []
         self._counters["accepted"] += 1
-        self._apply(command)
+        apply(self, command)
         self.plant.set_control(self._control())
         if self.unresponsive:
             self._counters["unanswered"] += 1
@@ -333,7 +287,7 @@ class HollowMotor(HollowCore):
         if self.fd_enabled:
             return FdReply(
                 position_deg=self.position_deg,
-                velocity_rpm=plant.speed_dps / _DPS_PER_RPM,
+                velocity_rpm=plant.speed_dps / DPS_PER_RPM,
                 current_raw=round(_clamp(plant.current_a / self.fd_current_a_per_count, *_INT16)),
                 mode=self.ctrl_mode,
                 running=self.enabled,
@@ -343,7 +297,7 @@ class HollowMotor(HollowCore):
             )
         model = self.model
         speed = _clamp(
-            plant.speed_dps / _DPS_PER_RAD_S, -model.speed_full_scale_rad_s, model.speed_full_scale_rad_s
+            plant.speed_dps / DPS_PER_RAD_S, -model.speed_full_scale_rad_s, model.speed_full_scale_rad_s
         )
         current = _clamp(plant.current_a, -model.current_full_scale_a, model.current_full_scale_a)
         if self.can_mode is CanMode.NORMAL:
@@ -372,99 +326,6 @@ class HollowMotor(HollowCore):
             # cannot receive FD frames at all.
             return self.fd_enabled or not frame.is_fd
         return frame.is_fd == self.fd_enabled
-
-    def _apply(self, command: HollowCommand[Any]) -> None:
-        handler = _BEHAVIOUR.get(type(command))
-        if handler is None:  # a request class without behaviour here: a gap of the model, not noise
-            raise NotImplementedError(
-                f"the simulated hollow motor does not implement {type(command).__name__}"
-            )
-        handler(self, command)
-
-    @_does(Start)
-    def _start_command(self, command: Start) -> None:
-        self._start()
-
-    @_does(Stop)
-    def _stop(self, command: Stop) -> None:
-        self.enabled = False
-
-    @_does(SelectMode)
-    def _select_mode(self, command: SelectMode) -> None:
-        self.ctrl_mode = command.mode  # temporary, not persisted (§4.1)
-
-    @_does(SetZero)
-    def _set_zero_command(self, command: SetZero) -> None:
-        self._set_zero()
-
-    @_does(Setpoint)
-    def _setpoint(self, command: Setpoint) -> None:
-        self.setpoint = HeldSetpoint(
-            target_deg=command.position_deg,
-            speed_dps=command.speed_rad_s * _DPS_PER_RAD_S,
-            current_a=command.current_a,
-            kp=command.kp,
-            kd=command.kd,
-        )
-
-    @_does(IncrementalSetpoint)
-    def _incremental_setpoint(self, command: IncrementalSetpoint) -> None:
-        # §5.2 / A11: each frame moves the target once; the first one starts from where the motor is.
-        base = self.setpoint.target_deg if self.setpoint is not None else self.position_deg
-        self.setpoint = HeldSetpoint(
-            target_deg=base + command.step_deg,
-            speed_dps=command.speed_rad_s * _DPS_PER_RAD_S,
-            current_a=command.current_a,
-            kp=command.kp,
-            kd=command.kd,
-        )
-
-    @_does(CanModeSwitch)
-    def _can_mode_switch(self, command: CanModeSwitch) -> None:
-        self.can_mode = command.mode  # until power-off (§5.1)
-
-    @_does(PiMultiplier)
-    def _pi_multiplier(self, command: PiMultiplier) -> None:
-        # §6: stored and reported by the simulator; the plant's loops have no gain knob.
-        self.pi_multipliers[command.gain] = command.multiplier
-
-    def _start(self) -> None:
-        self.enabled = True
-        if self.can_mode is CanMode.EXTENDED and self.ctrl_mode is ControlMode.POSITION:
-            # §5.2 [M]: FC in extended position mode locks at the present position.
-            held = self.setpoint
-            self.setpoint = HeldSetpoint(
-                target_deg=self.position_deg,
-                speed_dps=held.speed_dps if held else self.model.speed_full_scale_rad_s * _DPS_PER_RAD_S,
-                current_a=held.current_a if held else self.model.current_full_scale_a,
-                kp=held.kp if held else 0,
-                kd=held.kd if held else 0,
-            )
-        elif self.setpoint is None:
-            self._counters["start_without_setpoint"] += 1
-
-    def _set_zero(self) -> None:
-        # §4.1 / A33: only while not enabled; not persisted. The multi-turn count is cleared with it.
-        if self.enabled:
-            self._counters["zero_refused"] += 1
-            return
-        self.zero_offset_deg = self.plant.position_deg
-
-    @_does(FdCommand)
-    def _apply_fd(self, command: FdCommand) -> None:
-        # §7.2 / §13: Mode Sel, Run Cmd, Kp, Kd, then Zero, which acts only if the motor is not
-        # running once this frame's Run Cmd is applied ("only while not enabled").
-        self.ctrl_mode = command.mode
-        self.enabled = command.run
-        self.setpoint = HeldSetpoint(
-            target_deg=command.position_deg,
-            speed_dps=command.velocity_rpm * _DPS_PER_RPM,
-            current_a=command.current_raw * self.fd_current_a_per_count,
-            kp=command.kp,
-            kd=command.kd,
-        )
-        if command.zero:
-            self._set_zero()
 
     def _control(self) -> Control:
         """The plant control for the present state (the mapping in the module docstring)."""

@@ -25,9 +25,11 @@ Run states (spec §4.5..§4.7, §9 D15):
   after 0x81 a new control command moves the motor (0x88 changes only OFF -> ON).
 * V2.35: 0x88 resumes the command held before 0x81; any control command runs the motor.
 
-Control commands map to plant controls as :mod:`~servobus.protocols.lk.sim.control` tabulates; the
-parameter commands and the ROM/RAM rules are in :mod:`~servobus.protocols.lk.sim.state`; replies are
-filled from the plant by :mod:`~servobus.protocols.lk.sim.replies`.
+What the motor does on each command is :mod:`~servobus.protocols.lk.sim.handlers`; control
+commands map to plant controls as :mod:`~servobus.protocols.lk.sim.control` tabulates; the parameter
+commands and the ROM/RAM rules are in :mod:`~servobus.protocols.lk.sim.state`; replies are filled
+from the plant by :mod:`~servobus.protocols.lk.sim.replies`; what a C twin shares with the model is
+:mod:`~servobus.protocols.lk.sim.twin`.
 
 Errors: :meth:`LkMotor.inject_error` starts a fault condition; its flag latches, the output goes
 off and the held command is dropped (protection). 0x9B clears the latched flags whose condition has
@@ -37,22 +39,17 @@ ended; flags of a persisting condition stay ("cannot be cleared while the fault 
 
 from __future__ import annotations
 
-import enum
 import math
 from collections import Counter
-from collections.abc import Callable, Mapping
-from typing import Any, ClassVar, TypeVar
+from collections.abc import Mapping
 
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
 from servobus.protocols import lk
 from servobus.protocols.lk import (
     DEFAULT_MODEL,
-    BrakeAction,
-    BrakeState,
     ErrorState,
     ErrorStateV235,
-    LkCommand,
     LkModel,
     LkReply,
     ParamId,
@@ -61,29 +58,26 @@ from servobus.protocols.lk import (
     SettingParam,
     decode_request,
 )
-from servobus.protocols.lk.codec import REQUESTS, check_available, reply_frame
-from servobus.protocols.lk.ids import MULTI_MOTOR_ID, MULTI_MOTOR_IDS, MULTI_MOTOR_REPLY_CODE, request_id
+from servobus.protocols.lk.codec import REQUESTS, reply_frame
+from servobus.protocols.lk.ids import MULTI_MOTOR_ID, MULTI_MOTOR_IDS, request_id
 from servobus.protocols.lk.model import encoder_counts_per_turn
-from servobus.protocols.lk.sim.control import CONTROL_COMMANDS, MotionContext, plant_control
-from servobus.protocols.lk.sim.core import CORE_FAMILY, LkCore, adopt_plant, release_plant
-from servobus.protocols.lk.sim.replies import encoder_reply, single_turn_deg, status1, status2, status3
+from servobus.protocols.lk.sim.handlers import handle
+from servobus.protocols.lk.sim.replies import status2
 from servobus.protocols.lk.sim.state import (
     LK_PLANT_PARAMS,
-    MEMORY_COMMANDS,
     AngleFrame,
     LkMemory,
     amps_per_count,
     default_settings,
 )
-from servobus.sim.device import BusLink, Emission, ListeningDevice
+from servobus.protocols.lk.sim.twin import RunState, TwinnedMotor
+from servobus.sim.device import Emission
 from servobus.sim.plant import (
     Brake,
     Control,
-    CurrentControl,
     Off,
     Plant,
     PlantParams,
-    PositionControl,
     SpeedControl,
 )
 
@@ -93,42 +87,17 @@ __all__ = ["DEFAULT_CALIBRATION_S", "DEFAULT_TURNAROUND_S", "LkMotor", "RunState
 DEFAULT_TURNAROUND_S = 200e-6
 # [001] §21: 0x18 rotates the motor "for several seconds" and replies when done.
 DEFAULT_CALIBRATION_S = 3.0
-_H = TypeVar("_H", bound=Callable[..., LkReply])
 _ERROR_BITS = {
     Revision.V2_36: 0xFF,
     Revision.V2_35: int(ErrorStateV235.LOW_VOLTAGE | ErrorStateV235.OVER_TEMPERATURE),
 }
 
 
-#: The motor's behaviour per command class: each handler registers the classes it answers, so
-#: the command list is the codec's, never a second one here (the declarations test sends each).
-_HANDLERS: dict[type, Callable[[LkMotor, Any, float], LkReply]] = {}
-
-
-def _handles(*classes: type[LkCommand]) -> Callable[[_H], _H]:
-    def register(handler: _H) -> _H:
-        for cls in classes:
-            if cls in _HANDLERS:  # pragma: no cover - a wiring error, caught at import
-                raise AssertionError(f"{cls.__name__} has two handlers")
-            _HANDLERS[cls] = handler
-        return handler
-
-    return register
-
-
-class RunState(enum.Enum):
-    """The motor's run state (spec §4.5..§4.7)."""
-
-    ON = "on"
-    STOPPED = "stopped"
-    OFF = "off"
-
-
-class LkMotor(ListeningDevice):
+class LkMotor(TwinnedMotor):
     """One LK motor on a CAN bus (implements :class:`~servobus.sim.device.Device`).
 
     On a network that runs the C core (issue 27), the motor gets a C twin (:meth:`core_attach`,
-    :mod:`~servobus.protocols.lk.sim.core`) that answers the control-loop traffic; the attributes C
+    :mod:`~servobus.protocols.lk.sim.twin`) that answers the control-loop traffic; the attributes C
     changes (:attr:`state`, :attr:`held`, the counters, the angle frame) are taken back before
     Python reads them, and the knobs C reads (:attr:`unresponsive`, :attr:`turnaround_s`) are
     pushed when they are set.
@@ -156,9 +125,6 @@ class LkMotor(ListeningDevice):
     Raises:
         ValueError: ``motor_id`` outside 1..32, a negative time, or a setting of the wrong scheme.
     """
-
-    CORE_FAMILY: ClassVar[int] = CORE_FAMILY
-    _twin: LkCore | None = None  # the C twin while on a C-core network
 
     def __init__(
         self,
@@ -214,93 +180,6 @@ class LkMotor(ListeningDevice):
         self._busy_until_s = -math.inf
         self._power_up()
 
-    # ---- what the C twin changes or reads (issue 27: see the class docstring) ----
-
-    @property
-    def state(self) -> RunState:
-        """The run state (spec §4.5..§4.7)."""
-        if self._twin is not None:
-            self._twin.pull()
-        return self._state
-
-    @state.setter
-    def state(self, value: RunState) -> None:
-        if self._twin is not None:
-            self._twin.pull()
-        self._state = value
-
-    @property
-    def held(self) -> Control | None:
-        """The control command held (run while ON; 0x80 and protection drop it)."""
-        if self._twin is not None:
-            self._twin.pull()
-        return self._held
-
-    @held.setter
-    def held(self, value: Control | None) -> None:
-        if self._twin is not None:
-            self._twin.pull()
-        self._held = value
-
-    @property
-    def angles(self) -> AngleFrame:
-        """The encoder counts' zero points (V2.36 0x80 moves the multi-turn origin, in C too)."""
-        if self._twin is not None:
-            self._twin.pull()
-        return self._angles
-
-    @property
-    def unresponsive(self) -> bool:
-        """A simulator fault knob: the motor still acts on requests but never replies."""
-        return self._unresponsive
-
-    @unresponsive.setter
-    def unresponsive(self, value: bool) -> None:
-        self._unresponsive = value
-        self.core_push()
-
-    @property
-    def turnaround_s(self) -> float:
-        """Request received -> reply ready."""
-        return self._turnaround_s
-
-    @turnaround_s.setter
-    def turnaround_s(self, value: float) -> None:
-        self._turnaround_s = value
-        self.core_push()
-
-    def core_attach(self, motor: Any, link: BusLink | None) -> None:
-        """Take the C twin ``motor`` (a zeroed ``sb_simmotor *``) and ``link`` from a C-core network:
-        the plant moves into ``motor.plant`` and C answers the control-loop traffic from now on."""
-        if link is not None and link is not self._link:
-            self.attach(link)
-        self.settle()
-        self._plant = adopt_plant(self._plant, motor)
-        self._twin = LkCore(self, motor)
-        self._twin.push()
-
-    def core_detach(self) -> None:
-        """Leave the C-core network: take C's last changes and the plant back into Python."""
-        twin = self._twin
-        if twin is None:
-            return
-        self.settle()
-        self._twin = None
-        self._plant = release_plant(self._plant)
-        if self._link is not None:
-            self.attach(None)
-
-    def core_push(self) -> None:
-        """Write into the C twin everything it reads (nothing without one)."""
-        if self._twin is not None:
-            self._twin.push()
-
-    def settle(self) -> None:
-        """Take what the C twin changed, then settle up with the network (ListeningDevice)."""
-        if self._twin is not None:
-            self._twin.pull()
-        super().settle()
-
     # ---- Device protocol ----
 
     @property
@@ -332,7 +211,7 @@ class LkMotor(ListeningDevice):
             reply = self._undecodable(frame)
         else:
             self._counters["accepted"] += 1
-            reply = self._handle(command, now_s)
+            reply = handle(self, command, now_s)
         self.plant.set_control(self._control(now_s))
         if reply is None:
             return []
@@ -495,153 +374,5 @@ class LkMotor(ListeningDevice):
         self._counters["undecodable"] += 1
         return None
 
-    # ---- commands ----
-
-    def _handle(self, command: LkCommand, now_s: float) -> LkReply:
-        handler = _HANDLERS.get(type(command))
-        if handler is None:  # pragma: no cover - the declarations test sends every command class
-            raise AssertionError(f"no handler for {type(command).__name__}")
-        return handler(self, command, now_s)
-
-    @_handles(lk.ReadStatus1, lk.ClearErrors)
-    def _status1(self, command: LkCommand, now_s: float) -> LkReply:
-        if isinstance(command, lk.ClearErrors):
-            self._latched &= self._conditions  # spec §4.2: persisting faults stay set
-        code = type(command).CODE
-        assert code is not None
-        return status1(code, self.model, self.plant, off=self.state is RunState.OFF, errors=self._latched)
-
-    @_handles(lk.ReadStatus2)
-    def _read_status2(self, command: LkCommand, now_s: float) -> LkReply:
-        return self._status2(0x9C)
-
-    @_handles(lk.ReadStatus3)
-    def _read_status3(self, command: LkCommand, now_s: float) -> LkReply:
-        return status3(self.model, self.plant)
-
-    @_handles(lk.MotorOff)
-    def _off(self, command: LkCommand, now_s: float) -> LkReply:
-        self.state, self.held = RunState.OFF, None
-        if self.revision is Revision.V2_36:
-            self.angles.clear_turns(self._total())  # [001] §5: "clear the number of turns"
-        return lk.EchoReply(command=0x80)
-
-    @_handles(lk.MotorStop)
-    def _stop(self, command: LkCommand, now_s: float) -> LkReply:
-        if self.state is RunState.ON:
-            self.state = RunState.STOPPED
-        return lk.EchoReply(command=0x81)
-
-    @_handles(lk.MotorRun)
-    def _run(self, command: LkCommand, now_s: float) -> LkReply:
-        # [001]: OFF -> ON only; [003]: resume the mode held before 0x81 (or after 0x80: idle).
-        if self.state is RunState.OFF or self.revision is Revision.V2_35:
-            self.state = RunState.ON
-        return lk.EchoReply(command=0x88)
-
-    @_handles(lk.SetZeroRam)
-    def _zero_ram(self, command: LkCommand, now_s: float) -> LkReply:
-        self.angles.zero_here(self._total())
-        if self.revision is Revision.V2_36 and self.state is RunState.ON:
-            self.state = RunState.STOPPED  # [001] §25, A30
-        return lk.EchoReply(command=0x95)
-
-    @_handles(lk.BrakeControl)
-    def _brake(self, command: lk.BrakeControl, now_s: float) -> LkReply:
-        if command.action is not BrakeAction.READ:
-            self.brake_engaged = command.action is BrakeAction.ENGAGE
-        return lk.BrakeReply(state=BrakeState.ENGAGED if self.brake_engaged else BrakeState.RELEASED)
-
-    @_handles(lk.MultiMotorTorque)
-    def _multi_motor(self, command: lk.MultiMotorTorque, now_s: float) -> LkReply:
-        slot = self.motor_id - 1
-        if command.currents_a is not None:
-            current = command.currents_a[slot]
-        else:
-            current = (command.iq_counts or (0, 0, 0, 0))[slot] * self._amps_per_count
-        self._execute(command, CurrentControl(current_a=current))
-        return self._status2(MULTI_MOTOR_REPLY_CODE)
-
-    @_handles(*CONTROL_COMMANDS)
-    def _set_point(self, command: LkCommand, now_s: float) -> LkReply:
-        code = type(command).CODE
-        assert code is not None
-        self._execute(command, plant_control(command, self._motion_context()))
-        return self._status2(code)
-
-    @_handles(lk.CalibrateEncoder)
-    def _calibrate(self, command: LkCommand, now_s: float) -> LkReply:
-        # [001] §21: busy for several seconds, then the result (ROM). The sim does not rotate the
-        # shaft; the calibration always succeeds.
-        self._busy_until_s = now_s + self.calibration_s
-        self.held = None
-        raw = self.angles.raw(self._total())
-        return lk.CalibrationReply(align_value=raw, align_ratio=1000, align_state=lk.AlignState.SUCCESS)
-
-    @_handles(lk.ReadEncoder)
-    def _read_encoder(self, command: LkCommand, now_s: float) -> LkReply:
-        return encoder_reply(self.model, self.angles, self._total())
-
-    @_handles(lk.SetZeroRom)
-    def _zero_rom(self, command: LkCommand, now_s: float) -> LkReply:
-        # spec §4.22: ROM only, "needs to be powered on again before it can take effect".
-        offset = self.memory.rom_encoder_offset_counts = self.angles.raw(self._total())
-        return lk.EncoderOffsetReply(command=0x19, encoder_bits=self.model.encoder_bits, offset_counts=offset)
-
-    @_handles(lk.WriteEncoderOffset)
-    def _write_offset(self, command: lk.WriteEncoderOffset, now_s: float) -> LkReply:
-        self.memory.rom_encoder_offset_counts = command.offset_counts  # A21: read as RAM and ROM
-        self.angles.set_offset(command.offset_counts)
-        return lk.EncoderOffsetReply(
-            command=0x91, encoder_bits=self.model.encoder_bits, offset_counts=command.offset_counts
-        )
-
-    @_handles(lk.ReadMultiTurnAngle)
-    def _read_multi_turn(self, command: LkCommand, now_s: float) -> LkReply:
-        return lk.MultiTurnAngleReply(angle_deg=self.multi_turn_deg)
-
-    @_handles(lk.ReadSingleTurnAngle)
-    def _read_single_turn(self, command: LkCommand, now_s: float) -> LkReply:
-        angle = single_turn_deg(self.revision, self.plant.params.gear_ratio, self.multi_turn_deg)
-        if self.revision is Revision.V2_36:
-            return lk.SingleTurnAngleReply(angle_deg=angle)
-        return lk.SingleTurnAngleReplyV235(angle_deg=angle)
-
-    @_handles(*MEMORY_COMMANDS)
-    def _parameter(self, command: LkCommand, now_s: float) -> LkReply:
-        reply = self.memory.answer(command)
-        assert reply is not None  # registered for MEMORY_COMMANDS only
-        if isinstance(reply, lk.ParamWriteReply) and not reply.ok:
-            self._counters["refused"] += 1
-        self._apply_acceleration()  # 0xC1, 0x42/0x44 (V2.35) and 0x34 may change it
-        return reply
-
-    def _execute(self, command: LkCommand, control: Control) -> None:
-        try:
-            check_available(command, model=self.model)
-        except ValueError:
-            self._counters["not_implemented"] += 1  # [001] 0xA0 on MF/MH/MG: "invalid"
-            return
-        if self._latched:
-            self._counters["not_executed_fault"] += 1
-            return
-        if self.revision is Revision.V2_36 and self.state is RunState.OFF:
-            self._counters["not_executed_off"] += 1  # [001] §5: replies, "will not perform the action"
-            return
-        self.state, self.held = RunState.ON, control
-
     def _status2(self, code: int) -> LkReply:
         return status2(code, self.model, self.plant, encoder_counts=self.encoder_counts)
-
-    def _motion_context(self) -> MotionContext:
-        held = self.held if self.state is RunState.ON else None
-        return MotionContext(
-            revision=self.revision,
-            gear_ratio=self.plant.params.gear_ratio,
-            amps_per_count=self._amps_per_count,
-            limits=self.memory.limits(),
-            multi_turn_deg=self.multi_turn_deg,
-            origin_deg=self.angles.origin_deg(),
-            position_deg=self.plant.position_deg,
-            held_target_deg=held.position_deg if isinstance(held, PositionControl) else None,
-        )
