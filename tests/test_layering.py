@@ -66,10 +66,7 @@ def _sans_io_files() -> list[Path]:
 
 
 #: sans-IO violations in modules this test does not own, reported to the coordinator: file -> reason
-SANS_IO_KNOWN: dict[str, str] = {
-    "frame.py": "frame.py:15 (TYPE_CHECKING) and :136 (Frame.to_message) import python-can (main"
-    " 22462b4): an I/O library in the sans-IO base layer; to fix in frame.py",
-}
+SANS_IO_KNOWN: dict[str, str] = {}  # a file here is a known violation (xfail, strict), with why
 
 
 def _sans_io_params() -> list[object]:
