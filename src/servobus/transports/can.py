@@ -150,26 +150,13 @@ class CanTransport(Transport[Frame, Frame]):
             raise ValueError(f"enobufs={enobufs!r} must be 'wait' or 'drop'")
         if min_gap_s < 0 or enobufs_timeout_s < 0:
             raise ValueError(f"min_gap_s={min_gap_s} and enobufs_timeout_s={enobufs_timeout_s} must be >= 0")
-        if interface is None and notifier is not None:
-            buses = notifier.bus if isinstance(notifier.bus, tuple | list) else (notifier.bus,)
-            if len(buses) != 1:
-                raise ValueError(f"the notifier reads {len(buses)} buses: give the one to use")
-            interface = buses[0]
-        self._borrowed: can.BusABC | None = None
-        self._notifier = notifier
-        if isinstance(interface, can.BusABC):
+        self._borrowed, self._notifier = _borrowed_bus(interface, notifier)
+        if self._borrowed is not None:
             if channel is not None or options or config_context is not None:
                 raise ValueError("an open can.BusABC takes no channel, configuration or python-can options")
-            self._borrowed = interface
             interface, ignore_config, reopen = None, True, False
             options = {"interface": _interface_name(self._borrowed)}
             fd = fd or getattr(self._borrowed, "protocol", None) in _FD_PROTOCOLS
-        elif interface is not None and not isinstance(interface, str):
-            raise TypeError(
-                f"interface must be a python-can interface name or a can.BusABC, not {interface!r}"
-            )
-        elif notifier is not None:
-            raise ValueError("a notifier goes with the open can.BusABC it reads")
         given = {"interface": interface, "channel": channel, "bitrate": bitrate, "data_bitrate": data_bitrate}
         self.config = _merged_config(given, options, fd=fd, ignore=ignore_config, context=config_context)
         self.fd = bool(self.config.get("fd", False))
@@ -428,6 +415,29 @@ class _Opening:
 _FD_PROTOCOLS = tuple(
     getattr(can.CanProtocol, name) for name in ("CAN_FD", "CAN_FD_NON_ISO") if hasattr(can, "CanProtocol")
 )
+
+
+def _borrowed_bus(
+    interface: str | can.BusABC | None, notifier: can.Notifier | None
+) -> tuple[can.BusABC | None, can.Notifier | None]:
+    """The application's open bus (and its notifier) when ``interface`` or ``notifier`` names one.
+
+    Raises:
+        ValueError: a notifier over several buses, or one without the bus it reads.
+        TypeError: ``interface`` is neither a name nor a ``can.BusABC``.
+    """
+    if interface is None and notifier is not None:
+        buses = notifier.bus if isinstance(notifier.bus, tuple | list) else (notifier.bus,)
+        if len(buses) != 1:
+            raise ValueError(f"the notifier reads {len(buses)} buses: give the one to use")
+        interface = buses[0]
+    if isinstance(interface, can.BusABC):
+        return interface, notifier
+    if interface is not None and not isinstance(interface, str):
+        raise TypeError(f"interface must be a python-can interface name or a can.BusABC, not {interface!r}")
+    if notifier is not None:
+        raise ValueError("a notifier goes with the open can.BusABC it reads")
+    return None, None
 
 
 def _merged_config(

@@ -133,6 +133,44 @@ def _count(deframer: StreamDeframer, name: str) -> int:
     return value if isinstance(value, int) else 0
 
 
+def _line_settings(
+    framing: Framing | None, mode: str | None, baud: int | None, parity: str | None
+) -> tuple[SerialLine | None, Framing, int, str]:
+    """The serial line, framing, baud rate and parity that ``SerialTransport``'s arguments name.
+
+    Raises:
+        ValueError: neither framing nor mode, an unknown mode or parity, a rate the line does not use.
+    """
+    line = None
+    if mode is not None:
+        line = find_serial_line(mode)
+        if line is None:
+            raise ValueError(f"mode={mode!r} is not one of {', '.join(serial_line_names())}")
+    if framing is None:
+        if line is None:
+            raise ValueError("give framing= (the family's: FAMILY.bind(1, link='rs485').framing) or mode=")
+        framing = line.framing()
+    elif not isinstance(framing, Framing):
+        raise ValueError(f"framing={framing!r} has no encode(frame) and deframer()")
+    elif line is None:
+        line = find_serial_line(framing.name)
+    label = mode if mode is not None else framing.name
+    bauds: tuple[int, ...] | None = line.bauds if line is not None else getattr(framing, "bauds", None)
+    if baud is None:
+        if not bauds:
+            raise ValueError(f"baud= is needed: framing {framing.name!r} names no baud rates")
+        baud = bauds[0]
+    if bauds and baud not in bauds:
+        raise ValueError(f"baud={baud} is not one of {label}'s rates {tuple(bauds)}")
+    if parity is None:
+        parity = line.parity if line is not None else "N"
+    if baud <= 0:
+        raise ValueError(f"baud={baud} must be positive")
+    if parity not in _PARITY_BITS:
+        raise ValueError(f"parity={parity!r} is not one of 'N', 'E', 'O'")
+    return line, framing, baud, parity
+
+
 class SerialTransport(Transport[Frame, Frame]):
     """One RS485 port: serial Frames out one transaction at a time, whole Frames in.
 
@@ -189,39 +227,8 @@ class SerialTransport(Transport[Frame, Frame]):
     ) -> None:
         self.mode: str | None = mode
         #: the family's serial line this transport runs (None: a framing no family declares)
-        self.line: SerialLine | None = None
-        if mode is not None:
-            self.line = find_serial_line(mode)
-            if self.line is None:
-                known = ", ".join(serial_line_names())
-                raise ValueError(f"mode={mode!r} is not one of {known}")
-        if framing is None:
-            if self.line is None:
-                raise ValueError(
-                    "give framing= (the family's: FAMILY.bind(1, link='rs485').framing) or mode="
-                )
-            framing = self.line.framing()
-        elif not isinstance(framing, Framing):
-            raise ValueError(f"framing={framing!r} has no encode(frame) and deframer()")
-        elif self.line is None:
-            self.line = find_serial_line(framing.name)
-        self._framing = framing
-        label = mode if mode is not None else framing.name
-        bauds: tuple[int, ...] | None = (
-            self.line.bauds if self.line is not None else getattr(framing, "bauds", None)
-        )
-        if baud is None:
-            if not bauds:
-                raise ValueError(f"baud= is needed: framing {framing.name!r} names no baud rates")
-            baud = bauds[0]
-        if bauds and baud not in bauds:
-            raise ValueError(f"baud={baud} is not one of {label}'s rates {tuple(bauds)}")
-        if parity is None:
-            parity = self.line.parity if self.line is not None else "N"
-        if baud <= 0:
-            raise ValueError(f"baud={baud} must be positive")
-        if parity not in _PARITY_BITS:
-            raise ValueError(f"parity={parity!r} is not one of 'N', 'E', 'O'")
+        self.line: SerialLine | None
+        self.line, self._framing, baud, parity = _line_settings(framing, mode, baud, parity)
         negative = any(t is not None and t < 0 for t in (gap_s, turnaround_s))
         if negative or (idle_s is not None and idle_s <= 0):
             raise ValueError(
@@ -248,7 +255,7 @@ class SerialTransport(Transport[Frame, Frame]):
         self._turnaround_s = self._gap_s if turnaround_s is None else turnaround_s
         self.idle_s = max(silence_s, _USB_BURST_S) if idle_s is None else idle_s
         self._serial_options = {"exclusive": exclusive, **options}
-        self._deframer: StreamDeframer = framing.deframer()
+        self._deframer: StreamDeframer = self._framing.deframer()
         self._old_counts = [0, 0]  # discarded bytes, CRC errors of the de-framers of past connections
         self._load_known = True
         self._port: SerialPort | None = None
