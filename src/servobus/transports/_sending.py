@@ -1,0 +1,148 @@
+"""A transport's send side: the bounded queue, and the one writer task per connection that empties it."""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Generic, TypeVar
+
+import anyio
+from anyio.abc import TaskGroup
+
+from servobus.errors import TransportError
+from servobus.runtime import Waiter
+from servobus.transports._waiters import WaiterList
+
+if TYPE_CHECKING:
+    from servobus.transports.base import Transport
+
+__all__ = ["Outgoing", "SendQueue", "SendQueueFull"]
+
+TxT = TypeVar("TxT")
+
+
+class SendQueueFull(TransportError):
+    """A non-blocking send found the queue full: back off, or ``await drain()`` first.
+
+    (No longer an ``asyncio.QueueFull``: the transports are not asyncio's; catch this, or
+    TransportError.)
+    """
+
+
+@dataclass(slots=True)
+class Outgoing(Generic[TxT]):
+    """One queued frame: what to write, when it was queued, how long the line stays ours after it,
+    and the handle its send report echoes (the item itself when the sender gave none)."""
+
+    item: TxT
+    queued_at: float
+    hold_s: float | None = None
+    handle: Any = None
+
+
+class SendQueue(Generic[TxT]):
+    """Frames waiting for the wire, and the writer task (one per connection) that hands them over.
+
+    The writer takes up to ``transport.batch_size`` frames at a time, drops those older than
+    ``stale_after_s``, and awaits ``transport._transmit(batch)``. It runs in the transport's task
+    group, inside a cancel scope of its own that a loss or a close cancels.
+    """
+
+    __slots__ = ("_scope", "_transport", "_wake", "idle", "items", "size", "stale_after_s", "transmitting")
+
+    def __init__(self, transport: Transport[Any, TxT], size: int, stale_after_s: float | None) -> None:
+        self._transport = transport
+        self.size = size
+        self.stale_after_s = stale_after_s
+        self.items: deque[Outgoing[TxT]] = deque()
+        self.transmitting = False
+        #: tasks in drain(), woken when the queue is empty and nothing is being written
+        self.idle = WaiterList()
+        self._wake: Waiter[None] | None = None
+        self._scope: anyio.CancelScope | None = None
+
+    def put(self, outgoing: Outgoing[TxT]) -> None:
+        if len(self.items) >= self.size:
+            transport = self._transport
+            transport._stats.queue_full += 1
+            raise SendQueueFull(
+                f"{transport.name}: send queue full ({self.size} frames); await drain() before sending more"
+            )
+        self.items.append(outgoing)
+        wake = self._wake
+        if wake is not None and not wake.done():
+            wake.set_result(None)
+
+    async def drain(self) -> None:
+        """Until every queued frame has been written or dropped.
+
+        Raises:
+            TransportError: the transport is not open, or stops being open meanwhile.
+        """
+        transport = self._transport
+        while self.items or self.transmitting:
+            if not transport.is_open or transport._runtime is None:
+                raise transport._error()
+            await self.idle.park(transport._runtime)
+        if not transport.is_open:
+            raise transport._error()
+
+    def start(self, tasks: TaskGroup, generation: int) -> None:
+        """Start this connection's writer (a loss or a close stops it: :meth:`stop`)."""
+        self.stop()
+        self._scope = scope = anyio.CancelScope()
+        tasks.start_soon(self._run, scope, generation, name=f"{self._transport.name} writer")
+
+    def stop(self) -> None:
+        if self._scope is not None:
+            self._scope.cancel()
+            self._scope = None
+        self.transmitting = False
+
+    def purge(self, reason: str) -> None:
+        """Drop every queued frame (counted and reported with ``reason``)."""
+        if self.items:
+            dropped = list(self.items)
+            self.items.clear()
+            self._transport._dropped(reason, [o.handle for o in dropped])
+
+    async def _run(self, scope: anyio.CancelScope, generation: int) -> None:
+        transport = self._transport
+        lane = transport._runtime
+        assert lane is not None  # started by an open transport
+        items = self.items
+        with scope:
+            while True:
+                if not items:
+                    self.idle.wake_all()
+                    self._wake = wake = lane.waiter()
+                    try:
+                        await wake
+                    finally:
+                        self._wake = None
+                    continue
+                batch = [items.popleft() for _ in range(min(transport.batch_size, len(items)))]
+                batch = self._drop_stale(batch, transport._now())
+                if not batch:
+                    continue
+                self.transmitting = True
+                try:
+                    await transport._transmit(batch)
+                except anyio.get_cancelled_exc_class():
+                    raise
+                except Exception as exc:  # a transmit bug must not leave the queue stuck forever
+                    transport._lose(exc, generation)
+                    return
+                finally:
+                    self.transmitting = False
+                    # not written: lost, closed or failed
+                    transport._dropped("purged", [o.handle for o in batch])
+                if generation != transport._generation:  # _transmit lost the device
+                    return
+
+    def _drop_stale(self, batch: list[Outgoing[TxT]], now: float) -> list[Outgoing[TxT]]:
+        limit = self.stale_after_s
+        if limit is None or now - batch[0].queued_at <= limit:  # the oldest is first
+            return batch
+        self._transport._dropped("stale", [o.handle for o in batch if now - o.queued_at > limit])
+        return [o for o in batch if now - o.queued_at <= limit]
