@@ -48,6 +48,7 @@ from servobus.frame import Frame
 from servobus.timing import nominal_frame_time_s
 from servobus.transports._can_readers import Batch, Reader, start_reader
 from servobus.transports._can_sender import BlockingSender, SendReport, buffer_full
+from servobus.transports._watch import as_loop
 from servobus.transports.base import Outgoing, Transport, logger
 from servobus.transports.contract import LineRules
 from servobus.transports.events import BusOff, CanErrorClass, ErrorFrame
@@ -209,7 +210,7 @@ class CanTransport(Transport[Frame, Frame]):
             raise ValueError(f"{self.name}: {frame!r} is a serial-link message, not a CAN frame")
         if frame.is_fd and not self.fd:
             raise ValueError(f"{self.name}: CAN FD frame {frame!r} on a bus opened without fd=True")
-        self._enqueue(frame)  # TODO(handle) after the base's conversion
+        self._enqueue(frame, None, handle)
 
     def set_receive_ids(self, ids: Iterable[int] | None, *, extended: bool = False) -> None:
         """Receive only these identifiers (exact match); None receives everything again.
@@ -259,6 +260,7 @@ class CanTransport(Transport[Frame, Frame]):
             find = getattr(can.Notifier, "find_instances", None)  # python-can >= 4.5
             running = [n for n in (find(bus) if find else ()) if not n.stopped]
             notifier = running[0] if running else None
+        assert self._runtime is not None  # set by open()
         self._reader = start_reader(self, bus, notifier, self._generation, self._runtime, self._tasks)
 
     async def _disconnect(self) -> None:
@@ -326,18 +328,18 @@ class CanTransport(Transport[Frame, Frame]):
     # ----------------------------------------------------------------- sending
 
     async def _transmit(self, batch: list[Outgoing[Frame]]) -> None:
-        assert self._bus is not None
+        assert self._bus is not None and self._runtime is not None
         frames = batch.copy()
         batch.clear()  # the writer thread accounts for these itself, even if this task is cancelled
         generation = self._generation
-        call = self._runtime.call_soon_threadsafe
+        call, backend = self._runtime.call_soon_threadsafe, self._runtime.name
         await anyio.to_thread.run_sync(
             self._sender.send_batch,
             self._bus,
             frames,
             self._now() - time.monotonic(),
             lambda: generation == self._generation,
-            lambda report: call(self._account, report, generation),
+            lambda report: call(as_loop, backend, self._account, report, generation),
             message_from_frame,
             abandon_on_cancel=True,  # a loss or close need not wait for a blocked send
             limiter=self._send_lane,
@@ -352,17 +354,17 @@ class CanTransport(Transport[Frame, Frame]):
             ("enobufs_dropped", report.enobufs_dropped),
             ("purged", report.purged),
         ):
-            self._dropped(reason, [o.item for o in items])
+            self._dropped(reason, [o.handle for o in items])
         for outgoing, sent_at in report.sent:
             frame = outgoing.item
             stats.bytes_out += len(frame.data)
             if self._load_known:
                 self._load.add(sent_at, self._frame_time_s(frame))
-            self._sent(frame, sent_at)
+            self._sent(outgoing.handle, sent_at)
         if report.error is not None:
             self._lose(report.error, generation)
 
-    def _write_now(self, frame: Frame) -> bool:
+    def _write_now(self, frame: Frame, handle: Any) -> bool:
         """Loop-native send for a bus whose ``send`` never blocks (python-can's ``virtual``, timeout 0)."""
         bus = self._bus
         if bus is None:
@@ -380,7 +382,7 @@ class CanTransport(Transport[Frame, Frame]):
         stats.bytes_out += len(frame.data)
         if self._load_known:
             self._load.add(now, self._frame_time_s(frame))
-        self._sent(frame, now)
+        self._sent(handle, now)
         return True
 
 

@@ -316,10 +316,10 @@ class SerialTransport(Transport[Frame, Frame]):
 
     @property
     def rules(self) -> LineRules:
-        """Half duplex at the baud rate, with the gap, the turnaround and the staleness set here."""
+        """Half duplex, with the gap, the turnaround and the staleness set here (no CAN bit rate: the
+        Bus's shortest round trip is a CAN frame's)."""
         return LineRules(
             half_duplex=True,
-            bitrate=self.baud,
             gap_s=self._gap_s,
             turnaround_s=self._turnaround_s,
             stale_after_s=self._stale_after_s,
@@ -349,7 +349,7 @@ class SerialTransport(Transport[Frame, Frame]):
         if reply_timeout_s is not None and reply_timeout_s < 0:
             raise ValueError(f"reply_timeout_s={reply_timeout_s} must be >= 0")
         self._framing.encode(frame)  # refuse now what the framing cannot put on the wire
-        self._enqueue(frame, reply_timeout_s)  # TODO(handle) after the base's conversion
+        self._enqueue(frame, reply_timeout_s, handle)
 
     def stats(self) -> TransportStats:
         snapshot = super().stats()
@@ -364,6 +364,7 @@ class SerialTransport(Transport[Frame, Frame]):
         self._old_counts[0] += _count(self._deframer, "discarded_bytes")
         self._old_counts[1] += _count(self._deframer, "crc_errors")
         self._deframer = self._framing.deframer()
+        assert self._runtime is not None  # set by open()
         self._port = SerialPort.open(
             self,
             self._generation,
@@ -439,7 +440,7 @@ class SerialTransport(Transport[Frame, Frame]):
                 return
             batch.pop(0)
             if now is None:
-                self._dropped("stale", [outgoing.item])
+                self._dropped("stale", [outgoing.handle])
                 continue
             reply = None if outgoing.hold_s is None else anyio.Event()
             self._reply = reply
@@ -448,7 +449,7 @@ class SerialTransport(Transport[Frame, Frame]):
             stats.frames_out += 1
             stats.bytes_out += len(data)
             self._load.add(now, on_wire_s)
-            self._sent(outgoing.item, now)
+            self._sent(outgoing.handle, now)
             if reply is not None and outgoing.hold_s is not None:
                 try:
                     # no reply in time: the line is free again; matching the silence is the caller's job

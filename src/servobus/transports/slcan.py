@@ -192,7 +192,7 @@ class SlcanTransport(Transport[Frame, Frame]):
             raise ValueError(f"{self.name}: CAN FD frame {frame!r} on an adapter opened without fd=True")
         if self.listen_only:
             raise ValueError(f"{self.name}: the adapter is open listen-only; it sends nothing")
-        self._enqueue(frame)  # TODO(handle) after the base's conversion
+        self._enqueue(frame, None, handle)
 
     def line_counters(self) -> dict[str, int]:
         """The line de-framer's counters since creation: frames, remote, acks (``z``/``Z``), oks (empty
@@ -222,6 +222,7 @@ class SlcanTransport(Transport[Frame, Frame]):
     # ----------------------------------------------------------------- connection
 
     async def _connect(self) -> None:
+        assert self._runtime is not None  # set by open()
         self._port = SerialPort.open(
             self,
             self._generation,
@@ -326,7 +327,7 @@ class SlcanTransport(Transport[Frame, Frame]):
             if limit is not None and now - batch[0].queued_at > limit:
                 stale = [o for o in batch if now - o.queued_at > limit]
                 batch[:] = [o for o in batch if now - o.queued_at <= limit]
-                self._dropped("stale", [o.item for o in stale])
+                self._dropped("stale", [o.handle for o in stale])
                 if not batch:
                     return
             lines = [encode_line(o.item) for o in (batch[:1] if gap else batch)]
@@ -353,7 +354,7 @@ class SlcanTransport(Transport[Frame, Frame]):
                 stats.bytes_out += len(frame.data)
                 if self._load_known:
                     self._load.add(now, self._frame_time_s(frame))
-                self._sent(frame, now)
+                self._sent(outgoing.handle, now)
             del batch[:sent]
         port = self._port
         if self._tail and port is not None:
