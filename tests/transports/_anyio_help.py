@@ -19,6 +19,7 @@ from typing import Any, TypeVar
 
 import anyio
 import pytest
+import sniffio
 
 T = TypeVar("T")
 
@@ -59,8 +60,10 @@ def _expect_failure_on_trio(backend: str, modules: list[str]) -> None:
         pytest.xfail(f"{', '.join(modules)} still asyncio-only (converted on another branch of issue 28)")
 
 
-def needs_sim_on(backend: str) -> None:
-    """An expected failure on trio while the simulator's attachments are asyncio-only."""
+def needs_sim_on(backend: str | None = None) -> None:
+    """An expected failure on trio while the simulator's attachments are asyncio-only (``backend``:
+    the running one by default)."""
+    backend = backend or sniffio.current_async_library()
     _expect_failure_on_trio(backend, _asyncio_only("servobus.sim.attach", "servobus.sim.pty"))
 
 
