@@ -67,7 +67,7 @@ def needs_sim_on(backend: str | None = None) -> None:
     _expect_failure_on_trio(backend, _asyncio_only("servobus.sim.attach", "servobus.sim.pty"))
 
 
-def needs_bus_on(backend: str) -> None:
+def needs_bus_on(backend: str | None = None) -> None:
     """An expected failure while the Bus is asyncio-only: on trio, and on asyncio too, where the old
     Bus leaves the transport's task group from another task than the one that entered it."""
     modules = _asyncio_only("servobus.bus")

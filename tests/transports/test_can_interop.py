@@ -148,7 +148,7 @@ async def test_a_servobus_bus_runs_on_the_applications_bus_and_notifier(
     channel: str, app_bus: can.BusABC, anyio_backend: object
 ) -> None:
     needs_sim_on(backend_of(anyio_backend))
-    needs_bus_on(backend_of(anyio_backend))
+    needs_bus_on()
     mine = _Collect()
     notifier = can.Notifier(app_bus, [mine], timeout=0.01)
     try:
