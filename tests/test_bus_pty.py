@@ -42,7 +42,7 @@ from servobus.sim.pty import PtyPort
 from servobus.timing import uart_time_s
 from servobus.transports import CanTransport, SerialTransport, SimTransport, SlcanTransport
 from sim._standins import Sniffer
-from transports._anyio_help import needs_bus_on, needs_sim_on, serving
+from transports._anyio_help import needs_bus_on, serving
 
 pytestmark = pytest.mark.anyio
 
@@ -89,7 +89,6 @@ async def slcan_bus(bench: CanBench, *, native: bool = True, **options: Any) -> 
         transport = CanTransport(
             "slcan", port.path, bitrate=1_000_000, sleep_after_open=0, ignore_config=True
         )
-    needs_sim_on()
     needs_bus_on()
     try:
         with anyio.fail_after(5):
@@ -255,7 +254,6 @@ async def rs485_bus(
     """A Bus on a SerialTransport whose framing is ``family``'s on ``link``, to ``devices`` on a pty."""
     port = PtyPort()
     framing = get_family(family).bind(1, link=link).framing
-    needs_sim_on()
     needs_bus_on()
     try:
         transport = SerialTransport(port.path, framing=framing, baud=baud)

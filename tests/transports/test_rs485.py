@@ -49,7 +49,7 @@ from servobus.sim.pty import PtyPort
 from servobus.timing import uart_time_s
 from servobus.transports import SerialTransport
 
-from ._anyio_help import needs_sim_on, serving, within
+from ._anyio_help import serving, within
 
 pytestmark = pytest.mark.anyio
 
@@ -66,7 +66,6 @@ def read1(motor_id: int = 1) -> Frame:
 async def line(
     devices: Sequence[SerialDevice], *, baud: int, **options: object
 ) -> AsyncIterator[SerialTransport]:
-    needs_sim_on()
     port = PtyPort()
     try:
         transport = SerialTransport(port.path, baud=baud, **options)  # type: ignore[arg-type]
@@ -425,7 +424,6 @@ def test_a_framing_in_hand_finds_its_line_without_importing_another_family() -> 
 async def test_a_loss_while_waiting_for_a_reply_leaves_the_line_usable_after_the_reopen(
     tmp_path: Path,
 ) -> None:
-    needs_sim_on()
     link = tmp_path / "tty485"
     first, second = PtyPort(link=link), None
     transport = SerialTransport(str(link), framing=MOTOR1.framing, reopen_backoff_s=(0.01, 0.05))

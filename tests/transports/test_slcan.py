@@ -31,7 +31,7 @@ from servobus.sim.slcan import SlcanAdapter
 from servobus.transports import SlcanTransport, TransportState, create_transport
 from servobus.transports.slcan import encode_line
 
-from ._anyio_help import backend_of, needs_sim_on, serving
+from ._anyio_help import serving
 
 pytestmark = pytest.mark.anyio
 
@@ -114,8 +114,7 @@ async def receive_n(transport: SlcanTransport, n: int, timeout: float = 2.0) -> 
 # ---- with simulated motors ----
 
 
-async def test_round_trips_with_thirty_two_simulated_motors(tmp_path: object, anyio_backend: object) -> None:
-    needs_sim_on(backend_of(anyio_backend))
+async def test_round_trips_with_thirty_two_simulated_motors(tmp_path: object) -> None:
     network = SimCanNetwork([MyActuatorMotor(i) for i in range(1, 33)])
     port = PtyPort()
     async with (
@@ -144,8 +143,7 @@ async def test_round_trips_with_thirty_two_simulated_motors(tmp_path: object, an
     port.close()
 
 
-async def test_can_fd_frames_go_out_and_come_back(tmp_path: object, anyio_backend: object) -> None:
-    needs_sim_on(backend_of(anyio_backend))
+async def test_can_fd_frames_go_out_and_come_back(tmp_path: object) -> None:
     from sim._standins import Responder
 
     port = PtyPort()

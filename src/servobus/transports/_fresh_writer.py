@@ -45,10 +45,12 @@ class FreshWriter:
         self.written_at = 0.0
         #: times the OS output buffer was flushed
         self.flushes = 0
+        self._blocked = False  # the port's last write took nothing (or part): wait before the next
 
     def reset(self) -> None:
         """A new connection: its port has taken nothing yet, so nothing it holds is old."""
         self.written_at = self._clock()
+        self._blocked = False
 
     async def write(self, port: SerialPort, data: bytes, deadline: float | None) -> float | None:
         """Hand ``data`` to ``port`` whole, when it can take it.
@@ -72,18 +74,27 @@ class FreshWriter:
                 if done:  # a cut frame must not sit in front of the next one
                     self._flush(port)
                 return None
+            if self._blocked:
+                # The port took nothing last time: wait for room (event-driven) before writing again;
+                # a write into a full tty costs about as much as the wait (0.25 ms on a pty).
+                timeout = None if deadline is None else max(deadline - now, 0.0)
+                if not await port.wait_writable(timeout):
+                    if done:
+                        self._flush(port)
+                    return None  # stale before the port had room
+                self._blocked = False
             try:
                 done += port.write(view[done:])
             except BlockingIOError:
-                pass
+                self._blocked = True
+                continue
             except InterruptedError:
                 continue
             if done:
                 self.written_at = now
             if done == len(data):
                 return now
-            # Event-driven until the port takes bytes again or the deadline passes.
-            await port.wait_writable(None if deadline is None else max(deadline - clock(), 0.0))
+            self._blocked = True  # the kernel took part of it: it is full
 
     async def _pause(self, port: SerialPort, deadline: float | None, drain_s: float) -> bool:
         """Sleep while the port drains (at least 1 ms: never a spin); False once ``deadline`` passed."""

@@ -133,10 +133,12 @@ class SerialPort:
         """
         return os.write(self.fd, data)
 
-    async def wait_writable(self, timeout_s: float | None = None) -> None:
-        """Until the kernel takes bytes again (or ``timeout_s`` passed)."""
+    async def wait_writable(self, timeout_s: float | None = None) -> bool:
+        """Until the kernel takes bytes again: True, or False when ``timeout_s`` passed first."""
         with anyio.move_on_after(timeout_s):
             await anyio.wait_writable(self.fd)
+            return True
+        return False
 
     def out_waiting(self) -> int:
         """Bytes the OS still holds for the port (0 where the driver cannot tell, as on a pty).
