@@ -236,6 +236,20 @@ async def test_reopen_attempts_back_off_exponentially() -> None:
     assert gaps == [0.01, 0.02, 0.04, 0.04, 0.04]
 
 
+async def test_a_loss_reported_from_a_loop_callback_fails_waiters_and_recovers() -> None:
+    """A reader's callback (asyncio's add_reader, a thread's call_soon_threadsafe) runs in no task."""
+    async with MemoryTransport(reopen_backoff_s=(0.01, 0.01)) as transport:
+        assert transport._runtime is not None
+        results: list[object] = []
+        async with anyio.create_task_group() as tasks:
+            tasks.start_soon(outcome, results, transport.receive)
+            await anyio.sleep(0.001)
+            transport._runtime.call_soon(transport.fail, OSError("from a callback"))
+        assert len(results) == 1 and isinstance(results[0], TransportError)
+        await transport.wait_open(timeout=1.0)
+    assert (transport.stats().losses, transport.stats().reopens) == (1, 1)
+
+
 async def test_without_reopen_a_lost_transport_stays_lost_until_closed() -> None:
     async with MemoryTransport(reopen=False) as transport:
         transport.fail(ConnectionError("gone"))
