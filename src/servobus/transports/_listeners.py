@@ -9,7 +9,7 @@ import anyio
 
 from servobus.transports.events import StateChanged, TransportEvent, TransportState
 
-__all__ = ["Listener", "Listeners"]
+__all__ = ["EventSource", "Listener", "Listeners"]
 
 logger = logging.getLogger("servobus.transports")
 
@@ -64,3 +64,23 @@ class Listeners:
                         return
         finally:
             self.remove(collect)
+
+
+class EventSource:
+    """A link's listener API over its :class:`Listeners` (a base class of Transport and LinkBase)."""
+
+    _listeners: Listeners
+
+    def add_listener(self, listener: Listener) -> None:
+        """Call ``listener(event)`` on the loop for every event; its exceptions are logged, not raised."""
+        self._listeners.add(listener)
+
+    def remove_listener(self, listener: Listener) -> None:
+        self._listeners.remove(listener)
+
+    def events(self, maxsize: int = 1000) -> AsyncIterator[TransportEvent]:
+        """Events as an async stream, ending after the link closes (oldest dropped when full)."""
+        return self._listeners.stream(maxsize)
+
+    def _emit(self, event: TransportEvent) -> None:
+        self._listeners.emit(event)

@@ -83,4 +83,5 @@ class OwnedTaskGroup:
         self.check_owner("close()")
         self._group = self._owner = None
         group.cancel_scope.cancel()
-        return bool(await group.__aexit__(exc_type, exc, tb))
+        absorbed = await group.__aexit__(exc_type, exc, tb)
+        return exc is not None and bool(absorbed)  # (True with no exception passed means nothing)

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import logging
 from collections import deque
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
@@ -12,11 +14,16 @@ from anyio.abc import TaskGroup
 from servobus.errors import TransportError
 from servobus.runtime import Waiter
 from servobus.transports._waiters import WaiterList
+from servobus.transports.contract import SendReporter
+from servobus.transports.events import FramesDropped, TransportEvent
+from servobus.transports.stats import TransportStats
 
 if TYPE_CHECKING:
     from servobus.transports.base import Transport
 
-__all__ = ["Outgoing", "SendQueue", "SendQueueFull"]
+__all__ = ["Outgoing", "SendQueue", "SendQueueFull", "SendReports"]
+
+logger = logging.getLogger("servobus.transports")
 
 TxT = TypeVar("TxT")
 
@@ -146,3 +153,48 @@ class SendQueue(Generic[TxT]):
             return batch
         self._transport._dropped("stale", [o.handle for o in batch if now - o.queued_at > limit])
         return [o for o in batch if now - o.queued_at <= limit]
+
+
+class SendReports:
+    """A transport's send reports and drop counts (a base class of Transport): every frame
+    :meth:`send` accepted is reported once, by the handle it was sent with."""
+
+    name: str
+    _stats: TransportStats
+    _reporter: SendReporter | None
+
+    if TYPE_CHECKING:  # (the transport's; declared here for the type checker only)
+
+        def _now(self) -> float: ...
+
+        def _emit(self, event: TransportEvent) -> None: ...
+
+    def _dropped(self, reason: str, handles: Sequence[Any] | int) -> None:
+        """Count frames that will never be sent, and report each one whose handle is known."""
+        count = handles if isinstance(handles, int) else len(handles)
+        if count:
+            setattr(self._stats, reason, getattr(self._stats, reason) + count)
+            self._emit(FramesDropped(reason, count, self._now()))
+            reporter = self._reporter
+            if reporter is not None and not isinstance(handles, int):
+                for handle in handles:
+                    self._call(reporter, handle, None, reason)
+
+    def _sent(self, handle: Any, sent_at: float) -> None:
+        """Report that the frame sent with ``handle`` left at ``sent_at`` (counting is the subclass's)."""
+        if self._reporter is not None:
+            self._call(self._reporter, handle, sent_at, None)
+
+    def set_send_reporter(self, reporter: SendReporter | None) -> None:
+        """Call ``reporter(handle, sent_at, None)`` for every frame that left, and
+        ``reporter(handle, None, reason)`` for every one dropped after :meth:`send` accepted it.
+
+        Called on the loop; its exceptions are logged, never raised into the transport.
+        """
+        self._reporter = reporter
+
+    def _call(self, callback: Callable[..., object], *args: object) -> None:
+        try:
+            callback(*args)
+        except Exception:
+            logger.exception("%s: callback %r failed", self.name, callback)

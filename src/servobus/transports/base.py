@@ -29,7 +29,8 @@ outlives ``close()``, and an unexpected error of those tasks is raised by it, no
 
 * ``async _connect()``: open the device (tag callbacks with ``self._generation``); start its reader
   tasks in ``self._tasks`` (the transport's task group, there from ``_connect`` on, on a first open
-  and on every reopen); raise TransportError when it cannot.
+  and on every reopen; ``_connect`` always runs in a task: ``open()``'s or the recovery task's, and
+  anyio starts no task from a bare loop callback); raise TransportError when it cannot.
 * ``async _disconnect()``: release the device; never raises for a device already gone. It runs
   after the task group's tasks have ended on ``close()``, and in the recovery task after a loss
   (the reader tasks of the lost connection must then stop by themselves: check the generation).
@@ -40,7 +41,8 @@ outlives ``close()``, and an unexpected error of those tasks is raised by it, no
   stack; True when written (counted and reported with ``_sent(handle, now)`` by the subclass).
 * ``send(frame, handle=None, ...)``: a subclass's public send calls
   ``self._enqueue(item, hold_s, handle)``.
-* It calls: ``_deliver(frames)`` (on the loop), ``_lose(cause, generation)``, ``_sent(handle,
+* It calls (on the loop, from a task or a loop callback): ``_deliver(frames)``, ``_lose(cause,
+  generation)`` (a loss wakes the recovery task, which runs from open to close), ``_sent(handle,
   sent_at)``, ``_dropped(reason, handles_or_count)``, ``_set_state``, ``_emit(event)``, ``_now()``,
   ``_error()``; it counts into ``self._stats`` and ``self._load``; ``self._runtime`` (the
   :class:`~servobus.runtime.Runtime`: ``time``, ``call_soon``, ``call_soon_threadsafe``,
@@ -56,7 +58,7 @@ import copy
 import logging
 import time
 import warnings
-from collections.abc import AsyncIterator, Callable, Sequence
+from collections.abc import Callable
 from types import TracebackType
 from typing import Any, ClassVar, Generic, Self, TypeVar
 
@@ -65,13 +67,14 @@ from anyio.abc import TaskGroup
 
 from servobus import runtime as _runtime
 from servobus.errors import TransportError
-from servobus.transports._inbox import Inbox
-from servobus.transports._listeners import Listener, Listeners
+from servobus.transports._inbox import Inbox, ReceiveSide
+from servobus.transports._listeners import EventSource, Listeners
 from servobus.transports._owned import OwnedTaskGroup
-from servobus.transports._sending import Outgoing, SendQueue, SendQueueFull
+from servobus.transports._recovery import Recovery
+from servobus.transports._sending import Outgoing, SendQueue, SendQueueFull, SendReports
 from servobus.transports._waiters import WaiterList
 from servobus.transports.contract import LineRules
-from servobus.transports.events import FramesDropped, StateChanged, TransportEvent, TransportState
+from servobus.transports.events import StateChanged, TransportState
 from servobus.transports.stats import LoadMeter, TransportStats
 
 __all__ = ["Consumer", "Outgoing", "SendQueueFull", "SendReporter", "Transport"]
@@ -87,7 +90,7 @@ Consumer = Callable[[list[RxT]], object]
 SendReporter = Callable[[Any, float | None, str | None], object]
 
 
-class Transport(abc.ABC, Generic[RxT, TxT]):
+class Transport(ReceiveSide[RxT], SendReports, EventSource, abc.ABC, Generic[RxT, TxT]):
     """Frames out through a bounded queue, frames in through a consumer or a buffer, one device.
 
     Use it as an async context manager (``async with CanTransport(...) as bus:``), or call
@@ -121,13 +124,9 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
             raise ValueError(f"queue_size={queue_size} and rx_buffer={rx_buffer} must be at least 1")
         if stale_after_s is not None and stale_after_s <= 0:
             raise ValueError(f"stale_after_s={stale_after_s} must be positive (or None)")
-        first, longest = reopen_backoff_s
-        if not 0 < first <= longest:
-            raise ValueError(f"reopen_backoff_s={reopen_backoff_s} must be 0 < first <= longest")
         self.name = name
         self._stale_after_s = stale_after_s
-        self._reopen = reopen
-        self._backoff = (first, longest)
+        self._recovery = Recovery(self, reopen, reopen_backoff_s)
         self._state = TransportState.CLOSED
         self._stats = TransportStats()
         self._load = LoadMeter()
@@ -231,8 +230,9 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
         """
         if self._state is not TransportState.CLOSED:
             raise RuntimeError(f"{self.name} is already {self._state.value}")
-        self._runtime = _runtime.current()
-        await self._owned.enter()
+        self._runtime = lane = _runtime.current()
+        tasks = await self._owned.enter()
+        tasks.start_soon(self._recovery.watch, lane, name=f"{self.name} recovery")
         self._set_state(TransportState.OPENING)
         self._generation += 1
         try:
@@ -322,42 +322,8 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
         Safe to call more than once and from stale callbacks (``generation`` of an older
         connection): only the first call for the current connection acts. Call it on the loop.
         """
-        if self._state is not TransportState.OPEN or generation not in (None, self._generation):
-            return
-        logger.warning("%s: device lost: %s", self.name, cause)
-        self._stats.losses += 1
-        self._generation += 1
-        self._failure = ("device lost", cause)
-        self._set_state(TransportState.LOST, cause)
-        self._sending.stop()
-        self._sending.purge("purged")
-        self._inbox.readers.fail_all(self._error)
-        self._sending.idle.fail_all(self._error)
-        self._tasks.start_soon(self._recover, name=f"{self.name} recovery")
-
-    async def _recover(self) -> None:
-        try:
-            await self._disconnect()
-        except Exception as exc:  # the device is gone already: nothing to release
-            logger.debug("%s: disconnect after a loss: %s", self.name, exc)
-        if not self._reopen:
-            return
-        delay, longest = self._backoff
-        while self._state is TransportState.LOST:
-            await anyio.sleep(delay)
-            self._generation += 1
-            try:
-                await self._connect()
-            except Exception as exc:  # the device is still away (or refuses): try again later
-                log = logger.debug if isinstance(exc, TransportError) else logger.warning
-                log("%s: reopen failed: %s", self.name, exc)
-                delay = min(2 * delay, longest)
-                continue
-            if self._state is not TransportState.LOST:  # closed meanwhile: close() releases it
-                return
-            self._stats.reopens += 1
-            logger.info("%s: reopened", self.name)
-            self._connected()
+        if self._state is TransportState.OPEN and generation in (None, self._generation):
+            self._recovery.lose(cause)
 
     def _set_state(self, state: TransportState, cause: BaseException | None = None) -> None:
         self._state = state
@@ -401,98 +367,7 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
         """
         await self._sending.drain()
 
-    def _dropped(self, reason: str, handles: Sequence[Any] | int) -> None:
-        """Count frames that will never be sent, and report each one whose handle is known."""
-        count = handles if isinstance(handles, int) else len(handles)
-        if count:
-            setattr(self._stats, reason, getattr(self._stats, reason) + count)
-            self._emit(FramesDropped(reason, count, self._now()))
-            reporter = self._reporter
-            if reporter is not None and not isinstance(handles, int):
-                for handle in handles:
-                    self._call(reporter, handle, None, reason)
-
-    def _sent(self, handle: Any, sent_at: float) -> None:
-        """Report that the frame sent with ``handle`` left at ``sent_at`` (counting is the subclass's)."""
-        if self._reporter is not None:
-            self._call(self._reporter, handle, sent_at, None)
-
-    def set_send_reporter(self, reporter: SendReporter | None) -> None:
-        """Call ``reporter(handle, sent_at, None)`` for every frame that left, and
-        ``reporter(handle, None, reason)`` for every one dropped after :meth:`send` accepted it.
-
-        Called on the loop; its exceptions are logged, never raised into the transport.
-        """
-        self._reporter = reporter
-
-    def _call(self, callback: Callable[..., object], *args: object) -> None:
-        try:
-            callback(*args)
-        except Exception:
-            logger.exception("%s: callback %r failed", self.name, callback)
-
-    # ----------------------------------------------------------------- receiving
-
-    def set_consumer(self, consumer: Consumer[RxT] | None) -> None:
-        """Push delivery: call ``consumer(frames)`` on the loop with every received batch.
-
-        With a consumer, nothing is buffered for :meth:`receive`; frames already buffered are handed
-        to it at once. Its exceptions are logged, never raised into the reader. None goes back to
-        buffering.
-        """
-        self._inbox.set_consumer(consumer)
-
-    def _deliver(self, frames: Sequence[RxT]) -> None:
-        """Hand received frames to the consumer, or to readers (call on the loop)."""
-        self._inbox.deliver(frames)
-
-    async def receive(self) -> RxT:
-        """The next received frame (frames received before a loss or close come first).
-
-        Raises:
-            TransportError: the device is lost or the transport closed, and nothing is buffered.
-        """
-        buffered = self._inbox.frames
-        while not buffered:
-            await self._wait_rx()
-        return buffered.popleft()
-
-    async def receive_batch(self, max_frames: int | None = None) -> list[RxT]:
-        """Every buffered frame (at most ``max_frames``), waiting for at least one."""
-        while not self._inbox.frames:
-            await self._wait_rx()
-        return self._inbox.take(max_frames)
-
-    async def _wait_rx(self) -> None:
-        if self._state is not TransportState.OPEN or self._runtime is None:
-            raise self._error()
-        await self._inbox.wait(self._runtime)
-
-    async def __aiter__(self) -> AsyncIterator[RxT]:
-        """Received frames until the transport is closed; a loss raises TransportError."""
-        while True:
-            try:
-                yield await self.receive()
-            except TransportError:
-                if self._state is TransportState.CLOSED:
-                    return
-                raise
-
-    # ----------------------------------------------------------------- events and counters
-
-    def add_listener(self, listener: Listener) -> None:
-        """Call ``listener(event)`` on the loop for every event; its exceptions are logged, not raised."""
-        self._listeners.add(listener)
-
-    def remove_listener(self, listener: Listener) -> None:
-        self._listeners.remove(listener)
-
-    def events(self, maxsize: int = 1000) -> AsyncIterator[TransportEvent]:
-        """Events as an async stream, ending after the transport closes (oldest dropped when full)."""
-        return self._listeners.stream(maxsize)
-
-    def _emit(self, event: TransportEvent) -> None:
-        self._listeners.emit(event)
+    # ----------------------------------------------------------------- counters
 
     def stats(self) -> TransportStats:
         """A snapshot of the counters, with the current state, queue depth and bus load."""

@@ -11,7 +11,8 @@ are here, once:
 * ``open()`` takes the loop's :class:`~servobus.runtime.Runtime` into ``self._runtime`` (``time``,
   ``call_soon``, ``waiter``) and enters the link's task group (``self._tasks``: a subclass starts
   its background tasks there); ``close()``, from the same task, cancels them, waits for them and
-  leaves it (a task's error is raised there). ``async with link:`` does both.
+  leaves it (a task's error is raised there). ``async with link:`` does both. Start tasks from a
+  task (anyio cannot start one from a bare loop callback on asyncio).
 * ``self._loop`` is the asyncio loop when the link runs on asyncio (None on trio), for subclasses
   written against asyncio's ``call_at`` (they run on asyncio only).
 """

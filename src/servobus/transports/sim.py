@@ -7,12 +7,12 @@ given a network, or a :class:`~servobus.sim.network.SimCanNetwork` (the Python r
 * **Zero-copy out**: :meth:`SimTransport.send` hands the caller's own :class:`~servobus.frame.Frame`
   to the network (``network.send(frame, now)``) from the caller's stack, with no queue hop; the
   network's bus model then gives it its exact bit time and arbitration.
-* **One clock task in**: the transport keeps one task (in its task group) waiting for the network's
-  next event, through a cancel scope whose deadline is moved when an earlier event is armed (and
-  woken at once through a waiter when the event is due now: a send). When it fires, the network
-  runs up to the loop's time and the frames the host received are delivered as one batch, stamped
-  with the time their transmission ended (on the loop's clock). Nothing polls: an idle network arms
-  no deadline at all. Then the network runs ahead over what the host can neither see nor change
+* **One clock in**: the transport keeps one wake-up armed on the network's next event: a task in
+  its task group (any backend) or, on asyncio, the loop's ``call_at`` (the measured fast lane:
+  :mod:`servobus.transports._simclock`). When it fires, the network runs up to the loop's time and
+  the frames the host received are delivered as one batch, stamped with the time their
+  transmission ended (on the loop's clock). Nothing polls: an idle network arms nothing. Then the
+  network runs ahead over what the host can neither see nor change
   (:meth:`~servobus.sim.network.SimCanNetwork.run_ahead`: while the host still has a frame queued,
   its later frames wait behind it), so the clock is next armed for the next frame the host
   receives rather than for every frame on the wire: a burst of requests costs one wake-up, not one
@@ -36,21 +36,19 @@ Everything else (counters, send reports, push delivery, events) is the base
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable
-from typing import Any
+from typing import Any, ClassVar
 
-import anyio
 import anyio.lowlevel
 
 from servobus.errors import TransportError
 from servobus.frame import Frame
-from servobus.runtime import Waiter
 from servobus.sim.canbus import CanBusModel
 from servobus.sim.corenet import CoreCanNetwork
 from servobus.sim.device import Device
 from servobus.sim.faults import FaultInjector
 from servobus.sim.network import SimCanNetwork
+from servobus.transports._simclock import Clock, start_clock
 from servobus.transports.base import Outgoing, Transport
 
 __all__ = ["SimTransport"]
@@ -73,6 +71,9 @@ class SimTransport(Transport[Frame, Frame]):
     Raises:
         ValueError: both a network and the parts of a new one were given.
     """
+
+    #: run the clock as a task on asyncio too (trio always does): the tests of both lanes set it
+    task_clock: ClassVar[bool] = False
 
     def __init__(
         self,
@@ -108,7 +109,7 @@ class SimTransport(Transport[Frame, Frame]):
         self._t0 = 0.0
         #: network time the clock task is armed for (None: idle, nothing to wait for)
         self._timer_at: float | None = None
-        self._clock: _Clock | None = None  # the running clock task's handles
+        self._clock: Clock | None = None  # this connection's clock (see _simclock.py)
         self._busy_s = 0.0  # the bus model's busy time already added to the load meter
 
     # ----------------------------------------------------------------- public API
@@ -169,8 +170,16 @@ class SimTransport(Transport[Frame, Frame]):
         self._busy_s = network.bus.busy_s
         self._direct = True
         self._stop_clock()
-        self._clock = clock = _Clock(self._generation)
-        self._tasks.start_soon(self._run_clock, clock, name=f"{self.name} clock")
+        assert self._runtime is not None
+        self._clock = start_clock(
+            self._runtime,
+            self._tasks,
+            self._armed_loop_time,
+            self._on_timer,
+            self._generation,
+            name=f"{self.name} clock",
+            task_lane=self.task_clock,
+        )
         self._rearm(self._generation)
 
     async def _disconnect(self) -> None:
@@ -212,39 +221,18 @@ class SimTransport(Transport[Frame, Frame]):
         if armed is not None and armed <= at:
             return
         self._timer_at = at
-        clock = self._clock
-        if clock is None:
-            return
-        if at <= self._now() - self._t0:  # due now: wake the clock task without a cancellation
-            wake = clock.wake
-            if wake is not None and not wake.done():
-                wake.set_result(None)
-        elif clock.wait is not None:
-            clock.wait.deadline = at + self._t0
+        if self._clock is not None:
+            self._clock.poke(at + self._t0)
+
+    def _armed_loop_time(self) -> float | None:
+        at = self._timer_at
+        return None if at is None else at + self._t0
 
     def _stop_clock(self) -> None:
         clock, self._clock = self._clock, None
         if clock is not None:
-            clock.stop.cancel()
+            clock.stop()
         self._timer_at = None
-
-    async def _run_clock(self, clock: _Clock) -> None:
-        """The clock task of one connection: wait for the armed time, then :meth:`_on_timer`."""
-        lane = self._runtime
-        assert lane is not None
-        with clock.stop:
-            while clock.generation == self._generation:
-                at = self._timer_at
-                if at is not None and at <= lane.time() - self._t0:
-                    await anyio.lowlevel.checkpoint()  # due already: let the loop turn once
-                else:
-                    clock.wake = wake = lane.waiter()
-                    with anyio.CancelScope(deadline=math.inf if at is None else at + self._t0) as wait:
-                        clock.wait = wait
-                        await wake
-                    clock.wait = clock.wake = None
-                if self._timer_at is not None:
-                    self._on_timer(clock.generation)
 
     def _rearm(self, generation: int) -> None:
         at = self.network.next_event_s()
@@ -276,18 +264,6 @@ class SimTransport(Transport[Frame, Frame]):
             at = network.run_ahead(until)
             if at is not None:
                 self._arm(at, generation)
-
-
-class _Clock:
-    """One connection's clock task: what stops it, and its current wait (to move or to wake)."""
-
-    __slots__ = ("generation", "stop", "wait", "wake")
-
-    def __init__(self, generation: int) -> None:
-        self.generation = generation
-        self.stop = anyio.CancelScope()
-        self.wait: anyio.CancelScope | None = None
-        self.wake: Waiter[None] | None = None
 
 
 # A received frame is the sender's own object: the host gets a copy stamped with the time it ended.
