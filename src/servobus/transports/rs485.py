@@ -27,15 +27,14 @@ One :class:`SerialTransport` is one port and one half-duplex line:
   one whole frame comes back or the timeout passes, and the rests are kept between frames.
 * **Backpressure and freshness** (``_fresh_writer.FreshWriter``). Every byte not yet written stays
   in our own queue; the port gets one frame at a time, and only when it can take it now: the OS
-  output buffer holds at most
-  ``high_water_bytes`` (``TIOCOUTQ``, polled no faster than every millisecond) and the write does
-  not block (``EAGAIN``: wait for the descriptor to become writable, event-driven). A frame older
-  than ``stale_after_s`` when it would be written is dropped (reported ``"stale"``), never
-  written; one that cannot be written whole before it goes stale is abandoned and its head flushed
-  from the OS buffer (``tcflush``); and when the OS reports bytes it has held, without taking more,
-  for longer than ``stale_after_s`` (a stalled adapter), they are flushed too. For a motor a stale
-  set-point is worse than none. What the OS cannot report stays out of reach: a pty's buffer
-  (``TIOCOUTQ`` says 0) keeps the frames it took while they were fresh.
+  output buffer holds at most ``high_water_bytes`` (``TIOCOUTQ``, polled no faster than every
+  millisecond) and the write does not block (``EAGAIN``: wait for the descriptor to become writable,
+  event-driven). A frame older than ``stale_after_s`` when it would be written is dropped (reported
+  ``"stale"``), never written; one that cannot be written whole before it goes stale is abandoned
+  and its head flushed from the OS buffer (``tcflush``); and when the OS reports bytes it has held,
+  without taking more, for longer than ``stale_after_s`` (a stalled adapter), they are flushed too.
+  For a motor a stale set-point is worse than none. What the OS cannot report stays out of reach: a
+  pty's buffer (``TIOCOUTQ`` says 0) keeps the frames it took while they were fresh.
 * **Receiving**: bytes go through the de-framer as they arrive; when no byte has come for
   ``idle_s`` the de-framer is told the line went idle, which drops a stray partial frame as noise
   (and ends a Modbus RTU frame). ``idle_s`` is not the wire's 3.5-character silence: USB adapters
@@ -175,7 +174,7 @@ class SerialTransport(Transport[Frame, Frame]):
     """One RS485 port: serial Frames out one transaction at a time, whole Frames in.
 
     Args:
-        port: the serial device (``/dev/ttyUSB0``, a pty, or any pyserial URL).
+        port: the serial device (``/dev/ttyUSB0``, a pty, or a pyserial URL with a file descriptor, such as ``socket://``).
         framing: how Frames look on the wire, from the family:
             ``FAMILY.bind(motor_id, link="rs485").framing``.
         mode: the name or an alias of a registered family's serial line (``Family.serial``):
