@@ -174,7 +174,8 @@ class SerialTransport(Transport[Frame, Frame]):
     """One RS485 port: serial Frames out one transaction at a time, whole Frames in.
 
     Args:
-        port: the serial device (``/dev/ttyUSB0``, a pty, or a pyserial URL with a file descriptor, such as ``socket://``).
+        port: the serial device (``/dev/ttyUSB0``, a pty, or a pyserial URL with a file descriptor,
+            such as ``socket://``).
         framing: how Frames look on the wire, from the family:
             ``FAMILY.bind(motor_id, link="rs485").framing``.
         mode: the name or an alias of a registered family's serial line (``Family.serial``):
