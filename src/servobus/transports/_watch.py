@@ -4,7 +4,8 @@ The readers of servobus (a python-can bus's descriptor, a serial port) read a li
 one CAN frame, one burst of bytes. So a wake-up's cost is paid per frame. anyio's ``wait_readable`` is
 the portable form, and on trio it is trio's own wait; on asyncio it costs about 23 µs per wake-up
 against 4 µs for a callback the loop keeps registered (``loop.add_reader``), measured with an eventfd
-ping-pong (100k wake-ups, this machine). So :class:`ReadWatch` has two lanes behind one interface:
+ping-pong (100k wake-ups), and through CanTransport's descriptor reader (one frame per wake-up) 27
+against 9 µs of CPU per frame (trio: 15). So :class:`ReadWatch` has two lanes behind one interface:
 
 * **asyncio** (the measured fast lane): the loop's own reader callback, registered once.
 * **any other backend** (trio): one task in the transport's task group that waits with
