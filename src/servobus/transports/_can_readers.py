@@ -9,18 +9,16 @@ behind one small interface (private).
   ``call_soon_threadsafe`` (never blocks the thread).
 * :class:`NotifierReader`: the application's ``can.Notifier`` reads the bus: a listener on it.
 
-Each hands ``(message, monotonic time)`` pairs to the transport's ``_take`` with the connection's
-generation (a thread's hand-over through :func:`~servobus.transports._watch.as_loop`); frames read on
-the loop are stamped on the loop's clock already (``shift`` 0), those from a
-thread on ``time.monotonic`` and shifted onto the loop's clock when they arrive there (trio's clock
-and a virtual clock are not ``time.monotonic``). A read that fails with an OS error is a lost device
+Each hands ``(message, time)`` pairs to the transport's ``_take`` with the connection's generation.
+Frames read on the loop are stamped on the loop's clock already (``shift`` 0); those from a thread on
+``time.monotonic``, shifted onto the loop's clock when they arrive there (trio's clock and a virtual
+clock are not ``time.monotonic``). A read that fails with an OS error is a lost device
 (``_lose``); one python-can cannot parse is a bad frame (``_count_bad``), and reading goes on.
 """
 
 from __future__ import annotations
 
 import contextlib
-import functools
 import threading
 import time
 from collections.abc import Sequence
@@ -31,7 +29,7 @@ import can
 from anyio.abc import TaskGroup
 
 from servobus.runtime import Runtime
-from servobus.transports._watch import ReadWatch, as_loop
+from servobus.transports._watch import ReadWatch
 
 __all__ = ["FdReader", "NotifierReader", "Reader", "ThreadReader", "device_failed"]
 
@@ -135,7 +133,7 @@ class ThreadReader:
         self._sink = sink
         self._bus = bus
         self._generation = generation
-        self._call = functools.partial(runtime.call_soon_threadsafe, as_loop, runtime.name)
+        self._call = runtime.call_soon_threadsafe
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=f"{sink.name} reader", daemon=True)
 
@@ -192,7 +190,7 @@ class NotifierReader(can.Listener):
         self._notifier = notifier
         self._generation = generation
         self._runtime = runtime
-        self._call = functools.partial(runtime.call_soon_threadsafe, as_loop, runtime.name)
+        self._call = runtime.call_soon_threadsafe
         self._pending: list[tuple[can.Message, float]] = []
         self._lock = threading.Lock()
 
@@ -209,7 +207,7 @@ class NotifierReader(can.Listener):
             if len(self._pending) > 1:
                 return  # a hand-over is already on its way
         if self._runtime.is_current():  # a notifier running on our own loop
-            as_loop(self._runtime.name, self._flush)
+            self._flush()
             return
         with contextlib.suppress(RuntimeError):  # the loop is gone: nobody is left to take it
             self._call(self._flush)

@@ -13,11 +13,8 @@ against 9 µs of CPU per frame (trio: 15). So :class:`ReadWatch` has two lanes b
 
 :data:`ASYNCIO_CALLBACKS` set to False puts asyncio on the task lane too (the tests run both lanes).
 
-**anyio from a loop callback.** A reader callback, and a thread's hand-over (``call_soon_threadsafe``),
-run outside any task. anyio finds its backend through sniffio, which on asyncio looks for a current
-task: there is none in a callback, so a callback that reaches ``TaskGroup.start_soon`` (the base's
-``_lose`` starts its recovery task) would fail with ``NoEventLoopError``. :func:`as_loop` runs a
-callback with sniffio told the backend's name; every callback of these transports goes through it.
+On the callback lane ``on_ready`` runs in no task (as a thread's ``call_soon_threadsafe`` hand-over
+does): what it calls must not need anyio's task context (the base's ``_lose`` does not).
 """
 
 from __future__ import annotations
@@ -27,31 +24,16 @@ from collections.abc import Callable
 from typing import Any
 
 import anyio
-import sniffio
 from anyio.abc import TaskGroup
 
 from servobus.runtime import Runtime
 
-__all__ = ["ASYNCIO_CALLBACKS", "ReadWatch", "as_loop"]
+__all__ = ["ASYNCIO_CALLBACKS", "ReadWatch"]
 
 logger = logging.getLogger("servobus.transports")
 
 #: asyncio watches through the loop's reader callback (True) or a task like any backend (False)
 ASYNCIO_CALLBACKS = True
-
-
-def as_loop(backend: str, fn: Callable[..., object], *args: object) -> None:
-    """Call ``fn(*args)`` (from a loop callback) with sniffio told that ``backend`` runs here, so
-    anything it calls may use anyio. ``runtime.call_soon_threadsafe(as_loop, runtime.name, fn, ...)``
-    is how a thread hands work to the loop."""
-    token = _library.set(backend)
-    try:
-        fn(*args)
-    finally:
-        _library.reset(token)
-
-
-_library = sniffio.current_async_library_cvar
 
 
 class ReadWatch:
@@ -62,7 +44,7 @@ class ReadWatch:
     (a descriptor left readable would otherwise wake the loop for ever).
     """
 
-    __slots__ = ("_backend", "_ended", "_fd", "_loop", "_name", "_on_ready", "_scope", "_tasks", "lane")
+    __slots__ = ("_ended", "_fd", "_loop", "_name", "_on_ready", "_scope", "_tasks", "lane")
 
     def __init__(
         self, runtime: Runtime, tasks: TaskGroup, fd: int, on_ready: Callable[[], object], name: str
@@ -71,7 +53,6 @@ class ReadWatch:
         self._on_ready = on_ready
         self._name = name
         self._tasks = tasks
-        self._backend = runtime.name
         loop: Any = getattr(runtime, "loop", None) if runtime.name == "asyncio" else None
         self._loop = loop if ASYNCIO_CALLBACKS else None
         #: "callback" (asyncio's reader callback) or "task" (a task waiting with anyio.wait_readable)
@@ -102,14 +83,11 @@ class ReadWatch:
                 await self._ended.wait()
 
     def _ready(self) -> None:
-        token = _library.set(self._backend)  # a callback, not a task: see as_loop
         try:
             self._on_ready()
         except Exception:
             logger.exception("%s: the reader failed; the descriptor is no longer watched", self._name)
             self.cancel()
-        finally:
-            _library.reset(token)
 
     async def _watch(self, scope: anyio.CancelScope, ended: anyio.Event) -> None:
         try:

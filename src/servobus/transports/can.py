@@ -48,7 +48,6 @@ from servobus.frame import Frame
 from servobus.timing import nominal_frame_time_s
 from servobus.transports._can_readers import Batch, Reader, start_reader
 from servobus.transports._can_sender import BlockingSender, SendReport, buffer_full
-from servobus.transports._watch import as_loop
 from servobus.transports.base import Outgoing, Transport, logger
 from servobus.transports.contract import LineRules
 from servobus.transports.events import BusOff, CanErrorClass, ErrorFrame
@@ -332,14 +331,14 @@ class CanTransport(Transport[Frame, Frame]):
         frames = batch.copy()
         batch.clear()  # the writer thread accounts for these itself, even if this task is cancelled
         generation = self._generation
-        call, backend = self._runtime.call_soon_threadsafe, self._runtime.name
+        call = self._runtime.call_soon_threadsafe
         await anyio.to_thread.run_sync(
             self._sender.send_batch,
             self._bus,
             frames,
             self._now() - time.monotonic(),
             lambda: generation == self._generation,
-            lambda report: call(as_loop, backend, self._account, report, generation),
+            lambda report: call(self._account, report, generation),
             message_from_frame,
             abandon_on_cancel=True,  # a loss or close need not wait for a blocked send
             limiter=self._send_lane,
