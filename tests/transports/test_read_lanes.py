@@ -109,3 +109,51 @@ async def test_rs485_reads_and_loses_a_port_on_the_lane(lane: str, tmp_path: Pat
     await test_rs485.test_garbage_and_corrupt_frames_are_counted_and_the_good_frame_still_comes()
     await test_rs485.test_modbus_rtu_at_19200_and_a_truncated_frame_is_dropped_on_the_silence()
     await test_rs485.test_a_loss_while_waiting_for_a_reply_leaves_the_line_usable_after_the_reopen(tmp_path)
+
+
+def test_callbacks_outside_a_task_can_use_anyio_under_plain_asyncio(channel: str) -> None:
+    """Under ``asyncio.run`` (no anyio runner), a reader callback and a thread's hand-over run in no
+    task: the transports run them in a context that names asyncio to sniffio, so a consumer or a
+    send reporter (the Bus's intake) may call anyio there."""
+    import asyncio
+
+    import can
+    import sniffio
+
+    from servobus.frame import Frame
+    from servobus.transports import CanTransport
+
+    seen: dict[str, list[str]] = {"can rx": [], "can report": [], "slcan rx": []}
+
+    def probe(where: str) -> None:
+        try:
+            seen[where].append(sniffio.current_async_library())
+        except sniffio.AsyncLibraryNotFoundError:
+            seen[where].append("none")
+
+    async def scenario() -> None:
+        peer = can.Bus(interface="virtual", channel=channel)
+        try:
+            # min_gap_s: sends go through the writer thread, so their reports are handed over
+            async with CanTransport("virtual", channel, ignore_config=True, min_gap_s=0.001) as transport:
+                transport.set_consumer(lambda frames: probe("can rx"))
+                transport.set_send_reporter(lambda handle, at, why: probe("can report"))
+                peer.send(can.Message(arbitration_id=0x241, data=b"\x01", is_extended_id=False))
+                transport.send(Frame(arbitration_id=0x141, data=b"\x02"))
+                await transport.drain()
+                for _ in range(100):
+                    if seen["can rx"]:
+                        break
+                    await asyncio.sleep(0.01)
+        finally:
+            peer.shutdown()
+        async with test_slcan.raw_open() as (slcan, adapter):
+            slcan.set_consumer(lambda frames: probe("slcan rx"))
+            adapter.inject(test_slcan.GOOD)
+            for _ in range(100):
+                if seen["slcan rx"]:
+                    break
+                await asyncio.sleep(0.01)
+
+    asyncio.run(scenario())
+    assert seen == {"can rx": ["asyncio"], "can report": ["asyncio"], "slcan rx": ["asyncio"]}

@@ -29,7 +29,7 @@ import can
 from anyio.abc import TaskGroup
 
 from servobus.runtime import Runtime
-from servobus.transports._watch import ReadWatch
+from servobus.transports._watch import ReadWatch, loop_context
 
 __all__ = ["FdReader", "NotifierReader", "Reader", "ThreadReader", "device_failed"]
 
@@ -135,7 +135,9 @@ class ThreadReader:
         self._generation = generation
         self._call = runtime.call_soon_threadsafe
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name=f"{sink.name} reader", daemon=True)
+        self._thread = threading.Thread(  # its hand-overs run in a context naming the backend
+            target=loop_context(runtime).run, args=(self._run,), name=f"{sink.name} reader", daemon=True
+        )
 
     def start(self) -> None:
         self._thread.start()
@@ -191,6 +193,7 @@ class NotifierReader(can.Listener):
         self._generation = generation
         self._runtime = runtime
         self._call = runtime.call_soon_threadsafe
+        self._context = loop_context(runtime)  # a copy per hand-over: threads may overlap
         self._pending: list[tuple[can.Message, float]] = []
         self._lock = threading.Lock()
 
@@ -210,7 +213,7 @@ class NotifierReader(can.Listener):
             self._flush()
             return
         with contextlib.suppress(RuntimeError):  # the loop is gone: nobody is left to take it
-            self._call(self._flush)
+            self._call(self._context.copy().run, self._flush)
 
     def _flush(self) -> None:
         with self._lock:
@@ -223,12 +226,12 @@ class NotifierReader(can.Listener):
         Raises NotImplementedError, python-can's "not handled here", so whether the application's
         notifier stops or reads on stays its own listeners' decision, as without servobus.
         """
-        sink, generation, call = self._sink, self._generation, self._call
+        sink, generation, call, run = self._sink, self._generation, self._call, self._context.copy().run
         with contextlib.suppress(RuntimeError):
             if device_failed(exc):
-                call(sink._lose, exc, generation)
+                call(run, sink._lose, exc, generation)
             else:  # a frame python-can could not parse
-                call(sink._count_bad, 1, generation)
+                call(run, sink._count_bad, 1, generation)
         raise NotImplementedError
 
     def stop(self) -> None:

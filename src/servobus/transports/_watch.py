@@ -13,12 +13,16 @@ against 9 µs of CPU per frame (trio: 15). So :class:`ReadWatch` has two lanes b
 
 :data:`ASYNCIO_CALLBACKS` set to False puts asyncio on the task lane too (the tests run both lanes).
 
-On the callback lane ``on_ready`` runs in no task (as a thread's ``call_soon_threadsafe`` hand-over
-does): what it calls must not need anyio's task context (the base's ``_lose`` does not).
+**Callbacks that run in no task** (the callback lane's ``on_ready``, a thread's hand-over through
+``call_soon_threadsafe``) run in :func:`loop_context`: a context in which sniffio names the backend, so
+what they call (the Bus's intake, through the consumer) may use anyio under a plain ``asyncio.run``
+too (anyio finds no backend in a bare asyncio callback otherwise). It is set once, when the callback
+is registered or the thread started: nothing per call.
 """
 
 from __future__ import annotations
 
+import contextvars
 import logging
 from collections.abc import Callable
 from typing import Any
@@ -28,12 +32,26 @@ from anyio.abc import TaskGroup
 
 from servobus.runtime import Runtime
 
-__all__ = ["ASYNCIO_CALLBACKS", "ReadWatch"]
+__all__ = ["ASYNCIO_CALLBACKS", "ReadWatch", "loop_context"]
 
 logger = logging.getLogger("servobus.transports")
 
 #: asyncio watches through the loop's reader callback (True) or a task like any backend (False)
 ASYNCIO_CALLBACKS = True
+
+
+def loop_context(runtime: Runtime) -> contextvars.Context:
+    """A copy of the current context in which sniffio (when installed) names ``runtime``'s backend: run
+    a callback that runs in no task in it (``context.run(loop.add_reader, ...)``, a thread started as
+    ``Thread(target=context.run, args=(fn,))``). One context is entered by one thread at a time: take
+    a fresh one per thread."""
+    context = contextvars.copy_context()
+    try:
+        import sniffio
+    except ImportError:  # anyio then finds asyncio by its running loop, callbacks included
+        return context
+    context.run(sniffio.current_async_library_cvar.set, runtime.name)
+    return context
 
 
 class ReadWatch:
@@ -44,7 +62,7 @@ class ReadWatch:
     (a descriptor left readable would otherwise wake the loop for ever).
     """
 
-    __slots__ = ("_ended", "_fd", "_loop", "_name", "_on_ready", "_scope", "_tasks", "lane")
+    __slots__ = ("_ended", "_fd", "_loop", "_name", "_on_ready", "_runtime", "_scope", "_tasks", "lane")
 
     def __init__(
         self, runtime: Runtime, tasks: TaskGroup, fd: int, on_ready: Callable[[], object], name: str
@@ -53,6 +71,7 @@ class ReadWatch:
         self._on_ready = on_ready
         self._name = name
         self._tasks = tasks
+        self._runtime = runtime
         loop: Any = getattr(runtime, "loop", None) if runtime.name == "asyncio" else None
         self._loop = loop if ASYNCIO_CALLBACKS else None
         #: "callback" (asyncio's reader callback) or "task" (a task waiting with anyio.wait_readable)
@@ -61,8 +80,8 @@ class ReadWatch:
         self._ended: anyio.Event | None = None
 
     def start(self) -> None:
-        if self._loop is not None:
-            self._loop.add_reader(self._fd, self._ready)
+        if self._loop is not None:  # the callback's context is the one current at registration
+            loop_context(self._runtime).run(self._loop.add_reader, self._fd, self._ready)
             return
         self._scope = anyio.CancelScope()
         self._ended = anyio.Event()

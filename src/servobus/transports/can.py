@@ -48,6 +48,7 @@ from servobus.frame import Frame
 from servobus.timing import nominal_frame_time_s
 from servobus.transports._can_readers import Batch, Reader, start_reader
 from servobus.transports._can_sender import BlockingSender, SendReport, buffer_full
+from servobus.transports._watch import loop_context
 from servobus.transports.base import Outgoing, Transport, logger
 from servobus.transports.contract import LineRules
 from servobus.transports.events import BusOff, CanErrorClass, ErrorFrame
@@ -333,6 +334,7 @@ class CanTransport(Transport[Frame, Frame]):
         generation = self._generation
         call = self._runtime.call_soon_threadsafe
         await anyio.to_thread.run_sync(
+            loop_context(self._runtime).run,  # its report's hand-over runs in a context naming the backend
             self._sender.send_batch,
             self._bus,
             frames,
