@@ -150,6 +150,36 @@ async def test_frames_go_in_as_they_are_and_the_reply_is_pushed_to_the_consumer(
         assert bus._timer_at is None  # an idle network arms nothing: nothing polls
 
 
+async def _consumer_using_anyio(sim: type[SimTransport]) -> tuple[list[float], list[anyio.Event]]:
+    seen: list[float] = []
+    events: list[anyio.Event] = []
+
+    def consumer(frames: list[Frame]) -> None:
+        seen.append(anyio.current_time())
+        events.append(anyio.Event())
+        events[-1].set()
+
+    async with sim(devices=[MyActuatorMotor(1)]) as bus:
+        bus.set_consumer(consumer)
+        bus.send(ma.FAMILY.bind(1).encode(ma.ReadStatus2()))
+        await anyio.sleep(0.01)
+    return seen, events
+
+
+@pytest.mark.parametrize("sim", [SimTransport, TaskClockSim], ids=["loop", "task"])
+def test_the_consumer_may_use_anyio_under_plain_asyncio_too(sim: type[SimTransport]) -> None:
+    """Delivery runs in asyncio's call_at callback (or a task), also under a plain asyncio loop (no
+    anyio.run to name the backend to sniffio): the consumer (the Bus's intake) can use anyio."""
+    seen, events = virtual.run(_consumer_using_anyio(sim))
+    assert len(seen) == 1 and seen[0] > 0 and events[0].is_set()
+
+
+@pytest.mark.anyio
+async def test_the_consumer_may_use_anyio_in_every_lane(Sim: type[SimTransport]) -> None:
+    seen, events = await _consumer_using_anyio(Sim)
+    assert len(seen) == 1 and seen[0] > 0 and events[0].is_set()
+
+
 @pytest.mark.anyio
 async def test_thirty_two_pairs_take_the_bit_count_bound_plus_turnaround(
     Sim: type[SimTransport],
