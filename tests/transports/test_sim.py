@@ -8,6 +8,7 @@ lanes (``lane``: the loop's call_at, and the task trio uses); on trio the clock 
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Awaitable, Callable
 from typing import Any
@@ -33,7 +34,7 @@ from servobus.sim.device import Device
 from servobus.sim.faults import FaultInjector, FaultPlan
 from servobus.sim.network import SimCanNetwork
 from servobus.timing import frame_time_s
-from servobus.transports import SimTransport, TransportState, create_transport
+from servobus.transports import LineRules, SimTransport, TransportState, create_transport
 from sim._standins import Sniffer
 
 
@@ -522,6 +523,13 @@ async def test_a_closed_transport_stops_its_timer_and_a_reopen_continues_the_clo
         second = await bus.receive()
     round_trip = first.timestamp - start  # 0.68 ms at 500 kbit/s
     assert second.timestamp - first.timestamp == pytest.approx(5.0 + round_trip, abs=2e-6)
+
+
+def test_the_rules_say_the_simulated_bus_s_bit_rate() -> None:
+    assert SimTransport().rules == LineRules(bitrate=1_000_000, stale_after_s=0.5)
+    network = SimCanNetwork([MyActuatorMotor(1)], bus=CanBusModel(bitrate=500_000))
+    assert SimTransport(network, stale_after_s=None).rules == LineRules(bitrate=500_000, stale_after_s=None)
+    assert SimTransport(bus=CanBusModel(bitrate=math.inf)).rules.bitrate is None
 
 
 def test_a_network_and_the_parts_of_another_are_refused_together() -> None:
