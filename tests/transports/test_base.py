@@ -7,6 +7,7 @@ that fails on cue, a wire that stalls on cue) so that every branch is seen.
 
 from __future__ import annotations
 
+import asyncio
 import dataclasses
 import gc
 import logging
@@ -27,6 +28,7 @@ from servobus.transports import (
     Transport,
     TransportEvent,
     TransportState,
+    TransportStats,
 )
 from servobus.transports.base import Outgoing
 from servobus.transports.contract import LineRules
@@ -248,6 +250,22 @@ async def test_a_loss_reported_from_a_loop_callback_fails_waiters_and_recovers()
         assert len(results) == 1 and isinstance(results[0], TransportError)
         await transport.wait_open(timeout=1.0)
     assert (transport.stats().losses, transport.stats().reopens) == (1, 1)
+
+
+def test_a_loss_reported_from_a_bare_asyncio_callback_recovers() -> None:
+    """Under plain asyncio (no anyio.run naming the backend to sniffio) a loop callback is no task:
+    the loss must still start the recovery (asyncio-specific, so asyncio.run)."""
+
+    async def main() -> TransportStats:
+        async with MemoryTransport(reopen_backoff_s=(0.01, 0.01)) as transport:
+            asyncio.get_running_loop().call_soon(transport.fail, OSError("from add_reader"))
+            await asyncio.sleep(0.005)
+            assert transport.stats().losses == 1
+            await transport.wait_open(timeout=1.0)
+        return transport.stats()
+
+    stats = asyncio.run(main())
+    assert (stats.losses, stats.reopens) == (1, 1)
 
 
 async def test_without_reopen_a_lost_transport_stays_lost_until_closed() -> None:

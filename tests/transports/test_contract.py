@@ -225,7 +225,7 @@ class EchoLink(LinkBase):
         try:
             await anyio.sleep(self.WIRE_S)
         except anyio.get_cancelled_exc_class():
-            self._dropped(handle, "purged")
+            self._dropped("purged", [handle])
             raise
         self._sent(handle, self._now(), frame)
         reply = Frame(arbitration_id=frame.arbitration_id + 0x100, data=frame.data, timestamp=self._now())

@@ -8,6 +8,7 @@ lanes (``lane``: the loop's call_at, and the task trio uses); on trio the clock 
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Awaitable, Callable
 from typing import Any
@@ -33,7 +34,7 @@ from servobus.sim.device import Device
 from servobus.sim.faults import FaultInjector, FaultPlan
 from servobus.sim.network import SimCanNetwork
 from servobus.timing import frame_time_s
-from servobus.transports import SimTransport, TransportState, create_transport
+from servobus.transports import LineRules, SimTransport, TransportState, create_transport
 from sim._standins import Sniffer
 
 
@@ -148,6 +149,36 @@ async def test_frames_go_in_as_they_are_and_the_reply_is_pushed_to_the_consumer(
         assert [[f.arbitration_id for f in batch] for batch in batches] == [[reply_id(1)], [reply_id(1)]]
         assert batches[0][0].timestamp == sniffer.seen[2][0]  # stamped with its end on the wire
         assert bus._timer_at is None  # an idle network arms nothing: nothing polls
+
+
+async def _consumer_using_anyio(sim: type[SimTransport]) -> tuple[list[float], list[anyio.Event]]:
+    seen: list[float] = []
+    events: list[anyio.Event] = []
+
+    def consumer(frames: list[Frame]) -> None:
+        seen.append(anyio.current_time())
+        events.append(anyio.Event())
+        events[-1].set()
+
+    async with sim(devices=[MyActuatorMotor(1)]) as bus:
+        bus.set_consumer(consumer)
+        bus.send(ma.FAMILY.bind(1).encode(ma.ReadStatus2()))
+        await anyio.sleep(0.01)
+    return seen, events
+
+
+@pytest.mark.parametrize("sim", [SimTransport, TaskClockSim], ids=["loop", "task"])
+def test_the_consumer_may_use_anyio_under_plain_asyncio_too(sim: type[SimTransport]) -> None:
+    """Delivery runs in asyncio's call_at callback (or a task), also under a plain asyncio loop (no
+    anyio.run to name the backend to sniffio): the consumer (the Bus's intake) can use anyio."""
+    seen, events = virtual.run(_consumer_using_anyio(sim))
+    assert len(seen) == 1 and seen[0] > 0 and events[0].is_set()
+
+
+@pytest.mark.anyio
+async def test_the_consumer_may_use_anyio_in_every_lane(Sim: type[SimTransport]) -> None:
+    seen, events = await _consumer_using_anyio(Sim)
+    assert len(seen) == 1 and seen[0] > 0 and events[0].is_set()
 
 
 @pytest.mark.anyio
@@ -492,6 +523,13 @@ async def test_a_closed_transport_stops_its_timer_and_a_reopen_continues_the_clo
         second = await bus.receive()
     round_trip = first.timestamp - start  # 0.68 ms at 500 kbit/s
     assert second.timestamp - first.timestamp == pytest.approx(5.0 + round_trip, abs=2e-6)
+
+
+def test_the_rules_say_the_simulated_bus_s_bit_rate() -> None:
+    assert SimTransport().rules == LineRules(bitrate=1_000_000, stale_after_s=0.5)
+    network = SimCanNetwork([MyActuatorMotor(1)], bus=CanBusModel(bitrate=500_000))
+    assert SimTransport(network, stale_after_s=None).rules == LineRules(bitrate=500_000, stale_after_s=None)
+    assert SimTransport(bus=CanBusModel(bitrate=math.inf)).rules.bitrate is None
 
 
 def test_a_network_and_the_parts_of_another_are_refused_together() -> None:

@@ -40,7 +40,6 @@ def given(**fields: Any) -> dict[str, Any]:
     """The fields a generated method was given (those not left at :data:`DEFAULT`)."""
     return {name: value for name, value in fields.items() if value is not DEFAULT}
 
-
 _BUILTINS = {int, float, bool, str, bytes, type(None), object}
 _NO_DEFAULT = dataclasses.MISSING
 _LINE_LENGTH = 110  # pyproject.toml's, which ruff's import sorting keeps to even where E501 is off

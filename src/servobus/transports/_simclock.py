@@ -15,6 +15,7 @@ Both fire ``fire(generation)`` on the loop at or after the armed loop time, neve
 
 from __future__ import annotations
 
+import contextvars
 from collections.abc import Callable
 from typing import Any, Protocol
 
@@ -38,18 +39,19 @@ class Clock(Protocol):
 class LoopClock:
     """asyncio's lane: one ``loop.call_at`` handle on the armed time."""
 
-    __slots__ = ("_fire", "_generation", "_handle", "_loop")
+    __slots__ = ("_context", "_fire", "_generation", "_handle", "_loop")
 
     def __init__(self, loop: Any, fire: Callable[[int], object], generation: int) -> None:
         self._loop = loop
         self._fire = fire
         self._generation = generation
         self._handle: Any = None
+        self._context = _asyncio_context()
 
     def poke(self, when: float) -> None:
         if self._handle is not None:
             self._handle.cancel()
-        self._handle = self._loop.call_at(when, self._on_time)
+        self._handle = self._loop.call_at(when, self._on_time, context=self._context)
 
     def _on_time(self) -> None:
         self._handle = None
@@ -59,6 +61,17 @@ class LoopClock:
         if self._handle is not None:
             self._handle.cancel()
             self._handle = None
+
+
+def _asyncio_context() -> contextvars.Context:
+    """The current context, with sniffio (when installed) told that asyncio runs it."""
+    context = contextvars.copy_context()
+    try:
+        import sniffio
+    except ImportError:  # anyio then finds asyncio by its running loop, callbacks included
+        return context
+    context.run(sniffio.current_async_library_cvar.set, "asyncio")
+    return context
 
 
 class TaskClock:

@@ -177,9 +177,15 @@ class Transport(ReceiveSide[RxT], SendReports, EventSource, abc.ABC, Generic[RxT
         raise NotImplementedError
 
     def _now(self) -> float:
-        """The loop's clock (time.monotonic() before the transport was first opened)."""
+        """The loop's clock (time.monotonic() before the transport was first opened, or once the
+        trio run it was opened in has ended: trio's clock exists only inside its run)."""
         lane = self._runtime
-        return lane.time() if lane is not None else time.monotonic()
+        if lane is None:
+            return time.monotonic()
+        try:
+            return lane.time()
+        except RuntimeError:
+            return time.monotonic()
 
     @property
     def _tasks(self) -> TaskGroup:

@@ -2,7 +2,7 @@
 bench links), on anyio: it runs on asyncio and on trio.
 
 A subclass writes ``send(frame, handle=None)`` and, on the loop, reports with
-``self._sent(handle, sent_at)`` / ``self._dropped(handle, reason)`` and delivers with
+``self._sent(handle, sent_at)`` / ``self._dropped(reason, handles)`` and delivers with
 ``self._deliver(frames)`` (each counts into :meth:`LinkBase.stats`); it declares its line with a
 ``rules`` class attribute (:class:`~servobus.transports.contract.LineRules`, default
 ``LineRules()``). Opening, closing, the task group, the callbacks, the counters and the listeners
@@ -20,6 +20,7 @@ are here, once:
 from __future__ import annotations
 
 import copy
+from collections.abc import Sequence
 from types import TracebackType
 from typing import Any, Self
 
@@ -156,14 +157,18 @@ class LinkBase:
         if self._reporter is not None:
             self._reporter(handle, sent_at, None)
 
-    def _dropped(self, handle: object, reason: str) -> None:
-        """Report the frame sent with ``handle`` as never to leave, for ``reason`` (a counter's name)."""
+    def _dropped(self, reason: str, handles: Sequence[object]) -> None:
+        """Report the frames sent with ``handles`` as never to leave, for ``reason`` (a counter of
+        :class:`~servobus.transports.stats.TransportStats`: ``"stale"``, ``"purged"``, ...)."""
+        if not handles:
+            return
         if hasattr(self._stats, reason):
-            setattr(self._stats, reason, getattr(self._stats, reason) + 1)
+            setattr(self._stats, reason, getattr(self._stats, reason) + len(handles))
         if self._runtime is not None:
-            self._emit(FramesDropped(reason, 1, self._runtime.time()))
+            self._emit(FramesDropped(reason, len(handles), self._runtime.time()))
         if self._reporter is not None:
-            self._reporter(handle, None, reason)
+            for handle in handles:
+                self._reporter(handle, None, reason)
 
     def _deliver(self, frames: list[Frame]) -> None:
         """Hand received frames to the consumer (on the loop)."""

@@ -36,6 +36,7 @@ Everything else (counters, send reports, push delivery, events) is the base
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 from typing import Any, ClassVar
 
@@ -139,6 +140,12 @@ class SimTransport(Transport[Frame, Frame]):
     def loop_time(self, network_time: float) -> float:
         """A time on the network's clock as the loop's time (what received frames are stamped with)."""
         return network_time + self._t0
+
+    @property
+    def bitrate(self) -> int | None:
+        """The simulated bus's nominal bit rate (None for an infinitely fast one): :attr:`rules`."""
+        rate = self.network.bus.bitrate
+        return int(rate) if math.isfinite(rate) and rate > 0 else None
 
     @property
     def plugged(self) -> bool:

@@ -27,367 +27,78 @@ class Motor(_Motor):
     """A lk motor on a Bus (``bus.motor(FAMILY, id)``): a typed method per command."""
 
     # 0x8C, V2.36 only: engage or release the holding brake, or read its state (spec §4.8).
-    async def brake_control(
-        self, action: states.BrakeAction, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.BrakeReply:
-        return await self.request(commands.BrakeControl(action=action), timeout_s=timeout_s, retries=retries)
-
+    async def brake_control(self, action: states.BrakeAction, *, timeout_s: float | None = None, retries: int = 0) -> replies.BrakeReply: return await self.request(commands.BrakeControl(action=action), timeout_s=timeout_s, retries=retries)
     # 0x18, V2.36 only: calibrate the encoder (writes ROM; replies after several seconds) (spec §4.21).
-    async def calibrate_encoder(
-        self, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies_position.CalibrationReply:
-        return await self.request(commands.CalibrateEncoder(), timeout_s=timeout_s, retries=retries)
-
+    async def calibrate_encoder(self, *, timeout_s: float | None = None, retries: int = 0) -> replies_position.CalibrationReply: return await self.request(commands.CalibrateEncoder(), timeout_s=timeout_s, retries=retries)
     # 0x9B: clear the error flags; they stay set while the fault persists (spec §4.2).
-    async def clear_errors(
-        self, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.Status1Reply | replies.Status1ReplyV235:
-        return await self.request(commands.ClearErrors(), timeout_s=timeout_s, retries=retries)
-
+    async def clear_errors(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.Status1Reply | replies.Status1ReplyV235: return await self.request(commands.ClearErrors(), timeout_s=timeout_s, retries=retries)
     # 0x80: motor off; clears the turn count and the last control command; reply is an echo (spec §4.5).
-    async def motor_off(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.EchoReply:
-        return await self.request(commands.MotorOff(), timeout_s=timeout_s, retries=retries)
-
+    async def motor_off(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.EchoReply: return await self.request(commands.MotorOff(), timeout_s=timeout_s, retries=retries)
     # 0x88: V2.36 OFF -> ON; V2.35 resume after 0x81; reply is an echo (spec §4.7, D15).
-    async def motor_run(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.EchoReply:
-        return await self.request(commands.MotorRun(), timeout_s=timeout_s, retries=retries)
-
+    async def motor_run(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.EchoReply: return await self.request(commands.MotorRun(), timeout_s=timeout_s, retries=retries)
     # 0x81: stop the motor without clearing its state; reply is an echo (spec §4.6).
-    async def motor_stop(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.EchoReply:
-        return await self.request(commands.MotorStop(), timeout_s=timeout_s, retries=retries)
-
+    async def motor_stop(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.EchoReply: return await self.request(commands.MotorStop(), timeout_s=timeout_s, retries=retries)
     # 0x33, V2.35 only: read acceleration. **Inferred layout** (spec §4.30, A18).
-    async def read_acceleration(
-        self, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies_position.AccelerationReply:
-        return await self.request(commands.ReadAcceleration(), timeout_s=timeout_s, retries=retries)
-
+    async def read_acceleration(self, *, timeout_s: float | None = None, retries: int = 0) -> replies_position.AccelerationReply: return await self.request(commands.ReadAcceleration(), timeout_s=timeout_s, retries=retries)
     # 0x90: read encoder position, raw position and zero offset (spec §4.20).
-    async def read_encoder(
-        self, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies_position.EncoderReply:
-        return await self.request(commands.ReadEncoder(), timeout_s=timeout_s, retries=retries)
-
+    async def read_encoder(self, *, timeout_s: float | None = None, retries: int = 0) -> replies_position.EncoderReply: return await self.request(commands.ReadEncoder(), timeout_s=timeout_s, retries=retries)
     # 0x92: read the multi-turn angle (spec §4.24).
-    async def read_multi_turn_angle(
-        self, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies_position.MultiTurnAngleReply:
-        return await self.request(commands.ReadMultiTurnAngle(), timeout_s=timeout_s, retries=retries)
-
+    async def read_multi_turn_angle(self, *, timeout_s: float | None = None, retries: int = 0) -> replies_position.MultiTurnAngleReply: return await self.request(commands.ReadMultiTurnAngle(), timeout_s=timeout_s, retries=retries)
     # 0x94: read the single-turn angle (the reply layout differs per revision, D9) (spec §4.25).
-    async def read_single_turn_angle(
-        self, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies_position.SingleTurnAngleReply | replies_position.SingleTurnAngleReplyV235:
-        return await self.request(commands.ReadSingleTurnAngle(), timeout_s=timeout_s, retries=retries)
-
+    async def read_single_turn_angle(self, *, timeout_s: float | None = None, retries: int = 0) -> replies_position.SingleTurnAngleReply | replies_position.SingleTurnAngleReplyV235: return await self.request(commands.ReadSingleTurnAngle(), timeout_s=timeout_s, retries=retries)
     # 0x9A: read temperature, voltage (V2.36: bus current, motor state) and error flags (spec §4.1).
-    async def read_status1(
-        self, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.Status1Reply | replies.Status1ReplyV235:
-        return await self.request(commands.ReadStatus1(), timeout_s=timeout_s, retries=retries)
-
+    async def read_status1(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.Status1Reply | replies.Status1ReplyV235: return await self.request(commands.ReadStatus1(), timeout_s=timeout_s, retries=retries)
     # 0x9C: read temperature, iq (MS: power), speed and encoder (spec §4.3).
-    async def read_status2(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.Status2Reply:
-        return await self.request(commands.ReadStatus2(), timeout_s=timeout_s, retries=retries)
-
+    async def read_status2(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.Status2Reply: return await self.request(commands.ReadStatus2(), timeout_s=timeout_s, retries=retries)
     # 0x9D: read the phase currents ([001]: no effect on MS) (spec §4.4).
-    async def read_status3(
-        self, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.Status3Reply | replies.Status3ReplyV235:
-        return await self.request(commands.ReadStatus3(), timeout_s=timeout_s, retries=retries)
-
+    async def read_status3(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.Status3Reply | replies.Status3ReplyV235: return await self.request(commands.ReadStatus3(), timeout_s=timeout_s, retries=retries)
     # 0x95: current position becomes zero in RAM ([001]: then motor-stop state); echo (spec §4.26).
-    async def set_zero_ram(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.EchoReply:
-        return await self.request(commands.SetZeroRam(), timeout_s=timeout_s, retries=retries)
-
+    async def set_zero_ram(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.EchoReply: return await self.request(commands.SetZeroRam(), timeout_s=timeout_s, retries=retries)
     # 0x19: current position becomes the zero after the next power cycle (writes ROM) (spec §4.22).
-    async def set_zero_rom(
-        self, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies_position.EncoderOffsetReply:
-        return await self.request(commands.SetZeroRom(), timeout_s=timeout_s, retries=retries)
-
+    async def set_zero_rom(self, *, timeout_s: float | None = None, retries: int = 0) -> replies_position.EncoderOffsetReply: return await self.request(commands.SetZeroRom(), timeout_s=timeout_s, retries=retries)
     # 0x34, V2.35 only: write the acceleration limit to RAM; reply is an echo (spec §4.31).
-    async def write_acceleration(
-        self, acceleration_dps2: float, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies_position.AccelerationReply:
-        return await self.request(
-            commands.WriteAcceleration(acceleration_dps2=acceleration_dps2),
-            timeout_s=timeout_s,
-            retries=retries,
-        )
-
+    async def write_acceleration(self, acceleration_dps2: float, *, timeout_s: float | None = None, retries: int = 0) -> replies_position.AccelerationReply: return await self.request(commands.WriteAcceleration(acceleration_dps2=acceleration_dps2), timeout_s=timeout_s, retries=retries)
     # 0x91, V2.35 only: set the encoder zero offset (spec §4.23; RAM or ROM not stated, A21).
-    async def write_encoder_offset(
-        self, offset_counts: int, encoder_bits: int, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies_position.EncoderOffsetReply:
-        return await self.request(
-            commands.WriteEncoderOffset(offset_counts=offset_counts, encoder_bits=encoder_bits),
-            timeout_s=timeout_s,
-            retries=retries,
-        )
-
+    async def write_encoder_offset(self, offset_counts: int, encoder_bits: int, *, timeout_s: float | None = None, retries: int = 0) -> replies_position.EncoderOffsetReply: return await self.request(commands.WriteEncoderOffset(offset_counts=offset_counts, encoder_bits=encoder_bits), timeout_s=timeout_s, retries=retries)
     # 0xA7: move by an increment from the current position (spec §4.16).
-    async def incremental_position(
-        self, increment_deg: float, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.Status2Reply:
-        return await self.request(
-            commands_control.IncrementalPosition(increment_deg=increment_deg),
-            timeout_s=timeout_s,
-            retries=retries,
-        )
-
+    async def incremental_position(self, increment_deg: float, *, timeout_s: float | None = None, retries: int = 0) -> replies.Status2Reply: return await self.request(commands_control.IncrementalPosition(increment_deg=increment_deg), timeout_s=timeout_s, retries=retries)
     # 0xA8: incremental move with a speed limit (spec §4.17; worked examples W5, W6).
-    async def incremental_position_speed(
-        self,
-        increment_deg: float,
-        max_speed_dps: float | None,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> replies.Status2Reply:
-        return await self.request(
-            commands_control.IncrementalPositionSpeed(
-                increment_deg=increment_deg, max_speed_dps=max_speed_dps
-            ),
-            timeout_s=timeout_s,
-            retries=retries,
-        )
-
+    async def incremental_position_speed(self, increment_deg: float, max_speed_dps: float | None, *, timeout_s: float | None = None, retries: int = 0) -> replies.Status2Reply: return await self.request(commands_control.IncrementalPositionSpeed(increment_deg=increment_deg, max_speed_dps=max_speed_dps), timeout_s=timeout_s, retries=retries)
     # Identifier 0x280, V2.35 only: torque set-points for motors 1..4 in one frame (spec §5).
-    async def multi_motor_torque(
-        self,
-        motor_type: model.MotorType,
-        currents_a: tuple[float, float, float, float] | None = None,
-        iq_counts: tuple[int, int, int, int] | None = None,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> replies.Status2Reply:
-        return await self.request(
-            commands_control.MultiMotorTorque(
-                motor_type=motor_type, currents_a=currents_a, iq_counts=iq_counts
-            ),
-            timeout_s=timeout_s,
-            retries=retries,
-        )
-
+    async def multi_motor_torque(self, motor_type: model.MotorType, currents_a: tuple[float, float, float, float] | None = None, iq_counts: tuple[int, int, int, int] | None = None, *, timeout_s: float | None = None, retries: int = 0) -> replies.Status2Reply: return await self.request(commands_control.MultiMotorTorque(motor_type=motor_type, currents_a=currents_a, iq_counts=iq_counts), timeout_s=timeout_s, retries=retries)
     # 0xA3: multi-turn absolute position (spec §4.12).
-    async def multi_turn_position(
-        self, angle_deg: float, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.Status2Reply:
-        return await self.request(
-            commands_control.MultiTurnPosition(angle_deg=angle_deg), timeout_s=timeout_s, retries=retries
-        )
-
+    async def multi_turn_position(self, angle_deg: float, *, timeout_s: float | None = None, retries: int = 0) -> replies.Status2Reply: return await self.request(commands_control.MultiTurnPosition(angle_deg=angle_deg), timeout_s=timeout_s, retries=retries)
     # 0xA4: multi-turn absolute position with a speed limit (spec §4.13).
-    async def multi_turn_position_speed(
-        self,
-        angle_deg: float,
-        max_speed_dps: float | None,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> replies.Status2Reply:
-        return await self.request(
-            commands_control.MultiTurnPositionSpeed(angle_deg=angle_deg, max_speed_dps=max_speed_dps),
-            timeout_s=timeout_s,
-            retries=retries,
-        )
-
+    async def multi_turn_position_speed(self, angle_deg: float, max_speed_dps: float | None, *, timeout_s: float | None = None, retries: int = 0) -> replies.Status2Reply: return await self.request(commands_control.MultiTurnPositionSpeed(angle_deg=angle_deg, max_speed_dps=max_speed_dps), timeout_s=timeout_s, retries=retries)
     # 0xA0: open-loop output ([001]: MS only, open-loop voltage; [003]: "torque open loop") (spec §4.9).
-    async def open_loop_control(
-        self, power_counts: int, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.Status2Reply:
-        return await self.request(
-            commands_control.OpenLoopControl(power_counts=power_counts), timeout_s=timeout_s, retries=retries
-        )
-
+    async def open_loop_control(self, power_counts: int, *, timeout_s: float | None = None, retries: int = 0) -> replies.Status2Reply: return await self.request(commands_control.OpenLoopControl(power_counts=power_counts), timeout_s=timeout_s, retries=retries)
     # 0xA5, V2.36 layout: single-turn position, angle uint32 DATA[4..7] (spec §4.14, D8).
-    async def single_turn_position(
-        self,
-        angle_deg: float,
-        direction: states.SpinDirection,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> replies.Status2Reply:
-        return await self.request(
-            commands_control.SingleTurnPosition(angle_deg=angle_deg, direction=direction),
-            timeout_s=timeout_s,
-            retries=retries,
-        )
-
+    async def single_turn_position(self, angle_deg: float, direction: states.SpinDirection, *, timeout_s: float | None = None, retries: int = 0) -> replies.Status2Reply: return await self.request(commands_control.SingleTurnPosition(angle_deg=angle_deg, direction=direction), timeout_s=timeout_s, retries=retries)
     # 0xA6, V2.36 layout: single-turn position with speed limit, angle uint32 (spec §4.15, D8).
-    async def single_turn_position_speed(
-        self,
-        angle_deg: float,
-        direction: states.SpinDirection,
-        max_speed_dps: float | None,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> replies.Status2Reply:
-        return await self.request(
-            commands_control.SingleTurnPositionSpeed(
-                angle_deg=angle_deg, direction=direction, max_speed_dps=max_speed_dps
-            ),
-            timeout_s=timeout_s,
-            retries=retries,
-        )
-
+    async def single_turn_position_speed(self, angle_deg: float, direction: states.SpinDirection, max_speed_dps: float | None, *, timeout_s: float | None = None, retries: int = 0) -> replies.Status2Reply: return await self.request(commands_control.SingleTurnPositionSpeed(angle_deg=angle_deg, direction=direction, max_speed_dps=max_speed_dps), timeout_s=timeout_s, retries=retries)
     # 0xA6, V2.35 layout: angle uint16 DATA[4..5], 0..359.99°, DATA[6..7] NULL (spec §4.15, D8).
-    async def single_turn_position_speed_v235(
-        self,
-        angle_deg: float,
-        direction: states.SpinDirection,
-        max_speed_dps: float | None,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> replies.Status2Reply:
-        return await self.request(
-            commands_control.SingleTurnPositionSpeedV235(
-                angle_deg=angle_deg, direction=direction, max_speed_dps=max_speed_dps
-            ),
-            timeout_s=timeout_s,
-            retries=retries,
-        )
-
+    async def single_turn_position_speed_v235(self, angle_deg: float, direction: states.SpinDirection, max_speed_dps: float | None, *, timeout_s: float | None = None, retries: int = 0) -> replies.Status2Reply: return await self.request(commands_control.SingleTurnPositionSpeedV235(angle_deg=angle_deg, direction=direction, max_speed_dps=max_speed_dps), timeout_s=timeout_s, retries=retries)
     # 0xA5, V2.35 layout: angle uint16 DATA[4..5], 0..359.99° (spec §4.14, D8).
-    async def single_turn_position_v235(
-        self,
-        angle_deg: float,
-        direction: states.SpinDirection,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> replies.Status2Reply:
-        return await self.request(
-            commands_control.SingleTurnPositionV235(angle_deg=angle_deg, direction=direction),
-            timeout_s=timeout_s,
-            retries=retries,
-        )
-
+    async def single_turn_position_v235(self, angle_deg: float, direction: states.SpinDirection, *, timeout_s: float | None = None, retries: int = 0) -> replies.Status2Reply: return await self.request(commands_control.SingleTurnPositionV235(angle_deg=angle_deg, direction=direction), timeout_s=timeout_s, retries=retries)
     # 0xA2, V2.36 layout: speed closed loop with a torque-current limit (spec §4.11, D7).
-    async def speed_control(
-        self,
-        speed_dps: float,
-        motor_type: model.MotorType,
-        current_limit_a: float | None = None,
-        iq_limit_counts: int | None = None,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> replies.Status2Reply:
-        return await self.request(
-            commands_control.SpeedControl(
-                speed_dps=speed_dps,
-                motor_type=motor_type,
-                current_limit_a=current_limit_a,
-                iq_limit_counts=iq_limit_counts,
-            ),
-            timeout_s=timeout_s,
-            retries=retries,
-        )
-
+    async def speed_control(self, speed_dps: float, motor_type: model.MotorType, current_limit_a: float | None = None, iq_limit_counts: int | None = None, *, timeout_s: float | None = None, retries: int = 0) -> replies.Status2Reply: return await self.request(commands_control.SpeedControl(speed_dps=speed_dps, motor_type=motor_type, current_limit_a=current_limit_a, iq_limit_counts=iq_limit_counts), timeout_s=timeout_s, retries=retries)
     # 0xA2, V2.35 layout: speed closed loop, DATA[1..3] NULL (spec §4.11, D7).
-    async def speed_control_v235(
-        self, speed_dps: float, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.Status2Reply:
-        return await self.request(
-            commands_control.SpeedControlV235(speed_dps=speed_dps), timeout_s=timeout_s, retries=retries
-        )
-
+    async def speed_control_v235(self, speed_dps: float, *, timeout_s: float | None = None, retries: int = 0) -> replies.Status2Reply: return await self.request(commands_control.SpeedControlV235(speed_dps=speed_dps), timeout_s=timeout_s, retries=retries)
     # 0xA1: torque (iq) closed loop; not limited by Max Torque Current (spec §4.10).
-    async def torque_control(
-        self,
-        motor_type: model.MotorType,
-        current_a: float | None = None,
-        iq_counts: int | None = None,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> replies.Status2Reply:
-        return await self.request(
-            commands_control.TorqueControl(motor_type=motor_type, current_a=current_a, iq_counts=iq_counts),
-            timeout_s=timeout_s,
-            retries=retries,
-        )
-
+    async def torque_control(self, motor_type: model.MotorType, current_a: float | None = None, iq_counts: int | None = None, *, timeout_s: float | None = None, retries: int = 0) -> replies.Status2Reply: return await self.request(commands_control.TorqueControl(motor_type=motor_type, current_a=current_a, iq_counts=iq_counts), timeout_s=timeout_s, retries=retries)
     # 0x40, V2.35 layout: read a parameter, ``40 | ParamID | 00..`` (spec §4.27; worked example W4).
-    async def read_param(
-        self, param: params.ParamId, *, timeout_s: float | None = None, retries: int = 0
-    ) -> params_v235.ParamReply:
-        return await self.request(params_v235.ReadParam(param=param), timeout_s=timeout_s, retries=retries)
-
+    async def read_param(self, param: params.ParamId, *, timeout_s: float | None = None, retries: int = 0) -> params_v235.ParamReply: return await self.request(params_v235.ReadParam(param=param), timeout_s=timeout_s, retries=retries)
     # 0x42, V2.35 layout: write one parameter to RAM, lost at power-off (spec §4.28, §6.3).
-    async def write_param_ram(
-        self,
-        param: params.ParamId,
-        value: int | params.PidGains,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> params_v235.ParamWriteReply:
-        return await self.request(
-            params_v235.WriteParamRam(param=param, value=value), timeout_s=timeout_s, retries=retries
-        )
-
+    async def write_param_ram(self, param: params.ParamId, value: int | params.PidGains, *, timeout_s: float | None = None, retries: int = 0) -> params_v235.ParamWriteReply: return await self.request(params_v235.WriteParamRam(param=param, value=value), timeout_s=timeout_s, retries=retries)
     # 0x44, V2.35 layout: write one parameter to ROM, kept over power-off (spec §4.29, §6.3).
-    async def write_param_rom(
-        self,
-        param: params.ParamId,
-        value: int | params.PidGains,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> params_v235.ParamWriteReply:
-        return await self.request(
-            params_v235.WriteParamRom(param=param, value=value), timeout_s=timeout_s, retries=retries
-        )
-
+    async def write_param_rom(self, param: params.ParamId, value: int | params.PidGains, *, timeout_s: float | None = None, retries: int = 0) -> params_v235.ParamWriteReply: return await self.request(params_v235.WriteParamRom(param=param, value=value), timeout_s=timeout_s, retries=retries)
     # 0xC0, V2.36 only: read a control parameter from RAM (spec §4.18).
-    async def read_control_param(
-        self, param: params.ControlParam, *, timeout_s: float | None = None, retries: int = 0
-    ) -> params_v236.ControlParamReply:
-        return await self.request(
-            params_v236.ReadControlParam(param=param), timeout_s=timeout_s, retries=retries
-        )
-
+    async def read_control_param(self, param: params.ControlParam, *, timeout_s: float | None = None, retries: int = 0) -> params_v236.ControlParamReply: return await self.request(params_v236.ReadControlParam(param=param), timeout_s=timeout_s, retries=retries)
     # 0x40, V2.36 layout: read a setting parameter, ``40 | addr1 | addr2 | 00..`` (spec §4.27).
-    async def read_setting(
-        self, param: params.SettingParam, *, timeout_s: float | None = None, retries: int = 0
-    ) -> params_v236.SettingReply:
-        return await self.request(params_v236.ReadSetting(param=param), timeout_s=timeout_s, retries=retries)
-
+    async def read_setting(self, param: params.SettingParam, *, timeout_s: float | None = None, retries: int = 0) -> params_v236.SettingReply: return await self.request(params_v236.ReadSetting(param=param), timeout_s=timeout_s, retries=retries)
     # 0x44, V2.36 layout: save every written setting to ROM, ``44 05 FA 00 ..`` (spec §4.29).
-    async def save_settings(
-        self, *, timeout_s: float | None = None, retries: int = 0
-    ) -> params_v236.SaveSettingsReply:
-        return await self.request(params_v236.SaveSettings(), timeout_s=timeout_s, retries=retries)
-
+    async def save_settings(self, *, timeout_s: float | None = None, retries: int = 0) -> params_v236.SaveSettingsReply: return await self.request(params_v236.SaveSettings(), timeout_s=timeout_s, retries=retries)
     # 0xC1, V2.36 only: write a control parameter to RAM, effective at once (spec §4.19, §6.1).
-    async def write_control_param(
-        self,
-        param: params.ControlParam,
-        value: int | params.PidGains,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> params_v236.ControlParamReply:
-        return await self.request(
-            params_v236.WriteControlParam(param=param, value=value), timeout_s=timeout_s, retries=retries
-        )
-
+    async def write_control_param(self, param: params.ControlParam, value: int | params.PidGains, *, timeout_s: float | None = None, retries: int = 0) -> params_v236.ControlParamReply: return await self.request(params_v236.WriteControlParam(param=param, value=value), timeout_s=timeout_s, retries=retries)
     # 0x42, V2.36 layout: write a setting parameter; saved to ROM only by 0x44 (spec §4.28).
-    async def write_setting(
-        self,
-        param: params.SettingParam,
-        value: int | params.PidGains,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> params_v236.SettingReply:
-        return await self.request(
-            params_v236.WriteSetting(param=param, value=value), timeout_s=timeout_s, retries=retries
-        )
+    async def write_setting(self, param: params.SettingParam, value: int | params.PidGains, *, timeout_s: float | None = None, retries: int = 0) -> params_v236.SettingReply: return await self.request(params_v236.WriteSetting(param=param, value=value), timeout_s=timeout_s, retries=retries)

@@ -51,6 +51,7 @@ MULTI_MOTOR_IDS = range(1, 5)
 MULTI_MOTOR_REPLY_CODE = 0xA1  # spec §5: "same as the single motor torque closed-loop reply"
 
 
+
 def _check_motor_id(motor_id: int) -> None:
     if isinstance(motor_id, bool) or not isinstance(motor_id, int):
         raise ValueError(f"motor_id={motor_id!r} is not an integer")

@@ -18,387 +18,86 @@ class Motor(_Motor):
     """A myactuator motor on a Bus (``bus.motor(FAMILY, id)``): a typed method per command."""
 
     # 0xB6 active reply (CAN only): stream ``command``'s reply every ``interval_ms`` (10 ms/LSB).
-    async def active_reply(
-        self,
-        command: enums.StreamableCommand,
-        enabled: bool,
-        interval_ms: int | None = None,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> None:
-        return await self.request(
-            commands.ActiveReply(command=command, enabled=enabled, interval_ms=interval_ms),
-            timeout_s=timeout_s,
-            retries=retries,
-        )
-
+    async def active_reply(self, command: enums.StreamableCommand, enabled: bool, interval_ms: int | None = None, *, timeout_s: float | None = None, retries: int = 0) -> None: return await self.request(commands.ActiveReply(command=command, enabled=enabled, interval_ms=interval_ms), timeout_s=timeout_s, retries=retries)
     # 0x78 close the holding brake.
-    async def brake_lock(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.Echo:
-        return await self.request(commands.BrakeLock(), timeout_s=timeout_s, retries=retries)
-
+    async def brake_lock(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.Echo: return await self.request(commands.BrakeLock(), timeout_s=timeout_s, retries=retries)
     # 0x77 open the holding brake.
-    async def brake_release(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.Echo:
-        return await self.request(commands.BrakeRelease(), timeout_s=timeout_s, retries=retries)
-
+    async def brake_release(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.Echo: return await self.request(commands.BrakeRelease(), timeout_s=timeout_s, retries=retries)
     # 0x20 function control: ``index`` selects the function, ``value`` is its 32-bit argument.
-    async def function_control(
-        self, index: enums.FunctionIndex, value: int = 0, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.Echo:
-        return await self.request(
-            commands.FunctionControl(index=index, value=value), timeout_s=timeout_s, retries=retries
-        )
-
+    async def function_control(self, index: enums.FunctionIndex, value: int = 0, *, timeout_s: float | None = None, retries: int = 0) -> replies.Echo: return await self.request(commands.FunctionControl(index=index, value=value), timeout_s=timeout_s, retries=retries)
     # 0x80 motor off: output off, running state cleared.
-    async def motor_shutdown(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.Echo:
-        return await self.request(commands.MotorShutdown(), timeout_s=timeout_s, retries=retries)
-
+    async def motor_shutdown(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.Echo: return await self.request(commands.MotorShutdown(), timeout_s=timeout_s, retries=retries)
     # 0x81 stop and hold; the closed loop stays active.
-    async def motor_stop(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.Echo:
-        return await self.request(commands.MotorStop(), timeout_s=timeout_s, retries=retries)
-
+    async def motor_stop(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.Echo: return await self.request(commands.MotorStop(), timeout_s=timeout_s, retries=retries)
     # 0x42 read one acceleration value.
-    async def read_acceleration(
-        self, index: enums.AccelIndex, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.AccelerationReply:
-        return await self.request(
-            commands.ReadAcceleration(index=index), timeout_s=timeout_s, retries=retries
-        )
-
+    async def read_acceleration(self, index: enums.AccelIndex, *, timeout_s: float | None = None, retries: int = 0) -> replies.AccelerationReply: return await self.request(commands.ReadAcceleration(index=index), timeout_s=timeout_s, retries=retries)
     # 0x79 read the motor id (V4.3 only; DATA[2] = 1). Sent like ``SetCanId``.
-    async def read_can_id(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.CanIdReply:
-        return await self.request(commands.ReadCanId(), timeout_s=timeout_s, retries=retries)
-
+    async def read_can_id(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.CanIdReply: return await self.request(commands.ReadCanId(), timeout_s=timeout_s, retries=retries)
     # 0x62 read the multi-turn encoder zero offset.
-    async def read_encoder_offset(
-        self, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.EncoderOffsetReply:
-        return await self.request(commands.ReadEncoderOffset(), timeout_s=timeout_s, retries=retries)
-
+    async def read_encoder_offset(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.EncoderOffsetReply: return await self.request(commands.ReadEncoderOffset(), timeout_s=timeout_s, retries=retries)
     # 0x60 read the multi-turn encoder position: the raw position (0x61) minus the zero offset
-    async def read_encoder_position(
-        self, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.EncoderPositionReply:
-        return await self.request(commands.ReadEncoderPosition(), timeout_s=timeout_s, retries=retries)
-
+    async def read_encoder_position(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.EncoderPositionReply: return await self.request(commands.ReadEncoderPosition(), timeout_s=timeout_s, retries=retries)
     # 0x61 read the raw multi-turn encoder position.
-    async def read_encoder_raw(
-        self, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.EncoderRawReply:
-        return await self.request(commands.ReadEncoderRaw(), timeout_s=timeout_s, retries=retries)
-
+    async def read_encoder_raw(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.EncoderRawReply: return await self.request(commands.ReadEncoderRaw(), timeout_s=timeout_s, retries=retries)
     # 0xB5 read the motor model, V4.3 form: all-zero request, 7 characters back (``ModelReply``).
-    async def read_model(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.ModelReply:
-        return await self.request(commands.ReadModel(), timeout_s=timeout_s, retries=retries)
-
+    async def read_model(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.ModelReply: return await self.request(commands.ReadModel(), timeout_s=timeout_s, retries=retries)
     # 0xB5 read the motor model, V4.4 form: DATA[1] = 0x01, DATA[2] = ``part`` (1: characters 1-5, 2:
-    async def read_model_part(
-        self, part: int, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.ModelPartReply:
-        return await self.request(commands.ReadModelPart(part=part), timeout_s=timeout_s, retries=retries)
-
+    async def read_model_part(self, part: int, *, timeout_s: float | None = None, retries: int = 0) -> replies.ModelPartReply: return await self.request(commands.ReadModelPart(part=part), timeout_s=timeout_s, retries=retries)
     # 0x92 read the multi-turn angle.
-    async def read_multi_turn_angle(
-        self, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.MultiTurnAngleReply:
-        return await self.request(commands.ReadMultiTurnAngle(), timeout_s=timeout_s, retries=retries)
-
+    async def read_multi_turn_angle(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.MultiTurnAngleReply: return await self.request(commands.ReadMultiTurnAngle(), timeout_s=timeout_s, retries=retries)
     # 0x30 read one PID parameter.
-    async def read_pid(
-        self, index: enums.PidIndex, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.PidReply:
-        return await self.request(commands.ReadPid(index=index), timeout_s=timeout_s, retries=retries)
-
+    async def read_pid(self, index: enums.PidIndex, *, timeout_s: float | None = None, retries: int = 0) -> replies.PidReply: return await self.request(commands.ReadPid(index=index), timeout_s=timeout_s, retries=retries)
     # 0x70 read the operating mode.
-    async def read_run_mode(
-        self, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.RunModeReply:
-        return await self.request(commands.ReadRunMode(), timeout_s=timeout_s, retries=retries)
-
+    async def read_run_mode(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.RunModeReply: return await self.request(commands.ReadRunMode(), timeout_s=timeout_s, retries=retries)
     # 0xB1 read the time since power-up or reset.
-    async def read_run_time(
-        self, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.RunTimeReply:
-        return await self.request(commands.ReadRunTime(), timeout_s=timeout_s, retries=retries)
-
+    async def read_run_time(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.RunTimeReply: return await self.request(commands.ReadRunTime(), timeout_s=timeout_s, retries=retries)
     # 0x94 read the single-turn angle. The reply layout differs by revision: ``SingleTurnAngleReply``
-    async def read_single_turn_angle(
-        self, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.SingleTurnAngleReply | replies.CircleAngleReply:
-        return await self.request(commands.ReadSingleTurnAngle(), timeout_s=timeout_s, retries=retries)
-
+    async def read_single_turn_angle(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.SingleTurnAngleReply | replies.CircleAngleReply: return await self.request(commands.ReadSingleTurnAngle(), timeout_s=timeout_s, retries=retries)
     # 0x90 read the single-turn encoder (V4.3 only; removed in V4.4).
-    async def read_single_turn_encoder(
-        self, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.SingleTurnEncoderReply:
-        return await self.request(commands.ReadSingleTurnEncoder(), timeout_s=timeout_s, retries=retries)
-
+    async def read_single_turn_encoder(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.SingleTurnEncoderReply: return await self.request(commands.ReadSingleTurnEncoder(), timeout_s=timeout_s, retries=retries)
     # 0x9A read temperature, brake, voltage and error flags.
-    async def read_status1(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.Status1Reply:
-        return await self.request(commands.ReadStatus1(), timeout_s=timeout_s, retries=retries)
-
+    async def read_status1(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.Status1Reply: return await self.request(commands.ReadStatus1(), timeout_s=timeout_s, retries=retries)
     # 0x9C read temperature, torque current, speed and angle: the R2 layout, which the closed-loop
-    async def read_status2(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.StatusReply:
-        return await self.request(commands.ReadStatus2(), timeout_s=timeout_s, retries=retries)
-
+    async def read_status2(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.StatusReply: return await self.request(commands.ReadStatus2(), timeout_s=timeout_s, retries=retries)
     # 0x9D read temperature and phase currents.
-    async def read_status3(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.Status3Reply:
-        return await self.request(commands.ReadStatus3(), timeout_s=timeout_s, retries=retries)
-
+    async def read_status3(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.Status3Reply: return await self.request(commands.ReadStatus3(), timeout_s=timeout_s, retries=retries)
     # 0xB2 read the firmware version date (see ``revision_from_version_date``).
-    async def read_version_date(
-        self, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.VersionDateReply:
-        return await self.request(commands.ReadVersionDate(), timeout_s=timeout_s, retries=retries)
-
+    async def read_version_date(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.VersionDateReply: return await self.request(commands.ReadVersionDate(), timeout_s=timeout_s, retries=retries)
     # 0xB4 set the link rate by raw index (DATA[7]), used from the next power-up. The index meaning
-    async def set_baud_rate(
-        self, baud_index: int, *, timeout_s: float | None = None, retries: int = 0
-    ) -> None:
-        return await self.request(
-            commands.SetBaudRate(baud_index=baud_index), timeout_s=timeout_s, retries=retries
-        )
-
+    async def set_baud_rate(self, baud_index: int, *, timeout_s: float | None = None, retries: int = 0) -> None: return await self.request(commands.SetBaudRate(baud_index=baud_index), timeout_s=timeout_s, retries=retries)
     # 0x79 write the motor id (V4.3 only). Sent on CAN 0x300 or RS485 ID byte 0xCD: **every motor on the
-    async def set_can_id(
-        self, motor_id: int, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.Echo:
-        return await self.request(commands.SetCanId(motor_id=motor_id), timeout_s=timeout_s, retries=retries)
-
+    async def set_can_id(self, motor_id: int, *, timeout_s: float | None = None, retries: int = 0) -> replies.Echo: return await self.request(commands.SetCanId(motor_id=motor_id), timeout_s=timeout_s, retries=retries)
     # 0xB3 communication-interruption protection: without traffic for ``timeout_ms`` the motor cuts its
-    async def set_comm_timeout(
-        self, timeout_ms: int | None, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.Echo:
-        return await self.request(
-            commands.SetCommTimeout(timeout_ms=timeout_ms), timeout_s=timeout_s, retries=retries
-        )
-
+    async def set_comm_timeout(self, timeout_ms: int | None, *, timeout_s: float | None = None, retries: int = 0) -> replies.Echo: return await self.request(commands.SetCommTimeout(timeout_ms=timeout_ms), timeout_s=timeout_s, retries=retries)
     # 0x76 reset the system. **No reply**: the program restarts.
-    async def system_reset(self, *, timeout_s: float | None = None, retries: int = 0) -> None:
-        return await self.request(commands.SystemReset(), timeout_s=timeout_s, retries=retries)
-
+    async def system_reset(self, *, timeout_s: float | None = None, retries: int = 0) -> None: return await self.request(commands.SystemReset(), timeout_s=timeout_s, retries=retries)
     # 0x43 write one acceleration (1 dps/s) to RAM and ROM: 100..60000, or ``None`` for 0 on the wire
-    async def write_acceleration(
-        self,
-        index: enums.AccelIndex,
-        acceleration_dps_s: float | None,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> replies.Echo:
-        return await self.request(
-            commands.WriteAcceleration(index=index, acceleration_dps_s=acceleration_dps_s),
-            timeout_s=timeout_s,
-            retries=retries,
-        )
-
+    async def write_acceleration(self, index: enums.AccelIndex, acceleration_dps_s: float | None, *, timeout_s: float | None = None, retries: int = 0) -> replies.Echo: return await self.request(commands.WriteAcceleration(index=index, acceleration_dps_s=acceleration_dps_s), timeout_s=timeout_s, retries=retries)
     # 0x64 write the current position to ROM as the zero (effective after 0x76).
-    async def write_current_position_as_zero(
-        self, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.ZeroOffsetReply:
-        return await self.request(commands.WriteCurrentPositionAsZero(), timeout_s=timeout_s, retries=retries)
-
+    async def write_current_position_as_zero(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.ZeroOffsetReply: return await self.request(commands.WriteCurrentPositionAsZero(), timeout_s=timeout_s, retries=retries)
     # 0x63 write an encoder value (int32 counts) to ROM as the zero; effective after restart. Reply:
-    async def write_encoder_zero(
-        self, offset_counts: int, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.Echo:
-        return await self.request(
-            commands.WriteEncoderZero(offset_counts=offset_counts), timeout_s=timeout_s, retries=retries
-        )
-
+    async def write_encoder_zero(self, offset_counts: int, *, timeout_s: float | None = None, retries: int = 0) -> replies.Echo: return await self.request(commands.WriteEncoderZero(offset_counts=offset_counts), timeout_s=timeout_s, retries=retries)
     # 0x31 write one PID parameter (float32) to RAM, lost at power-off.
-    async def write_pid_ram(
-        self, index: enums.PidIndex, value: float, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.Echo:
-        return await self.request(
-            commands.WritePidRam(index=index, value=value), timeout_s=timeout_s, retries=retries
-        )
-
+    async def write_pid_ram(self, index: enums.PidIndex, value: float, *, timeout_s: float | None = None, retries: int = 0) -> replies.Echo: return await self.request(commands.WritePidRam(index=index, value=value), timeout_s=timeout_s, retries=retries)
     # 0x32 write one PID parameter (float32) to ROM. [000]: saved only while the motor is disabled.
-    async def write_pid_rom(
-        self, index: enums.PidIndex, value: float, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.Echo:
-        return await self.request(
-            commands.WritePidRom(index=index, value=value), timeout_s=timeout_s, retries=retries
-        )
-
+    async def write_pid_rom(self, index: enums.PidIndex, value: float, *, timeout_s: float | None = None, retries: int = 0) -> replies.Echo: return await self.request(commands.WritePidRom(index=index, value=value), timeout_s=timeout_s, retries=retries)
     # 0xA4 absolute multi-turn position. With position acceleration 0 (0x43 index 0), a PI tracks the
-    async def absolute_position_control(
-        self,
-        angle_deg: float,
-        max_speed_dps: float | None,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> replies.StatusReply:
-        return await self.request(
-            commands_control.AbsolutePositionControl(angle_deg=angle_deg, max_speed_dps=max_speed_dps),
-            timeout_s=timeout_s,
-            retries=retries,
-        )
-
+    async def absolute_position_control(self, angle_deg: float, max_speed_dps: float | None, *, timeout_s: float | None = None, retries: int = 0) -> replies.StatusReply: return await self.request(commands_control.AbsolutePositionControl(angle_deg=angle_deg, max_speed_dps=max_speed_dps), timeout_s=timeout_s, retries=retries)
     # 0xA9 absolute position with a torque limit (% of rated current; above the stall current the stall
-    async def force_position_control(
-        self,
-        angle_deg: float,
-        max_speed_dps: float | None,
-        max_torque_pct: int,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> replies.StatusReply:
-        return await self.request(
-            commands_control.ForcePositionControl(
-                angle_deg=angle_deg, max_speed_dps=max_speed_dps, max_torque_pct=max_torque_pct
-            ),
-            timeout_s=timeout_s,
-            retries=retries,
-        )
-
+    async def force_position_control(self, angle_deg: float, max_speed_dps: float | None, max_torque_pct: int, *, timeout_s: float | None = None, retries: int = 0) -> replies.StatusReply: return await self.request(commands_control.ForcePositionControl(angle_deg=angle_deg, max_speed_dps=max_speed_dps, max_torque_pct=max_torque_pct), timeout_s=timeout_s, retries=retries)
     # 0xA8 move by ``angle_deg`` from the current position (its sign gives the direction).
-    async def incremental_position_control(
-        self,
-        angle_deg: float,
-        max_speed_dps: float | None,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> replies.StatusReply:
-        return await self.request(
-            commands_control.IncrementalPositionControl(angle_deg=angle_deg, max_speed_dps=max_speed_dps),
-            timeout_s=timeout_s,
-            retries=retries,
-        )
-
+    async def incremental_position_control(self, angle_deg: float, max_speed_dps: float | None, *, timeout_s: float | None = None, retries: int = 0) -> replies.StatusReply: return await self.request(commands_control.IncrementalPositionControl(angle_deg=angle_deg, max_speed_dps=max_speed_dps), timeout_s=timeout_s, retries=retries)
     # 0x72 SF (V4.4 only): absolute position with speed feed-forward in % of rated speed. The
-    async def position_speed_feedforward(
-        self,
-        angle_deg: float,
-        max_speed_dps: float | None,
-        feedforward_speed_pct: int,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> replies.StatusReply:
-        return await self.request(
-            commands_control.PositionSpeedFeedforward(
-                angle_deg=angle_deg, max_speed_dps=max_speed_dps, feedforward_speed_pct=feedforward_speed_pct
-            ),
-            timeout_s=timeout_s,
-            retries=retries,
-        )
-
+    async def position_speed_feedforward(self, angle_deg: float, max_speed_dps: float | None, feedforward_speed_pct: int, *, timeout_s: float | None = None, retries: int = 0) -> replies.StatusReply: return await self.request(commands_control.PositionSpeedFeedforward(angle_deg=angle_deg, max_speed_dps=max_speed_dps, feedforward_speed_pct=feedforward_speed_pct), timeout_s=timeout_s, retries=retries)
     # 0x73 TF (V4.4 only): absolute position with torque feed-forward in % of rated current.
-    async def position_torque_feedforward(
-        self,
-        angle_deg: float,
-        max_speed_dps: float | None,
-        feedforward_torque_pct: int,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> replies.StatusReply:
-        return await self.request(
-            commands_control.PositionTorqueFeedforward(
-                angle_deg=angle_deg,
-                max_speed_dps=max_speed_dps,
-                feedforward_torque_pct=feedforward_torque_pct,
-            ),
-            timeout_s=timeout_s,
-            retries=retries,
-        )
-
+    async def position_torque_feedforward(self, angle_deg: float, max_speed_dps: float | None, feedforward_torque_pct: int, *, timeout_s: float | None = None, retries: int = 0) -> replies.StatusReply: return await self.request(commands_control.PositionTorqueFeedforward(angle_deg=angle_deg, max_speed_dps=max_speed_dps, feedforward_torque_pct=feedforward_torque_pct), timeout_s=timeout_s, retries=retries)
     # 0xA6 single-turn position 0..360° in ``direction``. Reply: ``SingleTurnStatusReply`` (encoder).
-    async def single_turn_position_control(
-        self,
-        angle_deg: float,
-        max_speed_dps: float | None,
-        direction: enums.SpinDirection,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> replies.SingleTurnStatusReply:
-        return await self.request(
-            commands_control.SingleTurnPositionControl(
-                angle_deg=angle_deg, max_speed_dps=max_speed_dps, direction=direction
-            ),
-            timeout_s=timeout_s,
-            retries=retries,
-        )
-
+    async def single_turn_position_control(self, angle_deg: float, max_speed_dps: float | None, direction: enums.SpinDirection, *, timeout_s: float | None = None, retries: int = 0) -> replies.SingleTurnStatusReply: return await self.request(commands_control.SingleTurnPositionControl(angle_deg=angle_deg, max_speed_dps=max_speed_dps, direction=direction), timeout_s=timeout_s, retries=retries)
     # 0xA2 speed closed loop (output shaft), with the optional force-control limit of V4.3+.
-    async def speed_control(
-        self,
-        speed_dps: float,
-        max_torque_pct: int | None = None,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> replies.StatusReply:
-        return await self.request(
-            commands_control.SpeedControl(speed_dps=speed_dps, max_torque_pct=max_torque_pct),
-            timeout_s=timeout_s,
-            retries=retries,
-        )
-
+    async def speed_control(self, speed_dps: float, max_torque_pct: int | None = None, *, timeout_s: float | None = None, retries: int = 0) -> replies.StatusReply: return await self.request(commands_control.SpeedControl(speed_dps=speed_dps, max_torque_pct=max_torque_pct), timeout_s=timeout_s, retries=retries)
     # 0xA1 torque (q-axis current) closed loop. It cannot release a brake: send 0x77 first.
-    async def torque_control(
-        self, current_a: float, *, timeout_s: float | None = None, retries: int = 0
-    ) -> replies.StatusReply:
-        return await self.request(
-            commands_control.TorqueControl(current_a=current_a), timeout_s=timeout_s, retries=retries
-        )
-
+    async def torque_control(self, current_a: float, *, timeout_s: float | None = None, retries: int = 0) -> replies.StatusReply: return await self.request(commands_control.TorqueControl(current_a=current_a), timeout_s=timeout_s, retries=retries)
     # Motion (MIT) mode setpoint, sent on 0x400 + ID (§5.1):
-    async def motion_command(
-        self,
-        position_rad: float,
-        velocity_rad_s: float,
-        kp: float,
-        kd: float,
-        torque_ff_nm: float,
-        scales: motion.MotionScales = DEFAULT,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> motion.MotionReply:
-        return await self.request(
-            motion.MotionCommand(
-                position_rad=position_rad,
-                velocity_rad_s=velocity_rad_s,
-                kp=kp,
-                kd=kd,
-                torque_ff_nm=torque_ff_nm,
-                **given(scales=scales),
-            ),
-            timeout_s=timeout_s,
-            retries=retries,
-        )
-
+    async def motion_command(self, position_rad: float, velocity_rad_s: float, kp: float, kd: float, torque_ff_nm: float, scales: motion.MotionScales = DEFAULT, *, timeout_s: float | None = None, retries: int = 0) -> motion.MotionReply: return await self.request(motion.MotionCommand(position_rad=position_rad, velocity_rad_s=velocity_rad_s, kp=kp, kd=kd, torque_ff_nm=torque_ff_nm, **given(scales=scales)), timeout_s=timeout_s, retries=retries)
     # RS485 motion-mode request (V4.4 only): the CAN motion mode's control law with float32 values.
-    async def rs485_motion_command(
-        self,
-        motor_id: int,
-        position_rad: float,
-        velocity_rad_s: float,
-        kp: float,
-        kd: float,
-        torque_ff_nm: float,
-        mode: enums.Rs485MotionMode = enums.Rs485MotionMode.SERVO,
-        *,
-        timeout_s: float | None = None,
-        retries: int = 0,
-    ) -> rs485_motion.Rs485MotionReply:
-        return await self.request(
-            rs485_motion.Rs485MotionCommand(
-                motor_id=motor_id,
-                position_rad=position_rad,
-                velocity_rad_s=velocity_rad_s,
-                kp=kp,
-                kd=kd,
-                torque_ff_nm=torque_ff_nm,
-                mode=mode,
-            ),
-            timeout_s=timeout_s,
-            retries=retries,
-        )
+    async def rs485_motion_command(self, motor_id: int, position_rad: float, velocity_rad_s: float, kp: float, kd: float, torque_ff_nm: float, mode: enums.Rs485MotionMode = enums.Rs485MotionMode.SERVO, *, timeout_s: float | None = None, retries: int = 0) -> rs485_motion.Rs485MotionReply: return await self.request(rs485_motion.Rs485MotionCommand(motor_id=motor_id, position_rad=position_rad, velocity_rad_s=velocity_rad_s, kp=kp, kd=kd, torque_ff_nm=torque_ff_nm, mode=mode), timeout_s=timeout_s, retries=retries)
