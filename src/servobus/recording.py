@@ -27,8 +27,9 @@ import can
 from servobus.frame import Frame
 from servobus.logs import Scalar, message_values
 from servobus.protocols import Reply
+from servobus.transports.base import SendReporter
 from servobus.transports.can import message_from_frame
-from servobus.transports.contract import Consumer, LineRules, SendReporter
+from servobus.transports.contract import Consumer, LineRules
 from servobus.transports.events import TransportEvent
 from servobus.transports.stats import TransportStats
 

@@ -14,16 +14,19 @@ from anyio.abc import TaskGroup
 from servobus.errors import TransportError
 from servobus.runtime import Waiter
 from servobus.transports._waiters import WaiterList
-from servobus.transports.contract import SendReporter
 from servobus.transports.events import FramesDropped, TransportEvent
 from servobus.transports.stats import TransportStats
 
 if TYPE_CHECKING:
     from servobus.transports.base import Transport
 
-__all__ = ["Outgoing", "SendQueue", "SendQueueFull", "SendReports"]
+__all__ = ["Outgoing", "SendQueue", "SendQueueFull", "SendReporter", "SendReports"]
 
 logger = logging.getLogger("servobus.transports")
+
+#: ``reporter(handle, sent_at, reason)`` (contract.SendReporter; the handle typed Any, so that a
+#: sender whose reporter takes its own handle type, a Bus's Request, type-checks against it)
+SendReporter = Callable[[Any, float | None, str | None], object]
 
 TxT = TypeVar("TxT")
 

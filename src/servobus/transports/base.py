@@ -71,7 +71,7 @@ from servobus.transports._inbox import Inbox, ReceiveSide
 from servobus.transports._listeners import EventSource, Listeners
 from servobus.transports._owned import OwnedTaskGroup
 from servobus.transports._recovery import Recovery
-from servobus.transports._sending import Outgoing, SendQueue, SendQueueFull, SendReports
+from servobus.transports._sending import Outgoing, SendQueue, SendQueueFull, SendReporter, SendReports
 from servobus.transports._waiters import WaiterList
 from servobus.transports.contract import LineRules
 from servobus.transports.events import StateChanged, TransportState
@@ -86,8 +86,6 @@ TxT = TypeVar("TxT")
 
 #: ``consumer(frames)``: a batch of received frames, called on the event loop.
 Consumer = Callable[[list[RxT]], object]
-#: ``reporter(handle, sent_at, reason)``: ``sent_at`` when the frame left, else ``reason`` it never will.
-SendReporter = Callable[[Any, float | None, str | None], object]
 
 
 class Transport(ReceiveSide[RxT], SendReports, EventSource, abc.ABC, Generic[RxT, TxT]):

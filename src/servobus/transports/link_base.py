@@ -32,7 +32,8 @@ from servobus.errors import TransportError
 from servobus.frame import Frame
 from servobus.transports._listeners import Listener, Listeners
 from servobus.transports._owned import OwnedTaskGroup
-from servobus.transports.contract import Consumer, LineRules, SendReporter
+from servobus.transports._sending import SendReporter
+from servobus.transports.contract import Consumer, LineRules
 from servobus.transports.events import FramesDropped, StateChanged, TransportEvent, TransportState
 from servobus.transports.stats import TransportStats
 
