@@ -9,8 +9,8 @@ does not pace bytes, so this measures each host's receive ceiling, not a bus's.
 Two receivers, alternated (A, B, A, B, ...) in one run so that machine noise hits both:
 
 * ``native``: ``SlcanTransport(path, bitrate=1_000_000)``, frames taken with ``receive_batch()`` on the
-  event loop (pyserial-asyncio-fast reads, the C line de-framer cuts and checks, each frame becomes a
-  timestamped ``Frame``).
+  event loop (the port's descriptor read by the loop's reader callback, the C line de-framer cuts and
+  checks, each frame becomes a timestamped ``Frame``).
 * ``python-can``: ``can.Bus(interface="slcan", channel=path, bitrate=1_000_000, sleep_after_open=0)``,
   frames taken with ``bus.recv()`` in a loop. Its reader takes one byte per ``read(1)`` call, so it
   gets a smaller N (the rate, not the count, is compared).

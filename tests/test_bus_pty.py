@@ -17,9 +17,9 @@ from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import anyio
 import pytest
 
-from _serving import serving
 from servobus.bus import Bus, Motor
 from servobus.errors import MotorTimeout
 from servobus.frame import Frame
@@ -42,6 +42,9 @@ from servobus.sim.pty import PtyPort
 from servobus.timing import uart_time_s
 from servobus.transports import CanTransport, SerialTransport, SimTransport, SlcanTransport
 from sim._standins import Sniffer
+from transports._anyio_help import needs_bus_on, serving
+
+pytestmark = pytest.mark.anyio
 
 MA_IDS = (1, 2, 3)
 LK_IDS = (9, 10)
@@ -86,13 +89,11 @@ async def slcan_bus(bench: CanBench, *, native: bool = True, **options: Any) -> 
         transport = CanTransport(
             "slcan", port.path, bitrate=1_000_000, sleep_after_open=0, ignore_config=True
         )
+    needs_bus_on()
     try:
-        async with (
-            asyncio.timeout(5),
-            serving(serve_slcan(bench.network(), port)),
-            Bus(transport, **options) as bus,
-        ):
-            yield bus
+        with anyio.fail_after(5):
+            async with serving(serve_slcan(bench.network(), port)), Bus(transport, **options) as bus:
+                yield bus
     finally:
         port.close()
 
@@ -138,7 +139,6 @@ def _check_reply(motor: Motor, reply: object) -> None:
         assert isinstance(reply, ho.NormalReply) and reply.motor_id == motor.motor_id
 
 
-@pytest.mark.asyncio
 async def test_single_requests_and_a_cycle_over_native_slcan_reach_every_family() -> None:
     bench = CanBench()
     async with slcan_bus(bench, safe=None) as bus:
@@ -161,16 +161,14 @@ async def test_single_requests_and_a_cycle_over_native_slcan_reach_every_family(
     assert all(bench.heard(m.codec.encode(_read(m))) >= 2 for m in motors)
 
 
-@pytest.mark.asyncio
 async def test_a_silent_motor_on_native_slcan_costs_only_its_own_reply() -> None:
     bench = CanBench()
     bench.lk[9].unresponsive = True
     async with slcan_bus(bench, safe=None) as bus:
         motors = _all_motors(bus)
-        loop = asyncio.get_running_loop()
-        began = loop.time()
+        began = anyio.current_time()
         results = await bus.cycle([(m, _read(m)) for m in motors], timeout_s=0.1)
-        took = loop.time() - began
+        took = anyio.current_time() - began
     silent = motors.index(bus.motor("lk", 9))
     assert isinstance(results[silent], MotorTimeout) and "lk motor 9 ReadStatus1" in str(results[silent])
     for i, (motor, reply) in enumerate(zip(motors, results, strict=True)):
@@ -179,7 +177,6 @@ async def test_a_silent_motor_on_native_slcan_costs_only_its_own_reply() -> None
     assert 0.1 <= took < 0.5
 
 
-@pytest.mark.asyncio
 async def test_an_exception_over_native_slcan_stops_every_commanded_motor() -> None:
     bench = CanBench()
     with pytest.raises(RuntimeError, match="user code failed"):
@@ -195,7 +192,7 @@ async def test_an_exception_over_native_slcan_stops_every_commanded_motor() -> N
                 if m.motor_id not in (1, 9, 20) and m.codec.family != "hollow":
                     await m.request(_read(m), timeout_s=T)
             assert bench.myactuator[1].control != Off() and bench.hollow[20].enabled
-            await asyncio.sleep(0.05)  # the motors run for a while
+            await anyio.sleep(0.05)  # the motors run for a while
             raise RuntimeError("user code failed")
     # Each commanded motor got its family's stop, once, and acted on it.
     stops = {
@@ -211,7 +208,6 @@ async def test_an_exception_over_native_slcan_stops_every_commanded_motor() -> N
     assert bench.myactuator[2].control == Off() and bench.lk[10].state is RunState.ON
 
 
-@pytest.mark.asyncio
 async def test_requests_over_python_can_slcan_reach_every_family() -> None:
     bench = CanBench()
     async with slcan_bus(bench, native=False, safe=None) as bus:
@@ -258,14 +254,12 @@ async def rs485_bus(
     """A Bus on a SerialTransport whose framing is ``family``'s on ``link``, to ``devices`` on a pty."""
     port = PtyPort()
     framing = get_family(family).bind(1, link=link).framing
+    needs_bus_on()
     try:
         transport = SerialTransport(port.path, framing=framing, baud=baud)
-        async with (
-            asyncio.timeout(5),
-            serving(serve_rs485(devices, port, baud=baud)),
-            Bus(transport, **options) as bus,
-        ):
-            yield bus
+        with anyio.fail_after(5):
+            async with serving(serve_rs485(devices, port, baud=baud)), Bus(transport, **options) as bus:
+                yield bus
     finally:
         port.close()
 
@@ -315,7 +309,6 @@ class Heard:
         return None
 
 
-@pytest.mark.asyncio
 async def test_myactuator_rs485_motors_answer_a_request_and_a_cycle_one_at_a_time() -> None:
     fronts = {i: MyActuatorRs485Motor(MyActuatorMotor(i)) for i in MA_IDS}
     line = Timed(Line(list(fronts.values())))
@@ -336,7 +329,6 @@ async def test_myactuator_rs485_motors_answer_a_request_and_a_cycle_one_at_a_tim
     _one_at_a_time(line)
 
 
-@pytest.mark.asyncio
 async def test_an_exception_on_rs485_stops_every_commanded_motor() -> None:
     fronts = {i: MyActuatorRs485Motor(MyActuatorMotor(i)) for i in MA_IDS}
     heard = Heard()
@@ -358,7 +350,6 @@ async def test_an_exception_on_rs485_stops_every_commanded_motor() -> None:
     assert [fronts[i].counters["replies"] for i in MA_IDS] == [2, 1, 2]
 
 
-@pytest.mark.asyncio
 async def test_hollow_motors_behind_the_rs485_converter_answer_and_are_stopped() -> None:
     converter = HollowConverter([HollowMotor(i, fd_enabled=True) for i in (1, 2)])
     line = Timed(converter)
@@ -376,7 +367,6 @@ async def test_hollow_motors_behind_the_rs485_converter_answer_and_are_stopped()
     _one_at_a_time(line)
 
 
-@pytest.mark.asyncio
 async def test_hollow_motors_behind_the_modbus_converter_answer_and_are_stopped() -> None:
     converter = HollowConverter([HollowMotor(i, fd_enabled=True) for i in (5, 6)], mode=ConverterMode.MODBUS)
     line = Timed(converter)
@@ -401,6 +391,7 @@ async def test_hollow_motors_behind_the_modbus_converter_answer_and_are_stopped(
 
 
 def test_hollow_can_fd_motors_share_the_in_process_bus_with_the_other_families() -> None:
+    needs_bus_on()
     hollow = {i: HollowMotor(i, fd_enabled=True) for i in HOLLOW_IDS}
     devices: list[Device] = [MyActuatorMotor(1), LkMotor(9), *hollow.values()]
 

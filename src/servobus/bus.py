@@ -556,8 +556,7 @@ class Bus:
             with contextlib.suppress(ValueError):
                 self.transport.remove_listener(self._on_event)
             if self._owns_transport:
-                with anyio.CancelScope(shield=True):
-                    await self.transport.close()
+                await self.transport.close()
         return None
 
     def _closed_error(self) -> TransportError:

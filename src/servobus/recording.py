@@ -1,7 +1,8 @@
 """What ``servobus record`` writes: telemetry rows (CSV, JSONL), raw frames (candump), and its files.
 
-* :class:`TapLink` wraps a transport and shows every frame that went out (at its send report) and
-  every frame that came in to a callback, before the Bus sees it; the Bus works as without it.
+* :class:`TapLink` wraps a FrameLink and shows every frame that went out (at its send report) and
+  every frame that came in to a callback, before the Bus sees it; the Bus works as without it (a
+  FrameLink itself: its send reports echo the Bus's handles).
 * :class:`CandumpWriter` writes those frames through python-can's ``CanutilsLogWriter``, ``R``/``T``
   marking direction, so :class:`servobus.logs.FrameDecoder` tells requests from replies on reading.
 * :class:`TelemetryWriter` writes one row per decoded reply: ``time_s``, ``motor_id``, ``family``,
@@ -19,15 +20,18 @@ import os
 import tempfile
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, Self, TextIO
 
 import can
 
 from servobus.frame import Frame
 from servobus.logs import Scalar, message_values
 from servobus.protocols import Reply
+from servobus.transports.base import SendReporter
 from servobus.transports.can import message_from_frame
+from servobus.transports.contract import Consumer, LineRules
 from servobus.transports.events import TransportEvent
+from servobus.transports.stats import TransportStats
 
 __all__ = ["CandumpWriter", "NewFiles", "TapLink", "TelemetryWriter", "telemetry_row"]
 
@@ -36,9 +40,14 @@ FrameCallback = Callable[[Frame, bool, float], object]
 
 
 class TapLink:
-    """A transport that shows ``on_frame`` every frame sent (once its send report came) and received.
+    """A FrameLink around ``inner`` that shows ``on_frame`` every frame sent (once its send report
+    came) and every frame received, before the Bus sees it; the Bus works as without it.
 
-    Everything else goes to ``inner`` (a bit rate, a half-duplex flag: the Bus reads them).
+    It follows the FrameLink contract (:mod:`servobus.transports.contract`): its rules and stats are
+    the inner link's, and the Bus's send handles are echoed to the Bus's reporter untouched. A send
+    goes to ``inner`` with a handle of the tap's own that carries the frame and the caller's handle,
+    so the tap knows which frame left whatever the inner link copies or re-encodes. Anything else
+    (a transport's own API) is read from ``inner``.
     """
 
     def __init__(self, inner: Any, on_frame: FrameCallback, clock: Callable[[], float]) -> None:
@@ -51,6 +60,11 @@ class TapLink:
         return getattr(self._inner, name)
 
     @property
+    def rules(self) -> LineRules:
+        rules: LineRules = self._inner.rules
+        return rules
+
+    @property
     def is_open(self) -> bool:
         return bool(self._inner.is_open)
 
@@ -60,10 +74,21 @@ class TapLink:
     async def close(self) -> None:
         await self._inner.close()
 
-    def send(self, frame: Frame) -> None:
-        self._inner.send(frame)
+    async def __aenter__(self) -> Self:
+        await self.open()
+        return self
 
-    def set_consumer(self, consumer: Callable[[list[Frame]], object] | None) -> None:
+    async def __aexit__(self, *exc_info: object) -> None:
+        await self.close()
+
+    def stats(self) -> TransportStats:
+        stats: TransportStats = self._inner.stats()
+        return stats
+
+    def send(self, frame: Frame, handle: object = None) -> None:
+        self._inner.send(frame, _Tapped(frame, frame if handle is None else handle))
+
+    def set_consumer(self, consumer: Consumer | None) -> None:
         if consumer is None:
             self._inner.set_consumer(None)
             return
@@ -76,15 +101,17 @@ class TapLink:
 
         self._inner.set_consumer(tapped)
 
-    def set_send_reporter(self, reporter: Callable[[Frame, float | None, str | None], object] | None) -> None:
+    def set_send_reporter(self, reporter: SendReporter | None) -> None:
         if reporter is None:
             self._inner.set_send_reporter(None)
             return
 
-        def tapped(frame: Frame, sent_at: float | None, reason: str | None) -> object:
+        def tapped(handle: object, sent_at: float | None, reason: str | None) -> object:
+            if not isinstance(handle, _Tapped):  # not sent through the tap: not the Bus's
+                return None
             if reason is None:
-                self._on_frame(frame, False, sent_at if sent_at is not None else self._clock())
-            return reporter(frame, sent_at, reason)
+                self._on_frame(handle.frame, False, sent_at if sent_at is not None else self._clock())
+            return reporter(handle.handle, sent_at, reason)
 
         self._inner.set_send_reporter(tapped)
 
@@ -93,6 +120,16 @@ class TapLink:
 
     def remove_listener(self, listener: Callable[[TransportEvent], object]) -> None:
         self._inner.remove_listener(listener)
+
+
+class _Tapped:
+    """The handle the tap sends with: the frame it saw, and the sender's own handle."""
+
+    __slots__ = ("frame", "handle")
+
+    def __init__(self, frame: Frame, handle: object) -> None:
+        self.frame = frame
+        self.handle = handle
 
 
 class CandumpWriter:

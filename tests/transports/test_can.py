@@ -6,7 +6,6 @@ and send-failure policies use a python-can bus whose ``send`` fails on cue.
 
 from __future__ import annotations
 
-import asyncio
 import errno
 import itertools
 import time
@@ -14,6 +13,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, ClassVar
 
+import anyio
 import can
 import pytest
 
@@ -28,6 +28,10 @@ from servobus.transports import (
     TransportState,
 )
 from servobus.transports.can import frame_from_message, message_from_frame
+
+from ._anyio_help import within
+
+pytestmark = pytest.mark.anyio
 
 
 @pytest.fixture
@@ -67,7 +71,6 @@ def test_frames_convert_to_and_from_python_can_messages() -> None:
     assert frame_from_message(message, 0.0).is_rx is False  # our own echo stays marked
 
 
-@pytest.mark.asyncio
 @pytest.mark.usefixtures("clean_config")
 async def test_the_adapter_comes_from_python_cans_environment_configuration(
     monkeypatch: pytest.MonkeyPatch, channel: str, peer: can.BusABC
@@ -78,12 +81,11 @@ async def test_the_adapter_comes_from_python_cans_environment_configuration(
     async with CanTransport() as transport:
         assert transport.config["interface"] == "virtual" and transport.bitrate == 500_000
         transport.send(Frame(arbitration_id=0x141, data=b"\x9c"))
-        (message,) = await asyncio.to_thread(_recv_all, peer, 1)
+        (message,) = await anyio.to_thread.run_sync(_recv_all, peer, 1)
         assert message.arbitration_id == 0x141
         assert transport.stats().bus_load_pct is not None
 
 
-@pytest.mark.asyncio
 @pytest.mark.usefixtures("clean_config")
 async def test_a_canrc_file_is_read_and_arguments_win_over_it(tmp_path: Path, channel: str) -> None:
     (tmp_path / ".canrc").write_text(
@@ -102,35 +104,31 @@ def test_no_interface_anywhere_is_a_clear_error() -> None:
         CanTransport("virtual", "x", enobufs="block", ignore_config=True)  # type: ignore[arg-type]
 
 
-@pytest.mark.asyncio
 async def test_fd_frames_need_an_fd_bus(channel: str) -> None:
     async with CanTransport("virtual", channel, ignore_config=True) as transport:
         with pytest.raises(ValueError, match="fd=True"):
             transport.send(Frame(arbitration_id=0x1, data=bytes(16), is_fd=True))
 
 
-@pytest.mark.asyncio
 async def test_serial_messages_never_go_to_a_can_adapter(channel: str) -> None:
     async with CanTransport("virtual", channel, ignore_config=True) as transport:
         with pytest.raises(ValueError, match="serial-link message"):
             transport.send(Frame(arbitration_id=0x1, data=bytes(8), is_serial=True))
 
 
-@pytest.mark.asyncio
 async def test_receive_ids_filter_what_arrives(channel: str, peer: can.BusABC) -> None:
     async with CanTransport("virtual", channel, ignore_config=True, receive_ids=[0x241, 0x242]) as transport:
         for can_id in (0x240, 0x241, 0x243, 0x242):
             peer.send(can.Message(arbitration_id=can_id, data=b"\x01", is_extended_id=False))
-        got = [await asyncio.wait_for(transport.receive(), 1.0) for _ in range(2)]
+        got = [await within(1.0, transport.receive()) for _ in range(2)]
         assert [f.arbitration_id for f in got] == [0x241, 0x242]
         transport.set_receive_ids(None)
         peer.send(can.Message(arbitration_id=0x243, data=b"\x02", is_extended_id=False))
-        assert (await asyncio.wait_for(transport.receive(), 1.0)).arbitration_id == 0x243
+        assert (await within(1.0, transport.receive())).arbitration_id == 0x243
         with pytest.raises(ValueError, match="outside"):
             transport.set_receive_ids([0x800])
 
 
-@pytest.mark.asyncio
 async def test_error_frames_and_bus_off_become_events_and_remote_frames_are_dropped(
     channel: str, peer: can.BusABC
 ) -> None:
@@ -143,7 +141,7 @@ async def test_error_frames_and_bus_off_become_events_and_remote_frames_are_drop
         peer.send(can.Message(is_error_frame=True, arbitration_id=0x040, data=bytes(8)))
         peer.send(can.Message(is_remote_frame=True, arbitration_id=0x141, dlc=8, is_extended_id=False))
         peer.send(can.Message(arbitration_id=0x241, data=b"\x01", is_extended_id=False))
-        frame = await asyncio.wait_for(transport.receive(), 1.0)
+        frame = await within(1.0, transport.receive())
         assert frame.arbitration_id == 0x241
         stats = transport.stats()
     errors = [e for e in events if isinstance(e, ErrorFrame)]
@@ -153,17 +151,15 @@ async def test_error_frames_and_bus_off_become_events_and_remote_frames_are_drop
     assert (stats.error_frames, stats.bus_off, stats.ignored, stats.frames_in) == (2, 1, 1, 1)
 
 
-@pytest.mark.asyncio
 async def test_min_gap_spaces_the_frames_on_the_wire(channel: str, peer: can.BusABC) -> None:
     async with CanTransport("virtual", channel, ignore_config=True, min_gap_s=0.01) as transport:
         for i in range(5):
             transport.send(Frame(arbitration_id=0x141, data=bytes([i])))
         await transport.drain()
-    times = [m.timestamp for m in await asyncio.to_thread(_recv_all, peer, 5)]
+    times = [m.timestamp for m in await anyio.to_thread.run_sync(_recv_all, peer, 5)]
     assert min(b - a for a, b in itertools.pairwise(times)) >= 0.009
 
 
-@pytest.mark.asyncio
 async def test_bus_load_counts_frames_both_ways_at_the_configured_bit_rate(
     channel: str, peer: can.BusABC
 ) -> None:
@@ -174,7 +170,7 @@ async def test_bus_load_counts_frames_both_ways_at_the_configured_bit_rate(
         for _ in range(100):
             peer.send(can.Message(arbitration_id=0x241, data=bytes(8), is_extended_id=False))
         for _ in range(100):
-            await asyncio.wait_for(transport.receive(), 1.0)
+            await within(1.0, transport.receive())
         load = transport.stats().bus_load_pct
     # 200 unstuffed 8-byte standard frames of 111 bits at 1 Mbit/s within the last second.
     assert load == pytest.approx(100 * 200 * 111e-6, rel=1e-6)
@@ -213,7 +209,6 @@ def _enobufs() -> can.CanOperationError:
     return can.CanOperationError("Failed to transmit: [Errno 105] No buffer space available", errno.ENOBUFS)
 
 
-@pytest.mark.asyncio
 async def test_enobufs_wait_policy_retries_until_the_adapter_takes_the_frame(flaky: type[_FlakyBus]) -> None:
     flaky.failures = [_enobufs(), _enobufs(), can.CanOperationError("Transmit buffer full")]
     async with CanTransport("flaky", "x", ignore_config=True, enobufs="wait") as transport:
@@ -224,7 +219,6 @@ async def test_enobufs_wait_policy_retries_until_the_adapter_takes_the_frame(fla
     assert (stats.enobufs_waits, stats.enobufs_dropped, stats.frames_out) == (3, 0, 1)
 
 
-@pytest.mark.asyncio
 async def test_enobufs_drop_policy_and_wait_timeout_drop_and_count(flaky: type[_FlakyBus]) -> None:
     flaky.failures = [_enobufs()]
     async with CanTransport("flaky", "x", ignore_config=True, enobufs="drop") as transport:
@@ -243,7 +237,6 @@ async def test_enobufs_drop_policy_and_wait_timeout_drop_and_count(flaky: type[_
     assert stats.enobufs_dropped == 1 and stats.enobufs_waits > 1
 
 
-@pytest.mark.asyncio
 async def test_any_other_send_failure_is_a_loss_and_the_bus_is_reopened(flaky: type[_FlakyBus]) -> None:
     flaky.failures = [
         can.CanOperationError("Failed to transmit: [Errno 100] Network is down", errno.ENETDOWN)
@@ -252,7 +245,7 @@ async def test_any_other_send_failure_is_a_loss_and_the_bus_is_reopened(flaky: t
         states: list[TransportState] = []
         transport.add_listener(lambda e: states.append(e.state) if hasattr(e, "state") else None)
         transport.send(Frame(arbitration_id=0x141, data=b"\x01"))
-        await asyncio.sleep(0.1)  # the writer thread fails, the loss is reported, a reopen follows
+        await anyio.sleep(0.1)  # the writer thread fails, the loss is reported, a reopen follows
         await transport.wait_open(timeout=2.0)
         transport.send(Frame(arbitration_id=0x141, data=b"\x02"))
         await transport.drain()
@@ -272,7 +265,6 @@ def test_a_message_whose_dlc_disagrees_with_its_data_does_not_convert() -> None:
         frame_from_message(message, 0.0)
 
 
-@pytest.mark.asyncio
 async def test_virtual_sends_are_written_from_send_itself_and_reported(
     channel: str, peer: can.BusABC
 ) -> None:
@@ -295,7 +287,6 @@ def _stalled() -> can.CanOperationError:
     return error
 
 
-@pytest.mark.asyncio
 async def test_a_stalled_adapter_is_backpressure_not_a_lost_device(flaky: type[_FlakyBus]) -> None:
     flaky.failures = [_stalled(), _stalled()]
     async with CanTransport("flaky", "x", ignore_config=True, enobufs="wait") as transport:
@@ -322,7 +313,6 @@ class _ParseErrorBus(_FlakyBus):
         return item, False
 
 
-@pytest.mark.asyncio
 async def test_frames_python_can_cannot_parse_are_counted_and_reading_goes_on(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -338,14 +328,13 @@ async def test_frames_python_can_cannot_parse_are_counted_and_reading_goes_on(
     ]
     monkeypatch.setattr(can, "Bus", lambda **config: _ParseErrorBus(**config))
     async with CanTransport("parse", "x", ignore_config=True) as transport:
-        frames = [await asyncio.wait_for(transport.receive(), 2.0) for _ in range(2)]
+        frames = [await within(2.0, transport.receive()) for _ in range(2)]
         stats = transport.stats()
         assert transport.is_open
     assert [f.arbitration_id for f in frames] == [0x241, 0x241]
     assert (stats.bad_frames, stats.losses) == (3, 0)
 
 
-@pytest.mark.asyncio
 async def test_a_malformed_slcan_line_on_a_real_pty_is_one_bad_frame_not_a_lost_adapter() -> None:
     import os
 
@@ -354,14 +343,14 @@ async def test_a_malformed_slcan_line_on_a_real_pty_is_one_bad_frame_not_a_lost_
         async with CanTransport(
             "slcan", os.ttyname(slave), bitrate=1_000_000, ignore_config=True, sleep_after_open=0
         ) as transport:
-            await asyncio.sleep(0.05)
+            await anyio.sleep(0.05)
             os.read(master, 1024)  # the open sequence python-can wrote
             os.write(master, b"t12\r" + b"t12311\r" + b"t2418" + b"9C" + b"00" * 7 + b"\r")
-            frame = await asyncio.wait_for(transport.receive(), 2.0)
+            frame = await within(2.0, transport.receive())
             assert frame == Frame(arbitration_id=0x241, data=b"\x9c" + bytes(7))
             # A peer that never ends its line (written from a thread: the pty holds only a few KiB).
-            await asyncio.to_thread(os.write, master, b"x" * 100_000)
-            await asyncio.sleep(0.2)
+            await anyio.to_thread.run_sync(os.write, master, b"x" * 100_000)
+            await anyio.sleep(0.2)
             stats = transport.stats()
             assert transport.is_open
             assert len(transport.bus._buffer) <= 200  # type: ignore[union-attr]
@@ -371,7 +360,6 @@ async def test_a_malformed_slcan_line_on_a_real_pty_is_one_bad_frame_not_a_lost_
         os.close(slave)
 
 
-@pytest.mark.asyncio
 async def test_the_virtual_fast_send_hands_every_listener_its_own_message(channel: str) -> None:
     first = can.Bus(interface="virtual", channel=channel)
     second = can.Bus(interface="virtual", channel=channel)
@@ -392,7 +380,6 @@ async def test_the_virtual_fast_send_hands_every_listener_its_own_message(channe
         second.shutdown()
 
 
-@pytest.mark.asyncio
 async def test_a_full_virtual_listener_queue_is_a_failed_send_not_a_blocked_loop(channel: str) -> None:
     peer = can.Bus(interface="virtual", channel=channel, rx_queue_size=1)
     try:

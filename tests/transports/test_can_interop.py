@@ -6,11 +6,11 @@ bus of the same channel (``servobus.sim.attach.serve_python_can``).
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import threading
 from collections.abc import AsyncIterator, Iterator
 
+import anyio
 import can
 import pytest
 from can.interfaces.virtual import VirtualBus
@@ -22,6 +22,10 @@ from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.sim.attach import serve_python_can
 from servobus.sim.network import SimCanNetwork
 from servobus.transports import CanTransport, TransportState
+
+from ._anyio_help import needs_bus_on, serving, within
+
+pytestmark = pytest.mark.anyio
 
 
 @pytest.fixture
@@ -52,27 +56,25 @@ class _Collect(can.Listener):
 
 
 async def _until(predicate: object, timeout: float = 2.0) -> None:
-    async with asyncio.timeout(timeout):
+    with anyio.fail_after(timeout):
         while not predicate():  # type: ignore[operator]
-            await asyncio.sleep(0.005)
+            await anyio.sleep(0.005)
 
 
-@pytest.mark.asyncio
 async def test_an_open_application_bus_is_used_and_left_open(app_bus: can.BusABC, peer: can.BusABC) -> None:
     transport = CanTransport(app_bus)
     assert transport.name == f"can:virtual:{app_bus.channel_info}"
     async with transport:
         transport.send(Frame(arbitration_id=0x141, data=b"\x9c"))
-        sent = await asyncio.to_thread(peer.recv, 2.0)
+        sent = await anyio.to_thread.run_sync(peer.recv, 2.0)
         assert sent is not None and (sent.arbitration_id, bytes(sent.data)) == (0x141, b"\x9c")
         peer.send(can.Message(arbitration_id=0x241, data=b"\x01", is_extended_id=False))
-        assert await asyncio.wait_for(transport.receive(), 2.0) == Frame(arbitration_id=0x241, data=b"\x01")
+        assert await within(2.0, transport.receive()) == Frame(arbitration_id=0x241, data=b"\x01")
     assert transport.state is TransportState.CLOSED
     app_bus.send(can.Message(arbitration_id=0x7, data=b"", is_extended_id=False))  # still open: no raise
     assert peer.recv(2.0) is not None
 
 
-@pytest.mark.asyncio
 async def test_beside_the_applications_notifier_both_get_every_frame(
     app_bus: can.BusABC, peer: can.BusABC
 ) -> None:
@@ -82,18 +84,17 @@ async def test_beside_the_applications_notifier_both_get_every_frame(
         async with CanTransport(app_bus, notifier=notifier) as transport:
             for ident in (0x241, 0x242):
                 peer.send(can.Message(arbitration_id=ident, data=b"\x00", is_extended_id=False))
-            got = [await asyncio.wait_for(transport.receive(), 2.0) for _ in range(2)]
+            got = [await within(2.0, transport.receive()) for _ in range(2)]
             assert [f.arbitration_id for f in got] == [0x241, 0x242]
             await _until(lambda: len(mine.ids) == 2)
         assert notifier.listeners == [mine]  # servobus took itself off, the notifier reads on
         mine.got.clear()
         peer.send(can.Message(arbitration_id=0x243, data=b"", is_extended_id=False))
-        assert await asyncio.to_thread(mine.got.wait, 2.0) and mine.ids[-1] == 0x243
+        assert await anyio.to_thread.run_sync(mine.got.wait, 2.0) and mine.ids[-1] == 0x243
     finally:
         notifier.stop()
 
 
-@pytest.mark.asyncio
 async def test_a_bus_with_a_running_notifier_is_joined_not_read_a_second_time(
     app_bus: can.BusABC, peer: can.BusABC
 ) -> None:
@@ -104,14 +105,13 @@ async def test_a_bus_with_a_running_notifier_is_joined_not_read_a_second_time(
             assert len(notifier.listeners) == 2  # it joined the notifier: no reader of its own
             for i in range(20):
                 peer.send(can.Message(arbitration_id=0x241, data=bytes([i]), is_extended_id=False))
-            got = [await asyncio.wait_for(transport.receive(), 2.0) for _ in range(20)]
+            got = [await within(2.0, transport.receive()) for _ in range(20)]
             assert [f.data[0] for f in got] == list(range(20))  # none lost to a competing recv()
             await _until(lambda: len(mine.ids) == 20)
     finally:
         notifier.stop()
 
 
-@pytest.mark.asyncio
 async def test_receive_ids_on_an_application_bus_filter_here_and_leave_its_filters(
     app_bus: can.BusABC, peer: can.BusABC
 ) -> None:
@@ -122,7 +122,7 @@ async def test_receive_ids_on_an_application_bus_filter_here_and_leave_its_filte
         assert app_bus.filters == before
         for ident in (0x242, 0x241, 0x244, 0x243):
             peer.send(can.Message(arbitration_id=ident, data=b"", is_extended_id=False))
-        got = [await asyncio.wait_for(transport.receive(), 2.0) for _ in range(2)]
+        got = [await within(2.0, transport.receive()) for _ in range(2)]
         assert [f.arbitration_id for f in got] == [0x241, 0x243]
     assert app_bus.filters == before
 
@@ -137,20 +137,17 @@ def test_an_open_bus_takes_no_python_can_configuration(app_bus: can.BusABC) -> N
 @contextlib.asynccontextmanager
 async def _motors_on(channel: str, *ids: int) -> AsyncIterator[None]:
     bus = can.Bus(interface="virtual", channel=channel)
-    task = asyncio.create_task(serve_python_can(SimCanNetwork([MyActuatorMotor(i) for i in ids]), bus))
     try:
-        yield
+        async with serving(serve_python_can(SimCanNetwork([MyActuatorMotor(i) for i in ids]), bus)):
+            yield
     finally:
-        task.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await task
         bus.shutdown()
 
 
-@pytest.mark.asyncio
 async def test_a_servobus_bus_runs_on_the_applications_bus_and_notifier(
     channel: str, app_bus: can.BusABC
 ) -> None:
+    needs_bus_on()
     mine = _Collect()
     notifier = can.Notifier(app_bus, [mine], timeout=0.01)
     try:
@@ -176,7 +173,6 @@ class _Vanishing(VirtualBus):
         return super().recv(timeout)
 
 
-@pytest.mark.asyncio
 @pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")
 async def test_a_device_lost_under_the_applications_notifier_is_a_loss_and_the_notifier_decides(
     channel: str,

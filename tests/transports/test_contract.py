@@ -1,22 +1,35 @@
 """One contract over every path: SLCAN on a pty (python-can's and native), RS485 on a pty, CAN FD on
-the virtual bus, and the in-process simulated bus.
+the virtual bus, and the in-process simulated bus; and the link's side of the FrameLink contract
+(servobus.transports.contract) over every in-process link type, on asyncio and on trio.
 
-Every test here runs over each path of tests/transports/_paths.py; the unplug and reopen tests
-over the two pty paths, where a device can really vanish.
+The path tests run over each path of tests/transports/_paths.py (on asyncio, where the real
+transports run); the unplug and reopen tests over the two pty paths, where a device can really
+vanish. The link tests (below the paths) run every in-process link: SimTransport in both clock
+lanes, a SimTransport subclass that sends a copy of each frame, the recording tap around a
+SimTransport, and LinkBase links (one of them copying too), in virtual time. The Bus's side (its
+time-outs with a copying link) is tests/transports/test_contract_bus.py.
 """
 
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import time
 import zlib
+from collections.abc import Callable
 from pathlib import Path
 
+import anyio
 import pytest
 
+from _backends import BACKENDS, virtual
 from servobus.errors import TransportError
 from servobus.frame import Frame
-from servobus.transports import TransportState
+from servobus.recording import TapLink
+from servobus.transports import SimTransport, TransportState, TransportStats
+from servobus.transports.contract import FrameLink, LineRules
+from servobus.transports.link_base import LinkBase
+from sim._standins import Responder
 
 from ._paths import PATHS, LinePath, open_path
 
@@ -170,3 +183,194 @@ async def test_close_ends_async_iteration_and_pending_receivers_fail(name: str, 
         with pytest.raises(TransportError, match="closed"):
             await transport.receive()
         assert transport.state is TransportState.CLOSED
+
+
+# ================================================================ the link's side of the contract
+
+
+@pytest.fixture(params=BACKENDS)
+def anyio_backend(request: pytest.FixtureRequest) -> tuple[str, dict[str, object]]:
+    return virtual(request.param)
+
+
+class TaskClockSim(SimTransport):
+    task_clock = True
+
+
+class CopyingSim(SimTransport):
+    """Sends a copy of every frame (as a link that re-encodes would): reports must echo the handle."""
+
+    def send(self, frame: Frame, handle: object = None) -> None:
+        super().send(dataclasses.replace(frame), frame if handle is None else handle)
+
+
+class EchoLink(LinkBase):
+    """A LinkBase link: each frame takes ``WIRE_S`` on the wire (a task of the link's own), then is
+    reported sent and answered on ``id + 0x100``; frames still on the wire at close are reported
+    purged."""
+
+    name = "echo"
+    rules = LineRules(bitrate=1_000_000, stale_after_s=0.5)
+    WIRE_S = 0.001
+
+    def send(self, frame: Frame, handle: object = None) -> None:
+        if not self.is_open:
+            raise TransportError(f"{self.name}: not open")
+        self._tasks.start_soon(self._wire, self._outgoing(frame), self._handle(frame, handle))
+
+    def _outgoing(self, frame: Frame) -> Frame:
+        return frame
+
+    async def _wire(self, frame: Frame, handle: object) -> None:
+        try:
+            await anyio.sleep(self.WIRE_S)
+        except anyio.get_cancelled_exc_class():
+            self._dropped("purged", [handle])
+            raise
+        self._sent(handle, self._now(), frame)
+        reply = Frame(arbitration_id=frame.arbitration_id + 0x100, data=frame.data, timestamp=self._now())
+        self._deliver([reply])
+
+
+class CopyingEchoLink(EchoLink):
+    def _outgoing(self, frame: Frame) -> Frame:
+        return dataclasses.replace(frame)
+
+
+def _tapped_sim() -> FrameLink:
+    return TapLink(SimTransport(devices=[Responder(1)]), lambda *_: None, anyio.current_time)
+
+
+#: every in-process link type, built fresh (a simulated responder on 0x141 answers on 0x241)
+LINKS: dict[str, Callable[[], FrameLink]] = {
+    "sim": lambda: SimTransport(devices=[Responder(1)]),
+    "sim-task-clock": lambda: TaskClockSim(devices=[Responder(1)]),
+    "sim-copying": lambda: CopyingSim(devices=[Responder(1)]),
+    "tap-sim": _tapped_sim,
+    "linkbase": EchoLink,
+    "linkbase-copying": CopyingEchoLink,
+}
+
+
+@dataclasses.dataclass(eq=False)
+class Handle:
+    """A sender's handle (the Bus passes its Request): compared by identity."""
+
+    n: int
+
+
+class Reports:
+    """What a link reported, by handle identity."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[object, float | None, str | None]] = []
+
+    def __call__(self, handle: object, sent_at: float | None, reason: str | None) -> None:
+        self.calls.append((handle, sent_at, reason))
+
+    def of(self, handle: object) -> list[tuple[float | None, str | None]]:
+        return [(at, why) for h, at, why in self.calls if h is handle]
+
+
+def _request(n: int) -> Frame:
+    return Frame(arbitration_id=0x141, data=bytes([n, 0, 0, 0, 0, 0, 0, 0]))
+
+
+@pytest.mark.anyio
+@pytest.mark.parametrize("kind", LINKS)
+async def test_every_link_declares_its_rules_and_counts(kind: str) -> None:
+    link = LINKS[kind]()
+    assert isinstance(link, FrameLink)
+    assert isinstance(link.rules, LineRules)
+    assert isinstance(link.stats(), TransportStats)
+    assert not link.is_open
+    async with link:
+        assert link.is_open
+        link.send(_request(1))
+        with anyio.fail_after(1.0):
+            while link.stats().frames_out < 1:
+                await anyio.sleep(0.0005)
+    stats = link.stats()
+    assert stats.frames_out == 1 and stats.state is TransportState.CLOSED
+    assert not link.is_open
+
+
+@pytest.mark.anyio
+@pytest.mark.parametrize("kind", LINKS)
+async def test_every_accepted_frame_is_reported_once_with_the_handle_it_was_given(kind: str) -> None:
+    link = LINKS[kind]()
+    reports = Reports()
+    received: list[Frame] = []
+    link.set_send_reporter(reports)
+    link.set_consumer(received.extend)
+    handles = [Handle(n) for n in range(5)]
+    frames = [_request(n) for n in range(6)]
+    async with link:
+        for frame, handle in zip(frames, handles, strict=False):
+            sent_from = anyio.current_time()
+            link.send(frame, handle)
+        link.send(frames[5])  # no handle: the frame is the handle
+        with anyio.fail_after(1.0):
+            while len(received) < 6:
+                await anyio.sleep(0.0005)
+    for handle in handles:
+        [(sent_at, reason)] = reports.of(handle)  # once, with this very object
+        assert reason is None and sent_at is not None and sent_at >= sent_from
+    [(sent_at, reason)] = reports.of(frames[5])
+    assert reason is None
+    assert len(reports.calls) == 6
+    assert sorted(f.data[0] for f in received) == list(range(6))
+
+
+@pytest.mark.anyio
+@pytest.mark.parametrize("kind", ["linkbase", "linkbase-copying"])
+async def test_frames_that_never_leave_are_reported_with_the_reason(kind: str) -> None:
+    link = LINKS[kind]()
+    reports = Reports()
+    link.set_send_reporter(reports)
+    handles = [Handle(n) for n in range(3)]
+    async with link:
+        for n, handle in enumerate(handles):
+            link.send(_request(n), handle)
+        # closed before they left: each is reported once, as purged
+    assert [reports.of(h) for h in handles] == [[(None, "purged")]] * 3
+    assert link.stats().purged == 3 and link.stats().frames_out == 0
+
+
+@pytest.mark.anyio
+@pytest.mark.parametrize("kind", ["sim", "sim-copying", "tap-sim"])
+async def test_a_lost_sim_link_refuses_sends_and_reports_nothing_it_did_not_accept(kind: str) -> None:
+    link = LINKS[kind]()
+    reports = Reports()
+    link.set_send_reporter(reports)
+    async with link:
+        sim = link._inner if isinstance(link, TapLink) else link
+        assert isinstance(sim, SimTransport)
+        sim.unplug()
+        with pytest.raises(TransportError, match="lost"):
+            link.send(_request(1), Handle(1))
+    assert reports.calls == []
+
+
+@pytest.mark.anyio
+@pytest.mark.parametrize("kind", LINKS)
+async def test_open_and_close_belong_to_one_task_and_nothing_runs_after_close(kind: str) -> None:
+    link = LINKS[kind]()
+    before = len(anyio.get_running_tasks())
+    refused: list[RuntimeError] = []
+
+    async def close_elsewhere() -> None:
+        try:
+            await link.close()
+        except RuntimeError as exc:
+            refused.append(exc)
+
+    await link.open()
+    link.send(_request(1))
+    async with anyio.create_task_group() as tasks:
+        tasks.start_soon(close_elsewhere)
+    assert refused and "task that opened it" in str(refused[0])
+    assert link.is_open
+    await link.close()
+    assert len(anyio.get_running_tasks()) == before
+    await link.close()  # twice is harmless

@@ -8,7 +8,6 @@ Frames through the family's bound codec (``FAMILY.bind(id, link="rs485")``) and 
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import itertools
 import os
@@ -27,9 +26,9 @@ from importlib.metadata import EntryPoint
 from pathlib import Path
 from typing import Any
 
+import anyio
 import pytest
 
-from _serving import serving
 from servobus import _plugins
 from servobus.core import crc16_modbus
 from servobus.errors import TransportError
@@ -49,6 +48,10 @@ from servobus.sim.device import SerialDevice, SerialEmission
 from servobus.sim.pty import PtyPort
 from servobus.timing import uart_time_s
 from servobus.transports import SerialTransport
+
+from ._anyio_help import serving, within
+
+pytestmark = pytest.mark.anyio
 
 MOTOR1 = ma.FAMILY.bind(1, link="rs485")
 STOP_ALL = Frame(arbitration_id=RS485_BROADCAST_ID, data=ma.MotorStop().encode(), is_serial=True)
@@ -147,7 +150,6 @@ def test_the_line_declares_its_half_duplex_rules_per_baud_rate(baud: int, parity
         SerialTransport("/dev/null", framing=Stx(), baud=baud, turnaround_s=-1)
 
 
-@pytest.mark.asyncio
 async def test_send_takes_serial_frames_the_framing_accepts() -> None:
     async with line([Scripted(script=[])], baud=1_000_000, mode="myactuator") as transport:
         with pytest.raises(ValueError, match="not a serial Frame"):
@@ -159,7 +161,6 @@ async def test_send_takes_serial_frames_the_framing_accepts() -> None:
         assert transport.stats().queue_depth == 0
 
 
-@pytest.mark.asyncio
 @pytest.mark.parametrize("baud", [115_200, 1_000_000])
 async def test_myactuator_motors_answer_at_two_baud_rates_and_the_line_time_shows(baud: int) -> None:
     motors = [MyActuatorRs485Motor(MyActuatorMotor(i)) for i in (1, 2, 3)]
@@ -170,9 +171,9 @@ async def test_myactuator_motors_answer_at_two_baud_rates_and_the_line_time_show
         started = time.monotonic()
         for codec in codecs:
             transport.send(codec.encode(ma.ReadStatus1()), reply_timeout_s=0.1)
-        replies = [await asyncio.wait_for(transport.receive(), 1.0) for _ in range(3)]
+        replies = [await within(1.0, transport.receive()) for _ in range(3)]
         elapsed = time.monotonic() - started
-        now = asyncio.get_running_loop().time()
+        now = anyio.current_time()
     decoded = [codec.decode(reply) for codec, reply in zip(codecs, replies, strict=True)]
     assert [r.arbitration_id for r in replies] == [1, 2, 3]
     assert all(reply.is_serial for reply in replies)
@@ -185,7 +186,6 @@ async def test_myactuator_motors_answer_at_two_baud_rates_and_the_line_time_show
     assert len(sent) == 3 and all(s < r.timestamp for s, r in zip(sent, replies, strict=True))
 
 
-@pytest.mark.asyncio
 async def test_the_line_is_held_for_a_reply_then_released_by_the_reply_or_the_timeout() -> None:
     slow = Scripted(script=[(0.03, encode_rs485(1, ma.ReadStatus1()))], turnaround_s=0.03)
     async with line([slow], baud=1_000_000, mode="myactuator") as transport:
@@ -199,7 +199,7 @@ async def test_the_line_is_held_for_a_reply_then_released_by_the_reply_or_the_ti
         for _ in range(3):
             transport.send(STOP_ALL)
         await transport.drain()
-        await asyncio.sleep(0.1)
+        await anyio.sleep(0.1)
         quick = slow.heard[before:]
         assert quick[-1] - quick[0] < 0.03
         # A reply that never comes holds the line for reply_timeout_s, no longer.
@@ -208,45 +208,42 @@ async def test_the_line_is_held_for_a_reply_then_released_by_the_reply_or_the_ti
         transport.send(read1(), reply_timeout_s=0.05)
         transport.send(read1())
         await transport.drain()
-        await asyncio.sleep(0.02)
+        await anyio.sleep(0.02)
     assert 0.05 <= silent.heard[1] - silent.heard[0] < 0.5
 
 
-@pytest.mark.asyncio
 async def test_garbage_and_corrupt_frames_are_counted_and_the_good_frame_still_comes() -> None:
     good = encode_rs485(1, ma.ReadStatus1())
     corrupt = good[:-1] + bytes([good[-1] ^ 0xFF])
     noisy = Scripted(script=[(0.0, corrupt + b"\x00\x11\x22" + good)])
     async with line([noisy], baud=1_000_000, mode="myactuator") as transport:
         transport.send(read1(), reply_timeout_s=0.2)
-        frame = await asyncio.wait_for(transport.receive(), 1.0)
-        await asyncio.sleep(0.01)
+        frame = await within(1.0, transport.receive())
+        await anyio.sleep(0.01)
         stats = transport.stats()
     assert frame == read1()  # the motor's echo of the request: same address byte, same body
     assert (stats.crc_errors, stats.discarded_bytes) == (1, len(corrupt) + 3)
     assert stats.frames_in == 1
 
 
-@pytest.mark.asyncio
 async def test_hollow_transparent_framing_through_the_converter_at_1_mbaud() -> None:
     converter = HollowConverter([HollowMotor(i, fd_enabled=True) for i in (1, 2)])
     codecs = [ho.FAMILY.bind(i, link="rs485") for i in (1, 2)]
     async with line([converter], baud=1_000_000, framing=codecs[0].framing) as transport:
         for codec in codecs:
             transport.send(codec.encode(ho.FdCommand()), reply_timeout_s=0.1)
-        replies = [await asyncio.wait_for(transport.receive(), 1.0) for _ in range(2)]
+        replies = [await within(1.0, transport.receive()) for _ in range(2)]
     kinds = [codec.classify(reply)[0].value for codec, reply in zip(codecs, replies, strict=True)]
     assert kinds == ["reply", "reply"]
     assert [codec.decode(reply).slave_id for codec, reply in zip(codecs, replies, strict=True)] == [1, 2]
 
 
-@pytest.mark.asyncio
 async def test_modbus_rtu_at_19200_and_a_truncated_frame_is_dropped_on_the_silence() -> None:
     converter = HollowConverter([HollowMotor(5, fd_enabled=True)], mode=ConverterMode.MODBUS)
     codec = ho.FAMILY.bind(5, link="modbus")
     async with line([converter], baud=19_200, mode="modbus-rtu") as transport:
         transport.send(codec.encode(ModbusRead(slave_id=5)), reply_timeout_s=0.2)
-        reply = codec.decode(await asyncio.wait_for(transport.receive(), 1.0))
+        reply = codec.decode(await within(1.0, transport.receive()))
     assert isinstance(reply, ModbusReadReply) and reply.slave_id == 5
 
     body = bytes([5, 0x03, 0x20]) + bytes(32)
@@ -254,7 +251,7 @@ async def test_modbus_rtu_at_19200_and_a_truncated_frame_is_dropped_on_the_silen
     cut = Scripted(script=[(0.0, read_reply[:10]), (0.05, read_reply)])
     async with line([cut], baud=19_200, mode="modbus-rtu") as transport:
         transport.send(codec.encode(ModbusRead(slave_id=5)), reply_timeout_s=0.5)
-        frame = await asyncio.wait_for(transport.receive(), 1.0)
+        frame = await within(1.0, transport.receive())
         stats = transport.stats()
     assert (frame.arbitration_id, frame.data) == (5, body[1:])
     # Dropped as noise when the line went quiet, not counted as a frame that failed its CRC (which
@@ -262,7 +259,6 @@ async def test_modbus_rtu_at_19200_and_a_truncated_frame_is_dropped_on_the_silen
     assert (stats.discarded_bytes, stats.crc_errors, stats.frames_in) == (10, 0, 1)
 
 
-@pytest.mark.asyncio
 async def test_a_frame_split_by_a_usb_style_burst_gap_is_still_whole() -> None:
     # A USB adapter can deliver the second half of a frame milliseconds after the first: far longer
     # than 3.5 characters at 1 Mbaud (35 us), so the host must not take that gap for the line's
@@ -271,7 +267,7 @@ async def test_a_frame_split_by_a_usb_style_burst_gap_is_still_whole() -> None:
     bursty = Scripted(script=[(0.0, reply[:5]), (0.008, reply[5:])])
     async with line([bursty], baud=1_000_000, mode="myactuator") as transport:
         transport.send(read1(), reply_timeout_s=0.2)
-        frame = await asyncio.wait_for(transport.receive(), 1.0)
+        frame = await within(1.0, transport.receive())
         stats = transport.stats()
     assert frame == read1() and stats.discarded_bytes == 0
 
@@ -343,14 +339,13 @@ class StxEcho:
         return None
 
 
-@pytest.mark.asyncio
 async def test_a_framing_the_transport_does_not_know_is_a_plug_in() -> None:
     async with line([StxEcho()], baud=57_600, framing=Stx()) as transport:
         transport.send(
             Frame(arbitration_id=7, data=b"\x01\x02\x03" * 20, is_serial=True), reply_timeout_s=0.2
         )
         transport.send(Frame(arbitration_id=8, data=b"", is_serial=True), reply_timeout_s=0.2)
-        replies = [await asyncio.wait_for(transport.receive(), 1.0) for _ in range(2)]
+        replies = [await within(1.0, transport.receive()) for _ in range(2)]
         stats = transport.stats()
     assert replies == [
         Frame(arbitration_id=7, data=b"\x03\x02\x01" * 20, is_serial=True),
@@ -390,7 +385,6 @@ def stx_family(monkeypatch: pytest.MonkeyPatch) -> Family:
     return STX_FAMILY
 
 
-@pytest.mark.asyncio
 async def test_a_plug_in_familys_serial_line_gives_framing_rates_parity_and_counters(
     stx_family: Family,
 ) -> None:
@@ -407,7 +401,7 @@ async def test_a_plug_in_familys_serial_line_gives_framing_rates_parity_and_coun
     noisy = Scripted(script=[(0.0, b"\xff\xfe\xfd" + Stx().encode(reply))])
     async with line([noisy], baud=9_600, mode="stx", parity="N") as transport:  # a pty refuses parity
         transport.send(Frame(arbitration_id=3, data=b"", is_serial=True), reply_timeout_s=0.5)
-        got = await asyncio.wait_for(transport.receive(), 1.0)
+        got = await within(1.0, transport.receive())
         stats = transport.stats()
     assert got == reply and transport.baud == 9_600
     assert (stats.discarded_bytes, stats.crc_errors) == (3, 0)  # the de-framer's public counter
@@ -427,7 +421,6 @@ def test_a_framing_in_hand_finds_its_line_without_importing_another_family() -> 
     assert done.stdout.split() == ["1000000", "hollow-transparent", "[]"], done.stderr
 
 
-@pytest.mark.asyncio
 async def test_a_loss_while_waiting_for_a_reply_leaves_the_line_usable_after_the_reopen(
     tmp_path: Path,
 ) -> None:
@@ -437,10 +430,10 @@ async def test_a_loss_while_waiting_for_a_reply_leaves_the_line_usable_after_the
     try:
         async with serving(serve_rs485([Scripted(script=[])], first, baud=1_000_000)), transport:
             transport.send(read1(), reply_timeout_s=5.0)  # never answered
-            await asyncio.sleep(0.05)
+            await anyio.sleep(0.05)
             first.unplug()  # while the writer waits for that reply
             with pytest.raises(TransportError):
-                await asyncio.wait_for(transport.receive(), 1.0)
+                await within(1.0, transport.receive())
             second = PtyPort(link=link)
             async with serving(
                 serve_rs485([MyActuatorRs485Motor(MyActuatorMotor(1))], second, baud=1_000_000)
@@ -448,7 +441,7 @@ async def test_a_loss_while_waiting_for_a_reply_leaves_the_line_usable_after_the
                 await transport.wait_open(timeout=5.0)
                 transport.send(STOP_ALL)  # no reply expected
                 transport.send(read1(), reply_timeout_s=0.2)
-                replies = [await asyncio.wait_for(transport.receive(), 1.0) for _ in range(2)]
+                replies = [await within(1.0, transport.receive()) for _ in range(2)]
     finally:
         for port in (first, second):
             if port is not None:
@@ -471,7 +464,6 @@ def _fill(fd: int) -> int:
             return total
 
 
-@pytest.mark.asyncio
 async def test_a_stalled_port_never_writes_a_stale_frame_and_never_spins() -> None:
     """Issue 14: with a stalled port, set-points 6 s old reached the motor, and pyserial-asyncio-fast
     spun at 100 % CPU (pyserial retries EAGAIN in a busy loop; the library's writer callback stays
@@ -510,12 +502,12 @@ async def test_a_stalled_port_never_writes_a_stale_frame_and_never_spins() -> No
         start_reading.wait()
         while not stop_reading.is_set():
             if select.select([master], [], [], 0.02)[0]:
-                arrivals.append((time.monotonic(), os.read(master, 65536)))
+                arrivals.append((time.monotonic() + to_loop_clock, os.read(master, 65536)))
 
     reader = threading.Thread(target=read_master, daemon=True)
     timer = threading.Timer(5 * STALE_S, start_reading.set)
-    loop = asyncio.get_running_loop()
-    t0 = loop.time()
+    t0 = anyio.current_time()
+    to_loop_clock = t0 - time.monotonic()  # the reader thread's stamps, on the loop's clock
     seq = 0
 
     async def stream(until: Callable[[], bool]) -> tuple[float, float]:
@@ -525,10 +517,10 @@ async def test_a_stalled_port_never_writes_a_stale_frame_and_never_spins() -> No
         cpu, wall = time.process_time(), time.monotonic()
         while not until():
             if transport.queue_room:
-                data = struct.pack("<If", seq, loop.time() - t0)
+                data = struct.pack("<If", seq, anyio.current_time() - t0)
                 transport.send(Frame(arbitration_id=1, data=data, is_serial=True))
                 seq += 1
-            await asyncio.sleep(0.001)
+            await anyio.sleep(0.001)
         return time.process_time() - cpu, time.monotonic() - wall
 
     reader.start()
@@ -538,11 +530,11 @@ async def test_a_stalled_port_never_writes_a_stale_frame_and_never_spins() -> No
             timer.start()
             stalled_cpu, stalled_wall = await stream(start_reading.is_set)
             stalled_stats, stalled_seq = transport.stats(), seq
-            resumed_at = loop.time()
-            await stream(lambda: loop.time() > resumed_at + 2 * STALE_S)
-            await asyncio.wait_for(transport.drain(), 2.0)
+            resumed_at = anyio.current_time()
+            await stream(lambda: anyio.current_time() > resumed_at + 2 * STALE_S)
+            await within(2.0, transport.drain())
             cpu, wall = time.process_time(), time.monotonic()
-            await asyncio.sleep(0.3)  # idle after the stall: where the library's writer callback spins
+            await anyio.sleep(0.3)  # idle after the stall: where the library's writer callback spins
             idle_cpu, idle_wall = time.process_time() - cpu, time.monotonic() - wall
             stats = transport.stats()
     finally:

@@ -10,16 +10,15 @@ over this transport in test_contract.py (the ``native-slcan`` path).
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import os
 import time
 import tty
 from collections.abc import AsyncIterator
 
+import anyio
 import pytest
 
-from _serving import serving
 from servobus.errors import TransportError
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
@@ -31,6 +30,10 @@ from servobus.sim.pty import PtyPort
 from servobus.sim.slcan import SlcanAdapter
 from servobus.transports import SlcanTransport, TransportState, create_transport
 from servobus.transports.slcan import encode_line
+
+from ._anyio_help import serving
+
+pytestmark = pytest.mark.anyio
 
 GOOD = b"t2418" + b"9C" + b"00" * 7 + b"\r"
 
@@ -51,14 +54,8 @@ class RawAdapter:
 
     async def answer_open(self) -> None:
         """Answer each command line until O (or L) has been answered; read nothing after it."""
-        loop = asyncio.get_running_loop()
         while True:
-            ready = loop.create_future()
-            loop.add_reader(self.master, ready.set_result, None)
-            try:
-                await ready
-            finally:
-                loop.remove_reader(self.master)
+            await anyio.wait_readable(self.master)
             self._buf += os.read(self.master, 4096)
             while b"\r" in self._buf:
                 line, self._buf = self._buf.split(b"\r", 1)
@@ -92,23 +89,23 @@ class RawAdapter:
 async def raw_open(**options: object) -> AsyncIterator[tuple[SlcanTransport, RawAdapter]]:
     adapter = RawAdapter()
     transport = SlcanTransport(adapter.path, reopen=False, **options)  # type: ignore[arg-type]
-    answering = asyncio.ensure_future(adapter.answer_open())
     try:
-        await transport.open()
-        await answering
-        assert adapter.commands == [b"C", b"S8", b"O"]
-        yield transport, adapter
+        async with anyio.create_task_group() as answering:
+            answering.start_soon(adapter.answer_open)
+            await transport.open()  # answered up to O before it returns
+            assert adapter.commands == [b"C", b"S8", b"O"]
+            try:
+                yield transport, adapter
+            finally:
+                await transport.close()
+                answering.cancel_scope.cancel()
     finally:
-        answering.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await answering
-        await transport.close()
         adapter.close()
 
 
 async def receive_n(transport: SlcanTransport, n: int, timeout: float = 2.0) -> list[Frame]:
     frames: list[Frame] = []
-    async with asyncio.timeout(timeout):
+    with anyio.fail_after(timeout):
         while len(frames) < n:
             frames += await transport.receive_batch()
     return frames
@@ -117,7 +114,6 @@ async def receive_n(transport: SlcanTransport, n: int, timeout: float = 2.0) -> 
 # ---- with simulated motors ----
 
 
-@pytest.mark.asyncio
 async def test_round_trips_with_thirty_two_simulated_motors(tmp_path: object) -> None:
     network = SimCanNetwork([MyActuatorMotor(i) for i in range(1, 33)])
     port = PtyPort()
@@ -147,7 +143,6 @@ async def test_round_trips_with_thirty_two_simulated_motors(tmp_path: object) ->
     port.close()
 
 
-@pytest.mark.asyncio
 async def test_can_fd_frames_go_out_and_come_back(tmp_path: object) -> None:
     from sim._standins import Responder
 
@@ -192,7 +187,6 @@ def test_arguments_are_checked_in_one_line() -> None:
 # ---- what a broken adapter sends ----
 
 
-@pytest.mark.asyncio
 async def test_a_malformed_line_is_one_bad_frame_and_the_transport_stays_open() -> None:
     """Issue 14: ``t12\\r`` made CanTransport declare python-can's slcan adapter lost."""
     async with raw_open() as (transport, adapter):
@@ -204,11 +198,10 @@ async def test_a_malformed_line_is_one_bad_frame_and_the_transport_stays_open() 
         assert (stats.bad_frames, stats.losses, stats.frames_in) == (4, 0, 1)
         transport.send(Frame(arbitration_id=0x141, data=b"\x01"))
         await transport.drain()
-        await asyncio.sleep(0.01)
+        await anyio.sleep(0.01)
         assert adapter.read_all() == b"t141101\r"
 
 
-@pytest.mark.asyncio
 async def test_a_dlc_that_disagrees_with_the_data_is_counted_and_dropped() -> None:
     """Issue 14: python-can delivered ``t1238112233`` as a frame of the wrong length."""
     async with raw_open() as (transport, adapter):
@@ -216,12 +209,11 @@ async def test_a_dlc_that_disagrees_with_the_data_is_counted_and_dropped() -> No
             b"t1238112233\r" + b"t1232AABBCC\r" + b"t1230AA\r" + b"t1239" + b"00" * 9 + b"\r" + GOOD
         )
         frames = await receive_n(transport, 1)
-        await asyncio.sleep(0.02)
+        await anyio.sleep(0.02)
         assert frames == [Frame(arbitration_id=0x241, data=bytes.fromhex("9C") + bytes(7))]
         assert transport.stats().bad_frames == 4 and transport.state is TransportState.OPEN
 
 
-@pytest.mark.asyncio
 async def test_one_mebibyte_without_cr_costs_bounded_memory_and_little_loop_time() -> None:
     """Issue 14: python-can's line buffer grew without bound and held the loop for over a minute."""
     async with raw_open() as (transport, adapter):
@@ -230,18 +222,16 @@ async def test_one_mebibyte_without_cr_costs_bounded_memory_and_little_loop_time
         on_bytes = transport._on_bytes
 
         def timed(data: bytes, generation: int) -> None:
-            loop = asyncio.get_running_loop()
-            started = loop.time()
+            started = time.perf_counter()
             on_bytes(data, generation)
-            feed_s.append(loop.time() - started)
+            feed_s.append(time.perf_counter() - started)
             pending.append(transport.line_counters()["pending"])
 
         transport._on_bytes = timed  # type: ignore[method-assign]
         blob = b"t" + b"0123456789ABCDEF" * (1 << 16)
-        loop = asyncio.get_running_loop()
-        writer = loop.run_in_executor(None, adapter.inject, blob + b"\r" + GOOD)
-        (frame,) = await receive_n(transport, 1, timeout=10.0)
-        await writer
+        async with anyio.create_task_group() as writer:
+            writer.start_soon(anyio.to_thread.run_sync, adapter.inject, blob + b"\r" + GOOD)
+            (frame,) = await receive_n(transport, 1, timeout=10.0)
         assert frame.arbitration_id == 0x241
         assert sum(len(b) for b in [blob]) >= 1 << 20
         assert sum(feed_s) < 0.1, f"{sum(feed_s) * 1000:.1f} ms of loop time for 1 MiB"
@@ -252,12 +242,11 @@ async def test_one_mebibyte_without_cr_costs_bounded_memory_and_little_loop_time
         assert (stats.state, stats.bad_frames, stats.losses) == (TransportState.OPEN, 1, 0)
 
 
-@pytest.mark.asyncio
 async def test_remote_frames_replies_and_bells_are_counted_not_delivered() -> None:
     async with raw_open() as (transport, adapter):
         adapter.inject(b"r1230\rR000001230\r\az\rZ\r\r" + GOOD)
         await receive_n(transport, 1)
-        await asyncio.sleep(0.02)
+        await anyio.sleep(0.02)
         counters = transport.line_counters()
         assert (counters["remote"], counters["bells"], counters["acks"]) == (2, 1, 2)
         stats = transport.stats()
@@ -267,7 +256,6 @@ async def test_remote_frames_replies_and_bells_are_counted_not_delivered() -> No
 # ---- a stalled adapter: backpressure, freshness, no spinning ----
 
 
-@pytest.mark.asyncio
 async def test_a_stalled_adapter_is_backpressure_and_nothing_is_written_late() -> None:
     """The far end stops reading: the kernel fills, the writer waits without spinning, frames that
     wait longer than stale_after_s are dropped (counted and reported), the transport stays OPEN, and
@@ -284,17 +272,17 @@ async def test_a_stalled_adapter_is_backpressure_and_nothing_is_written_late() -
                 sent_ids += 1
 
         send_some(2000)  # ~30 KB of lines: more than a pty takes
-        await asyncio.sleep(0.05)
+        await anyio.sleep(0.05)
         stats = transport.stats()
         assert 0 < stats.frames_out < 2000 and stats.queue_depth + stats.frames_out <= 2000
         cpu = time.process_time()
-        await asyncio.sleep(0.5)  # stalled for longer than stale_after_s
+        await anyio.sleep(0.5)  # stalled for longer than stale_after_s
         assert time.process_time() - cpu < 0.15, "the writer spins while the adapter is stalled"
         assert transport.state is TransportState.OPEN
         written_before = transport.stats().frames_out
         received = adapter.read_all()  # the adapter wakes up
         for _ in range(50):
-            await asyncio.sleep(0.01)
+            await anyio.sleep(0.01)
             received += adapter.read_all()
         stats = transport.stats()
         assert stats.stale > 0 and stats.losses == 0
@@ -310,23 +298,20 @@ async def test_a_stalled_adapter_is_backpressure_and_nothing_is_written_late() -
 # ---- opening ----
 
 
-@pytest.mark.asyncio
 async def test_an_adapter_that_refuses_the_bit_rate_fails_the_open() -> None:
     adapter = RawAdapter(refuse=b"S8")
-    answering = asyncio.ensure_future(adapter.answer_open())
     try:
-        transport = SlcanTransport(adapter.path, reopen=False)
-        with pytest.raises(TransportError, match=r"refused 'S8' \(BEL\)"):
-            await transport.open()
-        assert transport.state is TransportState.CLOSED
+        async with anyio.create_task_group() as answering:
+            answering.start_soon(adapter.answer_open)
+            transport = SlcanTransport(adapter.path, reopen=False)
+            with pytest.raises(TransportError, match=r"refused 'S8' \(BEL\)"):
+                await transport.open()
+            assert transport.state is TransportState.CLOSED
+            answering.cancel_scope.cancel()
     finally:
-        answering.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await answering
         adapter.close()
 
 
-@pytest.mark.asyncio
 async def test_a_port_that_answers_nothing_fails_the_open_within_the_timeout() -> None:
     adapter = RawAdapter(answer=b"")
     try:
@@ -339,7 +324,6 @@ async def test_a_port_that_answers_nothing_fails_the_open_within_the_timeout() -
         adapter.close()
 
 
-@pytest.mark.asyncio
 async def test_a_missing_port_is_a_transport_error() -> None:
     with pytest.raises(TransportError, match="cannot open"):
         await SlcanTransport("/dev/nonexistent-slcan", reopen=False).open()

@@ -1,7 +1,9 @@
-"""Transports: frames to and from real devices, asyncio, with counters and recovery.
+"""Transports: frames to and from real devices, on anyio (asyncio or trio), with counters and recovery.
 
-One interface (:class:`Transport`: ``open``/``close``, ``send``, ``drain``, ``receive``,
-``async for``, ``events``, ``stats``) over two kinds of line:
+Every transport is a :class:`~servobus.transports.contract.FrameLink` (``rules``, ``stats()``,
+``send(frame, handle)`` with reports that echo the handle, open and close in one task). One
+interface (:class:`Transport`: ``open``/``close``, ``send``, ``drain``, ``receive``, ``async for``,
+``events``, ``stats``, ``rules``) over these lines:
 
 * ``"can"``: :class:`CanTransport`, any python-can interface, CAN and CAN FD, carrying
   :class:`~servobus.frame.Frame`.
@@ -13,7 +15,8 @@ One interface (:class:`Transport`: ``open``/``close``, ``send``, ``drain``, ``re
   declared serial lines, ``Family.serial``, give the framing by name, its baud rates and parity).
 * ``"sim"``: :class:`SimTransport`, the in-process bus onto a simulated CAN network
   (:class:`~servobus.sim.network.SimCanNetwork`), on the event loop's clock (virtual time under
-  ``looptime`` or :func:`servobus.sim.virtual.run`), carrying :class:`~servobus.frame.Frame`.
+  ``looptime``, :func:`servobus.sim.virtual.run` or trio's ``MockClock``), carrying
+  :class:`~servobus.frame.Frame`.
 
 :func:`create_transport` builds one by name; third-party transports register under the
 ``servobus.transports`` entry-point group. The heavy modules load on first use.
@@ -25,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 
 from servobus import _plugins
 from servobus.transports.base import SendQueueFull, Transport
+from servobus.transports.contract import FrameLink, LineRules
 from servobus.transports.events import (
     BusOff,
     CanErrorClass,
@@ -48,7 +52,9 @@ __all__ = [
     "CanErrorClass",
     "CanTransport",
     "ErrorFrame",
+    "FrameLink",
     "FramesDropped",
+    "LineRules",
     "SendQueueFull",
     "SerialTransport",
     "SimTransport",

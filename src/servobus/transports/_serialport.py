@@ -1,26 +1,48 @@
-"""What the serial transports (RS485 lines, the native SLCAN adapter) share: opening a port through
-pyserial-asyncio-fast, its callbacks, and letting go of it (private).
+"""What the serial transports (RS485 lines, the native SLCAN adapter) share: one open port, read and
+written through its file descriptor on the running loop, asyncio or trio (private).
 
-pyserial-asyncio-fast is imported when a port opens, so CAN-only users never load it. Its reading side
-is used as it is (one reader on the loop, 16 KiB per wake-up instead of its 1 KiB); both transports
-write to the port's file descriptor themselves (see their module docstrings for why).
+pyserial opens and configures the port (baud rate, parity, the exclusive lock; any pyserial URL with a
+file descriptor); from then on the port is a non-blocking descriptor:
+
+* **Reading**: a :class:`~servobus.transports._watch.ReadWatch` (asyncio's reader callback, a task on
+  trio) reads up to ``read_size`` bytes per wake-up and hands them to the owner. EOF or an OS error is
+  a lost port, reported once.
+* **Writing**: ``os.write`` (never blocks; EAGAIN raises ``BlockingIOError``), ``wait_writable`` when
+  the kernel is full, ``TIOCOUTQ`` for what the OS still holds and ``tcflush`` to discard it.
+
+Why not pyserial-asyncio-fast any more: it is asyncio only, and the transports already wrote to the
+descriptor themselves (its write path spins on a slow port: see rs485's docstring). Its read side was
+the loop's reader callback calling ``Serial.read``; :class:`ReadWatch`'s asyncio lane is that same
+callback around ``os.read``, so asyncio keeps its speed (bench: ``transport`` part) and trio gets a path.
+
+pyserial is imported when a port opens, so CAN-only users never load it.
 """
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
+import errno
+import fcntl
+import os
+import struct
+import termios
 from typing import Any, Protocol
 
-from servobus.errors import TransportError
+import anyio
+from anyio.abc import TaskGroup
 
-__all__ = ["LineProtocol", "Owner", "close_port", "open_port"]
+from servobus.errors import TransportError
+from servobus.runtime import Runtime
+from servobus.transports._watch import ReadWatch
+
+__all__ = ["Owner", "SerialPort"]
 
 READ_SIZE = 16384  # bytes taken from the port per wake-up, at most
+_TIOCOUTQ_ARG = bytes(4)
 
 
 class Owner(Protocol):
-    """The transport a port's callbacks go to (tagged with its connection's generation)."""
+    """The transport a port's reads go to (tagged with its connection's generation)."""
 
     name: str
 
@@ -29,57 +51,123 @@ class Owner(Protocol):
     def _lose(self, cause: BaseException, generation: int | None = None) -> None: ...
 
 
-class LineProtocol(asyncio.Protocol):
-    """pyserial-asyncio-fast's callbacks, forwarded to the transport of one connection."""
+class SerialPort:
+    """One open port: reads go to ``owner`` from :meth:`open` until :meth:`close`.
 
-    def __init__(self, owner: Owner, generation: int) -> None:
+    Attributes:
+        serial: the pyserial object (for the port's settings; never read or written through it).
+        fd: the port's non-blocking descriptor.
+        failed: the port failed (reported to the owner once) or was closed: write no more.
+    """
+
+    def __init__(self, owner: Owner, generation: int, serial: Any, fd: int, read_size: int) -> None:
+        self.serial = serial
+        self.fd = fd
+        self.failed = False
         self._owner = owner
         self._generation = generation
-        self.closed: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        self._read_size = read_size
+        self._watch: ReadWatch | None = None
 
-    def data_received(self, data: bytes) -> None:
+    @classmethod
+    def open(
+        cls,
+        owner: Owner,
+        generation: int,
+        port: str,
+        runtime: Runtime,
+        tasks: TaskGroup,
+        *,
+        read_size: int = READ_SIZE,
+        **serial_options: Any,
+    ) -> SerialPort:
+        """Open ``port`` with pyserial and start reading it.
+
+        Raises:
+            TransportError: the port cannot be opened or has no file descriptor (chained to the cause).
+        """
+        import serial
+
+        try:
+            device = serial.serial_for_url(port, timeout=0, write_timeout=0, **serial_options)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise TransportError(f"{owner.name}: cannot open: {exc}") from exc
+        try:
+            fd = device.fileno()
+            os.set_blocking(fd, False)
+        except (AttributeError, OSError, ValueError, TypeError, NotImplementedError) as exc:
+            device.close()
+            raise TransportError(f"{owner.name}: {port!r} has no file descriptor to read") from exc
+        line = cls(owner, generation, device, fd, read_size)
+        line._watch = ReadWatch(runtime, tasks, fd, line._on_readable, owner.name)
+        line._watch.start()
+        return line
+
+    def _on_readable(self) -> None:
+        try:
+            data = os.read(self.fd, self._read_size)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError as exc:  # EIO: unplugged, or the pty's far end closed
+            self._fail(exc)
+            return
+        if not data:
+            self._fail(ConnectionError("the port closed (end of file)"))
+            return
         self._owner._on_bytes(data, self._generation)
 
-    def connection_lost(self, exc: Exception | None) -> None:
-        if not self.closed.done():
-            self.closed.set_result(None)
-        if exc is None:
-            exc = ConnectionError("the port closed")
-        self._owner._lose(exc, self._generation)
+    def _fail(self, cause: BaseException) -> None:
+        if self._watch is not None:
+            self._watch.cancel()  # a vanished port stays readable: stop watching it
+        self.failed = True
+        self._owner._lose(cause, self._generation)
 
+    # ----------------------------------------------------------------- writing
 
-async def open_port(
-    owner: Owner, generation: int, port: str, *, read_size: int = READ_SIZE, **serial_options: Any
-) -> tuple[asyncio.Transport, LineProtocol]:
-    """Open ``port`` with pyserial-asyncio-fast, its reads (``read_size`` bytes at most per wake-up)
-    going to ``owner``.
+    def write(self, data: bytes | memoryview) -> int:
+        """Hand bytes to the kernel without blocking: how many it took.
 
-    Raises:
-        TransportError: the port cannot be opened (chained to the cause).
-    """
-    import serial
-    import serial_asyncio_fast
+        Raises:
+            BlockingIOError: it takes nothing now (wait with :meth:`wait_writable`).
+            OSError: the port failed.
+        """
+        return os.write(self.fd, data)
 
-    loop = asyncio.get_running_loop()
-    protocol = LineProtocol(owner, generation)
-    try:
-        line, _ = await serial_asyncio_fast.create_serial_connection(
-            loop, lambda: protocol, port, **serial_options
-        )
-    except (serial.SerialException, OSError, ValueError) as exc:
-        raise TransportError(f"{owner.name}: cannot open: {exc}") from exc
-    # pyserial-asyncio-fast reads at most 1 KiB per wake-up (its own TODO says so); a larger read
-    # takes a burst in one call, which is what the de-framers are built for.
-    if hasattr(line, "_max_read_size"):
-        line._max_read_size = read_size
-    return line, protocol
+    async def wait_writable(self, timeout_s: float | None = None) -> bool:
+        """Until the kernel takes bytes again: True, or False when ``timeout_s`` passed first."""
+        with anyio.move_on_after(timeout_s):
+            await anyio.wait_writable(self.fd)
+            return True
+        return False
 
+    def out_waiting(self) -> int:
+        """Bytes the OS still holds for the port (0 where the driver cannot tell, as on a pty).
 
-async def close_port(line: asyncio.Transport | None, protocol: LineProtocol | None) -> None:
-    """Abort ``line`` and wait (1 s at most) until its connection_lost has run."""
-    if line is None or protocol is None:
-        return
-    if not line.is_closing():  # a failed line is already closing (closing twice breaks it)
-        line.abort()
-    with contextlib.suppress(TimeoutError):
-        await asyncio.wait_for(asyncio.shield(protocol.closed), 1.0)
+        Raises:
+            OSError: the port failed.
+        """
+        try:
+            return int(struct.unpack("I", fcntl.ioctl(self.fd, termios.TIOCOUTQ, _TIOCOUTQ_ARG))[0])
+        except OSError as exc:
+            if exc.errno in (errno.ENOTTY, errno.EINVAL, errno.ENOTSUP, errno.EOPNOTSUPP):
+                return 0
+            raise
+
+    def flush_output(self) -> bool:
+        """Discard what the OS holds for the port and has not sent (``tcflush``): True if it could."""
+        try:
+            termios.tcflush(self.fd, termios.TCOFLUSH)
+        except OSError:
+            return False
+        return True
+
+    # ----------------------------------------------------------------- closing
+
+    async def close(self) -> None:
+        """Stop reading (waiting until the reader is done with the descriptor), then close the port."""
+        self.failed = True  # no longer usable: a writer that still holds it stops
+        if self._watch is not None:
+            await self._watch.stop()
+            self._watch = None
+        with contextlib.suppress(Exception):  # a vanished port cannot be closed cleanly
+            self.serial.close()

@@ -1,54 +1,80 @@
-"""The transport base: one reader, one writer, a bounded send queue, waiters that fail together.
+"""The transport base: one device, a bounded send queue and its writer, a receive side, loss and reopen.
 
-A concrete transport (CAN through python-can, RS485 through pyserial-asyncio-fast) supplies three
-things: how to open its device (:meth:`Transport._connect`), how to let go of it
-(:meth:`Transport._disconnect`), and how to put a batch of queued frames on the wire
-(:meth:`Transport._transmit`). It hands received frames to :meth:`Transport._deliver` and reports a
-failed device with :meth:`Transport._lose`. Everything else is here, once:
+Everything here runs on anyio, on asyncio or on trio: the loop's hot-path operations come from
+:func:`servobus.runtime.current` (taken by :meth:`Transport.open`), background tasks live in a task
+group the transport owns (entered by ``open()``, left by ``close()`` in the same task: nothing
+outlives ``close()``, and an unexpected error of those tasks is raised by it, not lost).
 
 * **Sending never blocks the loop.** :meth:`Transport.send` appends to a bounded queue and
-  returns; one writer task empties it in batches. A full queue raises :class:`SendQueueFull`;
-  ``await drain()`` waits until everything queued has been written.
-* **Receiving is pushed**: :meth:`Transport.set_consumer` makes the transport call one consumer
-  (the Bus's intake) on the event loop with every batch of received frames. Without a consumer,
-  frames wait in a bounded buffer read by :meth:`Transport.receive`, :meth:`Transport.receive_batch`
-  or ``async for frame in transport``; when nobody reads, the oldest are dropped and counted, never
-  memory without end.
-* **Every send is accounted for**: :meth:`Transport.set_send_reporter` gets
-  ``reporter(item, sent_at, None)`` when a frame left (``sent_at`` on the loop's clock), or
-  ``reporter(item, None, reason)`` when it never will (``"stale"``, ``"purged"``, ``"enobufs_dropped"``).
-* **No hop where none is needed**: a transport whose device never blocks (python-can's ``virtual``,
-  the in-process simulator) writes a frame from :meth:`Transport.send` itself when nothing is queued
-  ahead of it.
+  returns; one writer task empties it in batches. A full queue raises :class:`SendQueueFull` (a
+  :class:`~servobus.errors.TransportError`); ``await drain()`` waits until everything queued has
+  been written. A transport whose device never blocks (python-can's ``virtual``, the in-process
+  simulator) writes a frame from ``send()`` itself when nothing is queued ahead of it.
+* **Every send is accounted for, by its handle**: ``send(frame, handle)`` (the FrameLink contract,
+  :mod:`servobus.transports.contract`); the reporter set by :meth:`Transport.set_send_reporter`
+  gets ``reporter(handle, sent_at, None)`` when the frame left (``sent_at`` on the loop's clock) or
+  ``reporter(handle, None, reason)`` when it never will (``"stale"``, ``"purged"``,
+  ``"enobufs_dropped"``). With no handle, the frame is the handle.
+* **Receiving is pushed** to one consumer (:meth:`Transport.set_consumer`), or buffered (bounded,
+  the oldest dropped and counted) for :meth:`Transport.receive`, ``receive_batch`` and ``async for``.
 * **Loss.** When the device fails, every pending ``receive()`` and ``drain()`` raises
   :class:`~servobus.errors.TransportError` (chained to the cause) at once, the state goes to
-  ``LOST``, the queued frames are purged (counted), and a background task reopens the device with
-  exponential backoff. Frames queued before an outage are never replayed onto a bus whose motors
-  may just have restarted; frames that waited longer than ``stale_after_s`` are dropped too.
+  ``LOST``, the queued frames are purged, and a recovery task reopens the device with exponential
+  backoff. Frames queued before an outage are never replayed; frames older than ``stale_after_s``
+  when their turn comes are dropped.
 * **Events** (state changes, error frames, bus-off, drops) go to listeners and :meth:`events`.
+  Received frames carry the loop's clock (``anyio.current_time()``).
 
-Received frames carry the time the transport read them on the event loop's clock (``loop.time()``,
-which is ``time.monotonic()`` on a plain asyncio loop and the virtual clock under ``looptime``), so
-they compare directly with ``loop.time()`` deadlines.
+**The subclass interface** (what a concrete transport writes, and what it may call):
+
+* ``async _connect()``: open the device (tag callbacks with ``self._generation``); start its reader
+  tasks in ``self._tasks`` (the transport's task group, there from ``_connect`` on, on a first open
+  and on every reopen; ``_connect`` always runs in a task: ``open()``'s or the recovery task's, and
+  anyio starts no task from a bare loop callback); raise TransportError when it cannot.
+* ``async _disconnect()``: release the device; never raises for a device already gone. It runs
+  after the task group's tasks have ended on ``close()``, and in the recovery task after a loss
+  (the reader tasks of the lost connection must then stop by themselves: check the generation).
+* ``async _transmit(batch)``: write a list of :class:`Outgoing` in order, taking each off the front
+  as it goes; report each with ``self._sent(outgoing.handle, sent_at)``; call ``_lose`` on failure.
+  What is still in ``batch`` when it returns or is cancelled is reported purged by the base.
+* ``_write_now(item, handle) -> bool`` (only while ``self._direct``): write from ``send()``'s
+  stack; True when written (counted and reported with ``_sent(handle, now)`` by the subclass).
+* ``send(frame, handle=None, ...)``: a subclass's public send calls
+  ``self._enqueue(item, hold_s, handle)``.
+* It calls (on the loop, from a task or a loop callback): ``_deliver(frames)``, ``_lose(cause,
+  generation)`` (a loss wakes the recovery task, which runs from open to close), ``_sent(handle,
+  sent_at)``, ``_dropped(reason, handles_or_count)``, ``_set_state``, ``_emit(event)``, ``_now()``,
+  ``_error()``; it counts into ``self._stats`` and ``self._load``; ``self._runtime`` (the
+  :class:`~servobus.runtime.Runtime`: ``time``, ``call_soon``, ``call_soon_threadsafe``,
+  ``waiter``) replaces the asyncio loop; ``self._tasks`` is where its tasks start.
+* It declares its line: attributes or properties ``half_duplex``, ``bitrate``, ``gap_s``,
+  ``turnaround_s`` (and ``stale_after_s`` from the constructor) make :attr:`Transport.rules`.
 """
 
 from __future__ import annotations
 
 import abc
-import asyncio
-import contextlib
 import copy
 import logging
 import time
 import warnings
-from collections import deque
-from collections.abc import AsyncIterator, Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable
 from types import TracebackType
-from typing import ClassVar, Generic, Self, TypeVar
+from typing import Any, ClassVar, Generic, Self, TypeVar
 
+import anyio
+from anyio.abc import TaskGroup
+
+from servobus import runtime as _runtime
 from servobus.errors import TransportError
-from servobus.transports.events import FramesDropped, StateChanged, TransportEvent, TransportState
+from servobus.transports._inbox import Inbox, ReceiveSide
+from servobus.transports._listeners import EventSource, Listeners
+from servobus.transports._owned import OwnedTaskGroup
+from servobus.transports._recovery import Recovery
+from servobus.transports._sending import Outgoing, SendQueue, SendQueueFull, SendReporter, SendReports
+from servobus.transports._waiters import WaiterList
+from servobus.transports.contract import LineRules
+from servobus.transports.events import StateChanged, TransportState
 from servobus.transports.stats import LoadMeter, TransportStats
 
 __all__ = ["Consumer", "Outgoing", "SendQueueFull", "SendReporter", "Transport"]
@@ -60,28 +86,13 @@ TxT = TypeVar("TxT")
 
 #: ``consumer(frames)``: a batch of received frames, called on the event loop.
 Consumer = Callable[[list[RxT]], object]
-#: ``reporter(item, sent_at, reason)``: ``sent_at`` when the item left, else ``reason`` it never will.
-SendReporter = Callable[[TxT, float | None, str | None], object]
 
 
-class SendQueueFull(TransportError, asyncio.QueueFull):
-    """A non-blocking send found the queue full: back off, or ``await drain()`` first."""
+class Transport(ReceiveSide[RxT], SendReports, EventSource, abc.ABC, Generic[RxT, TxT]):
+    """Frames out through a bounded queue, frames in through a consumer or a buffer, one device.
 
-
-@dataclass(slots=True)
-class Outgoing(Generic[TxT]):
-    """One queued frame: what to write, when it was queued, how long the line stays ours after it."""
-
-    item: TxT
-    queued_at: float
-    hold_s: float | None = None
-
-
-class Transport(abc.ABC, Generic[RxT, TxT]):
-    """Frames out through a bounded queue, frames in through a bounded buffer, one device.
-
-    Use it as an async context manager (``async with CanTransport(...) as bus:``) or call
-    :meth:`open` and :meth:`close`.
+    Use it as an async context manager (``async with CanTransport(...) as bus:``), or call
+    :meth:`open` and :meth:`close` from the same task.
 
     Args:
         name: a label for errors and logs.
@@ -111,35 +122,24 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
             raise ValueError(f"queue_size={queue_size} and rx_buffer={rx_buffer} must be at least 1")
         if stale_after_s is not None and stale_after_s <= 0:
             raise ValueError(f"stale_after_s={stale_after_s} must be positive (or None)")
-        first, longest = reopen_backoff_s
-        if not 0 < first <= longest:
-            raise ValueError(f"reopen_backoff_s={reopen_backoff_s} must be 0 < first <= longest")
         self.name = name
-        self._queue_size = queue_size
-        self._rx_capacity = rx_buffer
         self._stale_after_s = stale_after_s
-        self._reopen = reopen
-        self._backoff = (first, longest)
+        self._recovery = Recovery(self, reopen, reopen_backoff_s)
         self._state = TransportState.CLOSED
         self._stats = TransportStats()
         self._load = LoadMeter()
         self._load_known = False  # subclasses set it when they know the line's bit rate
-        self._queue: deque[Outgoing[TxT]] = deque()
-        self._rx: deque[RxT] = deque()
-        self._rx_waiters: list[asyncio.Future[None]] = []
-        self._idle_waiters: list[asyncio.Future[None]] = []
-        self._open_waiters: list[asyncio.Future[None]] = []
-        self._writer_wake: asyncio.Future[None] | None = None
-        self._writer: asyncio.Task[None] | None = None
-        self._recovery: asyncio.Task[None] | None = None
-        self._transmitting = False
-        self._listeners: list[Callable[[TransportEvent], object]] = []
+        self._sending: SendQueue[TxT] = SendQueue(self, queue_size, stale_after_s)
+        self._queue = self._sending.items  # the send queue itself (read on every send)
+        self._inbox: Inbox[RxT] = Inbox(name, rx_buffer, lambda count: self._dropped("rx_overflow", count))
+        self._open_waiters = WaiterList()
+        self._listeners = Listeners(name)
+        self._owned = OwnedTaskGroup(name)
         self._failure: tuple[str, BaseException | None] | None = ("not open", None)
         self._generation = 0  # bumped per connection: callbacks of an old one are ignored
-        self._loop: asyncio.AbstractEventLoop | None = None
+        self._runtime: _runtime.Runtime | None = None
         self._ever_opened = False
-        self._consumer: Consumer[RxT] | None = None
-        self._reporter: SendReporter[TxT] | None = None
+        self._reporter: SendReporter | None = None
         #: set by a subclass whose device never blocks a write: send() then writes at once when
         #: nothing is queued ahead (see :meth:`_write_now`)
         self._direct = False
@@ -148,7 +148,8 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
 
     @abc.abstractmethod
     async def _connect(self) -> None:
-        """Open the device and start reading; tag callbacks with ``self._generation``.
+        """Open the device and start reading (tasks in ``self._tasks``); tag callbacks with
+        ``self._generation``.
 
         Raises:
             TransportError: the device cannot be opened (chained to the cause).
@@ -160,26 +161,37 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
 
     @abc.abstractmethod
     async def _transmit(self, batch: list[Outgoing[TxT]]) -> None:
-        """Write ``batch`` in order, count it, and call :meth:`_lose` if the device fails.
+        """Write ``batch`` in order, count and report (``_sent(o.handle, at)``) each, and call
+        :meth:`_lose` if the device fails. Take each frame off the front of ``batch`` as it goes
+        out; whatever is left when this returns or is cancelled is reported purged by the base."""
 
-        Take each frame off the front of ``batch`` as it goes out (a writer thread that accounts
-        for its frames itself may take them all at once). Whatever is still in ``batch`` when this
-        returns, or when a loss or close cancels it, is counted as purged here in the base.
-        """
-
-    def _write_now(self, item: TxT) -> bool:
+    def _write_now(self, item: TxT, handle: Any) -> bool:
         """Write ``item`` from the caller's stack (only called while ``self._direct`` is True).
 
         Returns:
-            True when written (counted and reported here by the subclass); False to queue it
-            instead (the device cannot take it now).
+            True when written (counted, and reported with ``_sent(handle, now)``, by the subclass);
+            False to queue it instead (the device cannot take it now).
         """
         raise NotImplementedError
 
     def _now(self) -> float:
-        """The event loop's clock (time.monotonic() before the transport was first opened)."""
-        loop = self._loop
-        return loop.time() if loop is not None else time.monotonic()
+        """The loop's clock (time.monotonic() before the transport was first opened, or once the
+        trio run it was opened in has ended: trio's clock exists only inside its run)."""
+        lane = self._runtime
+        if lane is None:
+            return time.monotonic()
+        try:
+            return lane.time()
+        except RuntimeError:
+            return time.monotonic()
+
+    @property
+    def _tasks(self) -> TaskGroup:
+        """The transport's task group (from :meth:`_connect` on, until :meth:`close`)."""
+        group = self._owned.group
+        if group is None:
+            raise RuntimeError(f"{self.name}: no task group: the transport is not open")
+        return group
 
     # ----------------------------------------------------------------- life cycle
 
@@ -193,11 +205,28 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
         return self._stale_after_s
 
     @property
+    def rules(self) -> LineRules:
+        """The line's rules (the FrameLink contract), from what the subclass declares.
+
+        A subclass declares ``half_duplex``, ``bitrate``, ``gap_s`` and ``turnaround_s`` as
+        attributes or properties (those it lacks take LineRules' defaults); ``stale_after_s`` is the
+        constructor's.
+        """
+        half_duplex = bool(getattr(self, "half_duplex", False))
+        return LineRules(
+            half_duplex=half_duplex,
+            bitrate=getattr(self, "bitrate", None),
+            gap_s=float(getattr(self, "gap_s", 0.0) or 0.0),
+            turnaround_s=float(getattr(self, "turnaround_s", 0.0) or 0.0),
+            stale_after_s=self._stale_after_s,
+        )
+
+    @property
     def is_open(self) -> bool:
         return self._state is TransportState.OPEN
 
     async def open(self) -> None:
-        """Open the device.
+        """Open the device, and enter the transport's task group in the calling task.
 
         Raises:
             TransportError: it cannot be opened (the cause is chained); the state stays CLOSED.
@@ -205,52 +234,67 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
         """
         if self._state is not TransportState.CLOSED:
             raise RuntimeError(f"{self.name} is already {self._state.value}")
-        self._loop = asyncio.get_running_loop()
+        self._runtime = lane = _runtime.current()
+        tasks = await self._owned.enter()
+        tasks.start_soon(self._recovery.watch, lane, name=f"{self.name} recovery")
         self._set_state(TransportState.OPENING)
         self._generation += 1
         try:
             await self._connect()
         except BaseException:
-            self._set_state(TransportState.CLOSED)
+            self._generation += 1
+            try:
+                await self._owned.leave()  # (no shield around it: the group must be the innermost)
+            finally:
+                self._set_state(TransportState.CLOSED)
             raise
         self._ever_opened = True
         self._connected()
 
     async def close(self) -> None:
-        """Stop, drop whatever is still queued (counted as purged) and release the device.
+        """Stop, drop whatever is still queued (reported purged) and release the device.
 
-        Pending receivers raise :class:`~servobus.errors.TransportError`; ``async for`` loops end.
-        Closing twice is harmless.
+        Call it from the task that opened the transport (not inside a cancel scope entered after
+        ``open()``). Pending receivers raise :class:`~servobus.errors.TransportError`; ``async for``
+        loops end. Closing twice is harmless.
+
+        Raises:
+            RuntimeError: called from another task than the one that opened the transport.
+            BaseExceptionGroup: a task of the transport failed (after the transport is closed).
         """
+        await self._close(None, None, None)
+
+    async def _close(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> bool:
         if self._state is TransportState.CLOSED:
-            return
+            return False
+        self._owned.check_owner("close()")
         self._generation += 1
         self._failure = ("closed", None)
         self._state = TransportState.CLOSED  # announced last, after the drops it causes
-        for task in (self._recovery, self._writer):
-            if task is not None and task is not asyncio.current_task():
-                task.cancel()
-                with contextlib.suppress(asyncio.CancelledError):
-                    await task
-        self._recovery = self._writer = None
-        self._purge("purged")
-        self._fail_waiters(self._open_waiters)
-        self._fail_waiters(self._rx_waiters)
-        self._fail_waiters(self._idle_waiters)
-        await self._disconnect()  # also when LOST: the recovery task may not have got to it
-        self._set_state(TransportState.CLOSED)
+        self._sending.stop()
+        try:
+            return await self._owned.leave(exc_type, exc, tb)
+        finally:
+            with anyio.CancelScope(shield=True):
+                self._sending.purge("purged")
+                self._open_waiters.fail_all(self._error)
+                self._inbox.readers.fail_all(self._error)
+                self._sending.idle.fail_all(self._error)
+                await self._disconnect()  # also when LOST: the recovery task may not have got to it
+                self._set_state(TransportState.CLOSED)
 
     async def __aenter__(self) -> Self:
         await self.open()
         return self
 
     async def __aexit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        await self.close()
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> bool:
+        if exc is not None and not isinstance(exc, anyio.get_cancelled_exc_class()):
+            exc_type, exc, tb = None, None, None  # the block's own error is not the task group's
+        return await self._close(exc_type, exc, tb)
 
     def __del__(self) -> None:
         if getattr(self, "_ever_opened", False) and self._state is not TransportState.CLOSED:
@@ -265,66 +309,25 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
         """
         if self._state is TransportState.OPEN:
             return
-        if self._state is TransportState.CLOSED:
+        if self._state is TransportState.CLOSED or self._runtime is None:
             raise self._error()
-        async with asyncio.timeout(timeout):
-            await _park(self._open_waiters)
+        with anyio.fail_after(timeout):
+            await self._open_waiters.park(self._runtime)
 
     def _connected(self) -> None:
         self._failure = None
         self._set_state(TransportState.OPEN)
-        self._writer = asyncio.get_running_loop().create_task(
-            self._write_loop(self._generation), name=f"{self.name} writer"
-        )
-        for waiter in self._open_waiters:
-            _wake(waiter)
+        self._sending.start(self._tasks, self._generation)
+        self._open_waiters.wake_all()
 
     def _lose(self, cause: BaseException, generation: int | None = None) -> None:
         """The device failed: fail every waiter at once, purge the queue, start reopening.
 
         Safe to call more than once and from stale callbacks (``generation`` of an older
-        connection): only the first call for the current connection acts.
+        connection): only the first call for the current connection acts. Call it on the loop.
         """
-        if self._state is not TransportState.OPEN or generation not in (None, self._generation):
-            return
-        logger.warning("%s: device lost: %s", self.name, cause)
-        self._stats.losses += 1
-        self._generation += 1
-        self._failure = ("device lost", cause)
-        self._set_state(TransportState.LOST, cause)
-        if self._writer is not None and self._writer is not asyncio.current_task():
-            self._writer.cancel()
-        self._writer = None
-        self._transmitting = False
-        self._purge("purged")
-        self._fail_waiters(self._rx_waiters)
-        self._fail_waiters(self._idle_waiters)
-        assert self._loop is not None
-        self._recovery = self._loop.create_task(self._recover(), name=f"{self.name} recovery")
-
-    async def _recover(self) -> None:
-        with contextlib.suppress(Exception):
-            await self._disconnect()
-        if not self._reopen:
-            return
-        delay, longest = self._backoff
-        while self._state is TransportState.LOST:
-            await asyncio.sleep(delay)
-            self._generation += 1
-            try:
-                await self._connect()
-            except Exception as exc:  # the device is still away (or refuses): try again later
-                log = logger.debug if isinstance(exc, TransportError) else logger.warning
-                log("%s: reopen failed: %s", self.name, exc)
-                delay = min(2 * delay, longest)
-                continue
-            if self._state is not TransportState.LOST:  # closed while we were opening
-                await self._disconnect()
-                return
-            self._stats.reopens += 1
-            logger.info("%s: reopened", self.name)
-            self._recovery = None
-            self._connected()
+        if self._state is TransportState.OPEN and generation in (None, self._generation):
+            self._recovery.lose(cause)
 
     def _set_state(self, state: TransportState, cause: BaseException | None = None) -> None:
         self._state = state
@@ -337,32 +340,28 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
         error.__cause__ = cause
         return error
 
-    def _fail_waiters(self, waiters: list[asyncio.Future[None]]) -> None:
-        for waiter in waiters:
-            if not waiter.done():
-                waiter.set_exception(self._error())
-        waiters.clear()
-
     # ----------------------------------------------------------------- sending
 
-    def _enqueue(self, item: TxT, hold_s: float | None = None) -> None:
+    def _enqueue(self, item: TxT, hold_s: float | None = None, handle: Any = None) -> None:
+        """Accept ``item`` for sending (its send report will carry ``handle``, or ``item``).
+
+        Raises:
+            TransportError: the transport is not open.
+            SendQueueFull: the queue is full.
+        """
         if self._state is not TransportState.OPEN:
             raise self._error()
-        if self._direct and not self._queue and not self._transmitting and self._write_now(item):
+        if handle is None:
+            handle = item
+        sending = self._sending
+        if self._direct and not self._queue and not sending.transmitting and self._write_now(item, handle):
             return
-        if len(self._queue) >= self._queue_size:
-            self._stats.queue_full += 1
-            raise SendQueueFull(
-                f"{self.name}: send queue full ({self._queue_size} frames); await drain() before sending more"
-            )
-        self._queue.append(Outgoing(item, self._now(), hold_s))
-        if self._writer_wake is not None:
-            _wake(self._writer_wake)
+        sending.put(Outgoing(item, self._now(), hold_s, handle))
 
     @property
     def queue_room(self) -> int:
         """Frames :meth:`send` accepts now without raising :class:`SendQueueFull`."""
-        return self._queue_size - len(self._queue)
+        return self._sending.size - len(self._queue)
 
     async def drain(self) -> None:
         """Wait until every queued frame has been written (or dropped by policy).
@@ -370,192 +369,9 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
         Raises:
             TransportError: the device was lost or the transport closed meanwhile.
         """
-        while self._queue or self._transmitting:
-            if self._state is not TransportState.OPEN:
-                raise self._error()
-            await _park(self._idle_waiters)
-        if self._state is not TransportState.OPEN:
-            raise self._error()
+        await self._sending.drain()
 
-    async def _write_loop(self, generation: int) -> None:
-        loop = asyncio.get_running_loop()
-        queue = self._queue
-        while True:
-            if not queue:
-                for waiter in self._idle_waiters:
-                    _wake(waiter)
-                self._writer_wake = loop.create_future()
-                await self._writer_wake
-                self._writer_wake = None
-                continue
-            batch = [queue.popleft() for _ in range(min(self.batch_size, len(queue)))]
-            batch = self._drop_stale(batch, self._now())
-            if not batch:
-                continue
-            self._transmitting = True
-            try:
-                await self._transmit(batch)
-            except asyncio.CancelledError:
-                raise
-            except Exception as exc:  # a transmit bug must not leave the queue stuck forever
-                self._lose(exc, generation)
-                return
-            finally:
-                self._transmitting = False
-                self._dropped("purged", [o.item for o in batch])  # not written: lost, closed or failed
-            if generation != self._generation:  # _transmit lost the device
-                return
-
-    def _drop_stale(self, batch: list[Outgoing[TxT]], now: float) -> list[Outgoing[TxT]]:
-        limit = self._stale_after_s
-        if limit is None or now - batch[0].queued_at <= limit:  # the oldest is first
-            return batch
-        fresh = [item for item in batch if now - item.queued_at <= limit]
-        self._dropped("stale", [o.item for o in batch if now - o.queued_at > limit])
-        return fresh
-
-    def _purge(self, reason: str) -> None:
-        if self._queue:
-            self._dropped(reason, [o.item for o in self._queue])
-            self._queue.clear()
-
-    def _dropped(self, reason: str, items: Sequence[TxT] | int) -> None:
-        """Count frames that will never be sent, and report each one that is known."""
-        count = items if isinstance(items, int) else len(items)
-        if count:
-            setattr(self._stats, reason, getattr(self._stats, reason) + count)
-            self._emit(FramesDropped(reason, count, self._now()))
-            reporter = self._reporter
-            if reporter is not None and not isinstance(items, int):
-                for item in items:
-                    self._call(reporter, item, None, reason)
-
-    def _sent(self, item: TxT, sent_at: float) -> None:
-        """Report that ``item`` left at ``sent_at`` (a subclass calls it; counting is its own)."""
-        if self._reporter is not None:
-            self._call(self._reporter, item, sent_at, None)
-
-    def set_send_reporter(self, reporter: SendReporter[TxT] | None) -> None:
-        """Call ``reporter(item, sent_at, None)`` for every frame that left, and
-        ``reporter(item, None, reason)`` for every one dropped after :meth:`send` accepted it.
-
-        Called on the event loop; its exceptions are logged, never raised into the transport.
-        """
-        self._reporter = reporter
-
-    def _call(self, callback: Callable[..., object], *args: object) -> None:
-        try:
-            callback(*args)
-        except Exception:
-            logger.exception("%s: callback %r failed", self.name, callback)
-
-    # ----------------------------------------------------------------- receiving
-
-    def set_consumer(self, consumer: Consumer[RxT] | None) -> None:
-        """Push delivery: call ``consumer(frames)`` on the event loop with every received batch.
-
-        With a consumer, nothing is buffered for :meth:`receive`; frames already buffered are handed
-        to it at once. Its exceptions are logged, never raised into the reader. None goes back to
-        buffering.
-        """
-        self._consumer = consumer
-        if consumer is not None and self._rx:
-            frames = list(self._rx)
-            self._rx.clear()
-            self._call(consumer, frames)
-
-    def _deliver(self, frames: Sequence[RxT]) -> None:
-        """Hand received frames to the consumer, or to readers (call in the loop thread)."""
-        consumer = self._consumer
-        if consumer is not None:
-            try:
-                consumer(frames if isinstance(frames, list) else list(frames))
-            except Exception:
-                logger.exception("%s: consumer %r failed", self.name, consumer)
-            return
-        rx = self._rx
-        rx.extend(frames)
-        if (overflow := len(rx) - self._rx_capacity) > 0:
-            for _ in range(overflow):
-                rx.popleft()
-            self._dropped("rx_overflow", overflow)
-        for waiter in self._rx_waiters:
-            _wake(waiter)
-
-    async def receive(self) -> RxT:
-        """The next received frame (frames received before a loss or close come first).
-
-        Raises:
-            TransportError: the device is lost or the transport closed, and nothing is buffered.
-        """
-        while True:
-            if self._rx:
-                return self._rx.popleft()
-            await self._wait_rx()
-
-    async def receive_batch(self, max_frames: int | None = None) -> list[RxT]:
-        """Every buffered frame (at most ``max_frames``), waiting for at least one."""
-        while not self._rx:
-            await self._wait_rx()
-        rx = self._rx
-        if max_frames is None or max_frames >= len(rx):
-            frames = list(rx)
-            rx.clear()
-            return frames
-        return [rx.popleft() for _ in range(max_frames)]
-
-    async def _wait_rx(self) -> None:
-        if self._state is not TransportState.OPEN:
-            raise self._error()
-        await _park(self._rx_waiters)
-
-    async def __aiter__(self) -> AsyncIterator[RxT]:
-        """Received frames until the transport is closed; a loss raises TransportError."""
-        while True:
-            try:
-                yield await self.receive()
-            except TransportError:
-                if self._state is TransportState.CLOSED:
-                    return
-                raise
-
-    # ----------------------------------------------------------------- events and counters
-
-    def add_listener(self, listener: Callable[[TransportEvent], object]) -> None:
-        """Call ``listener(event)`` in the loop for every event; its exceptions are logged, not raised."""
-        self._listeners.append(listener)
-
-    def remove_listener(self, listener: Callable[[TransportEvent], object]) -> None:
-        self._listeners.remove(listener)
-
-    async def events(self, maxsize: int = 1000) -> AsyncIterator[TransportEvent]:
-        """Events as an async stream, ending after the transport closes (oldest dropped when full)."""
-        pending: deque[TransportEvent] = deque(maxlen=maxsize)
-        ready = asyncio.Event()
-
-        def collect(event: TransportEvent) -> None:
-            pending.append(event)
-            ready.set()
-
-        self.add_listener(collect)
-        try:
-            while True:
-                await ready.wait()
-                ready.clear()
-                while pending:
-                    event = pending.popleft()
-                    yield event
-                    if isinstance(event, StateChanged) and event.state is TransportState.CLOSED:
-                        return
-        finally:
-            self.remove_listener(collect)
-
-    def _emit(self, event: TransportEvent) -> None:
-        for listener in list(self._listeners):
-            try:
-                listener(event)
-            except Exception:
-                logger.exception("%s: event listener %r failed", self.name, listener)
+    # ----------------------------------------------------------------- counters
 
     def stats(self) -> TransportStats:
         """A snapshot of the counters, with the current state, queue depth and bus load."""
@@ -567,19 +383,3 @@ class Transport(abc.ABC, Generic[RxT, TxT]):
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name} {self._state.value}>"
-
-
-def _wake(future: asyncio.Future[None]) -> None:
-    if not future.done():
-        future.set_result(None)
-
-
-async def _park(waiters: list[asyncio.Future[None]]) -> None:
-    """Wait on a new future in ``waiters`` until it is woken (or failed), then leave the list."""
-    waiter = asyncio.get_running_loop().create_future()
-    waiters.append(waiter)
-    try:
-        await waiter
-    finally:
-        with contextlib.suppress(ValueError):  # already cleared by _fail_waiters
-            waiters.remove(waiter)

@@ -1,4 +1,4 @@
-"""RS485 serial lines through pyserial-asyncio-fast: Frames in and out, the framing chosen by the family.
+"""RS485 serial lines on the port's descriptor: Frames in and out, the framing chosen by the family.
 
 One :class:`SerialTransport` is one port and one half-duplex line:
 
@@ -18,22 +18,23 @@ One :class:`SerialTransport` is one port and one half-duplex line:
   de-framer where it has them as public ``int`` attributes, and kept over reconnections in
   :meth:`~SerialTransport.stats`; a de-framer without them counts 0.
 * **The line's rules are declared**, read-only, for the orchestrator to schedule by:
+  :attr:`~SerialTransport.rules` (the :class:`~servobus.transports.contract.LineRules` a Bus reads),
   :attr:`~SerialTransport.half_duplex` (True), :attr:`~SerialTransport.max_outstanding` (one
   request per port), :attr:`~SerialTransport.char_time_s`, :attr:`~SerialTransport.gap_s` (rest
   between two frames of ours) and :attr:`~SerialTransport.turnaround_s` (rest after the far end's
   last byte before we drive the line). The Bus will enforce them itself. Standalone (scripts,
   tests) the transport keeps doing it: a frame sent with ``reply_timeout_s`` holds the line until
   one whole frame comes back or the timeout passes, and the rests are kept between frames.
-* **Backpressure and freshness.** Every byte not yet written stays in our own queue; the port gets
-  one frame at a time, and only when it can take it now: the OS output buffer holds at most
-  ``high_water_bytes`` (``TIOCOUTQ``, polled no faster than every millisecond) and the write does
-  not block (``EAGAIN``: wait for the descriptor to become writable, event-driven). A frame older
-  than ``stale_after_s`` when it would be written is dropped (reported ``"stale"``), never
-  written; one that cannot be written whole before it goes stale is abandoned and its head flushed
-  from the OS buffer (``tcflush``); and when the OS reports bytes it has held, without taking more,
-  for longer than ``stale_after_s`` (a stalled adapter), they are flushed too. For a motor a stale
-  set-point is worse than none. What the OS cannot report stays out of reach: a pty's buffer
-  (``TIOCOUTQ`` says 0) keeps the frames it took while they were fresh.
+* **Backpressure and freshness** (``_fresh_writer.FreshWriter``). Every byte not yet written stays
+  in our own queue; the port gets one frame at a time, and only when it can take it now: the OS
+  output buffer holds at most ``high_water_bytes`` (``TIOCOUTQ``, polled no faster than every
+  millisecond) and the write does not block (``EAGAIN``: wait for the descriptor to become writable,
+  event-driven). A frame older than ``stale_after_s`` when it would be written is dropped (reported
+  ``"stale"``), never written; one that cannot be written whole before it goes stale is abandoned
+  and its head flushed from the OS buffer (``tcflush``); and when the OS reports bytes it has held,
+  without taking more, for longer than ``stale_after_s`` (a stalled adapter), they are flushed too.
+  For a motor a stale set-point is worse than none. What the OS cannot report stays out of reach: a
+  pty's buffer (``TIOCOUTQ`` says 0) keeps the frames it took while they were fresh.
 * **Receiving**: bytes go through the de-framer as they arrive; when no byte has come for
   ``idle_s`` the de-framer is told the line went idle, which drops a stray partial frame as noise
   (and ends a Modbus RTU frame). ``idle_s`` is not the wire's 3.5-character silence: USB adapters
@@ -42,42 +43,34 @@ One :class:`SerialTransport` is one port and one half-duplex line:
 * **Loss**: a port that vanishes (EIO, ENODEV, EOF on a pty) fails every waiter at once and is
   reopened by path with backoff, as in :class:`~servobus.transports.base.Transport`.
 
-**Why we write to the descriptor ourselves.** pyserial-asyncio-fast (0.16) reads well, but its
-write path has two upstream bugs that a slow or stalled port triggers
-(https://github.com/home-assistant-libs/pyserial-asyncio-fast/pull/36, "fix defered writes", open;
-also pyserial/pyserial-asyncio#77): after a partial write it registers a writer callback and never
-removes it, so once the buffer is drained ``_write_ready`` runs on every loop iteration and fails
-``assert data, "Write buffer should not be empty"``: 100 % CPU, an exception logged per
-iteration; and its direct write goes through pyserial's ``Serial.write``, which with
-``write_timeout=0`` retries ``EAGAIN`` in a busy loop, blocking the event loop until the port takes
-the bytes. Its buffer is also unbounded and below our freshness check. So we never call its
-``write``: the frame goes to the port's file descriptor with ``os.write`` (non-blocking), and when
-the port is full we wait with ``loop.add_writer`` for one wake-up and remove the callback again.
-pyserial-asyncio-fast still opens the port and reads it. (A ``socket://`` URL, which has no tty
-descriptor, goes through the library's transport, one frame at a time into an empty buffer.)
+**Why we write to the descriptor ourselves.** pyserial-asyncio-fast (0.16) has two write-path bugs
+that a slow or stalled port triggers
+(https://github.com/home-assistant-libs/pyserial-asyncio-fast/pull/36, "fix defered writes"; also
+pyserial/pyserial-asyncio#77): a writer callback that stays registered and spins at 100 % CPU, and
+pyserial's ``Serial.write``, which with ``write_timeout=0`` retries ``EAGAIN`` in a busy loop. So a
+frame goes to the port's file descriptor with ``os.write`` (non-blocking), and a full port is waited
+for with ``anyio.wait_writable``. Reading is the descriptor's too, on asyncio and on trio
+(:mod:`servobus.transports._serialport`).
 
-pyserial-asyncio-fast is imported when the first port opens, so CAN-only users never load it.
+pyserial is imported when the first port opens, so CAN-only users never load it.
 """
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
-import errno
-import fcntl
-import os
-import struct
 import sys
-import termios
 from collections.abc import Callable
 from typing import Any
+
+import anyio
 
 from servobus.frame import Frame
 from servobus.protocols import SerialLine, available_families, get_family
 from servobus.protocols._bound import Framing, StreamDeframer
 from servobus.timing import uart_time_s
-from servobus.transports._serialport import LineProtocol, close_port, open_port
+from servobus.transports._fresh_writer import FreshWriter
+from servobus.transports._serialport import SerialPort
 from servobus.transports.base import Outgoing, Transport
+from servobus.transports.contract import LineRules
 from servobus.transports.stats import TransportStats
 
 __all__ = ["SerialTransport", "find_serial_line", "serial_line_names"]
@@ -85,10 +78,7 @@ __all__ = ["SerialTransport", "find_serial_line", "serial_line_names"]
 _IDLE_CHARS = 3.5  # Modbus RTU's inter-frame silence, in character times
 _READ_SIZE = 16384  # bytes taken from the port per wake-up, at most
 _USB_BURST_S = 0.02  # longer than the gaps USB adapters put inside frames (FTDI latency timer: 16 ms)
-_POLL_MIN_S = 0.001  # the OS output buffer is polled no faster than this: never a spin
-_POLL_MAX_S = 0.05
 _HIGH_WATER_BYTES = 64  # about one frame of any built-in framing may wait in the OS buffer
-_TIOCOUTQ_ARG = bytes(4)
 
 #: a received Frame is fresh from the de-framer, held by nobody else: stamp it in place
 _SET_TIMESTAMP: Callable[[Frame, float], None] = Frame.timestamp.__set__  # type: ignore[attr-defined,misc]
@@ -142,11 +132,50 @@ def _count(deframer: StreamDeframer, name: str) -> int:
     return value if isinstance(value, int) else 0
 
 
+def _line_settings(
+    framing: Framing | None, mode: str | None, baud: int | None, parity: str | None
+) -> tuple[SerialLine | None, Framing, int, str]:
+    """The serial line, framing, baud rate and parity that ``SerialTransport``'s arguments name.
+
+    Raises:
+        ValueError: neither framing nor mode, an unknown mode or parity, a rate the line does not use.
+    """
+    line = None
+    if mode is not None:
+        line = find_serial_line(mode)
+        if line is None:
+            raise ValueError(f"mode={mode!r} is not one of {', '.join(serial_line_names())}")
+    if framing is None:
+        if line is None:
+            raise ValueError("give framing= (the family's: FAMILY.bind(1, link='rs485').framing) or mode=")
+        framing = line.framing()
+    elif not isinstance(framing, Framing):
+        raise ValueError(f"framing={framing!r} has no encode(frame) and deframer()")
+    elif line is None:
+        line = find_serial_line(framing.name)
+    label = mode if mode is not None else framing.name
+    bauds: tuple[int, ...] | None = line.bauds if line is not None else getattr(framing, "bauds", None)
+    if baud is None:
+        if not bauds:
+            raise ValueError(f"baud= is needed: framing {framing.name!r} names no baud rates")
+        baud = bauds[0]
+    if bauds and baud not in bauds:
+        raise ValueError(f"baud={baud} is not one of {label}'s rates {tuple(bauds)}")
+    if parity is None:
+        parity = line.parity if line is not None else "N"
+    if baud <= 0:
+        raise ValueError(f"baud={baud} must be positive")
+    if parity not in _PARITY_BITS:
+        raise ValueError(f"parity={parity!r} is not one of 'N', 'E', 'O'")
+    return line, framing, baud, parity
+
+
 class SerialTransport(Transport[Frame, Frame]):
     """One RS485 port: serial Frames out one transaction at a time, whole Frames in.
 
     Args:
-        port: the serial device (``/dev/ttyUSB0``, a pty, or any pyserial URL).
+        port: the serial device (``/dev/ttyUSB0``, a pty, or a pyserial URL with a file descriptor,
+            such as ``socket://``).
         framing: how Frames look on the wire, from the family:
             ``FAMILY.bind(motor_id, link="rs485").framing``.
         mode: the name or an alias of a registered family's serial line (``Family.serial``):
@@ -198,39 +227,8 @@ class SerialTransport(Transport[Frame, Frame]):
     ) -> None:
         self.mode: str | None = mode
         #: the family's serial line this transport runs (None: a framing no family declares)
-        self.line: SerialLine | None = None
-        if mode is not None:
-            self.line = find_serial_line(mode)
-            if self.line is None:
-                known = ", ".join(serial_line_names())
-                raise ValueError(f"mode={mode!r} is not one of {known}")
-        if framing is None:
-            if self.line is None:
-                raise ValueError(
-                    "give framing= (the family's: FAMILY.bind(1, link='rs485').framing) or mode="
-                )
-            framing = self.line.framing()
-        elif not isinstance(framing, Framing):
-            raise ValueError(f"framing={framing!r} has no encode(frame) and deframer()")
-        elif self.line is None:
-            self.line = find_serial_line(framing.name)
-        self._framing = framing
-        label = mode if mode is not None else framing.name
-        bauds: tuple[int, ...] | None = (
-            self.line.bauds if self.line is not None else getattr(framing, "bauds", None)
-        )
-        if baud is None:
-            if not bauds:
-                raise ValueError(f"baud= is needed: framing {framing.name!r} names no baud rates")
-            baud = bauds[0]
-        if bauds and baud not in bauds:
-            raise ValueError(f"baud={baud} is not one of {label}'s rates {tuple(bauds)}")
-        if parity is None:
-            parity = self.line.parity if self.line is not None else "N"
-        if baud <= 0:
-            raise ValueError(f"baud={baud} must be positive")
-        if parity not in _PARITY_BITS:
-            raise ValueError(f"parity={parity!r} is not one of 'N', 'E', 'O'")
+        self.line: SerialLine | None
+        self.line, self._framing, baud, parity = _line_settings(framing, mode, baud, parity)
         negative = any(t is not None and t < 0 for t in (gap_s, turnaround_s))
         if negative or (idle_s is not None and idle_s <= 0):
             raise ValueError(
@@ -256,21 +254,22 @@ class SerialTransport(Transport[Frame, Frame]):
         self._gap_s = silence_s if gap_s is None else gap_s
         self._turnaround_s = self._gap_s if turnaround_s is None else turnaround_s
         self.idle_s = max(silence_s, _USB_BURST_S) if idle_s is None else idle_s
-        self._high_water = high_water_bytes
         self._serial_options = {"exclusive": exclusive, **options}
-        self._deframer: StreamDeframer = framing.deframer()
+        self._deframer: StreamDeframer = self._framing.deframer()
         self._old_counts = [0, 0]  # discarded bytes, CRC errors of the de-framers of past connections
         self._load_known = True
-        self._line: asyncio.Transport | None = None
-        self._protocol: LineProtocol | None = None
-        self._fd: int | None = None  # the port's descriptor, written by us (see the module docstring)
+        self._port: SerialPort | None = None
+        self._writer_line = FreshWriter(
+            high_water_bytes=high_water_bytes,
+            char_time_s=self._char_time_s,
+            stale_after_s=stale_after_s,
+            clock=self._now,
+        )
         self._tx_quiet_at = 0.0  # loop time our last byte ends on the wire
         self._rx_quiet_at = 0.0  # loop time the far end's last byte came
-        self._written_at = 0.0  # loop time the port last took bytes from us
-        self._flushes = 0
         self._last_rx = 0.0
-        self._idle_timer: asyncio.TimerHandle | None = None
-        self._reply: asyncio.Future[None] | None = None
+        self._quiet: _QuietWatch | None = None
+        self._reply: anyio.Event | None = None
 
     # ----------------------------------------------------------------- the line's rules
 
@@ -307,13 +306,24 @@ class SerialTransport(Transport[Frame, Frame]):
     @property
     def high_water_bytes(self) -> int:
         """Bytes the OS output buffer may hold when the next frame is written."""
-        return self._high_water
+        return self._writer_line.high_water_bytes
 
     @property
     def output_flushes(self) -> int:
         """Times the OS output buffer was flushed: bytes it reported outlasted ``stale_after_s``,
         or a frame could not be written whole before it went stale."""
-        return self._flushes
+        return self._writer_line.flushes
+
+    @property
+    def rules(self) -> LineRules:
+        """Half duplex, with the gap, the turnaround and the staleness set here (no CAN bit rate: the
+        Bus's shortest round trip is a CAN frame's)."""
+        return LineRules(
+            half_duplex=True,
+            gap_s=self._gap_s,
+            turnaround_s=self._turnaround_s,
+            stale_after_s=self._stale_after_s,
+        )
 
     def wire_time_s(self, n_bytes: int) -> float:
         """Seconds ``n_bytes`` occupy this line."""
@@ -321,10 +331,11 @@ class SerialTransport(Transport[Frame, Frame]):
 
     # ----------------------------------------------------------------- public API
 
-    def send(self, frame: Frame, *, reply_timeout_s: float | None = None) -> None:
+    def send(self, frame: Frame, handle: object = None, *, reply_timeout_s: float | None = None) -> None:
         """Queue one serial Frame (as the family's codec encoded it on its ``"rs485"`` link).
 
         Args:
+            handle: what the send report names (the frame itself when None).
             reply_timeout_s: a reply is expected: keep the line for up to this long after the
                 frame has left, until a whole frame comes back. None: no reply (broadcast).
 
@@ -338,7 +349,7 @@ class SerialTransport(Transport[Frame, Frame]):
         if reply_timeout_s is not None and reply_timeout_s < 0:
             raise ValueError(f"reply_timeout_s={reply_timeout_s} must be >= 0")
         self._framing.encode(frame)  # refuse now what the framing cannot put on the wire
-        self._enqueue(frame, reply_timeout_s)
+        self._enqueue(frame, reply_timeout_s, handle)
 
     def stats(self) -> TransportStats:
         snapshot = super().stats()
@@ -349,13 +360,17 @@ class SerialTransport(Transport[Frame, Frame]):
     # ----------------------------------------------------------------- connection
 
     async def _connect(self) -> None:
-        import serial_asyncio_fast
-
-        loop = asyncio.get_running_loop()
-        line, protocol = await open_port(
+        # Bytes of a frame cut by the loss cannot be completed: a fresh de-framer, counts kept.
+        self._old_counts[0] += _count(self._deframer, "discarded_bytes")
+        self._old_counts[1] += _count(self._deframer, "crc_errors")
+        self._deframer = self._framing.deframer()
+        assert self._runtime is not None  # set by open()
+        self._port = SerialPort.open(
             self,
             self._generation,
             self.port,
+            self._runtime,
+            self._tasks,
             read_size=_READ_SIZE,
             baudrate=self.baud,
             parity=self.parity,
@@ -363,27 +378,17 @@ class SerialTransport(Transport[Frame, Frame]):
             stopbits=1,
             **self._serial_options,
         )
-        fd: int | None = None
-        port = getattr(line, "serial", None)
-        if isinstance(line, serial_asyncio_fast.SerialTransport) and port is not None:
-            with contextlib.suppress(AttributeError, OSError, ValueError, TypeError):
-                fd = port.fileno()
-                os.set_blocking(fd, False)
-        # Bytes of a frame cut by the loss cannot be completed: a fresh de-framer, counts kept.
-        self._old_counts[0] += _count(self._deframer, "discarded_bytes")
-        self._old_counts[1] += _count(self._deframer, "crc_errors")
-        self._deframer = self._framing.deframer()
-        self._line, self._protocol, self._fd = line, protocol, fd
-        self._written_at = loop.time()
+        self._quiet = _QuietWatch(self, self._generation)
+        self._tasks.start_soon(self._quiet.run, name=f"{self.name} idle")
+        self._writer_line.reset()
 
     async def _disconnect(self) -> None:
-        line, protocol = self._line, self._protocol
-        self._line = self._protocol = None
-        self._fd = None
-        if self._idle_timer is not None:
-            self._idle_timer.cancel()
-            self._idle_timer = None
-        await close_port(line, protocol)
+        port, self._port = self._port, None
+        quiet, self._quiet = self._quiet, None
+        if quiet is not None:
+            quiet.stop()
+        if port is not None:
+            await port.close()
 
     # ----------------------------------------------------------------- receiving
 
@@ -395,19 +400,12 @@ class SerialTransport(Transport[Frame, Frame]):
         self._load.add(now, uart_time_s(len(data), self.baud, bits_per_byte=self.bits_per_char))
         self._last_rx = self._rx_quiet_at = now
         self._take(self._deframer.feed(data), now)
-        if self._idle_timer is None:
-            self._idle_timer = asyncio.get_running_loop().call_later(self.idle_s, self._on_quiet, generation)
+        if self._quiet is not None:
+            self._quiet.arm()
 
-    def _on_quiet(self, generation: int) -> None:
-        self._idle_timer = None
-        if generation != self._generation:
-            return
-        now = self._now()
-        still = self._last_rx + self.idle_s - now
-        if still > 0:  # bytes came meanwhile: the silence starts over
-            self._idle_timer = asyncio.get_running_loop().call_later(still, self._on_quiet, generation)
-            return
-        self._take(self._deframer.idle(), now)
+    def _on_quiet(self) -> None:
+        """No byte for ``idle_s``: the de-framer drops (or ends) the partial frame it holds."""
+        self._take(self._deframer.idle(), self._now())
 
     def _take(self, frames: list[Frame], now: float) -> None:
         if not frames:
@@ -416,146 +414,83 @@ class SerialTransport(Transport[Frame, Frame]):
             _SET_TIMESTAMP(frame, now)
         self._stats.frames_in += len(frames)
         self._deliver(frames)
-        if self._reply is not None and not self._reply.done():
-            self._reply.set_result(None)
+        if self._reply is not None:
+            self._reply.set()
 
     # ----------------------------------------------------------------- sending
 
     async def _transmit(self, batch: list[Outgoing[Frame]]) -> None:
-        loop = asyncio.get_running_loop()
         stats = self._stats
         limit = self._stale_after_s
         generation = self._generation
         while batch:
             outgoing = batch[0]
             deadline = None if limit is None else outgoing.queued_at + limit
-            rest = max(self._tx_quiet_at + self._gap_s, self._rx_quiet_at + self._turnaround_s) - loop.time()
+            rest = max(self._tx_quiet_at + self._gap_s, self._rx_quiet_at + self._turnaround_s) - self._now()
             if rest > 0:
-                await asyncio.sleep(rest)
-            line = self._line
-            if line is None or line.is_closing():  # failed while we rested: the base purges the rest
+                await anyio.sleep(rest)
+            port = self._port
+            if port is None or port.failed:  # failed while we rested: the base purges the rest
                 return
             data = self._framing.encode(outgoing.item)
             try:
-                now = await self._write(line, data, deadline)
+                now = await self._writer_line.write(port, data, deadline)
             except OSError as exc:  # the port failed under the write (EIO: unplugged)
                 self._lose(exc, generation)
                 return
             batch.pop(0)
             if now is None:
-                self._dropped("stale", [outgoing.item])
+                self._dropped("stale", [outgoing.handle])
                 continue
-            reply = None if outgoing.hold_s is None else loop.create_future()
+            reply = None if outgoing.hold_s is None else anyio.Event()
             self._reply = reply
             on_wire_s = self._char_time_s * len(data)
             self._tx_quiet_at = now + on_wire_s
             stats.frames_out += 1
             stats.bytes_out += len(data)
             self._load.add(now, on_wire_s)
-            self._sent(outgoing.item, now)
+            self._sent(outgoing.handle, now)
             if reply is not None and outgoing.hold_s is not None:
                 try:
-                    await asyncio.wait_for(reply, on_wire_s + outgoing.hold_s)
-                except TimeoutError:
-                    pass  # no reply: the line is free again; matching the silence is the caller's job
+                    # no reply in time: the line is free again; matching the silence is the caller's job
+                    with anyio.move_on_after(on_wire_s + outgoing.hold_s):
+                        await reply.wait()
                 finally:
                     self._reply = None
 
-    async def _write(self, line: asyncio.Transport, data: bytes, deadline: float | None) -> float | None:
-        """Hand ``data`` to the port whole, when it can take it.
 
-        Returns:
-            The loop time its last bytes were handed over, or None: ``deadline`` came first (the
-            frame went stale) and nothing of it is left in front of the next frame.
+class _QuietWatch:
+    """One connection's silence timer: ``idle_s`` after the last byte, the transport's ``_on_quiet``.
 
-        Raises:
-            OSError: the port failed (not EAGAIN).
-        """
-        fd = self._fd
-        if fd is None:  # no tty descriptor (socket:// URL): the library's transport, one frame at a time
-            while line.get_write_buffer_size():
-                if not await self._pause(deadline, line.get_write_buffer_size() * self._char_time_s):
-                    return None
-            now = asyncio.get_running_loop().time()
-            if deadline is not None and now > deadline:
-                return None
-            line.write(data)
-            self._written_at = now
-            return now
-        while (queued := self._out_waiting(fd)) > self._high_water:
-            if not await self._pause(deadline, (queued - self._high_water) * self._char_time_s):
-                return None
-        loop = asyncio.get_running_loop()
-        view = memoryview(data)
-        done = 0
-        while True:
-            now = loop.time()
-            if deadline is not None and now > deadline:  # went stale while we waited
-                if done:  # a cut frame must not sit in front of the next one
-                    self._flush(fd)
-                return None
-            try:
-                done += os.write(fd, view[done:])
-            except BlockingIOError:
-                pass
-            except InterruptedError:
-                continue
-            if done:
-                self._written_at = now
-            if done == len(data):
-                return now
-            await self._writable(fd, deadline)
+    A task in the transport's task group that sleeps while bytes come and waits while none are
+    expected, so a burst costs one flag, not a timer per read.
+    """
 
-    async def _pause(self, deadline: float | None, drain_s: float) -> bool:
-        """Sleep while the port drains (at least 1 ms: never a spin); False once ``deadline`` passed."""
-        now = asyncio.get_running_loop().time()
-        self._flush_if_stalled(now)
-        if deadline is not None and now >= deadline:
-            return False
-        wait = min(max(drain_s, _POLL_MIN_S), _POLL_MAX_S)
-        await asyncio.sleep(wait if deadline is None else min(wait, deadline - now))
-        return True
+    def __init__(self, transport: SerialTransport, generation: int) -> None:
+        self._transport = transport
+        self._generation = generation
+        self._armed = False
+        self._wake = anyio.Event()
+        self._scope = anyio.CancelScope()
 
-    async def _writable(self, fd: int, deadline: float | None) -> None:
-        """Wait, event-driven, until ``fd`` takes bytes again or ``deadline`` passes.
+    def arm(self) -> None:
+        """Bytes came: time the silence after them (no-op while it is being timed)."""
+        if not self._armed:
+            self._armed = True
+            self._wake.set()
 
-        One wake-up, then the callback is removed (upstream's stays registered and spins).
-        """
-        loop = asyncio.get_running_loop()
-        ready: asyncio.Future[None] = loop.create_future()
-        loop.add_writer(fd, _wake, ready)
-        try:
-            timeout = None if deadline is None else max(deadline - loop.time(), 0.0)
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(ready, timeout)
-        finally:
-            loop.remove_writer(fd)
+    def stop(self) -> None:
+        self._scope.cancel()
 
-    def _flush_if_stalled(self, now: float) -> None:
-        """The OS holds bytes for the port (above the high-water mark) and has taken nothing from us
-        for longer than ``stale_after_s``: what it holds was written before that, so it is stale."""
-        limit = self._stale_after_s
-        if limit is None or self._fd is None or now - self._written_at <= limit:
-            return
-        self._flush(self._fd)
-        self._written_at = now  # once per stall period, not on every poll
-
-    def _flush(self, fd: int) -> None:
-        """Discard what the OS holds for the port and has not yet sent (``tcflush(TCOFLUSH)``)."""
-        with contextlib.suppress(OSError):
-            termios.tcflush(fd, termios.TCOFLUSH)
-            self._flushes += 1
-
-    def _out_waiting(self, fd: int) -> int:
-        """Bytes the OS still holds for the port (0 where the driver cannot tell, as on a pty)."""
-        try:
-            return int(struct.unpack("I", fcntl.ioctl(fd, termios.TIOCOUTQ, _TIOCOUTQ_ARG))[0])
-        except OSError as exc:
-            if exc.errno in (errno.ENOTTY, errno.EINVAL, errno.ENOTSUP):
-                return 0
-            raise
-
-
-def _wake(future: asyncio.Future[None]) -> None:
-    if not future.done():
-        future.set_result(None)
+    async def run(self) -> None:
+        transport = self._transport
+        with self._scope:
+            while True:
+                await self._wake.wait()
+                self._wake = anyio.Event()
+                while (still := transport._last_rx + transport.idle_s - transport._now()) > 0:
+                    await anyio.sleep(still)  # bytes came meanwhile: the silence starts over
+                self._armed = False
+                if transport._generation != self._generation:
+                    return
+                transport._on_quiet()

@@ -7,21 +7,24 @@ given a network, or a :class:`~servobus.sim.network.SimCanNetwork` (the Python r
 * **Zero-copy out**: :meth:`SimTransport.send` hands the caller's own :class:`~servobus.frame.Frame`
   to the network (``network.send(frame, now)``) from the caller's stack, with no queue hop; the
   network's bus model then gives it its exact bit time and arbitration.
-* **One timer in**: the transport keeps a single ``loop.call_at`` timer on the network's next event.
-  When it fires, the network runs up to the loop's time and the frames the host received are
-  delivered as one batch, stamped with the time their transmission ended (on the loop's clock).
-  Nothing polls: an idle network arms no timer at all. Then the network runs ahead over what the
-  host can neither see nor change (:meth:`~servobus.sim.network.SimCanNetwork.run_ahead`: while the
-  host still has a frame queued, its later frames wait behind it), so the timer is next armed for
-  the next frame the host receives rather than for every frame on the wire: a burst of requests
-  costs one timer, not one per request. The trace is the same; device state (a simulated motor's
-  counters, say) may read ahead of the loop's clock by the host's queued burst.
+* **One clock in**: the transport keeps one wake-up armed on the network's next event: a task in
+  its task group (any backend) or, on asyncio, the loop's ``call_at`` (the measured fast lane:
+  :mod:`servobus.transports._simclock`). When it fires, the network runs up to the loop's time and
+  the frames the host received are delivered as one batch, stamped with the time their
+  transmission ended (on the loop's clock). Nothing polls: an idle network arms nothing. Then the
+  network runs ahead over what the host can neither see nor change
+  (:meth:`~servobus.sim.network.SimCanNetwork.run_ahead`: while the host still has a frame queued,
+  its later frames wait behind it), so the clock is next armed for the next frame the host
+  receives rather than for every frame on the wire: a burst of requests costs one wake-up, not one
+  per request. The trace is the same; device state (a simulated motor's counters, say) may read
+  ahead of the loop's clock by the host's queued burst.
 * **Time**: network time = loop time - ``t0``, where ``t0`` is fixed the first time the transport
   opens on a loop (so that the network's clock continues from its ``now_s`` at that moment; a fresh
-  network on a ``looptime`` loop that starts at 0 gets ``t0 = 0``, and the two clocks are the same
-  numbers). On a plain asyncio loop the network then runs in real time; on a virtual-time loop
-  (``looptime``, :func:`servobus.sim.virtual.run`) it runs as fast as the host can compute it,
-  because the only timers are the network's own events and the host's sleeps.
+  network on a virtual clock that starts at 0 gets ``t0 = 0``, and the two clocks are the same
+  numbers). On a real clock the network then runs in real time; on a virtual one (``looptime``,
+  :func:`servobus.sim.virtual.run`, trio's ``MockClock(autojump_threshold=0)``) it runs as fast as
+  the host can compute it, because the only deadlines are the network's own events and the host's
+  sleeps. It runs on asyncio and on trio.
 * **Loss**: :meth:`SimTransport.unplug` pulls the adapter: pending receivers and drains fail at once
   with :class:`~servobus.errors.TransportError`, the state goes to ``LOST`` and reopening fails until
   :meth:`SimTransport.replug`. The devices keep running meanwhile; what they sent while the host was
@@ -33,8 +36,11 @@ Everything else (counters, send reports, push delivery, events) is the base
 
 from __future__ import annotations
 
-import asyncio
+import math
 from collections.abc import Iterable
+from typing import Any, ClassVar
+
+import anyio.lowlevel
 
 from servobus.errors import TransportError
 from servobus.frame import Frame
@@ -43,6 +49,7 @@ from servobus.sim.corenet import CoreCanNetwork
 from servobus.sim.device import Device
 from servobus.sim.faults import FaultInjector
 from servobus.sim.network import SimCanNetwork
+from servobus.transports._simclock import Clock, start_clock
 from servobus.transports.base import Outgoing, Transport
 
 __all__ = ["SimTransport"]
@@ -65,6 +72,9 @@ class SimTransport(Transport[Frame, Frame]):
     Raises:
         ValueError: both a network and the parts of a new one were given.
     """
+
+    #: run the clock as a task on asyncio too (trio always does): the tests of both lanes set it
+    task_clock: ClassVar[bool] = False
 
     def __init__(
         self,
@@ -96,16 +106,18 @@ class SimTransport(Transport[Frame, Frame]):
         self.network = network
         self._load_known = True  # measured exactly: the bus model's busy time
         self._plugged = True
-        self._anchor: tuple[asyncio.AbstractEventLoop, float] | None = None  # (loop, t0)
+        self._anchor: object = None  # the loop (its native token) t0 was fixed on
         self._t0 = 0.0
-        self._timer: asyncio.TimerHandle | None = None
-        self._timer_at = 0.0  # network time the timer is armed for
+        #: network time the clock task is armed for (None: idle, nothing to wait for)
+        self._timer_at: float | None = None
+        self._clock: Clock | None = None  # this connection's clock (see _simclock.py)
         self._busy_s = 0.0  # the bus model's busy time already added to the load meter
 
     # ----------------------------------------------------------------- public API
 
-    def send(self, frame: Frame) -> None:
-        """Put ``frame`` (this very object) on the simulated bus now; it never blocks.
+    def send(self, frame: Frame, handle: Any = None) -> None:
+        """Put ``frame`` (this very object) on the simulated bus now; it never blocks. Its send
+        report carries ``handle`` (``frame`` when None).
 
         Raises:
             ValueError: a serial-link message.
@@ -114,7 +126,7 @@ class SimTransport(Transport[Frame, Frame]):
         """
         if frame.is_serial:
             raise ValueError(f"{self.name}: {frame!r} is a serial-link message, not a CAN frame")
-        self._enqueue(frame)
+        self._enqueue(frame, None, handle)
 
     @property
     def t0(self) -> float:
@@ -128,6 +140,12 @@ class SimTransport(Transport[Frame, Frame]):
     def loop_time(self, network_time: float) -> float:
         """A time on the network's clock as the loop's time (what received frames are stamped with)."""
         return network_time + self._t0
+
+    @property
+    def bitrate(self) -> int | None:
+        """The simulated bus's nominal bit rate (None for an infinitely fast one): :attr:`rules`."""
+        rate = self.network.bus.bitrate
+        return int(rate) if math.isfinite(rate) and rate > 0 else None
 
     @property
     def plugged(self) -> bool:
@@ -148,30 +166,40 @@ class SimTransport(Transport[Frame, Frame]):
     async def _connect(self) -> None:
         if not self._plugged:
             raise TransportError(f"{self.name}: cannot open: adapter unplugged")
-        loop = asyncio.get_running_loop()
+        now = self._now()
+        loop = anyio.lowlevel.current_token().native_token
         network = self.network
-        if self._anchor is None or self._anchor[0] is not loop:
-            self._t0 = loop.time() - network.now_s
-            self._anchor = (loop, self._t0)
+        if self._anchor is not loop:
+            self._t0 = now - network.now_s
+            self._anchor = loop
         else:  # reopened on the same loop: the devices ran on while we were away, unheard
-            self._stats.ignored += len(network.advance(max(network.now_s, loop.time() - self._t0)))
+            self._stats.ignored += len(network.advance(max(network.now_s, now - self._t0)))
         self._busy_s = network.bus.busy_s
         self._direct = True
+        self._stop_clock()
+        assert self._runtime is not None
+        self._clock = start_clock(
+            self._runtime,
+            self._tasks,
+            self._armed_loop_time,
+            self._on_timer,
+            self._generation,
+            name=f"{self.name} clock",
+            task_lane=self.task_clock,
+        )
         self._rearm(self._generation)
 
     async def _disconnect(self) -> None:
         self._direct = False
-        if self._timer is not None:
-            self._timer.cancel()
-            self._timer = None
+        self._stop_clock()
 
     # ----------------------------------------------------------------- sending
 
-    def _write_now(self, frame: Frame) -> bool:
+    def _write_now(self, frame: Frame, handle: Any) -> bool:
         if not self._plugged:
             self._lose(TransportError(f"{self.name}: adapter unplugged"), self._generation)
             raise self._error()
-        self._put(frame, self._now())
+        self._put(frame, handle, self._now())
         return True
 
     async def _transmit(self, batch: list[Outgoing[Frame]]) -> None:
@@ -179,30 +207,39 @@ class SimTransport(Transport[Frame, Frame]):
             if not self._plugged:
                 self._lose(TransportError(f"{self.name}: adapter unplugged"), self._generation)
                 return  # what is left in batch is counted as purged by the base
-            self._put(batch.pop(0).item, self._now())
+            outgoing = batch.pop(0)
+            self._put(outgoing.item, outgoing.handle, self._now())
 
-    def _put(self, frame: Frame, now: float) -> None:
+    def _put(self, frame: Frame, handle: Any, now: float) -> None:
         network = self.network
         at = now - self._t0
         network.send(frame, at if at > network.now_s else network.now_s)
         stats = self._stats
         stats.frames_out += 1
         stats.bytes_out += len(frame.data)
-        self._sent(frame, now)
+        self._sent(handle, now)
         self._arm(network.now_s if at < network.now_s else at, self._generation)
 
     # ----------------------------------------------------------------- the network's clock
 
     def _arm(self, at: float, generation: int) -> None:
-        """Have the timer fire at network time ``at`` (or earlier, if it already would)."""
-        timer = self._timer
-        if timer is not None:
-            if self._timer_at <= at:
-                return
-            timer.cancel()
-        assert self._loop is not None
+        """Have the clock fire at network time ``at`` (or earlier, if it already would)."""
+        armed = self._timer_at
+        if armed is not None and armed <= at:
+            return
         self._timer_at = at
-        self._timer = self._loop.call_at(at + self._t0, self._on_timer, generation)
+        if self._clock is not None:
+            self._clock.poke(at + self._t0)
+
+    def _armed_loop_time(self) -> float | None:
+        at = self._timer_at
+        return None if at is None else at + self._t0
+
+    def _stop_clock(self) -> None:
+        clock, self._clock = self._clock, None
+        if clock is not None:
+            clock.stop()
+        self._timer_at = None
 
     def _rearm(self, generation: int) -> None:
         at = self.network.next_event_s()
@@ -210,14 +247,13 @@ class SimTransport(Transport[Frame, Frame]):
             self._arm(at, generation)
 
     def _on_timer(self, generation: int) -> None:
-        self._timer = None
-        if generation != self._generation:
+        armed, self._timer_at = self._timer_at, None
+        if generation != self._generation or armed is None:
             return
-        assert self._loop is not None
         network = self.network
         # asyncio runs a timer that is due within its clock's resolution: never run short of the
-        # event the timer was armed for, or it would be re-armed for the same instant.
-        until = max(self._loop.time() - self._t0, self._timer_at)
+        # event the clock was armed for, or it would be re-armed for the same instant.
+        until = max(self._now() - self._t0, armed)
         received = network.advance(until)
         busy = network.bus.busy_s
         if busy != self._busy_s:

@@ -1,7 +1,7 @@
-"""SLCAN (LAWICEL) USB-CAN adapters, natively: pyserial-asyncio-fast reads, the C core cuts lines.
+"""SLCAN (LAWICEL) USB-CAN adapters, natively: the port's descriptor on the loop, the C core cuts lines.
 
 :class:`SlcanTransport` speaks to an SLCAN adapter (CANable, CANUSB, the hollow manual's USB-CANFD
-adapter, the simulator's pty) without python-can, on the event loop, with no thread:
+adapter, the simulator's pty) without python-can, on the event loop (asyncio or trio), with no thread:
 
 * **Receiving**: the bytes the adapter sends go through :class:`~servobus.core.SlcanDeframer` as
   they arrive (up to 64 KiB per wake-up). A malformed line (``t12``, bad hex, an 11-bit id above
@@ -17,8 +17,8 @@ adapter, the simulator's pty) without python-can, on the event loop, with no thr
 * **Sending**: frames become ``t``/``T`` lines (``d``/``D``/``b``/``B`` for CAN FD) written straight to
   the port's file descriptor, a batch per write, never more than the kernel takes at once: lines
   the kernel did not take stay in our queue, where ``stale_after_s`` still applies (only a line
-  cut in the middle is finished). pyserial-asyncio-fast's own write path is not used: with
-  ``write_timeout=0`` pyserial retries EAGAIN in a busy loop.
+  cut in the middle is finished before anything else). pyserial's own write path is not used: with
+  ``write_timeout=0`` it retries EAGAIN in a busy loop.
 * **A stalled adapter is backpressure, not loss**: when the port takes nothing (EAGAIN) or the
   driver's output queue (``out_waiting``) is above ``write_high_water`` bytes, the writer waits;
   ``send`` keeps queueing until the queue is full (:class:`~servobus.transports.base.SendQueueFull`),
@@ -29,23 +29,24 @@ adapter, the simulator's pty) without python-can, on the event loop, with no thr
   once and the port is reopened by path with backoff, as in
   :class:`~servobus.transports.base.Transport`.
 
-pyserial-asyncio-fast is imported when the first port opens.
+pyserial is imported when the first port opens (see :mod:`servobus.transports._serialport`).
 """
 
 from __future__ import annotations
 
-import asyncio
 import binascii
 import contextlib
-import os
 from typing import Any
+
+import anyio
 
 from servobus.core import SlcanDeframer
 from servobus.errors import TransportError
 from servobus.frame import Frame
 from servobus.timing import nominal_frame_time_s
-from servobus.transports._serialport import LineProtocol, close_port, open_port
+from servobus.transports._serialport import SerialPort
 from servobus.transports.base import Outgoing, Transport
+from servobus.transports.contract import LineRules
 from servobus.transports.stats import TransportStats
 
 __all__ = ["DATA_BITRATES", "NOMINAL_BITRATES", "SlcanTransport", "encode_line"]
@@ -164,19 +165,20 @@ class SlcanTransport(Transport[Frame, Frame]):
         self._serial_options = {"exclusive": exclusive, **options}
         self._deframer = SlcanDeframer(timestamps=timestamps)
         self._load_known = bitrate is not None
-        self._line: asyncio.Transport | None = None
-        self._protocol: LineProtocol | None = None
-        self._serial: Any = None  # the pyserial Serial under the line
-        self._fd = -1
+        self._port: SerialPort | None = None
         self._tail = b""  # the unwritten rest of a line the kernel took only part of
-        self._writable: asyncio.Future[None] | None = None
-        self._writer_armed = False
-        self._answer: asyncio.Future[None] | None = None  # an open command waiting for OK or BEL
+        self._answer: anyio.Event | None = None  # an open command waiting for OK or BEL
 
     # ----------------------------------------------------------------- public API
 
-    def send(self, frame: Frame) -> None:
-        """Queue ``frame``; the writer puts it on the port in order.
+    @property
+    def rules(self) -> LineRules:
+        """A full-duplex CAN bus at the adapter's bit rate (unknown when the adapter's own is kept)."""
+        return LineRules(bitrate=self.bitrate, stale_after_s=self._stale_after_s)
+
+    def send(self, frame: Frame, handle: object = None) -> None:
+        """Queue ``frame``; the writer puts it on the port in order. The send report names ``handle``
+        (the frame itself when None).
 
         Raises:
             ValueError: a serial-link message, a CAN FD frame without ``fd=True``, or any frame on a
@@ -190,7 +192,7 @@ class SlcanTransport(Transport[Frame, Frame]):
             raise ValueError(f"{self.name}: CAN FD frame {frame!r} on an adapter opened without fd=True")
         if self.listen_only:
             raise ValueError(f"{self.name}: the adapter is open listen-only; it sends nothing")
-        self._enqueue(frame)
+        self._enqueue(frame, None, handle)
 
     def line_counters(self) -> dict[str, int]:
         """The line de-framer's counters since creation: frames, remote, acks (``z``/``Z``), oks (empty
@@ -220,23 +222,24 @@ class SlcanTransport(Transport[Frame, Frame]):
     # ----------------------------------------------------------------- connection
 
     async def _connect(self) -> None:
-        line, protocol = await open_port(
+        assert self._runtime is not None  # set by open()
+        self._port = SerialPort.open(
             self,
             self._generation,
             self.port,
+            self._runtime,
+            self._tasks,
             read_size=_READ_SIZE,
             baudrate=self.tty_baudrate,
             **self._serial_options,
         )
         self._deframer.clear()  # a line cut by the loss cannot be completed
-        self._line, self._protocol = line, protocol
-        self._serial = line.get_extra_info("serial")
-        self._fd = self._serial.fileno()
         self._tail = b""
         try:
             await self._open_channel()
         except BaseException:
-            await self._disconnect()
+            with anyio.CancelScope(shield=True):
+                await self._disconnect()
             raise
 
     async def _open_channel(self) -> None:
@@ -249,21 +252,21 @@ class SlcanTransport(Transport[Frame, Frame]):
 
     async def _command(self, command: bytes, *, must_succeed: bool = True) -> None:
         """Write one configuration command and wait for its answer (CR: done, BEL: refused)."""
+        assert self._port is not None
         deframer = self._deframer
         answered = deframer.oks + deframer.bells
         bells = deframer.bells
-        self._answer = asyncio.get_running_loop().create_future()
         try:
             try:
-                written = os.write(self._fd, command + b"\r")
+                written = self._port.write(command + b"\r")
             except OSError as exc:
                 raise TransportError(f"{self.name}: cannot write {command.decode()!r}: {exc}") from exc
             if written != len(command) + 1:
                 raise TransportError(f"{self.name}: the adapter did not take {command.decode()!r}")
-            async with asyncio.timeout(self.open_timeout_s):
+            with anyio.fail_after(self.open_timeout_s):
                 while deframer.oks + deframer.bells == answered:
-                    await self._answer
-                    self._answer = asyncio.get_running_loop().create_future()
+                    self._answer = anyio.Event()
+                    await self._answer.wait()
         except TimeoutError:
             raise TransportError(
                 f"{self.name}: no answer to {command.decode()!r} within {self.open_timeout_s} s: "
@@ -275,19 +278,14 @@ class SlcanTransport(Transport[Frame, Frame]):
             raise TransportError(f"{self.name}: the adapter refused {command.decode()!r} (BEL)")
 
     async def _disconnect(self) -> None:
-        line, protocol = self._line, self._protocol
-        self._line = self._protocol = None
-        self._disarm_writer()
-        if self._writable is not None and not self._writable.done():
-            self._writable.set_result(None)
-        self._writable = None
+        port, self._port = self._port, None
         self._tail = b""
-        if line is not None and not line.is_closing():
+        if port is None:
+            return
+        if not port.failed:
             with contextlib.suppress(OSError):
-                os.write(self._fd, b"C\r")  # take the adapter off the bus; best effort
-        await close_port(line, protocol)
-        self._fd = -1
-        self._serial = None
+                port.write(b"C\r")  # take the adapter off the bus; best effort
+        await port.close()
 
     # ----------------------------------------------------------------- receiving
 
@@ -296,8 +294,8 @@ class SlcanTransport(Transport[Frame, Frame]):
             return
         now = self._now()
         frames = self._deframer.feed(data, now)
-        if self._answer is not None and not self._answer.done():
-            self._answer.set_result(None)
+        if self._answer is not None:
+            self._answer.set()
         if not frames:
             return
         stats = self._stats
@@ -319,22 +317,23 @@ class SlcanTransport(Transport[Frame, Frame]):
         limit = self._stale_after_s
         gap = self.min_gap_s
         while batch:
-            if not await self._wait_for_room():
+            port = self._port
+            if port is None or port.failed or not await self._wait_for_room(port):
                 return  # the line went away: the base counts the rest as purged
             now = self._now()
             if gap and (rest := self._last_start + gap - now) > 0:
-                await asyncio.sleep(rest)
+                await anyio.sleep(rest)
                 continue  # look at room and freshness again after the rest
             if limit is not None and now - batch[0].queued_at > limit:
                 stale = [o for o in batch if now - o.queued_at > limit]
                 batch[:] = [o for o in batch if now - o.queued_at <= limit]
-                self._dropped("stale", [o.item for o in stale])
+                self._dropped("stale", [o.handle for o in stale])
                 if not batch:
                     return
             lines = [encode_line(o.item) for o in (batch[:1] if gap else batch)]
             data = b"".join(lines)
             try:
-                written = os.write(self._fd, data)
+                written = port.write(data)
             except BlockingIOError:
                 written = 0
             except OSError as exc:
@@ -347,7 +346,6 @@ class SlcanTransport(Transport[Frame, Frame]):
                 sent += 1
             if end > written:
                 self._tail = data[written:end]
-                self._arm_writer()
             if sent:
                 self._last_start = now
             for outgoing in batch[:sent]:
@@ -356,54 +354,31 @@ class SlcanTransport(Transport[Frame, Frame]):
                 stats.bytes_out += len(frame.data)
                 if self._load_known:
                     self._load.add(now, self._frame_time_s(frame))
-                self._sent(frame, now)
+                self._sent(outgoing.handle, now)
             del batch[:sent]
+        port = self._port
+        if self._tail and port is not None:
+            await self._wait_for_room(port)  # a cut line is finished before the writer rests
 
-    async def _wait_for_room(self) -> bool:
-        """Wait until the port takes bytes again; False when the line is gone meanwhile."""
-        while True:
-            line = self._line
-            if line is None or line.is_closing() or self._fd < 0:
-                return False
+    async def _wait_for_room(self, port: SerialPort) -> bool:
+        """Finish a cut line, then wait until the driver's output queue is below the high-water mark;
+        False when the port failed meanwhile."""
+        while not port.failed:
             if self._tail:
-                self._arm_writer()
-                assert self._writable is not None
-                await self._writable
+                try:
+                    self._tail = self._tail[port.write(self._tail) :]
+                except BlockingIOError:
+                    await port.wait_writable()
+                except OSError as exc:
+                    self._lose(exc, self._generation)
+                    return False
                 continue
             try:
-                queued = self._serial.out_waiting
-            except Exception:  # no output queue to ask for, or a failing port (the reader reports it)
+                queued = port.out_waiting()
+            except OSError:  # a failing port: the reader reports it
                 queued = 0
             if queued > self.write_high_water:
-                await asyncio.sleep(_STALL_POLL_S)
+                await anyio.sleep(_STALL_POLL_S)
                 continue
             return True
-
-    def _arm_writer(self) -> None:
-        if self._writable is None or self._writable.done():
-            self._writable = asyncio.get_running_loop().create_future()
-        if not self._writer_armed and self._fd >= 0:
-            asyncio.get_running_loop().add_writer(self._fd, self._on_writable)
-            self._writer_armed = True
-
-    def _disarm_writer(self) -> None:
-        if self._writer_armed:
-            with contextlib.suppress(Exception):
-                asyncio.get_running_loop().remove_writer(self._fd)
-            self._writer_armed = False
-
-    def _on_writable(self) -> None:
-        """The kernel has room: finish the cut line; wake the writer once nothing of it is left."""
-        try:
-            written = os.write(self._fd, self._tail) if self._tail else 0
-        except BlockingIOError:
-            return
-        except OSError as exc:
-            self._disarm_writer()
-            self._lose(exc)
-            return
-        self._tail = self._tail[written:]
-        if not self._tail:
-            self._disarm_writer()
-            if self._writable is not None and not self._writable.done():
-                self._writable.set_result(None)
+        return False

@@ -1,0 +1,203 @@
+"""A transport's send side: the bounded queue, and the one writer task per connection that empties it."""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Generic, TypeVar
+
+import anyio
+from anyio.abc import TaskGroup
+
+from servobus.errors import TransportError
+from servobus.runtime import Waiter
+from servobus.transports._waiters import WaiterList
+from servobus.transports.events import FramesDropped, TransportEvent
+from servobus.transports.stats import TransportStats
+
+if TYPE_CHECKING:
+    from servobus.transports.base import Transport
+
+__all__ = ["Outgoing", "SendQueue", "SendQueueFull", "SendReporter", "SendReports"]
+
+logger = logging.getLogger("servobus.transports")
+
+#: ``reporter(handle, sent_at, reason)`` (contract.SendReporter; the handle typed Any, so that a
+#: sender whose reporter takes its own handle type, a Bus's Request, type-checks against it)
+SendReporter = Callable[[Any, float | None, str | None], object]
+
+TxT = TypeVar("TxT")
+
+
+class SendQueueFull(TransportError):
+    """A non-blocking send found the queue full: back off, or ``await drain()`` first.
+
+    (No longer an ``asyncio.QueueFull``: the transports are not asyncio's; catch this, or
+    TransportError.)
+    """
+
+
+@dataclass(slots=True)
+class Outgoing(Generic[TxT]):
+    """One queued frame: what to write, when it was queued, how long the line stays ours after it,
+    and the handle its send report echoes (the item itself when the sender gave none)."""
+
+    item: TxT
+    queued_at: float
+    hold_s: float | None = None
+    handle: Any = None
+
+
+class SendQueue(Generic[TxT]):
+    """Frames waiting for the wire, and the writer task (one per connection) that hands them over.
+
+    The writer takes up to ``transport.batch_size`` frames at a time, drops those older than
+    ``stale_after_s``, and awaits ``transport._transmit(batch)``. It runs in the transport's task
+    group, inside a cancel scope of its own that a loss or a close cancels.
+    """
+
+    __slots__ = ("_scope", "_transport", "_wake", "idle", "items", "size", "stale_after_s", "transmitting")
+
+    def __init__(self, transport: Transport[Any, TxT], size: int, stale_after_s: float | None) -> None:
+        self._transport = transport
+        self.size = size
+        self.stale_after_s = stale_after_s
+        self.items: deque[Outgoing[TxT]] = deque()
+        self.transmitting = False
+        #: tasks in drain(), woken when the queue is empty and nothing is being written
+        self.idle = WaiterList()
+        self._wake: Waiter[None] | None = None
+        self._scope: anyio.CancelScope | None = None
+
+    def put(self, outgoing: Outgoing[TxT]) -> None:
+        if len(self.items) >= self.size:
+            transport = self._transport
+            transport._stats.queue_full += 1
+            raise SendQueueFull(
+                f"{transport.name}: send queue full ({self.size} frames); await drain() before sending more"
+            )
+        self.items.append(outgoing)
+        wake = self._wake
+        if wake is not None and not wake.done():
+            wake.set_result(None)
+
+    async def drain(self) -> None:
+        """Until every queued frame has been written or dropped.
+
+        Raises:
+            TransportError: the transport is not open, or stops being open meanwhile.
+        """
+        transport = self._transport
+        while self.items or self.transmitting:
+            if not transport.is_open or transport._runtime is None:
+                raise transport._error()
+            await self.idle.park(transport._runtime)
+        if not transport.is_open:
+            raise transport._error()
+
+    def start(self, tasks: TaskGroup, generation: int) -> None:
+        """Start this connection's writer (a loss or a close stops it: :meth:`stop`)."""
+        self.stop()
+        self._scope = scope = anyio.CancelScope()
+        tasks.start_soon(self._run, scope, generation, name=f"{self._transport.name} writer")
+
+    def stop(self) -> None:
+        if self._scope is not None:
+            self._scope.cancel()
+            self._scope = None
+        self.transmitting = False
+
+    def purge(self, reason: str) -> None:
+        """Drop every queued frame (counted and reported with ``reason``)."""
+        if self.items:
+            dropped = list(self.items)
+            self.items.clear()
+            self._transport._dropped(reason, [o.handle for o in dropped])
+
+    async def _run(self, scope: anyio.CancelScope, generation: int) -> None:
+        transport = self._transport
+        lane = transport._runtime
+        assert lane is not None  # started by an open transport
+        items = self.items
+        with scope:
+            while True:
+                if not items:
+                    self.idle.wake_all()
+                    self._wake = wake = lane.waiter()
+                    try:
+                        await wake
+                    finally:
+                        self._wake = None
+                    continue
+                batch = [items.popleft() for _ in range(min(transport.batch_size, len(items)))]
+                batch = self._drop_stale(batch, transport._now())
+                if not batch:
+                    continue
+                self.transmitting = True
+                try:
+                    await transport._transmit(batch)
+                except anyio.get_cancelled_exc_class():
+                    raise
+                except Exception as exc:  # a transmit bug must not leave the queue stuck forever
+                    transport._lose(exc, generation)
+                    return
+                finally:
+                    self.transmitting = False
+                    # not written: lost, closed or failed
+                    transport._dropped("purged", [o.handle for o in batch])
+                if generation != transport._generation:  # _transmit lost the device
+                    return
+
+    def _drop_stale(self, batch: list[Outgoing[TxT]], now: float) -> list[Outgoing[TxT]]:
+        limit = self.stale_after_s
+        if limit is None or now - batch[0].queued_at <= limit:  # the oldest is first
+            return batch
+        self._transport._dropped("stale", [o.handle for o in batch if now - o.queued_at > limit])
+        return [o for o in batch if now - o.queued_at <= limit]
+
+
+class SendReports:
+    """A transport's send reports and drop counts (a base class of Transport): every frame
+    :meth:`send` accepted is reported once, by the handle it was sent with."""
+
+    name: str
+    _stats: TransportStats
+    _reporter: SendReporter | None
+
+    if TYPE_CHECKING:  # (the transport's; declared here for the type checker only)
+
+        def _now(self) -> float: ...
+
+        def _emit(self, event: TransportEvent) -> None: ...
+
+    def _dropped(self, reason: str, handles: Sequence[Any] | int) -> None:
+        """Count frames that will never be sent, and report each one whose handle is known."""
+        count = handles if isinstance(handles, int) else len(handles)
+        if count:
+            setattr(self._stats, reason, getattr(self._stats, reason) + count)
+            self._emit(FramesDropped(reason, count, self._now()))
+            reporter = self._reporter
+            if reporter is not None and not isinstance(handles, int):
+                for handle in handles:
+                    self._call(reporter, handle, None, reason)
+
+    def _sent(self, handle: Any, sent_at: float) -> None:
+        """Report that the frame sent with ``handle`` left at ``sent_at`` (counting is the subclass's)."""
+        if self._reporter is not None:
+            self._call(self._reporter, handle, sent_at, None)
+
+    def set_send_reporter(self, reporter: SendReporter | None) -> None:
+        """Call ``reporter(handle, sent_at, None)`` for every frame that left, and
+        ``reporter(handle, None, reason)`` for every one dropped after :meth:`send` accepted it.
+
+        Called on the loop; its exceptions are logged, never raised into the transport.
+        """
+        self._reporter = reporter
+
+    def _call(self, callback: Callable[..., object], *args: object) -> None:
+        try:
+            callback(*args)
+        except Exception:
+            logger.exception("%s: callback %r failed", self.name, callback)
