@@ -27,8 +27,8 @@
   :class:`~servobus.transports.events.BusOff` for bus-off); remote frames are counted and dropped.
 
 The conversions between :class:`~servobus.frame.Frame` and ``can.Message`` are
-:meth:`Frame.from_message <servobus.frame.Frame.from_message>` and :func:`message_from_frame` (which
-:meth:`Frame.to_message <servobus.frame.Frame.to_message>` calls: servobus.frame never imports can).
+:meth:`Frame.from_message <servobus.frame.Frame.from_message>` and :func:`message_from_frame` (here,
+at python-can's edge: servobus.frame never imports can).
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ from servobus.transports.base import Outgoing, Transport, logger
 from servobus.transports.contract import LineRules
 from servobus.transports.events import BusOff, CanErrorClass, ErrorFrame
 
-__all__ = ["CanMessage", "CanTransport", "frame_from_message", "message_from_frame"]
+__all__ = ["CanTransport", "frame_from_message", "message_from_frame"]
 
 
 def frame_from_message(message: can.Message, timestamp: float) -> Frame:
@@ -67,7 +67,7 @@ def frame_from_message(message: can.Message, timestamp: float) -> Frame:
 
 
 def message_from_frame(frame: Frame, **message: Any) -> can.Message:
-    """A :class:`Frame` as a ``can.Message`` (:meth:`Frame.to_message`): identifier, extended, FD,
+    """A :class:`Frame` as a ``can.Message``: identifier, extended, FD,
     BRS, ESI, data, ``is_rx`` and timestamp; ``message`` adds other ``can.Message`` arguments.
 
     Raises:
@@ -87,10 +87,6 @@ def message_from_frame(frame: Frame, **message: Any) -> can.Message:
         check=False,  # a Frame is valid already
         **message,
     )
-
-
-#: python-can's ``Message``, under a name :mod:`servobus.frame` can annotate with (it never imports can).
-CanMessage = can.Message
 
 
 class CanTransport(Transport[Frame, Frame]):
