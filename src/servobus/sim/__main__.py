@@ -21,7 +21,6 @@ other, print one line (``servobus.sim: error: ...``) to stderr and exit with sta
 from __future__ import annotations
 
 import argparse
-import asyncio
 import contextlib
 import os
 import signal
@@ -30,7 +29,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import NoReturn
 
+import anyio
+
 from servobus.protocols import available_families, get_family
+from servobus.signals import stop_on
 from servobus.sim.attach import serve_rs485, serve_slcan
 from servobus.sim.corenet import CoreCanNetwork
 from servobus.sim.family import Setup, SimFamily, SimOptions
@@ -199,46 +201,34 @@ async def run(args: argparse.Namespace, setup: Setup) -> None:
     Raises:
         UsageError: the link could not be created (it appeared after the checks, or the folder refused).
     """
-    loop = asyncio.get_running_loop()
-    task = asyncio.current_task()
-    assert task is not None
-    signalled: list[int] = []
-
-    def stop(signum: int) -> None:
-        signalled.append(signum)
-        task.cancel()
-
-    for signum in (signal.SIGTERM, signal.SIGHUP):
-        loop.add_signal_handler(signum, stop, signum)
-    port = PtyPort()
     link = Path(args.link) if args.link is not None else None
-    made_link = False
-    try:
-        if link is not None:
-            make_link(link, port.path)
-            made_link = True
-        print(port.path if link is None else link, flush=True)
-        kind = "RS485 line" if args.rs485 else "SLCAN adapter"
-        print(
-            f"{args.motors} simulated {args.family} motor(s) behind a {kind}; Ctrl-C stops", file=sys.stderr
-        )
-        await serve(setup, port)
-    except asyncio.CancelledError:
-        if not signalled:
-            raise
-        task.uncancel()
-    finally:
-        port.close()
-        if made_link and link is not None:
-            remove_link(link, port.path)
+    # (the signals' receiver is in place before the path is printed; a signal ends the block quietly)
+    async with stop_on(signal.SIGTERM, signal.SIGHUP, signal.SIGINT, exit=False):
+        port = PtyPort()
+        made_link = False
+        try:
+            if link is not None:
+                make_link(link, port.path)
+                made_link = True
+            print(port.path if link is None else link, flush=True)
+            kind = "RS485 line" if args.rs485 else "SLCAN adapter"
+            print(
+                f"{args.motors} simulated {args.family} motor(s) behind a {kind}; Ctrl-C stops",
+                file=sys.stderr,
+            )
+            await serve(setup, port)
+        finally:
+            port.close()
+            if made_link and link is not None:
+                remove_link(link, port.path)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
     try:
         setup = build(args)
-        with contextlib.suppress(KeyboardInterrupt):
-            asyncio.run(run(args, setup))
+        with contextlib.suppress(KeyboardInterrupt):  # (a Ctrl-C before the signals are taken)
+            anyio.run(run, args, setup)
     except UsageError as exc:
         print(f"{ERROR_PREFIX}{exc}", file=sys.stderr)
         return EXIT_USAGE
