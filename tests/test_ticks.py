@@ -93,3 +93,13 @@ def test_on_the_real_clock_ticks_start_on_time(backend: str) -> None:
     late = sorted(t.late_s for t in got)
     assert [t.index - t.skipped for t in got][:1] == [0]
     assert 0.0 <= late[len(late) // 2] < 0.0003, late[len(late) // 2]
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_servobus_sim_virtual_runs_the_pacer_on_either_backend(backend: str) -> None:
+    from servobus.sim import virtual
+
+    async def main() -> list[float]:
+        return [tick.deadline async for tick in ticks(100, count=3)]
+
+    assert virtual.run(main(), start=10.0, backend=backend) == pytest.approx([10.0, 10.01, 10.02])
