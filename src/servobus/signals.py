@@ -91,7 +91,8 @@ class StopOn:
                 async for signum in arrivals:
                     if self.received is None:  # (later ones: the safe stop is under way)
                         self.received = _signal.Signals(signum)
-                        self._targets[-1].cancel()
+                        if self._targets:  # (none yet: the block's scope is cancelled as it opens)
+                            self._targets[-1].cancel()
         finally:
             self.taking_signals = False
             for sig, handler in previous.items():
