@@ -30,9 +30,9 @@ from pathlib import Path
 from typing import NoReturn
 
 import anyio
+import anyio.abc
 
 from servobus.protocols import available_families, get_family
-from servobus.signals import stop_on
 from servobus.sim.attach import serve_rs485, serve_slcan
 from servobus.sim.corenet import CoreCanNetwork
 from servobus.sim.family import Setup, SimFamily, SimOptions
@@ -201,26 +201,47 @@ async def run(args: argparse.Namespace, setup: Setup) -> None:
     Raises:
         UsageError: the link could not be created (it appeared after the checks, or the folder refused).
     """
-    link = Path(args.link) if args.link is not None else None
-    # (the signals' receiver is in place before the path is printed; a signal ends the block quietly)
-    async with stop_on(signal.SIGTERM, signal.SIGHUP, signal.SIGINT, exit=False):
-        port = PtyPort()
-        made_link = False
+    failed: list[UsageError] = []
+    async with anyio.create_task_group() as group:
+        # (the signals are taken before the path is printed; one cancels the group, serving ends)
+        await group.start(_until_signalled, group.cancel_scope, name="servobus.sim signals")
         try:
-            if link is not None:
-                make_link(link, port.path)
-                made_link = True
-            print(port.path if link is None else link, flush=True)
-            kind = "RS485 line" if args.rs485 else "SLCAN adapter"
-            print(
-                f"{args.motors} simulated {args.family} motor(s) behind a {kind}; Ctrl-C stops",
-                file=sys.stderr,
-            )
-            await serve(setup, port)
-        finally:
-            port.close()
-            if made_link and link is not None:
-                remove_link(link, port.path)
+            await _serve_on_a_pty(args, setup)
+        except UsageError as exc:  # (out of the group as itself, not in an exception group)
+            failed.append(exc)
+        group.cancel_scope.cancel()
+    if failed:
+        raise failed[0]
+
+
+async def _until_signalled(
+    scope: anyio.CancelScope, *, task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED
+) -> None:
+    """Cancel ``scope`` on SIGTERM, SIGHUP or Ctrl-C (taken here, on asyncio and trio alike)."""
+    with anyio.open_signal_receiver(signal.SIGTERM, signal.SIGHUP, signal.SIGINT) as signals:
+        task_status.started()
+        async for _ in signals:
+            scope.cancel()  # (a second one while the pty closes changes nothing)
+
+
+async def _serve_on_a_pty(args: argparse.Namespace, setup: Setup) -> None:
+    link = Path(args.link) if args.link is not None else None
+    port = PtyPort()
+    made_link = False
+    try:
+        if link is not None:
+            make_link(link, port.path)
+            made_link = True
+        print(port.path if link is None else link, flush=True)
+        kind = "RS485 line" if args.rs485 else "SLCAN adapter"
+        print(
+            f"{args.motors} simulated {args.family} motor(s) behind a {kind}; Ctrl-C stops", file=sys.stderr
+        )
+        await serve(setup, port)
+    finally:
+        port.close()
+        if made_link and link is not None:
+            remove_link(link, port.path)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
