@@ -1,11 +1,10 @@
 """The README runs as written: every ```python block as a script (those that need hardware on simulated
 devices behind ptys, their device paths swapped), every ```pycon block as a doctest; the quick start,
-the service and the signal example also for what they do; the CLI section shows every command and
-the Dependencies section names every runtime dependency."""
+the service and the signal example also for what they do, on asyncio and on trio; the CLI section shows
+every command and the Dependencies section names every runtime dependency."""
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import doctest
 import os
@@ -13,6 +12,8 @@ import re
 import signal
 import subprocess
 import sys
+import threading
+import time
 import tomllib
 from collections.abc import Iterator
 from pathlib import Path
@@ -22,9 +23,10 @@ import anyio
 import click
 import pytest
 
+from _backends import BACKENDS
 from servobus.cli import cli
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
-from servobus.sim.plant import PositionControl
+from servobus.sim.plant import PositionControl, SpeedControl
 from servobus.transports.sim import SimTransport
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -118,17 +120,28 @@ def test_every_pycon_block_passes_as_a_doctest(line: int, text: str) -> None:
     assert runner.failures == 0, "".join(report)
 
 
-def test_the_quick_start_drives_simulated_motors_through_bus_and_motor() -> None:
+def _on(backend: str, code: str) -> str:
+    """``code`` with its ``anyio.run(main)`` line (at the start of a line) run on ``backend``."""
+    run = re.compile(r"^anyio\.run\(main\)", re.M)
+    assert len(run.findall(code)) == 1, "the block ends with one anyio.run(main)"
+    return run.sub(f"anyio.run(main, backend={backend!r})", code)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_the_quick_start_drives_simulated_motors_through_bus_and_motor(backend: str) -> None:
     code = _block("quickstart")
     assert not re.search(r"0x[0-9A-Fa-f]{3}\b", code), "the quick start names a raw CAN id"
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    done = subprocess.run(
+        [sys.executable, "-c", _on(backend, code)], capture_output=True, text=True, timeout=120
+    )
     assert done.returncode == 0, done.stderr
     lines = done.stdout.splitlines()
     assert lines[0].startswith("motor 1: ") and lines[1] == "last tick: 32/32 replies", done.stdout
     assert re.fullmatch(r"broadcast: 32 replies; latency p50 \d+\.\d\d ms", lines[2]), done.stdout
 
 
-def test_the_service_example_runs_in_a_task_group_and_stops_its_motors() -> None:
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_the_service_example_runs_in_a_task_group_and_stops_its_motors(backend: str) -> None:
     namespace: dict[str, Any] = {}
     exec(compile(_block("service"), "README service", "exec"), namespace)
     devices = [MyActuatorMotor(i) for i in (1, 2, 3)]
@@ -137,22 +150,36 @@ def test_the_service_example_runs_in_a_task_group_and_stops_its_motors() -> None
         with anyio.move_on_after(1.3):  # the service runs until its host cancels it
             await namespace["serve"](SimTransport(devices=devices))
 
-    anyio.run(main)
+    anyio.run(main, backend=backend)
     for device in devices:  # they ran at 30 dps; cancelled, the safe stop (0x81) made each hold
         assert isinstance(device.control, PositionControl), device.control
 
 
-def test_the_signal_example_stops_its_motor_and_exits_143_on_sigterm() -> None:
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_the_signal_example_stops_its_motor_and_exits_143_on_sigterm(backend: str) -> None:
     namespace: dict[str, Any] = {}
     exec(compile(_block("signals"), "README signals", "exec"), namespace)
     device = MyActuatorMotor(1)
 
-    async def main() -> None:
-        asyncio.get_running_loop().call_later(0.5, os.kill, os.getpid(), signal.SIGTERM)
-        await namespace["main"](SimTransport(devices=[device]))
+    ended = threading.Event()
 
-    with pytest.raises(SystemExit) as stopped:
-        asyncio.run(main())
+    def terminate_once_it_turns() -> None:  # (a thread: the signal comes once the block drives the motor)
+        until = time.monotonic() + 30
+        while not isinstance(device.control, SpeedControl) and time.monotonic() < until:
+            if ended.wait(0.01):
+                return  # the block ended on its own (an error): no signal for pytest itself
+        time.sleep(0.2)
+        if not ended.is_set():
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    killer = threading.Thread(target=terminate_once_it_turns, daemon=True)
+    killer.start()
+    try:
+        with pytest.raises(SystemExit) as stopped:
+            anyio.run(namespace["main"], SimTransport(devices=[device]), backend=backend)
+    finally:
+        ended.set()
+        killer.join()
     assert stopped.value.code == 143
     assert isinstance(device.control, PositionControl), device.control  # it turned; the stop made it hold
 

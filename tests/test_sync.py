@@ -12,6 +12,7 @@ from typing import Any
 
 import pytest
 
+from _backends import BACKENDS
 from servobus import sync
 from servobus.errors import MotorTimeout
 from servobus.protocols import myactuator as ma
@@ -30,8 +31,10 @@ def _stops(sniffer: Sniffer) -> set[int]:
     }
 
 
-def test_commands_block_and_return_their_replies() -> None:
-    with sync.Bus(SimTransport(devices=[MyActuatorMotor(1), MyActuatorMotor(2)])) as bus:
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_commands_block_and_return_their_replies(backend: str) -> None:
+    transport = SimTransport(devices=[MyActuatorMotor(1), MyActuatorMotor(2)])
+    with sync.Bus(transport, backend=backend) as bus:
         one, two = bus.motor("myactuator", 1), bus.motor("myactuator", 2)
         assert isinstance(one.read_status2(), ma.StatusReply)
         results = bus.cycle([(one, ma.ReadMultiTurnAngle()), (two, ma.ReadStatus1())])
@@ -47,10 +50,11 @@ def test_a_timeout_raises_in_the_caller() -> None:
         bus.motor("myactuator", 1).read_status2(timeout_s=0.05)
 
 
-def test_an_exception_in_the_block_stops_the_commanded_motors() -> None:
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_an_exception_in_the_block_stops_the_commanded_motors(backend: str) -> None:
     sniffer = Sniffer()
     transport = SimTransport(devices=[MyActuatorMotor(1), MyActuatorMotor(2), sniffer])
-    with pytest.raises(RuntimeError, match="script failed"), sync.Bus(transport) as bus:
+    with pytest.raises(RuntimeError, match="script failed"), sync.Bus(transport, backend=backend) as bus:
         bus.motor("myactuator", 1).speed_control(speed_dps=45.0)
         bus.motor("myactuator", 2).read_status2()
         raise RuntimeError("script failed")
@@ -86,12 +90,14 @@ def test_motor_commands_take_their_fields_by_position_as_declared() -> None:
     assert sent[1] == sent[2] == ma.SpeedControl(speed_dps=45.0, max_torque_pct=50).encode()
 
 
-def test_the_sync_bus_has_metrics_subscriptions_ticks_and_requests() -> None:
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_the_sync_bus_has_metrics_subscriptions_ticks_and_requests(backend: str) -> None:
     heard: list[tuple[int, Any]] = []
     statuses: list[Any] = []
     silent = MyActuatorMotor(2)
     silent.unresponsive = True
-    with sync.Bus(SimTransport(devices=[MyActuatorMotor(1), silent]), offline_after_misses=1) as bus:
+    transport = SimTransport(devices=[MyActuatorMotor(1), silent])
+    with sync.Bus(transport, backend=backend, offline_after_misses=1) as bus:
         bus.subscribe(lambda motor, traffic, reply: heard.append((motor.motor_id, reply)))
         bus.subscribe_status(statuses.append)
         one, two = bus.motor("myactuator", 1), bus.motor("myactuator", 2)

@@ -102,19 +102,25 @@ class Motor:
 class Bus:
     """A :class:`servobus.Bus` on a background event loop; every call blocks until done.
 
+    The Bus is entered and left by one task of the background loop (the portal's
+    ``wrap_async_context_manager``), as ``async with`` would: the task groups the Bus and its
+    transport own are entered and left in the same task, as anyio requires.
+
     Args:
         transport, **options: as :class:`servobus.Bus`.
+        backend: the background loop's, "asyncio" (default) or "trio" (through anyio).
 
     Raises:
         TransportError: the transport cannot be opened.
     """
 
-    def __init__(self, transport: Any, **options: Any) -> None:
-        self._portal_cm = start_blocking_portal(backend="asyncio")
+    def __init__(self, transport: Any, *, backend: str = "asyncio", **options: Any) -> None:
+        self._portal_cm = start_blocking_portal(backend=backend)
         self._portal = self._portal_cm.__enter__()
-        self._bus = _bus.Bus(transport, **options)
         try:
-            self._portal.call(self._bus.__aenter__)
+            self._bus = _bus.Bus(transport, **options)
+            self._inside = self._portal.wrap_async_context_manager(self._bus)
+            self._inside.__enter__()
         except BaseException:
             self._portal_cm.__exit__(None, None, None)
             raise
@@ -211,7 +217,7 @@ class Bus:
         self._open = False
         _OPEN.discard(self)
         try:
-            self._portal.call(self._bus.__aexit__, type(exc) if exc else None, exc, None)
+            self._inside.__exit__(type(exc) if exc else None, exc, exc.__traceback__ if exc else None)
         finally:
             self._portal_cm.__exit__(None, None, None)
 

@@ -1,28 +1,33 @@
 """A fixed-rate pacer for control loops: ``async for tick in ticks(hz=1000): ...``.
 
 Ticks are due at absolute times ``start + n / hz``, never "period after the last one", so a slow
-iteration does not push every later tick back. asyncio's sleep cannot hit a deadline inside a
-millisecond: the epoll selector rounds its timeout up to whole milliseconds, so a 0.5 ms sleep
-takes 1 ms or more. The pacer therefore sleeps until ``spin_s`` (default 1.2 ms) before the deadline
-and then yields to the loop (``sleep(0)``, other tasks still run) until the deadline has come. At
-1 kHz that spins the whole period, one core at 100%, and ticks start 1 µs late (median; p99 2 µs;
-2,000 ticks here); with ``spin_s=0.0005`` the CPU falls to 9% and the median lateness grows to
-0.27 ms. Below ~400 Hz most of each period is slept.
+iteration does not push every later tick back. An event loop's sleep cannot hit a deadline inside a
+millisecond: asyncio's epoll selector, and trio's, round their timeout up to whole milliseconds, so a
+0.5 ms sleep takes 1 ms or more. The pacer therefore sleeps until ``spin_s`` (default 1.2 ms) before
+the deadline and then yields to the loop (``anyio.sleep(0)``: other tasks still run) until the deadline
+has come. At 1 kHz that spins the whole period, one core at 100%, and ticks start 2 µs late on asyncio
+(median; p99 13 µs; 2,000 ticks here); with ``spin_s=0.0005`` the CPU falls to 15% and the median
+lateness grows to 0.3 ms. Below ~400 Hz most of each period is slept.
 
 A tick whose deadline has already passed when the previous iteration ends is reported (``late_s``);
 ticks that were missed entirely are skipped, not run in a burst, and counted (``skipped``). One
 pacer can drive several buses: await their cycles in the body.
 
-Works on any asyncio loop, including virtual time (``servobus.sim.virtual``), where every tick is
-exactly on time.
+Runs on asyncio and trio (through anyio; the clock is the loop's, :func:`servobus.runtime.current`),
+including virtual time (looptime, ``servobus.sim.virtual``, or trio's ``MockClock``), where every tick
+is exactly on time: a clock that did not move while the pacer yielded is a virtual one, which moves
+only when every task waits, so the pacer sleeps on it instead of spinning.
 """
 
 from __future__ import annotations
 
-import asyncio
 import math
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
+
+import anyio
+
+from servobus import runtime
 
 __all__ = ["Tick", "ticks"]
 
@@ -63,26 +68,28 @@ async def ticks(hz: float, *, spin_s: float = 0.0012, count: int | None = None) 
         raise ValueError(f"hz={hz!r} must be a positive number")
     if not (math.isfinite(spin_s) and spin_s >= 0):
         raise ValueError(f"spin_s={spin_s!r} must be >= 0")
-    loop = asyncio.get_running_loop()
+    clock = runtime.current().time
     period = 1.0 / hz
-    start = loop.time()
+    start = clock()
     index = 0
     yielded = 0
     while count is None or yielded < count:
         deadline = start + index * period
-        now = loop.time()
+        now = clock()
         skipped = 0
         if now - deadline >= period:  # whole periods passed: skip them, keep the grid
             skipped = int((now - deadline) // period)
             index += skipped
             deadline = start + index * period
         if deadline - now > spin_s:
-            await asyncio.sleep(deadline - now - spin_s)
-        while (before := loop.time()) < deadline:
-            await asyncio.sleep(0)
-            if loop.time() == before:  # a virtual clock moves only when the loop idles: sleep on it
-                await asyncio.sleep(deadline - before)
-        started = loop.time()
+            await anyio.sleep(deadline - now - spin_s)
+        while (before := clock()) < deadline:
+            await anyio.sleep(0)
+            if clock() == before:  # a virtual clock moves only when the loop idles: sleep on it
+                await anyio.sleep(deadline - before)
+                if clock() == before:  # (looptime rounds timers to its resolution: a hair short)
+                    break
+        started = clock()
         yield Tick(index, deadline, started, started - deadline, skipped)
         yielded += 1
         index += 1

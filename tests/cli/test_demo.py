@@ -43,6 +43,14 @@ def test_json_summary(capsys: pytest.CaptureFixture[str]) -> None:
     assert summary["latency_p99_ms"] is not None and summary["bus_load_mean_pct"] > 0
 
 
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_the_demo_runs_on_either_backend(capsys: pytest.CaptureFixture[str], backend: str) -> None:
+    args = ["demo", "--duration", "0.5", "--motors", "6", "--buses", "2", "--hz", "200", "--backend", backend]
+    summary = run_json(capsys, args)
+    assert summary["buses"] == 2 and summary["errors"] == 0 and summary["ticks"] > 0
+    assert summary["pairs"] == 6 * summary["ticks"]  # every bus's cycle ran every tick
+
+
 def test_the_layout_is_classic_cans_capacity_per_tick() -> None:
     at_1khz = layout(1000, 32, None, DEFAULT_TURNAROUND_S)
     assert at_1khz.capacity == 3 and at_1khz.buses == 11 and sum(at_1khz.per_bus) == 32

@@ -1,18 +1,21 @@
 """The simulator behind real I/O: python-can's slcan over a pty, python-can's virtual bus, RS485 on a pty.
 
 Stand-in devices (tests/sim/_standins.py) keep these about the attachments; the family device
-models are exercised through the same attachments in tests/sim/devices.
+models are exercised through the same attachments in tests/sim/devices. Every test runs on asyncio and
+on trio (anyio's plugin): the attachments are anyio's task groups, waits and clock.
 """
 
 from __future__ import annotations
 
-import asyncio
+import contextlib
+from collections.abc import AsyncIterator, Coroutine
+from typing import Any
 
+import anyio
 import can
 import pytest
 import serial
 
-from _serving import serving
 from servobus.core import crc16_modbus
 from servobus.sim.attach import serve_python_can, serve_rs485, serve_slcan
 from servobus.sim.network import SimCanNetwork
@@ -20,6 +23,21 @@ from servobus.sim.pty import PtyPort
 from servobus.sim.slcan import SlcanAdapter
 
 from ._standins import Responder, SerialResponder
+
+pytestmark = pytest.mark.anyio
+
+
+async def _awaited(coroutine: Coroutine[Any, Any, None]) -> None:
+    await coroutine
+
+
+@contextlib.asynccontextmanager
+async def serving(coroutine: Coroutine[Any, Any, None]) -> AsyncIterator[None]:
+    """Run an attachment in a task group for the length of the block, cancelled at its end."""
+    async with anyio.create_task_group() as group:
+        group.start_soon(_awaited, coroutine)
+        yield
+        group.cancel_scope.cancel()
 
 
 def _exchange(bus: can.BusABC, requests: list[can.Message], expect: int) -> list[can.Message]:
@@ -31,7 +49,6 @@ def _exchange(bus: can.BusABC, requests: list[can.Message], expect: int) -> list
     return replies
 
 
-@pytest.mark.asyncio
 async def test_python_can_slcan_talks_to_thirty_two_simulated_devices_over_a_pty() -> None:
     network = SimCanNetwork([Responder(i) for i in range(1, 33)])
     port = PtyPort()
@@ -43,7 +60,7 @@ async def test_python_can_slcan_talks_to_thirty_two_simulated_devices_over_a_pty
                 can.Message(arbitration_id=0x140 + i, data=[0x9C, i, 0, 0, 0, 0, 0, 0], is_extended_id=False)
                 for i in range(1, 33)
             ]
-            replies = await asyncio.to_thread(_exchange, bus, requests, 32)
+            replies = await anyio.to_thread.run_sync(_exchange, bus, requests, 32)
         finally:
             bus.shutdown()
     port.close()
@@ -54,7 +71,6 @@ async def test_python_can_slcan_talks_to_thirty_two_simulated_devices_over_a_pty
     assert network.bus.frames == 64  # the 32 requests and the 32 replies
 
 
-@pytest.mark.asyncio
 async def test_python_can_virtual_bus_carries_classic_and_fd_frames() -> None:
     network = SimCanNetwork([Responder(1)])
     channel = f"sim-{id(network)}"
@@ -65,7 +81,7 @@ async def test_python_can_virtual_bus_carries_classic_and_fd_frames() -> None:
             can.Message(arbitration_id=0x141, data=[0x9C] + [0] * 7, is_extended_id=False),
             can.Message(arbitration_id=0x141, data=bytes(range(16)), is_fd=True, is_extended_id=False),
         ]
-        replies = await asyncio.to_thread(_exchange, host, requests, 2)
+        replies = await anyio.to_thread.run_sync(_exchange, host, requests, 2)
     host.shutdown()
     sim_side.shutdown()
     assert [(m.arbitration_id, bytes(m.data), m.is_fd) for m in replies] == [
@@ -92,12 +108,11 @@ def _transact(path: str, baud: int) -> tuple[list[bytes], float]:
         return replies, time.perf_counter() - start
 
 
-@pytest.mark.asyncio
 @pytest.mark.parametrize("baud", [115_200, 1_000_000])
 async def test_rs485_request_reply_with_thirty_two_devices_over_a_pty(baud: int) -> None:
     port = PtyPort()
     async with serving(serve_rs485([SerialResponder(i) for i in range(1, 33)], port, baud=baud)):
-        replies, elapsed = await asyncio.to_thread(_transact, port.path, baud)
+        replies, elapsed = await anyio.to_thread.run_sync(_transact, port.path, baud)
     port.close()
     assert replies == [_rs485_frame(i) for i in range(1, 33)]
     # Each reply is paced by the line: 13 bytes x 10 bits at the baud rate, at least.
@@ -109,25 +124,24 @@ class _Broken(Responder):
         raise RuntimeError("device model bug")
 
 
-@pytest.mark.asyncio
 async def test_a_device_model_error_ends_the_attachment_loudly() -> None:
     network = SimCanNetwork([_Broken(1)])
     channel = f"sim-{id(network)}"
     sim_side = can.Bus(interface="virtual", channel=channel)
     host = can.Bus(interface="virtual", channel=channel)
-    serving = asyncio.ensure_future(serve_python_can(network, sim_side))
     host.send(can.Message(arbitration_id=0x141, data=[0x9C] + [0] * 7, is_extended_id=False))
-    with pytest.raises(ExceptionGroup) as caught:
-        await asyncio.wait_for(serving, 2.0)
-    assert caught.group_contains(RuntimeError, match="device model bug")
-    host.shutdown()
-    sim_side.shutdown()
+    try:
+        with pytest.raises(RuntimeError, match="device model bug"), anyio.fail_after(2.0):
+            await serve_python_can(network, sim_side)
+    finally:
+        host.shutdown()
+        sim_side.shutdown()
 
 
-@pytest.mark.asyncio
 async def test_unplugging_the_pty_ends_the_attachment() -> None:
     port = PtyPort()
-    serving = asyncio.ensure_future(serve_slcan(SimCanNetwork(), port))
-    await asyncio.sleep(0.01)
-    port.unplug()
-    await asyncio.wait_for(serving, 2.0)  # returns normally
+    with anyio.fail_after(2.0):
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(serve_slcan, SimCanNetwork(), port)
+            await anyio.sleep(0.01)
+            port.unplug()  # the attachment returns normally

@@ -8,13 +8,14 @@ the others still get theirs, and :func:`fail_if_any` turns the failures into one
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
+import contextvars
 import signal
-from collections.abc import Callable, Coroutine, Iterator, Mapping, Sequence
+from collections.abc import Coroutine, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
+import anyio
 import click
 
 from servobus.bus import Motor
@@ -23,67 +24,87 @@ from servobus.cli._output import refused
 from servobus.cli.plugin import STATUS_SOURCES, Op
 from servobus.errors import ServobusError
 from servobus.protocols import Command, Reply, get_family
+from servobus.signals import StopOn, stop_on
 
-__all__ = ["Outcome", "ask", "ask_all", "codecs", "fail_if_any", "plan", "run", "status_of"]
+__all__ = [
+    "BACKENDS",
+    "Outcome",
+    "ask",
+    "ask_all",
+    "codecs",
+    "fail_if_any",
+    "plan",
+    "run",
+    "status_of",
+    "stop_scope",
+]
 
 T = TypeVar("T")
 
 
-def run(coro: Coroutine[Any, Any, T]) -> T:
-    """Run ``coro`` on a fresh event loop, Ctrl-C and SIGTERM alike cancelling it: every ``async with
-    Bus`` in it is left through its safe stop, and the command ends here as KeyboardInterrupt, which
-    ``servobus.cli.main`` turns into the line naming the motors stopped and exit 130 (Ctrl-C) or 143
-    (SIGTERM: systemd, ``docker stop``, ``timeout``).
+#: the event loops a command may run on (``--backend``); asyncio is the default and the fastest here
+BACKENDS = ("asyncio", "trio")
 
-    Ctrl-C is asyncio's own (the first cancels the main task); SIGTERM is turned into the same
-    cancellation by a handler on the loop while ``coro`` runs (the handler before is put back
-    after), and is noted in :data:`servobus.cli.SIGNALLED` for the exit code. A second SIGTERM while
-    the safe stop runs is ignored: the stop is bounded by the Bus's ``safe_timeout_s``.
+#: the run's signal block, for :func:`stop_scope`
+_STOP: contextvars.ContextVar[StopOn] = contextvars.ContextVar("servobus.cli.stop")
+
+
+def run(coro: Coroutine[Any, Any, T], *, backend: str = "asyncio") -> T:
+    """Run ``coro`` on a fresh event loop (``anyio.run``, asyncio unless ``backend`` says trio),
+    Ctrl-C and SIGTERM alike cancelling it: every ``async with Bus`` in it is left through its safe
+    stop, and the command ends here as KeyboardInterrupt, which ``servobus.cli.main`` turns into the
+    line naming the motors stopped and exit 130 (Ctrl-C) or 143 (SIGTERM: systemd, ``docker stop``,
+    ``timeout``).
+
+    Both signals are taken by :func:`servobus.signals.stop_on` while ``coro`` runs (the handlers
+    before are put back after) and SIGTERM is noted in :data:`servobus.cli.SIGNALLED` for the exit code. A
+    second signal while the safe stop runs is ignored: the stop is bounded by the Bus's
+    ``safe_timeout_s``. A command that ends its own run on the signal (:func:`stop_scope`, like
+    ``demo``) returns its value instead.
     """
     from servobus.cli import SIGNALLED
 
-    terminated = False
-    task: asyncio.Task[Any] | None = None
-
-    def on_sigterm() -> None:
-        nonlocal terminated
-        if terminated or task is None:
-            return  # the safe stop is under way
-        terminated = True
-        SIGNALLED.append(signal.SIGTERM)
-        task.cancel("servobus: SIGTERM")
-
-    async def main() -> T:
-        nonlocal task
-        task = asyncio.current_task()
-        with _handled(signal.SIGTERM, on_sigterm):
-            return await coro
+    async def main() -> tuple[bool, T | None]:
+        async with stop_on(signal.SIGTERM, signal.SIGINT, exit=False) as stop:
+            token = _STOP.set(stop)
+            try:
+                return True, await coro
+            finally:
+                _STOP.reset(token)
+                if stop.received not in (
+                    None,
+                    signal.SIGINT,
+                ):  # (the list holds the others: Ctrl-C's is the default)
+                    SIGNALLED.append(stop.received)
+        return False, None  # (cancelled by the signal)
 
     try:
-        return asyncio.run(main())
-    except asyncio.CancelledError:
-        if terminated:  # (a command that ends its own run on the cancellation, like demo, returns)
-            raise KeyboardInterrupt from None
+        finished, result = anyio.run(main, backend=backend)
+    except BaseExceptionGroup as group:  # one error from a task group's task: say it as itself
+        leaves = _leaves(group)
+        if len(leaves) == 1:
+            raise leaves[0] from None
         raise
+    if not finished:
+        raise KeyboardInterrupt
+    return result  # type: ignore[return-value]
 
 
-@contextlib.contextmanager
-def _handled(signum: signal.Signals, callback: Callable[[], None]) -> Iterator[None]:
-    """``callback`` on the running loop for ``signum`` inside the block, the process's handler before
-    it put back after. Nothing where the loop cannot take signals (not the main thread, Windows)."""
-    loop = asyncio.get_running_loop()
-    previous = signal.getsignal(signum)
-    try:
-        loop.add_signal_handler(signum, callback)
-    except (NotImplementedError, RuntimeError):
-        yield
-        return
-    try:
-        yield
-    finally:
-        loop.remove_signal_handler(signum)
-        if previous is not None:  # (None: a handler not installed from Python; the default stays)
-            signal.signal(signum, previous)
+def _leaves(group: BaseExceptionGroup[BaseException]) -> list[BaseException]:
+    """The exceptions in ``group`` and the groups inside it."""
+    return [
+        leaf
+        for exc in group.exceptions
+        for leaf in (_leaves(exc) if isinstance(exc, BaseExceptionGroup) else [exc])
+    ]
+
+
+def stop_scope() -> contextlib.AbstractContextManager[anyio.CancelScope]:
+    """The block a Ctrl-C or SIGTERM cancels instead of the whole command: a loop whose summary is
+    still printed after it (its ``cancelled_caught`` says the signal came). Outside :func:`run`, a
+    plain cancel scope."""
+    stop = _STOP.get(None)
+    return stop.scope() if stop is not None else anyio.CancelScope()
 
 
 @dataclass(slots=True)

@@ -10,11 +10,10 @@ relative move sends its increment once and then only reads where the motor is.
 
 from __future__ import annotations
 
-import asyncio
-import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, TypeVar
 
+import anyio
 import click
 from rich.live import Live
 
@@ -186,7 +185,7 @@ async def _monitor(
     async with open_bus(conn, safe=None) as (bus, motors):
         items = _items(motors, planned)
         outcomes = [Outcome(m.motor_id) for m in motors]
-        start = asyncio.get_running_loop().time()
+        start = anyio.current_time()
         with _LiveStatus(live, rate_hz) as view:
             async for tick in bus.ticks(rate_hz, spin_s=0.0):
                 elapsed = tick.started - start
@@ -326,10 +325,10 @@ async def _run_setpoints(
         items = _items(motors, repeats)
         settled = 0
         arrived_s: float | None = None
-        start = time.monotonic()
+        start = anyio.current_time()  # (the loop's clock, the ticks')
         with _LiveStatus(live, rate_hz) as view:
             async for tick in bus.ticks(rate_hz, spin_s=0.0):
-                elapsed = time.monotonic() - start
+                elapsed = tick.started - start
                 if duration is not None and elapsed >= duration:
                     break
                 _take(outcomes, items, await bus.cycle(items, timeout_s=conn.timeout_s))

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import time
 from dataclasses import dataclass, field
@@ -12,6 +11,7 @@ from typing import Any
 import anyio
 import click
 
+from servobus import runtime
 from servobus.bus import Bus, Motor, command_classes
 from servobus.cli._connect import Connection, connection_options
 from servobus.cli._families import cli_part
@@ -180,10 +180,10 @@ async def _record(
     frames_file: Any,
     tally: Tally,
 ) -> None:
-    loop = asyncio.get_running_loop()
-    origin = loop.time()
+    clock = runtime.current().time  # (the Bus's: the replies' last_seen are on it)
+    origin = clock()
     frames = CandumpWriter(frames_file, epoch=time.time(), origin=origin) if frames_file else None
-    tap = TapLink(conn.transport(), frames.write if frames else lambda *_: None, loop.time)
+    tap = TapLink(conn.transport(), frames.write if frames else lambda *_: None, clock)
     kinds = {Traffic.REPLY, Traffic.STREAM, Traffic.REPORT, Traffic.LATE, Traffic.UNSOLICITED}
 
     def on_reply(motor: Motor, traffic: Traffic, reply: Reply) -> None:
@@ -192,7 +192,7 @@ async def _record(
         tally.replies += 1
         tally.by_motor[motor.motor_id] = tally.by_motor.get(motor.motor_id, 0) + 1
         if telemetry is not None:
-            when = (motor.last_seen or loop.time()) - origin
+            when = (motor.last_seen or clock()) - origin
             telemetry.write(telemetry_row(when, conn.family, motor.motor_id, reply))
 
     try:

@@ -21,7 +21,6 @@ other, print one line (``servobus.sim: error: ...``) to stderr and exit with sta
 from __future__ import annotations
 
 import argparse
-import asyncio
 import contextlib
 import os
 import signal
@@ -29,6 +28,9 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import NoReturn
+
+import anyio
+import anyio.abc
 
 from servobus.protocols import available_families, get_family
 from servobus.sim.attach import serve_rs485, serve_slcan
@@ -199,19 +201,32 @@ async def run(args: argparse.Namespace, setup: Setup) -> None:
     Raises:
         UsageError: the link could not be created (it appeared after the checks, or the folder refused).
     """
-    loop = asyncio.get_running_loop()
-    task = asyncio.current_task()
-    assert task is not None
-    signalled: list[int] = []
+    failed: list[UsageError] = []
+    async with anyio.create_task_group() as group:
+        # (the signals are taken before the path is printed; one cancels the group, serving ends)
+        await group.start(_until_signalled, group.cancel_scope, name="servobus.sim signals")
+        try:
+            await _serve_on_a_pty(args, setup)
+        except UsageError as exc:  # (out of the group as itself, not in an exception group)
+            failed.append(exc)
+        group.cancel_scope.cancel()
+    if failed:
+        raise failed[0]
 
-    def stop(signum: int) -> None:
-        signalled.append(signum)
-        task.cancel()
 
-    for signum in (signal.SIGTERM, signal.SIGHUP):
-        loop.add_signal_handler(signum, stop, signum)
-    port = PtyPort()
+async def _until_signalled(
+    scope: anyio.CancelScope, *, task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED
+) -> None:
+    """Cancel ``scope`` on SIGTERM, SIGHUP or Ctrl-C (taken here, on asyncio and trio alike)."""
+    with anyio.open_signal_receiver(signal.SIGTERM, signal.SIGHUP, signal.SIGINT) as signals:
+        task_status.started()
+        async for _ in signals:
+            scope.cancel()  # (a second one while the pty closes changes nothing)
+
+
+async def _serve_on_a_pty(args: argparse.Namespace, setup: Setup) -> None:
     link = Path(args.link) if args.link is not None else None
+    port = PtyPort()
     made_link = False
     try:
         if link is not None:
@@ -223,10 +238,6 @@ async def run(args: argparse.Namespace, setup: Setup) -> None:
             f"{args.motors} simulated {args.family} motor(s) behind a {kind}; Ctrl-C stops", file=sys.stderr
         )
         await serve(setup, port)
-    except asyncio.CancelledError:
-        if not signalled:
-            raise
-        task.uncancel()
     finally:
         port.close()
         if made_link and link is not None:
@@ -237,8 +248,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
     try:
         setup = build(args)
-        with contextlib.suppress(KeyboardInterrupt):
-            asyncio.run(run(args, setup))
+        with contextlib.suppress(KeyboardInterrupt):  # (a Ctrl-C before the signals are taken)
+            anyio.run(run, args, setup)
     except UsageError as exc:
         print(f"{ERROR_PREFIX}{exc}", file=sys.stderr)
         return EXIT_USAGE

@@ -12,18 +12,21 @@ a clock (the event loop's) and an end a host talks to:
   reply written when its last byte would have arrived at the line's baud rate.
 
 Each runs until cancelled (or its port closes) and leaves the port or bus to its owner to close.
-Its tasks run in a task group: an exception in a device model ends the whole attachment and
-reaches the caller, never dies silently in a background task.
+Its tasks run in an anyio task group: an exception in a device model ends the whole attachment and
+reaches the caller, never dies silently in a background task. They run on asyncio and on trio.
 """
 
 from __future__ import annotations
 
-import asyncio
+import math
 from collections.abc import Callable, Coroutine, Sequence
 from typing import Any
 
+import anyio
 import can
+from anyio.streams.memory import MemoryObjectReceiveStream
 
+from servobus import runtime
 from servobus.frame import Frame
 from servobus.sim.corenet import CoreCanNetwork
 from servobus.sim.device import SerialDevice, SerialEmission
@@ -40,28 +43,32 @@ class SimClock:
     """Simulated seconds since start, read from the event loop's monotonic clock."""
 
     def __init__(self) -> None:
-        self._loop = asyncio.get_running_loop()
-        self._t0 = self._loop.time()
+        self._time = runtime.current().time
+        self._t0 = self._time()
 
     def now(self) -> float:
-        return self._loop.time() - self._t0
+        return self._time() - self._t0
+
+
+def _inbox() -> tuple[Callable[[Frame], None], MemoryObjectReceiveStream[Frame]]:
+    """An unbounded queue of host frames: its ``put`` (never blocks) and its receiving end."""
+    send, receive = anyio.create_memory_object_stream[Frame](math.inf)
+    return send.send_nowait, receive
 
 
 async def _run_network(
     network: SimCanNetwork | CoreCanNetwork,
-    inbox: asyncio.Queue[Frame],
+    inbox: MemoryObjectReceiveStream[Frame],
     deliver: Callable[[Frame], None],
     clock: SimClock,
 ) -> None:
     """Feed host frames in as they come, sleep until the network's next event, deliver its output."""
     while True:
         wake = network.next_event_s()
-        timeout = None if wake is None else max(0.0, wake - clock.now())
-        try:
-            frame = await asyncio.wait_for(inbox.get(), timeout)
-        except TimeoutError:
-            pass
-        else:
+        frame: Frame | None = None
+        with anyio.move_on_after(math.inf if wake is None else max(0.0, wake - clock.now())):
+            frame = await inbox.receive()
+        if frame is not None:
             network.send(frame, max(network.now_s, clock.now()))
         for _, received in network.advance(clock.now()):
             deliver(received)
@@ -77,7 +84,7 @@ async def serve_slcan(
     """
     adapter = adapter or SlcanAdapter()
     clock = SimClock()
-    inbox: asyncio.Queue[Frame] = asyncio.Queue()
+    put, inbox = _inbox()
 
     def deliver(frame: Frame) -> None:
         if not port.closed and (line := adapter.to_host(frame)):
@@ -92,31 +99,35 @@ async def serve_slcan(
             if answer:
                 port.write(answer)
             for frame in frames:
-                inbox.put_nowait(frame)
+                put(frame)
         raise _PortClosed
 
     await _run_together(_run_network(network, inbox, deliver, clock), read_host())
 
 
 async def serve_python_can(network: SimCanNetwork | CoreCanNetwork, bus: can.BusABC) -> None:
-    """Serve ``network`` on a python-can bus (typically ``virtual``): its frames in, replies out."""
-    loop = asyncio.get_running_loop()
+    """Serve ``network`` on a python-can bus (typically ``virtual``): its frames in, replies out.
+
+    python-can's notifier thread reads the bus; each message is handed to the loop
+    (``call_soon_threadsafe`` of :mod:`servobus.runtime`) and stamped there, on the loop's clock.
+    """
+    lane = runtime.current()
     clock = SimClock()
-    inbox: asyncio.Queue[Frame] = asyncio.Queue()
-    reader = can.AsyncBufferedReader()
-    notifier = can.Notifier(bus, [reader], loop=loop)
+    put, inbox = _inbox()
+
+    def take(message: can.Message) -> None:  # (on the loop)
+        put(frame_from_message(message, clock.now()))
+
+    def on_message(message: can.Message) -> None:  # (on the notifier's thread)
+        if not (message.is_error_frame or message.is_remote_frame):
+            lane.call_soon_threadsafe(take, message)
 
     def deliver(frame: Frame) -> None:
         bus.send(message_from_frame(frame))
 
-    async def read_host() -> None:
-        async for message in reader:
-            if message.is_error_frame or message.is_remote_frame:
-                continue
-            inbox.put_nowait(frame_from_message(message, clock.now()))
-
+    notifier = can.Notifier(bus, [on_message])
     try:
-        await _run_together(_run_network(network, inbox, deliver, clock), read_host())
+        await _run_network(network, inbox, deliver, clock)
     finally:
         notifier.stop()
 
@@ -130,7 +141,7 @@ async def serve_rs485(devices: Sequence[SerialDevice], port: PtyPort, *, baud: i
     clock = SimClock()
     line_free_s = 0.0
     pending: list[SerialEmission] = []
-    wakeup = asyncio.Event()
+    wakeup = anyio.Event()
 
     def collect(emissions: list[SerialEmission]) -> None:
         pending.extend(emissions)
@@ -138,21 +149,19 @@ async def serve_rs485(devices: Sequence[SerialDevice], port: PtyPort, *, baud: i
         wakeup.set()
 
     async def writer() -> None:
-        nonlocal line_free_s
+        nonlocal line_free_s, wakeup
         while True:
             deadlines = [d for d in (dev.next_deadline_s() for dev in devices) if d is not None]
             due = min([*(e.ready_s for e in pending[:1]), *deadlines], default=None)
-            wakeup.clear()
+            wakeup = anyio.Event()  # (an anyio Event is set once: a fresh one per wait)
             if due is None:
                 await wakeup.wait()
                 continue
             delay = due - clock.now()
             if delay > 0:
-                try:
-                    await asyncio.wait_for(wakeup.wait(), delay)
+                with anyio.move_on_after(delay):
+                    await wakeup.wait()
                     continue  # something new arrived: recompute
-                except TimeoutError:
-                    pass
             now = clock.now()
             for device in devices:
                 if (deadline := device.next_deadline_s()) is not None and deadline <= now:
@@ -161,7 +170,7 @@ async def serve_rs485(devices: Sequence[SerialDevice], port: PtyPort, *, baud: i
                 emission = pending.pop(0)
                 start = max(emission.ready_s, line_free_s)
                 line_free_s = start + uart_time_s(len(emission.data), baud)
-                await asyncio.sleep(max(0.0, line_free_s - clock.now()))
+                await anyio.sleep(max(0.0, line_free_s - clock.now()))
                 if port.closed:
                     return
                 port.write(emission.data)
@@ -183,8 +192,12 @@ class _PortClosed(Exception):
 async def _run_together(*coroutines: Coroutine[Any, Any, None]) -> None:
     """Run ``coroutines`` until one ends; its exception (other than a closed port) propagates."""
     try:
-        async with asyncio.TaskGroup() as group:
+        async with anyio.create_task_group() as group:
             for coroutine in coroutines:
-                group.create_task(coroutine)
+                group.start_soon(_awaited, coroutine)
     except* _PortClosed:
         pass
+
+
+async def _awaited(coroutine: Coroutine[Any, Any, None]) -> None:
+    await coroutine

@@ -10,6 +10,11 @@ the path the host knows.
 The slave is put in raw mode (no echo, no CR/LF translation, no XON/XOFF), since every protocol
 here is binary or CR-terminated ASCII. The baud rate of a pty means nothing; the simulator paces
 its writes itself with ``timing.uart_time_s``.
+
+Reads wait through ``anyio.wait_readable``, on asyncio and on trio. :meth:`PtyPort.write` never
+blocks: what the pty cannot take at once (a host that stopped reading) is written when it drains, by
+a writer callback on asyncio's loop; on trio, which has no such callbacks, by the next ``write``,
+``read`` or :meth:`PtyPort.drain`.
 """
 
 from __future__ import annotations
@@ -21,6 +26,8 @@ import os
 import tty
 from collections.abc import AsyncIterator
 from pathlib import Path
+
+import anyio
 
 __all__ = ["PtyPort"]
 
@@ -55,7 +62,7 @@ class PtyPort:
         self.bytes_out = 0
         self._pending = bytearray()
         self._writer_armed = False
-        self._read_waiter: asyncio.Future[None] | None = None
+        self._reading = False
         self._closed = False
 
     @property
@@ -89,8 +96,9 @@ class PtyPort:
                     raise
                 sent = 0
             if sent == 0:
-                if not self._writer_armed:
-                    asyncio.get_running_loop().add_writer(self._master, self._on_writable)
+                loop = asyncio._get_running_loop()  # (None: trio, or no loop; see the module's docstring)
+                if not self._writer_armed and loop is not None:
+                    loop.add_writer(self._master, self._on_writable)
                     self._writer_armed = True
                 return
             self.bytes_out += sent
@@ -101,10 +109,22 @@ class PtyPort:
         self._writer_armed = False
         self._drain()
 
+    async def drain(self) -> None:
+        """Wait until every byte :meth:`write` queued was taken by the pty (a host reading)."""
+        while self._pending and not self._closed:
+            self._disarm()  # (one watcher per fd: the wait below takes the writer's place)
+            await anyio.wait_writable(self._master)
+            self._drain()
+
+    def _disarm(self) -> None:
+        if self._writer_armed and (loop := asyncio._get_running_loop()) is not None:
+            loop.remove_writer(self._master)
+            self._writer_armed = False
+
     async def read(self) -> bytes:
         """The next bytes the host wrote (waits for them); b"" once the port is closed."""
-        loop = asyncio.get_running_loop()
         while not self._closed:
+            self._drain()  # (bytes a full pty held back, where no writer callback is armed)
             try:
                 data = os.read(self._master, _READ_SIZE)
             except BlockingIOError:
@@ -112,14 +132,13 @@ class PtyPort:
             if data:
                 self.bytes_in += len(data)
                 return data
-            self._read_waiter = ready = loop.create_future()
-            loop.add_reader(self._master, _wake, ready)
+            self._reading = True
             try:
-                await ready
+                await anyio.wait_readable(self._master)
+            except anyio.ClosedResourceError:
+                pass  # close() while waiting: b""
             finally:
-                self._read_waiter = None
-                if not self._closed:
-                    loop.remove_reader(self._master)
+                self._reading = False
         return b""
 
     async def __aiter__(self) -> AsyncIterator[bytes]:
@@ -134,12 +153,9 @@ class PtyPort:
         if self._closed:
             return
         self._closed = True
-        with contextlib.suppress(RuntimeError):  # no running loop: nothing was registered
-            loop = asyncio.get_running_loop()
-            loop.remove_reader(self._master)
-            loop.remove_writer(self._master)
-        if self._read_waiter is not None:
-            _wake(self._read_waiter)  # a pending read() returns b""
+        self._disarm()
+        if self._reading:
+            anyio.notify_closing(self._master)  # a pending read() returns b""
         os.close(self._master)
         os.close(self._slave)
         if self.link is not None and self.link.is_symlink() and os.readlink(self.link) == self.path:
@@ -150,8 +166,3 @@ class PtyPort:
             self._closed = True
             os.close(self._master)
             os.close(self._slave)
-
-
-def _wake(future: asyncio.Future[None]) -> None:
-    if not future.done():
-        future.set_result(None)

@@ -1,4 +1,4 @@
-"""Virtual time: run asyncio code on a clock that jumps to the next timer whenever the loop is idle.
+"""Virtual time: run async code on a clock that jumps to the next timer whenever the loop is idle.
 
 With the in-process bus (:class:`~servobus.transports.sim.SimTransport`) every timer in a
 simulation is either the network's next event or the host's own sleep or timeout, so on a
@@ -25,6 +25,9 @@ Outside pytest (benchmarks, demos)::
         return asyncio.get_running_loop().time()
 
     virtual.run(scenario())        # 10.0..., in milliseconds of wall time
+
+On trio the same is trio's own ``MockClock(autojump_threshold=0)``: ``virtual.run(scenario(),
+backend="trio")`` (in tests, tests/_backends.py's ``virtual("trio")``).
 
 Real I/O still works on such a loop, but while the loop waits on it the clock moves in real time
 (and threads, executors and ``to_thread`` slow it down to real time): keep virtual-time scenarios
@@ -71,13 +74,29 @@ def new_event_loop(
     return loop
 
 
-def run(main: Coroutine[Any, Any, T], *, start: float = 0.0, **options: Any) -> T:
+def run(main: Coroutine[Any, Any, T], *, start: float = 0.0, backend: str = "asyncio", **options: Any) -> T:
     """Run ``main`` to completion on a new virtual-time loop (like :func:`asyncio.run`) and close it.
 
     Args:
         main: the coroutine.
-        start, **options: see :func:`new_event_loop`.
+        start, **options: see :func:`new_event_loop` (asyncio only).
+        backend: "asyncio" (looptime's loop) or "trio" (``trio.testing.MockClock(autojump_threshold=0)``).
     """
+    if backend == "trio":
+        if options:
+            raise TypeError(f"options {sorted(options)} are looptime's: asyncio only")
+        import trio
+        import trio.testing
+
+        clock = trio.testing.MockClock(autojump_threshold=0)
+        clock.jump(start)
+
+        async def body() -> T:
+            return await main
+
+        return trio.run(body, clock=clock)
+    if backend != "asyncio":
+        raise ValueError(f"backend={backend!r}: 'asyncio' or 'trio'")
     loop = new_event_loop(start=start, **options)
     with asyncio.Runner(loop_factory=lambda: loop) as runner:
         return runner.run(main)
