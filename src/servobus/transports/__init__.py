@@ -8,9 +8,9 @@ interface (:class:`Transport`: ``open``/``close``, ``send``, ``drain``, ``receiv
 * ``"can"``: :class:`CanTransport`, any python-can interface, CAN and CAN FD, carrying
   :class:`~servobus.frame.Frame`.
 * ``"slcan"``: :class:`SlcanTransport`, an SLCAN (LAWICEL) USB-CAN adapter spoken natively
-  (pyserial-asyncio-fast and the C line de-framer, no python-can), carrying
+  (pyserial and the C line de-framer, no python-can), carrying
   :class:`~servobus.frame.Frame`.
-* ``"rs485"``: :class:`SerialTransport`, an RS485 port through pyserial-asyncio-fast, carrying
+* ``"rs485"``: :class:`SerialTransport`, an RS485 port through pyserial, carrying
   serial :class:`~servobus.frame.Frame` messages in the framing its family supplies (the family's
   declared serial lines, ``Family.serial``, give the framing by name, its baud rates and parity).
 * ``"sim"``: :class:`SimTransport`, the in-process bus onto a simulated CAN network
