@@ -14,9 +14,9 @@ it runs on a virtual-time loop (:func:`servobus.sim.virtual.run`):
   with the family's own de-framer, as :class:`~servobus.transports.rs485.SerialTransport` does, and the
   frames are handed to the Bus stamped with the loop's time.
 * The line's rules are the ones :class:`~servobus.transports.rs485.SerialTransport` declares for the same
-  framing and baud rate (an unopened instance is asked): ``half_duplex``, ``max_outstanding`` (1),
-  ``gap_s`` (3.5 characters, the rest the Bus keeps after each exchange) and ``turnaround_s``. So the Bus
-  schedules this line exactly as it schedules a real port.
+  framing and baud rate (an unopened instance is asked): its ``rules`` (half duplex, ``gap_s``: 3.5
+  characters, the rest the Bus keeps after each exchange, ``turnaround_s``, ``stale_after_s``). So the
+  Bus schedules this line exactly as it schedules a real port.
 
 Every transmission is logged (:attr:`SerialLine.log`: who, start, end, bytes), which is what the
 efficiency bound is computed from.
@@ -66,16 +66,13 @@ class SerialLine(LinkBase):
         self.devices = list(devices)
         self.framing = framing
         self.baud = baud
-        self.half_duplex = declared.half_duplex
-        self.max_outstanding = declared.max_outstanding
+        self.rules = declared.rules  # (the FrameLink contract: half duplex, gap, turnaround, staleness)
         self.char_time_s = declared.char_time_s
-        self.gap_s = declared.gap_s
-        self.turnaround_s = declared.turnaround_s
         self.log: list[LineUse] = []
         self._deframer = framing.deframer()
         self._free_at = 0.0
 
-    def send(self, frame: Frame) -> None:
+    def send(self, frame: Frame, handle: object = None) -> None:
         loop = self._loop
         assert loop is not None and self._open
         if not frame.is_serial:
@@ -83,8 +80,7 @@ class SerialLine(LinkBase):
         data = self.framing.encode(frame)
         now = loop.time()
         start, end = self._occupy("host", now, len(data))
-        if self._reporter is not None:
-            self._reporter(frame, start, None)
+        self._sent(frame if handle is None else handle, start, frame)
         loop.call_at(end, self._to_devices, data, end)
 
     def _occupy(self, who: str, ready_s: float, n_bytes: int) -> tuple[float, float]:

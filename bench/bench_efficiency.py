@@ -337,7 +337,7 @@ async def rs485_run(baud: int, motors_n: int, cycles: int) -> dict[str, Any]:
         raise RuntimeError(f"rs485 {baud} x{motors_n}: {len(uses)} transmissions for {exchanges} exchanges")
     wire = sum(u.end_s - u.start_s for u in uses)
     turnaround = devices[0].motor.turnaround_s
-    bound = wire + exchanges * (turnaround + line.gap_s)
+    bound = wire + exchanges * (turnaround + line.rules.gap_s)
     no_gap = wire + exchanges * turnaround
     return {
         "bus": f"RS485 {baud:,} baud (8N1, half duplex)",
@@ -352,8 +352,8 @@ async def rs485_run(baud: int, motors_n: int, cycles: int) -> dict[str, Any]:
         "wire_us_per_cycle": wire / cycles * 1e6,
         "bound_us_per_cycle": bound / cycles * 1e6,
         "turnaround_us": turnaround * 1e6,
-        "gap_us": line.gap_s * 1e6,
-        "declared_turnaround_us": line.turnaround_s * 1e6,
+        "gap_us": line.rules.gap_s * 1e6,
+        "declared_turnaround_us": line.rules.turnaround_s * 1e6,
         "bus_load": wire / elapsed,
     }
 
