@@ -217,7 +217,6 @@ class Bus:
         self._runtime: _runtime.Runtime | None = None
         self._is_current: Callable[[], bool] = _elsewhere
         self._group: anyio.abc.TaskGroup | None = None
-        self._owns_transport = False
         self._closing = False  # the block is being left: only the safe commands may still go out
         self.safe_sent: tuple[Motor, ...] = ()
         self.safe_acknowledged: tuple[Motor, ...] = ()
@@ -239,19 +238,16 @@ class Bus:
         self._runtime, self._is_current = runtime, runtime.is_current
         self._closing = False
         self.safe_sent = self.safe_acknowledged = ()
-        if not self.transport.is_open:
-            await self.transport.open()
-            self._owns_transport = True
         group = anyio.create_task_group()
         await group.__aenter__()
         try:
+            if not self.transport.is_open:  # opened (and closed) by a task of the Bus's
+                await group.start(self._engine.keep_link)
             self._engine.attach(runtime)
             await group.start(self._engine.run)
         except BaseException as exc:
-            try:
-                await _leave(group, type(exc), exc, exc.__traceback__)
-            finally:
-                await _release(self)
+            self._engine.stop()
+            await _leave(group, type(exc), exc, exc.__traceback__)
             raise
         self._group = group
         return self
@@ -269,11 +265,9 @@ class Bus:
                 await safe_stop(self)
         finally:
             engine.detach(self._closed_error())
-            try:
-                if group is not None:
-                    suppress = await _leave(group, exc_type, exc, tb)
-            finally:
-                await _release(self)
+            engine.stop()
+            if group is not None:
+                suppress = await _leave(group, exc_type, exc, tb)
         return suppress
 
     def _closed_error(self) -> TransportError:
@@ -423,21 +417,13 @@ class Bus:
         return Metrics.of(self.scheduler.counts, self.scheduler.latency().snapshot(), load)
 
 
-async def _release(bus: Bus) -> None:
-    """Close the link if the Bus opened it (by the task that opened it: the link shields its own
-    clean-up)."""
-    if bus._owns_transport:
-        bus._owns_transport = False
-        await bus.transport.close()
-
-
 async def _leave(
     group: anyio.abc.TaskGroup,
     exc_type: type[BaseException] | None,
     exc: BaseException | None,
     tb: TracebackType | None,
 ) -> bool | None:
-    """Leave the Bus's task group: its timer task ends, and an error it had is raised here. The
+    """Leave the Bus's task group (its tasks were told to end): an error of one is raised here. The
     block's own exception is not the group's to wrap (it goes on as it is); a cancellation is
     the group's to see (it may be its own)."""
     group.cancel_scope.cancel()

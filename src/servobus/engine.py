@@ -70,6 +70,8 @@ class Engine:
         self.reports_sends = link.rules.reports_sends
         self.runtime: Runtime | None = None
         self._scope: anyio.CancelScope | None = None
+        self._life: anyio.CancelScope | None = None  # the timer task's
+        self._released: anyio.Event | None = None  # set: the link-keeping task closes the link
         self._armed = math.inf  # the timer's deadline
         self.delivery = Delivery(self)
         watchdog.rearm = self.kick
@@ -100,22 +102,45 @@ class Engine:
 
     async def run(self, *, task_status: TaskStatus[None] = anyio.TASK_STATUS_IGNORED) -> None:
         """The Bus's one timer: sleeps until the armed deadline (re-armed by :meth:`kick`), then
-        expires what is due, runs the silence check and lets the next requests go. Runs until the
-        Bus's task group is cancelled."""
+        expires what is due, runs the silence check and lets the next requests go. Shielded from
+        the cancellation of the block around the Bus (the safe stop needs its time-outs): it runs
+        until :meth:`stop`."""
         started = False
-        try:
-            while True:
-                with anyio.CancelScope(deadline=self._wake_at()) as scope:
-                    self._scope = scope
-                    self._armed = scope.deadline
-                    if not started:
-                        started = True
-                        task_status.started()
-                    await anyio.sleep_forever()
+        with anyio.CancelScope(shield=True) as self._life:
+            try:
+                while True:
+                    with anyio.CancelScope(deadline=self._wake_at()) as scope:
+                        self._scope = scope
+                        self._armed = scope.deadline
+                        if not started:
+                            started = True
+                            task_status.started()
+                        await anyio.sleep_forever()
+                    self._scope = None
+                    self.on_timer()
+            finally:
                 self._scope = None
-                self.on_timer()
-        finally:
-            self._scope = None
+
+    async def keep_link(self, *, task_status: TaskStatus[None] = anyio.TASK_STATUS_IGNORED) -> None:
+        """Open the link and keep it open until :meth:`stop`, then close it (one task does both,
+        as the contract asks). Shielded: the link's own tasks live in this task's scope, so the
+        cancellation of the block around the Bus does not stop them before the safe stop went
+        out."""
+        self._released = released = anyio.Event()
+        with anyio.CancelScope(shield=True):
+            await self.link.open()
+            try:
+                task_status.started()
+                await released.wait()
+            finally:
+                await self.link.close()
+
+    def stop(self) -> None:
+        """End the timer task and release the link (the Bus's task group is being left)."""
+        if self._life is not None:
+            self._life.cancel()
+        if self._released is not None:
+            self._released.set()
 
     def _wake_at(self) -> float:
         deadline = self.scheduler.next_deadline()
