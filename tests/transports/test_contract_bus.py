@@ -20,8 +20,8 @@ from typing import Any
 
 import anyio
 import pytest
-from _backends import BACKENDS, virtual
 
+from _backends import BACKENDS, virtual
 from servobus.bus import Bus
 from servobus.errors import MotorTimeout
 from servobus.frame import Frame
@@ -36,6 +36,7 @@ from servobus.transports.stats import TransportStats
 pytestmark = pytest.mark.anyio
 
 STATUS = bytes.fromhex("9C 32 64 00 F4 01 2D 00")
+CAN_1M = LineRules(bitrate=1_000_000)
 
 
 @pytest.fixture(params=BACKENDS)
@@ -58,7 +59,7 @@ class Line:
     def __init__(
         self,
         *,
-        rules: LineRules = LineRules(bitrate=1_000_000),
+        rules: LineRules = CAN_1M,
         reply_s: float = 0.0002,
         report_s: float | None = 0.0,
         copy: bool = False,
@@ -197,7 +198,8 @@ async def test_a_copying_link_that_echoes_the_handle_works_as_any_other() -> Non
                 assert all(isinstance(r, ma.StatusReply) for r in results), results
             assert isinstance(await motors[0].read_status2(timeout_s=0.05), ma.StatusReply)
         stats = bus.stats()
-        assert stats["replies"] == 13 and stats.get("timeouts", 0) == 0 and stats.get("unreported", 0) == 0, stats
+        assert stats["replies"] == 13, stats
+        assert stats.get("timeouts", 0) == 0 and stats.get("unreported", 0) == 0, stats
 
 
 async def test_a_link_that_does_not_report_sends_times_from_hand_over() -> None:
