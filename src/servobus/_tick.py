@@ -168,7 +168,7 @@ def start(
             prepared.append((m, request))
     enqueue = engine.enqueue
     for motor, request in prepared:
-        enqueue(motor, request)
+        enqueue(motor, request, now)
     for slot, motor, counter, error in skipped:
         scheduler.motor_counts[id(motor.codec)][counter] += 1
         slot.set_result(error)
