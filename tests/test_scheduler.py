@@ -524,3 +524,63 @@ def test_an_undecodable_reply_before_the_send_report_fails_its_request_at_the_re
     early = scheduler.sent(sending, 0.0002)
     assert early is not None and early.request is request and request.state is S.FAILED
     assert isinstance(request.error, ProtocolError) and scheduler.counts["malformed"] == 1
+
+
+def test_every_move_goes_through_the_table_and_an_illegal_one_is_a_typed_error(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from servobus import _scheduler_time
+    from servobus.errors import RequestStateError, ServobusError
+
+    assert not any(hasattr(state, "next") for state in S)  # (the table is the only place)
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec])
+    request = scheduler.request(codec, ma.ReadStatus2())
+    scheduler.submit(request, 0.0)
+    with pytest.raises(RequestStateError, match=r"myactuator motor 1 ReadStatus2: queued -> replied"):
+        scheduler._move(request, S.REPLIED)
+    assert issubclass(RequestStateError, RuntimeError) and issubclass(RequestStateError, ServobusError)
+    # The hot moves read the table too: one it does not allow fails, typed, naming both states.
+    (sending,) = scheduler.poll(0.0)[0]
+    monkeypatch.setattr(_scheduler_time, "_TO_SENT", frozenset())
+    with pytest.raises(RequestStateError, match="sending -> sent is not allowed"):
+        scheduler.sent(sending, 0.0)
+
+
+def test_a_request_whose_send_report_never_comes_still_times_out() -> None:
+    """With ``report_within_s``, a request handed over and never reported gets a provisional
+    deadline: that long after hand-over, plus its timeout. A report that comes in time re-bases its
+    deadline on when the frame left."""
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec], report_within_s=0.1)
+    lost, late = (
+        scheduler.request(codec, command, timeout_s=0.05) for command in (ma.ReadStatus2(), ma.ReadStatus1())
+    )
+    for request in (lost, late):
+        scheduler.submit(request, 0.0)
+    assert list(scheduler.poll(0.0)[0]) == [lost, late]
+    assert scheduler.next_deadline() == pytest.approx(0.1)  # when the first report is overdue
+    assert scheduler.sent(late, 0.04) is None  # late, but within report_within_s: timed from then
+    assert late.deadline == pytest.approx(0.09)
+    assert scheduler.expire(0.0999) == [late]  # (its own timeout: nothing came)
+    assert scheduler.expire(0.1) == [] and lost.deadline == pytest.approx(0.15)
+    deadline = scheduler.next_deadline()
+    assert deadline == pytest.approx(0.15)
+    assert scheduler.expire(deadline) == [lost] and lost.state is S.TIMED_OUT
+    assert scheduler.counts["unreported"] == 1 and scheduler.counts["timeouts"] == 2
+    assert scheduler.pending == 0
+    assert scheduler.sent(lost, 0.2) is None  # a report that still comes changes nothing
+
+
+def test_a_dropped_frame_fails_its_request_with_a_transport_error_that_says_why() -> None:
+    from servobus.errors import TransportError
+
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec], name="can0")
+    request = scheduler.request(codec, ma.ReadStatus2())
+    scheduler.submit(request, 0.0)
+    scheduler.poll(0.0)
+    scheduler.not_sent(request, "purged", 0.001)
+    assert request.state is S.FAILED and isinstance(request.error, TransportError)
+    assert str(request.error) == "can0: myactuator motor 1 ReadStatus2 not sent (purged)"
+    assert scheduler.counts["not_sent_purged"] == 1
