@@ -508,3 +508,22 @@ def test_a_bus_used_from_another_event_loop_says_so_at_once_and_logs_no_tracebac
         assert error.startswith("sim: this Bus runs on another event loop"), error
         assert "use servobus.sync.Bus from other threads" in error
     assert not [r for r in caplog.records if r.levelname == "ERROR"], caplog.text
+
+
+async def test_an_error_in_the_bus_s_own_task_is_raised_from_its_block_not_lost() -> None:
+    """The Bus's timer task runs in the Bus's task group: a bug there cancels the block (after its
+    safe stop) and is raised when the block is left."""
+    device = MyActuatorMotor(1)
+    device.unresponsive = True
+    sniffer = Sniffer()
+    with pytest.raises(BaseExceptionGroup) as caught:
+        async with Bus(SimTransport(devices=[device, MyActuatorMotor(2), sniffer])) as bus:
+            await bus.motor("myactuator", 2).speed_control(speed_dps=10.0)
+
+            def broken() -> None:
+                raise ZeroDivisionError("a bug in the timer")
+
+            bus._engine.on_timer = broken  # type: ignore[method-assign]
+            await bus.motor("myactuator", 1).read_status2(timeout_s=0.01)  # its timeout fires the timer
+    assert [type(e) for e in caught.value.exceptions] == [ZeroDivisionError]
+    assert _stops(sniffer) == {2}  # the safe stop went out all the same

@@ -5,19 +5,21 @@ resolved by done callbacks (no gathering of one future per request, nothing back
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Hashable, Sequence
 from typing import TYPE_CHECKING, Any
 
 import anyio
 
 from servobus._tick import Result
+from servobus.frame import Frame
 from servobus.protocols import Command, get_family
 from servobus.runtime import Runtime
+from servobus.scheduler import Request
 
 if TYPE_CHECKING:
     from servobus.bus import Bus
+    from servobus.engine import Engine
     from servobus.motor import Motor
-    from servobus.scheduler import Request
 
 __all__ = ["broadcast", "wait_all", "wait_any"]
 
@@ -47,7 +49,7 @@ async def broadcast(
     by_id = {m.motor_id: m for m in motors}
     timeout = timeout_s if timeout_s is not None else max(m.codec.timeout_s(command) for m in motors)
     expected = {
-        motor_id: engine.expect(by_id[motor_id], command, key, timeout)
+        motor_id: _expect(engine, by_id[motor_id], command, key, timeout)
         for motor_id, key in plan.replies.items()
     }
     for motor in motors:
@@ -95,3 +97,15 @@ async def wait_all(runtime: Runtime, contexts: Sequence[Any]) -> list[Result]:
             context.add_done_callback(ended)
         await waiter
     return [context.exception() or context.result() for context in contexts]
+
+
+def _expect(engine: Engine, motor: Motor, command: Command, key: Hashable, timeout_s: float) -> Request:
+    """A request whose frame is sent by someone else (a broadcast): it only awaits ``key``."""
+    assert engine.runtime is not None
+    # (its frame is never sent: the request goes into flight directly, past the queue)
+    request = Request(
+        motor.codec, command, Frame(arbitration_id=0), key, timeout_s, context=engine.runtime.waiter()
+    )
+    engine.scheduler.expect(request, engine.time())
+    engine.kick()
+    return request

@@ -22,7 +22,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
-from collections.abc import Hashable, Iterable
+from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any
 
 import anyio
@@ -31,7 +31,6 @@ from anyio.abc import TaskStatus
 
 from servobus.delivery import Delivery
 from servobus.errors import MotorStreaming, MotorTimeout, TransportError
-from servobus.frame import Frame
 from servobus.protocols import Command
 from servobus.runtime import Runtime, RuntimeMismatch
 from servobus.scheduler import Received, Request, RequestState, Scheduler
@@ -231,17 +230,6 @@ class Engine:
             self.bus._commanded[id(motor.codec)] = motor
         motor.codec.note_sent(request.command)
         self.scheduler.submit(request, self.time() if now is None else now)
-
-    def expect(self, motor: Motor, command: Command, key: Hashable, timeout_s: float) -> Request:
-        """A request whose frame is sent by someone else (a broadcast): it only awaits ``key``."""
-        assert self.runtime is not None
-        # (its frame is never sent: the request goes into flight directly, past the queue)
-        request = Request(
-            motor.codec, command, Frame(arbitration_id=0), key, timeout_s, context=self.runtime.waiter()
-        )
-        self.scheduler.expect(request, self.time())
-        self.kick()
-        return request
 
     # ---- requests out ----
 
