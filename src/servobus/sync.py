@@ -113,10 +113,8 @@ class Bus:
         self._portal_cm = start_blocking_portal(backend="asyncio")
         self._portal = self._portal_cm.__enter__()
         self._bus = _bus.Bus(transport, **options)
-        # (entered and left by one task of the portal: the Bus owns a task group)
-        self._entered = self._portal.wrap_async_context_manager(self._bus)
         try:
-            self._entered.__enter__()
+            self._portal.call(self._bus.__aenter__)
         except BaseException:
             self._portal_cm.__exit__(None, None, None)
             raise
@@ -213,7 +211,7 @@ class Bus:
         self._open = False
         _OPEN.discard(self)
         try:
-            self._entered.__exit__(type(exc) if exc else None, exc, exc.__traceback__ if exc else None)
+            self._portal.call(self._bus.__aexit__, type(exc) if exc else None, exc, None)
         finally:
             self._portal_cm.__exit__(None, None, None)
 
