@@ -35,7 +35,7 @@ class Pacing:
     _queue: deque[Request]
     _pending: dict[Hashable, deque[Request]]
     _in_flight: dict[Request, None]
-    _unreported: deque[Request]
+    _audit_at: float | None
     _held: dict[Hashable, float]
     _recent: Recent
     _doubtful: set[Hashable]
@@ -101,7 +101,6 @@ class Pacing:
         queue = self._queue
         limit = self.stale_after_s
         pending, in_flight = self._pending, self._in_flight
-        unreported = self._unreported if self.report_within_s is not None else None
         while queue and len(in_flight) < self.max_in_flight:
             request = queue.popleft()
             if limit is not None and request.queued_at is not None and now - request.queued_at > limit:
@@ -123,12 +122,13 @@ class Pacing:
             request.state = _SENDING
             request.attempts += 1
             request.handed_at = now
+            request.deadline = None  # (a retry's old one: set again by its report, or its audit)
             in_flight[request] = None
-            if unreported is not None:
-                unreported.append(request)
             if key is not None:
                 pending[key] = deque((request,))
             out.append(request)
         waiting.extend(queue)
         self._queue = waiting
+        if out and self._audit_at is None and self.report_within_s is not None:
+            self._audit_at = now + self.report_within_s  # (see Timing.expire)
         return out, stale

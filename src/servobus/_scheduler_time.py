@@ -52,7 +52,7 @@ class Timing:
     _queue: deque[Request]
     _in_flight: dict[Request, None]
     _deadlines: list[tuple[float, int, Request]]
-    _unreported: deque[Request]
+    _audit_at: float | None
     _sent_count: int
     _recent: Recent
     _held: dict[Hashable, float]
@@ -179,8 +179,8 @@ class Timing:
         queue's front instead. A request whose frame the link never reported as sent times out
         too, once its provisional deadline passed (``report_within_s`` after it was handed over,
         plus its timeout)."""
-        if self._unreported:
-            self._overdue(now)
+        if self._audit_at is not None and self._audit_at <= now:
+            self._audit(now)
         expired: list[Request] = []
         heap = self._deadlines
         while heap and heap[0][0] <= now:
@@ -209,22 +209,24 @@ class Timing:
             expired.append(request)
         return expired
 
-    def _overdue(self, now: float) -> None:
-        """Requests handed over longer than ``report_within_s`` ago without a send report: each gets
-        a provisional deadline (that long after it was handed over, plus its timeout; a report that
-        still comes times it from when it left instead)."""
+    def _audit(self, now: float) -> None:
+        """Look for requests handed over ``report_within_s`` ago or longer that got no send report:
+        each gets a provisional deadline (that long after it was handed over, plus its timeout; a
+        report that still comes times it from when it left instead). The next audit is due when
+        the next of the others would be overdue. (An audit, not a record per request: the hot path
+        only stamps ``handed_at``.)"""
         within = self.report_within_s
-        unreported = self._unreported
         assert within is not None
-        while unreported:
-            request = unreported[0]
-            if request.state is not _SENDING or request.handed_at is None:
-                unreported.popleft()  # (reported, or gone)
+        self._audit_at = None
+        for request in self._in_flight:
+            if request.state is not _SENDING or request.deadline is not None or request.handed_at is None:
+                continue  # (reported, or already given its provisional deadline)
+            due = request.handed_at + within
+            if due > now:
+                if self._audit_at is None or due < self._audit_at:
+                    self._audit_at = due
                 continue
-            if request.handed_at + within > now:
-                return
-            unreported.popleft()
-            request.deadline = deadline = request.handed_at + within + request.timeout_s
+            request.deadline = deadline = due + request.timeout_s
             self._sent_count += 1
             heapq.heappush(self._deadlines, (deadline, self._sent_count, request))
 
@@ -265,22 +267,14 @@ class Timing:
         """When :meth:`expire` or :meth:`~servobus.scheduler.Scheduler.poll` next has something to
         do (None: nothing)."""
         heap = self._deadlines
-        unreported = self._unreported
         if not self._in_flight:
             heap.clear()  # every entry is of a request that left (a whole tick answered: at once)
-            unreported.clear()
-        while heap and (
-            heap[0][2].deadline != heap[0][0]
-            or (heap[0][2].state is not _SENT and heap[0][2].state is not _SENDING)
-        ):
+            self._audit_at = None
+        while heap and (heap[0][2].deadline != heap[0][0] or heap[0][2].state not in _OUT):
             heapq.heappop(heap)  # the request left (replied, cancelled) or was sent again
         times = [heap[0][0]] if heap else []
-        while unreported and unreported[0].state is not _SENDING:
-            unreported.popleft()  # (its report came: the common case, a whole burst at once)
-        if unreported:
-            first = unreported[0]
-            assert first.handed_at is not None and self.report_within_s is not None
-            times.append(first.handed_at + self.report_within_s)
+        if self._audit_at is not None:
+            times.append(self._audit_at)
         if self._queue and len(self._in_flight) < self.max_in_flight:
             if self._rest_until:
                 times.append(self._rest_until)

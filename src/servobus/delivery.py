@@ -32,6 +32,7 @@ class Delivery:
         self.name = engine.name
         self.scheduler = engine.scheduler
         self._warned: set[int] = set()  # motors (by codec id) whose undecodable reply was logged
+        self._settle = engine.settle  # (once per reply: bound here)
 
     def on_frames(self, frames: list[Frame]) -> None:
         now = self.engine.time()
@@ -81,7 +82,7 @@ class Delivery:
                 except Exception:  # a subscriber's bug must not stop the reader
                     logger.exception("%s: subscriber %r failed", self.name, callback)
         if got.request is not None:
-            self.engine.settle(got.request, None)
+            self._settle(got.request, None)
 
     def _note_faults(self, motor: Any, flags: Any) -> None:
         if not flags:
