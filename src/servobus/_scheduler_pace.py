@@ -122,7 +122,6 @@ class Pacing:
             request.state = _SENDING
             request.attempts += 1
             request.handed_at = now
-            request.deadline = None  # (a retry's old one: set again by its report, or its audit)
             in_flight[request] = None
             if key is not None:
                 pending[key] = deque((request,))

@@ -12,7 +12,7 @@ from collections.abc import Hashable
 from heapq import heapify, heappush
 from typing import TYPE_CHECKING
 
-from servobus._request import FROM, Received, Recent, Request, RequestState, illegal
+from servobus._request import FROM, Received, Recent, Request, RequestState
 from servobus.frame import Frame
 from servobus.protocols import BoundCodec, FrameKind
 from servobus.protocols._bound import KIND_REPLY
@@ -136,15 +136,13 @@ class Timing:
             The verdict on a reply-shaped frame with its key that came before this report (EARLY),
             now that the send time is known: the reply, or a duplicate or late frame.
         """
-        if request.state is not _SENDING:
+        if request.state not in _TO_SENT:  # (the table's guard: SENDING, the only way to SENT)
             return None  # cancelled while the frame was on its way (or timed out unreported)
         request.sent_at = at
         if request.key is None:  # nothing to wait for
             self._finish(request, _REPLIED, at)
             self.motor_counts[id(request.codec)]["replies"] += 1
             return None
-        if request.state not in _TO_SENT:  # (the table, read on the hot path)
-            illegal(request, _SENT)
         request.state = _SENT
         if request.adaptive:
             rtt = request.rtt
@@ -192,6 +190,7 @@ class Timing:
                 self._leave_flight(request, now)
                 if request.attempts <= request.retries:
                     self._move(request, _QUEUED)
+                    request.deadline = None  # (set again when it leaves: by its report, or an audit)
                     self._queue.appendleft(request)
                     self._count(request.codec, "retries")
                     if request.key is not None:  # the retry, too, waits out the late reply
@@ -270,7 +269,10 @@ class Timing:
         if not self._in_flight:
             heap.clear()  # every entry is of a request that left (a whole tick answered: at once)
             self._audit_at = None
-        while heap and (heap[0][2].deadline != heap[0][0] or heap[0][2].state not in _OUT):
+        while heap and (
+            heap[0][2].deadline != heap[0][0]
+            or (heap[0][2].state is not _SENT and heap[0][2].state is not _SENDING)
+        ):
             heapq.heappop(heap)  # the request left (replied, cancelled) or was sent again
         times = [heap[0][0]] if heap else []
         if self._audit_at is not None:

@@ -33,6 +33,7 @@ class Delivery:
         self.scheduler = engine.scheduler
         self._warned: set[int] = set()  # motors (by codec id) whose undecodable reply was logged
         self._settle = engine.settle  # (once per reply: bound here)
+        self._by_codec = engine.bus._by_codec  # (the Bus's, for good)
 
     def on_frames(self, frames: list[Frame]) -> None:
         now = self.engine.time()
@@ -62,7 +63,7 @@ class Delivery:
 
     def deliver(self, got: Received, now: float) -> None:
         """A decoded frame of one of our motors: its state, watchdog, watchers, and its request."""
-        motor = self.bus._by_codec.get(id(got.codec))
+        motor = self._by_codec.get(id(got.codec))
         reply = got.reply
         assert reply is not None
         if motor is not None:

@@ -154,12 +154,15 @@ class Engine:
         return math.inf if deadline is None else deadline
 
     def kick(self) -> None:
-        """Re-arm the timer at the next deadline (time-outs, a half-duplex line's rest, silence)."""
+        """Re-arm the timer for the next deadline (time-outs, a half-duplex line's rest, silence)
+        when that is earlier than the one it is armed for. A later one waits: the timer wakes at
+        the earlier time, finds nothing due and sleeps until the next (one re-arm per burst of
+        requests, not two per request's life: a re-arm costs more than a wake-up now and then)."""
         scope = self._scope
         if scope is None:
             return  # (the timer task is running: it reads the deadline when it sleeps again)
         deadline = self._wake_at()
-        if deadline != self._armed:
+        if deadline < self._armed:
             self._armed = deadline
             scope.deadline = deadline
 
