@@ -20,8 +20,9 @@ Two questions, each answered against a baseline in the same run:
 
 2. **Transactions per second on one core, zero-latency reflector.** A FrameLink in this file
    (:class:`Reflector`) answers every frame with a prebuilt reply frame looked up by arbitration id:
-   the replies of one loop iteration are delivered in one consumer call (``loop.call_soon``), each send
-   is reported to the send reporter at once with the loop's time. Nothing is decoded, built or
+   the replies of one loop iteration are delivered in one consumer call (the runtime lane's
+   ``call_soon``), each send is reported to the send reporter at once with the loop's time, echoing
+   its handle (the FrameLink contract). Nothing is decoded, built or
    simulated on that side, so the figure is servobus: ``bus.cycle([(motor, ReadStatus2()), ...])`` over
    32 motors, encode, schedule, match, decode to a typed ``StatusReply``, futures. The items list is
    built once and reused (a ReadStatus2 tick needs no new commands). Baselines on the same prebuilt
@@ -33,6 +34,12 @@ Two questions, each answered against a baseline in the same run:
      as python-can's ``virtual`` and most vendor interfaces do); one transaction at a time: encode the
      command with the same bound codec, ``bus.send(can.Message(...))``, ``await
      reader.get_message()``, check the id, decode the typed reply with the same codec.
+   * **on trio** (recorded beside, no target): the same ``cycle()`` over 32 motors on trio
+     (``trio_cycle32_transactions_s``) against a bare trio floor (``trio_cycle32_vs_floor``, CPU µs
+     per transaction): the asyncio floor's loop with trio's primitives, ONE task per cycle parked
+     with ``trio.lowlevel.wait_task_rescheduled`` and rescheduled by the ``run_sync_soon`` callback
+     that delivers the cycle's last reply (trio has no future; one ``trio.Event`` per request would
+     cost a checkpoint each).
    * as information, the same naive loop on a reflector bus with a file descriptor (an ``os.eventfd``
      the Notifier watches with ``loop.add_reader``: no thread hop, python-can's socketcan path), and a
      pipelined naive loop (32 sends, then 32 awaits) on the thread reflector.

@@ -246,7 +246,7 @@ class Bus:
             self._engine.attach(runtime)
             await group.start(self._engine.run)
         except BaseException as exc:
-            self._engine.stop()
+            self._engine.abort()
             await _leave(group, type(exc), exc, exc.__traceback__)
             raise
         self._group = group

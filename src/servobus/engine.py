@@ -72,6 +72,7 @@ class Engine:
         self._scope: anyio.CancelScope | None = None
         self._life: anyio.CancelScope | None = None  # the timer task's
         self._released: anyio.Event | None = None  # set: the link-keeping task closes the link
+        self._keeper: anyio.CancelScope | None = None  # the link-keeping task's (shielded) scope
         self._armed = math.inf  # the timer's deadline
         self.delivery = Delivery(self)
         watchdog.rearm = self.kick
@@ -129,9 +130,9 @@ class Engine:
         """Open the link and keep it open until :meth:`stop`, then close it (one task does both,
         as the contract asks). Shielded: the link's own tasks live in this task's scope, so the
         cancellation of the block around the Bus does not stop them before the safe stop went
-        out."""
+        out. :meth:`abort` cancels it (an opening the Bus's block gave up on)."""
         self._released = released = anyio.Event()
-        with anyio.CancelScope(shield=True):
+        with anyio.CancelScope(shield=True) as self._keeper:
             await self.link.open()
             try:
                 task_status.started()
@@ -146,6 +147,13 @@ class Engine:
         if self._released is not None:
             self._released.set()
 
+    def abort(self) -> None:
+        """:meth:`stop`, and an opening of the link still under way is cancelled (entering the Bus
+        failed, or was cancelled)."""
+        self.stop()
+        if self._keeper is not None:
+            self._keeper.cancel()
+
     def _wake_at(self) -> float:
         deadline = self.scheduler.next_deadline()
         silence = self.watchdog.silence_at
@@ -155,9 +163,8 @@ class Engine:
 
     def kick(self) -> None:
         """Re-arm the timer for the next deadline (time-outs, a half-duplex line's rest, silence)
-        when that is earlier than the one it is armed for. A later one waits: the timer wakes at
-        the earlier time, finds nothing due and sleeps until the next (one re-arm per burst of
-        requests, not two per request's life: a re-arm costs more than a wake-up now and then)."""
+        when that is earlier than the one it is armed for; a later one waits for its wake-up (one
+        re-arm per burst of requests: a re-arm costs more than a wake-up now and then)."""
         scope = self._scope
         if scope is None:
             return  # (the timer task is running: it reads the deadline when it sleeps again)
@@ -238,11 +245,14 @@ class Engine:
 
     def pump(self) -> None:
         """Hand the requests the scheduler lets go to the link; tell the stale ones' callers."""
-        send, stale = self.scheduler.poll(self.time())
-        for request in send:
-            self.hand_over(request)
-        for request in stale:
-            self.settle(request, request.error)
+        while True:
+            send, stale = self.scheduler.poll(self.time())
+            for request in send:
+                self.hand_over(request)
+            for request in stale:
+                self.settle(request, request.error)
+            if not send or self.reports_sends:
+                break  # (on a link that does not report, what left may have made room for more)
         self.kick()
 
     def hand_over(self, request: Request) -> None:
@@ -253,7 +263,7 @@ class Engine:
             self.settle(request, exc)
             return
         if not self.reports_sends:  # its deadline starts now
-            self._left(request, self.time())
+            self._judged(request, self.scheduler.sent(request, self.time()))
 
     def abandon(self, requests: Iterable[Request]) -> None:
         """The caller stopped waiting (cancelled): unresolved requests are cancelled; a reply that
@@ -286,18 +296,14 @@ class Engine:
         elif reason is not None:
             self.scheduler.not_sent(request, reason, self.time())
             self.settle(request, request.error)
-        elif self._left(request, self.time()):
+        elif self._judged(request, self.scheduler.sent(request, self.time())):
             return
         self.pump()  # it left the wire's count: the next may go
 
-    def _left(self, request: Request, at: float) -> bool:
-        """``request``'s frame left at ``at``: its deadline starts. True when nothing more is to
-        be done (it waits for its reply, and the timer already fires in time)."""
-        return self._judged(request, self.scheduler.sent(request, at))
-
     def _judged(self, request: Request, early: Received | None) -> bool:
-        """After its send report: the verdict on a reply that came before it, and then what
-        ``request`` waits for (see :meth:`_left`)."""
+        """``request`` was reported sent (its deadline starts): ``early``, the verdict on a reply
+        that came before the report, is delivered. True when nothing more is to be done (it waits
+        for its reply, and the timer fires in time)."""
         if early is not None and early.reply is not None:  # its reply came before this report
             self.delivery.deliver(early, self.time())
         elif early is not None and early.request is not None:  # ... and did not decode

@@ -224,3 +224,27 @@ async def test_a_link_that_reports_late_still_has_its_replies_matched() -> None:
         assert all(isinstance(r, ma.StatusReply) for r in results), results
     stats = bus.stats()
     assert stats["replies"] == 5 and stats.get("timeouts", 0) == 0, stats
+
+
+async def test_on_a_link_that_does_not_report_more_requests_than_fit_in_flight_all_go() -> None:
+    """More requests than ``max_in_flight`` on a link that does not report: each is timed from its
+    hand-over, and the ones queued behind go as the first are answered."""
+    line = Line(rules=LineRules(bitrate=1_000_000, reports_sends=False), report_s=None)
+    async with Bus(line, safe=None, max_in_flight=2) as bus:
+        motors = [bus.motor("myactuator", m) for m in range(1, 7)]
+        with anyio.fail_after(1.0):
+            results = await bus.cycle([(m, ma.ReadStatus2()) for m in motors], timeout_s=0.05)
+        assert all(isinstance(r, ma.StatusReply) for r in results), results
+        assert len(line.sent) == 6
+
+
+async def test_on_a_link_that_does_not_report_commands_without_a_reply_never_wait_for_room() -> None:
+    """A command with no reply (a system reset) ends when it is handed over to a link that does not
+    report; the ones queued behind it (more than ``max_in_flight``) go at once too, not at some
+    later frame or timer."""
+    line = Line(rules=LineRules(bitrate=1_000_000, reports_sends=False), report_s=None)
+    async with Bus(line, safe=None, max_in_flight=2) as bus:
+        motors = [bus.motor("myactuator", m) for m in range(1, 7)]
+        with anyio.fail_after(1.0):
+            results = await bus.cycle([(m, ma.SystemReset()) for m in motors])
+        assert results == [None] * 6 and len(line.sent) == 6
