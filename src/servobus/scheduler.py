@@ -5,7 +5,7 @@ the transport's send reports, each with a clock value (intake: :meth:`Scheduler.
 :meth:`Scheduler.sent`, :meth:`Scheduler.not_sent`); the scheduler answers with decisions (what to
 send and what went stale: :meth:`Scheduler.poll`; what missed its reply: :meth:`Scheduler.expire`;
 when to ask again: :meth:`Scheduler.next_deadline`) and keeps every rule about matching and timing
-(in its parts: servobus._scheduler_match, servobus._scheduler_time):
+(in its parts: servobus._scheduler_match, servobus._scheduler_pace, servobus._scheduler_time):
 
 * **Matching** is by the key the motor's bound codec gives (``reply_key`` for a request, ``classify``
   for a frame); requests with equal keys wait in FIFO order. A frame whose key matches nothing is
@@ -22,7 +22,9 @@ when to ask again: :meth:`Scheduler.next_deadline`) and keeps every rule about m
   or FAILED (the transport never sent it, or was lost, or its reply did not decode: ``request.error``
   says why, and is what its caller gets). A request with no key (no reply expected) is REPLIED as
   soon as it left. Each is counted once, by its end. A request whose send report never comes still
-  times out: ``report_within_s`` after it was handed over it gets a provisional deadline.
+  times out: ``report_within_s`` after it was handed over it gets a provisional deadline (that plus
+  its timeout; counted ``unreported``), and a report that comes in time re-bases it on when the
+  frame left.
 * **Timing**: with no ``timeout_s`` of its own, a request's timeout comes from the round trips
   measured for its motor and command class (:class:`~servobus.rtt.RoundTrip`, RFC 6298); after a
   timeout its key is held for the late reply (``late_hold_s``), and a reply that comes after a hold
