@@ -63,4 +63,3 @@ def test_cycle_and_the_trio_floor_on_the_reflector(motors: int) -> None:
     floor = trio.run(bench_bus.floor_reflector_trio, 5, replies, motors)
     assert ours.rate > 0 and floor.rate > 0
     assert ours.cpu_us >= 0 and floor.cpu_us >= 0
-

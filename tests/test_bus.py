@@ -146,8 +146,11 @@ async def test_a_cancelled_request_leaves_nothing_pending_and_its_reply_is_count
     async def scenario() -> dict[str, int]:
         async with Bus(SimTransport(devices=_motors(1)), safe=None) as bus:
             motor = bus.motor("myactuator", 1)
+            async def read() -> None:
+                await motor.read_status2()
+
             async with anyio.create_task_group() as group:
-                group.start_soon(motor.read_status2)
+                group.start_soon(read)
                 await _until(lambda: bus.scheduler.pending)  # the frame is on the wire now
                 group.cancel_scope.cancel()
             assert bus.scheduler.pending == 0

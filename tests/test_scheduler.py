@@ -573,7 +573,7 @@ def test_a_request_whose_send_report_never_comes_still_times_out() -> None:
     assert scheduler.expire(0.0999) == [late]  # (its own timeout: nothing came)
     assert scheduler.expire(0.1) == [] and lost.deadline == pytest.approx(0.15)
     deadline = scheduler.next_deadline()
-    assert deadline == pytest.approx(0.15)
+    assert deadline is not None and deadline == pytest.approx(0.15)
     assert scheduler.expire(deadline) == [lost] and lost.state is S.TIMED_OUT
     assert scheduler.counts["unreported"] == 1 and scheduler.counts["timeouts"] == 2
     assert scheduler.pending == 0
