@@ -146,6 +146,7 @@ async def test_a_cancelled_request_leaves_nothing_pending_and_its_reply_is_count
     async def scenario() -> dict[str, int]:
         async with Bus(SimTransport(devices=_motors(1)), safe=None) as bus:
             motor = bus.motor("myactuator", 1)
+
             async def read() -> None:
                 await motor.read_status2()
 
