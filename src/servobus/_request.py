@@ -85,6 +85,9 @@ class Request:
     # set from it when the frame leaves (``rtt.base_s``: the codec's own time for the command).
     rtt: RoundTrip | None = None
     adaptive: bool = False
+    # A command that changes the motor (not safe to repeat): its freshness counts from ``queued_at``,
+    # stamped by the scheduler when it is submitted.
+    writes: bool = False
     state: RequestState = RequestState.QUEUED
     sent_at: float | None = None
     deadline: float | None = None
@@ -92,9 +95,6 @@ class Request:
     error: BaseException | None = None
     attempts: int = 0
     submitted: bool = False
-    # A command that changes the motor (not safe to repeat): its freshness counts from ``queued_at``,
-    # stamped by the scheduler when it is submitted.
-    writes: bool = False
     queued_at: float | None = None
     handed_at: float | None = None  # when its frame was last handed to the link
 

@@ -127,14 +127,15 @@ def _take(waiter: Waiter[Any]) -> None:
 
 def start(
     engine: Engine, items: list[tuple[Motor, Command]], timeout_s: float | None, probe_interval_s: float
-) -> tuple[Tick, list[Request]]:
+) -> tuple[Tick, list[tuple[Motor, Request]]]:
     """Queue one tick's requests (``Bus.cycle``; ``items`` not empty): every command is encoded (and
     checked: ValueError before anything is queued), then the motors the tick does not wait for
     get their outcome at once (MotorStreaming, MotorOffline, MotorBusy; an offline motor's command
     still goes every ``probe_interval_s``, as a probe nobody waits for), then one pump.
 
     Returns:
-        The tick to await, and the requests it waits for.
+        The tick to await, and the motors and requests queued (a probe's context is not a
+        :class:`Slot`: the tick does not wait for it).
     """
     runtime = engine.runtime
     assert runtime is not None
@@ -148,7 +149,7 @@ def start(
     for i, (m, c) in enumerate(items):
         slot = Slot(tick, i)
         try:
-            request = prepare(m, c, timeout_s=timeout_s, retries=0, context=slot)
+            request = prepare(m, c, timeout_s, 0, slot)
         except MotorStreaming as exc:
             skipped.append((slot, m, "skipped_streaming", exc))
             continue
@@ -173,4 +174,4 @@ def start(
         scheduler.motor_counts[id(motor.codec)][counter] += 1
         slot.set_result(error)
     engine.pump()
-    return tick, [r for _, r in prepared if r.context.__class__ is Slot]  # (not the probes)
+    return tick, prepared

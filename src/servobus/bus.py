@@ -347,7 +347,7 @@ class Bus:
         """:meth:`Motor.request`."""
         if not self._is_current():
             _not_our_loop(self)
-        request = self._engine.submit(motor, command, timeout_s=timeout_s, retries=retries)
+        request = self._engine.submit(motor, command, timeout_s, retries)
         try:
             reply: Reply | None = await request.context
         except anyio.get_cancelled_exc_class():
@@ -379,11 +379,11 @@ class Bus:
         items = list(items)
         if not items:
             return []
-        tick, waited = _tick.start(self._engine, items, timeout_s, self.probe_interval_s)
+        tick, queued = _tick.start(self._engine, items, timeout_s, self.probe_interval_s)
         try:
             return await tick.future
         except BaseException:
-            self._engine.abandon(waited)
+            self._engine.abandon(r for _, r in queued if r.context.__class__ is _tick.Slot)  # (not probes)
             raise
 
     async def broadcast(

@@ -34,6 +34,7 @@ class Delivery:
         self._warned: set[int] = set()  # motors (by codec id) whose undecodable reply was logged
         self._settle = engine.settle  # (once per reply: bound here)
         self._by_codec = engine.bus._by_codec  # (the Bus's, for good)
+        self._subscribers = engine.bus._subscribers
 
     def on_frames(self, frames: list[Frame]) -> None:
         now = self.engine.time()
@@ -77,7 +78,7 @@ class Delivery:
                 self.stream_goes_on(motor, got.frame, now)
             for watcher in motor._watchers:
                 watcher._push(got.traffic, reply)
-            for callback in self.bus._subscribers:
+            for callback in self._subscribers:
                 try:
                     callback(motor, got.traffic, reply)
                 except Exception:  # a subscriber's bug must not stop the reader
@@ -115,7 +116,7 @@ class Delivery:
         self.scheduler.motor_counts[id(motor.codec)]["stream_off_resent"] += 1
         logger.info("%s: %r still streams 0x%02X: switching it off again", self.name, motor, code)
         try:
-            request = engine.prepare(motor, off, timeout_s=None, retries=0, context=detached(engine.runtime))
+            request = engine.prepare(motor, off, None, 0, detached(engine.runtime))
         except (ValueError, TransportError):  # (never out of the reader)
             logger.exception("%s: %r: the stream's 'off' could not be sent again", self.name, motor)
             return

@@ -189,10 +189,10 @@ class Engine:
     # ---- requests in ----
 
     def submit(
-        self, motor: Motor, command: Command, *, timeout_s: float | None, retries: int, safe: bool = False
+        self, motor: Motor, command: Command, timeout_s: float | None, retries: int, safe: bool = False
     ) -> Request:
         """A request for ``command``, queued, and what may go sent (see :meth:`prepare`)."""
-        request = self.prepare(motor, command, timeout_s=timeout_s, retries=retries, safe=safe)
+        request = self.prepare(motor, command, timeout_s, retries, None, safe)
         self.enqueue(motor, request)
         self.pump()
         return request
@@ -201,11 +201,10 @@ class Engine:
         self,
         motor: Motor,
         command: Command,
-        *,
         timeout_s: float | None,
         retries: int,
-        safe: bool = False,
         context: Any = None,
+        safe: bool = False,
     ) -> Request:
         """The request for ``command``, encoded (ValueError here, before anything is queued), settled
         into ``context`` (default: a waiter of its own).
@@ -219,12 +218,9 @@ class Engine:
             raise RuntimeMismatch(f"{self.name}: use the Bus inside 'async with'")
         if self.bus._closing and not safe:
             raise self.bus._closed_error()
+        # (positional: a call by keyword costs more, and this is once per request)
         request = self.scheduler.request(
-            motor.codec,
-            command,
-            timeout_s=timeout_s,
-            retries=retries,
-            context=runtime.waiter() if context is None else context,
+            motor.codec, command, timeout_s, retries, runtime.waiter() if context is None else context
         )
         if request.key is None and motor.codec.streams and not request.writes:
             streams = ", ".join(f"0x{code:02X}" for code in sorted(motor.codec.streams))
@@ -279,11 +275,13 @@ class Engine:
     def on_report(self, handle: object, sent_at: float | None, reason: str | None) -> None:
         """The link's send report: ``handle`` is the Request handed over (anything else, a frame
         sent past the scheduler, is not ours to time)."""
-        if handle.__class__ is not Request:
-            return
-        request: Request = handle
-        if request.state is not _SENDING:
+        try:
+            state = handle.state  # type: ignore[attr-defined]
+        except AttributeError:
+            return  # (a frame sent past the scheduler: a broadcast's)
+        if state is not _SENDING:
             return  # (cancelled, or timed out unreported, while its frame was on its way)
+        request: Request = handle  # type: ignore[assignment]
         if reason is None and sent_at is not None:  # (the common case, written out: one per request)
             early = self.scheduler.sent(request, sent_at)
             if early is None and request.state is _SENT:

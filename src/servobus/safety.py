@@ -38,7 +38,7 @@ async def safe_stop(bus: Bus) -> None:
 
     async def stop(motor: Motor, command: Command) -> None:
         while True:
-            request = bus._engine.submit(motor, command, timeout_s=None, retries=0, safe=True)
+            request = bus._engine.submit(motor, command, None, 0, safe=True)
             attempts[motor].append(request)
             try:
                 await awaitable(request.context)

@@ -216,7 +216,6 @@ class Scheduler(Pacing, Matching, Timing):
         self,
         codec: BoundCodec,
         command: Command,
-        *,
         timeout_s: float | None = None,
         retries: int = 0,
         context: Any = None,
@@ -243,9 +242,8 @@ class Scheduler(Pacing, Matching, Timing):
             rtt = rtts[type(command)] = RoundTrip(base)
             self._set_floors(rtts)
         key = codec.reply_key(command)
-        request = Request(codec, command, frame, key, timeout, retries, context, rtt, timeout_s is None)
-        request.writes = writes  # (an attribute, not a keyword: the keyword costs more, per request)
-        return request
+        # (all positional: a keyword costs more, and this is once per request)
+        return Request(codec, command, frame, key, timeout, retries, context, rtt, timeout_s is None, writes)
 
     def submit(self, request: Request, now: float) -> None:
         """Queue ``request`` behind the others (FIFO); a command's freshness counts from ``now``.
