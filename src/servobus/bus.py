@@ -242,7 +242,7 @@ class Bus:
         await group.__aenter__()
         try:
             if not self.transport.is_open:  # opened (and closed) by a task of the Bus's
-                await group.start(self._engine.keep_link)
+                await self._engine.keeper.open(group)
             self._engine.attach(runtime)
             await group.start(self._engine.run)
         except BaseException as exc:

@@ -42,7 +42,7 @@ if TYPE_CHECKING:
     from servobus.bus import Bus
     from servobus.motor import Motor
 
-__all__ = ["Engine"]
+__all__ = ["Engine", "LinkKeeper"]
 
 logger = logging.getLogger("servobus.bus")
 
@@ -71,8 +71,7 @@ class Engine:
         self.runtime: Runtime | None = None
         self._scope: anyio.CancelScope | None = None
         self._life: anyio.CancelScope | None = None  # the timer task's
-        self._released: anyio.Event | None = None  # set: the link-keeping task closes the link
-        self._keeper: anyio.CancelScope | None = None  # the link-keeping task's (shielded) scope
+        self.keeper = LinkKeeper(link)
         self._armed = math.inf  # the timer's deadline
         self.delivery = Delivery(self)
         watchdog.rearm = self.kick
@@ -126,33 +125,17 @@ class Engine:
             finally:
                 self._scope = None
 
-    async def keep_link(self, *, task_status: TaskStatus[None] = anyio.TASK_STATUS_IGNORED) -> None:
-        """Open the link and keep it open until :meth:`stop`, then close it (one task does both,
-        as the contract asks). Shielded: the link's own tasks live in this task's scope, so the
-        cancellation of the block around the Bus does not stop them before the safe stop went
-        out. :meth:`abort` cancels it (an opening the Bus's block gave up on)."""
-        self._released = released = anyio.Event()
-        with anyio.CancelScope(shield=True) as self._keeper:
-            await self.link.open()
-            try:
-                task_status.started()
-                await released.wait()
-            finally:
-                await self.link.close()
-
     def stop(self) -> None:
         """End the timer task and release the link (the Bus's task group is being left)."""
         if self._life is not None:
             self._life.cancel()
-        if self._released is not None:
-            self._released.set()
+        self.keeper.release()
 
     def abort(self) -> None:
         """:meth:`stop`, and an opening of the link still under way is cancelled (entering the Bus
         failed, or was cancelled)."""
         self.stop()
-        if self._keeper is not None:
-            self._keeper.cancel()
+        self.keeper.cancel()
 
     def _wake_at(self) -> float:
         deadline = self.scheduler.next_deadline()
@@ -349,3 +332,50 @@ class Engine:
             future.set_exception(
                 request.error or TransportError(f"{self.name}: {request.describe()} {request.state.value}")
             )
+
+
+class LinkKeeper:
+    """The task that opens a Bus's link and closes it (when the Bus opened it)."""
+
+    def __init__(self, link: FrameLink) -> None:
+        self.link = link
+        self._released: anyio.Event | None = None  # set: the link-keeping task closes the link
+        self._keeper: anyio.CancelScope | None = None  # the link-keeping task's (shielded) scope
+        self._open_error: Exception | None = None
+
+    async def open(self, group: anyio.abc.TaskGroup) -> None:
+        """Open the link in a task of ``group`` that keeps it open until :meth:`release`, then
+        closes it (one task does both, as the contract asks). That task is shielded: the link's own
+        tasks live in its scope, so the cancellation of the block around the Bus does not stop
+        them before the safe stop went out; :meth:`cancel` cancels it (an opening the block gave
+        up on). The link's error on opening is raised here, as it is."""
+        self._released, opened, self._open_error = anyio.Event(), anyio.Event(), None
+        group.start_soon(self._keep_link, opened)
+        await opened.wait()
+        if self._open_error is not None:
+            raise self._open_error
+
+    async def _keep_link(self, opened: anyio.Event) -> None:
+        assert self._released is not None
+        with anyio.CancelScope(shield=True) as self._keeper:
+            try:
+                await self.link.open()
+            except Exception as exc:
+                self._open_error = exc
+                return
+            finally:
+                opened.set()
+            try:
+                await self._released.wait()
+            finally:
+                await self.link.close()
+
+    def release(self) -> None:
+        """Close the link (the Bus's task group is being left)."""
+        if self._released is not None:
+            self._released.set()
+
+    def cancel(self) -> None:
+        """Give up an opening still under way."""
+        if self._keeper is not None:
+            self._keeper.cancel()

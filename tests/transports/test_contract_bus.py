@@ -23,7 +23,7 @@ import pytest
 
 from _backends import BACKENDS, virtual
 from servobus.bus import Bus
-from servobus.errors import MotorTimeout
+from servobus.errors import MotorTimeout, TransportError
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
@@ -248,3 +248,26 @@ async def test_on_a_link_that_does_not_report_commands_without_a_reply_never_wai
         with anyio.fail_after(1.0):
             results = await bus.cycle([(m, ma.SystemReset()) for m in motors])
         assert results == [None] * 6 and len(line.sent) == 6
+
+
+class _Unopenable(Line):
+    async def open(self) -> None:
+        raise TransportError("line: no such port")
+
+
+class _Hanging(Line):
+    async def open(self) -> None:
+        await anyio.sleep_forever()
+
+
+async def test_a_link_that_cannot_open_raises_its_own_error_and_one_that_hangs_can_be_given_up() -> None:
+    """The Bus opens its link in a task of its own (so the link's tasks outlive a cancelled block
+    until the safe stop went out); opening still raises the link's error as it is, and an opening
+    that hangs ends with the scope that gives up on it."""
+    with pytest.raises(TransportError, match="no such port"):
+        async with Bus(_Unopenable()):
+            pass
+    with anyio.move_on_after(0.5) as scope:
+        async with Bus(_Hanging()):
+            raise AssertionError("entered a link that never opened")
+    assert scope.cancelled_caught
