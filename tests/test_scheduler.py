@@ -592,3 +592,26 @@ def test_a_dropped_frame_fails_its_request_with_a_transport_error_that_says_why(
     assert request.state is S.FAILED and isinstance(request.error, TransportError)
     assert str(request.error) == "can0: myactuator motor 1 ReadStatus2 not sent (purged)"
     assert scheduler.counts["not_sent_purged"] == 1
+
+
+def test_a_reply_stamped_after_its_deadline_is_late_whichever_the_host_took_first() -> None:
+    """The loop may take a reply in before the timer that expires its request: a reply stamped
+    after the deadline is still late (the request times out, and says so at the next expire); an
+    unstamped one counts from when it was taken in."""
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec])
+    request = scheduler.request(codec, ma.ReadStatus2(), timeout_s=0.01)
+    scheduler.submit(request, 0.0)
+    _send_all(scheduler, 0.0)
+    got = scheduler.receive(_reply(1, t=0.012), 0.013)
+    assert got.traffic is Traffic.LATE and got.request is None and request.state is S.TIMED_OUT
+    assert scheduler.next_deadline() == pytest.approx(0.01)  # (its expiry is due: to be told)
+    assert scheduler.expire(0.013) == [request] and scheduler.expire(0.013) == []
+    assert scheduler.counts["timeouts"] == 1 and scheduler.counts["late"] == 1
+    in_time = scheduler.request(codec, ma.ReadStatus1(), timeout_s=0.01)
+    scheduler.submit(in_time, 0.1)
+    _send_all(scheduler, 0.1)
+    assert (
+        scheduler.receive(_reply(1, data=bytes.fromhex("9A 32 00 00 00 00 00 00"), t=0.109), 0.2).request
+        is in_time
+    )

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 from servobus._request import FROM, Received, Recent, Request, RequestState, Traffic, illegal
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
-from servobus.protocols import BoundCodec, FrameKind
+from servobus.protocols import BoundCodec, FrameKind, Reply
 from servobus.protocols._bound import KIND_NOT_OURS, KIND_REPLY, KIND_REPORT, KIND_STREAM
 
 if TYPE_CHECKING:
@@ -51,6 +51,7 @@ class Matching:
     _early: dict[Hashable, tuple[BoundCodec, Frame]]
     _doubtful: set[Hashable]
     _any_measured: bool
+    _overtaken: list[Request]
     _rest_until: float
     _bus_counts: Counter[str]
     motor_counts: dict[int, Counter[str]]
@@ -63,6 +64,8 @@ class Matching:
         def _finish(self, request: Request, state: RequestState, now: float) -> None: ...
 
         def _first_measured(self) -> None: ...
+
+        def _miss(self, request: Request, now: float) -> bool: ...
 
     def receive(self, frame: Frame, now: float) -> Received:
         """Classify ``frame``, resolve the request it answers, count it."""
@@ -105,6 +108,9 @@ class Matching:
             else:
                 fresh = sent_at is not None and frame.timestamp >= sent_at
             if request.state is _SENT and fresh:
+                stamp = frame.timestamp
+                if stamp and request.deadline is not None and stamp > request.deadline:
+                    return self._overtake(request, codec, frame, reply, now)
                 request.reply = reply
                 # _leave_flight, written out for the hot path (a SENT request has no EARLY frame)
                 waiting.popleft()
@@ -143,6 +149,18 @@ class Matching:
             self._count(codec, kind.value)
             return Received(Traffic(kind.value), frame, codec, reply)
         traffic = self._unmatched(key, now, frame.timestamp or now)
+        self._count(codec, traffic.value)
+        return Received(traffic, frame, codec, reply)
+
+    def _overtake(
+        self, request: Request, codec: BoundCodec, frame: Frame, reply: Reply, now: float
+    ) -> Received:
+        """``request``'s reply came stamped after its deadline (the loop took it in before the
+        timer): the request timed out, whichever came first to the host; the frame is its late
+        reply. :meth:`~servobus.scheduler.Scheduler.expire` says so next."""
+        if self._miss(request, now):
+            self._overtaken.append(request)
+        traffic = self._unmatched(request.key, now, frame.timestamp)
         self._count(codec, traffic.value)
         return Received(traffic, frame, codec, reply)
 

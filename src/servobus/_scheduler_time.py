@@ -53,6 +53,7 @@ class Timing:
     _in_flight: dict[Request, None]
     _deadlines: list[tuple[float, int, Request]]
     _audit_at: float | None
+    _overtaken: list[Request]
     _sent_count: int
     _recent: Recent
     _held: dict[Hashable, float]
@@ -179,34 +180,38 @@ class Timing:
         plus its timeout)."""
         if self._audit_at is not None and self._audit_at <= now:
             self._audit(now)
-        expired: list[Request] = []
+        expired, self._overtaken = self._overtaken, []
         heap = self._deadlines
         while heap and heap[0][0] <= now:
             deadline, _, request = heapq.heappop(heap)
             if request.deadline != deadline:
                 continue  # (an entry of a request that left, or was timed again)
             state = request.state
-            if state is _SENT:
-                self._leave_flight(request, now)
-                if request.attempts <= request.retries:
-                    self._move(request, _QUEUED)
-                    request.deadline = None  # (set again when it leaves: by its report, or an audit)
-                    self._queue.appendleft(request)
-                    self._count(request.codec, "retries")
-                    if request.key is not None:  # the retry, too, waits out the late reply
-                        self._expect_late(request, now)
-                    continue
-            elif state is _SENDING:  # its send report never came
-                self._leave_flight(request, now)
+            if state is _SENDING:  # its send report never came
                 self._count(request.codec, "unreported")
-            else:
+            elif state is not _SENT:
                 continue
-            self._move(request, _TIMED_OUT)
-            self._count(request.codec, "timeouts")
-            if request.key is not None:
-                self._expect_late(request, now)
-            expired.append(request)
+            if self._miss(request, now):
+                expired.append(request)
         return expired
+
+    def _miss(self, request: Request, now: float) -> bool:
+        """``request`` (SENT or SENDING) missed its deadline: TIMED_OUT (True), or back in the
+        queue's front for a retry (False); either way its key is held for the late reply."""
+        self._leave_flight(request, now)
+        if request.attempts <= request.retries and request.state is _SENT:
+            self._move(request, _QUEUED)
+            request.deadline = None  # (set again when it leaves: by its report, or an audit)
+            self._queue.appendleft(request)
+            self._count(request.codec, "retries")
+            if request.key is not None:  # the retry, too, waits out the late reply
+                self._expect_late(request, now)
+            return False
+        self._move(request, _TIMED_OUT)
+        self._count(request.codec, "timeouts")
+        if request.key is not None:
+            self._expect_late(request, now)
+        return True
 
     def _audit(self, now: float) -> None:
         """Look for requests handed over ``report_within_s`` ago or longer that got no send report:
@@ -275,6 +280,8 @@ class Timing:
         ):
             heapq.heappop(heap)  # the request left (replied, cancelled) or was sent again
         times = [heap[0][0]] if heap else []
+        if self._overtaken:  # (missed already: for expire() to say so)
+            times.append(min(r.deadline or 0.0 for r in self._overtaken))
         if self._audit_at is not None:
             times.append(self._audit_at)
         if self._queue and len(self._in_flight) < self.max_in_flight:

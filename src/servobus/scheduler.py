@@ -181,6 +181,7 @@ class Scheduler(Pacing, Matching, Timing):
         self._in_flight: dict[Request, None] = {}  # SENDING or SENT, in send order
         self._deadlines: list[tuple[float, int, Request]] = []  # a heap; entries of left requests stay
         self._audit_at: float | None = None  # when to look for sends never reported (report_within_s)
+        self._overtaken: list[Request] = []  # timed out by a reply stamped after their deadline
         self._sent_count = 0  # a tie-breaker for the heap
         self._recent = Recent()
         self._held: dict[Hashable, float] = {}  # key -> until when its next exchange waits
