@@ -20,8 +20,9 @@ Two questions, each answered against a baseline in the same run:
 
 2. **Transactions per second on one core, zero-latency reflector.** A FrameLink in this file
    (:class:`Reflector`) answers every frame with a prebuilt reply frame looked up by arbitration id:
-   the replies of one loop iteration are delivered in one consumer call (``loop.call_soon``), each send
-   is reported to the send reporter at once with the loop's time. Nothing is decoded, built or
+   the replies of one loop iteration are delivered in one consumer call (the runtime lane's
+   ``call_soon``), each send is reported to the send reporter at once with the loop's time, echoing
+   its handle (the FrameLink contract). Nothing is decoded, built or
    simulated on that side, so the figure is servobus: ``bus.cycle([(motor, ReadStatus2()), ...])`` over
    32 motors, encode, schedule, match, decode to a typed ``StatusReply``, futures. The items list is
    built once and reused (a ReadStatus2 tick needs no new commands). Baselines on the same prebuilt
@@ -33,6 +34,12 @@ Two questions, each answered against a baseline in the same run:
      as python-can's ``virtual`` and most vendor interfaces do); one transaction at a time: encode the
      command with the same bound codec, ``bus.send(can.Message(...))``, ``await
      reader.get_message()``, check the id, decode the typed reply with the same codec.
+   * **on trio** (recorded beside, no target): the same ``cycle()`` over 32 motors on trio
+     (``trio_cycle32_transactions_s``) against a bare trio floor (``trio_cycle32_vs_floor``, CPU µs
+     per transaction): the asyncio floor's loop with trio's primitives, ONE task per cycle parked
+     with ``trio.lowlevel.wait_task_rescheduled`` and rescheduled by the ``run_sync_soon`` callback
+     that delivers the cycle's last reply (trio has no future; one ``trio.Event`` per request would
+     cost a checkpoint each).
    * as information, the same naive loop on a reflector bus with a file descriptor (an ``os.eventfd``
      the Notifier watches with ``loop.add_reader``: no thread hop, python-can's socketcan path), and a
      pipelined naive loop (32 sends, then 32 awaits) on the thread reflector.
@@ -99,11 +106,13 @@ from servobus.protocols import (  # noqa: E402
 )
 from servobus.protocols import myactuator as ma  # noqa: E402
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor  # noqa: E402
+from servobus.runtime import current  # noqa: E402
 from servobus.sim import virtual  # noqa: E402
 from servobus.sim.device import Emission  # noqa: E402
 from servobus.transports import CanTransport  # noqa: E402
-from servobus.transports.link_base import LinkBase  # noqa: E402
+from servobus.transports.contract import Consumer, LineRules, SendReporter  # noqa: E402
 from servobus.transports.sim import SimTransport  # noqa: E402
+from servobus.transports.stats import TransportStats  # noqa: E402
 
 KEY = "bus"
 MOTORS = 32
@@ -246,32 +255,62 @@ def efficiency(cfg: Config, log: Callable[[str], None]) -> dict[str, Any]:
 # ================================================================ 2. zero-latency reflector
 
 
-class Reflector(LinkBase):
-    """A FrameLink answering every frame with a prebuilt reply: all the cost measured is the Bus's.
+class Reflector:
+    """A FrameLink (the contract of servobus.transports.contract) answering every frame with a
+    prebuilt reply: all the cost measured is the Bus's. It runs on asyncio and on trio.
 
-    ``send`` reports the frame as sent (the loop's time) to the send reporter at once and puts the
-    reply found by the request's arbitration id on a list; the replies of one loop iteration are
-    delivered to the consumer in one call, scheduled with ``loop.call_soon``.
+    ``send(frame, handle)`` reports the send (with the loop's time) to the send reporter at once,
+    echoing ``handle``, and puts the reply found by the request's arbitration id on a list; the
+    replies of one loop iteration are delivered to the consumer in one call, scheduled with the
+    runtime lane's ``call_soon`` (asyncio's ``loop.call_soon``, trio's ``run_sync_soon``).
     """
 
     name = "reflector"
+    rules = LineRules()
 
     def __init__(self, replies: dict[int, Frame]) -> None:
-        super().__init__()
         self.replies = replies
         self._out: list[Frame] = []
+        self._consumer: Consumer | None = None
+        self._reporter: SendReporter | None = None
+        self._open = False
         self.sent = 0
 
-    def send(self, frame: Frame) -> None:
-        loop = self._loop
-        assert loop is not None
+    @property
+    def is_open(self) -> bool:
+        return self._open
+
+    async def open(self) -> None:
+        runtime = current()
+        self._time, self._call_soon = runtime.time, runtime.call_soon
+        self._open = True
+
+    async def close(self) -> None:
+        self._open = False
+
+    def set_consumer(self, consumer: Consumer | None) -> None:
+        self._consumer = consumer
+
+    def set_send_reporter(self, reporter: SendReporter | None) -> None:
+        self._reporter = reporter
+
+    def add_listener(self, listener: Callable[[Any], object]) -> None:
+        pass
+
+    def remove_listener(self, listener: Callable[[Any], object]) -> None:
+        pass
+
+    def stats(self) -> TransportStats:
+        return TransportStats()
+
+    def send(self, frame: Frame, handle: object = None) -> None:
         self.sent += 1
         reporter = self._reporter
         if reporter is not None:
-            reporter(frame, loop.time(), None)
+            reporter(frame if handle is None else handle, self._time(), None)
         out = self._out
         if not out:
-            loop.call_soon(self._flush)
+            self._call_soon(self._flush)
         out.append(self.replies[frame.arbitration_id])
 
     def _flush(self) -> None:
@@ -410,6 +449,63 @@ async def floor_reflector(cycles: int, replies: dict[int, Frame], motors: int = 
     return Sample(cycles * motors / elapsed, cpu / (cycles * motors) * 1e6)
 
 
+async def floor_reflector_trio(cycles: int, replies: dict[int, Frame], motors: int = MOTORS) -> Sample:
+    """The bare trio floor: the asyncio floor's loop with trio's primitives, and no anyio.
+
+    Per cycle: ONE task parked with ``trio.lowlevel.wait_task_rescheduled`` (what a cycle awaits:
+    trio has no future, and awaiting one ``trio.Event`` per request costs a checkpoint each); per
+    motor, a "send" that appends the request's id to a list (the first of a loop iteration schedules
+    one ``run_sync_soon`` callback, as the Reflector does on trio); the callback puts each prebuilt
+    reply in its slot and reschedules the cycle's task when the last one came.
+    """
+    import trio
+
+    family = get_family(FAMILY)
+    request_ids = [family.bind(i).encode(ma.ReadStatus2()).arbitration_id for i in range(1, motors + 1)]
+    run_soon = trio.lowlevel.current_trio_token().run_sync_soon
+    reschedule, park = trio.lowlevel.reschedule, trio.lowlevel.wait_task_rescheduled
+    pending: dict[int, int] = {}
+    out: list[int] = []
+    state: dict[str, Any] = {}
+
+    def flush() -> None:
+        batch = out[:]
+        out.clear()
+        results = state["results"]
+        for ident in batch:
+            results[pending.pop(ident)] = replies[ident]
+        state["left"] -= len(batch)
+        if not state["left"]:
+            reschedule(state["task"])
+
+    def abort(_: object) -> Any:
+        return trio.lowlevel.Abort.SUCCEEDED
+
+    async def cycle() -> list[Frame]:
+        state["results"] = results = [None] * motors
+        state["left"] = motors
+        state["task"] = trio.lowlevel.current_task()
+        for i, ident in enumerate(request_ids):
+            pending[ident] = i
+            if not out:
+                run_soon(flush)
+            out.append(ident)
+        await park(abort)
+        return results  # type: ignore[return-value]
+
+    await cycle()  # warm-up
+    cpu = time.process_time()
+    start = time.perf_counter()
+    for _ in range(cycles - 1):
+        await cycle()
+    last = await cycle()
+    elapsed = time.perf_counter() - start
+    cpu = time.process_time() - cpu
+    if len(last) != motors or any(not isinstance(f, Frame) for f in last):
+        raise RuntimeError(f"trio floor: {last[:1]}")
+    return Sample(cycles * motors / elapsed, cpu / (cycles * motors) * 1e6)
+
+
 async def _naive_loop(
     bus: can.BusABC, n: int, *, pipelined: bool = False, notifier_timeout: float = 0.05
 ) -> Sample:
@@ -525,7 +621,12 @@ def alternate(
     samples: dict[str, list[Sample]] = {name: [] for name in runners}
     for repeat in range(repeats):
         for name, runner in runners.items():
-            sample = asyncio.run(runner())
+            if name.startswith("trio_"):
+                import trio
+
+                sample = trio.run(runner)
+            else:
+                sample = asyncio.run(runner())
             samples[name].append(sample)
             log(
                 f"  repeat {repeat + 1}/{repeats} {name:<22} {sample.rate:12,.0f} transactions/s "
@@ -547,7 +648,10 @@ def transactions(cfg: Config, log: Callable[[str], None]) -> dict[str, Any]:
         cycles = max(2, cfg.cycles * MOTORS // n)
         runners[f"cycle{n}"] = lambda n=n, c=cycles: ours_reflector(c, replies, n)  # type: ignore[misc]
         runners[f"floor{n}"] = lambda n=n, c=cycles: floor_reflector(c, replies, n)  # type: ignore[misc]
+    cycles32 = max(2, cfg.cycles)
     runners |= {
+        "trio_cycle32": lambda: ours_reflector(cycles32, replies, MOTORS),
+        "trio_floor32": lambda: floor_reflector_trio(cycles32, replies, MOTORS),
         "naive": lambda: naive_reflector(cfg.naive, replies),
         "naive_fd": lambda: naive_reflector(cfg.naive, replies, fd=True),
         "naive_pipelined32": lambda: naive_reflector(cfg.naive, replies, pipelined=True),
@@ -646,6 +750,14 @@ def summarise(eff: dict[str, Any], tx: dict[str, Any], cfg: Config) -> dict[str,
         "cycle32_vs_floor_basis": "CPU µs per transaction, ours / the floor's (median of repeats)",
         "cycle32_vs_floor_wall": sizes["32"]["vs_floor_wall"],
         "floor32_transactions_s": sizes["32"]["floor_transactions_s"],
+        "trio_cycle32_transactions_s": round(med["trio_cycle32"]),
+        "trio_cycle32_cpu_us_per_transaction": round(cpu["trio_cycle32"], 2),
+        "trio_floor32_transactions_s": round(med["trio_floor32"]),
+        "trio_cycle32_vs_floor": round(cpu["trio_cycle32"] / cpu["trio_floor32"], 2),
+        "trio_cycle32_vs_floor_per_repeat": paired("trio_cycle32", "trio_floor32", cpu_time=True),
+        "trio_floor": "one task per cycle parked with trio.lowlevel.wait_task_rescheduled, "
+        "callbacks through run_sync_soon (floor_reflector_trio)",
+        "trio_cycle32_vs_asyncio_cycle32": round(med["trio_cycle32"] / med["cycle32"], 2),
         "cycle_sizes": sizes,
         "naive_cpu_us_per_transaction": round(cpu["naive"], 2),
         "cycle32_vs_naive": round(med["cycle32"] / med["naive"], 2),
@@ -735,6 +847,21 @@ def render_markdown(figures: dict[str, Any], meta: dict[str, Any]) -> str:
             f"{t['cycle32_us_per_transaction']:.2f}",
             "{:,} to {:,}".format(*t["spread_transactions_s"]["cycle32"]),
             ">= 100,000",
+        ),
+        (
+            "`bus.cycle()` over 32 motors on trio (`trio_cycle32_transactions_s`; CPU vs the trio "
+            f"floor: `trio_cycle32_vs_floor` {t['trio_cycle32_vs_floor']:.2f})",
+            f"{t['trio_cycle32_transactions_s']:,}",
+            f"{1e6 / t['trio_cycle32_transactions_s']:.2f}",
+            "{:,} to {:,}".format(*t["spread_transactions_s"]["trio_cycle32"]),
+            "(reported)",
+        ),
+        (
+            "the bare trio floor (one parked task per cycle, `run_sync_soon`)",
+            f"{t['trio_floor32_transactions_s']:,}",
+            f"{1e6 / t['trio_floor32_transactions_s']:.2f}",
+            "{:,} to {:,}".format(*t["spread_transactions_s"]["trio_floor32"]),
+            "(info)",
         ),
         (
             "naive python-can: send, await `AsyncBufferedReader` (Notifier thread), decode",
@@ -888,7 +1015,7 @@ def render_markdown(figures: dict[str, Any], meta: dict[str, Any]) -> str:
                 "Shares of the profiled process's samples; µs = share x the measured CPU µs per transaction "
                 f"({unit_us:.2f})."
                 + (
-                    " `Bus.cycle` (the send side) and the Reflector's flush into `Bus._on_frames` (the "
+                    " `Bus.cycle` (the send side) and the Reflector's flush into `Delivery.on_frames` (the "
                     "receive side) are the two halves."
                     if name == "cycle32"
                     else ""
@@ -940,7 +1067,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"efficiency_can1m_32 {figures['efficiency_can1m_32']:.4f} (sequential "
         f"{figures['efficiency_can1m_32_sequential']:.4f}); cycle32 {figures['cycle32_transactions_s']:,} "
         f"transactions/s ({figures['cycle32_us_per_transaction']:.2f} µs), naive "
-        f"{figures['naive_transactions_s']:,}/s, ratio {figures['cycle32_vs_naive']:.2f}; on virtual "
+        f"{figures['naive_transactions_s']:,}/s, ratio {figures['cycle32_vs_naive']:.2f}, vs floor "
+        f"{figures['cycle32_vs_floor']:.2f}; trio {figures['trio_cycle32_transactions_s']:,}/s, vs its "
+        f"floor {figures['trio_cycle32_vs_floor']:.2f}; on virtual "
         f"{figures['cycle32_python_can_virtual_transactions_s']:,}/s"
     )
     missed = figures["targets_missed"]

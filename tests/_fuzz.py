@@ -483,6 +483,7 @@ class TransportRig:
         self.transports: list[Any] = []
         self.buses: list[Any] = []
         self._tasks: list[asyncio.Task[None]] = []
+        self._holders: list[tuple[asyncio.Task[None], asyncio.Event]] = []
         if kind == "slcan":
             from servobus.sim.attach import serve_slcan
             from servobus.sim.network import SimCanNetwork
@@ -508,15 +509,29 @@ class TransportRig:
                 self._open(SerialTransport(port.path, mode=mode, reopen=False), Bus, motors)
 
     def _open(self, transport: Any, bus_type: Any, motors: list[tuple[str, int, dict[str, Any]]]) -> None:
-        async def start() -> Any:
-            await transport.open()
-            bus = bus_type(transport, safe=None)
-            await bus.__aenter__()
-            for family, motor_id, options in motors:
-                bus.motor(family, motor_id, **options)
-            return bus
+        # One task opens the link and enters the Bus, and leaves both (a Bus owns a task group,
+        # entered and left by one task); it holds them until close().
+        ready: asyncio.Future[Any] = self.loop.create_future()
+        stop = asyncio.Event()
 
-        self.buses.append(self.loop.run_until_complete(start()))
+        async def hold() -> None:
+            try:
+                await transport.open()
+                try:
+                    async with bus_type(transport, safe=None) as bus:
+                        for family, motor_id, options in motors:
+                            bus.motor(family, motor_id, **options)
+                        ready.set_result(bus)
+                        await stop.wait()
+                finally:
+                    await transport.close()
+            except BaseException as exc:
+                if not ready.done():
+                    ready.set_exception(exc)
+                raise
+
+        self._holders.append((self.loop.create_task(hold()), stop))
+        self.buses.append(self.loop.run_until_complete(ready))
         self.transports.append(transport)
 
     def feed(self, data: bytes) -> None:
@@ -582,10 +597,9 @@ class TransportRig:
 
     def close(self) -> None:
         async def stop() -> None:
-            for bus in self.buses:
-                await bus.__aexit__(None, None, None)
-            for transport in self.transports:
-                await transport.close()
+            for holder, stopping in self._holders:
+                stopping.set()
+                await holder
             for task in self._tasks:
                 task.cancel()
                 with contextlib.suppress(asyncio.CancelledError, Exception):
@@ -693,10 +707,10 @@ def scheduler_intake(data: bytes) -> None:
                 request = scheduler.request(
                     codec, inp.pick(commands[id(codec)]), timeout_s=0.001 * (1 + inp.byte() % 8)
                 )
-                scheduler.submit(request)
+                scheduler.submit(request, now)
                 made.append(request)
         elif op == 1:  # what may go, goes
-            sending += scheduler.next_to_send(now)
+            sending += scheduler.poll(now)[0]
         elif op == 2 and sending:  # a send report
             request = sending.pop(inp.byte() % len(sending))
             early = scheduler.sent(request, now)
@@ -758,7 +772,7 @@ def scheduler_intake(data: bytes) -> None:
             scheduler.sent(request, now)
             if request.state is RequestState.REPLIED:
                 note_end(request, "replied")
-        sending = scheduler.next_to_send(now)
+        sending = list(scheduler.poll(now)[0])
         now += 0.01
         for request in scheduler.expire(now):
             note_end(request, "timed out")

@@ -52,3 +52,14 @@ def test_cycle_and_the_asyncio_floor_on_the_reflector(motors: int) -> None:
     floor = asyncio.run(bench_bus.floor_reflector(5, replies, motors))
     assert ours.rate > 0 and floor.rate > 0
     assert ours.cpu_us >= 0 and floor.cpu_us >= 0
+
+
+@pytest.mark.parametrize("motors", [1, 32])
+def test_cycle_and_the_trio_floor_on_the_reflector(motors: int) -> None:
+    import trio
+
+    replies = bench_bus.prebuilt_replies(ma.ReadStatus2())
+    ours = trio.run(bench_bus.ours_reflector, 5, replies, motors)
+    floor = trio.run(bench_bus.floor_reflector_trio, 5, replies, motors)
+    assert ours.rate > 0 and floor.rate > 0
+    assert ours.cpu_us >= 0 and floor.cpu_us >= 0

@@ -1,13 +1,15 @@
-"""servobus.Bus and Motor over the in-process simulated bus, on virtual time (no real clock)."""
+"""servobus.Bus and Motor over the in-process simulated bus, on asyncio and trio in virtual time (no
+real clock): anyio's pytest plugin runs each test on both."""
 
 from __future__ import annotations
 
-import asyncio
 from collections.abc import Awaitable, Callable
-from typing import Any, TypeVar
+from typing import Any
 
+import anyio
 import pytest
 
+from _backends import BACKENDS, virtual
 from servobus.bus import Bus, command_classes
 from servobus.errors import MotorTimeout, TransportError
 from servobus.protocols import hollow as ho
@@ -17,40 +19,43 @@ from servobus.protocols.hollow.sim.device import HollowMotor
 from servobus.protocols.lk.sim.device import LkMotor
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.scheduler import Traffic
-from servobus.sim import virtual
 from servobus.transports.sim import SimTransport
 from sim._standins import Sniffer
 
-T = TypeVar("T")
+pytestmark = pytest.mark.anyio
 
 
-def run(scenario: Callable[[], Awaitable[T]]) -> T:
-    async def main() -> T:
-        return await scenario()
+@pytest.fixture(params=BACKENDS)
+def anyio_backend(request: pytest.FixtureRequest) -> tuple[str, dict[str, object]]:
+    return virtual(request.param)
 
-    return virtual.run(main())
+
+async def _until(condition: Callable[[], object]) -> None:
+    """Let the other tasks run until ``condition()`` holds (a task started is on its way)."""
+    while not condition():
+        await anyio.sleep(0)
 
 
 def _motors(n: int = 4) -> list[MyActuatorMotor]:
     return [MyActuatorMotor(m) for m in range(1, n + 1)]
 
 
-def test_a_motor_command_returns_its_typed_reply() -> None:
+async def test_a_motor_command_returns_its_typed_reply() -> None:
     async def scenario() -> tuple[Any, Any, float]:
         async with Bus(SimTransport(devices=_motors(1))) as bus:
             motor = bus.motor("myactuator", 1)
-            start = asyncio.get_running_loop().time()
+            start = anyio.current_time()
             status = await motor.read_status2()
             speed = await motor.speed_control(speed_dps=90.0)
-            return status, speed, asyncio.get_running_loop().time() - start
+            return status, speed, anyio.current_time() - start
 
-    status, speed, elapsed = run(scenario)
+    status, speed, elapsed = await scenario()
     assert isinstance(status, ma.StatusReply) and status.command is ma.StatusCommand.READ_STATUS_2
     assert isinstance(speed, ma.StatusReply) and speed.command is ma.StatusCommand.SPEED_CONTROL
     assert elapsed < 0.002  # two exchanges at 1 Mbit/s with the simulator's turnaround
 
 
-def test_a_cycle_returns_every_reply_in_order_and_a_silent_motor_only_costs_its_own() -> None:
+async def test_a_cycle_returns_every_reply_in_order_and_a_silent_motor_only_costs_its_own() -> None:
     motors = _motors(32)
     motors[4].unresponsive = True
 
@@ -59,13 +64,13 @@ def test_a_cycle_returns_every_reply_in_order_and_a_silent_motor_only_costs_its_
             handles = [bus.motor("myactuator", m) for m in range(1, 33)]
             return await bus.cycle([(h, ma.ReadStatus2()) for h in handles])
 
-    results = run(scenario)
+    results = await scenario()
     assert len(results) == 32
     assert isinstance(results[4], MotorTimeout) and "myactuator motor 5 ReadStatus2" in str(results[4])
     assert all(isinstance(r, ma.StatusReply) for i, r in enumerate(results) if i != 4)
 
 
-def test_each_request_of_a_cycle_has_its_own_observable_outcome() -> None:
+async def test_each_request_of_a_cycle_has_its_own_observable_outcome() -> None:
     motors = _motors(3)
     motors[1].unresponsive = True
 
@@ -82,10 +87,10 @@ def test_each_request_of_a_cycle_has_its_own_observable_outcome() -> None:
 
             bus.scheduler.request = request  # type: ignore[method-assign]
             results = await bus.cycle([(h, ma.ReadStatus2()) for h in handles], timeout_s=0.01)
-            await asyncio.sleep(0)  # (done callbacks run soon after, as a future's)
+            await anyio.sleep(0)  # (done callbacks run soon after, as a future's)
             return results, seen, await bus.cycle([])
 
-    results, seen, empty = run(scenario)
+    results, seen, empty = await scenario()
     assert [type(r) for r in results] == [ma.StatusReply, MotorTimeout, ma.StatusReply]
     assert sorted((c, type(e).__name__) for c, e in seen) == [
         (False, "MotorTimeout"),
@@ -95,28 +100,37 @@ def test_each_request_of_a_cycle_has_its_own_observable_outcome() -> None:
     assert empty == []
 
 
-def test_a_cancelled_cycle_cancels_its_requests_and_leaves_nothing_pending() -> None:
+async def test_a_cancelled_cycle_cancels_its_requests_and_leaves_nothing_pending() -> None:
     async def scenario() -> tuple[int, dict[str, int]]:
         async with Bus(SimTransport(devices=_motors(4)), safe=None) as bus:
             handles = [bus.motor("myactuator", m) for m in range(1, 5)]
-            task = asyncio.create_task(bus.cycle([(h, ma.ReadStatus2()) for h in handles]))
-            await asyncio.sleep(0)  # the frames are on their way
-            task.cancel()
-            with pytest.raises(asyncio.CancelledError):
-                await task
+            ended: list[str] = []
+
+            async def cycle() -> None:
+                try:
+                    await bus.cycle([(h, ma.ReadStatus2()) for h in handles])
+                except anyio.get_cancelled_exc_class():
+                    ended.append("cancelled")
+                    raise
+
+            async with anyio.create_task_group() as group:
+                group.start_soon(cycle)
+                await _until(lambda: bus.scheduler.pending)  # the frames are on their way
+                group.cancel_scope.cancel()
+            assert ended == ["cancelled"]
             pending = bus.scheduler.pending
-            await asyncio.sleep(0.01)  # the replies arrive, late
+            await anyio.sleep(0.01)  # the replies arrive, late
             assert all(
                 isinstance(r, ma.StatusReply)
                 for r in await bus.cycle([(h, ma.ReadStatus2()) for h in handles])
             )
             return pending, bus.stats()
 
-    pending, stats = run(scenario)
+    pending, stats = await scenario()
     assert pending == 0 and stats["replies"] == 4 and stats["late"] + stats["replies"] == 8
 
 
-def test_a_timeout_names_motor_command_and_time() -> None:
+async def test_a_timeout_names_motor_command_and_time() -> None:
     motor = MyActuatorMotor(1)
     motor.unresponsive = True
 
@@ -125,25 +139,28 @@ def test_a_timeout_names_motor_command_and_time() -> None:
             await bus.motor("myactuator", 1).read_status2(timeout_s=0.05)
 
     with pytest.raises(MotorTimeout, match=r"myactuator motor 1 ReadStatus2: no reply within 0\.05 s"):
-        run(scenario)
+        await scenario()
 
 
-def test_a_cancelled_request_leaves_nothing_pending_and_its_reply_is_counted_late() -> None:
+async def test_a_cancelled_request_leaves_nothing_pending_and_its_reply_is_counted_late() -> None:
     async def scenario() -> dict[str, int]:
         async with Bus(SimTransport(devices=_motors(1)), safe=None) as bus:
             motor = bus.motor("myactuator", 1)
-            task = asyncio.create_task(motor.read_status2())
-            await asyncio.sleep(0)  # the frame is on the wire now
-            task.cancel()
-            with pytest.raises(asyncio.CancelledError):
-                await task
+
+            async def read() -> None:
+                await motor.read_status2()
+
+            async with anyio.create_task_group() as group:
+                group.start_soon(read)
+                await _until(lambda: bus.scheduler.pending)  # the frame is on the wire now
+                group.cancel_scope.cancel()
             assert bus.scheduler.pending == 0
-            await asyncio.sleep(0.01)  # the reply arrives
+            await anyio.sleep(0.01)  # the reply arrives
             later = await motor.read_status2()  # and never answers a later request
             assert isinstance(later, ma.StatusReply)
             return bus.stats()
 
-    stats = run(scenario)
+    stats = await scenario()
     assert stats["late"] == 1 and stats["replies"] == 1
 
 
@@ -156,7 +173,7 @@ def _stops(sniffer: Sniffer, code: int = 0x81) -> set[int]:
     }
 
 
-def test_an_exception_in_the_block_stops_every_commanded_motor() -> None:
+async def test_an_exception_in_the_block_stops_every_commanded_motor() -> None:
     sniffer = Sniffer()
 
     async def scenario() -> None:
@@ -167,11 +184,11 @@ def test_an_exception_in_the_block_stops_every_commanded_motor() -> None:
             raise RuntimeError("user code failed")
 
     with pytest.raises(RuntimeError, match="user code failed"):
-        run(scenario)
+        await scenario()
     assert _stops(sniffer) == {1, 2, 3}
 
 
-def test_the_bus_says_which_motors_it_commanded_and_which_got_the_safe_command() -> None:
+async def test_the_bus_says_which_motors_it_commanded_and_which_got_the_safe_command() -> None:
     async def scenario(safe: str | None) -> tuple[list[int], list[int]]:
         async with Bus(SimTransport(devices=_motors(3)), safe=safe) as bus:
             for m in (1, 3):
@@ -180,11 +197,11 @@ def test_the_bus_says_which_motors_it_commanded_and_which_got_the_safe_command()
             assert bus.safe_sent == ()
         return [m.motor_id for m in bus.commanded], [m.motor_id for m in bus.safe_sent]
 
-    assert run(lambda: scenario("stop")) == ([1, 3], [1, 3])
-    assert run(lambda: scenario(None)) == ([1, 3], [])
+    assert await scenario("stop") == ([1, 3], [1, 3])
+    assert await scenario(None) == ([1, 3], [])
 
 
-def test_cancellation_stops_every_commanded_motor_too() -> None:
+async def test_cancellation_stops_every_commanded_motor_too() -> None:
     sniffer = Sniffer()
 
     async def scenario() -> None:
@@ -192,19 +209,17 @@ def test_cancellation_stops_every_commanded_motor_too() -> None:
             async with Bus(SimTransport(devices=[*_motors(2), sniffer]), safe="shutdown") as bus:
                 for m in (1, 2):
                     await bus.motor("myactuator", m).torque_control(current_a=0.5)
-                await asyncio.sleep(10)
+                await anyio.sleep(10)
 
-        task = asyncio.create_task(control())
-        await asyncio.sleep(1)
-        task.cancel()
-        with pytest.raises(asyncio.CancelledError):
-            await task
+        with anyio.move_on_after(1) as scope:
+            await control()
+        assert scope.cancelled_caught
 
-    run(scenario)
+    await scenario()
     assert _stops(sniffer, 0x80) == {1, 2}
 
 
-def test_leaving_the_block_fails_what_is_pending_and_nothing_follows_the_safe_stop() -> None:
+async def test_leaving_the_block_fails_what_is_pending_and_nothing_follows_the_safe_stop() -> None:
     """A task the block did not wait for keeps commanding: its set-points must not reach the motor
     after the safe stop, and its pending request must end (TransportError), not hang."""
     sniffer = Sniffer()
@@ -218,22 +233,33 @@ def test_leaving_the_block_fails_what_is_pending_and_nothing_follows_the_safe_st
 
         transport = SimTransport(devices=[*_motors(1), silent, sniffer])
         await transport.open()  # the user's: the Bus leaves it open
-        async with Bus(transport) as bus:
-            loop = asyncio.create_task(control(bus.motor("myactuator", 1)))
-            waiting = asyncio.create_task(bus.motor("myactuator", 2).read_status2(timeout_s=5.0))
-            await asyncio.sleep(0.01)
-        done, _ = await asyncio.wait([loop, waiting], timeout=1.0)
-        await transport.close()
-        return tuple(t.exception() if t in done else None for t in (loop, waiting))  # type: ignore[return-value]
+        errors: dict[str, BaseException] = {}
 
-    loop_error, waiting_error = run(scenario)
+        async def keep(name: str, call: Callable[[], Awaitable[object]]) -> None:
+            try:
+                await call()
+            except Exception as exc:
+                errors[name] = exc
+
+        with anyio.move_on_after(1.0):
+            # (tasks the Bus's block does not wait for)
+            async with anyio.create_task_group() as group, Bus(transport) as bus:
+                group.start_soon(keep, "loop", lambda: control(bus.motor("myactuator", 1)))
+                group.start_soon(
+                    keep, "waiting", lambda: bus.motor("myactuator", 2).read_status2(timeout_s=5.0)
+                )
+                await anyio.sleep(0.01)
+        await transport.close()
+        return errors.get("loop"), errors.get("waiting")
+
+    loop_error, waiting_error = await scenario()
     assert isinstance(loop_error, TransportError) and "closed" in str(loop_error)
     assert isinstance(waiting_error, TransportError) and "closed" in str(waiting_error)
     to_motor_1 = [f.data[0] for _, f in sniffer.seen if f.arbitration_id == 0x141]
     assert to_motor_1[-1] == 0x81 and to_motor_1.count(0x81) == 1, to_motor_1[-5:]
 
 
-def test_out_of_range_values_raise_before_anything_is_sent() -> None:
+async def test_out_of_range_values_raise_before_anything_is_sent() -> None:
     sniffer = Sniffer()
 
     async def scenario() -> None:
@@ -244,11 +270,11 @@ def test_out_of_range_values_raise_before_anything_is_sent() -> None:
             with pytest.raises(ValueError, match="motor_id"):
                 await bus.cycle([(motor, ma.ReadStatus2()), (motor, ma.SetCanId(motor_id=40))])
 
-    run(scenario)
+    await scenario()
     assert sniffer.seen == []
 
 
-def test_every_family_through_one_bus() -> None:
+async def test_every_family_through_one_bus() -> None:
     devices = [MyActuatorMotor(1), LkMotor(9), HollowMotor(20)]
 
     async def scenario() -> list[Any]:
@@ -264,33 +290,33 @@ def test_every_family_through_one_bus() -> None:
                 ]
             )
 
-    angle, status, hollow_reply = run(scenario)
+    angle, status, hollow_reply = await scenario()
     assert isinstance(angle, ma.MultiTurnAngleReply)
     assert isinstance(status, lk.Status2Reply)
     assert isinstance(hollow_reply, ho.NormalReply) and hollow_reply.motor_id == 20
 
 
-def test_motors_that_collide_are_refused_with_both_named() -> None:
+async def test_motors_that_collide_are_refused_with_both_named() -> None:
     async def scenario() -> None:
         async with Bus(SimTransport(devices=[])) as bus:
             bus.motor("myactuator", 1)
             bus.motor("lk", 1, revision="V2_35")
 
     with pytest.raises(ValueError, match=r"myactuator motor 1 .* lk motor 1"):
-        run(scenario)
+        await scenario()
 
 
-def test_a_broadcast_gathers_each_motors_reply() -> None:
+async def test_a_broadcast_gathers_each_motors_reply() -> None:
     async def scenario() -> dict[int, Any]:
         async with Bus(SimTransport(devices=_motors(4))) as bus:
             handles = [bus.motor("myactuator", m) for m in range(1, 5)]
             return await bus.broadcast(ma.ReadStatus2(), handles)
 
-    results = run(scenario)
+    results = await scenario()
     assert sorted(results) == [1, 2, 3, 4] and all(isinstance(r, ma.StatusReply) for r in results.values())
 
 
-def test_a_broadcast_after_a_timeout_gets_the_reply_and_sends_only_its_frame() -> None:
+async def test_a_broadcast_after_a_timeout_gets_the_reply_and_sends_only_its_frame() -> None:
     """A motor that missed one broadcast (its key held for a late reply) answers the next: that reply
     is its result, and nothing but the broadcast frames goes out (no request's placeholder frame)."""
     motors = _motors(2)
@@ -306,14 +332,14 @@ def test_a_broadcast_after_a_timeout_gets_the_reply_and_sends_only_its_frame() -
             assert bus.scheduler.pending == 0
             return [first, second]
 
-    first, second = run(scenario)
+    first, second = await scenario()
     assert isinstance(first[2], MotorTimeout)
     assert all(isinstance(r, ma.StatusReply) for r in second.values()), second
     sent = [f.arbitration_id for _, f in sniffer.seen if not 0x241 <= f.arbitration_id <= 0x260]
     assert sent == [0x280, 0x280]
 
 
-def test_state_and_subscribers_see_stream_frames() -> None:
+async def test_state_and_subscribers_see_stream_frames() -> None:
     async def scenario() -> tuple[list[Traffic], Any]:
         seen: list[Traffic] = []
         async with Bus(SimTransport(devices=_motors(1)), safe=None) as bus:
@@ -322,31 +348,31 @@ def test_state_and_subscribers_see_stream_frames() -> None:
             await motor.request(
                 ma.ActiveReply(command=ma.StreamableCommand(0x9C), enabled=True, interval_ms=10)
             )
-            await asyncio.sleep(0.1)
+            await anyio.sleep(0.1)
             read = await motor.read_status2()  # answered by the next stream frame
             await motor.request(
                 ma.ActiveReply(command=ma.StreamableCommand(0x9C), enabled=False, interval_ms=None)
             )
             return seen, read
 
-    seen, read = run(scenario)
+    seen, read = await scenario()
     assert seen.count(Traffic.STREAM) >= 9 and isinstance(read, ma.StatusReply)
 
 
-def test_a_lost_transport_fails_what_is_pending_at_once() -> None:
+async def test_a_lost_transport_fails_what_is_pending_at_once() -> None:
     motor = MyActuatorMotor(1)
     motor.unresponsive = True
+    transport = SimTransport(devices=[motor], reopen=False)
 
-    async def scenario() -> None:
-        transport = SimTransport(devices=[motor], reopen=False)
-        async with Bus(transport, safe=None) as bus:
-            task = asyncio.create_task(bus.motor("myactuator", 1).read_status2(timeout_s=5.0))
-            await asyncio.sleep(0.01)
-            transport.unplug()
-            await task
+    async def unplug() -> None:
+        await anyio.sleep(0.01)
+        transport.unplug()
 
-    with pytest.raises(TransportError, match="lost"):
-        run(scenario)
+    async with Bus(transport, safe=None) as bus, anyio.create_task_group() as group:
+        group.start_soon(unplug)
+        with pytest.raises(TransportError, match="lost"):
+            await bus.motor("myactuator", 1).read_status2(timeout_s=5.0)
+        assert anyio.current_time() < 0.1  # at once, not after its 5 s
 
 
 def test_command_classes_are_the_motor_methods_by_name() -> None:
@@ -355,7 +381,7 @@ def test_command_classes_are_the_motor_methods_by_name() -> None:
     assert command_classes("lk")["read_multi_turn_angle"] is lk.ReadMultiTurnAngle
 
 
-def test_unknown_commands_are_an_attribute_error() -> None:
+async def test_unknown_commands_are_an_attribute_error() -> None:
     async def scenario() -> None:
         async with Bus(SimTransport(devices=[])) as bus:
             motor = bus.motor("lk", 2)
@@ -363,28 +389,28 @@ def test_unknown_commands_are_an_attribute_error() -> None:
             motor.fly_to_the_moon  # noqa: B018
 
     with pytest.raises(AttributeError, match="lk motors have no command 'fly_to_the_moon'"):
-        run(scenario)
+        await scenario()
 
 
-def test_a_motors_stream_frames_come_through_a_bounded_iterator() -> None:
+async def test_a_motors_stream_frames_come_through_a_bounded_iterator() -> None:
     async def scenario() -> tuple[list[Any], int, int]:
         async with Bus(SimTransport(devices=_motors(1)), safe=None) as bus:
             motor = bus.motor("myactuator", 1)
             async with motor.frames(size=4) as frames:
                 await motor.active_reply(command=ma.StreamableCommand(0x9C), enabled=True, interval_ms=10)
                 got = [await frames.__anext__() for _ in range(3)]
-                await asyncio.sleep(0.1)  # ten more frames come; only the newest four are kept
+                await anyio.sleep(0.1)  # ten more frames come; only the newest four are kept
                 kept = len(frames._items)
                 dropped = frames.dropped
             await motor.active_reply(command=ma.StreamableCommand(0x9C), enabled=False, interval_ms=None)
             return got, kept, dropped
 
-    got, kept, dropped = run(scenario)
+    got, kept, dropped = await scenario()
     assert all(isinstance(r, ma.StatusReply) for r in got)
     assert kept == 4 and dropped >= 5
 
 
-def test_motor_commands_take_their_fields_by_position_in_declaration_order() -> None:
+async def test_motor_commands_take_their_fields_by_position_in_declaration_order() -> None:
     sniffer = Sniffer()
 
     async def scenario() -> None:
@@ -397,7 +423,7 @@ def test_motor_commands_take_their_fields_by_position_in_declaration_order() -> 
             with pytest.raises(TypeError, match="multiple values for argument 'speed_dps'"):
                 await motor.speed_control(1.0, speed_dps=2.0)
 
-    run(scenario)
+    await scenario()
     sent = [f.data for _, f in sniffer.seen if f.arbitration_id == 0x141]
     assert sent[:2] == [  # then the safe stop on leaving the block
         ma.SetCommTimeout(timeout_ms=100).encode(),
@@ -410,7 +436,7 @@ class _AsyncCallable:
         raise AssertionError("never awaited")
 
 
-def test_an_async_subscriber_is_refused_with_a_clear_type_error() -> None:
+async def test_an_async_subscriber_is_refused_with_a_clear_type_error() -> None:
     async def on_reply(*args: object) -> None:
         raise AssertionError("never awaited")
 
@@ -426,11 +452,14 @@ def test_an_async_subscriber_is_refused_with_a_clear_type_error() -> None:
             await bus.motor("myactuator", 1).read_status2()
             assert len(heard) == 1
 
-    run(scenario)
+    await scenario()
 
 
+@pytest.mark.parametrize(
+    ("owner_backend", "caller_backend"), [("asyncio", "asyncio"), ("trio", "asyncio"), ("asyncio", "trio")]
+)
 def test_a_bus_used_from_another_event_loop_says_so_at_once_and_logs_no_traceback(
-    caplog: pytest.LogCaptureFixture,
+    caplog: pytest.LogCaptureFixture, owner_backend: str, caller_backend: str
 ) -> None:
     """A Bus entered in a thread's own loop, called from a coroutine on another loop: request(),
     cycle() and broadcast() raise one clear RuntimeError before anything is queued (it used to
@@ -449,9 +478,9 @@ def test_a_bus_used_from_another_event_loop_says_so_at_once_and_logs_no_tracebac
             box["bus"] = bus
             entered.set()
             while not leave.is_set():
-                await asyncio.sleep(0.002)
+                await anyio.sleep(0.002)
 
-    thread = threading.Thread(target=asyncio.run, args=(owner(),))
+    thread = threading.Thread(target=anyio.run, args=(owner,), kwargs={"backend": owner_backend})
     thread.start()
     assert entered.wait(10)
     bus = box["bus"]
@@ -473,7 +502,7 @@ def test_a_bus_used_from_another_event_loop_says_so_at_once_and_logs_no_tracebac
 
     try:
         with caplog.at_level("ERROR"):
-            errors = asyncio.run(elsewhere())
+            errors = anyio.run(elsewhere, backend=caller_backend)
             assert bus.scheduler.pending == 0  # nothing went in
     finally:
         leave.set()
@@ -483,3 +512,22 @@ def test_a_bus_used_from_another_event_loop_says_so_at_once_and_logs_no_tracebac
         assert error.startswith("sim: this Bus runs on another event loop"), error
         assert "use servobus.sync.Bus from other threads" in error
     assert not [r for r in caplog.records if r.levelname == "ERROR"], caplog.text
+
+
+async def test_an_error_in_the_bus_s_own_task_is_raised_from_its_block_not_lost() -> None:
+    """The Bus's timer task runs in the Bus's task group: a bug there cancels the block (after its
+    safe stop) and is raised when the block is left."""
+    device = MyActuatorMotor(1)
+    device.unresponsive = True
+    sniffer = Sniffer()
+    with pytest.raises(BaseExceptionGroup) as caught:
+        async with Bus(SimTransport(devices=[device, MyActuatorMotor(2), sniffer])) as bus:
+            await bus.motor("myactuator", 2).speed_control(speed_dps=10.0)
+
+            def broken() -> None:
+                raise ZeroDivisionError("a bug in the timer")
+
+            bus._engine.on_timer = broken  # type: ignore[method-assign]
+            await bus.motor("myactuator", 1).read_status2(timeout_s=0.01)  # its timeout fires the timer
+    assert [type(e) for e in caught.value.exceptions] == [ZeroDivisionError]
+    assert _stops(sniffer) == {2}  # the safe stop went out all the same

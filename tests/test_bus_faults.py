@@ -1,4 +1,5 @@
-"""A seeded fault run through the Bus (``bus.cycle`` and ``motor.request``) on virtual time.
+"""A seeded fault run through the Bus (``bus.cycle`` and ``motor.request``), on asyncio and trio in
+virtual time.
 
 The scheduler-level run (tests/test_scheduler.py) drives the sans-IO scheduler by hand; this one goes
 through everything the Bus adds on top of it (its futures, its one timer, push delivery and send
@@ -24,8 +25,9 @@ run found (a late reply answering the next request; a reply beating its send rep
 
 from __future__ import annotations
 
-import asyncio
 import functools
+import heapq
+import math
 import random
 import time
 from collections import Counter
@@ -33,17 +35,21 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+import anyio
 import pytest
 
+from _backends import BACKENDS, virtual
 from servobus.bus import Bus, Motor
 from servobus.errors import MotorBusy, MotorTimeout, ProtocolError, TransportError
 from servobus.frame import Frame
 from servobus.protocols import Command, Reply
 from servobus.protocols import myactuator as ma
+from servobus.runtime import Runtime, current
 from servobus.scheduler import Request
-from servobus.sim import virtual
 from servobus.timing import frame_time_s
-from servobus.transports.link_base import LinkBase
+from servobus.transports.contract import Consumer, LineRules, SendReporter
+from servobus.transports.events import TransportEvent
+from servobus.transports.stats import TransportStats
 
 BITRATE = 1_000_000
 FRAME_S = frame_time_s(Frame(arbitration_id=0x241, data=bytes(8)), BITRATE)  # one 8-byte frame's wire time
@@ -56,6 +62,13 @@ LOST = frozenset({"drop", "corrupt", "delay"})  # faults after which the request
 # A delayed reply comes at most MAX_TIMEOUT_S + 15 ms after its request left (FaultPlan): the Bus holds
 # a timed-out key that long, so no late reply can answer the next request with its key.
 LATE_HOLD_S = MAX_TIMEOUT_S + 0.015
+
+pytestmark = pytest.mark.anyio
+
+
+@pytest.fixture(params=BACKENDS)
+def anyio_backend(request: pytest.FixtureRequest) -> tuple[str, dict[str, object]]:
+    return virtual(request.param)
 
 
 @dataclass(frozen=True, slots=True)
@@ -78,8 +91,9 @@ class Sent:
     sent_at: float  # when the request frame left (the send report's time)
 
 
-class FaultyReflector(LinkBase):
-    """A FrameLink to 32 MyActuator motors (0x141..0x160) that answers in virtual time, with faults.
+class FaultyReflector:
+    """A FrameLink (on the contract alone) to 32 MyActuator motors (0x141..0x160) that answers in
+    virtual time, with faults.
 
     One wire at ``BITRATE``: a request occupies it for its frame time and is reported sent when it
     has left; its reply follows ``TURNAROUND_S`` later. What happens to each reply is drawn from the
@@ -102,10 +116,17 @@ class FaultyReflector(LinkBase):
     """
 
     name = "reflector"
-    bitrate = BITRATE
+    rules = LineRules(bitrate=BITRATE)
 
     def __init__(self, plan: FaultPlan, seed: int, *, report_after_reply: bool = False) -> None:
-        super().__init__()
+        self._runtime: Runtime | None = None
+        self._group: Any = None
+        self._consumer: Consumer | None = None
+        self._reporter: SendReporter | None = None
+        # the link's clock: (when, order, callback, args), run by one task in the link's task group
+        self._events: list[tuple[float, int, Callable[..., None], tuple[Any, ...]]] = []
+        self._order = 0
+        self._sleep: anyio.CancelScope | None = None
         self.plan = plan
         self.report_after_reply = report_after_reply
         self.sent: dict[int, Sent] = {}
@@ -118,16 +139,46 @@ class FaultyReflector(LinkBase):
 
     # ---- FrameLink ----
 
-    def send(self, frame: Frame) -> None:
-        if not self._open or self._loop is None:
+    @property
+    def is_open(self) -> bool:
+        return self._group is not None
+
+    async def open(self) -> None:
+        self._runtime = current()
+        self._group = anyio.create_task_group()
+        await self._group.__aenter__()
+        await self._group.start(self._clock)
+
+    async def close(self) -> None:
+        group, self._group = self._group, None
+        group.cancel_scope.cancel()
+        await group.__aexit__(None, None, None)
+
+    def set_consumer(self, consumer: Consumer | None) -> None:
+        self._consumer = consumer
+
+    def set_send_reporter(self, reporter: SendReporter | None) -> None:
+        self._reporter = reporter
+
+    def add_listener(self, listener: Callable[[TransportEvent], object]) -> None:
+        pass
+
+    def remove_listener(self, listener: Callable[[TransportEvent], object]) -> None:
+        pass
+
+    def stats(self) -> TransportStats:
+        return TransportStats()
+
+    def send(self, frame: Frame, handle: object = None) -> None:
+        if self._group is None or self._runtime is None:
             raise TransportError("reflector: not open")
-        loop = self._loop
-        start = max(loop.time(), self._free_at)
+        start = max(self._runtime.time(), self._free_at)
         left = start + FRAME_S
         reply, token = self._answer(frame)
         arrives = left + TURNAROUND_S + FRAME_S
         # The send report says when the frame left; it may itself come later (see report_after_reply).
-        self._later(arrives + FRAME_S if self.report_after_reply else left, self._report, frame, left)
+        report = frame if handle is None else handle
+        self._later(arrives + FRAME_S if self.report_after_reply else left, self._report, report, left)
         self._free_at = arrives  # the reply follows its request on the one wire
         fate = self._draw()
         self.counts[fate] += 1
@@ -187,22 +238,33 @@ class FaultyReflector(LinkBase):
     # ---- the clock ----
 
     def _later(self, at: float, callback: Callable[..., None], *args: Any) -> None:
-        assert self._loop is not None
         self.scheduled += 1
-        self._loop.call_at(at, self._run, callback, args)
+        self._order += 1
+        heapq.heappush(self._events, (at, self._order, callback, args))
+        if self._sleep is not None and at < self._sleep.deadline:
+            self._sleep.deadline = at
 
-    def _run(self, callback: Callable[..., None], args: tuple[Any, ...]) -> None:
-        self.scheduled -= 1
-        callback(*args)
+    async def _clock(self, *, task_status: Any = anyio.TASK_STATUS_IGNORED) -> None:
+        task_status.started()
+        events = self._events
+        while True:
+            with anyio.CancelScope(deadline=events[0][0] if events else math.inf) as self._sleep:
+                await anyio.sleep_forever()
+            self._sleep = None
+            now = anyio.current_time()
+            while events and events[0][0] <= now:
+                _, _, callback, args = heapq.heappop(events)
+                self.scheduled -= 1
+                callback(*args)
 
-    def _report(self, frame: Frame, left: float) -> None:
+    def _report(self, handle: object, left: float) -> None:
         if self._reporter is not None:
-            self._reporter(frame, left, None)
+            self._reporter(handle, left, None)
 
     def _deliver(self, frame: Frame) -> None:
-        assert self._loop is not None
+        assert self._runtime is not None
         if self._consumer is not None:
-            now = self._loop.time()
+            now = self._runtime.time()
             self._consumer([Frame(arbitration_id=frame.arbitration_id, data=frame.data, timestamp=now)])
 
 
@@ -257,8 +319,9 @@ class Checker:
 
         self.bus.scheduler.request = request  # type: ignore[method-assign]
 
-    def _resolved(self, record: Tracked, future: asyncio.Future[Any]) -> None:
-        now = asyncio.get_running_loop().time()
+    def _resolved(self, record: Tracked, future: Any) -> None:
+        assert self.link._runtime is not None
+        now = self.link._runtime.time()
         record.resolved_at = now
         request = record.request
         sent = self.link.sent.pop(id(request.frame), None)
@@ -373,17 +436,17 @@ async def _scenario(n_requests: int, seed: int) -> tuple[Bus, FaultyReflector, C
                 for i, result in enumerate(results):
                     checker.caller_got(first + i, result)
 
-        async with asyncio.TaskGroup() as group:
-            group.create_task(cycles())
+        async with anyio.create_task_group() as group:
+            group.start_soon(cycles)
             for i in range(3):
-                group.create_task(requester(random.Random(seed * 100 + i)))
-        await asyncio.sleep(0.1)  # the last delayed replies arrive (as late ones)
+                group.start_soon(requester, random.Random(seed * 100 + i))
+        await anyio.sleep(0.1)  # the last delayed replies arrive (as late ones)
     return bus, link, checker
 
 
-def _run(n_requests: int, seed: int) -> tuple[Counter[str], Counter[str], Checker, float]:
+async def _run(n_requests: int, seed: int) -> tuple[Counter[str], Counter[str], Checker, float]:
     started = time.perf_counter()
-    bus, link, checker = virtual.run(_scenario(n_requests, seed))
+    bus, link, checker = await _scenario(n_requests, seed)
     wall_s = time.perf_counter() - started
     stats, faults = Counter(bus.stats()), link.counts
     # Nothing wrong but the known defect (see Checker); every request resolved, through its caller,
@@ -412,31 +475,31 @@ def _run(n_requests: int, seed: int) -> tuple[Counter[str], Counter[str], Checke
     return stats, faults, checker, wall_s
 
 
-def _check(n_requests: int, seed: int) -> None:
+async def _check(n_requests: int, seed: int) -> None:
     """Everything above, then the done-when exactly: no reply delivered to the wrong request, so the
     lost replies are exactly the timeouts, and every delayed or duplicated reply is counted late or
     duplicate (which of the two is the scheduler's guess: a duplicate that comes while an older
     timeout of its key is still in the late window is counted late)."""
-    stats, faults, checker, _ = _run(n_requests, seed)
+    stats, faults, checker, _ = await _run(n_requests, seed)
     assert not checker.stale
     assert stats["timeouts"] + stats["failed"] == faults["drop"] + faults["corrupt"] + faults["delay"]
     assert stats["late"] + stats["duplicate"] == faults["delay"] + faults["duplicate"]
     assert stats["unsolicited"] == 0
 
 
-def test_seeded_faults_through_the_bus_5k_requests() -> None:
-    _check(5_000, seed=5)
+async def test_seeded_faults_through_the_bus_5k_requests() -> None:
+    await _check(5_000, seed=5)
 
 
 @pytest.mark.slow
-def test_seeded_faults_through_the_bus_100k_requests() -> None:
-    _check(100_000, seed=13)
+async def test_seeded_faults_through_the_bus_100k_requests() -> None:
+    await _check(100_000, seed=13)
 
 
 # ---- the two defects this run found, alone (fixed in the scheduler) ----
 
 
-def test_a_slow_motors_late_reply_never_answers_the_next_request() -> None:
+async def test_a_slow_motors_late_reply_never_answers_the_next_request() -> None:
     """A motor that answers every read 5.5 ms after it left, asked with a 5 ms timeout, one read
     after the other: each read must time out and each reply be counted late."""
     link = FaultyReflector(
@@ -452,15 +515,15 @@ def test_a_slow_motors_late_reply_never_answers_the_next_request() -> None:
                     results.append(_token(await motor.read_multi_turn_angle(timeout_s=0.005)))
                 except MotorTimeout as exc:
                     results.append(exc)
-            await asyncio.sleep(0.1)
+            await anyio.sleep(0.1)
             return results, bus.stats()
 
-    results, stats = virtual.run(scenario())
+    results, stats = await scenario()
     assert all(isinstance(r, MotorTimeout) for r in results), results
     assert stats.get("late") == 5
 
 
-def test_a_reply_that_comes_before_the_send_report_answers_its_request() -> None:
+async def test_a_reply_that_comes_before_the_send_report_answers_its_request() -> None:
     link = FaultyReflector(
         FaultPlan(drop=0, duplicate=0, corrupt=0, delay=0), seed=0, report_after_reply=True
     )
@@ -473,6 +536,6 @@ def test_a_reply_that_comes_before_the_send_report_answers_its_request() -> None
                 got = exc
             return got, bus.stats()
 
-    got, stats = virtual.run(scenario())
+    got, stats = await scenario()
     assert got == 1, got  # the reflector's first token: the reply to this very request
     assert (stats.get("replies"), stats.get("unsolicited", 0), stats.get("timeouts", 0)) == (1, 0, 0)

@@ -1,12 +1,15 @@
-"""The Bus's watchdogs (host side, and the motor's own 0xB3), streams and metrics, on virtual time."""
+"""The Bus's watchdogs (host side, and the motor's own 0xB3), streams and metrics, on asyncio and trio
+in virtual time."""
 
 from __future__ import annotations
 
-import asyncio
+from collections.abc import Awaitable
 from typing import Any
 
+import anyio
 import pytest
 
+from _backends import BACKENDS, virtual
 from servobus.bus import Bus, MotorStatus
 from servobus.errors import MotorFault, MotorTimeout, TransportError
 from servobus.metrics import LatencyWindow
@@ -18,7 +21,17 @@ from servobus.protocols.lk.sim.device import LkMotor
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.ticks import ticks
 from servobus.transports.sim import SimTransport
-from test_bus import run
+
+pytestmark = pytest.mark.anyio
+
+
+@pytest.fixture(params=BACKENDS)
+def anyio_backend(request: pytest.FixtureRequest) -> tuple[str, dict[str, object]]:
+    return virtual(request.param)
+
+
+async def _into(box: list[Any], call: Awaitable[Any]) -> None:
+    box.append(await call)
 
 
 def _events(bus: Bus) -> list[MotorStatus]:
@@ -31,7 +44,7 @@ def _brief(events: list[MotorStatus]) -> list[tuple[int, bool, str]]:
     return [(s.motor.motor_id, s.online, s.reason) for s in events]
 
 
-def test_a_motor_that_misses_replies_goes_offline_and_comes_back_when_it_answers() -> None:
+async def test_a_motor_that_misses_replies_goes_offline_and_comes_back_when_it_answers() -> None:
     device = MyActuatorMotor(1)
 
     async def scenario() -> tuple[list[MotorStatus], list[bool | None]]:
@@ -51,28 +64,27 @@ def test_a_motor_that_misses_replies_goes_offline_and_comes_back_when_it_answers
             states.append(motor.online)
             return events, states
 
-    events, states = run(scenario)
+    events, states = await scenario()
     assert states == [None, True, True, False, True]
     assert _brief(events) == [(1, True, "answered"), (1, False, "2 replies missed"), (1, True, "answered")]
 
 
-def test_a_silent_motor_goes_offline_after_the_silence_limit_and_only_then() -> None:
+async def test_a_silent_motor_goes_offline_after_the_silence_limit_and_only_then() -> None:
     devices = [MyActuatorMotor(1), MyActuatorMotor(2)]
 
     async def scenario() -> tuple[list[MotorStatus], float, float]:
         async with Bus(SimTransport(devices=devices), offline_after_s=0.5) as bus:
             events = _events(bus)
-            loop = asyncio.get_running_loop()
             one, two = bus.motor("myactuator", 1), bus.motor("myactuator", 2)
             await bus.cycle([(one, ma.ReadStatus1()), (two, ma.ReadStatus1())])
             heard = two.last_seen
             assert heard is not None
             for _ in range(10):  # motor 1 is polled every 0.1 s; motor 2 never again
-                await asyncio.sleep(0.1)
+                await anyio.sleep(0.1)
                 await one.read_status1()
-            return events, heard, loop.time()
+            return events, heard, anyio.current_time()
 
-    events, heard, end = run(scenario)
+    events, heard, end = await scenario()
     assert _brief(events) == [(1, True, "answered"), (2, True, "answered"), (2, False, "silent for 0.5 s")]
     assert events[-1].at == pytest.approx(heard + 0.5, abs=1e-6) and end > heard + 1.0
 
@@ -84,7 +96,7 @@ def test_watchdog_options_are_checked() -> None:
         Bus(SimTransport(devices=[]), offline_after_s=0)
 
 
-def test_the_motor_side_watchdog_0xb3_stops_a_motor_the_host_stopped_talking_to() -> None:
+async def test_the_motor_side_watchdog_0xb3_stops_a_motor_the_host_stopped_talking_to() -> None:
     device = MyActuatorMotor(1)
 
     async def scenario() -> tuple[bool, bool]:
@@ -92,16 +104,16 @@ def test_the_motor_side_watchdog_0xb3_stops_a_motor_the_host_stopped_talking_to(
             motor = bus.motor("myactuator", 1)
             await motor.set_comm_timeout(timeout_ms=100)
             await motor.speed_control(speed_dps=90.0)
-            await asyncio.sleep(0.05)
+            await anyio.sleep(0.05)
             before = device.comm_tripped
-            await asyncio.sleep(0.2)  # the host goes quiet (a crashed control loop)
+            await anyio.sleep(0.2)  # the host goes quiet (a crashed control loop)
             return before, device.comm_tripped
 
-    before, after = run(scenario)
+    before, after = await scenario()
     assert (before, after) == (False, True)
 
 
-def test_a_stream_is_switched_on_iterated_and_switched_off_even_on_an_exception() -> None:
+async def test_a_stream_is_switched_on_iterated_and_switched_off_even_on_an_exception() -> None:
     device = MyActuatorMotor(1)
 
     async def scenario() -> tuple[list[Any], int]:
@@ -115,25 +127,25 @@ def test_a_stream_is_switched_on_iterated_and_switched_off_even_on_an_exception(
                         if len(got) == 5:
                             raise RuntimeError("user code")
             after = bus.stats().get("stream", 0)
-            await asyncio.sleep(0.1)  # switched off: no more frames
+            await anyio.sleep(0.1)  # switched off: no more frames
             return got, bus.stats().get("stream", 0) - after
 
-    got, more = run(scenario)
+    got, more = await scenario()
     assert len(got) == 5 and all(isinstance(r, ma.StatusReply) for r in got)
     assert more == 0
 
 
-def test_a_family_without_streams_says_so() -> None:
+async def test_a_family_without_streams_says_so() -> None:
     async def scenario() -> None:
         async with Bus(SimTransport(devices=[LkMotor(1)])) as bus:
             stream = bus.motor("lk", 1).stream(0x9C, interval_ms=10)
             await stream.__aenter__()
 
     with pytest.raises(ValueError, match="lk motors have no active-reply streams"):
-        run(scenario)
+        await scenario()
 
 
-def test_metrics_count_per_bus_and_per_motor_with_latency_from_the_wire() -> None:
+async def test_metrics_count_per_bus_and_per_motor_with_latency_from_the_wire() -> None:
     devices = [MyActuatorMotor(1), MyActuatorMotor(2)]
     devices[1].unresponsive = True
 
@@ -143,10 +155,10 @@ def test_metrics_count_per_bus_and_per_motor_with_latency_from_the_wire() -> Non
             one, two = bus.motor("myactuator", 1), bus.motor("myactuator", 2)
             for _ in range(10):
                 await bus.cycle([(one, ma.ReadStatus2()), (two, ma.ReadStatus2())], timeout_s=0.01)
-                await asyncio.sleep(0.02)
+                await anyio.sleep(0.02)
             return bus.metrics(), one.metrics(), two.metrics()
 
-    bus, one, two = run(scenario)
+    bus, one, two = await scenario()
     assert (bus.requests, bus.replies, bus.timeouts) == (20, 10, 10)
     assert (one.requests, one.replies, one.timeouts) == (10, 10, 0)
     assert (two.requests, two.replies, two.timeouts) == (10, 0, 10)
@@ -169,26 +181,25 @@ def test_latency_percentiles_are_nearest_rank() -> None:
         LatencyWindow(0)
 
 
-def test_while_a_motor_streams_a_write_is_sent_without_awaiting_the_reply_it_will_never_get() -> None:
+async def test_while_a_motor_streams_a_write_is_sent_without_awaiting_the_reply_it_will_never_get() -> None:
     device = MyActuatorMotor(1)
 
     async def scenario() -> tuple[Any, Any, float, int]:
         async with Bus(SimTransport(devices=[device]), safe=None) as bus:
             motor = bus.motor("myactuator", 1)
-            loop = asyncio.get_running_loop()
             async with motor.stream(ma.ReadStatus2, interval_ms=10):
-                start = loop.time()
+                start = anyio.current_time()
                 written = await motor.speed_control(speed_dps=45.0)
-                took = loop.time() - start
+                took = anyio.current_time() - start
                 read = await motor.read_status2()  # the streamed command: the next stream frame
             return written, read, took, bus.metrics().timeouts
 
-    written, read, took, timeouts = run(scenario)
+    written, read, took, timeouts = await scenario()
     assert written is None and isinstance(read, ma.StatusReply) and read.speed_dps == pytest.approx(45, abs=1)
     assert took < 0.001 and timeouts == 0
 
 
-def test_a_reported_fault_is_kept_as_a_motor_fault_with_its_flags_until_a_report_without_it() -> None:
+async def test_a_reported_fault_is_kept_as_a_motor_fault_with_its_flags_until_a_report_without_it() -> None:
     device = MyActuatorMotor(1)
     lk_device = LkMotor(2)
 
@@ -198,20 +209,20 @@ def test_a_reported_fault_is_kept_as_a_motor_fault_with_its_flags_until_a_report
             seen: list[Any] = [motor.fault]
             await motor.read_status1()
             seen.append(motor.fault)
-            device.inject_error(ma.ErrorFlags.OVER_VOLTAGE, asyncio.get_running_loop().time())
+            device.inject_error(ma.ErrorFlags.OVER_VOLTAGE, anyio.current_time())
             await motor.read_status2()  # a reply without flags says nothing about them
             seen.append(motor.fault)
             await motor.read_status1()
             seen.append(motor.fault)
-            device.clear_error(ma.ErrorFlags.OVER_VOLTAGE, asyncio.get_running_loop().time())
+            device.clear_error(ma.ErrorFlags.OVER_VOLTAGE, anyio.current_time())
             await motor.read_status1()
             seen.append(motor.fault)
-            lk_device.inject_error(lk.ErrorState.MOTOR_OVER_TEMPERATURE, asyncio.get_running_loop().time())
+            lk_device.inject_error(lk.ErrorState.MOTOR_OVER_TEMPERATURE, anyio.current_time())
             await lk_motor.read_status1()
             seen.append(lk_motor.fault)
             return seen
 
-    seen = run(scenario)
+    seen = await scenario()
     assert seen[:3] == [None, None, None] and seen[4] is None
     fault = seen[3]
     assert isinstance(fault, MotorFault) and fault.flags == ma.ErrorFlags.OVER_VOLTAGE and fault.motor_id == 1
@@ -219,33 +230,40 @@ def test_a_reported_fault_is_kept_as_a_motor_fault_with_its_flags_until_a_report
     assert isinstance(seen[5], MotorFault) and seen[5].flags == lk.ErrorState.MOTOR_OVER_TEMPERATURE
 
 
-def test_after_a_transport_loss_the_pending_fail_at_once_and_requests_work_again_after_recovery() -> None:
+async def test_after_a_transport_loss_the_pending_fail_at_once_and_requests_work_after_recovery() -> None:
     device = MyActuatorMotor(1)
 
     async def scenario() -> tuple[BaseException, float, Any]:
         transport = SimTransport(devices=[device], reopen_backoff_s=(0.05, 0.1))
         async with Bus(transport, safe=None) as bus:
             motor = bus.motor("myactuator", 1)
-            loop = asyncio.get_running_loop()
             device.unresponsive = True
-            waiting = asyncio.ensure_future(motor.read_status2(timeout_s=5.0))
-            await asyncio.sleep(0.01)
-            lost_at = loop.time()
-            transport.unplug()
-            failed = await asyncio.gather(waiting, return_exceptions=True)
-            took = loop.time() - lost_at
+
+            async def unplug() -> float:
+                await anyio.sleep(0.01)
+                transport.unplug()
+                return anyio.current_time()
+
+            async with anyio.create_task_group() as group:
+                lost: list[float] = []
+                group.start_soon(_into, lost, unplug())
+                try:
+                    await motor.read_status2(timeout_s=5.0)
+                except TransportError as exc:
+                    failed = [exc]
+            took = anyio.current_time() - lost[0]
             device.unresponsive = False
             transport.replug()
             await transport.wait_open(timeout=1.0)
             return failed[0], took, await motor.read_status2()
 
-    failed, took, after = run(scenario)
+    failed, took, after = await scenario()
     assert isinstance(failed, TransportError) and "lost" in str(failed)
     assert took < 0.001  # at once, not after the 5 s timeout
     assert isinstance(after, ma.StatusReply)
 
 
-def test_one_pacer_drives_two_buses() -> None:
+async def test_one_pacer_drives_two_buses() -> None:
     async def scenario() -> list[tuple[int, int, int]]:
         one = Bus(SimTransport(devices=[MyActuatorMotor(i) for i in (1, 2)]))
         two = Bus(SimTransport(devices=[LkMotor(i) for i in (1, 2)]))
@@ -254,18 +272,19 @@ def test_one_pacer_drives_two_buses() -> None:
             a = [one.motor("myactuator", i) for i in (1, 2)]
             b = [two.motor("lk", i) for i in (1, 2)]
             async for tick in ticks(hz=100, count=5):
-                first, second = await asyncio.gather(
-                    one.cycle([(m, ma.ReadStatus2()) for m in a]),
-                    two.cycle([(m, lk.ReadStatus2()) for m in b]),
-                )
+                out: tuple[list[Any], list[Any]] = ([], [])
+                async with anyio.create_task_group() as group:
+                    group.start_soon(_into, out[0], one.cycle([(m, ma.ReadStatus2()) for m in a]))
+                    group.start_soon(_into, out[1], two.cycle([(m, lk.ReadStatus2()) for m in b]))
+                (first,), (second,) = out
                 replies = sum(r is not None and not isinstance(r, BaseException) for r in [*first, *second])
                 seen.append((tick.index, tick.skipped, replies))
         return seen
 
-    assert run(scenario) == [(i, 0, 4) for i in range(5)]
+    assert await scenario() == [(i, 0, 4) for i in range(5)]
 
 
-def test_motion_mode_through_the_bus_for_myactuator_and_hollow() -> None:
+async def test_motion_mode_through_the_bus_for_myactuator_and_hollow() -> None:
     async def scenario() -> tuple[Any, Any, Any]:
         devices = [MyActuatorMotor(1), HollowMotor(20)]
         async with Bus(SimTransport(devices=devices)) as bus:
@@ -273,7 +292,7 @@ def test_motion_mode_through_the_bus_for_myactuator_and_hollow() -> None:
             first = await motor.motion_command(
                 position_rad=0.5, velocity_rad_s=0.0, kp=50.0, kd=1.0, torque_ff_nm=0.0
             )
-            await asyncio.sleep(0.5)  # the simulated rotor follows the spring toward 0.5 rad
+            await anyio.sleep(0.5)  # the simulated rotor follows the spring toward 0.5 rad
             later = await motor.motion_command(
                 position_rad=0.5, velocity_rad_s=0.0, kp=50.0, kd=1.0, torque_ff_nm=0.0
             )
@@ -282,13 +301,13 @@ def test_motion_mode_through_the_bus_for_myactuator_and_hollow() -> None:
             )
             return first, later, hollow
 
-    first, later, hollow = run(scenario)
+    first, later, hollow = await scenario()
     assert isinstance(first, ma.MotionReply) and first.motor_id == 1
     assert isinstance(later, ma.MotionReply) and abs(later.position_rad - 0.5) < abs(first.position_rad - 0.5)
     assert isinstance(hollow, ho.NormalReply) and hollow.motor_id == 20
 
 
-def test_a_frame_iterator_ends_when_the_bus_closes_instead_of_hanging() -> None:
+async def test_a_frame_iterator_ends_when_the_bus_closes_instead_of_hanging() -> None:
     async def scenario() -> int:
         got = 0
 
@@ -298,11 +317,11 @@ def test_a_frame_iterator_ends_when_the_bus_closes_instead_of_hanging() -> None:
                 got += 1
 
         bus = Bus(SimTransport(devices=[MyActuatorMotor(1)]), safe=None)
-        async with bus:
-            frames = await bus.motor("myactuator", 1).frames().__aenter__()
-            reader = asyncio.ensure_future(read(frames))
-            await asyncio.sleep(0.01)
-        await asyncio.wait_for(reader, 1.0)  # ends once the Bus is closed
+        with anyio.fail_after(1.0):  # the reader ends once the Bus is closed
+            async with anyio.create_task_group() as group, bus:
+                frames = await bus.motor("myactuator", 1).frames().__aenter__()
+                group.start_soon(read, frames)
+                await anyio.sleep(0.01)
         return got
 
-    assert run(scenario) == 0
+    assert await scenario() == 0

@@ -1,16 +1,18 @@
 """Safety: what happens when the control task dies or stalls, how fast the host sees a motor go
 silent, and that out-of-range commands never leave. (SIGTERM: tests/test_signals.py.)
 
-All on the in-process bus with virtual time: a passive node records every frame on the wire.
+All on the in-process bus, on asyncio and trio in virtual time: a passive node records every frame
+on the wire.
 """
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 
+import anyio
 import pytest
 
+from _backends import BACKENDS, virtual
 from servobus.bus import Bus, MotorStatus
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
@@ -20,6 +22,13 @@ from sim._standins import Sniffer
 
 COMM_TIMEOUT_MS = 100
 
+pytestmark = pytest.mark.anyio
+
+
+@pytest.fixture(params=BACKENDS)
+def anyio_backend(request: pytest.FixtureRequest) -> tuple[str, dict[str, object]]:
+    return virtual(request.param)
+
 
 def _bench(n: int = 2) -> tuple[SimTransport, list[MyActuatorMotor], Sniffer]:
     motors = [MyActuatorMotor(i) for i in range(1, n + 1)]
@@ -28,53 +37,59 @@ def _bench(n: int = 2) -> tuple[SimTransport, list[MyActuatorMotor], Sniffer]:
 
 
 @pytest.mark.parametrize("how", ["dies", "stalls"])
-@pytest.mark.asyncio
-@pytest.mark.looptime
 async def test_when_the_control_task_dies_or_stalls_the_motor_side_timeout_stops_the_motor(how: str) -> None:
     """0xB3 set to 100 ms; a 100 Hz speed loop runs, then dies (an exception) or stalls (blocks on
     something that never comes) while the Bus stays open: no frame reaches the motor, and within
     100 ms of the last one the motor cuts its output, locks the brake and slows to a stop."""
     transport, (motor, other), _ = _bench()
-    loop = asyncio.get_running_loop()
     async with transport, Bus(transport, safe=None) as bus:
         m = bus.motor("myactuator", 1)
         await m.request(ma.SetCommTimeout(timeout_ms=COMM_TIMEOUT_MS))
-        never = asyncio.Event()
+        never = anyio.Event()
 
         async def control() -> None:
             for _i in range(50):
                 await m.speed_control(speed_dps=360)
-                await asyncio.sleep(0.01)
+                await anyio.sleep(0.01)
             if how == "dies":
                 raise RuntimeError("the control task's bug")
             await never.wait()
 
-        task = asyncio.create_task(control())
-        await asyncio.sleep(0.6)
+        died: list[BaseException] = []
+
+        async def watched() -> None:
+            try:
+                await control()
+            except RuntimeError as exc:
+                died.append(exc)
+
+        group = anyio.create_task_group()
+        await group.__aenter__()
+        group.start_soon(watched)
+        await anyio.sleep(0.6)
         assert not motor.comm_tripped and motor.plant.speed_dps > 300  # running while commanded
         last = motor._last_heard_s
         if how == "dies":
-            with pytest.raises(RuntimeError):
-                await task
-        await asyncio.sleep(0.5)
-        motor.advance(transport.network_time(loop.time()))  # the plant is integrated lazily: bring it up
+            assert [str(e) for e in died] == ["the control task's bug"]
+        await anyio.sleep(0.5)
+        motor.advance(
+            transport.network_time(anyio.current_time())
+        )  # the plant is integrated lazily: bring it up
         assert motor.comm_tripped and motor.counters["comm_timeouts"] == 1
         assert not motor.enabled and not motor.brake_released
         assert abs(motor.plant.speed_dps) < 1.0
         assert other.counters["comm_timeouts"] == 0  # 0xB3 was set on motor 1 only
         # It tripped 100 ms after the last frame it heard (its own clock, in the network's time).
-        assert transport.loop_time(last) + COMM_TIMEOUT_MS / 1000 <= loop.time()
-        task.cancel()
+        assert transport.loop_time(last) + COMM_TIMEOUT_MS / 1000 <= anyio.current_time()
+        group.cancel_scope.cancel()
+        await group.__aexit__(None, None, None)
 
 
-@pytest.mark.asyncio
-@pytest.mark.looptime
 async def test_host_side_offline_detection_fires_within_its_configured_time() -> None:
     """Two watchdogs: ``offline_after_misses`` missed replies in a row (a polled motor), and
     ``offline_after_s`` of silence (a motor that was heard and then is not). Each fires within its
     own bound of the moment the motor stopped answering, and the motor is online at its next reply."""
     transport, (motor, _other), _ = _bench()
-    loop = asyncio.get_running_loop()
     statuses: list[MotorStatus] = []
     # (late_hold_s: each poll goes out 10 ms after the last timed out, not after the hold a motor
     # measured a few times gets, twice the codec's 20 ms)
@@ -89,16 +104,18 @@ async def test_host_side_offline_detection_fires_within_its_configured_time() ->
         assert m1.online and m2.online
         # Motor 1 stops answering while it is polled every 10 ms with a 10 ms timeout.
         motor.unresponsive = True
-        silent_at = loop.time()
+        silent_at = anyio.current_time()
 
         async def poll() -> None:
             while True:
                 with contextlib.suppress(Exception):
                     await m1.read_status2(timeout_s=0.01)
-                await asyncio.sleep(0.01)
+                await anyio.sleep(0.01)
 
-        poller = asyncio.create_task(poll())
-        await asyncio.sleep(0.3)
+        poller = anyio.create_task_group()
+        await poller.__aenter__()
+        poller.start_soon(poll)
+        await anyio.sleep(0.3)
         # Motor 2 is simply not asked any more: only the silence watchdog can see it.
         offline = {s.motor.motor_id: s for s in statuses if not s.online}
         assert set(offline) == {1, 2}
@@ -107,13 +124,12 @@ async def test_host_side_offline_detection_fires_within_its_configured_time() ->
         assert offline[2].reason == "silent for 0.2 s"
         assert offline[2].at - m2.last_seen <= 0.2 + 1e-6  # type: ignore[operator]
         motor.unresponsive = False
-        await asyncio.sleep(0.05)
+        await anyio.sleep(0.05)
         assert m1.online and statuses[-1].motor is m1 and statuses[-1].online
-        poller.cancel()
+        poller.cancel_scope.cancel()
+        await poller.__aexit__(None, None, None)
 
 
-@pytest.mark.asyncio
-@pytest.mark.looptime
 async def test_limits_are_enforced_before_any_frame_leaves() -> None:
     """An out-of-range set-point raises ValueError naming the field and its limit, and nothing goes
     on the wire; a cycle with one bad command sends none of its commands."""
@@ -127,8 +143,41 @@ async def test_limits_are_enforced_before_any_frame_leaves() -> None:
             await m1.request(ma.SetCommTimeout(timeout_ms=0))
         with pytest.raises(ValueError, match="speed_dps"):
             await bus.cycle([(m1, ma.SpeedControl(speed_dps=10)), (m2, ma.SpeedControl(speed_dps=-1e12))])
-        await asyncio.sleep(0.05)
+        await anyio.sleep(0.05)
         assert sniffer.seen[before:] == []
         assert bus.stats().get("requests", 0) == 0
         await m1.speed_control(speed_dps=10)  # a good one still goes
         assert len(sniffer.seen) == before + 2
+
+
+def _stops(sniffer: Sniffer, code: int = 0x81) -> set[int]:
+    """The motors a request with command byte ``code`` went to (requests only: 0x141..0x160)."""
+    return {
+        f.arbitration_id - 0x140
+        for _, f in sniffer.seen
+        if 0x141 <= f.arbitration_id <= 0x160 and f.data[:1] == bytes([code])
+    }
+
+
+@pytest.mark.parametrize("how", ["exception", "cancelled", "cancelled while waiting"])
+async def test_a_bus_left_by_an_exception_or_a_cancellation_stops_its_motors(how: str) -> None:
+    """Left by the block's exception, by the cancellation of the scope around it (its deadline),
+    or by that cancellation while a request waits for its reply: every commanded motor gets the
+    safe command and acknowledges it, and the block's exception goes on as it was."""
+    motors = [MyActuatorMotor(i) for i in (1, 2, 3)]
+    motors[2].unresponsive = True  # (for "cancelled while waiting")
+    sniffer = Sniffer()
+    transport = SimTransport(SimCanNetwork([*motors, sniffer]))
+    with anyio.move_on_after(1.0) as scope, contextlib.suppress(RuntimeError):
+        async with Bus(transport) as bus:  # (the Bus opens the link, and closes it)
+            for m in (1, 2):
+                await bus.motor("myactuator", m).speed_control(speed_dps=90)
+            if how == "exception":
+                raise RuntimeError("the control task's bug")
+            if how == "cancelled":
+                await anyio.sleep_forever()
+            await bus.motor("myactuator", 3).read_status2(timeout_s=10.0)
+    assert scope.cancelled_caught == (how != "exception")
+    assert _stops(sniffer) == {1, 2}
+    assert [m.motor_id for m in bus.safe_acknowledged] == [1, 2]
+    assert not transport.is_open

@@ -27,10 +27,10 @@ def _reply(motor: int, data: bytes = STATUS, t: float = 0.0) -> Frame:
 
 
 def _send_all(scheduler: Scheduler, now: float) -> list[Request]:
-    out = scheduler.next_to_send(now)
+    out, _ = scheduler.poll(now)
     for request in out:
         scheduler.sent(request, now)
-    return out
+    return list(out)
 
 
 def test_equal_keys_go_one_exchange_at_a_time_so_a_duplicate_cannot_answer_the_second() -> None:
@@ -40,7 +40,7 @@ def test_equal_keys_go_one_exchange_at_a_time_so_a_duplicate_cannot_answer_the_s
     first, second = (scheduler.request(codec, ma.ReadStatus2()) for _ in range(2))
     third = scheduler.request(other, ma.ReadStatus2())
     for request in (first, second, third):
-        scheduler.submit(request)
+        scheduler.submit(request, 0.0)
     assert _send_all(scheduler, 0.0) == [first, third]  # the second waits; other keys go past it
     got = scheduler.receive(_reply(1, t=0.001), 0.001)
     assert (got.traffic, got.request) == (Traffic.REPLY, first) and first.state is S.REPLIED
@@ -55,7 +55,7 @@ def test_a_frame_that_comes_sooner_than_the_wire_allows_is_not_the_reply() -> No
     codec = MA.bind(1)
     scheduler = Scheduler([codec], min_reply_s=0.0002)
     request = scheduler.request(codec, ma.ReadStatus2())
-    scheduler.submit(request)
+    scheduler.submit(request, 0.0)
     _send_all(scheduler, 0.010)
     assert scheduler.receive(_reply(1, t=0.0101), 0.0101).traffic is Traffic.UNSOLICITED
     assert request.state is S.SENT
@@ -73,7 +73,7 @@ def test_a_stray_echo_never_answers_a_write_of_another_value() -> None:
     first, second = scheduler.request(codec, one), scheduler.request(codec, two)
     assert first.key != second.key  # an echo's key holds the value written: both may be in flight
     for request in (first, second):
-        scheduler.submit(request)
+        scheduler.submit(request, 0.0)
     assert _send_all(scheduler, 0.0) == [first, second]
     assert scheduler.receive(_echo(1, one, 0.001), 0.001).request is first
     got = scheduler.receive(_echo(1, one, 0.002), 0.002)  # the first write, answered twice
@@ -89,7 +89,7 @@ def test_the_late_and_duplicate_windows_forget_expired_keys() -> None:
         now = k * 0.001
         command = ma.WriteEncoderZero(offset_counts=k)
         request = scheduler.request(codec, command)
-        scheduler.submit(request)
+        scheduler.submit(request, 0.0)
         _send_all(scheduler, now)
         assert scheduler.receive(_echo(1, command, now), now).request is request
     assert len(scheduler._recent.replied) <= 64  # ~10 live in the window, pruned past 64
@@ -99,7 +99,7 @@ def test_a_reply_stamped_at_a_virtual_clocks_first_instant_is_not_taken_for_an_u
     codec = MA.bind(1)
     scheduler = Scheduler([codec], min_reply_s=0.0002)
     request = scheduler.request(codec, ma.ReadStatus2())
-    scheduler.submit(request)
+    scheduler.submit(request, 0.0)
     _send_all(scheduler, 0.0)  # sent at t = 0.0, as on a loop started at 0 (looptime)
     assert scheduler.receive(_reply(1, t=0.0), 0.0).traffic is Traffic.UNSOLICITED
     assert scheduler.receive(_reply(1, t=0.0003), 0.0003).request is request
@@ -111,7 +111,7 @@ def test_replies_of_other_commands_or_motors_never_resolve_the_wrong_request() -
     status = scheduler.request(one, ma.ReadStatus2())
     angle = scheduler.request(two, ma.ReadMultiTurnAngle())
     for request in (status, angle):
-        scheduler.submit(request)
+        scheduler.submit(request, 0.0)
     _send_all(scheduler, 0.0)
     assert scheduler.receive(_reply(2, STATUS), 0.001).traffic is Traffic.UNSOLICITED  # motor 2, wrong code
     assert scheduler.receive(Frame(arbitration_id=0x7FF, data=b"\x01"), 0.001).traffic is Traffic.FOREIGN
@@ -123,7 +123,7 @@ def test_a_malformed_reply_fails_its_request_with_the_codecs_error_not_a_timeout
     codec = MA.bind(1)
     scheduler = Scheduler([codec])
     request = scheduler.request(codec, ma.ReadStatus2())
-    scheduler.submit(request)
+    scheduler.submit(request, 0.0)
     _send_all(scheduler, 0.0)
     got = scheduler.receive(_reply(1, STATUS[:5]), 0.001)  # truncated: keyed 0x9C, does not decode
     assert got.traffic is Traffic.MALFORMED and got.request is request and request.state is S.FAILED
@@ -143,8 +143,8 @@ def test_a_request_times_out_at_its_deadline_from_when_it_left_and_its_reply_is_
     codec = MA.bind(1)
     scheduler = Scheduler([codec])
     request = scheduler.request(codec, ma.ReadStatus2(), timeout_s=0.01)
-    scheduler.submit(request)
-    scheduler.next_to_send(0.0)
+    scheduler.submit(request, 0.0)
+    list(scheduler.poll(0.0)[0])
     assert scheduler.next_deadline() is None  # not left yet: no deadline
     scheduler.sent(request, 0.005)
     assert scheduler.next_deadline() == pytest.approx(0.015)
@@ -158,12 +158,12 @@ def test_a_cancelled_requests_reply_is_late_and_never_reaches_a_later_request() 
     codec = MA.bind(1)
     scheduler = Scheduler([codec], min_reply_s=0.0002)
     old = scheduler.request(codec, ma.ReadStatus2())
-    scheduler.submit(old)
+    scheduler.submit(old, 0.0)
     _send_all(scheduler, 0.0)
     scheduler.cancel(old, 0.001)
     assert scheduler.pending == 0 and old.state is S.CANCELLED
     new = scheduler.request(codec, ma.ReadStatus2())
-    scheduler.submit(new)
+    scheduler.submit(new, 0.0)
     _send_all(scheduler, 0.002)
     assert new.state is S.QUEUED  # held: the old request's reply may still come
     assert scheduler.receive(_reply(1, t=0.0021), 0.0021).traffic is Traffic.LATE
@@ -177,23 +177,23 @@ def test_after_a_timeout_the_key_is_held_for_the_late_reply_then_released_by_tim
     codec = MA.bind(1)
     scheduler = Scheduler([codec], late_hold_s=0.05)
     old = scheduler.request(codec, ma.ReadStatus2(), timeout_s=0.01)
-    scheduler.submit(old)
+    scheduler.submit(old, 0.0)
     _send_all(scheduler, 0.0)
     assert scheduler.expire(0.01) == [old]
     new = scheduler.request(codec, ma.ReadStatus2())
     other = scheduler.request(codec, ma.ReadStatus1())  # another key is not held
-    scheduler.submit(new)
-    scheduler.submit(other)
-    assert scheduler.next_to_send(0.02) == [other]
+    scheduler.submit(new, 0.0)
+    scheduler.submit(other, 0.0)
+    assert list(scheduler.poll(0.02)[0]) == [other]
     assert scheduler.next_deadline() == pytest.approx(0.06)
-    assert scheduler.next_to_send(0.0599) == [] and scheduler.next_to_send(0.0601) == [new]
+    assert not scheduler.poll(0.0599)[0] and list(scheduler.poll(0.0601)[0]) == [new]
 
 
 def test_a_broadcast_reply_waits_for_its_keys_and_then_goes_past_the_queue() -> None:
     codec = MA.bind(1)
     scheduler = Scheduler([codec])
     timed_out = scheduler.request(codec, ma.ReadStatus2(), timeout_s=0.01)
-    scheduler.submit(timed_out)
+    scheduler.submit(timed_out, 0.0)
     _send_all(scheduler, 0.0)
     assert scheduler.blocking([timed_out.key], 0.005) == (None, [timed_out])  # in flight
     scheduler.expire(0.01)
@@ -201,7 +201,7 @@ def test_a_broadcast_reply_waits_for_its_keys_and_then_goes_past_the_queue() -> 
     assert scheduler.blocking([timed_out.key], 0.015) == (0.04, [])
     assert scheduler.blocking([timed_out.key], 0.04) == (None, [])
     queued = scheduler.request(codec, ma.ReadMultiTurnAngle())
-    scheduler.submit(queued)  # the queue does not hold a broadcast's expectation back
+    scheduler.submit(queued, 0.0)  # the queue does not hold a broadcast's expectation back
     expected = dataclasses.replace(
         scheduler.request(codec, ma.ReadStatus2(), timeout_s=0.02), frame=Frame(arbitration_id=0)
     )
@@ -217,8 +217,8 @@ def test_a_reply_that_beats_its_send_report_answers_its_request() -> None:
     codec = MA.bind(1)
     scheduler = Scheduler([codec], min_reply_s=0.0002)
     request = scheduler.request(codec, ma.ReadStatus2())
-    scheduler.submit(request)
-    assert scheduler.next_to_send(0.0) == [request] and request.state is S.SENDING
+    scheduler.submit(request, 0.0)
+    assert list(scheduler.poll(0.0)[0]) == [request] and request.state is S.SENDING
     assert scheduler.receive(_reply(1, t=0.0004), 0.0004).traffic is Traffic.EARLY
     got = scheduler.sent(request, 0.0001)  # the report comes after: now the reply can be judged
     assert got is not None and got.traffic is Traffic.REPLY and got.request is request
@@ -229,12 +229,12 @@ def test_an_early_frame_too_soon_after_its_send_time_is_not_the_reply() -> None:
     codec = MA.bind(1)
     scheduler = Scheduler([codec], min_reply_s=0.0002)
     first = scheduler.request(codec, ma.ReadStatus2())
-    scheduler.submit(first)
+    scheduler.submit(first, 0.0)
     _send_all(scheduler, 0.0)
     scheduler.receive(_reply(1, t=0.0003), 0.0003)
     second = scheduler.request(codec, ma.ReadStatus2())
-    scheduler.submit(second)
-    assert scheduler.next_to_send(0.0004) == [second]
+    scheduler.submit(second, 0.0)
+    assert list(scheduler.poll(0.0004)[0]) == [second]
     # The first reply's duplicate, stamped before the second request could have been answered:
     assert scheduler.receive(_reply(1, t=0.0005), 0.0005).traffic is Traffic.EARLY
     got = scheduler.sent(second, 0.0004)
@@ -246,7 +246,7 @@ def test_retry_safe_reads_go_again_and_writes_are_never_retried() -> None:
     codec = MA.bind(1)
     scheduler = Scheduler([codec])
     read = scheduler.request(codec, ma.ReadStatus2(), timeout_s=0.01, retries=1)
-    scheduler.submit(read)
+    scheduler.submit(read, 0.0)
     _send_all(scheduler, 0.0)
     assert scheduler.expire(0.01) == [] and read.state is S.QUEUED
     # The retry waits for the first attempt's late reply, as the next request would (it comes: the
@@ -264,7 +264,7 @@ def test_pacing_keeps_the_in_flight_limit_and_a_half_duplex_line_rests_between_e
     scheduler = Scheduler(codecs, one_at_a_time=True, gap_s=0.001)
     requests = [scheduler.request(c, ma.ReadStatus2()) for c in codecs]
     for request in requests:
-        scheduler.submit(request)
+        scheduler.submit(request, 0.0)
     assert _send_all(scheduler, 0.0) == requests[:1] and _send_all(scheduler, 0.0) == []
     reply = Frame(arbitration_id=1, data=STATUS, is_serial=True)
     scheduler.receive(reply, 0.002)
@@ -272,7 +272,7 @@ def test_pacing_keeps_the_in_flight_limit_and_a_half_duplex_line_rests_between_e
     assert _send_all(scheduler, 0.003) == requests[1:2]
     limited = Scheduler([MA.bind(1)], max_in_flight=2)
     for read in (ma.ReadStatus1(), ma.ReadStatus2(), ma.ReadStatus3()):
-        limited.submit(limited.request(limited.codecs[0], read))
+        limited.submit(limited.request(limited.codecs[0], read), 0.0)
     assert len(_send_all(limited, 0.0)) == 2
 
 
@@ -280,7 +280,7 @@ def test_commands_without_a_reply_are_done_when_they_leave() -> None:
     codec = MA.bind(1)
     scheduler = Scheduler([codec])
     reset = scheduler.request(codec, ma.SystemReset())
-    scheduler.submit(reset)
+    scheduler.submit(reset, 0.0)
     _send_all(scheduler, 0.0)
     assert reset.state is S.REPLIED and reset.reply is None and scheduler.pending == 0
 
@@ -290,7 +290,7 @@ def test_a_streamed_read_is_answered_by_the_next_stream_frame_after_it_left() ->
     codec.note_sent(ma.ActiveReply(command=ma.StreamableCommand(0x9C), enabled=True, interval_ms=10))
     scheduler = Scheduler([codec])
     read = scheduler.request(codec, ma.ReadStatus2())
-    scheduler.submit(read)
+    scheduler.submit(read, 0.0)
     _send_all(scheduler, 0.010)
     assert scheduler.receive(_reply(1, t=0.009), 0.0101).traffic is Traffic.STREAM  # older than the request
     assert read.state is S.SENT
@@ -303,10 +303,10 @@ def test_a_lost_transport_fails_everything_pending() -> None:
     scheduler = Scheduler([codec], max_in_flight=1)
     requests = [scheduler.request(codec, ma.ReadStatus2()) for _ in range(3)]
     for request in requests:
-        scheduler.submit(request)
+        scheduler.submit(request, 0.0)
     _send_all(scheduler, 0.0)
     error = OSError("unplugged")
-    assert scheduler.fail_all(error, 0.001) == requests
+    assert scheduler.fail(error, 0.001) == requests
     assert all(r.state is S.FAILED and r.error is error for r in requests) and scheduler.pending == 0
 
 
@@ -320,13 +320,13 @@ def test_illegal_moves_name_the_request() -> None:
     codec = MA.bind(1)
     scheduler = Scheduler([codec])
     request = scheduler.request(codec, ma.ReadStatus2())
-    scheduler.submit(request)
+    scheduler.submit(request, 0.0)
     with pytest.raises(RuntimeError, match="myactuator motor 1 ReadStatus2 is already queued"):
-        scheduler.submit(request)
+        scheduler.submit(request, 0.0)
     _send_all(scheduler, 0.0)
     scheduler.receive(_reply(1), 0.001)
     with pytest.raises(RuntimeError, match="is replied: a request is submitted once"):
-        scheduler.submit(request)
+        scheduler.submit(request, 0.0)
 
 
 # ---- a seeded run over the simulated bus, with faults (issue 15's reliability figure, sans-IO) ----
@@ -350,9 +350,9 @@ def _run(n_requests: int, seed: int) -> tuple[Scheduler, list[Request], list[tup
         while len(requests) < n_requests and scheduler.pending < 64:
             codec = rng.choice(codecs)
             request = scheduler.request(codec, rng.choice(READS)(), timeout_s=0.02)
-            scheduler.submit(request)
+            scheduler.submit(request, 0.0)
             requests.append(request)
-        for request in scheduler.next_to_send(now):
+        for request in list(scheduler.poll(now)[0]):
             network.send(request.frame, now)
             scheduler.sent(request, now)
         times = [t for t in (network.next_event_s(), scheduler.next_deadline()) if t is not None]
@@ -406,12 +406,12 @@ def test_a_held_key_on_a_half_duplex_line_waits_without_waking_all_the_time() ->
     codec = MA.bind(1)
     scheduler = Scheduler([codec], one_at_a_time=True, gap_s=0.001, late_hold_s=0.05)
     old = scheduler.request(codec, ma.ReadStatus2(), timeout_s=0.01)
-    scheduler.submit(old)
+    scheduler.submit(old, 0.0)
     _send_all(scheduler, 0.0)
     assert scheduler.expire(0.01) == [old]
     new = scheduler.request(codec, ma.ReadStatus2())
-    scheduler.submit(new)
-    assert scheduler.next_to_send(0.02) == []  # the rest is over, the key still held
+    scheduler.submit(new, 0.0)
+    assert not scheduler.poll(0.02)[0]  # the rest is over, the key still held
     assert scheduler.next_deadline() == pytest.approx(0.06)  # not the past rest: no busy timer
 
 
@@ -419,12 +419,12 @@ def test_answered_requests_under_a_long_timeout_do_not_pile_up_in_the_deadline_h
     codecs = [MA.bind(i) for i in (1, 2)]
     scheduler = Scheduler(codecs)
     slow = scheduler.request(codecs[0], ma.ReadStatus2(), timeout_s=60.0)
-    scheduler.submit(slow)
+    scheduler.submit(slow, 0.0)
     _send_all(scheduler, 0.0)
     for n in range(1000):
         now = 0.001 * (n + 1)
         request = scheduler.request(codecs[1], ma.ReadStatus2())
-        scheduler.submit(request)
+        scheduler.submit(request, 0.0)
         _send_all(scheduler, now)
         scheduler.receive(_reply(2, t=now + 0.0005), now + 0.0005)
         assert request.state is S.REPLIED
@@ -438,13 +438,15 @@ def test_a_command_that_waited_too_long_for_its_turn_is_never_sent_but_a_read_is
     first = scheduler.request(codec, ma.ReadStatus1(), timeout_s=0.5)
     command = scheduler.request(codec, ma.SpeedControl(speed_dps=10.0))
     read = scheduler.request(codec, ma.ReadStatus2())
-    command.queued_at = 0.0  # as the Bus stamps a command (a read has none: never stale)
     for request in (first, command, read):
-        scheduler.submit(request)
+        scheduler.submit(request, 0.0)
     _send_all(scheduler, 0.0)
     assert scheduler.expire(0.5) == [first]  # the line was busy for 0.5 s
-    assert scheduler.next_to_send(0.5) == [read] and command.state is S.FAILED
-    assert scheduler.take_stale() == [command] and scheduler.take_stale() == []
+    sending, stale = scheduler.poll(0.5)
+    assert sending == [read] and command.state is S.FAILED and stale == [command]
+    assert command.queued_at == 0.0 and read.queued_at is None  # stamped at submit: a command only
+    assert "not sent (stale" in str(command.error)  # what its caller gets
+    assert scheduler.poll(0.5) == ((), ())
     assert scheduler.counts["not_sent_stale"] == 1
 
 
@@ -453,7 +455,7 @@ def test_a_command_that_waited_too_long_for_its_turn_is_never_sent_but_a_read_is
 
 def _exchange(scheduler: Scheduler, codec: object, command: object, at: float, rtt_s: float) -> Request:
     request = scheduler.request(codec, command)  # type: ignore[arg-type]
-    scheduler.submit(request)
+    scheduler.submit(request, 0.0)
     _send_all(scheduler, at)
     data = STATUS if isinstance(command, ma.ReadStatus2) else None
     if data is not None:
@@ -475,7 +477,7 @@ def test_a_measured_class_gets_its_estimate_and_a_slow_class_keeps_its_codecs_ti
     write = scheduler.request(codec, ma.WriteEncoderZero(offset_counts=5))
     assert write.rtt is not None and write.rtt.base_s == 0.5 and write.rtt.floor_s == 0.5
     write.rtt.add(0.001)
-    scheduler.submit(write)
+    scheduler.submit(write, 0.0)
     _send_all(scheduler, 2.0)
     assert write.timeout_s == 0.5
 
@@ -485,7 +487,7 @@ def test_with_nothing_measured_the_requests_waiting_to_be_timed_again_stay_bound
     scheduler = Scheduler([codec], late_hold_s=0.0)
     for i in range(1000):
         request = scheduler.request(codec, ma.ReadStatus2())
-        scheduler.submit(request)
+        scheduler.submit(request, 0.0)
         _send_all(scheduler, i * 2.0)
         scheduler.expire(i * 2.0 + 1.5)  # the motor never answers
     assert len(scheduler._provisional) <= 64
@@ -497,16 +499,16 @@ def test_a_late_reply_after_a_given_up_one_keeps_the_key_ambiguous() -> None:
     codec = MA.bind(1)
     scheduler = Scheduler([codec])
     a = scheduler.request(codec, ma.ReadStatus2(), timeout_s=0.01)
-    scheduler.submit(a)
+    scheduler.submit(a, 0.0)
     _send_all(scheduler, 0.0)
     scheduler.expire(0.01)  # held until twice the codec's 20 ms: 0.04
     b = scheduler.request(codec, ma.ReadStatus2(), timeout_s=0.01)
-    scheduler.submit(b)
+    scheduler.submit(b, 0.0)
     _send_all(scheduler, 0.05)  # A's hold ended: doubtful
     scheduler.expire(0.065)
     assert scheduler.receive(_reply(1, t=0.07), 0.07).traffic is Traffic.LATE  # B's, or A's
     c = scheduler.request(codec, ma.ReadStatus2(), timeout_s=0.01)
-    scheduler.submit(c)
+    scheduler.submit(c, 0.0)
     _send_all(scheduler, 0.08)
     got = scheduler.receive(_reply(1, t=0.081), 0.081)
     assert got.request is c and scheduler.counts["ambiguous"] == 1
@@ -516,9 +518,100 @@ def test_an_undecodable_reply_before_the_send_report_fails_its_request_at_the_re
     codec = MA.bind(1)
     scheduler = Scheduler([codec])
     request = scheduler.request(codec, ma.ReadStatus2())
-    scheduler.submit(request)
-    (sending,) = scheduler.next_to_send(0.0)
+    scheduler.submit(request, 0.0)
+    (sending,) = list(scheduler.poll(0.0)[0])
     assert scheduler.receive(_reply(1, STATUS[:5], t=0.001), 0.001).traffic is Traffic.EARLY
     early = scheduler.sent(sending, 0.0002)
     assert early is not None and early.request is request and request.state is S.FAILED
     assert isinstance(request.error, ProtocolError) and scheduler.counts["malformed"] == 1
+
+
+def test_every_move_goes_through_the_table_and_an_illegal_one_is_a_typed_error(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from servobus import _scheduler_time
+    from servobus.errors import RequestStateError, ServobusError
+
+    assert not any(hasattr(state, "next") for state in S)  # (the table is the only place)
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec])
+    request = scheduler.request(codec, ma.ReadStatus2())
+    scheduler.submit(request, 0.0)
+    with pytest.raises(RequestStateError, match=r"myactuator motor 1 ReadStatus2: queued -> replied"):
+        scheduler._move(request, S.REPLIED)
+    assert issubclass(RequestStateError, RuntimeError) and issubclass(RequestStateError, ServobusError)
+    # The hot moves read the table too: one it does not allow fails, typed, naming both states
+    # (a send report it does not allow is taken for none).
+    from servobus import _scheduler_pace
+
+    monkeypatch.setattr(_scheduler_pace, "_TO_SENDING", ())
+    with pytest.raises(RequestStateError, match="queued -> sending is not allowed"):
+        scheduler.poll(0.0)
+    monkeypatch.undo()
+    scheduler = Scheduler([codec])
+    scheduler.submit(scheduler.request(codec, ma.ReadStatus2()), 0.0)
+    (sending,) = scheduler.poll(0.0)[0]
+    monkeypatch.setattr(_scheduler_time, "_TO_SENT", ())
+    assert scheduler.sent(sending, 0.0) is None and sending.state is S.SENDING
+
+
+def test_a_request_whose_send_report_never_comes_still_times_out() -> None:
+    """With ``report_within_s``, a request handed over and never reported gets a provisional
+    deadline: that long after hand-over, plus its timeout. A report that comes in time re-bases its
+    deadline on when the frame left."""
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec], report_within_s=0.1)
+    lost, late = (
+        scheduler.request(codec, command, timeout_s=0.05) for command in (ma.ReadStatus2(), ma.ReadStatus1())
+    )
+    for request in (lost, late):
+        scheduler.submit(request, 0.0)
+    assert list(scheduler.poll(0.0)[0]) == [lost, late]
+    assert scheduler.next_deadline() == pytest.approx(0.1)  # when the first report is overdue
+    assert scheduler.sent(late, 0.04) is None  # late, but within report_within_s: timed from then
+    assert late.deadline == pytest.approx(0.09)
+    assert scheduler.expire(0.0999) == [late]  # (its own timeout: nothing came)
+    assert scheduler.expire(0.1) == [] and lost.deadline == pytest.approx(0.15)
+    deadline = scheduler.next_deadline()
+    assert deadline is not None and deadline == pytest.approx(0.15)
+    assert scheduler.expire(deadline) == [lost] and lost.state is S.TIMED_OUT
+    assert scheduler.counts["unreported"] == 1 and scheduler.counts["timeouts"] == 2
+    assert scheduler.pending == 0
+    assert scheduler.sent(lost, 0.2) is None  # a report that still comes changes nothing
+
+
+def test_a_dropped_frame_fails_its_request_with_a_transport_error_that_says_why() -> None:
+    from servobus.errors import TransportError
+
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec], name="can0")
+    request = scheduler.request(codec, ma.ReadStatus2())
+    scheduler.submit(request, 0.0)
+    scheduler.poll(0.0)
+    scheduler.not_sent(request, "purged", 0.001)
+    assert request.state is S.FAILED and isinstance(request.error, TransportError)
+    assert str(request.error) == "can0: myactuator motor 1 ReadStatus2 not sent (purged)"
+    assert scheduler.counts["not_sent_purged"] == 1
+
+
+def test_a_reply_stamped_after_its_deadline_is_late_whichever_the_host_took_first() -> None:
+    """The loop may take a reply in before the timer that expires its request: a reply stamped
+    after the deadline is still late (the request times out, and says so at the next expire); an
+    unstamped one counts from when it was taken in."""
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec])
+    request = scheduler.request(codec, ma.ReadStatus2(), timeout_s=0.01)
+    scheduler.submit(request, 0.0)
+    _send_all(scheduler, 0.0)
+    got = scheduler.receive(_reply(1, t=0.012), 0.013)
+    assert got.traffic is Traffic.LATE and got.request is None and request.state is S.TIMED_OUT
+    assert scheduler.next_deadline() == pytest.approx(0.01)  # (its expiry is due: to be told)
+    assert scheduler.expire(0.013) == [request] and scheduler.expire(0.013) == []
+    assert scheduler.counts["timeouts"] == 1 and scheduler.counts["late"] == 1
+    in_time = scheduler.request(codec, ma.ReadStatus1(), timeout_s=0.01)
+    scheduler.submit(in_time, 0.1)
+    _send_all(scheduler, 0.1)
+    assert (
+        scheduler.receive(_reply(1, data=bytes.fromhex("9A 32 00 00 00 00 00 00"), t=0.109), 0.2).request
+        is in_time
+    )

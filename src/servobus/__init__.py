@@ -14,6 +14,7 @@ from servobus.errors import (
     MotorStreaming,
     MotorTimeout,
     ProtocolError,
+    RequestStateError,
     ServobusError,
     TransportError,
 )
@@ -34,6 +35,7 @@ __all__ = [
     "MotorStreaming",
     "MotorTimeout",
     "ProtocolError",
+    "RequestStateError",
     "ServobusError",
     "TransportError",
     "__version__",

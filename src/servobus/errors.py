@@ -25,6 +25,7 @@ __all__ = [
     "MotorStreaming",
     "MotorTimeout",
     "ProtocolError",
+    "RequestStateError",
     "ServobusError",
     "TransportError",
 ]
@@ -120,3 +121,8 @@ class MotorFault(ServobusError):
 
 class TransportError(ServobusError):
     """The adapter or port failed: unplugged, bus-off, closed."""
+
+
+class RequestStateError(ServobusError, RuntimeError):
+    """A request was moved in a way its life cycle does not allow (``scheduler.TRANSITIONS``): a bug
+    in the scheduler's caller, named with the request and both states."""

@@ -1,0 +1,177 @@
+"""The outcomes of one ``Bus.cycle()`` gathered into one waiter (:class:`Tick`), each request's
+place in it (:class:`Slot`), and the waiters of requests nobody awaits (:func:`detached`).
+
+A cycle wakes once, when its last request ends, not once per motor (what gathering one future per
+request costs). The waiter is the runtime's (:mod:`servobus.runtime`): an ``asyncio.Future`` on
+asyncio, a ``TrioWaiter`` on trio; nothing here imports either.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+from servobus.errors import MotorBusy, MotorOffline, MotorStreaming
+from servobus.protocols import Command, Reply
+from servobus.runtime import Runtime, Waiter, WaiterCancelled
+
+if TYPE_CHECKING:
+    from servobus.engine import Engine
+    from servobus.motor import Motor
+    from servobus.scheduler import Request
+
+__all__ = ["Result", "Slot", "Tick", "awaitable", "detached", "start"]
+
+Result = Reply | BaseException | None
+
+
+class Tick:
+    """The results of one cycle, in order; :attr:`future` is done when the last request ended."""
+
+    __slots__ = ("future", "left", "results", "runtime")
+
+    def __init__(self, runtime: Runtime, size: int) -> None:
+        self.runtime = runtime
+        self.future: Waiter[list[Result]] = runtime.waiter()
+        self.results: list[Result] = [None] * size
+        self.left = size
+
+
+class Slot:
+    """One request's place in a :class:`Tick`, with the part of a waiter's interface the Bus and
+    an observer of the request (``request.context``) use: its outcome is the tick's result there."""
+
+    __slots__ = ("_callbacks", "_state", "index", "tick")
+
+    def __init__(self, tick: Tick, index: int) -> None:
+        self.tick = tick
+        self.index = index
+        self._state = 0  # 0 pending, 1 done, 2 cancelled
+        self._callbacks: list[Callable[[Slot], object]] | None = None
+
+    def done(self) -> bool:
+        return self._state != 0
+
+    def cancelled(self) -> bool:
+        return self._state == 2
+
+    def set_result(self, value: Result) -> None:
+        self._state = 1
+        tick = self.tick
+        tick.results[self.index] = value
+        tick.left -= 1
+        if not tick.left and not tick.future.done():
+            tick.future.set_result(tick.results)
+        if self._callbacks:
+            self._run_callbacks()
+
+    set_exception = set_result  # an exception is the request's result, as a value
+
+    def cancel(self) -> bool:
+        """The cycle awaiting the tick was cancelled (its waiter is already)."""
+        if self._state:
+            return False
+        self._state = 2
+        if self._callbacks:
+            self._run_callbacks()
+        return True
+
+    def result(self) -> Result:
+        value = self._outcome()
+        if isinstance(value, BaseException):
+            raise value
+        return value
+
+    def exception(self) -> BaseException | None:
+        value = self._outcome()
+        return value if isinstance(value, BaseException) else None
+
+    def _outcome(self) -> Result:
+        if self._state == 2:
+            raise WaiterCancelled("the cycle was cancelled")
+        if not self._state:
+            raise RuntimeError("the request has not ended")
+        return self.tick.results[self.index]
+
+    def add_done_callback(self, callback: Callable[[Slot], object]) -> None:
+        """As a waiter's: ``callback(slot)`` soon after the request ends."""
+        if self._state:
+            self.tick.runtime.call_soon(callback, self)
+        else:
+            self._callbacks = [*(self._callbacks or ()), callback]
+
+    def _run_callbacks(self) -> None:
+        callbacks, self._callbacks = self._callbacks or [], None
+        call_soon = self.tick.runtime.call_soon
+        for callback in callbacks:
+            call_soon(callback, self)
+
+
+def awaitable(context: Waiter[Any] | Slot) -> Waiter[Any]:
+    """What to await for a request to end: its waiter, or its cycle's."""
+    return context.tick.future if isinstance(context, Slot) else context
+
+
+def detached(runtime: Runtime) -> Waiter[Any]:
+    """A waiter for a request nobody awaits (a probe, a repeated stream "off"): its outcome is taken
+    when it ends, so an exception is never reported as "never retrieved"."""
+    waiter = runtime.waiter()
+    waiter.add_done_callback(_take)
+    return waiter
+
+
+def _take(waiter: Waiter[Any]) -> None:
+    if not waiter.cancelled():
+        waiter.exception()
+
+
+def start(
+    engine: Engine, items: list[tuple[Motor, Command]], timeout_s: float | None, probe_interval_s: float
+) -> tuple[Tick, list[tuple[Motor, Request]]]:
+    """Queue one tick's requests (``Bus.cycle``; ``items`` not empty): every command is encoded (and
+    checked: ValueError before anything is queued), then the motors the tick does not wait for
+    get their outcome at once (MotorStreaming, MotorOffline, MotorBusy; an offline motor's command
+    still goes every ``probe_interval_s``, as a probe nobody waits for), then one pump.
+
+    Returns:
+        The tick to await, and the motors and requests queued (a probe's context is not a
+        :class:`Slot`: the tick does not wait for it).
+    """
+    runtime = engine.runtime
+    assert runtime is not None
+    tick = Tick(runtime, len(items))
+    prepared: list[tuple[Motor, Request]] = []
+    skipped: list[tuple[Slot, Motor, str, BaseException]] = []
+    now = engine.time()
+    scheduler = engine.scheduler
+    busy = None if scheduler.quiet else scheduler.busy  # (None, the common case: nothing waits)
+    prepare = engine.prepare
+    for i, (m, c) in enumerate(items):
+        slot = Slot(tick, i)
+        try:
+            request = prepare(m, c, timeout_s, 0, slot)
+        except MotorStreaming as exc:
+            skipped.append((slot, m, "skipped_streaming", exc))
+            continue
+        if m.online is False:
+            why = f"{m!r} is offline ({m._misses} replies missed): the tick does not wait for it"
+            if now >= m._probe_at and (busy is None or not busy(request.key, now)):  # a probe
+                m._probe_at = now + probe_interval_s
+                request.context = detached(runtime)
+                prepared.append((m, request))
+                skipped.append((slot, m, "probes", MotorOffline(why)))
+            else:
+                skipped.append((slot, m, "skipped_offline", MotorOffline(why)))
+        elif busy is not None and busy(request.key, now):
+            why = f"{m!r}: the reply to its last {type(c).__name__} is still due: not sent this tick"
+            skipped.append((slot, m, "skipped_busy", MotorBusy(why)))
+        else:
+            prepared.append((m, request))
+    enqueue = engine.enqueue
+    for motor, request in prepared:
+        enqueue(motor, request, now)
+    for slot, motor, counter, error in skipped:
+        scheduler.motor_counts[id(motor.codec)][counter] += 1
+        slot.set_result(error)
+    engine.pump()
+    return tick, prepared

@@ -1,0 +1,271 @@
+"""A motor on a Bus (:class:`Motor`: its codec, its latest telemetry, a method per command of its
+family) and its frames as an async iterator (:class:`MotorFrames`); servobus.bus re-exports both."""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import inspect
+from collections import deque
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterable
+from typing import TYPE_CHECKING, Any, Self, TypeVar
+
+import anyio
+
+from servobus.errors import MotorFault, MotorTimeout, TransportError
+from servobus.metrics import Metrics
+from servobus.protocols import BoundCodec, Command, Family, Reply, get_family
+from servobus.scheduler import Traffic
+
+if TYPE_CHECKING:
+    from servobus.bus import Bus
+
+__all__ = ["Motor", "MotorFrames", "NamedMotor", "command_classes"]
+
+R = TypeVar("R")
+
+
+def command_classes(family: str) -> dict[str, type[Command]]:
+    """The command classes of ``family`` by method name (``ReadStatus2`` -> ``read_status2``): the
+    names :class:`Motor` offers as methods (``await motor.read_status2()``).
+
+    Raises:
+        ValueError: no family has that name.
+    """
+    return get_family(family).methods()
+
+
+class MotorFrames:
+    """The decoded frames of one motor as an async iterator, buffered up to ``size``.
+
+    Use ``async with motor.frames() as frames: async for reply in frames: ...``. When the reader falls
+    behind, the oldest frames are dropped and counted in :attr:`dropped`, so a slow consumer never
+    holds memory without end or slows the Bus.
+    """
+
+    def __init__(self, motor: Motor, size: int, kinds: frozenset[Traffic]) -> None:
+        if size < 1:
+            raise ValueError(f"size={size} must be at least 1")
+        self.motor = motor
+        self.kinds = kinds
+        self.dropped = 0
+        self._size = size
+        self._items: deque[Reply] = deque()
+        self._ready: anyio.Event | None = None  # (anyio's events are one-shot: a new one per wait)
+        self._closed = False
+
+    def _push(self, traffic: Traffic, reply: Reply) -> None:
+        if traffic not in self.kinds:
+            return
+        if len(self._items) >= self._size:
+            self._items.popleft()
+            self.dropped += 1
+        self._items.append(reply)
+        if self._ready is not None:
+            self._ready.set()
+
+    async def __aenter__(self) -> Self:
+        self.motor._watchers.append(self)
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        self._end()
+
+    def _end(self) -> None:
+        """No more frames (the block was left, or the Bus closed): the iteration ends."""
+        self._closed = True
+        with contextlib.suppress(ValueError):
+            self.motor._watchers.remove(self)
+        if self._ready is not None:
+            self._ready.set()
+
+    def __aiter__(self) -> Self:
+        return self
+
+    async def __anext__(self) -> Reply:
+        while not self._items:
+            if self._closed:
+                raise StopAsyncIteration
+            self._ready = ready = anyio.Event()
+            await ready.wait()
+            self._ready = None
+        return self._items.popleft()
+
+
+class Motor:
+    """One motor on a Bus: its codec, its latest telemetry, and a method per command of its family.
+
+    ``await motor.speed_control(speed_dps=100)`` builds ``SpeedControl(speed_dps=100)`` (its range
+    checks raise ValueError before anything is sent) and awaits the typed reply.
+
+    Attributes:
+        codec: the bound codec (family, id, revision, link).
+        state: the latest reply, stream frame or error report received from this motor (None yet).
+        last_seen: when it was received (the loop's clock; None yet).
+        fault: the error flags the motor last reported (a :class:`~servobus.errors.MotorFault`, to
+            read or raise), or None when its last report of them had none (or none came yet).
+        online: the host-side watchdog's verdict: True once it answered, False after
+            ``offline_after_misses`` missed replies in a row or ``offline_after_s`` of silence, None
+            before either happened. A motor that answers again is online again.
+    """
+
+    def __init__(self, bus: Bus, codec: BoundCodec, commands: dict[str, type[Command]] | None = None) -> None:
+        self.bus = bus
+        self.codec = codec
+        self.state: Reply | None = None
+        self.last_seen: float | None = None
+        self.online: bool | None = None
+        self.fault: MotorFault | None = None
+        self._misses = 0
+        # by method name; from the Family the Bus bound it with (a plug-in may be unregistered)
+        self._commands = command_classes(codec.family) if commands is None else commands
+        self._watchers: list[MotorFrames] = []
+        self._probe_at = 0.0  # while offline: when cycle() may next send it a command, as a probe
+        # Streams switched off: the command byte -> (the "off" command, when it was last sent, the
+        # stream's interval in s).
+        self._ending: dict[int, tuple[Command, float, float]] = {}
+
+    def metrics(self) -> Metrics:
+        """This motor's counters and request-to-reply latency (see :class:`~servobus.metrics.Metrics`)."""
+        scheduler = self.bus.scheduler
+        key = id(self.codec)
+        return Metrics.of(scheduler.motor_counts[key], scheduler.motor_latency[key].snapshot())
+
+    @contextlib.asynccontextmanager
+    async def stream(
+        self, command: int | type[Command], *, interval_ms: int, size: int = 64
+    ) -> AsyncIterator[MotorFrames]:
+        """Have the motor stream ``command``'s reply every ``interval_ms`` (MyActuator 0xB6) and iterate
+        the frames; the stream is switched off when the block is left, however it is left.
+
+        ``async with motor.stream(ma.ReadStatus2, interval_ms=10) as frames: async for r in frames``.
+        While a stream is on the motor answers no requests (MyActuator §9 item 18), except reads of
+        the streamed command, which the next stream frame answers.
+
+        Raises:
+            ValueError: the family has no streams, the command cannot be streamed, or a bad interval.
+        """
+        active_reply: Callable[..., Command] | None = self._commands.get("active_reply")
+        if active_reply is None:
+            raise ValueError(f"{self.codec.family} motors have no active-reply streams")
+        code = command if isinstance(command, int) else command.CODE
+        if code is None:
+            raise ValueError(f"{command!r} has no command byte to stream")
+        on = active_reply(command=code, enabled=True, interval_ms=interval_ms)
+        off = active_reply(command=code, enabled=False)
+        async with self.frames(size=size, kinds=(Traffic.STREAM,)) as frames:
+            self._ending.pop(code, None)
+            await self.request(on)
+            try:
+                yield frames
+            finally:
+                with anyio.CancelScope(shield=True), contextlib.suppress(TransportError, MotorTimeout):
+                    await self.request(off)
+                    # "off" gets no reply: if it was lost, the frames that keep coming say so, and
+                    # the Bus sends it again (Bus._stream_goes_on).
+                    self._ending[code] = (off, self.bus._now(), interval_ms / 1000)
+
+    def frames(
+        self, *, size: int = 64, kinds: Iterable[Traffic] = (Traffic.STREAM, Traffic.REPORT)
+    ) -> MotorFrames:
+        """This motor's decoded frames of ``kinds`` (default: 0xB6 stream frames and error reports)
+        as an async iterator; enable a stream first (MyActuator: ``await motor.active_reply(...)``).
+
+        Raises:
+            ValueError: ``size`` below 1.
+        """
+        return MotorFrames(self, size, frozenset(kinds))
+
+    @property
+    def motor_id(self) -> int:
+        return self.codec.motor_id
+
+    def __repr__(self) -> str:
+        return f"<Motor {self.codec.family} {self.codec.motor_id} on {self.bus.name}>"
+
+    async def request(self, command: Command[R], *, timeout_s: float | None = None, retries: int = 0) -> R:
+        """Send ``command`` and await its reply: the type its class declares (``Command[StatusReply]``),
+        None for commands that get none. A command to a motor that streams gets no reply either
+        (MyActuator §4.36): then it is None too, whatever its class declares.
+
+        Raises:
+            ValueError: the command is refused by the codec (before any frame is sent).
+            MotorTimeout: no reply within the timeout (the codec's default for the command).
+            TransportError: the transport was lost or refused the frame.
+            RuntimeError: called from another event loop than the Bus's (servobus.sync.Bus is for threads).
+        """
+        return await self.bus.request(self, command, timeout_s=timeout_s, retries=retries)
+
+    if not TYPE_CHECKING:  # the typed subclass (Family.motor) spells each method; this is for the rest
+
+        def __getattr__(self, name: str) -> Callable[..., Awaitable[Reply | None]]:
+            try:
+                cls = self.__dict__["_commands"][name]
+            except KeyError:
+                raise AttributeError(f"{self.codec.family} motors have no command {name!r}") from None
+
+            async def call(
+                *args: Any, timeout_s: float | None = None, retries: int = 0, **fields: Any
+            ) -> Reply | None:
+                if args:  # the command's fields in their declaration order, as the command lists them
+                    fields = _positional_fields(cls, name, args, fields)
+                return await self.request(cls(**fields), timeout_s=timeout_s, retries=retries)
+
+            call.__name__ = name
+            call.__doc__ = f"Send {cls.__name__} and await its reply.\n\n{cls.__doc__ or ''}"
+            return call
+
+    def __dir__(self) -> list[str]:
+        return [*super().__dir__(), *self._commands]
+
+
+if TYPE_CHECKING:
+
+    class NamedMotor(Motor):
+        """What a type checker knows of a motor bound by its family's name: its methods exist,
+        untyped (``bus.motor(FAMILY, id)`` gives the typed ones)."""
+
+        def __getattr__(self, name: str) -> Callable[..., Awaitable[Any]]: ...
+
+else:
+    NamedMotor = Motor
+
+
+def _motor_class(family: Family[Any]) -> type[Motor]:
+    """The family's typed Motor class (Motor itself where it has none), its methods documented
+    with their commands' docstrings (the generated file keeps one line a method)."""
+    if family.motor is None:
+        return Motor
+    cls: type[Motor] = family.motor()
+    if "_documented" not in cls.__dict__:
+        for name, command in family.methods().items():
+            if name in Motor.__dict__:
+                raise TypeError(f"{family.name}: command {command.__name__} would hide Motor.{name}")
+            method = cls.__dict__.get(name)
+            if method is not None and method.__doc__ is None:
+                method.__doc__ = f"Send {command.__name__} and await its reply.\n\n{command.__doc__ or ''}"
+        cls._documented = True  # type: ignore[attr-defined]
+    return cls
+
+
+def _positional_fields(
+    cls: type[Command], name: str, args: tuple[Any, ...], fields: dict[str, Any]
+) -> dict[str, Any]:
+    """``args`` given to ``motor.<name>(...)`` as keyword fields of ``cls``, in declaration order."""
+    names = [f.name for f in dataclasses.fields(cls) if f.init]  # type: ignore[arg-type]
+    if len(args) > len(names):
+        listed = ", ".join(names) or "none"
+        raise TypeError(f"{name}() takes {len(names)} positional field(s) ({listed}), {len(args)} given")
+    for field_name, value in zip(names, args, strict=False):
+        if field_name in fields:
+            raise TypeError(f"{name}() got {field_name!r} both by position and by keyword")
+        fields[field_name] = value
+    return fields
+
+
+def _refuse_coroutine(callback: Callable[..., object], method: str) -> None:
+    if inspect.iscoroutinefunction(callback) or inspect.iscoroutinefunction(type(callback).__call__):
+        raise TypeError(
+            f"{method}() takes a plain function: {callback!r} is async and would never be awaited "
+            "(start it in a task group from a plain one)"
+        )
