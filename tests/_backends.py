@@ -20,9 +20,9 @@ BACKENDS = ("asyncio", "trio")
 
 
 def _looptime_loop() -> asyncio.AbstractEventLoop:
-    import looptime
+    from servobus.sim.virtual import new_event_loop  # (the simulator's own: no idle cycles before a jump)
 
-    return looptime.patch_event_loop(asyncio.new_event_loop(), start=0)
+    return new_event_loop(start=0)
 
 
 def virtual(backend: str) -> tuple[str, dict[str, Any]]:

@@ -159,17 +159,28 @@ def _stops(sniffer: Sniffer, code: int = 0x81) -> set[int]:
     }
 
 
+class _TaskClockSim(SimTransport):
+    task_clock = True  # (its clock is a task of the link on asyncio too, as on trio)
+
+
+@pytest.mark.parametrize("opener", ["bus", "user", "user, clock task"])
 @pytest.mark.parametrize("how", ["exception", "cancelled", "cancelled while waiting"])
-async def test_a_bus_left_by_an_exception_or_a_cancellation_stops_its_motors(how: str) -> None:
+async def test_a_bus_left_by_an_exception_or_a_cancellation_stops_its_motors(how: str, opener: str) -> None:
     """Left by the block's exception, by the cancellation of the scope around it (its deadline),
     or by that cancellation while a request waits for its reply: every commanded motor gets the
-    safe command and acknowledges it, and the block's exception goes on as it was."""
+    safe command and acknowledges it, and the block's exception goes on as it was. The same when
+    the user opened the link around the Bus: the cancellation does not take the link's tasks (its
+    clock, on the task lane) away before the safe stop went out and was answered."""
     motors = [MyActuatorMotor(i) for i in (1, 2, 3)]
     motors[2].unresponsive = True  # (for "cancelled while waiting")
     sniffer = Sniffer()
-    transport = SimTransport(SimCanNetwork([*motors, sniffer]))
+    kind = _TaskClockSim if opener.endswith("task") else SimTransport
+    transport = kind(SimCanNetwork([*motors, sniffer]))
     with anyio.move_on_after(1.0) as scope, contextlib.suppress(RuntimeError):
-        async with Bus(transport) as bus:  # (the Bus opens the link, and closes it)
+        async with contextlib.AsyncExitStack() as stack:
+            if opener != "bus":
+                await stack.enter_async_context(transport)
+            bus = await stack.enter_async_context(Bus(transport))
             for m in (1, 2):
                 await bus.motor("myactuator", m).speed_control(speed_dps=90)
             if how == "exception":

@@ -26,9 +26,9 @@ from typing import Protocol
 
 import anyio
 import can
-from anyio.abc import TaskGroup
 
 from servobus.runtime import Runtime
+from servobus.transports._owned import LinkTasks
 from servobus.transports._watch import ReadWatch, loop_context
 
 __all__ = ["FdReader", "NotifierReader", "Reader", "ThreadReader", "device_failed"]
@@ -85,7 +85,7 @@ class FdReader:
     """One frame per readiness of the bus's descriptor, read on the loop."""
 
     def __init__(
-        self, sink: Sink, bus: can.BusABC, fd: int, generation: int, runtime: Runtime, tasks: TaskGroup
+        self, sink: Sink, bus: can.BusABC, fd: int, generation: int, runtime: Runtime, tasks: LinkTasks
     ) -> None:
         self._sink = sink
         self._bus = bus
@@ -244,7 +244,7 @@ def start_reader(
     notifier: can.Notifier | None,
     generation: int,
     runtime: Runtime,
-    tasks: TaskGroup,
+    tasks: LinkTasks,
 ) -> Reader:
     """The reader for ``bus``: the notifier's listener, the descriptor's watch, or a thread; started."""
     reader: FdReader | ThreadReader | NotifierReader

@@ -6,33 +6,70 @@ around it: the group must be left by that task, with no cancel scope entered aft
 own clean-up). While the group is open, the opening task runs inside its cancel scope: a
 background task that fails cancels that task too, and ``close()`` (or ``async with``'s exit) raises
 the failure, so no error of a link's tasks is lost.
+
+A link's tasks run shielded until ``close()`` (or a loss) cancels them: a link lives until it is
+closed, so a cancellation of the scope around an opened link (Ctrl-C, SIGTERM through
+:func:`servobus.signals.stop_on`) does not take its writer, readers or clock away while a Bus on it
+still sends its motors the safe stop.
 """
 
 from __future__ import annotations
 
+from collections.abc import Awaitable, Callable
 from types import TracebackType
+from typing import Any
 
 import anyio
 from anyio import TaskInfo
 from anyio.abc import TaskGroup
 
-__all__ = ["OwnedTaskGroup"]
+__all__ = ["LinkTasks", "OwnedTaskGroup"]
+
+
+class LinkTasks:
+    """Where a link starts its background tasks: each runs in a shielded scope of its own, which
+    only the link cancels (its own stop, or :meth:`OwnedTaskGroup.leave`)."""
+
+    __slots__ = ("_group", "_scopes")
+
+    def __init__(self, group: TaskGroup) -> None:
+        self._group = group
+        self._scopes: set[anyio.CancelScope] = set()
+
+    def start_soon(self, func: Callable[..., Awaitable[Any]], *args: object, name: object = None) -> None:
+        scope = anyio.CancelScope(shield=True)
+        self._scopes.add(scope)
+        self._group.start_soon(self._run, scope, func, args, name=name)
+
+    async def _run(
+        self, scope: anyio.CancelScope, func: Callable[..., Awaitable[Any]], args: tuple[object, ...]
+    ) -> None:
+        try:
+            with scope:
+                await func(*args)
+        finally:
+            self._scopes.discard(scope)
+
+    def cancel(self) -> None:
+        for scope in list(self._scopes):
+            scope.cancel()
 
 
 class OwnedTaskGroup:
     """One link's task group, and the task that opened it."""
 
-    __slots__ = ("_group", "_name", "_owner")
+    __slots__ = ("_group", "_name", "_owner", "_tasks")
 
     def __init__(self, name: str) -> None:
         self._name = name
         self._group: TaskGroup | None = None
+        self._tasks: LinkTasks | None = None
         self._owner: TaskInfo | None = None
 
     @property
-    def group(self) -> TaskGroup | None:
-        """The entered task group (None while not entered)."""
-        return self._group
+    def tasks(self) -> LinkTasks | None:
+        """Where the link starts its tasks (None while the group is not entered)."""
+        return self._tasks
 
     async def enter(self) -> TaskGroup:
         """Enter a new task group in the calling task.
@@ -45,6 +82,7 @@ class OwnedTaskGroup:
         group = anyio.create_task_group()
         await group.__aenter__()
         self._group = group
+        self._tasks = LinkTasks(group)
         self._owner = anyio.get_current_task()
         return group
 
@@ -81,7 +119,10 @@ class OwnedTaskGroup:
         if group is None:
             return False
         self.check_owner("close()")
-        self._group = self._owner = None
+        tasks = self._tasks
+        self._group = self._owner = self._tasks = None
+        if tasks is not None:
+            tasks.cancel()
         group.cancel_scope.cancel()
         absorbed = await group.__aexit__(exc_type, exc, tb)
         return exc is not None and bool(absorbed)  # (True with no exception passed means nothing)

@@ -9,10 +9,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
 import anyio
-from anyio.abc import TaskGroup
 
 from servobus.errors import TransportError
 from servobus.runtime import Waiter
+from servobus.transports._owned import LinkTasks
 from servobus.transports._waiters import WaiterList
 from servobus.transports.events import FramesDropped, TransportEvent
 from servobus.transports.stats import TransportStats
@@ -97,7 +97,7 @@ class SendQueue(Generic[TxT]):
         if not transport.is_open:
             raise transport._error()
 
-    def start(self, tasks: TaskGroup, generation: int) -> None:
+    def start(self, tasks: LinkTasks, generation: int) -> None:
         """Start this connection's writer (a loss or a close stops it: :meth:`stop`)."""
         self.stop()
         self._scope = scope = anyio.CancelScope()

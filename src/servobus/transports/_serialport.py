@@ -29,10 +29,10 @@ import termios
 from typing import Any, Protocol
 
 import anyio
-from anyio.abc import TaskGroup
 
 from servobus.errors import TransportError
 from servobus.runtime import Runtime
+from servobus.transports._owned import LinkTasks
 from servobus.transports._watch import ReadWatch
 
 __all__ = ["Owner", "SerialPort"]
@@ -76,7 +76,7 @@ class SerialPort:
         generation: int,
         port: str,
         runtime: Runtime,
-        tasks: TaskGroup,
+        tasks: LinkTasks,
         *,
         read_size: int = READ_SIZE,
         **serial_options: Any,

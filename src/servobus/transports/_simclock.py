@@ -21,9 +21,9 @@ from typing import Any, Protocol
 
 import anyio
 import anyio.lowlevel
-from anyio.abc import TaskGroup
 
 from servobus.runtime import Runtime, Waiter
+from servobus.transports._owned import LinkTasks
 
 __all__ = ["Clock", "LoopClock", "TaskClock", "start_clock"]
 
@@ -135,7 +135,7 @@ class TaskClock:
 
 def start_clock(
     lane: Runtime,
-    tasks: TaskGroup,
+    tasks: LinkTasks,
     next_at: Callable[[], float | None],
     fire: Callable[[int], object],
     generation: int,

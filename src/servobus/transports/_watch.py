@@ -28,9 +28,9 @@ from collections.abc import Callable
 from typing import Any
 
 import anyio
-from anyio.abc import TaskGroup
 
 from servobus.runtime import Runtime
+from servobus.transports._owned import LinkTasks
 
 __all__ = ["ASYNCIO_CALLBACKS", "ReadWatch", "loop_context"]
 
@@ -65,7 +65,7 @@ class ReadWatch:
     __slots__ = ("_ended", "_fd", "_loop", "_name", "_on_ready", "_runtime", "_scope", "_tasks", "lane")
 
     def __init__(
-        self, runtime: Runtime, tasks: TaskGroup, fd: int, on_ready: Callable[[], object], name: str
+        self, runtime: Runtime, tasks: LinkTasks, fd: int, on_ready: Callable[[], object], name: str
     ) -> None:
         self._fd = fd
         self._on_ready = on_ready

@@ -63,13 +63,12 @@ from types import TracebackType
 from typing import Any, ClassVar, Generic, Self, TypeVar
 
 import anyio
-from anyio.abc import TaskGroup
 
 from servobus import runtime as _runtime
 from servobus.errors import TransportError
 from servobus.transports._inbox import Inbox, ReceiveSide
 from servobus.transports._listeners import EventSource, Listeners
-from servobus.transports._owned import OwnedTaskGroup
+from servobus.transports._owned import LinkTasks, OwnedTaskGroup
 from servobus.transports._recovery import Recovery
 from servobus.transports._sending import Outgoing, SendQueue, SendQueueFull, SendReporter, SendReports
 from servobus.transports._waiters import WaiterList
@@ -186,12 +185,12 @@ class Transport(ReceiveSide[RxT], SendReports, EventSource, abc.ABC, Generic[RxT
             return time.monotonic()
 
     @property
-    def _tasks(self) -> TaskGroup:
+    def _tasks(self) -> LinkTasks:
         """The transport's task group (from :meth:`_connect` on, until :meth:`close`)."""
-        group = self._owned.group
-        if group is None:
+        tasks = self._owned.tasks
+        if tasks is None:
             raise RuntimeError(f"{self.name}: no task group: the transport is not open")
-        return group
+        return tasks
 
     # ----------------------------------------------------------------- life cycle
 

@@ -25,13 +25,12 @@ from types import TracebackType
 from typing import Any, Self
 
 import anyio
-from anyio.abc import TaskGroup
 
 from servobus import runtime as _runtime
 from servobus.errors import TransportError
 from servobus.frame import Frame
 from servobus.transports._listeners import Listener, Listeners
-from servobus.transports._owned import OwnedTaskGroup
+from servobus.transports._owned import LinkTasks, OwnedTaskGroup
 from servobus.transports._sending import SendReporter
 from servobus.transports.contract import Consumer, LineRules
 from servobus.transports.events import FramesDropped, StateChanged, TransportEvent, TransportState
@@ -62,12 +61,12 @@ class LinkBase:
         return self._open
 
     @property
-    def _tasks(self) -> TaskGroup:
+    def _tasks(self) -> LinkTasks:
         """The link's task group (between ``open()`` and ``close()``)."""
-        group = self._owned.group
-        if group is None:
+        tasks = self._owned.tasks
+        if tasks is None:
             raise RuntimeError(f"{self.name}: no task group: the link is not open")
-        return group
+        return tasks
 
     def _now(self) -> float:
         """The loop's clock (``anyio.current_time()``)."""
