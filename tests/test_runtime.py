@@ -91,3 +91,21 @@ async def test_call_soon_threadsafe_hands_over_from_a_thread_in_order() -> None:
         await done
     thread.join()
     assert got == list(range(100))
+
+
+@pytest.mark.parametrize("anyio_backend", ["trio"])  # (asyncio's loop has its own exception handler)
+async def test_on_trio_a_failing_callback_is_logged_and_the_run_goes_on(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """In trio's queue a callback's exception would end the whole run (TrioInternalError)."""
+    lane = runtime.current()
+    seen: list[int] = []
+
+    def boom() -> None:
+        raise ValueError("a callback's bug")
+
+    lane.call_soon(boom)
+    lane.call_soon(seen.append, 1)
+    await _soon(seen)
+    assert seen == [1]
+    assert "a callback's bug" in caplog.text

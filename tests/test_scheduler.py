@@ -173,6 +173,33 @@ def test_a_cancelled_requests_reply_is_late_and_never_reaches_a_later_request() 
     assert new.state is S.REPLIED and scheduler.pending == 0
 
 
+def test_a_request_given_up_on_before_its_send_report_holds_its_key_until_the_report_times_it() -> None:
+    """Cancelled while its frame waits in the link's queue: that frame may still leave, later than
+    the request's own timeout, and its reply must not answer the next request with its key. The key
+    is held until the report could come; the report (the Engine passes it on) re-times the hold
+    from when the frame left, and the late reply, when it comes, is counted late and frees it."""
+    codec = MA.bind(1)
+    scheduler = Scheduler([codec], min_reply_s=0.0001, report_within_s=0.6)
+    old = scheduler.request(codec, ma.ReadStatus2())
+    scheduler.submit(old, 0.0)
+    out, _ = scheduler.poll(0.0)
+    assert out == [old]
+    scheduler.cancel(old, 0.001)  # no send report yet
+    new = scheduler.request(codec, ma.ReadStatus2())
+    scheduler.submit(new, 0.04)
+    out, _ = scheduler.poll(0.04)
+    assert out == [] and new.state is S.QUEUED  # past the old one's timeout, still held
+    scheduler.sent_after_all(old, 0.05)  # its frame left after all
+    out, _ = scheduler.poll(0.0502)
+    assert out == []
+    assert scheduler.receive(_reply(1, t=0.0507), 0.0507).traffic is Traffic.LATE
+    out, _ = scheduler.poll(0.0508)  # the late reply came: the key is free again
+    assert out == [new]
+    scheduler.sent(new, 0.0508)
+    scheduler.receive(_reply(1, t=0.0511), 0.0511)
+    assert new.state is S.REPLIED and scheduler.pending == 0
+
+
 def test_after_a_timeout_the_key_is_held_for_the_late_reply_then_released_by_time() -> None:
     codec = MA.bind(1)
     scheduler = Scheduler([codec], late_hold_s=0.05)

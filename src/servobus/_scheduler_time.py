@@ -33,6 +33,7 @@ _TIMED_OUT = RequestState.TIMED_OUT
 _REPLIED = RequestState.REPLIED
 _TO_SENT = FROM[_SENT]
 _OUT = frozenset({_SENDING, _SENT})
+_GIVEN_UP = frozenset({RequestState.CANCELLED, _TIMED_OUT})
 
 
 class Timing:
@@ -242,8 +243,12 @@ class Timing:
         key = request.key
         if self.late_hold_s is not None:
             until = now + self.late_hold_s
-        elif request.sent_at is None:  # (cancelled before its send report: its time is unknown)
-            until = now + request.timeout_s
+        elif request.sent_at is None:
+            # Given up on before its send report: the frame may still be in the link's queue, and
+            # its reply could answer the next request with its key. Held until the report can come
+            # (report_within_s after hand-over) and a reply after it; the report re-bases this.
+            handed = request.handed_at if request.handed_at is not None else now
+            until = max(now, handed + (self.report_within_s or 0.0)) + request.timeout_s
         else:
             until = request.sent_at + max(2.0 * request.timeout_s, self._late_s(request))
         recent = self._recent
@@ -255,6 +260,26 @@ class Timing:
             recent.prune(now)
         if until > now:
             self._held[key] = max(until, self._held.get(key, until))
+
+    def sent_after_all(self, request: Request, at: float) -> None:
+        """The send report of a request given up on before it came (cancelled, or timed out
+        unreported): its frame left at ``at``, so its key's hold for the late reply is counted
+        from then (:meth:`_expect_late`), no longer from a guess."""
+        if request.sent_at is not None or request.key is None or request.state not in _GIVEN_UP:
+            return
+        key = request.key
+        entries = self._recent.late.get(key) or []
+        for entry in entries:
+            if entry[1] is None:  # (its entry: made with no send time)
+                entries.remove(entry)
+                break
+        holds = [entry[3] for entry in entries]  # (the key's other holds stand)
+        if holds:
+            self._held[key] = max(holds)
+        else:
+            self._held.pop(key, None)
+        request.sent_at = at
+        self._expect_late(request, at)
 
     def _late_s(self, request: Request) -> float:
         """How late ``request``'s reply may come after it left: from its estimate once that rests

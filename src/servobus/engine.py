@@ -262,9 +262,11 @@ class Engine:
             state = handle.state  # type: ignore[attr-defined]
         except AttributeError:
             return  # (a frame sent past the scheduler: a broadcast's)
-        if state is not _SENDING:
-            return  # (cancelled, or timed out unreported, while its frame was on its way)
         request: Request = handle  # type: ignore[assignment]
+        if state is not _SENDING:  # (cancelled, or timed out unreported, while its frame was on its way)
+            if sent_at is not None:
+                self.scheduler.sent_after_all(request, sent_at)  # (its late reply's hold)
+            return
         if reason is None and sent_at is not None:  # (the common case, written out: one per request)
             early = self.scheduler.sent(request, sent_at)
             if early is None and request.state is _SENT:

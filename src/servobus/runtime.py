@@ -18,6 +18,7 @@ both backends). Nothing else in servobus imports asyncio or trio for these.
 from __future__ import annotations
 
 import asyncio
+import logging
 import sys
 from collections.abc import Callable, Generator
 from typing import Any, Generic, Protocol, TypeVar
@@ -25,6 +26,8 @@ from typing import Any, Generic, Protocol, TypeVar
 __all__ = ["Runtime", "RuntimeMismatch", "Waiter", "WaiterCancelled", "current"]
 
 T = TypeVar("T")
+
+logger = logging.getLogger("servobus.runtime")
 
 
 class WaiterCancelled(Exception):
@@ -191,6 +194,15 @@ class _Raised:
         self.exc = exc
 
 
+def _logged(fn: Callable[..., object], args: tuple[object, ...]) -> None:
+    """Run a callback handed to trio's queue: an exception is logged, as asyncio does with a
+    callback's (in trio's queue it would end the whole run with TrioInternalError)."""
+    try:
+        fn(*args)
+    except Exception:
+        logger.exception("callback %r failed", fn)
+
+
 class _TrioRuntime:
     name = "trio"
 
@@ -199,8 +211,13 @@ class _TrioRuntime:
 
         self.token = trio.lowlevel.current_trio_token()
         self.time = trio.current_time
+        run_sync_soon = self.token.run_sync_soon
+
         # (run_sync_soon is thread-safe; from the loop's thread it is the same queue, in order)
-        self.call_soon = self.call_soon_threadsafe = self.token.run_sync_soon
+        def call_soon(fn: Callable[..., object], *args: object) -> None:
+            run_sync_soon(_logged, fn, args)
+
+        self.call_soon = self.call_soon_threadsafe = call_soon
         self.reschedule = trio.lowlevel.reschedule
         self.current_task = trio.lowlevel.current_task
         self.park = trio.lowlevel.wait_task_rescheduled
