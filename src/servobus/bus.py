@@ -350,7 +350,7 @@ class Bus:
         request = self._engine.submit(motor, command, timeout_s, retries)
         try:
             reply: Reply | None = await request.context
-        except anyio.get_cancelled_exc_class():
+        except BaseException:  # cancelled or interrupted: given up, not left in flight (a no-op if it ended)
             self._engine.abandon((request,))
             raise
         return cast(R, reply)

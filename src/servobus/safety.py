@@ -27,7 +27,15 @@ async def safe_stop(bus: Bus) -> None:
     """Send ``bus.safe`` to every motor the Bus commanded, again to each one that did not answer,
     until all answered or ``bus.safe_timeout_s`` ended; sets ``bus.safe_sent`` and
     ``bus.safe_acknowledged``, and names the motors that did not answer in a warning."""
-    if bus.safe is None or not bus._commanded or not bus.transport.is_open:
+    if bus.safe is None or not bus._commanded:
+        return
+    if not bus.transport.is_open:
+        logger.warning(
+            "%s: the link is not open: the %s command cannot reach %s",
+            bus.name,
+            bus.safe,
+            ", ".join(repr(m) for m in bus._commanded.values()),
+        )
         return
     commands: dict[Motor, Command] = {}
     for motor in list(bus._commanded.values()):
