@@ -393,7 +393,7 @@ async def test_open_failure_leaves_it_closed_and_a_second_open_is_refused() -> N
     transport = MemoryTransport(fail_connects=1)
     with pytest.raises(TransportError, match="not there"):
         await transport.open()
-    assert transport.state is TransportState.CLOSED and transport._owned.group is None
+    assert transport.state is TransportState.CLOSED and transport._owned.tasks is None
     await transport.open()
     with pytest.raises(RuntimeError, match="already open"):
         await transport.open()
@@ -503,7 +503,7 @@ async def test_nothing_the_transport_started_runs_after_close() -> None:
         await anyio.sleep(0.05)
         assert await transport.receive() == b"tick"
         assert transport.readers_running == 1  # the lost connection's reader has ended
-    assert transport.readers_running == 0 and transport._owned.group is None
+    assert transport.readers_running == 0 and transport._owned.tasks is None
     await anyio.sleep(0.1)
     assert transport.readers_running == 0
 

@@ -572,6 +572,7 @@ async def test_a_stalled_port_never_writes_a_stale_frame_and_never_spins() -> No
     assert stats.frames_out == len(written) and stats.frames_out + stats.stale == seq
     # The line works at once after the stall: most set-points sent since arrived.
     assert stats.frames_out > (seq - stalled_seq) / 2
-    # No spin: CPU time while stalled and after stays a small part of the wall time.
-    assert stalled_cpu < 0.2 * stalled_wall, f"{stalled_cpu:.3f} s CPU in {stalled_wall:.3f} s stalled"
+    # No spin: CPU time while stalled and after stays a small part of the wall time. (A spin is
+    # 100 %; the test's own 1 kHz stream costs 10-22 % of a loaded 2-core machine on trio.)
+    assert stalled_cpu < 0.35 * stalled_wall, f"{stalled_cpu:.3f} s CPU in {stalled_wall:.3f} s stalled"
     assert idle_cpu < 0.2 * idle_wall, f"{idle_cpu:.3f} s CPU in {idle_wall:.3f} s after the stall"

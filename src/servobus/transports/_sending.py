@@ -11,9 +11,8 @@ from typing import TYPE_CHECKING, Any, Generic, TypeVar
 import anyio
 
 from servobus.errors import TransportError
-from servobus.runtime import Waiter
 from servobus.transports._owned import LinkTasks
-from servobus.transports._waiters import WaiterList
+from servobus.transports._waiters import Alarm, WaiterList
 from servobus.transports.events import FramesDropped, TransportEvent
 from servobus.transports.stats import TransportStats
 
@@ -58,7 +57,7 @@ class SendQueue(Generic[TxT]):
     group, inside a cancel scope of its own that a loss or a close cancels.
     """
 
-    __slots__ = ("_scope", "_transport", "_wake", "idle", "items", "size", "stale_after_s", "transmitting")
+    __slots__ = ("_alarm", "_scope", "_transport", "idle", "items", "size", "stale_after_s", "transmitting")
 
     def __init__(self, transport: Transport[Any, TxT], size: int, stale_after_s: float | None) -> None:
         self._transport = transport
@@ -68,7 +67,7 @@ class SendQueue(Generic[TxT]):
         self.transmitting = False
         #: tasks in drain(), woken when the queue is empty and nothing is being written
         self.idle = WaiterList()
-        self._wake: Waiter[None] | None = None
+        self._alarm = Alarm()  # the writer's, while the queue is empty
         self._scope: anyio.CancelScope | None = None
 
     def put(self, outgoing: Outgoing[TxT]) -> None:
@@ -79,9 +78,7 @@ class SendQueue(Generic[TxT]):
                 f"{transport.name}: send queue full ({self.size} frames); await drain() before sending more"
             )
         self.items.append(outgoing)
-        wake = self._wake
-        if wake is not None and not wake.done():
-            wake.set_result(None)
+        self._alarm.ring()
 
     async def drain(self) -> None:
         """Until every queued frame has been written or dropped.
@@ -125,11 +122,7 @@ class SendQueue(Generic[TxT]):
             while True:
                 if not items:
                     self.idle.wake_all()
-                    self._wake = wake = lane.waiter()
-                    try:
-                        await wake
-                    finally:
-                        self._wake = None
+                    await self._alarm.wait(lane)
                     continue
                 batch = [items.popleft() for _ in range(min(transport.batch_size, len(items)))]
                 batch = self._drop_stale(batch, transport._now())

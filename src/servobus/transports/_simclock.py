@@ -22,8 +22,9 @@ from typing import Any, Protocol
 import anyio
 import anyio.lowlevel
 
-from servobus.runtime import Runtime, Waiter
+from servobus.runtime import Runtime
 from servobus.transports._owned import LinkTasks
+from servobus.transports._waiters import Alarm
 
 __all__ = ["Clock", "LoopClock", "TaskClock", "start_clock"]
 
@@ -77,7 +78,7 @@ def _asyncio_context() -> contextvars.Context:
 class TaskClock:
     """Any backend's lane: one task in the transport's task group (see the module's docstring)."""
 
-    __slots__ = ("_fire", "_generation", "_lane", "_next_at", "_stop", "_wait", "_wake")
+    __slots__ = ("_alarm", "_fire", "_generation", "_lane", "_next_at", "_stop", "_wait")
 
     def __init__(
         self,
@@ -92,12 +93,11 @@ class TaskClock:
         self._generation = generation
         self._stop = anyio.CancelScope()
         self._wait: anyio.CancelScope | None = None
-        self._wake: Waiter[None] | None = None
+        self._alarm = Alarm()  # rung while it idles with nothing armed
 
     def poke(self, when: float) -> None:
-        if self._wake is not None:  # idle: wake it (no cancellation)
-            if not self._wake.done():
-                self._wake.set_result(None)
+        if self._alarm.waiting:  # idle: wake it (no cancellation)
+            self._alarm.ring()
         elif self._wait is not None:  # asleep until a later time: cut the sleep short
             self._wait.cancel()
         # (otherwise it is firing now, and reads the armed time when done)
@@ -112,11 +112,7 @@ class TaskClock:
             while True:
                 when = self._next_at()
                 if when is None:
-                    self._wake = wake = lane.waiter()
-                    try:
-                        await wake
-                    finally:
-                        self._wake = None
+                    await self._alarm.wait(lane)
                     continue
                 delay = when - lane.time()
                 if delay > 0:

@@ -15,7 +15,7 @@ from typing import Any
 
 from servobus.runtime import Runtime, Waiter
 
-__all__ = ["WaiterList"]
+__all__ = ["Alarm", "WaiterList"]
 
 
 class WaiterList:
@@ -51,3 +51,29 @@ class WaiterList:
             if not waiter.done():
                 waiter.set_exception(error())
         self._waiters.clear()
+
+
+class Alarm:
+    """One task's wake-up: it parks in :meth:`wait` until :meth:`ring` (a ring while it does not
+    wait is dropped: the task looks at its work again before it parks)."""
+
+    __slots__ = ("_waiter",)
+
+    def __init__(self) -> None:
+        self._waiter: Waiter[None] | None = None
+
+    @property
+    def waiting(self) -> bool:
+        return self._waiter is not None
+
+    async def wait(self, runtime: Runtime) -> None:
+        self._waiter = waiter = runtime.waiter()
+        try:
+            await waiter
+        finally:
+            self._waiter = None
+
+    def ring(self) -> None:
+        waiter = self._waiter
+        if waiter is not None and not waiter.done():
+            waiter.set_result(None)
