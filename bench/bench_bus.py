@@ -80,7 +80,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Coroutine, Sequence
+from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -375,16 +375,25 @@ class Sample:
 async def _cycles(bus: Bus, cycles: int, motors: int = MOTORS) -> Sample:
     """Transactions/s of ``cycles`` cycles of ReadStatus2 over the bus's motors 1..n (after a warm-up)."""
     items = [(bus.motor(FAMILY, i), ma.ReadStatus2()) for i in range(1, motors + 1)]
-    check(await bus.cycle(items), "warm-up cycle", motors)
+    sample, last = await _timed(lambda: bus.cycle(items), cycles, motors)
+    check(last, "last cycle", motors)
+    return sample
+
+
+async def _timed(
+    cycle: Callable[[], Awaitable[Sequence[object]]], cycles: int, motors: int
+) -> tuple[Sample, Sequence[object]]:
+    """``cycles`` runs of ``cycle()`` after one warm-up: the rate and CPU per transaction, and the
+    last run's results (for the caller to check)."""
+    await cycle()  # warm-up
     cpu = time.process_time()
     start = time.perf_counter()
     for _ in range(cycles - 1):
-        await bus.cycle(items)
-    last = await bus.cycle(items)
+        await cycle()
+    last = await cycle()
     elapsed = time.perf_counter() - start
     cpu = time.process_time() - cpu
-    check(last, "last cycle", motors)
-    return Sample(cycles * motors / elapsed, cpu / (cycles * motors) * 1e6)
+    return Sample(cycles * motors / elapsed, cpu / (cycles * motors) * 1e6), last
 
 
 def check(results: Sequence[object], what: str, motors: int = MOTORS) -> None:
@@ -436,17 +445,10 @@ async def floor_reflector(cycles: int, replies: dict[int, Frame], motors: int = 
             out.append(ident)
         return await asyncio.gather(*futures)
 
-    await cycle()  # warm-up
-    cpu = time.process_time()
-    start = time.perf_counter()
-    for _ in range(cycles - 1):
-        await cycle()
-    last = await cycle()
-    elapsed = time.perf_counter() - start
-    cpu = time.process_time() - cpu
+    sample, last = await _timed(cycle, cycles, motors)
     if len(last) != motors or any(not isinstance(f, Frame) for f in last):
         raise RuntimeError(f"floor: {last[:1]}")
-    return Sample(cycles * motors / elapsed, cpu / (cycles * motors) * 1e6)
+    return sample
 
 
 async def floor_reflector_trio(cycles: int, replies: dict[int, Frame], motors: int = MOTORS) -> Sample:
@@ -493,17 +495,10 @@ async def floor_reflector_trio(cycles: int, replies: dict[int, Frame], motors: i
         await park(abort)
         return results  # type: ignore[return-value]
 
-    await cycle()  # warm-up
-    cpu = time.process_time()
-    start = time.perf_counter()
-    for _ in range(cycles - 1):
-        await cycle()
-    last = await cycle()
-    elapsed = time.perf_counter() - start
-    cpu = time.process_time() - cpu
+    sample, last = await _timed(cycle, cycles, motors)
     if len(last) != motors or any(not isinstance(f, Frame) for f in last):
         raise RuntimeError(f"trio floor: {last[:1]}")
-    return Sample(cycles * motors / elapsed, cpu / (cycles * motors) * 1e6)
+    return sample
 
 
 async def _naive_loop(
