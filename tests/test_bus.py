@@ -524,7 +524,7 @@ async def test_an_error_in_the_bus_s_own_task_is_raised_from_its_block_not_lost(
         async with Bus(SimTransport(devices=[device, MyActuatorMotor(2), sniffer])) as bus:
             await bus.motor("myactuator", 2).speed_control(speed_dps=10.0)
 
-            def broken() -> None:
+            def broken(now: float | None = None) -> None:
                 raise ZeroDivisionError("a bug in the timer")
 
             bus._engine.on_timer = broken  # type: ignore[method-assign]

@@ -292,6 +292,16 @@ class Timing:
         trusted = [r.late_s() for r in self._measured() if r.samples >= TRUSTED_SAMPLES]
         return max([2.0 * rtt.base_s if rtt is not None else 0.0, *trusted])
 
+    def timeout_due(self, now: float) -> bool:
+        """Whether :meth:`expire` at ``now`` has a request to time out (not a line's rest or a held
+        key: those only let the next requests go)."""
+        if self._overtaken or (self._audit_at is not None and self._audit_at <= now):
+            return True
+        heap = self._deadlines
+        while heap and (heap[0][2].deadline != heap[0][0] or heap[0][2].state not in _OUT):
+            heapq.heappop(heap)  # the request left (replied, cancelled) or was sent again
+        return bool(heap) and heap[0][0] <= now
+
     def next_deadline(self) -> float | None:
         """When :meth:`expire` or :meth:`~servobus.scheduler.Scheduler.poll` next has something to
         do (None: nothing)."""
