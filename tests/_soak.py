@@ -316,7 +316,7 @@ class _Soak:
                 "held": len(scheduler._held),
                 "late_keys": len(scheduler._recent.late),
                 "replied_keys": len(scheduler._recent.replied),
-                "by_frame": len(bus._by_frame),
+                "in_flight": len(scheduler._in_flight),
             }
             for name, size in tables.items():
                 result.max_tables[name] = max(result.max_tables.get(name, 0), size)
