@@ -91,6 +91,7 @@ class FdReader:
         self._bus = bus
         self._generation = generation
         self._watch = ReadWatch(runtime, tasks, fd, self._on_readable, sink.name)
+        self._slcan = _is_python_can_slcan(bus)  # (its line buffer is bounded here: see below)
 
     def start(self) -> None:
         self._watch.start()
@@ -110,9 +111,18 @@ class FdReader:
             sink._lose(exc, self._generation)
             return
         finally:
-            _bound_line_buffer(bus, sink, self._generation)
+            if self._slcan:
+                _bound_line_buffer(bus, sink, self._generation)
         if message is not None:
             sink._take([(message, sink._now())], self._generation)
+
+
+def _is_python_can_slcan(bus: can.BusABC) -> bool:
+    try:
+        from can.interfaces.slcan import slcanBus
+    except ImportError:  # (python-can without its slcan interface)
+        return False
+    return isinstance(bus, slcanBus)
 
 
 def _bound_line_buffer(bus: can.BusABC, sink: Sink, generation: int) -> None:
