@@ -374,3 +374,30 @@ async def test_open_and_close_belong_to_one_task_and_nothing_runs_after_close(ki
     await link.close()
     assert len(anyio.get_running_tasks()) == before
     await link.close()  # twice is harmless
+
+
+@pytest.mark.anyio
+async def test_a_failing_consumer_or_reporter_is_logged_and_the_link_goes_on(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """The owner's callbacks run inside the link's own code (here, a task of the link): their error
+    is logged and reaches neither that task nor the next frame."""
+    calls: list[str] = []
+
+    def consumer(frames: list[Frame]) -> None:
+        calls.append("frames")
+        raise ValueError("the consumer's bug")
+
+    def reporter(handle: object, sent_at: float | None, reason: str | None) -> None:
+        calls.append("report")
+        raise KeyError("the reporter's bug")
+
+    async with EchoLink() as link:
+        link.set_consumer(consumer)
+        link.set_send_reporter(reporter)
+        for n in range(2):
+            link.send(Frame(arbitration_id=0x141, data=bytes([n])))
+            await anyio.sleep(0.01)
+        assert link.is_open
+    assert calls == ["report", "frames"] * 2
+    assert "the consumer's bug" in caplog.text and "the reporter's bug" in caplog.text

@@ -20,7 +20,8 @@ are here, once:
 from __future__ import annotations
 
 import copy
-from collections.abc import Sequence
+import logging
+from collections.abc import Callable, Sequence
 from types import TracebackType
 from typing import Any, Self
 
@@ -37,6 +38,8 @@ from servobus.transports.events import FramesDropped, StateChanged, TransportEve
 from servobus.transports.stats import TransportStats
 
 __all__ = ["LinkBase"]
+
+logger = logging.getLogger("servobus.transports")
 
 
 class LinkBase:
@@ -155,7 +158,7 @@ class LinkBase:
         if frame is not None:
             self._stats.bytes_out += len(frame.data)
         if self._reporter is not None:
-            self._reporter(handle, sent_at, None)
+            self._guarded(self._reporter, handle, sent_at, None)
 
     def _dropped(self, reason: str, handles: Sequence[object]) -> None:
         """Report the frames sent with ``handles`` as never to leave, for ``reason`` (a counter of
@@ -168,14 +171,22 @@ class LinkBase:
             self._emit(FramesDropped(reason, len(handles), self._runtime.time()))
         if self._reporter is not None:
             for handle in handles:
-                self._reporter(handle, None, reason)
+                self._guarded(self._reporter, handle, None, reason)
 
     def _deliver(self, frames: list[Frame]) -> None:
         """Hand received frames to the consumer (on the loop)."""
         self._stats.frames_in += len(frames)
         self._stats.bytes_in += sum(len(frame.data) for frame in frames)
         if self._consumer is not None:
-            self._consumer(frames)
+            self._guarded(self._consumer, frames)
+
+    def _guarded(self, callback: Callable[..., object], *args: object) -> None:
+        """Call the owner's consumer or reporter: its error is logged, as a Transport does, and
+        never reaches the link's own code (a task of it, or a callback on trio's queue)."""
+        try:
+            callback(*args)
+        except Exception:
+            logger.exception("%s: callback %r failed", self.name, callback)
 
     def _emit(self, event: TransportEvent) -> None:
         self._listeners.emit(event)
