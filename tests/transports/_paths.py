@@ -17,19 +17,19 @@ can be unplugged and plugged back in at the same stable link.
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import math
 import random
 import struct
 from collections.abc import AsyncIterator, Callable, Coroutine
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import anyio
+import anyio.abc
 import can
 
-from _serving import serving
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
 from servobus.sim.attach import serve_python_can, serve_rs485, serve_slcan
@@ -39,6 +39,8 @@ from servobus.sim.pty import PtyPort
 from servobus.sim.slcan import SlcanAdapter
 from servobus.transports import CanTransport, SerialTransport, SimTransport, SlcanTransport, Transport
 from sim._standins import Responder, SerialResponder
+
+from ._anyio_help import serving
 
 PATHS = ("slcan", "rs485", "virtual-fd", "native-slcan", "sim")
 REPLY_TIMEOUT_S = 0.2
@@ -60,7 +62,6 @@ class LinePath:
     peer_seen: Callable[[], list[bytes]]  # payloads of the requests the peer has received
     unplug: Callable[[], None] | None = None
     replug: Callable[[], Coroutine[Any, Any, None]] | None = None
-    tasks: list[asyncio.Task[None]] = field(default_factory=list)
 
     @staticmethod
     def seq_of(data: bytes) -> int:
@@ -82,26 +83,38 @@ async def open_path(name: str, tmp_path: Path, **transport_options: Any) -> Asyn
 
 
 class _PtyPeer:
-    """A simulated peer behind a pty at a stable link, which can be unplugged and come back."""
+    """A simulated peer behind a pty at a stable link, which can be unplugged and come back.
+
+    ``async with`` it around the transport: its servings run in its own task group, entered before
+    the transport's (anyio nests task groups: the transport is closed inside it)."""
 
     def __init__(self, link: Path, serve: Callable[[PtyPort], Coroutine[Any, Any, None]]) -> None:
         self.link = link
         self._serve = serve
         self.port: PtyPort | None = None
-        self._stack = contextlib.AsyncExitStack()
+        self._group: anyio.abc.TaskGroup | None = None
+
+    async def __aenter__(self) -> _PtyPeer:
+        self._group = anyio.create_task_group()
+        await self._group.__aenter__()
+        await self.plug()
+        return self
+
+    async def __aexit__(self, *exc: Any) -> bool | None:
+        assert self._group is not None
+        if self.port is not None:
+            self.port.close()
+        self._group.cancel_scope.cancel()
+        return await self._group.__aexit__(*exc)
 
     async def plug(self) -> None:
+        assert self._group is not None
         self.port = PtyPort(link=self.link)
-        await self._stack.enter_async_context(serving(self._serve(self.port)))
+        self._group.start_soon(self._serve, self.port)
 
     def unplug(self) -> None:
         assert self.port is not None
         self.port.unplug()
-
-    async def close(self) -> None:
-        if self.port is not None:
-            self.port.close()
-        await self._stack.aclose()
 
 
 @contextlib.asynccontextmanager
@@ -112,12 +125,10 @@ async def _slcan(tmp_path: Path, **options: Any) -> AsyncIterator[LinePath]:
         responders.append(Responder(1))  # a fresh device each time it is plugged in
         return serve_slcan(SimCanNetwork([responders[-1]]), port, SlcanAdapter(bitrate=None))
 
-    peer = _PtyPeer(tmp_path / "ttyCAN", serve)
-    await peer.plug()
-    transport = CanTransport(
-        "slcan", str(peer.link), bitrate=1_000_000, sleep_after_open=0, ignore_config=True, **options
-    )
-    try:
+    async with _PtyPeer(tmp_path / "ttyCAN", serve) as peer:
+        transport = CanTransport(
+            "slcan", str(peer.link), bitrate=1_000_000, sleep_after_open=0, ignore_config=True, **options
+        )
         async with transport:
             yield LinePath(
                 name="slcan",
@@ -128,8 +139,6 @@ async def _slcan(tmp_path: Path, **options: Any) -> AsyncIterator[LinePath]:
                 unplug=peer.unplug,
                 replug=peer.plug,
             )
-    finally:
-        await peer.close()
 
 
 @contextlib.asynccontextmanager
@@ -140,10 +149,8 @@ async def _native_slcan(tmp_path: Path, **options: Any) -> AsyncIterator[LinePat
         responders.append(Responder(1))  # a fresh device each time it is plugged in
         return serve_slcan(SimCanNetwork([responders[-1]]), port, SlcanAdapter(bitrate=None))
 
-    peer = _PtyPeer(tmp_path / "ttySLCAN", serve)
-    await peer.plug()
-    transport = SlcanTransport(str(peer.link), bitrate=1_000_000, **options)
-    try:
+    async with _PtyPeer(tmp_path / "ttySLCAN", serve) as peer:
+        transport = SlcanTransport(str(peer.link), bitrate=1_000_000, **options)
         async with transport:
             yield LinePath(
                 name="native-slcan",
@@ -154,8 +161,6 @@ async def _native_slcan(tmp_path: Path, **options: Any) -> AsyncIterator[LinePat
                 unplug=peer.unplug,
                 replug=peer.plug,
             )
-    finally:
-        await peer.close()
 
 
 @contextlib.asynccontextmanager
@@ -172,16 +177,14 @@ async def _rs485(tmp_path: Path, *, baud: int = 2_500_000, **options: Any) -> As
         seen.clear()  # a fresh device each time it is plugged in
         return serve_rs485([Recording(1)], port, baud=baud)
 
-    peer = _PtyPeer(tmp_path / "tty485", serve)
-    await peer.plug()
     framing = ma.FAMILY.bind(1, link="rs485").framing
-    transport = SerialTransport(str(peer.link), framing=framing, baud=baud, **options)
 
     def request(seq: int) -> None:
         frame = Frame(arbitration_id=1, data=payload(seq, 8), is_serial=True)
         transport.send(frame, reply_timeout_s=REPLY_TIMEOUT_S)
 
-    try:
+    async with _PtyPeer(tmp_path / "tty485", serve) as peer:
+        transport = SerialTransport(str(peer.link), framing=framing, baud=baud, **options)
         async with transport:
             yield LinePath(
                 name="rs485",
@@ -192,8 +195,6 @@ async def _rs485(tmp_path: Path, *, baud: int = 2_500_000, **options: Any) -> As
                 unplug=peer.unplug,
                 replug=peer.plug,
             )
-    finally:
-        await peer.close()
 
 
 @contextlib.asynccontextmanager

@@ -2,9 +2,9 @@
 the virtual bus, and the in-process simulated bus; and the link's side of the FrameLink contract
 (servobus.transports.contract) over every in-process link type, on asyncio and on trio.
 
-The path tests run over each path of tests/transports/_paths.py (on asyncio, where the real
-transports run); the unplug and reopen tests over the two pty paths, where a device can really
-vanish. The link tests (below the paths) run every in-process link: SimTransport in both clock
+The path tests run over each path of tests/transports/_paths.py, on asyncio and on trio in real
+time (real I/O: ptys, python-can's virtual bus); the unplug and reopen tests over the pty paths,
+where a device can really vanish. The link tests (below the paths) run every in-process link: SimTransport in both clock
 lanes, a SimTransport subclass that sends a copy of each frame, the recording tap around a
 SimTransport, and LinkBase links (one of them copying too), in virtual time. The Bus's side (its
 time-outs with a copying link) is tests/transports/test_contract_bus.py.
@@ -12,7 +12,6 @@ time-outs with a copying link) is tests/transports/test_contract_bus.py.
 
 from __future__ import annotations
 
-import asyncio
 import dataclasses
 import time
 import zlib
@@ -31,6 +30,7 @@ from servobus.transports.contract import FrameLink, LineRules
 from servobus.transports.link_base import LinkBase
 from sim._standins import Responder
 
+from ._anyio_help import within
 from ._paths import PATHS, LinePath, open_path
 
 PTY_PATHS = ("slcan", "rs485", "native-slcan")
@@ -51,7 +51,7 @@ async def soak(path: LinePath, n: int, *, window: int = 32) -> None:
         while sent < n and sent - received < window and transport.queue_room:
             path.request(sent)
             sent += 1
-        for reply in await asyncio.wait_for(transport.receive_batch(), 5.0):
+        for reply in await within(5.0, transport.receive_batch()):
             data = path.reply_payload(reply)
             assert path.seq_of(data) == received, f"reply {path.seq_of(data)} where {received} was due"
             received_crc = zlib.crc32(data, received_crc)
@@ -66,21 +66,23 @@ async def soak(path: LinePath, n: int, *, window: int = 32) -> None:
     assert (stats.discarded_bytes, stats.crc_errors) == (0, 0)
 
 
-@pytest.mark.asyncio
+@pytest.mark.anyio
+@pytest.mark.parametrize("anyio_backend", BACKENDS)  # (real time: real I/O)
 @pytest.mark.parametrize("name", PATHS)
 async def test_requests_are_answered_through_the_real_path(name: str, tmp_path: Path) -> None:
     async with open_path(name, tmp_path) as path:
         path.request(7)
-        reply = await asyncio.wait_for(path.transport.receive(), 2.0)
+        reply = await within(2.0, path.transport.receive())
         assert path.seq_of(path.reply_payload(reply)) == 7
-        assert abs(reply.timestamp - time.monotonic()) < 1.0  # the loop's clock
+        assert abs(reply.timestamp - anyio.current_time()) < 1.0  # the loop's clock
         stats = path.transport.stats()
         assert stats.state is TransportState.OPEN
         assert stats.frames_in == stats.frames_out == 1 and stats.bytes_in > 0
         assert stats.bytes_out == stats.bytes_in
 
 
-@pytest.mark.asyncio
+@pytest.mark.anyio
+@pytest.mark.parametrize("anyio_backend", BACKENDS)  # (real time: real I/O)
 @pytest.mark.parametrize("name", PATHS)
 async def test_no_frame_lost_duplicated_or_reordered_short(name: str, tmp_path: Path) -> None:
     async with open_path(name, tmp_path) as path:
@@ -88,7 +90,8 @@ async def test_no_frame_lost_duplicated_or_reordered_short(name: str, tmp_path: 
 
 
 @pytest.mark.slow
-@pytest.mark.asyncio
+@pytest.mark.anyio
+@pytest.mark.parametrize("anyio_backend", BACKENDS)  # (real time: real I/O)
 @pytest.mark.parametrize("name", PATHS)
 async def test_no_frame_lost_duplicated_or_reordered_over_100k_frames(name: str, tmp_path: Path) -> None:
     async with open_path(name, tmp_path, queue_size=1024) as path:
@@ -110,7 +113,8 @@ async def _stall_writer(path: LinePath) -> None:
             path.transport.send(Frame(arbitration_id=0x149, data=bytes([seq])))
 
 
-@pytest.mark.asyncio
+@pytest.mark.anyio
+@pytest.mark.parametrize("anyio_backend", BACKENDS)  # (real time: real I/O)
 @pytest.mark.parametrize("name", PTY_PATHS)
 async def test_unplug_fails_every_pending_waiter_within_100_ms(name: str, tmp_path: Path) -> None:
     # slcan (both): keep frames queued for a while
@@ -118,28 +122,42 @@ async def test_unplug_fails_every_pending_waiter_within_100_ms(name: str, tmp_pa
     async with open_path(name, tmp_path, reopen=False, **options) as path:
         transport = path.transport
         await _stall_writer(path)
-        waiters = [asyncio.ensure_future(transport.receive()) for _ in range(3)]
-        waiters.append(asyncio.ensure_future(transport.receive_batch()))
-        waiters.append(asyncio.ensure_future(transport.drain()))
-        await asyncio.sleep(0.05)
-        assert not any(w.done() for w in waiters)
-        assert path.unplug is not None
-        unplugged = time.monotonic()
-        path.unplug()
-        results = await asyncio.wait_for(asyncio.gather(*waiters, return_exceptions=True), 1.0)
-        elapsed = time.monotonic() - unplugged
+        calls = [transport.receive] * 3 + [transport.receive_batch, transport.drain]
+        results: list[object] = [None] * len(calls)
+        ended = [False] * len(calls)
+
+        async def wait(i: int) -> None:
+            try:
+                results[i] = await calls[i]()
+            except Exception as exc:
+                results[i] = exc
+            ended[i] = True
+
+        async with anyio.create_task_group() as waiters:
+            for i in range(len(calls)):
+                waiters.start_soon(wait, i)
+            await anyio.sleep(0.05)
+            assert not any(ended)
+            assert path.unplug is not None
+            unplugged = time.monotonic()
+            path.unplug()
+            with anyio.fail_after(1.0):
+                while not all(ended):
+                    await anyio.sleep(0.001)
+            elapsed = time.monotonic() - unplugged
         assert all(isinstance(r, TransportError) for r in results), results
         assert elapsed < 0.1, f"waiters failed {elapsed * 1000:.1f} ms after the unplug"
-        assert all(r.__cause__ is not None for r in results)  # chained to the I/O error
+        assert all(isinstance(r, BaseException) and r.__cause__ is not None for r in results)  # I/O error
         assert transport.state is TransportState.LOST
         with pytest.raises(TransportError, match="device lost"):
             path.request(99)
-        await asyncio.sleep(0.05)  # a batch already in the CAN writer thread reports back
+        await anyio.sleep(0.05)  # a batch already in the CAN writer thread reports back
         stats = transport.stats()
         assert (stats.losses, stats.purged, stats.queue_depth) == (1, 3 - stats.frames_out, 0)
 
 
-@pytest.mark.asyncio
+@pytest.mark.anyio
+@pytest.mark.parametrize("anyio_backend", BACKENDS)  # (real time: real I/O)
 @pytest.mark.parametrize("name", PTY_PATHS)
 async def test_the_transport_reopens_when_the_device_returns_and_replays_nothing(
     name: str, tmp_path: Path
@@ -147,18 +165,18 @@ async def test_the_transport_reopens_when_the_device_returns_and_replays_nothing
     async with open_path(name, tmp_path, reopen_backoff_s=(0.02, 0.1)) as path:
         transport = path.transport
         path.request(1)
-        await asyncio.wait_for(transport.receive(), 2.0)
+        await within(2.0, transport.receive())
         await _stall_writer(path)
         assert path.unplug is not None and path.replug is not None
         path.unplug()
         with pytest.raises(TransportError):
-            await asyncio.wait_for(transport.receive(), 1.0)
-        await asyncio.sleep(0.3)  # several reopen attempts fail while the device is away
+            await within(1.0, transport.receive())
+        await anyio.sleep(0.3)  # several reopen attempts fail while the device is away
         assert transport.state is TransportState.LOST
         await path.replug()
         await transport.wait_open(timeout=5.0)
         path.request(2)
-        reply = await asyncio.wait_for(transport.receive(), 2.0)
+        reply = await within(2.0, transport.receive())
         assert path.seq_of(path.reply_payload(reply)) == 2
         # The new device saw only what was sent after it came back: nothing queued before the loss.
         assert [path.seq_of(p) for p in path.peer_seen()] == [2]
@@ -166,20 +184,26 @@ async def test_the_transport_reopens_when_the_device_returns_and_replays_nothing
         assert (stats.losses, stats.reopens, stats.state) == (1, 1, TransportState.OPEN)
 
 
-@pytest.mark.asyncio
+@pytest.mark.anyio
+@pytest.mark.parametrize("anyio_backend", BACKENDS)  # (real time: real I/O)
 @pytest.mark.parametrize("name", PATHS)
 async def test_close_ends_async_iteration_and_pending_receivers_fail(name: str, tmp_path: Path) -> None:
-    async with open_path(name, tmp_path) as path:
+    got: list[list[object]] = []
+    # (the iterating task's group is entered before the link's: anyio nests task groups)
+    async with anyio.create_task_group() as group, open_path(name, tmp_path) as path:
         transport = path.transport
         path.request(1)
 
-        async def iterate() -> list[object]:
-            return [frame async for frame in transport]
+        async def iterate() -> None:
+            got.append([frame async for frame in transport])
 
-        iteration = asyncio.ensure_future(iterate())
-        await asyncio.sleep(0.2)
+        group.start_soon(iterate)
+        await anyio.sleep(0.2)
         await transport.close()
-        assert len(await asyncio.wait_for(iteration, 1.0)) == 1
+        with anyio.fail_after(1.0):
+            while not got:
+                await anyio.sleep(0.001)
+        assert len(got[0]) == 1
         with pytest.raises(TransportError, match="closed"):
             await transport.receive()
         assert transport.state is TransportState.CLOSED
