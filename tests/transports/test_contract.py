@@ -6,8 +6,8 @@ The path tests run over each path of tests/transports/_paths.py, on asyncio and 
 time (real I/O: ptys, python-can's virtual bus); the unplug and reopen tests over the pty paths,
 where a device can really vanish. The link tests (below the paths) run every in-process link:
 SimTransport in both clock lanes, a SimTransport subclass that sends a copy of each frame, the
-recording tap around a SimTransport, and LinkBase links (one of them copying too), in virtual time. The Bus's side (its
-time-outs with a copying link) is tests/transports/test_contract_bus.py.
+recording tap around a SimTransport, and LinkBase links (one of them copying too), in virtual time.
+The Bus's side (its time-outs with a copying link) is tests/transports/test_contract_bus.py.
 """
 
 from __future__ import annotations
