@@ -9,7 +9,7 @@ report for it ever comes.
   hand-over);
 * a link that reports late (after the reply came) still has its replies matched.
 
-The links here are small in-file ones built on the contract alone, and SimTransport subclasses.
+The links here are a small in-file one on LinkBase, and SimTransport subclasses.
 """
 
 from __future__ import annotations
@@ -27,11 +27,9 @@ from servobus.errors import MotorTimeout, TransportError
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
-from servobus.runtime import current
-from servobus.transports.contract import Consumer, FrameLink, LineRules, SendReporter
-from servobus.transports.events import TransportEvent
+from servobus.transports.contract import FrameLink, LineRules
+from servobus.transports.link_base import LinkBase
 from servobus.transports.sim import SimTransport
-from servobus.transports.stats import TransportStats
 
 pytestmark = pytest.mark.anyio
 
@@ -44,10 +42,10 @@ def anyio_backend(request: pytest.FixtureRequest) -> tuple[str, dict[str, object
     return virtual(request.param)
 
 
-class Line:
-    """A FrameLink on the contract alone: MyActuator motors 1..n answer every request with a status
-    frame ``reply_s`` after it left (motors in ``silent`` never do); each send is reported
-    ``report_s`` after it was handed over (None: never), with ``sent_at`` when it left (at once).
+class Line(LinkBase):
+    """A FrameLink on LinkBase: MyActuator motors 1..n answer every request with a status frame
+    ``reply_s`` after it left (motors in ``silent`` never do); each send is reported ``report_s``
+    after it was handed over (None: never), with ``sent_at`` when it left (at once).
 
     Args:
         copy: send a copy of each frame (``dataclasses.replace``), as a re-encoding link does.
@@ -66,77 +64,33 @@ class Line:
         echo: bool = True,
         silent: tuple[int, ...] = (),
     ) -> None:
-        self._rules = rules
+        super().__init__()
+        self.rules = rules
         self.reply_s = reply_s
         self.report_s = report_s
         self.copy = copy
         self.echo = echo
         self.silent = silent
         self.sent: list[Frame] = []
-        self._consumer: Consumer | None = None
-        self._reporter: SendReporter | None = None
-        self._group: Any = None
-
-    @property
-    def rules(self) -> LineRules:
-        return self._rules
-
-    @property
-    def is_open(self) -> bool:
-        return self._group is not None
-
-    async def open(self) -> None:
-        self._runtime = current()
-        group = anyio.create_task_group()
-        await group.__aenter__()
-        self._group = group
-
-    async def close(self) -> None:
-        group, self._group = self._group, None
-        group.cancel_scope.cancel()
-        await group.__aexit__(None, None, None)
 
     def send(self, frame: Frame, handle: object = None) -> None:
         out = dataclasses.replace(frame) if self.copy else frame
         self.sent.append(out)
-        left_at = self._runtime.time()
+        left_at = self._now()
         handle = handle if (self.echo and handle is not None) else out
         if self.report_s is not None:
-            self._later(self.report_s, self._report, handle, left_at)
+            self._later(self.report_s, self._sent, handle, left_at)
         motor = frame.arbitration_id - 0x140
         if 1 <= motor <= 32 and motor not in self.silent and frame.data[:1] == STATUS[:1]:
             reply = Frame(arbitration_id=0x240 + motor, data=STATUS, timestamp=left_at + self.reply_s)
-            self._later(self.reply_s, self._deliver, reply)
+            self._later(self.reply_s, self._deliver, [reply])
 
     def _later(self, delay_s: float, fn: Callable[..., object], *args: object) -> None:
         async def at() -> None:
             await anyio.sleep(delay_s)
             fn(*args)
 
-        self._group.start_soon(at)
-
-    def _report(self, handle: object, left_at: float) -> None:
-        if self._reporter is not None:
-            self._reporter(handle, left_at, None)
-
-    def _deliver(self, frame: Frame) -> None:
-        if self._consumer is not None:
-            self._consumer([frame])
-
-    def set_consumer(self, consumer: Consumer | None) -> None:
-        self._consumer = consumer
-
-    def set_send_reporter(self, reporter: SendReporter | None) -> None:
-        self._reporter = reporter
-
-    def add_listener(self, listener: Callable[[TransportEvent], object]) -> None:
-        pass
-
-    def remove_listener(self, listener: Callable[[TransportEvent], object]) -> None:
-        pass
-
-    def stats(self) -> TransportStats:
-        return TransportStats()
+        self._tasks.start_soon(at)
 
 
 class CopyingSim(SimTransport):
