@@ -23,7 +23,7 @@ import anyio
 from anyio import TaskInfo
 from anyio.abc import TaskGroup
 
-__all__ = ["LinkTasks", "OwnedTaskGroup"]
+__all__ = ["LinkTasks", "OwnedTaskGroup", "owned_exit"]
 
 
 class LinkTasks:
@@ -126,3 +126,13 @@ class OwnedTaskGroup:
         group.cancel_scope.cancel()
         absorbed = await group.__aexit__(exc_type, exc, tb)
         return exc is not None and bool(absorbed)  # (True with no exception passed means nothing)
+
+
+def owned_exit(
+    exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+) -> tuple[type[BaseException] | None, BaseException | None, TracebackType | None]:
+    """What ``async with link:``'s exit passes to :meth:`OwnedTaskGroup.leave`: a cancellation (it
+    may be the group's own), never the block's own error (that is not the task group's)."""
+    if exc is not None and not isinstance(exc, anyio.get_cancelled_exc_class()):
+        return None, None, None
+    return exc_type, exc, tb

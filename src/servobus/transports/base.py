@@ -68,7 +68,7 @@ from servobus import runtime as _runtime
 from servobus.errors import TransportError
 from servobus.transports._inbox import Inbox, ReceiveSide
 from servobus.transports._listeners import EventSource, Listeners
-from servobus.transports._owned import LinkTasks, OwnedTaskGroup
+from servobus.transports._owned import LinkTasks, OwnedTaskGroup, owned_exit
 from servobus.transports._recovery import Recovery
 from servobus.transports._sending import Outgoing, SendQueue, SendQueueFull, SendReporter, SendReports
 from servobus.transports._waiters import WaiterList
@@ -291,9 +291,7 @@ class Transport(ReceiveSide[RxT], SendReports, EventSource, abc.ABC, Generic[RxT
     async def __aexit__(
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> bool:
-        if exc is not None and not isinstance(exc, anyio.get_cancelled_exc_class()):
-            exc_type, exc, tb = None, None, None  # the block's own error is not the task group's
-        return await self._close(exc_type, exc, tb)
+        return await self._close(*owned_exit(exc_type, exc, tb))
 
     def __del__(self) -> None:
         if getattr(self, "_ever_opened", False) and self._state is not TransportState.CLOSED:

@@ -25,13 +25,11 @@ from collections.abc import Callable, Sequence
 from types import TracebackType
 from typing import Any, Self
 
-import anyio
-
 from servobus import runtime as _runtime
 from servobus.errors import TransportError
 from servobus.frame import Frame
 from servobus.transports._listeners import Listener, Listeners
-from servobus.transports._owned import LinkTasks, OwnedTaskGroup
+from servobus.transports._owned import LinkTasks, OwnedTaskGroup, owned_exit
 from servobus.transports._sending import SendReporter
 from servobus.transports.contract import Consumer, LineRules
 from servobus.transports.events import FramesDropped, StateChanged, TransportEvent, TransportState
@@ -122,9 +120,7 @@ class LinkBase:
     async def __aexit__(
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> bool:
-        if exc is not None and not isinstance(exc, anyio.get_cancelled_exc_class()):
-            exc_type, exc, tb = None, None, None  # the block's own error is not the task group's
-        return await self._close(exc_type, exc, tb)
+        return await self._close(*owned_exit(exc_type, exc, tb))
 
     # ---- the FrameLink surface ----
 
