@@ -297,10 +297,19 @@ class Timing:
         key: those only let the next requests go)."""
         if self._overtaken or (self._audit_at is not None and self._audit_at <= now):
             return True
+        first = self._first_deadline()
+        return first is not None and first <= now
+
+    def _first_deadline(self) -> float | None:
+        """The earliest deadline of a request still out (entries of requests that left, were
+        answered or were timed again are dropped on the way)."""
         heap = self._deadlines
-        while heap and (heap[0][2].deadline != heap[0][0] or heap[0][2].state not in _OUT):
+        while heap and (
+            heap[0][2].deadline != heap[0][0]
+            or (heap[0][2].state is not _SENT and heap[0][2].state is not _SENDING)
+        ):
             heapq.heappop(heap)  # the request left (replied, cancelled) or was sent again
-        return bool(heap) and heap[0][0] <= now
+        return heap[0][0] if heap else None
 
     def next_deadline(self) -> float | None:
         """When :meth:`expire` or :meth:`~servobus.scheduler.Scheduler.poll` next has something to
@@ -309,12 +318,8 @@ class Timing:
         if not self._in_flight:
             heap.clear()  # every entry is of a request that left (a whole tick answered: at once)
             self._audit_at = None
-        while heap and (
-            heap[0][2].deadline != heap[0][0]
-            or (heap[0][2].state is not _SENT and heap[0][2].state is not _SENDING)
-        ):
-            heapq.heappop(heap)  # the request left (replied, cancelled) or was sent again
-        times = [heap[0][0]] if heap else []
+        first = self._first_deadline()
+        times = [first] if first is not None else []
         if self._overtaken:  # (missed already: for expire() to say so)
             times.append(min(r.deadline or 0.0 for r in self._overtaken))
         if self._audit_at is not None:
