@@ -187,7 +187,9 @@ class Bridge:
         self._declared: list[Any] = []
         self._clients: set[str] = set()
         self._group: anyio.abc.TaskGroup | None = None
-        self._events, self._events_in = anyio.create_memory_object_stream[tuple[Any, tuple[Any, ...]]](_PENDING)
+        self._events, self._events_in = anyio.create_memory_object_stream[tuple[Any, tuple[Any, ...]]](
+            _PENDING
+        )
         self.dropped_events = 0  # Zenoh callbacks dropped because _PENDING were waiting
         self._lane: runtime.Runtime | None = None
         self.stop_log: deque[tuple[int, str, int, str]] = deque(maxlen=1000)  # (unix ns, bus, id, why)
@@ -246,7 +248,9 @@ class Bridge:
         session, keys = self._session, self.keys
         self._declared.append(
             session.liveliness().declare_subscriber(
-                keys.clients, self._handed(self._on_client, lambda s: (str(s.key_expr), _kind(s))), history=True
+                keys.clients,
+                self._handed(self._on_client, lambda s: (str(s.key_expr), _kind(s))),
+                history=True,
             )
         )
         self._declared.append(session.liveliness().declare_token(keys.alive))
@@ -260,10 +264,16 @@ class Bridge:
                 session.declare_subscriber(
                     keys.motor(name, "*", "setpoint"), self._handed(self._on_setpoints, as_bytes, served)
                 ),
-                session.declare_queryable(keys.motor(name, "*", "request"), self._handed(self._on_query, None, served)),
-                session.declare_queryable(keys.motor(name, "*", "read"), self._handed(self._on_query, None, served)),
+                session.declare_queryable(
+                    keys.motor(name, "*", "request"), self._handed(self._on_query, None, served)
+                ),
+                session.declare_queryable(
+                    keys.motor(name, "*", "read"), self._handed(self._on_query, None, served)
+                ),
                 session.declare_queryable(keys.bus(name, "info"), self._handed(self._on_info, None, served)),
-                session.declare_queryable(keys.bus(name, "metrics"), self._handed(self._on_metrics, None, served)),
+                session.declare_queryable(
+                    keys.bus(name, "metrics"), self._handed(self._on_metrics, None, served)
+                ),
             ]
             for mid in served.motors:
                 served.publishers[mid] = session.declare_publisher(keys.motor(name, mid, "state"))
@@ -313,7 +323,9 @@ class Bridge:
             return
         self._clients.discard(client_id)
         for served in self.served.values():
-            self._stop(served, [mid for mid, owner in served.owners.items() if owner == client_id], "client left")
+            self._stop(
+                served, [mid for mid, owner in served.owners.items() if owner == client_id], "client left"
+            )
 
     def _stop(self, served: _Served, motor_ids: Iterable[int], why: str) -> None:
         """Drop the motors' set-points and ownership, and send them the Bus's safe command."""
@@ -328,7 +340,9 @@ class Bridge:
         served.counts["stops"] += len(motors)
         now = time.time_ns()
         self.stop_log.extend((now, served.name, m.motor_id, why) for m in motors)
-        logger.warning("%s/%s: stopping motors %s (%s)", self.node, served.name, [m.motor_id for m in motors], why)
+        logger.warning(
+            "%s/%s: stopping motors %s (%s)", self.node, served.name, [m.motor_id for m in motors], why
+        )
         if served.bus.safe is not None and self._group is not None:
             self._group.start_soon(self._send_stop, served, motors)
 
@@ -447,7 +461,9 @@ class Bridge:
             logger.exception("%s: request failed", query.key_expr)
             result = wire.Result(error=exc)
         try:
-            query.reply(query.key_expr, wire.encode_result(schema or next(iter(served.schemas.values())), result))
+            query.reply(
+                query.key_expr, wire.encode_result(schema or next(iter(served.schemas.values())), result)
+            )
         except Exception:  # the client went away meanwhile
             logger.debug("reply to %s failed", query.key_expr, exc_info=True)
         finally:

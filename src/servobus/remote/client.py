@@ -17,6 +17,7 @@ stops the motors this client commanded. If the bridge vanishes, every pending an
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import math
@@ -284,15 +285,15 @@ class RemoteBus:
 
             await anyio.to_thread.run_sync(close)
 
-    def _handed(self, handler: Callable[[Any], object], extract: Callable[[Any], Any]) -> Callable[[Any], None]:
+    def _handed(
+        self, handler: Callable[[Any], object], extract: Callable[[Any], Any]
+    ) -> Callable[[Any], None]:
         lane = self._lane
         assert lane is not None
 
         def callback(item: Any) -> None:
-            try:
+            with contextlib.suppress(RuntimeError):  # the loop is closed: we are shutting down
                 lane.call_soon_threadsafe(handler, extract(item))
-            except RuntimeError:  # the loop is closed: we are shutting down
-                pass
 
         return callback
 
@@ -331,7 +332,9 @@ class RemoteBus:
         if found is None:
             raise ValueError(f"{self.node}/{self.name} has no motor {wanted} (motors: {sorted(self.motors)})")
         if family is not None and found.family.name != family.name:
-            raise ValueError(f"motor {wanted} on {self.node}/{self.name} is {found.family.name}, not {family.name}")
+            raise ValueError(
+                f"motor {wanted} on {self.node}/{self.name} is {found.family.name}, not {family.name}"
+            )
         return found
 
     def _on_state(self, payload: bytes) -> None:
@@ -379,7 +382,9 @@ class RemoteBus:
         self._check()
         leaf = "read" if type(command).READ else "request"
         if leaf == "request" and self.read_only:
-            raise PermissionError(f"{type(command).__name__} commands the motor: this connection is read-only")
+            raise PermissionError(
+                f"{type(command).__name__} commands the motor: this connection is read-only"
+            )
         payload = wire.encode_request(motor.schema, wire.Request(self.client_id, command, timeout_s))
         key = self.keys.motor(self.name, motor.motor_id, leaf)
         answers = await self._get(key, payload, (timeout_s or 1.0) + self.timeout_s)
@@ -458,10 +463,8 @@ class RemoteBus:
                 answers.append(ok.payload.to_bytes())
 
         def on_done() -> None:
-            try:
+            with contextlib.suppress(RuntimeError):
                 lane.call_soon_threadsafe(done.set)
-            except RuntimeError:
-                pass
 
         self._waiting.add(done)
         try:

@@ -40,7 +40,7 @@ def check_name(what: str, name: str) -> str:
 class Keys:
     """The keys of one node (a bridge), built once; the motor's are built per call."""
 
-    __slots__ = ("node", "alive", "clients", "_prefix")
+    __slots__ = ("_prefix", "alive", "clients", "node")
 
     def __init__(self, node: str) -> None:
         self.node = check_name("node", node)

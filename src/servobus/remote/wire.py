@@ -46,12 +46,12 @@ from servobus.protocols import Command, Family, Reply, get_family
 
 __all__ = [
     "VERSION",
+    "Request",
     "Result",
     "Schema",
     "Setpoints",
     "State",
     "WireError",
-    "Request",
     "decode_request",
     "decode_result",
     "decode_setpoints",
@@ -80,7 +80,7 @@ class WireError(ValueError):
 class Schema:
     """The numbered types of one family: what :func:`encode_value` may write and read back."""
 
-    __slots__ = ("family", "types", "index", "digest", "_fields")
+    __slots__ = ("_fields", "digest", "family", "index", "types")
 
     def __init__(self, family: Family[Any]) -> None:
         found: dict[type, None] = {}
@@ -212,7 +212,7 @@ def _count(n: int) -> int:
 class _Reader:
     """A cursor over received bytes; every read checks what is left."""
 
-    __slots__ = ("data", "at")
+    __slots__ = ("at", "data")
 
     def __init__(self, data: bytes, at: int = 0) -> None:
         self.data = data
@@ -267,7 +267,7 @@ def decode_value(schema: Schema, reader: _Reader, depth: int = 0) -> Any:
         return reader.raw(reader.take(_U16))
     if tag == _TUPLE:
         return tuple(decode_value(schema, reader, depth + 1) for _ in range(reader.take(_U8)))
-    if tag == _ENUM or tag == _DATACLASS:
+    if tag in (_ENUM, _DATACLASS):
         index = reader.take(_U16)
         if index >= len(schema.types):
             raise WireError(f"type {index} is not in the {schema.family} schema")
@@ -331,9 +331,7 @@ class Setpoints:
     items: tuple[tuple[int, Command], ...]
 
 
-def encode_setpoints(
-    schemas: Callable[[int], Schema], message: Setpoints
-) -> bytes:
+def encode_setpoints(schemas: Callable[[int], Schema], message: Setpoints) -> bytes:
     """``message`` as bytes; ``schemas(motor_id)`` gives each motor's family schema."""
     out = _start(SETPOINTS)
     out += bytes.fromhex(message.client_id)
@@ -492,7 +490,9 @@ def encode_state(schema: Schema, state: State) -> bytes:
     out += _U64.pack(state.stamp_unix_ns)
     out.append(1 if state.online else 0)
     encode_value(schema, state.reply, out)
-    encode_value(schema, state.fault if state.fault is None or type(state.fault) in schema.index else None, out)
+    encode_value(
+        schema, state.fault if state.fault is None or type(state.fault) in schema.index else None, out
+    )
     return bytes(out)
 
 
