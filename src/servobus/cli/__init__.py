@@ -63,6 +63,7 @@ COMMANDS: dict[str, str] = {
     "dbc": "servobus.cli.dbc:dbc",
     "sim": "servobus.cli.sim:sim",
     "bench": "servobus.cli.bench:bench",
+    "bridge": "servobus.cli.bridge:bridge",
 }
 
 

@@ -33,6 +33,7 @@ __all__ = [
     "note_exit",
     "open_bus",
     "parse_ids",
+    "remote_connection_options",
     "revision_option",
     "sim_devices",
     "sim_part",
@@ -342,7 +343,36 @@ timeout_option = click.option(
 def connection_options(func: F) -> F:
     """Add the connection options (and ``--timeout-ms``) to a click command; it receives
     ``conn: Connection``."""
+    return _connection_options(func, remote=False)
 
+
+def remote_connection_options(func: F) -> F:
+    """:func:`connection_options`, and ``--remote NODE/BUS`` with its options
+    (:mod:`servobus.cli._remote`): the command receives ``conn`` and ``remote`` (a
+    :class:`~servobus.cli._remote.Remote`, or None for a local bus). With ``--remote``, ``conn``
+    keeps only ``--family`` (as given), ``--ids`` and ``--timeout-ms``, unchecked: the bridge's motors
+    are known once connected; a local bus option given with it is refused (exit 2)."""
+    return _connection_options(func, remote=True)
+
+
+#: the options that name a local bus (``Connection`` field -> flag), refused with ``--remote``
+_LOCAL = {
+    "sim": "--sim",
+    "interface": "--interface",
+    "channel": "--channel",
+    "bitrate": "--bitrate",
+    "fd": "--fd",
+    "data_bitrate": "--data-bitrate",
+    "port": "--port",
+    "baud": "--baud",
+    "revision": "--revision",
+}
+
+
+def _connection_options(func: F, *, remote: bool) -> F:
+    from servobus.cli._remote import remote_from, remote_options
+
+    @(remote_options if remote else _unchanged)
     @family_option
     @revision_option
     @click.option(
@@ -384,9 +414,22 @@ def connection_options(func: F) -> F:
             ids = parse_ids(ids_text) if ids_text else ()
         except ValueError as exc:
             raise click.BadParameter(str(exc), param_hint="--ids") from None
-        return func(*args, conn=_check(Connection(ids=ids, **fields)), **kwargs)
+        if not remote:
+            return func(*args, conn=_check(Connection(ids=ids, **fields)), **kwargs)
+        target = remote_from(kwargs)
+        if target is None:
+            return func(*args, conn=_check(Connection(ids=ids, **fields)), remote=None, **kwargs)
+        local = [flag for name, flag in _LOCAL.items() if fields[name] not in (None, False)]
+        if local:
+            raise click.UsageError(f"--remote and {', '.join(local)}: the bus is the bridge's, give one")
+        conn = Connection(family=fields["family"], ids=ids, timeout_s=fields["timeout_s"])
+        return func(*args, conn=conn, remote=target, **kwargs)
 
     return wrapper  # type: ignore[return-value]
+
+
+def _unchanged(func: F) -> F:
+    return func
 
 
 def note_exit(bus: Bus) -> None:

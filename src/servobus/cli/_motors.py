@@ -13,12 +13,11 @@ import contextvars
 import signal
 from collections.abc import Coroutine, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, TypeVar
+from typing import Any, Protocol, TypeVar
 
 import anyio
 import click
 
-from servobus.bus import Motor
 from servobus.cli._connect import Connection, open_bus
 from servobus.cli._output import refused
 from servobus.cli.plugin import STATUS_SOURCES, Op
@@ -28,12 +27,14 @@ from servobus.signals import StopOn, stop_on
 
 __all__ = [
     "BACKENDS",
+    "Asked",
     "Outcome",
     "ask",
     "ask_all",
     "codecs",
     "fail_if_any",
     "plan",
+    "plan_codecs",
     "run",
     "status_of",
     "stop_scope",
@@ -107,6 +108,19 @@ def stop_scope() -> contextlib.AbstractContextManager[anyio.CancelScope]:
     return stop.scope() if stop is not None else anyio.CancelScope()
 
 
+class Asked(Protocol):
+    """What the helpers here ask of a motor: a :class:`~servobus.bus.Motor`, or a bridge's
+    (:class:`servobus.cli._remote.RemoteCliMotor`)."""
+
+    @property
+    def motor_id(self) -> int: ...
+
+    @property
+    def codec(self) -> Any: ...
+
+    async def request(self, command: Command[T], *, timeout_s: float | None = None) -> T: ...
+
+
 @dataclass(slots=True)
 class Outcome:
     """One motor's result: the replies to what was sent (in order), or the error that ended it."""
@@ -139,8 +153,17 @@ def plan(conn: Connection, op: Op, values: Mapping[str, Any]) -> list[Sequence[C
         click.UsageError: a value out of range, a command the motor's revision or link lacks, or a
             combination the family does not support (exit 2).
     """
+    return plan_codecs(codecs(conn), op, values)
+
+
+def plan_codecs(bound: Sequence[Any], op: Op, values: Mapping[str, Any]) -> list[Sequence[Command]]:
+    """:func:`plan` for motors' bound codecs (a bridge's motors: bound here after connecting).
+
+    Raises:
+        click.UsageError: as :func:`plan` (exit 2).
+    """
     planned = []
-    for codec in codecs(conn):
+    for codec in bound:
         with refused():
             commands = op.first(codec, values)
             for command in commands:
@@ -150,7 +173,7 @@ def plan(conn: Connection, op: Op, values: Mapping[str, Any]) -> list[Sequence[C
 
 
 async def ask_all(
-    motors: Sequence[Motor], planned: Sequence[Sequence[Command]], *, timeout_s: float | None = None
+    motors: Sequence[Asked], planned: Sequence[Sequence[Command]], *, timeout_s: float | None = None
 ) -> list[Outcome]:
     """Send each motor its commands in order (the motors one after the other); collect the replies.
     ``timeout_s``: each reply's timeout (None: the library's)."""

@@ -10,25 +10,26 @@ relative move sends its increment once and then only reads where the motor is.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
-from typing import Any, TypeVar
+from collections.abc import Awaitable, Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import anyio
 import click
 from rich.live import Live
 
-from servobus.bus import Motor
 from servobus.cli import _ids
-from servobus.cli._connect import Connection, connection_options, open_bus
+from servobus.cli._connect import Connection, connection_options, open_bus, remote_connection_options
 from servobus.cli._families import current_limit_users, op, status_reads
 from servobus.cli._motors import (
     STATUS_COLUMNS,
+    Asked,
     Outcome,
     ask,
     ask_all,
     codecs,
     fail_if_any,
     plan,
+    plan_codecs,
     run,
     status_of,
 )
@@ -48,6 +49,11 @@ from servobus.cli._output import (
 )
 from servobus.errors import ServobusError
 from servobus.protocols import Command, Reply
+from servobus.ticks import ticks
+
+if TYPE_CHECKING:
+    from servobus.cli._remote import Remote
+    from servobus.cli.plugin import Op
 
 __all__ = [
     "brake",
@@ -69,6 +75,10 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 #: the replies to a set-point's first commands -> whether a status shows it arrived
 Arrival = Callable[[Sequence[Reply | None]], Callable[[dict[str, Any]], bool]]
+#: one tick's (motor, command) pairs
+Items = list[tuple[Any, Command]]
+#: sends one tick's items: the items answered and their results (an error, as a value, for a motor)
+Cycle = Callable[[Items], Awaitable[tuple[Sequence[tuple[Any, Command]], Sequence[Any]]]]
 
 
 # ---- output ----
@@ -133,14 +143,17 @@ def _print_results(outcomes: Sequence[Outcome], sent: Sequence[Sequence[Command]
         "servobus status --sim 3",
         "servobus status -i slcan -c /dev/ttyACM0 --ids 1-3",
         "servobus status -i socketcan -c can0 --family lk --ids 9,10 --json",
+        "servobus status --remote arm/can0 --endpoint tcp/192.168.1.20:7447   # through a bridge",
     ),
 )
-@connection_options
+@remote_connection_options
 @json_option
-def status(conn: Connection, as_json: bool) -> None:
+def status(conn: Connection, remote: Remote | None, as_json: bool) -> None:
     """Read each motor's position, speed, current, temperature, voltage and errors once."""
-    reads = status_reads(conn.family)
-    outcomes = ask(conn, plan(conn, reads, {}))
+    if remote is not None:
+        _, outcomes, _ = run(_remote_ask(conn, remote, status_reads, {}, read_only=True))
+    else:
+        outcomes = ask(conn, plan(conn, status_reads(conn.family), {}))
     rows = _status_rows(outcomes)
     if as_json:
         emit_json(rows)
@@ -154,21 +167,28 @@ def status(conn: Connection, as_json: bool) -> None:
     epilog=examples(
         "servobus monitor --sim 4                    # live table until Ctrl-C",
         "servobus monitor --sim 4 --rate-hz 50 --duration 10 --json > samples.jsonl",
+        "servobus monitor --remote arm/can0 --duration 10 --json   # the states the bridge publishes",
     ),
 )
-@connection_options
+@remote_connection_options
 @click.option("--rate-hz", type=FloatRange(min=0.1, max=1000), default=10.0, show_default=True)
 @click.option("--duration", type=FloatRange(min=0), help="Stop after this many seconds [default: Ctrl-C].")
 @json_option
-def monitor(conn: Connection, rate_hz: float, duration: float | None, as_json: bool) -> None:
+def monitor(
+    conn: Connection, remote: Remote | None, rate_hz: float, duration: float | None, as_json: bool
+) -> None:
     """Poll the motors' status at a fixed rate and show it live (JSON: one line per motor and sample).
 
-    Only reads are sent: the motors keep doing what they were doing.
+    Only reads are sent: the motors keep doing what they were doing. With --remote, the motors are
+    read once, then shown as the bridge publishes their states (JSON: a line per state published,
+    at most --rate-hz per motor).
     """
-    reads = status_reads(conn.family)
-    planned = plan(conn, reads, {})
     live = not as_json and console(stderr=True).is_terminal
-    outcomes = run(_monitor(conn, planned, rate_hz, duration, as_json, live))
+    if remote is not None:
+        outcomes = run(_remote_monitor(conn, remote, rate_hz, duration, as_json, live))
+    else:
+        planned = plan(conn, status_reads(conn.family), {})
+        outcomes = run(_monitor(conn, planned, rate_hz, duration, as_json, live))
     if not as_json:
         console().print(_status_table(_status_rows(outcomes)))
     fail_if_any(outcomes)
@@ -206,13 +226,49 @@ async def _monitor(
         return outcomes
 
 
-def _items(motors: Sequence[Motor], commands: Sequence[Sequence[Command]]) -> list[tuple[Motor, Command]]:
+async def _remote_monitor(
+    conn: Connection, remote: Remote, rate_hz: float, duration: float | None, as_json: bool, live: bool
+) -> list[Outcome]:
+    from servobus.cli._remote import open_remote, plan_motors
+
+    async with open_remote(conn, remote, read_only=True) as (bus, motors):
+        wanted = {motor.motor_id for motor in motors}
+        published: dict[int, Reply] = {}
+        bus.subscribe(lambda motor, reply: published.update({motor.motor_id: reply}))
+        outcomes = await ask_all(motors, plan_motors(motors, status_reads, {}), timeout_s=conn.timeout_s)
+        where = f"{len(motors)} motor(s) of {remote.target}"
+        start = anyio.current_time()
+        with _LiveStatus(live, rate_hz) as view:
+            async for tick in ticks(rate_hz, spin_s=0.0):
+                elapsed = tick.started - start
+                if duration is not None and elapsed >= duration:
+                    break
+                fresh = {mid: reply for mid, reply in published.items() if mid in wanted}
+                published.clear()
+                for outcome, motor in zip(outcomes, motors, strict=True):
+                    if motor.remote.online is False:
+                        outcome.error = f"motor {motor.motor_id} is offline (the bridge's watchdog)"
+                    elif outcome.motor_id in fresh:  # (before the replies of other kinds it keeps)
+                        new = fresh[outcome.motor_id]
+                        kept = [r for r in outcome.replies if type(r) is not type(new)]
+                        outcome.replies, outcome.error = [new, *kept], None
+                    if as_json and outcome.motor_id in fresh:
+                        emit_json(
+                            {"t": round(elapsed, 4), "id": outcome.motor_id}
+                            | status_of(outcome.replies)
+                            | {"error": outcome.error}
+                        )
+                view.show(tick.index, outcomes, f"{where}, {elapsed:.1f} s (Ctrl-C stops)")
+        return outcomes
+
+
+def _items(motors: Sequence[Asked], commands: Sequence[Sequence[Command]]) -> Items:
     """One tick's (motor, command) pairs: each motor's commands, in order."""
     return [(motor, command) for motor, each in zip(motors, commands, strict=True) for command in each]
 
 
 def _take(
-    outcomes: Sequence[Outcome], items: Sequence[tuple[Motor, Command]], results: Sequence[Any]
+    outcomes: Sequence[Outcome], items: Sequence[tuple[Asked, Command]], results: Sequence[Any]
 ) -> dict[int, list[Reply | None]]:
     """One tick's results into each motor's outcome: its error, or its replies of this tick (a motor
     that failed keeps the replies of the last tick it answered). Returns this tick's replies by id.
@@ -270,23 +326,19 @@ def _drive(
     keep: bool,
     as_json: bool,
     arrival: Arrival | None = None,
+    remote: Remote | None = None,
 ) -> None:
-    entry = op(conn.family, name)
-    if values.get("max_current_a") is not None and not entry.current_limit:
-        raise click.UsageError(
-            f"{conn.family} {name} carries no current limit: drop --max-current-a "
-            f"(it is for {current_limit_users()})"
-        )
-    planned = plan(conn, entry, values)
-    repeat = entry.repeat
-    assert repeat is not None
-    with refused():  # refused here (exit 2), not after the first set-point went out
-        repeats = [repeat(codec, values) for codec in codecs(conn)]
-        for codec, commands in zip(codecs(conn), repeats, strict=True):
-            for command in commands:
-                codec.encode(command)
     live = not as_json and console(stderr=True).is_terminal
-    outcomes = run(_run_setpoints(conn, name, planned, repeats, rate_hz, duration, keep, live, arrival))
+    if remote is not None:
+        _commanding(name, remote)
+        if keep:
+            raise click.UsageError(
+                "--keep with --remote: the bridge stops the motors a client commanded when it leaves"
+            )
+        outcomes = run(_remote_setpoints(conn, remote, name, values, rate_hz, duration, live, arrival))
+    else:
+        planned, repeats = _setpoints(conn.family, name, codecs(conn), values)
+        outcomes = run(_run_setpoints(conn, name, planned, repeats, rate_hz, duration, keep, live, arrival))
     rows = _status_rows(outcomes)
     if as_json:
         emit_json(rows)
@@ -295,6 +347,39 @@ def _drive(
         if keep:
             click.echo("left running (--keep): stop them with `servobus stop`", err=True)
     fail_if_any(outcomes)
+
+
+def _commanding(name: str, remote: Remote) -> None:
+    """Refuse ``--read-only`` for a command that commands the motors (exit 2, nothing sent)."""
+    if remote.read_only:
+        raise click.UsageError(f"--read-only: {name} commands the motors; drop --read-only")
+
+
+def _setpoints(
+    family: str, name: str, bound: Sequence[Any], values: Mapping[str, Any]
+) -> tuple[list[Sequence[Command]], list[Sequence[Command]]]:
+    """The commands set-point command ``name`` sends each motor (its codec in ``bound``) first, and
+    those it resends: all built and encoded now.
+
+    Raises:
+        click.UsageError: the family has no such command, a value out of range, a command the revision
+            lacks, a current limit the command does not carry (exit 2, nothing sent).
+    """
+    entry = op(family, name)
+    if values.get("max_current_a") is not None and not entry.current_limit:
+        raise click.UsageError(
+            f"{family} {name} carries no current limit: drop --max-current-a "
+            f"(it is for {current_limit_users()})"
+        )
+    planned = plan_codecs(bound, entry, values)
+    repeat = entry.repeat
+    assert repeat is not None
+    with refused():  # refused here (exit 2), not after the first set-point went out
+        repeats = [repeat(codec, values) for codec in bound]
+        for codec, commands in zip(bound, repeats, strict=True):
+            for command in commands:
+                codec.encode(command)
+    return planned, repeats
 
 
 async def _run_setpoints(
@@ -309,29 +394,99 @@ async def _run_setpoints(
     arrival: Arrival | None,
 ) -> list[Outcome]:
     async with open_bus(conn, safe=None if keep else "stop") as (bus, motors):
-        outcomes = await ask_all(motors, planned, timeout_s=conn.timeout_s)
+
+        async def cycle(items: Items) -> tuple[Items, Sequence[Any]]:
+            return items, await bus.cycle(items, timeout_s=conn.timeout_s)
+
+        where = f"{conn.family} {_ids(conn.motor_ids)}"
+        hold = _Hold(name, where, rate_hz, duration, live, arrival)
+        return await hold(motors, planned, repeats, cycle, keep=keep, timeout_s=conn.timeout_s)
+
+
+async def _remote_setpoints(
+    conn: Connection,
+    remote: Remote,
+    name: str,
+    values: Mapping[str, Any],
+    rate_hz: float,
+    duration: float | None,
+    live: bool,
+    arrival: Arrival | None,
+) -> list[Outcome]:
+    """:func:`_run_setpoints` through a bridge: the first commands as requests (their replies come
+    back), the rest as the bridge's set-points, valid for three ticks; the states the bridge published
+    are the status. Leaving stops the motors (the bridge's safe stop for a client that left)."""
+    from servobus.cli._remote import open_remote
+
+    async with open_remote(conn, remote, valid_for_s=max(0.1, 3.0 / rate_hz)) as (bus, motors):
+        planned: list[Sequence[Command]] = []
+        repeats: list[Sequence[Command]] = []
+        for motor in motors:  # (each in its own family: a bridge's bus may mix them)
+            first, again = _setpoints(motor.codec.family, name, [motor.codec], values)
+            planned += first
+            repeats += again
+
+        async def cycle(items: Items) -> tuple[Items, Sequence[Any]]:
+            results = await bus.cycle([(motor.remote, command) for motor, command in items])
+            answered = [(item, r) for item, r in zip(items, results, strict=True) if r is not None]
+            return [item for item, _ in answered], [r for _, r in answered]
+
+        families = sorted({motor.codec.family for motor in motors})
+        where = f"{'/'.join(families)} {_ids([m.motor_id for m in motors])} of {remote.target}"
+        hold = _Hold(name, where, rate_hz, duration, live, arrival)
+        return await hold(motors, planned, repeats, cycle, keep=False, timeout_s=conn.timeout_s)
+
+
+class _Hold:
+    """A set-point command's run on opened motors: the first commands, then the set-point resent at
+    ``rate_hz`` until ``duration``, the arrival, or Ctrl-C (the stop is the Bus's or the bridge's)."""
+
+    def __init__(
+        self,
+        name: str,
+        where: str,
+        rate_hz: float,
+        duration: float | None,
+        live: bool,
+        arrival: Arrival | None,
+    ) -> None:
+        self.name = name
+        self.where = where
+        self.rate_hz = rate_hz
+        self.duration = duration
+        self.live = live
+        self.arrival = arrival
+
+    async def __call__(
+        self,
+        motors: Sequence[Asked],
+        planned: Sequence[Sequence[Command]],
+        repeats: Sequence[Sequence[Command]],
+        cycle: Cycle,
+        *,
+        keep: bool,
+        timeout_s: float | None,
+    ) -> list[Outcome]:
+        name, rate_hz, duration, arrival = self.name, self.rate_hz, self.duration, self.arrival
+        outcomes = await ask_all(motors, planned, timeout_s=timeout_s)
         if keep or any(o.error for o in outcomes):
             return outcomes
-        if not live:  # (a terminal shows the live table instead)
+        if not self.live:  # (a terminal shows the live table instead)
             ends = ["arrival"] if arrival is not None else []
             ends += [f"{duration:g} s"] if duration is not None else []
             until = ", ".join(ends) + (" or " if ends else "") + "Ctrl-C"
-            click.echo(
-                f"{name}: {conn.family} {_ids(conn.motor_ids)} driven at {rate_hz:g} Hz until {until}, "
-                "then stopped",
-                err=True,
-            )
+            click.echo(f"{name}: {self.where} driven at {rate_hz:g} Hz until {until}, then stopped", err=True)
         arrived = None if arrival is None else [arrival(o.replies) for o in outcomes]
         items = _items(motors, repeats)
         settled = 0
         arrived_s: float | None = None
         start = anyio.current_time()  # (the loop's clock, the ticks')
-        with _LiveStatus(live, rate_hz) as view:
-            async for tick in bus.ticks(rate_hz, spin_s=0.0):
+        with _LiveStatus(self.live, rate_hz) as view:
+            async for tick in ticks(rate_hz, spin_s=0.0):
                 elapsed = tick.started - start
                 if duration is not None and elapsed >= duration:
                     break
-                _take(outcomes, items, await bus.cycle(items, timeout_s=conn.timeout_s))
+                _take(outcomes, *await cycle(items))
                 if arrived is not None:
                     done = all(
                         o.error is None and there(status_of(o.replies))
@@ -385,9 +540,10 @@ _keep = click.option(
         "servobus move --sim 2 --angle-deg 90                   # until both are there, then hold",
         "servobus move --ids 1-3 -i slcan -c /dev/ttyACM0 --angle-deg -45 --max-speed-dps 60",
         "servobus move --sim 1 --angle-deg 30 --relative --duration 2",
+        "servobus move --remote arm/can0 --ids 2 --angle-deg 45        # through a bridge",
     ),
 )
-@connection_options
+@remote_connection_options
 @click.option("--angle-deg", type=float, required=True, help="Target angle of the output shaft.")
 @click.option(
     "--max-speed-dps",
@@ -412,6 +568,7 @@ _keep = click.option(
 @json_option
 def move(
     conn: Connection,
+    remote: Remote | None,
     angle_deg: float,
     max_speed_dps: float,
     no_speed_limit: bool,
@@ -456,6 +613,7 @@ def move(
         keep=keep,
         as_json=as_json,
         arrival=arrival,
+        remote=remote,
     )
 
 
@@ -471,7 +629,7 @@ def _one_value(
     key = option.removeprefix("--").replace("-", "_")
 
     @click.command(name, help=help_text, context_settings=SETTINGS, epilog=examples(*lines))
-    @connection_options
+    @remote_connection_options
     @click.option(option, key, type=float, required=True, help=option_help)
     @(_max_current if limit else _same)
     @_rate
@@ -479,9 +637,17 @@ def _one_value(
     @_keep
     @json_option
     def command(
-        conn: Connection, rate_hz: float, duration: float | None, keep: bool, as_json: bool, **value: float
+        conn: Connection,
+        remote: Remote | None,
+        rate_hz: float,
+        duration: float | None,
+        keep: bool,
+        as_json: bool,
+        **value: float,
     ) -> None:
-        _drive(conn, name, value, rate_hz=rate_hz, duration=duration, keep=keep, as_json=as_json)
+        _drive(
+            conn, name, value, rate_hz=rate_hz, duration=duration, keep=keep, as_json=as_json, remote=remote
+        )
 
     return command
 
@@ -513,7 +679,7 @@ torque = _one_value(
         "servobus mit --ids 2 -i slcan -c /dev/ttyACM0 --position-rad 0 --kp 5 --kd 0.5 --torque-ff-nm 0.3",
     ),
 )
-@connection_options
+@remote_connection_options
 @click.option("--position-rad", type=float, required=True, help="Target position p_des.")
 @click.option("--velocity-rad-s", type=float, default=0.0, show_default=True, help="Target velocity v_des.")
 @click.option("--kp", type=float, required=True, help="Position gain (N·m/rad).")
@@ -525,6 +691,7 @@ torque = _one_value(
 @json_option
 def mit(
     conn: Connection,
+    remote: Remote | None,
     position_rad: float,
     velocity_rad_s: float,
     kp: float,
@@ -546,36 +713,87 @@ def mit(
         "kd": kd,
         "torque_ff_nm": torque_ff_nm,
     }
-    _drive(conn, "mit", values, rate_hz=rate_hz, duration=duration, keep=keep, as_json=as_json)
+    _drive(
+        conn, "mit", values, rate_hz=rate_hz, duration=duration, keep=keep, as_json=as_json, remote=remote
+    )
 
 
 # ---- one-shots ----
 
 
-def _one_shot(conn: Connection, name: str, values: Mapping[str, Any], *, yes: bool, as_json: bool) -> None:
-    entry = op(conn.family, name)
-    planned = plan(conn, entry, values)
-    if entry.rom:
-        ids = ", ".join(str(i) for i in conn.motor_ids)
-        confirm(f"{name} writes the ROM of {conn.family} motor(s) {ids}. Continue?", yes)
-
-    outcomes = ask(conn, planned)
+def _one_shot(
+    conn: Connection,
+    name: str,
+    values: Mapping[str, Any],
+    *,
+    yes: bool,
+    as_json: bool,
+    remote: Remote | None = None,
+) -> None:
+    if remote is not None:
+        _commanding(name, remote)
+        planned, outcomes, families = run(
+            _remote_ask(conn, remote, lambda family: op(family, name), values, rom=(name, yes))
+        )
+        notes = [note for family in families if (note := op(family, name).note)]
+    else:
+        entry = op(conn.family, name)
+        planned = plan(conn, entry, values)
+        if entry.rom:
+            ids = ", ".join(str(i) for i in conn.motor_ids)
+            confirm(f"{name} writes the ROM of {conn.family} motor(s) {ids}. Continue?", yes)
+        outcomes = ask(conn, planned)
+        notes = [entry.note] if entry.note else []
     _print_results(outcomes, planned, as_json)
     fail_if_any(outcomes)
-    if entry.note and not as_json:
-        click.echo(f"note: {entry.note}", err=True)
+    if not as_json:
+        for note in dict.fromkeys(notes):
+            click.echo(f"note: {note}", err=True)
 
 
-def _plain(name: str, help_text: str, *lines: str) -> click.Command:
-    """A one-shot with no options of its own: ``servobus NAME`` sends the family's NAME command."""
+async def _remote_ask(
+    conn: Connection,
+    remote: Remote,
+    op_of: Callable[[str], Op],
+    values: Mapping[str, Any],
+    *,
+    read_only: bool = False,
+    rom: tuple[str, bool] | None = None,
+) -> tuple[list[Sequence[Command]], list[Outcome], list[str]]:
+    """:func:`servobus.cli._motors.ask` through a bridge: each motor's commands (``op_of(family)``)
+    built once the bridge said the motors' families, sent as requests, their replies collected.
+    ``rom``: (the command's name, ``--yes``), to ask first where it writes the ROM.
+
+    Returns:
+        The commands sent, each motor's outcome, and the motors' families.
+    """
+    from servobus.cli._remote import open_remote, plan_motors
+
+    async with open_remote(conn, remote, read_only=read_only) as (_, motors):
+        planned = plan_motors(motors, op_of, values)
+        families = sorted({motor.codec.family for motor in motors})
+        if rom is not None and any(op_of(family).rom for family in families):
+            ids = ", ".join(str(m.motor_id) for m in motors)
+            confirm(f"{rom[0]} writes the ROM of motor(s) {ids} of {remote.target}. Continue?", rom[1])
+        return planned, await ask_all(motors, planned, timeout_s=conn.timeout_s), families
+
+
+def _plain(name: str, help_text: str, *lines: str, remote: bool = False) -> click.Command:
+    """A one-shot with no options of its own: ``servobus NAME`` sends the family's NAME command
+    (``remote``: also to a bridge's motors, ``--remote``)."""
 
     @click.command(name, help=help_text, context_settings=SETTINGS, epilog=examples(*lines))
-    @connection_options
+    @(remote_connection_options if remote else _local_only)
     @json_option
-    def command(conn: Connection, as_json: bool) -> None:
-        _one_shot(conn, name, {}, yes=True, as_json=as_json)
+    def command(conn: Connection, as_json: bool, remote: Remote | None = None) -> None:
+        _one_shot(conn, name, {}, yes=True, as_json=as_json, remote=remote)
 
     return command
+
+
+def _local_only(func: F) -> F:
+    """:func:`connection_options` for a command without ``--remote``."""
+    return connection_options(func)
 
 
 stop = _plain(
@@ -583,12 +801,16 @@ stop = _plain(
     "Stop and hold position (the loop stays active; hollow motors: output off).",
     "servobus stop --sim 2",
     "servobus stop -i socketcan -c can0 --ids 1-8",
+    "servobus stop --remote arm/can0",
+    remote=True,
 )
 off = _plain(
     "off",
     "Switch the output off: the shaft is free (MyActuator 0x80, LK 0x80, hollow stop).",
     "servobus off --sim 2",
     "servobus off -i socketcan -c can0 --ids 1-8",
+    "servobus off --remote arm/can0 --ids 3",
+    remote=True,
 )
 clear_errors = _plain(
     "clear-errors",
@@ -607,15 +829,17 @@ reset = _plain(
 @click.command(
     context_settings=SETTINGS,
     epilog=examples(
-        "servobus brake --sim 1 --release", "servobus brake -i slcan -c /dev/ttyACM0 --ids 3 --lock"
+        "servobus brake --sim 1 --release",
+        "servobus brake -i slcan -c /dev/ttyACM0 --ids 3 --lock",
+        "servobus brake --remote arm/can0 --ids 3 --lock",
     ),
 )
-@connection_options
+@remote_connection_options
 @click.option("--lock/--release", "lock", required=True, help="Close (hold) or open the holding brake.")
 @json_option
-def brake(conn: Connection, lock: bool, as_json: bool) -> None:
+def brake(conn: Connection, remote: Remote | None, lock: bool, as_json: bool) -> None:
     """Lock or release the holding brake."""
-    _one_shot(conn, "brake", {"lock": lock}, yes=True, as_json=as_json)
+    _one_shot(conn, "brake", {"lock": lock}, yes=True, as_json=as_json, remote=remote)
 
 
 @click.command(

@@ -13,19 +13,22 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 from rich.progress import Progress
 
-from servobus.bus import Bus, Motor
-from servobus.cli._connect import Connection, connection_options
+from servobus.bus import Bus
+from servobus.cli._connect import Connection, remote_connection_options
 from servobus.cli._families import cli_part, status_reads
-from servobus.cli._motors import codecs, run
+from servobus.cli._motors import Asked, codecs, run
 from servobus.cli._output import SETTINGS, console, emit_json, examples, json_option, jsonable, table
 from servobus.cli.plugin import Query
 from servobus.errors import ServobusError
-from servobus.protocols import get_family
+from servobus.protocols import Reply, get_family
+
+if TYPE_CHECKING:
+    from servobus.cli._remote import Remote
 
 __all__ = ["scan"]
 
@@ -40,23 +43,30 @@ DEFAULT_IDS = tuple(range(1, 33))
         "servobus scan --sim 4",
         "servobus scan -i slcan -c /dev/ttyACM0",
         "servobus scan -i socketcan -c can0 --family lk --ids 1-8 --json",
+        "servobus scan --remote arm/can0          # the motors a bridge serves on its bus can0",
     ),
 )
-@connection_options
+@remote_connection_options
 @json_option
-def scan(conn: Connection, as_json: bool) -> None:
+def scan(conn: Connection, remote: Remote | None, as_json: bool) -> None:
     """Probe ids 1-32 (those of them the family allows; or --ids) for motors of the family; list id,
     revision, model, firmware date, state and error flags of those that answer. (With --sim N the
-    simulated motors are 1..N.)"""
-    reads = status_reads(conn.family)  # refused here for a family without a read-only request
-    ids = conn.ids or tuple(i for i in DEFAULT_IDS if i in get_family(conn.family).motor_ids)
-    rows = run(_scan(conn, ids, reads.first(codecs(conn)[0], {})[0], as_json))
+    simulated motors are 1..N; with --remote, the motors the bridge serves on the bus.)"""
+    if remote is not None:
+        rows = run(_scan_remote(conn, remote))
+        where = f"of {remote.target}"
+    else:
+        reads = status_reads(conn.family)  # refused here for a family without a read-only request
+        ids = conn.ids or tuple(i for i in DEFAULT_IDS if i in get_family(conn.family).motor_ids)
+        rows = run(_scan(conn, ids, reads.first(codecs(conn)[0], {})[0], as_json))
+        where = f"on ids {_span(ids)}"
     if as_json:
         emit_json(rows)
     elif rows:
         console().print(table(None, COLUMNS, ([r.get(c) for c in COLUMNS] for r in rows)))
     if not rows:
-        raise click.ClickException(f"no {conn.family} motor answered on ids {_span(ids)}")
+        family = remote.family if remote is not None else conn.family
+        raise click.ClickException(f"no {family + ' ' if family else ''}motor answered {where}")
 
 
 def _span(ids: Sequence[int]) -> str:
@@ -79,11 +89,7 @@ async def _scan(conn: Connection, ids: Sequence[int], probe: Any, quiet: bool) -
                     except ServobusError:
                         progress.advance(task)
                         continue
-                    row: dict[str, Any] = dict.fromkeys(COLUMNS)
-                    row.update(id=motor_id, family=conn.family, revision=motor.codec.revision.name)
-                    faults = getattr(reply, "FAULTS", None)
-                    row["errors"] = jsonable(getattr(reply, faults)) if faults else None
-                    row["state"] = jsonable(getattr(reply, "motor_state", None))
+                    row = _row(motor, reply)
                     with contextlib.suppress(ServobusError):
                         row.update(await _ask(motor, part.identify, conn.timeout_s))
                     rows.append(row)
@@ -101,7 +107,44 @@ async def _scan(conn: Connection, ids: Sequence[int], probe: Any, quiet: bool) -
     return rows
 
 
-async def _ask(motor: Motor, query: Query | None, timeout_s: float | None) -> dict[str, Any]:
+def _row(motor: Asked, reply: Reply) -> dict[str, Any]:
+    """A motor's row from its reply to the probe: id, family, revision, state and error flags."""
+    row: dict[str, Any] = dict.fromkeys(COLUMNS)
+    row.update(id=motor.motor_id, family=motor.codec.family, revision=motor.codec.revision.name)
+    faults = getattr(reply, "FAULTS", None)
+    row["errors"] = jsonable(getattr(reply, faults)) if faults else None
+    row["state"] = jsonable(getattr(reply, "motor_state", None))
+    return row
+
+
+async def _scan_remote(conn: Connection, remote: Remote) -> list[dict[str, Any]]:
+    """The motors the bridge serves on the bus (or those of them ``--ids`` names), each probed with
+    its family's first status read and then asked what the family's ``cli`` part asks, as bound on the
+    bridge (its revision is the bridge's)."""
+    from servobus.cli._remote import open_remote
+
+    rows: list[dict[str, Any]] = []
+    async with open_remote(conn, remote, read_only=True) as (_, motors):
+        for motor in motors:
+            family = motor.codec.family
+            probe = status_reads(family).first(motor.codec, {})[0]
+            try:
+                reply = await motor.request(probe, timeout_s=conn.timeout_s)
+            except ServobusError:
+                continue
+            row = _row(motor, reply)
+            part = cli_part(family)
+            with contextlib.suppress(ServobusError):
+                row.update(await _ask(motor, part.identify, conn.timeout_s))
+            try:
+                row.update(await _ask(motor, part.describe, conn.timeout_s))
+            except ServobusError as exc:
+                row["state"] = f"answered the probe, then: {exc}"
+            rows.append(row)
+    return rows
+
+
+async def _ask(motor: Asked, query: Query | None, timeout_s: float | None) -> dict[str, Any]:
     """The columns ``query`` makes of the motor's replies to its reads (nothing without a query).
 
     Raises:
