@@ -15,12 +15,14 @@ Zenoh calls us on its own threads; every callback only hands its bytes to the ev
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import logging
 import time
 from collections import deque
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from types import TracebackType
 from typing import Any, Self
 
 import anyio
@@ -30,8 +32,10 @@ from servobus import runtime
 from servobus._version import __version__
 from servobus.bus import Bus, Motor, MotorStatus
 from servobus.errors import ServobusError
+from servobus.protocols import Reply
 from servobus.remote import wire
 from servobus.remote.keys import Keys, check_name
+from servobus.scheduler import Traffic
 from servobus.ticks import ticks
 
 __all__ = ["Bridge"]
@@ -102,6 +106,10 @@ class _Served:
             ),
             0,
         )
+
+    def changed(self, motor: Motor, traffic: Traffic, reply: Reply) -> None:
+        """(The Bus's subscriber) the motor's state is to be published."""
+        self.dirty.add(motor.motor_id)
 
     def info(self, node: str, bridge: Bridge) -> dict[str, Any]:
         return {
@@ -217,11 +225,13 @@ class Bridge:
             self._group.start_soon(self._publish_states, served)
         return self
 
-    async def __aexit__(self, *exc: object) -> bool | None:
+    async def __aexit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> bool | None:
         try:
             if self._group is not None:
                 self._group.cancel_scope.cancel()
-                await self._group.__aexit__(*exc)
+                await self._group.__aexit__(exc_type, exc, tb)
         finally:
             self._group = None
             await self._close()
@@ -278,8 +288,8 @@ class Bridge:
             for mid in served.motors:
                 served.publishers[mid] = session.declare_publisher(keys.motor(name, mid, "state"))
                 self._declared.append(served.publishers[mid])
-            served.bus.subscribe(lambda motor, traffic, reply, s=served: s.dirty.add(motor.motor_id))
-            served.bus.subscribe_status(lambda status, s=served: self._on_status(s, status))
+            served.bus.subscribe(served.changed)
+            served.bus.subscribe_status(functools.partial(self._on_status, served))
 
     def _handed(self, handler: Any, extract: Any, *bound: Any) -> Any:
         """A Zenoh callback that hands ``extract(item)`` (or the item) to ``handler``, which runs
