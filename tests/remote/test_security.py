@@ -355,7 +355,7 @@ def _probe(bridge: Bridge, config: zenoh.Config, client_id: str, *, reads: bool,
 
         both = {f"{ROOT}/b/1/setpoint", f"{ROOT}/b/setpoints"}
         _until(lambda: both <= set(bridge.puts), timeout=command_s, step=put_setpoints)
-        keys = ("b/1/read", "b/info", "b/1/request")
+        keys = ("b/1/read", "b/info", "b/1/request", "b/**")
         replies = {key: _replies(session, f"{ROOT}/{key}") for key in keys}
         if commands:  # (a declaration may still be on its way: asked again until answered)
             _until(
@@ -426,13 +426,19 @@ def tls_bridge(pki: Pki) -> Iterator[Bridge]:
 def _assert_commander(seen: Seen) -> None:
     assert seen.alive and seen.state
     assert seen.setpoint and seen.setpoints
-    assert seen.replies == {"b/1/read": [b"read"], "b/info": [b"info"], "b/1/request": [b"request"]}
+    # a wildcard beyond the allowed keys is denied whole, even to a commander
+    assert seen.replies == {
+        "b/1/read": [b"read"],
+        "b/info": [b"info"],
+        "b/1/request": [b"request"],
+        "b/**": [],
+    }
     assert seen.token and seen.token_gone
 
 
 def _assert_reader(seen: Seen) -> None:
     assert seen.alive and seen.state
-    assert seen.replies == {"b/1/read": [b"read"], "b/info": [b"info"], "b/1/request": []}
+    assert seen.replies == {"b/1/read": [b"read"], "b/info": [b"info"], "b/1/request": [], "b/**": []}
     assert not seen.setpoint and not seen.setpoints
     assert not seen.token
 
@@ -451,7 +457,7 @@ def test_usrpwd_user_in_neither_set_may_do_nothing(usrpwd_bridge: Bridge) -> Non
     config = client_config([usrpwd_bridge.endpoint], user="other", password="other-secret")
     seen = _probe(usrpwd_bridge, config, "other-1", reads=False, commands=False)
     assert not (seen.alive or seen.state or seen.setpoint or seen.setpoints or seen.token)
-    assert seen.replies == {"b/1/read": [], "b/info": [], "b/1/request": []}
+    assert seen.replies == {"b/1/read": [], "b/info": [], "b/1/request": [], "b/**": []}
 
 
 @pytest.mark.parametrize(
@@ -485,6 +491,32 @@ def test_tls_refused(tls_bridge: Bridge, pki: Pki, who: str) -> None:
         [tls_bridge.endpoint], tls_ca=pki.ca.cert, connect_timeout_s=REFUSED_TIMEOUT_S, **cert
     )
     _refused(tls_bridge, config)
+
+
+def test_usrpwd_and_tls_need_the_same_name_in_both(users_file: Path, pki: Pki) -> None:
+    endpoint = f"tls/127.0.0.1:{_port()}"
+    access = Access(
+        commanders=frozenset({"cmd"}),
+        readers=frozenset({"ro"}),
+        users_file=users_file,
+        tls_cert=pki.server.cert,
+        tls_key=pki.server.key,
+        tls_ca=pki.ca.cert,
+    )
+    bridge = Bridge(zenoh.open(bridge_config(NODE, [endpoint], access)), endpoint)
+    try:
+        bridge.serve()
+        cert = {"tls_cert": pki.cmd.cert, "tls_key": pki.cmd.key, "tls_ca": pki.ca.cert}
+        both = client_config([endpoint], user="cmd", password="cmd-secret", **cert)
+        _assert_commander(_probe(bridge, both, "cmd-1", reads=True, commands=True))
+        # user ro with certificate cmd: in neither set as a pair, so no right at all
+        mixed = client_config([endpoint], user="ro", password="ro-secret", **cert)
+        seen = _probe(bridge, mixed, "mixed-1", reads=False, commands=False)
+        assert not (seen.alive or seen.state or seen.setpoint or seen.token)
+        # the certificate alone is not enough
+        _refused(bridge, client_config([endpoint], connect_timeout_s=REFUSED_TIMEOUT_S, **cert))
+    finally:
+        bridge.session.close()
 
 
 # --- sockets ----------------------------------------------------------------------------------------
