@@ -22,6 +22,9 @@ on key expressions inside those above (``servobus/N/B/*/setpoint`` is fine, ``se
 and would never be announced to a client), and a client's wildcard query reaches only what its whole
 key expression is allowed (``servobus/N/B/*/read`` does, ``servobus/N/B/**`` is denied).
 
+Usrpwd alone authenticates a client when it connects but does not encrypt what follows (set-points
+included): beyond a network you trust, listen on ``tls/`` with client certificates.
+
 A client (:func:`client_config`) is a peer that listens on nothing and connects to the bridge only;
 ``zenoh.open`` fails (``zenoh.ZError``, within the connect timeout) when no bridge answers or the
 bridge refuses its credentials, and :func:`open_error` says so in one line.
@@ -373,9 +376,14 @@ def bridge_config(
                     f"bridge_config: TLS access but {', '.join(plain)} is not tls/ or quic/: a client "
                     "there has no certificate, so no right"
                 )
-            settings["transport/link/tls/listen_certificate"] = str(Path(access.tls_cert or "").resolve())
-            settings["transport/link/tls/listen_private_key"] = str(Path(access.tls_key or "").resolve())
-            settings["transport/link/tls/root_ca_certificate"] = str(Path(access.tls_ca or "").resolve())
+            for key, path in (
+                ("listen_certificate", access.tls_cert),
+                ("listen_private_key", access.tls_key),
+                ("root_ca_certificate", access.tls_ca),
+            ):
+                if path is not None:  # (all three are: Access checked)
+                    settings[f"transport/link/tls/{key}"] = str(path.resolve())
+            # Without it the bridge asks no certificate, and a client has no common name.
             settings["transport/link/tls/enable_mtls"] = True
         if access.users_file is not None:
             settings["transport/auth/usrpwd/dictionary_file"] = str(access.users_file.resolve())
