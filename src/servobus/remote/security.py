@@ -317,6 +317,11 @@ _COMMON: dict[str, Any] = {
     "scouting/multicast/enabled": False,
     "scouting/gossip/enabled": False,
     "adminspace/enabled": False,
+    # A peer that stops answering without closing its link (a frozen process, a pulled cable) is
+    # dropped after 1 s instead of Zenoh's 10 s, and with it its liveliness token: the bridge stops
+    # the motors it commanded (set-points going stale stop them sooner).
+    "transport/link/tx/lease": 1000,
+    "transport/link/tx/keep_alive": 4,
 }
 
 
@@ -337,7 +342,8 @@ def bridge_config(
         insecure: listen beyond this host without ``access`` all the same.
         config_file: a Zenoh JSON5 config loaded first. Set on top of it, whatever it says: ``mode``,
             ``listen/endpoints``, ``connect/endpoints`` (none), ``scouting/multicast/enabled`` and
-            ``scouting/gossip/enabled`` (false), ``adminspace/enabled`` (false); with ``access``,
+            ``scouting/gossip/enabled`` (false), ``adminspace/enabled`` (false),
+            ``transport/link/tx/lease`` (1 s) and ``keep_alive`` (4 a lease); with ``access``,
             ``access_control``, ``transport/auth/usrpwd/dictionary_file`` (with a users file) and
             ``transport/link/tls/{listen_certificate,listen_private_key,root_ca_certificate,
             enable_mtls}`` (with TLS).
