@@ -11,6 +11,7 @@ import select
 import signal
 import socket
 import subprocess
+import sys
 import time
 from collections.abc import Iterator
 
@@ -169,3 +170,27 @@ def test_bad_bridge_arguments_are_one_line_and_exit_2(
     capsys: pytest.CaptureFixture[str], args: list[str], said: str
 ) -> None:
     assert said in one_line(capsys, ["bridge", *args])
+
+
+def test_the_default_endpoint_is_the_security_modules() -> None:
+    """The CLI names it without importing Zenoh (it loads without the [remote] extra)."""
+    from servobus.cli import _remote
+    from servobus.cli import bridge as bridge_cli
+    from servobus.remote.security import DEFAULT_ENDPOINT
+
+    assert _remote._default() == bridge_cli.DEFAULT_ENDPOINT == DEFAULT_ENDPOINT
+
+
+@pytest.mark.parametrize(
+    "args", [["status", "--remote", f"{NODE}/sim1"], ["bridge", "--sim", "1"], ["status", "--sim", "1"]]
+)
+def test_without_zenoh_remote_is_one_line_naming_the_extra_and_local_commands_still_run(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, args: list[str]
+) -> None:
+    monkeypatch.setitem(sys.modules, "zenoh", None)  # (import zenoh raises ImportError)
+    for name in [n for n in sys.modules if n == "servobus.remote" or n.startswith("servobus.remote.")]:
+        monkeypatch.delitem(sys.modules, name)
+    if args[0] == "status" and "--sim" in args:
+        run(capsys, args)
+    else:
+        assert "pip install 'servobus[remote]'" in one_line(capsys, args, code=1)

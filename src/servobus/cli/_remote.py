@@ -16,7 +16,7 @@ bridge sends its Bus's safe command to the motors this client commanded.
 from __future__ import annotations
 
 import contextlib
-from collections.abc import AsyncIterator, Callable, Mapping, Sequence
+from collections.abc import AsyncIterator, Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -37,6 +37,7 @@ __all__ = [
     "RemoteCliMotor",
     "open_remote",
     "plan_motors",
+    "remote_extra",
     "remote_from",
     "remote_options",
 ]
@@ -80,7 +81,8 @@ class Remote:
     def connect(self, *, read_only: bool = False, valid_for_s: float = 0.1) -> RemoteBus:
         """The :class:`~servobus.remote.RemoteBus` to enter (``read_only`` as well as ``--read-only``:
         a command that only reads declares no commanding client)."""
-        from servobus.remote import connect
+        with remote_extra():
+            from servobus.remote import connect
 
         return connect(
             self.target,
@@ -93,7 +95,23 @@ class Remote:
 
 
 def _default() -> str:
-    return "tcp/127.0.0.1:7447"  # (servobus.remote.security.DEFAULT_ENDPOINT, without importing zenoh)
+    """:data:`servobus.remote.security.DEFAULT_ENDPOINT`, known without importing Zenoh: the commands
+    load without the ``[remote]`` extra (a test checks the two agree)."""
+    return "tcp/127.0.0.1:7447"
+
+
+@contextlib.contextmanager
+def remote_extra() -> Iterator[None]:
+    """Inside the block, :mod:`servobus.remote` failing to import (no ``eclipse-zenoh``) is one line
+    naming the extra to install, exit 1.
+
+    Raises:
+        click.ClickException: the ImportError's message.
+    """
+    try:
+        yield
+    except ImportError as exc:
+        raise click.ClickException(str(exc)) from exc
 
 
 def remote_options(func: F) -> F:
@@ -150,7 +168,8 @@ def remote_from(kwargs: dict[str, Any]) -> Remote | None:
         if given:
             raise click.UsageError(f"{', '.join(given)}: for a bus on a bridge, with --remote NODE/BUS")
         return None
-    from servobus.remote.keys import check_name
+    with remote_extra():
+        from servobus.remote.keys import check_name
 
     node, slash, bus = target.partition("/")
     try:

@@ -29,13 +29,14 @@ from servobus.bus import Bus, Motor
 from servobus.cli._connect import Connection, connection_options, note_exit, sim_devices
 from servobus.cli._motors import run, stop_scope
 from servobus.cli._output import SETTINGS, FloatRange, examples, refused
+from servobus.cli._remote import remote_extra
 
 if TYPE_CHECKING:
     from servobus.remote.security import Access
 
 __all__ = ["bridge", "default_node"]
 
-DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"  # (servobus.remote.security's, without importing zenoh here)
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"  # (servobus.remote.security's, without importing Zenoh: a test)
 
 _File = click.Path(exists=True, dir_okay=False, path_type=Path)
 
@@ -139,8 +140,9 @@ def bridge(
     Loopback only by default; beyond this host only with --users and/or --tls-cert/--tls-key/--tls-ca
     (with --commander/--reader), or --insecure. On exit the buses send their safe stop.
     """
-    from servobus.remote.keys import check_name
-    from servobus.remote.security import bridge_config
+    with remote_extra():
+        from servobus.remote.keys import check_name
+        from servobus.remote.security import bridge_config
 
     node = node or default_node()
     try:
