@@ -372,7 +372,6 @@ _LOCAL = {
 def _connection_options(func: F, *, remote: bool) -> F:
     from servobus.cli._remote import remote_from, remote_options
 
-    @(remote_options if remote else _unchanged)
     @family_option
     @revision_option
     @click.option(
@@ -394,6 +393,7 @@ def _connection_options(func: F, *, remote: bool) -> F:
     @click.option("--port", help="Serial port of an RS485 line (/dev/ttyUSB0).")
     @click.option("--baud", type=click.IntRange(min=1), help="Serial baud rate [default: the family's].")
     @timeout_option
+    @(remote_options if remote else _unchanged)
     @functools.wraps(func)
     def wrapper(*args: Any, ids_text: str | None, **kwargs: Any) -> Any:
         names = (

@@ -136,7 +136,12 @@ def remote_options(func: F) -> F:
             click.option(
                 "--user", envvar=ENV_USER, show_envvar=True, help="User name, when the bridge asks for one."
             ),
-            click.option("--password", envvar=ENV_PASSWORD, show_envvar=True, help="Its password."),
+            click.option(
+                "--password",
+                envvar=ENV_PASSWORD,
+                show_envvar=True,
+                help="Its password (from the environment, it stays out of the process list).",
+            ),
             click.option(
                 "--read-only",
                 is_flag=True,
