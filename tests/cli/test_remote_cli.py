@@ -14,6 +14,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
@@ -194,3 +195,63 @@ def test_without_zenoh_remote_is_one_line_naming_the_extra_and_local_commands_st
         run(capsys, args)
     else:
         assert "pip install 'servobus[remote]'" in one_line(capsys, args, code=1)
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["torque", "--ids", "4", "--current-a", "0.1", "--duration", "0.2"],
+        ["mit", "--ids", "4", "--position-rad", "0.2", "--kp", "5", "--kd", "0.5", "--duration", "0.2"],
+        ["off", "--ids", "4"],
+        ["brake", "--ids", "4", "--lock"],
+    ],
+)
+def test_the_other_commands_run_through_the_bridge(
+    capsys: pytest.CaptureFixture[str], bridge: tuple[str, str], args: list[str]
+) -> None:
+    endpoint, _ = bridge
+    rows = run_json(capsys, [args[0], *_remote(endpoint, "sim2"), *args[1:]])
+    assert [r["id"] for r in rows] == [4] and rows[0]["error"] is None, rows
+
+
+@contextlib.contextmanager
+def _bridge(*args: str) -> Iterator[str]:
+    """A bridge of its own (``servobus bridge ARGS``, a free loopback port): its endpoint."""
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    process = subprocess.Popen(
+        [*SERVOBUS, "bridge", *args, "--listen", endpoint],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert process.stdout is not None
+        ready, _, _ = select.select([process.stdout], [], [], 20)
+        assert ready and process.stdout.readline().startswith("serving"), process.poll()
+        yield endpoint
+    finally:
+        process.terminate()
+        process.wait(timeout=20)
+
+
+def test_with_users_a_commander_commands_a_reader_reads_and_a_wrong_password_is_one_line(
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    tmp_path: Path,
+) -> None:
+    users = tmp_path / "users.txt"
+    users.write_text("alice:secret\nbob:pw\n")
+    args = ["--sim", "2", "--node", NODE, "--users", str(users), "--commander", "alice", "--reader", "bob"]
+    with _bridge(*args) as endpoint:
+        remote = _remote(endpoint)
+        alice = ["--user", "alice", "--password", "secret"]
+        move = ["move", *remote, *alice, "--ids", "1", "--angle-deg", "10", "--duration", "3"]
+        rows = run_json(capsys, move)
+        assert abs(rows[0]["angle_deg"] - 10) <= 1, rows
+        monkeypatch.setenv("SERVOBUS_REMOTE_USER", "bob")  # (from the environment)
+        monkeypatch.setenv("SERVOBUS_REMOTE_PASSWORD", "pw")
+        assert [r["id"] for r in run_json(capsys, ["status", *remote])] == [1, 2]
+        err = one_line(capsys, ["stop", *remote, "--ids", "1"], code=1)
+        assert "access control refused it" in err
+        monkeypatch.setenv("SERVOBUS_REMOTE_PASSWORD", "wrong")
+        assert "credentials were refused" in one_line(capsys, ["status", *remote], code=1)
