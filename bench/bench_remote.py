@@ -1,0 +1,682 @@
+"""servobus.remote across processes: a Zenoh bridge in one process, a client in another, on loopback.
+
+Set-up (each run): the **bridge process** (this file with ``--bridge``) runs one ``Bus(SimTransport)``
+with 32 simulated MyActuator motors (ids 1-32) and serves it with ``servobus.remote.Bridge`` (node
+``bench``, bus ``sim``, ``hz=1000``, the default ``state_hz`` and ``stop_after_s``) on a free loopback
+TCP port. Its transport is a :class:`SimTransport` that writes down, with the wall clock
+(``time.time_ns``), every 0xA2 speed set-point and every 0x81 stop frame at the moment it is handed to
+the simulated network (on the in-process SimTransport that is the moment the frame is on the
+simulated wire: it is queued there, and its wire time follows), and every 0x81 reply the host gets.
+The **client process** (``--client``) is another Python process that uses
+``servobus.remote.connect("bench/sim")``. Both processes are on this machine, so their wall clocks
+agree.
+
+Figures (``remote.*``):
+
+* ``tick_hz_32``: set-point updates per second that reach each of the 32 motors. The client publishes
+  one ``cycle()`` batch of 32 ``SpeedControl`` set-points per tick of its own 1 kHz pacer (the bridge's
+  tick rate: faster would be overwritten before it is sent), batch ``k`` carrying ``speed_dps=k``, so
+  each batch is a new set-point for every motor. Counted on the wire: per motor, the distinct
+  set-points that reached the simulated bus in the client's publishing window / that window; the
+  median over the motors. The bridge's own ``applied`` counter / 32 / s is given beside it. Two buses:
+  a zero-wire-time bus (``bitrate=inf``: what the bridge and Zenoh carry; the headline) and the
+  default 1 Mbit/s classic CAN bus (32 motors are 64 frames, ~7.6 ms of wire per cycle: at most ~130
+  cycles/s on any host, so the wire, not the bridge, is the bound there).
+* ``setpoint_to_wire_p50_ms`` / ``_p99_ms``: per set-point and motor, the first time its frame reached
+  the simulated bus minus the client's wall-clock time just before ``cycle()`` (zero-wire-time bus). The
+  bridge's own figure (``setpoint_to_wire_ms``: the set-point's ``sent_unix_ns`` to the tick that hands
+  it to ``Bus.cycle``) is given beside it.
+* ``request_rtt_p50_ms`` / ``_p99_ms``: ``await motor.read_status2()`` through the bridge's ``read``
+  queryable, timed in the client (sequential, round robin over the 32 motors, 1 Mbit/s bus); the
+  baseline is ``Bus.request(motor, ReadStatus2())`` on the same bus in the bridge process in the same
+  run, before the bridge opens: the ratio is what the network hop costs.
+* ``stop_after_client_loss_ms``: a client commands the 32 motors at 200 Hz (``valid_for_s`` 0.1, the
+  default), and is SIGKILLed after 0.5 s; the time from just before ``os.kill`` to the last of the 32
+  stop frames reaching the simulated bus (and to the last stop reply reaching the bridge's Bus, beside
+  it). Median and max of the kills (one bridge process, a new client per kill; 1 Mbit/s bus).
+
+Targets (the issue): ``tick_hz_32`` >= 200, ``setpoint_to_wire_p99_ms`` <= 5, ``stop_after_client_loss_ms``
+<= 250 (median and max). Where one is missed a py-spy profile of the bridge process is taken.
+
+Usage (from the repository root)::
+
+    python bench/bench_remote.py            # 5 runs of each figure: ~2 min
+    python bench/bench_remote.py --quick    # one short run of each (CI smoke), writes nothing
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import math
+import os
+import signal
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+BENCH_DIR = Path(__file__).resolve().parent
+if str(BENCH_DIR) not in sys.path:
+    sys.path.insert(0, str(BENCH_DIR))
+
+import _meta  # noqa: E402
+import _profile  # noqa: E402
+import _results  # noqa: E402
+
+NODE, BUS = "bench", "sim"
+MOTORS = 32
+HZ = 1000.0
+TICK_HZ_TARGET = 200.0
+TO_WIRE_P99_TARGET_MS = 5.0
+STOP_TARGET_MS = 250.0
+SPEED, STOP = 0xA2, 0x81
+REQUEST_BASE, REPLY_BASE = 0x140, 0x240
+
+
+@dataclass(frozen=True)
+class Config:
+    mode: str
+    runs: int  # tick runs per bus, RTT runs, kills
+    tick_seconds: float
+    reads: int  # per RTT run
+    profile_seconds: float  # 0: none
+
+
+FULL = Config("full", 5, 5.0, 500, 8.0)
+QUICK = Config("quick", 1, 1.0, 64, 0.0)
+
+
+def _percentile(values: Sequence[float], q: float) -> float:
+    ordered = sorted(values)
+    if not ordered:
+        return math.nan
+    return ordered[max(0, math.ceil(q * len(ordered)) - 1)]
+
+
+# ============================================================================ the bridge process
+
+
+async def bridge_process(args: argparse.Namespace) -> None:
+    import anyio
+
+    from servobus.bus import Bus
+    from servobus.protocols import myactuator as ma
+    from servobus.protocols.myactuator.sim import MyActuatorMotor
+    from servobus.remote import Bridge
+    from servobus.remote.security import bridge_config
+    from servobus.sim.canbus import CanBusModel
+    from servobus.transports.sim import SimTransport
+
+    first: dict[tuple[int, int], int] = {}  # (motor, set-point k) -> first wall ns on the wire
+    stops: list[tuple[int, int]] = []  # (wall ns, motor) of each stop frame sent
+    stop_replies: list[tuple[int, int]] = []
+
+    class Recording(SimTransport):
+        def _put(self, frame: Any, handle: Any, now: float) -> None:
+            data = frame.data
+            if data:
+                if data[0] == SPEED:
+                    key = (
+                        frame.arbitration_id - REQUEST_BASE,
+                        round(int.from_bytes(data[4:8], "little", signed=True) / 100),
+                    )
+                    if key not in first:
+                        first[key] = time.time_ns()
+                elif data[0] == STOP:
+                    stops.append((time.time_ns(), frame.arbitration_id - REQUEST_BASE))
+            super()._put(frame, handle, now)
+
+        def _deliver(self, frames: Any) -> None:
+            now = time.time_ns()
+            stop_replies.extend(
+                (now, f.arbitration_id - REPLY_BASE) for f in frames if f.data and f.data[0] == STOP
+            )
+            super()._deliver(frames)
+
+    transport = Recording(
+        devices=[MyActuatorMotor(i) for i in range(1, MOTORS + 1)],
+        bus=CanBusModel(bitrate=math.inf if args.bitrate == "inf" else float(args.bitrate)),
+    )
+    endpoint = f"tcp/127.0.0.1:{args.port}"
+    async with Bus(transport) as bus:
+        motors = [bus.motor(ma.FAMILY, i) for i in range(1, MOTORS + 1)]
+        baseline = []
+        for i in range(args.baseline):
+            t0 = time.perf_counter()
+            await bus.request(motors[i % MOTORS], ma.ReadStatus2())
+            baseline.append(time.perf_counter() - t0)
+        async with Bridge(
+            NODE, {BUS: (bus, motors)}, config=bridge_config(NODE, [endpoint]), hz=args.hz
+        ) as bridge:
+            print(json.dumps({"ready": True, "pid": os.getpid(), "baseline_s": baseline}), flush=True)
+            await anyio.to_thread.run_sync(sys.stdin.read)  # until the runner closes our stdin
+            metrics = bridge.metrics()[BUS]
+            stop_log = list(bridge.stop_log)
+    Path(args.out).write_text(
+        json.dumps(
+            {
+                "first": [[m, k, ns] for (m, k), ns in first.items()],
+                "stops": stops,
+                "stop_replies": stop_replies,
+                "stop_log": stop_log,
+                "metrics": metrics,
+            }
+        )
+    )
+
+
+# ============================================================================ the client process
+
+
+async def client_process(args: argparse.Namespace) -> None:
+    import anyio
+
+    from servobus.protocols import myactuator as ma
+    from servobus.remote import connect
+    from servobus.ticks import ticks
+
+    endpoint = f"tcp/127.0.0.1:{args.port}"
+    async with connect(f"{NODE}/{BUS}", endpoints=[endpoint]) as bus:
+        motors = [bus.motor(ma.FAMILY, i) for i in range(1, MOTORS + 1)]
+        out: dict[str, Any] = {}
+        if args.client == "rtt":
+            for motor in motors:  # warm-up: one read each
+                await motor.read_status2()
+            rtt = []
+            for i in range(args.reads):
+                t0 = time.perf_counter()
+                await motors[i % MOTORS].read_status2()
+                rtt.append(time.perf_counter() - t0)
+            out["rtt_s"] = rtt
+        elif args.client == "tick":
+            sent: list[int] = []
+            cpu0 = time.process_time()
+            k = 0
+            async for tick in ticks(args.rate, spin_s=0.0):
+                if tick.index >= args.seconds * args.rate:
+                    break
+                k += 1
+                command = ma.SpeedControl(speed_dps=float(k))
+                sent.append(time.time_ns())
+                await bus.cycle([(m, command) for m in motors])
+            out["sent_ns"] = sent
+            out["cpu_s"] = time.process_time() - cpu0
+            await anyio.sleep(0.3)  # the last set-points reach the wire
+            out["metrics"] = await bus.metrics()
+        else:  # hold: command the motors until killed
+            k = 0
+            async for _ in ticks(args.rate, spin_s=0.0):
+                k += 1
+                await bus.cycle([(m, ma.SpeedControl(speed_dps=float(k % 1000 + 1))) for m in motors])
+                if k == 20:
+                    print("commanding", flush=True)
+        print(json.dumps(out), flush=True)
+
+
+# ============================================================================ the runner
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _script(*extra: str) -> list[str]:
+    return [sys.executable, str(Path(__file__).resolve()), *extra]
+
+
+@contextlib.contextmanager
+def bridge(bitrate: str, work: Path, baseline: int = 0, wrap: Sequence[str] = ()) -> Iterator[dict[str, Any]]:
+    """Start a bridge process; yield its ready line (plus ``port``, ``process``); on exit, its log
+    (under ``result``)."""
+    port = free_port()
+    out = work / f"bridge-{port}.json"
+    command = [*wrap, *_script("--bridge", "--port", str(port), "--bitrate", bitrate, "--hz", str(HZ))]
+    command += ["--baseline", str(baseline), "--out", str(out)]
+    process = subprocess.Popen(
+        command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    state: dict[str, Any] = {"port": port, "process": process}
+    try:
+        assert process.stdout is not None
+        line = process.stdout.readline()
+        while line and not line.startswith("{"):
+            line = process.stdout.readline()
+        if not line:
+            raise RuntimeError(f"bridge process failed: {process.stderr.read() if process.stderr else ''}")
+        state.update(json.loads(line))
+        yield state
+    finally:
+        if process.stdin is not None:
+            process.stdin.close()
+        try:
+            process.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+    if process.returncode != 0 or not out.exists():
+        raise RuntimeError(
+            f"bridge process failed ({process.returncode}): "
+            f"{process.stderr.read()[-2000:] if process.stderr else ''}"
+        )
+    state["result"] = json.loads(out.read_text())
+
+
+def client(port: int, *extra: str, timeout: float = 120) -> dict[str, Any]:
+    done = subprocess.run(
+        _script("--client", *extra, "--port", str(port)),
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+    )
+    if done.returncode != 0:
+        raise RuntimeError(f"client failed ({done.returncode}): {done.stderr[-2000:]}")
+    return dict(json.loads(done.stdout.strip().splitlines()[-1]))
+
+
+def tick_run(bitrate: str, seconds: float, work: Path, wrap: Sequence[str] = ()) -> dict[str, Any]:
+    """One client publishing batches at HZ for ``seconds``; what reached the wire."""
+    with bridge(bitrate, work, wrap=wrap) as state:
+        pid = state["pid"]
+        cpu0 = _proc_cpu_s(pid)
+        wall0 = time.perf_counter()
+        got = client(state["port"], "tick", "--seconds", str(seconds), "--rate", str(HZ))
+        bridge_cpu = (_proc_cpu_s(pid) - cpu0) / (time.perf_counter() - wall0)
+    log = state["result"]
+    sent = got["sent_ns"]
+    window_s = (sent[-1] - sent[0]) / 1e9
+    per_motor: dict[int, int] = {}
+    latency = []
+    for motor, k, ns in log["first"]:
+        if 1 <= k <= len(sent):
+            per_motor[motor] = per_motor.get(motor, 0) + 1
+            latency.append((ns - sent[k - 1]) / 1e6)
+    counts = [per_motor.get(m, 0) for m in range(1, MOTORS + 1)]
+    bridge_counts = log["metrics"]["bridge"]
+    own = log["metrics"]["setpoint_to_wire_ms"]
+    return {
+        "bitrate": bitrate,
+        "batches_sent": len(sent),
+        "publish_hz": (len(sent) - 1) / window_s,
+        "updates_per_motor_s": statistics.median(counts) / window_s,
+        "updates_per_motor_s_min": min(counts) / window_s,
+        "applied_per_motor_s": bridge_counts["applied"] / MOTORS / window_s,
+        "to_wire_p50_ms": _percentile(latency, 0.5),
+        "to_wire_p99_ms": _percentile(latency, 0.99),
+        "to_wire_max_ms": max(latency) if latency else math.nan,
+        "bridge_to_cycle_p50_ms": own["p50"],
+        "bridge_to_cycle_p99_ms": own["p99"],
+        "bridge_counts": bridge_counts,
+        "bus_metrics": {k: v for k, v in log["metrics"]["bus"].items() if not isinstance(v, dict | list)},
+        "client_cpu_pct": 100 * got["cpu_s"] / window_s,
+        "bridge_cpu_pct": 100 * bridge_cpu,
+        "load": list(os.getloadavg()),
+    }
+
+
+def rtt_run(reads: int, work: Path) -> dict[str, Any]:
+    with bridge("1000000", work, baseline=reads) as state:
+        got = client(state["port"], "rtt", "--reads", str(reads))
+    remote, local = got["rtt_s"], state["baseline_s"]
+    return {
+        "rtt_p50_ms": _percentile(remote, 0.5) * 1e3,
+        "rtt_p99_ms": _percentile(remote, 0.99) * 1e3,
+        "local_p50_ms": _percentile(local, 0.5) * 1e3,
+        "local_p99_ms": _percentile(local, 0.99) * 1e3,
+        "reads": len(remote),
+    }
+
+
+def stop_runs(kills: int, work: Path) -> list[dict[str, Any]]:
+    """``kills`` clients, one after the other, each commanding the motors and then SIGKILLed."""
+    killed = []
+    with bridge("1000000", work) as state:
+        for _ in range(kills):
+            process = subprocess.Popen(
+                _script("--client", "hold", "--port", str(state["port"]), "--rate", "200"),
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
+            )
+            assert process.stdout is not None
+            line = process.stdout.readline()
+            if not line.startswith("commanding"):
+                process.kill()
+                raise RuntimeError(f"hold client failed: {process.stderr.read() if process.stderr else ''}")
+            time.sleep(0.5)
+            at = time.time_ns()
+            os.kill(process.pid, signal.SIGKILL)
+            process.wait()
+            killed.append(at)
+            time.sleep(0.8)  # the stop goes out; the next client starts on stopped motors
+    log = state["result"]
+    out = []
+    for i, at in enumerate(killed):
+        until = killed[i + 1] if i + 1 < len(killed) else math.inf
+        frames = [(ns, m) for ns, m in log["stops"] if at <= ns < until]
+        replies = [(ns, m) for ns, m in log["stop_replies"] if at <= ns < until]
+        logged = [entry for entry in log["stop_log"] if at <= entry[0] < until]
+        first_frame = {m: ns for ns, m in reversed(frames)}
+        first_reply = {m: ns for ns, m in reversed(replies)}
+        out.append(
+            {
+                "stopped_motors": len(first_frame),
+                "to_last_stop_frame_ms": (max(first_frame.values()) - at) / 1e6
+                if len(first_frame) == MOTORS
+                else math.nan,
+                "to_first_stop_frame_ms": (min(first_frame.values()) - at) / 1e6 if first_frame else math.nan,
+                "to_last_stop_reply_ms": (max(first_reply.values()) - at) / 1e6
+                if len(first_reply) == MOTORS
+                else math.nan,
+                "to_stop_log_ms": (logged[0][0] - at) / 1e6 if logged else math.nan,
+                "why": sorted({entry[3] for entry in logged}),
+            }
+        )
+    return out
+
+
+def _proc_cpu_s(pid: int) -> float:
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return math.nan
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _median(runs: Sequence[dict[str, Any]], key: str) -> float:
+    return round(statistics.median(r[key] for r in runs), 3)
+
+
+def profile_tick(seconds: float, work: Path) -> dict[str, Any]:
+    """One extra zero-wire-time tick run with the bridge process under py-spy."""
+    if not _profile.pyspy_available():
+        return {"error": "py-spy not found"}
+    stacks = work / "bridge-stacks.txt"
+    wrap = [
+        "py-spy",
+        "record",
+        "--format",
+        "raw",
+        "--idle",
+        "--nonblocking",
+        "--rate",
+        "250",
+        "--output",
+        str(stacks),
+        "--",
+    ]
+    run = tick_run("inf", seconds, work, wrap=wrap)
+    if not stacks.exists():
+        return {"error": "py-spy wrote no stacks", "run": run}
+    return {"seconds": seconds, "run": run, "bridge": _profile.collapsed(stacks, top=14)}
+
+
+def summarise(
+    tick: dict[str, list[dict[str, Any]]], rtt: list[dict[str, Any]], stops: list[dict[str, Any]]
+) -> dict[str, Any]:
+    ideal, can = tick["inf"], tick.get("1000000", [])
+    out: dict[str, Any] = {
+        "tick_hz_32": _median(ideal, "updates_per_motor_s"),
+        "tick_hz_32_applied": _median(ideal, "applied_per_motor_s"),
+        "tick_hz_32_publish_hz": _median(ideal, "publish_hz"),
+        "setpoint_to_wire_p50_ms": _median(ideal, "to_wire_p50_ms"),
+        "setpoint_to_wire_p99_ms": _median(ideal, "to_wire_p99_ms"),
+        "bridge_to_cycle_p50_ms": _median(ideal, "bridge_to_cycle_p50_ms"),
+        "bridge_to_cycle_p99_ms": _median(ideal, "bridge_to_cycle_p99_ms"),
+        "bridge_cpu_pct": _median(ideal, "bridge_cpu_pct"),
+        "client_cpu_pct": _median(ideal, "client_cpu_pct"),
+        "request_rtt_p50_ms": _median(rtt, "rtt_p50_ms"),
+        "request_rtt_p99_ms": _median(rtt, "rtt_p99_ms"),
+        "local_request_p50_ms": _median(rtt, "local_p50_ms"),
+        "local_request_p99_ms": _median(rtt, "local_p99_ms"),
+        "stop_after_client_loss_ms": round(statistics.median(s["to_last_stop_frame_ms"] for s in stops), 2),
+        "stop_after_client_loss_max_ms": round(max(s["to_last_stop_frame_ms"] for s in stops), 2),
+        "stop_reply_after_client_loss_ms": round(
+            statistics.median(s["to_last_stop_reply_ms"] for s in stops), 2
+        ),
+        "stop_log_after_client_loss_ms": round(statistics.median(s["to_stop_log_ms"] for s in stops), 2),
+        "runs": len(ideal),
+        "statistic": "median over runs",
+        "per_run": {"tick_inf": ideal, "tick_1m": can, "rtt": rtt, "stops": stops},
+    }
+    out["request_rtt_vs_local"] = round(out["request_rtt_p50_ms"] / out["local_request_p50_ms"], 2)
+    if can:
+        out["tick_hz_32_can1m"] = _median(can, "updates_per_motor_s")
+        out["setpoint_to_wire_p99_ms_can1m"] = _median(can, "to_wire_p99_ms")
+    targets = {
+        "tick_hz_32": (">=", TICK_HZ_TARGET, out["tick_hz_32"] >= TICK_HZ_TARGET),
+        "setpoint_to_wire_p99_ms": (
+            "<=",
+            TO_WIRE_P99_TARGET_MS,
+            out["setpoint_to_wire_p99_ms"] <= TO_WIRE_P99_TARGET_MS,
+        ),
+        "stop_after_client_loss_ms": (
+            "<=",
+            STOP_TARGET_MS,
+            out["stop_after_client_loss_ms"] <= STOP_TARGET_MS,
+        ),
+        "stop_after_client_loss_max_ms": (
+            "<=",
+            STOP_TARGET_MS,
+            out["stop_after_client_loss_max_ms"] <= STOP_TARGET_MS,
+        ),
+    }
+    out["targets"] = {k: {"op": op, "target": t, "met": met} for k, (op, t, met) in targets.items()}
+    out["targets_missed"] = [
+        f"remote.{k} = {out[k]} (target {op} {t})" for k, (op, t, met) in targets.items() if not met
+    ]
+    return out
+
+
+def render_markdown(f: dict[str, Any], info: dict[str, Any]) -> str:
+    lines = _meta.header_lines(
+        "## Across processes: servobus.remote on loopback (`bench/bench_remote.py`)", info
+    )
+    can = f["per_run"]["tick_1m"]
+    lines += [
+        "",
+        f"Bridge process: one `Bus(SimTransport)` with {MOTORS} simulated MyActuator motors served by "
+        f"`servobus.remote.Bridge(hz={HZ:g})` (default `state_hz`, `stop_after_s`) on a loopback TCP port; "
+        "client: another process using `servobus.remote.connect`. Times are wall clock (`time.time_ns`), "
+        'the same clock in both processes. "On the wire" = the moment the bridge\'s Bus hands the frame to '
+        "the simulated network (the transport records it as it queues the frame on the simulated bus; on "
+        "the in-process SimTransport nothing lies between that and the wire). "
+        f"Median of {f['runs']} runs; every run in results.json.",
+        "",
+        _results.markdown_table(
+            ["figure", "key", "value", "beside it", "target", "met?"],
+            [
+                (
+                    "set-point updates/s reaching each of 32 motors (zero-wire-time bus)",
+                    "`remote.tick_hz_32`",
+                    f"**{f['tick_hz_32']:,.0f}**",
+                    f"bridge's `applied`/32/s {f['tick_hz_32_applied']:,.0f}; client published "
+                    f"{f['tick_hz_32_publish_hz']:,.0f} batches/s",
+                    f">= {TICK_HZ_TARGET:.0f}",
+                    _met(f, "tick_hz_32"),
+                ),
+                (
+                    "the same on the 1 Mbit/s classic CAN bus",
+                    "`remote.tick_hz_32_can1m`",
+                    f"{f.get('tick_hz_32_can1m', math.nan):,.0f}",
+                    "the wire's bound: 64 frames of ~118 µs per cycle = ~130 cycles/s",
+                    "(info)",
+                    "-",
+                ),
+                (
+                    "client publish -> frame on the bus, p99 / p50",
+                    "`remote.setpoint_to_wire_p99_ms`",
+                    f"**{f['setpoint_to_wire_p99_ms']:.2f}** / {f['setpoint_to_wire_p50_ms']:.2f} ms",
+                    f"bridge's own (sent -> handed to `Bus.cycle`): p99 {f['bridge_to_cycle_p99_ms']:.2f} / "
+                    f"p50 {f['bridge_to_cycle_p50_ms']:.2f} ms",
+                    f"p99 <= {TO_WIRE_P99_TARGET_MS:g} ms",
+                    _met(f, "setpoint_to_wire_p99_ms"),
+                ),
+                (
+                    "`read_status2()` through the bridge, p50 / p99",
+                    "`remote.request_rtt_p50_ms`, `_p99_ms`",
+                    f"{f['request_rtt_p50_ms']:.2f} / {f['request_rtt_p99_ms']:.2f} ms",
+                    f"local `Bus.request`: {f['local_request_p50_ms']:.2f} / "
+                    f"{f['local_request_p99_ms']:.2f} ms; "
+                    f"remote / local p50 = {f['request_rtt_vs_local']:.1f}x",
+                    "(info)",
+                    "-",
+                ),
+                (
+                    "SIGKILL of the client -> last of 32 stop frames on the bus, median / max",
+                    "`remote.stop_after_client_loss_ms`",
+                    f"**{f['stop_after_client_loss_ms']:.1f}** / {f['stop_after_client_loss_max_ms']:.1f} ms",
+                    f"-> bridge's `stop_log` {f['stop_log_after_client_loss_ms']:.1f} ms; -> last stop reply "
+                    f"{f['stop_reply_after_client_loss_ms']:.1f} ms (medians)",
+                    f"<= {STOP_TARGET_MS:.0f} ms",
+                    _met(f, "stop_after_client_loss_ms") + " / " + _met(f, "stop_after_client_loss_max_ms"),
+                ),
+            ],
+            "llrlll",
+        ),
+        f"CPU during the zero-wire-time runs (% of one core): bridge process {f['bridge_cpu_pct']:.0f}, "
+        f"client {f['client_cpu_pct']:.0f}. Stops were triggered by: "
+        + ", ".join(sorted({w for s in f["per_run"]["stops"] for w in s["why"]}))
+        + ".",
+    ]
+    if can:
+        lines += [
+            "",
+            "On the 1 Mbit/s bus the bridge's tick sends every motor's latest set-point each "
+            "`Bus.cycle`, and a "
+            f"cycle of 32 takes the wire ~7.6 ms: {f['tick_hz_32_can1m']:,.0f} updates/s per motor, p99 "
+            f"publish -> wire {f['setpoint_to_wire_p99_ms_can1m']:.1f} ms (a set-point waits for the cycle "
+            "in flight). Splitting the motors over buses (`servobus bridge --sim 32 --buses 4`) is "
+            "the remedy.",
+        ]
+    missed = f["targets_missed"]
+    lines += ["", "Targets: " + ("**Not met**: " + "; ".join(missed) + "." if missed else "Met.")]
+    profile = f.get("profile")
+    if profile:
+        lines += [
+            "",
+            "### Where the time goes: the bridge process "
+            f"(py-spy, one extra run of {profile.get('seconds', 0):g} s)",
+            "",
+        ]
+        if "error" in profile:
+            lines.append(f"Profile failed: {profile['error']}")
+        else:
+            lines += _profile.markdown(profile["bridge"], top=12)
+    return "\n".join(lines) + "\n"
+
+
+def _met(f: dict[str, Any], key: str) -> str:
+    return "yes" if f["targets"][key]["met"] else "**no**"
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument(
+        "--quick", action="store_true", help="one short run of each (CI smoke), writes nothing"
+    )
+    parser.add_argument("--output", type=Path, help="write RESULTS.md and results.json to this directory")
+    parser.add_argument("--check", action="store_true", help="exit with status 1 when a target is missed")
+    parser.add_argument("--runs", type=int, help="runs of each figure")
+    parser.add_argument("--profile-seconds", type=float, help="seconds of the py-spy run (0: none)")
+    # the processes' own arguments
+    parser.add_argument("--bridge", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--client", choices=("tick", "rtt", "hold"), help=argparse.SUPPRESS)
+    parser.add_argument("--port", type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--bitrate", default="1000000", help=argparse.SUPPRESS)
+    parser.add_argument("--hz", type=float, default=HZ, help=argparse.SUPPRESS)
+    parser.add_argument("--rate", type=float, default=HZ, help=argparse.SUPPRESS)
+    parser.add_argument("--seconds", type=float, default=1.0, help=argparse.SUPPRESS)
+    parser.add_argument("--reads", type=int, default=100, help=argparse.SUPPRESS)
+    parser.add_argument("--baseline", type=int, default=0, help=argparse.SUPPRESS)
+    parser.add_argument("--out", help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.bridge or args.client:
+        import anyio
+
+        anyio.run(bridge_process if args.bridge else client_process, args)
+        return 0
+    started = time.perf_counter()
+    load = _meta.load_average()
+    base = QUICK if args.quick else FULL
+    cfg = Config(
+        base.mode,
+        args.runs or base.runs,
+        base.tick_seconds,
+        base.reads,
+        base.profile_seconds if args.profile_seconds is None else args.profile_seconds,
+    )
+    out_dir: Path | None = args.output if args.output is not None else (None if args.quick else BENCH_DIR)
+    print(f"bench_remote ({cfg.mode}): {cfg.runs} run(s) of each figure", flush=True)
+    with tempfile.TemporaryDirectory(prefix="bench-remote-") as tmp:
+        work = Path(tmp)
+        tick: dict[str, list[dict[str, Any]]] = {}
+        for bitrate in ("inf", "1000000"):
+            for i in range(cfg.runs):
+                r = tick_run(bitrate, cfg.tick_seconds, work)
+                tick.setdefault(bitrate, []).append(r)
+                print(
+                    f"  tick {bitrate:>7} run {i + 1}/{cfg.runs}: "
+                    f"{r['updates_per_motor_s']:7.1f} updates/s per motor "
+                    f"(applied {r['applied_per_motor_s']:.1f}, published {r['publish_hz']:.0f}/s), "
+                    f"to wire p50/p99 {r['to_wire_p50_ms']:.2f}/{r['to_wire_p99_ms']:.2f} ms "
+                    f"(bridge's {r['bridge_to_cycle_p50_ms']:.2f}/"
+                    f"{r['bridge_to_cycle_p99_ms']:.2f}), CPU bridge {r['bridge_cpu_pct']:.0f} % client "
+                    f"{r['client_cpu_pct']:.0f} %",
+                    flush=True,
+                )
+        rtt = []
+        for i in range(cfg.runs):
+            r = rtt_run(cfg.reads, work)
+            rtt.append(r)
+            print(
+                f"  rtt run {i + 1}/{cfg.runs}: remote p50/p99 "
+                f"{r['rtt_p50_ms']:.3f}/{r['rtt_p99_ms']:.3f} ms, "
+                f"local {r['local_p50_ms']:.3f}/{r['local_p99_ms']:.3f} ms",
+                flush=True,
+            )
+        stops = stop_runs(max(cfg.runs, 1 if args.quick else 5), work)
+        for i, s in enumerate(stops):
+            print(
+                f"  kill {i + 1}/{len(stops)}: last stop frame {s['to_last_stop_frame_ms']:.1f} ms, "
+                f"last reply {s['to_last_stop_reply_ms']:.1f} ms, "
+                f"stop_log {s['to_stop_log_ms']:.1f} ms ({', '.join(s['why'])})",
+                flush=True,
+            )
+        figures = summarise(tick, rtt, stops)
+        if cfg.profile_seconds > 0 and figures["targets_missed"]:
+            print(f"  profile run ({cfg.profile_seconds:g} s, bridge under py-spy)", flush=True)
+            figures["profile"] = profile_tick(cfg.profile_seconds, work)
+    info = _meta.meta(
+        "bench/bench_remote.py",
+        argv,
+        mode=cfg.mode,
+        runs=cfg.runs,
+        tick_seconds=cfg.tick_seconds,
+        reads=cfg.reads,
+        load_average_at_start=load,
+        runtime_s=round(time.perf_counter() - started, 1),
+    )
+    missed = figures["targets_missed"]
+    print("TARGETS MISSED: " + "; ".join(missed) if missed else "All remote targets met.")
+    if out_dir is not None:
+        _results.update_results_json(out_dir / "results.json", "remote", {**figures, "meta": info})
+        _results.replace_markdown_section(out_dir / "RESULTS.md", "remote", render_markdown(figures, info))
+        print(f"Wrote {out_dir / 'RESULTS.md'} and {out_dir / 'results.json'} (key remote).")
+    print(f"Total runtime: {time.perf_counter() - started:.1f} s")
+    return 1 if args.check and missed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
