@@ -29,6 +29,9 @@ Figures (``remote.*``):
   ``sent_unix_ns`` to the tick that hands it to ``Bus.cycle``), and where the time goes: each batch is
   stamped in the bridge process as Zenoh's callback runs (Zenoh's thread) and as the bridge's intake task
   takes it (the event loop). The first 0.3 s after connecting are left out of these and the counts.
+  When this host allows it (``chrt -f 10``), the 200/s run is repeated with both processes at
+  real-time priority (``setpoint_to_wire_p99_ms_rt``): the latency when other work on the machine
+  cannot delay them.
 * ``request_rtt_p50_ms`` / ``_p99_ms``: ``await motor.read_status2()`` through the bridge's ``read``
   queryable, timed in the client (sequential, round robin over the 32 motors, 1 Mbit/s bus); the
   baseline is ``Bus.request(motor, ReadStatus2())`` on the same bus in the bridge process in the same
@@ -43,7 +46,7 @@ Targets (the issue): ``tick_hz_32`` >= 200, ``setpoint_to_wire_p99_ms`` <= 5, ``
 
 Usage (from the repository root)::
 
-    python bench/bench_remote.py            # 5 runs of each figure: ~2 min
+    python bench/bench_remote.py            # 5 runs of each figure: ~3 min
     python bench/bench_remote.py --quick    # one short run of each (CI smoke), writes nothing
 """
 
