@@ -1,0 +1,301 @@
+"""A bridge and its clients as separate processes on the loopback interface (Zenoh peer mode, endpoints
+on 127.0.0.1 only, no router, no scouting): the process boundaries the remote layer exists for.
+
+Each process is tests/remote/_proc.py (one JSON command a line in, one ``@@`` line out per command).
+The bridge's Bus sits on 32 simulated MyActuator motors behind a SimTransport that counts every frame
+sent by arbitration id and first byte: what reached a motor is read there, and from each simulated
+motor's control. Every wait is bounded (no call waits more than its timeout, and teardown kills
+every process group), so a broken bridge fails a test instead of hanging CI.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ipaddress
+import json
+import os
+import queue
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+import servobus
+
+PROC = Path(__file__).with_name("_proc.py")
+SRC = Path(servobus.__file__).resolve().parent.parent
+NODE, BUS = "n", "b"
+MOTORS = range(1, 33)
+REQUEST_ID = 0x140  # + motor id: the requests a MyActuator motor takes (its control commands among them)
+STOP, SPEED, STATUS2 = 0x81, 0xA2, 0x9C
+
+
+class Proc:
+    """One process of the test: its answers are read by a thread, so every wait has a timeout."""
+
+    def __init__(self, role: str, port: int, *args: str, backend: str = "asyncio") -> None:
+        self.role = role
+        self.err = tempfile.TemporaryFile()  # noqa: SIM115 - closed by close(), at teardown
+        env = dict(
+            os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(SRC), os.environ.get("PYTHONPATH")]))
+        )
+        self.process = subprocess.Popen(
+            [sys.executable, str(PROC), role, "--port", str(port), "--backend", backend, *args],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=self.err,
+            text=True,
+            bufsize=1,
+            start_new_session=True,
+            env=env,
+        )
+        self.pid = self.process.pid
+        self.answers: queue.Queue[dict[str, Any] | None] = queue.Queue()
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        assert self.process.stdout is not None
+        for line in self.process.stdout:
+            if line.startswith("@@ "):
+                self.answers.put(json.loads(line[3:]))
+        self.answers.put(None)
+
+    def stderr(self) -> str:
+        self.err.seek(0)
+        return self.err.read().decode(errors="replace")[-3000:]
+
+    def answer(self, timeout_s: float) -> dict[str, Any]:
+        try:
+            found = self.answers.get(timeout=timeout_s)
+        except queue.Empty:
+            raise AssertionError(
+                f"{self.role} {self.pid}: no answer within {timeout_s} s\n{self.stderr()}"
+            ) from None
+        if found is None:
+            raise AssertionError(
+                f"{self.role} {self.pid} ended (code {self.process.poll()})\n{self.stderr()}"
+            )
+        return found
+
+    def call(self, op: str, timeout_s: float = 10.0, **fields: Any) -> dict[str, Any]:
+        assert self.process.stdin is not None
+        self.process.stdin.write(json.dumps({"op": op, **fields}) + "\n")
+        self.process.stdin.flush()
+        return self.answer(timeout_s)
+
+    def ok(self, op: str, timeout_s: float = 10.0, **fields: Any) -> dict[str, Any]:
+        found = self.call(op, timeout_s, **fields)
+        assert found.get("ok"), f"{self.role} {op}: {found}\n{self.stderr()}"
+        return found
+
+    def kill(self) -> None:
+        if self.process.poll() is None:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(self.pid, signal.SIGKILL)
+        with contextlib.suppress(subprocess.TimeoutExpired):  # (SIGKILL ends it: only a bound)
+            self.process.wait(timeout=10)
+
+    def close(self) -> None:
+        self.kill()
+        for stream in (self.process.stdin, self.process.stdout):
+            if stream is not None:
+                with contextlib.suppress(OSError):
+                    stream.close()
+        self.err.close()
+
+
+def free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+@pytest.fixture
+def spawn() -> Iterator[Callable[..., Proc]]:
+    """``spawn(role, port, *args, backend=...)``: a process, killed (its whole group) at teardown."""
+    started: list[Proc] = []
+
+    def start(role: str, port: int, *args: str, backend: str = "asyncio") -> Proc:
+        proc = Proc(role, port, *args, backend=backend)
+        started.append(proc)
+        ready = proc.answer(timeout_s=30)
+        assert ready.get("ready"), ready
+        return proc
+
+    yield start
+    for proc in started:
+        proc.close()
+
+
+def bridge(spawn: Callable[..., Proc], *args: str, backend: str = "asyncio") -> tuple[Proc, int]:
+    port = free_port()
+    return spawn("bridge", port, "--motors", str(len(MOTORS)), *args, backend=backend), port
+
+
+# ---- what reached the motors ----
+
+
+def frames_of(report: dict[str, Any]) -> dict[int, dict[int, list[int]]]:
+    """``{motor id: {first byte: [count, first ns, last ns]}}`` of the request frames sent."""
+    out: dict[int, dict[int, list[int]]] = {}
+    for arbitration_id, byte0, count, first, last in report["frames"]:
+        out.setdefault(arbitration_id - REQUEST_ID, {})[byte0] = [count, first, last]
+    return out
+
+
+def until(check: Callable[[], Any], timeout_s: float, what: str, interval_s: float = 0.05) -> Any:
+    """``check()``'s first truthy value, polled; AssertionError naming ``what`` after ``timeout_s``."""
+    end = time.monotonic() + timeout_s
+    while True:
+        found = check()
+        if found:
+            return found
+        if time.monotonic() > end:
+            raise AssertionError(f"not within {timeout_s} s: {what}")
+        time.sleep(interval_s)
+
+
+def report_when(
+    bridge: Proc, condition: Callable[[dict[str, Any]], bool], timeout_s: float, what: str
+) -> dict[str, Any]:
+    last: dict[str, Any] = {}
+
+    def check() -> dict[str, Any] | None:
+        nonlocal last
+        last = bridge.ok("report")
+        return last if condition(last) else None
+
+    try:
+        return until(check, timeout_s, what)
+    except AssertionError as exc:
+        raise AssertionError(f"{exc}\nlast report: {json.dumps(last)[:3000]}\n{bridge.stderr()}") from None
+
+
+def speeds(report: dict[str, Any], motors: Any = MOTORS) -> dict[int, float | None]:
+    controls = report["controls"]
+    return {
+        m: controls[str(m)].get("speed_dps") if controls[str(m)]["kind"] == "SpeedControl" else None
+        for m in motors
+    }
+
+
+def stopped(report: dict[str, Any], motors: Any = MOTORS) -> bool:
+    frames = frames_of(report)
+    return all(STOP in frames.get(m, {}) for m in motors)
+
+
+# ---- the sockets of a process ----
+
+
+def _address(text: str) -> tuple[ipaddress.IPv4Address | ipaddress.IPv6Address, int]:
+    host, port = text.split(":")
+    raw = bytes.fromhex(host)
+    # /proc/net/tcp{,6} prints each 32-bit word of the address in host (little-endian) order
+    words = b"".join(raw[i : i + 4][::-1] for i in range(0, len(raw), 4))
+    address = ipaddress.ip_address(words)
+    if isinstance(address, ipaddress.IPv6Address) and address.ipv4_mapped is not None:
+        address = address.ipv4_mapped
+    return address, int(port, 16)
+
+
+def inet_sockets(pid: int) -> list[tuple[str, str, str, str]]:
+    """``(protocol, local, remote, state)`` of every TCP/UDP socket process ``pid`` holds."""
+    inodes = set()
+    for fd in os.listdir(f"/proc/{pid}/fd"):
+        try:
+            target = os.readlink(f"/proc/{pid}/fd/{fd}")
+        except OSError:
+            continue
+        if target.startswith("socket:["):
+            inodes.add(target[len("socket:[") : -1])
+    found = []
+    for protocol in ("tcp", "tcp6", "udp", "udp6"):
+        with open(f"/proc/{pid}/net/{protocol}") as table:
+            next(table)
+            for line in table:
+                parts = line.split()
+                if parts[9] in inodes:
+                    (lhost, lport), (rhost, rport) = _address(parts[1]), _address(parts[2])
+                    state = "LISTEN" if parts[3] == "0A" else parts[3]
+                    found.append((protocol, f"{lhost}:{lport}", f"{rhost}:{rport}", state))
+    return found
+
+
+def assert_loopback_only(pid: int, listen_port: int | None) -> list[tuple[str, str, str, str]]:
+    """Every socket of ``pid`` is TCP on 127.0.0.1 (no UDP, so no scouting); it listens on
+    ``127.0.0.1:listen_port`` alone (None: on nothing)."""
+    found = inet_sockets(pid)
+    assert found, f"process {pid} has no socket"
+    for protocol, local, remote, state in found:
+        assert protocol.startswith("tcp"), (protocol, local, remote, state)
+        assert local.startswith("127.0.0.1:"), (protocol, local, remote, state)
+        assert remote.startswith(("127.0.0.1:", "0.0.0.0:")), (protocol, local, remote, state)
+    listening = sorted(local for _, local, _, state in found if state == "LISTEN")
+    assert listening == ([] if listen_port is None else [f"127.0.0.1:{listen_port}"]), found
+    return found
+
+
+# ---- 1. a client drives 32 motors ----
+
+
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_a_client_drives_32_motors_and_its_clean_exit_stops_them(
+    spawn: Callable[..., Proc], backend: str
+) -> None:
+    server, port = bridge(spawn, backend=backend)
+    client = spawn("client", port, backend=backend)
+    me = client.ok("connect")["client_id"]
+    client.ok("hold", motors=list(MOTORS), command="SpeedControl", fields={"speed_dps": 30.0}, hz=200.0)
+    report_when(server, lambda r: set(speeds(r).values()) == {30.0}, 10, "all 32 motors at 30 dps")
+    time.sleep(1.0)
+    for motor in (1, 16, 32):
+        found = client.ok("request", motor=motor, command="ReadStatus2")
+        assert found["reply"]["type"] == "StatusReply"
+        assert found["reply"]["speed_dps"] == pytest.approx(30.0, abs=1.0), found
+    state = client.ok("counts")
+    assert state["held"]["error"] is None, state
+    assert all(
+        s is not None and s["speed_dps"] == pytest.approx(30.0, abs=1.0) for s in state["states"].values()
+    ), state
+
+    # the processes talk over 127.0.0.1 only, the bridge listens on its endpoint alone, no UDP
+    print("bridge sockets", assert_loopback_only(server.pid, port))
+    print("client sockets", assert_loopback_only(client.pid, None))
+
+    running = server.ok("report")
+    frames = frames_of(running)
+    assert all(frames[m][SPEED][0] > 0 and STOP not in frames[m] for m in MOTORS), frames
+    assert all(frames[m][STATUS2][0] >= 1 for m in (1, 16, 32)), frames
+    assert running["bridge"]["applied"] >= len(MOTORS) and running["bridge"]["malformed"] == 0
+    assert running["owners"] == {str(m): me for m in MOTORS}
+
+    # a clean exit while commanding: the client's token goes, the bridge stops its 32 motors
+    closed = client.ok("close")
+    done = report_when(server, stopped, 5, "stop frames to all 32 motors")
+    reasons = {why for _, _, _, why in done["stop_log"]}
+    print("clean exit: stops", sorted(reasons), "held cycles", closed)
+    assert sorted(m for _, _, m, _ in done["stop_log"]) == list(MOTORS)
+    assert all(c["kind"] == "PositionControl" for c in done["controls"].values()), done["controls"]
+    assert done["owners"] == {} and done["clients"] == 0
+    # every set-point sent is accounted for: taken, dropped as stale or reordered, or refused (after
+    # the token went)
+    sent = closed["counts"]["setpoints_sent"]
+    accounted = ("setpoints", "stale", "reordered", "refused")
+    counts = report_when(
+        server,
+        lambda r: sum(r["bridge"][k] for k in accounted) == sent,
+        5,
+        f"{sent} set-points accounted for",
+    )["bridge"]
+    print(
+        f"{backend}: {counts['setpoints']} set-points taken, {counts['applied']} applied, "
+        f"{counts['stale']} stale"
+    )
