@@ -85,14 +85,15 @@ class Proc:
             )
         return found
 
-    def call(self, op: str, timeout_s: float = 10.0, **fields: Any) -> dict[str, Any]:
+    def call(self, op: str, wait_s: float = 10.0, **fields: Any) -> dict[str, Any]:
+        """Send command ``op`` with ``fields``; its answer (AssertionError after ``wait_s``)."""
         assert self.process.stdin is not None
         self.process.stdin.write(json.dumps({"op": op, **fields}) + "\n")
         self.process.stdin.flush()
-        return self.answer(timeout_s)
+        return self.answer(wait_s)
 
-    def ok(self, op: str, timeout_s: float = 10.0, **fields: Any) -> dict[str, Any]:
-        found = self.call(op, timeout_s, **fields)
+    def ok(self, op: str, wait_s: float = 10.0, **fields: Any) -> dict[str, Any]:
+        found = self.call(op, wait_s, **fields)
         assert found.get("ok"), f"{self.role} {op}: {found}\n{self.stderr()}"
         return found
 
@@ -188,8 +189,10 @@ def speeds(report: dict[str, Any], motors: Any = MOTORS) -> dict[int, float | No
 
 
 def stopped(report: dict[str, Any], motors: Any = MOTORS) -> bool:
+    """Whether ``motors`` were each sent a stop (0x81) and hold their position (the stop took)."""
     frames = frames_of(report)
-    return all(STOP in frames.get(m, {}) for m in motors)
+    controls = report["controls"]
+    return all(STOP in frames.get(m, {}) and controls[str(m)]["kind"] == "PositionControl" for m in motors)
 
 
 # ---- the sockets of a process ----
@@ -299,3 +302,100 @@ def test_a_client_drives_32_motors_and_its_clean_exit_stops_them(
         f"{backend}: {counts['setpoints']} set-points taken, {counts['applied']} applied, "
         f"{counts['stale']} stale"
     )
+
+
+# ---- 2. the client is killed: the bridge stops its motors ----
+
+
+def test_a_killed_client_has_its_32_motors_stopped_at_once(spawn: Callable[..., Proc]) -> None:
+    server, port = bridge(spawn)
+    client = spawn("client", port)
+    # set-points valid for 5 s: only the client's vanished token can stop the motors within 1 s
+    client.ok("connect", valid_for_s=5.0)
+    client.ok("hold", motors=list(MOTORS), command="SpeedControl", fields={"speed_dps": 45.0})
+    report_when(server, lambda r: set(speeds(r).values()) == {45.0}, 10, "all 32 motors at 45 dps")
+    server.ok("reset")
+    killed_ns = time.time_ns()
+    client.kill()
+    done = report_when(server, stopped, 5, "stop frames to all 32 motors after the client was killed")
+    frames = frames_of(done)
+    first = [frames[m][STOP][1] - killed_ns for m in MOTORS]
+    decided = [when - killed_ns for when, _, _, _ in done["stop_log"]]
+    print(
+        f"kill -> stop decided {min(decided) / 1e6:.1f} ms, stop frames "
+        f"{min(first) / 1e6:.1f}..{max(first) / 1e6:.1f} ms"
+    )
+    assert {why for _, _, _, why in done["stop_log"]} == {"client left"}, done["stop_log"]
+    assert sorted(m for _, _, m, _ in done["stop_log"]) == list(MOTORS)
+    assert max(first) < 1e9, first
+    # no set-point went out after the stop
+    assert all(SPEED not in frames[m] or frames[m][SPEED][2] <= frames[m][STOP][1] for m in MOTORS), frames
+    assert all(c["kind"] == "PositionControl" for c in done["controls"].values()), done["controls"]
+    assert done["clients"] == 0 and done["owners"] == {}
+
+
+# ---- 3. the bridge is killed: the client's calls fail at once ----
+
+
+def test_a_killed_bridge_fails_the_clients_calls_instead_of_hanging(spawn: Callable[..., Proc]) -> None:
+    server, port = bridge(spawn, backend="trio")
+    client = spawn("client", port)
+    client.ok("connect", timeout_s=1.0)
+    client.ok("hold", motors=[1, 2], command="SpeedControl", fields={"speed_dps": 10.0})
+    assert client.ok("request", motor=1, command="ReadStatus2")["reply"]["type"] == "StatusReply"
+    server.kill()
+    killed = time.monotonic()
+    failed = client.call("request", motor=1, command="ReadStatus2")
+    waited = time.monotonic() - killed
+    print(f"request after the bridge was killed: {failed.get('error')} after {waited * 1e3:.0f} ms: {failed}")
+    assert not failed["ok"] and "RemoteError" in failed["errors"], failed
+    assert waited < 3.0
+    # the hold's set-points fail too (BridgeLost once the token's loss is seen), and a later request
+    held = until(lambda: client.ok("counts")["held"]["error"], 3, "the hold's cycle to fail")
+    assert held == "BridgeLost"
+    again = client.call("request", motor=2, command="ReadStatus2")
+    assert again["error"] == "BridgeLost" and again["elapsed_s"] < 0.5, again
+    assert client.ok("close")["elapsed_s"] < 3
+    # nobody listens there any more: connecting fails within its timeout, clearly
+    refused = client.call("connect", timeout_s=1.0)
+    print(f"connect to a dead endpoint: {refused['error']} after {refused['elapsed_s'] * 1e3:.0f} ms")
+    assert not refused["ok"] and "RemoteError" in refused["errors"] and refused["elapsed_s"] < 3.0, refused
+    assert "no bridge reachable" in refused["message"], refused
+
+
+# ---- 4. two clients contend for a motor ----
+
+
+def test_two_clients_contend_for_a_motor(spawn: Callable[..., Proc]) -> None:
+    server, port = bridge(spawn)
+    a = spawn("client", port)
+    b = spawn("client", port, backend="trio")
+    a_id = a.ok("connect")["client_id"]
+    b_id = b.ok("connect")["client_id"]
+    a.ok("hold", motors=[3], command="SpeedControl", fields={"speed_dps": 30.0})
+    report_when(server, lambda r: speeds(r, [3]) == {3: 30.0}, 10, "motor 3 at A's 30 dps")
+    before = server.ok("report")["bridge"]["refused"]
+    b.ok("hold", motors=[3], command="SpeedControl", fields={"speed_dps": -50.0})
+    contended = report_when(
+        server, lambda r: r["bridge"]["refused"] >= before + 20, 10, "B's set-points refused"
+    )
+    time.sleep(0.3)
+    contended = server.ok("report")
+    assert speeds(contended, [3]) == {3: 30.0}, contended["controls"]["3"]
+    assert contended["owners"] == {"3": a_id}
+    assert contended["bridge"]["refused"] >= before + 20
+    # B's command through a request is refused; its read is answered
+    refused = b.call("request", motor=3, command="SpeedControl", fields={"speed_dps": -50.0})
+    assert not refused["ok"] and refused["error"] == "PermissionError", refused
+    assert "held by another client" in refused["message"]
+    read = b.ok("request", motor=3, command="ReadStatus2")
+    assert read["reply"]["speed_dps"] == pytest.approx(30.0, abs=1.0), read
+    assert frames_of(server.ok("report"))[3].keys() <= {SPEED, STATUS2}
+    # A leaves: its motor is stopped, then B (still sending) has it
+    a.ok("close")
+    taken = report_when(
+        server, lambda r: speeds(r, [3]) == {3: -50.0} and r["owners"] == {"3": b_id}, 5, "motor 3 at B's -50"
+    )
+    assert [(m, why) for _, _, m, why in taken["stop_log"]] == [(3, "client left")]
+    assert b.ok("request", motor=3, command="SpeedControl", fields={"speed_dps": -50.0})["reply"]
+    assert b.ok("counts")["held"]["error"] is None
