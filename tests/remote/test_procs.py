@@ -13,10 +13,13 @@ from __future__ import annotations
 import contextlib
 import ipaddress
 import json
+import math
 import os
 import queue
+import random
 import signal
 import socket
+import struct
 import subprocess
 import sys
 import tempfile
@@ -29,6 +32,8 @@ from typing import Any
 import pytest
 
 import servobus
+from servobus.protocols import myactuator as ma
+from servobus.remote import wire
 
 PROC = Path(__file__).with_name("_proc.py")
 SRC = Path(servobus.__file__).resolve().parent.parent
@@ -399,3 +404,146 @@ def test_two_clients_contend_for_a_motor(spawn: Callable[..., Proc]) -> None:
     assert [(m, why) for _, _, m, why in taken["stop_log"]] == [(3, "client left")]
     assert b.ok("request", motor=3, command="SpeedControl", fields={"speed_dps": -50.0})["reply"]
     assert b.ok("counts")["held"]["error"] is None
+
+
+# ---- 5. malformed payloads to every key ----
+
+SCHEMA = wire.Schema.of(ma.FAMILY.name)
+NOBODY = "00" * wire.CLIENT_ID_BYTES  # a client id with no liveliness token
+F64_30 = struct.pack("<d", 30.0)
+
+
+def key(*parts: object) -> str:
+    return "/".join(["servobus", NODE, BUS, *map(str, parts)])
+
+
+def setpoints(items: list[tuple[int, Any]], client_id: str = NOBODY) -> bytes:
+    now = time.time_ns()
+    return wire.encode_setpoints(
+        lambda _: SCHEMA, wire.Setpoints(client_id, 1, now, now + 5_000_000_000, tuple(items))
+    )
+
+
+def request(command: Any, client_id: str = NOBODY, timeout_s: float | None = None) -> bytes:
+    return wire.encode_request(SCHEMA, wire.Request(client_id, command, timeout_s))
+
+
+def edited(message: bytes, old: bytes, new: bytes) -> bytes:
+    """``message`` with its one occurrence of ``old`` replaced (a value past what its type allows)."""
+    assert message.count(old) == 1, (message, old)
+    return message.replace(old, new)
+
+
+def malformed_setpoints() -> list[tuple[str, str, bytes]]:
+    """``(what, key, payload)``: each is one malformed message to the bridge."""
+    speed = ma.SpeedControl(speed_dps=30.0)
+    good = setpoints([(3, speed)])
+    head = good[: 2 + wire.CLIENT_ID_BYTES + 4 + 8 + 8]  # version, kind, client, seq, sent, deadline
+    reply = ma.StatusReply(
+        temperature_c=25, current_a=0.0, speed_dps=0.0, angle_deg=0.0, command=ma.StatusCommand.READ_STATUS_2
+    )
+    nested = b"\x07\x01" * 12 + b"\x00"  # a tuple of a tuple of ... deeper than the wire allows
+    rng = random.Random(29)
+    bulk = key("setpoints")
+    return [
+        ("empty", bulk, b""),
+        ("one byte", bulk, b"\x01"),
+        ("truncated", bulk, good[:-3]),
+        ("a byte left over", bulk, good + b"\x00"),
+        ("wrong version", bulk, bytes([wire.VERSION + 1]) + good[1:]),
+        ("wrong kind", bulk, good[:1] + bytes([wire.REQUEST]) + good[2:]),
+        ("speed past its range", bulk, edited(good, F64_30, struct.pack("<d", 1e12))),
+        ("speed NaN", bulk, edited(good, F64_30, struct.pack("<d", math.nan))),
+        ("speed a string", bulk, edited(good, b"\x04" + F64_30, b"\x05\x02\x0030")),
+        ("speed True", bulk, edited(good, b"\x04" + F64_30, b"\x02")),
+        ("no motor 99 on the bus", bulk, setpoints([(99, speed)])),
+        ("a reply, not a command", bulk, setpoints([(3, reply)])),
+        ("an int, not a command", bulk, head + struct.pack("<HH", 1, 3) + b"\x03" + struct.pack("<q", 7)),
+        ("a type past the schema", bulk, head + struct.pack("<HH", 1, 3) + b"\x09\xff\xff\x00"),
+        ("nested too deep", bulk, head + struct.pack("<HH", 1, 3) + nested),
+        ("300 set-points", bulk, head + struct.pack("<H", 300) + b"\x00" * 600),
+        ("random bytes", bulk, rng.randbytes(64)),
+        ("2 MB", bulk, good[:2] + rng.randbytes(2_000_000)),
+        ("motor 4's set-point on motor 3's key", key(3, "setpoint"), setpoints([(4, speed)])),
+        ("motors 3 and 4 on motor 3's key", key(3, "setpoint"), setpoints([(3, speed), (4, speed)])),
+        ("motor 99's key", key(99, "setpoint"), setpoints([(99, speed)])),
+        ("a motor key that is not a number", key("x", "setpoint"), good),
+        ("random bytes on a motor's key", key(3, "setpoint"), rng.randbytes(40)),
+    ]
+
+
+def malformed_requests() -> list[tuple[str, str, bytes | None]]:
+    speed = ma.SpeedControl(speed_dps=30.0)
+    good = request(speed)
+    read = request(ma.ReadStatus2())
+    return [
+        ("no payload", key(3, "request"), None),
+        ("random bytes", key(3, "request"), random.Random(3).randbytes(50)),
+        ("a set-point message", key(3, "request"), setpoints([(3, speed)])),
+        ("wrong version", key(3, "request"), bytes([9]) + good[1:]),
+        ("timeout -1", key(3, "request"), request(speed, timeout_s=-1.0)),
+        ("timeout inf", key(3, "request"), request(speed, timeout_s=math.inf)),
+        ("timeout 1e9", key(3, "request"), request(speed, timeout_s=1e9)),
+        ("speed past its range", key(3, "request"), edited(good, F64_30, struct.pack("<d", -1e12))),
+        ("truncated", key(3, "request"), good[:-1]),
+        ("no motor 99", key(99, "request"), good),
+        ("a motor key that is not a number", key("x", "request"), good),
+        ("a motor key with a sign", key("+3", "request"), good),
+        ("read: no payload", key(3, "read"), None),
+        ("read: truncated", key(3, "read"), read[:-2]),
+        ("read: no motor 99", key(99, "read"), read),
+    ]
+
+
+def test_malformed_payloads_to_every_key_reach_no_motor(spawn: Callable[..., Proc]) -> None:
+    server, port = bridge(spawn)
+    watcher = spawn("client", port)
+    raw = spawn("client", port)
+    watcher.ok("connect")
+    server.ok("reset")
+    puts = malformed_setpoints()
+    queries = malformed_requests()
+    raw.ok("raw_put", items=[(k, p.hex()) for _, k, p in puts])
+    answered = raw.ok("raw_get", items=[(k, None if p is None else p.hex()) for _, k, p in queries])[
+        "answers"
+    ]
+    for (what, _, _), found in zip(queries, answered, strict=True):
+        # each query is answered once, with the error, never left waiting
+        assert len(found["ok"]) == 1 and not found["err"], (what, found)
+        result = wire.decode_result(SCHEMA, bytes.fromhex(found["ok"][0]))
+        assert isinstance(result.error, ValueError) and "malformed" in str(result.error), (what, result)
+    expected = len(puts) + len(queries)
+    done = report_when(server, lambda r: r["bridge"]["malformed"] >= expected, 10, f"{expected} malformed")
+    assert done["bridge"]["malformed"] == expected, done["bridge"]
+    # well formed, but not allowed: a set-point or a command from a client with no token, a command
+    # sent as a read
+    raw.ok("raw_put", items=[(key("setpoints"), setpoints([(3, ma.SpeedControl(speed_dps=30.0))]).hex())])
+    refused = raw.ok(
+        "raw_get",
+        items=[
+            (key(3, "request"), request(ma.SpeedControl(speed_dps=30.0)).hex()),
+            (key(3, "read"), request(ma.MotorStop()).hex()),
+            (key(3, "request"), request(ma.MotorStop(), client_id="ab" * 16).hex()),
+        ],
+    )["answers"]
+    errors = [wire.decode_result(SCHEMA, bytes.fromhex(found["ok"][0])).error for found in refused]
+    assert all(isinstance(e, PermissionError) for e in errors), errors
+    print("refused:", *errors, sep="\n  ")
+    # info and metrics ignore a payload
+    for leaf in ("info", "metrics"):
+        found = raw.ok("raw_get", items=[(key(leaf), b"\xff\x00garbage".hex())])["answers"][0]
+        assert isinstance(json.loads(bytes.fromhex(found["ok"][0])), dict), found
+    # a state put by a client (the bridge does not listen there; another client reading it drops it)
+    raw.ok("raw_put", items=[(key(3, "state"), b"\x01\x04garbage".hex()), (key(3, "state"), b"".hex())])
+    after = report_when(server, lambda r: r["bridge"]["refused"] >= 4, 5, "4 refusals")
+    assert after["bridge"]["malformed"] == expected and after["bridge"]["refused"] == 4, after["bridge"]
+    assert after["bridge"]["setpoints"] == 0 and after["bridge"]["applied"] == 0, after["bridge"]
+    # nothing reached a motor; the bridge is alive and serves
+    assert after["frames"] == [], after["frames"]
+    assert all(c["kind"] == "Off" for c in after["controls"].values()), after["controls"]
+    assert after["dropped_events"] == 0 and after["stop_log"] == []
+    assert "Traceback" not in server.stderr(), server.stderr()  # bad input is not a bug of the bridge
+    assert watcher.ok("request", motor=3, command="ReadStatus2")["reply"]["type"] == "StatusReply"
+    watcher.ok("hold", motors=[3], command="SpeedControl", fields={"speed_dps": 30.0})
+    report_when(server, lambda r: speeds(r, [3]) == {3: 30.0}, 5, "motor 3 commanded after it all")
+    print("watcher:", watcher.ok("counts")["counts"])
