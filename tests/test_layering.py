@@ -179,6 +179,8 @@ LAYERS: dict[str, list[str]] = {
         "servobus.recording",
         "servobus.protocols.<family>._motor",
     ],
+    # buses served to other computers (issue 29): above the Bus, below the command line; no family
+    "remote": ["servobus.remote"],
     "app": [
         "servobus.cli",
         "servobus.dbc",
@@ -196,6 +198,7 @@ MAY_IMPORT: dict[str, set[str]] = {
     "sim": {"base", "protocols", "family", "sim"},
     "sim-front": {"base", "protocols", "family", "sim", "sim-front", "transports"},
     "bus": {"base", "protocols", "family", "scheduler", "transports", "bus"},
+    "remote": {"base", "protocols", "scheduler", "bus", "remote"},
     "app": set(LAYERS),
 }
 #: the simulator modules a transport may import: the networks the in-process link runs and the

@@ -15,12 +15,14 @@ Zenoh calls us on its own threads; every callback only hands its bytes to the ev
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import logging
 import time
 from collections import deque
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from types import TracebackType
 from typing import Any, Self
 
 import anyio
@@ -30,8 +32,10 @@ from servobus import runtime
 from servobus._version import __version__
 from servobus.bus import Bus, Motor, MotorStatus
 from servobus.errors import ServobusError
+from servobus.protocols import Reply
 from servobus.remote import wire
 from servobus.remote.keys import Keys, check_name
+from servobus.scheduler import Traffic
 from servobus.ticks import ticks
 
 __all__ = ["Bridge"]
@@ -102,6 +106,10 @@ class _Served:
             ),
             0,
         )
+
+    def changed(self, motor: Motor, traffic: Traffic, reply: Reply) -> None:
+        """(The Bus's subscriber) the motor's state is to be published."""
+        self.dirty.add(motor.motor_id)
 
     def info(self, node: str, bridge: Bridge) -> dict[str, Any]:
         return {
@@ -217,11 +225,13 @@ class Bridge:
             self._group.start_soon(self._publish_states, served)
         return self
 
-    async def __aexit__(self, *exc: object) -> bool | None:
+    async def __aexit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> bool | None:
         try:
             if self._group is not None:
                 self._group.cancel_scope.cancel()
-                await self._group.__aexit__(*exc)
+                await self._group.__aexit__(exc_type, exc, tb)
         finally:
             self._group = None
             await self._close()
@@ -278,8 +288,8 @@ class Bridge:
             for mid in served.motors:
                 served.publishers[mid] = session.declare_publisher(keys.motor(name, mid, "state"))
                 self._declared.append(served.publishers[mid])
-            served.bus.subscribe(lambda motor, traffic, reply, s=served: s.dirty.add(motor.motor_id))
-            served.bus.subscribe_status(lambda status, s=served: self._on_status(s, status))
+            served.bus.subscribe(served.changed)
+            served.bus.subscribe_status(functools.partial(self._on_status, served))
 
     def _handed(self, handler: Any, extract: Any, *bound: Any) -> Any:
         """A Zenoh callback that hands ``extract(item)`` (or the item) to ``handler``, which runs
@@ -381,9 +391,14 @@ class Bridge:
         assert self._lane is not None
         expires = self._lane.time() + left_ns / 1e9
         for mid, command in message.items:
-            owner = served.owners.get(mid)
-            if owner not in (None, message.client_id) and owner in self._clients and not self.allow_takeover:
+            if self._holder(served, mid, message.client_id) is not None:
                 served.counts["refused"] += 1
+                continue
+            try:  # what the motor's codec refuses (a command its revision lacks) never reaches a tick
+                served.motors[mid].codec.encode(command)
+            except ValueError as exc:
+                served.counts["malformed"] += 1
+                logger.debug("%s: set-point for motor %s refused by its codec: %s", key, mid, exc)
                 continue
             held = served.held.get(mid)
             if held is not None and held.client_id == message.client_id and _older(message.seq, held.seq):
@@ -420,7 +435,12 @@ class Bridge:
                 held.applied = True
                 served.to_wire_ns.append(handed - held.sent_unix_ns)
             served.counts["applied"] += len(fresh)
-            await served.bus.cycle(items)
+            try:
+                await served.bus.cycle(items)
+            except ValueError:  # (checked on intake; if a codec still refuses, the tick must go on)
+                logger.exception("%s/%s: a tick's set-points were refused; dropped", self.node, served.name)
+                served.counts["malformed"] += len(items)
+                served.held.clear()
 
     # ---- requests ----
 
@@ -449,7 +469,7 @@ class Bridge:
                     raise PermissionError(f"{type(command).__name__} is not a read: send it as a request")
             else:
                 served.counts["requests"] += 1
-                self._may_command(served, mid, request.client_id)
+                self._may_command(served, mid, request.client_id, command)
             reply = await served.bus.request(motor, command, timeout_s=request.timeout_s)
             result = wire.Result(reply=reply)
         except wire.WireError as exc:
@@ -472,13 +492,21 @@ class Bridge:
         finally:
             query.drop()
 
-    def _may_command(self, served: _Served, mid: int, client_id: str) -> None:
+    def _may_command(self, served: _Served, mid: int, client_id: str, command: Any) -> None:
         if client_id not in self._clients:
             raise PermissionError(f"client {client_id} has no liveliness token: it may only read")
+        holder = self._holder(served, mid, client_id)
+        if holder is not None:
+            raise PermissionError(f"motor {mid} on {served.name} is held by another client ({holder})")
+        if not type(command).READ:
+            served.owners[mid] = client_id
+
+    def _holder(self, served: _Served, mid: int, client_id: str) -> str | None:
+        """The live client other than ``client_id`` that holds motor ``mid``; None: free to command."""
         owner = served.owners.get(mid)
-        if owner not in (None, client_id) and owner in self._clients and not self.allow_takeover:
-            raise PermissionError(f"motor {mid} on {served.name} is held by another client ({owner})")
-        served.owners[mid] = client_id
+        if owner is None or owner == client_id or owner not in self._clients or self.allow_takeover:
+            return None
+        return owner
 
     def _on_info(self, served: _Served, query: Any) -> None:
         self._reply_json(query, served.info(self.node, self))

@@ -21,10 +21,12 @@ import contextlib
 import json
 import logging
 import math
+import os
 import time
 import uuid
 from collections.abc import Awaitable, Callable, Iterable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Self, TypeVar
 
 import anyio
@@ -42,6 +44,7 @@ __all__ = ["BridgeLost", "RemoteBus", "RemoteError", "RemoteMotor", "RemoteStatu
 logger = logging.getLogger(__name__)
 
 R = TypeVar("R")
+StrPath = str | os.PathLike[str]
 
 
 class RemoteError(TransportError):
@@ -105,10 +108,10 @@ def connect(
     endpoints: Sequence[str] = (DEFAULT_ENDPOINT,),
     user: str | None = None,
     password: str | None = None,
-    tls_cert: str | None = None,
-    tls_key: str | None = None,
-    tls_ca: str | None = None,
-    config_file: str | None = None,
+    tls_cert: StrPath | None = None,
+    tls_key: StrPath | None = None,
+    tls_ca: StrPath | None = None,
+    config_file: StrPath | None = None,
     read_only: bool = False,
     valid_for_s: float = 0.1,
     timeout_s: float = 2.0,
@@ -158,8 +161,8 @@ class RemoteBus:
         endpoints: Sequence[str] = (DEFAULT_ENDPOINT,),
         user: str | None = None,
         password: str | None = None,
-        tls: tuple[str | None, str | None, str | None] = (None, None, None),
-        config_file: str | None = None,
+        tls: tuple[StrPath | None, StrPath | None, StrPath | None] = (None, None, None),
+        config_file: StrPath | None = None,
         read_only: bool = False,
         valid_for_s: float = 0.1,
         timeout_s: float = 2.0,
@@ -200,10 +203,10 @@ class RemoteBus:
             self.endpoints,
             user=user,
             password=password,
-            tls_cert=cert,
-            tls_key=key,
-            tls_ca=ca,
-            config_file=config_file,
+            tls_cert=_path(cert),
+            tls_key=_path(key),
+            tls_ca=_path(ca),
+            config_file=_path(config_file),
             connect_timeout_s=self.timeout_s,
         )
         self._lane = runtime.current()
@@ -502,6 +505,10 @@ class RemoteBus:
             except (ValueError, KeyError, TypeError):
                 continue
         return sorted(names)
+
+
+def _path(value: StrPath | None) -> Path | None:
+    return None if value is None else Path(value)
 
 
 def _latest(motor: RemoteMotor) -> Reply | BaseException | None:

@@ -1,0 +1,191 @@
+"""The bridge and the client in one process, on asyncio and trio: set-point freshness, stops on
+stale set-points, what a read may be, clients without a token, a bridge that goes away."""
+
+from __future__ import annotations
+
+import socket
+import time
+import uuid
+from collections.abc import AsyncIterator
+
+import anyio
+import pytest
+
+import servobus
+from servobus.protocols import myactuator as ma
+from servobus.protocols.myactuator.sim import MyActuatorMotor
+from servobus.remote import Bridge, BridgeLost, RemoteError, connect, wire
+from servobus.remote.security import bridge_config, client_config
+from servobus.transports.sim import SimTransport
+
+pytestmark = pytest.mark.anyio
+
+zenoh = pytest.importorskip("zenoh")
+
+
+def _endpoint() -> str:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+
+
+class Served:
+    def __init__(self, bridge: Bridge, bus: servobus.Bus, endpoint: str) -> None:
+        self.bridge, self.bus, self.endpoint = bridge, bus, endpoint
+
+    def counts(self) -> dict[str, int]:
+        return self.bridge.served["b"].counts
+
+
+async def _serve(endpoint: str, **options: object) -> AsyncIterator[Served]:
+    transport = SimTransport(devices=[MyActuatorMotor(i) for i in range(1, 5)])
+    async with servobus.Bus(transport) as bus:
+        motors = [bus.motor(ma.FAMILY, i) for i in range(1, 5)]
+        async with Bridge(
+            "n", {"b": (bus, motors)}, config=bridge_config("n", [endpoint]), **options
+        ) as bridge:
+            yield Served(bridge, bus, endpoint)
+
+
+@pytest.fixture
+async def served() -> AsyncIterator[Served]:
+    async for item in _serve(_endpoint(), stop_after_s=0.05):
+        yield item
+
+
+async def _until(predicate: object, timeout_s: float = 3.0) -> None:
+    with anyio.fail_after(timeout_s):
+        while not predicate():  # type: ignore[operator]
+            await anyio.sleep(0.005)
+
+
+async def test_set_points_go_out_every_tick_then_go_stale_and_the_motor_is_stopped(served: Served) -> None:
+    async with connect("n/b", endpoints=[served.endpoint]) as remote:
+        motor = remote.motor(ma.FAMILY, 2)
+        await remote.cycle([(motor, ma.SpeedControl(speed_dps=90.0))], valid_for_s=0.2)
+        await _until(lambda: served.counts()["applied"] == 1)
+        sent = served.bus.metrics().requests
+        await anyio.sleep(0.1)
+        assert served.bus.metrics().requests > sent + 5  # the bridge's tick repeats the fresh set-point
+        await _until(lambda: served.counts()["expired"] == 1)
+        await _until(lambda: served.counts()["stops"] == 1)
+        assert [(bus, mid) for _, bus, mid, why in served.bridge.stop_log] == [("b", 2)]
+        assert "stale" in served.bridge.stop_log[0][3]
+        await _until(lambda: isinstance(motor.state, ma.StatusReply) or motor.state is not None)
+
+
+async def test_a_set_point_that_arrives_stale_is_dropped_and_counted(served: Served) -> None:
+    async with connect("n/b", endpoints=[served.endpoint]) as remote:
+        motor = remote.motor(1)
+        await remote.cycle([(motor, ma.SpeedControl(speed_dps=10.0))], valid_for_s=1e-7)
+        await _until(lambda: served.counts()["stale"] == 1)
+        assert served.counts()["applied"] == 0
+        assert 1 not in served.bridge.served["b"].owners
+
+
+async def test_leaving_the_block_stops_the_motors_the_client_commanded(served: Served) -> None:
+    async with connect("n/b", endpoints=[served.endpoint]) as remote:
+        motors = [remote.motor(i) for i in (1, 3)]
+        await remote.cycle([(m, ma.SpeedControl(speed_dps=30.0)) for m in motors], valid_for_s=5.0)
+        await _until(lambda: served.counts()["applied"] == 2)
+    await _until(lambda: served.counts()["stops"] == 2)
+    assert sorted(mid for _, _, mid, why in served.bridge.stop_log if why == "client left") == [1, 3]
+
+
+async def test_requests_reads_and_typed_replies(served: Served) -> None:
+    async with connect("n/b", endpoints=[served.endpoint]) as remote:
+        motor = remote.motor(ma.FAMILY, 4)
+        status = await motor.request(ma.ReadStatus2())
+        assert isinstance(status, ma.StatusReply)
+        assert isinstance(await motor.read_status1(), ma.Status1Reply)
+        echo = await motor.motor_stop()
+        assert echo is not None
+        assert served.counts()["reads"] == 2 and served.counts()["requests"] == 1
+        assert served.bridge.served["b"].owners == {4: remote.client_id}
+        with pytest.raises(ValueError, match="no motor 9"):
+            remote.motor(9)
+        with pytest.raises(AttributeError, match="no command"):
+            motor.read_statuss2  # noqa: B018
+        metrics = await remote.metrics()
+        assert metrics["bridge"]["reads"] == 2
+
+
+async def test_a_read_only_connection_commands_nothing(served: Served) -> None:
+    async with connect("n/b", endpoints=[served.endpoint], read_only=True) as remote:
+        motor = remote.motor(1)
+        assert isinstance(await motor.read_status2(), ma.StatusReply)
+        with pytest.raises(PermissionError, match="read-only"):
+            await motor.speed_control(speed_dps=10.0)
+        with pytest.raises(PermissionError, match="read-only"):
+            await remote.cycle([(motor, ma.SpeedControl(speed_dps=10.0))])
+    assert served.counts()["setpoints"] == 0 and served.bridge.served["b"].owners == {}
+
+
+async def test_the_read_key_runs_reads_only_and_a_client_without_a_token_commands_nothing(
+    served: Served,
+) -> None:
+    """A raw session (no liveliness token) tries a command through ``read`` and through ``request``,
+    and set-points: every one is refused by the bridge itself."""
+    schema = wire.Schema.of("myactuator")
+    stranger = uuid.uuid4().hex
+    session = await anyio.to_thread.run_sync(zenoh.open, client_config([served.endpoint]))
+    try:
+        for leaf in ("read", "request"):
+            payload = wire.encode_request(schema, wire.Request(stranger, ma.SpeedControl(speed_dps=5.0)))
+            key = f"servobus/n/b/1/{leaf}"
+            replies = await anyio.to_thread.run_sync(
+                lambda key=key, payload=payload: list(session.get(key, payload=payload, timeout=2.0))
+            )
+            error = wire.decode_result(schema, replies[0].ok.payload.to_bytes()).error
+            assert isinstance(error, PermissionError), leaf
+        now = time.time_ns()
+        message = wire.Setpoints(stranger, 1, now, now + 10**9, ((1, ma.SpeedControl(speed_dps=5.0)),))
+        session.put("servobus/n/b/setpoints", wire.encode_setpoints(lambda mid: schema, message))
+        await _until(lambda: served.counts()["refused"] >= 3)
+    finally:
+        await anyio.to_thread.run_sync(session.close)
+    assert served.counts()["setpoints"] == 0 and served.bridge.served["b"].owners == {}
+
+
+async def test_a_bridge_that_goes_away_fails_calls_at_once() -> None:
+    endpoint = _endpoint()
+    async with anyio.create_task_group() as group:
+        stop = anyio.Event()
+
+        async def bridge() -> None:
+            async for _ in _serve(endpoint):
+                await stop.wait()
+
+        group.start_soon(bridge)
+        with anyio.fail_after(5):
+            while True:
+                try:
+                    remote = await connect("n/b", endpoints=[endpoint], timeout_s=0.5).__aenter__()
+                    break
+                except RemoteError:
+                    await anyio.sleep(0.05)
+        try:
+            motor = remote.motor(1)
+            await motor.read_status2()
+            stop.set()
+            await _until(lambda: remote.lost is not None)
+            with anyio.fail_after(1), pytest.raises(BridgeLost):
+                await motor.read_status2()
+            with pytest.raises(BridgeLost):
+                await remote.cycle([(motor, ma.SpeedControl(speed_dps=1.0))])
+        finally:
+            await remote.__aexit__(None, None, None)
+
+
+async def test_clear_errors_on_connect(served: Served) -> None:
+    with pytest.raises(RemoteError, match=r"no bus 'x'.*its buses: b"):
+        async with connect("n/x", endpoints=[served.endpoint]):
+            pass
+    with pytest.raises(RemoteError, match="no bridge named 'm'"):
+        async with connect("m/b", endpoints=[served.endpoint], timeout_s=0.3):
+            pass
+    with anyio.fail_after(5), pytest.raises(RemoteError, match="no bridge reachable"):
+        async with connect("n/b", endpoints=[_endpoint()], timeout_s=0.3):
+            pass
+    with pytest.raises(ValueError, match="NODE/BUS"):
+        connect("n")
