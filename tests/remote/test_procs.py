@@ -533,7 +533,7 @@ def test_malformed_payloads_to_every_key_reach_no_motor(spawn: Callable[..., Pro
     for leaf in ("info", "metrics"):
         found = raw.ok("raw_get", items=[(key(leaf), b"\xff\x00garbage".hex())])["answers"][0]
         assert isinstance(json.loads(bytes.fromhex(found["ok"][0])), dict), found
-    # a state put by a client (the bridge does not listen there; another client reading it drops it)
+    # state puts by a client: the bridge subscribes to no state (and, a peer, forwards nothing)
     raw.ok("raw_put", items=[(key(3, "state"), b"\x01\x04garbage".hex()), (key(3, "state"), b"".hex())])
     after = report_when(server, lambda r: r["bridge"]["refused"] >= 4, 5, "4 refusals")
     assert after["bridge"]["malformed"] == expected and after["bridge"]["refused"] == 4, after["bridge"]
@@ -547,3 +547,62 @@ def test_malformed_payloads_to_every_key_reach_no_motor(spawn: Callable[..., Pro
     watcher.ok("hold", motors=[3], command="SpeedControl", fields={"speed_dps": 30.0})
     report_when(server, lambda r: speeds(r, [3]) == {3: 30.0}, 5, "motor 3 commanded after it all")
     print("watcher:", watcher.ok("counts")["counts"])
+
+
+# ---- 6. credentials: wrong ones refused, a reader reaches no motor ----
+
+
+def test_wrong_credentials_and_a_reader_reach_no_motor(spawn: Callable[..., Proc], tmp_path: Path) -> None:
+    users = tmp_path / "users.txt"
+    users.write_text("cmd:cmd-secret\nro:ro-secret\n")
+    server, port = bridge(spawn, "--users", str(users), "--commander", "cmd", "--reader", "ro")
+    client = spawn("client", port)
+    for what, user, password in [
+        ("wrong password", "cmd", "guess"),
+        ("unknown user", "mallory", "cmd-secret"),
+        ("a reader's name, the commander's password", "ro", "cmd-secret"),
+        ("no credentials", None, None),
+    ]:
+        refused = client.call("connect", user=user, password=password, timeout_s=1.0)
+        print(f"{what}: {refused.get('error')} after {refused['elapsed_s'] * 1e3:.0f} ms")
+        assert not refused["ok"] and "RemoteError" in refused["errors"], (what, refused)
+        assert refused["elapsed_s"] < 3.0, (what, refused)
+    assert server.ok("report")["clients"] == 0
+
+    # the commander commands (the access rules let it through), and its leaving stops its motors
+    client.ok("connect", user="cmd", password="cmd-secret")
+    client.ok("hold", motors=[1, 2], command="SpeedControl", fields={"speed_dps": 30.0})
+    report_when(server, lambda r: speeds(r, [1, 2]) == {1: 30.0, 2: 30.0}, 5, "the commander's set-points")
+    client.ok("close")
+    report_when(server, lambda r: stopped(r, [1, 2]), 5, "motors 1, 2 stopped after the commander left")
+
+    server.ok("reset")
+    before = server.ok("report")
+    reader = spawn("client", port, backend="trio")
+    for read_only in (True, False):  # a reader that says so, and one that tries to command anyway
+        reader.ok("connect", user="ro", password="ro-secret", read_only=read_only, timeout_s=1.0)
+        assert server.ok("report")["clients"] == 0  # a reader's token is denied: it commands nothing
+        read = reader.ok("request", motor=1, command="ReadStatus2")
+        assert read["reply"]["type"] == "StatusReply", read
+        until(lambda: reader.ok("counts")["counts"]["states"] > 0, 5, "a state reaching the reader")
+        command = reader.call("request", motor=1, command="SpeedControl", fields={"speed_dps": 90.0})
+        print(f"reader (read_only={read_only}) commanding: {command.get('error')}: {command.get('message')}")
+        assert not command["ok"], command
+        if read_only:
+            assert command["error"] == "PermissionError", command
+            cycle = reader.call("cycle", motors=[1], command="SpeedControl", fields={"speed_dps": 90.0})
+            assert cycle["error"] == "PermissionError", cycle
+        else:  # its query is denied by the bridge's access control: it gets no answer, said clearly
+            assert "RemoteError" in command["errors"] and "access control" in command["message"], command
+            reader.ok("hold", motors=[1, 2, 3], command="SpeedControl", fields={"speed_dps": 90.0})
+            time.sleep(0.5)
+            assert reader.ok("release")["error"] is None
+        reader.ok("close")
+    after = server.ok("report")
+    # only reads reached the motors; no set-point or request reached the bridge
+    assert {b for frames in frames_of(after).values() for b in frames} == {STATUS2}, after["frames"]
+    for name in ("setpoints", "applied", "requests", "refused", "malformed", "stops"):
+        assert after["bridge"][name] == before["bridge"][name], (name, before["bridge"], after["bridge"])
+    assert after["bridge"]["reads"] == before["bridge"]["reads"] + 2
+    assert after["clients"] == 0 and after["owners"] == {}
+    assert all(c["kind"] != "SpeedControl" for c in after["controls"].values()), after["controls"]
