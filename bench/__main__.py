@@ -23,6 +23,9 @@ Parts, in order (each is also a script of its own, ``python bench/bench_<part>.p
   (``bench_loop1k.py``; ``loop1k.*``, ``loop1k_fd.*``).
 * ``scaling``: cost per tick against motors per bus, buses per process and processes, with a plot
   (``bench_scaling.py``; ``scaling.*``).
+* ``remote``: servobus.remote across processes on loopback: a Zenoh bridge serving 32 simulated motors,
+  a client in another process: set-point updates/s, publish-to-wire latency, request round trip against
+  the local Bus, the safe stop after the client is SIGKILLed (``bench_remote.py``; ``remote.*``).
 
 Every part writes its own key of results.json and its own section of RESULTS.md (others' keys and
 sections are kept); profiles (cProfile or py-spy) of each headline figure go into its section. The runner
@@ -58,6 +61,7 @@ PARTS = {
     "sim": "bench_sim",
     "loop1k": "bench_loop1k",
     "scaling": "bench_scaling",
+    "remote": "bench_remote",
 }
 SUMMARY = "summary"
 
@@ -107,11 +111,20 @@ HEADLINES: tuple[tuple[str, str, str, str], ...] = (
     ("loop1k.device_cpu_pct", "1 kHz x 32 (CAN): simulated devices' CPU", "{:.0f} %", "< 25 %"),
     ("loop1k_fd.on_time_pct", "1 kHz x 32 (CAN FD, 8 per bus): ticks on time", "{:.2f} %", ">= 99.5 %"),
     ("loop1k_fd_4pb.on_time_pct", "1 kHz x 32 (CAN FD, 4 per bus): ticks on time", "{:.2f} %", "(info)"),
+    ("remote.tick_hz_32", "remote client -> 32 motors: set-point updates/s per motor", "{:,.0f}", ">= 200"),
+    ("remote.setpoint_to_wire_p99_ms", "remote set-point: client publish -> bus, p99", "{:.2f} ms",
+     "<= 5 ms"),
+    ("remote.request_rtt_p50_ms", "remote `read_status2()` round trip, p50", "{:.2f} ms", "(info)"),
+    ("remote.request_rtt_vs_local", "remote read p50 / local `Bus.request` p50", "{:.1f}x", "(info)"),
+    ("remote.stop_after_client_loss_ms", "client SIGKILLed -> 32 motors stopped, median", "{:.0f} ms",
+     "<= 250 ms"),
+    ("remote.stop_after_client_loss_max_ms", "client SIGKILLed -> 32 motors stopped, max", "{:.0f} ms",
+     "<= 250 ms"),
     ("scaling.buses_per_process.64.cpu_us_per_transaction", "64 buses x 4 motors: CPU per transaction",
      "{:.2f} µs", "-"),
 )  # fmt: skip
 
-MISSED_KEYS = ("codec", "bus", "efficiency", "sim", "loop1k", "loop1k_fd")
+MISSED_KEYS = ("codec", "bus", "efficiency", "sim", "loop1k", "loop1k_fd", "remote")
 
 
 def summary_markdown(results: dict[str, Any], command: str, load: list[float], runtime_s: float) -> str:

@@ -198,3 +198,18 @@ def test_a_flipped_byte_is_a_message_or_a_wire_error(which: int, at: int, value:
         (_DECODERS[0] if which == 0 else lambda d: wire.decode_request(wire.Schema.of("myactuator"), d))(
             bytes(data)
         )
+
+
+def test_a_motor_key_has_one_spelling() -> None:
+    from servobus.remote.keys import Keys
+
+    keys = Keys("n")
+    assert keys.parse_motor("servobus/n/b/3/request") == ("b", 3, "request")
+    for bad in (
+        "servobus/n/b/03/request",
+        "servobus/n/b/\u0663/request",
+        "servobus/n/b/+3/read",
+        "servobus/m/b/3/read",
+    ):
+        with pytest.raises(ValueError, match="not a motor key"):
+            keys.parse_motor(bad)

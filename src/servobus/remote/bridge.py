@@ -452,7 +452,10 @@ class Bridge:
         schema = None
         try:
             key = str(query.key_expr)
-            _, mid, leaf = self.keys.parse_motor(key)
+            try:
+                _, mid, leaf = self.keys.parse_motor(key)
+            except ValueError as exc:  # a client's key (servobus/N/B/x/request): malformed, not a bug
+                raise wire.WireError(str(exc)) from None
             motor = served.motors.get(mid)
             if motor is None:
                 raise wire.WireError(f"no motor {mid} on bus {served.name}")

@@ -23,6 +23,7 @@ __all__ = ["ROOT", "Keys", "check_name"]
 
 ROOT = "servobus"
 
+_MOTOR = re.compile(r"0|[1-9][0-9]{0,4}")  # one spelling per id: no "03", no other digit scripts
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
 
 
@@ -67,6 +68,6 @@ class Keys:
             ValueError: not a motor key of this node.
         """
         parts = str(key).split("/")
-        if len(parts) != 5 or parts[0] != ROOT or parts[1] != self.node or not parts[3].isdigit():
+        if len(parts) != 5 or parts[0] != ROOT or parts[1] != self.node or not _MOTOR.fullmatch(parts[3]):
             raise ValueError(f"{key!r} is not a motor key of node {self.node!r}")
         return parts[2], int(parts[3]), parts[4]
