@@ -3,6 +3,7 @@ stale set-points, what a read may be, clients without a token, a bridge that goe
 
 from __future__ import annotations
 
+import contextlib
 import socket
 import time
 import uuid
@@ -98,8 +99,7 @@ async def test_requests_reads_and_typed_replies(served: Served) -> None:
         status = await motor.request(ma.ReadStatus2())
         assert isinstance(status, ma.StatusReply)
         assert isinstance(await motor.read_status1(), ma.Status1Reply)
-        echo = await motor.motor_stop()
-        assert echo is not None
+        assert isinstance(await motor.speed_control(speed_dps=5.0), ma.StatusReply)
         assert served.counts()["reads"] == 2 and served.counts()["requests"] == 1
         assert served.bridge.served["b"].owners == {4: remote.client_id}
         with pytest.raises(ValueError, match="no motor 9"):
@@ -189,3 +189,28 @@ async def test_clear_errors_on_connect(served: Served) -> None:
             pass
     with pytest.raises(ValueError, match="NODE/BUS"):
         connect("n")
+
+
+async def test_a_motor_the_client_made_safe_itself_is_left_as_it_is(served: Served) -> None:
+    """``off`` then leaving must not re-engage the motor with the bridge's stop; a motor left
+    running by a request is stopped."""
+    async with connect("n/b", endpoints=[served.endpoint]) as remote:
+        await remote.motor(1).motor_shutdown()
+        await remote.motor(2).speed_control(speed_dps=20.0)
+        assert served.bridge.served["b"].owners == {2: remote.client_id}
+    await _until(lambda: served.counts()["stops"] == 1)
+    await anyio.sleep(0.05)
+    assert [mid for _, _, mid, _ in served.bridge.stop_log] == [2]
+
+
+async def test_the_missing_bus_error_lists_every_bus() -> None:
+    endpoint = _endpoint()
+    async with contextlib.AsyncExitStack() as stack:
+        buses = {}
+        for name in ("s1", "s2", "s3"):
+            bus = await stack.enter_async_context(servobus.Bus(SimTransport(devices=[MyActuatorMotor(1)])))
+            buses[name] = (bus, [bus.motor(ma.FAMILY, 1)])
+        await stack.enter_async_context(Bridge("n", buses, config=bridge_config("n", [endpoint])))
+        with pytest.raises(RemoteError, match=r"its buses: s1, s2, s3\)"):
+            async with connect("n/x", endpoints=[endpoint]):
+                pass

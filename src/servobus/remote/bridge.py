@@ -83,6 +83,7 @@ class _Served:
                 raise ValueError(f"bus {name}: two motors with id {motor.motor_id} (keys name motors by id)")
             self.motors[motor.motor_id] = motor
         self.schemas = {mid: wire.Schema.of(m.codec.family) for mid, m in self.motors.items()}
+        self.safe_commands = {mid: _safe_commands(m) for mid, m in self.motors.items()}
         self.held: dict[int, _Held] = {}
         self.stale_since: dict[int, float] = {}  # motor -> when its set-point expired (loop clock)
         self.owners: dict[int, str] = {}
@@ -472,6 +473,11 @@ class Bridge:
                 self._may_command(served, mid, request.client_id, command)
             reply = await served.bus.request(motor, command, timeout_s=request.timeout_s)
             result = wire.Result(reply=reply)
+            if leaf == "request" and command in served.safe_commands[mid]:
+                # The client made the motor safe itself (stop, off, brake): leaving must not undo it.
+                served.held.pop(mid, None)
+                if served.owners.get(mid) == request.client_id:
+                    del served.owners[mid]
         except wire.WireError as exc:
             served.counts["malformed"] += 1
             result = wire.Result(error=ValueError(f"malformed request: {exc}"))
@@ -509,15 +515,14 @@ class Bridge:
         return owner
 
     def _on_info(self, served: _Served, query: Any) -> None:
-        self._reply_json(query, served.info(self.node, self))
+        self._reply_json(query, self.keys.bus(served.name, "info"), served.info(self.node, self))
 
     def _on_metrics(self, served: _Served, query: Any) -> None:
-        self._reply_json(query, served.metrics())
+        self._reply_json(query, self.keys.bus(served.name, "metrics"), served.metrics())
 
-    @staticmethod
-    def _reply_json(query: Any, body: dict[str, Any]) -> None:
-        try:
-            query.reply(query.key_expr, json.dumps(body).encode())
+    def _reply_json(self, query: Any, key: str, body: dict[str, Any]) -> None:
+        try:  # on the bus's own key: answers to a wildcard query (servobus/N/*/info) stay apart
+            query.reply(key, json.dumps(body).encode())
         finally:
             query.drop()
 
@@ -557,6 +562,17 @@ class Bridge:
     def metrics(self) -> dict[str, dict[str, Any]]:
         """Each served bus's metrics: the Bus's, the bridge's counters, set-point-to-wire latency."""
         return {name: served.metrics() for name, served in self.served.items()}
+
+
+def _safe_commands(motor: Motor) -> frozenset[Any]:
+    """The commands that make ``motor`` safe (each kind its family has)."""
+    found = set()
+    for kind in ("stop", "shutdown", "brake"):
+        try:
+            found.add(motor.codec.safe_command(kind))
+        except ValueError:  # a kind this family or revision has no command for
+            continue
+    return frozenset(found)
 
 
 def _older(seq: int, than: int) -> bool:

@@ -367,7 +367,7 @@ def bridge_config(
                 raise InsecureListen(
                     f"refusing to listen on {endpoint} without access control (it is reachable from "
                     "other hosts): give --users FILE or --tls-cert/--tls-key/--tls-ca with "
-                    "--commanders/--readers, or --insecure to let anyone who reaches it command the motors"
+                    "--commander/--reader, or --insecure to let anyone who reaches it command the motors"
                 )
     settings: dict[str, Any] = {
         **_COMMON,
