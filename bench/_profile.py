@@ -129,6 +129,23 @@ def pyspy_available() -> bool:
     return shutil.which("py-spy") is not None
 
 
+def pyspy_wrap(out: Path, rate: int = 250) -> list[str]:
+    """The ``py-spy record`` prefix of :func:`pyspy_record`'s command, for a process started elsewhere."""
+    return [
+        "py-spy",
+        "record",
+        "--format",
+        "raw",
+        "--idle",
+        "--nonblocking",
+        "--rate",
+        str(rate),
+        "--output",
+        str(out),
+        "--",
+    ]
+
+
 def pyspy_record(
     command: Sequence[str],
     out: Path,
@@ -143,12 +160,13 @@ def pyspy_record(
     timing (a stack may occasionally be torn; py-spy counts those as errors). ``--idle`` keeps the
     samples where the thread waits (in the selector), so the shares add up to the whole wall time.
     """
-    cmd = [
-        "py-spy", "record", "--format", "raw", "--idle", "--nonblocking",
-        "--rate", str(rate), "--output", str(out), "--", *command,
-    ]  # fmt: skip
     return subprocess.run(
-        cmd, capture_output=True, text=True, env={**os.environ, **(env or {})}, timeout=timeout, check=False
+        [*pyspy_wrap(out, rate), *command],
+        capture_output=True,
+        text=True,
+        env={**os.environ, **(env or {})},
+        timeout=timeout,
+        check=False,
     )
 
 

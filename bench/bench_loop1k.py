@@ -360,19 +360,7 @@ def profile_run(layout: Layout, seconds: float, work: Path) -> dict[str, Any]:
     if not _profile.pyspy_available():
         return {"error": "py-spy not found"}
     dev_out, host_out = work / f"{layout.key}-devices.txt", work / f"{layout.key}-host.txt"
-    wrap = [
-        "py-spy",
-        "record",
-        "--format",
-        "raw",
-        "--idle",
-        "--nonblocking",
-        "--rate",
-        "250",
-        "--output",
-        str(dev_out),
-        "--",
-    ]
+    wrap = _profile.pyspy_wrap(dev_out)
     with devices(layout, wrap) as (process, paths):
         pid = _device_pid(process, True)
         done = _profile.pyspy_record(host_command(layout, paths, seconds, pid), host_out)

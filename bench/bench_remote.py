@@ -484,19 +484,7 @@ def profile_tick(seconds: float, work: Path, rate: float) -> dict[str, Any]:
     if not _profile.pyspy_available():
         return {"error": "py-spy not found"}
     stacks = work / "bridge-stacks.txt"
-    wrap = [
-        "py-spy",
-        "record",
-        "--format",
-        "raw",
-        "--idle",
-        "--nonblocking",
-        "--rate",
-        "250",
-        "--output",
-        str(stacks),
-        "--",
-    ]
+    wrap = _profile.pyspy_wrap(stacks)
     run = tick_run("inf", seconds, work, wrap=wrap, rate=rate)
     if not stacks.exists():
         return {"error": "py-spy wrote no stacks", "run": run}

@@ -27,6 +27,7 @@ from typing import Any, Self
 
 import anyio
 import anyio.abc
+import zenoh
 
 from servobus import runtime
 from servobus._version import __version__
@@ -34,6 +35,7 @@ from servobus.bus import Bus, Motor, MotorStatus
 from servobus.errors import ServobusError
 from servobus.protocols import Reply
 from servobus.remote import wire
+from servobus.remote._session import close_session, sample_kind
 from servobus.remote.keys import Keys, check_name
 from servobus.scheduler import Traffic
 from servobus.ticks import ticks
@@ -44,19 +46,6 @@ logger = logging.getLogger(__name__)
 
 _PENDING = 4096  # Zenoh callbacks waiting for the intake task; more are dropped and counted
 _LATENCY_KEPT = 20_000  # set-point -> wire samples kept for the percentiles
-
-
-def _zenoh() -> Any:
-    try:
-        import zenoh
-    except ImportError:  # pragma: no cover - the extra is named in the message
-        raise ImportError("servobus.remote needs eclipse-zenoh: pip install 'servobus[remote]'") from None
-    return zenoh
-
-
-def _kind(sample: Any) -> str:
-    """``"PUT"`` or ``"DELETE"`` (a liveliness token appeared or vanished)."""
-    return "PUT" if sample.kind == _zenoh().SampleKind.PUT else "DELETE"
 
 
 @dataclass(slots=True)
@@ -206,7 +195,6 @@ class Bridge:
     # ---- life cycle ----
 
     async def __aenter__(self) -> Self:
-        zenoh = _zenoh()
         if self._config is None:
             from servobus.remote.security import bridge_config
 
@@ -214,7 +202,7 @@ class Bridge:
         self._lane = runtime.current()
         self._session = await anyio.to_thread.run_sync(zenoh.open, self._config)
         try:
-            self._declare(zenoh)
+            self._declare()
             self._group = anyio.create_task_group()
             await self._group.__aenter__()
         except BaseException:
@@ -241,26 +229,14 @@ class Bridge:
     async def _close(self) -> None:
         session, self._session = self._session, None
         declared, self._declared = self._declared, []
-        if session is None:
-            return
-        with anyio.CancelScope(shield=True):
+        await close_session(session, declared)
 
-            def close() -> None:
-                for item in reversed(declared):
-                    try:
-                        item.undeclare()
-                    except Exception:  # already gone with its session
-                        logger.debug("undeclare failed", exc_info=True)
-                session.close()
-
-            await anyio.to_thread.run_sync(close)
-
-    def _declare(self, zenoh: Any) -> None:
+    def _declare(self) -> None:
         session, keys = self._session, self.keys
         self._declared.append(
             session.liveliness().declare_subscriber(
                 keys.clients,
-                self._handed(self._on_client, lambda s: (str(s.key_expr), _kind(s))),
+                self._handed(self._on_client, lambda s: (str(s.key_expr), sample_kind(s))),
                 history=True,
             )
         )

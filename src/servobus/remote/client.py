@@ -30,12 +30,13 @@ from pathlib import Path
 from typing import Any, Self, TypeVar
 
 import anyio
+import zenoh
 
 from servobus import runtime
 from servobus.errors import MotorOffline, TransportError
 from servobus.protocols import Command, Family, Reply, get_family
 from servobus.remote import wire
-from servobus.remote.bridge import _kind, _zenoh
+from servobus.remote._session import close_session, sample_kind
 from servobus.remote.keys import Keys, check_name
 from servobus.remote.security import DEFAULT_ENDPOINT, client_config, open_error
 
@@ -197,7 +198,6 @@ class RemoteBus:
     # ---- life cycle ----
 
     async def __aenter__(self) -> Self:
-        zenoh = _zenoh()
         user, password, (cert, key, ca), config_file = self._config
         config = client_config(
             self.endpoints,
@@ -226,7 +226,7 @@ class RemoteBus:
         self._alive = anyio.Event()
         self._declared.append(
             session.liveliness().declare_subscriber(
-                keys.alive, self._handed(self._on_alive, _kind), history=True
+                keys.alive, self._handed(self._on_alive, sample_kind), history=True
             )
         )
         with anyio.move_on_after(self.timeout_s):
@@ -261,7 +261,6 @@ class RemoteBus:
             )
         )
         if not self.read_only:
-            zenoh = _zenoh()
             self._setpoints = session.declare_publisher(
                 keys.bus(self.name, "setpoints"), express=True, priority=zenoh.Priority.REAL_TIME
             )
@@ -274,19 +273,7 @@ class RemoteBus:
         session, self._session = self._session, None
         declared, self._declared = self._declared, []
         self._setpoints = None
-        if session is None:
-            return
-        with anyio.CancelScope(shield=True):
-
-            def close() -> None:
-                for item in reversed(declared):
-                    try:
-                        item.undeclare()
-                    except Exception:
-                        logger.debug("undeclare failed", exc_info=True)
-                session.close()
-
-            await anyio.to_thread.run_sync(close)
+        await close_session(session, declared)
 
     def _handed(
         self, handler: Callable[[Any], object], extract: Callable[[Any], Any]
@@ -454,7 +441,6 @@ class RemoteBus:
 
     async def _get(self, key: str, payload: bytes | None, timeout_s: float) -> list[bytes]:
         """The payloads of the answers to a query, gathered on Zenoh's thread, awaited here."""
-        zenoh = _zenoh()
         lane = self._lane
         assert lane is not None
         done = anyio.Event()
