@@ -1,10 +1,13 @@
 """The Bus's safe stop (:func:`safe_stop`): every commanded motor gets the safe command, again and
-again, until it acknowledged it or the time for it ended; one task per motor, in a task group."""
+again, until it acknowledged it or the time for it ended; one task per motor, in a task group
+(:func:`stop_motors`, which the remote bridge uses too for the motors of a client that left)."""
 
 from __future__ import annotations
 
 import contextlib
 import logging
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import anyio
@@ -18,7 +21,7 @@ if TYPE_CHECKING:
     from servobus.motor import Motor
     from servobus.scheduler import Request
 
-__all__ = ["safe_stop"]
+__all__ = ["StopOutcome", "safe_stop", "stop_motors"]
 
 logger = logging.getLogger("servobus.bus")
 
@@ -41,6 +44,40 @@ async def safe_stop(bus: Bus) -> None:
     for motor in list(bus._commanded.values()):
         with contextlib.suppress(ValueError):
             commands[motor] = motor.codec.safe_command(bus.safe)
+    outcome = StopOutcome()
+    try:
+        await stop_motors(bus, commands, bus.safe_timeout_s, outcome)
+    finally:
+        bus.safe_sent = outcome.sent
+        bus.safe_acknowledged = outcome.acknowledged
+        missing = [m for m in commands if m not in outcome.acknowledged]
+        if missing:
+            logger.warning(
+                "%s: the %s command was not acknowledged by %s within %g s",
+                bus.name,
+                bus.safe,
+                ", ".join(repr(m) for m in missing),
+                bus.safe_timeout_s,
+            )
+
+
+@dataclass(slots=True)
+class StopOutcome:
+    """What :func:`stop_motors` did: the motors whose command left, and those that acknowledged it."""
+
+    sent: tuple[Motor, ...] = ()
+    acknowledged: tuple[Motor, ...] = ()
+
+
+async def stop_motors(
+    bus: Bus, commands: Mapping[Motor, Command], timeout_s: float, outcome: StopOutcome | None = None
+) -> StopOutcome:
+    """Send each motor its (safe) command, past the watchdog (an offline motor gets it too), again to
+    each one that did not answer, until all answered or ``timeout_s`` ended.
+
+    ``outcome`` (a new one when None) is filled in even when the caller is cancelled meanwhile.
+    """
+    outcome = StopOutcome() if outcome is None else outcome
     attempts: dict[Motor, list[Request]] = {motor: [] for motor in commands}
     acknowledged: set[Motor] = set()
 
@@ -64,20 +101,12 @@ async def safe_stop(bus: Bus) -> None:
             return
 
     try:
-        with anyio.move_on_after(bus.safe_timeout_s):
+        with anyio.move_on_after(timeout_s):
             async with anyio.create_task_group() as group:
                 for motor, command in commands.items():
                     group.start_soon(stop, motor, command)
     finally:
         bus._engine.abandon(r for sent in attempts.values() for r in sent)
-        bus.safe_sent = tuple(m for m, tried in attempts.items() if any(r.sent_at is not None for r in tried))
-        bus.safe_acknowledged = tuple(m for m in commands if m in acknowledged)
-        missing = [m for m in commands if m not in acknowledged]
-        if missing:
-            logger.warning(
-                "%s: the %s command was not acknowledged by %s within %g s",
-                bus.name,
-                bus.safe,
-                ", ".join(repr(m) for m in missing),
-                bus.safe_timeout_s,
-            )
+        outcome.sent = tuple(m for m, tried in attempts.items() if any(r.sent_at is not None for r in tried))
+        outcome.acknowledged = tuple(m for m in commands if m in acknowledged)
+    return outcome

@@ -209,7 +209,9 @@ async def test_the_line_is_held_for_a_reply_then_released_by_the_reply_or_the_ti
         transport.send(read1())
         await transport.drain()
         await anyio.sleep(0.02)
-    assert 0.05 <= silent.heard[1] - silent.heard[0] < 0.5
+    # (the line is held from when the first frame was written; the device may hear that frame up to
+    # a few ms late on a loaded host, and the second promptly: 49.7 ms was seen once)
+    assert 0.045 <= silent.heard[1] - silent.heard[0] < 0.5
 
 
 async def test_garbage_and_corrupt_frames_are_counted_and_the_good_frame_still_comes() -> None:
