@@ -186,7 +186,7 @@ class Client:
             )
         )
         self.stack = stack
-        return {"client_id": self.bus.client_id, "motors": sorted(self.bus.motors)}
+        return {"token_id": self.bus.token_id, "motors": sorted(self.bus.motors)}
 
     async def close(self, _: dict[str, Any]) -> dict[str, Any]:
         """Leave the connection (a hold running is released first); its counts as they were."""

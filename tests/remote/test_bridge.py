@@ -101,7 +101,7 @@ async def test_requests_reads_and_typed_replies(served: Served) -> None:
         assert isinstance(await motor.read_status1(), ma.Status1Reply)
         assert isinstance(await motor.speed_control(speed_dps=5.0), ma.StatusReply)
         assert served.counts()["reads"] == 2 and served.counts()["requests"] == 1
-        assert served.bridge.served["b"].owners == {4: remote.client_id}
+        assert served.bridge.served["b"].owners == {4: remote.token_id}
         with pytest.raises(ValueError, match="no motor 9"):
             remote.motor(9)
         with pytest.raises(AttributeError, match="no command"):
@@ -197,7 +197,7 @@ async def test_a_motor_the_client_made_safe_itself_is_left_as_it_is(served: Serv
     async with connect("n/b", endpoints=[served.endpoint]) as remote:
         await remote.motor(1).motor_shutdown()
         await remote.motor(2).speed_control(speed_dps=20.0)
-        assert served.bridge.served["b"].owners == {2: remote.client_id}
+        assert served.bridge.served["b"].owners == {2: remote.token_id}
     await _until(lambda: served.counts()["stops"] == 1)
     await anyio.sleep(0.05)
     assert [mid for _, _, mid, _ in served.bridge.stop_log] == [2]

@@ -261,7 +261,7 @@ def test_a_client_drives_32_motors_and_its_clean_exit_stops_them(
 ) -> None:
     server, port = bridge(spawn, backend=backend)
     client = spawn("client", port, backend=backend)
-    me = client.ok("connect")["client_id"]
+    me = client.ok("connect")["token_id"]
     client.ok("hold", motors=list(MOTORS), command="SpeedControl", fields={"speed_dps": 30.0}, hz=200.0)
     report_when(server, lambda r: set(speeds(r).values()) == {30.0}, 10, "all 32 motors at 30 dps")
     time.sleep(1.0)
@@ -375,8 +375,8 @@ def test_two_clients_contend_for_a_motor(spawn: Callable[..., Proc]) -> None:
     server, port = bridge(spawn)
     a = spawn("client", port)
     b = spawn("client", port, backend="trio")
-    a_id = a.ok("connect")["client_id"]
-    b_id = b.ok("connect")["client_id"]
+    a_id = a.ok("connect")["token_id"]
+    b_id = b.ok("connect")["token_id"]
     a.ok("hold", motors=[3], command="SpeedControl", fields={"speed_dps": 30.0})
     report_when(server, lambda r: speeds(r, [3]) == {3: 30.0}, 10, "motor 3 at A's 30 dps")
     before = server.ok("report")["bridge"]["refused"]

@@ -2,26 +2,27 @@
 
 The control loop stays next to its bus. Each bus gets its own tick task that sends, every tick, the
 latest fresh set-point of each motor through ``Bus.cycle()``; clients only change what that loop
-sends. A set-point carries the time after which it must not be applied: a stale one is dropped and
-counted, and a motor whose set-point has been stale for ``stop_after_s``, or whose commanding client
-is gone (its liveliness token vanished), gets the Bus's safe command. Requests run one command
-through the Bus and answer with the typed reply or the error. States (latest reply, online flag,
-fault) are published as they change, at most ``state_hz`` per motor.
+sends. A set-point carries the time after which it must not be applied (and is never held longer
+than ``max_valid_s``): a stale one is dropped and counted, and a motor whose set-point has been stale
+for ``stop_after_s``, or whose commanding client is gone (its liveliness token vanished), gets its
+safe command. Requests run one command through the Bus and answer with the typed reply or the
+error. States (latest reply, online flag, fault) are published as they change, at most ``state_hz``
+per motor.
 
-Zenoh calls us on its own threads; every callback only hands its bytes to the event loop
-(``runtime.call_soon_threadsafe``), where all the state lives.
+Zenoh calls us on its own threads; every callback only hands its bytes to the event loop, where all
+the state lives. Set-points and queries wait in a bounded backlog (beyond it they are dropped on
+Zenoh's thread, and counted); a client's liveliness changes are never dropped.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import json
 import logging
+import math
 import time
 from collections import deque
-from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from types import TracebackType
 from typing import Any, Self
 
@@ -30,111 +31,21 @@ import anyio.abc
 import zenoh
 
 from servobus import runtime
-from servobus._version import __version__
 from servobus.bus import Bus, Motor, MotorStatus
 from servobus.errors import ServobusError
-from servobus.protocols import Reply
+from servobus.protocols import Command
 from servobus.remote import wire
+from servobus.remote._served import Held, Served
 from servobus.remote._session import close_session, sample_kind
-from servobus.remote.keys import Keys, check_name
-from servobus.scheduler import Traffic
+from servobus.remote.keys import Keys
+from servobus.safety import stop_motors
 from servobus.ticks import ticks
 
 __all__ = ["Bridge"]
 
 logger = logging.getLogger(__name__)
 
-_PENDING = 4096  # Zenoh callbacks waiting for the intake task; more are dropped and counted
-_LATENCY_KEPT = 20_000  # set-point -> wire samples kept for the percentiles
-
-
-@dataclass(slots=True)
-class _Held:
-    """A motor's latest set-point: who sent it, until when it may be applied, whether it went out."""
-
-    client_id: str
-    seq: int
-    command: Any
-    sent_unix_ns: int
-    expires: float  # the loop's clock
-    applied: bool = False
-
-
-class _Served:
-    """One bus as the bridge serves it: its motors, set-points, owners and counters."""
-
-    def __init__(self, name: str, bus: Bus, motors: Sequence[Motor]) -> None:
-        self.name = check_name("bus", name)
-        self.bus = bus
-        self.motors: dict[int, Motor] = {}
-        for motor in motors:
-            if motor.motor_id in self.motors:
-                raise ValueError(f"bus {name}: two motors with id {motor.motor_id} (keys name motors by id)")
-            self.motors[motor.motor_id] = motor
-        self.schemas = {mid: wire.Schema.of(m.codec.family) for mid, m in self.motors.items()}
-        self.safe_commands = {mid: _safe_commands(m) for mid, m in self.motors.items()}
-        self.held: dict[int, _Held] = {}
-        self.stale_since: dict[int, float] = {}  # motor -> when its set-point expired (loop clock)
-        self.owners: dict[int, str] = {}
-        self.dirty: set[int] = set()
-        self.published: dict[int, float] = {}
-        self.publishers: dict[int, Any] = {}
-        self.to_wire_ns: deque[int] = deque(maxlen=_LATENCY_KEPT)
-        self.counts = dict.fromkeys(
-            (
-                "setpoints",  # set-points received, well-formed
-                "applied",  # set-points that went out at least once
-                "stale",  # arrived past their deadline
-                "expired",  # went stale while held (not renewed in time)
-                "reordered",  # older than the one held from the same client
-                "refused",  # a motor another live client holds, or a client with no token
-                "malformed",  # messages that did not parse or were not a motor's command
-                "requests",
-                "reads",
-                "stops",  # safe stops sent because a client vanished or went stale
-                "states",  # states published
-            ),
-            0,
-        )
-
-    def changed(self, motor: Motor, traffic: Traffic, reply: Reply) -> None:
-        """(The Bus's subscriber) the motor's state is to be published."""
-        self.dirty.add(motor.motor_id)
-
-    def info(self, node: str, bridge: Bridge) -> dict[str, Any]:
-        return {
-            "node": node,
-            "bus": self.name,
-            "servobus": __version__,
-            "wire": wire.VERSION,
-            "hz": bridge.hz,
-            "state_hz": bridge.state_hz,
-            "stop_after_s": bridge.stop_after_s,
-            "safe": self.bus.safe,
-            "motors": [
-                {
-                    "id": mid,
-                    "family": m.codec.family,
-                    "revision": m.codec.revision.name,
-                    "link": m.codec.link,
-                    "schema": self.schemas[mid].digest,
-                }
-                for mid, m in sorted(self.motors.items())
-            ],
-        }
-
-    def metrics(self) -> dict[str, Any]:
-        samples = sorted(self.to_wire_ns)
-
-        def pct(q: float) -> float | None:
-            return samples[min(len(samples) - 1, int(q * len(samples)))] / 1e6 if samples else None
-
-        return {
-            "bus": dataclasses.asdict(self.bus.metrics()),
-            "bridge": dict(self.counts),
-            "setpoint_to_wire_ms": {"p50": pct(0.5), "p99": pct(0.99), "n": len(samples)},
-            "owners": {str(mid): owner for mid, owner in sorted(self.owners.items())},
-        }
+_BACKLOG = 4096  # set-points and queries waiting for the loop; more are dropped on Zenoh's thread
 
 
 class Bridge:
@@ -145,6 +56,11 @@ class Bridge:
     configuration comes from :func:`servobus.remote.security.bridge_config` (loopback only unless
     authenticated).
 
+    A motor a client commanded gets its safe command when that client leaves (its process ends or
+    its link is lost for the 1 s lease), and when its set-point stays stale for ``stop_after_s``:
+    the Bus's ``safe`` kind, or ``"stop"`` for a Bus whose ``safe`` is None. A motor a client made
+    safe itself (a stop, shutdown or brake request) is no longer that client's.
+
     Args:
         node: this bridge's name, the second key segment (a host name, ``arm``).
         buses: ``{bus name: (Bus, motors)}``; the motors are those served (ids unique per bus).
@@ -152,6 +68,7 @@ class Bridge:
         hz: the tick rate of each bus's set-point loop.
         state_hz: the most states published per motor per second.
         stop_after_s: how long a motor's set-point may be stale before the motor is stopped.
+        max_valid_s: the longest a set-point is held, whatever deadline its client gave.
         allow_takeover: whether a client may command a motor another live client holds.
     """
 
@@ -164,32 +81,37 @@ class Bridge:
         hz: float = 1000.0,
         state_hz: float = 100.0,
         stop_after_s: float = 0.05,
+        max_valid_s: float = 1.0,
         allow_takeover: bool = False,
     ) -> None:
-        for name, value in (("hz", hz), ("state_hz", state_hz)):
-            if not value > 0:
-                raise ValueError(f"{name}={value!r} must be > 0")
-        if not stop_after_s >= 0:
+        for name, value in (("hz", hz), ("state_hz", state_hz), ("max_valid_s", max_valid_s)):
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name}={value!r} must be a positive number")
+        if not (math.isfinite(stop_after_s) and stop_after_s >= 0):
             raise ValueError(f"stop_after_s={stop_after_s!r} must be >= 0")
         self.keys = Keys(node)
         self.node = node
         self.hz = float(hz)
         self.state_hz = float(state_hz)
         self.stop_after_s = float(stop_after_s)
+        self.max_valid_s = float(max_valid_s)
         self.allow_takeover = allow_takeover
-        self.served = {name: _Served(name, bus, motors) for name, (bus, motors) in buses.items()}
+        self.served = {name: Served(name, bus, motors) for name, (bus, motors) in buses.items()}
         if not self.served:
             raise ValueError("a bridge needs at least one bus")
         self._config = config
         self._session: Any = None
         self._declared: list[Any] = []
-        self._clients: set[str] = set()
+        self._clients: set[str] = set()  # public ids of the clients whose token is alive
+        self._public: dict[str, str] = {}  # secret id -> public id (a cache)
         self._group: anyio.abc.TaskGroup | None = None
-        self._events, self._events_in = anyio.create_memory_object_stream[tuple[Any, tuple[Any, ...]]](
-            _PENDING
-        )
-        self.dropped_events = 0  # Zenoh callbacks dropped because _PENDING were waiting
         self._lane: runtime.Runtime | None = None
+        self._events, self._events_in = anyio.create_memory_object_stream[tuple[Any, tuple[Any, ...]]](
+            math.inf
+        )
+        self._stops, self._stops_in = anyio.create_memory_object_stream[tuple[Served, list[Motor]]](math.inf)
+        self._backlog = 0  # events handed to the loop and not yet taken (approximate: two threads)
+        self.dropped_events = 0  # set-points and queries dropped because _BACKLOG were waiting
         self.stop_log: deque[tuple[int, str, int, str]] = deque(maxlen=1000)  # (unix ns, bus, id, why)
 
     # ---- life cycle ----
@@ -209,6 +131,7 @@ class Bridge:
             await self._close()
             raise
         self._group.start_soon(self._take_events)
+        self._group.start_soon(self._take_stops)
         for served in self.served.values():
             self._group.start_soon(self._tick, served)
             self._group.start_soon(self._publish_states, served)
@@ -234,33 +157,20 @@ class Bridge:
     def _declare(self) -> None:
         session, keys = self._session, self.keys
         self._declared.append(
-            session.liveliness().declare_subscriber(
-                keys.clients,
-                self._handed(self._on_client, lambda s: (str(s.key_expr), sample_kind(s))),
-                history=True,
-            )
+            session.liveliness().declare_subscriber(keys.clients, self._on_liveliness, history=True)
         )
         self._declared.append(session.liveliness().declare_token(keys.alive))
-        as_bytes = lambda s: (str(s.key_expr), s.payload.to_bytes())  # noqa: E731
         for served in self.served.values():
             name = served.name
+            setpoints = self._handed(self._on_setpoints, served, _payload)
+            query = self._handed(self._on_query, served)
             self._declared += [
-                session.declare_subscriber(
-                    keys.bus(name, "setpoints"), self._handed(self._on_setpoints, as_bytes, served)
-                ),
-                session.declare_subscriber(
-                    keys.motor(name, "*", "setpoint"), self._handed(self._on_setpoints, as_bytes, served)
-                ),
-                session.declare_queryable(
-                    keys.motor(name, "*", "request"), self._handed(self._on_query, None, served)
-                ),
-                session.declare_queryable(
-                    keys.motor(name, "*", "read"), self._handed(self._on_query, None, served)
-                ),
-                session.declare_queryable(keys.bus(name, "info"), self._handed(self._on_info, None, served)),
-                session.declare_queryable(
-                    keys.bus(name, "metrics"), self._handed(self._on_metrics, None, served)
-                ),
+                session.declare_subscriber(keys.bus(name, "setpoints"), setpoints),
+                session.declare_subscriber(keys.motor(name, "*", "setpoint"), setpoints),
+                session.declare_queryable(keys.motor(name, "*", "request"), query),
+                session.declare_queryable(keys.motor(name, "*", "read"), query),
+                session.declare_queryable(keys.bus(name, "info"), self._handed(self._on_info, served)),
+                session.declare_queryable(keys.bus(name, "metrics"), self._handed(self._on_metrics, served)),
             ]
             for mid in served.motors:
                 served.publishers[mid] = session.declare_publisher(keys.motor(name, mid, "state"))
@@ -268,16 +178,30 @@ class Bridge:
             served.bus.subscribe(served.changed)
             served.bus.subscribe_status(functools.partial(self._on_status, served))
 
-    def _handed(self, handler: Any, extract: Any, *bound: Any) -> Any:
-        """A Zenoh callback that hands ``extract(item)`` (or the item) to ``handler``, which runs
-        in the bridge's intake task (so it may start tasks), in the order Zenoh called."""
+    # ---- Zenoh's threads -> the loop ----
+
+    def _handed(
+        self,
+        handler: Callable[[Served, Any], None],
+        served: Served,
+        extract: Callable[[Any], Any] | None = None,
+    ) -> Callable[[Any], None]:
+        """A Zenoh callback that hands ``extract(item)`` (or the item, a query) to ``handler``, which
+        runs in the bridge's intake task (so it may start tasks), in the order Zenoh called; beyond
+        ``_BACKLOG`` waiting it drops the item here, on Zenoh's thread (a query: answered nothing)."""
         lane = self._lane
         assert lane is not None
         put = self._put_event
 
         def callback(item: Any) -> None:
+            if self._backlog >= _BACKLOG:
+                self.dropped_events += 1
+                if extract is None:
+                    item.drop()
+                return
+            self._backlog += 1
             try:
-                lane.call_soon_threadsafe(put, handler, (*bound, extract(item) if extract else item))
+                lane.call_soon_threadsafe(put, handler, (served, extract(item) if extract else item))
             except RuntimeError:  # the loop is closed: we are shutting down
                 logger.debug("a zenoh callback after the loop closed was dropped")
 
@@ -286,66 +210,99 @@ class Bridge:
     def _put_event(self, handler: Any, args: tuple[Any, ...]) -> None:
         try:
             self._events.send_nowait((handler, args))
-        except (anyio.WouldBlock, anyio.BrokenResourceError, anyio.ClosedResourceError):
-            self.dropped_events += 1
-            query = args[-1]
-            if hasattr(query, "drop"):  # a dropped query is answered "no reply" at once
-                query.drop()
+        except (anyio.BrokenResourceError, anyio.ClosedResourceError):  # closing
+            self._backlog -= 1
+            if hasattr(args[-1], "drop"):
+                args[-1].drop()
 
     async def _take_events(self) -> None:
         async with self._events_in:
             async for handler, args in self._events_in:
+                self._backlog -= 1
                 try:
                     handler(*args)
                 except Exception:  # one bad event must not end the bridge's intake
                     logger.exception("%s: handling a message failed", self.node)
 
+    def _on_liveliness(self, sample: zenoh.Sample) -> None:
+        """(Zenoh's thread) a client's token came or went: handed to the loop, never dropped."""
+        item = (str(sample.key_expr).rsplit("/", 1)[-1], sample_kind(sample))
+        assert self._lane is not None
+        try:
+            self._lane.call_soon_threadsafe(self._on_client, item)
+        except RuntimeError:  # the loop is closed: we are shutting down
+            logger.debug("a liveliness change after the loop closed was dropped")
+
     # ---- clients ----
 
     def _on_client(self, item: tuple[str, str]) -> None:
-        key, kind = item
-        client_id = key.rsplit("/", 1)[-1]
+        client, kind = item
         if kind == "PUT":
-            self._clients.add(client_id)
+            self._clients.add(client)
             return
-        self._clients.discard(client_id)
+        self._clients.discard(client)
         for served in self.served.values():
             self._stop(
-                served, [mid for mid, owner in served.owners.items() if owner == client_id], "client left"
+                served, [mid for mid, owner in served.owners.items() if owner == client], "client left"
             )
 
-    def _stop(self, served: _Served, motor_ids: Iterable[int], why: str) -> None:
-        """Drop the motors' set-points and ownership, and send them the Bus's safe command."""
-        motors = []
-        for mid in motor_ids:
-            served.held.pop(mid, None)
-            served.stale_since.pop(mid, None)
-            served.owners.pop(mid, None)
-            motors.append(served.motors[mid])
+    def _client(self, secret: str) -> str:
+        """The public id of the client whose messages carry ``secret``."""
+        found = self._public.get(secret)
+        if found is None:
+            if len(self._public) > 4096:
+                self._public.clear()
+            found = self._public[secret] = wire.public_id(secret)
+        return found
+
+    def _holder(self, served: Served, mid: int, client: str) -> str | None:
+        """The live client other than ``client`` that holds motor ``mid``; None: free to command."""
+        owner = served.owners.get(mid)
+        if owner is None or owner == client or owner not in self._clients or self.allow_takeover:
+            return None
+        return owner
+
+    def _stop(self, served: Served, motor_ids: Iterable[int], why: str) -> None:
+        """Release the motors (set-points, holder) and send each its safe command, in a task."""
+        motors = [served.motors[mid] for mid in motor_ids]
         if not motors:
             return
+        for motor in motors:
+            served.release(motor.motor_id)
         served.counts["stops"] += len(motors)
         now = time.time_ns()
         self.stop_log.extend((now, served.name, m.motor_id, why) for m in motors)
-        logger.warning(
-            "%s/%s: stopping motors %s (%s)", self.node, served.name, [m.motor_id for m in motors], why
-        )
-        if served.bus.safe is not None and self._group is not None:
-            self._group.start_soon(self._send_stop, served, motors)
+        ids = [m.motor_id for m in motors]
+        logger.warning("%s/%s: stopping motors %s (%s)", self.node, served.name, ids, why)
+        self._stops.send_nowait((served, motors))
 
-    async def _send_stop(self, served: _Served, motors: list[Motor]) -> None:
-        kind = served.bus.safe or "stop"
-        with anyio.CancelScope(shield=True), anyio.move_on_after(served.bus.safe_timeout_s):
-            pending = motors
-            while pending:
-                results = await served.bus.cycle([(m, m.codec.safe_command(kind)) for m in pending])
-                pending = [m for m, r in zip(pending, results, strict=True) if isinstance(r, BaseException)]
-                if pending:
-                    await anyio.sleep(0.005)
+    async def _take_stops(self) -> None:
+        assert self._group is not None
+        async with self._stops_in:
+            async for served, motors in self._stops_in:
+                self._group.start_soon(self._send_stop, served, motors)
+
+    async def _send_stop(self, served: Served, motors: list[Motor]) -> None:
+        """The motors' safe commands, past the watchdog, again until acknowledged or the Bus's
+        ``safe_timeout_s`` ended (what the Bus's own safe stop does); shielded."""
+        commands: dict[Motor, Command] = {}
+        for motor in motors:
+            command = served.stop_commands[motor.motor_id]
+            if command is not None:
+                commands[motor] = command
+        with anyio.CancelScope(shield=True):
+            try:
+                outcome = await stop_motors(served.bus, commands, served.bus.safe_timeout_s)
+            except Exception:  # the bridge must outlive a stop that failed; it is logged
+                logger.exception("%s/%s: the stop of %s failed", self.node, served.name, motors)
+                return
+        missing = [m.motor_id for m in commands if m not in outcome.acknowledged]
+        if missing:
+            logger.warning("%s/%s: motors %s did not acknowledge their stop", self.node, served.name, missing)
 
     # ---- set-points ----
 
-    def _on_setpoints(self, served: _Served, item: tuple[str, bytes]) -> None:
+    def _on_setpoints(self, served: Served, item: tuple[str, bytes]) -> None:
         key, payload = item
         try:
             message = wire.decode_setpoints(served.schemas.get, payload)
@@ -357,18 +314,22 @@ class Bridge:
             served.counts["malformed"] += 1
             logger.debug("%s: malformed set-points dropped: %s", key, exc)
             return
-        if message.client_id not in self._clients:
+        client = self._client(message.client_id)
+        if client not in self._clients:
             served.counts["refused"] += len(message.items)
             return
-        now_ns = time.time_ns()
-        left_ns = min(message.deadline_unix_ns - now_ns, message.deadline_unix_ns - message.sent_unix_ns)
+        left_ns = min(
+            message.deadline_unix_ns - time.time_ns(),
+            message.deadline_unix_ns - message.sent_unix_ns,
+            int(self.max_valid_s * 1e9),
+        )
         if left_ns <= 0:
             served.counts["stale"] += len(message.items)
             return
         assert self._lane is not None
         expires = self._lane.time() + left_ns / 1e9
         for mid, command in message.items:
-            if self._holder(served, mid, message.client_id) is not None:
+            if self._holder(served, mid, client) is not None:
                 served.counts["refused"] += 1
                 continue
             try:  # what the motor's codec refuses (a command its revision lacks) never reaches a tick
@@ -378,21 +339,21 @@ class Bridge:
                 logger.debug("%s: set-point for motor %s refused by its codec: %s", key, mid, exc)
                 continue
             held = served.held.get(mid)
-            if held is not None and held.client_id == message.client_id and _older(message.seq, held.seq):
+            if held is not None and held.client == client and _older(message.seq, held.seq):
                 served.counts["reordered"] += 1
                 continue
             served.counts["setpoints"] += 1
-            served.owners[mid] = message.client_id
+            served.owners[mid] = client
             served.stale_since.pop(mid, None)
-            served.held[mid] = _Held(message.client_id, message.seq, command, message.sent_unix_ns, expires)
+            served.held[mid] = Held(client, message.seq, command, message.sent_unix_ns, expires)
 
-    async def _tick(self, served: _Served) -> None:
+    async def _tick(self, served: Served) -> None:
         assert self._lane is not None
         clock = self._lane.time
         async for _ in ticks(self.hz, spin_s=0.0):
             now = clock()
             items = []
-            fresh: list[_Held] = []
+            fresh: list[Held] = []
             for mid, held in list(served.held.items()):
                 if now > held.expires:
                     del served.held[mid]
@@ -417,99 +378,104 @@ class Bridge:
             except ValueError:  # (checked on intake; if a codec still refuses, the tick must go on)
                 logger.exception("%s/%s: a tick's set-points were refused; dropped", self.node, served.name)
                 served.counts["malformed"] += len(items)
-                served.held.clear()
+                for motor, _ in items:  # stale from now: stopped after stop_after_s like any other
+                    served.held.pop(motor.motor_id, None)
+                    served.stale_since[motor.motor_id] = now
 
     # ---- requests ----
 
-    def _on_query(self, served: _Served, query: Any) -> None:
+    def _on_query(self, served: Served, query: zenoh.Query) -> None:
         assert self._group is not None
         self._group.start_soon(self._answer, served, query)
 
-    async def _answer(self, served: _Served, query: Any) -> None:
-        schema = None
+    async def _answer(self, served: Served, query: zenoh.Query) -> None:
         try:
-            key = str(query.key_expr)
+            schema, result = await self._outcome(served, query)
+        except BaseException:  # cancelled (the bridge is closing): answered nothing, at once
+            _finish(query)
+            raise
+        await _reply(query, str(query.key_expr), wire.encode_result(schema, result))
+
+    async def _outcome(self, served: Served, query: zenoh.Query) -> tuple[wire.Schema, wire.Result]:
+        """The result of a query on ``request`` or ``read``, and the schema to encode it with."""
+        schema = next(iter(served.schemas.values()))  # (for an error before the motor is known)
+        try:
             try:
-                _, mid, leaf = self.keys.parse_motor(key)
+                bus, mid, leaf = self.keys.parse_motor(str(query.key_expr))
             except ValueError as exc:  # a client's key (servobus/N/B/x/request): malformed, not a bug
                 raise wire.WireError(str(exc)) from None
             motor = served.motors.get(mid)
-            if motor is None:
+            if bus != served.name or motor is None:  # (servobus/N/*/3/request: one motor per request)
                 raise wire.WireError(f"no motor {mid} on bus {served.name}")
             schema = served.schemas[mid]
             payload = query.payload
             request = wire.decode_request(schema, payload.to_bytes() if payload is not None else b"")
-            command = request.command
-            if leaf == "read":
-                served.counts["reads"] += 1
-                if not type(command).READ:
-                    raise PermissionError(f"{type(command).__name__} is not a read: send it as a request")
-            else:
-                served.counts["requests"] += 1
-                self._may_command(served, mid, request.client_id, command)
-            reply = await served.bus.request(motor, command, timeout_s=request.timeout_s)
-            result = wire.Result(reply=reply)
-            if leaf == "request" and command in served.safe_commands[mid]:
-                # The client made the motor safe itself (stop, off, brake): leaving must not undo it.
-                served.held.pop(mid, None)
-                if served.owners.get(mid) == request.client_id:
-                    del served.owners[mid]
+            return schema, await self._run(served, motor, leaf, request)
         except wire.WireError as exc:
             served.counts["malformed"] += 1
-            result = wire.Result(error=ValueError(f"malformed request: {exc}"))
+            return schema, wire.Result(error=ValueError(f"malformed request: {exc}"))
         except PermissionError as exc:
             served.counts["refused"] += 1
-            result = wire.Result(error=exc)
-        except ServobusError as exc:
-            result = wire.Result(error=exc)
+            return schema, wire.Result(error=exc)
         except Exception as exc:  # a bug must not leave the client waiting; it is logged here
             logger.exception("%s: request failed", query.key_expr)
-            result = wire.Result(error=exc)
+            return schema, wire.Result(error=exc)
+
+    async def _run(self, served: Served, motor: Motor, leaf: str, request: wire.Request) -> wire.Result:
+        """Run one request through the Bus; the Bus's error as a value.
+
+        Raises:
+            PermissionError: a command through ``read``, a client without a token, a motor another
+                live client holds.
+        """
+        command, mid = request.command, motor.motor_id
+        if leaf == "read":
+            served.counts["reads"] += 1
+            if not type(command).READ:
+                raise PermissionError(f"{type(command).__name__} is not a read: send it as a request")
+        else:
+            served.counts["requests"] += 1
+            client = self._client(request.client_id)
+            if client not in self._clients:
+                raise PermissionError("this client has no liveliness token: it may only read")
+            holder = self._holder(served, mid, client)
+            if holder is not None:
+                raise PermissionError(f"motor {mid} on {served.name} is held by another client ({holder})")
+            if command in served.safe_commands[mid]:
+                # The client makes the motor safe itself (stop, off, brake): leaving must not undo it.
+                served.release(mid)
+            elif not type(command).READ:
+                served.owners[mid] = client
         try:
-            query.reply(
-                query.key_expr, wire.encode_result(schema or next(iter(served.schemas.values())), result)
-            )
-        except Exception:  # the client went away meanwhile
-            logger.debug("reply to %s failed", query.key_expr, exc_info=True)
-        finally:
-            query.drop()
+            return wire.Result(reply=await served.bus.request(motor, command, timeout_s=request.timeout_s))
+        except ServobusError as exc:
+            return wire.Result(error=exc)
 
-    def _may_command(self, served: _Served, mid: int, client_id: str, command: Any) -> None:
-        if client_id not in self._clients:
-            raise PermissionError(f"client {client_id} has no liveliness token: it may only read")
-        holder = self._holder(served, mid, client_id)
-        if holder is not None:
-            raise PermissionError(f"motor {mid} on {served.name} is held by another client ({holder})")
-        if not type(command).READ:
-            served.owners[mid] = client_id
+    def _on_info(self, served: Served, query: zenoh.Query) -> None:
+        assert self._group is not None
+        limits = {
+            "hz": self.hz,
+            "state_hz": self.state_hz,
+            "stop_after_s": self.stop_after_s,
+            "max_valid_s": self.max_valid_s,
+        }
+        body = json.dumps(served.info(self.node, limits)).encode()
+        # (on the bus's own key: the answers to a wildcard query, servobus/N/*/info, stay apart)
+        self._group.start_soon(_reply, query, self.keys.bus(served.name, "info"), body)
 
-    def _holder(self, served: _Served, mid: int, client_id: str) -> str | None:
-        """The live client other than ``client_id`` that holds motor ``mid``; None: free to command."""
-        owner = served.owners.get(mid)
-        if owner is None or owner == client_id or owner not in self._clients or self.allow_takeover:
-            return None
-        return owner
-
-    def _on_info(self, served: _Served, query: Any) -> None:
-        self._reply_json(query, self.keys.bus(served.name, "info"), served.info(self.node, self))
-
-    def _on_metrics(self, served: _Served, query: Any) -> None:
-        self._reply_json(query, self.keys.bus(served.name, "metrics"), served.metrics())
-
-    def _reply_json(self, query: Any, key: str, body: dict[str, Any]) -> None:
-        try:  # on the bus's own key: answers to a wildcard query (servobus/N/*/info) stay apart
-            query.reply(key, json.dumps(body).encode())
-        finally:
-            query.drop()
+    def _on_metrics(self, served: Served, query: zenoh.Query) -> None:
+        assert self._group is not None
+        body = json.dumps(served.metrics()).encode()
+        self._group.start_soon(_reply, query, self.keys.bus(served.name, "metrics"), body)
 
     # ---- states ----
 
-    def _on_status(self, served: _Served, status: MotorStatus) -> None:
+    def _on_status(self, served: Served, status: MotorStatus) -> None:
         mid = status.motor.motor_id
         if mid in served.publishers:
             self._publish(served, mid)
 
-    def _publish(self, served: _Served, mid: int) -> None:
+    def _publish(self, served: Served, mid: int) -> None:
         motor = served.motors[mid]
         fault = motor.fault.flags if motor.fault is not None else None
         state = wire.State(mid, time.time_ns(), motor.online is not False, motor.state, fault)
@@ -523,7 +489,7 @@ class Bridge:
         assert self._lane is not None
         served.published[mid] = self._lane.time()
 
-    async def _publish_states(self, served: _Served) -> None:
+    async def _publish_states(self, served: Served) -> None:
         assert self._lane is not None
         period = 1.0 / self.state_hz
         while True:
@@ -540,15 +506,29 @@ class Bridge:
         return {name: served.metrics() for name, served in self.served.items()}
 
 
-def _safe_commands(motor: Motor) -> frozenset[Any]:
-    """The commands that make ``motor`` safe (each kind its family has)."""
-    found = set()
-    for kind in ("stop", "shutdown", "brake"):
+def _finish(query: Any) -> None:
+    """No more answers to ``query``: the client's get ends now (not at its timeout)."""
+    query.drop()
+
+
+async def _reply(query: Any, key: str, payload: bytes) -> None:
+    """Answer ``query`` and end it, on a worker thread: Zenoh's reply follows the congestion control
+    the querier chose, and one that blocks (a client that reads no more) must not block the loop."""
+
+    def reply() -> None:
         try:
-            found.add(motor.codec.safe_command(kind))
-        except ValueError:  # a kind this family or revision has no command for
-            continue
-    return frozenset(found)
+            query.reply(key, payload)
+        except Exception:  # the client went away meanwhile
+            logger.debug("reply to %s failed", key, exc_info=True)
+        finally:
+            query.drop()
+
+    with anyio.CancelScope(shield=True):  # (answered once it is begun: a cancelled task still ends it)
+        await anyio.to_thread.run_sync(reply)
+
+
+def _payload(sample: zenoh.Sample) -> tuple[str, bytes]:
+    return str(sample.key_expr), sample.payload.to_bytes()
 
 
 def _older(seq: int, than: int) -> bool:

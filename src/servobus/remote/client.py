@@ -168,8 +168,7 @@ class RemoteBus:
         valid_for_s: float = 0.1,
         timeout_s: float = 2.0,
     ) -> None:
-        if not (math.isfinite(valid_for_s) and valid_for_s > 0):
-            raise ValueError(f"valid_for_s={valid_for_s!r} must be > 0")
+        _check_valid(valid_for_s)
         if not (math.isfinite(timeout_s) and timeout_s > 0):
             raise ValueError(f"timeout_s={timeout_s!r} must be > 0")
         self.keys = Keys(node)
@@ -179,7 +178,8 @@ class RemoteBus:
         self.read_only = read_only
         self.valid_for_s = valid_for_s
         self.timeout_s = timeout_s
-        self.client_id = uuid.uuid4().hex
+        self.client_id = uuid.uuid4().hex  # a secret: only this client's messages carry it
+        self.token_id = wire.public_id(self.client_id)  # what the bridge and its metrics call it
         self.info: dict[str, Any] = {}
         self.motors: dict[int, RemoteMotor] = {}
         self.lost: BridgeLost | None = None
@@ -237,7 +237,7 @@ class RemoteBus:
                 f"(none running, or this client may not see it)"
             )
         if not self.read_only:
-            self._declared.append(session.liveliness().declare_token(keys.client(self.client_id)))
+            self._declared.append(session.liveliness().declare_token(keys.client(self.token_id)))
         info = await self._get_json(keys.bus(self.name, "info"))
         if info is None:
             buses = await self._list_buses()
@@ -401,7 +401,7 @@ class RemoteBus:
             bridge's watchdog has it offline, or None before any state came.
 
         Raises:
-            ValueError: a motor of another bus, or a non-positive ``valid_for_s``.
+            ValueError: a motor of another bus, or a ``valid_for_s`` outside (0, 3600].
             PermissionError: a read-only connection.
         """
         self._check()
@@ -411,9 +411,7 @@ class RemoteBus:
         for motor, _ in items:
             if self.motors.get(motor.motor_id) is not motor:
                 raise ValueError(f"{motor!r} is not a motor of {self.node}/{self.name}")
-        valid = self.valid_for_s if valid_for_s is None else valid_for_s
-        if not (math.isfinite(valid) and valid > 0):
-            raise ValueError(f"valid_for_s={valid!r} must be > 0")
+        valid = self.valid_for_s if valid_for_s is None else _check_valid(valid_for_s)
         now = time.time_ns()
         self._seq = (self._seq + 1) & 0xFFFFFFFF
         message = wire.Setpoints(
@@ -463,6 +461,7 @@ class RemoteBus:
                 payload=payload,
                 timeout=timeout_s,
                 express=True,
+                congestion_control=zenoh.CongestionControl.DROP,  # never block this loop
             )
             await done.wait()
         finally:
@@ -491,6 +490,14 @@ class RemoteBus:
             except (ValueError, KeyError, TypeError):
                 continue
         return sorted(names)
+
+
+def _check_valid(valid_for_s: float) -> float:
+    """``valid_for_s`` if it is a set-point's possible validity (the bridge holds one at most its
+    ``max_valid_s``, 1 s by default), else ValueError."""
+    if not (math.isfinite(valid_for_s) and 0 < valid_for_s <= 3600):
+        raise ValueError(f"valid_for_s={valid_for_s!r} must be in (0, 3600]")
+    return valid_for_s
 
 
 def _path(value: StrPath | None) -> Path | None:

@@ -27,7 +27,7 @@ import hashlib
 import math
 import struct
 import typing
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cache
 from typing import Any
@@ -61,6 +61,7 @@ __all__ = [
     "encode_setpoints",
     "encode_state",
     "peek_motor",
+    "public_id",
 ]
 
 VERSION = 1
@@ -112,8 +113,9 @@ class Schema:
         """The schema of the family named ``family`` (built once)."""
         return Schema(get_family(family))
 
-    def fields(self, cls: type) -> tuple[str, ...]:
-        return self._fields[cls]
+    def fields(self, cls: type) -> tuple[str, ...] | None:
+        """The init fields of dataclass ``cls`` in order (None: not a dataclass of the schema)."""
+        return self._fields.get(cls)
 
 
 def _qualified(cls: type) -> str:
@@ -180,7 +182,7 @@ def encode_value(schema: Schema, value: object, out: bytearray, depth: int = 0) 
             encode_value(schema, item, out, depth + 1)
     elif dataclasses.is_dataclass(value) and not isinstance(value, type):
         cls = type(value)
-        names = schema.fields(cls) if cls in schema.index else ()
+        names = schema.fields(cls) or ()
         out.append(_DATACLASS)
         out += _U16.pack(_type_index(schema, cls))
         out += _U8.pack(len(names))
@@ -276,7 +278,7 @@ def decode_value(schema: Schema, reader: _Reader, depth: int = 0) -> Any:
             if not issubclass(cls, enum.Enum):
                 raise WireError(f"{cls.__name__} is not an enum")
             return _build(cls, (decode_value(schema, reader, depth + 1),), {})
-        names = schema._fields.get(cls)
+        names = schema.fields(cls)
         if names is None:
             raise WireError(f"{cls.__name__} is not a dataclass")
         if reader.take(_U8) != len(names):
@@ -313,6 +315,13 @@ def _open(data: bytes, kind: int) -> _Reader:
 
 def _client_id(reader: _Reader) -> str:
     return reader.raw(CLIENT_ID_BYTES).hex()
+
+
+def public_id(client_id: str) -> str:
+    """The name a client is known by (its liveliness token, ``owners`` in metrics): a hash of the
+    secret id its messages carry, so that seeing who holds a motor does not let another client
+    speak in its name."""
+    return hashlib.sha256(bytes.fromhex(client_id)).hexdigest()[:32]
 
 
 # ---- messages ----
@@ -517,8 +526,3 @@ def decode_state(schema: Schema, data: bytes) -> State:
     if fault is not None and not isinstance(fault, enum.Flag):
         raise WireError("a fault that is not error flags")
     return State(motor_id, stamp, bool(online), reply, fault)
-
-
-def schemas_of(families: Sequence[tuple[int, str]]) -> dict[int, Schema]:
-    """``{motor_id: schema}`` for ``(motor_id, family name)`` pairs."""
-    return {motor_id: Schema.of(name) for motor_id, name in families}

@@ -1,0 +1,140 @@
+"""One bus as a bridge serves it: its motors and their codecs' safe commands, the set-point each
+motor holds, which client holds each motor, the counters and the figures the bridge reports."""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from servobus._version import __version__
+from servobus.bus import Bus, Motor
+from servobus.protocols import Command, Reply
+from servobus.remote import wire
+from servobus.remote.keys import check_name
+from servobus.scheduler import Traffic
+
+logger = logging.getLogger("servobus.remote.bridge")
+
+_LATENCY_KEPT = 20_000  # set-point -> wire samples kept for the percentiles
+
+#: the bridge's counters of each bus, and what each counts
+COUNTS = {
+    "setpoints": "set-points taken (well-formed, fresh, from the motor's holder)",
+    "applied": "set-points that went out at least once",
+    "stale": "set-points that arrived past their deadline",
+    "expired": "set-points that went stale while held (not renewed in time)",
+    "reordered": "set-points older than the one held from the same client",
+    "refused": "commands from a client without a token, or for a motor another live client holds",
+    "malformed": "messages that did not parse, or were not a command the motor's codec takes",
+    "requests": "commands through request",
+    "reads": "commands through read",
+    "stops": "safe stops sent because a client left or its set-points went stale",
+    "states": "states published",
+}
+
+
+@dataclass(slots=True)
+class Held:
+    """A motor's latest set-point: who sent it, until when it may be applied, whether it went out."""
+
+    client: str
+    seq: int
+    command: Command
+    sent_unix_ns: int
+    expires: float  # the loop's clock
+    applied: bool = False
+
+
+class Served:
+    """One bus as the bridge serves it."""
+
+    def __init__(self, name: str, bus: Bus, motors: Sequence[Motor]) -> None:
+        self.name = check_name("bus", name)
+        self.bus = bus
+        self.motors: dict[int, Motor] = {}
+        for motor in motors:
+            if motor.motor_id in self.motors:
+                raise ValueError(f"bus {name}: two motors with id {motor.motor_id} (keys name motors by id)")
+            self.motors[motor.motor_id] = motor
+        self.schemas = {mid: wire.Schema.of(m.codec.family) for mid, m in self.motors.items()}
+        #: the commands with which a client makes a motor safe itself (then it no longer holds it)
+        self.safe_commands = {mid: _safe_commands(m) for mid, m in self.motors.items()}
+        #: what a motor gets when its client leaves: the Bus's safe kind, "stop" where the Bus has none
+        self.stop_commands = {mid: _stop_command(m, bus.safe or "stop") for mid, m in self.motors.items()}
+        self.held: dict[int, Held] = {}
+        self.stale_since: dict[int, float] = {}  # motor -> when its set-point expired (loop clock)
+        self.owners: dict[int, str] = {}  # motor -> the public id of the client that holds it
+        self.dirty: set[int] = set()
+        self.published: dict[int, float] = {}
+        self.publishers: dict[int, Any] = {}
+        self.to_wire_ns: deque[int] = deque(maxlen=_LATENCY_KEPT)
+        self.counts = dict.fromkeys(COUNTS, 0)
+
+    def changed(self, motor: Motor, traffic: Traffic, reply: Reply) -> None:
+        """(The Bus's subscriber) the motor's state is to be published."""
+        self.dirty.add(motor.motor_id)
+
+    def release(self, mid: int) -> None:
+        """Motor ``mid`` has no set-point and no holder any more."""
+        self.held.pop(mid, None)
+        self.stale_since.pop(mid, None)
+        self.owners.pop(mid, None)
+
+    def info(self, node: str, limits: dict[str, Any]) -> dict[str, Any]:
+        return {
+            "node": node,
+            "bus": self.name,
+            "servobus": __version__,
+            "wire": wire.VERSION,
+            **limits,
+            "safe": self.bus.safe,
+            "motors": [
+                {
+                    "id": mid,
+                    "family": m.codec.family,
+                    "revision": m.codec.revision.name,
+                    "link": m.codec.link,
+                    "schema": self.schemas[mid].digest,
+                }
+                for mid, m in sorted(self.motors.items())
+            ],
+        }
+
+    def metrics(self) -> dict[str, Any]:
+        samples = sorted(self.to_wire_ns)
+
+        def pct(q: float) -> float | None:
+            return samples[min(len(samples) - 1, int(q * len(samples)))] / 1e6 if samples else None
+
+        return {
+            "bus": dataclasses.asdict(self.bus.metrics()),
+            "bridge": dict(self.counts),
+            "setpoint_to_wire_ms": {"p50": pct(0.5), "p99": pct(0.99), "n": len(samples)},
+            "owners": {str(mid): owner for mid, owner in sorted(self.owners.items())},
+        }
+
+
+def _safe_commands(motor: Motor) -> frozenset[Command]:
+    """The commands that make ``motor`` safe (each kind its family has)."""
+    found = set()
+    for kind in ("stop", "shutdown", "brake"):
+        try:
+            found.add(motor.codec.safe_command(kind))
+        except ValueError:  # a kind this family or revision has no command for
+            continue
+    return frozenset(found)
+
+
+def _stop_command(motor: Motor, kind: str) -> Command | None:
+    """``motor``'s safe command of ``kind``, its "stop" where it has none of that kind, else None."""
+    for wanted in dict.fromkeys((kind, "stop")):
+        try:
+            return motor.codec.safe_command(wanted)
+        except ValueError:
+            continue
+    logger.warning("%r has no %r nor 'stop' safe command: a client that leaves cannot stop it", motor, kind)
+    return None
