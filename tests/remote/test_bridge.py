@@ -214,3 +214,61 @@ async def test_the_missing_bus_error_lists_every_bus() -> None:
         with pytest.raises(RemoteError, match=r"its buses: s1, s2, s3\)"):
             async with connect("n/x", endpoints=[endpoint]):
                 pass
+
+
+async def test_a_client_leaving_is_never_dropped_even_when_set_points_are(
+    served: Served, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """With the backlog full (every set-point and query dropped on Zenoh's thread), a client's
+    token vanishing still reaches the bridge, and its motor is stopped."""
+    from servobus.remote import bridge as bridge_module
+
+    async with connect("n/b", endpoints=[served.endpoint]) as remote:
+        await remote.motor(3).speed_control(speed_dps=40.0)
+        monkeypatch.setattr(bridge_module, "_BACKLOG", 0)
+        await remote.cycle([(remote.motor(3), ma.SpeedControl(speed_dps=1.0))])
+        await _until(lambda: served.bridge.dropped_events >= 1)
+    await _until(lambda: served.counts()["stops"] == 1)
+    assert [mid for _, _, mid, _ in served.bridge.stop_log] == [3]
+
+
+async def test_a_client_cannot_speak_in_another_clients_name(served: Served) -> None:
+    """The owner's public id (metrics, token) is not the secret its messages carry: a message that
+    carries it is a message from no live client."""
+    async with connect("n/b", endpoints=[served.endpoint]) as holder:
+        await holder.motor(1).speed_control(speed_dps=40.0)
+        owner = (await holder.metrics())["owners"]["1"]
+        assert owner == holder.token_id != holder.client_id
+        async with connect("n/b", endpoints=[served.endpoint]) as other:
+            other.client_id = owner  # forged: the id anyone can see
+            with pytest.raises(PermissionError, match="no liveliness token"):
+                await other.motor(1).speed_control(speed_dps=-40.0)
+            await other.cycle([(other.motor(1), ma.SpeedControl(speed_dps=-40.0))])
+            await _until(lambda: served.counts()["refused"] >= 2)
+        assert served.bridge.served["b"].owners == {1: holder.token_id}
+        assert served.counts()["setpoints"] == 0
+
+
+@pytest.mark.parametrize("safe", [None, "brake"])
+async def test_a_leaving_client_s_motors_are_stopped_whatever_the_bus_s_safe_kind(safe: str | None) -> None:
+    """A Bus with safe=None (no stop on its own exit) still stops a remote client's motors when the
+    client leaves; a kind the family lacks (hollow has no brake) falls back to "stop", and the
+    bridge lives on."""
+    from servobus.protocols import hollow
+    from servobus.protocols.hollow.sim import HollowMotor
+
+    endpoint = _endpoint()
+    family = ma if safe is None else hollow
+    device = MyActuatorMotor(1) if safe is None else HollowMotor(1)
+    async with servobus.Bus(SimTransport(devices=[device]), safe=safe) as bus:
+        motor = bus.motor(family.FAMILY, 1)
+        async with Bridge("n", {"b": (bus, [motor])}, config=bridge_config("n", [endpoint])) as bridge:
+            async with connect("n/b", endpoints=[endpoint]) as remote:
+                command = ma.SpeedControl(speed_dps=5.0) if safe is None else hollow.Start()
+                await remote.motor(1).request(command)
+            await _until(lambda: bridge.served["b"].counts["stops"] == 1)
+            stop = bridge.served["b"].stop_commands[1]
+            assert stop == motor.codec.safe_command("stop")
+            await _until(lambda: bus.metrics().replies >= 2)  # the command's reply, then the stop's
+            async with connect("n/b", endpoints=[endpoint]) as again:  # the bridge still serves
+                assert (await again.metrics())["bridge"]["stops"] == 1

@@ -261,7 +261,9 @@ def test_a_client_drives_32_motors_and_its_clean_exit_stops_them(
 ) -> None:
     server, port = bridge(spawn, backend=backend)
     client = spawn("client", port, backend=backend)
-    me = client.ok("connect")["token_id"]
+    # (valid 0.5 s, not the default 0.1: a bridge whose loop lags 0.1 s on a loaded CI host rightly
+    # drops set-points as stale and stops the motors; that is tested elsewhere, not here)
+    me = client.ok("connect", valid_for_s=0.5)["token_id"]
     client.ok("hold", motors=list(MOTORS), command="SpeedControl", fields={"speed_dps": 30.0}, hz=200.0)
     report_when(server, lambda r: set(speeds(r).values()) == {30.0}, 10, "all 32 motors at 30 dps")
     time.sleep(1.0)
