@@ -491,6 +491,12 @@ def tick_run(
         "bridge_to_cycle_p50_ms": own["p50"],
         "bridge_to_cycle_p99_ms": own["p99"],
         "bridge_counts": bridge_counts,
+        # set-points that reached the bridge past their deadline (valid_for_s), of all that reached it
+        "stale_pct": 100
+        * bridge_counts["stale"]
+        / max(1, bridge_counts["stale"] + bridge_counts["setpoints"]),
+        # motors the bridge stopped during the run because their set-points went stale
+        "stale_stops": sum(1 for entry in log["stop_log"] if str(entry[3]).startswith("set-points stale")),
         "breakdown_ms": breakdown,
         "bus_metrics": bus_metrics,
         "client_cpu_pct": 100 * got["cpu_s"] / window_s,
@@ -693,6 +699,8 @@ def _four_buses(tick: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
             "setpoint_to_wire_p99_ms_can1m_4x8_1khz": _median(fast, "to_wire_p99_ms"),
             "setpoint_to_wire_legs_ms_can1m_4x8_1khz": _legs(fast),
             "bridge_cpu_pct_can1m_4x8_1khz": _median(fast, "bridge_cpu_pct"),
+            "stale_pct_can1m_4x8_1khz": _median(fast, "stale_pct"),
+            "stale_stops_can1m_4x8_1khz": sum(r["stale_stops"] for r in fast),
             "client_cpu_pct_can1m_4x8_1khz": _median(fast, "client_cpu_pct"),
         }
     paced = tick.get("can1m_4x8_200hz")
@@ -706,8 +714,32 @@ def _four_buses(tick: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
             "tick_hz_32_can1m_4x8_200hz": _median(paced, "updates_per_motor_s"),
             "bridge_cpu_pct_can1m_4x8_200hz": _median(paced, "bridge_cpu_pct"),
             "client_cpu_pct_can1m_4x8_200hz": _median(paced, "client_cpu_pct"),
+            "stale_pct_can1m_4x8_200hz": _median(paced, "stale_pct"),
+            "stale_stops_can1m_4x8_200hz": sum(r["stale_stops"] for r in paced),
         }
     return out
+
+
+def _four_buses_text(f: dict[str, Any]) -> str:
+    """What bounds the 4x8 layout at 1 kHz per bus, from the run's own numbers."""
+    legs = f["setpoint_to_wire_legs_ms_can1m_4x8_1khz"]
+    text = (
+        "4x8 with the client at 1 kHz per bus: it publishes 4 batches per tick "
+        f"(~{4 * f['tick_hz_32_can1m_4x8_publish_hz']:,.0f} a second) into one bridge process, whose event "
+        "loop takes every bus's set-points, runs the 4 tick tasks and publishes the states (bridge "
+        f"{f['bridge_cpu_pct_can1m_4x8_1khz']:.0f} % of a core); batches wait for it (-> the bridge's event "
+        f"loop p50 / p99 {legs['to_event_loop']['p50']:.1f} / {legs['to_event_loop']['p99']:.1f} ms), "
+        f"{f['stale_pct_can1m_4x8_1khz']:.0f} % of the set-points reached it past their `valid_for_s` "
+        "(0.1 s) and were dropped as stale, and its staleness watchdog sent "
+        f"{f['stale_stops_can1m_4x8_1khz']} motor stops over the runs: there the bridge process, not the "
+        "4 wires (~530 cycles/s each), bounds the updates/s."
+    )
+    if "stale_pct_can1m_4x8_200hz" in f:
+        text += (
+            f" At 200/s per bus {f['stale_pct_can1m_4x8_200hz']:.0f} % were stale and the watchdog stopped "
+            f"{f['stale_stops_can1m_4x8_200hz']} motors."
+        )
+    return text + " "
 
 
 def _legs_text(legs: dict[str, dict[str, float]]) -> str:
@@ -884,7 +916,8 @@ def render_markdown(f: dict[str, Any], info: dict[str, Any]) -> str:
         )
         + ". The last leg includes the wait for the bridge's next tick (up to 1 ms; on a 1 Mbit/s bus, "
         "for the bus's cycle under way to end). "
-        "Stops were triggered by: "
+        + (_four_buses_text(f) if "tick_hz_32_can1m_4x8" in f else "")
+        + "The kills' stops were triggered by: "
         + ", ".join(sorted({w for s in f["per_run"]["stops"] for w in s["why"]}))
         + " (the liveliness token vanishing with the killed process's TCP connection; the staleness "
         "path, `valid_for_s` + `stop_after_s` = 150 ms, never came first).",
