@@ -22,6 +22,14 @@ Figures (``remote.*``):
   a zero-wire-time bus (``bitrate=inf``: what the bridge and Zenoh carry; the headline) and the
   default 1 Mbit/s classic CAN bus (32 motors are 64 frames, ~7.6 ms of wire per cycle: at most ~130
   cycles/s on any host, so the wire, not the bridge, is the bound there).
+* ``tick_hz_32_can1m_4x8``, ``setpoint_to_wire_p50_ms_can1m_4x8`` / ``_p99_ms_can1m_4x8``: the layout of
+  ``servobus bridge --sim 32 --buses 4``: the bridge serves 4 buses ``sim1``..``sim4``, each its own
+  1 Mbit/s simulated CAN bus with 8 motors (ids 1-8 on each); the client opens the 4 buses
+  (``connect("bench/simK")``, one RemoteBus and Zenoh session each, in one process) and publishes one
+  ``cycle()`` batch of 8 set-points per bus per tick. A cycle of one bus is 16 frames, ~1.9 ms of wire:
+  ~530 cycles/s per bus is the wire's bound. Updates/s are counted as above over the 32 motors (client
+  at 1 kHz); the latency is per set-point and motor from the client's wall clock just before that bus's
+  ``cycle()``, with the client at 200 batches per bus per second (and at 1 kHz beside it).
 * ``setpoint_to_wire_p50_ms`` / ``_p99_ms``: per set-point and motor, the first time its frame reached
   the simulated bus minus the client's wall-clock time just before ``cycle()``, with the client at 200
   batches/s (the rate ``tick_hz_32``'s target asks for; zero-wire-time bus). Beside it: the same at 1 kHz
@@ -46,8 +54,8 @@ Targets (the issue): ``tick_hz_32`` >= 200, ``setpoint_to_wire_p99_ms`` <= 5, ``
 
 Usage (from the repository root)::
 
-    python bench/bench_remote.py            # 5 runs of each figure: ~3 min
-    python bench/bench_remote.py --quick    # one short run of each (CI smoke), writes nothing
+    python bench/bench_remote.py            # 5 runs of each figure: ~4 min
+    python bench/bench_remote.py --quick    # one short run of each (not 4x8 at 1 kHz; CI), writes nothing
 """
 
 from __future__ import annotations
@@ -81,9 +89,27 @@ NODE, BUS = "bench", "sim"
 MOTORS = 32
 HZ = 1000.0
 TICK_HZ_TARGET = 200.0
-#: (name, bus bit rate, the client's batches per second): the saturating run (``tick_hz_32``), the run at
-#: the target's rate (``setpoint_to_wire_*``), and the 1 Mbit/s classic CAN bus (information)
-SCENARIOS = (("inf_1khz", "inf", 1000.0), ("inf_200hz", "inf", 200.0), ("can1m_1khz", "1000000", 1000.0))
+#: (name, bus bit rate, the client's batches per second per bus, buses the 32 motors are spread over):
+#: the saturating run (``tick_hz_32``), the run at the target's rate (``setpoint_to_wire_*``), the 1 Mbit/s
+#: classic CAN bus (information), and ``servobus bridge --sim 32 --buses 4``'s layout: 4 buses of 8
+#: motors, each a 1 Mbit/s classic CAN bus (information), saturating and at the target's rate
+SCENARIOS = (
+    ("inf_1khz", "inf", 1000.0, 1),
+    ("inf_200hz", "inf", 200.0, 1),
+    ("can1m_1khz", "1000000", 1000.0, 1),
+    ("can1m_4x8_1khz", "1000000", 1000.0, 4),
+    ("can1m_4x8_200hz", "1000000", 200.0, 4),
+)
+#: left out of --quick (CI): in a 1-second run the 4 buses' 1 kHz batches mostly wait in the bridge's
+#: intake until stale (the full run's text says why), so a smoke test learns more from the 200/s run
+QUICK_SKIP = frozenset({"can1m_4x8_1khz"})
+
+
+def bus_names(buses: int) -> list[str]:
+    """The served buses' names: ``sim`` alone, or ``sim1``..``simN`` (as ``servobus bridge --buses N``)."""
+    return [BUS] if buses == 1 else [f"{BUS}{b}" for b in range(1, buses + 1)]
+
+
 #: the 200/s run again with both processes (and their Zenoh threads) at real-time priority, when this
 #: host allows it: what the latency is when other work on the machine cannot delay them
 REALTIME = ("chrt", "-f", "10")
@@ -137,35 +163,44 @@ async def bridge_process(args: argparse.Namespace) -> None:
     from servobus.sim.canbus import CanBusModel
     from servobus.transports.sim import SimTransport
 
+    # Motors are numbered 1..32 across the buses (bus b's motor i is b * per_bus + i), so that the
+    # runner counts the 32 motors the same way whatever the layout.
     first: dict[tuple[int, int], int] = {}  # (motor, set-point k) -> first wall ns on the wire
     stops: list[tuple[int, int]] = []  # (wall ns, motor) of each stop frame sent
     stop_replies: list[tuple[int, int]] = []
 
     class Recording(SimTransport):
+        offset = 0  # this bus's first motor's number minus its id
+
         def _put(self, frame: Any, handle: Any, now: float) -> None:
             data = frame.data
             if data:
                 if data[0] == SPEED:
                     key = (
-                        frame.arbitration_id - REQUEST_BASE,
+                        frame.arbitration_id - REQUEST_BASE + self.offset,
                         round(int.from_bytes(data[4:8], "little", signed=True) / 100),
                     )
                     if key not in first:
                         first[key] = time.time_ns()
                 elif data[0] == STOP:
-                    stops.append((time.time_ns(), frame.arbitration_id - REQUEST_BASE))
+                    stops.append((time.time_ns(), frame.arbitration_id - REQUEST_BASE + self.offset))
             super()._put(frame, handle, now)
 
         def _deliver(self, frames: Any) -> None:
             now = time.time_ns()
             stop_replies.extend(
-                (now, f.arbitration_id - REPLY_BASE) for f in frames if f.data and f.data[0] == STOP
+                (now, f.arbitration_id - REPLY_BASE + self.offset)
+                for f in frames
+                if f.data and f.data[0] == STOP
             )
             super()._deliver(frames)
 
     if args.switch_interval:
         sys.setswitchinterval(args.switch_interval)
-    arrivals: list[tuple[int, int, int, int]] = []  # (seq, sent, in Zenoh's callback, in the loop) ns
+    names = bus_names(args.buses)
+    index = {name: b for b, name in enumerate(names)}
+    # (bus, seq, sent, in Zenoh's callback, in the loop) ns
+    arrivals: list[tuple[int, int, int, int, int]] = []
 
     class Timed(Bridge):
         """The bridge as it is, with each set-point batch's arrival stamped where it lands: in Zenoh's
@@ -185,27 +220,49 @@ async def bridge_process(args: argparse.Namespace) -> None:
             if len(payload) >= 34:
                 seq = int.from_bytes(payload[18:22], "little")
                 sent = int.from_bytes(payload[22:30], "little")
-                arrivals.append((seq, sent, arrived, time.time_ns()))
+                arrivals.append((index[served.name], seq, sent, arrived, time.time_ns()))
             self._on_setpoints(served, (key, payload))
 
-    transport = Recording(
-        devices=[MyActuatorMotor(i) for i in range(1, MOTORS + 1)],
-        bus=CanBusModel(bitrate=math.inf if args.bitrate == "inf" else float(args.bitrate)),
-    )
+    per_bus = MOTORS // args.buses
     endpoint = f"tcp/127.0.0.1:{args.port}"
-    async with Bus(transport) as bus:
-        motors = [bus.motor(ma.FAMILY, i) for i in range(1, MOTORS + 1)]
+    async with contextlib.AsyncExitStack() as stack:
+        served = {}
+        for b, name in enumerate(names):
+            transport = Recording(
+                devices=[MyActuatorMotor(i) for i in range(1, per_bus + 1)],
+                bus=CanBusModel(bitrate=math.inf if args.bitrate == "inf" else float(args.bitrate)),
+                name=name,
+            )
+            transport.offset = b * per_bus
+            bus = await stack.enter_async_context(Bus(transport, name=name))
+            served[name] = (bus, [bus.motor(ma.FAMILY, i) for i in range(1, per_bus + 1)])
+        bus, motors = served[names[0]]
         baseline = []
         for i in range(args.baseline):
             t0 = time.perf_counter()
-            await bus.request(motors[i % MOTORS], ma.ReadStatus2())
+            await bus.request(motors[i % len(motors)], ma.ReadStatus2())
             baseline.append(time.perf_counter() - t0)
-        async with Timed(
-            NODE, {BUS: (bus, motors)}, config=bridge_config(NODE, [endpoint]), hz=args.hz
-        ) as bridge:
+        async with Timed(NODE, served, config=bridge_config(NODE, [endpoint]), hz=args.hz) as bridge:
             print(json.dumps({"ready": True, "pid": os.getpid(), "baseline_s": baseline}), flush=True)
             await anyio.to_thread.run_sync(sys.stdin.read)  # until the runner closes our stdin
-            metrics = bridge.metrics()[BUS]
+            by_bus = bridge.metrics()
+            # The 32 motors' figures over all the buses: the bridge's counters summed, its
+            # set-point -> Bus.cycle latency over every bus's samples (as _Served.metrics takes them).
+            samples = sorted(ns for s in bridge.served.values() for ns in s.to_wire_ns)
+            own = {
+                f"p{round(q * 100)}": samples[min(len(samples) - 1, int(q * len(samples)))] / 1e6
+                if samples
+                else None
+                for q in (0.5, 0.99)
+            }
+            metrics = {
+                "bus": by_bus[names[0]]["bus"] if len(names) == 1 else {},
+                "buses": {name: m["bus"] for name, m in by_bus.items()},
+                "bridge": {
+                    k: sum(m["bridge"][k] for m in by_bus.values()) for k in by_bus[names[0]]["bridge"]
+                },
+                "setpoint_to_wire_ms": {**own, "n": len(samples)},
+            }
             stop_log = list(bridge.stop_log)
     Path(args.out).write_text(
         json.dumps(
@@ -232,8 +289,15 @@ async def client_process(args: argparse.Namespace) -> None:
     from servobus.ticks import ticks
 
     endpoint = f"tcp/127.0.0.1:{args.port}"
-    async with connect(f"{NODE}/{BUS}", endpoints=[endpoint]) as bus:
-        motors = [bus.motor(ma.FAMILY, i) for i in range(1, MOTORS + 1)]
+    async with contextlib.AsyncExitStack() as stack:
+        # one RemoteBus (and Zenoh session) per bus of the bridge, all in this process
+        buses = [
+            await stack.enter_async_context(connect(f"{NODE}/{name}", endpoints=[endpoint]))
+            for name in bus_names(args.buses)
+        ]
+        per_bus = MOTORS // len(buses)
+        lanes = [(bus, [bus.motor(ma.FAMILY, i) for i in range(1, per_bus + 1)]) for bus in buses]
+        motors = [m for _, ms in lanes for m in ms]
         out: dict[str, Any] = {}
         if args.client == "rtt":
             for motor in motors:  # warm-up: one read each
@@ -245,7 +309,7 @@ async def client_process(args: argparse.Namespace) -> None:
                 rtt.append(time.perf_counter() - t0)
             out["rtt_s"] = rtt
         elif args.client == "tick":
-            sent: list[int] = []
+            sent: list[list[int]] = [[] for _ in lanes]  # per bus: the wall ns just before each cycle()
             cpu0 = time.process_time()
             k = 0
             async for tick in ticks(args.rate, spin_s=0.0):
@@ -253,17 +317,20 @@ async def client_process(args: argparse.Namespace) -> None:
                     break
                 k += 1
                 command = ma.SpeedControl(speed_dps=float(k))
-                sent.append(time.time_ns())
-                await bus.cycle([(m, command) for m in motors])
+                for (bus, ms), stamps in zip(lanes, sent, strict=True):
+                    stamps.append(time.time_ns())
+                    await bus.cycle([(m, command) for m in ms])
             out["sent_ns"] = sent
             out["cpu_s"] = time.process_time() - cpu0
             await anyio.sleep(0.3)  # the last set-points reach the wire
-            out["metrics"] = await bus.metrics()
+            out["metrics"] = [await bus.metrics() for bus in buses]
         else:  # hold: command the motors until killed
             k = 0
             async for _ in ticks(args.rate, spin_s=0.0):
                 k += 1
-                await bus.cycle([(m, ma.SpeedControl(speed_dps=float(k % 1000 + 1))) for m in motors])
+                command = ma.SpeedControl(speed_dps=float(k % 1000 + 1))
+                for bus, ms in lanes:
+                    await bus.cycle([(m, command) for m in ms])
                 if k == 20:
                     print("commanding", flush=True)
         print(json.dumps(out), flush=True)
@@ -284,13 +351,19 @@ def _script(*extra: str) -> list[str]:
 
 @contextlib.contextmanager
 def bridge(
-    bitrate: str, work: Path, baseline: int = 0, wrap: Sequence[str] = (), extra: Sequence[str] = ()
+    bitrate: str,
+    work: Path,
+    baseline: int = 0,
+    wrap: Sequence[str] = (),
+    extra: Sequence[str] = (),
+    buses: int = 1,
 ) -> Iterator[dict[str, Any]]:
-    """Start a bridge process; yield its ready line (plus ``port``, ``process``); on exit, its log
-    (under ``result``)."""
+    """Start a bridge process (its 32 motors on ``buses`` buses); yield its ready line (plus ``port``,
+    ``process``); on exit, its log (under ``result``)."""
     port = free_port()
     out = work / f"bridge-{port}.json"
     command = [*wrap, *_script("--bridge", "--port", str(port), "--bitrate", bitrate, "--hz", str(HZ))]
+    command += ["--buses", str(buses)]
     command += ["--baseline", str(baseline), "--out", str(out), *extra]
     process = subprocess.Popen(
         command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
@@ -342,16 +415,29 @@ def tick_run(
     rate: float = HZ,
     extra: Sequence[str] = (),
     client_wrap: Sequence[str] = (),
+    buses: int = 1,
 ) -> dict[str, Any]:
-    """One client publishing batches at ``rate`` for ``seconds``; what reached the wire."""
-    with bridge(bitrate, work, wrap=wrap, extra=extra) as state:
+    """One client publishing batches at ``rate`` (per bus) for ``seconds``; what reached the wire."""
+    with bridge(bitrate, work, wrap=wrap, extra=extra, buses=buses) as state:
         pid = state["pid"]
         cpu0 = _proc_cpu_s(pid)
         wall0 = time.perf_counter()
-        got = client(state["port"], "tick", "--seconds", str(seconds), "--rate", str(rate), wrap=client_wrap)
+        got = client(
+            state["port"],
+            "tick",
+            "--seconds",
+            str(seconds),
+            "--rate",
+            str(rate),
+            "--buses",
+            str(buses),
+            wrap=client_wrap,
+        )
         bridge_cpu = (_proc_cpu_s(pid) - cpu0) / (time.perf_counter() - wall0)
     log = state["result"]
-    sent = got["sent_ns"]
+    sent_by_bus = got["sent_ns"]  # per bus: the wall ns just before each batch's cycle()
+    sent = sent_by_bus[0]
+    per_bus = MOTORS // buses
     window_s = (sent[-1] - sent[0]) / 1e9
     # The first WARM_UP_S after connecting (Zenoh's routes, the first decodes) are left out of the
     # counts and latencies: batches 1..skip.
@@ -362,31 +448,39 @@ def tick_run(
     for motor, k, ns in log["first"]:
         if skip < k <= len(sent):
             per_motor[motor] = per_motor.get(motor, 0) + 1
-            latency.append((ns - sent[k - 1]) / 1e6)
+            latency.append((ns - sent_by_bus[(motor - 1) // per_bus][k - 1]) / 1e6)
     counts = [per_motor.get(m, 0) for m in range(1, MOTORS + 1)]
     # Where a batch's time goes: client -> Zenoh's callback in the bridge (loopback TCP, Zenoh, the
     # GIL) -> the bridge's intake on the event loop -> the first of its frames on the bus (the wait
     # for the next tick, the tick's own work, Bus.cycle).
-    wire_first: dict[int, int] = {}
-    for _, k, ns in log["first"]:
-        if k not in wire_first or ns < wire_first[k]:
-            wire_first[k] = ns
+    wire_first: dict[tuple[int, int], int] = {}  # (bus, k) -> the first of its frames on that bus
+    for motor, k, ns in log["first"]:
+        key = ((motor - 1) // per_bus, k)
+        if key not in wire_first or ns < wire_first[key]:
+            wire_first[key] = ns
     legs: dict[str, list[float]] = {"to_zenoh_callback": [], "to_event_loop": [], "to_bus": []}
-    for seq, sent_ns, arrived, intake in log["arrivals"]:
+    for b, seq, sent_ns, arrived, intake in log["arrivals"]:
         if seq <= skip:
             continue
         legs["to_zenoh_callback"].append((arrived - sent_ns) / 1e6)
         legs["to_event_loop"].append((intake - arrived) / 1e6)
-        if seq in wire_first:
-            legs["to_bus"].append((wire_first[seq] - intake) / 1e6)
+        if (b, seq) in wire_first:
+            legs["to_bus"].append((wire_first[b, seq] - intake) / 1e6)
     breakdown = {
         leg: {"p50": _percentile(v, 0.5), "p99": _percentile(v, 0.99), "max": max(v, default=math.nan)}
         for leg, v in legs.items()
     }
     bridge_counts = log["metrics"]["bridge"]
     own = log["metrics"]["setpoint_to_wire_ms"]
+    bus_metrics: Any = {k: v for k, v in log["metrics"]["bus"].items() if not isinstance(v, dict | list)}
+    if buses > 1:
+        bus_metrics = {
+            name: {k: v for k, v in m.items() if not isinstance(v, dict | list)}
+            for name, m in log["metrics"]["buses"].items()
+        }
     return {
         "bitrate": bitrate,
+        "buses": buses,
         "batches_sent": len(sent),
         "publish_hz": (len(sent) - 1) / window_s,
         "updates_per_motor_s": statistics.median(counts) / measured_s,
@@ -398,8 +492,19 @@ def tick_run(
         "bridge_to_cycle_p50_ms": own["p50"],
         "bridge_to_cycle_p99_ms": own["p99"],
         "bridge_counts": bridge_counts,
+        # set-points that reached the bridge past their deadline (valid_for_s), of all that reached it
+        "stale_pct": 100
+        * bridge_counts["stale"]
+        / max(1, bridge_counts["stale"] + bridge_counts["setpoints"]),
+        # motors the bridge stopped because their set-points went stale while the client was publishing
+        # (those after its last batch, when every set-point goes stale, are not counted)
+        "stale_stops": sum(
+            1
+            for entry in log["stop_log"]
+            if sent[0] <= entry[0] <= sent[-1] and str(entry[3]).startswith("set-points stale")
+        ),
         "breakdown_ms": breakdown,
-        "bus_metrics": {k: v for k, v in log["metrics"]["bus"].items() if not isinstance(v, dict | list)},
+        "bus_metrics": bus_metrics,
         "client_cpu_pct": 100 * got["cpu_s"] / window_s,
         "bridge_cpu_pct": 100 * bridge_cpu,
         "load": list(os.getloadavg()),
@@ -532,6 +637,7 @@ def summarise(
         ),
         "setpoint_to_wire_p50_ms_can1m": _median(can, "to_wire_p50_ms"),
         "setpoint_to_wire_p99_ms_can1m": _median(can, "to_wire_p99_ms"),
+        **_four_buses(tick),
         "request_rtt_p50_ms": _median(rtt, "rtt_p50_ms"),
         "request_rtt_p99_ms": _median(rtt, "rtt_p99_ms"),
         "local_request_p50_ms": _median(rtt, "local_p50_ms"),
@@ -573,6 +679,63 @@ def summarise(
     return out
 
 
+def _four_buses(tick: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
+    """``servobus bridge --sim 32 --buses 4``'s layout: updates/s from the 1 kHz run (left out of
+    --quick), the latency from the 200/s run, the 1 kHz run's latency beside it."""
+    out: dict[str, Any] = {}
+    fast = tick.get("can1m_4x8_1khz")
+    if fast:
+        out |= {
+            "tick_hz_32_can1m_4x8": _median(fast, "updates_per_motor_s"),
+            "tick_hz_32_can1m_4x8_applied": _median(fast, "applied_per_motor_s"),
+            "tick_hz_32_can1m_4x8_publish_hz": _median(fast, "publish_hz"),
+            "setpoint_to_wire_p50_ms_can1m_4x8_1khz": _median(fast, "to_wire_p50_ms"),
+            "setpoint_to_wire_p99_ms_can1m_4x8_1khz": _median(fast, "to_wire_p99_ms"),
+            "setpoint_to_wire_legs_ms_can1m_4x8_1khz": _legs(fast),
+            "bridge_cpu_pct_can1m_4x8_1khz": _median(fast, "bridge_cpu_pct"),
+            "stale_pct_can1m_4x8_1khz": _median(fast, "stale_pct"),
+            "stale_stops_can1m_4x8_1khz": sum(r["stale_stops"] for r in fast),
+            "client_cpu_pct_can1m_4x8_1khz": _median(fast, "client_cpu_pct"),
+        }
+    paced = tick.get("can1m_4x8_200hz")
+    if paced:
+        out |= {
+            "setpoint_to_wire_p50_ms_can1m_4x8": _median(paced, "to_wire_p50_ms"),
+            "setpoint_to_wire_p99_ms_can1m_4x8": _median(paced, "to_wire_p99_ms"),
+            "bridge_to_cycle_p50_ms_can1m_4x8": _median(paced, "bridge_to_cycle_p50_ms"),
+            "bridge_to_cycle_p99_ms_can1m_4x8": _median(paced, "bridge_to_cycle_p99_ms"),
+            "setpoint_to_wire_legs_ms_can1m_4x8": _legs(paced),
+            "tick_hz_32_can1m_4x8_200hz": _median(paced, "updates_per_motor_s"),
+            "bridge_cpu_pct_can1m_4x8_200hz": _median(paced, "bridge_cpu_pct"),
+            "client_cpu_pct_can1m_4x8_200hz": _median(paced, "client_cpu_pct"),
+            "stale_pct_can1m_4x8_200hz": _median(paced, "stale_pct"),
+            "stale_stops_can1m_4x8_200hz": sum(r["stale_stops"] for r in paced),
+        }
+    return out
+
+
+def _four_buses_text(f: dict[str, Any]) -> str:
+    """What bounds the 4x8 layout at 1 kHz per bus, from the run's own numbers."""
+    legs = f["setpoint_to_wire_legs_ms_can1m_4x8_1khz"]
+    text = (
+        "4x8 with the client at 1 kHz per bus: it publishes 4 batches per tick "
+        f"(~{4 * f['tick_hz_32_can1m_4x8_publish_hz']:,.0f} a second) into one bridge process, whose event "
+        "loop takes every bus's set-points, runs the 4 tick tasks and publishes the states (bridge "
+        f"{f['bridge_cpu_pct_can1m_4x8_1khz']:.0f} % of a core); batches wait for it (-> the bridge's event "
+        f"loop p50 / p99 {legs['to_event_loop']['p50']:.1f} / {legs['to_event_loop']['p99']:.1f} ms), "
+        f"{f['stale_pct_can1m_4x8_1khz']:.0f} % of the set-points reached it past their `valid_for_s` "
+        "(0.1 s) and were dropped as stale, and its staleness watchdog sent "
+        f"{f['stale_stops_can1m_4x8_1khz']} motor stops over the runs while the client published: "
+        "there the bridge process, not the 4 wires (~530 cycles/s each), bounds the updates/s."
+    )
+    if "stale_pct_can1m_4x8_200hz" in f:
+        text += (
+            f" At 200/s per bus {f['stale_pct_can1m_4x8_200hz']:.0f} % were stale and the watchdog stopped "
+            f"{f['stale_stops_can1m_4x8_200hz']} motors."
+        )
+    return text + " "
+
+
 def _legs_text(legs: dict[str, dict[str, float]]) -> str:
     names = {
         "to_zenoh_callback": "client -> Zenoh's callback in the bridge",
@@ -599,7 +762,13 @@ def render_markdown(f: dict[str, Any], info: dict[str, Any]) -> str:
         "between that and the wire; on the 1 Mbit/s bus the frame then waits for the frames before it). "
         "**Updates/s** = per motor, the distinct set-points whose frames reached the bus / the client's "
         "publishing time; the median of the 32 motors. Zero-wire-time bus: `CanBusModel(bitrate=inf)` (the "
-        "bridge's and Zenoh's own limits); 1 Mbit/s: the default classic CAN bus. "
+        "bridge's and Zenoh's own limits); 1 Mbit/s: the default classic CAN bus. **4x8** "
+        "(`servobus bridge --sim 32 --buses 4`'s layout): the bridge serves 4 buses `sim1`..`sim4`, each "
+        "its own `Bus(SimTransport)` on a 1 Mbit/s classic CAN bus with 8 motors (ids 1-8), one tick task "
+        'each; the client opens the 4 (`connect("bench/simK")`: 4 RemoteBuses, 4 Zenoh sessions in one '
+        "process) and publishes one batch of 8 set-points per bus per tick of its pacer (its rate is "
+        "per bus); latency from its clock just before that bus's `cycle()`; updates/s over the 32 motors "
+        "as above. "
         f"Median of {f['runs']} runs of each (every run in results.json); {f['kills']} kills.",
         "",
         _results.markdown_table(
@@ -659,6 +828,48 @@ def render_markdown(f: dict[str, Any], info: dict[str, Any]) -> str:
                     "(info)",
                     "-",
                 ),
+                *(
+                    [
+                        (
+                            "4x8: updates/s per motor (client at 1 kHz per bus), 4 buses of 8 motors, "
+                            "each 1 Mbit/s CAN",
+                            "`remote.tick_hz_32_can1m_4x8`",
+                            f"{f['tick_hz_32_can1m_4x8']:,.0f}",
+                            f"bridge's `applied`/32/s {f['tick_hz_32_can1m_4x8_applied']:,.0f}; the client "
+                            f"published {f['tick_hz_32_can1m_4x8_publish_hz']:,.0f} batches/s per bus; "
+                            f"CPU (% of one core): bridge {f['bridge_cpu_pct_can1m_4x8_1khz']:.0f}, client "
+                            f"{f['client_cpu_pct_can1m_4x8_1khz']:.0f}; publish -> bus at 1 kHz p99 / p50 "
+                            f"{f['setpoint_to_wire_p99_ms_can1m_4x8_1khz']:.2f} / "
+                            f"{f['setpoint_to_wire_p50_ms_can1m_4x8_1khz']:.2f} ms; the wire's bound: 16 "
+                            "frames of ~118 µs per bus per cycle = ~530 cycles/s",
+                            "(info)",
+                            "-",
+                        )
+                    ]
+                    if "tick_hz_32_can1m_4x8" in f
+                    else []
+                ),
+                *(
+                    [
+                        (
+                            "4x8: client publish -> frame on the bus, p99 / p50 (client at 200 batches/s "
+                            "per bus)",
+                            "`remote.setpoint_to_wire_p99_ms_can1m_4x8`",
+                            f"{f['setpoint_to_wire_p99_ms_can1m_4x8']:.2f} / "
+                            f"{f['setpoint_to_wire_p50_ms_can1m_4x8']:.2f} ms",
+                            "bridge's own (sent -> handed to `Bus.cycle`): "
+                            f"{f['bridge_to_cycle_p99_ms_can1m_4x8']:.2f} / "
+                            f"{f['bridge_to_cycle_p50_ms_can1m_4x8']:.2f} ms; updates/s per motor "
+                            f"{f['tick_hz_32_can1m_4x8_200hz']:,.0f}; CPU bridge "
+                            f"{f['bridge_cpu_pct_can1m_4x8_200hz']:.0f}, client "
+                            f"{f['client_cpu_pct_can1m_4x8_200hz']:.0f}",
+                            "(info)",
+                            "-",
+                        )
+                    ]
+                    if "setpoint_to_wire_p99_ms_can1m_4x8" in f
+                    else []
+                ),
                 (
                     "`read_status2()` through the bridge, p50 / p99 (1 Mbit/s bus)",
                     "`remote.request_rtt_p50_ms`, `_p99_ms`",
@@ -692,8 +903,15 @@ def render_markdown(f: dict[str, Any], info: dict[str, Any]) -> str:
         )
         + "; at 1 kHz: "
         + _legs_text(f["setpoint_to_wire_legs_ms_1khz"])
-        + ". The last leg includes the wait for the bridge's next tick (up to 1 ms). "
-        "Stops were triggered by: "
+        + (
+            "; 4x8 at 200/s per bus: " + _legs_text(f["setpoint_to_wire_legs_ms_can1m_4x8"])
+            if "setpoint_to_wire_legs_ms_can1m_4x8" in f
+            else ""
+        )
+        + ". The last leg includes the wait for the bridge's next tick (up to 1 ms; on a 1 Mbit/s bus, "
+        "for the bus's cycle under way to end). "
+        + (_four_buses_text(f) if "tick_hz_32_can1m_4x8" in f else "")
+        + "The kills' stops were triggered by: "
         + ", ".join(sorted({w for s in f["per_run"]["stops"] for w in s["why"]}))
         + " (the liveliness token vanishing with the killed process's TCP connection; the staleness "
         "path, `valid_for_s` + `stop_after_s` = 150 ms, never came first).",
@@ -772,6 +990,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--port", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--bitrate", default="1000000", help=argparse.SUPPRESS)
     parser.add_argument("--hz", type=float, default=HZ, help=argparse.SUPPRESS)
+    parser.add_argument("--buses", type=int, default=1, help=argparse.SUPPRESS)
     parser.add_argument("--rate", type=float, default=HZ, help=argparse.SUPPRESS)
     parser.add_argument("--seconds", type=float, default=1.0, help=argparse.SUPPRESS)
     parser.add_argument("--reads", type=int, default=100, help=argparse.SUPPRESS)
@@ -799,16 +1018,28 @@ def main(argv: Sequence[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="bench-remote-") as tmp:
         work = Path(tmp)
         tick: dict[str, list[dict[str, Any]]] = {}
-        scenarios = [(name, bitrate, rate, ()) for name, bitrate, rate in SCENARIOS]
+        scenarios = [
+            (name, bitrate, rate, buses, ())
+            for name, bitrate, rate, buses in SCENARIOS
+            if not (args.quick and name in QUICK_SKIP)
+        ]
         if realtime_allowed():
-            scenarios.append(("inf_200hz_rt", "inf", 200.0, REALTIME))
-        for name, bitrate, rate, priority in scenarios:
+            scenarios.append(("inf_200hz_rt", "inf", 200.0, 1, REALTIME))
+        for name, bitrate, rate, buses, priority in scenarios:
             for i in range(cfg.runs):
-                r = tick_run(bitrate, cfg.tick_seconds, work, wrap=priority, rate=rate, client_wrap=priority)
+                r = tick_run(
+                    bitrate,
+                    cfg.tick_seconds,
+                    work,
+                    wrap=priority,
+                    rate=rate,
+                    client_wrap=priority,
+                    buses=buses,
+                )
                 tick.setdefault(name, []).append(r)
                 legs = r["breakdown_ms"]
                 print(
-                    f"  {name:<10} run {i + 1}/{cfg.runs}: "
+                    f"  {name:<15} run {i + 1}/{cfg.runs}: "
                     f"{r['updates_per_motor_s']:7.1f} updates/s per motor "
                     f"(applied {r['applied_per_motor_s']:.1f}, published {r['publish_hz']:.0f}/s), "
                     f"to wire p50/p99 {r['to_wire_p50_ms']:.2f}/{r['to_wire_p99_ms']:.2f} ms "
