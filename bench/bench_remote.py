@@ -206,14 +206,15 @@ async def bridge_process(args: argparse.Namespace) -> None:
         """The bridge as it is, with each set-point batch's arrival stamped where it lands: in Zenoh's
         callback (its own thread) and when the bridge's intake task takes it on the event loop."""
 
-        def _handed(self, handler: Any, extract: Any, *bound: Any) -> Any:
+        def _handed(self, handler: Any, served: Any, extract: Any = None) -> Any:
+            # (the bridge's private hand-over, wrapped for the benchmark's stamps only)
             if getattr(handler, "__name__", "") != "_on_setpoints":
-                return super()._handed(handler, extract, *bound)
+                return super()._handed(handler, served, extract)
 
             def stamped(sample: Any) -> Any:
                 return (*extract(sample), time.time_ns())
 
-            return super()._handed(self._timed, stamped, *bound)
+            return super()._handed(self._timed, served, stamped)
 
         def _timed(self, served: Any, item: tuple[str, bytes, int]) -> None:
             key, payload, arrived = item
