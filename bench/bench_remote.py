@@ -204,25 +204,16 @@ async def bridge_process(args: argparse.Namespace) -> None:
 
     class Timed(Bridge):
         """The bridge as it is, with each set-point batch's arrival stamped where it lands: in Zenoh's
-        callback (its own thread) and when the bridge's intake task takes it on the event loop."""
+        callback (its own thread) and when the bridge's event loop takes it."""
 
-        def _handed(self, handler: Any, served: Any, extract: Any = None) -> Any:
-            # (the bridge's private hand-over, wrapped for the benchmark's stamps only)
-            if getattr(handler, "__name__", "") != "_on_setpoints":
-                return super()._handed(handler, served, extract)
-
-            def stamped(sample: Any) -> Any:
-                return (*extract(sample), time.time_ns())
-
-            return super()._handed(self._timed, served, stamped)
-
-        def _timed(self, served: Any, item: tuple[str, bytes, int]) -> None:
-            key, payload, arrived = item
+        def _on_setpoints(self, served: Any, item: tuple[str, bytes, int]) -> None:
+            # (the bridge's private intake, wrapped for the benchmark's stamps only)
+            _, payload, arrived = item
             if len(payload) >= 34:
                 seq = int.from_bytes(payload[18:22], "little")
                 sent = int.from_bytes(payload[22:30], "little")
                 arrivals.append((index[served.name], seq, sent, arrived, time.time_ns()))
-            self._on_setpoints(served, (key, payload))
+            super()._on_setpoints(served, item)
 
     per_bus = MOTORS // args.buses
     endpoint = f"tcp/127.0.0.1:{args.port}"

@@ -272,3 +272,18 @@ async def test_a_leaving_client_s_motors_are_stopped_whatever_the_bus_s_safe_kin
             await _until(lambda: bus.metrics().replies >= 2)  # the command's reply, then the stop's
             async with connect("n/b", endpoints=[endpoint]) as again:  # the bridge still serves
                 assert (await again.metrics())["bridge"]["stops"] == 1
+
+
+async def test_a_client_faster_than_the_bridge_costs_no_queue_only_replaced_batches(served: Served) -> None:
+    """100 batches published while the bridge's loop is busy: the newest one wins, the rest are
+    replaced on Zenoh's thread (counted), none waits in a queue to be applied late."""
+    async with connect("n/b", endpoints=[served.endpoint]) as remote:
+        motor = remote.motor(2)
+        for speed in range(1, 101):  # (cycle publishes without awaiting: the loop is ours meanwhile)
+            await remote.cycle([(motor, ma.SpeedControl(speed_dps=float(speed)))], valid_for_s=1.0)
+        time.sleep(0.2)  # the bridge's Zenoh thread receives them all while its loop is held here
+        held = served.bridge.served["b"].held
+        await _until(lambda: 2 in held and held[2].command == ma.SpeedControl(speed_dps=100.0))
+        counts = served.counts()
+        assert counts["overwritten"] > 50, counts
+        assert counts["setpoints"] + counts["overwritten"] + counts["reordered"] <= 100, counts

@@ -515,8 +515,15 @@ def test_malformed_payloads_to_every_key_reach_no_motor(spawn: Callable[..., Pro
         result = wire.decode_result(SCHEMA, bytes.fromhex(found["ok"][0]))
         assert isinstance(result.error, ValueError) and "malformed" in str(result.error), (what, result)
     expected = len(puts) + len(queries)
-    done = report_when(server, lambda r: r["bridge"]["malformed"] >= expected, 10, f"{expected} malformed")
-    assert done["bridge"]["malformed"] == expected, done["bridge"]
+
+    def taken(r: dict[str, Any]) -> int:
+        # each bad message is malformed, or was replaced on its key by the next one of the same
+        # (garbage) client id before the bridge read it: never applied, never lost track of
+        return int(r["bridge"]["malformed"] + r["bridge"]["overwritten"])
+
+    done = report_when(server, lambda r: taken(r) >= expected, 10, f"{expected} malformed or overwritten")
+    assert taken(done) == expected, done["bridge"]
+    expected = done["bridge"]["malformed"]
     # well formed, but not allowed: a set-point or a command from a client with no token, a command
     # sent as a read
     raw.ok("raw_put", items=[(key("setpoints"), setpoints([(3, ma.SpeedControl(speed_dps=30.0))]).hex())])

@@ -25,6 +25,7 @@ _LATENCY_KEPT = 20_000  # set-point -> wire samples kept for the percentiles
 COUNTS = {
     "setpoints": "set-points taken (well-formed, fresh, from the motor's holder)",
     "applied": "set-points that went out at least once",
+    "overwritten": "set-point messages a newer one of the same client replaced before the bridge took them",
     "stale": "set-points that arrived past their deadline",
     "expired": "set-points that went stale while held (not renewed in time)",
     "reordered": "set-points older than the one held from the same client",

@@ -10,8 +10,9 @@ error. States (latest reply, online flag, fault) are published as they change, a
 per motor.
 
 Zenoh calls us on its own threads; every callback only hands its bytes to the event loop, where all
-the state lives. Set-points and queries wait in a bounded backlog (beyond it they are dropped on
-Zenoh's thread, and counted); a client's liveliness changes are never dropped.
+the state lives. Of the set-points, only each client's latest message on each key waits for the loop
+(a newer one replaces it); queries wait in a bounded backlog (beyond it they are dropped on Zenoh's
+thread, and counted); a client's liveliness changes are never dropped.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import functools
 import json
 import logging
 import math
+import threading
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -111,6 +113,9 @@ class Bridge:
         )
         self._stops, self._stops_in = anyio.create_memory_object_stream[tuple[Served, list[Motor]]](math.inf)
         self._backlog = 0  # events handed to the loop and not yet taken (approximate: two threads)
+        # (key, client id) -> [served, the latest set-point message, when it came, how many it replaced]
+        self._latest: dict[tuple[str, bytes], list[Any]] = {}
+        self._latest_lock = threading.Lock()
         self.dropped_events = 0  # set-points and queries dropped because _BACKLOG were waiting
         self.stop_log: deque[tuple[int, str, int, str]] = deque(maxlen=1000)  # (unix ns, bus, id, why)
 
@@ -162,7 +167,7 @@ class Bridge:
         self._declared.append(session.liveliness().declare_token(keys.alive))
         for served in self.served.values():
             name = served.name
-            setpoints = self._handed(self._on_setpoints, served, _payload)
+            setpoints = self._setpoints_callback(served)
             query = self._handed(self._on_query, served)
             self._declared += [
                 session.declare_subscriber(keys.bus(name, "setpoints"), setpoints),
@@ -223,6 +228,42 @@ class Bridge:
                     handler(*args)
                 except Exception:  # one bad event must not end the bridge's intake
                     logger.exception("%s: handling a message failed", self.node)
+
+    def _setpoints_callback(self, served: Served) -> Callable[[zenoh.Sample], None]:
+        """A Zenoh callback for set-points: only the latest message of each client on each key waits
+        for the loop (a newer one replaces it there, counted ``overwritten``), so a client that
+        publishes faster than the bridge takes them costs no queue and no lag, only replaced batches."""
+        lane = self._lane
+        assert lane is not None
+        take = self._take_setpoints
+
+        def callback(sample: zenoh.Sample) -> None:
+            key, payload = _payload(sample)
+            slot = (key, payload[2:18])  # (the client's id: wire.py's header, version and kind first)
+            with self._latest_lock:
+                entry = self._latest.get(slot)
+                if entry is not None:
+                    entry[1:] = [payload, time.time_ns(), entry[3] + 1]
+                    return
+                if len(self._latest) >= _BACKLOG:
+                    self.dropped_events += 1
+                    return
+                self._latest[slot] = [served, payload, time.time_ns(), 0]
+            try:
+                lane.call_soon_threadsafe(take, slot)
+            except RuntimeError:  # the loop is closed: we are shutting down
+                logger.debug("set-points after the loop closed were dropped")
+
+        return callback
+
+    def _take_setpoints(self, slot: tuple[str, bytes]) -> None:
+        with self._latest_lock:
+            served, payload, arrived_ns, overwritten = self._latest.pop(slot)
+        served.counts["overwritten"] += overwritten
+        try:
+            self._on_setpoints(served, (slot[0], payload, arrived_ns))
+        except Exception:  # one bad message must not end anything
+            logger.exception("%s: handling set-points failed", self.node)
 
     def _on_liveliness(self, sample: zenoh.Sample) -> None:
         """(Zenoh's thread) a client's token came or went: handed to the loop, never dropped."""
@@ -302,8 +343,9 @@ class Bridge:
 
     # ---- set-points ----
 
-    def _on_setpoints(self, served: Served, item: tuple[str, bytes]) -> None:
-        key, payload = item
+    def _on_setpoints(self, served: Served, item: tuple[str, bytes, int]) -> None:
+        """Take a set-point message (``key``, ``payload``, the wall ns Zenoh handed it over)."""
+        key, payload, _ = item
         try:
             message = wire.decode_setpoints(served.schemas.get, payload)
             if key.endswith("/setpoint"):
