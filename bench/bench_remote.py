@@ -35,8 +35,8 @@ Figures (``remote.*``):
   batches/s (the rate ``tick_hz_32``'s target asks for; zero-wire-time bus). Beside it: the same at 1 kHz
   (the saturating run), the bridge's own figure (``setpoint_to_wire_ms``: the set-point's
   ``sent_unix_ns`` to the tick that hands it to ``Bus.cycle``), and where the time goes: each batch is
-  stamped in the bridge process as Zenoh's callback runs (Zenoh's thread) and as the bridge's intake task
-  takes it (the event loop). The first 0.3 s after connecting are left out of these and the counts.
+  stamped in the bridge process as Zenoh's callback runs (Zenoh's thread) and as the bridge's event loop
+  takes it. The first 0.3 s after connecting are left out of these and the counts.
   When this host allows it (``chrt -f 10``), the 200/s run is repeated with both processes at
   real-time priority (``setpoint_to_wire_p99_ms_rt``): the latency when other work on the machine
   cannot delay them.
@@ -886,7 +886,7 @@ def render_markdown(f: dict[str, Any], info: dict[str, Any]) -> str:
             "llrlll",
         ),
         "Where a set-point's time goes, p50 / p99 ms (each batch stamped in the bridge process as Zenoh's "
-        "callback runs and as the bridge's intake task takes it; the medians over runs): at 200 batches/s: "
+        "callback runs and as the bridge's event loop takes it; the medians over runs): at 200 batches/s: "
         + _legs_text(f["setpoint_to_wire_legs_ms"])
         + (
             "; at 200/s with real-time priority: " + _legs_text(f["setpoint_to_wire_legs_ms_rt"])
