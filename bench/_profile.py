@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import cProfile
 import linecache
+import math
 import os
 import pstats
 import re
@@ -276,3 +277,12 @@ def markdown(
             + ".",
         ]
     return lines
+
+
+def proc_cpu_s(pid: int) -> float:
+    """User + system CPU seconds of process ``pid`` so far (Linux /proc)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return math.nan
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")

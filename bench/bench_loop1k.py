@@ -164,15 +164,6 @@ def sweep(layout: Layout, seconds: float) -> list[dict[str, Any]]:
 # ============================================================================================== host
 
 
-def proc_cpu_s(pid: int) -> float:
-    """User + system CPU seconds of process ``pid`` so far (Linux /proc)."""
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except OSError:
-        return math.nan
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
 def _percentiles(values: Sequence[float]) -> dict[str, float]:
     ordered = sorted(values)
     if not ordered:
@@ -221,7 +212,7 @@ async def host(layout: Layout, paths: Sequence[str], seconds: float, device_pid:
         on_time = bad = skipped = 0
         reply_type = layout.reply
         load0 = os.getloadavg()
-        dev0 = proc_cpu_s(device_pid)
+        dev0 = _profile.proc_cpu_s(device_pid)
         cpu0 = time.process_time()
         wall0 = time.perf_counter()
         async for tick in ticks(HZ):
@@ -237,7 +228,7 @@ async def host(layout: Layout, paths: Sequence[str], seconds: float, device_pid:
             on_time += done <= period and not wrong
         wall = time.perf_counter() - wall0
         cpu = time.process_time() - cpu0
-        dev = proc_cpu_s(device_pid) - dev0
+        dev = _profile.proc_cpu_s(device_pid) - dev0
         load1 = os.getloadavg()
         latency = window.snapshot()
         stats = [bus.stats() for bus, _ in plan]

@@ -412,7 +412,7 @@ def tick_run(
     """One client publishing batches at ``rate`` (per bus) for ``seconds``; what reached the wire."""
     with bridge(bitrate, work, wrap=wrap, extra=extra, buses=buses) as state:
         pid = state["pid"]
-        cpu0 = _proc_cpu_s(pid)
+        cpu0 = _profile.proc_cpu_s(pid)
         wall0 = time.perf_counter()
         got = client(
             state["port"],
@@ -425,7 +425,7 @@ def tick_run(
             str(buses),
             wrap=client_wrap,
         )
-        bridge_cpu = (_proc_cpu_s(pid) - cpu0) / (time.perf_counter() - wall0)
+        bridge_cpu = (_profile.proc_cpu_s(pid) - cpu0) / (time.perf_counter() - wall0)
     log = state["result"]
     sent_by_bus = got["sent_ns"]  # per bus: the wall ns just before each batch's cycle()
     sent = sent_by_bus[0]
@@ -562,14 +562,6 @@ def stop_runs(kills: int, work: Path) -> list[dict[str, Any]]:
             }
         )
     return out
-
-
-def _proc_cpu_s(pid: int) -> float:
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except OSError:
-        return math.nan
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def _median(runs: Sequence[dict[str, Any]], key: str) -> float:
