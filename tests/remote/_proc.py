@@ -126,7 +126,7 @@ async def bridge_main(args: argparse.Namespace) -> None:
                             "frames": frames.listed(),
                             "bridge": dict(served.counts),
                             "owners": {str(k): v for k, v in served.owners.items()},
-                            "clients": len(bridge._clients),
+                            "clients": len(bridge.clients.live),
                             "dropped_events": bridge.dropped_events,
                             "stop_log": [list(entry) for entry in bridge.stop_log],
                             "controls": {str(d.motor_id): _control(d) for d in devices},

@@ -217,15 +217,13 @@ async def test_the_missing_bus_error_lists_every_bus() -> None:
 
 
 async def test_a_client_leaving_is_never_dropped_even_when_set_points_are(
-    served: Served, monkeypatch: pytest.MonkeyPatch
+    served: Served,
 ) -> None:
     """With the backlog full (every set-point and query dropped on Zenoh's thread), a client's
     token vanishing still reaches the bridge, and its motor is stopped."""
-    from servobus.remote import bridge as bridge_module
-
     async with connect("n/b", endpoints=[served.endpoint]) as remote:
         await remote.motor(3).speed_control(speed_dps=40.0)
-        monkeypatch.setattr(bridge_module, "_BACKLOG", 0)
+        served.bridge._handover._limit = 0  # type: ignore[union-attr]  # (full: nothing more waits)
         await remote.cycle([(remote.motor(3), ma.SpeedControl(speed_dps=1.0))])
         await _until(lambda: served.bridge.dropped_events >= 1)
     await _until(lambda: served.counts()["stops"] == 1)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import time
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -78,6 +79,26 @@ class Served:
     def changed(self, motor: Motor, traffic: Traffic, reply: Reply) -> None:
         """(The Bus's subscriber) the motor's state is to be published."""
         self.dirty.add(motor.motor_id)
+
+    def publish(self, mid: int, now: float) -> None:
+        """Publish motor ``mid``'s state now (``now``: the loop's clock)."""
+        motor = self.motors[mid]
+        fault = motor.fault.flags if motor.fault is not None else None
+        state = wire.State(mid, time.time_ns(), motor.online is not False, motor.state, fault)
+        try:
+            self.publishers[mid].put(wire.encode_state(self.schemas[mid], state))
+        except wire.WireError as exc:
+            logger.debug("state of motor %s not encodable: %s", mid, exc)
+            return
+        self.counts["states"] += 1
+        self.dirty.discard(mid)
+        self.published[mid] = now
+
+    def publish_due(self, now: float, period: float) -> None:
+        """Publish the state of each motor that changed and was last published ``period`` ago."""
+        for mid in list(self.dirty):
+            if now - self.published.get(mid, -period) >= period:
+                self.publish(mid, now)
 
     def release(self, mid: int) -> None:
         """Motor ``mid`` has no set-point and no holder any more."""

@@ -1,0 +1,121 @@
+"""Zenoh's threads -> the bridge's event loop (:class:`Handover`).
+
+Zenoh calls its callbacks on its own threads; the bridge's state lives on its event loop. Each kind
+of callback is handed over by its own rule:
+
+* set-points (:meth:`Handover.latest`): only each client's latest message on each key waits for
+  the loop; a newer one replaces it there (counted ``overwritten``), so a client that publishes
+  faster than the bridge takes them costs no queue and no lag;
+* queries (:meth:`Handover.queued`): in order, to a task that may start tasks, at most
+  ``backlog`` waiting; beyond that a query is answered nothing at once, on Zenoh's thread;
+* liveliness (:meth:`Handover.direct`): straight to the loop, never dropped.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import anyio
+
+from servobus import runtime
+
+if TYPE_CHECKING:
+    from servobus.remote._served import Served
+
+logger = logging.getLogger("servobus.remote.bridge")
+
+
+class Handover:
+    """What Zenoh's threads hand to one bridge's event loop (``lane``)."""
+
+    def __init__(self, lane: runtime.Runtime, backlog: int) -> None:
+        self._lane = lane
+        self._limit = backlog
+        self._events, self._events_in = anyio.create_memory_object_stream[tuple[Any, tuple[Any, ...]]](
+            math.inf
+        )
+        self._waiting = 0  # queued items handed over and not yet taken (approximate: two threads)
+        # (key, client id) -> [served, the latest set-point message, when it came, how many it replaced]
+        self._latest: dict[tuple[str, bytes], list[Any]] = {}
+        self._lock = threading.Lock()
+        self.dropped = 0  # set-points and queries dropped because the backlog was full
+
+    def _call(self, fn: Callable[..., object], *args: Any) -> None:
+        try:
+            self._lane.call_soon_threadsafe(fn, *args)
+        except RuntimeError:  # the loop is closed: the bridge is shutting down
+            logger.debug("a zenoh callback after the loop closed was dropped")
+
+    def direct(
+        self, handler: Callable[[Any], object], extract: Callable[[Any], Any]
+    ) -> Callable[[Any], None]:
+        """A callback that hands ``extract(item)`` to ``handler`` on the loop, never dropped."""
+        return lambda item: self._call(handler, extract(item))
+
+    def queued(self, handler: Callable[[Served, Any], object], served: Served) -> Callable[[Any], None]:
+        """A callback that hands each query to ``handler(served, query)``, run by :meth:`run`."""
+
+        def callback(query: Any) -> None:
+            if self._waiting >= self._limit:
+                self.dropped += 1
+                query.drop()  # (the client's get ends now, with no answer)
+                return
+            self._waiting += 1
+            self._call(self._put, handler, (served, query))
+
+        return callback
+
+    def _put(self, handler: Any, args: tuple[Any, ...]) -> None:
+        try:
+            self._events.send_nowait((handler, args))
+        except (anyio.BrokenResourceError, anyio.ClosedResourceError):  # closing
+            self._waiting -= 1
+            args[-1].drop()
+
+    async def run(self) -> None:
+        """Run the queued handlers, in order, in this task (so that they may start tasks)."""
+        async with self._events_in:
+            async for handler, args in self._events_in:
+                self._waiting -= 1
+                try:
+                    handler(*args)
+                except Exception:  # one bad message must not end the bridge's intake
+                    logger.exception("handling a message failed")
+
+    def latest(
+        self, handler: Callable[[Served, tuple[str, bytes, int]], object], served: Served
+    ) -> Callable[[Any], None]:
+        """A callback for set-points: ``handler(served, (key, payload, arrived_ns))`` on the loop,
+        with each client's latest message on each key only."""
+
+        def callback(sample: Any) -> None:
+            key, payload = str(sample.key_expr), sample.payload.to_bytes()
+            slot = (key, payload[2:18])  # (the client's id: in wire.py's header, after version and kind)
+            with self._lock:
+                entry = self._latest.get(slot)
+                if entry is not None:
+                    entry[1:] = [payload, time.time_ns(), entry[3] + 1]
+                    return
+                if len(self._latest) >= self._limit:
+                    self.dropped += 1
+                    return
+                self._latest[slot] = [served, payload, time.time_ns(), 0]
+            self._call(self._take, handler, slot)
+
+        return callback
+
+    def _take(
+        self, handler: Callable[[Served, tuple[str, bytes, int]], object], slot: tuple[str, bytes]
+    ) -> None:
+        with self._lock:
+            served, payload, arrived_ns, overwritten = self._latest.pop(slot)
+        served.counts["overwritten"] += overwritten
+        try:
+            handler(served, (slot[0], payload, arrived_ns))
+        except Exception:  # one bad message must not end anything
+            logger.exception("handling set-points failed")
