@@ -106,9 +106,6 @@ class Bridge:
         self.clients = Clients(allow_takeover)
         self._group: anyio.abc.TaskGroup | None = None
         self._lane: runtime.Runtime | None = None
-        self._events, self._events_in = anyio.create_memory_object_stream[tuple[Any, tuple[Any, ...]]](
-            math.inf
-        )
         self._stops, self._stops_in = anyio.create_memory_object_stream[tuple[Served, list[Motor]]](math.inf)
         self._handover: Handover | None = None
         self.stop_log: deque[tuple[int, str, int, str]] = deque(maxlen=1000)  # (unix ns, bus, id, why)
