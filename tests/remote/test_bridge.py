@@ -285,3 +285,15 @@ async def test_a_client_faster_than_the_bridge_costs_no_queue_only_replaced_batc
         counts = served.counts()
         assert counts["overwritten"] > 50, counts
         assert counts["setpoints"] + counts["overwritten"] + counts["reordered"] <= 100, counts
+
+
+async def test_a_client_that_joins_late_sees_each_state_within_a_second(served: Served) -> None:
+    async with connect("n/b", endpoints=[served.endpoint]) as first:
+        await first.motor(4).read_status2()
+    await anyio.sleep(0.2)  # (nothing changes from now on)
+    async with connect("n/b", endpoints=[served.endpoint], read_only=True) as late:
+        with anyio.fail_after(2.0):
+            while late.motor(4).state is None:
+                await anyio.sleep(0.02)
+        assert isinstance(late.motor(4).state, ma.StatusReply) and late.motor(4).online is True
+        assert late.motor(1).state is None  # (never heard from: nothing to say)

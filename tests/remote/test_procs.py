@@ -341,6 +341,27 @@ def test_a_killed_client_has_its_32_motors_stopped_at_once(spawn: Callable[..., 
     assert done["clients"] == 0 and done["owners"] == {}
 
 
+def test_a_frozen_client_loses_its_motors_to_the_lease(spawn: Callable[..., Proc]) -> None:
+    """A client process suspended (SIGSTOP: its link neither closes nor answers) that commanded a
+    motor by a request only (no set-point to go stale) has it stopped when its 1 s lease ends."""
+    server, port = bridge(spawn)
+    client = spawn("client", port)
+    client.ok("connect")
+    client.ok("request", motor=5, command="SpeedControl", fields={"speed_dps": 20.0})
+    report_when(server, lambda r: speeds(r, [5]) == {5: 20.0}, 10, "motor 5 at 20 dps")
+    server.ok("reset")
+    frozen_ns = time.time_ns()
+    os.killpg(client.pid, signal.SIGSTOP)
+    try:
+        done = report_when(server, lambda r: stopped(r, [5]), 5, "motor 5 stopped after SIGSTOP")
+    finally:
+        os.killpg(client.pid, signal.SIGCONT)
+    after_ms = (done["stop_log"][0][0] - frozen_ns) / 1e6
+    print(f"SIGSTOP -> stop decided {after_ms:.0f} ms")
+    assert [(m, why) for _, _, m, why in done["stop_log"]] == [(5, "client left")]
+    assert 500 < after_ms < 3000, after_ms  # the lease (1 s), not the TCP close of a killed process
+
+
 # ---- 3. the bridge is killed: the client's calls fail at once ----
 
 

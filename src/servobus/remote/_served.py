@@ -21,6 +21,7 @@ from servobus.scheduler import Traffic
 logger = logging.getLogger("servobus.remote.bridge")
 
 _LATENCY_KEPT = 20_000  # set-point -> wire samples kept for the percentiles
+REFRESH_S = 1.0  # a motor's state is published again after this long without a change
 
 #: the bridge's counters of each bus, and what each counts
 COUNTS = {
@@ -95,9 +96,13 @@ class Served:
         self.published[mid] = now
 
     def publish_due(self, now: float, period: float) -> None:
-        """Publish the state of each motor that changed and was last published ``period`` ago."""
+        """Publish the state of each motor that changed and was last published ``period`` ago, and
+        again every ``REFRESH_S`` of each one that has a state (a client that joins late sees it)."""
         for mid in list(self.dirty):
             if now - self.published.get(mid, -period) >= period:
+                self.publish(mid, now)
+        for mid, at in list(self.published.items()):
+            if now - at >= REFRESH_S:
                 self.publish(mid, now)
 
     def release(self, mid: int) -> None:

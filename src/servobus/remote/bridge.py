@@ -7,7 +7,7 @@ than ``max_valid_s``): a stale one is dropped and counted, and a motor whose set
 for ``stop_after_s``, or whose commanding client is gone (its liveliness token vanished), gets its
 safe command. Requests run one command through the Bus and answer with the typed reply or the
 error. States (latest reply, online flag, fault) are published as they change, at most ``state_hz``
-per motor.
+per motor, and every second besides (a client that joins late sees them).
 
 Zenoh calls us on its own threads; every callback only hands its bytes to the event loop, where all
 the state lives. Of the set-points, only each client's latest message on each key waits for the loop

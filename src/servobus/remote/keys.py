@@ -1,16 +1,16 @@
 """The key expressions a bridge serves, in one place (node N, bus B, motor M, its decimal id):
 
-==============================  =====================================================  ==========
-``servobus/N/_alive``           the bridge's liveliness token                          readers
-``servobus/N/_clients/<id>``    a commanding client's liveliness token                 commanders
-``servobus/N/B/info``           queryable: the bus's motors, families, limits (JSON)   readers
-``servobus/N/B/metrics``        queryable: the Bus's and the bridge's counters (JSON)  readers
-``servobus/N/B/M/state``        published: latest reply, online flag, fault (binary)   readers
-``servobus/N/B/M/read``         queryable: one read-only command (``READ``)            readers
-``servobus/N/B/M/request``      queryable: one command of any kind                     commanders
-``servobus/N/B/M/setpoint``     subscribed: a motor's set-point                        commanders
-``servobus/N/B/setpoints``      subscribed: a batch of set-points of one bus           commanders
-==============================  =====================================================  ==========
+| key | what | who may use it |
+|---|---|---|
+| ``servobus/N/_alive`` | the bridge's liveliness token | readers |
+| ``servobus/N/_clients/<id>`` | a commanding client's liveliness token | commanders |
+| ``servobus/N/B/info`` | queryable: the bus's motors, families, limits (JSON) | readers |
+| ``servobus/N/B/metrics`` | queryable: the Bus's and the bridge's counters (JSON) | readers |
+| ``servobus/N/B/M/state`` | published: latest reply, online flag, fault (binary) | readers |
+| ``servobus/N/B/M/read`` | queryable: one read-only command (``READ``) | readers |
+| ``servobus/N/B/M/request`` | queryable: one command of any kind | commanders |
+| ``servobus/N/B/M/setpoint`` | subscribed: a motor's set-point | commanders |
+| ``servobus/N/B/setpoints`` | subscribed: a batch of set-points of one bus | commanders |
 
 Names are checked here so that a node, bus or client id can never be a wildcard or a path.
 """
