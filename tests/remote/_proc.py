@@ -97,7 +97,7 @@ def _control(device: MyActuatorMotor) -> dict[str, Any]:
 
 
 async def bridge_main(args: argparse.Namespace) -> None:
-    from servobus.remote import Bridge
+    from servobus.remote import Bridge, wire
     from servobus.remote.security import Access, bridge_config
 
     endpoint = f"tcp/127.0.0.1:{args.port}"
@@ -125,7 +125,7 @@ async def bridge_main(args: argparse.Namespace) -> None:
                             "now_ns": time.time_ns(),
                             "frames": frames.listed(),
                             "bridge": dict(served.counts),
-                            "owners": {str(k): v for k, v in served.owners.items()},
+                            "owners": {str(k): wire.shown_id(v) for k, v in served.owners.items()},
                             "clients": len(bridge.clients.live),
                             "dropped_events": bridge.dropped_events,
                             "stop_log": [list(entry) for entry in bridge.stop_log],
@@ -186,7 +186,7 @@ class Client:
             )
         )
         self.stack = stack
-        return {"token_id": self.bus.token_id, "motors": sorted(self.bus.motors)}
+        return {"shown_id": self.bus.shown_id, "motors": sorted(self.bus.motors)}
 
     async def close(self, _: dict[str, Any]) -> dict[str, Any]:
         """Leave the connection (a hold running is released first); its counts as they were."""

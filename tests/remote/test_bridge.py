@@ -235,10 +235,10 @@ async def test_a_client_cannot_speak_in_another_clients_name(served: Served) -> 
     carries it is a message from no live client."""
     async with connect("n/b", endpoints=[served.endpoint]) as holder:
         await holder.motor(1).speed_control(speed_dps=40.0)
-        owner = (await holder.metrics())["owners"]["1"]
-        assert owner == holder.token_id != holder.client_id
+        shown = (await holder.metrics())["owners"]["1"]
+        assert shown == holder.shown_id and len({shown, holder.token_id, holder.client_id}) == 3
         async with connect("n/b", endpoints=[served.endpoint]) as other:
-            other.client_id = owner  # forged: the id anyone can see
+            other.client_id = holder.token_id  # forged: its token's key (what a bridge's peer could see)
             with pytest.raises(PermissionError, match="no liveliness token"):
                 await other.motor(1).speed_control(speed_dps=-40.0)
             await other.cycle([(other.motor(1), ma.SpeedControl(speed_dps=-40.0))])
@@ -297,3 +297,56 @@ async def test_a_client_that_joins_late_sees_each_state_within_a_second(served: 
                 await anyio.sleep(0.02)
         assert isinstance(late.motor(4).state, ma.StatusReply) and late.motor(4).online is True
         assert late.motor(1).state is None  # (never heard from: nothing to say)
+
+
+async def test_a_bridge_that_closes_stops_the_motors_its_clients_hold() -> None:
+    """Leaving the bridge's block (its Bus going on, with safe=None) stops what clients drove."""
+    endpoint = _endpoint()
+    async with servobus.Bus(SimTransport(devices=[MyActuatorMotor(1), MyActuatorMotor(2)]), safe=None) as bus:
+        motors = [bus.motor(ma.FAMILY, i) for i in (1, 2)]
+        async with Bridge("n", {"b": (bus, motors)}, config=bridge_config("n", [endpoint])) as bridge:
+            remote = await connect("n/b", endpoints=[endpoint]).__aenter__()
+            try:
+                await remote.cycle([(remote.motor(1), ma.SpeedControl(speed_dps=30.0))], valid_for_s=1.0)
+                await _until(lambda: bridge.served["b"].counts["applied"] == 1)
+                requests = bus.metrics().requests
+            except BaseException:
+                await remote.__aexit__(None, None, None)
+                raise
+        try:
+            assert [(m, why) for _, _, m, why in bridge.stop_log] == [(1, "bridge closing")]
+            assert bus.metrics().replies >= requests + 1  # the stop, answered before the block ended
+        finally:
+            await remote.__aexit__(None, None, None)
+
+
+async def test_a_stop_request_the_motor_does_not_acknowledge_leaves_it_to_the_bridge() -> None:
+    """A client's own stop that gets no reply does not release the motor: the bridge stops it."""
+    endpoint = _endpoint()
+    async with servobus.Bus(SimTransport(devices=[MyActuatorMotor(1)])) as bus:
+        motors = [bus.motor(ma.FAMILY, i) for i in (1, 9)]  # (no device answers as motor 9)
+        config = bridge_config("n", [endpoint])
+        async with (
+            Bridge("n", {"b": (bus, motors)}, config=config) as bridge,
+            connect("n/b", endpoints=[endpoint]) as remote,
+        ):
+            with pytest.raises(servobus.MotorTimeout):
+                await remote.motor(9).motor_stop(timeout_s=0.05)
+            await _until(lambda: [m for _, _, m, _ in bridge.stop_log] == [9])
+            assert bridge.served["b"].owners == {}
+
+
+async def test_a_motor_the_bridge_does_not_serve_is_none_of_its_business() -> None:
+    """A Bus motor left out of the bridge answers locally; the bridge publishes nothing of it and
+    lives on."""
+    endpoint = _endpoint()
+    async with servobus.Bus(SimTransport(devices=[MyActuatorMotor(1), MyActuatorMotor(2)])) as bus:
+        served_motor, local = bus.motor(ma.FAMILY, 1), bus.motor(ma.FAMILY, 2)
+        async with Bridge("n", {"b": (bus, [served_motor])}, config=bridge_config("n", [endpoint])) as bridge:
+            for _ in range(3):
+                await local.read_status2()
+                await anyio.sleep(0.03)  # (past the states' publishing period)
+            async with connect("n/b", endpoints=[endpoint]) as remote:
+                assert sorted(remote.motors) == [1]
+                assert isinstance(await remote.motor(1).read_status2(), ma.StatusReply)
+            assert 2 not in bridge.served["b"].published

@@ -263,7 +263,7 @@ def test_a_client_drives_32_motors_and_its_clean_exit_stops_them(
     client = spawn("client", port, backend=backend)
     # (valid 0.5 s, not the default 0.1: a bridge whose loop lags 0.1 s on a loaded CI host rightly
     # drops set-points as stale and stops the motors; that is tested elsewhere, not here)
-    me = client.ok("connect", valid_for_s=0.5)["token_id"]
+    me = client.ok("connect", valid_for_s=0.5)["shown_id"]
     client.ok("hold", motors=list(MOTORS), command="SpeedControl", fields={"speed_dps": 30.0}, hz=200.0)
     report_when(server, lambda r: set(speeds(r).values()) == {30.0}, 10, "all 32 motors at 30 dps")
     time.sleep(1.0)
@@ -398,8 +398,8 @@ def test_two_clients_contend_for_a_motor(spawn: Callable[..., Proc]) -> None:
     server, port = bridge(spawn)
     a = spawn("client", port)
     b = spawn("client", port, backend="trio")
-    a_id = a.ok("connect")["token_id"]
-    b_id = b.ok("connect")["token_id"]
+    a_id = a.ok("connect")["shown_id"]
+    b_id = b.ok("connect")["shown_id"]
     a.ok("hold", motors=[3], command="SpeedControl", fields={"speed_dps": 30.0})
     report_when(server, lambda r: speeds(r, [3]) == {3: 30.0}, 10, "motor 3 at A's 30 dps")
     before = server.ok("report")["bridge"]["refused"]

@@ -46,7 +46,8 @@ class Clients:
 
     def command(self, served: Served, mid: int, secret: str, command: Command) -> None:
         """Let the client with ``secret`` send ``command`` to motor ``mid`` as a request: it holds the
-        motor after (none does after a command that makes it safe, nor after a read).
+        motor after a command that is not a read. A command that makes the motor safe ends the
+        motor's set-point now and, once the motor acknowledged it, its holder (:func:`safe_done`).
 
         Raises:
             PermissionError: the client has no live token, or another live client holds the motor.
@@ -58,7 +59,19 @@ class Clients:
         if holder is not None:
             raise PermissionError(f"motor {mid} on {served.name} is held by another client ({holder})")
         if command in served.safe_commands[mid]:
-            # The client makes the motor safe itself (stop, off, brake): leaving must not undo it.
-            served.release(mid)
-        elif not type(command).READ:
+            served.held.pop(mid, None)  # (the tick must not send the set-point over the stop)
+            served.stale_since.pop(mid, None)
+        if not type(command).READ:
             served.owners[mid] = client
+
+
+def safe_done(served: Served, mid: int, secret: str, acknowledged: bool, now: float) -> None:
+    """After a request of motor ``mid``'s safe command: acknowledged, the client made the motor safe
+    itself and no longer holds it (so its leaving does not undo that, as after ``servobus off``);
+    not acknowledged, the motor is stale from ``now`` (the loop's clock) and gets the bridge's own
+    stop, repeated until acknowledged, after ``stop_after_s``."""
+    if acknowledged:
+        if served.owners.get(mid) == wire.public_id(secret):
+            served.release(mid)
+    else:
+        served.stale_since[mid] = now

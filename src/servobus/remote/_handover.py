@@ -3,9 +3,11 @@
 Zenoh calls its callbacks on its own threads; the bridge's state lives on its event loop. Each kind
 of callback is handed over by its own rule:
 
-* set-points (:meth:`Handover.latest`): only each client's latest message on each key waits for
-  the loop; a newer one replaces it there (counted ``overwritten``), so a client that publishes
-  faster than the bridge takes them costs no queue and no lag;
+* set-points (:meth:`Handover.latest`): of each client's messages on each key, at most the
+  ``PER_SLOT`` latest wait for the loop, in order; an older one beyond them is dropped there (counted
+  ``overwritten``), so a client that publishes faster than the bridge takes them costs no queue and
+  no lag, while one whose successive batches name different motors loses none of them to the next
+  unless it is that far ahead;
 * queries (:meth:`Handover.queued`): in order, to a task that may start tasks, at most
   ``backlog`` waiting; beyond that a query is answered nothing at once, on Zenoh's thread;
 * liveliness (:meth:`Handover.direct`): straight to the loop, never dropped.
@@ -29,6 +31,8 @@ if TYPE_CHECKING:
 
 logger = logging.getLogger("servobus.remote.bridge")
 
+PER_SLOT = 8  # set-point messages of one client on one key that may wait for the loop
+
 
 class Handover:
     """What Zenoh's threads hand to one bridge's event loop (``lane``)."""
@@ -40,7 +44,7 @@ class Handover:
             math.inf
         )
         self._waiting = 0  # queued items handed over and not yet taken (approximate: two threads)
-        # (key, client id) -> [served, the latest set-point message, when it came, how many it replaced]
+        # (key, client id) -> [served, [(message, when it came), ...] oldest first, how many were dropped]
         self._latest: dict[tuple[str, bytes], list[Any]] = {}
         self._lock = threading.Lock()
         self.dropped = 0  # set-points and queries dropped because the backlog was full
@@ -78,20 +82,30 @@ class Handover:
             args[-1].drop()
 
     async def run(self) -> None:
-        """Run the queued handlers, in order, in this task (so that they may start tasks)."""
+        """Run the queued handlers, in order, in this task (so that they may start tasks); the
+        queries still waiting when it ends are answered nothing, at once."""
         async with self._events_in:
-            async for handler, args in self._events_in:
-                self._waiting -= 1
-                try:
-                    handler(*args)
-                except Exception:  # one bad message must not end the bridge's intake
-                    logger.exception("handling a message failed")
+            try:
+                async for handler, args in self._events_in:
+                    self._waiting -= 1
+                    try:
+                        handler(*args)
+                    except Exception:  # one bad message must not end the bridge's intake
+                        logger.exception("handling a message failed")
+                        args[-1].drop()  # (the handler failed before it took the query on)
+            finally:
+                while True:
+                    try:
+                        _, args = self._events_in.receive_nowait()
+                    except (anyio.WouldBlock, anyio.EndOfStream):
+                        break
+                    args[-1].drop()
 
     def latest(
         self, handler: Callable[[Served, tuple[str, bytes, int]], object], served: Served
     ) -> Callable[[Any], None]:
         """A callback for set-points: ``handler(served, (key, payload, arrived_ns))`` on the loop,
-        with each client's latest message on each key only."""
+        for each client's latest ``PER_SLOT`` messages on each key, oldest first."""
 
         def callback(sample: Any) -> None:
             key, payload = str(sample.key_expr), sample.payload.to_bytes()
@@ -99,12 +113,16 @@ class Handover:
             with self._lock:
                 entry = self._latest.get(slot)
                 if entry is not None:
-                    entry[1:] = [payload, time.time_ns(), entry[3] + 1]
+                    waiting = entry[1]
+                    waiting.append((payload, time.time_ns()))
+                    if len(waiting) > PER_SLOT:
+                        del waiting[0]
+                        entry[2] += 1
                     return
                 if len(self._latest) >= self._limit:
                     self.dropped += 1
                     return
-                self._latest[slot] = [served, payload, time.time_ns(), 0]
+                self._latest[slot] = [served, [(payload, time.time_ns())], 0]
             self._call(self._take, handler, slot)
 
         return callback
@@ -113,9 +131,10 @@ class Handover:
         self, handler: Callable[[Served, tuple[str, bytes, int]], object], slot: tuple[str, bytes]
     ) -> None:
         with self._lock:
-            served, payload, arrived_ns, overwritten = self._latest.pop(slot)
+            served, waiting, overwritten = self._latest.pop(slot)
         served.counts["overwritten"] += overwritten
-        try:
-            handler(served, (slot[0], payload, arrived_ns))
-        except Exception:  # one bad message must not end anything
-            logger.exception("handling set-points failed")
+        for payload, arrived_ns in waiting:
+            try:
+                handler(served, (slot[0], payload, arrived_ns))
+            except Exception:  # one bad message must not end anything
+                logger.exception("handling set-points failed")

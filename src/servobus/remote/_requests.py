@@ -9,10 +9,11 @@ from typing import Any
 
 import anyio
 
+from servobus import runtime
 from servobus.bus import Motor
 from servobus.errors import ServobusError
 from servobus.remote import wire
-from servobus.remote._clients import Clients
+from servobus.remote._clients import Clients, safe_done
 from servobus.remote._served import Served
 from servobus.remote.keys import Keys
 
@@ -26,7 +27,12 @@ async def answer(served: Served, query: Any, keys: Keys, clients: Clients) -> No
     except BaseException:  # cancelled (the bridge is closing): answered nothing, at once
         finish(query)
         raise
-    await reply(query, str(query.key_expr), wire.encode_result(schema, result))
+    try:
+        payload = wire.encode_result(schema, result)
+    except wire.WireError as exc:  # (a plug-in's reply with a value the encoding has no form for)
+        logger.warning("%s: the reply cannot be encoded: %s", query.key_expr, exc)
+        payload = wire.encode_result(schema, wire.Result(error=ServobusError(f"reply not encodable: {exc}")))
+    await reply(query, str(query.key_expr), payload)
 
 
 async def _outcome(
@@ -66,18 +72,24 @@ async def _run(
         PermissionError: a command through ``read``, a client without a token, a motor another live
             client holds.
     """
-    command = request.command
+    command, mid = request.command, motor.motor_id
+    safe = leaf == "request" and command in served.safe_commands[mid]
     if leaf == "read":
         served.counts["reads"] += 1
         if not type(command).READ:
             raise PermissionError(f"{type(command).__name__} is not a read: send it as a request")
     else:
         served.counts["requests"] += 1
-        clients.command(served, motor.motor_id, request.client_id, command)
+        clients.command(served, mid, request.client_id, command)
     try:
-        return wire.Result(reply=await served.bus.request(motor, command, timeout_s=request.timeout_s))
+        reply = await served.bus.request(motor, command, timeout_s=request.timeout_s)
     except ServobusError as exc:
+        if safe:
+            safe_done(served, mid, request.client_id, False, runtime.current().time())
         return wire.Result(error=exc)
+    if safe:
+        safe_done(served, mid, request.client_id, True, runtime.current().time())
+    return wire.Result(reply=reply)
 
 
 def finish(query: Any) -> None:

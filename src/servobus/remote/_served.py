@@ -78,8 +78,9 @@ class Served:
         self.counts = dict.fromkeys(COUNTS, 0)
 
     def changed(self, motor: Motor, traffic: Traffic, reply: Reply) -> None:
-        """(The Bus's subscriber) the motor's state is to be published."""
-        self.dirty.add(motor.motor_id)
+        """(The Bus's subscriber) the motor's state is to be published, if it is one served here."""
+        if self.motors.get(motor.motor_id) is motor:
+            self.dirty.add(motor.motor_id)
 
     def publish(self, mid: int, now: float) -> None:
         """Publish motor ``mid``'s state now (``now``: the loop's clock)."""
@@ -141,7 +142,7 @@ class Served:
             "bus": dataclasses.asdict(self.bus.metrics()),
             "bridge": dict(self.counts),
             "setpoint_to_wire_ms": {"p50": pct(0.5), "p99": pct(0.99), "n": len(samples)},
-            "owners": {str(mid): owner for mid, owner in sorted(self.owners.items())},
+            "owners": {str(mid): wire.shown_id(owner) for mid, owner in sorted(self.owners.items())},
         }
 
 

@@ -139,6 +139,12 @@ class Bridge:
     ) -> bool | None:
         try:
             if self._group is not None:
+                with anyio.CancelScope(shield=True):  # the clients' motors, before the tasks go
+                    for served in self.served.values():
+                        held = set(served.owners) | set(served.held) | set(served.stale_since)
+                        motors = self._release(served, sorted(held), "bridge closing")
+                        if motors:
+                            await self._send_stop(served, motors)
                 self._group.cancel_scope.cancel()
                 await self._group.__aexit__(exc_type, exc, tb)
         finally:
@@ -195,23 +201,39 @@ class Bridge:
 
     def _stop(self, served: Served, motor_ids: Iterable[int], why: str) -> None:
         """Release the motors (set-points, holder) and send each its safe command, in a task."""
+        motors = self._release(served, motor_ids, why)
+        if motors:
+            try:
+                self._stops.send_nowait((served, motors))
+            except (anyio.BrokenResourceError, anyio.ClosedResourceError):  # (closed: stopped on exit)
+                logger.warning("%s/%s: the bridge is closed: no stop for %s", self.node, served.name, motors)
+
+    def _release(self, served: Served, motor_ids: Iterable[int], why: str) -> list[Motor]:
+        """Release the motors and write down why they are stopped; the motors."""
         motors = [served.motors[mid] for mid in motor_ids]
-        if not motors:
-            return
         for motor in motors:
             served.release(motor.motor_id)
-        served.counts["stops"] += len(motors)
-        now = time.time_ns()
-        self.stop_log.extend((now, served.name, m.motor_id, why) for m in motors)
-        ids = [m.motor_id for m in motors]
-        logger.warning("%s/%s: stopping motors %s (%s)", self.node, served.name, ids, why)
-        self._stops.send_nowait((served, motors))
+        if motors:
+            served.counts["stops"] += len(motors)
+            now = time.time_ns()
+            self.stop_log.extend((now, served.name, m.motor_id, why) for m in motors)
+            ids = [m.motor_id for m in motors]
+            logger.warning("%s/%s: stopping motors %s (%s)", self.node, served.name, ids, why)
+        return motors
 
     async def _take_stops(self) -> None:
         assert self._group is not None
         async with self._stops_in:
-            async for served, motors in self._stops_in:
-                self._group.start_soon(self._send_stop, served, motors)
+            try:
+                async for served, motors in self._stops_in:
+                    self._group.start_soon(self._send_stop, served, motors)
+            finally:  # (cancelled: the stops queued meanwhile still go; _send_stop is shielded)
+                while True:
+                    try:
+                        served, motors = self._stops_in.receive_nowait()
+                    except (anyio.WouldBlock, anyio.EndOfStream):
+                        break
+                    self._group.start_soon(self._send_stop, served, motors)
 
     async def _send_stop(self, served: Served, motors: list[Motor]) -> None:
         """The motors' safe commands, past the watchdog, again until acknowledged or the Bus's
@@ -341,8 +363,9 @@ class Bridge:
 
     def _on_status(self, served: Served, status: MotorStatus) -> None:
         assert self._lane is not None
-        if status.motor.motor_id in served.publishers:
-            served.publish(status.motor.motor_id, self._lane.time())
+        mid = status.motor.motor_id
+        if served.motors.get(mid) is status.motor and mid in served.publishers:
+            served.publish(mid, self._lane.time())
 
     async def _publish_states(self, served: Served) -> None:
         assert self._lane is not None

@@ -179,7 +179,8 @@ class RemoteBus:
         self.valid_for_s = valid_for_s
         self.timeout_s = timeout_s
         self.client_id = uuid.uuid4().hex  # a secret: only this client's messages carry it
-        self.token_id = wire.public_id(self.client_id)  # what the bridge and its metrics call it
+        self.token_id = wire.public_id(self.client_id)  # its liveliness token's name
+        self.shown_id = wire.shown_id(self.token_id)  # what the bridge's metrics call it (owners)
         self.info: dict[str, Any] = {}
         self.motors: dict[int, RemoteMotor] = {}
         self.lost: BridgeLost | None = None

@@ -62,6 +62,7 @@ __all__ = [
     "encode_state",
     "peek_motor",
     "public_id",
+    "shown_id",
 ]
 
 VERSION = 1
@@ -318,10 +319,16 @@ def _client_id(reader: _Reader) -> str:
 
 
 def public_id(client_id: str) -> str:
-    """The name a client is known by (its liveliness token, ``owners`` in metrics): a hash of the
-    secret id its messages carry, so that seeing who holds a motor does not let another client
-    speak in its name."""
+    """The name of a client's liveliness token: a hash of the secret id its messages carry, so that
+    knowing the token does not let another client speak in its name."""
     return hashlib.sha256(bytes.fromhex(client_id)).hexdigest()[:32]
+
+
+def shown_id(public: str) -> str:
+    """How a bridge's metrics name the client that holds a motor: a hash of its public id, so that
+    reading them does not tell another client the key of that client's liveliness token (whoever
+    declared a token with the same key would keep it alive when that client left)."""
+    return hashlib.sha256(b"shown:" + bytes.fromhex(public)).hexdigest()[:16]
 
 
 # ---- messages ----
