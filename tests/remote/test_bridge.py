@@ -350,3 +350,16 @@ async def test_a_motor_the_bridge_does_not_serve_is_none_of_its_business() -> No
                 assert sorted(remote.motors) == [1]
                 assert isinstance(await remote.motor(1).read_status2(), ma.StatusReply)
             assert 2 not in bridge.served["b"].published
+
+
+async def test_batches_naming_different_motors_are_not_lost_to_each_other(served: Served) -> None:
+    """Two batches of one client, for different motors, both waiting for a busy bridge: both taken."""
+    async with connect("n/b", endpoints=[served.endpoint]) as remote:
+        await remote.cycle([(remote.motor(1), ma.SpeedControl(speed_dps=11.0))], valid_for_s=1.0)
+        await remote.cycle([(remote.motor(2), ma.SpeedControl(speed_dps=22.0))], valid_for_s=1.0)
+        time.sleep(0.2)  # (both reach the bridge's Zenoh thread while its loop is held here)
+        held = served.bridge.served["b"].held
+        await _until(lambda: {1, 2} <= set(held))
+        assert held[1].command == ma.SpeedControl(speed_dps=11.0)
+        assert held[2].command == ma.SpeedControl(speed_dps=22.0)
+        assert served.counts()["overwritten"] == 0
