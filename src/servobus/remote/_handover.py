@@ -10,7 +10,8 @@ of callback is handed over by its own rule:
   unless it is that far ahead;
 * queries (:meth:`Handover.queued`): in order, to a task that may start tasks, at most
   ``backlog`` waiting; beyond that a query is answered nothing at once, on Zenoh's thread;
-* liveliness (:meth:`Handover.direct`): straight to the loop, never dropped.
+* liveliness: straight to the loop, never dropped (:func:`servobus.remote._session.handed`, no
+  need of this class).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 import anyio
 
 from servobus import runtime
+from servobus.remote._session import to_loop
 
 if TYPE_CHECKING:
     from servobus.remote._served import Served
@@ -49,18 +51,6 @@ class Handover:
         self._lock = threading.Lock()
         self.dropped = 0  # set-points and queries dropped because the backlog was full
 
-    def _call(self, fn: Callable[..., object], *args: Any) -> None:
-        try:
-            self._lane.call_soon_threadsafe(fn, *args)
-        except RuntimeError:  # the loop is closed: the bridge is shutting down
-            logger.debug("a zenoh callback after the loop closed was dropped")
-
-    def direct(
-        self, handler: Callable[[Any], object], extract: Callable[[Any], Any]
-    ) -> Callable[[Any], None]:
-        """A callback that hands ``extract(item)`` to ``handler`` on the loop, never dropped."""
-        return lambda item: self._call(handler, extract(item))
-
     def queued(self, handler: Callable[[Served, Any], object], served: Served) -> Callable[[Any], None]:
         """A callback that hands each query to ``handler(served, query)``, run by :meth:`run`."""
 
@@ -70,7 +60,7 @@ class Handover:
                 query.drop()  # (the client's get ends now, with no answer)
                 return
             self._waiting += 1
-            self._call(self._put, handler, (served, query))
+            to_loop(self._lane, self._put, handler, (served, query))
 
         return callback
 
@@ -123,7 +113,7 @@ class Handover:
                     self.dropped += 1
                     return
                 self._latest[slot] = [served, [(payload, time.time_ns())], 0]
-            self._call(self._take, handler, slot)
+            to_loop(self._lane, self._take, handler, slot)
 
         return callback
 

@@ -3,12 +3,31 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from typing import Any
 
 import anyio
 import zenoh
 
+from servobus import runtime
+
 logger = logging.getLogger(__name__)
+
+
+def to_loop(lane: runtime.Runtime, fn: Callable[..., object], *args: Any) -> None:
+    """(On one of Zenoh's threads) call ``fn(*args)`` soon on the event loop of ``lane``; nothing
+    once that loop is closed (its owner is shutting down)."""
+    try:
+        lane.call_soon_threadsafe(fn, *args)
+    except RuntimeError:
+        logger.debug("a zenoh callback after the loop closed was dropped")
+
+
+def handed(
+    lane: runtime.Runtime, handler: Callable[[Any], object], extract: Callable[[Any], Any]
+) -> Callable[[Any], None]:
+    """A Zenoh callback that hands ``extract(item)`` to ``handler`` on the loop of ``lane``."""
+    return lambda item: to_loop(lane, handler, extract(item))
 
 
 def sample_kind(sample: zenoh.Sample) -> str:

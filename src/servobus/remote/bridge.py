@@ -38,7 +38,7 @@ from servobus.remote import _requests, wire
 from servobus.remote._clients import Clients
 from servobus.remote._handover import Handover
 from servobus.remote._served import Held, Served
-from servobus.remote._session import close_session, sample_kind
+from servobus.remote._session import close_session, handed, sample_kind
 from servobus.remote.keys import Keys
 from servobus.safety import stop_motors
 from servobus.ticks import ticks
@@ -158,11 +158,11 @@ class Bridge:
         await close_session(session, declared)
 
     def _declare(self) -> None:
-        session, keys, handover = self._session, self.keys, self._handover
-        assert handover is not None
+        session, keys, handover, lane = self._session, self.keys, self._handover, self._lane
+        assert handover is not None and lane is not None
         self._declared.append(
             session.liveliness().declare_subscriber(
-                keys.clients, handover.direct(self._on_client, _token), history=True
+                keys.clients, handed(lane, self._on_client, _token), history=True
             )
         )
         self._declared.append(session.liveliness().declare_token(keys.alive))

@@ -17,7 +17,6 @@ stops the motors this client commanded. If the bridge vanishes, every pending an
 
 from __future__ import annotations
 
-import contextlib
 import json
 import logging
 import math
@@ -36,7 +35,7 @@ from servobus import runtime
 from servobus.errors import MotorOffline, TransportError
 from servobus.protocols import Command, Family, Reply, get_family
 from servobus.remote import wire
-from servobus.remote._session import close_session, sample_kind
+from servobus.remote._session import close_session, handed, sample_kind, to_loop
 from servobus.remote.keys import Keys, check_name
 from servobus.remote.security import DEFAULT_ENDPOINT, client_config, open_error
 
@@ -223,11 +222,12 @@ class RemoteBus:
         return self
 
     async def _start(self) -> None:
-        session, keys = self._session, self.keys
+        session, keys, lane = self._session, self.keys, self._lane
+        assert lane is not None
         self._alive = anyio.Event()
         self._declared.append(
             session.liveliness().declare_subscriber(
-                keys.alive, self._handed(self._on_alive, sample_kind), history=True
+                keys.alive, handed(lane, self._on_alive, sample_kind), history=True
             )
         )
         with anyio.move_on_after(self.timeout_s):
@@ -258,7 +258,7 @@ class RemoteBus:
         self._declared.append(
             session.declare_subscriber(
                 keys.motor(self.name, "*", "state"),
-                self._handed(self._on_state, lambda s: s.payload.to_bytes()),
+                handed(lane, self._on_state, lambda s: s.payload.to_bytes()),
             )
         )
         if not self.read_only:
@@ -275,18 +275,6 @@ class RemoteBus:
         declared, self._declared = self._declared, []
         self._setpoints = None
         await close_session(session, declared)
-
-    def _handed(
-        self, handler: Callable[[Any], object], extract: Callable[[Any], Any]
-    ) -> Callable[[Any], None]:
-        lane = self._lane
-        assert lane is not None
-
-        def callback(item: Any) -> None:
-            with contextlib.suppress(RuntimeError):  # the loop is closed: we are shutting down
-                lane.call_soon_threadsafe(handler, extract(item))
-
-        return callback
 
     def _on_alive(self, kind: str) -> None:
         if kind == "PUT":
@@ -451,8 +439,7 @@ class RemoteBus:
                 answers.append(ok.payload.to_bytes())
 
         def on_done() -> None:
-            with contextlib.suppress(RuntimeError):
-                lane.call_soon_threadsafe(done.set)
+            to_loop(lane, done.set)
 
         self._waiting.add(done)
         try:
