@@ -130,28 +130,27 @@ def _set_zero(motor: HollowMotor) -> None:
     motor.zero_offset_deg = motor.plant.position_deg
 
 
-@_does(Setpoint)
-def _setpoint(motor: HollowMotor, command: Setpoint) -> None:
-    motor.setpoint = HeldSetpoint(
-        target_deg=command.position_deg,
+def _held(command: Setpoint | IncrementalSetpoint, target_deg: float) -> HeldSetpoint:
+    """What the motor holds after a set-point frame aiming at ``target_deg``."""
+    return HeldSetpoint(
+        target_deg=target_deg,
         speed_dps=command.speed_rad_s * DPS_PER_RAD_S,
         current_a=command.current_a,
         kp=command.kp,
         kd=command.kd,
     )
+
+
+@_does(Setpoint)
+def _setpoint(motor: HollowMotor, command: Setpoint) -> None:
+    motor.setpoint = _held(command, command.position_deg)
 
 
 @_does(IncrementalSetpoint)
 def _incremental_setpoint(motor: HollowMotor, command: IncrementalSetpoint) -> None:
     # §5.2 / A11: each frame moves the target once; the first one starts from where the motor is.
     base = motor.setpoint.target_deg if motor.setpoint is not None else motor.position_deg
-    motor.setpoint = HeldSetpoint(
-        target_deg=base + command.step_deg,
-        speed_dps=command.speed_rad_s * DPS_PER_RAD_S,
-        current_a=command.current_a,
-        kp=command.kp,
-        kd=command.kd,
-    )
+    motor.setpoint = _held(command, base + command.step_deg)
 
 
 @_does(CanModeSwitch)
