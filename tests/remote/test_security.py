@@ -391,10 +391,8 @@ def _refused(bridge: Bridge, config: zenoh.Config) -> None:
     assert bridge.puts == []
 
 
-@pytest.fixture(scope="module")
-def usrpwd_bridge(users_file: Path) -> Iterator[Bridge]:
-    endpoint = f"tcp/127.0.0.1:{_port()}"
-    access = Access(commanders=frozenset({"cmd"}), readers=frozenset({"ro"}), users_file=users_file)
+def _served(endpoint: str, access: Access) -> Iterator[Bridge]:
+    """A recording bridge session on ``endpoint`` with ``access``, for one module's tests."""
     session = zenoh.open(bridge_config(NODE, [endpoint], access))
     bridge = Bridge(session, endpoint)
     try:
@@ -402,6 +400,13 @@ def usrpwd_bridge(users_file: Path) -> Iterator[Bridge]:
         yield bridge
     finally:
         session.close()
+
+
+@pytest.fixture(scope="module")
+def usrpwd_bridge(users_file: Path) -> Iterator[Bridge]:
+    endpoint = f"tcp/127.0.0.1:{_port()}"
+    access = Access(commanders=frozenset({"cmd"}), readers=frozenset({"ro"}), users_file=users_file)
+    yield from _served(endpoint, access)
 
 
 @pytest.fixture(scope="module")
@@ -414,13 +419,7 @@ def tls_bridge(pki: Pki) -> Iterator[Bridge]:
         tls_key=pki.server.key,
         tls_ca=pki.ca.cert,
     )
-    session = zenoh.open(bridge_config(NODE, [endpoint], access))
-    bridge = Bridge(session, endpoint)
-    try:
-        bridge.serve()
-        yield bridge
-    finally:
-        session.close()
+    yield from _served(endpoint, access)
 
 
 def _assert_commander(seen: Seen) -> None:
