@@ -6,6 +6,8 @@ against: what its ``send`` writes, the adapter parses; what the adapter writes, 
 
 from __future__ import annotations
 
+from typing import Any
+
 import can
 import can.interfaces.slcan
 import pytest
@@ -16,11 +18,22 @@ from servobus.frame import Frame
 from servobus.sim.slcan import SlcanAdapter, format_frame, parse_frame
 
 
+def _read_all(port: Any) -> bytes:
+    """What python-can wrote to its loop:// port. pyserial's loop read gives up at the port's own
+    timeout (a wall-clock one), so one read on a loaded machine can return part of it: read on
+    until every byte that was waiting came."""
+    waiting = port.in_waiting
+    written = b""
+    while len(written) < waiting:
+        written += port.read(waiting - len(written))
+    return written
+
+
 def _python_can_slcan() -> can.BusABC:
     """python-can's slcan interface on pyserial's loopback port: what it writes, it reads back."""
     bus = can.Bus(interface="slcan", channel="loop://", sleep_after_open=0)
     port = bus.serialPortOrig  # type: ignore[attr-defined]
-    assert port.read(port.in_waiting) == b"O\r"  # opened the channel
+    assert _read_all(port) == b"O\r"  # opened the channel
     return bus
 
 
@@ -64,7 +77,7 @@ def test_python_can_sends_what_the_adapter_parses(frame: Frame) -> None:
     )
     bus.send(message)
     port = bus.serialPortOrig  # type: ignore[attr-defined]
-    written = port.read(port.in_waiting)
+    written = _read_all(port)
     bus.shutdown()
     adapter = SlcanAdapter(is_open=True)
     answer, sent = adapter.receive(written)
