@@ -2,10 +2,13 @@
 
 0xB1 counts milliseconds since power-up (§4.31). A motor that kept running since the host first
 saw it (or since it last came back from a restart) reads at least the time since then, and at least
-its last reading plus the time since that one; one that reads less was powered up in between.
+its last reading plus the time since that one; one that reads less was powered up in between (or
+is another motor: what it was told is lost either way).
 Clocks: the motor's and the host's may differ by :data:`DRIFT`, and a reading is late by its
 reply's latency and rounded to the millisecond (:data:`SLACK_S`). A restart within about
-``SLACK_S`` of the host first seeing the motor cannot be told from its power-up.
+``SLACK_S`` of the host first seeing the motor cannot be told from its power-up. The count wraps
+after 49.7 days: a reading that may have wrapped since the last one proves nothing, and before the
+first reading (the first return) a motor up for 49.7 days would read as restarted.
 """
 
 from __future__ import annotations
@@ -28,13 +31,15 @@ def _judge(before: Sightings, after: Sightings, known_since_s: float) -> str | N
     now = after.get(RunTimeReply)
     if now is None:
         return None
+    run_time_ms: int = now.reply.run_time_ms  # type: ignore[attr-defined]
     least_s = (now.at - known_since_s) * (1 - DRIFT)
     earlier = before.get(RunTimeReply)
     if earlier is not None and earlier.at >= known_since_s:
         last_s = earlier.reply.run_time_ms / 1000  # type: ignore[attr-defined]
+        if last_s + (now.at - earlier.at) * (1 + DRIFT) + SLACK_S >= _WRAP_S:
+            return None  # it may have wrapped meanwhile: no proof either way
         least_s = max(least_s, last_s + (now.at - earlier.at) * (1 - DRIFT))
     least_s -= SLACK_S
-    run_time_ms: int = now.reply.run_time_ms  # type: ignore[attr-defined]
     if least_s >= _WRAP_S or run_time_ms / 1000 >= least_s:
         return None
     return (
