@@ -10,8 +10,10 @@ reported once: a :class:`~servobus.watchdog.MotorStatus` with reason ``"restarte
 ``bus.subscribe_status`` callbacks, the motor's ``restarts`` counter, ``motor.restarted_at`` and one
 warning. What to send the motor again is the user's decision (docs/restarts.md has the recipe).
 
-Nothing here runs per reply: the Bus's intake only remembers the last reply of each type the family
-names (``Motor._remembered``); the rest runs on the watchdog's transitions.
+Nothing here runs per reply: what is judged is the motor's last reply before its silence, the reply
+that brought it back, the probes' replies, and the last reply of each type the family names for the
+intake to remember (``Motor._remembered``: LK's 0x92, which its probes cannot give before the
+silence); the rest runs on the watchdog's transitions.
 """
 
 from __future__ import annotations
@@ -47,6 +49,7 @@ class Restarts:
     def __init__(self, bus: Bus) -> None:
         self.bus = bus
         self._known_since: dict[int, float] = {}  # by codec id: running without a restart since
+        self._readings: dict[int, dict[type, Seen]] = {}  # by codec id: its probes' last replies
         self._before: dict[int, dict[type, Seen]] = {}  # by codec id: what it said before its silence
 
     def on_status(self, status: MotorStatus) -> None:
@@ -57,7 +60,10 @@ class Restarts:
             return
         key = id(motor.codec)
         if not status.online:
-            self._before[key] = dict(motor._remembered)
+            said = {**self._readings.get(key, {}), **motor._remembered}
+            if motor.state is not None:  # its last word (dated late, which only weakens a proof)
+                said[type(motor.state)] = Seen(motor.state, status.at)
+            self._before[key] = said
             return
         if key not in self._known_since:  # first seen: its run time (if any) starts before now
             self._known_since[key] = status.at
@@ -65,26 +71,31 @@ class Restarts:
             return
         before = self._before.pop(key, None)
         group = self.bus._group
-        if before is None or group is None or self.bus._closing:
+        if before is None or group is None or self.bus._closing or motor.state is None:
             return
-        group.start_soon(self._check, motor, before, status.at)
+        back = Seen(motor.state, status.at)  # the reply that brought it back
+        group.start_soon(self._check, motor, before, back)
 
-    async def _check(self, motor: Motor, before: dict[type, Seen], back_at: float) -> None:
-        """Read the family's probes of ``motor`` (back online at ``back_at``) and judge."""
+    async def _check(self, motor: Motor, before: dict[type, Seen], back: Seen) -> None:
+        """Read the family's probes of ``motor`` (back online with ``back``) and judge."""
         evidence = evidence_of(motor)
         assert evidence is not None
+        key = id(motor.codec)
+        after = {kind: seen for kind, seen in motor._remembered.items() if seen.at >= back.at}
+        after[type(back.reply)] = back
         for probe in evidence.probes:
             try:
-                await motor.request(probe(), retries=1)
+                reply = await motor.request(probe(), retries=1)
             except ServobusError as exc:  # offline again, streaming, the Bus closing: no verdict
                 logger.debug("%s: %r: restart check not done (%s)", self.bus.name, motor, exc)
                 return
-        after = {kind: seen for kind, seen in motor._remembered.items() if seen.at >= back_at}
-        key = id(motor.codec)
+            if reply is not None:  # (kept: the next silence's "before")
+                seen = after[type(reply)] = Seen(reply, self.bus._now())
+                self._readings.setdefault(key, {})[type(reply)] = seen
         why = evidence.judge(before, after, self._known_since[key])
         if why is None or self.bus._closing:
             return
-        self._known_since[key] = back_at
-        motor.restarted_at = back_at
+        self._known_since[key] = back.at
+        motor.restarted_at = back.at
         self.bus.scheduler.motor_counts[key]["restarts"] += 1
         self.bus._watchdog.restarted(motor, self.bus._now(), why)

@@ -40,10 +40,13 @@ class RestartEvidence:
         probes: reads (command classes without fields) the Bus sends when the motor comes back
             online; their replies are in ``after``. None where the reply that brought it back says
             enough.
-        remembers: the reply types the Bus remembers (the last of each) while the motor answers.
-        judge: ``judge(before, after, known_since_s)``: the evidence in words when ``before`` (what was
-            remembered when the motor went silent) and ``after`` (what came since it answered again,
-            the probes' replies included) prove a restart, else None. ``known_since_s``: since when
+        remembers: reply types whose last one the Bus's intake remembers while the motor answers,
+            for evidence that neither the motor's last reply before its silence nor the probes'
+            earlier replies give (each costs a look-up per reply: keep it empty where they do).
+        judge: ``judge(before, after, known_since_s)``: the evidence in words when ``before`` (when
+            the motor went silent: its last reply, the probes' last replies, what was remembered)
+            and ``after`` (the reply that brought it back, the probes' replies) prove a restart,
+            else None. ``known_since_s``: since when
             the host has known the motor to be running without a restart (when it was first seen,
             or came back from its last reported restart).
     """

@@ -10,7 +10,6 @@ A motor that works within one turn gives no such evidence.
 from __future__ import annotations
 
 from servobus.protocols._restart import RestartEvidence, Seen, Sightings
-from servobus.protocols.hollow.replies import ExtendedReply, FdReply, NormalReply
 
 __all__ = ["RESTART"]
 
@@ -30,5 +29,6 @@ def _judge(before: Sightings, after: Sightings, known_since_s: float) -> str | N
     return None
 
 
-# No probe: the reply that brought the motor back carries its position.
-RESTART = RestartEvidence(probes=(), remembers=frozenset((NormalReply, ExtendedReply, FdReply)), judge=_judge)
+# No probe, nothing to remember: its last reply before the silence and the one that brought it back
+# carry its position.
+RESTART = RestartEvidence(probes=(), remembers=frozenset(), judge=_judge)

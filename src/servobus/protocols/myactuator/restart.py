@@ -48,4 +48,5 @@ def _judge(before: Sightings, after: Sightings, known_since_s: float) -> str | N
     )
 
 
-RESTART = RestartEvidence(probes=(ReadRunTime,), remembers=frozenset((RunTimeReply,)), judge=_judge)
+# Nothing to remember from the traffic: the last reading is the probe's, on the last return.
+RESTART = RestartEvidence(probes=(ReadRunTime,), remembers=frozenset(), judge=_judge)
