@@ -54,6 +54,7 @@ from servobus.errors import TransportError
 from servobus.metrics import Metrics
 from servobus.motor import Motor, MotorFrames, NamedMotor, _motor_class, _refuse_coroutine, command_classes
 from servobus.protocols import Command, Family, Reply, get_family
+from servobus.restarts import Restarts
 from servobus.safety import safe_stop
 from servobus.scheduler import Scheduler, Traffic
 from servobus.ticks import Tick as PacerTick
@@ -214,6 +215,7 @@ class Bus:
         self._commanded: dict[int, Motor] = {}
         self._subscribers: list[Callable[[Motor, Traffic, Reply], object]] = []
         self._engine = Engine(self, self.scheduler, transport, self._watchdog)
+        self._watchdog.listeners.append(Restarts(self).on_status)  # (first: before the users')
         self._runtime: _runtime.Runtime | None = None
         self._is_current: Callable[[], bool] = _elsewhere
         self._group: anyio.abc.TaskGroup | None = None

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 from servobus._tick import detached
 from servobus.errors import MotorFault, TransportError
 from servobus.frame import Frame
+from servobus.protocols._restart import Seen
 from servobus.scheduler import Received, Traffic
 
 if TYPE_CHECKING:
@@ -70,6 +71,8 @@ class Delivery:
         if motor is not None:
             motor.state = reply
             motor.last_seen = got.frame.timestamp or now
+            if motor._remembers and type(reply) in motor._remembers:  # (servobus.restarts)
+                motor._remembered[type(reply)] = Seen(reply, now)
             if motor._misses or motor.online is not True:
                 self.engine.watchdog.answered(motor, now)
             if reply.FAULTS is not None:

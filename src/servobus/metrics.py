@@ -94,6 +94,7 @@ class Metrics:
         latency: request-to-reply time of the last replies.
         bus_load_pct: share of the line used in the last second, from the transport (bus only;
             None when unknown).
+        restarts: times a motor came back online from a restart (servobus.restarts).
     """
 
     requests: int
@@ -115,6 +116,7 @@ class Metrics:
     foreign: int
     latency: Latency
     bus_load_pct: float | None = None
+    restarts: int = 0
 
     @classmethod
     def of(cls, counts: Mapping[str, int], latency: Latency, bus_load_pct: float | None = None) -> Metrics:
@@ -141,4 +143,5 @@ class Metrics:
             foreign=c("foreign", 0),
             latency=latency,
             bus_load_pct=bus_load_pct,
+            restarts=c("restarts", 0),
         )

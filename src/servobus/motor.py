@@ -15,6 +15,7 @@ import anyio
 from servobus.errors import MotorFault, MotorTimeout, TransportError
 from servobus.metrics import Metrics
 from servobus.protocols import BoundCodec, Command, Family, Reply, get_family
+from servobus.protocols._restart import Seen
 from servobus.scheduler import Traffic
 
 if TYPE_CHECKING:
@@ -107,6 +108,8 @@ class Motor:
         online: the host-side watchdog's verdict: True once it answered, False after
             ``offline_after_misses`` missed replies in a row or ``offline_after_s`` of silence, None
             before either happened. A motor that answers again is online again.
+        restarted_at: when the motor last came back online from a restart (the loop's clock; None:
+            none was found). Its ``"restarted"`` MotorStatus says so too (servobus.restarts).
     """
 
     def __init__(self, bus: Bus, codec: BoundCodec, commands: dict[str, type[Command]] | None = None) -> None:
@@ -117,6 +120,11 @@ class Motor:
         self.online: bool | None = None
         self.fault: MotorFault | None = None
         self._misses = 0
+        self.restarted_at: float | None = None
+        # the last reply of each type its family's restart evidence remembers (servobus.restarts)
+        evidence = getattr(codec, "RESTART", None)
+        self._remembers: frozenset[type] = evidence.remembers if evidence is not None else frozenset()
+        self._remembered: dict[type, Seen] = {}
         # by method name; from the Family the Bus bound it with (a plug-in may be unregistered)
         self._commands = command_classes(codec.family) if commands is None else commands
         self._watchers: list[MotorFrames] = []

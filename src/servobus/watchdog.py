@@ -22,13 +22,16 @@ logger = logging.getLogger("servobus.bus")
 
 @dataclass(frozen=True, slots=True)
 class MotorStatus:
-    """A motor went offline (missed replies, or silent too long) or came back (it answered).
+    """A motor went offline (missed replies, or silent too long), came back (it answered), or is
+    found to have restarted.
 
     Attributes:
         motor: the motor.
         online: its new state.
         at: when (the loop's clock).
-        reason: why, in words (``"3 replies missed"``, ``"silent for 0.5 s"``, ``"answered"``).
+        reason: why, in words (``"3 replies missed"``, ``"silent for 0.5 s"``, ``"answered"``), or
+            ``"restarted"``: the motor, back online, had restarted (servobus.restarts; it follows
+            its ``"answered"``), so the set-points it held are lost.
     """
 
     motor: Motor
@@ -89,13 +92,21 @@ class Watchdog:
         (logger.info if online else logger.warning)(
             "%s: %r %s (%s)", self.name, motor, "online" if online else "offline", reason
         )
+        self._tell(status)
+        if online:
+            self.arm_silence()
+
+    def restarted(self, motor: Motor, at: float, evidence: str) -> None:
+        """``motor``, back online, had restarted (servobus.restarts found ``evidence``): told once."""
+        logger.warning("%s: %r restarted (%s): what it was told before is lost", self.name, motor, evidence)
+        self._tell(MotorStatus(motor, True, at, "restarted"))
+
+    def _tell(self, status: MotorStatus) -> None:
         for callback in self.listeners:
             try:
                 callback(status)
             except Exception:  # a listener's bug must not stop the reader
                 logger.exception("%s: status listener %r failed", self.name, callback)
-        if online:
-            self.arm_silence()
 
     def arm_silence(self) -> None:
         """Time the silence check for the online motor heard from longest ago (if none is armed)."""

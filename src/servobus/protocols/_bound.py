@@ -43,6 +43,7 @@ from typing import Any, ClassVar, Protocol, runtime_checkable
 
 from servobus.frame import Frame
 from servobus.protocols._message import Command, Reply
+from servobus.protocols._restart import RestartEvidence
 
 __all__ = [
     "EXTENDED",
@@ -236,6 +237,9 @@ class CodecBase:
 
     def decode(self, frame: Frame) -> Reply:
         raise NotImplementedError
+
+    #: what proves that the motor restarted, per family (servobus.restarts; None: nothing does)
+    RESTART: ClassVar[RestartEvidence | None] = None
 
     #: kind -> a function building the command, per family (see :meth:`safe_command`)
     SAFE_COMMANDS: ClassVar[dict[str, Any]] = {}

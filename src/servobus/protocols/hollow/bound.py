@@ -58,6 +58,7 @@ from servobus.protocols.hollow.ids import (
 from servobus.protocols.hollow.model import DEFAULT_MODEL, HollowModel, packers
 from servobus.protocols.hollow.replies import FD_TEMPERATURE_LIMITS_C as FD_TEMPERATURE_LIMITS
 from servobus.protocols.hollow.replies import ExtendedReply, FdReply, NormalReply, reply_classes
+from servobus.protocols.hollow.restart import RESTART
 from servobus.protocols.hollow.rs485 import ModbusWrite, decode_modbus_reply, encode_transparent
 
 __all__ = ["LINKS", "HollowCodec", "ModbusFraming", "TransparentFraming", "bind", "broadcast"]
@@ -158,6 +159,7 @@ class HollowCodec(CodecBase):
     """One hollow motor on one link. Build it with :func:`bind` (or ``FAMILY.bind``)."""
 
     family = "hollow"
+    RESTART = RESTART  # what proves a restart (servobus.restarts)
     # Classic CAN has the special Stop frame; an FD motor (and the converter) is stopped by a control
     # frame with Run Cmd off. The hollow motors have no brake command and no separate power-off.
     SAFE_COMMANDS = {  # noqa: RUF012 - a class table, not per instance

@@ -68,6 +68,7 @@ from servobus.protocols.lk.replies import (
     status2_slot,
     torque_range,
 )
+from servobus.protocols.lk.restart import RESTART
 from servobus.protocols.lk.states import BrakeAction
 
 __all__ = ["LINKS", "LkCodec", "bind", "broadcast"]
@@ -280,6 +281,7 @@ class LkCodec(CodecBase):
     """One LK motor on CAN. Build it with :func:`bind` (or ``FAMILY.bind``)."""
 
     family = "lk"
+    RESTART = RESTART  # what proves a restart (servobus.restarts)
     SAFE_COMMANDS = {  # noqa: RUF012 - a class table, not per instance
         "stop": lambda codec: cmd.MotorStop(),
         "shutdown": lambda codec: cmd.MotorOff(),

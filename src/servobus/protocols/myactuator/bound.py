@@ -72,6 +72,7 @@ from servobus.protocols.myactuator.motion import (
     MotionScales,
     reply_packer,
 )
+from servobus.protocols.myactuator.restart import RESTART
 from servobus.protocols.myactuator.revision import Revision
 from servobus.protocols.myactuator.rs485 import RS485_FRAME_SIZE, encode_rs485, rs485_deframer
 from servobus.protocols.myactuator.rs485_motion import Rs485MotionCommand
@@ -136,6 +137,7 @@ class MyActuatorCodec(CodecBase):
     """One MyActuator motor on one link. Build it with :func:`bind` (or ``FAMILY.bind``)."""
 
     family = "myactuator"
+    RESTART = RESTART  # what proves a restart (servobus.restarts)
     SAFE_COMMANDS = {  # noqa: RUF012 - a class table, not per instance
         "stop": lambda codec: cmd.MotorStop(),
         "shutdown": lambda codec: cmd.MotorShutdown(),

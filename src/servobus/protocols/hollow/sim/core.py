@@ -49,6 +49,7 @@ class HollowCore(ListeningDevice):
     fd_enabled: bool
     turnaround_s: float
     turnaround_jitter_s: float
+    power_back_s: float | None  # (servobus.sim.power.PowerCuts: set while a brownout lasts)
     fd_current_a_per_count: float
 
     # The C twin (cdata sb_simmotor *) and its sb_hollow_state, while attached.
@@ -118,8 +119,11 @@ class HollowCore(ListeningDevice):
         motor.listen_all = 0
         motor.n_listen = 1
         motor.listen[0] = self.motor_id
-        # The guards: an unresponsive motor and jittered turnarounds (Python's random) are the model's.
-        motor.hot = not self._py_unresponsive and self.turnaround_jitter_s == 0.0
+        # The guards: an unresponsive or unpowered motor and jittered turnarounds (Python's random) are
+        # the model's.
+        motor.hot = (
+            not self._py_unresponsive and self.turnaround_jitter_s == 0.0 and self.power_back_s is None
+        )
         motor.py_deadline_s = math.inf  # the model has no deadlines of its own
 
     def settle(self) -> None:

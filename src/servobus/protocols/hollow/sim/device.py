@@ -81,6 +81,7 @@ from servobus.sim.plant import (
     PositionControl,
     SpeedControl,
 )
+from servobus.sim.power import PowerCuts
 
 __all__ = [
     "DEFAULT_FD_CURRENT_A_PER_COUNT",
@@ -119,7 +120,7 @@ _TEMPERATURE_LIMITS_C = (-125, 125)  # §7.3
 _INT16 = (-(1 << 15), (1 << 15) - 1)
 
 
-class HollowMotor(HollowCore):
+class HollowMotor(HollowCore, PowerCuts):
     """One hollow-series motor on a CAN or CAN FD bus (implements :class:`~servobus.sim.device.Device`).
 
     Args:
@@ -210,6 +211,9 @@ class HollowMotor(HollowCore):
         Returns:
             One reply on the host id, or nothing (not ours, not decodable, or unresponsive).
         """
+        if self.power_back_s is not None and not self.powered(now_s):
+            self.plant.advance(now_s)
+            return []
         self.plant.advance(now_s)
         self._counters["received"] += 1
         if frame.arbitration_id != self.motor_id:
@@ -238,6 +242,8 @@ class HollowMotor(HollowCore):
 
     def poll(self, now_s: float) -> list[Emission]:
         """Nothing: the motor never transmits on its own (§3, "pure slave")."""
+        if self.power_back_s is not None:
+            self.powered(now_s)
         self.plant.advance(now_s)
         return []
 
@@ -263,6 +269,15 @@ class HollowMotor(HollowCore):
         self.plant.advance(now_s)
         self._counters["reboots"] += 1
         self._power_up()
+
+    def _power_cut(self, now_s: float) -> None:
+        # No supply: no output power, the shaft is free (as after FD, §4.1).
+        self.plant.advance(now_s)
+        self.plant.set_control(Off())
+
+    def _power_changed(self) -> None:
+        self._changed()
+        self.core_push()  # its C twin stands aside while the power is cut (HollowCore.core_push)
 
     def _power_up(self) -> None:
         self.enabled = False

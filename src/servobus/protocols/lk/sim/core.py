@@ -120,7 +120,7 @@ class LkCore:
         motor.listen_all = 0
 
     def push(self) -> None:
-        """Write everything C reads; ``hot`` says whether C may act (no latched error)."""
+        """Write everything C reads; ``hot`` says whether C may act (no latched error, powered)."""
         self.pull()  # C's changes first, or the model's stale copy would overwrite them
         device, motor, s = self._device, self.motor, self.state
         model = device.model
@@ -152,7 +152,7 @@ class LkCore:
         motor.listen[1] = _MULTI_MOTOR_ID
         motor.n_listen = 2
         motor.py_deadline_s = math.inf  # the model has no deadlines of its own
-        motor.hot = not device._latched
+        motor.hot = not device._latched and device.power_back_s is None
 
     def pull(self) -> None:
         """Take what C changed since the last pull (nothing to do unless it acted)."""

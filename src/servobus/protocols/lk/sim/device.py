@@ -80,6 +80,7 @@ from servobus.sim.plant import (
     PlantParams,
     SpeedControl,
 )
+from servobus.sim.power import PowerCuts
 
 __all__ = ["DEFAULT_CALIBRATION_S", "DEFAULT_TURNAROUND_S", "LkMotor", "RunState"]
 
@@ -93,7 +94,7 @@ _ERROR_BITS = {
 }
 
 
-class LkMotor(TwinnedMotor):
+class LkMotor(TwinnedMotor, PowerCuts):
     """One LK motor on a CAN bus (implements :class:`~servobus.sim.device.Device`).
 
     On a network that runs the C core (issue 27), the motor gets a C twin (:meth:`core_attach`,
@@ -199,6 +200,9 @@ class LkMotor(TwinnedMotor):
             The reply (0x280: this motor's reply) ready ``turnaround_s`` later (0x18: after the
             calibration), or nothing (ignored, or :attr:`unresponsive`).
         """
+        if self.power_back_s is not None and not self.powered(now_s):
+            self.plant.advance(now_s)
+            return []
         self.plant.advance(now_s)
         self._counters["received"] += 1
         reason = self._ignore_reason(frame, now_s)
@@ -224,6 +228,8 @@ class LkMotor(TwinnedMotor):
 
     def poll(self, now_s: float) -> list[Emission]:
         """Nothing: an LK motor only answers (no active reports in either manual)."""
+        if self.power_back_s is not None:
+            self.powered(now_s)
         self.plant.advance(now_s)
         return []
 
@@ -248,6 +254,16 @@ class LkMotor(TwinnedMotor):
         self._counters["reboots"] += 1
         self._power_up()
         self.core_push()
+
+    def _power_cut(self, now_s: float) -> None:
+        # No supply: the output is off (a brake that engages at power-up engages unpowered); the
+        # held command and the turn count are lost at the power-up (reboot).
+        self.plant.advance(now_s)
+        self.plant.set_control(Brake() if self.brake_at_power_up else Off())
+
+    def _power_changed(self) -> None:
+        self._changed()
+        self.core_push()  # its C twin stands aside while the power is cut (LkCore.push: not hot)
 
     def inject_error(
         self, flags: ErrorState | ErrorStateV235, now_s: float, *, persistent: bool = True

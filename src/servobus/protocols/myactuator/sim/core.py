@@ -170,10 +170,11 @@ def _class_ok(cls: type) -> bool:
 
 def c_may_act(device: MyActuatorMotor) -> bool:
     """The model's guards: the C path reproduces the model in this state (no error flag latched or
-    reported, not unresponsive, not cut off by 0xB3, an encoder and ids the C state holds)."""
+    reported, not unresponsive, powered, not cut off by 0xB3, an encoder and ids the C state holds)."""
     encoder = device.encoder
     return (
         not device.__dict__["unresponsive"]
+        and device.power_back_s is None
         and not device.errors.flags
         and not device.comm_tripped
         and device._next_report_s is None

@@ -123,6 +123,7 @@ from servobus.sim.plant import (
     Plant,
     PlantParams,
 )
+from servobus.sim.power import PowerCuts
 
 __all__ = ["DEFAULT_TURNAROUND_S", "ERROR_REPORT_PERIOD_S", "MyActuatorMotor", "Stream"]
 
@@ -138,7 +139,7 @@ RUN_MODE_POWER_UP = ma.RunMode.POSITION_LOOP
 HANDLER_MODULES = (reads, loops, settings, streams)
 
 
-class MyActuatorMotor(Intake, Faults):
+class MyActuatorMotor(Intake, Faults, PowerCuts):
     """One MyActuator RMD-X motor on a CAN bus (implements :class:`~servobus.sim.device.Device`).
 
     Args:
@@ -170,6 +171,8 @@ class MyActuatorMotor(Intake, Faults):
         streams: active 0xB6 streams by command.
         feedforward_pct: the last 0x72/0x73 feed-forward (% of rated speed / current), or None.
         unresponsive: a simulator fault knob: the motor still acts on frames but never transmits.
+        power_back_s: while a :meth:`~servobus.sim.power.PowerCuts.brownout` lasts, when the power
+            comes back (None: powered).
         counters: frames and events by kind (see the module docstring).
 
     Raises:
@@ -256,6 +259,9 @@ class MyActuatorMotor(Intake, Faults):
             The reply (after ``turnaround_s``), or nothing (not for us, not decodable, no reply by the
             manual, streaming, or unresponsive).
         """
+        if self.power_back_s is not None and not self.powered(now_s):
+            self.advance(now_s)
+            return []
         self.advance(now_s)
         self._counters["received"] += 1
         kind = self._route(frame)
@@ -329,6 +335,9 @@ class MyActuatorMotor(Intake, Faults):
 
     def spontaneous(self, now_s: float) -> list[tuple[float, Reply]]:
         """Advance to ``now_s`` and return the stream frames and error reports due, with their times."""
+        if self.power_back_s is not None and not self.powered(now_s):
+            self.advance(now_s)
+            return []
         self.advance(now_s)
         out: list[tuple[float, Reply]] = []
         streams = self.streams
@@ -353,6 +362,8 @@ class MyActuatorMotor(Intake, Faults):
 
     def handle(self, command: Command, now_s: float, *, rs485: bool = False) -> Reply | None:
         """Act on a decoded request addressed to this motor; return the reply to send, if any."""
+        if self.power_back_s is not None and not self.powered(now_s):
+            return None  # (the RS485 front's way in: its line is dead too)
         self._counters["accepted"] += 1
         self._heard(now_s)
         reply = self._execute(command, now_s, rs485=rs485)
@@ -375,6 +386,20 @@ class MyActuatorMotor(Intake, Faults):
         self.advance(now_s)
         self._counters["reboots"] += 1
         self._power_up(now_s)
+
+    def _power_cut(self, now_s: float) -> None:
+        # No supply: the output is off and the power-off brake holds (a brake is locked unpowered,
+        # §4.30); nothing runs, nothing streams or reports until the power-up.
+        self.advance(now_s)
+        self.brake_released = False
+        self.streams = {}
+        self._next_report_s = None
+        self._set_control(Off(), self.run_mode)
+
+    def _power_changed(self) -> None:
+        self._changed()
+        if self._core is not None:
+            self._core.push()  # its C twin stands aside while the power is cut, and acts again after
 
     def _power_up(self, now_s: float) -> None:
         keep_turns = self.rom.save_multi_turn and not self.rom.clear_multi_turn
