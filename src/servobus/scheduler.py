@@ -280,7 +280,9 @@ class Scheduler(Pacing, Matching, Timing):
             self._pending.setdefault(request.key, deque()).append(request)
         self.sent(request, at)
 
-    def not_sent(self, request: Request, reason: str, now: float, error: TransportError | None = None) -> None:
+    def not_sent(
+        self, request: Request, reason: str, now: float, error: TransportError | None = None
+    ) -> None:
         """The link dropped ``request``'s frame (stale, purged, queue_full, bus_off, ...): it fails,
         with ``error`` (default: a TransportError that says why) in ``request.error``."""
         if request.state in FINAL:

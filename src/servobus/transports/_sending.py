@@ -19,7 +19,15 @@ from servobus.transports.stats import TransportStats
 if TYPE_CHECKING:
     from servobus.transports.base import Transport
 
-__all__ = ["BusOffError", "Outgoing", "SendQueue", "SendQueueFull", "SendReporter", "SendReports", "not_sent_error"]
+__all__ = [
+    "BusOffError",
+    "Outgoing",
+    "SendQueue",
+    "SendQueueFull",
+    "SendReporter",
+    "SendReports",
+    "not_sent_error",
+]
 
 logger = logging.getLogger("servobus.transports")
 

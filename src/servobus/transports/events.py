@@ -90,9 +90,9 @@ class FramesDropped:
 
     Reasons, named as their :class:`~servobus.transports.stats.TransportStats` counters:
     ``"enobufs_dropped"`` (the adapter's send buffer was full: reported ``"queue_full"``),
-    ``"bus_off_dropped"`` (the controller was bus-off: reported ``"bus_off"``), ``"stale"`` (queued longer than
-    ``stale_after_s``), ``"purged"`` (queued when the device was lost or the transport closed),
-    ``"rx_overflow"`` (received while nobody read the receive buffer, oldest first).
+    ``"bus_off_dropped"`` (the controller was bus-off: reported ``"bus_off"``), ``"stale"``
+    (queued longer than ``stale_after_s``), ``"purged"`` (queued when the device was lost or the
+    transport closed), ``"rx_overflow"`` (received while nobody read the receive buffer, oldest first).
     """
 
     reason: str
