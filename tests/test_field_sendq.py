@@ -11,23 +11,29 @@ python-can's ``virtual`` interface (a controller wrapper that refuses sends duri
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+import itertools
+import math
+import time
+from collections.abc import Iterator
 from typing import Any
 
 import anyio
+import can
 import pytest
 
 from servobus.bus import Bus
-from servobus.errors import TransportError
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.sim import virtual
+from servobus.sim.attach import serve_python_can
+from servobus.sim.corenet import CoreCanNetwork
 from servobus.sim.episodes import ControllerEpisodes, Episode
 from servobus.transports import (
     BusOff,
     BusOffError,
     BusRestarted,
     CanErrorClass,
+    CanTransport,
     ErrorFrame,
     SendQueueFull,
     TransportEvent,
@@ -37,6 +43,20 @@ from servobus.transports.sim import SimTransport
 HZ = 200.0
 MOTORS = range(1, 9)
 START_S, EPISODE_S = 0.5, 0.5  # the episode: from 0.5 s into the run, for 0.5 s
+
+
+class _Origin:
+    """A real-time controller's clock: its episodes' time 0 is when the loop starts (shared by every
+    bus a transport opens)."""
+
+    def __init__(self) -> None:
+        self.origin_s = time.monotonic()
+
+    def start(self) -> None:
+        self.origin_s = time.monotonic()
+
+    def __call__(self) -> float:
+        return time.monotonic() - self.origin_s
 
 
 @dataclasses.dataclass
@@ -56,17 +76,21 @@ class Run:
         return [r for at, results in self.ticks if lo_s <= at < hi_s for r in results]
 
 
-async def _loop(bus: Bus, link: Any, seconds: float) -> Run:
+async def _loop(
+    bus: Bus, link: Any, seconds: float, motors: range = MOTORS, origin: _Origin | None = None
+) -> Run:
     events: list[TransportEvent] = []
     link.add_listener(events.append)
-    batch = [(bus.motor("myactuator", i), ma.SpeedControl(speed_dps=10.0)) for i in MOTORS]
+    batch = [(bus.motor("myactuator", i), ma.SpeedControl(speed_dps=10.0)) for i in motors]
     start = anyio.current_time()
+    if origin is not None:  # (a real-time controller: its episodes start with the loop)
+        origin.start()
     ticks: list[tuple[float, list[object]]] = []
     async for _ in bus.ticks(HZ, spin_s=0.0):
         now = anyio.current_time() - start
         if now >= seconds:
             break
-        ticks.append((now, await bus.cycle(batch)))
+        ticks.append((now, list(await bus.cycle(batch))))
     return Run(ticks, bus.stats(), link.stats(), events)
 
 
@@ -120,9 +144,14 @@ def test_a_full_send_queue_episode_is_seeded() -> None:
 # ---- bus-off ----
 
 
-def _bus_off_checks(run: Run, *, restart_s: float) -> None:
+def _answered(results: list[object]) -> float:
+    return sum(isinstance(r, ma.StatusReply) for r in results) / max(1, len(results))
+
+
+def _bus_off_checks(run: Run, *, restart_s: float, real_time: bool = False) -> None:
     """No reopen, both error frames counted and heard, requests failed fast meanwhile, and the bus
-    answers again within 0.5 s of the restart."""
+    answers again within 0.5 s of the restart (in real time on a shared machine, a reply now and
+    then misses its 5 ms floor before and after the episode alike: most, not all)."""
     assert run.stats.losses == run.stats.reopens == 0  # a state of the link, not a lost device
     errors = [e for e in run.events if isinstance(e, ErrorFrame)]
     assert [e.classes for e in errors] == [CanErrorClass.BUS_OFF, CanErrorClass.RESTARTED]
@@ -130,16 +159,14 @@ def _bus_off_checks(run: Run, *, restart_s: float) -> None:
     assert (run.stats.bus_off, run.stats.restarted) == (1, 1)
     assert [type(e) for e in run.events if isinstance(e, BusOff | BusRestarted)] == [BusOff, BusRestarted]
     during = run.results(START_S + 0.05, START_S + EPISODE_S - 0.05)
-    assert during and all(isinstance(r, TransportError) for r in during), {type(r) for r in during}
-    assert any(isinstance(r, BusOffError) for r in during)
-    assert run.counts["not_sent_bus_off"] >= 1
-    back = [
-        at
-        for at, results in run.ticks
-        if at >= restart_s and all(isinstance(r, ma.StatusReply) for r in results)
-    ]
+    refused = [r for r in during if isinstance(r, BusOffError)]
+    assert len(refused) >= 0.9 * len(during) > 0, {type(r) for r in during}  # (or MotorBusy: not sent)
+    assert not any(isinstance(r, ma.StatusReply) for r in during)
+    assert run.counts["not_sent_bus_off"] == run.stats.bus_off_dropped >= len(refused)
+    back = [at for at, results in run.ticks if at >= restart_s and _answered(results) == 1.0]
     assert back and back[0] - restart_s <= 0.5, back[:1]
-    assert all(isinstance(r, ma.StatusReply) for _, results in run.ticks if _ >= back[0] for r in results)
+    after = run.results(back[0], math.inf)
+    assert _answered(after) >= (0.9 if real_time else 1.0), _answered(after)
 
 
 @pytest.mark.parametrize("backend", ["asyncio", "trio"])
@@ -147,3 +174,64 @@ def test_bus_off_is_a_state_of_the_link_and_the_bus_answers_again_after_the_rest
     run = _sim_run("bus_off", backend=backend)
     _bus_off_checks(run, restart_s=START_S + EPISODE_S)
     assert run.rate_hz(START_S, START_S + EPISODE_S) >= 0.8 * run.rate_hz(0.0, START_S)  # no stall
+
+
+# ---- through python-can: its virtual interface behind a controller that refuses sends ----
+
+
+@pytest.fixture
+def faulty_interface(monkeypatch: pytest.MonkeyPatch) -> Iterator[str]:
+    """python-can's name for :class:`servobus.sim.canfaults.FaultyCanBus` (opened by CanTransport as
+    any interface, so a transport that reopens would get a fresh one on the same episodes)."""
+    monkeypatch.setitem(
+        can.interfaces.BACKENDS, "servobus-faulty", ("servobus.sim.canfaults", "FaultyCanBus")
+    )
+    yield "servobus-faulty"
+
+
+PY_MOTORS = range(1, 5)
+_channels = itertools.count()
+
+
+async def _python_can_run(kind: str, interface: str, channel: str) -> Run:
+    episodes = ControllerEpisodes([Episode(kind=kind, start_s=START_S, duration_s=EPISODE_S)])  # type: ignore[arg-type]
+    origin = _Origin()
+    network = CoreCanNetwork([MyActuatorMotor(i) for i in PY_MOTORS])
+    sim_side = can.Bus(interface="virtual", channel=channel)
+    link = CanTransport(
+        interface,
+        channel,
+        ignore_config=True,
+        episodes=episodes,
+        clock=origin,
+        origin_s=0.0,
+        reopen_backoff_s=(0.01, 0.1),
+    )
+    try:
+        async with anyio.create_task_group() as group:
+            group.start_soon(serve_python_can, network, sim_side)
+            async with Bus(link, safe=None) as bus:
+                run = await _loop(bus, link, 2.0, PY_MOTORS, origin)
+            group.cancel_scope.cancel()
+    finally:
+        sim_side.shutdown()
+    return run
+
+
+@pytest.mark.anyio
+async def test_through_python_can_a_full_send_queue_keeps_the_loop(faulty_interface: str) -> None:
+    run = await _python_can_run("queue_full", faulty_interface, f"sendq-{next(_channels)}")
+    clean = run.rate_hz(0.1, START_S)
+    during = run.rate_hz(START_S, START_S + EPISODE_S)
+    assert during >= 0.8 * clean, (during, clean)  # (on main: 2 ticks/s, each frame retried 0.1 s)
+    refused = [r for r in run.results(START_S, START_S + EPISODE_S) if isinstance(r, SendQueueFull)]
+    assert refused and run.counts["not_sent_queue_full"] == run.stats.enobufs_dropped == len(refused)
+    assert run.stats.losses == run.stats.reopens == 0
+    after = run.results(START_S + EPISODE_S + 0.1, 2.0)
+    assert _answered(after) >= 0.9 * _answered(run.results(0.1, START_S)), _answered(after)
+
+
+@pytest.mark.anyio
+async def test_through_python_can_bus_off_is_no_lost_device(faulty_interface: str) -> None:
+    run = await _python_can_run("bus_off", faulty_interface, f"sendq-{next(_channels)}")
+    _bus_off_checks(run, restart_s=START_S + EPISODE_S, real_time=True)
