@@ -12,6 +12,7 @@ to the adapter: the restart of an adapter that reports no error frames is found 
 from __future__ import annotations
 
 import logging
+import math
 from typing import TYPE_CHECKING, ClassVar
 
 from servobus.transports._sending import BusOffError
@@ -35,6 +36,9 @@ class BusOffState:
     #: when the controller went bus-off (loop clock), None while it is not
     _off_since: float | None = None
     _probe_at = 0.0
+    #: when it last came back: a refusal from before then (a worker thread's report that crossed the
+    #: RESTARTED error frame on its way to the loop) is old news
+    _back_at = -math.inf
 
     if TYPE_CHECKING:  # (the transport's; declared here for the type checker only)
 
@@ -67,7 +71,7 @@ class BusOffState:
             self._came_back(at)
 
     def _went_bus_off(self, at: float, cause: BaseException | None = None) -> None:
-        if self._off_since is not None:
+        if self._off_since is not None or at < self._back_at:
             return
         self._off_since = at
         self._probe_at = at + self.bus_off_probe_s
@@ -80,6 +84,7 @@ class BusOffState:
         if since is None:
             return
         self._off_since = None
+        self._back_at = at
         self._stats.restarted += 1
         logger.info("%s: the CAN controller restarted after %.3f s bus-off", self.name, at - since)
         self._emit(BusRestarted(at))

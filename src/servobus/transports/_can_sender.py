@@ -45,6 +45,7 @@ class SendReport:
     enobufs_dropped: list[Any] = field(default_factory=list)
     bus_off: list[Any] = field(default_factory=list)
     bus_off_cause: BaseException | None = None
+    bus_off_at: float = 0.0  # when the adapter refused with ENETDOWN (loop clock)
     error: BaseException | None = None
 
 
@@ -116,6 +117,7 @@ class BlockingSender:
             sent = self._send_one(bus, to_message(outgoing.item), report)
             if sent is None:
                 if report.bus_off_cause is not None:
+                    report.bus_off_at = time.monotonic() + shift
                     report.bus_off = batch[index:]  # each would be refused the same: not tried
                 else:
                     report.purged = batch[index + 1 :]

@@ -151,6 +151,7 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, abc.ABC
         self._runtime: _runtime.Runtime | None = None
         self._ever_opened = False
         self._reporter: SendReporter | None = None
+        self._off_since: float | None = None  # (BusOffState's; an instance attribute: read on every send)
         #: set by a subclass whose device never blocks a write: send() then writes at once when
         #: nothing is queued ahead (see :meth:`_write_now`)
         self._direct = False

@@ -360,7 +360,7 @@ class CanTransport(Transport[Frame, Frame]):
             self._dropped(reason, [o.handle for o in items], counter)
         if report.bus_off_cause is not None:
             if generation == self._generation:
-                self._went_bus_off(self._now(), report.bus_off_cause)
+                self._went_bus_off(report.bus_off_at, report.bus_off_cause)
             self._dropped("bus_off", [o.handle for o in report.bus_off], "bus_off_dropped")
         for outgoing, sent_at in report.sent:
             frame = outgoing.item
