@@ -23,6 +23,7 @@ from servobus.transports import (
     CanTransport,
     ErrorFrame,
     TransportEvent,
+    TransportStats,
 )
 
 from . import test_can
@@ -62,7 +63,7 @@ async def test_a_full_buffer_is_waited_for_once_then_each_frame_gets_one_try(
             await anyio.sleep(0)  # (one batch each, as a control loop's ticks would)
         await transport.drain()
         took_s = time.perf_counter() - started
-        stats = transport.stats()
+        stats: TransportStats = transport.stats()
     assert [why for _, _, why in reports] == ["queue_full"] * 40
     assert stats.enobufs_dropped == 40 and stats.losses == 0
     assert took_s < 0.05 + 0.2  # one wait (the first frame's), not forty (it was 0.1 s a frame)
@@ -97,7 +98,7 @@ async def test_enetdown_is_bus_off_not_a_lost_device_and_a_probe_finds_the_resta
         assert not transport.bus_off
         transport.send(_frame(5), 5)
         await transport.drain()
-        stats = transport.stats()
+        stats: TransportStats = transport.stats()
     assert [(h, why) for h, _, why in reports] == [(1, "bus_off"), (3, "bus_off"), (4, None), (5, None)]
     assert [bytes(m.data) for m in flaky.sent] == [b"\x04", b"\x05"]
     assert (stats.losses, stats.reopens, stats.bus_off, stats.restarted) == (0, 0, 1, 1)
@@ -122,7 +123,7 @@ async def test_bus_off_and_restarted_error_frames_move_the_state_and_are_each_co
             while transport.bus_off:
                 await anyio.sleep(0.005)
         transport.send(_frame(2))
-        stats = transport.stats()
+        stats: TransportStats = transport.stats()
     assert (stats.error_frames, stats.bus_off, stats.restarted, stats.losses) == (2, 1, 1, 0)
     kinds = [type(e) for e in events if isinstance(e, ErrorFrame | BusOff | BusRestarted)]
     assert kinds == [ErrorFrame, BusOff, ErrorFrame, BusRestarted]
