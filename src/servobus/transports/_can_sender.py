@@ -79,8 +79,9 @@ class BlockingSender:
         self._full = False  # the adapter's buffer stayed full through a whole wait (writer thread only)
 
     def renew(self) -> None:
-        """A new connection: its gaps may be slept again."""
+        """A new connection: its gaps may be slept again, and its buffer is waited for again."""
         self.abort = threading.Event()
+        self._full = False
 
     def send_batch(
         self,

@@ -350,7 +350,7 @@ class CanTransport(Transport[Frame, Frame]):
         stats = self._stats
         stats.frames_out += len(report.sent)
         stats.enobufs_waits += report.enobufs_waits
-        if report.sent:  # a frame went through: the controller is not bus-off (any more)
+        if report.sent and self._off_since is not None:  # a frame went through: the controller is back
             self._came_back(report.sent[0][1])
         for reason, items, counter in (
             ("stale", report.stale, None),
