@@ -136,3 +136,29 @@ def peer(channel: str) -> Any:
     bus = can.Bus(interface="virtual", channel=channel)
     yield bus
     bus.shutdown()
+
+
+async def test_on_the_loop_native_virtual_path_enetdown_is_bus_off_at_once(
+    channel: str, peer: can.BusABC, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    async with CanTransport("virtual", channel, ignore_config=True) as transport:
+        assert transport.bus is not None
+        refuse = [_down()]
+        send = transport.bus.send
+
+        def failing(message: can.Message, timeout: float | None = None) -> None:
+            if refuse:
+                raise refuse.pop()
+            send(message, timeout)
+
+        monkeypatch.setattr(transport.bus, "send", failing)
+        with pytest.raises(BusOffError):
+            transport.send(_frame(1))  # written from send() itself: refused there, at once
+        assert transport.bus_off and transport.is_open
+        await anyio.sleep(transport.bus_off_probe_s * 1.5)
+        transport.send(_frame(2))  # the probe goes through: back
+        assert not transport.bus_off
+        stats: TransportStats = transport.stats()
+    assert (stats.bus_off, stats.restarted, stats.bus_off_dropped, stats.losses) == (1, 1, 1, 0)
+    (message,) = test_can._recv_all(peer, 1)
+    assert bytes(message.data) == b"\x02"
