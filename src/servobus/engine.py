@@ -34,6 +34,7 @@ from servobus.errors import MotorStreaming, MotorTimeout, TransportError
 from servobus.protocols import Command
 from servobus.runtime import Runtime, RuntimeMismatch
 from servobus.scheduler import Received, Request, RequestState, Scheduler
+from servobus.transports._sending import not_sent_error
 from servobus.transports.contract import FrameLink
 from servobus.transports.events import StateChanged, TransportEvent, TransportState
 from servobus.watchdog import Watchdog
@@ -248,8 +249,9 @@ class Engine:
     def hand_over(self, request: Request) -> None:
         try:
             self.link.send(request.frame, request)
-        except Exception as exc:  # a full queue, a lost transport: this request fails, nothing else
-            self.scheduler.not_sent(request, type(exc).__name__, self.time())
+        except Exception as exc:  # a full queue, bus-off, a lost transport: this request fails, nothing else
+            # (a refusal with a reason of its own, queue_full or bus_off, counts as its report would)
+            self.scheduler.not_sent(request, getattr(exc, "reason", None) or type(exc).__name__, self.time())
             self.settle(request, exc)
             return
         if not self.reports_sends:  # its deadline starts now
@@ -288,7 +290,8 @@ class Engine:
             if self._judged(request, early):
                 return
         elif reason is not None:
-            self.scheduler.not_sent(request, reason, self.time())
+            error = not_sent_error(reason, f"{self.name}: {request.describe()} not sent ({reason})")
+            self.scheduler.not_sent(request, reason, self.time(), error)
             self.settle(request, request.error)
         elif self._judged(request, self.scheduler.sent(request, self.time())):
             return

@@ -8,7 +8,8 @@
      ├── MotorStreaming     the motor streams (0xB6) and answers no other request meanwhile
      ├── MotorFault         the motor reported error flags (decoded)
      └── TransportError     adapter lost, bus-off, port closed (raised from its cause)
-          └── SendQueueFull  (servobus.transports) a send found the queue full
+          ├── SendQueueFull  (servobus.transports) a send found the queue (or the adapter's) full
+          └── BusOffError    (servobus.transports) the CAN controller is bus-off: sends fail fast
 
 Bad *input* from the caller is not in this tree: an out-of-range setpoint raises ValueError naming
 the field, the value and the limit, before any frame is built.

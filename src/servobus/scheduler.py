@@ -280,12 +280,14 @@ class Scheduler(Pacing, Matching, Timing):
             self._pending.setdefault(request.key, deque()).append(request)
         self.sent(request, at)
 
-    def not_sent(self, request: Request, reason: str, now: float) -> None:
-        """The link dropped ``request``'s frame (stale, purged, ...): it fails, with a TransportError
-        in ``request.error`` that says why."""
+    def not_sent(
+        self, request: Request, reason: str, now: float, error: TransportError | None = None
+    ) -> None:
+        """The link dropped ``request``'s frame (stale, purged, queue_full, bus_off, ...): it fails,
+        with ``error`` (default: a TransportError that says why) in ``request.error``."""
         if request.state in FINAL:
             return
-        request.error = TransportError(f"{self.name}: {request.describe()} not sent ({reason})")
+        request.error = error or TransportError(f"{self.name}: {request.describe()} not sent ({reason})")
         self._finish(request, _FAILED, now)
         self._count(request.codec, f"not_sent_{reason}")
 

@@ -211,7 +211,9 @@ def _enobufs() -> can.CanOperationError:
 
 async def test_enobufs_wait_policy_retries_until_the_adapter_takes_the_frame(flaky: type[_FlakyBus]) -> None:
     flaky.failures = [_enobufs(), _enobufs(), can.CanOperationError("Transmit buffer full")]
-    async with CanTransport("flaky", "x", ignore_config=True, enobufs="wait") as transport:
+    async with CanTransport(
+        "flaky", "x", ignore_config=True, enobufs="wait", enobufs_timeout_s=0.5
+    ) as transport:
         transport.send(Frame(arbitration_id=0x141, data=b"\x01"))
         await transport.drain()
         stats = transport.stats()
@@ -239,7 +241,8 @@ async def test_enobufs_drop_policy_and_wait_timeout_drop_and_count(flaky: type[_
 
 async def test_any_other_send_failure_is_a_loss_and_the_bus_is_reopened(flaky: type[_FlakyBus]) -> None:
     flaky.failures = [
-        can.CanOperationError("Failed to transmit: [Errno 100] Network is down", errno.ENETDOWN)
+        # (ENETDOWN is bus-off, a state of the bus: tests/transports/test_send_errors.py)
+        can.CanOperationError("Failed to transmit: [Errno 19] No such device", errno.ENODEV)
     ]
     async with CanTransport("flaky", "x", ignore_config=True, reopen_backoff_s=(0.01, 0.01)) as transport:
         states: list[TransportState] = []
@@ -289,7 +292,9 @@ def _stalled() -> can.CanOperationError:
 
 async def test_a_stalled_adapter_is_backpressure_not_a_lost_device(flaky: type[_FlakyBus]) -> None:
     flaky.failures = [_stalled(), _stalled()]
-    async with CanTransport("flaky", "x", ignore_config=True, enobufs="wait") as transport:
+    async with CanTransport(
+        "flaky", "x", ignore_config=True, enobufs="wait", enobufs_timeout_s=0.5
+    ) as transport:
         transport.send(Frame(arbitration_id=0x141, data=b"\x01"))
         await transport.drain()
         stats = transport.stats()

@@ -70,7 +70,7 @@ async def test_can_drops_name_the_handle(flaky: type[test_can._FlakyBus]) -> Non
         transport.send(Frame(arbitration_id=0x141, data=b"\x02"), Handle(2))
         await transport.drain()
     assert [(h.n, at is None, why) for h, at, why in reports] == [
-        (1, True, "enobufs_dropped"),
+        (1, True, "queue_full"),  # (counted enobufs_dropped)
         (2, False, None),
     ]
 

@@ -87,12 +87,12 @@ async def serve_slcan(
     put, inbox = _inbox()
 
     def deliver(frame: Frame) -> None:
-        if not port.closed and (line := adapter.to_host(frame)):
+        if not port.closed and (line := adapter.to_host(frame, clock.now())):
             port.write(line)
 
     async def read_host() -> None:
         async for data in port:
-            answer, frames = adapter.receive(data)
+            answer, frames = adapter.receive(data, clock.now())
             if adapter.bitrate:
                 network.bus.bitrate = adapter.bitrate
             network.bus.data_bitrate = adapter.data_bitrate

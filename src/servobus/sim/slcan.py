@@ -14,6 +14,13 @@ is CR, failure BEL; a transmitted ``t``/``T`` is acknowledged ``z``/``Z`` + CR a
 Configuration is refused while the channel is open, and frames while it is closed, as the
 manual's set-up order (``S8``, ``Y5``, then ``O``) requires. A stray ``\\n`` (the manual's
 ``O\\r\\n``) is ignored.
+
+The adapter's controller may have episodes (:class:`~servobus.sim.episodes.ControllerEpisodes`, on
+the time given to :meth:`SlcanAdapter.receive` and :meth:`SlcanAdapter.to_host`), answered as a
+LAWICEL adapter does: a frame it cannot transmit (transmit FIFO full, or bus-off) is answered BEL
+instead of ``z``/``Z`` and never reaches the bus; ``F`` reports the transmit FIFO full (bit 1), and
+bus-off as error warning, error passive and bus error (bits 2, 5, 7); while bus-off it receives
+nothing.
 """
 
 from __future__ import annotations
@@ -21,6 +28,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from servobus.frame import Frame
+from servobus.sim.episodes import ControllerEpisodes
 
 __all__ = ["DATA_BITRATES", "NOMINAL_BITRATES", "SlcanAdapter", "format_frame", "parse_frame"]
 
@@ -116,6 +124,8 @@ class SlcanAdapter:
         listen_only: opened with ``L``: frames are received, never sent.
         bitrate, data_bitrate: set by ``S``/``Y`` (None after ``s`` BTR registers).
         errors: commands answered with BEL; discarded: bytes of over-long lines dropped.
+        episodes: the controller's full-queue and bus-off episodes (None: none).
+        refused: frames answered BEL because of an episode (counted in ``errors`` too).
     """
 
     serial_number: str = "SB01"
@@ -128,10 +138,16 @@ class SlcanAdapter:
     timestamps: bool = False
     errors: int = 0
     discarded: int = 0
+    episodes: ControllerEpisodes | None = None
+    refused: int = 0
+    _now_s: float = 0.0
     _line: bytearray = field(default_factory=bytearray, repr=False)
 
-    def receive(self, data: bytes) -> tuple[bytes, list[Frame]]:
-        """Bytes the host wrote -> (bytes to answer, frames to transmit on the bus)."""
+    def receive(self, data: bytes, now_s: float | None = None) -> tuple[bytes, list[Frame]]:
+        """Bytes the host wrote at ``now_s`` (the episodes' clock) -> (bytes to answer, frames to
+        transmit on the bus)."""
+        if now_s is not None:
+            self._now_s = now_s
         answer = bytearray()
         frames: list[Frame] = []
         for byte in data:
@@ -149,8 +165,11 @@ class SlcanAdapter:
                 self._line.append(byte)
         return bytes(answer), frames
 
-    def to_host(self, frame: Frame) -> bytes:
-        """The line for a frame seen on the bus, or nothing while the channel is closed."""
+    def to_host(self, frame: Frame, now_s: float | None = None) -> bytes:
+        """The line for a frame seen on the bus at ``now_s``, or nothing while the channel is closed
+        (or the controller is bus-off)."""
+        if self.episodes is not None and now_s is not None and not self.episodes.receiving(now_s):
+            return b""
         return format_frame(frame) if self.is_open else b""
 
     def _fail(self) -> tuple[bytes, None]:
@@ -168,6 +187,9 @@ class SlcanAdapter:
                 frame, _remote = parse_frame(line)
             except ValueError:
                 return self._fail()
+            if self.episodes is not None and self.episodes.refusal(self._now_s) is not None:
+                self.refused += 1
+                return self._fail()  # not transmitted: LAWICEL's BEL instead of z/Z
             ack = b"Z\r" if head in "TR" else b"z\r" if head in "tr" else OK
             return ack, frame  # a remote frame is acknowledged; motors here answer no RTR
         if head in "SYs":
@@ -187,11 +209,22 @@ class SlcanAdapter:
         if head == "N" and not arg:
             return f"N{self.serial_number}\r".encode(), None
         if head == "F" and not arg:
-            return b"F00\r", None
+            return b"F%02X\r" % self._status_flags(), None
         if head == "Z" and arg in ("0", "1"):
             self.timestamps = arg == "1"
             return OK, None
         return self._fail()
+
+    def _status_flags(self) -> int:
+        """LAWICEL's status byte: transmit FIFO full (0x02); bus-off as error warning, error
+        passive and bus error (0x04 | 0x20 | 0x80)."""
+        episodes = self.episodes
+        if episodes is None:
+            return 0
+        episode = next((e for e in episodes.episodes if e.covers(self._now_s)), None)
+        if episode is None:
+            return 0
+        return 0x02 if episode.kind == "queue_full" else 0xA4
 
     def _configure(self, head: str, arg: str) -> tuple[bytes, None]:
         if head == "S" and len(arg) == 1 and arg.isdigit() and int(arg) in NOMINAL_BITRATES:

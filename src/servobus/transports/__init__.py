@@ -27,10 +27,11 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from servobus import _plugins
-from servobus.transports.base import SendQueueFull, Transport
+from servobus.transports.base import BusOffError, SendQueueFull, Transport
 from servobus.transports.contract import FrameLink, LineRules
 from servobus.transports.events import (
     BusOff,
+    BusRestarted,
     CanErrorClass,
     ErrorFrame,
     FramesDropped,
@@ -49,6 +50,8 @@ if TYPE_CHECKING:
 __all__ = [
     "TRANSPORTS",
     "BusOff",
+    "BusOffError",
+    "BusRestarted",
     "CanErrorClass",
     "CanTransport",
     "ErrorFrame",

@@ -1,6 +1,13 @@
 """How a :class:`~servobus.transports.can.CanTransport` writes to its python-can bus from a worker thread:
 in order, with a minimum gap, and by its ENOBUFS policy (private).
 
+A full adapter buffer (ENOBUFS) costs the loop at most one short wait per episode: the first frame
+that meets it is retried for ``enobufs_timeout_s`` (a controller's queue drains a frame every
+~0.13 ms at 1 Mbit/s, so a burst finds room at once); once a wait ran out the buffer is taken to
+be full, and each later frame gets one try, not sent if refused, until one goes through. A
+refused ENETDOWN is bus-off, a state of the link: that frame and the rest of its batch are not
+sent (each would be refused the same), and the loop is told.
+
 python-can's ``send`` blocks on most interfaces, so a batch of queued frames is sent by
 :meth:`BlockingSender.send_batch` in a worker thread (``anyio.to_thread``). What became of each frame
 goes back to the loop in one :class:`SendReport`, handed over by the thread itself, so frames are
@@ -21,7 +28,7 @@ import can
 
 from servobus.frame import Frame
 
-__all__ = ["BlockingSender", "SendReport", "buffer_full"]
+__all__ = ["BlockingSender", "SendReport", "buffer_full", "controller_off"]
 
 _ENOBUFS_RETRY_S = 0.0005
 
@@ -36,6 +43,9 @@ class SendReport:
     purged: list[Any] = field(default_factory=list)
     enobufs_waits: int = 0
     enobufs_dropped: list[Any] = field(default_factory=list)
+    bus_off: list[Any] = field(default_factory=list)
+    bus_off_cause: BaseException | None = None
+    bus_off_at: float = 0.0  # when the adapter refused with ENETDOWN (loop clock)
     error: BaseException | None = None
 
 
@@ -44,7 +54,8 @@ class BlockingSender:
 
     Args:
         min_gap_s: least time between the starts of two frames.
-        enobufs: ``"wait"`` (retry until ``enobufs_timeout_s``, then drop) or ``"drop"`` (at once).
+        enobufs: ``"wait"`` (retry until ``enobufs_timeout_s``, then drop; while the buffer stays
+            full, later frames get one try each) or ``"drop"`` (at once).
         send_timeout_s: the timeout given to python-can's ``send``.
         stale_after_s: a frame older than this when its turn comes is not sent.
     """
@@ -65,10 +76,12 @@ class BlockingSender:
         self.stale_after_s = stale_after_s
         self.abort = threading.Event()  # set by a loss or a close: cuts a gap's sleep short
         self._last_send = 0.0  # perf_counter of the last frame's start (writer thread only)
+        self._full = False  # the adapter's buffer stayed full through a whole wait (writer thread only)
 
     def renew(self) -> None:
-        """A new connection: its gaps may be slept again."""
+        """A new connection: its gaps may be slept again, and its buffer is waited for again."""
         self.abort = threading.Event()
+        self._full = False
 
     def send_batch(
         self,
@@ -104,7 +117,11 @@ class BlockingSender:
                     break
             sent = self._send_one(bus, to_message(outgoing.item), report)
             if sent is None:
-                report.purged = batch[index + 1 :]
+                if report.bus_off_cause is not None:
+                    report.bus_off_at = time.monotonic() + shift
+                    report.bus_off = batch[index:]  # each would be refused the same: not tried
+                else:
+                    report.purged = batch[index + 1 :]
                 break
             if sent:
                 report.sent.append((outgoing, time.monotonic() + shift))
@@ -115,7 +132,7 @@ class BlockingSender:
 
     def _send_one(self, bus: can.BusABC, message: can.Message, report: SendReport) -> bool | None:
         """Send with the ENOBUFS policy: True sent, False dropped by the policy, None when the bus
-        failed (``report.error`` says how).
+        failed (``report.error`` says how) or is bus-off (``report.bus_off_cause``).
 
         A full adapter buffer (ENOBUFS) and a stalled adapter (a serial write timeout, as python-can's
         slcan reports it) are both backpressure: wait and retry, or drop, by the policy.
@@ -125,10 +142,16 @@ class BlockingSender:
             try:
                 bus.send(message, timeout=self.send_timeout_s)
             except can.CanError as exc:
+                if controller_off(exc):
+                    report.bus_off_cause = exc
+                    return None
                 if not buffer_full(exc):
                     report.error = exc
                     return None
-                if self.enobufs == "drop" or time.perf_counter() >= give_up:
+                if self.enobufs == "drop" or self._full:
+                    return False
+                if time.perf_counter() >= give_up:
+                    self._full = True  # until a frame goes through, later ones are not waited for
                     return False
                 report.enobufs_waits += 1
                 time.sleep(_ENOBUFS_RETRY_S)
@@ -137,6 +160,7 @@ class BlockingSender:
                 return None
             else:
                 self._last_send = time.perf_counter()
+                self._full = False
                 return True
 
 
@@ -154,3 +178,10 @@ def buffer_full(exc: can.CanError) -> bool:
         return True
     text = str(exc).lower()
     return "buffer full" in text or "write timeout" in text
+
+
+def controller_off(exc: can.CanError) -> bool:
+    """python-can's way of saying "the controller is bus-off" on a send: ENETDOWN (SocketCAN)."""
+    code = getattr(exc, "error_code", None)
+    cause = exc.__cause__
+    return code == errno.ENETDOWN or (isinstance(cause, OSError) and cause.errno == errno.ENETDOWN)

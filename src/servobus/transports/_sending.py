@@ -19,7 +19,15 @@ from servobus.transports.stats import TransportStats
 if TYPE_CHECKING:
     from servobus.transports.base import Transport
 
-__all__ = ["Outgoing", "SendQueue", "SendQueueFull", "SendReporter", "SendReports"]
+__all__ = [
+    "BusOffError",
+    "Outgoing",
+    "SendQueue",
+    "SendQueueFull",
+    "SendReporter",
+    "SendReports",
+    "not_sent_error",
+]
 
 logger = logging.getLogger("servobus.transports")
 
@@ -31,11 +39,31 @@ TxT = TypeVar("TxT")
 
 
 class SendQueueFull(TransportError):
-    """A non-blocking send found the queue full: back off, or ``await drain()`` first.
+    """A send found a queue full: the transport's own (back off, or ``await drain()`` first), or the
+    adapter's (ENOBUFS: the frame was not sent, later ones may be).
 
     (No longer an ``asyncio.QueueFull``: the transports are not asyncio's; catch this, or
     TransportError.)
     """
+
+    #: the send-report reason of a frame this refused (a request's ``not_sent_queue_full``)
+    reason = "queue_full"
+
+
+class BusOffError(TransportError):
+    """The CAN controller is bus-off: nothing is sent until it restarts. A state of the link, not a
+    lost device: the transport stays open, and sends work again once the controller is back."""
+
+    reason = "bus_off"
+
+
+#: send-report reasons whose refused frames fail with an error of their own
+_NOT_SENT: dict[str, type[TransportError]] = {"queue_full": SendQueueFull, "bus_off": BusOffError}
+
+
+def not_sent_error(reason: str, message: str) -> TransportError:
+    """The error a frame refused for ``reason`` fails with (a TransportError for the other reasons)."""
+    return _NOT_SENT.get(reason, TransportError)(message)
 
 
 @dataclass(slots=True)
@@ -165,12 +193,14 @@ class SendReports:
 
         def _emit(self, event: TransportEvent) -> None: ...
 
-    def _dropped(self, reason: str, handles: Sequence[Any] | int) -> None:
-        """Count frames that will never be sent, and report each one whose handle is known."""
+    def _dropped(self, reason: str, handles: Sequence[Any] | int, counter: str | None = None) -> None:
+        """Count frames that will never be sent (in the counter named ``counter``, or ``reason``),
+        and report each one whose handle is known with ``reason``."""
         count = handles if isinstance(handles, int) else len(handles)
         if count:
-            setattr(self._stats, reason, getattr(self._stats, reason) + count)
-            self._emit(FramesDropped(reason, count, self._now()))
+            counter = counter or reason
+            setattr(self._stats, counter, getattr(self._stats, counter) + count)
+            self._emit(FramesDropped(counter, count, self._now()))
             reporter = self._reporter
             if reporter is not None and not isinstance(handles, int):
                 for handle in handles:

@@ -14,7 +14,8 @@ outlives ``close()``, and an unexpected error of those tasks is raised by it, no
   :mod:`servobus.transports.contract`); the reporter set by :meth:`Transport.set_send_reporter`
   gets ``reporter(handle, sent_at, None)`` when the frame left (``sent_at`` on the loop's clock) or
   ``reporter(handle, None, reason)`` when it never will (``"stale"``, ``"purged"``,
-  ``"enobufs_dropped"``). With no handle, the frame is the handle.
+  ``"queue_full"``: the adapter's buffer was full, ``"bus_off"``). With no handle, the frame is
+  the handle.
 * **Receiving is pushed** to one consumer (:meth:`Transport.set_consumer`), or buffered (bounded,
   the oldest dropped and counted) for :meth:`Transport.receive`, ``receive_batch`` and ``async for``.
 * **Loss.** When the device fails, every pending ``receive()`` and ``drain()`` raises
@@ -22,6 +23,9 @@ outlives ``close()``, and an unexpected error of those tasks is raised by it, no
   ``LOST``, the queued frames are purged, and a recovery task reopens the device with exponential
   backoff. Frames queued before an outage are never replayed; frames older than ``stale_after_s``
   when their turn comes are dropped.
+* **Bus-off** is a state of the open link (:mod:`servobus.transports._busoff`), not a loss: events
+  :class:`~servobus.transports.events.BusOff` and ``BusRestarted``, and meanwhile sends fail at once
+  with :class:`BusOffError` (reason ``"bus_off"``).
 * **Events** (state changes, error frames, bus-off, drops) go to listeners and :meth:`events`.
   Received frames carry the loop's clock (``anyio.current_time()``).
 
@@ -66,17 +70,25 @@ import anyio
 
 from servobus import runtime as _runtime
 from servobus.errors import TransportError
+from servobus.transports._busoff import BusOffState
 from servobus.transports._inbox import Inbox, ReceiveSide
 from servobus.transports._listeners import EventSource, Listeners
 from servobus.transports._owned import LinkTasks, OwnedTaskGroup, owned_exit
 from servobus.transports._recovery import Recovery
-from servobus.transports._sending import Outgoing, SendQueue, SendQueueFull, SendReporter, SendReports
+from servobus.transports._sending import (
+    BusOffError,
+    Outgoing,
+    SendQueue,
+    SendQueueFull,
+    SendReporter,
+    SendReports,
+)
 from servobus.transports._waiters import WaiterList
 from servobus.transports.contract import LineRules
 from servobus.transports.events import StateChanged, TransportState
 from servobus.transports.stats import LoadMeter, TransportStats
 
-__all__ = ["Consumer", "Outgoing", "SendQueueFull", "SendReporter", "Transport"]
+__all__ = ["BusOffError", "Consumer", "Outgoing", "SendQueueFull", "SendReporter", "Transport"]
 
 logger = logging.getLogger("servobus.transports")
 
@@ -87,7 +99,7 @@ TxT = TypeVar("TxT")
 Consumer = Callable[[list[RxT]], object]
 
 
-class Transport(ReceiveSide[RxT], SendReports, EventSource, abc.ABC, Generic[RxT, TxT]):
+class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, abc.ABC, Generic[RxT, TxT]):
     """Frames out through a bounded queue, frames in through a consumer or a buffer, one device.
 
     Use it as an async context manager (``async with CanTransport(...) as bus:``), or call
@@ -139,6 +151,7 @@ class Transport(ReceiveSide[RxT], SendReports, EventSource, abc.ABC, Generic[RxT
         self._runtime: _runtime.Runtime | None = None
         self._ever_opened = False
         self._reporter: SendReporter | None = None
+        self._off_since: float | None = None  # (BusOffState's; an instance attribute: read on every send)
         #: set by a subclass whose device never blocks a write: send() then writes at once when
         #: nothing is queued ahead (see :meth:`_write_now`)
         self._direct = False
@@ -313,6 +326,7 @@ class Transport(ReceiveSide[RxT], SendReports, EventSource, abc.ABC, Generic[RxT
 
     def _connected(self) -> None:
         self._failure = None
+        self._forget_bus_off()
         self._set_state(TransportState.OPEN)
         self._sending.start(self._tasks, self._generation)
         self._open_waiters.wake_all()
@@ -345,9 +359,12 @@ class Transport(ReceiveSide[RxT], SendReports, EventSource, abc.ABC, Generic[RxT
         Raises:
             TransportError: the transport is not open.
             SendQueueFull: the queue is full.
+            BusOffError: the CAN controller is bus-off (and this frame is not its probe).
         """
         if self._state is not TransportState.OPEN:
             raise self._error()
+        if self._off_since is not None:
+            self._bus_off_gate(self._now())
         if handle is None:
             handle = item
         sending = self._sending

@@ -15,7 +15,13 @@
   optional minimum gap between frames (``_can_sender``). python-can's ``virtual`` bus never blocks
   a send given ``timeout=0``: there ``send`` writes the frame at once when nothing is queued. A full
   adapter buffer (ENOBUFS, "transmit buffer full") is handled by policy: ``"wait"`` retries until
-  ``enobufs_timeout_s`` and then drops, ``"drop"`` drops at once; both are counted.
+  ``enobufs_timeout_s`` (2 ms) and then drops, and while the buffer stays full later frames get
+  one try each, so a full buffer never stalls a control loop; ``"drop"`` drops at once. A frame not
+  sent is counted (``enobufs_dropped``) and reported ``"queue_full"``.
+* **Bus-off** (a BUS_OFF error frame, or a send refused with ENETDOWN) is a state of the open bus,
+  not a lost device: no close or reopen, events ``BusOff`` and then ``BusRestarted`` (a RESTARTED
+  error frame, or a send that went through), and meanwhile sends fail at once (``BusOffError``,
+  reported ``"bus_off"``; see :mod:`servobus.transports._busoff`).
 * **Filters**: :meth:`CanTransport.set_receive_ids` installs exact-match filters for the reply
   identifiers in use; python-can puts them in the kernel or adapter where the interface can, and
   filters in software otherwise. They are re-applied after a reopen.
@@ -23,8 +29,9 @@
   (and ``notifier=``, the application's ``can.Notifier`` on it, when there is one; a bus with a
   running notifier is joined by itself). servobus then listens through that notifier instead of
   reading the bus, filters its reply identifiers in software, and never shuts the bus down.
-* **Error frames** become :class:`~servobus.transports.events.ErrorFrame` events (and
-  :class:`~servobus.transports.events.BusOff` for bus-off); remote frames are counted and dropped.
+* **Error frames** become :class:`~servobus.transports.events.ErrorFrame` events, each counted
+  (``error_frames``; BUS_OFF and RESTARTED also move the bus-off state); remote frames are counted
+  and dropped.
 
 The conversions between :class:`~servobus.frame.Frame` and ``can.Message`` are
 :meth:`Frame.from_message <servobus.frame.Frame.from_message>` and :func:`message_from_frame` (here,
@@ -47,11 +54,11 @@ from servobus.errors import TransportError
 from servobus.frame import Frame
 from servobus.timing import nominal_frame_time_s
 from servobus.transports._can_readers import Batch, Reader, start_reader
-from servobus.transports._can_sender import BlockingSender, SendReport, buffer_full
+from servobus.transports._can_sender import BlockingSender, SendReport, buffer_full, controller_off
 from servobus.transports._watch import loop_context
-from servobus.transports.base import Outgoing, Transport, logger
+from servobus.transports.base import BusOffError, Outgoing, Transport, logger
 from servobus.transports.contract import LineRules
-from servobus.transports.events import BusOff, CanErrorClass, ErrorFrame
+from servobus.transports.events import CanErrorClass
 
 __all__ = ["CanTransport", "frame_from_message", "message_from_frame"]
 
@@ -108,7 +115,8 @@ class CanTransport(Transport[Frame, Frame]):
         config_context, ignore_config: python-can's configuration section, or none at all.
         min_gap_s: least time between the starts of two sent frames (0: back to back).
         enobufs: what to do when the adapter's send buffer is full: ``"wait"`` or ``"drop"``.
-        enobufs_timeout_s: with ``"wait"``, how long one frame may wait for buffer room.
+        enobufs_timeout_s: with ``"wait"``, how long a frame that meets a full buffer may wait for
+            room (the first of an episode: later ones are not waited for until one goes through).
         send_timeout_s: the timeout given to python-can's ``send``.
         receive_ids: reply identifiers to filter for (see :meth:`set_receive_ids`).
         queue_size, rx_buffer, stale_after_s, reopen, reopen_backoff_s: see
@@ -133,7 +141,7 @@ class CanTransport(Transport[Frame, Frame]):
         ignore_config: bool = False,
         min_gap_s: float = 0.0,
         enobufs: Literal["wait", "drop"] = "wait",
-        enobufs_timeout_s: float = 0.1,
+        enobufs_timeout_s: float = 0.002,
         send_timeout_s: float | None = 0.05,
         receive_ids: Iterable[int] | None = None,
         queue_size: int = 256,
@@ -200,6 +208,7 @@ class CanTransport(Transport[Frame, Frame]):
         Raises:
             ValueError: an FD frame on a bus opened without ``fd=True``, or a serial-link message.
             SendQueueFull: the queue is full.
+            BusOffError: the CAN controller is bus-off.
             TransportError: the bus is not open (lost or closed).
         """
         if frame.is_serial:
@@ -310,12 +319,7 @@ class CanTransport(Transport[Frame, Frame]):
             self._deliver(frames)
 
     def _on_error_frame(self, message: can.Message, timestamp: float) -> None:
-        classes = CanErrorClass(message.arbitration_id & 0x3FF)
-        self._stats.error_frames += 1
-        self._emit(ErrorFrame(timestamp, classes, bytes(message.data)))
-        if CanErrorClass.BUS_OFF in classes:
-            self._stats.bus_off += 1
-            self._emit(BusOff(timestamp))
+        self._note_error_frame(CanErrorClass(message.arbitration_id & 0x3FF), bytes(message.data), timestamp)
 
     def _frame_time_s(self, frame: Frame) -> float:
         assert self.bitrate is not None
@@ -346,12 +350,18 @@ class CanTransport(Transport[Frame, Frame]):
         stats = self._stats
         stats.frames_out += len(report.sent)
         stats.enobufs_waits += report.enobufs_waits
-        for reason, items in (
-            ("stale", report.stale),
-            ("enobufs_dropped", report.enobufs_dropped),
-            ("purged", report.purged),
+        if report.sent and self._off_since is not None:  # a frame went through: the controller is back
+            self._came_back(report.sent[0][1])
+        for reason, items, counter in (
+            ("stale", report.stale, None),
+            ("queue_full", report.enobufs_dropped, "enobufs_dropped"),
+            ("purged", report.purged, None),
         ):
-            self._dropped(reason, [o.handle for o in items])
+            self._dropped(reason, [o.handle for o in items], counter)
+        if report.bus_off_cause is not None:
+            if generation == self._generation:
+                self._went_bus_off(report.bus_off_at, report.bus_off_cause)
+            self._dropped("bus_off", [o.handle for o in report.bus_off], "bus_off_dropped")
         for outgoing, sent_at in report.sent:
             frame = outgoing.item
             stats.bytes_out += len(frame.data)
@@ -371,9 +381,15 @@ class CanTransport(Transport[Frame, Frame]):
         except can.CanError as exc:
             if buffer_full(exc):
                 return False  # queue it: the writer thread applies the ENOBUFS policy
+            if controller_off(exc):
+                self._went_bus_off(self._now(), exc)
+                self._stats.bus_off_dropped += 1
+                raise BusOffError(f"{self.name}: the CAN controller is bus-off ({exc})") from exc
             self._lose(exc, self._generation)
             raise self._error() from exc
         now = self._now()
+        if self._off_since is not None:
+            self._came_back(now)
         stats = self._stats
         stats.frames_out += 1
         stats.bytes_out += len(frame.data)

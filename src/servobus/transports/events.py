@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 __all__ = [
     "BusOff",
+    "BusRestarted",
     "CanErrorClass",
     "ErrorFrame",
     "FramesDropped",
@@ -69,7 +70,16 @@ class ErrorFrame:
 
 @dataclass(frozen=True, slots=True)
 class BusOff:
-    """The CAN controller went bus-off: it sends nothing until it recovers or is restarted."""
+    """The CAN controller went bus-off (an error frame said so, or a send was refused with
+    ENETDOWN): it sends nothing until it recovers or is restarted. The transport stays OPEN; sends
+    fail fast meanwhile (:class:`~servobus.transports.base.BusOffError`, reason ``"bus_off"``)."""
+
+    timestamp: float
+
+
+@dataclass(frozen=True, slots=True)
+class BusRestarted:
+    """The CAN controller is back from bus-off (a RESTARTED error frame, or a send went through)."""
 
     timestamp: float
 
@@ -79,9 +89,10 @@ class FramesDropped:
     """Frames the transport dropped on purpose, by ``reason``.
 
     Reasons, named as their :class:`~servobus.transports.stats.TransportStats` counters:
-    ``"enobufs_dropped"`` (the adapter's send buffer stayed full), ``"stale"`` (queued longer than
-    ``stale_after_s``), ``"purged"`` (queued when the device was lost or the transport closed),
-    ``"rx_overflow"`` (received while nobody read the receive buffer, oldest first).
+    ``"enobufs_dropped"`` (the adapter's send buffer was full: reported ``"queue_full"``),
+    ``"bus_off_dropped"`` (the controller was bus-off: reported ``"bus_off"``), ``"stale"``
+    (queued longer than ``stale_after_s``), ``"purged"`` (queued when the device was lost or the
+    transport closed), ``"rx_overflow"`` (received while nobody read the receive buffer, oldest first).
     """
 
     reason: str
@@ -89,4 +100,4 @@ class FramesDropped:
     timestamp: float
 
 
-TransportEvent = StateChanged | ErrorFrame | BusOff | FramesDropped
+TransportEvent = StateChanged | ErrorFrame | BusOff | BusRestarted | FramesDropped

@@ -25,6 +25,12 @@ given a network, or a :class:`~servobus.sim.network.SimCanNetwork` (the Python r
   :func:`servobus.sim.virtual.run`, trio's ``MockClock(autojump_threshold=0)``) it runs as fast as
   the host can compute it, because the only deadlines are the network's own events and the host's
   sleeps. It runs on asyncio and on trio.
+* **The host's controller**: ``episodes=`` (:class:`~servobus.sim.episodes.ControllerEpisodes`, on
+  the network's clock) gives it a full send queue (a send refused fails at once with
+  :class:`~servobus.transports.base.SendQueueFull`, counted ``enobufs_dropped``, reported
+  ``"queue_full"``) and bus-off (BUS_OFF and RESTARTED error frames at their times, sends refused
+  meanwhile, nothing received): what :class:`~servobus.transports.can.CanTransport` makes of
+  python-can's ENOBUFS, ENETDOWN and error frames.
 * **Loss**: :meth:`SimTransport.unplug` pulls the adapter: pending receivers and drains fail at once
   with :class:`~servobus.errors.TransportError`, the state goes to ``LOST`` and reopening fails until
   :meth:`SimTransport.replug`. The devices keep running meanwhile; what they sent while the host was
@@ -47,10 +53,12 @@ from servobus.frame import Frame
 from servobus.sim.canbus import CanBusModel
 from servobus.sim.corenet import CoreCanNetwork
 from servobus.sim.device import Device
+from servobus.sim.episodes import ControllerEpisodes
 from servobus.sim.faults import FaultInjector
 from servobus.sim.network import SimCanNetwork
 from servobus.transports._simclock import Clock, start_clock
-from servobus.transports.base import Outgoing, Transport
+from servobus.transports.base import BusOffError, Outgoing, SendQueueFull, Transport
+from servobus.transports.events import CanErrorClass
 
 __all__ = ["SimTransport"]
 
@@ -64,6 +72,7 @@ class SimTransport(Transport[Frame, Frame]):
         devices: the simulated devices of a new network.
         bus: its bus model (1 Mbit/s classic CAN by default).
         to_devices, to_host: fault injectors on each direction of a new network's link.
+        episodes: the host controller's full-queue and bus-off episodes (network time).
         name: a label for errors and logs.
         queue_size, rx_buffer, stale_after_s, reopen, reopen_backoff_s: see
             :class:`~servobus.transports.base.Transport`. Sends are written at once, so the queue
@@ -84,6 +93,7 @@ class SimTransport(Transport[Frame, Frame]):
         bus: CanBusModel | None = None,
         to_devices: FaultInjector | None = None,
         to_host: FaultInjector | None = None,
+        episodes: ControllerEpisodes | None = None,
         name: str = "sim",
         queue_size: int = 256,
         rx_buffer: int = 65536,
@@ -104,6 +114,7 @@ class SimTransport(Transport[Frame, Frame]):
             reopen_backoff_s=reopen_backoff_s,
         )
         self.network = network
+        self.episodes = episodes
         self._load_known = True  # measured exactly: the bus model's busy time
         self._plugged = True
         self._anchor: object = None  # the loop (its native token) t0 was fixed on
@@ -199,7 +210,14 @@ class SimTransport(Transport[Frame, Frame]):
         if not self._plugged:
             self._lose(TransportError(f"{self.name}: adapter unplugged"), self._generation)
             raise self._error()
-        self._put(frame, handle, self._now())
+        now = self._now()
+        if self.episodes is not None and (why := self._refusal(now)) is not None:
+            if why == "queue_full":
+                self._stats.enobufs_dropped += 1
+                raise SendQueueFull(f"{self.name}: the controller's send queue is full (ENOBUFS)")
+            self._stats.bus_off_dropped += 1
+            raise BusOffError(f"{self.name}: the CAN controller is bus-off (ENETDOWN)")
+        self._put(frame, handle, now)
         return True
 
     async def _transmit(self, batch: list[Outgoing[Frame]]) -> None:
@@ -208,7 +226,24 @@ class SimTransport(Transport[Frame, Frame]):
                 self._lose(TransportError(f"{self.name}: adapter unplugged"), self._generation)
                 return  # what is left in batch is counted as purged by the base
             outgoing = batch.pop(0)
-            self._put(outgoing.item, outgoing.handle, self._now())
+            now = self._now()
+            if self.episodes is not None and (why := self._refusal(now)) is not None:
+                self._dropped(
+                    why, [outgoing.handle], "enobufs_dropped" if why == "queue_full" else "bus_off_dropped"
+                )
+                continue
+            self._put(outgoing.item, outgoing.handle, now)
+
+    def _refusal(self, now: float) -> str | None:
+        """Whether the controller refuses a send now ("queue_full", "bus_off"), as its episodes say;
+        a refused ENETDOWN is bus-off, and a send that goes through after one ends it."""
+        assert self.episodes is not None
+        why = self.episodes.refusal(now - self._t0)
+        if why == "bus_off":
+            self._went_bus_off(now)
+        elif why is None and self._off_since is not None:
+            self._came_back(now)
+        return why
 
     def _put(self, frame: Frame, handle: Any, now: float) -> None:
         network = self.network
@@ -245,6 +280,8 @@ class SimTransport(Transport[Frame, Frame]):
         at = self.network.next_event_s()
         if at is not None:
             self._arm(at, generation)
+        if self.episodes is not None and (at := self.episodes.next_error_frame_s()) is not None:
+            self._arm(at, generation)
 
     def _on_timer(self, generation: int) -> None:
         armed, self._timer_at = self._timer_at, None
@@ -255,6 +292,9 @@ class SimTransport(Transport[Frame, Frame]):
         # event the clock was armed for, or it would be re-armed for the same instant.
         until = max(self._now() - self._t0, armed)
         received = network.advance(until)
+        episodes = self.episodes
+        if episodes is not None:
+            received = self._controller(episodes, received, until)
         busy = network.bus.busy_s
         if busy != self._busy_s:
             self._load.add(until + self._t0, busy - self._busy_s)
@@ -271,6 +311,19 @@ class SimTransport(Transport[Frame, Frame]):
             at = network.run_ahead(until)
             if at is not None:
                 self._arm(at, generation)
+            if episodes is not None and (at := episodes.next_error_frame_s()) is not None:
+                self._arm(at, generation)
+
+    def _controller(
+        self, episodes: ControllerEpisodes, received: list[tuple[float, Frame]], until: float
+    ) -> list[tuple[float, Frame]]:
+        """The controller's error frames due by ``until`` (network time), and what it received of
+        ``received``: nothing while it is bus-off (counted ``ignored``)."""
+        for at, classes in episodes.error_frames(until):
+            self._note_error_frame(CanErrorClass(classes), bytes(8), at + self._t0)
+        heard = [(at, frame) for at, frame in received if episodes.receiving(at)]
+        self._stats.ignored += len(received) - len(heard)
+        return heard
 
 
 # A received frame is the sender's own object: the host gets a copy stamped with the time it ended.

@@ -30,9 +30,12 @@ class TransportStats:
         stale: queued frames dropped because they waited longer than ``stale_after_s``.
         purged: queued frames dropped when the device was lost or the transport closed.
         enobufs_waits, enobufs_dropped: sends the adapter refused for a full buffer, then retried
-            or dropped by the ENOBUFS policy.
+            or not sent by the ENOBUFS policy (reported ``"queue_full"``).
+        bus_off_dropped: frames not sent because the controller was bus-off (reported ``"bus_off"``).
         rx_overflow: received frames dropped because nobody read the receive buffer.
-        error_frames, bus_off: error frames and bus-off events reported by the adapter.
+        error_frames: every error frame the adapter reported.
+        bus_off, restarted: times the controller went bus-off (a BUS_OFF error frame, or a send
+            refused with ENETDOWN) and came back (a RESTARTED error frame, or a send went through).
         ignored: received frames a transport does not carry (CAN remote frames).
         bad_frames: received frames or lines that do not parse (a malformed SLCAN line, a DLC that
             disagrees with the data): counted and dropped, never a lost device.
@@ -53,9 +56,11 @@ class TransportStats:
     purged: int = 0
     enobufs_waits: int = 0
     enobufs_dropped: int = 0
+    bus_off_dropped: int = 0
     rx_overflow: int = 0
     error_frames: int = 0
     bus_off: int = 0
+    restarted: int = 0
     ignored: int = 0
     bad_frames: int = 0
     losses: int = 0
