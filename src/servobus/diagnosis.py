@@ -12,9 +12,9 @@ terminator, another program on the port) all look like a silent motor. Two parts
   families are plug-ins, none is named here), frames on **other ids** (and whose motor would send
   them), or **nothing at all**. :func:`explain` says it for the whole bus.
 
-Asking a family costs a bound codec (``Family.bind``: up to ms each), so bound codecs are kept, and a
-family is asked about a motor id only where the frames' ids fit the offsets between its motors'
-request and reply ids.
+A family is asked through its family-level reply decoder (``Family.decode_reply``: tens of µs), and
+only where a frame's id fits the offsets between its motors' ids and their reply ids (read once from
+one bound motor per revision: binding costs up to ms).
 """
 
 from __future__ import annotations
@@ -22,6 +22,8 @@ from __future__ import annotations
 import functools
 from collections import defaultdict
 from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from enum import Enum
 
 from servobus.frame import Frame
 from servobus.protocols import BoundCodec, Family, available_families, get_family
@@ -89,7 +91,7 @@ def _families() -> tuple[Family, ...]:
     return tuple(found)
 
 
-@functools.lru_cache(maxsize=256)
+@functools.lru_cache(maxsize=128)
 def _bound(family: str, revision: str, motor_id: int) -> BoundCodec | None:
     found = get_family(family)
     if motor_id not in found.motor_ids:
@@ -100,39 +102,58 @@ def _bound(family: str, revision: str, motor_id: int) -> BoundCodec | None:
         return None
 
 
+@dataclass(frozen=True)
+class _Ids:
+    """A family revision's identifiers, from one motor's codec: the offsets ``reply id - motor id``
+    and ``request id - motor id`` of its motors, and the ids all of them share (a host id)."""
+
+    replies: tuple[int, ...] = ()
+    requests: tuple[int, ...] = ()
+    shared: frozenset[int] = frozenset()
+
+
 @functools.lru_cache(maxsize=64)
-def _ids(family: str, revision: str) -> tuple[tuple[int, ...], frozenset[int]]:
-    """The offsets ``reply id - motor id`` of this family's motors, and the ids all of them share (a
-    host id, broadcasts), from one motor's codec."""
+def _ids(family: str, revision: str) -> _Ids:
     ids = get_family(family).motor_ids
     reference = 1 if 1 in ids else ids[0]
     codec = _bound(family, revision, reference)
     if codec is None:
-        return (), frozenset()
-    offsets = tuple(sorted({(rid & _ID_MASK) - reference for rid in codec.reply_ids}))
-    return offsets, frozenset(i & _ID_MASK for i in codec.shared_ids)
+        return _Ids()
+    return _Ids(
+        tuple(sorted({(i & _ID_MASK) - reference for i in codec.reply_ids})),
+        tuple(sorted({(i & _ID_MASK) - reference for i in codec.request_ids})),
+        frozenset(i & _ID_MASK for i in codec.shared_ids),
+    )
 
 
-def _claims(codec: BoundCodec, frame: Frame) -> bool:
+def _decodes(family: Family, revision: Enum, frame: Frame) -> bool:
+    """Whether ``frame`` is a reply of ``family`` in ``revision`` (its family-level decoder: no
+    motor's codec to bind, which costs up to ms)."""
     try:
-        return codec.classify(frame)[0] is not KIND_NOT_OURS
+        family.decode_reply(frame.arbitration_id, frame.data, revision=revision)
     except Exception:
         return False
+    return True
 
 
 def _as_motor(frame: Frame, motor_id: int, skip: tuple[str, str]) -> tuple[str, str] | None:
     """(family, revision) whose motor ``motor_id`` would send ``frame`` (not ``skip``'s), or None."""
+    fid = frame.arbitration_id
     for family in _families():
         for revision in family.revisions:
             if (family.name, revision.name) == skip:
                 continue
-            offsets, shared = _ids(family.name, revision.name)
-            fid = frame.arbitration_id
-            if fid not in shared and not any(fid == motor_id + o for o in offsets):
-                continue  # (no motor of it at motor_id would use that id: not asked, not bound)
-            codec = _bound(family.name, revision.name, motor_id)
-            if codec is not None and _claims(codec, frame):
-                return family.name, revision.name
+            ids = _ids(family.name, revision.name)
+            if any(fid == motor_id + o for o in ids.replies):
+                if _decodes(family, revision, frame):
+                    return family.name, revision.name
+            elif fid in ids.shared:  # (a host id: which motor is in the data, as its codec reads it)
+                codec = _bound(family.name, revision.name, motor_id)
+                try:
+                    if codec is not None and codec.classify(frame)[0] is not KIND_NOT_OURS:
+                        return family.name, revision.name
+                except Exception:
+                    continue
     return None
 
 
@@ -142,10 +163,9 @@ def _sender(frame: Frame, prefer: str | None) -> tuple[str, str, int] | None:
     families = sorted(_families(), key=lambda f: f.name != prefer)
     for family in families:
         for revision in family.revisions:
-            for offset in _ids(family.name, revision.name)[0]:
+            for offset in _ids(family.name, revision.name).replies:
                 motor_id = frame.arbitration_id - offset
-                codec = _bound(family.name, revision.name, motor_id)
-                if codec is not None and _claims(codec, frame):
+                if motor_id in family.motor_ids and _decodes(family, revision, frame):
                     return family.name, revision.name, motor_id
     return None
 
@@ -194,12 +214,11 @@ def _requests(senders: dict[int, tuple[str, str, int] | None]) -> dict[int, tupl
     them (a frame on a request id can look like a reply where a revision answers on that id)."""
     asked: dict[int, tuple[str, str, int]] = {}
     for ident, sender in senders.items():
-        codec = _bound(*sender) if sender is not None else None
-        if codec is not None:
-            for request_id in codec.request_ids:
-                request_id &= _ID_MASK
+        if sender is not None:
+            for offset in _ids(*sender[:2]).requests:
+                request_id = sender[2] + offset
                 if request_id != ident and request_id in senders:
-                    asked[request_id] = sender  # type: ignore[assignment]
+                    asked[request_id] = sender
     return asked
 
 
