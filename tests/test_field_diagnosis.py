@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import anyio
 import pytest
 
 from _backends import BACKENDS
@@ -22,8 +23,13 @@ from servobus.protocols import myactuator as ma
 from servobus.protocols.lk.sim.device import LkMotor
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.sim import virtual
+from servobus.sim.attach import serve_slcan
 from servobus.sim.device import Emission
+from servobus.sim.network import SimCanNetwork
+from servobus.sim.pty import PtyPort
+from servobus.transports import SlcanTransport
 from servobus.transports.sim import SimTransport
+from transports._anyio_help import serving
 
 #: what a silent line is told (servobus.diagnosis.NOTHING_AT_ALL; said here too, so that this module
 #: runs against a servobus without it, and fails there by its assertions)
@@ -153,3 +159,20 @@ def test_the_diagnosis_without_a_bus() -> None:
     )
     assert diagnose(codec, seen, 3.0, heard=False) == NOTHING_AT_ALL  # (before the request left)
     assert explain([]) is None
+
+
+@pytest.mark.anyio
+async def test_through_slcan_on_a_pty_the_timeout_names_the_family_that_answered() -> None:
+    """The same through a real link: the simulator's SLCAN adapter on a pty, an LK motor behind it,
+    asked as a MyActuator motor, in real time."""
+    port = PtyPort()
+    try:
+        with anyio.fail_after(10):
+            network = SimCanNetwork([LkMotor(3)])
+            transport = SlcanTransport(port.path, bitrate=1_000_000)
+            async with serving(serve_slcan(network, port)), Bus(transport, safe=None) as bus:
+                with pytest.raises(MotorTimeout) as raised:
+                    await bus.motor("myactuator", 3).request(ma.ReadStatus1(), timeout_s=0.3)
+    finally:
+        port.close()
+    assert raised.value.diagnosis == "0x183 answered as lk (V2_36) would: --family lk?"
