@@ -82,6 +82,33 @@ def test_the_probes_are_short_first_and_the_silent_ids_are_probed_again(
     assert all(t is None for _, t in probes[5:])
 
 
+def test_on_a_silent_line_one_id_gets_the_librarys_timeout_before_the_others_their_second_probe(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A fresh adapter's first exchange can be slow: one probe waits the library's timeout (the
+    others do not each wait it, as a half-duplex line would have them in turn)."""
+    _simulate(monkeypatch)
+    probes: list[tuple[int, float | None]] = []
+    request = Motor.request
+
+    async def spied(self: Motor, command: Any, *, timeout_s: float | None = None, **kwargs: Any) -> Any:
+        probes.append((self.motor_id, timeout_s))
+        return await request(self, command, timeout_s=timeout_s, **kwargs)
+
+    monkeypatch.setattr(Motor, "request", spied)
+    one_line(capsys, ["scan", "--sim", "1", "--ids", "1-3"], code=1)
+    first, second = scan_cli.FIRST_TIMEOUT_S, scan_cli.SECOND_TIMEOUT_S
+    assert probes == [(1, first), (2, first), (3, first), (1, None), (2, second), (3, second)]
+
+
+def test_a_motor_slower_than_the_first_probe_is_found_by_the_second(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    _simulate(monkeypatch, MyActuatorMotor(2, turnaround_s=0.15))
+    rows = run_json(capsys, ["scan", "--sim", "1", "--ids", "1-3"])
+    assert [r["id"] for r in rows] == [2]
+
+
 def test_through_a_real_pty_an_lk_bus_is_named_within_3_s(capsys: pytest.CaptureFixture[str]) -> None:
     with pty_simulators() as start:
         path = start("--family", "lk", "--motors", "2")

@@ -2,13 +2,13 @@
 
 Each id is probed with the family's first status read (a read changes nothing on a motor), all ids
 at once with a short first timeout (:data:`FIRST_TIMEOUT_S`), then those that did not answer once
-more with a longer one (:data:`SECOND_TIMEOUT_S`, or the library's on a line that said nothing at
-all; with ``--timeout-ms``, one probe of all ids with that), with a progress bar: a bus of motors of
-another family costs about a second, not a timeout per id. When nobody answers, the message says
-what the bus saw instead (:mod:`servobus.diagnosis`): another family's replies ("--family lk?"),
-frames on other ids, or no frame at all (bitrate, wiring, termination, another program on the
-port). The motors that answered are then asked what the family can tell: revision, model, firmware
-date, state and error flags. The family's ``cli`` part says how (``identify`` and
+more with a longer one (:data:`SECOND_TIMEOUT_S`; on a line that said nothing at all, one id first
+with the library's; with ``--timeout-ms``, one probe of all ids with that), with a progress bar: a
+bus of motors of another family costs about a second, not a timeout per id. When nobody answers,
+the message says what the bus saw instead (:mod:`servobus.diagnosis`): another family's replies
+("--family lk?"), frames on other ids, or no frame at all (bitrate, wiring, termination, another
+program on the port). The motors that answered are then asked what the family can tell: revision,
+model, firmware date, state and error flags. The family's ``cli`` part says how (``identify`` and
 ``describe``, :class:`servobus.cli.plugin.Query`): a motor is probed as the revision given (the
 family's default) and then described in the revision its ``identify`` named (MyActuator: the one its
 firmware date implies).
@@ -45,8 +45,8 @@ COLUMNS = ("id", "family", "revision", "model", "firmware", "state", "errors")
 DEFAULT_IDS = tuple(range(1, 33))
 #: the first probe's timeout (every id at once): a motor on a bus answers within a few ms
 FIRST_TIMEOUT_S = 0.1
-#: the second probe's, of the ids that were silent, when the line is alive (something answered the
-#: first); on a line that said nothing it is the library's (a fresh adapter's first exchange is slow)
+#: the second probe's, of the ids that were silent; on a line that said nothing at all, one of them
+#: is probed first with the library's timeout (a fresh adapter's first exchange can be that slow)
 SECOND_TIMEOUT_S = 0.3
 
 
@@ -111,9 +111,11 @@ async def _scan(
                 silent = [m for m in motors if m.motor_id not in replies]
                 progress.advance(task, len(motors) - len(silent))
                 if conn.timeout_s is None and silent:
-                    alive = bool(replies or bus.scheduler.seen.since(began))
-                    second_s = SECOND_TIMEOUT_S if alive else None
-                    replies.update(await _probe_all(silent, probe, second_s))  # (a slow motor or adapter)
+                    again = silent
+                    if not _heard(bus, began):  # one probe with the library's (first) timeout
+                        replies.update(await _probe_all(silent[:1], probe, None))
+                        again = [m for m in silent[1:] if m.motor_id not in replies]
+                    replies.update(await _probe_all(again, probe, SECOND_TIMEOUT_S))  # (a slow motor)
                 progress.advance(task, len(silent))
                 for motor in motors:
                     if motor.motor_id in replies:
@@ -134,6 +136,12 @@ async def _scan(
                 except ServobusError as exc:
                     row["state"] = f"answered the probe, then: {exc}"
     return rows, seen
+
+
+def _heard(bus: Bus, since: float) -> bool:
+    """Whether the bus received any frame since ``since``: a reply (even a late one) or another."""
+    seen = any(m.last_seen is not None and m.last_seen >= since for m in bus.motors.values())
+    return seen or bool(bus.scheduler.seen.since(since))
 
 
 async def _probe_all(motors: Sequence[Asked], probe: Any, timeout_s: float | None) -> dict[int, Reply]:
