@@ -206,3 +206,25 @@ def test_the_script_exits_143_with_no_bus_left_running() -> None:
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
     assert done.returncode == 143, done.stderr
     assert done.stdout.split() == ["PositionControl"]
+
+
+@pytest.mark.anyio
+async def test_tasks_inside_the_block_are_cancelled_and_both_motors_stop() -> None:
+    """The usual shape: the Bus in the main task, a task per motor inside its block."""
+    devices = [MyActuatorMotor(1), MyActuatorMotor(2)]
+    with pytest.raises(SystemExit) as exited:
+        async with Bus(SimTransport(devices=devices, name="sim")) as bus:
+
+            async def drive(motor_id: int) -> None:
+                motor = bus.motor("myactuator", motor_id)
+                while True:
+                    await motor.speed_control(speed_dps=120)
+                    await anyio.sleep(0.01)
+
+            async with anyio.create_task_group() as group:
+                group.start_soon(drive, 1)
+                group.start_soon(drive, 2)
+                await anyio.sleep(0.05)
+                os.kill(os.getpid(), signal.SIGTERM)
+    assert exited.value.code == 143
+    assert all(isinstance(d.plant.control, PositionControl) for d in devices)
