@@ -228,3 +228,27 @@ async def test_tasks_inside_the_block_are_cancelled_and_both_motors_stop() -> No
                 os.kill(os.getpid(), signal.SIGTERM)
     assert exited.value.code == 143
     assert all(isinstance(d.plant.control, PositionControl) for d in devices)
+
+
+@pytest.mark.anyio
+async def test_a_second_sigterm_during_the_safe_stop_is_ignored(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The handler is let go only after the safe stop: a second SIGTERM (an impatient operator, a
+    script that sends two) does not kill the process before the stop went out."""
+    import servobus.bus as bus_module
+
+    safe_stop = bus_module.safe_stop
+
+    async def signalled_again(bus: Bus) -> None:
+        os.kill(os.getpid(), signal.SIGTERM)
+        await safe_stop(bus)
+
+    monkeypatch.setattr(bus_module, "safe_stop", signalled_again)
+    device = MyActuatorMotor(1)
+    with pytest.raises(SystemExit) as exited:
+        async with Bus(SimTransport(devices=[device], name="sim")) as bus:
+            await bus.motor("myactuator", 1).speed_control(speed_dps=120)
+            os.kill(os.getpid(), signal.SIGTERM)
+            await anyio.sleep(5)
+    assert exited.value.code == 143
+    assert isinstance(device.plant.control, PositionControl)
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL

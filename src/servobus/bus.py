@@ -273,15 +273,29 @@ class Bus:
     async def __aexit__(
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> bool | None:
+        taken, self._sigterm = self._sigterm, None
+        if taken is None:
+            return await self._close(exc_type, exc, tb)
+        try:  # (SIGTERM's handler is let go after the safe stop: a second SIGTERM meanwhile is ignored)
+            signalled = bool(taken.scope.__exit__(exc_type, exc, tb))  # its cancellation, ended here
+            if signalled:
+                await self._close(None, None, None)
+                suppress: bool | None = True
+            else:
+                suppress = await self._close(exc_type, exc, tb)
+        finally:
+            taken.release()
+        if taken.exits and (exc is None or signalled):
+            raise SystemExit(128 + signal.SIGTERM)  # after the safe stop, as Ctrl-C's KeyboardInterrupt
+        return suppress
+
+    async def _close(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> bool | None:
+        """Leave the block: the safe stop, then the Bus's task group (``exc``: how the block ended)."""
         engine, group = self._engine, self._group
         self._closing, self._group = True, None
         suppress: bool | None = None
-        taken, self._sigterm = self._sigterm, None
-        if taken is not None:
-            taken.release()
-            if taken.scope.__exit__(exc_type, exc, tb):  # the signal's cancellation, ended here
-                exc_type = exc = tb = None
-                suppress = True
         try:
             # What is still queued would go out with the safe commands, or after them.
             engine.fail(self.scheduler.fail(self._closed_error(), engine.time(), queued_only=True))
@@ -291,9 +305,7 @@ class Bus:
             engine.detach(self._closed_error())
             engine.stop()
             if group is not None:
-                suppress = await _leave(group, exc_type, exc, tb) or suppress
-        if taken is not None and taken.exits and exc is None:
-            raise SystemExit(128 + signal.SIGTERM)  # after the safe stop, as Ctrl-C's KeyboardInterrupt
+                suppress = await _leave(group, exc_type, exc, tb)
         return suppress
 
     def _closed_error(self) -> TransportError:

@@ -43,6 +43,7 @@ with ``taking_signals`` False.
 from __future__ import annotations
 
 import contextlib
+import os
 import signal as _signal
 import threading
 from collections.abc import AsyncIterator, Callable, Iterator
@@ -223,8 +224,16 @@ class _SigtermDefault:
             return  # a second one while the safe stop runs: that stop is bounded by safe_timeout_s
         self.received_by = tuple(self.open)
         self.exiting = next(iter(self.open), None)
+        reached = False
         for taken in self.received_by:
-            taken._call_soon(taken.scope.cancel)
+            try:
+                taken._call_soon(taken.scope.cancel)
+                reached = True
+            except RuntimeError:  # its loop is closed (a Bus never left): nothing to stop there
+                continue
+        if not reached:  # no Bus could be told: the default action, as if none had taken the signal
+            _signal.signal(_signal.SIGTERM, _signal.SIG_DFL)
+            os.kill(os.getpid(), _signal.SIGTERM)
 
 
 _SIGTERM = _SigtermDefault()
