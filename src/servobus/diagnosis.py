@@ -4,13 +4,15 @@ A motor of the wrong family, motors at other ids, and a dead line (wrong bit rat
 terminator, another program on the port) all look like a silent motor. Two parts tell them apart:
 
 * :class:`Seen`, sans-IO, fed by the scheduler with every frame no motor of the bus claims (counted
-  ``foreign``; never on a reply's path): per arbitration id, how many came, when, and the last one.
+  ``foreign``; never on a reply's path): per arbitration id, how many came since it was first seen,
+  when, and the last one.
   Bounded (the ids seen last), O(1) per frame.
 * :func:`diagnose`, run only when a request times out (or ``servobus scan`` found nobody): for a
   silent motor, one line saying what came instead: frames of **another family** on its ids (each
-  registered family's codec is asked whether the frame classifies as its reply for that motor id:
-  families are plug-ins, none is named here), frames on **other ids** (and whose motor would send
-  them), or **nothing at all**. :func:`explain` says it for the whole bus.
+  registered family is asked whether the frame is its reply for that motor id: families are
+  plug-ins, none is named here), frames on **other ids** (and whose motors would send them, or
+  another host's requests to them), or **nothing at all**. :func:`explain` says it for the whole
+  bus.
 
 A family is asked through its family-level reply decoder (``Family.decode_reply``: tens of µs), and
 only where a frame's id fits the offsets between its motors' ids and their reply ids (read once from
@@ -75,7 +77,7 @@ class Seen:
         return sorted((e for e in self.ids.values() if e.last_at >= at), key=lambda e: e.frame.arbitration_id)
 
 
-# ---- what the families say (bound codecs kept: binding costs up to ms) ----
+# ---- what the families say ----
 
 
 @functools.lru_cache(maxsize=1)
