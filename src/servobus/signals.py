@@ -7,11 +7,14 @@ timeout (MyActuator 0xB3) trips, if it is set. So while a Bus is open in the mai
 has that default disposition (``SIG_DFL``), the Bus takes it (:func:`take_sigterm`): SIGTERM does
 what Ctrl-C does, the ``async with Bus`` block is cancelled, the safe stop goes out, and the oldest
 Bus open leaves with ``SystemExit(143)`` (128 + 15, the status a shell reports for SIGTERM), on
-asyncio and on trio. One handler serves every Bus open at once; the default is put back when the
-last one closes. A handler the program set itself (or :func:`stop_on`, as the CLI uses) is left
-alone: the Bus takes nothing then. Opt out with ``Bus(..., sigterm=False)``. With several Buses in
-sibling tasks of a task group, the ``SystemExit`` leaves the group wrapped in an exception group:
-use :func:`stop_on` outermost there.
+asyncio and on trio (the Buses opened inside it are left quietly, their blocks cancelled too). A
+second SIGTERM while the safe stop runs is ignored. One handler serves every Bus open at once; the
+default is put back when the last one closes, after its safe stop. A handler the program set itself
+(or :func:`stop_on`, as the CLI uses) is left alone: the Bus takes nothing then. Opt out with
+``Bus(..., sigterm=False)``. With several Buses in sibling tasks of a task group, the ``SystemExit``
+leaves the group wrapped in an exception group: use :func:`stop_on` outermost there.
+(:class:`servobus.sync.Bus` runs its loop in a thread of its own, where no signal arrives: it takes
+none.)
 
 **Opt-in, any signal: stop_on.** A signal cancels a block, so every ``async with Bus`` in it is left
 through its safe stop. In the main coroutine::
