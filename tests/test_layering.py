@@ -159,6 +159,7 @@ LAYERS: dict[str, list[str]] = {
         "servobus._scheduler_match",
         "servobus._scheduler_pace",
         "servobus._scheduler_time",
+        "servobus.diagnosis",  # (what the bus saw instead of a reply: sans-IO, asks the registry)
     ],
     "transports": ["servobus.transports"],
     "sim": ["servobus.sim", "servobus.protocols.<family>.sim"],

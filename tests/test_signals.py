@@ -43,12 +43,12 @@ CHILD = textwrap.dedent(
         async with transport:
             if protect:
                 async with stop_on(signal.SIGTERM):
-                    await drive(transport)
+                    await drive(transport, True)
             else:
-                await drive(transport)
+                await drive(transport, False)
 
-    async def drive(transport) -> None:
-        async with Bus(transport) as bus:
+    async def drive(transport, sigterm: bool) -> None:
+        async with Bus(transport, sigterm=sigterm) as bus:
             motor = bus.motor("myactuator", 1)
             await motor.speed_control(speed_dps=90, timeout_s=0.5)
             print("ready", flush=True)
@@ -103,8 +103,8 @@ async def test_sigterm_with_stop_on_sends_the_safe_stop_and_exits_143(backend: s
 
 @pytest.mark.asyncio
 async def test_sigterm_without_it_kills_the_process_and_no_stop_is_sent() -> None:
-    """The reason the helper exists: the Bus alone takes no signals, so the default action ends the
-    process where it stands."""
+    """Neither the helper nor the Bus's own default (``sigterm=False``): the default action ends
+    the process where it stands."""
     code, codes = await _run_child(protect=False, backend="asyncio")
     assert code == -signal.SIGTERM
     assert ma.MotorStop.CODE not in codes

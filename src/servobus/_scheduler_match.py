@@ -12,6 +12,7 @@ from collections.abc import Hashable
 from typing import TYPE_CHECKING
 
 from servobus._request import FROM, Received, Recent, Request, RequestState, Traffic, illegal
+from servobus.diagnosis import Seen
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
 from servobus.protocols import BoundCodec, FrameKind, Reply
@@ -54,6 +55,7 @@ class Matching:
     _overtaken: list[Request]
     _rest_until: float
     _bus_counts: Counter[str]
+    seen: Seen
     motor_counts: dict[int, Counter[str]]
     motor_latency: dict[int, LatencyWindow]
 
@@ -74,6 +76,7 @@ class Matching:
             if kind is not KIND_NOT_OURS:
                 return self._ours(codec, kind, key, frame, now)
         self._bus_counts["foreign"] += 1
+        self.seen.note(frame, now)
         return Received(_T_FOREIGN, frame)
 
     def _ours(

@@ -26,6 +26,9 @@ then:
   From then on nothing else is sent: requests not yet sent, and any made later (by a task the block
   did not wait for), fail with TransportError, and so does every request still waiting for a reply
   once the block is left.
+* SIGTERM, by default, does what Ctrl-C does: while a Bus is open in the main thread and SIGTERM has
+  Python's default disposition, the signal cancels the block, the safe stop goes out and the process
+  exits with status 143 (``sigterm=False``: not this Bus; :mod:`servobus.signals`).
 
 The Bus is a thin router between its parts: the sans-IO :class:`~servobus.scheduler.Scheduler`
 matches, paces and times out; the :class:`~servobus.engine.Engine` moves frames and decisions
@@ -33,12 +36,14 @@ between it and the link and owns the Bus's one timer task; the :class:`~servobus
 says which motors are offline; ``servobus._tick`` gathers a cycle's outcomes; ``servobus.safety``
 stops the motors. The Bus owns a task group (entered with its block, left after the safe stop)
 that runs the timer: nothing outlives the block, and an error of that task is raised from it. No
-global state, no signal handlers: a Bus lives inside the user's loop and task groups.
+global state but SIGTERM's default handler (one for the process, only where the program set none):
+a Bus lives inside the user's loop and task groups.
 """
 
 from __future__ import annotations
 
 import logging
+import signal
 from collections.abc import AsyncIterator, Callable, Iterable, Sequence
 from types import TracebackType
 from typing import Any, NoReturn, Self, TypeVar, cast, overload
@@ -57,6 +62,7 @@ from servobus.protocols import Command, Family, Reply, get_family
 from servobus.restarts import Restarts
 from servobus.safety import safe_stop
 from servobus.scheduler import Scheduler, Traffic
+from servobus.signals import SigtermTaken, take_sigterm
 from servobus.ticks import Tick as PacerTick
 from servobus.ticks import ticks
 from servobus.transports.contract import FrameLink, LineRules
@@ -161,6 +167,9 @@ class Bus:
             silence alone never does; set it when the motor streams or is polled steadily).
         probe_interval_s: how often :meth:`cycle` still sends an offline motor its command (as a
             probe the tick does not wait for) until it answers.
+        sigterm: SIGTERM leaves the block as Ctrl-C does (safe stop, then exit status 143) while
+            the Bus is open in the main thread and SIGTERM has Python's default disposition; False:
+            this Bus takes no signal (:mod:`servobus.signals`).
 
     Attributes:
         safe_sent: the motors whose safe command left (the link reported it sent) when the
@@ -185,12 +194,15 @@ class Bus:
         min_timeout_s: float = 0.005,
         max_timeout_s: float = 10.0,
         probe_interval_s: float = 0.1,
+        sigterm: bool = True,
     ) -> None:
         if safe_timeout_s <= 0:
             raise ValueError(f"safe_timeout_s={safe_timeout_s} must be positive")
         if probe_interval_s <= 0:
             raise ValueError(f"probe_interval_s={probe_interval_s} must be positive")
         self.probe_interval_s = probe_interval_s
+        self.sigterm = sigterm
+        self._sigterm: SigtermTaken | None = None  # this block's share of SIGTERM's default handler
         self.transport = transport
         self.name = name or transport.name
         self.safe = safe
@@ -252,11 +264,37 @@ class Bus:
             await _leave(group, type(exc), exc, exc.__traceback__)
             raise
         self._group = group
+        if self.sigterm:  # (last: the block's scope is the innermost, left first)
+            scope = anyio.CancelScope()
+            scope.__enter__()
+            self._sigterm = take_sigterm(scope, runtime.call_soon_threadsafe)
+            if self._sigterm is None:
+                scope.__exit__(None, None, None)
         return self
 
     async def __aexit__(
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> bool | None:
+        taken, self._sigterm = self._sigterm, None
+        if taken is None:
+            return await self._close(exc_type, exc, tb)
+        try:  # (SIGTERM's handler is let go after the safe stop: a second SIGTERM meanwhile is ignored)
+            signalled = bool(taken.scope.__exit__(exc_type, exc, tb))  # its cancellation, ended here
+            if signalled:
+                await self._close(None, None, None)
+                suppress: bool | None = True
+            else:
+                suppress = await self._close(exc_type, exc, tb)
+        finally:
+            taken.release()
+        if taken.exits and (exc is None or signalled):
+            raise SystemExit(128 + signal.SIGTERM)  # after the safe stop, as Ctrl-C's KeyboardInterrupt
+        return suppress
+
+    async def _close(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> bool | None:
+        """Leave the block: the safe stop, then the Bus's task group (``exc``: how the block ended)."""
         engine, group = self._engine, self._group
         self._closing, self._group = True, None
         suppress: bool | None = None

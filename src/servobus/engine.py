@@ -30,6 +30,7 @@ import anyio.lowlevel
 from anyio.abc import TaskStatus
 
 from servobus.delivery import Delivery
+from servobus.diagnosis import diagnose
 from servobus.errors import MotorStreaming, MotorTimeout, TransportError
 from servobus.protocols import Command
 from servobus.runtime import Runtime, RuntimeMismatch
@@ -338,16 +339,24 @@ class Engine:
         elif request.state is _REPLIED:
             future.set_result(request.reply)
         elif request.state is _TIMED_OUT:
-            future.set_exception(
-                MotorTimeout(
-                    f"{request.describe()}: no reply within {request.timeout_s:g} s"
-                    + (f" ({request.attempts} attempts)" if request.attempts > 1 else "")
-                )
-            )
+            future.set_exception(self.timed_out(request))
         else:
             future.set_exception(
                 request.error or TransportError(f"{self.name}: {request.describe()} {request.state.value}")
             )
+
+    def timed_out(self, request: Request) -> MotorTimeout:
+        """The error of a request that got no reply, saying what the bus saw instead (computed here,
+        off the reply path: only a time-out pays for it)."""
+        now = self.time()
+        since = request.sent_at if request.sent_at is not None else now - request.timeout_s
+        heard = any(m.last_seen is not None and m.last_seen >= since for m in self.bus.motors.values())
+        diagnosis = diagnose(request.codec, self.scheduler.seen, since, heard=heard, sent=request.frame)
+        attempts = f" ({request.attempts} attempts)" if request.attempts > 1 else ""
+        return MotorTimeout(
+            f"{request.describe()}: no reply within {request.timeout_s:g} s{attempts}; {diagnosis}",
+            diagnosis=diagnosis,
+        )
 
 
 class LinkKeeper:

@@ -81,7 +81,17 @@ class ProtocolError(ServobusError):
 
 
 class MotorTimeout(ServobusError, TimeoutError):
-    """A motor did not answer within its deadline."""
+    """A motor did not answer within its deadline.
+
+    Attributes:
+        diagnosis: what the bus saw instead, when it was asked (a request that timed out): frames
+            of another family on the motor's ids, frames on other ids, or no frame at all
+            (servobus.diagnosis); also the end of the message. None: not asked.
+    """
+
+    def __init__(self, *args: object, diagnosis: str | None = None) -> None:
+        super().__init__(*args)
+        self.diagnosis = diagnosis
 
 
 class MotorOffline(MotorTimeout):

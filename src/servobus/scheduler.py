@@ -58,6 +58,7 @@ from servobus._request import (
 from servobus._scheduler_match import Matching
 from servobus._scheduler_pace import Pacing
 from servobus._scheduler_time import TRUSTED_SAMPLES, Timing
+from servobus.diagnosis import Seen
 from servobus.errors import RequestStateError, TransportError
 from servobus.frame import Frame
 from servobus.metrics import LatencyWindow
@@ -184,6 +185,7 @@ class Scheduler(Pacing, Matching, Timing):
         self._overtaken: list[Request] = []  # timed out by a reply stamped after their deadline
         self._sent_count = 0  # a tie-breaker for the heap
         self._recent = Recent()
+        self.seen = Seen()  # frames of no motor, for the diagnosis of a silent one (servobus.diagnosis)
         self._held: dict[Hashable, float] = {}  # key -> until when its next exchange waits
         self._early: dict[Hashable, tuple[BoundCodec, Frame]] = {}  # key -> a reply before its report
         self._rest_until = 0.0

@@ -1,10 +1,23 @@
-"""Opt-in: a signal (SIGTERM from a service manager, say) cancels a block, so every ``async with Bus``
-in it is left through its safe stop before the process exits.
+"""Signals that end a process while it drives motors: every ``async with Bus`` is left through its
+safe stop before the process exits.
 
-The Bus installs no signal handlers (a library must not take a process's signals). Without one,
-SIGTERM kills a Python process at once, and motors keep their last command until their own
-communication timeout (MyActuator 0xB3) trips, if it is set. With this helper, in the main
-coroutine::
+**SIGTERM by default.** Python's default for SIGTERM (systemd, ``docker stop``, ``timeout``) kills
+the process where it stands, and motors keep their last command until their own communication
+timeout (MyActuator 0xB3) trips, if it is set. So while a Bus is open in the main thread and SIGTERM
+has that default disposition (``SIG_DFL``), the Bus takes it (:func:`take_sigterm`): SIGTERM does
+what Ctrl-C does, the ``async with Bus`` block is cancelled, the safe stop goes out, and the oldest
+Bus open leaves with ``SystemExit(143)`` (128 + 15, the status a shell reports for SIGTERM), on
+asyncio and on trio (the Buses opened inside it are left quietly, their blocks cancelled too). A
+second SIGTERM while the safe stop runs is ignored. One handler serves every Bus open at once; the
+default is put back when the last one closes, after its safe stop. A handler the program set itself
+(or :func:`stop_on`, as the CLI uses) is left alone: the Bus takes nothing then. Opt out with
+``Bus(..., sigterm=False)``. With several Buses in sibling tasks of a task group, the ``SystemExit``
+leaves the group wrapped in an exception group: use :func:`stop_on` outermost there.
+(:class:`servobus.sync.Bus` runs its loop in a thread of its own, where no signal arrives: it takes
+none.)
+
+**Opt-in, any signal: stop_on.** A signal cancels a block, so every ``async with Bus`` in it is left
+through its safe stop. In the main coroutine::
 
     import signal
     from servobus.signals import stop_on
@@ -33,16 +46,17 @@ with ``taking_signals`` False.
 from __future__ import annotations
 
 import contextlib
+import os
 import signal as _signal
 import threading
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import AsyncIterator, Callable, Iterator
 from types import TracebackType
 from typing import Any
 
 import anyio
 import anyio.abc
 
-__all__ = ["StopOn", "stop_on"]
+__all__ = ["SigtermTaken", "StopOn", "stop_on", "take_sigterm"]
 
 
 class StopOn:
@@ -146,3 +160,92 @@ def stop_on(*signals: int, exit: bool = True) -> StopOn:
         ValueError: no signal given, or a number that is no signal.
     """
     return StopOn(signals, exit=exit)
+
+
+# ---- SIGTERM by default, for the Bus ----
+
+
+class SigtermTaken:
+    """One open Bus's share of the default SIGTERM handler (:func:`take_sigterm`): the cancel scope
+    around its block, cancelled on the signal. :meth:`release` when the block is left."""
+
+    def __init__(self, scope: anyio.CancelScope, call_soon_threadsafe: Callable[..., object]) -> None:
+        self.scope = scope
+        self._call_soon = call_soon_threadsafe
+
+    @property
+    def received(self) -> bool:
+        """True when SIGTERM came while this block was open."""
+        return _SIGTERM.received_by is not None and self in _SIGTERM.received_by
+
+    @property
+    def exits(self) -> bool:
+        """True when this block is the one that turns the signal into ``SystemExit(143)`` (the
+        oldest open when it came: the others are left quietly, inside it or beside it)."""
+        return _SIGTERM.exiting is self
+
+    def release(self) -> None:
+        """The block was left: the default disposition is back when it was the last one."""
+        _SIGTERM.release(self)
+
+
+class _SigtermDefault:
+    """The process's one SIGTERM handler for the Buses open in the main thread (module state, since
+    a signal's disposition is the process's)."""
+
+    def __init__(self) -> None:
+        self.open: dict[SigtermTaken, None] = {}  # in the order they were taken: the oldest first
+        self.received_by: tuple[SigtermTaken, ...] | None = None
+        self.exiting: SigtermTaken | None = None
+        self._handler = self._on_signal  # (one bound method, compared with getsignal()'s)
+
+    def take(
+        self, scope: anyio.CancelScope, call_soon_threadsafe: Callable[..., object]
+    ) -> SigtermTaken | None:
+        if threading.current_thread() is not threading.main_thread():
+            return None  # (signals reach the main thread only)
+        if not self.open:
+            if _signal.getsignal(_signal.SIGTERM) is not _signal.SIG_DFL:
+                return None  # the program's own handler, or stop_on's: theirs to act
+            _signal.signal(_signal.SIGTERM, self._handler)
+            self.received_by, self.exiting = None, None
+        taken = SigtermTaken(scope, call_soon_threadsafe)
+        self.open[taken] = None
+        if self.received_by is not None:  # opened while the others leave: leave too
+            scope.cancel()
+        return taken
+
+    def release(self, taken: SigtermTaken) -> None:
+        last = self.open.pop(taken, 0) is None and not self.open
+        if last and _signal.getsignal(_signal.SIGTERM) == self._handler:  # (one set since stays)
+            _signal.signal(_signal.SIGTERM, _signal.SIG_DFL)
+
+    def _on_signal(self, signum: int, frame: object) -> None:
+        # A Python-level handler runs between two bytecodes of the main thread, which may be in the
+        # middle of the loop's own work: the scopes are cancelled from the loop, soon.
+        if self.received_by is not None:
+            return  # a second one while the safe stop runs: that stop is bounded by safe_timeout_s
+        self.received_by = tuple(self.open)
+        self.exiting = next(iter(self.open), None)
+        reached = False
+        for taken in self.received_by:
+            try:
+                taken._call_soon(taken.scope.cancel)
+                reached = True
+            except RuntimeError:  # its loop is closed (a Bus never left): nothing to stop there
+                continue
+        if not reached:  # no Bus could be told: the default action, as if none had taken the signal
+            _signal.signal(_signal.SIGTERM, _signal.SIG_DFL)
+            os.kill(os.getpid(), _signal.SIGTERM)
+
+
+_SIGTERM = _SigtermDefault()
+
+
+def take_sigterm(
+    scope: anyio.CancelScope, call_soon_threadsafe: Callable[..., object]
+) -> SigtermTaken | None:
+    """Have SIGTERM cancel ``scope`` (an open Bus's block), through ``call_soon_threadsafe`` (its
+    loop's), where the default disposition allows (see the module docstring): the handle, or None
+    where nothing was taken (not the main thread, or SIGTERM already has a handler)."""
+    return _SIGTERM.take(scope, call_soon_threadsafe)

@@ -1,8 +1,14 @@
 """``servobus scan``: which motors answer, and what they are.
 
-Each id is probed with the family's first status read (a read changes nothing on a motor), with a
-progress bar; the motors that answered are then asked what the family can tell: revision, model,
-firmware date, state and error flags. The family's ``cli`` part says how (``identify`` and
+Each id is probed with the family's first status read (a read changes nothing on a motor), all ids
+at once with a short first timeout (:data:`FIRST_TIMEOUT_S`), then those that did not answer once
+more with a longer one (:data:`SECOND_TIMEOUT_S`; on a line that said nothing at all, one id first
+with the library's; with ``--timeout-ms``, one probe of all ids with that), with a progress bar: a
+bus of motors of another family costs about a second, not a timeout per id. When nobody answers,
+the message says what the bus saw instead (:mod:`servobus.diagnosis`): another family's replies
+("--family lk?"), frames on other ids, or no frame at all (bitrate, wiring, termination, another
+program on the port). The motors that answered are then asked what the family can tell: revision,
+model, firmware date, state and error flags. The family's ``cli`` part says how (``identify`` and
 ``describe``, :class:`servobus.cli.plugin.Query`): a motor is probed as the revision given (the
 family's default) and then described in the revision its ``identify`` named (MyActuator: the one its
 firmware date implies).
@@ -15,6 +21,7 @@ import dataclasses
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
+import anyio
 import click
 from rich.progress import Progress
 
@@ -24,6 +31,7 @@ from servobus.cli._families import cli_part, status_reads
 from servobus.cli._motors import Asked, codecs, run
 from servobus.cli._output import SETTINGS, console, emit_json, examples, json_option, jsonable, table
 from servobus.cli.plugin import Query
+from servobus.diagnosis import NOTHING_AT_ALL, explain
 from servobus.errors import ServobusError
 from servobus.protocols import Reply, get_family
 
@@ -35,6 +43,11 @@ __all__ = ["scan"]
 COLUMNS = ("id", "family", "revision", "model", "firmware", "state", "errors")
 #: the ids probed without --ids (those of them the family allows)
 DEFAULT_IDS = tuple(range(1, 33))
+#: the first probe's timeout (every id at once): a motor on a bus answers within a few ms
+FIRST_TIMEOUT_S = 0.1
+#: the second probe's, of the ids that were silent; on a line that said nothing at all, one of them
+#: is probed first with the library's timeout (a fresh adapter's first exchange can be that slow)
+SECOND_TIMEOUT_S = 0.3
 
 
 @click.command(
@@ -58,8 +71,12 @@ def scan(conn: Connection, remote: Remote | None, as_json: bool) -> None:
     else:
         reads = status_reads(conn.family)  # refused here for a family without a read-only request
         ids = conn.ids or tuple(i for i in DEFAULT_IDS if i in get_family(conn.family).motor_ids)
-        rows = run(_scan(conn, ids, reads.first(codecs(conn)[0], {})[0], as_json))
+        rows, seen = run(_scan(conn, ids, reads.first(codecs(conn)[0], {})[0], as_json))
         where = f"on ids {_span(ids)}"
+        if rows and seen:  # (the motors found are listed; what else answered is worth a line)
+            console(stderr=True).print(f"also seen: {seen}", markup=False, highlight=False)
+        elif not rows:
+            where += f"; {seen or NOTHING_AT_ALL}"
     if as_json:
         emit_json(rows)
     elif rows:
@@ -73,27 +90,41 @@ def _span(ids: Sequence[int]) -> str:
     return f"{ids[0]}-{ids[-1]}" if list(ids) == list(range(ids[0], ids[-1] + 1)) else ",".join(map(str, ids))
 
 
-async def _scan(conn: Connection, ids: Sequence[int], probe: Any, quiet: bool) -> list[dict[str, Any]]:
+async def _scan(
+    conn: Connection, ids: Sequence[int], probe: Any, quiet: bool
+) -> tuple[list[dict[str, Any]], str | None]:
+    """The rows of the motors that answered, by id, and what else the bus saw (None: nothing)."""
     transport = dataclasses.replace(conn, ids=()).transport()  # --sim N: motors 1..N, whatever is probed
     part = cli_part(conn.family)
-    rows: list[dict[str, Any]] = []
+    found: dict[int, dict[str, Any]] = {}
     async with transport:
         async with Bus(transport, safe=None) as bus:
+            began = anyio.current_time()  # (the Bus's clock: the loop's)
             shown = console(stderr=True)
             with Progress(console=shown, transient=True, disable=quiet or not shown.is_terminal) as progress:
                 task = progress.add_task(f"probing {conn.family} ids {_span(ids)}", total=len(ids))
-                for motor_id in ids:
-                    motor = bus.motor(conn.family, motor_id, **conn.bind_options())
-                    try:
-                        reply = await motor.request(probe, timeout_s=conn.timeout_s)
-                    except ServobusError:
-                        progress.advance(task)
-                        continue
-                    row = _row(motor, reply)
-                    with contextlib.suppress(ServobusError):
-                        row.update(await _ask(motor, part.identify, conn.timeout_s))
-                    rows.append(row)
-                    progress.advance(task)
+                motors = [bus.motor(conn.family, motor_id, **conn.bind_options()) for motor_id in ids]
+                # --timeout-ms: every probe waits that long, all at once; else a short first probe,
+                # and a longer second one of the ids that were silent
+                first_s = FIRST_TIMEOUT_S if conn.timeout_s is None else conn.timeout_s
+                replies = await _probe_all(motors, probe, first_s)
+                silent = [m for m in motors if m.motor_id not in replies]
+                progress.advance(task, len(motors) - len(silent))
+                if conn.timeout_s is None and silent:
+                    again = silent
+                    if not _heard(bus, began):  # one probe with the library's (first) timeout
+                        replies.update(await _probe_all(silent[:1], probe, None))
+                        again = [m for m in silent[1:] if m.motor_id not in replies]
+                    replies.update(await _probe_all(again, probe, SECOND_TIMEOUT_S))  # (a slow motor)
+                progress.advance(task, len(silent))
+                for motor in motors:
+                    if motor.motor_id in replies:
+                        row = _row(motor, replies[motor.motor_id])
+                        with contextlib.suppress(ServobusError):
+                            row.update(await _ask(motor, part.identify, conn.timeout_s))
+                        found[motor.motor_id] = row
+            seen = explain(bus.scheduler.seen.since(began), conn.family)
+        rows = [found[i] for i in sorted(found)]
         async with Bus(transport, safe=None) as bus:  # a fresh Bus: each motor in its own revision
             for row in rows:
                 options = conn.bind_options()
@@ -104,7 +135,27 @@ async def _scan(conn: Connection, ids: Sequence[int], probe: Any, quiet: bool) -
                     row.update(await _ask(motor, part.describe, conn.timeout_s))
                 except ServobusError as exc:
                     row["state"] = f"answered the probe, then: {exc}"
-    return rows
+    return rows, seen
+
+
+def _heard(bus: Bus, since: float) -> bool:
+    """Whether the bus received any frame since ``since``: a reply (even a late one) or another."""
+    seen = any(m.last_seen is not None and m.last_seen >= since for m in bus.motors.values())
+    return seen or bool(bus.scheduler.seen.since(since))
+
+
+async def _probe_all(motors: Sequence[Asked], probe: Any, timeout_s: float | None) -> dict[int, Reply]:
+    """Each motor's reply to ``probe``, all in flight at once; those that gave none are left out."""
+    replies: dict[int, Reply] = {}
+
+    async def one(motor: Asked) -> None:
+        with contextlib.suppress(ServobusError):
+            replies[motor.motor_id] = await motor.request(probe, timeout_s=timeout_s)
+
+    async with anyio.create_task_group() as group:
+        for motor in motors:
+            group.start_soon(one, motor)
+    return replies
 
 
 def _row(motor: Asked, reply: Reply) -> dict[str, Any]:
