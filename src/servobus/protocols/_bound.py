@@ -16,6 +16,9 @@ member                              gives
 ``retry_safe(command)``             True only for commands that change nothing (reads)
 ``note_sent(command)``              tell the codec a command left (0xB6 streams, 0x9A reports change
                                     what the motor's frames mean)
+``may_echo(command)``               True when a reply that is ``command``'s own bytes would be the
+                                    motor echoing it unexecuted (``Command.NEVER_ECHOED``, or any
+                                    command while the motor's 0xF1-like trip is known)
 ``safe_command(kind)``              the command that stops the motor: ``"stop"``, ``"shutdown"`` or
                                     ``"brake"`` (ValueError where the motor has no such command)
 ``request_ids`` / ``reply_ids``     this motor's own identifiers (filters, the collision check)
@@ -190,6 +193,8 @@ class BoundCodec(Protocol):
 
     def note_sent(self, command: Command) -> None: ...
 
+    def may_echo(self, command: Command) -> bool: ...
+
     def safe_command(self, kind: str = "stop") -> Command: ...
 
     @property
@@ -230,6 +235,11 @@ class CodecBase:
 
     def note_sent(self, command: Command) -> None:
         """Nothing the family's commands change alters how its frames are classified."""
+
+    def may_echo(self, command: Command) -> bool:
+        """Whether a reply equal to ``command``'s bytes means it was not executed: its class says
+        so (``NEVER_ECHOED``); a family whose motors echo in other states too overrides this."""
+        return command.NEVER_ECHOED
 
     def encode(self, command: Command) -> Frame:
         raise NotImplementedError

@@ -12,6 +12,11 @@ Classification tracks two things the motor's configuration changes, told through
   may take the first stream frame after its request left as the fresh answer).
 * 0x20 index 3 (error reporting): a 0x9A frame is REPORT (sent every 100 ms while an error lasts),
   never taken as a reply by classification alone.
+
+And one thing the motor tells of itself: a 0xF1 frame (``CommunicationTimeoutTripped``, REPORT) says its
+0xB3 protection tripped, and the first command after that is echoed, not executed. From an 0xF1 until
+the next other frame of the motor, :meth:`MyActuatorCodec.may_echo` is True for every command (a stop's
+real reply is its own bytes too); for control commands it always is (``NEVER_ECHOED``).
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ from servobus.protocols._bound import (
 from servobus.protocols._fast import Slow, maker
 from servobus.protocols._message import Command, Reply
 from servobus.protocols.myactuator import commands as cmd
+from servobus.protocols.myactuator import replies as rep
 from servobus.protocols.myactuator._fast import (
     compile_fixed,
     compile_fixed_encoder,
@@ -89,7 +95,9 @@ SLOW_TIMEOUT_S = 0.5
 _IS_SLOW: dict[type, bool] = {}
 _IS_READ: dict[type, bool] = {}
 _IS_NOTED: dict[type, bool] = {}
+_IS_NEVER_ECHOED: dict[type, bool] = {}
 _ERROR_REPORT_CODE = cmd.ReadStatus1.CODE
+_EVENT_CODES = frozenset(event.CODE for event in rep.EVENTS)
 #: Echo replies that carry the value their request wrote (§0, declared ``ECHO``): keyed with it
 #: (``echo_key``). Not the fixed all-zero echoes (nothing to tell apart), 0xB3 (the manuals print an
 #: all-zero reply to it, §9 item 8) nor 0x79 (its reply comes on a shared identifier).
@@ -159,6 +167,7 @@ class MyActuatorCodec(CodecBase):
         "_request_id",
         "_rs485",
         "_streams",
+        "_tripped",
     )
 
     def __init__(self, motor_id: int, revision: Revision, scales: MotionScales, link: str) -> None:
@@ -170,6 +179,7 @@ class MyActuatorCodec(CodecBase):
         self._has_id_setting = revision in cmd.SetCanId.REVISIONS
         self._streams: frozenset[int] = frozenset()
         self._reports = False
+        self._tripped = False
         self._fast = _FAST[revision]
         self._plans = _PLANS.setdefault(revision, {})
         self._motion_fast = motion_reply_decoder(scales, motor_id)
@@ -303,6 +313,15 @@ class MyActuatorCodec(CodecBase):
         elif isinstance(command, cmd.SystemReset):
             self._streams = frozenset()  # streams are RAM settings: a restart ends them
 
+    def may_echo(self, command: Command) -> bool:
+        """Whether a reply that is ``command``'s own bytes means it was not executed: always for the
+        control commands (``NEVER_ECHOED``), and for any command while the motor's 0xF1 trip is the
+        last thing it said (the echo of a stop looks like its real reply)."""
+        never = _IS_NEVER_ECHOED.get(type(command))
+        if never is None:
+            never = _IS_NEVER_ECHOED[type(command)] = command.NEVER_ECHOED
+        return never or self._tripped
+
     # ---- receiving ----
 
     def classify(self, frame: Frame) -> tuple[FrameKind, Hashable | None]:
@@ -318,6 +337,10 @@ class MyActuatorCodec(CodecBase):
             if not data:
                 return KIND_REPLY, None
             code = data[0]
+            if code in _EVENT_CODES:
+                self._tripped = True  # the next command may be echoed, not executed
+                return KIND_REPORT, self._reply_base | code
+            self._tripped = False  # the motor answers again: past the echo
             if code in self._streams:
                 return KIND_STREAM, self._reply_base | code
             if code == _ERROR_REPORT_CODE and self._reports:
