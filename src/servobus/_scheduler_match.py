@@ -12,7 +12,7 @@ from collections.abc import Hashable
 from typing import TYPE_CHECKING
 
 from servobus._request import FROM, Received, Recent, Request, RequestState, Traffic, illegal
-from servobus.errors import ProtocolError
+from servobus.errors import MotorNotExecuted, ProtocolError
 from servobus.frame import Frame
 from servobus.protocols import BoundCodec, FrameKind, Reply
 from servobus.protocols._bound import KIND_NOT_OURS, KIND_REPLY, KIND_REPORT, KIND_STREAM
@@ -34,6 +34,7 @@ _T_LATE = Traffic.LATE
 _T_MALFORMED = Traffic.MALFORMED
 _T_REPLY = Traffic.REPLY
 _T_UNSOLICITED = Traffic.UNSOLICITED
+_T_NOT_EXECUTED = Traffic.NOT_EXECUTED
 
 
 class Matching:
@@ -111,6 +112,9 @@ class Matching:
                 stamp = frame.timestamp
                 if stamp and request.deadline is not None and stamp > request.deadline:
                     return self._overtake(request, codec, frame, reply, now)
+                echo = request.echo
+                if echo is not None and frame.data == echo:
+                    return self._not_executed(request, codec, frame, now)
                 request.reply = reply
                 # _leave_flight, written out for the hot path (a SENT request has no EARLY frame)
                 waiting.popleft()
@@ -163,6 +167,23 @@ class Matching:
         traffic = self._unmatched(request.key, now, frame.timestamp)
         self._count(codec, traffic.value)
         return Received(traffic, frame, codec, reply)
+
+    def _not_executed(self, request: Request, codec: BoundCodec, frame: Frame, now: float) -> Received:
+        """``request``'s own bytes came back where its reply was due, for a command whose real reply
+        cannot be them: the motor echoed it and did not execute it. It fails with MotorNotExecuted
+        (the frame is its answer, so the same frame again is a duplicate)."""
+        data = frame.data
+        request.error = MotorNotExecuted(
+            f"{request.describe()} was echoed back ({data.hex(' ').upper()}) instead of answered: "
+            "not executed (as after the motor's communication watchdog tripped); send it again",
+            motor_id=codec.motor_id,
+            command=data[0] if data else None,
+            raw=data,
+        )
+        self._finish(request, _FAILED, now)
+        self._recent.replied[request.key] = now + self.late_window_s
+        self.motor_counts[id(codec)]["not_executed"] += 1
+        return Received(_T_NOT_EXECUTED, frame, codec, None, request)
 
     def _spoilt(self, key: Hashable | None, frame: Frame, error: ProtocolError, now: float) -> Request | None:
         """A frame with ``key`` that does not decode came: the request waiting for it fails with the

@@ -94,6 +94,10 @@ class Metrics:
         latency: request-to-reply time of the last replies.
         bus_load_pct: share of the line used in the last second, from the transport (bus only;
             None when unknown).
+        not_executed: requests a motor echoed back instead of executing them (MotorNotExecuted;
+            part of ``failed``).
+        comm_tripped: frames in which a motor said its communication watchdog tripped (MyActuator
+            0xF1; also counted in ``report``).
     """
 
     requests: int
@@ -115,6 +119,8 @@ class Metrics:
     foreign: int
     latency: Latency
     bus_load_pct: float | None = None
+    not_executed: int = 0
+    comm_tripped: int = 0
 
     @classmethod
     def of(cls, counts: Mapping[str, int], latency: Latency, bus_load_pct: float | None = None) -> Metrics:
@@ -141,4 +147,6 @@ class Metrics:
             foreign=c("foreign", 0),
             latency=latency,
             bus_load_pct=bus_load_pct,
+            not_executed=c("not_executed", 0),
+            comm_tripped=c("comm_tripped", 0),
         )

@@ -28,7 +28,9 @@ class MotorStatus:
         motor: the motor.
         online: its new state.
         at: when (the loop's clock).
-        reason: why, in words (``"3 replies missed"``, ``"silent for 0.5 s"``, ``"answered"``).
+        reason: why, in words (``"3 replies missed"``, ``"silent for 0.5 s"``, ``"answered"``), or
+            what the motor said of itself while it stays online or offline (``"communication
+            watchdog tripped (0xF1)"``: its output is off until it executes a command again).
     """
 
     motor: Motor
@@ -89,13 +91,21 @@ class Watchdog:
         (logger.info if online else logger.warning)(
             "%s: %r %s (%s)", self.name, motor, "online" if online else "offline", reason
         )
+        self._tell(status)
+        if online:
+            self.arm_silence()
+
+    def event(self, motor: Motor, at: float, reason: str) -> None:
+        """Tell the listeners what happened to ``motor`` that leaves it online as it is (``reason``:
+        ``"communication watchdog tripped (0xF1)"``; the caller logs it)."""
+        self._tell(MotorStatus(motor, motor.online is not False, at, reason))
+
+    def _tell(self, status: MotorStatus) -> None:
         for callback in self.listeners:
             try:
                 callback(status)
             except Exception:  # a listener's bug must not stop the reader
                 logger.exception("%s: status listener %r failed", self.name, callback)
-        if online:
-            self.arm_silence()
 
     def arm_silence(self) -> None:
         """Time the silence check for the online motor heard from longest ago (if none is armed)."""
