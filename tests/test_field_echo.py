@@ -23,10 +23,13 @@ from servobus.errors import MotorNotExecuted
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.scheduler import Traffic
+from servobus.sim.attach import serve_slcan
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.plant import PositionControl
-from servobus.transports import SimTransport
+from servobus.sim.pty import PtyPort
+from servobus.transports import SimTransport, SlcanTransport
 from sim._standins import Sniffer
+from transports._anyio_help import serving
 
 pytestmark = pytest.mark.anyio
 
@@ -146,3 +149,40 @@ async def test_the_safe_stop_is_sent_again_after_an_echoed_stop() -> None:
     assert _stops(sniffer) == 2
     assert [m.motor_id for m in bus.safe_acknowledged] == [1]
     assert bus.metrics().not_executed == 1
+
+
+# ---- through a real transport: the simulator's SLCAN adapter on a pseudo-terminal, real time ----
+
+T = 0.5  # a reply's timeout through the pty (the simulator shares the process; see test_bus_pty.py)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_over_slcan_on_a_pty_the_echo_fails_its_request_and_every_0xf1_is_counted(backend: str) -> None:
+    device, sniffer = MyActuatorMotor(1), Sniffer()
+    port = PtyPort()
+
+    async def main() -> tuple[Any, Any, list[str]]:
+        statuses: list[str] = []
+        with anyio.fail_after(10):
+            transport = SlcanTransport(port.path, bitrate=1_000_000)
+            network = SimCanNetwork([device, sniffer])
+            async with serving(serve_slcan(network, port)), Bus(transport, safe=None) as bus:
+                bus.subscribe_status(lambda status: statuses.append(status.reason))
+                motor = bus.motor("myactuator", 1)
+                await motor.set_comm_timeout(COMM_TIMEOUT_MS, timeout_s=T)
+                await motor.speed_control(speed_dps=90.0, timeout_s=T)
+                await anyio.sleep(0.3)  # quiet: the watchdog trips, one 0xF1
+                with pytest.raises(MotorNotExecuted):
+                    await motor.absolute_position_control(90.0, None, timeout_s=T)
+                reply = await motor.absolute_position_control(90.0, None, timeout_s=T)
+                return reply, bus.metrics(), statuses
+
+    try:
+        reply, metrics, statuses = anyio.run(main, backend=backend)
+    finally:
+        port.close()
+    assert isinstance(reply, ma.StatusReply) and isinstance(device.control, PositionControl)
+    assert device.counters["comm_echoed"] == 1 and device.counters["comm_trip_frames"] == 1
+    assert _trip_frames(sniffer, 1) == metrics.comm_tripped == 1
+    assert metrics.not_executed == 1 and metrics.malformed == 0
+    assert statuses.count("communication watchdog tripped (0xF1)") == 1
