@@ -16,6 +16,8 @@ hollow      none ("a pure slave ... no unsolicited frames", hollow.md)
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 
 from servobus import Frame
@@ -26,8 +28,12 @@ from servobus.protocols import myactuator as ma
 from servobus.protocols.hollow.sim.device import HollowMotor
 from servobus.protocols.lk.sim.device import LkMotor
 from servobus.protocols.myactuator.codec import COMMANDS
+from servobus.protocols.myactuator.codec import request_frame as ma_frame
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.scheduler import Request, RequestState, Scheduler, Traffic
+from servobus.sim.corenet import CoreCanNetwork
 from servobus.sim.network import SimCanNetwork
+from servobus.sim.plant import Off, PositionControl
 
 MA = get_family("myactuator")
 TRIP = bytes.fromhex("F1 00 00 00 00 00 00 00")
@@ -172,3 +178,57 @@ def test_lk_and_hollow_motors_send_nothing_unasked(family: str) -> None:
     network.send(codec.encode(command), 0.0)
     heard = network.advance(5.0)
     assert len(heard) == 1 and codec.classify(heard[0][1])[0] is FrameKind.REPLY
+
+
+# ---- the simulated motor: 0xF1 at the trip and every second, the echo, on both paths ----
+
+
+def _trip_run(network_class: type[SimCanNetwork | CoreCanNetwork], **options: Any) -> tuple[Any, ...]:
+    motor = MyActuatorMotor(1, **options)
+    network = network_class([motor])
+
+    def send(command: ma.MyActuatorCommand, at: float) -> None:
+        frame = ma_frame(command, 1)
+        network.send(frame, at)
+
+    send(ma.SetCommTimeout(timeout_ms=50), 0.0)
+    send(ma.SpeedControl(speed_dps=100.0), 0.01)
+    heard = network.advance(2.6)  # quiet after 0.01: the protection trips 50 ms after that frame
+    tripped_control = motor.control
+    send(CONTROL, 2.6)
+    heard += network.advance(2.62)
+    echoed_control = motor.control
+    send(CONTROL, 2.62)  # within the 50 ms: no new trip
+    heard += network.advance(2.64)
+    return heard, dict(motor.counters), tripped_control, echoed_control, motor.control
+
+
+@pytest.mark.parametrize("network_class", [SimCanNetwork, CoreCanNetwork])
+def test_the_simulated_motor_sends_0xf1_at_the_trip_and_each_second_and_echoes_the_next_command(
+    network_class: type[SimCanNetwork | CoreCanNetwork],
+) -> None:
+    heard, counters, tripped, echoed, executed = _trip_run(network_class)
+    trips = [t for t, f in heard if f.data == TRIP]
+    assert len(trips) == 3 and trips[1] - trips[0] == pytest.approx(1.0, abs=1e-3)
+    assert trips[2] - trips[0] == pytest.approx(2.0, abs=1e-3)
+    assert 0.06 < trips[0] < 0.0605  # at the trip: 50 ms after the speed frame ended on the wire
+    answers = [f for t, f in heard if t > 2.6]
+    assert answers[0].data == CONTROL.encode() and answers[0].arbitration_id == 0x241  # byte for byte
+    assert isinstance(ma.decode_reply(0x241, answers[1].data), ma.StatusReply)
+    assert answers[1].data != CONTROL.encode()
+    assert isinstance(tripped, Off) and isinstance(echoed, Off)  # the echoed command did nothing
+    assert isinstance(executed, PositionControl)
+    assert (counters["comm_timeouts"], counters["comm_trip_frames"], counters["comm_echoed"]) == (1, 3, 1)
+    assert counters["comm_restored"] == 1
+
+
+def test_both_paths_of_the_simulator_agree_on_a_trip() -> None:
+    python, core = _trip_run(SimCanNetwork), _trip_run(CoreCanNetwork)
+    assert [(round(t, 9), f) for t, f in python[0]] == [(round(t, 9), f) for t, f in core[0]]
+    assert python[1:] == core[1:]
+
+
+def test_with_trip_echo_off_the_motor_does_as_the_manuals_read() -> None:
+    heard, counters, _, echoed, _ = _trip_run(SimCanNetwork, trip_echo=False)
+    assert not any(f.data[:1] == b"\xf1" for _, f in heard)
+    assert isinstance(echoed, PositionControl) and "comm_echoed" not in counters
