@@ -186,3 +186,17 @@ def test_over_slcan_on_a_pty_the_echo_fails_its_request_and_every_0xf1_is_counte
     assert _trip_frames(sniffer, 1) == metrics.comm_tripped == 1
     assert metrics.not_executed == 1 and metrics.malformed == 0
     assert statuses.count("communication watchdog tripped (0xF1)") == 1
+
+
+async def test_a_broadcast_to_tripped_motors_gives_each_motor_not_executed() -> None:
+    transport, devices, _ = _bench(2)
+    async with transport, Bus(transport, safe=None) as bus:
+        motors = [bus.motor("myactuator", d.motor_id) for d in devices]
+        for m in motors:
+            await m.set_comm_timeout(COMM_TIMEOUT_MS)
+        await anyio.sleep(0.2)
+        assert all(d.comm_tripped for d in devices)
+        echoed = await bus.broadcast(ma.SpeedControl(speed_dps=20.0), motors)
+        executed = await bus.broadcast(ma.SpeedControl(speed_dps=20.0), motors)
+    assert all(isinstance(r, MotorNotExecuted) for r in echoed.values()), echoed
+    assert all(isinstance(r, ma.StatusReply) for r in executed.values()), executed
