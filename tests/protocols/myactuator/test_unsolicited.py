@@ -94,6 +94,9 @@ def test_may_echo_holds_for_every_command_from_a_0xf1_until_the_motor_speaks_aga
     codec.classify(_frame(TRIP))
     assert codec.may_echo(stop) and codec.may_echo(ma.ReadStatus2())
     codec.classify(_frame(TRIP))  # repeated about every second: still tripped
+    codec.note_sent(ma.FunctionControl(index=ma.FunctionIndex.ERROR_REPORTING, value=1))
+    report = ma.Status1Reply(temperature_c=30, mos_temperature_c=30, voltage_v=24.0, brake_released=False)
+    codec.classify(_frame(report.encode()))  # an error report answers nothing: still tripped
     assert codec.may_echo(stop)
     codec.classify(_frame(stop.encode()))  # the echo (or any other frame of the motor)
     assert not codec.may_echo(stop) and codec.may_echo(CONTROL)

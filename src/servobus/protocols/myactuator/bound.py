@@ -15,8 +15,8 @@ Classification tracks two things the motor's configuration changes, told through
 
 And one thing the motor tells of itself: a 0xF1 frame (``CommunicationTimeoutTripped``, REPORT) says its
 0xB3 protection tripped, and the first command after that is echoed, not executed. From an 0xF1 until
-the next other frame of the motor, :meth:`MyActuatorCodec.may_echo` is True for every command (a stop's
-real reply is its own bytes too); for control commands it always is (``NEVER_ECHOED``).
+the motor's next reply-shaped frame, :meth:`MyActuatorCodec.may_echo` is True for every command (a
+stop's real reply is its own bytes too); for control commands it always is (``NEVER_ECHOED``).
 """
 
 from __future__ import annotations
@@ -340,15 +340,16 @@ class MyActuatorCodec(CodecBase):
             if code in _EVENT_CODES:
                 self._tripped = True  # the next command may be echoed, not executed
                 return KIND_REPORT, self._reply_base | code
-            self._tripped = False  # the motor answers again: past the echo
             if code in self._streams:
                 return KIND_STREAM, self._reply_base | code
             if code == _ERROR_REPORT_CODE and self._reports:
                 return KIND_REPORT, self._reply_base | code
+            self._tripped = False  # the motor answers again: past the echo
             if code in _VALUE_ECHO_CODES:
                 return KIND_REPLY, echo_key(self._reply_base | code, data)
             return KIND_REPLY, self._reply_base | code
         if ident == self._motion_reply_id:
+            self._tripped = False
             return KIND_REPLY, self._motion_key
         # 0x79 replies come on an identifier every motor shares, so one 0x79 exchange at a time per
         # bus; and only a revision that has 0x79 claims them.
