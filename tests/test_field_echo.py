@@ -200,3 +200,12 @@ async def test_a_broadcast_to_tripped_motors_gives_each_motor_not_executed() -> 
         executed = await bus.broadcast(ma.SpeedControl(speed_dps=20.0), motors)
     assert all(isinstance(r, MotorNotExecuted) for r in echoed.values()), echoed
     assert all(isinstance(r, ma.StatusReply) for r in executed.values()), executed
+
+
+def test_motor_not_executed_crosses_the_remote_wire_as_itself() -> None:
+    from servobus.remote import wire
+
+    schema = wire.Schema.of("myactuator")
+    error = MotorNotExecuted("motor 1 SpeedControl was echoed back", motor_id=1, command=0xA2)
+    back = wire.decode_result(schema, wire.encode_result(schema, wire.Result(error=error))).error
+    assert isinstance(back, MotorNotExecuted) and back.motor_id == 1 and "echoed back" in str(back)
