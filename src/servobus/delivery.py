@@ -38,6 +38,7 @@ class Delivery:
         self._by_codec = engine.bus._by_codec  # (the Bus's, for good)
         self._subscribers = engine.bus._subscribers
         self.events = MotorEvents(engine)
+        self._tripped = self.events.tripped  # (read on every reply: bound here)
 
     def on_frames(self, frames: list[Frame]) -> None:
         now = self.engine.time()
@@ -81,7 +82,7 @@ class Delivery:
                 self.engine.watchdog.answered(motor, now)
             if event is not None:
                 self.events.event(motor, reply, now)
-            elif self.events.tripped and got.request is not None:
+            elif self._tripped and got.request is not None:
                 self.events.executed(motor)
             if reply.FAULTS is not None:
                 self._note_faults(motor, getattr(reply, reply.FAULTS))

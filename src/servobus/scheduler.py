@@ -246,7 +246,7 @@ class Scheduler(Pacing, Matching, Timing):
         # (all positional: a keyword costs more, and this is once per request)
         adaptive = timeout_s is None
         request = Request(codec, command, frame, key, timeout, retries, context, rtt, adaptive, writes)
-        if key is not None and codec.may_echo(command):
+        if key is not None and (command.NEVER_ECHOED or codec.echoing):  # (codec.may_echo, written out)
             request.echo = frame.data
         return request
 

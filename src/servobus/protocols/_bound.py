@@ -17,8 +17,9 @@ member                              gives
 ``note_sent(command)``              tell the codec a command left (0xB6 streams, 0x9A reports change
                                     what the motor's frames mean)
 ``may_echo(command)``               True when a reply that is ``command``'s own bytes would be the
-                                    motor echoing it unexecuted (``Command.NEVER_ECHOED``, or any
-                                    command while the motor's 0xF1-like trip is known)
+                                    motor echoing it unexecuted: ``Command.NEVER_ECHOED``, or
+                                    ``echoing`` (the family saw its motor say it will echo the next
+                                    command: MyActuator's 0xF1)
 ``safe_command(kind)``              the command that stops the motor: ``"stop"``, ``"shutdown"`` or
                                     ``"brake"`` (ValueError where the motor has no such command)
 ``request_ids`` / ``reply_ids``     this motor's own identifiers (filters, the collision check)
@@ -179,6 +180,9 @@ class BoundCodec(Protocol):
     @property
     def framing(self) -> Framing | None: ...
 
+    @property
+    def echoing(self) -> bool: ...
+
     def encode(self, command: Command) -> Frame: ...
 
     def reply_key(self, command: Command) -> Hashable | None: ...
@@ -236,10 +240,15 @@ class CodecBase:
     def note_sent(self, command: Command) -> None:
         """Nothing the family's commands change alters how its frames are classified."""
 
+    #: The motor said it will echo its next command unexecuted (MyActuator: an 0xF1 frame; the
+    #: family's ``classify`` sets it, and clears it at the motor's next reply). False in families
+    #: whose motors never say so.
+    echoing: bool = False
+
     def may_echo(self, command: Command) -> bool:
         """Whether a reply equal to ``command``'s bytes means it was not executed: its class says
-        so (``NEVER_ECHOED``); a family whose motors echo in other states too overrides this."""
-        return command.NEVER_ECHOED
+        so (``NEVER_ECHOED``), or the motor said it will echo its next command (``echoing``)."""
+        return command.NEVER_ECHOED or self.echoing
 
     def encode(self, command: Command) -> Frame:
         raise NotImplementedError
