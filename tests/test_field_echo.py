@@ -209,3 +209,18 @@ def test_motor_not_executed_crosses_the_remote_wire_as_itself() -> None:
     error = MotorNotExecuted("motor 1 SpeedControl was echoed back", motor_id=1, command=0xA2)
     back = wire.decode_result(schema, wire.encode_result(schema, wire.Result(error=error))).error
     assert isinstance(back, MotorNotExecuted) and back.motor_id == 1 and "echoed back" in str(back)
+
+
+async def test_a_motion_mode_command_echoed_after_a_trip_is_not_executed() -> None:
+    """The echo of a 0x400+ID frame comes on 0x500+ID (the simulator's choice: the report names no
+    identifier): it is told apart while the trip is known, since a motion reply could be any bytes."""
+    transport, (device,), _ = _bench()
+    async with transport, Bus(transport, safe=None) as bus:
+        motor = bus.motor("myactuator", 1)
+        await motor.set_comm_timeout(COMM_TIMEOUT_MS)
+        await anyio.sleep(0.2)
+        command = ma.MotionCommand(position_rad=1.0, velocity_rad_s=0.0, kp=20.0, kd=1.0, torque_ff_nm=0.0)
+        with pytest.raises(MotorNotExecuted):
+            await motor.request(command)
+        assert isinstance(await motor.request(command), ma.MotionReply)
+    assert device.counters["comm_echoed"] == 1

@@ -87,6 +87,8 @@ class Matching:
             if waiting and waiting[0].state is _SENDING and kind is KIND_REPLY and key not in self._early:
                 self._early[key] = (codec, frame)  # judged (and counted) when the send report comes
                 return Received(_T_EARLY, frame, codec)
+            if waiting and waiting[0].echo == frame.data and self._fresh(waiting[0], frame, now):
+                return self._not_executed(waiting[0], codec, frame, now)  # (a motion echo: no reply)
             self._count(codec, "malformed")
             return Received(_T_MALFORMED, frame, codec, error=exc, request=self._spoilt(key, frame, exc, now))
         waiting = self._pending.get(key) if key is not None else None
@@ -193,13 +195,19 @@ class Matching:
         if not waiting:
             return None
         request = waiting[0]
-        at = frame.timestamp or now
-        if request.state is not _SENT or request.sent_at is None or at < request.sent_at + self.min_reply_s:
+        if not self._fresh(request, frame, now):
             return None
         request.error = error.with_context(motor_id=request.codec.motor_id)
         self._finish(request, _FAILED, now)
         self._recent.replied[key] = now + self.late_window_s  # (the same frame again: a duplicate)
         return request
+
+    def _fresh(self, request: Request, frame: Frame, now: float) -> bool:
+        """``frame`` (taken in ``now``) came late enough after ``request`` left to be its answer."""
+        sent_at = request.sent_at
+        if request.state is not _SENT or sent_at is None:
+            return False
+        return (frame.timestamp or now) >= sent_at + self.min_reply_s
 
     def _unmatched(self, key: Hashable | None, now: float, at: float | None = None) -> Traffic:
         """What a frame with ``key`` that answers no request is; ``at``: when it was received."""
