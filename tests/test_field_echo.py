@@ -121,14 +121,18 @@ async def test_in_a_200_hz_loop_with_trips_no_echo_is_returned_as_a_reply() -> N
     replies = [r for r in seen_results if isinstance(r, ma.StatusReply)]
     refused = [r for r in seen_results if isinstance(r, MotorNotExecuted)]
     as_replies = [r for r in replies if any(r.encode() == c.encode() for _, c in batch)]
-    print(f"200 Hz: {len(replies)} replies, {echoed} echoes, {len(as_replies)} returned as replies")
+    trip_frames = sum(_trip_frames(sniffer, d.motor_id) for d in devices)
+    tripped = [s for s in statuses if "0xF1" in s.reason]
+    print(
+        f"200 Hz: {len(replies)} replies, {echoed} echoes, {len(refused)} MotorNotExecuted, "
+        f"{len(as_replies)} echoes returned as replies; 0xF1 on the wire {trip_frames}, counted "
+        f"{metrics.comm_tripped}, trips {len(tripped)} told"
+    )
     assert echoed == 4 * 6 and len(refused) == echoed and as_replies == []
     assert all(r.temperature_c != 0 for r in replies)
-    trip_frames = sum(_trip_frames(sniffer, d.motor_id) for d in devices)
     assert trip_frames == sum(d.counters["comm_trip_frames"] for d in devices) >= 24
     assert metrics.comm_tripped == trip_frames and metrics.not_executed == echoed
     assert metrics.malformed == 0
-    tripped = [s for s in statuses if "0xF1" in s.reason]
     assert len(tripped) == sum(d.counters["comm_timeouts"] for d in devices) == 24
 
 
