@@ -10,6 +10,7 @@ from servobus._version import __version__
 from servobus.errors import (
     MotorBusy,
     MotorFault,
+    MotorNotExecuted,
     MotorOffline,
     MotorStreaming,
     MotorTimeout,
@@ -30,6 +31,7 @@ __all__ = [
     "Motor",
     "MotorBusy",
     "MotorFault",
+    "MotorNotExecuted",
     "MotorOffline",
     "MotorStatus",
     "MotorStreaming",

@@ -68,6 +68,7 @@ class Traffic(enum.Enum):
     MALFORMED = "malformed"  # one of our motors' frames that does not decode
     FOREIGN = "foreign"  # not ours: another node, our own loop-back
     EARLY = "early"  # came before its request's send report: judged (and counted) when that comes
+    NOT_EXECUTED = "not_executed"  # the request's own bytes back: echoed, not executed (it failed)
 
 
 @dataclass(eq=False, slots=True)
@@ -97,6 +98,9 @@ class Request:
     submitted: bool = False
     queued_at: float | None = None
     handed_at: float | None = None  # when its frame was last handed to the link
+    # The bytes it sent, when a reply that is those bytes means "echoed, not executed" (the codec's
+    # ``may_echo``): compared only then, so other requests cost one attribute read per reply.
+    echo: bytes | None = None
 
     def describe(self) -> str:
         return f"{self.codec.family} motor {self.codec.motor_id} {type(self.command).__name__}"

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 from servobus._request import FROM, Received, Recent, Request, RequestState, Traffic, illegal
 from servobus.diagnosis import Seen
-from servobus.errors import ProtocolError
+from servobus.errors import MotorNotExecuted, ProtocolError
 from servobus.frame import Frame
 from servobus.protocols import BoundCodec, FrameKind, Reply
 from servobus.protocols._bound import KIND_NOT_OURS, KIND_REPLY, KIND_REPORT, KIND_STREAM
@@ -35,6 +35,7 @@ _T_LATE = Traffic.LATE
 _T_MALFORMED = Traffic.MALFORMED
 _T_REPLY = Traffic.REPLY
 _T_UNSOLICITED = Traffic.UNSOLICITED
+_T_NOT_EXECUTED = Traffic.NOT_EXECUTED
 
 
 class Matching:
@@ -89,6 +90,8 @@ class Matching:
             if waiting and waiting[0].state is _SENDING and kind is KIND_REPLY and key not in self._early:
                 self._early[key] = (codec, frame)  # judged (and counted) when the send report comes
                 return Received(_T_EARLY, frame, codec)
+            if waiting and waiting[0].echo == frame.data and self._fresh(waiting[0], frame, now):
+                return self._not_executed(waiting[0], codec, frame, now)  # (a motion echo: no reply)
             self._count(codec, "malformed")
             return Received(_T_MALFORMED, frame, codec, error=exc, request=self._spoilt(key, frame, exc, now))
         waiting = self._pending.get(key) if key is not None else None
@@ -114,6 +117,9 @@ class Matching:
                 stamp = frame.timestamp
                 if stamp and request.deadline is not None and stamp > request.deadline:
                     return self._overtake(request, codec, frame, reply, now)
+                echo = request.echo
+                if echo is not None and frame.data == echo:
+                    return self._not_executed(request, codec, frame, now)
                 request.reply = reply
                 # _leave_flight, written out for the hot path (a SENT request has no EARLY frame)
                 waiting.popleft()
@@ -167,6 +173,23 @@ class Matching:
         self._count(codec, traffic.value)
         return Received(traffic, frame, codec, reply)
 
+    def _not_executed(self, request: Request, codec: BoundCodec, frame: Frame, now: float) -> Received:
+        """``request``'s own bytes came back where its reply was due, for a command whose real reply
+        cannot be them: the motor echoed it and did not execute it. It fails with MotorNotExecuted
+        (the frame is its answer, so the same frame again is a duplicate)."""
+        data = frame.data
+        request.error = MotorNotExecuted(
+            f"{request.describe()} was echoed back ({data.hex(' ').upper()}) instead of answered: "
+            "not executed (as after the motor's communication watchdog tripped); send it again",
+            motor_id=codec.motor_id,
+            command=data[0] if data else None,
+            raw=data,
+        )
+        self._finish(request, _FAILED, now)
+        self._recent.replied[request.key] = now + self.late_window_s
+        self.motor_counts[id(codec)]["not_executed"] += 1
+        return Received(_T_NOT_EXECUTED, frame, codec, None, request)
+
     def _spoilt(self, key: Hashable | None, frame: Frame, error: ProtocolError, now: float) -> Request | None:
         """A frame with ``key`` that does not decode came: the request waiting for it fails with the
         codec's error (the motor answered it, in a way this codec cannot read: a revision mismatch,
@@ -175,13 +198,19 @@ class Matching:
         if not waiting:
             return None
         request = waiting[0]
-        at = frame.timestamp or now
-        if request.state is not _SENT or request.sent_at is None or at < request.sent_at + self.min_reply_s:
+        if not self._fresh(request, frame, now):
             return None
         request.error = error.with_context(motor_id=request.codec.motor_id)
         self._finish(request, _FAILED, now)
         self._recent.replied[key] = now + self.late_window_s  # (the same frame again: a duplicate)
         return request
+
+    def _fresh(self, request: Request, frame: Frame, now: float) -> bool:
+        """``frame`` (taken in ``now``) came late enough after ``request`` left to be its answer."""
+        sent_at = request.sent_at
+        if request.state is not _SENT or sent_at is None:
+            return False
+        return (frame.timestamp or now) >= sent_at + self.min_reply_s
 
     def _unmatched(self, key: Hashable | None, now: float, at: float | None = None) -> Traffic:
         """What a frame with ``key`` that answers no request is; ``at``: when it was received."""

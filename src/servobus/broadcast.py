@@ -106,6 +106,8 @@ def _expect(engine: Engine, motor: Motor, command: Command, key: Hashable, timeo
     request = Request(
         motor.codec, command, Frame(arbitration_id=0), key, timeout_s, context=engine.runtime.waiter()
     )
+    if motor.codec.may_echo(command):  # each motor echoes the broadcast's bytes (its own request's)
+        request.echo = motor.codec.encode(command).data
     engine.scheduler.expect(request, engine.time())
     engine.kick()
     return request

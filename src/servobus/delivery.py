@@ -7,6 +7,7 @@ from __future__ import annotations
 import logging
 from typing import TYPE_CHECKING, Any
 
+from servobus._events import MotorEvents
 from servobus._tick import detached
 from servobus.errors import MotorFault, TransportError
 from servobus.frame import Frame
@@ -22,6 +23,7 @@ __all__ = ["Delivery"]
 logger = logging.getLogger("servobus.bus")
 
 _STREAM = Traffic.STREAM
+_NOT_EXECUTED = Traffic.NOT_EXECUTED
 
 
 class Delivery:
@@ -36,6 +38,8 @@ class Delivery:
         self._settle = engine.settle  # (once per reply: bound here)
         self._by_codec = engine.bus._by_codec  # (the Bus's, for good)
         self._subscribers = engine.bus._subscribers
+        self.events = MotorEvents(engine)
+        self._tripped = self.events.tripped  # (read on every reply: bound here)
 
     def on_frames(self, frames: list[Frame]) -> None:
         now = self.engine.time()
@@ -45,6 +49,8 @@ class Delivery:
             if got.codec is not None:
                 if got.reply is not None:
                     self.deliver(got, now)
+                elif got.traffic is _NOT_EXECUTED:  # its request's own bytes: echoed, not executed
+                    self.events.not_executed(got)
                 elif got.request is not None:  # an undecodable reply: its request fails with why
                     self.undecodable(got)
         self.engine.pump()
@@ -69,12 +75,18 @@ class Delivery:
         reply = got.reply
         assert reply is not None
         if motor is not None:
-            motor.state = reply
+            event = reply.EVENT
+            if event is None:  # (an event measures nothing: the state stays the last reply's)
+                motor.state = reply
             motor.last_seen = got.frame.timestamp or now
             if motor._remembers and type(reply) in motor._remembers:  # (servobus.restarts)
                 motor._remembered[type(reply)] = Seen(reply, now)
             if motor._misses or motor.online is not True:
                 self.engine.watchdog.answered(motor, now)
+            if event is not None:
+                self.events.event(motor, reply, now)
+            elif self._tripped and got.request is not None:
+                self.events.executed(motor)
             if reply.FAULTS is not None:
                 self._note_faults(motor, getattr(reply, reply.FAULTS))
             if motor._ending and got.request is None and got.traffic is not _STREAM:

@@ -6,7 +6,8 @@
      │    ├── MotorOffline  cycle(): the motor is offline, the tick did not wait for it
      │    └── MotorBusy     cycle(): its last reply is still due, this tick's command was not sent
      ├── MotorStreaming     the motor streams (0xB6) and answers no other request meanwhile
-     ├── MotorFault         the motor reported error flags (decoded)
+     ├── MotorFault         the motor reported error flags (decoded), or an event frame (0xF1 trip)
+     ├── MotorNotExecuted   the motor echoed the request's bytes instead of executing it
      └── TransportError     adapter lost, bus-off, port closed (raised from its cause)
           ├── SendQueueFull  (servobus.transports) a send found the queue (or the adapter's) full
           └── BusOffError    (servobus.transports) the CAN controller is bus-off: sends fail fast
@@ -22,6 +23,7 @@ import enum
 __all__ = [
     "MotorBusy",
     "MotorFault",
+    "MotorNotExecuted",
     "MotorOffline",
     "MotorStreaming",
     "MotorTimeout",
@@ -117,17 +119,42 @@ class MotorStreaming(ServobusError):
 
 
 class MotorFault(ServobusError):
-    """A motor reported error flags.
+    """A motor reported error flags, or a frame that tells of a fault (MyActuator's 0xF1: its own
+    communication watchdog, 0xB3, cut the output).
 
     Attributes:
-        flags: the decoded flags (the family's flag enum; unknown bits kept).
+        flags: the decoded flags (the family's flag enum; unknown bits kept); None for a fault told
+            by an event frame, which carries no flags.
         motor_id: the motor that reported them.
     """
 
-    def __init__(self, message: str, *, flags: enum.Flag, motor_id: int) -> None:
+    def __init__(self, message: str, *, flags: enum.Flag | None, motor_id: int) -> None:
         super().__init__(message)
         self.flags = flags
         self.motor_id = motor_id
+
+
+class MotorNotExecuted(ServobusError):
+    """The motor answered a command with the command's own bytes and did not execute it.
+
+    A MyActuator motor whose communication watchdog (0xB3) tripped echoes the first command after
+    communication resumes, byte for byte, and executes only the next one. The request fails with
+    this error, for commands whose real reply cannot be their own bytes (the family declares
+    which: a control command's reply carries temperature and measurements), and for any command
+    sent while the motor's trip is known. Sending the command again is the remedy; the safe stop
+    does so by itself.
+
+    Attributes:
+        motor_id: the motor.
+        command: the command byte (DATA[0]) echoed, when there is one.
+        raw: the echoed bytes.
+    """
+
+    def __init__(self, message: str, *, motor_id: int, command: int | None = None, raw: bytes = b"") -> None:
+        super().__init__(message)
+        self.motor_id = motor_id
+        self.command = command
+        self.raw = bytes(raw)
 
 
 class TransportError(ServobusError):

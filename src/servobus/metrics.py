@@ -95,6 +95,10 @@ class Metrics:
         bus_load_pct: share of the line used in the last second, from the transport (bus only;
             None when unknown).
         restarts: times a motor came back online from a restart (servobus.restarts).
+        not_executed: requests a motor echoed back instead of executing them (MotorNotExecuted;
+            part of ``failed``).
+        comm_tripped: frames in which a motor said its communication watchdog tripped (MyActuator
+            0xF1; also counted in ``report``).
     """
 
     requests: int
@@ -117,6 +121,8 @@ class Metrics:
     latency: Latency
     bus_load_pct: float | None = None
     restarts: int = 0
+    not_executed: int = 0
+    comm_tripped: int = 0
 
     @classmethod
     def of(cls, counts: Mapping[str, int], latency: Latency, bus_load_pct: float | None = None) -> Metrics:
@@ -144,4 +150,6 @@ class Metrics:
             latency=latency,
             bus_load_pct=bus_load_pct,
             restarts=c("restarts", 0),
+            not_executed=c("not_executed", 0),
+            comm_tripped=c("comm_tripped", 0),
         )

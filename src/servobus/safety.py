@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 import anyio
 
 from servobus._tick import awaitable
-from servobus.errors import MotorTimeout, TransportError
+from servobus.errors import MotorNotExecuted, MotorTimeout, TransportError
 from servobus.protocols import Command
 
 if TYPE_CHECKING:
@@ -89,6 +89,8 @@ async def stop_motors(
                 await awaitable(request.context)
             except MotorTimeout:
                 continue  # lost on its way there or back: it is safe to repeat
+            except MotorNotExecuted:
+                continue  # echoed back, not executed (a tripped watchdog): not acknowledged
             except TransportError:
                 if not bus.transport.is_open:
                     return

@@ -246,7 +246,11 @@ class Scheduler(Pacing, Matching, Timing):
             self._set_floors(rtts)
         key = codec.reply_key(command)
         # (all positional: a keyword costs more, and this is once per request)
-        return Request(codec, command, frame, key, timeout, retries, context, rtt, timeout_s is None, writes)
+        adaptive = timeout_s is None
+        request = Request(codec, command, frame, key, timeout, retries, context, rtt, adaptive, writes)
+        if key is not None and (command.NEVER_ECHOED or codec.echoing):  # (codec.may_echo, written out)
+            request.echo = frame.data
+        return request
 
     def submit(self, request: Request, now: float) -> None:
         """Queue ``request`` behind the others (FIFO); a command's freshness counts from ``now``.

@@ -31,7 +31,9 @@ class MotorStatus:
         at: when (the loop's clock).
         reason: why, in words (``"3 replies missed"``, ``"silent for 0.5 s"``, ``"answered"``), or
             ``"restarted"``: the motor, back online, had restarted (servobus.restarts; it follows
-            its ``"answered"``), so the set-points it held are lost.
+            its ``"answered"``), so the set-points it held are lost; or
+            what the motor said of itself while it stays online or offline (``"communication
+            watchdog tripped (0xF1)"``: its output is off until it executes a command again).
     """
 
     motor: Motor
@@ -100,6 +102,10 @@ class Watchdog:
         """``motor``, back online, had restarted (servobus.restarts found ``evidence``): told once."""
         logger.warning("%s: %r restarted (%s): what it was told before is lost", self.name, motor, evidence)
         self._tell(MotorStatus(motor, True, at, "restarted"))
+    def event(self, motor: Motor, at: float, reason: str) -> None:
+        """Tell the listeners what happened to ``motor`` that leaves it online as it is (``reason``:
+        ``"communication watchdog tripped (0xF1)"``; the caller logs it)."""
+        self._tell(MotorStatus(motor, motor.online is not False, at, reason))
 
     def _tell(self, status: MotorStatus) -> None:
         for callback in self.listeners:

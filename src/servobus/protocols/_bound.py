@@ -16,6 +16,10 @@ member                              gives
 ``retry_safe(command)``             True only for commands that change nothing (reads)
 ``note_sent(command)``              tell the codec a command left (0xB6 streams, 0x9A reports change
                                     what the motor's frames mean)
+``may_echo(command)``               True when a reply that is ``command``'s own bytes would be the
+                                    motor echoing it unexecuted: ``Command.NEVER_ECHOED``, or
+                                    ``echoing`` (the family saw its motor say it will echo the next
+                                    command: MyActuator's 0xF1)
 ``safe_command(kind)``              the command that stops the motor: ``"stop"``, ``"shutdown"`` or
                                     ``"brake"`` (ValueError where the motor has no such command)
 ``request_ids`` / ``reply_ids``     this motor's own identifiers (filters, the collision check)
@@ -177,6 +181,9 @@ class BoundCodec(Protocol):
     @property
     def framing(self) -> Framing | None: ...
 
+    @property
+    def echoing(self) -> bool: ...
+
     def encode(self, command: Command) -> Frame: ...
 
     def reply_key(self, command: Command) -> Hashable | None: ...
@@ -190,6 +197,8 @@ class BoundCodec(Protocol):
     def retry_safe(self, command: Command) -> bool: ...
 
     def note_sent(self, command: Command) -> None: ...
+
+    def may_echo(self, command: Command) -> bool: ...
 
     def safe_command(self, kind: str = "stop") -> Command: ...
 
@@ -231,6 +240,16 @@ class CodecBase:
 
     def note_sent(self, command: Command) -> None:
         """Nothing the family's commands change alters how its frames are classified."""
+
+    #: The motor said it will echo its next command unexecuted (MyActuator: an 0xF1 frame; the
+    #: family's ``classify`` sets it, and clears it at the motor's next reply). False in families
+    #: whose motors never say so.
+    echoing: bool = False
+
+    def may_echo(self, command: Command) -> bool:
+        """Whether a reply equal to ``command``'s bytes means it was not executed: its class says
+        so (``NEVER_ECHOED``), or the motor said it will echo its next command (``echoing``)."""
+        return command.NEVER_ECHOED or self.echoing
 
     def encode(self, command: Command) -> Frame:
         raise NotImplementedError

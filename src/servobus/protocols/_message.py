@@ -70,6 +70,10 @@ class Command(Message, Generic[R]):
     ``NOTED``
         It changes how the motor talks (streams, error reports): the bound codec is told when it
         was sent (``BoundCodec.note_sent``).
+    ``NEVER_ECHOED``
+        Its real reply is never its own bytes (it carries measurements: temperature, current), so a
+        reply that is those bytes is the motor echoing it without executing it (MyActuator after
+        its 0xB3 trip): the request fails with ``MotorNotExecuted`` (``BoundCodec.may_echo``).
 
     ``REPLY`` is not written by hand: it is the type argument of the command's base, read when the
     class is made (a union for a command answered by one of several layouts; None for no reply).
@@ -83,6 +87,7 @@ class Command(Message, Generic[R]):
     STREAMABLE: ClassVar[bool] = False
     NO_REPLY: ClassVar[str | None] = None
     NOTED: ClassVar[bool] = False
+    NEVER_ECHOED: ClassVar[bool] = False
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -117,10 +122,17 @@ class Reply(Message):
 
     ``FAULTS`` names the field that holds the motor's error flags in replies that carry them (the Bus
     keeps ``motor.fault`` from it); None in every other reply.
+
+    ``EVENT`` names a frame the motor sends of itself to tell that something happened to it (not an
+    answer, not a measurement: MyActuator's 0xF1 communication trip): the Bus counts it under that
+    name, shows it in ``motor.fault`` until the motor executes a command again, and tells the
+    status listeners ``EVENT_REASON``. None in every other reply.
     """
 
     __slots__ = ()
     FAULTS: ClassVar[str | None] = None
+    EVENT: ClassVar[str | None] = None
+    EVENT_REASON: ClassVar[str] = ""
 
 
 Command.REPLY = Reply

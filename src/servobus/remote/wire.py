@@ -35,6 +35,7 @@ from typing import Any
 from servobus.errors import (
     MotorBusy,
     MotorFault,
+    MotorNotExecuted,
     MotorOffline,
     MotorStreaming,
     MotorTimeout,
@@ -430,6 +431,7 @@ _ERRORS: dict[str, type[Exception]] = {
         MotorOffline,
         MotorBusy,
         MotorStreaming,
+        MotorNotExecuted,
         ProtocolError,
         TransportError,
         ServobusError,
@@ -484,6 +486,10 @@ def decode_result(schema: Schema, data: bytes) -> Result:
         raise WireError("an error without a name and a message")
     if name == "MotorFault" and isinstance(flags, enum.Flag) and isinstance(motor_id, int):
         return Result(error=MotorFault(message, flags=flags, motor_id=motor_id))
+    if name == "MotorNotExecuted":
+        if isinstance(motor_id, int):
+            return Result(error=MotorNotExecuted(message, motor_id=motor_id))
+        name = "ServobusError"  # (it cannot be made without its motor)
     cls = _ERRORS.get(name, ServobusError)
     return Result(error=cls(message))
 

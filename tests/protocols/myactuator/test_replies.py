@@ -21,7 +21,7 @@ OTHER_REPLIES = [c for c in message_classes() if issubclass(c, Reply) and c not 
 
 
 def test_the_reply_lists_hold_every_exported_reply() -> None:
-    assert len(STANDARD_REPLIES) == 20
+    assert len(STANDARD_REPLIES) == 21  # 20 answers and the 0xF1 event (CommunicationTimeoutTripped)
     assert set(OTHER_REPLIES) == {ma.Echo, ma.MotionReply, ma.Rs485MotionReply}
 
 

@@ -12,6 +12,11 @@ Classification tracks two things the motor's configuration changes, told through
   may take the first stream frame after its request left as the fresh answer).
 * 0x20 index 3 (error reporting): a 0x9A frame is REPORT (sent every 100 ms while an error lasts),
   never taken as a reply by classification alone.
+
+And one thing the motor tells of itself: a 0xF1 frame (``CommunicationTimeoutTripped``, REPORT) says its
+0xB3 protection tripped, and the first command after that is echoed, not executed. From an 0xF1 until
+the motor's next reply-shaped frame the codec is ``echoing``, and ``may_echo`` is True for every command
+(a stop's real reply is its own bytes too); for control commands it always is (``NEVER_ECHOED``).
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ from servobus.protocols._bound import (
 from servobus.protocols._fast import Slow, maker
 from servobus.protocols._message import Command, Reply
 from servobus.protocols.myactuator import commands as cmd
+from servobus.protocols.myactuator import replies as rep
 from servobus.protocols.myactuator._fast import (
     compile_fixed,
     compile_fixed_encoder,
@@ -91,10 +97,12 @@ _IS_SLOW: dict[type, bool] = {}
 _IS_READ: dict[type, bool] = {}
 _IS_NOTED: dict[type, bool] = {}
 _ERROR_REPORT_CODE = cmd.ReadStatus1.CODE
+_EVENT_CODES = frozenset(event.CODE for event in rep.EVENTS)
 #: Echo replies that carry the value their request wrote (§0, declared ``ECHO``): keyed with it
 #: (``echo_key``). Not the fixed all-zero echoes (nothing to tell apart), 0xB3 (the manuals print an
 #: all-zero reply to it, §9 item 8) nor 0x79 (its reply comes on a shared identifier).
 _VALUE_ECHO_CODES = frozenset(c.CODE for c in COMMANDS if c.ECHO)
+_SPECIAL_CODES = _VALUE_ECHO_CODES | _EVENT_CODES
 
 
 def _fast_table(revision: Revision) -> dict[int, Callable[[bytes], Any]]:
@@ -161,6 +169,7 @@ class MyActuatorCodec(CodecBase):
         "_request_id",
         "_rs485",
         "_streams",
+        "echoing",
     )
 
     def __init__(self, motor_id: int, revision: Revision, scales: MotionScales, link: str) -> None:
@@ -172,6 +181,7 @@ class MyActuatorCodec(CodecBase):
         self._has_id_setting = revision in cmd.SetCanId.REVISIONS
         self._streams: frozenset[int] = frozenset()
         self._reports = False
+        self.echoing = False
         self._fast = _FAST[revision]
         self._plans = _PLANS.setdefault(revision, {})
         self._motion_fast = motion_reply_decoder(scales, motor_id)
@@ -324,10 +334,17 @@ class MyActuatorCodec(CodecBase):
                 return KIND_STREAM, self._reply_base | code
             if code == _ERROR_REPORT_CODE and self._reports:
                 return KIND_REPORT, self._reply_base | code
-            if code in _VALUE_ECHO_CODES:
+            if code in _SPECIAL_CODES:  # (one look-up on the hot path for both kinds)
+                if code in _EVENT_CODES:
+                    self.echoing = True  # the next command is echoed, not executed
+                    return KIND_REPORT, self._reply_base | code
+                self.echoing = False
                 return KIND_REPLY, echo_key(self._reply_base | code, data)
+            if self.echoing:
+                self.echoing = False  # the motor answers again: past the echo
             return KIND_REPLY, self._reply_base | code
         if ident == self._motion_reply_id:
+            self.echoing = False
             return KIND_REPLY, self._motion_key
         # 0x79 replies come on an identifier every motor shares, so one 0x79 exchange at a time per
         # bus; and only a revision that has 0x79 claims them.

@@ -142,6 +142,7 @@ def _reply_layout(command: type[MyActuatorCommand], reply: type[Reply]) -> tuple
 #: Reply layouts by DATA[0]: each command's declared reply types.
 REPLIES: Mapping[int, tuple[Candidate, ...]] = _table(
     [_reply_layout(c, reply) for c in _REQUEST_CLASSES for reply in c.reply_types()]
+    + [_layout(event) for event in rep.EVENTS]  # (frames the motor sends of itself, answering nothing)
 )
 
 #: Requests without a reply to wait for, and why (the command table's "none"/"random").

@@ -2,6 +2,10 @@
 
 All of them answer with the "status 2" layout (``replies.StatusReply``; 0xA6 with
 ``replies.SingleTurnStatusReply``) and run only "when the motor has no fault" (myactuator-v4.md §0).
+That reply carries the motor's temperature, current, speed and angle, so it is never the request's own
+bytes (but for a motor at exactly 0 °C, at rest, asked for zeros): a reply that is those bytes is the
+motor echoing the command without executing it, as it does with the first command after its 0xB3 trip
+(2b-t/myactuator_rmd_ros pull request 4). Each class declares ``NEVER_ECHOED`` for that.
 Units: amperes, dps, degrees of the output shaft; percentages of rated current / rated speed where the
 manual gives them.
 """
@@ -65,6 +69,7 @@ class TorqueControl(MyActuatorCommand[StatusReply]):
 
     CODE: ClassVar[int] = 0xA1
     TITLE: ClassVar[str] = "torque closed-loop control"
+    NEVER_ECHOED = True  # the reply carries temperature and measurements (module docstring)
     FIELDS = ((4, _CURRENT),)
     current_a: float
 
@@ -80,6 +85,7 @@ class SpeedControl(MyActuatorCommand[StatusReply]):
 
     CODE: ClassVar[int] = 0xA2
     TITLE: ClassVar[str] = "speed closed-loop control"
+    NEVER_ECHOED = True  # the reply carries temperature and measurements (module docstring)
     FIELDS = ((1, _MAX_TORQUE), (4, _SPEED))
     speed_dps: float
     max_torque_pct: int | None = None
@@ -96,6 +102,7 @@ class AbsolutePositionControl(MyActuatorCommand[StatusReply]):
 
     CODE: ClassVar[int] = 0xA4
     TITLE: ClassVar[str] = "absolute position closed-loop control"
+    NEVER_ECHOED = True  # the reply carries temperature and measurements (module docstring)
     FIELDS = ((2, _MAX_SPEED), (4, _ANGLE))
     angle_deg: float
     max_speed_dps: float | None
@@ -108,6 +115,7 @@ class SingleTurnPositionControl(MyActuatorCommand[SingleTurnStatusReply]):
 
     CODE: ClassVar[int] = 0xA6
     TITLE: ClassVar[str] = "single-turn position control"
+    NEVER_ECHOED = True  # the reply carries temperature and measurements (module docstring)
     FIELDS = ((1, EnumField("direction", 1, SpinDirection)), (2, _MAX_SPEED), (4, _SINGLE_TURN_ANGLE))
     angle_deg: float
     max_speed_dps: float | None
@@ -121,6 +129,7 @@ class IncrementalPositionControl(MyActuatorCommand[StatusReply]):
 
     CODE: ClassVar[int] = 0xA8
     TITLE: ClassVar[str] = "incremental position closed-loop control"
+    NEVER_ECHOED = True  # the reply carries temperature and measurements (module docstring)
     FIELDS = ((2, _MAX_SPEED), (4, _ANGLE))
     angle_deg: float
     max_speed_dps: float | None
@@ -134,6 +143,7 @@ class ForcePositionControl(MyActuatorCommand[StatusReply]):
 
     CODE: ClassVar[int] = 0xA9
     TITLE: ClassVar[str] = "force-limited position closed-loop control"
+    NEVER_ECHOED = True  # the reply carries temperature and measurements (module docstring)
     FIELDS = ((1, _FORCE_MAX_TORQUE), (2, _MAX_SPEED), (4, _ANGLE))
     angle_deg: float
     max_speed_dps: float | None
@@ -151,6 +161,7 @@ class PositionSpeedFeedforward(MyActuatorCommand[StatusReply]):
 
     CODE: ClassVar[int] = 0x72
     TITLE: ClassVar[str] = "position control with speed feed-forward"
+    NEVER_ECHOED = True  # the reply carries temperature and measurements (module docstring)
     REVISIONS = ONLY_V4_4
     FIELDS = ((1, _FF_SPEED), (2, _MAX_SPEED), (4, _ANGLE))
     angle_deg: float
@@ -165,6 +176,7 @@ class PositionTorqueFeedforward(MyActuatorCommand[StatusReply]):
 
     CODE: ClassVar[int] = 0x73
     TITLE: ClassVar[str] = "position control with torque feed-forward"
+    NEVER_ECHOED = True  # the reply carries temperature and measurements (module docstring)
     REVISIONS = ONLY_V4_4
     FIELDS = ((1, _FF_TORQUE), (2, _MAX_SPEED), (4, _ANGLE))
     angle_deg: float

@@ -3,8 +3,8 @@
 * **Standard frames** (0x140 + ID requests, 0x240 + ID replies, the 0x280 broadcast): multiplexed on
   DATA[0]; each layout is its class's ``FIELDS`` (:func:`servobus.dbc.keyed_layouts`): the family's
   commands of the revision by ``CODE``, their declared replies (``reply_types()``) by theirs, the R2
-  status layout under each command's byte. A command answered by ``Echo`` (its request's bytes) is
-  its own fields, named ``command.<field>``.
+  status layout under each command's byte, and the frames the motor sends of itself (``EVENTS``:
+  0xF1). A command answered by ``Echo`` (its request's bytes) is its own fields, named ``command.<field>``.
 * **Motion mode** (0x400/0x500 + ID): the C core's ``MIT_COMMAND``/``MIT_REPLY`` packers with the
   revision's :class:`~servobus.protocols.myactuator.MotionScales` (option ``max_torque_nm`` for V4.4's
   model-specific torque range), bit positions from :func:`servobus.dbc.packed_signals`.
@@ -20,6 +20,7 @@ from servobus.dbc import (
     DbcOption,
     DbcQuery,
     Described,
+    Keyed,
     Layout,
     MessageSpec,
     keyed_layouts,
@@ -29,6 +30,7 @@ from servobus.dbc import (
     request_keys,
 )
 from servobus.protocols.myactuator import (
+    EVENTS,
     FAMILY,
     Echo,
     MotionCommand,
@@ -54,7 +56,8 @@ def _describe(query: DbcQuery) -> Described:
     scales = MotionScales.for_revision(rev, max_torque_nm=query.options.get("max_torque_nm"))
     left_out: list[str] = []
     requests = keyed_layouts(request_keys(FAMILY.commands, rev), "request", left_out)
-    replies = keyed_layouts(reply_keys(FAMILY.commands, rev, echo=Echo), "reply", left_out)
+    events = [Keyed(event.CODE, event, event.__name__) for event in EVENTS if event.CODE is not None]
+    replies = keyed_layouts([*reply_keys(FAMILY.commands, rev, echo=Echo), *events], "reply", left_out)
     if rev in Rs485MotionCommand.REVISIONS:
         serial = [Rs485MotionCommand.__name__, *(r.__name__ for r in Rs485MotionCommand.reply_types())]
         left_out.append(f"RS485 MIT frames ({', '.join(serial)}): serial frames, not CAN")

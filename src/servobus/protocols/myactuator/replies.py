@@ -63,10 +63,12 @@ from servobus.protocols.myactuator.revision import (
 )
 
 __all__ = [
+    "EVENTS",
     "AccelerationReply",
     "CanIdLayout",
     "CanIdReply",
     "CircleAngleReply",
+    "CommunicationTimeoutTripped",
     "Echo",
     "EncoderOffsetReply",
     "EncoderPositionReply",
@@ -550,3 +552,42 @@ def join_model(parts: Iterable[ModelPartReply]) -> str:
             raise ValueError(f"model part {reply.part} given twice")
         by_part[reply.part] = reply.text
     return "".join(by_part.get(i, "") for i in (1, 2, 3))
+
+
+# ---- frames the motor sends of itself ----
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CommunicationTimeoutTripped(MyActuatorReply):
+    """0xF1 on 0x240+ID: the motor's communication watchdog (0xB3, §4.33) tripped: output off, brake locked.
+
+    In neither manual; reported for V3 drivers (2b-t/myactuator_rmd_ros, pull request 4): the motor
+    sends 0xF1 "without data" when the protection trips and about every second while it lasts, and
+    echoes the first command after communication resumes without executing it (the next one runs).
+    Which bytes follow DATA[0] is not known: any length and any further bytes read as this event
+    (the simulator sends ``F1 00 00 00 00 00 00 00``).
+    """
+
+    CODE: ClassVar[int] = 0xF1
+    TITLE: ClassVar[str] = "communication timeout tripped"
+    EVENT: ClassVar[str | None] = "comm_tripped"
+    EVENT_REASON: ClassVar[str] = "communication watchdog tripped (0xF1)"
+    FIELDS = ()
+
+    @classmethod
+    def decode(cls, data: bytes) -> Self:
+        """Any payload whose DATA[0] is 0xF1 (see the class docstring).
+
+        Raises:
+            ProtocolError: an empty payload or another DATA[0].
+        """
+        if not data or data[0] != cls.CODE:
+            command = data[0] if data else None
+            raise ProtocolError(f"{cls.__name__}: DATA[0] is not 0xF1", raw=data, command=command)
+        return cls()
+
+
+#: Every frame a MyActuator motor sends of itself that answers no command (the codec's REPLIES table
+#: takes them in; the bound codec classifies them REPORT). The other unsolicited frames are replies of
+#: commands: 0xB6 stream frames (STREAM) and 0x9A error reports (REPORT, with 0x20 index 3 on).
+EVENTS: tuple[type[MyActuatorReply], ...] = (CommunicationTimeoutTripped,)

@@ -54,6 +54,8 @@ class MotorBase(ListeningDevice):
     streams: dict[StreamableCommand, Stream]
     unresponsive: bool
     comm_tripped: bool
+    trip_echo: bool
+    _next_trip_frame_s: float | None
     _boot_s: float
     _last_heard_s: float
     _next_report_s: float | None

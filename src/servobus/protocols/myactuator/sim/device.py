@@ -73,8 +73,14 @@ dropped like any undecodable one); frames go to 0x240+ID (unstated, §1.1).
 set time, it will cut off the output [and] brake lock. To run again, you need to establish stable
 and continuous communication first" ([000] §2.32). When no frame for this motor arrives within the
 time, the output goes off and the brake locks (``comm_timeouts``); no error flag is set (none is
-named). The next frame for the motor restores communication (``comm_restored``) and is executed;
-control commands then run again and release the brake (0xA1 after 0x77). 0 disables it.
+named). The next frame for the motor restores communication (``comm_restored``); control commands then
+run again and release the brake (0xA1 after 0x77). 0 disables it. What V3 drivers are reported to do
+besides (2b-t/myactuator_rmd_ros, pull request 4; ``trip_echo``, on by default): at the trip and about
+every second while it lasts the motor sends ``F1 00 00 00 00 00 00 00`` on 0x240+ID
+(``CommunicationTimeoutTripped``; "without data": the zeros are our choice; ``comm_trip_frames``), and
+the frame that restores communication is echoed back byte for byte on its reply identifier and **not
+executed** (``comm_echoed``); the next one is. Modelled on CAN (the RS485 front switches it off).
+While tripped the motor is off the C path (``c_may_act``), so both paths agree.
 
 0x20 index 3: while an error flag is set the motor sends 0x9A on 0x240+ID every 100 ms, the first
 when the error appears (or reporting is switched on).
@@ -160,6 +166,8 @@ class MyActuatorMotor(Intake, Faults, PowerCuts):
         encoder_counts_per_turn: rotor encoder resolution.
         pole_pairs: rotor pole pairs (phase currents of 0x9D).
         name: the device name on its bus (default ``myactuator<id>``).
+        trip_echo: after a 0xB3 trip, send 0xF1 frames and echo the first command unexecuted, as
+            V3 drivers are reported to do (module docstring); False: the manuals' reading only.
         now_s: simulated time of power-up.
 
     Attributes:
@@ -168,6 +176,7 @@ class MyActuatorMotor(Intake, Faults, PowerCuts):
         run_mode: the 0x70 value.
         brake_released: the 0x9A brake flag: the brake-release command is in effect.
         comm_tripped: 0xB3 protection has cut the output and no frame has arrived since.
+        trip_echo: the constructor's argument (may be changed at any time).
         streams: active 0xB6 streams by command.
         feedforward_pct: the last 0x72/0x73 feed-forward (% of rated speed / current), or None.
         unresponsive: a simulator fault knob: the motor still acts on frames but never transmits.
@@ -200,6 +209,7 @@ class MyActuatorMotor(Intake, Faults, PowerCuts):
         encoder_counts_per_turn: int = DEFAULT_ENCODER_COUNTS_PER_TURN,
         pole_pairs: int = DEFAULT_POLE_PAIRS,
         name: str | None = None,
+        trip_echo: bool = True,
         now_s: float = 0.0,
     ) -> None:
         check_motor_id(motor_id)
@@ -238,6 +248,8 @@ class MyActuatorMotor(Intake, Faults, PowerCuts):
         self.run_mode = RUN_MODE_POWER_UP
         self.brake_released = False
         self.comm_tripped = False
+        self.trip_echo = trip_echo
+        self._next_trip_frame_s: float | None = None
         self.streams: dict[StreamableCommand, Stream] = {}
         self.feedforward_pct: int | None = None
         self._boot_s = now_s
@@ -273,8 +285,12 @@ class MyActuatorMotor(Intake, Faults, PowerCuts):
             self.count_refused_bytes(frame.data, can_id=frame.arbitration_id)
             return []
         motor_id = self.motor_id  # before a reset could change it
-        reply = self.handle(command, now_s)
-        if reply is None:
+        if self.comm_tripped and self.trip_echo:
+            data = self._echo_unexecuted(frame.data, now_s)
+        else:
+            reply = self.handle(command, now_s)
+            data = None if reply is None else _encode(reply)
+        if data is None:
             return []
         if kind is IdKind.MOTION_REQUEST:
             can_id = motion_reply_id(motor_id)
@@ -282,19 +298,32 @@ class MyActuatorMotor(Intake, Faults, PowerCuts):
             can_id = ID_SETTING_ID  # the 0x79 examples print the reply on 0x300 (§4.38)
         else:
             can_id = _reply_id(motor_id)
-        return [Emission(now_s + self.turnaround_s, Frame(arbitration_id=can_id, data=_encode(reply)))]
+        return [Emission(now_s + self.turnaround_s, Frame(arbitration_id=can_id, data=data))]
+
+    def _echo_unexecuted(self, data: bytes, now_s: float) -> bytes | None:
+        """The first frame after a 0xB3 trip: communication is back, the command is not executed,
+        its bytes go back as they came (None: nothing is sent)."""
+        self._counters["comm_echoed"] += 1
+        self._heard(now_s)
+        if self.unresponsive:
+            self._counters["unanswered"] += 1
+            return None
+        return data
 
     def poll(self, now_s: float) -> list[Emission]:
-        """Spontaneous frames due by ``now_s``: 0xB6 streams and 0x9A error reports (0x240+ID); also
-        trips the 0xB3 protection when its time has passed."""
+        """Spontaneous frames due by ``now_s``: 0xB6 streams, 0x9A error reports and 0xF1 trip frames
+        (0x240+ID); also trips the 0xB3 protection when its time has passed."""
         return [
             Emission(at, Frame(arbitration_id=reply_id(self.motor_id), data=reply.encode()))
             for at, reply in self.spontaneous(now_s)
         ]
 
     def next_deadline_s(self) -> float | None:
-        """The earliest of: the 0xB3 trip, the next stream frame, the next error report."""
+        """The earliest of: the 0xB3 trip (or, tripped, the next 0xF1 frame), the next stream frame,
+        the next error report."""
         protection, report = self.protection_deadline_s(), self._next_report_s
+        if protection is None:  # (tripped: the next 0xF1 frame instead)
+            protection = self._next_trip_frame_s
         streams = self.streams
         if streams and self._core is not None and self._core.runs_streams():
             streams = {}  # its C twin runs them (sb_ma_next_deadline)
@@ -350,6 +379,8 @@ class MyActuatorMotor(Intake, Faults, PowerCuts):
                 reply = self._execute(STREAMED[command](), now_s, rs485=False)
                 assert reply is not None
                 out.append((now_s, reply))
+        if self._next_trip_frame_s is not None:
+            out += self._trip_frames(now_s)
         if self._next_report_s is not None and self._next_report_s <= now_s:
             periods = math.floor((now_s - self._next_report_s) / ERROR_REPORT_PERIOD_S + 1e-9) + 1
             self._next_report_s += periods * ERROR_REPORT_PERIOD_S
@@ -410,6 +441,7 @@ class MyActuatorMotor(Intake, Faults, PowerCuts):
         self.errors.power_up()
         self.brake_released = False
         self.comm_tripped = False
+        self._next_trip_frame_s = None
         self.streams = {}
         self.feedforward_pct = None
         self._boot_s = self._last_heard_s = now_s

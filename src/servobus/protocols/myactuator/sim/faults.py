@@ -7,17 +7,26 @@ While a flag is set and 0x20 index 3 is on, the motor reports 0x9A every 100 ms 
 
 0xB3 communication protection: with no frame for this motor within the set time, the output goes off
 and the brake locks at that exact time (:meth:`Faults.advance`); the next frame restores it.
+With ``trip_echo`` (the default), as V3 drivers are reported to do (2b-t/myactuator_rmd_ros, pull
+request 4; in neither manual): the motor sends ``F1 00 00 00 00 00 00 00`` on 0x240+ID at the trip and
+every :data:`TRIP_FRAME_PERIOD_S` while it lasts (``comm_trip_frames``), and the next frame for it is
+echoed byte for byte and not executed (``comm_echoed``; the motor's ``receive``).
 """
 
 from __future__ import annotations
 
+import math
+
 from servobus.protocols._message import Reply
-from servobus.protocols.myactuator import ErrorFlags, Revision
+from servobus.protocols.myactuator import CommunicationTimeoutTripped, ErrorFlags, Revision
 from servobus.protocols.myactuator.sim.drive import Drive
 from servobus.protocols.myactuator.sim.state import status1
 from servobus.sim.plant import Off
 
-__all__ = ["Faults"]
+__all__ = ["TRIP_FRAME_PERIOD_S", "Faults"]
+
+#: 0xF1 frames while the 0xB3 protection holds: "repeat this frame every second" (the report above).
+TRIP_FRAME_PERIOD_S = 1.0
 
 
 class Faults(Drive):
@@ -46,7 +55,7 @@ class Faults(Drive):
         deadline = self.protection_deadline_s()
         if deadline is not None and deadline <= now_s:
             plant.advance(deadline)
-            self._trip()
+            self._trip(deadline)
         plant.advance(now_s)
 
     def protection_deadline_s(self) -> float | None:
@@ -59,15 +68,28 @@ class Faults(Drive):
         self._last_heard_s = now_s
         if self.comm_tripped:
             self.comm_tripped = False
+            self._next_trip_frame_s = None
             self._counters["comm_restored"] += 1
 
-    def _trip(self) -> None:
+    def _trip(self, at_s: float) -> None:
         # §4.33: "cut off the output [and] brake lock".
         self._changed()
         self.comm_tripped = True
+        if self.trip_echo:
+            self._next_trip_frame_s = at_s  # the first 0xF1 at the trip
         self._counters["comm_timeouts"] += 1
         self.brake_released = False
         self._set_control(Off(), self.run_mode)
+
+    def _trip_frames(self, now_s: float) -> list[tuple[float, Reply]]:
+        """The 0xF1 frame due by ``now_s`` while the protection holds (one, however late the poll)."""
+        due = self._next_trip_frame_s
+        if due is None or due > now_s:
+            return []
+        periods = math.floor((now_s - due) / TRIP_FRAME_PERIOD_S + 1e-9) + 1
+        self._next_trip_frame_s = due + periods * TRIP_FRAME_PERIOD_S
+        self._counters["comm_trip_frames"] += 1
+        return [(now_s, CommunicationTimeoutTripped())]
 
     def _update_reports(self, now_s: float) -> None:
         self._changed()  # the report deadline, and after a restart the identifiers

@@ -16,7 +16,9 @@ commands; this module only frames (spec ``myactuator-v4.md`` §1.2, §1.3, §4.3
   counted ``rs485_unsupported``. The motor sends nothing on its own on RS485 [I]: a half-duplex
   master/slave line has no arbitration, so the 0x20 index 3 error reports are dropped
   (``spontaneous_dropped``). The 0xB3 protection still trips (its field is named "CanRecvTime", but
-  the manuals do not restrict it to CAN, spec §9 item 30).
+  the manuals do not restrict it to CAN, spec §9 item 30); what is reported of it besides (0xF1
+  frames, the echo of the first command after, the motor's ``trip_echo``) was seen on CAN, and is
+  switched off here: the next frame after a trip is executed, as the manuals read.
 * The ``FE EE`` RS485 motion frame ([000] §6) is not simulated: its CRC32 is unverified, and the
   de-framer drops its bytes as noise.
 """
@@ -47,6 +49,7 @@ class MyActuatorRs485Motor:
 
     def __init__(self, motor: MyActuatorMotor, *, name: str | None = None) -> None:
         self.motor = motor
+        motor.trip_echo = False  # (reported on CAN only; see the module docstring)
         self._name = name or motor.name
         self._deframer = rs485_deframer()
         self._events: Counter[str] = Counter()
