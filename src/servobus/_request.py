@@ -68,6 +68,8 @@ class Traffic(enum.Enum):
     MALFORMED = "malformed"  # one of our motors' frames that does not decode
     FOREIGN = "foreign"  # not ours: another node, our own loop-back
     EARLY = "early"  # came before its request's send report: judged (and counted) when that comes
+    OTHER_HOST = "other host"  # another host's request to one of our motors (CAN is broadcast)
+    CONTENDED = "contended"  # the reply to another host's request: the motor's state, never ours
 
 
 @dataclass(eq=False, slots=True)
@@ -97,6 +99,7 @@ class Request:
     submitted: bool = False
     queued_at: float | None = None
     handed_at: float | None = None  # when its frame was last handed to the link
+    looped: bool = False  # its own frame came back from the link already (an adapter's loop-back)
 
     def describe(self) -> str:
         return f"{self.codec.family} motor {self.codec.motor_id} {type(self.command).__name__}"

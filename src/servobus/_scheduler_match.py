@@ -56,8 +56,16 @@ class Matching:
     _bus_counts: Counter[str]
     motor_counts: dict[int, Counter[str]]
     motor_latency: dict[int, LatencyWindow]
+    _by_request_id: dict[int, list[BoundCodec]]
+    _foreign: dict[Hashable, deque[tuple[float, float]]]
 
     if TYPE_CHECKING:
+
+        def _other_host(self, frame: Frame, now: float) -> Received: ...
+
+        def _contended(
+            self, codec: BoundCodec, key: Hashable, frame: Frame, reply: Reply, now: float
+        ) -> Received | None: ...
 
         def _count(self, codec: BoundCodec, name: str) -> None: ...
 
@@ -73,6 +81,8 @@ class Matching:
             kind, key = codec.classify(frame)
             if kind is not KIND_NOT_OURS:
                 return self._ours(codec, kind, key, frame, now)
+        if self._by_request_id:  # (another host's request to one of our motors?)
+            return self._other_host(frame, now)
         self._bus_counts["foreign"] += 1
         return Received(_T_FOREIGN, frame)
 
@@ -88,6 +98,10 @@ class Matching:
                 return Received(_T_EARLY, frame, codec)
             self._count(codec, "malformed")
             return Received(_T_MALFORMED, frame, codec, error=exc, request=self._spoilt(key, frame, exc, now))
+        if self._foreign and key in self._foreign and kind is KIND_REPLY:
+            contended = self._contended(codec, key, frame, reply, now)  # (servobus._scheduler_hosts)
+            if contended is not None:
+                return contended
         waiting = self._pending.get(key) if key is not None else None
         if waiting:
             request = waiting[0]

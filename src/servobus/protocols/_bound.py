@@ -18,6 +18,8 @@ member                              gives
                                     what the motor's frames mean)
 ``safe_command(kind)``              the command that stops the motor: ``"stop"``, ``"shutdown"`` or
                                     ``"brake"`` (ValueError where the motor has no such command)
+``request_key(frame)``              the key of the reply this motor will give to ``frame``, a request
+                                    of ANOTHER host to it (None: not one, or can't be told from a reply)
 ``request_ids`` / ``reply_ids``     this motor's own identifiers (filters, the collision check)
 ``shared_ids``                      identifiers every motor of the family uses (broadcasts, a host id)
 ``framing``                         serial links: Frame <-> bytes on the wire; None on CAN
@@ -230,6 +232,13 @@ class CodecBase:
 
     def note_sent(self, command: Command) -> None:
         """Nothing the family's commands change alters how its frames are classified."""
+
+    def request_key(self, frame: Frame) -> Hashable | None:
+        """The key of the reply this motor will give to ``frame``, a request another host sent it
+        (CAN is broadcast: the adapter receives other nodes' requests), or None: not a request to
+        this motor, one it will not answer, or one this family cannot tell from a reply (a family
+        without the method: the scheduler counts such frames ``foreign``, as before)."""
+        return None
 
     def encode(self, command: Command) -> Frame:
         raise NotImplementedError
