@@ -75,6 +75,8 @@ class Matching:
 
         def _miss(self, request: Request, now: float) -> bool: ...
 
+        def _ambiguous(self, request: Request, at: float, now: float) -> None: ...
+
     def receive(self, frame: Frame, now: float) -> Received:
         """Classify ``frame``, resolve the request it answers, count it."""
         for codec in self._by_id.get(frame.arbitration_id, ()):
@@ -156,8 +158,7 @@ class Matching:
                         if not self._any_measured:
                             self._first_measured()
                 if self._doubtful and key in self._doubtful:
-                    self._doubtful.discard(key)
-                    counts["ambiguous"] += 1  # it may be the reply of the request before
+                    self._ambiguous(request, frame.timestamp or now, now)  # (servobus._scheduler_time)
                 return Received(traffic, frame, codec, reply, request)
         if kind is KIND_STREAM or kind is KIND_REPORT:
             self._count(codec, kind.value)
@@ -215,7 +216,9 @@ class Matching:
                         self._first_measured()
                 if len(held) <= 1:  # the reply the key was held for came: the next exchange may go
                     self._held.pop(key, None)
-                    if not late:  # (a request given up on before it may still be answered)
+                    if late:  # a request given up on before may still be answered: in doubt
+                        self._doubtful.add(key)
+                    else:
                         self._doubtful.discard(key)
                 return _T_LATE
         until = recent.replied.get(key)

@@ -87,7 +87,9 @@ class Pacing:
         if held:
             for key in [k for k, until in held.items() if until <= now]:
                 del held[key]
-                if self._recent.late.get(key):  # its late reply never came: it may come yet
+                # its late reply never came: it may come yet (an entry whose window is its hold,
+                # the check after an ambiguous reply, ends with it: nothing more is due)
+                if any(e[0] > now for e in self._recent.late.get(key, ())):
                     self._doubtful.add(key)
         if self._rest_until:
             if now < self._rest_until:
