@@ -26,7 +26,7 @@ from servobus.bus import Bus
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
-from servobus.scheduler import Received
+from servobus.scheduler import Received, Scheduler, Traffic
 from servobus.sim.attach import serve_python_can
 from servobus.sim.canbus import CanBusModel
 from servobus.sim.corenet import CoreCanNetwork
@@ -228,3 +228,50 @@ def test_with_the_device_model_in_a_thread_no_late_reply_answers_the_next_reques
     assert wrong <= metrics.ambiguous, (
         f"{wrong} of {accepted} replies taken were an earlier request's: {metrics}"
     )
+
+
+# ---- the rules, without I/O (servobus._scheduler_time) ----
+
+
+def _status(t: float) -> Frame:
+    return Frame(arbitration_id=0x241, data=bytes.fromhex("9C 32 64 00 F4 01 2D 00"), timestamp=t)
+
+
+def _sent(scheduler: Scheduler, codec: Any, at: float, timeout_s: float = 0.005) -> Any:
+    request = scheduler.request(codec, ma.ReadStatus2(), timeout_s=timeout_s)
+    scheduler.submit(request, at)
+    (out,), _ = scheduler.poll(at)
+    scheduler.sent(out, at)
+    return request
+
+
+def test_a_timeout_noticed_late_holds_its_key_from_when_it_was_noticed() -> None:
+    codec = ma.FAMILY.bind(1)
+    scheduler = Scheduler([codec])
+    first = _sent(scheduler, codec, 0.0)
+    # the loop stalled 100 ms: the 5 ms timeout is noticed at 0.1, long after its hold (twice the
+    # codec's 20 ms before anything was measured) would have ended, counted from the request
+    assert scheduler.expire(0.100) == [first]
+    assert scheduler.busy(first.key, 0.101)  # still held: the host was not looking
+    assert scheduler.receive(_status(0.102), 0.102).traffic is Traffic.LATE  # (the stalled reply)
+    assert not scheduler.busy(first.key, 0.102)
+    second = _sent(scheduler, codec, 0.103)
+    assert scheduler.receive(_status(0.104), 0.104).request is second
+    assert scheduler.counts["ambiguous"] == 0
+
+
+def test_a_reply_in_doubt_is_counted_and_the_key_waits_for_the_replies_still_owed() -> None:
+    codec = ma.FAMILY.bind(1)
+    scheduler = Scheduler([codec])
+    first = _sent(scheduler, codec, 0.0)
+    assert scheduler.expire(0.005) == [first]  # noticed on time: held until 0.040
+    assert scheduler.poll(0.050) == ((), ())  # the hold ended without the late reply: in doubt
+    second = _sent(scheduler, codec, 0.050)
+    got = scheduler.receive(_status(0.051), 0.051)  # the first's, 51 ms late, or the second's?
+    assert got.request is second and scheduler.counts["ambiguous"] == 1
+    # if it was the first's, the second's own reply is still to come: it must answer no third
+    assert scheduler.busy(second.key, 0.052)
+    assert scheduler.receive(_status(0.053), 0.053).traffic is Traffic.LATE
+    third = _sent(scheduler, codec, 0.054)
+    assert scheduler.receive(_status(0.055), 0.055).request is third
+    assert scheduler.counts["ambiguous"] == 1
