@@ -93,7 +93,10 @@ class OtherHost:
         self._link = link
 
     def settle(self) -> None:
-        """Nothing to settle: it keeps no state of the frames it did not hear."""
+        """Settle up with the network (it keeps no state of the frames it did not hear)."""
+        link = self._link
+        if link is not None and link.behind:
+            link.catch_up(every_end=False)
 
     def receive(self, frame: Frame, now_s: float) -> list[Emission]:
         return []
