@@ -30,8 +30,11 @@ when to ask again: :meth:`Scheduler.next_deadline`) and keeps every rule about m
   frame left.
 * **Timing**: with no ``timeout_s`` of its own, a request's timeout comes from the round trips
   measured for its motor and command class (:class:`~servobus.rtt.RoundTrip`, RFC 6298); after a
-  timeout its key is held for the late reply (``late_hold_s``), and a reply that comes after a hold
-  ended without its late reply is counted ``ambiguous``.
+  timeout its key is held for the late reply (``late_hold_s``), counted from when the timeout was
+  noticed if the loop noticed it late (a stall: the host was not looking). While a request given up
+  on may still be answered (its hold ended without its reply) the key is in doubt: a reply taken
+  then is counted ``ambiguous``, and the key is held for the replies still owed if it was the
+  earlier one's.
 * **Pacing**: at most ``max_in_flight`` requests SENDING or SENT at once; a half-duplex line
   (``one_at_a_time``) allows one, and rests ``gap_s`` after each exchange before the next frame.
 * **Streams**: a request whose key a motor streams (0xB6) is answered by the first stream frame that
