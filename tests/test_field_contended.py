@@ -210,3 +210,34 @@ def test_each_family_tells_another_host_s_request_by_its_identifier() -> None:
     sent = myactuator.encode(write)
     assert myactuator.request_key(dataclasses.replace(sent, is_rx=True)) == myactuator.reply_key(write)
     assert myactuator.request_key(_theirs(4, 0.0)) is None  # another motor's
+
+
+@pytest.mark.parametrize("family", ["lk", "hollow"])
+def test_lk_and_hollow_requests_of_another_host_take_their_place_too(family: str) -> None:
+    from servobus.protocols.hollow.sim.device import HollowMotor
+    from servobus.protocols.lk.sim.device import LkMotor
+
+    if family == "lk":
+        codec, device, command = lk.FAMILY.bind(1), LkMotor(1), lk.ReadStatus2()
+    else:
+        codec, device = ho.FAMILY.bind(20), HollowMotor(20)
+        command = ho.Setpoint(position_deg=1.0, speed_rad_s=0.0, kp=5, kd=1, current_a=0.0)
+    scheduler = Scheduler([codec], min_reply_s=0.0001)
+    request = codec.encode(command)
+    theirs = Frame(
+        arbitration_id=request.arbitration_id,
+        data=request.data,
+        is_extended_id=request.is_extended_id,
+        timestamp=0.001,
+    )
+    (emission,) = device.receive(theirs, 0.001)
+    reply = emission.frame
+    assert scheduler.receive(theirs, 0.001).traffic is Traffic.OTHER_HOST
+    ours = scheduler.request(codec, command, timeout_s=0.01)
+    scheduler.submit(ours, 0.0012)
+    (out,), _ = scheduler.poll(0.0012)
+    scheduler.sent(out, 0.0012)
+    assert (
+        scheduler.receive(dataclasses.replace(reply, timestamp=0.0015), 0.0015).traffic is Traffic.CONTENDED
+    )
+    assert scheduler.receive(dataclasses.replace(reply, timestamp=0.0018), 0.0018).request is ours
