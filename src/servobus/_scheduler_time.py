@@ -273,9 +273,10 @@ class Timing:
         """``request`` took the reply received at ``at`` while its key was in doubt: requests with
         the key sent before it were given up on (their holds ended) and have had no reply. The
         reply may be the first of those's: counted ``ambiguous``. Either it was (and as many replies
-        as there were such requests are still to come, the last ``request``'s own) or they were
-        lost: the key is held for that many, until ``request``'s hold would end (a frame meanwhile
-        is late, and shows it was; none: the doubt is over, at the cost of one hold)."""
+        as there were such requests are still owed, the last ``request``'s own) or they were lost:
+        they stay owed for as long as the earlier ones could have come (a reply taken meanwhile is
+        in doubt too), and the key is held once, until ``request``'s hold would end (a frame then
+        is late; none: the next exchange goes, at the cost of one hold per episode)."""
         key = request.key
         self._doubtful.discard(key)
         late = self._recent.late.get(key)
@@ -289,8 +290,11 @@ class Timing:
         for entry in earlier:
             late.remove(entry)
         until = max(sent_at + max(2.0 * request.timeout_s, self._late_s(request)), now + request.timeout_s)
-        late.extend([(until, sent_at, request.rtt, until)] * len(earlier))  # (windows end with the hold)
-        self._held[key] = max(until, self._held.get(key, until))
+        window = max(e[0] for e in earlier)
+        # (owed, with no round trip: a reply to one is no sample of anyone's)
+        late.extend([(window, sent_at, None, until)] * len(earlier))
+        if all(e[2] is not None for e in earlier):  # a new episode: hold once
+            self._held[key] = max(until, self._held.get(key, until))
 
     def sent_after_all(self, request: Request, at: float) -> None:
         """The send report of a request given up on before it came (cancelled, or timed out
