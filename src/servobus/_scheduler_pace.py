@@ -87,8 +87,7 @@ class Pacing:
         if held:
             for key in [k for k, until in held.items() if until <= now]:
                 del held[key]
-                # its late reply never came: it may come yet (an entry whose window is its hold,
-                # the check after an ambiguous reply, ends with it: nothing more is due)
+                # its late reply never came: it may come yet, while its late window is open
                 if any(e[0] > now for e in self._recent.late.get(key, ())):
                     self._doubtful.add(key)
         if self._rest_until:
