@@ -69,6 +69,8 @@ class Traffic(enum.Enum):
     FOREIGN = "foreign"  # not ours: another node, our own loop-back
     EARLY = "early"  # came before its request's send report: judged (and counted) when that comes
     NOT_EXECUTED = "not_executed"  # the request's own bytes back: echoed, not executed (it failed)
+    OTHER_HOST = "other host"  # another host's request to one of our motors (CAN is broadcast)
+    CONTENDED = "contended"  # the reply to another host's request: the motor's state, never ours
 
 
 @dataclass(eq=False, slots=True)
@@ -101,6 +103,7 @@ class Request:
     # The bytes it sent, when a reply that is those bytes means "echoed, not executed" (the codec's
     # ``may_echo``): compared only then, so other requests cost one attribute read per reply.
     echo: bytes | None = None
+    looped: bool = False  # its own frame came back from the link already (an adapter's loop-back)
 
     def describe(self) -> str:
         return f"{self.codec.family} motor {self.codec.motor_id} {type(self.command).__name__}"

@@ -59,8 +59,16 @@ class Matching:
     seen: Seen
     motor_counts: dict[int, Counter[str]]
     motor_latency: dict[int, LatencyWindow]
+    _by_request_id: dict[int, list[BoundCodec]]
+    _foreign: dict[Hashable, deque[tuple[float, float]]]
 
     if TYPE_CHECKING:
+
+        def _other_host(self, frame: Frame, now: float) -> Received: ...
+
+        def _contended(
+            self, codec: BoundCodec, key: Hashable, frame: Frame, reply: Reply, now: float
+        ) -> Received | None: ...
 
         def _count(self, codec: BoundCodec, name: str) -> None: ...
 
@@ -70,12 +78,16 @@ class Matching:
 
         def _miss(self, request: Request, now: float) -> bool: ...
 
+        def _ambiguous(self, request: Request, at: float, now: float) -> None: ...
+
     def receive(self, frame: Frame, now: float) -> Received:
         """Classify ``frame``, resolve the request it answers, count it."""
         for codec in self._by_id.get(frame.arbitration_id, ()):
             kind, key = codec.classify(frame)
             if kind is not KIND_NOT_OURS:
                 return self._ours(codec, kind, key, frame, now)
+        if self._by_request_id:  # (another host's request to one of our motors?)
+            return self._other_host(frame, now)
         self._bus_counts["foreign"] += 1
         self.seen.note(frame, now)
         return Received(_T_FOREIGN, frame)
@@ -94,6 +106,10 @@ class Matching:
                 return self._not_executed(waiting[0], codec, frame, now)  # (a motion echo: no reply)
             self._count(codec, "malformed")
             return Received(_T_MALFORMED, frame, codec, error=exc, request=self._spoilt(key, frame, exc, now))
+        if self._foreign and key in self._foreign and kind is KIND_REPLY:
+            contended = self._contended(codec, key, frame, reply, now)  # (servobus._scheduler_hosts)
+            if contended is not None:
+                return contended
         waiting = self._pending.get(key) if key is not None else None
         if waiting:
             request = waiting[0]
@@ -151,8 +167,7 @@ class Matching:
                         if not self._any_measured:
                             self._first_measured()
                 if self._doubtful and key in self._doubtful:
-                    self._doubtful.discard(key)
-                    counts["ambiguous"] += 1  # it may be the reply of the request before
+                    self._ambiguous(request, frame.timestamp or now, now)  # (servobus._scheduler_time)
                 return Received(traffic, frame, codec, reply, request)
         if kind is KIND_STREAM or kind is KIND_REPORT:
             self._count(codec, kind.value)
@@ -233,7 +248,9 @@ class Matching:
                         self._first_measured()
                 if len(held) <= 1:  # the reply the key was held for came: the next exchange may go
                     self._held.pop(key, None)
-                    if not late:  # (a request given up on before it may still be answered)
+                    if late:  # a request given up on before may still be answered: in doubt
+                        self._doubtful.add(key)
+                    else:
                         self._doubtful.discard(key)
                 return _T_LATE
         until = recent.replied.get(key)

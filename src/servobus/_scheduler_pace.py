@@ -87,7 +87,8 @@ class Pacing:
         if held:
             for key in [k for k, until in held.items() if until <= now]:
                 del held[key]
-                if self._recent.late.get(key):  # its late reply never came: it may come yet
+                # its late reply never came: it may come yet, while its late window is open
+                if any(e[0] > now for e in self._recent.late.get(key, ())):
                     self._doubtful.add(key)
         if self._rest_until:
             if now < self._rest_until:

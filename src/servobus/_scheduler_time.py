@@ -251,6 +251,12 @@ class Timing:
             until = max(now, handed + (self.report_within_s or 0.0)) + request.timeout_s
         else:
             until = request.sent_at + max(2.0 * request.timeout_s, self._late_s(request))
+            deadline = request.deadline
+            if deadline is not None and now > deadline:
+                # Noticed late: the loop stalled (a GC pause, a busy machine, a thread holding the
+                # GIL). The host was not looking, and what came meanwhile may not be taken in yet:
+                # the hold counts from when the timeout was noticed, as if noticed on time.
+                until += now - deadline
         recent = self._recent
         entries = recent.late.setdefault(key, [])
         if entries and entries[0][0] < now:  # (a motor that never answers: its entries expire)
@@ -259,6 +265,35 @@ class Timing:
         if len(recent.late) > recent.limit:
             recent.prune(now)
         if until > now:
+            self._held[key] = max(until, self._held.get(key, until))
+        else:  # (a hold over before it began: the next reply with the key is in doubt)
+            self._doubtful.add(key)
+
+    def _ambiguous(self, request: Request, at: float, now: float) -> None:
+        """``request`` took the reply received at ``at`` while its key was in doubt: requests with
+        the key sent before it were given up on (their holds ended) and have had no reply. The
+        reply may be the first of those's: counted ``ambiguous``. Either it was (and as many replies
+        as there were such requests are still owed, the last ``request``'s own) or they were lost:
+        they stay owed for as long as the earlier ones could have come (a reply taken meanwhile is
+        in doubt too), and the key is held once, until ``request``'s hold would end (a frame then
+        is late; none: the next exchange goes, at the cost of one hold per episode)."""
+        key = request.key
+        self._doubtful.discard(key)
+        late = self._recent.late.get(key)
+        sent_at = request.sent_at
+        if not late or sent_at is None:
+            return
+        earlier = [e for e in late if e[0] > now and e[3] <= now and (e[1] is None or e[1] < sent_at)]
+        if not earlier:
+            return  # clear: nothing earlier can still answer
+        self.motor_counts[id(request.codec)]["ambiguous"] += 1
+        for entry in earlier:
+            late.remove(entry)
+        until = max(sent_at + max(2.0 * request.timeout_s, self._late_s(request)), now + request.timeout_s)
+        window = max(e[0] for e in earlier)
+        # (owed, with no round trip: a reply to one is no sample of anyone's)
+        late.extend([(window, sent_at, None, until)] * len(earlier))
+        if all(e[2] is not None for e in earlier):  # a new episode: hold once
             self._held[key] = max(until, self._held.get(key, until))
 
     def sent_after_all(self, request: Request, at: float) -> None:

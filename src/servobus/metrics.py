@@ -91,6 +91,9 @@ class Metrics:
         malformed: frames of a motor that did not decode (never taken as a reply).
         stream, report: a motor's 0xB6 stream frames and automatic error reports.
         foreign: frames of no motor on this bus (bus only; always 0 for a motor).
+        foreign_requests: another host's requests to the motor (CAN is broadcast: a second
+            controller on the bus).
+        contended: replies to another host's requests (the motor's state; never taken as ours).
         latency: request-to-reply time of the last replies.
         bus_load_pct: share of the line used in the last second, from the transport (bus only;
             None when unknown).
@@ -123,6 +126,8 @@ class Metrics:
     restarts: int = 0
     not_executed: int = 0
     comm_tripped: int = 0
+    foreign_requests: int = 0
+    contended: int = 0
 
     @classmethod
     def of(cls, counts: Mapping[str, int], latency: Latency, bus_load_pct: float | None = None) -> Metrics:
@@ -152,4 +157,6 @@ class Metrics:
             restarts=c("restarts", 0),
             not_executed=c("not_executed", 0),
             comm_tripped=c("comm_tripped", 0),
+            foreign_requests=c("foreign_requests", 0),
+            contended=c("contended", 0),
         )

@@ -15,6 +15,9 @@ when to ask again: :meth:`Scheduler.next_deadline`) and keeps every rule about m
   claims to be a reply but does not decode). A malformed frame never resolves a request with data:
   the request waiting for its key FAILS with the codec's ProtocolError (the motor answered, in a way
   this codec cannot read), instead of timing out as if nothing came.
+* **Other hosts**: another host's request to one of our motors (CAN is broadcast) takes its place
+  in that motor's order of replies, and the reply that answers it is counted ``contended``, never
+  taken as ours (servobus._scheduler_hosts).
 * **Life cycle** of a request (one table, :data:`TRANSITIONS`, every move checked against it; an
   illegal one raises :class:`~servobus.errors.RequestStateError`): QUEUED -> SENDING (handed to the
   transport) -> SENT (the transport reported when it left; the deadline starts there) -> REPLIED, or
@@ -27,8 +30,11 @@ when to ask again: :meth:`Scheduler.next_deadline`) and keeps every rule about m
   frame left.
 * **Timing**: with no ``timeout_s`` of its own, a request's timeout comes from the round trips
   measured for its motor and command class (:class:`~servobus.rtt.RoundTrip`, RFC 6298); after a
-  timeout its key is held for the late reply (``late_hold_s``), and a reply that comes after a hold
-  ended without its late reply is counted ``ambiguous``.
+  timeout its key is held for the late reply (``late_hold_s``), counted from when the timeout was
+  noticed if the loop noticed it late (a stall: the host was not looking). While a request given up
+  on may still be answered (its hold ended without its reply) the key is in doubt: a reply taken
+  then is counted ``ambiguous``, and the key is held for the replies still owed if it was the
+  earlier one's.
 * **Pacing**: at most ``max_in_flight`` requests SENDING or SENT at once; a half-duplex line
   (``one_at_a_time``) allows one, and rests ``gap_s`` after each exchange before the next frame.
 * **Streams**: a request whose key a motor streams (0xB6) is answered by the first stream frame that
@@ -55,6 +61,7 @@ from servobus._request import (
     Traffic,
     illegal,
 )
+from servobus._scheduler_hosts import OtherHosts
 from servobus._scheduler_match import Matching
 from servobus._scheduler_pace import Pacing
 from servobus._scheduler_time import TRUSTED_SAMPLES, Timing
@@ -88,7 +95,7 @@ _TO_SENT = FROM[_SENT]
 _NOTHING: tuple[Sequence[Request], Sequence[Request]] = ((), ())
 
 
-class Scheduler(Pacing, Matching, Timing):
+class Scheduler(Pacing, Matching, OtherHosts, Timing):
     """Pending requests of one bus, matched by key, paced, timed out, counted.
 
     Args:
@@ -177,6 +184,9 @@ class Scheduler(Pacing, Matching, Timing):
         self.min_reply_s = min_reply_s
         self.codecs: list[BoundCodec] = []
         self._by_id: dict[int, list[BoundCodec]] = {}
+        self._by_request_id: dict[int, list[BoundCodec]] = {}  # (servobus._scheduler_hosts)
+        self._foreign: dict[Hashable, deque[tuple[float, float]]] = {}
+        self._hosts_seen: dict[int, tuple[int, float]] = {}
         self._queue: deque[Request] = deque()
         self._pending: dict[Hashable, deque[Request]] = {}
         self._in_flight: dict[Request, None] = {}  # SENDING or SENT, in send order
@@ -212,6 +222,7 @@ class Scheduler(Pacing, Matching, Timing):
         self.motor_latency[id(codec)] = LatencyWindow(1024)
         for ident in codec.reply_ids | codec.shared_ids:
             self._by_id.setdefault(ident & 0x1FFFFFFF, []).append(codec)
+        self._index_requests(codec)
 
     # ---- requests ----
 

@@ -22,6 +22,8 @@ member                              gives
                                     command: MyActuator's 0xF1)
 ``safe_command(kind)``              the command that stops the motor: ``"stop"``, ``"shutdown"`` or
                                     ``"brake"`` (ValueError where the motor has no such command)
+``request_key(frame)``              the key of the reply this motor will give to ``frame``, a request
+                                    of ANOTHER host to it (None: not one, or can't be told from a reply)
 ``request_ids`` / ``reply_ids``     this motor's own identifiers (filters, the collision check)
 ``shared_ids``                      identifiers every motor of the family uses (broadcasts, a host id)
 ``framing``                         serial links: Frame <-> bytes on the wire; None on CAN
@@ -250,6 +252,13 @@ class CodecBase:
         """Whether a reply equal to ``command``'s bytes means it was not executed: its class says
         so (``NEVER_ECHOED``), or the motor said it will echo its next command (``echoing``)."""
         return command.NEVER_ECHOED or self.echoing
+
+    def request_key(self, frame: Frame) -> Hashable | None:
+        """The key of the reply this motor will give to ``frame``, a request another host sent it
+        (CAN is broadcast: the adapter receives other nodes' requests), or None: not a request to
+        this motor, one it will not answer, or one this family cannot tell from a reply (a family
+        without the method: the scheduler counts such frames ``foreign``, as before)."""
+        return None
 
     def encode(self, command: Command) -> Frame:
         raise NotImplementedError

@@ -298,6 +298,14 @@ class HollowCodec(CodecBase):
             return KIND_REPLY, self._key
         return KIND_NOT_OURS, None
 
+    def request_key(self, frame: Frame) -> Hashable | None:
+        """The key of the reply to ``frame`` if it is another host's request to this motor (on its
+        motor id, received; the motor answers on its host id whoever asked). None on the serial
+        links (one master per line)."""
+        if self.framing is not None or not frame.is_rx or frame.arbitration_id != self.motor_id:
+            return None
+        return self._key
+
     def decode(self, frame: Frame) -> Reply:
         """The typed reply in ``frame``.
 

@@ -388,6 +388,25 @@ class LkCodec(CodecBase):
             return KIND_REPLY, echo_key(self._reply_base | code, data)
         return KIND_REPLY, self._reply_base | self._aliases.get(code, code)
 
+    def request_key(self, frame: Frame) -> Hashable | None:
+        """The key of the reply to ``frame`` if it is another host's request to this motor (0x140+ID,
+        received). None on V2.35, whose replies come on the request's own identifier: a request
+        there cannot be told from a reply by its identifier."""
+        if (
+            frame.arbitration_id != self._request_id
+            or self._request_id == self._reply_id
+            or not frame.is_rx
+            or frame.is_extended_id
+            or frame.is_fd
+            or not frame.data
+        ):
+            return None
+        data = frame.data
+        code = data[0]
+        if code in _VALUE_ECHO_CODES:
+            return echo_key(self._reply_base | code, data)
+        return self._reply_base | self._aliases.get(code, code)
+
     def decode(self, frame: Frame) -> Reply:
         """The typed reply in ``frame``.
 

@@ -353,6 +353,25 @@ class MyActuatorCodec(CodecBase):
             return KIND_REPLY, frame_key(shared, ID_SETTING_CODE)
         return KIND_NOT_OURS, None
 
+    def request_key(self, frame: Frame) -> Hashable | None:
+        """The key of the reply to ``frame`` if it is another host's request to this motor (on
+        0x140+ID or 0x400+ID, received: not our own frame looped back), as :meth:`reply_key` would
+        give for the command it carries; None on RS485 (request and reply share the address)."""
+        if self._rs485 or not frame.is_rx or frame.is_extended_id or frame.is_fd or frame.is_serial:
+            return None
+        ident = frame.arbitration_id
+        if ident == self._motion_request_id:
+            return None if self._streams else self._motion_key
+        data = frame.data
+        if ident != self._request_id or not data:
+            return None
+        code = data[0]
+        if code in NO_REPLY or (self._streams and code not in self._streams):
+            return None
+        if code in _VALUE_ECHO_CODES:
+            return echo_key(self._reply_base | code, data)
+        return self._reply_base | code
+
     def decode(self, frame: Frame) -> Reply:
         """The typed reply in ``frame`` (a frame :meth:`classify` did not call NOT_OURS).
 

@@ -1,0 +1,155 @@
+"""The scheduler's part that knows other hosts on the bus (:class:`OtherHosts`, a part of
+:class:`~servobus.scheduler.Scheduler`).
+
+CAN is a broadcast medium: the adapter receives the requests another controller (a second PC, a
+teach pendant, a forgotten script) sends to our motors, and the motor answers them on the reply
+identifier it answers ours on, with the same DATA[0]. Replies carry no sequence number, but a motor
+answers in the order requests reached it. So a request of another host to one of our motors takes
+its place in that motor's order of expected replies (a placeholder, owned by nobody): the reply
+that answers it is the motor's state (counted ``contended``, given to subscribers), never the
+answer to our request with that key.
+
+Order on the wire: a request of ours left at ``sent_at`` (its send report); another host's frame
+is stamped when it ended. One that ended before ours was handed over, or while it may still have
+been on the wire when ours was (one frame's time, from ``min_reply_s``), reached the motor first.
+
+Our own frames that an adapter loops back (``is_rx`` False, or python-can's
+``receive_own_messages``) are never taken for another host's: the codec ignores frames not
+received (``is_rx``), and the first frame with our in-flight request's very bytes is ours.
+
+Sans-IO: ``now`` is always an argument.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import Counter, deque
+from collections.abc import Hashable
+from typing import TYPE_CHECKING
+
+from servobus._request import Received, Recent, Request, RequestState, Traffic
+from servobus.frame import Frame
+from servobus.protocols import BoundCodec, Reply
+
+__all__ = ["WARN_AFTER", "OtherHosts"]
+
+logger = logging.getLogger("servobus.bus")
+
+#: Requests of another host to one motor seen before the warning (so it can name their rate).
+WARN_AFTER = 8
+
+_SENDING = RequestState.SENDING
+_SENT = RequestState.SENT
+_T_OTHER_HOST = Traffic.OTHER_HOST
+_T_CONTENDED = Traffic.CONTENDED
+_T_FOREIGN = Traffic.FOREIGN
+
+
+class OtherHosts:
+    """Other hosts' requests to our motors (the scheduler's state is declared here for the type
+    checker)."""
+
+    name: str
+    min_reply_s: float
+    _pending: dict[Hashable, deque[Request]]
+    _recent: Recent
+    _bus_counts: Counter[str]
+    motor_counts: dict[int, Counter[str]]
+    _by_request_id: dict[int, list[BoundCodec]]
+    # key -> another host's requests still to be answered, oldest first: (when it ended on the
+    # wire, until when its reply is expected)
+    _foreign: dict[Hashable, deque[tuple[float, float]]]
+    _hosts_seen: dict[int, tuple[int, float]]  # motor (codec id) -> (requests seen, first stamp)
+
+    if TYPE_CHECKING:
+
+        def motor_timeout_s(self, codec: BoundCodec) -> float: ...
+
+    def _index_requests(self, codec: BoundCodec) -> None:
+        """Listen for other hosts' requests to ``codec``'s motor (a family that can tell them)."""
+        if getattr(codec, "request_key", None) is None:
+            return  # (a plug-in family without it: such frames stay ``foreign``)
+        for ident in {i & 0x1FFFFFFF for i in codec.request_ids}:
+            self._by_request_id.setdefault(ident, []).append(codec)
+
+    def _other_host(self, frame: Frame, now: float) -> Received:
+        """A frame on no motor's reply identifier: another host's request to one of our motors (a
+        placeholder in its order of replies), or ``foreign``."""
+        for codec in self._by_request_id.get(frame.arbitration_id, ()):
+            key = codec.request_key(frame)  # type: ignore[attr-defined]
+            if key is None:
+                continue
+            at = frame.timestamp or now
+            if self._looped(key, frame, at):
+                break
+            self._foreign.setdefault(key, deque()).append((at, at + 2.0 * self.motor_timeout_s(codec)))
+            counts = self.motor_counts[id(codec)]
+            counts["foreign_requests"] += 1
+            self._seen(codec, at)
+            return Received(_T_OTHER_HOST, frame, codec)
+        self._bus_counts["foreign"] += 1
+        return Received(_T_FOREIGN, frame)
+
+    def _looped(self, key: Hashable, frame: Frame, at: float) -> bool:
+        """Is ``frame`` our own request coming back (an adapter that loops sent frames back as
+        received)? The first frame with the very bytes of our request in flight, after it left."""
+        for request in self._pending.get(key, ()):
+            if (
+                not request.looped
+                and request.frame.data == frame.data
+                and request.frame.arbitration_id == frame.arbitration_id
+                and (request.state is _SENDING or (request.sent_at is not None and at >= request.sent_at))
+            ):
+                request.looped = True
+                return True
+        return False
+
+    def _seen(self, codec: BoundCodec, at: float) -> None:
+        """Count another host's request to ``codec``'s motor; warn once, naming the id and rate."""
+        count, first = self._hosts_seen.get(id(codec), (0, at))
+        count += 1
+        self._hosts_seen[id(codec)] = (count, first)
+        if count == WARN_AFTER:
+            ident = min(i & 0x1FFFFFFF for i in codec.request_ids)
+            rate = (count - 1) / (at - first) if at > first else float("nan")
+            logger.warning(
+                "%s: another host sends requests to %s motor %d (0x%03X), about %.0f per second: "
+                "its replies are kept apart from ours by order (counted 'contended')",
+                self.name,
+                codec.family,
+                codec.motor_id,
+                ident,
+                rate,
+            )
+
+    def _contended(
+        self, codec: BoundCodec, key: Hashable, frame: Frame, reply: Reply, now: float
+    ) -> Received | None:
+        """The reply ``frame`` with ``key``, while another host's request with that key waits: the
+        verdict if it answers that one (it reached the motor before our request waiting for the key,
+        and after any of ours whose late reply is held for), else None (matched as usual)."""
+        placeholders = self._foreign[key]
+        while placeholders and placeholders[0][1] < now:  # never answered (lost, or not to be)
+            placeholders.popleft()
+        if not placeholders:
+            del self._foreign[key]
+            return None
+        stamp = placeholders[0][0]
+        at = frame.timestamp or now
+        if at < stamp + self.min_reply_s:
+            return None  # too early to answer it
+        waiting = self._pending.get(key)
+        if waiting:
+            ours = waiting[0]
+            left = ours.sent_at if ours.state is _SENT else ours.handed_at
+            # one frame's time: it may still have been on the wire when ours was handed over
+            if left is not None and stamp > left + 1.5 * self.min_reply_s:
+                return None  # ours reached the motor first
+        late = self._recent.late.get(key)
+        if late and any(e[1] is not None and e[1] < stamp and e[3] >= now for e in late):
+            return None  # a late reply of ours is due first
+        placeholders.popleft()
+        if not placeholders:
+            del self._foreign[key]
+        self.motor_counts[id(codec)]["contended"] += 1
+        return Received(_T_CONTENDED, frame, codec, reply)

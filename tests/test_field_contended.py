@@ -1,0 +1,243 @@
+"""A second controller on the bus (issue [field], case 3): another host sends its own requests to
+our motors at 500 Hz, the motors answer it on the identifier and DATA[0] they answer us on. Its
+replies must never be taken as ours: the two hosts command different speeds (ours +100 dps, the
+other -50 dps) and a device model that puts the set-point of the request it answers into its reply
+tells which request a reply is for. On the project's simulator in virtual time, plus the scheduler's
+rules without I/O and one run through python-can's ``virtual`` bus.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import anyio
+import pytest
+
+from servobus.bus import Bus
+from servobus.frame import Frame
+from servobus.protocols import hollow as ho
+from servobus.protocols import lk
+from servobus.protocols import myactuator as ma
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+from servobus.scheduler import Received, Scheduler, Traffic
+from servobus.sim import virtual
+from servobus.sim.device import Emission
+from servobus.sim.otherhost import OtherHost
+from servobus.transports.sim import SimTransport
+
+OURS_DPS, THEIRS_DPS = 100.0, -50.0
+MOTORS = (1, 2, 3)
+
+
+class _SetpointMotor(MyActuatorMotor):
+    """A motor whose 0xA2 reply carries, in its speed field, the set-point of the request it answers
+    (whoever sent it), so a test can tell whose request a reply is for."""
+
+    def receive(self, frame: Frame, now_s: float) -> list[Emission]:
+        out = super().receive(frame, now_s)
+        if frame.data[:1] != b"\xa2":
+            return out
+        dps = int.from_bytes(frame.data[4:8], "little", signed=True) // 100
+        tagged = []
+        for emission in out:
+            data = emission.frame.data
+            if data[:1] == b"\xa2":
+                data = data[:4] + dps.to_bytes(2, "little", signed=True) + data[6:]
+                emission = Emission(emission.ready_s, dataclasses.replace(emission.frame, data=data))
+            tagged.append(emission)
+        return tagged
+
+
+def _run(
+    *, other: bool, hz: float = 200.0, seconds: float = 2.0, seed: int = 1, backend: str = "asyncio"
+) -> tuple[float, int, int, Any]:
+    """Our loop of SpeedControl(+100) at ``hz`` on three motors, with (or without) another host
+    commanding -50 dps at 500 Hz: (ticks per second, replies taken, of which another host's, bus)."""
+    devices: list[Any] = [_SetpointMotor(i) for i in MOTORS]
+    if other:
+        codecs = [ma.FAMILY.bind(i) for i in MOTORS]
+        devices.append(
+            OtherHost.commanding(codecs, ma.SpeedControl(speed_dps=THEIRS_DPS), rate_hz=500, seed=seed)
+        )
+    checked = [0, 0]
+
+    async def main() -> tuple[float, Any]:
+        async with Bus(SimTransport(devices=devices), safe=None) as bus:
+            receive = bus.scheduler.receive
+
+            def watch(frame: Frame, now: float) -> Received:
+                got = receive(frame, now)
+                if got.request is not None and isinstance(got.reply, ma.StatusReply):
+                    checked[0] += 1
+                    if got.reply.speed_dps != OURS_DPS:
+                        checked[1] += 1
+                return got
+
+            bus.scheduler.receive = watch  # type: ignore[method-assign]
+            batch = [(bus.motor("myactuator", i), ma.SpeedControl(speed_dps=OURS_DPS)) for i in MOTORS]
+            start = anyio.current_time()
+            ticks = 0
+            async for _ in bus.ticks(hz, spin_s=0.0):
+                if anyio.current_time() - start >= seconds:
+                    break
+                await bus.cycle(batch)
+                ticks += 1
+            return ticks / (anyio.current_time() - start), bus
+
+    rate, bus = virtual.run(main(), backend=backend)
+    return rate, checked[0], checked[1], bus
+
+
+@pytest.mark.parametrize(("seed", "backend"), [(1, "asyncio"), (2, "asyncio"), (3, "trio")])
+def test_a_second_controller_s_replies_are_never_taken_as_ours(
+    seed: int, backend: str, caplog: pytest.LogCaptureFixture
+) -> None:
+    clean_rate, _, _, _ = _run(other=False, backend=backend)
+    with caplog.at_level("WARNING", logger="servobus.bus"):
+        rate, taken, wrong, bus = _run(other=True, seed=seed, backend=backend)
+    assert wrong == 0, f"{wrong} of {taken} replies taken were the other host's"
+    assert taken >= 0.9 * 2.0 * 200 * len(MOTORS), taken
+    assert rate >= 0.95 * clean_rate, (rate, clean_rate)
+    for i in MOTORS:
+        metrics = bus.motor("myactuator", i).metrics()
+        assert metrics.contended > 0 and metrics.foreign_requests >= metrics.contended, metrics
+    warnings = [r.getMessage() for r in caplog.records if "another host" in r.getMessage()]
+    assert len(warnings) == len(MOTORS), warnings  # once per motor
+    assert "0x141" in " ".join(warnings) and "per second" in warnings[0]
+
+
+# ---- the rules, without I/O (servobus._scheduler_hosts) ----
+
+STATUS_A2 = bytes.fromhex("A2 32 64 00 F4 01 2D 00")
+
+
+def _theirs(motor: int, t: float, dps: float = THEIRS_DPS) -> Frame:
+    """Another host's 0xA2 request to ``motor``, as our adapter receives it."""
+    frame = ma.FAMILY.bind(motor).encode(ma.SpeedControl(speed_dps=dps))
+    return Frame(arbitration_id=frame.arbitration_id, data=frame.data, timestamp=t)
+
+
+def _reply(motor: int, t: float) -> Frame:
+    return Frame(arbitration_id=0x240 + motor, data=STATUS_A2, timestamp=t)
+
+
+def _ours(scheduler: Scheduler, codec: Any, at: float) -> Any:
+    request = scheduler.request(codec, ma.SpeedControl(speed_dps=OURS_DPS), timeout_s=0.01)
+    scheduler.submit(request, at)
+    (sent,), _ = scheduler.poll(at)
+    scheduler.sent(sent, at)
+    return request
+
+
+def test_a_request_of_another_host_before_ours_gets_the_first_reply() -> None:
+    codec = ma.FAMILY.bind(1)
+    scheduler = Scheduler([codec], min_reply_s=0.0001)
+    assert scheduler.receive(_theirs(1, 0.0010), 0.0010).traffic is Traffic.OTHER_HOST
+    ours = _ours(scheduler, codec, 0.0012)  # (handed over after theirs ended: theirs is answered first)
+    first = scheduler.receive(_reply(1, 0.0015), 0.0015)
+    assert first.traffic is Traffic.CONTENDED and first.request is None and ours.state.value == "sent"
+    assert isinstance(first.reply, ma.StatusReply)  # (the motor's state, for subscribers)
+    second = scheduler.receive(_reply(1, 0.0018), 0.0018)
+    assert second.request is ours
+    counts = scheduler.motor_counts[id(codec)]
+    assert counts["contended"] == 1 and counts["foreign_requests"] == 1 and scheduler.counts["foreign"] == 0
+
+
+def test_a_request_of_another_host_after_ours_leaves_ours_the_first_reply() -> None:
+    codec = ma.FAMILY.bind(1)
+    scheduler = Scheduler([codec], min_reply_s=0.0001)
+    ours = _ours(scheduler, codec, 0.0010)
+    scheduler.receive(_theirs(1, 0.0013), 0.0013)  # ended well after ours was handed over
+    assert scheduler.receive(_reply(1, 0.0014), 0.0014).request is ours
+    assert scheduler.receive(_reply(1, 0.0017), 0.0017).traffic is Traffic.CONTENDED
+    # ... and while theirs is still owed its reply, our next request's reply is not taken for it
+    scheduler.receive(_theirs(1, 0.0020), 0.0020)
+    later = _ours(scheduler, codec, 0.0021)
+    assert scheduler.receive(_reply(1, 0.0023), 0.0023).traffic is Traffic.CONTENDED
+    assert scheduler.receive(_reply(1, 0.0026), 0.0026).request is later
+
+
+def test_a_request_of_another_host_that_is_never_answered_stops_counting() -> None:
+    codec = ma.FAMILY.bind(1)
+    scheduler = Scheduler([codec], min_reply_s=0.0001)
+    scheduler.receive(_theirs(1, 0.0010), 0.0010)
+    ours = _ours(scheduler, codec, 0.5)  # (its reply was due long ago: lost, or not to be)
+    assert scheduler.receive(_reply(1, 0.5005), 0.5005).request is ours
+
+
+def test_our_own_frame_looped_back_is_not_another_host_s() -> None:
+    codec = ma.FAMILY.bind(1)
+    scheduler = Scheduler([codec], min_reply_s=0.0001)
+    ours = _ours(scheduler, codec, 0.0010)
+    own = ours.frame
+    back = Frame(arbitration_id=own.arbitration_id, data=own.data, timestamp=0.0011, is_rx=False)
+    assert scheduler.receive(back, 0.0011).traffic is Traffic.FOREIGN  # python-can's own message
+    # an adapter that loops it back as received: the first frame with our bytes after it left
+    again = Frame(arbitration_id=own.arbitration_id, data=own.data, timestamp=0.0011)
+    assert scheduler.receive(again, 0.0011).traffic is Traffic.FOREIGN
+    assert scheduler.receive(_reply(1, 0.0014), 0.0014).request is ours
+    assert scheduler.motor_counts[id(codec)]["foreign_requests"] == 0
+
+
+def test_another_host_is_warned_of_once_per_motor_with_its_identifier_and_rate(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    codecs = [ma.FAMILY.bind(1), ma.FAMILY.bind(2)]
+    scheduler = Scheduler(codecs)
+    with caplog.at_level("WARNING", logger="servobus.bus"):
+        for n in range(40):
+            for motor in (1, 2):
+                scheduler.receive(_theirs(motor, n * 0.002), n * 0.002)
+    warnings = [r.getMessage() for r in caplog.records]
+    assert len(warnings) == 2 and "0x141" in warnings[0] and "0x142" in warnings[1]
+    assert "about 500 per second" in warnings[0]
+
+
+def test_each_family_tells_another_host_s_request_by_its_identifier() -> None:
+    v236, v235 = lk.FAMILY.bind(1), lk.FAMILY.bind(1, revision="V2_35")
+    read = lk.ReadStatus2()
+    request = v236.encode(read)
+    received = Frame(arbitration_id=request.arbitration_id, data=request.data)
+    assert v236.request_key(received) == v236.reply_key(read)
+    assert v236.request_key(request) is None  # (our own, sent: is_rx False)
+    assert v235.request_key(received) is None  # V2.35 replies on the request's id: not to be told apart
+    hollow = ho.FAMILY.bind(20)
+    frame = hollow.encode(ho.Setpoint(position_deg=1.0, speed_rad_s=0.0, kp=5, kd=1, current_a=0.0))
+    assert hollow.request_key(dataclasses.replace(frame, is_rx=True)) == hollow.reply_key(ho.Stop())
+    myactuator = ma.FAMILY.bind(3)
+    write = ma.WriteEncoderZero(offset_counts=-1)  # an echo reply: keyed with the value written
+    sent = myactuator.encode(write)
+    assert myactuator.request_key(dataclasses.replace(sent, is_rx=True)) == myactuator.reply_key(write)
+    assert myactuator.request_key(_theirs(4, 0.0)) is None  # another motor's
+
+
+@pytest.mark.parametrize("family", ["lk", "hollow"])
+def test_lk_and_hollow_requests_of_another_host_take_their_place_too(family: str) -> None:
+    from servobus.protocols.hollow.sim.device import HollowMotor
+    from servobus.protocols.lk.sim.device import LkMotor
+
+    if family == "lk":
+        codec, device, command = lk.FAMILY.bind(1), LkMotor(1), lk.ReadStatus2()
+    else:
+        codec, device = ho.FAMILY.bind(20), HollowMotor(20)
+        command = ho.Setpoint(position_deg=1.0, speed_rad_s=0.0, kp=5, kd=1, current_a=0.0)
+    scheduler = Scheduler([codec], min_reply_s=0.0001)
+    request = codec.encode(command)
+    theirs = Frame(
+        arbitration_id=request.arbitration_id,
+        data=request.data,
+        is_extended_id=request.is_extended_id,
+        timestamp=0.001,
+    )
+    (emission,) = device.receive(theirs, 0.001)
+    reply = emission.frame
+    assert scheduler.receive(theirs, 0.001).traffic is Traffic.OTHER_HOST
+    ours = scheduler.request(codec, command, timeout_s=0.01)
+    scheduler.submit(ours, 0.0012)
+    (out,), _ = scheduler.poll(0.0012)
+    scheduler.sent(out, 0.0012)
+    assert (
+        scheduler.receive(dataclasses.replace(reply, timestamp=0.0015), 0.0015).traffic is Traffic.CONTENDED
+    )
+    assert scheduler.receive(dataclasses.replace(reply, timestamp=0.0018), 0.0018).request is ours
