@@ -17,10 +17,18 @@ soak`` runs it for 10 virtual minutes and records the figures. One run (:func:`r
   (``unresponsive``) and answers again after; and one bus's adapter is unplugged for 0.3..1 s and
   plugged back (:meth:`SimTransport.unplug` / :meth:`~SimTransport.replug`) every
   ``unplug_every_s``. (The stalled serial port is a real pty, so it is a test of its own in
-  tests/test_soak.py.)
+  tests/test_soak.py.) Issue [field] adds two: a **second controller** on bus 2
+  (:class:`~servobus.sim.otherhost.OtherHost` at ``other_host_hz``) writes its own tokens to motors
+  1 and 2 and reads motor 3's status, so its replies come on the ids ours come on; and on bus 3 every
+  motor has 0xB3 protection at ``comm_timeout_ms`` and, every ``trip_every_s``, one of them is left
+  out of the traffic long enough to **trip**: it sends 0xF1 frames and echoes the first command after
+  the pause unexecuted (the request fails ``MotorNotExecuted``, counted ``not_executed``).
 * **Wrong deliveries.** A WriteEncoderZero is echoed by the motor, so its ``offset_counts``, unique
   per request, comes back: a token reply whose token is not its request's is a mismatched reply.
-  Every other reply must be of the reply class its command gets.
+  Every other reply must be of the reply class its command gets, and no status reply may be a
+  command's own bytes taken for a reply (an echo reads as 0 °C: the simulated motors are never that
+  cold). The second controller writes positive tokens, ours are negative: its replies are
+  mismatched replies if they ever answer ours.
 * **Every request ends, once.** Each request the Bus makes (the scheduler's ``request`` is wrapped,
   nothing else changes) is followed to its end: replied, timed out, cancelled or failed (transport
   lost or frame not sent). The counters add up: made = replied + timed out + cancelled + failed,
@@ -55,7 +63,14 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from servobus.bus import Bus, Motor, MotorStatus
-from servobus.errors import MotorBusy, MotorOffline, MotorTimeout, ProtocolError, TransportError
+from servobus.errors import (
+    MotorBusy,
+    MotorNotExecuted,
+    MotorOffline,
+    MotorTimeout,
+    ProtocolError,
+    TransportError,
+)
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
@@ -64,6 +79,7 @@ from servobus.sim import virtual
 from servobus.sim.device import Emission
 from servobus.sim.faults import FaultInjector, FaultPlan
 from servobus.sim.network import SimCanNetwork
+from servobus.sim.otherhost import OtherHost
 from servobus.transports.sim import SimTransport
 
 __all__ = ["SoakPlan", "SoakResult", "run"]
@@ -81,6 +97,9 @@ TO_HOST = FaultPlan(
 )
 TO_DEVICES = FaultPlan(drop=0.005, corrupt=0.002, duplicate=0.002, delay=0.002, delay_s=(0.001, 0.008))
 TIMEOUT_S = 0.01
+OTHER_HOST_BUS = 2  # the bus with a second controller
+OTHER_TOKEN = 700_000  # its tokens (ours are negative)
+TRIP_BUS = 3  # the bus whose motors have 0xB3 protection and are left out to trip
 
 
 @dataclass(frozen=True)
@@ -100,6 +119,9 @@ class SoakPlan:
     # process's resident memory and its count of live objects (what the 10-minute run uses).
     memory: str = "tracemalloc"
     objects_limit: int = 20_000
+    other_host_hz: float = 500.0  # the second controller on bus 2 (0: none)
+    comm_timeout_ms: int = 50  # bus 3's motors' 0xB3 protection
+    trip_every_s: float = 2.0  # one of bus 3's motors is left out long enough to trip (0: never)
 
 
 @dataclass
@@ -238,6 +260,8 @@ class _Soak:
         self.buses: list[Bus] = []
         self.stopping = False
         self.replugged_at: dict[int, float] = {}
+        self.paused: set[tuple[int, int]] = set()  # (bus, motor id): left out of the traffic, to trip
+        self.other_hosts: list[OtherHost] = []
         self.loop: asyncio.AbstractEventLoop | None = None
 
     # ---- following every request ----
@@ -268,6 +292,8 @@ class _Soak:
             record.outcome = "skipped"  # cycle() did not wait for it (an offline motor's may be a probe)
         elif isinstance(error, MotorTimeout):
             record.outcome = "timed_out"
+        elif isinstance(error, MotorNotExecuted):
+            record.outcome = "not_executed"  # echoed after a 0xB3 trip: failed, and said so
         elif isinstance(error, TransportError | ProtocolError):
             record.outcome = "failed"
         elif error is not None:
@@ -291,6 +317,8 @@ class _Soak:
         expected = _REPLY_TYPES.get(type(record.request.command))
         if expected is not None and not isinstance(reply, expected):
             self.result.mismatched.append(f"{what} got {type(reply).__name__}")
+        elif isinstance(reply, ma.StatusReply) and reply.temperature_c == 0:
+            self.result.mismatched.append(f"{what} got its own bytes back as a reply: {reply!r}")
 
     def reached(self, bus: int, frame: Frame, now_s: float) -> None:
         record = self.records.pop(id(frame), None)
@@ -345,9 +373,12 @@ class _Soak:
             for b in range(plan.buses):
                 devices = [MyActuatorMotor(m) for m in range(1, plan.motors_per_bus + 1)]
                 watch = Watch(f"watch{b}", self, b)
+                nodes: list[Any] = [*devices, watch]
+                if b == OTHER_HOST_BUS and plan.other_host_hz > 0:
+                    nodes.append(self.other_host(plan))
                 to_host = FaultInjector(TO_HOST, seed=plan.seed * 10 + b)
                 to_devices = FaultInjector(TO_DEVICES, seed=plan.seed * 10 + 5 + b)
-                network = SimCanNetwork([*devices, watch], to_devices=to_devices, to_host=to_host)
+                network = SimCanNetwork(nodes, to_devices=to_devices, to_host=to_host)
                 transport = SimTransport(
                     network, name=f"sim{b}", stale_after_s=plan.fresh_s, reopen_backoff_s=(0.05, 0.4)
                 )
@@ -367,6 +398,8 @@ class _Soak:
             motors = [
                 [bus.motor("myactuator", m) for m in range(1, plan.motors_per_bus + 1)] for bus in self.buses
             ]
+            if plan.trip_every_s > 0:
+                await self.protect(motors[TRIP_BUS])
             stack.push_async_callback(self.switch_faults_off)  # runs first on the way out: before the stops
             async with asyncio.TaskGroup() as group:
                 for b in range(plan.buses):
@@ -392,9 +425,40 @@ class _Soak:
                     self.result.faults[f"{direction}_{kind}"] += n
         for bus in self.buses:
             self.result.bus_counts.update(bus.stats())
+        for devices in self.devices:
+            for device in devices:
+                for name in ("comm_timeouts", "comm_trip_frames", "comm_echoed"):
+                    self.result.faults[f"motor_{name}"] += device.counters.get(name, 0)
+
+    def other_host(self, plan: SoakPlan) -> OtherHost:
+        """The second controller: its own token writes to motors 1 and 2 (positive: ours are
+        negative) and a status read of motor 3, ``other_host_hz`` times a second."""
+        frames = [
+            ma.FAMILY.bind(1).encode(ma.WriteEncoderZero(offset_counts=OTHER_TOKEN)),
+            ma.FAMILY.bind(2).encode(ma.WriteEncoderZero(offset_counts=OTHER_TOKEN + 1)),
+            ma.FAMILY.bind(3).encode(ma.ReadStatus2()),
+        ]
+        host = OtherHost(frames, rate_hz=plan.other_host_hz, seed=plan.seed * 7)
+        self.other_hosts.append(host)
+        return host
+
+    async def protect(self, motors: list[Motor]) -> None:
+        """0xB3 protection on ``motors`` (through the faulty link: sent until acknowledged)."""
+        for motor in motors:
+            for _ in range(20):
+                with contextlib.suppress(MotorTimeout, TransportError, ProtocolError, MotorNotExecuted):
+                    await motor.request(
+                        ma.SetCommTimeout(timeout_ms=self.plan.comm_timeout_ms), timeout_s=0.05
+                    )
+                    break
+            else:
+                raise RuntimeError(f"0xB3 protection never acknowledged by {motor!r}")
 
     async def switch_faults_off(self) -> None:
         self.stopping = True
+        self.paused.clear()
+        for host in self.other_hosts:
+            host.rate_hz = 1e-6  # (quiet from its next period on)
         for injector in self.injectors:
             injector.plan = FaultPlan()
         for devices in self.devices:
@@ -415,13 +479,15 @@ class _Soak:
             items: list[tuple[Motor, Any]] = []
             for motor in motors:
                 x = rng.random()
+                if (b, motor.motor_id) in self.paused:
+                    continue
                 if x < 0.6:
                     items.append((motor, ma.ReadStatus2()))
                 elif x < 0.85:
                     items.append((motor, ma.SpeedControl(speed_dps=rng.uniform(-90, 90))))
                 else:
                     items.append((motor, ma.WriteEncoderZero(offset_counts=self.token())))
-            results = await self.buses[b].cycle(items, timeout_s=TIMEOUT_S)
+            results = await self.buses[b].cycle(items, timeout_s=TIMEOUT_S) if items else []
             assert len(results) == len(items)
             next_tick += period
             delay = next_tick - self.loop.time()
@@ -440,6 +506,9 @@ class _Soak:
         while self.loop.time() < end:
             motor = rng.choice(motors)
             x = rng.random()
+            if (b, motor.motor_id) in self.paused:
+                await asyncio.sleep(0.005)
+                continue
             if x < 0.4:
                 coro = motor.request(ma.ReadStatus1(), timeout_s=TIMEOUT_S, retries=rng.choice((0, 1)))
             elif x < 0.7:
@@ -450,12 +519,12 @@ class _Soak:
             if rng.random() < 0.1:  # the caller gives up after a random wait
                 await asyncio.sleep(rng.uniform(0, 0.004))
                 task.cancel()
-            with contextlib.suppress(MotorTimeout, TransportError, asyncio.CancelledError):
+            with contextlib.suppress(MotorTimeout, TransportError, MotorNotExecuted, asyncio.CancelledError):
                 await task
             await asyncio.sleep(rng.uniform(0.001, 0.02))
 
     async def chaos(self, end: float) -> None:
-        """Reboots, the silent motor, the unplugged adapter."""
+        """Reboots, the silent motor, the unplugged adapter, the motor left out until it trips."""
         assert self.loop is not None
         plan, rng = self.plan, random.Random(self.plan.seed * 3000)
         silent = self.devices[1][4]  # bus 1, motor 5
@@ -463,7 +532,19 @@ class _Soak:
         next_reboot = plan.reboot_every_s * rng.uniform(0.5, 1.5)
         next_unplug = min(plan.unplug_every_s, end / 2) * rng.uniform(0.5, 1.0)
         unplugged: tuple[int, float] | None = None
+        next_trip = plan.trip_every_s * rng.uniform(0.5, 1.0) if plan.trip_every_s > 0 else end
+        trip: tuple[tuple[int, int], float] | None = None
         while (now := self.loop.time()) < end:
+            if trip is None and now >= next_trip:
+                key = (TRIP_BUS, rng.randrange(1, plan.motors_per_bus + 1))
+                self.paused.add(key)
+                self.result.faults["motor_left_to_trip"] += 1
+                # long enough for its 0xB3 protection, and now and then for its second 0xF1 frame
+                trip = (key, now + plan.comm_timeout_ms / 1000 + rng.choice((0.1, 0.3, 1.2)))
+            elif trip is not None and now >= trip[1]:
+                self.paused.discard(trip[0])
+                trip = None
+                next_trip = now + plan.trip_every_s * rng.uniform(0.5, 1.5)
             if not silent.unresponsive and silent_from <= now < silent_to:
                 silent.unresponsive = True
                 self.result.faults["motor_silent"] += 1

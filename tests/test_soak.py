@@ -30,7 +30,7 @@ FAULT_KINDS = {
     f"{direction}_{kind}"
     for direction in ("to_host", "to_devices")
     for kind in ("drop", "corrupt", "duplicate", "delay")
-} | {"motor_reboot", "motor_silent", "adapter_unplug"}
+} | {"motor_reboot", "motor_silent", "adapter_unplug", "motor_left_to_trip", "motor_comm_echoed"}
 
 
 def _check(result: _soak.SoakResult) -> None:
@@ -40,9 +40,8 @@ def _check(result: _soak.SoakResult) -> None:
     assert set(result.faults) >= FAULT_KINDS, FAULT_KINDS - set(result.faults)
     # Counters add up: made = replied + timed out + cancelled + failed, and the Bus says the same.
     out, counts = result.outcomes, result.bus_counts
-    assert (
-        result.made == out["replied"] + out["timed_out"] + out["cancelled"] + out["failed"] + out["skipped"]
-    )
+    ended = ("replied", "timed_out", "cancelled", "failed", "skipped", "not_executed")
+    assert result.made == sum(out[name] for name in ended)
     assert (
         counts["requests"] == counts["replies"] + counts["timeouts"] + counts["cancelled"] + counts["failed"]
     )
@@ -66,6 +65,12 @@ def _check(result: _soak.SoakResult) -> None:
     silent = [e for e in result.offline_events if e[0] == "bus 1 motor 5"]
     assert [online for _, _, online, _ in silent][-2:] == [False, True]
     assert result.unplug_recovery_s and max(result.unplug_recovery_s) < 1.0
+    # [field]: every trip was seen (its 0xF1 frames counted by name) and every echo that reached the
+    # host failed its request (not_executed, part of failed), never a reply (the mismatch check);
+    # the second controller's requests took their place in its motors' order (contended).
+    assert counts["comm_tripped"] > 0 and out["not_executed"] > 0
+    assert counts["not_executed"] >= out["not_executed"]
+    assert counts["contended"] > 0
 
 
 @pytest.mark.slow  # ~36 s: out of the default suite, a step of its own in CI (.ci/run)
