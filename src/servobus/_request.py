@@ -100,6 +100,7 @@ class Request:
     queued_at: float | None = None
     handed_at: float | None = None  # when its frame was last handed to the link
     looped: bool = False  # its own frame came back from the link already (an adapter's loop-back)
+    on_wire_at: float | None = None  # when that loop-back says it ended on the wire (None: unknown)
 
     def describe(self) -> str:
         return f"{self.codec.family} motor {self.codec.motor_id} {type(self.command).__name__}"
