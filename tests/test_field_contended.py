@@ -166,16 +166,14 @@ def test_a_request_of_another_host_that_is_never_answered_stops_counting() -> No
     assert scheduler.receive(_reply(1, 0.5005), 0.5005).request is ours
 
 
-def test_our_own_frame_looped_back_is_not_another_host_s() -> None:
+@pytest.mark.parametrize("is_rx", [False, True], ids=["looped back as sent", "echoed as received"])
+def test_our_own_frame_looped_back_is_not_another_host_s(is_rx: bool) -> None:
     codec = ma.FAMILY.bind(1)
     scheduler = Scheduler([codec], min_reply_s=0.0001)
     ours = _ours(scheduler, codec, 0.0010)
     own = ours.frame
-    back = Frame(arbitration_id=own.arbitration_id, data=own.data, timestamp=0.0011, is_rx=False)
-    assert scheduler.receive(back, 0.0011).traffic is Traffic.FOREIGN  # python-can's own message
-    # an adapter that loops it back as received: the first frame with our bytes after it left
-    again = Frame(arbitration_id=own.arbitration_id, data=own.data, timestamp=0.0011)
-    assert scheduler.receive(again, 0.0011).traffic is Traffic.FOREIGN
+    back = Frame(arbitration_id=own.arbitration_id, data=own.data, timestamp=0.0011, is_rx=is_rx)
+    assert scheduler.receive(back, 0.0011).traffic is Traffic.FOREIGN  # (ours: no placeholder)
     assert scheduler.receive(_reply(1, 0.0014), 0.0014).request is ours
     assert scheduler.motor_counts[id(codec)]["foreign_requests"] == 0
 
@@ -241,3 +239,18 @@ def test_lk_and_hollow_requests_of_another_host_take_their_place_too(family: str
         scheduler.receive(dataclasses.replace(reply, timestamp=0.0015), 0.0015).traffic is Traffic.CONTENDED
     )
     assert scheduler.receive(dataclasses.replace(reply, timestamp=0.0018), 0.0018).request is ours
+
+
+def test_our_own_frame_looped_back_orders_ours_against_another_host_s_exactly() -> None:
+    """Ours was handed over at 1.0 ms but waited for the wire until 1.6 ms (SocketCAN's loop-back
+    says when it left); theirs ended at 1.3 ms: theirs reached the motor first."""
+    codec = ma.FAMILY.bind(1)
+    scheduler = Scheduler([codec], min_reply_s=0.0001)
+    ours = _ours(scheduler, codec, 0.0010)
+    scheduler.receive(_theirs(1, 0.0013), 0.0013)
+    own = ours.frame
+    back = Frame(arbitration_id=own.arbitration_id, data=own.data, timestamp=0.0016, is_rx=False)
+    assert scheduler.receive(back, 0.0016).traffic is Traffic.FOREIGN
+    assert ours.on_wire_at == 0.0016
+    assert scheduler.receive(_reply(1, 0.0017), 0.0017).traffic is Traffic.CONTENDED
+    assert scheduler.receive(_reply(1, 0.0020), 0.0020).request is ours

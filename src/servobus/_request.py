@@ -104,6 +104,7 @@ class Request:
     # ``may_echo``): compared only then, so other requests cost one attribute read per reply.
     echo: bytes | None = None
     looped: bool = False  # its own frame came back from the link already (an adapter's loop-back)
+    on_wire_at: float | None = None  # when that loop-back says it ended on the wire (None: unknown)
 
     def describe(self) -> str:
         return f"{self.codec.family} motor {self.codec.motor_id} {type(self.command).__name__}"

@@ -13,9 +13,10 @@ Order on the wire: a request of ours left at ``sent_at`` (its send report); anot
 is stamped when it ended. One that ended before ours was handed over, or while it may still have
 been on the wire when ours was (one frame's time, from ``min_reply_s``), reached the motor first.
 
-Our own frames that an adapter loops back (``is_rx`` False, or python-can's
-``receive_own_messages``) are never taken for another host's: the codec ignores frames not
-received (``is_rx``), and the first frame with our in-flight request's very bytes is ours.
+Our own frames that an adapter loops back (``is_rx`` False: python-can's ``receive_own_messages``,
+SocketCAN's loop-back; or as received, on adapters that echo) are never taken for another host's:
+the first frame with our in-flight request's very bytes is ours. Its stamp is then when ours was
+on the wire, which orders it exactly against another host's.
 
 Sans-IO: ``now`` is always an argument.
 """
@@ -76,6 +77,9 @@ class OtherHosts:
         """A frame on no motor's reply identifier: another host's request to one of our motors (a
         placeholder in its order of replies), or ``foreign``."""
         for codec in self._by_request_id.get(frame.arbitration_id, ()):
+            if not frame.is_rx:  # our own frame, looped back: when it was on the wire
+                self._looped(codec.request_key(_as_received(frame)), frame, frame.timestamp or now)  # type: ignore[attr-defined]
+                break
             key = codec.request_key(frame)  # type: ignore[attr-defined]
             if key is None:
                 continue
@@ -90,9 +94,12 @@ class OtherHosts:
         self._bus_counts["foreign"] += 1
         return Received(_T_FOREIGN, frame)
 
-    def _looped(self, key: Hashable, frame: Frame, at: float) -> bool:
-        """Is ``frame`` our own request coming back (an adapter that loops sent frames back as
-        received)? The first frame with the very bytes of our request in flight, after it left."""
+    def _looped(self, key: Hashable | None, frame: Frame, at: float) -> bool:
+        """Is ``frame`` our own request coming back (an adapter that loops sent frames back, as
+        received or as sent)? The first frame with the very bytes of our request in flight, after
+        it left; its stamp is when ours was on the wire (what orders it against another host's)."""
+        if key is None:
+            return False
         for request in self._pending.get(key, ()):
             if (
                 not request.looped
@@ -101,6 +108,7 @@ class OtherHosts:
                 and (request.state is _SENDING or (request.sent_at is not None and at >= request.sent_at))
             ):
                 request.looped = True
+                request.on_wire_at = at if frame.timestamp else None
                 return True
         return False
 
@@ -141,10 +149,14 @@ class OtherHosts:
         waiting = self._pending.get(key)
         if waiting:
             ours = waiting[0]
-            left = ours.sent_at if ours.state is _SENT else ours.handed_at
-            # one frame's time: it may still have been on the wire when ours was handed over
-            if left is not None and stamp > left + 1.5 * self.min_reply_s:
-                return None  # ours reached the motor first
+            if ours.on_wire_at is not None:  # (looped back: its end on the wire, as theirs)
+                if stamp > ours.on_wire_at:
+                    return None  # ours reached the motor first
+            else:
+                left = ours.sent_at if ours.state is _SENT else ours.handed_at
+                # one frame's time: it may still have been on the wire when ours was handed over
+                if left is not None and stamp > left + 1.5 * self.min_reply_s:
+                    return None  # ours reached the motor first
         late = self._recent.late.get(key)
         if late and any(e[1] is not None and e[1] < stamp and e[3] >= now for e in late):
             return None  # a late reply of ours is due first
@@ -153,3 +165,15 @@ class OtherHosts:
             del self._foreign[key]
         self.motor_counts[id(codec)]["contended"] += 1
         return Received(_T_CONTENDED, frame, codec, reply)
+
+
+def _as_received(frame: Frame) -> Frame:
+    """``frame`` (our own, looped back as sent) as the codec judges a received one."""
+    return Frame(
+        arbitration_id=frame.arbitration_id,
+        data=frame.data,
+        is_extended_id=frame.is_extended_id,
+        is_fd=frame.is_fd,
+        bitrate_switch=frame.bitrate_switch,
+        timestamp=frame.timestamp,
+    )
