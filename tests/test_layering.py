@@ -157,6 +157,7 @@ LAYERS: dict[str, list[str]] = {
         "servobus.scheduler",
         "servobus._request",
         "servobus._scheduler_match",
+        "servobus._scheduler_hosts",
         "servobus._scheduler_pace",
         "servobus._scheduler_time",
         "servobus.diagnosis",  # (what the bus saw instead of a reply: sans-IO, asks the registry)

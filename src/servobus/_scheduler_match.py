@@ -86,10 +86,14 @@ class Matching:
             kind, key = codec.classify(frame)
             if kind is not KIND_NOT_OURS:
                 return self._ours(codec, kind, key, frame, now)
-        if self._by_request_id:  # (another host's request to one of our motors?)
+        # Not a reply of ours: kept for a timeout's diagnosis, then another host's request to one
+        # of our motors, or foreign. (An old LK motor answers on its request id: seen either way;
+        # our own frames looped back are not news.)
+        if frame.is_rx:
+            self.seen.note(frame, now)
+        if self._by_request_id:
             return self._other_host(frame, now)
         self._bus_counts["foreign"] += 1
-        self.seen.note(frame, now)
         return Received(_T_FOREIGN, frame)
 
     def _ours(
