@@ -359,10 +359,24 @@ def report() -> None:
                     ["requests made", f"{sk['requests']:,}"],
                     [
                         "replied / timed out / cancelled / failed / not waited for by `cycle()`"
-                        " (offline or busy motor)",
+                        " (offline or busy motor) / echoed back unexecuted after a 0xB3 trip"
+                        " (`MotorNotExecuted`)",
                         " / ".join(
                             f"{sk['outcomes'].get(k, 0):,}"
-                            for k in ("replied", "timed_out", "cancelled", "failed", "skipped")
+                            for k in ("replied", "timed_out", "cancelled", "failed", "skipped", "not_executed")
+                        ),
+                    ],
+                    [
+                        "the second controller: its requests to our motors seen / their replies kept "
+                        "apart (`foreign_requests` / `contended`)",
+                        " / ".join(
+                            f"{sk.get('bus_counts', {}).get(k, 0):,}" for k in ("foreign_requests", "contended")
+                        ),
+                    ],
+                    [
+                        "0xB3 trips: 0xF1 frames counted (`comm_tripped`) / echoes failed (`not_executed`)",
+                        " / ".join(
+                            f"{sk.get('bus_counts', {}).get(k, 0):,}" for k in ("comm_tripped", "not_executed")
                         ),
                     ],
                     [

@@ -11,7 +11,6 @@ in this process.
 
 from __future__ import annotations
 
-import asyncio
 import os
 import signal
 import subprocess
@@ -23,16 +22,12 @@ import anyio
 import pytest
 
 from _backends import BACKENDS
-from _serving import serving
+from _serving import sigterm_a_child
 from servobus import Bus
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
-from servobus.sim.attach import serve_slcan
-from servobus.sim.network import SimCanNetwork
 from servobus.sim.plant import PositionControl
-from servobus.sim.pty import PtyPort
 from servobus.transports.sim import SimTransport
-from sim._standins import Sniffer
 
 SCRIPT = textwrap.dedent(
     """
@@ -59,33 +54,7 @@ SCRIPT = textwrap.dedent(
 async def _terminated(backend: str, *, sigterm: bool = True) -> tuple[int, list[int], MyActuatorMotor]:
     """The script run against a simulated motor on a pty, sent SIGTERM once it drives the motor:
     (its exit status, the command bytes the motor was sent, the motor)."""
-    port = PtyPort()
-    motor = MyActuatorMotor(1)
-    sniffer = Sniffer()
-    network = SimCanNetwork([motor, sniffer])
-    try:
-        async with serving(serve_slcan(network, port)):
-            child = await asyncio.create_subprocess_exec(
-                sys.executable,
-                "-c",
-                SCRIPT,
-                port.path,
-                "1" if sigterm else "0",
-                backend,
-                stdout=asyncio.subprocess.PIPE,
-                env={**os.environ, "PYTHONUNBUFFERED": "1"},
-            )
-            assert child.stdout is not None
-            line = await asyncio.wait_for(child.stdout.readline(), 20)
-            assert line.strip() == b"ready", line
-            await asyncio.sleep(0.1)
-            child.send_signal(signal.SIGTERM)
-            code = await asyncio.wait_for(child.wait(), 10)
-            await asyncio.sleep(0.1)  # the last frames reach the simulated bus
-    finally:
-        port.close()
-    codes = [frame.data[0] for _, frame in sniffer.seen if frame.arbitration_id == 0x141]
-    return code, codes, motor
+    return await sigterm_a_child(SCRIPT, "1" if sigterm else "0", backend)
 
 
 @pytest.mark.asyncio

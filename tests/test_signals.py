@@ -10,7 +10,6 @@ signal ignored, exceptions unwrapped, handlers put back) is checked without a Bu
 
 from __future__ import annotations
 
-import asyncio
 import os
 import signal
 import subprocess
@@ -21,14 +20,9 @@ import anyio
 import pytest
 
 from _backends import BACKENDS
-from _serving import serving
+from _serving import sigterm_a_child
 from servobus.protocols import myactuator as ma
-from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.signals import stop_on
-from servobus.sim.attach import serve_slcan
-from servobus.sim.network import SimCanNetwork
-from servobus.sim.pty import PtyPort
-from sim._standins import Sniffer
 
 CHILD = textwrap.dedent(
     """
@@ -62,32 +56,7 @@ CHILD = textwrap.dedent(
 
 
 async def _run_child(protect: bool, backend: str) -> tuple[int, list[int]]:
-    port = PtyPort()
-    motor = MyActuatorMotor(1)
-    sniffer = Sniffer()
-    network = SimCanNetwork([motor, sniffer])
-    try:
-        async with serving(serve_slcan(network, port)):
-            child = await asyncio.create_subprocess_exec(
-                sys.executable,
-                "-c",
-                CHILD,
-                port.path,
-                "1" if protect else "0",
-                backend,
-                stdout=asyncio.subprocess.PIPE,
-                env={**os.environ, "PYTHONUNBUFFERED": "1"},
-            )
-            assert child.stdout is not None
-            line = await asyncio.wait_for(child.stdout.readline(), 20)
-            assert line.strip() == b"ready", line
-            await asyncio.sleep(0.1)
-            child.send_signal(signal.SIGTERM)
-            code = await asyncio.wait_for(child.wait(), 10)
-            await asyncio.sleep(0.1)  # the last frames reach the simulated bus
-    finally:
-        port.close()
-    codes = [frame.data[0] for _, frame in sniffer.seen if frame.arbitration_id == 0x141]
+    code, codes, _ = await sigterm_a_child(CHILD, "1" if protect else "0", backend)
     return code, codes
 
 
