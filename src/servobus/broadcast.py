@@ -106,7 +106,10 @@ def _expect(engine: Engine, motor: Motor, command: Command, key: Hashable, timeo
     request = Request(
         motor.codec, command, Frame(arbitration_id=0), key, timeout_s, context=engine.runtime.waiter()
     )
-    if motor.codec.may_echo(command):  # each motor echoes the broadcast's bytes (its own request's)
+    # each motor echoes the broadcast's bytes (its own request's); a plug-in codec from before
+    # ``may_echo`` answers as it always did
+    may_echo = getattr(motor.codec, "may_echo", None)
+    if may_echo is not None and may_echo(command):
         request.echo = motor.codec.encode(command).data
     engine.scheduler.expect(request, engine.time())
     engine.kick()

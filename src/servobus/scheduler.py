@@ -259,7 +259,8 @@ class Scheduler(Pacing, Matching, OtherHosts, Timing):
         # (all positional: a keyword costs more, and this is once per request)
         adaptive = timeout_s is None
         request = Request(codec, command, frame, key, timeout, retries, context, rtt, adaptive, writes)
-        if key is not None and (command.NEVER_ECHOED or codec.echoing):  # (codec.may_echo, written out)
+        # (codec.may_echo, written out; a plug-in codec from before ``echoing`` is never echoing)
+        if key is not None and (command.NEVER_ECHOED or getattr(codec, "echoing", False)):
             request.echo = frame.data
         return request
 
