@@ -67,6 +67,35 @@ async def test_a_plain_bus_script_sent_sigterm_stops_its_motor_and_exits_143(bac
     assert isinstance(motor.plant.control, PositionControl)  # stopped: holding, no longer at 120 dps
 
 
+SYNC_SCRIPT = textwrap.dedent(
+    """
+    import sys
+    from servobus import sync
+    from servobus.transports import SlcanTransport
+
+    options = {} if sys.argv[2] == "1" else {"sigterm": False}
+    with sync.Bus(SlcanTransport(sys.argv[1], bitrate=1_000_000), **options) as bus:
+        motor = bus.motor("myactuator", 1)
+        motor.speed_control(speed_dps=120, timeout_s=0.5)
+        print("ready", flush=True)
+        for tick in bus.ticks(100):
+            motor.speed_control(speed_dps=120, timeout_s=0.5)
+    """
+)
+
+
+@pytest.mark.asyncio
+async def test_a_plain_sync_bus_script_sent_sigterm_stops_its_motor_and_exits_143() -> None:
+    """servobus.sync.Bus runs its loop in a thread of its own: the signal is raised in the main
+    thread as SystemExit(143), which leaves the ``with`` block through the safe stop."""
+    code, codes, motor = await sigterm_a_child(SYNC_SCRIPT, "1")
+    assert code == 143, code
+    assert codes[-1] == ma.MotorStop.CODE, [hex(c) for c in codes[-5:]]
+    assert isinstance(motor.plant.control, PositionControl)
+    code, codes, _ = await sigterm_a_child(SYNC_SCRIPT, "0")  # the opt-out
+    assert code == -signal.SIGTERM and ma.MotorStop.CODE not in codes
+
+
 @pytest.mark.asyncio
 async def test_with_sigterm_false_the_bus_takes_no_signal() -> None:
     """The opt-out: Python's default stays, SIGTERM kills the process where it stands."""

@@ -13,8 +13,11 @@ default is put back when the last one closes, after its safe stop. A handler the
 (or :func:`stop_on`, as the CLI uses) is left alone: the Bus takes nothing then. Opt out with
 ``Bus(..., sigterm=False)``. With several Buses in sibling tasks of a task group, the ``SystemExit``
 leaves the group wrapped in an exception group: use :func:`stop_on` outermost there.
-(:class:`servobus.sync.Bus` runs its loop in a thread of its own, where no signal arrives: it takes
-none.)
+:class:`servobus.sync.Bus` runs its loop in a thread of its own, where no signal arrives; opened
+in the main thread it takes SIGTERM there (:func:`raise_on_sigterm`): the signal raises
+``SystemExit(143)`` in the main thread, which leaves its ``with`` block (or reaches the interpreter's
+exit, which closes it) through the safe stop. A SIGTERM while a sync Bus closes is held until the
+close is over.
 
 **Opt-in, any signal: stop_on.** A signal cancels a block, so every ``async with Bus`` in it is left
 through its safe stop. In the main coroutine::
@@ -56,7 +59,7 @@ from typing import Any
 import anyio
 import anyio.abc
 
-__all__ = ["SigtermTaken", "StopOn", "stop_on", "take_sigterm"]
+__all__ = ["SigtermTaken", "StopOn", "raise_on_sigterm", "stop_on", "take_sigterm"]
 
 
 class StopOn:
@@ -249,3 +252,63 @@ def take_sigterm(
     loop's), where the default disposition allows (see the module docstring): the handle, or None
     where nothing was taken (not the main thread, or SIGTERM already has a handler)."""
     return _SIGTERM.take(scope, call_soon_threadsafe)
+
+
+class _SigtermRaised:
+    """SIGTERM for the blocking Buses (servobus.sync) open in the main thread: raised there as
+    ``SystemExit(143)``, as Ctrl-C raises KeyboardInterrupt, so the code blocked on the Bus leaves
+    through its ``with`` block. Held while one of them closes (its safe stop runs then)."""
+
+    def __init__(self) -> None:
+        self.open = 0
+        self.closing = 0
+        self.held = False
+        self.raised = False
+        self._handler = self._on_signal
+
+    def take(self) -> bool:
+        if threading.current_thread() is not threading.main_thread():
+            return False
+        if not self.open:
+            if _signal.getsignal(_signal.SIGTERM) is not _signal.SIG_DFL:
+                return False  # the program's own handler (or an async Bus's): theirs to act
+            _signal.signal(_signal.SIGTERM, self._handler)
+            self.held = self.raised = False
+        self.open += 1
+        return True
+
+    @contextlib.contextmanager
+    def closing_one(self) -> Iterator[None]:
+        """One of them closes: a SIGTERM meanwhile waits for the end of the close, then raises (once,
+        when the last one closed), and the default disposition is back after the last."""
+        self.closing += 1
+        try:
+            yield
+        finally:
+            self.closing -= 1
+            self.open -= 1
+            if not self.open and _signal.getsignal(_signal.SIGTERM) == self._handler:
+                _signal.signal(_signal.SIGTERM, _signal.SIG_DFL)
+            if self.held and not self.closing:
+                self.held = False
+                raise SystemExit(128 + _signal.SIGTERM)
+
+    def _on_signal(self, signum: int, frame: object) -> None:
+        if self.raised:
+            return  # a second one: the first is on its way out through the safe stop
+        self.raised = True
+        if self.closing:
+            self.held = True
+            return
+        raise SystemExit(128 + signum)
+
+
+_SIGTERM_RAISED = _SigtermRaised()
+
+
+def raise_on_sigterm() -> contextlib.AbstractContextManager[None] | None:
+    """For a blocking Bus opening in the main thread where SIGTERM has its default disposition: from
+    now on SIGTERM raises ``SystemExit(143)`` in the main thread (see the module docstring). Gives the
+    context to close the Bus in (it holds a SIGTERM that comes meanwhile and puts the default back
+    after the last), or None where nothing was taken."""
+    return _SIGTERM_RAISED.closing_one() if _SIGTERM_RAISED.take() else None

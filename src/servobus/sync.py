@@ -13,7 +13,10 @@ portal) and gives the same calls, blocking::
 
 Leaving the ``with`` block, or :meth:`Bus.close`, stops every commanded motor exactly as leaving
 ``async with`` does (an exception in the block too), then ends the background loop. A Bus still open
-when the interpreter exits is closed the same way then (with a ``ResourceWarning``). Calls may come
+when the interpreter exits is closed the same way then (with a ``ResourceWarning``). SIGTERM, by
+default, does what Ctrl-C does: opened in the main thread where SIGTERM has its default
+disposition, the Bus has the signal raise ``SystemExit(143)`` there, so the block is left through the
+safe stop and the process exits 143 (``sigterm=False``: not this Bus; :mod:`servobus.signals`). Calls may come
 from any thread; they are run one at a time on the Bus's loop. Motor commands take their fields by
 position too, in the command's order: ``motor.set_comm_timeout(100)``.
 """
@@ -21,6 +24,7 @@ position too, in the command's order: ``motor.set_comm_timeout(100)``.
 from __future__ import annotations
 
 import atexit
+import contextlib
 import functools
 import logging
 import warnings
@@ -35,6 +39,7 @@ from servobus import bus as _bus
 from servobus.metrics import Metrics
 from servobus.protocols import Command, Family, Reply
 from servobus.scheduler import Traffic
+from servobus.signals import raise_on_sigterm
 from servobus.ticks import Tick
 
 _logger = logging.getLogger("servobus.sync")
@@ -107,7 +112,7 @@ class Bus:
     transport own are entered and left in the same task, as anyio requires.
 
     Args:
-        transport, **options: as :class:`servobus.Bus`.
+        transport, **options: as :class:`servobus.Bus` (``sigterm=False``: SIGTERM is not taken).
         backend: the background loop's, "asyncio" (default) or "trio" (through anyio).
 
     Raises:
@@ -126,6 +131,8 @@ class Bus:
             raise
         self._open = True
         _OPEN.add(self)
+        # (the Bus inside runs in the portal's thread, where no signal comes: taken here)
+        self._sigterm = raise_on_sigterm() if options.get("sigterm", True) else None
 
     @property
     def bus(self) -> _bus.Bus:
@@ -216,10 +223,11 @@ class Bus:
             return
         self._open = False
         _OPEN.discard(self)
-        try:
-            self._inside.__exit__(type(exc) if exc else None, exc, exc.__traceback__ if exc else None)
-        finally:
-            self._portal_cm.__exit__(None, None, None)
+        with self._sigterm or contextlib.nullcontext():
+            try:
+                self._inside.__exit__(type(exc) if exc else None, exc, exc.__traceback__ if exc else None)
+            finally:
+                self._portal_cm.__exit__(None, None, None)
 
     def __enter__(self) -> Self:
         return self
