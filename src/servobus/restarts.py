@@ -92,7 +92,11 @@ class Restarts:
             if reply is not None:  # (kept: the next silence's "before")
                 seen = after[type(reply)] = Seen(reply, self.bus._now())
                 self._readings.setdefault(key, {})[type(reply)] = seen
-        why = evidence.judge(before, after, self._known_since[key])
+        try:
+            why = evidence.judge(before, after, self._known_since[key])
+        except Exception:  # a family's bug: no verdict, and never the end of the Bus's task group
+            logger.exception("%s: %r: the restart evidence of its family failed", self.bus.name, motor)
+            return
         if why is None or self.bus._closing:
             return
         self._known_since[key] = back.at
