@@ -14,8 +14,8 @@ receives frames in the order they were on the wire: a reply received before anot
 answers an earlier request (ours), by order alone. A reply received after it answers whichever of
 the two reached the motor first, and times must tell which:
 
-* On a link whose times are the wire's own (``exact_order``: the in-process simulator, python-can's
-  ``virtual`` bus, where a send is the frame on the wire and each frame carries when it was sent),
+* On a link whose times are the wire's own (``exact_order``: the in-process simulator, whose send
+  report is when the frame was queued on its wire and whose stamps are when frames ended there),
   ours left at ``sent_at`` (its send report), theirs is stamped when it ended; one that ended
   before ours left, or while it may still have been on the wire when ours was (one frame's time,
   from ``min_reply_s``), reached the motor first.
@@ -158,13 +158,24 @@ class OtherHosts:
         verdict if it answers that one (it reached the motor before our request waiting for the key,
         and after any of ours whose late reply is held for), else None (matched as usual)."""
         placeholders = self._foreign[key]
-        while placeholders and placeholders[0][1] < now:  # never answered (lost, or not to be)
-            placeholders.popleft()
+        at = frame.timestamp or now
+        # Never answered (lost, or not to be), by the reply's own stamp. Or answered this late (a
+        # stalled host, a slow adapter): then this reply may be its answer, so a request of ours
+        # handed over while that one's reply was still expected, that takes it, is ambiguous.
+        if placeholders[0][1] < at:
+            expected = 0.0
+            while placeholders and placeholders[0][1] < at:
+                expected = placeholders.popleft()[1]
+            waiting = self._pending.get(key)
+            if waiting:
+                ours = waiting[0]
+                if ours.handed_at is not None and ours.handed_at < expected and not ours.crossed:
+                    ours.crossed = True
+                    self.motor_counts[id(codec)]["ambiguous"] += 1
         if not placeholders:
             del self._foreign[key]
             return None
         stamp = placeholders[0][0]
-        at = frame.timestamp or now
         if at < stamp + self.min_reply_s and self.exact_order:
             return None  # too early to answer it (through an adapter, stamps of one read are alike)
         waiting = self._pending.get(key)
