@@ -38,6 +38,10 @@ SocketCAN's loop-back; or as received, on adapters that echo) are never taken fo
 the first frame with our in-flight request's very bytes is ours. Its stamp is then when ours was
 on the wire, which orders it exactly against another host's.
 
+A request of another host received before its motor was added to the Bus is not known (counted
+``foreign``): its reply, if it comes after ours was sent, is taken as ours. Add the motors before
+commanding them on a bus another host uses.
+
 Sans-IO: ``now`` is always an argument.
 """
 
