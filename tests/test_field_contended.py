@@ -254,3 +254,157 @@ def test_our_own_frame_looped_back_orders_ours_against_another_host_s_exactly() 
     assert ours.on_wire_at == 0.0016
     assert scheduler.receive(_reply(1, 0.0017), 0.0017).traffic is Traffic.CONTENDED
     assert scheduler.receive(_reply(1, 0.0020), 0.0020).request is ours
+
+
+# ---- real transport paths: python-can's ``virtual`` bus and the SLCAN adapter on a pty ----
+#
+# Here our request and another host's cross with the adapters' latencies in between (a reader
+# thread, the simulator's own hand-overs, a serial line): milliseconds, not one frame's time. What
+# cannot be ordered is answered with the later of the two replies and counted ``ambiguous``
+# (servobus._scheduler_hosts); what can be ordered must be right.
+
+
+def _run_real(
+    path: str, *, other: bool, hz: float = 200.0, seconds: float = 1.5
+) -> tuple[float, int, int, int, Any]:
+    """Our 200 Hz loop of SpeedControl(+100) on three motors through ``path`` ("virtual": CanTransport
+    on python-can's virtual bus; "slcan": the native SLCAN transport on a pty), in real time, with
+    (or without) another host at 500 Hz: (ticks per second, replies taken, of which another host's,
+    of those not marked as of unknown order, metrics)."""
+    import time as _time
+
+    import can
+
+    from servobus.sim.attach import serve_python_can, serve_slcan
+    from servobus.sim.network import SimCanNetwork
+    from servobus.sim.pty import PtyPort
+    from servobus.transports import CanTransport, SlcanTransport
+
+    devices: list[Any] = [_SetpointMotor(i) for i in MOTORS]
+    if other:
+        codecs = [ma.FAMILY.bind(i) for i in MOTORS]
+        devices.append(
+            OtherHost.commanding(codecs, ma.SpeedControl(speed_dps=THEIRS_DPS), rate_hz=500, seed=1)
+        )
+    network = SimCanNetwork(devices)
+    checked = [0, 0, 0]
+
+    async def main() -> tuple[float, Any]:
+        port: PtyPort | None = None
+        sim_side: can.BusABC | None = None
+        transport: Any
+        if path == "virtual":
+            channel = f"contended-{_time.monotonic_ns()}"
+            sim_side = can.Bus(interface="virtual", channel=channel)
+            serve = serve_python_can(network, sim_side)
+            transport = CanTransport("virtual", channel, ignore_config=True)
+        else:
+            port = PtyPort()
+            serve = serve_slcan(network, port)
+            transport = SlcanTransport(port.path, bitrate=1_000_000)
+        try:
+            with anyio.fail_after(seconds + 10):
+                async with anyio.create_task_group() as group:
+                    group.start_soon(lambda: serve)
+                    async with Bus(transport, safe=None) as bus:
+                        receive = bus.scheduler.receive
+
+                        def watch(frame: Frame, now: float) -> Received:
+                            got = receive(frame, now)
+                            if got.request is not None and isinstance(got.reply, ma.StatusReply):
+                                checked[0] += 1
+                                if got.reply.speed_dps != OURS_DPS:
+                                    checked[1] += 1
+                                    if not getattr(got.request, "crossed", False):
+                                        checked[2] += 1
+                            return got
+
+                        motors = [bus.motor("myactuator", i) for i in MOTORS]
+                        batch = [(m, ma.SpeedControl(speed_dps=OURS_DPS)) for m in motors]
+                        await bus.cycle(batch, timeout_s=0.5)  # (the first exchange through a fresh adapter)
+                        # Another host's requests received before the motors were added are not
+                        # known (counted foreign): their replies may still come now.
+                        await anyio.sleep(0.05)
+                        bus.scheduler.receive = watch  # type: ignore[method-assign]
+                        start = anyio.current_time()
+                        ticks = 0
+                        async for _ in bus.ticks(hz, spin_s=0.0):
+                            if anyio.current_time() - start >= seconds:
+                                break
+                            await bus.cycle(batch)
+                            ticks += 1
+                        rate = ticks / (anyio.current_time() - start)
+                    group.cancel_scope.cancel()
+        finally:
+            if port is not None:
+                port.close()
+            if sim_side is not None:
+                sim_side.shutdown()
+        return rate, bus
+
+    rate, bus = anyio.run(main)
+    return rate, checked[0], checked[1], checked[2], bus
+
+
+@pytest.mark.parametrize("path", ["virtual", "slcan"])
+def test_on_a_real_transport_path_no_reply_of_another_host_is_taken_as_ours_unmarked(path: str) -> None:
+    """Real time, about 4 s. Every reply taken as ours that was the other host's is one whose order
+    could not be known, and counted ``ambiguous``; the loop keeps its rate. At 100 Hz: ours waits
+    for the later of two replies when they crossed, about a millisecond more, which a 200 Hz tick
+    on this path (replies 1-5 ms through the reader thread or the pty) does not always have."""
+    clean_rate, clean_taken, _, _, _ = _run_real(path, other=False, hz=100)
+    rate, taken, wrong, unmarked, bus = _run_real(path, other=True, hz=100)
+    metrics = bus.metrics()
+    print(
+        f"\n{path}: clean {clean_rate:.1f}/s, {clean_taken} replies; with another host {rate:.1f}/s, "
+        f"{taken} replies taken, {wrong} the other host's ({unmarked} unmarked), "
+        f"ambiguous {metrics.ambiguous}, contended {metrics.contended}, timeouts {metrics.timeouts}"
+    )
+    assert unmarked == 0, f"{unmarked} of {taken} replies taken were the other host's, not marked: {metrics}"
+    assert wrong <= metrics.ambiguous, metrics
+    # (real time on a shared machine: typically 96-100 % of clean, 85 % seen among other tests;
+    # the 95 % bound is held in virtual time, by the simulator's test above. This catches a
+    # collapse: ours starved of replies by other hosts' requests, as a chain of them could)
+    assert rate >= 0.75 * clean_rate, (rate, clean_rate)
+    assert taken >= 0.8 * clean_taken, (taken, clean_taken, metrics)
+    assert metrics.contended > 0
+
+
+def test_through_an_adapter_a_crossing_of_unknown_order_gives_ours_the_later_reply_counted() -> None:
+    """Times off by an adapter's latency (``exact_order`` False): another host's request stamped
+    after ours was handed over may have reached the motor before or after it."""
+    codec = ma.FAMILY.bind(1)
+    scheduler = Scheduler([codec], min_reply_s=0.0001, exact_order=False)
+    counts = scheduler.motor_counts[id(codec)]
+    # stamped before ours was handed over: first for sure, nothing ambiguous
+    scheduler.receive(_theirs(1, 0.0010), 0.0010)
+    ours = _ours(scheduler, codec, 0.0012)
+    assert scheduler.receive(_reply(1, 0.0030), 0.0030).traffic is Traffic.CONTENDED
+    assert scheduler.receive(_reply(1, 0.0031), 0.0031).request is ours and not ours.crossed
+    assert counts["ambiguous"] == 0
+    # stamped after ours was handed over (well after, by the times: they say nothing here)
+    later = _ours(scheduler, codec, 0.0100)
+    scheduler.receive(_theirs(1, 0.0105), 0.0105)
+    scheduler.receive(_theirs(1, 0.0106), 0.0106)  # (a second one: after ours)
+    assert scheduler.receive(_reply(1, 0.0107), 0.0107).traffic is Traffic.CONTENDED
+    assert scheduler.receive(_reply(1, 0.0108), 0.0108).request is later and later.crossed
+    assert scheduler.receive(_reply(1, 0.0109), 0.0109).traffic is Traffic.CONTENDED
+    assert counts["ambiguous"] == 1 and counts["contended"] == 3
+    # a reply received before their request answers ours, by order alone
+    last = _ours(scheduler, codec, 0.0200)
+    assert scheduler.receive(_reply(1, 0.0210), 0.0210).request is last and not last.crossed
+    assert scheduler.receive(_theirs(1, 0.0205), 0.0211).traffic is Traffic.OTHER_HOST
+    assert scheduler.receive(_reply(1, 0.0212), 0.0212).traffic is Traffic.CONTENDED
+
+
+def test_a_reply_later_than_another_host_s_was_expected_is_counted_ambiguous() -> None:
+    """Another host's request whose reply is overdue (a stalled host, a slow adapter) may still be
+    answered: our request handed over meanwhile that takes the next reply is counted ambiguous."""
+    codec = ma.FAMILY.bind(1)
+    scheduler = Scheduler(
+        [codec], min_reply_s=0.0001, exact_order=False, initial_timeout_s=0.002, min_timeout_s=0.001
+    )
+    scheduler.receive(_theirs(1, 0.0010), 0.0010)  # (its reply expected within twice 2 ms)
+    ours = _ours(scheduler, codec, 0.0012)
+    assert scheduler.receive(_reply(1, 0.0080), 0.0080).request is ours and ours.crossed
+    assert scheduler.motor_counts[id(codec)]["ambiguous"] == 1

@@ -105,6 +105,9 @@ class Request:
     echo: bytes | None = None
     looped: bool = False  # its own frame came back from the link already (an adapter's loop-back)
     on_wire_at: float | None = None  # when that loop-back says it ended on the wire (None: unknown)
+    # Another host's request crossed it in an order that cannot be known: it takes the later reply
+    # (counted ``ambiguous`` once; servobus._scheduler_hosts).
+    crossed: bool = False
 
     def describe(self) -> str:
         return f"{self.codec.family} motor {self.codec.motor_id} {type(self.command).__name__}"

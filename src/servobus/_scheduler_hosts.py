@@ -9,14 +9,38 @@ its place in that motor's order of expected replies (a placeholder, owned by nob
 that answers it is the motor's state (counted ``contended``, given to subscribers), never the
 answer to our request with that key.
 
-Order on the wire: a request of ours left at ``sent_at`` (its send report); another host's frame
-is stamped when it ended. One that ended before ours was handed over, or while it may still have
-been on the wire when ours was (one frame's time, from ``min_reply_s``), reached the motor first.
+Order on the wire. Replies come in the order the requests reached the motor, and our adapter
+receives frames in the order they were on the wire: a reply received before another host's request
+answers an earlier request (ours), by order alone. A reply received after it answers whichever of
+the two reached the motor first, and times must tell which:
+
+* On a link whose times are the wire's own (``exact_order``: the in-process simulator, whose send
+  report is when the frame was queued on its wire and whose stamps are when frames ended there),
+  ours left at ``sent_at`` (its send report), theirs is stamped when it ended; one that ended
+  before ours left, or while it may still have been on the wire when ours was (one frame's time,
+  from ``min_reply_s``), reached the motor first.
+* Through an adapter (a reader thread, USB, a serial line) both times are off by its latency, which
+  is not known and is easily milliseconds: ours may wait in the adapter after its send report, and
+  theirs was on the wire some time before we stamped it. Theirs reached the motor first for sure
+  only if it was stamped before ours was even handed over (``handed_at``). Stamped after that (and
+  before this reply), the two *crossed*: the order is not known. Then ours is answered with the
+  **later of the two replies**, and counted ``ambiguous`` (``request.crossed``). That reply was
+  sent after the motor had both requests, so it is the motor's state after our command whichever
+  came first; if theirs came second, it shows theirs in force, which is the truth a control loop
+  needs, never a stale "confirmation" of ours. A further request of another host stamped later
+  is taken as after ours (ours waits for one reply more at most). It is never silent: a reply that
+  may be the other host's is counted, and the warning names the other host's identifier and rate.
+  The price is ambiguity on such a link while another host is on the bus; the cure is to remove the
+  second controller, or a link that tells when our own frame was on the wire (below).
 
 Our own frames that an adapter loops back (``is_rx`` False: python-can's ``receive_own_messages``,
 SocketCAN's loop-back; or as received, on adapters that echo) are never taken for another host's:
 the first frame with our in-flight request's very bytes is ours. Its stamp is then when ours was
 on the wire, which orders it exactly against another host's.
+
+A request of another host received before its motor was added to the Bus is not known (counted
+``foreign``): its reply, if it comes after ours was sent, is taken as ours. Add the motors before
+commanding them on a bus another host uses.
 
 Sans-IO: ``now`` is always an argument.
 """
@@ -52,6 +76,7 @@ class OtherHosts:
 
     name: str
     min_reply_s: float
+    exact_order: bool
     _pending: dict[Hashable, deque[Request]]
     _recent: Recent
     _bus_counts: Counter[str]
@@ -137,26 +162,44 @@ class OtherHosts:
         verdict if it answers that one (it reached the motor before our request waiting for the key,
         and after any of ours whose late reply is held for), else None (matched as usual)."""
         placeholders = self._foreign[key]
-        while placeholders and placeholders[0][1] < now:  # never answered (lost, or not to be)
-            placeholders.popleft()
+        at = frame.timestamp or now
+        # Never answered (lost, or not to be), by the reply's own stamp. Or answered this late (a
+        # stalled host, a slow adapter): then this reply may be its answer, so a request of ours
+        # handed over while that one's reply was still expected, that takes it, is ambiguous.
+        if placeholders[0][1] < at:
+            expected = 0.0
+            while placeholders and placeholders[0][1] < at:
+                expected = placeholders.popleft()[1]
+            waiting = self._pending.get(key)
+            if waiting:
+                ours = waiting[0]
+                if ours.handed_at is not None and ours.handed_at < expected and not ours.crossed:
+                    ours.crossed = True
+                    self.motor_counts[id(codec)]["ambiguous"] += 1
         if not placeholders:
             del self._foreign[key]
             return None
         stamp = placeholders[0][0]
-        at = frame.timestamp or now
-        if at < stamp + self.min_reply_s:
-            return None  # too early to answer it
+        if at < stamp + self.min_reply_s and self.exact_order:
+            return None  # too early to answer it (through an adapter, stamps of one read are alike)
         waiting = self._pending.get(key)
         if waiting:
             ours = waiting[0]
             if ours.on_wire_at is not None:  # (looped back: its end on the wire, as theirs)
                 if stamp > ours.on_wire_at:
                     return None  # ours reached the motor first
-            else:
+            elif self.exact_order:
                 left = ours.sent_at if ours.state is _SENT else ours.handed_at
                 # one frame's time: it may still have been on the wire when ours was handed over
                 if left is not None and stamp > left + 1.5 * self.min_reply_s:
                     return None  # ours reached the motor first
+            elif ours.handed_at is not None and stamp > ours.handed_at:
+                # Theirs came in after ours was handed over, before this reply: the order the two
+                # reached the motor in is not known. Ours takes the later of the two replies.
+                if ours.crossed:
+                    return None  # (the later one: another host's request after that is after ours)
+                ours.crossed = True
+                self.motor_counts[id(codec)]["ambiguous"] += 1
         late = self._recent.late.get(key)
         if late and any(e[1] is not None and e[1] < stamp and e[3] >= now for e in late):
             return None  # a late reply of ours is due first

@@ -116,6 +116,7 @@ def _scheduler(
         min_timeout_s=min_timeout_s,
         max_timeout_s=max_timeout_s,
         report_within_s=report_within_s(rules, in_flight) if rules.reports_sends else None,
+        exact_order=rules.exact_times,
         name=name,
     )
 

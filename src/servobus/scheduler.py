@@ -127,6 +127,9 @@ class Scheduler(Pacing, Matching, OtherHosts, Timing):
             frames ahead of it on the line, the link's own staleness limit): a request still not
             reported then gets a provisional deadline, that plus its timeout (None: reports always
             come, as from the sans-IO tests' plain calls).
+        exact_order: send reports and received frames' stamps are times on the wire itself (the
+            link's ``rules.exact_times``): our request and another host's are ordered by them; else
+            a crossing within the adapter's latency is of unknown order (servobus._scheduler_hosts).
         name: the bus's label, in the errors it stores (``request.error``).
 
     Raises:
@@ -148,6 +151,7 @@ class Scheduler(Pacing, Matching, OtherHosts, Timing):
         min_timeout_s: float = 0.005,
         max_timeout_s: float = 10.0,
         report_within_s: float | None = None,
+        exact_order: bool = True,
         name: str = "bus",
     ) -> None:
         if (
@@ -182,6 +186,7 @@ class Scheduler(Pacing, Matching, OtherHosts, Timing):
         self.gap_s = gap_s
         self.late_window_s = late_window_s
         self.min_reply_s = min_reply_s
+        self.exact_order = exact_order
         self.codecs: list[BoundCodec] = []
         self._by_id: dict[int, list[BoundCodec]] = {}
         self._by_request_id: dict[int, list[BoundCodec]] = {}  # (servobus._scheduler_hosts)

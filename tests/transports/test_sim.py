@@ -526,9 +526,12 @@ async def test_a_closed_transport_stops_its_timer_and_a_reopen_continues_the_clo
 
 
 def test_the_rules_say_the_simulated_bus_s_bit_rate() -> None:
-    assert SimTransport().rules == LineRules(bitrate=1_000_000, stale_after_s=0.5)
+    # (and that its times are the wire's own: another host's frames are ordered by them)
+    assert SimTransport().rules == LineRules(bitrate=1_000_000, stale_after_s=0.5, exact_times=True)
     network = SimCanNetwork([MyActuatorMotor(1)], bus=CanBusModel(bitrate=500_000))
-    assert SimTransport(network, stale_after_s=None).rules == LineRules(bitrate=500_000, stale_after_s=None)
+    assert SimTransport(network, stale_after_s=None).rules == LineRules(
+        bitrate=500_000, stale_after_s=None, exact_times=True
+    )
     assert SimTransport(bus=CanBusModel(bitrate=math.inf)).rules.bitrate is None
 
 

@@ -231,6 +231,7 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, abc.ABC
             gap_s=float(getattr(self, "gap_s", 0.0) or 0.0),
             turnaround_s=float(getattr(self, "turnaround_s", 0.0) or 0.0),
             stale_after_s=self._stale_after_s,
+            exact_times=bool(getattr(self, "exact_times", False)),
         )
 
     @property

@@ -50,6 +50,10 @@ class LineRules:
         turnaround_s: on a half-duplex line, the rest after the far end's last byte before sending.
         stale_after_s: a command (not a read) queued longer than this is not sent (None: no limit).
         reports_sends: the link calls the send reporter for every frame it accepted.
+        exact_times: a send report's time is when the frame was queued on the wire itself, and a
+            received frame's stamp is when it ended there, on one clock (the in-process simulator):
+            our frame and another host's are ordered by their times. Through an adapter (a reader
+            thread, USB, a serial line) both are off by its latency, which is not known: False.
     """
 
     half_duplex: bool = False
@@ -58,6 +62,7 @@ class LineRules:
     turnaround_s: float = 0.0
     stale_after_s: float | None = None
     reports_sends: bool = True
+    exact_times: bool = False
 
     def __post_init__(self) -> None:
         for name in ("gap_s", "turnaround_s"):

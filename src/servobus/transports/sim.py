@@ -152,6 +152,10 @@ class SimTransport(Transport[Frame, Frame]):
         """A time on the network's clock as the loop's time (what received frames are stamped with)."""
         return network_time + self._t0
 
+    #: a send report says when the frame was queued on the simulated wire, a received frame is
+    #: stamped when it ended there, on the loop's clock (:attr:`rules`' ``exact_times``)
+    exact_times = True
+
     @property
     def bitrate(self) -> int | None:
         """The simulated bus's nominal bit rate (None for an infinitely fast one): :attr:`rules`."""
