@@ -363,20 +363,29 @@ def report() -> None:
                         " (`MotorNotExecuted`)",
                         " / ".join(
                             f"{sk['outcomes'].get(k, 0):,}"
-                            for k in ("replied", "timed_out", "cancelled", "failed", "skipped", "not_executed")
+                            for k in (
+                                "replied",
+                                "timed_out",
+                                "cancelled",
+                                "failed",
+                                "skipped",
+                                "not_executed",
+                            )
                         ),
                     ],
                     [
                         "the second controller: its requests to our motors seen / their replies kept "
                         "apart (`foreign_requests` / `contended`)",
                         " / ".join(
-                            f"{sk.get('bus_counts', {}).get(k, 0):,}" for k in ("foreign_requests", "contended")
+                            f"{sk.get('bus_counts', {}).get(k, 0):,}"
+                            for k in ("foreign_requests", "contended")
                         ),
                     ],
                     [
                         "0xB3 trips: 0xF1 frames counted (`comm_tripped`) / echoes failed (`not_executed`)",
                         " / ".join(
-                            f"{sk.get('bus_counts', {}).get(k, 0):,}" for k in ("comm_tripped", "not_executed")
+                            f"{sk.get('bus_counts', {}).get(k, 0):,}"
+                            for k in ("comm_tripped", "not_executed")
                         ),
                     ],
                     [
