@@ -14,15 +14,14 @@ from typing import Any
 import anyio
 import pytest
 
+from _setpoint_motor import SetpointMotor
 from servobus.bus import Bus
 from servobus.frame import Frame
 from servobus.protocols import hollow as ho
 from servobus.protocols import lk
 from servobus.protocols import myactuator as ma
-from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.scheduler import Received, Scheduler, Traffic
 from servobus.sim import virtual
-from servobus.sim.device import Emission
 from servobus.sim.otherhost import OtherHost
 from servobus.transports.sim import SimTransport
 
@@ -30,31 +29,12 @@ OURS_DPS, THEIRS_DPS = 100.0, -50.0
 MOTORS = (1, 2, 3)
 
 
-class _SetpointMotor(MyActuatorMotor):
-    """A motor whose 0xA2 reply carries, in its speed field, the set-point of the request it answers
-    (whoever sent it), so a test can tell whose request a reply is for."""
-
-    def receive(self, frame: Frame, now_s: float) -> list[Emission]:
-        out = super().receive(frame, now_s)
-        if frame.data[:1] != b"\xa2":
-            return out
-        dps = int.from_bytes(frame.data[4:8], "little", signed=True) // 100
-        tagged = []
-        for emission in out:
-            data = emission.frame.data
-            if data[:1] == b"\xa2":
-                data = data[:4] + dps.to_bytes(2, "little", signed=True) + data[6:]
-                emission = Emission(emission.ready_s, dataclasses.replace(emission.frame, data=data))
-            tagged.append(emission)
-        return tagged
-
-
 def _run(
     *, other: bool, hz: float = 200.0, seconds: float = 2.0, seed: int = 1, backend: str = "asyncio"
 ) -> tuple[float, int, int, Any]:
     """Our loop of SpeedControl(+100) at ``hz`` on three motors, with (or without) another host
     commanding -50 dps at 500 Hz: (ticks per second, replies taken, of which another host's, bus)."""
-    devices: list[Any] = [_SetpointMotor(i) for i in MOTORS]
+    devices: list[Any] = [SetpointMotor(i) for i in MOTORS]
     if other:
         codecs = [ma.FAMILY.bind(i) for i in MOTORS]
         devices.append(
@@ -280,7 +260,7 @@ def _run_real(
     from servobus.sim.pty import PtyPort
     from servobus.transports import CanTransport, SlcanTransport
 
-    devices: list[Any] = [_SetpointMotor(i) for i in MOTORS]
+    devices: list[Any] = [SetpointMotor(i) for i in MOTORS]
     if other:
         codecs = [ma.FAMILY.bind(i) for i in MOTORS]
         devices.append(

@@ -22,36 +22,17 @@ import anyio
 import can
 import pytest
 
+from _setpoint_motor import SetpointMotor
 from servobus.bus import Bus
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
-from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.scheduler import Received, Scheduler, Traffic
 from servobus.sim.attach import serve_python_can
 from servobus.sim.canbus import CanBusModel
 from servobus.sim.corenet import CoreCanNetwork
-from servobus.sim.device import Emission
 from servobus.sim.faults import FaultInjector, FaultPlan
 from servobus.transports.can import CanTransport
 from servobus.transports.sim import SimTransport
-
-
-class _SetpointMotor(MyActuatorMotor):
-    """A motor whose 0xA2 reply carries, in its speed field, the set-point of the request it answers."""
-
-    def receive(self, frame: Frame, now_s: float) -> list[Emission]:
-        out = super().receive(frame, now_s)
-        if frame.data[:1] != b"\xa2":
-            return out
-        dps = int.from_bytes(frame.data[4:8], "little", signed=True) // 100
-        tagged = []
-        for emission in out:
-            data = emission.frame.data
-            if data[:1] == b"\xa2":
-                data = data[:4] + dps.to_bytes(2, "little", signed=True) + data[6:]
-                emission = Emission(emission.ready_s, dataclasses.replace(emission.frame, data=data))
-            tagged.append(emission)
-        return tagged
 
 
 class _Setpoints(FaultInjector):
@@ -137,7 +118,7 @@ async def test_after_a_70_ms_stall_in_a_75_ms_latency_spike_no_earlier_reply_is_
     each tick a set-point of its own; at tick 60 the replies start to come 75 ms late and, right
     after that tick's requests left, the loop stalls for 70 ms."""
     spike = _Spike(SPIKE_S, SPIKE_S)
-    transport = SimTransport(devices=[_SetpointMotor(i) for i in range(1, MOTORS + 1)], to_host=spike)
+    transport = SimTransport(devices=[SetpointMotor(i) for i in range(1, MOTORS + 1)], to_host=spike)
     checked = [0, 0]
     async with Bus(transport, safe=None) as bus:
         _watched(bus, checked)
@@ -195,7 +176,7 @@ def test_with_the_device_model_in_a_thread_no_late_reply_answers_the_next_reques
     late = _Tagged(FaultPlan(latency_s=(0.001, 0.004), latency_order="sender"), setpoints, seed)
     # The wire takes no time (an infinitely fast bus): a reply is as late as the adapter makes it.
     network = CoreCanNetwork(
-        [_SetpointMotor(i) for i in range(1, 33)],
+        [SetpointMotor(i) for i in range(1, 33)],
         bus=CanBusModel(bitrate=math.inf),
         to_devices=None,
         to_host=late,
