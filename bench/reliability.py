@@ -455,10 +455,10 @@ FINDINGS = """
   out of the traffic every 1..3 s until it trips) kept every promise over 10 virtual minutes: of the
   other host's 854,508 requests seen, 852,300 replies were kept apart (`contended`) and none answered
   ours (its tokens never came back on our writes); 235 echoes after a trip failed their requests
-  (`MotorNotExecuted`), and no set-point's echo was taken for a reply. Of the simulated motors' 241
-  echoes the other 6 were lost on the faulty link or were a read's or a write's echo after a trip
-  whose 0xF1 frames were all lost, which look like replies (README, "What these wires cannot tell
-  apart"). `ambiguous` rose from 24,935 to 41,291: the other host's replies cross the same faulty
+  (`MotorNotExecuted`), and no set-point's echo was taken for a reply. The simulated motors sent 241
+  echoes; the soak does not tell what became of the other 6: an echo dropped on the faulty link
+  times its request out, and a read's or a write's echo after a trip whose 0xF1 frames were all lost
+  looks like a reply (README, "What these wires cannot tell apart"). `ambiguous` rose from 24,935 to 41,291: the other host's replies cross the same faulty
   link (38,286 replies dropped towards the host, against 20,509), and a reply taken after a lost one
   is counted.
 * The fuzz targets found one input that broke a promise, in `scheduler_intake` (atheris, rerun after
