@@ -458,9 +458,9 @@ FINDINGS = """
   (`MotorNotExecuted`), and no set-point's echo was taken for a reply. The simulated motors sent 241
   echoes; the soak does not tell what became of the other 6: an echo dropped on the faulty link
   times its request out, and a read's or a write's echo after a trip whose 0xF1 frames were all lost
-  looks like a reply (README, "What these wires cannot tell apart"). `ambiguous` rose from 24,935 to 41,291: the other host's replies cross the same faulty
-  link (38,286 replies dropped towards the host, against 20,509), and a reply taken after a lost one
-  is counted.
+  looks like a reply (README, "What these wires cannot tell apart"). `ambiguous` rose from 24,935
+  to 41,291: the other host's replies cross the same faulty link (38,286 replies dropped towards the
+  host, against 20,509), and a reply taken after a lost one is counted.
 * The fuzz targets found one input that broke a promise, in `scheduler_intake` (atheris, rerun after
   the scheduler's hot-path changes; the bug was older): a reply stamped 0.0, a virtual clock's first
   instant, was taken for an unstamped frame and resolved a request sent at 0.0 sooner than
