@@ -56,12 +56,14 @@ from servobus._request import Received, Recent, Request, RequestState, Traffic
 from servobus.frame import Frame
 from servobus.protocols import BoundCodec, Reply
 
-__all__ = ["WARN_AFTER", "OtherHosts"]
+__all__ = ["RATE_WINDOW_S", "WARN_AFTER", "OtherHosts"]
 
 logger = logging.getLogger("servobus.bus")
 
-#: Requests of another host to one motor seen before the warning (so it can name their rate).
+#: Requests of another host to one motor seen, over at least RATE_WINDOW_S, before the warning
+#: (so it can name their rate).
 WARN_AFTER = 8
+RATE_WINDOW_S = 0.05
 
 _SENDING = RequestState.SENDING
 _SENT = RequestState.SENT
@@ -85,7 +87,8 @@ class OtherHosts:
     # key -> another host's requests still to be answered, oldest first: (when it ended on the
     # wire, until when its reply is expected)
     _foreign: dict[Hashable, deque[tuple[float, float]]]
-    _hosts_seen: dict[int, tuple[int, float]]  # motor (codec id) -> (requests seen, first stamp)
+    # motor (codec id) -> (requests seen, first stamp); -1 requests: warned already
+    _hosts_seen: dict[int, tuple[int, float]]
 
     if TYPE_CHECKING:
 
@@ -140,9 +143,14 @@ class OtherHosts:
     def _seen(self, codec: BoundCodec, at: float) -> None:
         """Count another host's request to ``codec``'s motor; warn once, naming the id and rate."""
         count, first = self._hosts_seen.get(id(codec), (0, at))
+        if count < 0:
+            return  # (warned)
         count += 1
         self._hosts_seen[id(codec)] = (count, first)
-        if count == WARN_AFTER:
+        # (over a short window at least: through an adapter frames come in bunches, whose stamps
+        # alone would make the rate look higher)
+        if count >= WARN_AFTER and at - first >= RATE_WINDOW_S:
+            self._hosts_seen[id(codec)] = (-1, first)
             ident = min(i & 0x1FFFFFFF for i in codec.request_ids)
             rate = (count - 1) / (at - first) if at > first else float("nan")
             logger.warning(
