@@ -766,8 +766,10 @@ def scheduler_intake(data: bytes) -> None:
         open_ = [r for r in made if r.state not in FINAL]
         assert scheduler.pending == len(open_), (scheduler.pending, len(open_))
         assert all(r.state in FINAL for r in made if id(r) in ended)
-    # The end: every send is reported, time runs past every deadline; nothing stays pending.
-    for _ in range(4 * len(made) + 4):
+    # The end: every send is reported, time runs past every deadline and every hold (a key in doubt
+    # is held for each reply still owed to it, one after the other: up to a few tenths of a second
+    # each here); nothing stays pending.
+    for _ in range(4 * len(made) + 400):
         for request in sending:
             scheduler.sent(request, now)
             if request.state is RequestState.REPLIED:
