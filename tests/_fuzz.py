@@ -672,7 +672,7 @@ def _sched_commands(codec: Any) -> list[Any]:
 
 @target
 def scheduler_intake(data: bytes) -> None:
-    from servobus.scheduler import FINAL, RequestState, Scheduler
+    from servobus.scheduler import FINAL, RequestState, Scheduler, Traffic
 
     inp = Input(data)
     name = inp.pick(sorted(_SCHED))
@@ -732,7 +732,15 @@ def scheduler_intake(data: bytes) -> None:
                 timestamp=now,
             )
             got = scheduler.receive(frame, now)  # never raises
-            if got.request is not None:
+            if got.request is not None and got.traffic in (Traffic.MALFORMED, Traffic.NOT_EXECUTED):
+                # the motor answered it in a way that is no reply: a frame that does not decode, or
+                # its own bytes back; it fails with why, never resolved with data
+                request = got.request
+                assert got.codec is request.codec, "a frame failed another motor's request"
+                assert request.state is RequestState.FAILED and request.error is not None
+                assert request.reply is None and got.reply is None
+                note_end(request, "failed")
+            elif got.request is not None:
                 request = got.request
                 assert got.codec is request.codec, "a reply went to another motor's request"
                 _kind, key = request.codec.classify(frame)

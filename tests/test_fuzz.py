@@ -26,7 +26,15 @@ REGRESSIONS: dict[str, list[bytes]] = {
         base64.b64decode(
             "////l5MZk5MZAhkZJZeTGZMIGS6X+BX//+YZkQgZLpf4Ff//5uZd/ebm2peTGZMIAuoZGQIZGSX/////l5MZk+b95uZBQUFB"
             "QUFB2peTGZMIAupBGRkCGRkl/////5eTGZOTGQIZGSWXkxmTCBkul/gV5ub95ubal5PebAgC6hkZAhkZJRkZApfm"
-        )
+        ),
+        # the sanitized run, 2026-11-28: a reply that does not decode fails its request (issue
+        # [control]); the harness still asked every request a frame resolved to be REPLIED.
+        base64.b64decode(
+            "vWBncKqs0X5qFgHD8lKNh1yFZDVXETsMXxbFAPgnazvLEGpH/G6WNf2CD3pMyHcE9iHXzV3QZV8jHgmuBnNLS4Y4SWiqBcZI"
+            "qSoL7ixNCE6CrCQiMDiWUsLTjqpdVsOiYokLswFNw+xNl4PUjNOF9b469p2hlUH9Q6jvQDPonN7ALI58+6JfaYFVobl5d3xB"
+            "zoL2GP4gcCrNBVD1CjpaWKNNYq9AKrZ7IQWM15XunJTqXsaJs2F4j5LHM/7L6NwJ828Cz8GYgJVf6SrsTLdMtPnh7xMW+ifJ"
+            "CA/Un1EwFJqmfwzcvtmZm2KxZO2+lHdxPvLqWdDZoF0hsZxphm8BoyHVHXJovbW0yA=="
+        ),
     ],
 }
 
