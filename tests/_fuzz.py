@@ -714,8 +714,8 @@ def scheduler_intake(data: bytes) -> None:
         elif op == 2 and sending:  # a send report
             request = sending.pop(inp.byte() % len(sending))
             early = scheduler.sent(request, now)
-            if request.state is RequestState.REPLIED:
-                note_end(request, "replied")
+            if request.state in FINAL:  # a reply that beat the report: taken, or failed with why
+                note_end(request, "replied" if request.state is RequestState.REPLIED else "failed")
             if early is not None and early.request is not None:
                 assert early.request is request
         elif op == 3:  # a frame comes in
@@ -780,8 +780,8 @@ def scheduler_intake(data: bytes) -> None:
     for _ in range(4 * len(made) + 400):
         for request in sending:
             scheduler.sent(request, now)
-            if request.state is RequestState.REPLIED:
-                note_end(request, "replied")
+            if request.state in FINAL:
+                note_end(request, "replied" if request.state is RequestState.REPLIED else "failed")
         sending = list(scheduler.poll(now)[0])
         now += 0.01
         for request in scheduler.expire(now):

@@ -35,6 +35,16 @@ REGRESSIONS: dict[str, list[bytes]] = {
             "zoL2GP4gcCrNBVD1CjpaWKNNYq9AKrZ7IQWM15XunJTqXsaJs2F4j5LHM/7L6NwJ828Cz8GYgJVf6SrsTLdMtPnh7xMW+ifJ"
             "CA/Un1EwFJqmfwzcvtmZm2KxZO2+lHdxPvLqWdDZoF0hsZxphm8BoyHVHXJovbW0yA=="
         ),
+        # and one that came before its send report, judged (failed) when the report came
+        base64.b64decode(
+            "qWgG4DrIJCxXD7PRjCj5W8xN8c6ySgaE7Cg/unNH2q1B+IFDAXEwoJnOK1pi1YXPThu3LZ9K1LtGr/ATAsaN9E3q2u6vhsk7"
+            "KYrZ5bimPBH2TymFj++42HnqoogY1T7TpuEokplUlNo5Im1ChhSRHHTkg/4vcvsygpVqn4iST6sMWLzUG/Xra7VcUKf6+h/o"
+            "Dw/DlvZyJd3Ku64/FUoJ8sAE27xv53CQMf+Bqdfm64pcSEvwy7tMxaGSTF7bhj3BuBY3OPIdDZbvxpFZHhSiflF1KotBb/6H"
+            "qgvwzSclK5hzNpfn+3s4dVNtMEv9+mt1NDL4IqwzkY2QVech2ohrM2p4BiJzostpom1BuwZfgQIYF5/p0LYlEhhrDslPKP1w"
+            "QUQrAydk99hPOGWUbBGHNJXtw1AgQfNQcGmkgXXMG3h2MW1S3KdoYMyBg0NSe+gLEc8n8vYdEcEyBFIUTvkYb3Xb/0c7Rh36"
+            "CbMM+17CopHlZJ4b/7GDkrNLH8EBmv7whSTrMEkkEYEJQZ991svsSQMBwPgFsIs7iW3y8iT03vOyRi1bpgay9A5j6Cx7/t4R"
+            "cS2Rh9w9GqSKqanrrR+imbUCYAuvmQ/ELB7cvvaaGG02KTp5z7NNqnwa2Cv0B2XmslY="
+        ),
     ],
 }
 
