@@ -29,6 +29,25 @@ OURS_DPS, THEIRS_DPS = 100.0, -50.0
 MOTORS = (1, 2, 3)
 
 
+def _watch_whose(bus: Bus, checked: list[int]) -> None:
+    """From now on count the status replies ``bus`` takes as answers to its requests: ``checked[0]``
+    all, ``[1]`` those carrying the other host's set-point, ``[2]`` of these the ones not marked as
+    of unknown order (``request.crossed``)."""
+    receive = bus.scheduler.receive
+
+    def watch(frame: Frame, now: float) -> Received:
+        got = receive(frame, now)
+        if got.request is not None and isinstance(got.reply, ma.StatusReply):
+            checked[0] += 1
+            if got.reply.speed_dps != OURS_DPS:
+                checked[1] += 1
+                if not got.request.crossed:
+                    checked[2] += 1
+        return got
+
+    bus.scheduler.receive = watch  # type: ignore[method-assign]
+
+
 def _run(
     *, other: bool, hz: float = 200.0, seconds: float = 2.0, seed: int = 1, backend: str = "asyncio"
 ) -> tuple[float, int, int, Any]:
@@ -40,21 +59,11 @@ def _run(
         devices.append(
             OtherHost.commanding(codecs, ma.SpeedControl(speed_dps=THEIRS_DPS), rate_hz=500, seed=seed)
         )
-    checked = [0, 0]
+    checked = [0, 0, 0]
 
     async def main() -> tuple[float, Any]:
         async with Bus(SimTransport(devices=devices), safe=None) as bus:
-            receive = bus.scheduler.receive
-
-            def watch(frame: Frame, now: float) -> Received:
-                got = receive(frame, now)
-                if got.request is not None and isinstance(got.reply, ma.StatusReply):
-                    checked[0] += 1
-                    if got.reply.speed_dps != OURS_DPS:
-                        checked[1] += 1
-                return got
-
-            bus.scheduler.receive = watch  # type: ignore[method-assign]
+            _watch_whose(bus, checked)
             batch = [(bus.motor("myactuator", i), ma.SpeedControl(speed_dps=OURS_DPS)) for i in MOTORS]
             start = anyio.current_time()
             ticks = 0
@@ -287,25 +296,13 @@ def _run_real(
                 async with anyio.create_task_group() as group:
                     group.start_soon(lambda: serve)
                     async with Bus(transport, safe=None) as bus:
-                        receive = bus.scheduler.receive
-
-                        def watch(frame: Frame, now: float) -> Received:
-                            got = receive(frame, now)
-                            if got.request is not None and isinstance(got.reply, ma.StatusReply):
-                                checked[0] += 1
-                                if got.reply.speed_dps != OURS_DPS:
-                                    checked[1] += 1
-                                    if not getattr(got.request, "crossed", False):
-                                        checked[2] += 1
-                            return got
-
                         motors = [bus.motor("myactuator", i) for i in MOTORS]
                         batch = [(m, ma.SpeedControl(speed_dps=OURS_DPS)) for m in motors]
                         await bus.cycle(batch, timeout_s=0.5)  # (the first exchange through a fresh adapter)
                         # Another host's requests received before the motors were added are not
                         # known (counted foreign): their replies may still come now.
                         await anyio.sleep(0.05)
-                        bus.scheduler.receive = watch  # type: ignore[method-assign]
+                        _watch_whose(bus, checked)
                         start = anyio.current_time()
                         ticks = 0
                         async for _ in bus.ticks(hz, spin_s=0.0):

@@ -47,6 +47,7 @@ Sans-IO: ``now`` is always an argument.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from collections import Counter, deque
 from collections.abc import Hashable
@@ -106,7 +107,9 @@ class OtherHosts:
         placeholder in its order of replies), or ``foreign``."""
         for codec in self._by_request_id.get(frame.arbitration_id, ()):
             if not frame.is_rx:  # our own frame, looped back: when it was on the wire
-                self._looped(codec.request_key(_as_received(frame)), frame, frame.timestamp or now)  # type: ignore[attr-defined]
+                as_received = dataclasses.replace(frame, is_rx=True)  # (how the codec judges it)
+                key = codec.request_key(as_received)  # type: ignore[attr-defined]
+                self._looped(key, frame, frame.timestamp or now)
                 break
             key = codec.request_key(frame)  # type: ignore[attr-defined]
             if key is None:
@@ -216,15 +219,3 @@ class OtherHosts:
             del self._foreign[key]
         self.motor_counts[id(codec)]["contended"] += 1
         return Received(_T_CONTENDED, frame, codec, reply)
-
-
-def _as_received(frame: Frame) -> Frame:
-    """``frame`` (our own, looped back as sent) as the codec judges a received one."""
-    return Frame(
-        arbitration_id=frame.arbitration_id,
-        data=frame.data,
-        is_extended_id=frame.is_extended_id,
-        is_fd=frame.is_fd,
-        bitrate_switch=frame.bitrate_switch,
-        timestamp=frame.timestamp,
-    )

@@ -61,12 +61,8 @@ def test_motors_found_are_listed_and_what_else_answered_is_one_line_on_stderr(
     assert re.fullmatch(said, err.strip()), err
 
 
-def test_the_probes_are_short_first_and_the_silent_ids_are_probed_again(
-    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """Without --timeout-ms: every id at FIRST_TIMEOUT_S, the silent ones at SECOND_TIMEOUT_S (the
-    line answers), then the motors found are asked with the library's timeouts."""
-    _simulate(monkeypatch, MyActuatorMotor(1))
+def _spy_probes(monkeypatch: pytest.MonkeyPatch) -> list[tuple[int, float | None]]:
+    """Every request scan makes, as (motor id, its timeout_s), in order."""
     probes: list[tuple[int, float | None]] = []
     request = Motor.request
 
@@ -75,6 +71,16 @@ def test_the_probes_are_short_first_and_the_silent_ids_are_probed_again(
         return await request(self, command, timeout_s=timeout_s, **kwargs)
 
     monkeypatch.setattr(Motor, "request", spied)
+    return probes
+
+
+def test_the_probes_are_short_first_and_the_silent_ids_are_probed_again(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Without --timeout-ms: every id at FIRST_TIMEOUT_S, the silent ones at SECOND_TIMEOUT_S (the
+    line answers), then the motors found are asked with the library's timeouts."""
+    _simulate(monkeypatch, MyActuatorMotor(1))
+    probes = _spy_probes(monkeypatch)
     rows = run_json(capsys, ["scan", "--sim", "1", "--ids", "1-3"])
     assert [r["id"] for r in rows] == [1]
     first, second = scan_cli.FIRST_TIMEOUT_S, scan_cli.SECOND_TIMEOUT_S
@@ -88,14 +94,7 @@ def test_on_a_silent_line_one_id_gets_the_librarys_timeout_before_the_others_the
     """A fresh adapter's first exchange can be slow: one probe waits the library's timeout (the
     others do not each wait it, as a half-duplex line would have them in turn)."""
     _simulate(monkeypatch)
-    probes: list[tuple[int, float | None]] = []
-    request = Motor.request
-
-    async def spied(self: Motor, command: Any, *, timeout_s: float | None = None, **kwargs: Any) -> Any:
-        probes.append((self.motor_id, timeout_s))
-        return await request(self, command, timeout_s=timeout_s, **kwargs)
-
-    monkeypatch.setattr(Motor, "request", spied)
+    probes = _spy_probes(monkeypatch)
     one_line(capsys, ["scan", "--sim", "1", "--ids", "1-3"], code=1)
     first, second = scan_cli.FIRST_TIMEOUT_S, scan_cli.SECOND_TIMEOUT_S
     assert probes == [(1, first), (2, first), (3, first), (1, None), (2, second), (3, second)]
