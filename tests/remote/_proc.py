@@ -10,7 +10,9 @@ serves.
 The bridge serves a Bus on simulated MyActuator motors (one SimTransport) whose every frame sent is
 counted by arbitration id and first data byte, with the wall-clock time of its first and last
 sending: that is "what reached the motors". Its commands: ``report`` (those counts since the last
-``reset``, the bridge's counters and stop log, each simulated motor's control), ``reset``, ``quit``.
+``reset``, the bridge's counters and stop log, each simulated motor's control, and the instruments:
+the set-point -> wire latency since the last ``reset``, the event loop's worst lag, the process's
+resident memory), ``reset``, ``quit``.
 
 The client holds at most one connection (``servobus.remote.connect``) and a raw Zenoh session for
 sending what a client never would. Its commands: ``connect``, ``hold`` (a task that sends a batch of
@@ -96,6 +98,37 @@ def _control(device: MyActuatorMotor) -> dict[str, Any]:
     return out
 
 
+class LoopLag:
+    """The event loop's worst lag since the last reset: how late a 1 ms sleep woke, at most. A
+    bridge whose loop is busy decoding or sorting is late here by as long as it was busy."""
+
+    def __init__(self) -> None:
+        self.worst_s = 0.0
+
+    async def run(self) -> None:
+        while True:
+            started = time.perf_counter()
+            await anyio.sleep(0.001)
+            self.worst_s = max(self.worst_s, time.perf_counter() - started - 0.001)
+
+
+def rss_mb() -> float:
+    """This process's resident memory (MB), from /proc."""
+    with open("/proc/self/statm") as statm:
+        return int(statm.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1e6
+
+
+def percentiles_ms(samples_ns: Any) -> dict[str, Any]:
+    ordered = sorted(samples_ns)
+    if not ordered:
+        return {"n": 0, "p50": None, "p99": None, "max": None}
+
+    def at(q: float) -> float:
+        return ordered[min(len(ordered) - 1, int(q * len(ordered)))] / 1e6
+
+    return {"n": len(ordered), "p50": at(0.5), "p99": at(0.99), "max": ordered[-1] / 1e6}
+
+
 async def bridge_main(args: argparse.Namespace) -> None:
     from servobus.remote import Bridge, wire
     from servobus.remote.security import Access, bridge_config
@@ -114,6 +147,10 @@ async def bridge_main(args: argparse.Namespace) -> None:
         async with Bridge(
             args.node, {args.bus: (bus, motors)}, config=config, hz=args.hz, stop_after_s=args.stop_after
         ) as bridge:
+            lag = LoopLag()
+            group = anyio.create_task_group()
+            await group.__aenter__()
+            group.start_soon(lag.run)
             emit({"ready": True, "pid": os.getpid(), "endpoint": endpoint})
             async for command in commands():
                 op = command["op"]
@@ -130,17 +167,25 @@ async def bridge_main(args: argparse.Namespace) -> None:
                             "dropped_events": bridge.dropped_events,
                             "stop_log": [list(entry) for entry in bridge.stop_log],
                             "controls": {str(d.motor_id): _control(d) for d in devices},
+                            "to_wire_ms": percentiles_ms(served.to_wire_ns),
+                            "loop_lag_ms": lag.worst_s * 1e3,
+                            "rss_mb": rss_mb(),
                         }
                     )
                 elif op == "reset":
                     frames.seen.clear()
                     bridge.stop_log.clear()
+                    for served in bridge.served.values():
+                        served.to_wire_ns.clear()
+                    lag.worst_s = 0.0
                     emit({"ok": True})
                 elif op == "quit":
                     emit({"ok": True})
                     break
                 else:
                     emit({"ok": False, "error": "ValueError", "message": f"unknown op {op!r}"})
+            group.cancel_scope.cancel()
+            await group.__aexit__(None, None, None)
 
 
 # ---- the client ----
