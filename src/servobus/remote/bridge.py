@@ -165,7 +165,6 @@ class Bridge:
                 keys.clients, handed(lane, self._on_client, _token), history=True
             )
         )
-        self._declared.append(session.liveliness().declare_token(keys.alive))
         for served in self.served.values():
             name = served.name
             setpoints = handover.latest(self._on_setpoints, served)
@@ -185,6 +184,9 @@ class Bridge:
                 self._declared.append(served.publishers[mid])
             served.bus.subscribe(served.changed)
             served.bus.subscribe_status(functools.partial(self._on_status, served))
+        # Last: a client that sees the bridge alive finds every bus's keys declared (a wildcard info
+        # query sent as soon as the token shows must not miss the buses declared after it).
+        self._declared.append(session.liveliness().declare_token(keys.alive))
 
     # ---- clients ----
 
