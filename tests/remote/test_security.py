@@ -187,7 +187,10 @@ def test_insecure_listen(users_file: Path) -> None:
     # accepted when told, or with access (neither is opened here)
     insecure = _settings(bridge_config(NODE, ["tcp/0.0.0.0:7447"], insecure=True))
     assert insecure["listen"]["endpoints"] == ["tcp/0.0.0.0:7447"]
-    assert not insecure["access_control"]["enabled"]
+    # (no users, but one client's traffic still reaches no other: every session a commander)
+    assert insecure["access_control"]["enabled"]
+    (anyone,) = insecure["access_control"]["subjects"]
+    assert anyone["id"] == "anyone" and not any(v for k, v in anyone.items() if k != "id"), anyone
     access = Access(commanders=frozenset({"cmd"}), users_file=users_file)
     guarded = _settings(bridge_config(NODE, ["tcp/0.0.0.0:7447"], access))
     assert guarded["access_control"]["enabled"]
@@ -201,6 +204,16 @@ def test_bridge_config_settings(users_file: Path) -> None:
     assert default["scouting"]["multicast"]["enabled"] is False
     assert default["scouting"]["gossip"]["enabled"] is False
     assert default["adminspace"]["enabled"] is False
+    # the default bridge isolates its clients with the commanders' rules, for any session
+    open_acl = default["access_control"]
+    assert open_acl["enabled"] is True and open_acl["default_permission"] == "deny"
+    assert [p["subjects"] for p in open_acl["policies"]] == [["anyone"]]
+    assert not any(
+        rule["flows"] == ["egress"]
+        and "put" in rule["messages"]
+        and any(k.endswith("setpoint") or k.endswith("setpoints") for k in rule["key_exprs"])
+        for rule in open_acl["rules"]
+    )
     access = Access(commanders=frozenset({"cmd"}), readers=frozenset({"ro"}), users_file=users_file)
     guarded = _settings(bridge_config(NODE, access=access))
     acl = guarded["access_control"]
