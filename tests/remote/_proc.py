@@ -460,7 +460,7 @@ class Hostile:
             return alive, replies
 
         alive, replies = await anyio.to_thread.run_sync(ask)
-        for _, payload in replies:
+        for _key, payload in replies:
             self._found(bytes.fromhex(payload))
         tokens = sorted({key for key, _ in self.tokens} | set(alive))
         return {
