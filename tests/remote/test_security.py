@@ -10,6 +10,7 @@ on the set-point keys, queryables on read/request/info, its ``_alive`` token, a 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import socket
@@ -245,10 +246,12 @@ def test_config_file_first_ours_on_top(tmp_path: Path) -> None:
     user_config = tmp_path / "zenoh.json5"
     user_config.write_text(
         "{ mode: 'router', listen: { endpoints: ['tcp/0.0.0.0:9'] },"
-        " scouting: { multicast: { enabled: true } }, queries_default_timeout: 1234 }"
+        " scouting: { multicast: { enabled: true } }, queries_default_timeout: 1234,"
+        " access_control: { enabled: false } }"
     )
     bridge = _settings(bridge_config(NODE, config_file=user_config))
     assert bridge["mode"] == "peer"
+    assert bridge["access_control"]["enabled"] is True  # (its clients stay apart, whatever the file says)
     assert bridge["listen"]["endpoints"] == [DEFAULT_ENDPOINT]
     assert bridge["scouting"]["multicast"]["enabled"] is False
     assert bridge["queries_default_timeout"] == 1234  # theirs, where we set nothing
@@ -404,7 +407,7 @@ def _refused(bridge: Bridge, config: zenoh.Config) -> None:
     assert bridge.puts == []
 
 
-def _served(endpoint: str, access: Access) -> Iterator[Bridge]:
+def _served(endpoint: str, access: Access | None) -> Iterator[Bridge]:
     """A recording bridge session on ``endpoint`` with ``access``, for one module's tests."""
     session = zenoh.open(bridge_config(NODE, [endpoint], access))
     bridge = Bridge(session, endpoint)
@@ -529,6 +532,37 @@ def test_usrpwd_and_tls_need_the_same_name_in_both(users_file: Path, pki: Pki) -
         _refused(bridge, client_config([endpoint], connect_timeout_s=REFUSED_TIMEOUT_S, **cert))
     finally:
         bridge.session.close()
+
+
+def test_default_bridge_every_session_commands_and_none_sees_another(tmp_path: Path) -> None:
+    """No users: any session may command (a peer, as ``connect`` opens), and a session in Zenoh's
+    ``client`` mode, which a peer routes for, is routed nothing of another client's."""
+    endpoint = f"tcp/127.0.0.1:{_port()}"
+    with contextlib.contextmanager(_served)(endpoint, None) as bridge:
+        spy_config = client_config([endpoint])
+        spy_config.insert_json5("mode", json.dumps("client"))
+        spy = zenoh.open(spy_config)
+        seen: list[str] = []
+        keep: list[Any] = []
+        try:
+            keep += [
+                spy.declare_subscriber(f"{ROOT}/**", lambda s: seen.append(str(s.key_expr))),
+                spy.declare_subscriber(f"{ROOT}/*/*/setpoint", lambda s: seen.append(str(s.key_expr))),
+                spy.declare_queryable(f"{ROOT}/**", lambda q: seen.append(str(q.key_expr))),
+                spy.liveliness().declare_subscriber(
+                    f"{ROOT}/_clients/*", lambda s: seen.append(str(s.key_expr)), history=True
+                ),
+            ]
+            _assert_commander(_probe(bridge, client_config([endpoint]), "cmd-1", reads=True, commands=True))
+            time.sleep(QUIET_S)
+            assert seen == [], seen
+            # what it may see, it sees: the bridge's token (so it is connected and served)
+            alive = [str(r.ok.key_expr) for r in spy.liveliness().get(f"{ROOT}/_alive", timeout=1.0) if r.ok]
+            assert alive == [f"{ROOT}/_alive"]
+            assert not [r for r in spy.liveliness().get(f"{ROOT}/_clients/*", timeout=0.5) if r.ok]
+        finally:
+            keep.clear()
+            spy.close()
 
 
 # --- sockets ----------------------------------------------------------------------------------------
