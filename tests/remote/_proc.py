@@ -20,7 +20,7 @@ set-points per tick until ``release``), ``release``, ``cycle``, ``request``, ``c
 ``raw_put``, ``raw_get``, ``quit``; each answer says ``ok`` or the error's type and message, and how
 long the call took.
 
-A hostile client (tests/remote/test_hostile_peers.py) opens raw Zenoh sessions of its own, in
+A hostile client (tests/remote/test_hostile_peers.py) opens a raw Zenoh session of its own, in
 ``client`` or ``peer`` mode: ``spy`` (watch everything under ``servobus/**``), ``spied`` (what it saw,
 with the secret and token ids found there), ``impersonate`` (act with every id it found: copies of
 the tokens, set-points and requests in those names, at a speed nobody else sends), ``impersonated``.
@@ -369,8 +369,8 @@ _ID_TEXT = re.compile(r"\b[0-9a-f]{32}\b")  # a secret or token id, as text (an 
 
 
 class Hostile:
-    """Raw Zenoh sessions of a program that wants to act in another client's name: it watches all
-    it is routed, then uses every secret and token id it found (and every one an error names)."""
+    """The raw Zenoh session of a program that wants to act in another client's name: it watches
+    all it is routed, then uses every secret and token id it found (and every one an error names)."""
 
     def __init__(self, args: argparse.Namespace) -> None:
         self.args = args
