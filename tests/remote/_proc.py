@@ -19,6 +19,12 @@ sending what a client never would. Its commands: ``connect``, ``hold`` (a task t
 set-points per tick until ``release``), ``release``, ``cycle``, ``request``, ``counts``, ``close``,
 ``raw_put``, ``raw_get``, ``quit``; each answer says ``ok`` or the error's type and message, and how
 long the call took.
+
+A hostile client (tests/remote/test_hostile_peers.py) opens a raw Zenoh session of its own, in
+``client`` or ``peer`` mode: ``spy`` (watch everything under ``servobus/**``), ``spied`` (what it saw,
+with the secret and token ids found there), ``impersonate`` (act with every id it found: copies of
+the tokens, set-points and requests in those names, at a speed nobody else sends), ``impersonated``.
+The bridge counts its speed frames by value (``speed_frames`` in ``report``) to tell them apart.
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ import argparse
 import contextlib
 import json
 import os
+import re
 import sys
 import time
 import traceback
@@ -60,10 +67,12 @@ async def commands() -> Any:
 
 
 class Frames:
-    """Every frame sent to the motors: ``(arbitration id, byte 0) -> [count, first ns, last ns]``."""
+    """Every frame sent to the motors: ``(arbitration id, byte 0) -> [count, first ns, last ns]``;
+    of the speed frames (0xA2), also by speed: ``(arbitration id, 0.01 dps) -> [count, first, last]``."""
 
     def __init__(self) -> None:
         self.seen: dict[tuple[int, int], list[int]] = {}
+        self.speeds: dict[tuple[int, int], list[int]] = {}
 
     def add(self, arbitration_id: int, data: bytes) -> None:
         now = time.time_ns()
@@ -74,9 +83,21 @@ class Frames:
         else:
             entry[0] += 1
             entry[2] = now
+        if key[1] == 0xA2 and len(data) >= 8:  # (a speed: DATA[4:8], 0.01 dps)
+            value = (arbitration_id, int.from_bytes(data[4:8], "little", signed=True))
+            entry = self.speeds.get(value)
+            if entry is None:
+                self.speeds[value] = [1, now, now]
+            else:
+                entry[0] += 1
+                entry[2] = now
 
     def listed(self) -> list[list[int]]:
         return [[aid, b0, *entry] for (aid, b0), entry in sorted(self.seen.items())]
+
+    def speeds_listed(self) -> list[list[Any]]:
+        """``[arbitration id, speed dps, count, first ns, last ns]`` of every speed sent."""
+        return [[aid, raw / 100, *entry] for (aid, raw), entry in sorted(self.speeds.items())]
 
 
 def logged_transport(frames: Frames, devices: list[MyActuatorMotor]) -> SimTransport:
@@ -170,10 +191,12 @@ async def bridge_main(args: argparse.Namespace) -> None:
                             "to_wire_ms": percentiles_ms(served.to_wire_ns),
                             "loop_lag_ms": lag.worst_s * 1e3,
                             "rss_mb": rss_mb(),
+                            "speed_frames": frames.speeds_listed(),
                         }
                     )
                 elif op == "reset":
                     frames.seen.clear()
+                    frames.speeds.clear()
                     bridge.stop_log.clear()
                     for served in bridge.served.values():
                         served.to_wire_ns.clear()
@@ -231,7 +254,13 @@ class Client:
             )
         )
         self.stack = stack
-        return {"shown_id": self.bus.shown_id, "motors": sorted(self.bus.motors)}
+        return {
+            "shown_id": self.bus.shown_id,
+            "motors": sorted(self.bus.motors),
+            # (what a hostile peer must never learn: tests/remote/test_hostile_peers.py)
+            "client_id": self.bus.client_id,
+            "token_id": self.bus.token_id,
+        }
 
     async def close(self, _: dict[str, Any]) -> dict[str, Any]:
         """Leave the connection (a hold running is released first); its counts as they were."""
@@ -334,6 +363,236 @@ class Client:
         return {"answers": out}
 
 
+# ---- a hostile client (tests/remote/test_hostile_peers.py) ----
+
+_ID_TEXT = re.compile(r"\b[0-9a-f]{32}\b")  # a secret or token id, as text (an error message)
+
+
+class Hostile:
+    """The raw Zenoh session of a program that wants to act in another client's name: it watches
+    all it is routed, then uses every secret and token id it found (and every one an error names)."""
+
+    def __init__(self, args: argparse.Namespace) -> None:
+        self.args = args
+        self.endpoint = f"tcp/127.0.0.1:{args.port}"
+        self.session: Any = None
+        self.kept: list[Any] = []  # declarations (subscribers, tokens) kept until quit
+        self.samples: list[tuple[str, str, str]] = []  # (what, key, payload hex)
+        self.tokens: list[tuple[str, str]] = []  # (key, kind)
+        self.queries: list[tuple[str, str]] = []  # (key, payload hex) routed to our queryable
+        self.newest_seq: dict[str, int] = {}  # secret id -> newest sequence number seen
+        self.scope: anyio.CancelScope | None = None
+        self.group: Any = None  # the client's task group, for the impersonation's task
+        self.sent = {"puts": 0, "requests": 0, "answers": 0}
+        self.answers: list[str] = []  # each request answer: the error's type, or "ok"
+
+    def calls(self) -> dict[str, Callable[[dict[str, Any]], Any]]:
+        return {
+            "spy": self.spy,
+            "spied": self.spied,
+            "impersonate": self.impersonate,
+            "impersonated": self.impersonated,
+        }
+
+    async def spy(self, c: dict[str, Any]) -> dict[str, Any]:
+        """Open a session in ``mode`` (``client`` or ``peer``) and watch ``servobus/**`` every way:
+        samples, liveliness with history, and a queryable (it answers nothing)."""
+        import zenoh
+
+        from servobus.remote.security import client_config
+
+        config = client_config([self.endpoint], connect_timeout_s=2.0)
+        config.insert_json5("mode", json.dumps(c["mode"]))
+        self.session = session = await anyio.to_thread.run_sync(zenoh.open, config)
+        node = self.args.node
+
+        def on_sample(what: str) -> Callable[[Any], None]:
+            return lambda s: self._sample(what, str(s.key_expr), s.payload.to_bytes())
+
+        def on_query(query: Any) -> None:
+            payload = b"" if query.payload is None else query.payload.to_bytes()
+            self.queries.append((str(query.key_expr), payload.hex()))
+            self._found(payload)
+
+        def on_token(sample: Any) -> None:
+            self.tokens.append((str(sample.key_expr), str(sample.kind)))
+
+        self.kept += [
+            session.declare_subscriber("servobus/**", on_sample("all")),
+            # (what any client may see: it shows this session is connected and served)
+            session.declare_subscriber(f"servobus/{node}/*/*/state", on_sample("state")),
+            session.liveliness().declare_subscriber("servobus/**", on_token, history=True),
+            session.liveliness().declare_subscriber(f"servobus/{node}/_alive", on_token, history=True),
+            session.declare_queryable("servobus/**", on_query),
+        ]
+        return {"zid": str(session.info.zid())}
+
+    def _sample(self, what: str, key: str, payload: bytes) -> None:
+        # (a state is public: it reaches a session that subscribes to states by every subscriber)
+        self.samples.append(("state" if key.endswith("/state") else what, key, payload.hex()))
+        self._found(payload)
+
+    def _found(self, payload: bytes) -> None:
+        """The secret id (and sequence number) in a set-point or request message, if it is one."""
+        from servobus.remote import wire
+
+        head = 2 + wire.CLIENT_ID_BYTES  # version, kind, the secret id; then a set-point's seq
+        if (
+            len(payload) >= head
+            and payload[0] == wire.VERSION
+            and payload[1] in (wire.SETPOINTS, wire.REQUEST)
+        ):
+            secret = payload[2:head].hex()
+            seq = int.from_bytes(payload[head : head + 4], "little") if payload[1] == wire.SETPOINTS else 0
+            self.newest_seq[secret] = max(seq, self.newest_seq.get(secret, 0))
+
+    async def spied(self, _: dict[str, Any]) -> dict[str, Any]:
+        """All it saw, a liveliness query and a query on ``servobus/**`` besides."""
+        session = self.session
+
+        def ask() -> tuple[list[str], list[list[str]]]:
+            alive = [str(r.ok.key_expr) for r in session.liveliness().get("servobus/**", timeout=1.0) if r.ok]
+            replies = [
+                [str(r.ok.key_expr), r.ok.payload.to_bytes().hex()]
+                for r in session.get("servobus/**", timeout=1.0)
+                if r.ok is not None
+            ]
+            return alive, replies
+
+        alive, replies = await anyio.to_thread.run_sync(ask)
+        for _key, payload in replies:
+            self._found(bytes.fromhex(payload))
+        tokens = sorted({key for key, _ in self.tokens} | set(alive))
+        return {
+            "samples": [s for s in self.samples if s[0] != "state"],
+            "states": sum(1 for s in self.samples if s[0] == "state"),
+            "tokens": tokens,
+            "liveliness_get": alive,
+            "replies": replies,
+            "queries": [q for q in self.queries if q[1]],  # (ours, without payload, left out)
+            "secrets": sorted(self.newest_seq),
+            "token_ids": sorted({key.rsplit("/", 1)[-1] for key in tokens if "/_clients/" in key}),
+        }
+
+    async def impersonate(self, c: dict[str, Any]) -> dict[str, Any]:
+        """Act in every name found: a token of its own (so it may ask), a request for each motor in
+        it (the refusal names the holder), copies of every token found and named, then set-points
+        and requests of ``command`` to ``motors`` in every secret's name found, and of ``own`` in
+        its own name, at ``hz``, until quit."""
+        from servobus.remote import wire
+
+        session = self.session
+        schema = wire.Schema.of(ma.FAMILY.name)
+        command = _command(c["command"], c.get("fields", {}))
+        own = _command(c["command"], c.get("own_fields", c.get("fields", {})))
+        mine = os.urandom(wire.CLIENT_ID_BYTES).hex()
+        node, bus = self.args.node, self.args.bus
+        self.kept.append(
+            session.liveliness().declare_token(f"servobus/{node}/_clients/{wire.public_id(mine)}")
+        )
+        await anyio.sleep(0.2)  # (its token reaches the bridge before its requests)
+        named: set[str] = set()
+        for mid in c["motors"]:
+            for text in await self._request(f"servobus/{node}/{bus}/{mid}/request", schema, mine, own):
+                named.update(_ID_TEXT.findall(text))
+        token_ids = set(c.get("token_ids", [])) | {
+            key.rsplit("/", 1)[-1] for key, _ in self.tokens if "/_clients/" in key
+        }
+        copies = sorted((token_ids | named) - {wire.public_id(mine)})
+        for token_id in copies:
+            self.kept.append(session.liveliness().declare_token(f"servobus/{node}/_clients/{token_id}"))
+        secrets = sorted((set(self.newest_seq) | named) - {mine})  # (its own probe too was seen)
+        commands = {secret: command for secret in secrets} | {mine: own}
+        period = 1.0 / c.get("hz", 200.0)
+        scope = self.scope = anyio.CancelScope()
+
+        async def run() -> None:
+            seq = {secret: self.newest_seq.get(secret, 0) + 100_000 for secret in commands}
+            with scope:
+                while True:
+                    now = time.time_ns()
+                    for secret, sent in commands.items():
+                        seq[secret] = (seq[secret] + 1) & 0xFFFFFFFF
+                        items = tuple((mid, sent) for mid in c["motors"])
+                        message = wire.Setpoints(secret, seq[secret], now, now + 1_000_000_000, items)
+                        session.put(
+                            f"servobus/{node}/{bus}/setpoints",
+                            wire.encode_setpoints(lambda _: schema, message),
+                        )
+                        for mid in c["motors"]:
+                            one = wire.Setpoints(
+                                secret, seq[secret], now, now + 1_000_000_000, ((mid, sent),)
+                            )
+                            session.put(
+                                f"servobus/{node}/{bus}/{mid}/setpoint",
+                                wire.encode_setpoints(lambda _: schema, one),
+                            )
+                        self.sent["puts"] += 1 + len(c["motors"])
+                    for secret, sent in commands.items():
+                        for mid in c["motors"]:
+                            key = f"servobus/{node}/{bus}/{mid}/request"
+                            self._ask(
+                                key, wire.encode_request(schema, wire.Request(secret, sent, None)), schema
+                            )
+                    await anyio.sleep(period)
+
+        self.group.start_soon(run)
+        return {"mine": mine, "named": sorted(named), "token_copies": copies, "secrets": secrets}
+
+    async def _request(self, key: str, schema: Any, secret: str, command: Any) -> list[str]:
+        """Each answer to one request in ``secret``'s name: the error's type and message, or "ok"."""
+        from servobus.remote import wire
+
+        payload = wire.encode_request(schema, wire.Request(secret, command, None))
+
+        def get() -> list[str]:
+            out = []
+            for reply in self.session.get(key, payload=payload, timeout=1.0):
+                if reply.ok is None:
+                    out.append("err " + reply.err.payload.to_bytes().decode(errors="replace"))
+                    continue
+                result = wire.decode_result(schema, reply.ok.payload.to_bytes())
+                error = result.error
+                out.append("ok" if error is None else f"{type(error).__name__}: {error}")
+            return out
+
+        found = await anyio.to_thread.run_sync(get)
+        self.answers += found
+        return found
+
+    def _ask(self, key: str, payload: bytes, schema: Any) -> None:
+        """A request sent without waiting (Zenoh's thread counts its answer)."""
+        import zenoh
+
+        from servobus.remote import wire
+
+        def on_reply(reply: Any) -> None:
+            self.sent["answers"] += 1
+            if reply.ok is not None:
+                error = wire.decode_result(schema, reply.ok.payload.to_bytes()).error
+                self.answers.append("ok" if error is None else type(error).__name__)
+
+        self.session.get(key, zenoh.handlers.Callback(on_reply, lambda: None), payload=payload, timeout=1.0)
+        self.sent["requests"] += 1
+
+    async def impersonated(self, _: dict[str, Any]) -> dict[str, Any]:
+        kinds: dict[str, int] = {}
+        for answer in self.answers:
+            kind = answer.split(":", 1)[0]
+            kinds[kind] = kinds.get(kind, 0) + 1
+        return {"sent": dict(self.sent), "answers": kinds, "running": self.scope is not None}
+
+    def close(self) -> None:
+        if self.scope is not None:
+            self.scope.cancel()
+        if self.session is not None:
+            for item in reversed(self.kept):
+                with contextlib.suppress(Exception):
+                    item.undeclare()
+            self.session.close()
+            self.session = None
+
+
 async def client_main(args: argparse.Namespace) -> None:
     client = Client(args)
     calls: dict[str, Callable[[dict[str, Any]], Any]] = {
@@ -344,8 +603,11 @@ async def client_main(args: argparse.Namespace) -> None:
         "raw_put": client.raw_put,
         "raw_get": client.raw_get,
     }
+    hostile = Hostile(args)
+    calls.update(hostile.calls())
     emit({"ready": True, "pid": os.getpid()})
     async with anyio.create_task_group() as group:
+        hostile.group = group
         async for command in commands():
             op = command["op"]
             started = time.perf_counter()
@@ -374,6 +636,7 @@ async def client_main(args: argparse.Namespace) -> None:
             answer["elapsed_s"] = time.perf_counter() - started
             emit(answer)
         group.cancel_scope.cancel()
+    hostile.close()
     if client.raw is not None:
         client.raw.close()
 

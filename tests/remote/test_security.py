@@ -10,6 +10,7 @@ on the set-point keys, queryables on read/request/info, its ``_alive`` token, a 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import socket
@@ -187,7 +188,10 @@ def test_insecure_listen(users_file: Path) -> None:
     # accepted when told, or with access (neither is opened here)
     insecure = _settings(bridge_config(NODE, ["tcp/0.0.0.0:7447"], insecure=True))
     assert insecure["listen"]["endpoints"] == ["tcp/0.0.0.0:7447"]
-    assert not insecure["access_control"]["enabled"]
+    # (no users, but one client's traffic still reaches no other: every session a commander)
+    assert insecure["access_control"]["enabled"]
+    (anyone,) = insecure["access_control"]["subjects"]
+    assert anyone["id"] == "anyone" and not any(v for k, v in anyone.items() if k != "id"), anyone
     access = Access(commanders=frozenset({"cmd"}), users_file=users_file)
     guarded = _settings(bridge_config(NODE, ["tcp/0.0.0.0:7447"], access))
     assert guarded["access_control"]["enabled"]
@@ -201,6 +205,16 @@ def test_bridge_config_settings(users_file: Path) -> None:
     assert default["scouting"]["multicast"]["enabled"] is False
     assert default["scouting"]["gossip"]["enabled"] is False
     assert default["adminspace"]["enabled"] is False
+    # the default bridge isolates its clients with the commanders' rules, for any session
+    open_acl = default["access_control"]
+    assert open_acl["enabled"] is True and open_acl["default_permission"] == "deny"
+    assert [p["subjects"] for p in open_acl["policies"]] == [["anyone"]]
+    assert not any(
+        rule["flows"] == ["egress"]
+        and "put" in rule["messages"]
+        and any(k.endswith("setpoint") or k.endswith("setpoints") for k in rule["key_exprs"])
+        for rule in open_acl["rules"]
+    )
     access = Access(commanders=frozenset({"cmd"}), readers=frozenset({"ro"}), users_file=users_file)
     guarded = _settings(bridge_config(NODE, access=access))
     acl = guarded["access_control"]
@@ -232,10 +246,12 @@ def test_config_file_first_ours_on_top(tmp_path: Path) -> None:
     user_config = tmp_path / "zenoh.json5"
     user_config.write_text(
         "{ mode: 'router', listen: { endpoints: ['tcp/0.0.0.0:9'] },"
-        " scouting: { multicast: { enabled: true } }, queries_default_timeout: 1234 }"
+        " scouting: { multicast: { enabled: true } }, queries_default_timeout: 1234,"
+        " access_control: { enabled: false } }"
     )
     bridge = _settings(bridge_config(NODE, config_file=user_config))
     assert bridge["mode"] == "peer"
+    assert bridge["access_control"]["enabled"] is True  # (its clients stay apart, whatever the file says)
     assert bridge["listen"]["endpoints"] == [DEFAULT_ENDPOINT]
     assert bridge["scouting"]["multicast"]["enabled"] is False
     assert bridge["queries_default_timeout"] == 1234  # theirs, where we set nothing
@@ -391,7 +407,7 @@ def _refused(bridge: Bridge, config: zenoh.Config) -> None:
     assert bridge.puts == []
 
 
-def _served(endpoint: str, access: Access) -> Iterator[Bridge]:
+def _served(endpoint: str, access: Access | None) -> Iterator[Bridge]:
     """A recording bridge session on ``endpoint`` with ``access``, for one module's tests."""
     session = zenoh.open(bridge_config(NODE, [endpoint], access))
     bridge = Bridge(session, endpoint)
@@ -516,6 +532,37 @@ def test_usrpwd_and_tls_need_the_same_name_in_both(users_file: Path, pki: Pki) -
         _refused(bridge, client_config([endpoint], connect_timeout_s=REFUSED_TIMEOUT_S, **cert))
     finally:
         bridge.session.close()
+
+
+def test_default_bridge_every_session_commands_and_none_sees_another(tmp_path: Path) -> None:
+    """No users: any session may command (a peer, as ``connect`` opens), and a session in Zenoh's
+    ``client`` mode, which a peer routes for, is routed nothing of another client's."""
+    endpoint = f"tcp/127.0.0.1:{_port()}"
+    with contextlib.contextmanager(_served)(endpoint, None) as bridge:
+        spy_config = client_config([endpoint])
+        spy_config.insert_json5("mode", json.dumps("client"))
+        spy = zenoh.open(spy_config)
+        seen: list[str] = []
+        keep: list[Any] = []
+        try:
+            keep += [
+                spy.declare_subscriber(f"{ROOT}/**", lambda s: seen.append(str(s.key_expr))),
+                spy.declare_subscriber(f"{ROOT}/*/*/setpoint", lambda s: seen.append(str(s.key_expr))),
+                spy.declare_queryable(f"{ROOT}/**", lambda q: seen.append(str(q.key_expr))),
+                spy.liveliness().declare_subscriber(
+                    f"{ROOT}/_clients/*", lambda s: seen.append(str(s.key_expr)), history=True
+                ),
+            ]
+            _assert_commander(_probe(bridge, client_config([endpoint]), "cmd-1", reads=True, commands=True))
+            time.sleep(QUIET_S)
+            assert seen == [], seen
+            # what it may see, it sees: the bridge's token (so it is connected and served)
+            alive = [str(r.ok.key_expr) for r in spy.liveliness().get(f"{ROOT}/_alive", timeout=1.0) if r.ok]
+            assert alive == [f"{ROOT}/_alive"]
+            assert not [r for r in spy.liveliness().get(f"{ROOT}/_clients/*", timeout=0.5) if r.ok]
+        finally:
+            keep.clear()
+            spy.close()
 
 
 # --- sockets ----------------------------------------------------------------------------------------

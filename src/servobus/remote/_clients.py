@@ -57,7 +57,9 @@ class Clients:
             raise PermissionError("this client has no liveliness token: it may only read")
         holder = self.holder(served, mid, client)
         if holder is not None:
-            raise PermissionError(f"motor {mid} on {served.name} is held by another client ({holder})")
+            # (named as the metrics name it: its token's key would let the asker keep that token alive)
+            shown = wire.shown_id(holder)
+            raise PermissionError(f"motor {mid} on {served.name} is held by another client ({shown})")
         if command in served.safe_commands[mid]:
             served.held.pop(mid, None)  # (the tick must not send the set-point over the stop)
             served.stale_since.pop(mid, None)

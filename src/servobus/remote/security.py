@@ -8,13 +8,18 @@ loopback, and gossip would let a connected peer make the bridge dial addresses i
 With :class:`Access`, clients authenticate with a user name and password (Zenoh's ``usrpwd``: a
 dictionary file of ``user:password`` lines), with a client certificate (mutual TLS: the subject is the
 certificate's common name), or both (then a client's user name and common name must both be in the
-same set). Zenoh's access control then denies everything but, for the keys of node ``N``:
+same set). Zenoh's access control denies everything but, for the keys of node ``N``:
 
 * readers and commanders: subscribe to ``servobus/N/<B>/<M>/state``; query
   ``servobus/N/<B>/info``, ``servobus/N/<B>/metrics`` and ``servobus/N/<B>/<M>/read``; see the
   bridge's liveliness token ``servobus/N/_alive``;
 * commanders also: put ``servobus/N/<B>/<M>/setpoint`` and ``servobus/N/<B>/setpoints``; query
   ``servobus/N/<B>/<M>/request``; declare a liveliness token ``servobus/N/_clients/<client id>``.
+
+Without :class:`Access` every session that connects is a commander, under the same rules: nothing
+is routed from one client to another (a Zenoh session in ``client`` mode is otherwise routed every
+other client's set-points, requests and tokens, secret ids included), so a local program cannot
+learn another client's secret nor keep its token alive, whatever the session's mode.
 
 Zenoh matches a message's key expression by *inclusion* in a rule's key expressions, the bridge's own
 declarations included: the bridge must declare its subscribers, queryables and liveliness subscriber
@@ -242,8 +247,9 @@ def _rule(rule_id: str, flow: str, messages: Sequence[str], keys: Sequence[str])
     }
 
 
-def _access_control(node: str, access: Access) -> dict[str, Any]:
-    """Zenoh's ``access_control`` for ``access`` on node ``node``: deny all but what is listed.
+def _access_control(node: str, access: Access | None) -> dict[str, Any]:
+    """Zenoh's ``access_control`` for ``access`` on node ``node``: deny all but what is listed;
+    without ``access``, every session may do what a commander may.
 
     Flows are seen from the bridge: ingress is what a client sends it, egress what it sends a client.
     Each line below was found needed by experiment (Zenoh 1.10.2, peer to peer, each rule dropped in
@@ -276,6 +282,23 @@ def _access_control(node: str, access: Access) -> dict[str, Any]:
         # Not needed in 1.10.2, as alive-watch-in: the bridge's watch on the tokens, announced.
         _rule("client-watch-out", "egress", ["declare_liveliness_subscriber"], [f"{root}/_clients/**"]),
     ]
+    if access is None:
+        # Everyone a commander, but the same rules: nothing a client sends is routed to another
+        # client (no set-point, request, token or query of one reaches the other), whatever the
+        # session's mode. A subject with no field is any session (checked with Zenoh 1.10.2).
+        return {
+            "enabled": True,
+            "default_permission": "deny",
+            "rules": reading + commanding,
+            "subjects": [{"id": "anyone"}],
+            "policies": [
+                {
+                    "id": "command",
+                    "rules": [rule["id"] for rule in reading + commanding],
+                    "subjects": ["anyone"],
+                }
+            ],
+        }
     subjects: list[dict[str, Any]] = []
     for subject_id, names in (("commanders", access.commanders), ("readers", access.readers)):
         if not names:
@@ -338,13 +361,14 @@ def bridge_config(
     Args:
         node: the node's key chunk (``servobus/<node>/…``).
         listen: the endpoints to listen on, exactly these.
-        access: who may do what; None: anyone who can connect may do anything.
+        access: who may do what; None: anyone who can connect may command (and nothing of one
+            client reaches another: see the module's docstring).
         insecure: listen beyond this host without ``access`` all the same.
         config_file: a Zenoh JSON5 config loaded first. Set on top of it, whatever it says: ``mode``,
             ``listen/endpoints``, ``connect/endpoints`` (none), ``scouting/multicast/enabled`` and
             ``scouting/gossip/enabled`` (false), ``adminspace/enabled`` (false),
-            ``transport/link/tx/lease`` (1 s) and ``keep_alive`` (4 a lease); with ``access``,
-            ``access_control``, ``transport/auth/usrpwd/dictionary_file`` (with a users file) and
+            ``transport/link/tx/lease`` (1 s) and ``keep_alive`` (4 a lease), ``access_control``;
+            with ``access``, ``transport/auth/usrpwd/dictionary_file`` (with a users file) and
             ``transport/link/tls/{listen_certificate,listen_private_key,root_ca_certificate,
             enable_mtls}`` (with TLS).
 
@@ -393,7 +417,7 @@ def bridge_config(
             settings["transport/link/tls/enable_mtls"] = True
         if access.users_file is not None:
             settings["transport/auth/usrpwd/dictionary_file"] = str(access.users_file.resolve())
-        settings["access_control"] = _access_control(node, access)
+    settings["access_control"] = _access_control(node, access)
     return _config(config_file, settings)
 
 
