@@ -15,6 +15,7 @@ from servobus.errors import ServobusError
 from servobus.remote import wire
 from servobus.remote._clients import Clients, safe_done
 from servobus.remote._served import Served
+from servobus.remote._withdraw import Withdrawn
 from servobus.remote.keys import Keys
 
 logger = logging.getLogger("servobus.remote.bridge")
@@ -83,6 +84,8 @@ async def _run(
         clients.command(served, mid, request.client_id, command)
     try:
         reply = await served.bus.request(motor, command, timeout_s=request.timeout_s)
+    except Withdrawn as exc:  # (its client lost the motor while it was queued: counted withdrawn)
+        return wire.Result(error=exc)
     except ServobusError as exc:
         if safe:
             safe_done(served, mid, request.client_id, False, runtime.current().time())

@@ -39,6 +39,7 @@ from servobus.remote._clients import Clients
 from servobus.remote._handover import Handover
 from servobus.remote._served import Held, Served
 from servobus.remote._session import close_session, handed, sample_kind
+from servobus.remote._withdraw import withdraw
 from servobus.remote.keys import Keys
 from servobus.safety import stop_motors
 from servobus.ticks import ticks
@@ -194,7 +195,7 @@ class Bridge:
         if kind == "PUT":
             self.clients.live.add(client)
             return
-        self.clients.live.discard(client)
+        self.clients.left(client)
         for served in self.served.values():
             held = [mid for mid, owner in served.owners.items() if owner == client]
             self._stop(served, held, "client left")
@@ -209,9 +210,11 @@ class Bridge:
                 logger.warning("%s/%s: the bridge is closed: no stop for %s", self.node, served.name, motors)
 
     def _release(self, served: Served, motor_ids: Iterable[int], why: str) -> list[Motor]:
-        """Release the motors and write down why they are stopped; the motors."""
+        """Release the motors, withdraw their holders' commands still queued (before the stop is
+        submitted: they would follow it) and write down why they are stopped; the motors."""
         motors = [served.motors[mid] for mid in motor_ids]
         for motor in motors:
+            withdraw(served, motor.motor_id, why)
             served.release(motor.motor_id)
         if motors:
             served.counts["stops"] += len(motors)
@@ -297,7 +300,7 @@ class Bridge:
                 served.counts["reordered"] += 1
                 continue
             served.counts["setpoints"] += 1
-            served.owners[mid] = client
+            self.clients.take(served, mid, client)
             served.stale_since.pop(mid, None)
             served.held[mid] = Held(client, message.seq, command, message.sent_unix_ns, expires)
 
@@ -319,6 +322,8 @@ class Bridge:
                     fresh.append(held)
             due = [mid for mid, since in served.stale_since.items() if now - since >= self.stop_after_s]
             if due:
+                for mid in due:
+                    self.clients.revoke(served, mid)
                 self._stop(served, due, f"set-points stale for {self.stop_after_s * 1e3:.0f} ms")
             if not items:
                 continue
