@@ -62,7 +62,11 @@ class Bridge:
     A motor a client commanded gets its safe command when that client leaves (its process ends or
     its link is lost for the 1 s lease), and when its set-point stays stale for ``stop_after_s``:
     the Bus's ``safe`` kind, or ``"stop"`` for a Bus whose ``safe`` is None. A motor a client made
-    safe itself (a stop, shutdown or brake request) is no longer that client's.
+    safe itself (a stop, shutdown or brake request) is no longer that client's. A client that loses
+    a motor (it left, its set-points went stale, it was taken over, the bridge closes) loses with it
+    its commands still queued on the Bus, withdrawn before the stop is submitted (``_withdraw``); one
+    stopped for stale set-points takes the motor back by a set-point or a stop request, not by the
+    requests it may have sent before the stop.
 
     Args:
         node: this bridge's name, the second key segment (a host name, ``arm``).
