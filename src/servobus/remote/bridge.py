@@ -304,7 +304,8 @@ class Bridge:
                 served.counts["reordered"] += 1
                 continue
             served.counts["setpoints"] += 1
-            self.clients.take(served, mid, client)
+            if served.owners.get(mid) != client:  # (a motor released or revoked has no owner)
+                self.clients.take(served, mid, client)
             served.stale_since.pop(mid, None)
             served.held[mid] = Held(client, message.seq, command, message.sent_unix_ns, expires)
 
