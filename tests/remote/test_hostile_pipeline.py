@@ -71,8 +71,9 @@ def test_a_killed_pipelining_commander_s_queued_requests_do_not_follow_its_stop(
     frames = frames_of(done)
     first_ms = [(frames[m][STOP][1] - killed_ns) / 1e6 for m in MOTORS_HELD]
     late = after_stop(done)
+    decided_ms = [(when - killed_ns) / 1e6 for when, _, _, _ in done["stop_log"]]
     print(
-        f"kill -> stop frames {min(first_ms):.1f}..{max(first_ms):.1f} ms; speed frames after the stop "
+        f"kill -> stop decided {min(decided_ms):.1f} ms, stop frames {min(first_ms):.1f}..{max(first_ms):.1f} ms; speed frames after the stop "
         f"{sum(late.values())} ({late}); withdrawn {done['bridge'].get('withdrawn')}; refused after the "
         f"kill (its queries still in the bridge's intake) {done['bridge']['refused']}"
     )

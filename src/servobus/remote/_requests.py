@@ -28,6 +28,9 @@ async def answer(served: Served, query: Any, keys: Keys, clients: Clients) -> No
     except BaseException:  # cancelled (the bridge is closing): answered nothing, at once
         finish(query)
         raise
+    if isinstance(result.error, Withdrawn) and result.error.client_left:
+        finish(query)  # (no answer to a client that is gone: no worker thread ahead of its stop)
+        return
     try:
         payload = wire.encode_result(schema, result)
     except wire.WireError as exc:  # (a plug-in's reply with a value the encoding has no form for)

@@ -24,19 +24,24 @@ if TYPE_CHECKING:
 
 class Withdrawn(PermissionError):
     """A command withdrawn before it was sent: its client no longer holds the motor (a
-    PermissionError to the client)."""
+    PermissionError to the client; none to a client that left)."""
+
+    def __init__(self, message: str, client_left: bool) -> None:
+        super().__init__(message)
+        self.client_left = client_left
 
 
-def withdraw(served: Served, mid: int, why: str) -> int:
+def withdraw(served: Served, mid: int, why: str, client_left: bool = False) -> int:
     """Withdraw the commands for motor ``mid`` still queued on ``served``'s Bus (their callers get
-    :class:`Withdrawn`, saying ``why``); how many."""
+    :class:`Withdrawn`, saying ``why``; ``client_left``: nobody to answer); how many."""
     safe = served.safe_commands[mid]
 
     def spare(request: Request) -> bool:
         return bool(type(request.command).READ) or request.command in safe
 
     error = Withdrawn(
-        f"motor {mid} on {served.name} was released ({why}): this command was withdrawn before it was sent"
+        f"motor {mid} on {served.name} was released ({why}): this command was withdrawn before it was sent",
+        client_left,
     )
     withdrawn = served.bus._engine.withdraw(served.motors[mid], error, spare)
     served.counts["withdrawn"] += len(withdrawn)

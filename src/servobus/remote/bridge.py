@@ -49,6 +49,7 @@ __all__ = ["Bridge"]
 logger = logging.getLogger(__name__)
 
 _BACKLOG = 4096  # set-points and queries waiting for the loop; more are dropped on Zenoh's thread
+_LEFT = "client left"  # why a motor is stopped when its client's token went
 
 
 class Bridge:
@@ -202,7 +203,7 @@ class Bridge:
         self.clients.left(client)
         for served in self.served.values():
             held = [mid for mid, owner in served.owners.items() if owner == client]
-            self._stop(served, held, "client left")
+            self._stop(served, held, _LEFT)
 
     def _stop(self, served: Served, motor_ids: Iterable[int], why: str) -> None:
         """Release the motors (set-points, holder) and send each its safe command, in a task."""
@@ -218,7 +219,7 @@ class Bridge:
         submitted: they would follow it) and write down why they are stopped; the motors."""
         motors = [served.motors[mid] for mid in motor_ids]
         for motor in motors:
-            withdraw(served, motor.motor_id, why)
+            withdraw(served, motor.motor_id, why, client_left=why == _LEFT)
             served.release(motor.motor_id)
         if motors:
             served.counts["stops"] += len(motors)
