@@ -73,9 +73,10 @@ def test_a_killed_pipelining_commander_s_queued_requests_do_not_follow_its_stop(
     late = after_stop(done)
     decided_ms = [(when - killed_ns) / 1e6 for when, _, _, _ in done["stop_log"]]
     print(
-        f"kill -> stop decided {min(decided_ms):.1f} ms, stop frames {min(first_ms):.1f}..{max(first_ms):.1f} ms; speed frames after the stop "
-        f"{sum(late.values())} ({late}); withdrawn {done['bridge'].get('withdrawn')}; refused after the "
-        f"kill (its queries still in the bridge's intake) {done['bridge']['refused']}"
+        f"kill -> stop decided {min(decided_ms):.1f} ms, stop frames {min(first_ms):.1f}.."
+        f"{max(first_ms):.1f} ms; speed frames after the stop {sum(late.values())} ({late}); withdrawn "
+        f"{done['bridge'].get('withdrawn')}; refused after the kill (its queries still in the bridge's "
+        f"intake) {done['bridge']['refused']}"
     )
     assert late == {}, f"{sum(late.values())} speed frames of the dead client after its stop: {late}"
     assert max(first_ms) <= 250, first_ms
