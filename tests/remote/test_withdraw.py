@@ -177,3 +177,34 @@ async def test_a_client_stopped_for_stale_set_points_takes_the_motor_back_only_b
         assert isinstance(await motor.motor_stop(), ma.Echo)
         assert isinstance(await motor.speed_control(speed_dps=40.0), ma.StatusReply)
         assert bridge.served["b"].owners == {2: a.token_id}
+
+
+async def test_a_bridge_that_closes_withdraws_what_its_clients_queued_before_its_stop() -> None:
+    endpoint, transport = _endpoint(), slow_bus(1, 2)
+    outcomes: list[Any] = []
+
+    async def a_speed(remote: Any) -> None:
+        with anyio.move_on_after(5):
+            try:
+                outcomes.append(await remote.motor(1).speed_control(speed_dps=90.0))
+            except Exception as exc:  # withdrawn, or no answer from a bridge that went
+                outcomes.append(exc)
+
+    async with servobus.Bus(transport, safe=None) as bus, anyio.create_task_group() as group:
+        motors = [bus.motor(ma.FAMILY, i) for i in (1, 2)]
+        async with Bridge("n", {"b": (bus, motors)}, config=bridge_config("n", [endpoint])) as bridge:
+            remote = await connect("n/b", endpoints=[endpoint]).__aenter__()
+            try:
+                for _ in range(6):
+                    group.start_soon(a_speed, remote)
+                await _until(lambda: bus.scheduler.pending >= 4)  # queued on the Bus
+            except BaseException:
+                await remote.__aexit__(None, None, None)
+                raise
+        await remote.__aexit__(None, None, None)
+    stop = lambda f: f[0] == 0x141 and f[1][0] == STOP  # noqa: E731
+    speed_after_stop = after(transport.sent, stop, lambda f: f[0] == 0x141)
+    assert speed_after_stop == [], [d.hex() for d in speed_after_stop]
+    assert [(m, why) for _, _, m, why in bridge.stop_log] == [(1, "bridge closing")]
+    assert bridge.served["b"].counts.get("withdrawn", 0) >= 1
+    assert any(isinstance(o, PermissionError) for o in outcomes), outcomes

@@ -146,6 +146,7 @@ class Bridge:
         try:
             if self._group is not None:
                 with anyio.CancelScope(shield=True):  # the clients' motors, before the tasks go
+                    self.clients.live.clear()  # (closing: their requests meanwhile are refused)
                     for served in self.served.values():
                         held = set(served.owners) | set(served.held) | set(served.stale_since)
                         motors = self._release(served, sorted(held), "bridge closing")
