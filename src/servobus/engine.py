@@ -22,7 +22,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING, Any
 
 import anyio
@@ -266,6 +266,19 @@ class Engine:
             request.context.cancel()  # (no effect on a resolved one)
             self.scheduler.cancel(request, now)  # (nor here)
         self.pump()
+
+    def withdraw(self, motor: Motor, error: BaseException, spare: Callable[[Request], bool]) -> list[Request]:
+        """The requests to ``motor`` not yet handed to the link, but those ``spare`` keeps, never
+        will be: they end (cancelled) and their callers get ``error``; returns them. Synchronous: a
+        request submitted after this call (a stop) cannot be overtaken by them, whereas a request
+        queued behind a reply still due would leave after a stop that has another reply key. What
+        was handed over is left alone (its frame leaves before anything submitted later)."""
+        now = self.time()
+        withdrawn = [r for r in self.scheduler.queued(motor.codec) if not spare(r)]
+        for request in withdrawn:
+            self.scheduler.cancel(request, now)
+            self.settle(request, error)
+        return withdrawn
 
     # ---- intake ----
 

@@ -333,6 +333,10 @@ class Scheduler(Pacing, Matching, OtherHosts, Timing):
             self._finish(request, _FAILED, now)
         return failed
 
+    def queued(self, codec: BoundCodec) -> list[Request]:
+        """The requests to ``codec``'s motor not yet handed to the link, in their order."""
+        return [request for request in self._queue if request.codec is codec]
+
     # ---- bookkeeping ----
 
     @property

@@ -12,13 +12,15 @@ counted by arbitration id and first data byte, with the wall-clock time of its f
 sending: that is "what reached the motors". Its commands: ``report`` (those counts since the last
 ``reset``, the bridge's counters and stop log, each simulated motor's control, and the instruments:
 the set-point -> wire latency since the last ``reset``, the event loop's worst lag, the process's
-resident memory), ``reset``, ``quit``.
+resident memory; the frames sent after their motor's first stop since ``reset``, the Bus's pending
+requests), ``reset``, ``quit``.
 
 The client holds at most one connection (``servobus.remote.connect``) and a raw Zenoh session for
 sending what a client never would. Its commands: ``connect``, ``hold`` (a task that sends a batch of
 set-points per tick until ``release``), ``release``, ``cycle``, ``request``, ``counts``, ``close``,
-``raw_put``, ``raw_get``, ``quit``; each answer says ``ok`` or the error's type and message, and how
-long the call took.
+``raw_put``, ``raw_get``, ``pipeline`` (requests kept in flight in the background), ``pipelined``
+(their counts; ``stop`` ends them), ``quit``; each answer says ``ok`` or the error's type and
+message, and how long the call took.
 
 A hostile client (tests/remote/test_hostile_peers.py) opens a raw Zenoh session of its own, in
 ``client`` or ``peer`` mode: ``spy`` (watch everything under ``servobus/**``), ``spied`` (what it saw,
@@ -45,7 +47,10 @@ import anyio
 import servobus
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.sim import MyActuatorMotor
+from servobus.sim.canbus import CanBusModel
 from servobus.transports.sim import SimTransport
+
+_STOP = 0x81  # MyActuator's stop command (its first byte)
 
 
 def emit(body: dict[str, Any]) -> None:
@@ -68,15 +73,19 @@ async def commands() -> Any:
 
 class Frames:
     """Every frame sent to the motors: ``(arbitration id, byte 0) -> [count, first ns, last ns]``;
-    of the speed frames (0xA2), also by speed: ``(arbitration id, 0.01 dps) -> [count, first, last]``."""
+    of the speed frames (0xA2), also by speed: ``(arbitration id, 0.01 dps) -> [count, first, last]``;
+    and of them all, those sent after the first stop (0x81) of their arbitration id (``after_stop``)."""
 
     def __init__(self) -> None:
         self.seen: dict[tuple[int, int], list[int]] = {}
         self.speeds: dict[tuple[int, int], list[int]] = {}
+        self.after_stop: dict[tuple[int, int], int] = {}
 
     def add(self, arbitration_id: int, data: bytes) -> None:
         now = time.time_ns()
         key = (arbitration_id, data[0] if data else -1)
+        if (arbitration_id, _STOP) in self.seen:  # (counted in the order the frames were sent)
+            self.after_stop[key] = self.after_stop.get(key, 0) + 1
         entry = self.seen.get(key)
         if entry is None:
             self.seen[key] = [1, now, now]
@@ -99,14 +108,21 @@ class Frames:
         """``[arbitration id, speed dps, count, first ns, last ns]`` of every speed sent."""
         return [[aid, raw / 100, *entry] for (aid, raw), entry in sorted(self.speeds.items())]
 
+    def clear(self) -> None:
+        self.seen.clear()
+        self.speeds.clear()
+        self.after_stop.clear()
 
-def logged_transport(frames: Frames, devices: list[MyActuatorMotor]) -> SimTransport:
+
+def logged_transport(
+    frames: Frames, devices: list[MyActuatorMotor], bitrate: float | None = None
+) -> SimTransport:
     class Logged(SimTransport):
         def _put(self, frame: Any, handle: Any, now: float) -> None:
             frames.add(frame.arbitration_id, bytes(frame.data))
             super()._put(frame, handle, now)
 
-    return Logged(devices=devices)
+    return Logged(devices=devices, bus=None if bitrate is None else CanBusModel(bitrate=bitrate))
 
 
 def _control(device: MyActuatorMotor) -> dict[str, Any]:
@@ -162,7 +178,7 @@ async def bridge_main(args: argparse.Namespace) -> None:
         )
     devices = [MyActuatorMotor(i) for i in range(1, args.motors + 1)]
     frames = Frames()
-    async with servobus.Bus(logged_transport(frames, devices)) as bus:
+    async with servobus.Bus(logged_transport(frames, devices, args.bitrate)) as bus:
         motors = [bus.motor(ma.FAMILY, d.motor_id) for d in devices]
         config = bridge_config(args.node, [endpoint], access)
         async with Bridge(
@@ -192,11 +208,12 @@ async def bridge_main(args: argparse.Namespace) -> None:
                             "loop_lag_ms": lag.worst_s * 1e3,
                             "rss_mb": rss_mb(),
                             "speed_frames": frames.speeds_listed(),
+                            "after_stop": [[*k, n] for k, n in sorted(frames.after_stop.items())],
+                            "pending": served.bus.scheduler.pending,
                         }
                     )
                 elif op == "reset":
-                    frames.seen.clear()
-                    frames.speeds.clear()
+                    frames.clear()
                     bridge.stop_log.clear()
                     for served in bridge.served.values():
                         served.to_wire_ns.clear()
@@ -593,8 +610,59 @@ class Hostile:
             self.session = None
 
 
+# ---- the client: pipelined requests (tests/remote/test_hostile_pipeline.py) ----
+
+
+class Pipeline:
+    """Requests kept in flight in the background: ``depth`` tasks per motor, each sending its next
+    request as soon as its last one ended (faster than a motor answers: they queue on the bridge's
+    Bus). What became of them is counted: replies, and errors by type (the first message of each)."""
+
+    def __init__(self) -> None:
+        self.scope: anyio.CancelScope | None = None
+        self.counts: dict[str, Any] = {"sent": 0, "ok": 0, "errors": {}, "messages": {}}
+
+    def start(self, bus: Any, c: dict[str, Any], group: Any) -> dict[str, Any]:
+        self.stop()
+        command = _command(c["command"], c.get("fields", {}))
+        motors = [bus.motor(mid) for mid in c["motors"]]
+        pause_s = c.get("pause_s", 0.001)  # after an error: a refused client does not spin
+        counts = self.counts = {"sent": 0, "ok": 0, "errors": {}, "messages": {}}
+        scope = self.scope = anyio.CancelScope()
+
+        async def run(motor: Any) -> None:
+            while True:
+                counts["sent"] += 1
+                try:
+                    await motor.request(command, timeout_s=c.get("timeout_s"))
+                except Exception as exc:
+                    name = type(exc).__name__
+                    counts["errors"][name] = counts["errors"].get(name, 0) + 1
+                    counts["messages"].setdefault(name, str(exc))
+                    await anyio.sleep(pause_s)
+                else:
+                    counts["ok"] += 1
+
+        async def run_all() -> None:
+            with scope:
+                async with anyio.create_task_group() as tasks:
+                    for motor in motors:
+                        for _ in range(c.get("depth", 4)):
+                            tasks.start_soon(run, motor)
+
+        group.start_soon(run_all)
+        return {}
+
+    def stop(self) -> dict[str, Any]:
+        if self.scope is not None:
+            self.scope.cancel()
+            self.scope = None
+        return dict(self.counts)
+
+
 async def client_main(args: argparse.Namespace) -> None:
     client = Client(args)
+    pipeline = Pipeline()
     calls: dict[str, Callable[[dict[str, Any]], Any]] = {
         "connect": client.connect,
         "close": client.close,
@@ -622,6 +690,10 @@ async def client_main(args: argparse.Namespace) -> None:
                     body = client.release_hold()
                 elif op == "counts":
                     body = client.counts(command)
+                elif op == "pipeline":  # (pipelined: its counts, "stop": true ends it)
+                    body = pipeline.start(client.bus, command, group)
+                elif op == "pipelined":
+                    body = pipeline.stop() if command.get("stop") else dict(pipeline.counts)
                 else:
                     body = await calls[op](command)
                 answer = {"ok": True, **body}
@@ -651,6 +723,7 @@ def main() -> None:
     parser.add_argument("--motors", type=int, default=32)
     parser.add_argument("--hz", type=float, default=1000.0)
     parser.add_argument("--stop-after", type=float, default=0.05)
+    parser.add_argument("--bitrate", type=float)  # the simulated CAN bus's (default: 1 Mbit/s)
     parser.add_argument("--users")
     parser.add_argument("--commander", action="append", default=[])
     parser.add_argument("--reader", action="append", default=[])

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 
 from servobus.protocols import Command
 from servobus.remote import wire
+from servobus.remote._withdraw import withdraw
 
 if TYPE_CHECKING:
     from servobus.remote._served import Served
@@ -26,6 +27,9 @@ class Clients:
     def __init__(self, allow_takeover: bool) -> None:
         self.allow_takeover = allow_takeover
         self.live: set[str] = set()  # public ids of the clients whose token is alive
+        # (client, bus, motor): motors stopped because the client's set-points went stale, which its
+        # requests (some sent before the stop, still on their way) do not take back (:meth:`command`)
+        self.revoked: set[tuple[str, str, int]] = set()
         self._public: dict[str, str] = {}  # secret id -> public id
 
     def public(self, secret: str) -> str:
@@ -50,7 +54,8 @@ class Clients:
         motor's set-point now and, once the motor acknowledged it, its holder (:func:`safe_done`).
 
         Raises:
-            PermissionError: the client has no live token, or another live client holds the motor.
+            PermissionError: the client has no live token, another live client holds the motor, or
+                the bridge stopped the motor for the client's stale set-points (:meth:`revoke`).
         """
         client = self.public(secret)
         if client not in self.live:
@@ -60,11 +65,43 @@ class Clients:
             # (named as the metrics name it: its token's key would let the asker keep that token alive)
             shown = wire.shown_id(holder)
             raise PermissionError(f"motor {mid} on {served.name} is held by another client ({shown})")
-        if command in served.safe_commands[mid]:
+        safe = command in served.safe_commands[mid]
+        if not safe and not type(command).READ and (client, served.name, mid) in self.revoked:
+            raise PermissionError(
+                f"motor {mid} on {served.name} was stopped because this client's set-points went stale: "
+                "a fresh set-point or a stop request of it takes the motor back"
+            )
+        if safe:
             served.held.pop(mid, None)  # (the tick must not send the set-point over the stop)
             served.stale_since.pop(mid, None)
         if not type(command).READ:
-            served.owners[mid] = client
+            self.take(served, mid, client)
+
+    def take(self, served: Served, mid: int, client: str) -> None:
+        """``client`` holds motor ``mid`` now; another client that held it (a takeover) loses its
+        set-point and its commands still queued on the Bus (:func:`withdraw`)."""
+        previous = served.owners.get(mid)
+        if previous is not None and previous != client:
+            withdraw(served, mid, "taken over by another client")
+            held = served.held.get(mid)
+            if held is not None and held.client == previous:
+                del served.held[mid]
+            served.stale_since.pop(mid, None)
+        self.revoked.discard((client, served.name, mid))
+        served.owners[mid] = client
+
+    def revoke(self, served: Served, mid: int) -> None:
+        """Motor ``mid`` is stopped for its holder's stale set-points: that client's commanding
+        requests for it are refused until it sends a fresh set-point or a stop request for it (its
+        requests sent before the stop would otherwise take the motor back after it)."""
+        owner = served.owners.get(mid)
+        if owner is not None and owner in self.live:
+            self.revoked.add((owner, served.name, mid))
+
+    def left(self, client: str) -> None:
+        """``client``'s token went: it holds nothing and may command nothing."""
+        self.live.discard(client)
+        self.revoked = {entry for entry in self.revoked if entry[0] != client}
 
 
 def safe_done(served: Served, mid: int, secret: str, acknowledged: bool, now: float) -> None:

@@ -15,6 +15,7 @@ from servobus.errors import ServobusError
 from servobus.remote import wire
 from servobus.remote._clients import Clients, safe_done
 from servobus.remote._served import Served
+from servobus.remote._withdraw import Withdrawn
 from servobus.remote.keys import Keys
 
 logger = logging.getLogger("servobus.remote.bridge")
@@ -27,6 +28,9 @@ async def answer(served: Served, query: Any, keys: Keys, clients: Clients) -> No
     except BaseException:  # cancelled (the bridge is closing): answered nothing, at once
         finish(query)
         raise
+    if isinstance(result.error, Withdrawn) and result.error.client_left:
+        finish(query)  # (no answer to a client that is gone: no worker thread ahead of its stop)
+        return
     try:
         payload = wire.encode_result(schema, result)
     except wire.WireError as exc:  # (a plug-in's reply with a value the encoding has no form for)
@@ -83,6 +87,8 @@ async def _run(
         clients.command(served, mid, request.client_id, command)
     try:
         reply = await served.bus.request(motor, command, timeout_s=request.timeout_s)
+    except Withdrawn as exc:  # (its client lost the motor while it was queued: counted withdrawn)
+        return wire.Result(error=exc)
     except ServobusError as exc:
         if safe:
             safe_done(served, mid, request.client_id, False, runtime.current().time())

@@ -36,6 +36,7 @@ COUNTS = {
     "requests": "commands through request",
     "reads": "commands through read",
     "stops": "safe stops sent because a client left or its set-points went stale",
+    "withdrawn": "queued commands of a client that lost the motor, withdrawn (not to follow its stop)",
     "states": "states published",
 }
 

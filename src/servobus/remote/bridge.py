@@ -39,6 +39,7 @@ from servobus.remote._clients import Clients
 from servobus.remote._handover import Handover
 from servobus.remote._served import Held, Served
 from servobus.remote._session import close_session, handed, sample_kind
+from servobus.remote._withdraw import withdraw
 from servobus.remote.keys import Keys
 from servobus.safety import stop_motors
 from servobus.ticks import ticks
@@ -48,6 +49,7 @@ __all__ = ["Bridge"]
 logger = logging.getLogger(__name__)
 
 _BACKLOG = 4096  # set-points and queries waiting for the loop; more are dropped on Zenoh's thread
+_LEFT = "client left"  # why a motor is stopped when its client's token went
 
 
 class Bridge:
@@ -61,7 +63,11 @@ class Bridge:
     A motor a client commanded gets its safe command when that client leaves (its process ends or
     its link is lost for the 1 s lease), and when its set-point stays stale for ``stop_after_s``:
     the Bus's ``safe`` kind, or ``"stop"`` for a Bus whose ``safe`` is None. A motor a client made
-    safe itself (a stop, shutdown or brake request) is no longer that client's.
+    safe itself (a stop, shutdown or brake request) is no longer that client's. A client that loses
+    a motor (it left, its set-points went stale, it was taken over, the bridge closes) loses with it
+    its commands still queued on the Bus, withdrawn before the stop is submitted (``_withdraw``); one
+    stopped for stale set-points takes the motor back by a set-point or a stop request, not by the
+    requests it may have sent before the stop.
 
     Args:
         node: this bridge's name, the second key segment (a host name, ``arm``).
@@ -140,6 +146,7 @@ class Bridge:
         try:
             if self._group is not None:
                 with anyio.CancelScope(shield=True):  # the clients' motors, before the tasks go
+                    self.clients.live.clear()  # (closing: their requests meanwhile are refused)
                     for served in self.served.values():
                         held = set(served.owners) | set(served.held) | set(served.stale_since)
                         motors = self._release(served, sorted(held), "bridge closing")
@@ -196,10 +203,10 @@ class Bridge:
         if kind == "PUT":
             self.clients.live.add(client)
             return
-        self.clients.live.discard(client)
+        self.clients.left(client)
         for served in self.served.values():
             held = [mid for mid, owner in served.owners.items() if owner == client]
-            self._stop(served, held, "client left")
+            self._stop(served, held, _LEFT)
 
     def _stop(self, served: Served, motor_ids: Iterable[int], why: str) -> None:
         """Release the motors (set-points, holder) and send each its safe command, in a task."""
@@ -211,9 +218,11 @@ class Bridge:
                 logger.warning("%s/%s: the bridge is closed: no stop for %s", self.node, served.name, motors)
 
     def _release(self, served: Served, motor_ids: Iterable[int], why: str) -> list[Motor]:
-        """Release the motors and write down why they are stopped; the motors."""
+        """Release the motors, withdraw their holders' commands still queued (before the stop is
+        submitted: they would follow it) and write down why they are stopped; the motors."""
         motors = [served.motors[mid] for mid in motor_ids]
         for motor in motors:
+            withdraw(served, motor.motor_id, why, client_left=why == _LEFT)
             served.release(motor.motor_id)
         if motors:
             served.counts["stops"] += len(motors)
@@ -299,7 +308,8 @@ class Bridge:
                 served.counts["reordered"] += 1
                 continue
             served.counts["setpoints"] += 1
-            served.owners[mid] = client
+            if served.owners.get(mid) != client:  # (a motor released or revoked has no owner)
+                self.clients.take(served, mid, client)
             served.stale_since.pop(mid, None)
             served.held[mid] = Held(client, message.seq, command, message.sent_unix_ns, expires)
 
@@ -321,6 +331,8 @@ class Bridge:
                     fresh.append(held)
             due = [mid for mid, since in served.stale_since.items() if now - since >= self.stop_after_s]
             if due:
+                for mid in due:
+                    self.clients.revoke(served, mid)
                 self._stop(served, due, f"set-points stale for {self.stop_after_s * 1e3:.0f} ms")
             if not items:
                 continue
