@@ -20,8 +20,10 @@ from types import ModuleType
 import pytest
 from hypothesis import settings
 
-settings.register_profile("default", max_examples=300)
-settings.register_profile("ci", max_examples=3000)
+# No deadline: what an example costs is measured in bench/, and on a shared 2-core host a slow
+# example is the machine's load, not a failure of the property.
+settings.register_profile("default", max_examples=300, deadline=None)
+settings.register_profile("ci", max_examples=3000, deadline=None)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
 
 _TESTS = str(Path(__file__).resolve().parent)
