@@ -51,7 +51,7 @@ COMMANDERS_WAITING, COMMANDERS_RUNNING = 256, 64
 READER_WAITING, READER_RUNNING = 8, 2
 #: all readers' queries waiting / in flight, and the most begun a second (in bursts of READ_BURST)
 READERS_WAITING, READERS_RUNNING = 64, 4
-READS_PER_S, READ_BURST = 200.0, 20
+READS_PER_S, READ_BURST = 100.0, 10
 
 _lock = threading.Lock()  # (the counters are written by Zenoh's threads too)
 

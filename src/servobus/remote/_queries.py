@@ -163,8 +163,10 @@ class Queries:
         def callback(query: Any) -> None:
             key = str(query.key_expr)
             payload = query.payload
+            # (a query refused is dropped, not answered: a reply could block this thread; and it is
+            # dropped with this callback's last reference to it: ``query.drop()`` would give up and
+            # take again the GIL, which the loop then waits for once more)
             if _limits.oversized(served, key, payload):
-                query.drop()  # (dropped, not answered: a reply could block this thread)
                 return
             leaf = key.rsplit("/", 1)[-1]
             lane: Hashable = leaf
@@ -180,7 +182,6 @@ class Queries:
                 self._woken = self._woken or wake
             if not taken:
                 _limits.count(served, "shed")
-                query.drop()
             elif wake:
                 to_loop(self._lane, self._wake)
 
