@@ -177,3 +177,79 @@ def test_a_reader_flood_of_reads_and_metrics_at_2000_per_s_starves_no_commander(
     # the readers are served at their rate (not starved, not more), the rest shed on arrival
     assert 0.5 * _limits.READS_PER_S * ATTACK_S <= answered <= _limits.READS_PER_S * ATTACK_S * 1.5, found
     assert found["counts"]["shed"] >= sent - answered - 100, found
+
+
+# ---- the queues themselves (remote/_queries.py), without processes ----
+
+
+class _ZBytes(bytes):
+    def to_bytes(self) -> bytes:
+        return bytes(self)
+
+
+class _Query:
+    """What the bridge reads of a ``zenoh.Query`` on Zenoh's thread."""
+
+    def __init__(self, key: str, payload: bytes | None) -> None:
+        self.key_expr, self.payload = key, None if payload is None else _ZBytes(payload)
+
+
+class _Lane:
+    def __init__(self) -> None:
+        self.now, self.woken = 0.0, 0
+
+    def time(self) -> float:
+        return self.now
+
+    def call_soon_threadsafe(self, fn: Callable[..., object], *args: Any) -> None:
+        self.woken += 1
+
+
+def test_queries_queue_per_client_and_kind_and_a_forged_id_buys_no_more_than_the_cap() -> None:
+    from servobus.remote import _limits, _queries
+
+    commander, reader = "c0" * wire.CLIENT_ID_BYTES, "5e" * wire.CLIENT_ID_BYTES
+    live = {wire.public_id(commander)}
+    lane = _Lane()
+    queries = _queries.Queries(lane, live.__contains__)  # type: ignore[arg-type]
+    served = type("Served", (), {"counts": {"oversized": 0, "shed": 0}})()
+
+    async def handler(served: Any, query: Any) -> None: ...
+
+    take = queries.callback(handler, served)
+    read = wire.encode_request(SCHEMA, wire.Request(reader, ma.ReadStatus2()))
+    forged = [read[:2] + bytes([i % 256, i // 256]) * 8 + read[18:] for i in range(2000)]
+    for i in range(2000):  # a reader's flood: its own id, a fresh id each time, metrics
+        take(_Query(key(1 + i % 32, "read"), read))
+        take(_Query(key(1 + i % 32, "read"), forged[i]))
+        take(_Query(key("metrics"), None))
+    take(_Query(key(1, "read"), read[:2] + b"\x00" * _limits.REQUEST_BYTES))  # one byte too long
+    readers, commanders = queries._readers, queries._commanders
+    assert readers.waiting == _limits.READERS_WAITING  # (every lane and the class full: no more)
+    assert all(len(q) <= _limits.READER_WAITING for q in readers.lanes.values())
+    assert served.counts == {"oversized": 1, "shed": 6000 - _limits.READERS_WAITING}
+    # a commander's queries (its id has a live token) wait apart: the readers' full queues take none
+    mine = wire.encode_request(SCHEMA, wire.Request(commander, ma.ReadStatus2()))
+    for motor in HELD:
+        take(_Query(key(motor, "read"), mine))
+    assert commanders.waiting == len(HELD) and list(commanders.lanes) == [bytes.fromhex(commander)]
+    # begun: all the commander's at once; of the readers', their cap, round-robin, at most two a lane
+    out: list[Any] = []
+    assert commanders.take(lane.now, out) is None and len(out) == len(HELD)
+    out.clear()
+    readers.take(lane.now, out)
+    assert len(out) == _limits.READERS_RUNNING and len({lane for _, lane, _ in out}) == len(out)
+    # and no more than READS_PER_S a second, however many finish
+    begun = len(out)
+    for second in range(1, 4):
+        lane.now = float(second)
+        while True:
+            for kind, done, _ in out:
+                kind.done(done)
+            out.clear()
+            wait_s = readers.take(lane.now, out)
+            begun += len(out)
+            if not out:
+                break
+        assert wait_s is not None and 0 < wait_s <= 1 / _limits.READS_PER_S
+    assert begun <= _limits.READ_BURST + 3 * _limits.READS_PER_S
