@@ -1,15 +1,16 @@
 """A reader attacks the bridge with queries (issue 37, attacks 1 and 4's queries): one 10 MB read,
-64 KB reads at 200/s, a flood of reads and metrics at 2,000/s (some with a client id forged afresh
+64 KB reads at 200/s, a flood of reads and metrics at 1,200/s (some with a client id forged afresh
 for each). Under each, at once: a commander holds 16 motors at 200 Hz and must keep its set-point ->
-wire latency (p99 within 2x the quiet value measured before and after, or 4 ms) and every set-point; a second
-commander is SIGKILLed and must have its 16 motors stopped within 250 ms; the bridge must not grow
-by more than 50 MB; the first commander's own reads are answered.
+wire latency (p99 within 2x the quiet value, both medians of windows in turn, or 4 ms) and its
+set-points; a second commander is SIGKILLed and must have its 16 motors stopped within 250 ms; the
+bridge must not grow by more than 50 MB; the first commander's own reads are answered.
 
 Processes as in test_procs.py (tests/remote/_proc.py, loopback only, every wait bounded).
 """
 
 from __future__ import annotations
 
+import statistics
 import time
 from collections.abc import Callable
 from typing import Any
@@ -23,7 +24,7 @@ __all__ = ["spawn"]  # (the fixture, from test_procs)
 
 HELD = list(range(1, 17))  # the commander that stays: set-points at 200 Hz
 KILLED = list(range(17, 33))  # the commander that is SIGKILLed: speed requests, valid until it leaves
-QUIET_S, ATTACK_S, KILL_AFTER_S = 1.0, 3.0, 1.0
+ROUNDS, WINDOW_S = 3, 1.0  # quiet and attacked windows in turn, each this long
 P99_FLOOR_MS = 4.0  # (the p99 limit is 2x the quiet p99, never below this: noise on a loaded host)
 
 
@@ -61,52 +62,62 @@ def attacked(spawn: Callable[..., Proc], attack: Callable[[Proc], None]) -> dict
         10,
         "the two commanders' motors at 30 and 45 dps",
     )
-    server.ok("reset")
-    time.sleep(QUIET_S)
-    quiet = server.ok("report")
-
-    server.ok("reset")
-    began = time.monotonic()
-    attack(reader)
-    rss = [quiet["rss_mb"]]
-    time.sleep(KILL_AFTER_S)
-    rss.append(server.ok("report")["rss_mb"])
-    killed_ns = time.time_ns()
-    killed.kill()
-    done = report_when(server, lambda r: stopped(r, KILLED), 5, "the killed commander's motors stopped")
-    first = [frames_of(done)[m][STOP][1] - killed_ns for m in KILLED]
-    asked = time.monotonic()
-    own = held.ok("request", motor=1, command="ReadStatus2", timeout_s=1.0)
-    own_ms = (time.monotonic() - asked) * 1e3
-    time.sleep(max(0.0, ATTACK_S - (time.monotonic() - began)))
-    during = server.ok("report")
-    rss.append(during["rss_mb"])
-    floods = reader.ok("flood_stop")["counts"]
-    server.ok("reset")  # quiet again: the quiet figure is the worse of before and after the attack
-    time.sleep(QUIET_S)  # (so that other work starting on the host meanwhile is not blamed on it)
-    again = server.ok("report")
+    # quiet and attacked windows in turn: the figures are each kind's median, so that other work
+    # on the host starting or ending meanwhile is not blamed on (nor hidden by) the attack
+    quiet: list[dict[str, Any]] = []
+    during: list[dict[str, Any]] = []
+    floods: list[dict[str, int]] = []
+    attack_s = 0.0
+    for turn in range(ROUNDS):
+        server.ok("reset")
+        time.sleep(WINDOW_S)
+        quiet.append(server.ok("report"))
+        server.ok("reset")
+        began = time.monotonic()
+        attack(reader)
+        if turn == ROUNDS // 2:  # the second commander is killed under attack
+            time.sleep(WINDOW_S / 3)
+            killed_ns = time.time_ns()
+            killed.kill()
+            done = report_when(
+                server, lambda r: stopped(r, KILLED), 5, "the killed commander's motors stopped"
+            )
+            first = [frames_of(done)[m][STOP][1] - killed_ns for m in KILLED]
+            asked = time.monotonic()
+            own = held.ok("request", motor=1, command="ReadStatus2", timeout_s=1.0)
+            own_ms = (time.monotonic() - asked) * 1e3
+        time.sleep(max(0.0, WINDOW_S - (time.monotonic() - began)))
+        during.append(server.ok("report"))
+        floods += reader.ok("flood_stop")["counts"]
+        attack_s += time.monotonic() - began
     sent = held.ok("release")["cycles"] * len(HELD)
     time.sleep(0.3)  # (the last set-points on their way)
     after = server.ok("report")
+
+    def median(reports: list[dict[str, Any]]) -> float:
+        return float(statistics.median(r["to_wire_ms"]["p99"] for r in reports))
+
     found = {
-        "quiet_p99_ms": max(quiet["to_wire_ms"]["p99"], again["to_wire_ms"]["p99"]),
-        "attack_p99_ms": during["to_wire_ms"]["p99"],
-        "quiet_lag_ms": max(quiet["loop_lag_ms"], again["loop_lag_ms"]),
-        "attack_lag_ms": during["loop_lag_ms"],
+        "quiet_p99_ms": median(quiet),
+        "attack_p99_ms": median(during),
+        "quiet_lag_ms": max(r["loop_lag_ms"] for r in quiet),
+        "attack_lag_ms": max(r["loop_lag_ms"] for r in during),
         "stop_ms": max(first) / 1e6,
         "own_read_ms": own_ms,
-        "rss_growth_mb": max(rss) - quiet["rss_mb"],
+        "rss_growth_mb": max(r["rss_mb"] for r in during) - quiet[0]["rss_mb"],
         "sent": sent,
         "counts": after["bridge"],
         "dropped_events": after["dropped_events"],
         "floods": floods,
+        "attack_s": attack_s,
     }
     print(
-        f"quiet p99 {found['quiet_p99_ms']:.2f} ms, lag {found['quiet_lag_ms']:.1f} ms; under attack: "
-        f"p99 {found['attack_p99_ms']:.2f} ms (n {during['to_wire_ms']['n']}), worst loop lag "
+        f"quiet p99 {[r['to_wire_ms']['p99'] for r in quiet]} ms, lag {found['quiet_lag_ms']:.1f} ms; under "
+        f"attack: p99 {[r['to_wire_ms']['p99'] for r in during]} ms, worst loop lag "
         f"{found['attack_lag_ms']:.1f} ms, kill -> last stop frame {found['stop_ms']:.1f} ms, own read "
-        f"{own_ms:.1f} ms, RSS {quiet['rss_mb']:.0f} MB + {found['rss_growth_mb']:.1f} MB; floods {floods}; "
-        f"set-points sent {sent}, bridge {after['bridge']}, dropped events {after['dropped_events']}"
+        f"{own_ms:.1f} ms, RSS {quiet[0]['rss_mb']:.0f} MB + {found['rss_growth_mb']:.1f} MB; "
+        f"floods {floods}; set-points sent {sent}, bridge {after['bridge']}, "
+        f"dropped events {after['dropped_events']}"
     )
     assert own["reply"]["type"] == "StatusReply", own
     assert sorted(m for _, _, m, _ in done["stop_log"]) == KILLED, done["stop_log"]
@@ -142,7 +153,7 @@ def test_a_readers_10_mb_and_64_kb_reads_neither_stall_the_bridge_nor_delay_a_st
 
     def attack(reader: Proc) -> None:
         reader.ok("flood", keys=[key(1, "read")], payload=big.hex(), hz=0.5, duration_s=1.0)
-        reader.ok("flood", keys=[key(2, "read")], payload=medium.hex(), hz=200.0, duration_s=ATTACK_S)
+        reader.ok("flood", keys=[key(2, "read")], payload=medium.hex(), hz=200.0, duration_s=60.0)
 
     found = attacked(spawn, attack)
     assert_unharmed(found)
@@ -155,16 +166,16 @@ def test_a_readers_10_mb_and_64_kb_reads_neither_stall_the_bridge_nor_delay_a_st
 # ---- attack 4, queries: a flood of reads and metrics ----
 
 
-def test_a_reader_flood_of_reads_and_metrics_at_2000_per_s_starves_no_commander(
+def test_a_reader_flood_of_reads_and_metrics_at_1200_per_s_starves_no_commander(
     spawn: Callable[..., Proc],
 ) -> None:
     read = wire.encode_request(SCHEMA, wire.Request("5e" * wire.CLIENT_ID_BYTES, ma.ReadStatus2()))
     reads = [key(m, "read") for m in range(1, 33)]
 
     def attack(reader: Proc) -> None:
-        reader.ok("flood", keys=reads, payload=read.hex(), hz=1000.0, duration_s=ATTACK_S)
-        reader.ok("flood", keys=reads, payload=read.hex(), hz=500.0, duration_s=ATTACK_S, fresh_id=True)
-        reader.ok("flood", keys=[key("metrics")], payload=None, hz=500.0, duration_s=ATTACK_S)
+        reader.ok("flood", keys=reads, payload=read.hex(), hz=600.0, duration_s=60.0)
+        reader.ok("flood", keys=reads, payload=read.hex(), hz=300.0, duration_s=60.0, fresh_id=True)
+        reader.ok("flood", keys=[key("metrics")], payload=None, hz=300.0, duration_s=60.0)
 
     found = attacked(spawn, attack)
     assert_unharmed(found)
@@ -173,9 +184,10 @@ def test_a_reader_flood_of_reads_and_metrics_at_2000_per_s_starves_no_commander(
 
     sent = sum(flood["sent"] for flood in found["floods"])
     answered = sum(flood["answers"] for flood in found["floods"])
-    assert sent >= 1000 * ATTACK_S * 0.9, found["floods"]  # (the flood did reach 2k/s, roughly)
+    assert sent >= 1000 * found["attack_s"], found  # (the flood did reach 1.2k/s, roughly)
     # the readers are served at their rate (not starved, not more), the rest shed on arrival
-    assert 0.5 * _limits.READS_PER_S * ATTACK_S <= answered <= _limits.READS_PER_S * ATTACK_S * 1.5, found
+    most = _limits.READS_PER_S * found["attack_s"] + ROUNDS * _limits.READ_BURST
+    assert 0.3 * most <= answered <= 1.2 * most, found
     assert found["counts"]["shed"] >= sent - answered - 100, found
 
 
