@@ -388,7 +388,8 @@ class Bridge:
 
     @property
     def dropped_events(self) -> int:
-        """Set-points and queries dropped on arrival because the backlog was full."""
+        """Set-points dropped on arrival because the backlog was full (queries refused on arrival
+        are counted in each bus's ``shed`` and ``oversized``)."""
         return self._handover.dropped if self._handover is not None else 0
 
     def metrics(self) -> dict[str, dict[str, Any]]:
