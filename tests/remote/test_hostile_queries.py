@@ -158,8 +158,9 @@ def test_a_readers_10_mb_and_64_kb_reads_neither_stall_the_bridge_nor_delay_a_st
     found = attacked(spawn, attack)
     assert_unharmed(found)
     assert found["attack_lag_ms"] < 200, found  # (main: the 10 MB read alone held the loop 2.9 s)
-    big_sent, medium_sent = (flood["sent"] for flood in found["floods"])
-    assert found["counts"]["oversized"] == big_sent + medium_sent >= 500, found
+    # (the reader tries 200/s; a loaded host's Zenoh slows its gets by backpressure: at least half)
+    sent = sum(flood["sent"] for flood in found["floods"])
+    assert found["counts"]["oversized"] == sent >= 100 * found["attack_s"], found
     assert found["counts"]["malformed"] == 0, found  # dropped unread: nothing of them was decoded
 
 
@@ -188,7 +189,7 @@ def test_a_reader_flood_of_reads_and_metrics_at_1200_per_s_starves_no_commander(
     # the readers are served at their rate (not starved, not more), the rest shed on arrival
     most = _limits.READS_PER_S * found["attack_s"] + ROUNDS * _limits.READ_BURST
     assert 0.3 * most <= answered <= 1.2 * most, found
-    assert found["counts"]["shed"] >= sent - answered - 100, found
+    assert found["counts"]["shed"] >= 0.8 * (sent - answered), found  # (the rest: waiting at the end)
 
 
 # ---- the queues themselves (remote/_queries.py), without processes ----
