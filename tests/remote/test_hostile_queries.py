@@ -1,5 +1,5 @@
 """A reader attacks the bridge with queries (issue 37, attacks 1 and 4's queries): one 10 MB read,
-64 KB reads at 200/s, a flood of reads and metrics at 2,000/s (some with a client id forged afresh
+64 KB reads at 200/s, a flood of reads and metrics at 1,500/s (some with a client id forged afresh
 for each). Under each, at once: a commander holds 16 motors at 200 Hz and must keep its set-point ->
 wire latency (p99 within 2x the quiet value, both medians of windows in turn, or 4 ms) and its
 set-points; a second commander is SIGKILLed and must have its 16 motors stopped within 250 ms; the
@@ -168,23 +168,23 @@ def test_a_readers_10_mb_and_64_kb_reads_neither_stall_the_bridge_nor_delay_a_st
 # ---- attack 4, queries: a flood of reads and metrics ----
 
 
-def test_a_reader_flood_of_reads_and_metrics_at_2000_per_s_starves_no_commander(
+def test_a_reader_flood_of_reads_and_metrics_at_1500_per_s_starves_no_commander(
     spawn: Callable[..., Proc],
 ) -> None:
     read = wire.encode_request(SCHEMA, wire.Request("5e" * wire.CLIENT_ID_BYTES, ma.ReadStatus2()))
     reads = [key(m, "read") for m in range(1, 33)]
 
     def attack(reader: Proc) -> None:
-        reader.ok("flood", keys=reads, payload=read.hex(), hz=1000.0, duration_s=60.0)
-        reader.ok("flood", keys=reads, payload=read.hex(), hz=500.0, duration_s=60.0, fresh_id=True)
-        reader.ok("flood", keys=[key("metrics")], payload=None, hz=500.0, duration_s=60.0)
+        reader.ok("flood", keys=reads, payload=read.hex(), hz=800.0, duration_s=60.0)
+        reader.ok("flood", keys=reads, payload=read.hex(), hz=400.0, duration_s=60.0, fresh_id=True)
+        reader.ok("flood", keys=[key("metrics")], payload=None, hz=300.0, duration_s=60.0)
 
     found = attacked(spawn, attack)
     sent = sum(flood["sent"] for flood in found["floods"])
     answered = sum(flood["answers"] for flood in found["floods"])
-    assert sent >= 1500 * found["attack_s"], found  # (the flood did reach 2k/s, roughly)
+    assert sent >= 1200 * found["attack_s"], found  # (the flood did reach 1.5k/s, roughly)
     # the readers together are served at their rate (100/s, in bursts of 10: _limits), not starved,
-    # not more (main: 60 % of 2,000/s), the rest shed on arrival
+    # not more (main: about half of them), the rest shed on arrival
     most = READS_PER_S * found["attack_s"] + ROUNDS * READ_BURST
     assert 0.3 * most <= answered <= 1.2 * most, found
     assert_unharmed(found)
