@@ -159,9 +159,10 @@ def test_a_readers_10_mb_and_64_kb_reads_neither_stall_the_bridge_nor_delay_a_st
     found = attacked(spawn, attack)
     assert_unharmed(found)
     assert found["attack_lag_ms"] < 200, found  # (main: the 10 MB read alone held the loop 2.9 s)
-    # (the reader tries 200/s; a loaded host's Zenoh slows its gets by backpressure: at least half)
+    # (the reader tries 200/s; Zenoh slows its gets by backpressure: 100-175/s were seen, and on a
+    # loaded host less, so the floor here only says that the attack took place)
     sent = sum(flood["sent"] for flood in found["floods"])
-    assert found["counts"]["oversized"] == sent >= 100 * found["attack_s"], found
+    assert found["counts"]["oversized"] == sent >= 50 * found["attack_s"], found
     assert found["counts"]["malformed"] == 0, found  # dropped unread: nothing of them was decoded
 
 
@@ -182,7 +183,9 @@ def test_a_reader_flood_of_reads_and_metrics_at_1500_per_s_starves_no_commander(
     found = attacked(spawn, attack)
     sent = sum(flood["sent"] for flood in found["floods"])
     answered = sum(flood["answers"] for flood in found["floods"])
-    assert sent >= 1200 * found["attack_s"], found  # (the flood did reach 1.5k/s, roughly)
+    # (the reader tries 1,500/s; it reached 1,300-1,450/s, on a loaded host less: the floor only says
+    # that the flood took place)
+    assert sent >= 800 * found["attack_s"], found
     # the readers together are served at their rate (100/s, in bursts of 10: _limits), not starved,
     # not more (main: about half of them), the rest shed on arrival
     most = READS_PER_S * found["attack_s"] + ROUNDS * READ_BURST
