@@ -134,12 +134,13 @@ def assert_unharmed(found: dict[str, Any]) -> None:
     counts = found["counts"]
     # every set-point the commander sent that reached the bridge was taken, or replaced by its next
     # before the loop took it (``overwritten``: the bridge applies the newer): none stale, none
-    # dropped on the way in. (Zenoh itself may drop a few before the bridge sees them: the client's
-    # publisher drops rather than blocks when a starved host does not drain its link; a control run
-    # with the flood sent to a key nobody serves lost 48 of 9,600 on a host at load 5. main: 12 %.)
+    # dropped on the way in. (Zenoh itself may drop some before the bridge sees them: the client's
+    # publisher drops rather than blocks when its link is not drained. None were lost on a host at
+    # load 2-4; at load 5-6, up to 1.4 % under the flood and 0.5 % in a control run whose flood went
+    # to a key nobody serves; main lost 12 %.)
     assert counts["stale"] == 0 and found["dropped_events"] == 0, found
     lost = found["sent"] - counts["setpoints"] - counts["overwritten"] * len(HELD)
-    assert 0 <= lost <= found["sent"] / 100, found
+    assert 0 <= lost <= found["sent"] * 0.03, found
 
 
 # ---- attack 1: big queries ----
