@@ -1,5 +1,5 @@
 """A reader attacks the bridge with queries (issue 37, attacks 1 and 4's queries): one 10 MB read,
-64 KB reads at 200/s, a flood of reads and metrics at 1,500/s (some with a client id forged afresh
+64 KB reads at 200/s, a flood of reads and metrics at 1,100/s (some with a client id forged afresh
 for each). Under each, at once: a commander holds 16 motors at 200 Hz and must keep its set-point ->
 wire latency (p99 within 2x the quiet value, both medians of windows in turn, or 4 ms) and its
 set-points; a second commander is SIGKILLed and must have its 16 motors stopped within 250 ms; the
@@ -140,7 +140,8 @@ def assert_unharmed(found: dict[str, Any]) -> None:
     # to a key nobody serves; main lost 12 %.)
     assert counts["stale"] == 0 and found["dropped_events"] == 0, found
     lost = found["sent"] - counts["setpoints"] - counts["overwritten"] * len(HELD)
-    assert 0 <= lost <= found["sent"] * 0.03, found
+    # (-16: the hold's last batch, published as it was released, before it was counted)
+    assert -len(HELD) <= lost <= found["sent"] * 0.03, found
 
 
 # ---- attack 1: big queries ----
@@ -170,23 +171,23 @@ def test_a_readers_10_mb_and_64_kb_reads_neither_stall_the_bridge_nor_delay_a_st
 # ---- attack 4, queries: a flood of reads and metrics ----
 
 
-def test_a_reader_flood_of_reads_and_metrics_at_1500_per_s_starves_no_commander(
+def test_a_reader_flood_of_reads_and_metrics_at_1100_per_s_starves_no_commander(
     spawn: Callable[..., Proc],
 ) -> None:
     read = wire.encode_request(SCHEMA, wire.Request("5e" * wire.CLIENT_ID_BYTES, ma.ReadStatus2()))
     reads = [key(m, "read") for m in range(1, 33)]
 
     def attack(reader: Proc) -> None:
-        reader.ok("flood", keys=reads, payload=read.hex(), hz=800.0, duration_s=60.0)
-        reader.ok("flood", keys=reads, payload=read.hex(), hz=400.0, duration_s=60.0, fresh_id=True)
-        reader.ok("flood", keys=[key("metrics")], payload=None, hz=300.0, duration_s=60.0)
+        reader.ok("flood", keys=reads, payload=read.hex(), hz=600.0, duration_s=60.0)
+        reader.ok("flood", keys=reads, payload=read.hex(), hz=300.0, duration_s=60.0, fresh_id=True)
+        reader.ok("flood", keys=[key("metrics")], payload=None, hz=200.0, duration_s=60.0)
 
     found = attacked(spawn, attack)
     sent = sum(flood["sent"] for flood in found["floods"])
     answered = sum(flood["answers"] for flood in found["floods"])
-    # (the reader tries 1,500/s; it reached 1,300-1,450/s, on a loaded host less: the floor only says
-    # that the flood took place)
-    assert sent >= 800 * found["attack_s"], found
+    # (the reader tries 1,100/s, and reaches it on a host at load 4; on a loaded host less: the floor
+    # only says that the flood took place)
+    assert sent >= 700 * found["attack_s"], found
     # the readers together are served at their rate (100/s, in bursts of 10: _limits), not starved,
     # not more (main: about half of them), the rest shed on arrival
     most = READS_PER_S * found["attack_s"] + ROUNDS * READ_BURST
