@@ -19,8 +19,9 @@ The client holds at most one connection (``servobus.remote.connect``) and a raw 
 sending what a client never would. Its commands: ``connect``, ``hold`` (a task that sends a batch of
 set-points per tick until ``release``), ``release``, ``cycle``, ``request``, ``counts``, ``close``,
 ``raw_put``, ``raw_get``, ``pipeline`` (requests kept in flight in the background), ``pipelined``
-(their counts; ``stop`` ends them), ``quit``; each answer says ``ok`` or the error's type and
-message, and how long the call took.
+(their counts; ``stop`` ends them), ``flood`` (queries sent in the background at a rate, their
+answers not awaited, until ``flood_stop``), ``flood_stop``, ``quit``; each answer says ``ok`` or the
+error's type and message, and how long the call took.
 
 A hostile client (tests/remote/test_hostile_peers.py) opens a raw Zenoh session of its own, in
 ``client`` or ``peer`` mode: ``spy`` (watch everything under ``servobus/**``), ``spied`` (what it saw,
@@ -33,10 +34,13 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import json
 import os
+import random
 import re
 import sys
+import threading
 import time
 import traceback
 from collections.abc import Callable
@@ -254,6 +258,7 @@ class Client:
         self.raw: Any = None
         self.hold_scope: anyio.CancelScope | None = None
         self.held = {"cycles": 0, "error": None, "message": None}
+        self.flooding: list[Flood] = []
 
     async def connect(self, c: dict[str, Any]) -> dict[str, Any]:
         from servobus.remote import connect
@@ -660,6 +665,70 @@ class Pipeline:
         return dict(self.counts)
 
 
+# ---- the client: a hostile peer's flood of queries ----
+
+
+class Flood:
+    """Queries sent from a thread at ``hz`` for ``duration_s`` (or until stopped), each answered
+    by Zenoh's callback, never awaited: what a peer that wants the bridge busy would send."""
+
+    def __init__(self, session: Any, c: dict[str, Any]) -> None:
+        self.session = session
+        self.keys: list[str] = c["keys"]
+        self.payload = None if c.get("payload") is None else bytes.fromhex(c["payload"])
+        self.fresh_id = c.get("fresh_id", False)  # a random client id in each query
+        self.hz = float(c["hz"])
+        self.duration_s = float(c.get("duration_s", 60.0))
+        self.counts = {"sent": 0, "answers": 0, "errors": 0, "ended": 0}
+        self.stopping = False
+        self.thread = threading.Thread(target=self.run, daemon=True)
+        self.thread.start()
+
+    def run(self) -> None:
+        import zenoh
+
+        def on_reply(reply: Any) -> None:
+            self.counts["answers" if reply.ok is not None else "errors"] += 1
+
+        def on_done() -> None:
+            self.counts["ended"] += 1
+
+        started = time.monotonic()
+        rng = random.Random(self.hz)
+        while not self.stopping and time.monotonic() - started < self.duration_s:
+            due = int((time.monotonic() - started) * self.hz) + 1
+            while self.counts["sent"] < due and not self.stopping:
+                payload = self.payload
+                if payload is not None and self.fresh_id:
+                    payload = payload[:2] + rng.randbytes(16) + payload[18:]
+                key = self.keys[self.counts["sent"] % len(self.keys)]
+                try:
+                    self.session.get(
+                        key, zenoh.handlers.Callback(on_reply, on_done), payload=payload, timeout=2.0
+                    )
+                except Exception:  # (a session closing under us: the flood ends)
+                    return
+                self.counts["sent"] += 1
+            time.sleep(0.002)
+
+    def stop(self) -> dict[str, Any]:
+        self.stopping = True
+        self.thread.join(timeout=10)
+        return dict(self.counts)
+
+
+async def flood(client: Client, c: dict[str, Any]) -> dict[str, Any]:
+    """One more flood, beside those running."""
+    client.flooding.append(Flood(await client.raw_session(), c))
+    return {}
+
+
+def flood_stop(client: Client, _: dict[str, Any]) -> dict[str, Any]:
+    """Stop every flood; the counts of each (sent, answers, errors, ended), in order."""
+    flooding, client.flooding = client.flooding, []
+    return {"counts": [each.stop() for each in flooding]}
+
+
 async def client_main(args: argparse.Namespace) -> None:
     client = Client(args)
     pipeline = Pipeline()
@@ -670,6 +739,7 @@ async def client_main(args: argparse.Namespace) -> None:
         "cycle": client.cycle,
         "raw_put": client.raw_put,
         "raw_get": client.raw_get,
+        "flood": functools.partial(flood, client),
     }
     hostile = Hostile(args)
     calls.update(hostile.calls())
@@ -694,6 +764,8 @@ async def client_main(args: argparse.Namespace) -> None:
                     body = pipeline.start(client.bus, command, group)
                 elif op == "pipelined":
                     body = pipeline.stop() if command.get("stop") else dict(pipeline.counts)
+                elif op == "flood_stop":
+                    body = flood_stop(client, command)
                 else:
                     body = await calls[op](command)
                 answer = {"ok": True, **body}
@@ -709,6 +781,8 @@ async def client_main(args: argparse.Namespace) -> None:
             emit(answer)
         group.cancel_scope.cancel()
     hostile.close()
+    for each in client.flooding:
+        each.stop()
     if client.raw is not None:
         client.raw.close()
 

@@ -212,3 +212,115 @@ def test_a_motor_key_has_one_spelling() -> None:
     ):
         with pytest.raises(ValueError, match="not a motor key"):
             keys.parse_motor(bad)
+
+
+# ---- what a bridge takes before decoding (remote/_limits.py), and the decode budget ----
+
+_STR_BYTES = 64  # (a string field's longest legitimate value: a model's name)
+
+
+def _most(schema: wire.Schema, hint: object, commands: tuple[type, ...]) -> tuple[int, int]:
+    """(The most bytes, the most values) a value of type ``hint`` encodes to, from the declarations."""
+    import dataclasses
+    import types
+    import typing
+
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if hint in (type(None), bool):
+        return 1, 1
+    if hint in (int, float):
+        return 9, 1
+    if hint in (str, bytes):
+        return 3 + _STR_BYTES, 1
+    if origin in (typing.Union, types.UnionType):
+        found = [_most(schema, a, commands) for a in args]
+        return max(b for b, _ in found), max(v for _, v in found)
+    if origin is tuple:
+        found = [_most(schema, a, commands) for a in args]
+        return 2 + sum(b for b, _ in found), 1 + sum(v for _, v in found)
+    if isinstance(hint, typing.TypeVar):  # (an echo: any command of the family)
+        found = [_most(schema, c, commands) for c in commands]
+        return max(b for b, _ in found), max(v for _, v in found)
+    assert isinstance(hint, type), hint
+    if issubclass(hint, enum.Enum):
+        return 3 + max(3 + len(m.value.encode()) if isinstance(m.value, str) else 9 for m in hint), 2
+    assert dataclasses.is_dataclass(hint), hint
+    most = (0, 0)
+    for cls in [c for c in schema.types if issubclass(c, hint) and dataclasses.is_dataclass(c)] or [hint]:
+        hints = typing.get_type_hints(cls)
+        found = [_most(schema, hints[f.name], commands) for f in dataclasses.fields(cls) if f.init]
+        most = max(most[0], 4 + sum(b for b, _ in found)), max(most[1], 1 + sum(v for _, v in found))
+    return most
+
+
+def _largest() -> dict[str, tuple[int, int]]:
+    """Per family: (the most bytes, the most values) of any command and of any reply."""
+    out = {}
+    for name in FAMILIES:
+        schema, family = wire.Schema.of(name), get_family(name)
+        commands = tuple(family.commands)
+        sent = [_most(schema, c, commands) for c in commands]
+        replies = [_most(schema, r, commands) for c in commands for r in c.reply_types()]
+        out[name] = (max(b for b, _ in sent), max(v for _, v in sent + replies))
+    return out
+
+
+def test_the_size_limits_hold_the_largest_legitimate_message_of_every_family() -> None:
+    from servobus.remote import _limits
+
+    for name in FAMILIES:  # (the estimate is no smaller than any command encoded)
+        schema, family = wire.Schema.of(name), get_family(name)
+        for command in _built(name):
+            out = bytearray()
+            wire.encode_value(schema, command, out)
+            assert len(out) <= _most(schema, type(command), tuple(family.commands))[0], command
+    command_bytes = max(b for b, _ in _largest().values())
+    values = max(v for _, v in _largest().values())
+    print(f"largest command {command_bytes} bytes; most values in a command or reply {values}")
+    assert (command_bytes, values) == (183, 18)  # (what _limits' and wire's docstrings say)
+    request = 2 + wire.CLIENT_ID_BYTES + 8 + command_bytes
+    setpoints_head = 2 + wire.CLIENT_ID_BYTES + 4 + 8 + 8 + 2
+    assert 4 * request <= _limits.REQUEST_BYTES
+    assert 4 * (setpoints_head + 2 + command_bytes) <= _limits.SETPOINT_BYTES
+    assert setpoints_head + wire._MAX_SETPOINTS * (2 + command_bytes) <= _limits.SETPOINTS_BYTES
+    assert 3 * values <= wire.MAX_VALUES
+    # each key's limit, exactly: the size itself passes, one byte more is counted and refused
+    counts = {"oversized": 0}
+    served = type("Served", (), {"counts": counts})()
+    for leaf, limit in _limits.BYTES.items():
+        assert not _limits.oversized(served, f"servobus/n/b/3/{leaf}", b"x" * limit)  # type: ignore[arg-type]
+        assert _limits.oversized(served, f"servobus/n/b/3/{leaf}", b"x" * (limit + 1))  # type: ignore[arg-type]
+    assert not _limits.oversized(served, "servobus/n/b/info", None)  # type: ignore[arg-type]
+    assert counts["oversized"] == len(_limits.BYTES)
+
+
+def _nested(counts: list[int]) -> bytes:
+    body = b"\x00"
+    for count in reversed(counts):
+        body = b"\x07" + bytes([count]) + body * count
+    return body
+
+
+def test_a_value_holds_at_most_max_values_whatever_its_bytes() -> None:
+    schema = wire.Schema.of("myactuator")
+    fits = b"\x07" + bytes([wire.MAX_VALUES - 1]) + b"\x00" * (wire.MAX_VALUES - 1)
+    assert wire.decode_value(schema, wire._Reader(fits)) == (None,) * (wire.MAX_VALUES - 1)
+    for data in (fits[:1] + bytes([wire.MAX_VALUES]) + b"\x00" * wire.MAX_VALUES, _nested([2] * 8)):
+        with pytest.raises(wire.WireError, match=f"more than {wire.MAX_VALUES} values"):
+            wire.decode_value(schema, wire._Reader(data))
+    # a 10 MB read (10.4 million values, within the depth limit) is refused at its 65th value
+    head = wire.encode_request(schema, wire.Request(CLIENT, ma.ReadStatus2()))[: 2 + wire.CLIENT_ID_BYTES + 8]
+    big = head + _nested([255, 255, 160])
+    started = time.perf_counter()
+    with pytest.raises(wire.WireError, match="values"):
+        wire.decode_request(schema, big)
+    took_s = time.perf_counter() - started
+    print(f"a {len(big) / 1e6:.1f} MB read refused in {took_s * 1e3:.2f} ms")
+    assert len(big) > 10_000_000 and took_s < 0.05
+    # the budget is per top-level value: a batch of 256 set-points of 12 values each decodes
+    batch = tuple(
+        (mid, ma.MotionCommand(position_rad=1.0, velocity_rad_s=2.0, kp=3.0, kd=0.5, torque_ff_nm=0.1))
+        for mid in range(256)
+    )
+    encoded = wire.encode_setpoints(lambda _: schema, wire.Setpoints(CLIENT, 1, 2, 3, batch))
+    assert wire.decode_setpoints(lambda _: schema, encoded).items == batch

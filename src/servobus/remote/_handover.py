@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 import anyio
 
 from servobus import runtime
+from servobus.remote import _limits
 from servobus.remote._session import to_loop
 
 if TYPE_CHECKING:
@@ -98,6 +99,8 @@ class Handover:
         for each client's latest ``PER_SLOT`` messages on each key, oldest first."""
 
         def callback(sample: Any) -> None:
+            if _limits.oversized(served, str(sample.key_expr), sample.payload):  # (before any copy)
+                return
             key, payload = str(sample.key_expr), sample.payload.to_bytes()
             slot = (key, payload[2:18])  # (the client's id: in wire.py's header, after version and kind)
             with self._lock:

@@ -33,6 +33,8 @@ COUNTS = {
     "reordered": "set-points older than the one held from the same client",
     "refused": "commands from a client without a token, or for a motor another live client holds",
     "malformed": "messages that did not parse, or were not a command the motor's codec takes",
+    "oversized": "messages longer than their key allows (remote/_limits.py), dropped before decoding",
+    "shed": "queries dropped on arrival: their client's or their kind's queue was full",
     "requests": "commands through request",
     "reads": "commands through read",
     "stops": "safe stops sent because a client left or its set-points went stale",

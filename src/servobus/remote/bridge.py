@@ -11,8 +11,10 @@ per motor, and every second besides (a client that joins late sees them).
 
 Zenoh calls us on its own threads; every callback only hands its bytes to the event loop, where all
 the state lives. Of the set-points, only each client's latest few messages on each key wait for the
-loop (an older one is dropped; ``_handover``); queries wait in a bounded backlog (beyond it they are
-dropped on Zenoh's thread, and counted); a client's liveliness changes are never dropped.
+loop (an older one is dropped; ``_handover``); queries wait in bounded queues per client and kind,
+served round-robin with quotas (``_queries``; beyond them they are dropped on Zenoh's thread, and
+counted); a message longer than its key allows is dropped there too, before anything of it is decoded
+(``_limits``); a client's liveliness changes are never dropped.
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from servobus.protocols import Command
 from servobus.remote import _requests, wire
 from servobus.remote._clients import Clients
 from servobus.remote._handover import Handover
+from servobus.remote._queries import Queries
 from servobus.remote._served import Held, Served
 from servobus.remote._session import close_session, handed, sample_kind
 from servobus.remote._withdraw import withdraw
@@ -50,6 +53,7 @@ logger = logging.getLogger(__name__)
 
 _BACKLOG = 4096  # set-points and queries waiting for the loop; more are dropped on Zenoh's thread
 _LEFT = "client left"  # why a motor is stopped when its client's token went
+_METRICS_EVERY_S = 0.5  # a metrics answer is computed again at most this often (it sorts 20k samples)
 
 
 class Bridge:
@@ -114,6 +118,8 @@ class Bridge:
         self._lane: runtime.Runtime | None = None
         self._stops, self._stops_in = anyio.create_memory_object_stream[tuple[Served, list[Motor]]](math.inf)
         self._handover: Handover | None = None
+        self._queries: Queries | None = None
+        self._metrics: dict[str, tuple[float, bytes]] = {}  # bus -> (when, the metrics answer)
         self.stop_log: deque[tuple[int, str, int, str]] = deque(maxlen=1000)  # (unix ns, bus, id, why)
 
     # ---- life cycle ----
@@ -125,6 +131,7 @@ class Bridge:
             self._config = bridge_config(self.node)
         self._lane = runtime.current()
         self._handover = Handover(self._lane, _BACKLOG)
+        self._queries = Queries(self._lane, self.clients.live.__contains__)
         self._session = await anyio.to_thread.run_sync(zenoh.open, self._config)
         try:
             self._declare()
@@ -134,6 +141,7 @@ class Bridge:
             await self._close()
             raise
         self._group.start_soon(self._handover.run)
+        self._group.start_soon(self._queries.run)
         self._group.start_soon(self._take_stops)
         for served in self.served.values():
             self._group.start_soon(self._tick, served)
@@ -166,7 +174,8 @@ class Bridge:
 
     def _declare(self) -> None:
         session, keys, handover, lane = self._session, self.keys, self._handover, self._lane
-        assert handover is not None and lane is not None
+        queries = self._queries
+        assert handover is not None and lane is not None and queries is not None
         self._declared.append(
             session.liveliness().declare_subscriber(
                 keys.clients, handed(lane, self._on_client, _token), history=True
@@ -175,15 +184,15 @@ class Bridge:
         for served in self.served.values():
             name = served.name
             setpoints = handover.latest(self._on_setpoints, served)
-            query = handover.queued(self._on_query, served)
+            query = queries.callback(self._on_query, served)
             self._declared += [
                 session.declare_subscriber(keys.bus(name, "setpoints"), setpoints),
                 session.declare_subscriber(keys.motor(name, "*", "setpoint"), setpoints),
                 session.declare_queryable(keys.motor(name, "*", "request"), query),
                 session.declare_queryable(keys.motor(name, "*", "read"), query),
-                session.declare_queryable(keys.bus(name, "info"), handover.queued(self._on_info, served)),
+                session.declare_queryable(keys.bus(name, "info"), queries.callback(self._on_info, served)),
                 session.declare_queryable(
-                    keys.bus(name, "metrics"), handover.queued(self._on_metrics, served)
+                    keys.bus(name, "metrics"), queries.callback(self._on_metrics, served)
                 ),
             ]
             for mid in served.motors:
@@ -352,12 +361,10 @@ class Bridge:
 
     # ---- requests, info, metrics ----
 
-    def _on_query(self, served: Served, query: zenoh.Query) -> None:
-        assert self._group is not None
-        self._group.start_soon(_requests.answer, served, query, self.keys, self.clients)
+    async def _on_query(self, served: Served, query: zenoh.Query) -> None:
+        await _requests.answer(served, query, self.keys, self.clients)
 
-    def _on_info(self, served: Served, query: zenoh.Query) -> None:
-        assert self._group is not None
+    async def _on_info(self, served: Served, query: zenoh.Query) -> None:
         limits = {
             "hz": self.hz,
             "state_hz": self.state_hz,
@@ -366,12 +373,15 @@ class Bridge:
         }
         body = json.dumps(served.info(self.node, limits)).encode()
         # (on the bus's own key: the answers to a wildcard query, servobus/N/*/info, stay apart)
-        self._group.start_soon(_requests.reply, query, self.keys.bus(served.name, "info"), body)
+        await _requests.reply(query, self.keys.bus(served.name, "info"), body)
 
-    def _on_metrics(self, served: Served, query: zenoh.Query) -> None:
-        assert self._group is not None
-        body = json.dumps(served.metrics()).encode()
-        self._group.start_soon(_requests.reply, query, self.keys.bus(served.name, "metrics"), body)
+    async def _on_metrics(self, served: Served, query: zenoh.Query) -> None:
+        assert self._lane is not None
+        now = self._lane.time()
+        cached = self._metrics.get(served.name)
+        if cached is None or now - cached[0] >= _METRICS_EVERY_S:  # (not a sort per query)
+            cached = self._metrics[served.name] = (now, json.dumps(served.metrics()).encode())
+        await _requests.reply(query, self.keys.bus(served.name, "metrics"), cached[1])
 
     # ---- states ----
 
@@ -392,7 +402,8 @@ class Bridge:
 
     @property
     def dropped_events(self) -> int:
-        """Set-points and queries dropped on arrival because the backlog was full."""
+        """Set-points dropped on arrival because the backlog was full (queries refused on arrival
+        are counted in each bus's ``shed`` and ``oversized``)."""
         return self._handover.dropped if self._handover is not None else 0
 
     def metrics(self) -> dict[str, dict[str, Any]]:

@@ -11,6 +11,9 @@ A value is one tag byte and its body (little-endian)::
     6 bytes (u16 length)   7 tuple (u8 count, values)   8 enum (u16 type, value)
     9 dataclass (u16 type, u8 field count, the init fields' values in declaration order)
 
+A decoded value nests at most 8 deep and holds at most :data:`MAX_VALUES` values (64; the largest
+command or reply of any family holds 18), so its cost is bounded whatever bytes arrive.
+
 Types are numbered by the family's :class:`Schema`: every command class, every reply type they
 declare and every dataclass or enum their fields name, sorted by qualified name. Both sides derive it
 from the same family, and :attr:`Schema.digest` (in the bridge's ``info``) tells a client whose
@@ -71,6 +74,10 @@ SETPOINTS, REQUEST, RESULT, STATE = 1, 2, 3, 4
 CLIENT_ID_BYTES = 16
 _MAX_DEPTH = 8
 _MAX_SETPOINTS = 256
+#: the most values (each tag counts one) one command, reply or error may hold when decoded: the
+#: largest of any family holds 18 (hollow's ModbusWrite, ModbusReadReply); so the cost of decoding
+#: a message is bounded by its count of such values, whatever its bytes
+MAX_VALUES = 64
 
 _NONE, _FALSE, _TRUE, _INT, _FLOAT, _STR, _BYTES, _TUPLE, _ENUM, _DATACLASS = range(10)
 _U8, _U16, _I64, _F64, _U64, _U32 = (struct.Struct(f) for f in ("<B", "<H", "<q", "<d", "<Q", "<I"))
@@ -243,14 +250,35 @@ class _Reader:
             raise WireError(f"{len(self.data) - self.at} bytes left over")
 
 
-def decode_value(schema: Schema, reader: _Reader, depth: int = 0) -> Any:
+class _Budget:
+    """How many more values one top-level value may hold (:data:`MAX_VALUES`)."""
+
+    __slots__ = ("left",)
+
+    def __init__(self, values: int = MAX_VALUES) -> None:
+        self.left = values
+
+    def spend(self) -> None:
+        self.left -= 1
+        if self.left < 0:
+            raise WireError(f"more than {MAX_VALUES} values in one value")
+
+
+def decode_value(schema: Schema, reader: _Reader, depth: int = 0, budget: _Budget | None = None) -> Any:
     """The value at ``reader``: built by its type's own constructor, which checks its ranges.
 
+    ``budget``: what the enclosing value may still hold (None: a top-level value, with
+    :data:`MAX_VALUES`); each value spends one, so its cost is bounded before its bytes are.
+
     Raises:
-        WireError: anything that does not parse, or that the constructor refuses (its message kept).
+        WireError: anything that does not parse, more values than the budget or deeper than
+            allowed, or a value the constructor refuses (its message kept).
     """
     if depth > _MAX_DEPTH:
         raise WireError("value nested too deep")
+    if budget is None:
+        budget = _Budget()
+    budget.spend()
     tag = reader.take(_U8)
     if tag == _NONE:
         return None
@@ -270,7 +298,7 @@ def decode_value(schema: Schema, reader: _Reader, depth: int = 0) -> Any:
     if tag == _BYTES:
         return reader.raw(reader.take(_U16))
     if tag == _TUPLE:
-        return tuple(decode_value(schema, reader, depth + 1) for _ in range(reader.take(_U8)))
+        return tuple(decode_value(schema, reader, depth + 1, budget) for _ in range(reader.take(_U8)))
     if tag in (_ENUM, _DATACLASS):
         index = reader.take(_U16)
         if index >= len(schema.types):
@@ -279,13 +307,13 @@ def decode_value(schema: Schema, reader: _Reader, depth: int = 0) -> Any:
         if tag == _ENUM:
             if not issubclass(cls, enum.Enum):
                 raise WireError(f"{cls.__name__} is not an enum")
-            return _build(cls, (decode_value(schema, reader, depth + 1),), {})
+            return _build(cls, (decode_value(schema, reader, depth + 1, budget),), {})
         names = schema.fields(cls)
         if names is None:
             raise WireError(f"{cls.__name__} is not a dataclass")
         if reader.take(_U8) != len(names):
             raise WireError(f"{cls.__name__} has {len(names)} fields")
-        values = {name: decode_value(schema, reader, depth + 1) for name in names}
+        values = {name: decode_value(schema, reader, depth + 1, budget) for name in names}
         return _build(cls, (), values)
     raise WireError(f"unknown tag {tag}")
 
