@@ -7,10 +7,15 @@ of callback is handed over by its own rule:
   ``PER_SLOT`` latest wait for the loop, in order; an older one beyond them is dropped there (counted
   ``overwritten``), so a client that publishes faster than the bridge takes them costs no queue and
   no lag, while one whose successive batches name different motors loses none of them to the next
-  unless it is that far ahead;
+  unless it is that far ahead. Only a client whose liveliness token lives has slots of its own
+  (checked here, on Zenoh's thread, by the hash of the secret id its messages carry), at most one
+  per key of its bus; the messages of every other id share one slot per bus that holds the latest
+  one only and is taken every ``TOKENLESS_PERIOD_S`` (:meth:`Handover.drain`): set-points under
+  fresh random ids, however many, cost the loop at most one message a period and take no room from
+  the clients that may command;
 * queries (:meth:`Handover.queued`): in order, to a task that may start tasks, at most
   ``backlog`` waiting; beyond that a query is answered nothing at once, on Zenoh's thread;
-* liveliness: straight to the loop, never dropped (:func:`servobus.remote._session.handed`, no
+* liveliness: never dropped, coalesced per client (:class:`servobus.remote._tokens.Tokens`, no
   need of this class).
 """
 
@@ -34,6 +39,7 @@ if TYPE_CHECKING:
 logger = logging.getLogger("servobus.remote.bridge")
 
 PER_SLOT = 8  # set-point messages of one client on one key that may wait for the loop
+TOKENLESS_PERIOD_S = 0.01  # how often the set-points of ids without a live token are taken (the latest)
 
 
 class Handover:
@@ -46,9 +52,12 @@ class Handover:
             math.inf
         )
         self._waiting = 0  # queued items handed over and not yet taken (approximate: two threads)
-        # (key, client id) -> [served, [(message, when it came), ...] oldest first, how many were dropped]
-        self._latest: dict[tuple[str, bytes], list[Any]] = {}
+        # (key, client id) -> [served, [(key, message, when it came), ...] oldest first, how many were
+        # dropped]; (bus, None): the one slot of a bus's set-points from ids without a live token
+        self._latest: dict[tuple[str, bytes | None], list[Any]] = {}
+        self._slots: dict[tuple[str, bytes], int] = {}  # (bus, client id) -> its slots waiting
         self._lock = threading.Lock()
+        self._tokenless: dict[str, Callable[[Served, tuple[str, bytes, int]], object]] = {}  # bus -> handler
         self.dropped = 0  # set-points and queries dropped because the backlog was full
 
     def queued(self, handler: Callable[[Served, Any], object], served: Served) -> Callable[[Any], None]:
@@ -92,39 +101,73 @@ class Handover:
                     args[-1].drop()
 
     def latest(
-        self, handler: Callable[[Served, tuple[str, bytes, int]], object], served: Served
+        self,
+        handler: Callable[[Served, tuple[str, bytes, int]], object],
+        served: Served,
+        admits: Callable[[bytes], bool],
     ) -> Callable[[Any], None]:
         """A callback for set-points: ``handler(served, (key, payload, arrived_ns))`` on the loop,
-        for each client's latest ``PER_SLOT`` messages on each key, oldest first."""
+        for each client's latest ``PER_SLOT`` messages on each key, oldest first, if ``admits(its
+        secret id)`` (its token lives; called on Zenoh's thread); else the latest of all the others'
+        (:meth:`drain`)."""
+        per_client = len(served.motors) + 1  # (a slot per key: the bus's, each motor's)
+        self._tokenless[served.name] = handler
 
         def callback(sample: Any) -> None:
             key, payload = str(sample.key_expr), sample.payload.to_bytes()
-            slot = (key, payload[2:18])  # (the client's id: in wire.py's header, after version and kind)
+            client = payload[2:18]  # (the client's id: in wire.py's header, after version and kind)
+            arrived_ns = time.time_ns()
+            if not admits(client):
+                with self._lock:
+                    entry = self._latest.get((served.name, None))
+                    if entry is None:
+                        self._latest[(served.name, None)] = [served, [(key, payload, arrived_ns)], 0]
+                    else:
+                        entry[1][0] = (key, payload, arrived_ns)
+                        entry[2] += 1
+                return
+            slot = (key, client)
             with self._lock:
                 entry = self._latest.get(slot)
                 if entry is not None:
                     waiting = entry[1]
-                    waiting.append((payload, time.time_ns()))
+                    waiting.append((key, payload, arrived_ns))
                     if len(waiting) > PER_SLOT:
                         del waiting[0]
                         entry[2] += 1
                     return
-                if len(self._latest) >= self._limit:
+                mine = self._slots.get((served.name, client), 0)
+                if len(self._latest) >= self._limit or mine >= per_client:
                     self.dropped += 1
                     return
-                self._latest[slot] = [served, [(payload, time.time_ns())], 0]
+                self._slots[(served.name, client)] = mine + 1
+                self._latest[slot] = [served, [(key, payload, arrived_ns)], 0]
             to_loop(self._lane, self._take, handler, slot)
 
         return callback
 
+    async def drain(self) -> None:
+        """Take the latest set-point message of ids without a live token, each bus's, every
+        ``TOKENLESS_PERIOD_S`` (they are refused there, or taken if the token came meanwhile)."""
+        while True:
+            await anyio.sleep(TOKENLESS_PERIOD_S)
+            for name, handler in self._tokenless.items():
+                if (name, None) in self._latest:
+                    self._take(handler, (name, None))
+
     def _take(
-        self, handler: Callable[[Served, tuple[str, bytes, int]], object], slot: tuple[str, bytes]
+        self, handler: Callable[[Served, tuple[str, bytes, int]], object], slot: tuple[str, bytes | None]
     ) -> None:
         with self._lock:
             served, waiting, overwritten = self._latest.pop(slot)
+            client = slot[1]
+            if client is not None:
+                mine = self._slots.pop((served.name, client)) - 1
+                if mine:
+                    self._slots[(served.name, client)] = mine
         served.counts["overwritten"] += overwritten
-        for payload, arrived_ns in waiting:
+        for item in waiting:
             try:
-                handler(served, (slot[0], payload, arrived_ns))
+                handler(served, item)
             except Exception:  # one bad message must not end anything
                 logger.exception("handling set-points failed")

@@ -38,7 +38,8 @@ from servobus.remote import _requests, wire
 from servobus.remote._clients import Clients
 from servobus.remote._handover import Handover
 from servobus.remote._served import Held, Served
-from servobus.remote._session import close_session, handed, sample_kind
+from servobus.remote._session import close_session
+from servobus.remote._tokens import Tokens
 from servobus.remote.keys import Keys
 from servobus.safety import stop_motors
 from servobus.ticks import ticks
@@ -128,6 +129,7 @@ class Bridge:
             await self._close()
             raise
         self._group.start_soon(self._handover.run)
+        self._group.start_soon(self._handover.drain)
         self._group.start_soon(self._take_stops)
         for served in self.served.values():
             self._group.start_soon(self._tick, served)
@@ -162,13 +164,13 @@ class Bridge:
         assert handover is not None and lane is not None
         self._declared.append(
             session.liveliness().declare_subscriber(
-                keys.clients, handed(lane, self._on_client, _token), history=True
+                keys.clients, Tokens(lane, self._on_clients).callback, history=True
             )
         )
         self._declared.append(session.liveliness().declare_token(keys.alive))
         for served in self.served.values():
             name = served.name
-            setpoints = handover.latest(self._on_setpoints, served)
+            setpoints = handover.latest(self._on_setpoints, served, self.clients.admits)
             query = handover.queued(self._on_query, served)
             self._declared += [
                 session.declare_subscriber(keys.bus(name, "setpoints"), setpoints),
@@ -188,15 +190,20 @@ class Bridge:
 
     # ---- clients ----
 
-    def _on_client(self, item: tuple[str, str]) -> None:
-        """(The loop) a client's token came or went; one that went has its motors stopped."""
-        client, kind = item
-        if kind == "PUT":
-            self.clients.live.add(client)
+    def _on_clients(self, batch: dict[str, tuple[bool, bool]]) -> None:
+        """(The loop) clients' tokens came or went (``{public id: (went, alive)}``, ``_tokens``); a
+        client whose token went, even for an instant, has its motors stopped."""
+        gone = set()
+        for client, (went, alive) in batch.items():
+            if went:
+                self.clients.live.discard(client)
+                gone.add(client)
+            if alive:
+                self.clients.live.add(client)
+        if not gone:
             return
-        self.clients.live.discard(client)
         for served in self.served.values():
-            held = [mid for mid, owner in served.owners.items() if owner == client]
+            held = [mid for mid, owner in served.owners.items() if owner in gone]
             self._stop(served, held, "client left")
 
     def _stop(self, served: Served, motor_ids: Iterable[int], why: str) -> None:
@@ -384,11 +391,6 @@ class Bridge:
     def metrics(self) -> dict[str, dict[str, Any]]:
         """Each served bus's metrics: the Bus's, the bridge's counters, set-point-to-wire latency."""
         return {name: served.metrics() for name, served in self.served.items()}
-
-
-def _token(sample: zenoh.Sample) -> tuple[str, str]:
-    """(A client's public id, ``"PUT"`` or ``"DELETE"``) of a liveliness sample."""
-    return str(sample.key_expr).rsplit("/", 1)[-1], sample_kind(sample)
 
 
 def _older(seq: int, than: int) -> bool:
