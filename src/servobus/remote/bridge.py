@@ -34,12 +34,11 @@ import zenoh
 from servobus import runtime
 from servobus.bus import Bus, Motor, MotorStatus
 from servobus.protocols import Command
-from servobus.remote import _requests, wire
+from servobus.remote import _requests, _tokens, wire
 from servobus.remote._clients import Clients
 from servobus.remote._handover import Handover
 from servobus.remote._served import Held, Served
 from servobus.remote._session import close_session
-from servobus.remote._tokens import Tokens
 from servobus.remote.keys import Keys
 from servobus.safety import stop_motors
 from servobus.ticks import ticks
@@ -109,6 +108,7 @@ class Bridge:
         self._lane: runtime.Runtime | None = None
         self._stops, self._stops_in = anyio.create_memory_object_stream[tuple[Served, list[Motor]]](math.inf)
         self._handover: Handover | None = None
+        self._tokens: _tokens.Tokens | None = None
         self.stop_log: deque[tuple[int, str, int, str]] = deque(maxlen=1000)  # (unix ns, bus, id, why)
 
     # ---- life cycle ----
@@ -128,8 +128,10 @@ class Bridge:
         except BaseException:
             await self._close()
             raise
+        assert self._tokens is not None
         self._group.start_soon(self._handover.run)
         self._group.start_soon(self._handover.drain)
+        self._group.start_soon(self._tokens.run)
         self._group.start_soon(self._take_stops)
         for served in self.served.values():
             self._group.start_soon(self._tick, served)
@@ -162,11 +164,9 @@ class Bridge:
     def _declare(self) -> None:
         session, keys, handover, lane = self._session, self.keys, self._handover, self._lane
         assert handover is not None and lane is not None
-        self._declared.append(
-            session.liveliness().declare_subscriber(
-                keys.clients, Tokens(lane, self._on_clients).callback, history=True
-            )
-        )
+        tokens = session.liveliness().declare_subscriber(keys.clients, _tokens.channel(), history=True)
+        self._declared.append(tokens)
+        self._tokens = _tokens.Tokens(tokens, self._on_clients)
         self._declared.append(session.liveliness().declare_token(keys.alive))
         for served in self.served.values():
             name = served.name
@@ -189,6 +189,15 @@ class Bridge:
             served.bus.subscribe_status(functools.partial(self._on_status, served))
 
     # ---- clients ----
+
+    def _take_tokens(self) -> None:
+        """(The loop) the token events waiting, now rather than at the next poll: a client's token
+        reaches the bridge before its first query (``connect`` asks for ``info``), so once that is
+        answered its set-points and requests find it live."""
+        if self._tokens is not None:
+            batch = self._tokens.take()
+            if batch:
+                self._on_clients(batch)
 
     def _on_clients(self, batch: dict[str, tuple[bool, bool]]) -> None:
         """(The loop) clients' tokens came or went (``{public id: (went, alive)}``, ``_tokens``); a
@@ -277,6 +286,8 @@ class Bridge:
             return
         client = self.clients.public(message.client_id)
         if client not in self.clients.live:
+            self._take_tokens()  # (its token may be waiting still)
+        if client not in self.clients.live:
             served.counts["refused"] += len(message.items)
             return
         left_ns = min(
@@ -351,6 +362,7 @@ class Bridge:
 
     def _on_info(self, served: Served, query: zenoh.Query) -> None:
         assert self._group is not None
+        self._take_tokens()
         limits = {
             "hz": self.hz,
             "state_hz": self.state_hz,
