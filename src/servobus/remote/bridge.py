@@ -131,6 +131,7 @@ class Bridge:
         assert self._tokens is not None
         self._group.start_soon(self._handover.run)
         self._group.start_soon(self._handover.drain)
+        self._group.start_soon(self._handover.pulls)
         self._group.start_soon(self._tokens.run)
         self._group.start_soon(self._take_stops)
         for served in self.served.values():
@@ -172,9 +173,10 @@ class Bridge:
             name = served.name
             setpoints = handover.latest(self._on_setpoints, served, self.clients.admits)
             query = handover.queued(self._on_query, served)
+            for key in (keys.bus(name, "setpoints"), keys.motor(name, "*", "setpoint")):
+                self._declared.append(session.declare_subscriber(key, handover.channel()))
+                handover.pull(self._declared[-1], setpoints)
             self._declared += [
-                session.declare_subscriber(keys.bus(name, "setpoints"), setpoints),
-                session.declare_subscriber(keys.motor(name, "*", "setpoint"), setpoints),
                 session.declare_queryable(keys.motor(name, "*", "request"), query),
                 session.declare_queryable(keys.motor(name, "*", "read"), query),
                 session.declare_queryable(keys.bus(name, "info"), handover.queued(self._on_info, served)),
