@@ -7,12 +7,12 @@ of callback is handed over by its own rule:
   (Rust: no Python, no GIL per message on Zenoh's side) and the loop takes them every ``PULL_S``
   (:meth:`Handover.pulls`), so a flood costs the loop a few microseconds a message and never takes
   the GIL from it; beyond ``SETPOINTS_WAITING`` untaken, Zenoh drops the oldest. Then, of each
-  client's messages on each key, at most the
-  ``PER_SLOT`` latest wait for the loop, in order; an older one beyond them is dropped there (counted
-  ``overwritten``), so a client that publishes faster than the bridge takes them costs no queue and
-  no lag, while one whose successive batches name different motors loses none of them to the next
-  unless it is that far ahead. Only a client whose liveliness token lives has slots of its own
-  (checked here, on Zenoh's thread, by the hash of the secret id its messages carry), at most one
+  client's messages on each key, at most the ``PER_SLOT`` latest wait for their handler, in order;
+  an older one beyond them is dropped there (counted ``overwritten``), so a client that publishes
+  faster than the bridge takes them costs no queue and no lag, while one whose successive batches
+  name different motors loses none of them to the next unless it is that far ahead. Only a client
+  whose liveliness token lives has slots of its own (checked before anything is decoded, by the
+  hash of the secret id its messages carry), at most one
   per key of its bus; the messages of every other id share one slot per bus that holds the latest
   one only and is taken every ``TOKENLESS_PERIOD_S`` (:meth:`Handover.drain`): set-points under
   fresh random ids, however many, cost the loop at most one message a period and take no room from

@@ -10,9 +10,11 @@ error. States (latest reply, online flag, fault) are published as they change, a
 per motor, and every second besides (a client that joins late sees them).
 
 Zenoh calls us on its own threads; every callback only hands its bytes to the event loop, where all
-the state lives. Of the set-points, only each client's latest few messages on each key wait for the
-loop (an older one is dropped; ``_handover``); queries wait in a bounded backlog (beyond it they are
-dropped on Zenoh's thread, and counted); a client's liveliness changes are never dropped.
+the state lives; set-points and liveliness samples wait in Zenoh's own channels instead, for the
+loop to take them. Of the set-points, only each client's latest few messages on each key wait for
+the loop (an older one is dropped; ``_handover``); queries wait in a bounded backlog (beyond it they
+are dropped on Zenoh's thread, and counted); a client's liveliness changes are never dropped
+(``_tokens``).
 """
 
 from __future__ import annotations
