@@ -116,7 +116,7 @@ class Handover:
     ) -> Callable[[Any], None]:
         """A callback for set-points: ``handler(served, (key, payload, arrived_ns))`` on the loop,
         for each client's latest ``PER_SLOT`` messages on each key, oldest first, if ``admits(its
-        secret id)`` (its token lives; called on Zenoh's thread); else the latest of all the others'
+        secret id)`` (its token lives); else the latest of all the others'
         (:meth:`drain`)."""
         per_client = len(served.motors) + 1  # (a slot per key: the bus's, each motor's)
         self._tokenless[served.name] = handler
