@@ -4,8 +4,8 @@ Zenoh calls its callbacks on its own threads; the bridge's state lives on its ev
 of callback is handed over by its own rule:
 
 * set-points (:meth:`Handover.latest`): they wait in Zenoh's own ring channel of each subscriber
-  (Rust: no Python, no GIL per message on Zenoh's side) and the loop takes them every ``PULL_S``
-  (:meth:`Handover.pulls`), so a flood costs the loop a few microseconds a message and never takes
+  (Rust: no Python, no GIL per message on Zenoh's side) and each bus's tick takes them first
+  thing (:meth:`Handover.take`), so a flood costs the loop a few microseconds a message and never takes
   the GIL from it; beyond ``SETPOINTS_WAITING`` untaken, Zenoh drops the oldest. Then, of each
   client's messages on each key, at most the ``PER_SLOT`` latest wait for their handler, in order;
   an older one beyond them is dropped there (counted ``overwritten``), so a client that publishes
@@ -44,7 +44,6 @@ if TYPE_CHECKING:
 logger = logging.getLogger("servobus.remote.bridge")
 
 PER_SLOT = 8  # set-point messages of one client on one key that may wait for the loop
-PULL_S = 0.001  # how often the loop takes the set-point messages waiting in Zenoh's channels
 SETPOINTS_WAITING = 1 << 14  # set-point messages a subscriber's channel holds (beyond: the oldest dropped)
 TOKENLESS_PERIOD_S = 0.01  # how often the set-points of ids without a live token are taken (the latest)
 
@@ -65,7 +64,8 @@ class Handover:
         self._slots: dict[tuple[str, bytes], int] = {}  # (bus, client id) -> its slots waiting
         self._lock = threading.Lock()
         self._tokenless: dict[str, Callable[[Served, tuple[str, bytes, int]], object]] = {}  # bus -> handler
-        self._pulled: list[tuple[Any, Callable[[Any], None]]] = []  # (subscriber, its callback)
+        self._pulled: dict[str, list[tuple[Any, Callable[[Any], None]]]] = {}  # bus -> (subscriber, callback)
+        self._new: list[tuple[Callable[[Served, tuple[str, bytes, int]], object], tuple[str, bytes]]] = []
         self.dropped = 0  # set-points and queries dropped because the backlog was full
 
     def queued(self, handler: Callable[[Served, Any], object], served: Served) -> Callable[[Any], None]:
@@ -150,7 +150,7 @@ class Handover:
                     return
                 self._slots[(served.name, client)] = mine + 1
                 self._latest[slot] = [served, [(key, payload, arrived_ns)], 0]
-            to_loop(self._lane, self._take, handler, slot)
+            self._new.append((handler, slot))  # (taken at the end of this pull)
 
         return callback
 
@@ -159,21 +159,24 @@ class Handover:
         """The handler to declare a set-point subscriber with (then :meth:`pull` it)."""
         return zenoh.handlers.RingChannel(SETPOINTS_WAITING)
 
-    def pull(self, subscriber: Any, callback: Callable[[Any], None]) -> None:
-        """Have :meth:`pulls` give each message of ``subscriber`` (declared with :meth:`channel`) to
+    def pull(self, served: Served, subscriber: Any, callback: Callable[[Any], None]) -> None:
+        """Have :meth:`take` give each message of ``subscriber`` (declared with :meth:`channel`) to
         ``callback`` (one of :meth:`latest`)."""
-        self._pulled.append((subscriber, callback))
+        self._pulled.setdefault(served.name, []).append((subscriber, callback))
 
-    async def pulls(self) -> None:
-        """Take the set-point messages waiting in Zenoh's channels every ``PULL_S``, until cancelled."""
-        while True:
-            await anyio.sleep(PULL_S)
-            for subscriber, callback in self._pulled:
-                for _ in range(SETPOINTS_WAITING):  # (however fast they come, the loop gets back to its work)
-                    sample = subscriber.try_recv()
-                    if sample is None:
-                        break
-                    callback(sample)
+    def take(self, served: Served) -> None:
+        """(The loop: ``served``'s tick, first thing) take the set-point messages waiting in Zenoh's
+        channels of ``served``, and hand each client's latest to the handler now: what came since
+        the last tick goes out in this one."""
+        for subscriber, callback in self._pulled.get(served.name, ()):
+            for _ in range(SETPOINTS_WAITING):  # (however fast they come, the tick gets back to its work)
+                sample = subscriber.try_recv()
+                if sample is None:
+                    break
+                callback(sample)
+        new, self._new = self._new, []
+        for handler, slot in new:
+            self._take(handler, slot)
 
     async def drain(self) -> None:
         """Take the latest set-point message of ids without a live token, each bus's, every

@@ -133,7 +133,6 @@ class Bridge:
         assert self._tokens is not None
         self._group.start_soon(self._handover.run)
         self._group.start_soon(self._handover.drain)
-        self._group.start_soon(self._handover.pulls)
         self._group.start_soon(self._tokens.run)
         self._group.start_soon(self._take_stops)
         for served in self.served.values():
@@ -177,7 +176,7 @@ class Bridge:
             query = handover.queued(self._on_query, served)
             for key in (keys.bus(name, "setpoints"), keys.motor(name, "*", "setpoint")):
                 self._declared.append(session.declare_subscriber(key, handover.channel()))
-                handover.pull(self._declared[-1], setpoints)
+                handover.pull(served, self._declared[-1], setpoints)
             self._declared += [
                 session.declare_queryable(keys.motor(name, "*", "request"), query),
                 session.declare_queryable(keys.motor(name, "*", "read"), query),
@@ -326,7 +325,10 @@ class Bridge:
     async def _tick(self, served: Served) -> None:
         assert self._lane is not None
         clock = self._lane.time
+        handover = self._handover
+        assert handover is not None
         async for _ in ticks(self.hz, spin_s=0.0):
+            handover.take(served)  # (the set-points that came since the last tick)
             now = clock()
             items = []
             fresh: list[Held] = []
