@@ -24,7 +24,7 @@ import zenoh
 
 from servobus.remote._session import sample_kind
 
-POLL_S = 0.005  # how often the loop takes the token events waiting (a client's stop waits this long at most)
+POLL_S = 0.005  # how often the loop takes the token events waiting, at least (each bus's tick takes them too)
 WAITING = 1 << 16  # token events that may wait in Zenoh's channel before its thread waits for the loop
 
 

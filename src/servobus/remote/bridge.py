@@ -328,6 +328,7 @@ class Bridge:
         handover = self._handover
         assert handover is not None
         async for _ in ticks(self.hz, spin_s=0.0):
+            self._take_tokens()  # (a client that left loses its motors before anything of it is sent)
             handover.take(served)  # (the set-points that came since the last tick)
             now = clock()
             items = []
