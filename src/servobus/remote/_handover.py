@@ -44,7 +44,7 @@ if TYPE_CHECKING:
 logger = logging.getLogger("servobus.remote.bridge")
 
 PER_SLOT = 8  # set-point messages of one client on one key that may wait for the loop
-SETPOINTS_WAITING = 1 << 14  # set-point messages a subscriber's channel holds (beyond: the oldest dropped)
+SETPOINTS_WAITING = 1024  # set-point messages a subscriber's channel holds per tick (beyond: oldest dropped)
 TOKENLESS_PERIOD_S = 0.01  # how often the set-points of ids without a live token are taken (the latest)
 
 
