@@ -33,6 +33,7 @@ The bridge counts its speed frames by value (``speed_frames`` in ``report``) to 
 from __future__ import annotations
 
 import argparse
+import collections
 import contextlib
 import functools
 import json
@@ -729,6 +730,118 @@ def flood_stop(client: Client, _: dict[str, Any]) -> dict[str, Any]:
     return {"counts": [each.stop() for each in flooding]}
 
 
+# ---- the client: hostile background load (test_hostile_churn.py) ----
+
+
+class Background:
+    """One hostile load run on a thread of its own over the client's raw Zenoh session, until
+    stopped: ``churn`` declares and undeclares ``_clients/<random>`` liveliness tokens (each a
+    token's coming and going), ``forge`` puts set-points of fresh random client ids (no token).
+    ``hz`` 0: as fast as the session takes them."""
+
+    def __init__(self, step: Callable[[], None], hz: float) -> None:
+        self._step = step
+        self._period_s = 1.0 / hz if hz > 0 else 0.0
+        self._stopping = threading.Event()
+        self.count = 0
+        self.error: str | None = None
+        self.started = time.perf_counter()
+        self.ended: float | None = None
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        next_at = time.perf_counter()
+        try:
+            while not self._stopping.is_set():
+                self._step()
+                self.count += 1
+                if self._period_s:
+                    next_at += self._period_s
+                    delay = next_at - time.perf_counter()
+                    if delay > 0:
+                        time.sleep(delay)
+        except Exception as exc:  # reported by *_stop
+            self.error = f"{type(exc).__name__}: {exc}"
+        self.ended = time.perf_counter()
+
+    def stop(self) -> dict[str, Any]:
+        self._stopping.set()
+        self._thread.join(timeout=10)
+        ended = self.ended if self.ended is not None else time.perf_counter()
+        elapsed = ended - self.started
+        return {"count": self.count, "ran_s": elapsed, "per_s": self.count / elapsed, "error": self.error}
+
+
+def churn_step(session: Any, prefix: str, alive: int) -> Callable[[], None]:
+    """One token declared under ``prefix/_clients/`` (a random public id each), and the oldest
+    undeclared once ``alive`` live (1: each goes at once)."""
+    tokens: collections.deque[Any] = collections.deque()
+
+    def step() -> None:
+        tokens.append(session.liveliness().declare_token(f"{prefix}/_clients/{os.urandom(16).hex()}"))
+        while len(tokens) >= alive:
+            tokens.popleft().undeclare()
+
+    return step
+
+
+def forge_step(session: Any, key: str, motors: list[int], command: Any) -> Callable[[], None]:
+    """One batch of set-points for ``motors`` on ``key`` under a fresh random client id."""
+    from servobus.remote import wire
+
+    schema = wire.Schema.of(ma.FAMILY.name)
+    publisher = session.declare_publisher(key)
+
+    def step() -> None:
+        now = time.time_ns()
+        message = wire.Setpoints(
+            os.urandom(wire.CLIENT_ID_BYTES).hex(),
+            1,
+            now,
+            now + 100_000_000,
+            tuple((m, command) for m in motors),
+        )
+        publisher.put(wire.encode_setpoints(lambda _: schema, message))
+
+    return step
+
+
+class Loads:
+    """The client's ops of hostile background load: ``churn``/``forge`` (``hz``; ``forge`` also
+    ``motors``, ``command``, ``fields``, and ``key``: the bus's ``setpoints`` by default) start one,
+    ``alive``: how many of its tokens live at once), ``churn_stop``/``forge_stop`` end it and say
+    how many it did (``count``, ``ran_s``, ``per_s``, ``error``)."""
+
+    def __init__(self, client: Client) -> None:
+        self.client = client
+        self.running: dict[str, Background] = {}
+
+    def calls(self) -> dict[str, Callable[[dict[str, Any]], Any]]:
+        return {"churn": self.churn, "forge": self.forge, "churn_stop": self.stop, "forge_stop": self.stop}
+
+    async def churn(self, c: dict[str, Any]) -> dict[str, Any]:
+        session = await self.client.raw_session()
+        prefix = f"servobus/{self.client.args.node}"
+        return self.start("churn", churn_step(session, prefix, c.get("alive", 1)), c)
+
+    async def forge(self, c: dict[str, Any]) -> dict[str, Any]:
+        session = await self.client.raw_session()
+        args = self.client.args
+        key = c.get("key", f"servobus/{args.node}/{args.bus}/setpoints")
+        command = _command(c.get("command", "SpeedControl"), c.get("fields", {"speed_dps": 5.0}))
+        return self.start("forge", forge_step(session, key, c["motors"], command), c)
+
+    def start(self, name: str, step: Callable[[], None], c: dict[str, Any]) -> dict[str, Any]:
+        if name in self.running:
+            raise ValueError(f"{name} runs already")
+        self.running[name] = Background(step, c.get("hz", 0.0))
+        return {}
+
+    async def stop(self, c: dict[str, Any]) -> dict[str, Any]:
+        return await anyio.to_thread.run_sync(self.running.pop(c["op"].removesuffix("_stop")).stop)
+
+
 async def client_main(args: argparse.Namespace) -> None:
     client = Client(args)
     pipeline = Pipeline()
@@ -743,6 +856,7 @@ async def client_main(args: argparse.Namespace) -> None:
     }
     hostile = Hostile(args)
     calls.update(hostile.calls())
+    calls.update(Loads(client).calls())
     emit({"ready": True, "pid": os.getpid()})
     async with anyio.create_task_group() as group:
         hostile.group = group

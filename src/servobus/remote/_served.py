@@ -27,7 +27,10 @@ REFRESH_S = 1.0  # a motor's state is published again after this long without a 
 COUNTS = {
     "setpoints": "set-points taken (well-formed, fresh, from the motor's holder)",
     "applied": "set-points that went out at least once",
-    "overwritten": "set-point messages a newer one of the same client replaced before the bridge took them",
+    "overwritten": (
+        "set-point messages a newer one of the same client (of any client without a token) replaced "
+        "before the bridge took them"
+    ),
     "stale": "set-points that arrived past their deadline",
     "expired": "set-points that went stale while held (not renewed in time)",
     "reordered": "set-points older than the one held from the same client",

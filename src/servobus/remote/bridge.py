@@ -10,11 +10,12 @@ error. States (latest reply, online flag, fault) are published as they change, a
 per motor, and every second besides (a client that joins late sees them).
 
 Zenoh calls us on its own threads; every callback only hands its bytes to the event loop, where all
-the state lives. Of the set-points, only each client's latest few messages on each key wait for the
-loop (an older one is dropped; ``_handover``); queries wait in bounded queues per client and kind,
-served round-robin with quotas (``_queries``; beyond them they are dropped on Zenoh's thread, and
-counted); a message longer than its key allows is dropped there too, before anything of it is decoded
-(``_limits``); a client's liveliness changes are never dropped.
+the state lives; set-points and liveliness samples wait in Zenoh's own channels instead, for the
+loop to take them (``_handover``, ``_tokens``). Of the set-points, only each client's latest few
+messages on each key wait for the loop (an older one is dropped); queries wait in bounded queues per
+client and kind, served round-robin with quotas (``_queries``; beyond them they are dropped on
+Zenoh's thread, and counted); a message longer than its key allows is dropped before anything of it
+is decoded (``_limits``); a client's liveliness changes are never dropped.
 """
 
 from __future__ import annotations
@@ -36,12 +37,12 @@ import zenoh
 from servobus import runtime
 from servobus.bus import Bus, Motor, MotorStatus
 from servobus.protocols import Command
-from servobus.remote import _requests, wire
+from servobus.remote import _requests, _tokens, wire
 from servobus.remote._clients import Clients
 from servobus.remote._handover import Handover
 from servobus.remote._queries import Queries
 from servobus.remote._served import Held, Served
-from servobus.remote._session import close_session, handed, sample_kind
+from servobus.remote._session import close_session
 from servobus.remote._withdraw import withdraw
 from servobus.remote.keys import Keys
 from servobus.safety import stop_motors
@@ -51,7 +52,7 @@ __all__ = ["Bridge"]
 
 logger = logging.getLogger(__name__)
 
-_BACKLOG = 4096  # set-points and queries waiting for the loop; more are dropped on Zenoh's thread
+_BACKLOG = 4096  # set-point slots waiting for the loop; more are dropped (queries: _queries)
 _LEFT = "client left"  # why a motor is stopped when its client's token went
 _METRICS_EVERY_S = 0.5  # a metrics answer is computed again at most this often (it sorts 20k samples)
 
@@ -120,6 +121,7 @@ class Bridge:
         self._handover: Handover | None = None
         self._queries: Queries | None = None
         self._metrics: dict[str, tuple[float, bytes]] = {}  # bus -> (when, the metrics answer)
+        self._tokens: _tokens.Tokens | None = None
         self.stop_log: deque[tuple[int, str, int, str]] = deque(maxlen=1000)  # (unix ns, bus, id, why)
 
     # ---- life cycle ----
@@ -140,8 +142,10 @@ class Bridge:
         except BaseException:
             await self._close()
             raise
-        self._group.start_soon(self._handover.run)
+        assert self._tokens is not None
         self._group.start_soon(self._queries.run)
+        self._group.start_soon(self._handover.drain)
+        self._group.start_soon(self._tokens.run)
         self._group.start_soon(self._take_stops)
         for served in self.served.values():
             self._group.start_soon(self._tick, served)
@@ -176,18 +180,17 @@ class Bridge:
         session, keys, handover, lane = self._session, self.keys, self._handover, self._lane
         queries = self._queries
         assert handover is not None and lane is not None and queries is not None
-        self._declared.append(
-            session.liveliness().declare_subscriber(
-                keys.clients, handed(lane, self._on_client, _token), history=True
-            )
-        )
+        tokens = session.liveliness().declare_subscriber(keys.clients, _tokens.channel(), history=True)
+        self._declared.append(tokens)
+        self._tokens = _tokens.Tokens(tokens, self._on_clients)
         for served in self.served.values():
             name = served.name
-            setpoints = handover.latest(self._on_setpoints, served)
+            setpoints = handover.latest(self._on_setpoints, served, self.clients.admits)
             query = queries.callback(self._on_query, served)
+            for key in (keys.bus(name, "setpoints"), keys.motor(name, "*", "setpoint")):
+                self._declared.append(session.declare_subscriber(key, handover.channel()))
+                handover.pull(served, self._declared[-1], setpoints)
             self._declared += [
-                session.declare_subscriber(keys.bus(name, "setpoints"), setpoints),
-                session.declare_subscriber(keys.motor(name, "*", "setpoint"), setpoints),
                 session.declare_queryable(keys.motor(name, "*", "request"), query),
                 session.declare_queryable(keys.motor(name, "*", "read"), query),
                 session.declare_queryable(keys.bus(name, "info"), queries.callback(self._on_info, served)),
@@ -206,15 +209,29 @@ class Bridge:
 
     # ---- clients ----
 
-    def _on_client(self, item: tuple[str, str]) -> None:
-        """(The loop) a client's token came or went; one that went has its motors stopped."""
-        client, kind = item
-        if kind == "PUT":
-            self.clients.live.add(client)
+    def _take_tokens(self) -> None:
+        """(The loop) the token events waiting, now rather than at the next poll: a client's token
+        reaches the bridge before its first query (``connect`` asks for ``info``), so once that is
+        answered its set-points and requests find it live."""
+        if self._tokens is not None:
+            batch = self._tokens.take()
+            if batch:
+                self._on_clients(batch)
+
+    def _on_clients(self, batch: dict[str, tuple[bool, bool]]) -> None:
+        """(The loop) clients' tokens came or went (``{public id: (went, alive)}``, ``_tokens``); a
+        client whose token went, even for an instant, has its motors stopped."""
+        gone = set()
+        for client, (went, alive) in batch.items():
+            if went:
+                self.clients.left(client)
+                gone.add(client)
+            if alive:
+                self.clients.live.add(client)
+        if not gone:
             return
-        self.clients.left(client)
         for served in self.served.values():
-            held = [mid for mid, owner in served.owners.items() if owner == client]
+            held = [mid for mid, owner in served.owners.items() if owner in gone]
             self._stop(served, held, _LEFT)
 
     def _stop(self, served: Served, motor_ids: Iterable[int], why: str) -> None:
@@ -290,6 +307,8 @@ class Bridge:
             return
         client = self.clients.public(message.client_id)
         if client not in self.clients.live:
+            self._take_tokens()  # (its token may be waiting still)
+        if client not in self.clients.live:
             served.counts["refused"] += len(message.items)
             return
         left_ns = min(
@@ -325,7 +344,11 @@ class Bridge:
     async def _tick(self, served: Served) -> None:
         assert self._lane is not None
         clock = self._lane.time
+        handover = self._handover
+        assert handover is not None
         async for _ in ticks(self.hz, spin_s=0.0):
+            self._take_tokens()  # (a client that left loses its motors before anything of it is sent)
+            handover.take(served)  # (the set-points that came since the last tick)
             now = clock()
             items = []
             fresh: list[Held] = []
@@ -365,6 +388,7 @@ class Bridge:
         await _requests.answer(served, query, self.keys, self.clients)
 
     async def _on_info(self, served: Served, query: zenoh.Query) -> None:
+        self._take_tokens()
         limits = {
             "hz": self.hz,
             "state_hz": self.state_hz,
@@ -409,11 +433,6 @@ class Bridge:
     def metrics(self) -> dict[str, dict[str, Any]]:
         """Each served bus's metrics: the Bus's, the bridge's counters, set-point-to-wire latency."""
         return {name: served.metrics() for name, served in self.served.items()}
-
-
-def _token(sample: zenoh.Sample) -> tuple[str, str]:
-    """(A client's public id, ``"PUT"`` or ``"DELETE"``) of a liveliness sample."""
-    return str(sample.key_expr).rsplit("/", 1)[-1], sample_kind(sample)
 
 
 def _older(seq: int, than: int) -> bool:
