@@ -6,6 +6,7 @@ a reply still due, and what reached each motor is the list of frames the transpo
 
 from __future__ import annotations
 
+import functools
 import socket
 from collections.abc import AsyncIterator
 from typing import Any
@@ -208,3 +209,50 @@ async def test_a_bridge_that_closes_withdraws_what_its_clients_queued_before_its
     assert [(m, why) for _, _, m, why in bridge.stop_log] == [(1, "bridge closing")]
     assert bridge.served["b"].counts.get("withdrawn", 0) >= 1
     assert any(isinstance(o, PermissionError) for o in outcomes), outcomes
+
+
+async def test_a_command_after_a_clients_own_stop_keeps_the_motor_held_so_its_leaving_stops_it() -> None:
+    """A client's stop request, acknowledged, releases the motor (its leaving must not undo that);
+    but a command it sent after the stop moves the motor again: then the motor stays held, and the
+    client's leaving stops it (it was left running, held by nobody)."""
+    endpoint, transport = _endpoint(), slow_bus(1)
+    async with servobus.Bus(transport, safe=None) as bus:
+        motor = bus.motor(ma.FAMILY, 1)
+        async with Bridge("n", {"b": (bus, [motor])}, config=bridge_config("n", [endpoint])) as bridge:
+            async with connect("n/b", endpoints=[endpoint]) as remote:
+                async with anyio.create_task_group() as group:
+                    group.start_soon(remote.motor(1).request, ma.MotorStop())
+                    await _until(lambda: bridge.served["b"].counts["requests"] >= 1)
+                    group.start_soon(functools.partial(remote.motor(1).speed_control, speed_dps=90.0))
+                assert bridge.served["b"].owners.get(1) == remote.token_id
+            await _until(lambda: len(bridge.stop_log) >= 1)
+    assert [(m, why) for _, _, m, why in bridge.stop_log] == [(1, "client left")]
+    assert transport.sent[-1][1][0] == STOP  # (the last frame the motor got: the stop)
+
+
+async def test_set_points_past_the_bus_or_without_a_token_are_refused_from_their_header() -> None:
+    """More set-points in a message than the bus has motors, or a client id without a live token:
+    refused from the header alone (no command decoded), counted ``malformed`` and ``refused``."""
+    from servobus.remote import wire
+
+    schema = wire.Schema.of("myactuator")
+    endpoint, transport = _endpoint(), slow_bus(1, 2)
+    async with servobus.Bus(transport, safe=None) as bus:
+        motors = [bus.motor(ma.FAMILY, i) for i in (1, 2)]
+        async with Bridge("n", {"b": (bus, motors)}, config=bridge_config("n", [endpoint])) as bridge:
+            served = bridge.served["b"]
+            async with connect("n/b", endpoints=[endpoint]) as remote:
+                speed = ma.SpeedControl(speed_dps=9.0)
+                now = 10**18
+                three = wire.Setpoints(
+                    remote.client_id, 1, now, now + 10**9, ((1, speed), (2, speed), (1, speed))
+                )
+                bridge._on_setpoints(
+                    served, ("n/b/setpoints", wire.encode_setpoints(lambda m: schema, three), 0)
+                )
+                assert served.counts["malformed"] == 1 and 1 not in served.held
+                stranger = wire.Setpoints("ab" * 16, 1, now, now + 10**9, ((1, speed),))
+                body = bytearray(wire.encode_setpoints(lambda m: schema, stranger))
+                body[-1] ^= 0xFF  # (a command that would not decode: never looked at)
+                bridge._on_setpoints(served, ("n/b/setpoints", bytes(body), 0))
+                assert served.counts["refused"] == 1 and served.counts["malformed"] == 1

@@ -85,6 +85,8 @@ class Clients:
         if safe:
             served.held.pop(mid, None)  # (the tick must not send the set-point over the stop)
             served.stale_since.pop(mid, None)
+        elif not type(command).READ:
+            served.commanded[mid] += 1
         if not type(command).READ:
             self.take(served, mid, client)
 
@@ -98,7 +100,8 @@ class Clients:
             if held is not None and held.client == previous:
                 del served.held[mid]
             served.stale_since.pop(mid, None)
-        self.revoked.discard((client, served.name, mid))
+        # (a motor that changed hands frees every client's revocation of it, not only the taker's)
+        self.revoked = {entry for entry in self.revoked if entry[1:] != (served.name, mid)}
         served.owners[mid] = client
 
     def revoke(self, served: Served, mid: int) -> None:
@@ -115,13 +118,15 @@ class Clients:
         self.revoked = {entry for entry in self.revoked if entry[0] != client}
 
 
-def safe_done(served: Served, mid: int, secret: str, acknowledged: bool, now: float) -> None:
+def safe_done(served: Served, mid: int, secret: str, acknowledged: bool, now: float, commanded: int) -> None:
     """After a request of motor ``mid``'s safe command: acknowledged, the client made the motor safe
-    itself and no longer holds it (so its leaving does not undo that, as after ``servobus off``);
-    not acknowledged, the motor is stale from ``now`` (the loop's clock) and gets the bridge's own
-    stop, repeated until acknowledged, after ``stop_after_s``."""
+    itself and no longer holds it (so its leaving does not undo that, as after ``servobus off``),
+    unless a command was taken for the motor since (``served.commanded[mid]`` is no longer
+    ``commanded``, its count when the safe command was taken): the motor moves again, and its
+    holder's leaving must stop it; not acknowledged, the motor is stale from ``now`` (the loop's
+    clock) and gets the bridge's own stop, repeated until acknowledged, after ``stop_after_s``."""
     if acknowledged:
-        if served.owners.get(mid) == wire.public_id(secret):
+        if served.commanded[mid] == commanded and served.owners.get(mid) == wire.public_id(secret):
             served.release(mid)
     else:
         served.stale_since[mid] = now

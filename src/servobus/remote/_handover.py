@@ -6,7 +6,9 @@ of callback is handed over by its own rule:
 * set-points (:meth:`Handover.latest`): they wait in Zenoh's own ring channel of each subscriber
   (Rust: no Python, no GIL per message on Zenoh's side) and each bus's tick takes them first
   thing (:meth:`Handover.take`), so a flood costs the loop a few microseconds a message and never takes
-  the GIL from it; beyond ``SETPOINTS_WAITING`` untaken, Zenoh drops the oldest. Then, of each
+  the GIL from it; beyond ``SETPOINTS_WAITING`` untaken, Zenoh drops the oldest. A tick decodes at
+  most ``MESSAGES_PER_TICK`` of them (the rest wait for the next, in order), each at most its bus's
+  motors' set-points (checked from the header first), so no sender makes a tick long. Then, of each
   client's messages on each key, at most the ``PER_SLOT`` latest wait for their handler, in order;
   an older one beyond them is dropped there (counted ``overwritten``), so a client that publishes
   faster than the bridge takes them costs no queue and no lag, while one whose successive batches
@@ -43,6 +45,9 @@ logger = logging.getLogger("servobus.remote.bridge")
 
 PER_SLOT = 8  # set-point messages of one client on one key that may wait for the loop
 SETPOINTS_WAITING = 1024  # set-point messages a subscriber's channel holds per tick (beyond: oldest dropped)
+#: set-point messages decoded per tick at most (each holds at most its bus's motors' set-points, so a
+#: tick's decoding is bounded however many clients send): the rest wait for the next tick, in order
+MESSAGES_PER_TICK = 64
 TOKENLESS_PERIOD_S = 0.01  # how often the set-points of ids without a live token are taken (the latest)
 
 
@@ -126,13 +131,20 @@ class Handover:
         the last tick goes out in this one."""
         for subscriber, callback in self._pulled.get(served.name, ()):
             for _ in range(SETPOINTS_WAITING):  # (however fast they come, the tick gets back to its work)
-                sample = subscriber.try_recv()
-                if sample is None:
-                    break
-                callback(sample)
+                try:
+                    sample = subscriber.try_recv()
+                    if sample is None:
+                        break
+                    callback(sample)
+                except Exception:  # one bad sample must not end the tick (and with it the bridge)
+                    logger.exception("taking a set-point message failed")
         new, self._new = self._new, []
-        for handler, slot in new:
-            self._take(handler, slot)
+        budget = MESSAGES_PER_TICK
+        for at, (handler, slot) in enumerate(new):
+            if budget <= 0:  # (the rest wait for the next tick, in order: a tick's cost is bounded)
+                self._new[:0] = new[at:]
+                break
+            budget -= self._take(handler, slot)
 
     async def drain(self) -> None:
         """Take the latest set-point message of ids without a live token, each bus's, every
@@ -145,7 +157,8 @@ class Handover:
 
     def _take(
         self, handler: Callable[[Served, tuple[str, bytes, int]], object], slot: tuple[str, bytes | None]
-    ) -> None:
+    ) -> int:
+        """Hand the messages waiting in ``slot`` to ``handler``; how many."""
         with self._lock:
             served, waiting, overwritten = self._latest.pop(slot)
             client = slot[1]
@@ -159,3 +172,4 @@ class Handover:
                 handler(served, item)
             except Exception:  # one bad message must not end anything
                 logger.exception("handling set-points failed")
+        return len(waiting)

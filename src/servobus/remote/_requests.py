@@ -85,16 +85,17 @@ async def _run(
     else:
         served.counts["requests"] += 1
         clients.command(served, mid, request.client_id, command)
+    commanded = served.commanded[mid]  # (for a stop: whether a command followed it, at safe_done)
     try:
         reply = await served.bus.request(motor, command, timeout_s=request.timeout_s)
     except Withdrawn as exc:  # (its client lost the motor while it was queued: counted withdrawn)
         return wire.Result(error=exc)
     except ServobusError as exc:
         if safe:
-            safe_done(served, mid, request.client_id, False, runtime.current().time())
+            safe_done(served, mid, request.client_id, False, runtime.current().time(), commanded)
         return wire.Result(error=exc)
     if safe:
-        safe_done(served, mid, request.client_id, True, runtime.current().time())
+        safe_done(served, mid, request.client_id, True, runtime.current().time(), commanded)
     return wire.Result(reply=reply)
 
 

@@ -77,6 +77,9 @@ class Served:
         self.held: dict[int, Held] = {}
         self.stale_since: dict[int, float] = {}  # motor -> when its set-point expired (loop clock)
         self.owners: dict[int, str] = {}  # motor -> the public id of the client that holds it
+        #: motor -> how many commands (set-points, requests that are not reads) were taken for it: a
+        #: client's stop releases the motor only if none came after it (:func:`_clients.safe_done`)
+        self.commanded: dict[int, int] = dict.fromkeys(self.motors, 0)
         self.dirty: set[int] = set()
         self.published: dict[int, float] = {}
         self.publishers: dict[int, Any] = {}

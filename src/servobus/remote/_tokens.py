@@ -25,6 +25,7 @@ import zenoh
 from servobus.remote._session import sample_kind
 
 POLL_S = 0.005  # how often the loop takes the token events waiting, at least (each bus's tick takes them too)
+TAKEN = 4096  # token events taken at most at once (the rest at the next poll)
 WAITING = 1 << 16  # token events that may wait in Zenoh's channel before its thread waits for the loop
 
 
@@ -53,7 +54,7 @@ class Tokens:
     def take(self) -> dict[str, tuple[bool, bool]]:
         """The events waiting, coalesced per client."""
         batch: dict[str, tuple[bool, bool]] = {}
-        for _ in range(WAITING):  # (however fast they come, the loop gets back to its work)
+        for _ in range(TAKEN):  # (however fast they come, the loop gets back to its work)
             sample = self._subscriber.try_recv()
             if sample is None:
                 break

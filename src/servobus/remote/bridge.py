@@ -123,6 +123,7 @@ class Bridge:
         self._metrics: dict[str, tuple[float, bytes]] = {}  # bus -> (when, the metrics answer)
         self._tokens: _tokens.Tokens | None = None
         self.stop_log: deque[tuple[int, str, int, str]] = deque(maxlen=1000)  # (unix ns, bus, id, why)
+        self._closing = False
 
     # ---- life cycle ----
 
@@ -158,10 +159,13 @@ class Bridge:
         try:
             if self._group is not None:
                 with anyio.CancelScope(shield=True):  # the clients' motors, before the tasks go
+                    self._closing = True  # (no token makes a client live again now)
                     self.clients.live.clear()  # (closing: their requests meanwhile are refused)
+                    released = []  # (every bus's motors released before the first stop is awaited)
                     for served in self.served.values():
                         held = set(served.owners) | set(served.held) | set(served.stale_since)
-                        motors = self._release(served, sorted(held), "bridge closing")
+                        released.append((served, self._release(served, sorted(held), "bridge closing")))
+                    for served, motors in released:
                         if motors:
                             await self._send_stop(served, motors)
                 self._group.cancel_scope.cancel()
@@ -226,7 +230,7 @@ class Bridge:
             if went:
                 self.clients.left(client)
                 gone.add(client)
-            if alive:
+            if alive and not self._closing:
                 self.clients.live.add(client)
         if not gone:
             return
@@ -296,6 +300,16 @@ class Bridge:
         """Take a set-point message (``key``, ``payload``, the wall ns Zenoh handed it over)."""
         key, payload, _ = item
         try:
+            # (from the header alone, before the commands are decoded: no more set-points than the
+            # bus has motors, and a client without a live token costs no decoding at all)
+            secret, count = wire.peek_setpoints(payload)
+            if count > len(served.motors):
+                raise wire.WireError(f"{count} set-points for a bus of {len(served.motors)} motors")
+            if self.clients.public(secret) not in self.clients.live:
+                self._take_tokens()  # (a token declared just before its first set-points)
+                if self.clients.public(secret) not in self.clients.live:
+                    served.counts["refused"] += count
+                    return
             message = wire.decode_setpoints(served.schemas.get, payload)
             if key.endswith("/setpoint"):
                 _, mid, _ = self.keys.parse_motor(key)
@@ -306,11 +320,6 @@ class Bridge:
             logger.debug("%s: malformed set-points dropped: %s", key, exc)
             return
         client = self.clients.public(message.client_id)
-        if client not in self.clients.live:
-            self._take_tokens()  # (its token may be waiting still)
-        if client not in self.clients.live:
-            served.counts["refused"] += len(message.items)
-            return
         left_ns = min(
             message.deadline_unix_ns - time.time_ns(),
             message.deadline_unix_ns - message.sent_unix_ns,
@@ -336,6 +345,7 @@ class Bridge:
                 served.counts["reordered"] += 1
                 continue
             served.counts["setpoints"] += 1
+            served.commanded[mid] += 1
             if served.owners.get(mid) != client:  # (a motor released or revoked has no owner)
                 self.clients.take(served, mid, client)
             served.stale_since.pop(mid, None)

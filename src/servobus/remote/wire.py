@@ -65,6 +65,7 @@ __all__ = [
     "encode_setpoints",
     "encode_state",
     "peek_motor",
+    "peek_setpoints",
     "public_id",
     "shown_id",
 ]
@@ -390,6 +391,19 @@ def encode_setpoints(schemas: Callable[[int], Schema], message: Setpoints) -> by
         out += _U16.pack(motor_id)
         encode_value(schemas(motor_id), command, out)
     return bytes(out)
+
+
+def peek_setpoints(data: bytes) -> tuple[str, int]:
+    """(The client id, how many set-points) of a set-point message, read from its header alone:
+    what a receiver checks before it pays for decoding the commands.
+
+    Raises:
+        WireError: not a set-point message, or a header cut short.
+    """
+    reader = _open(data, SETPOINTS)
+    client_id = _client_id(reader)
+    reader.at += _U32.size + 2 * _U64.size  # (seq, sent, deadline)
+    return client_id, int(reader.take(_U16))
 
 
 def decode_setpoints(schemas: Callable[[int], Schema | None], data: bytes) -> Setpoints:
