@@ -259,6 +259,11 @@ def test_queries_queue_per_client_and_kind_and_a_forged_id_buys_no_more_than_the
     assert readers.waiting == _limits.READERS_WAITING  # (every lane and the class full: no more)
     assert all(len(q) <= _limits.READER_WAITING for q in readers.lanes.values())
     assert served.counts == {"oversized": 1, "shed": 6000 - _limits.READERS_WAITING}
+    # a client's connect (its info query) is still taken and begun: info is a class of its own
+    take(_Query(key("info"), None))
+    assert queries._infos.waiting == 1 and served.counts["shed"] == 6000 - _limits.READERS_WAITING
+    began: list[Any] = []
+    assert queries._infos.take(lane.now, began) is None and len(began) == 1
     # a commander's queries (its id has a live token) wait apart: the readers' full queues take none
     mine = wire.encode_request(SCHEMA, wire.Request(commander, ma.ReadStatus2()))
     for motor in HELD:

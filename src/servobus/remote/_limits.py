@@ -52,6 +52,10 @@ READER_WAITING, READER_RUNNING = 8, 2
 #: all readers' queries waiting / in flight, and the most begun a second (in bursts of READ_BURST)
 READERS_WAITING, READERS_RUNNING = 64, 4
 READS_PER_S, READ_BURST = 100.0, 10
+#: ``info`` (a client's ``connect`` asks it once): a class of its own, so that a flood of reads or
+#: metrics never refuses a client its connection; waiting / in flight, begun a second (bursts)
+INFO_WAITING, INFO_RUNNING = 16, 2
+INFOS_PER_S, INFO_BURST = 50.0, 10
 
 _lock = threading.Lock()  # (the counters are written by Zenoh's threads too)
 

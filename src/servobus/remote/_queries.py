@@ -6,7 +6,9 @@ long, it is dropped) and put in a lane of its class:
 * **commanders**: ``request`` and ``read`` queries whose client id is that of a live client (its
   liveliness token is declared), one lane per client;
 * **readers**: the rest: ``read`` and ``request`` queries of a client id without a token, one lane
-  per id; ``info`` and ``metrics`` (they carry no id), one lane each.
+  per id; ``metrics`` (it carries no id), one lane;
+* **info**: ``info`` queries (a client's ``connect`` asks one), a class of their own, so that no
+  flood of reads or metrics refuses a client its connection.
 
 A lane or a class whose queue is full drops the query there (its client's get ends at once), counted
 ``shed``. The loop begins queries round-robin over each class's lanes, each lane up to its quota in
@@ -59,6 +61,14 @@ COMMANDERS = Quota(
     _limits.COMMANDER_RUNNING,
     _limits.COMMANDERS_WAITING,
     _limits.COMMANDERS_RUNNING,
+)
+INFOS = Quota(
+    _limits.INFO_WAITING,
+    _limits.INFO_RUNNING,
+    _limits.INFO_WAITING,
+    _limits.INFO_RUNNING,
+    _limits.INFOS_PER_S,
+    _limits.INFO_BURST,
 )
 READERS = Quota(
     _limits.READER_WAITING,
@@ -151,6 +161,7 @@ class Queries:
         self._live = live
         self._commanders = _Class(COMMANDERS)
         self._readers = _Class(READERS)
+        self._infos = _Class(INFOS)
         self._lock = threading.Lock()
         self._woken = False  # a wake-up is on its way to the loop
         self._closed = False
@@ -170,7 +181,7 @@ class Queries:
                 return
             leaf = key.rsplit("/", 1)[-1]
             lane: Hashable = leaf
-            kind = self._readers
+            kind = self._infos if leaf == "info" else self._readers
             if leaf in ("request", "read"):
                 # (at most REQUEST_BYTES: a cheap copy) the client id, after version and kind
                 lane = b"" if payload is None else payload.to_bytes()[2 : 2 + wire.CLIENT_ID_BYTES]
@@ -205,20 +216,20 @@ class Queries:
         finally:
             with self._lock:
                 self._closed = True
-                items = self._commanders.drain() + self._readers.drain()
+                items = self._commanders.drain() + self._readers.drain() + self._infos.drain()
             for _, _, query in items:
                 query.drop()
 
     def _begin(self, group: anyio.abc.TaskGroup) -> float | None:
-        """Start what may begin; the seconds until the readers' rate allows more (None: not waiting)."""
+        """Start what may begin; the seconds until a rate (readers', info's) allows more (None: no wait)."""
         now = self._lane.time()
         out: list[tuple[_Class, Hashable, _Item]] = []
         with self._lock:
             self._commanders.take(now, out)
-            wait_s = self._readers.take(now, out)
+            waits = [w for w in (self._readers.take(now, out), self._infos.take(now, out)) if w is not None]
         for kind, lane, item in out:
             group.start_soon(self._serve, kind, lane, item)
-        return wait_s
+        return min(waits, default=None)
 
     async def _serve(self, kind: _Class, lane: Hashable, item: _Item) -> None:
         handler, served, query = item
