@@ -29,6 +29,18 @@ OURS_DPS, THEIRS_DPS = 100.0, -50.0
 MOTORS = (1, 2, 3)
 
 
+async def _cycles_per_s(bus: Bus, batch: list[Any], hz: float, seconds: float) -> float:
+    """Cycle ``batch`` at ``hz`` for ``seconds``; the cycles a second it kept."""
+    start = anyio.current_time()
+    ticks = 0
+    async for _ in bus.ticks(hz, spin_s=0.0):
+        if anyio.current_time() - start >= seconds:
+            break
+        await bus.cycle(batch)
+        ticks += 1
+    return ticks / (anyio.current_time() - start)
+
+
 def _watch_whose(bus: Bus, checked: list[int]) -> None:
     """From now on count the status replies ``bus`` takes as answers to its requests: ``checked[0]``
     all, ``[1]`` those carrying the other host's set-point, ``[2]`` of these the ones not marked as
@@ -65,14 +77,7 @@ def _run(
         async with Bus(SimTransport(devices=devices), safe=None) as bus:
             _watch_whose(bus, checked)
             batch = [(bus.motor("myactuator", i), ma.SpeedControl(speed_dps=OURS_DPS)) for i in MOTORS]
-            start = anyio.current_time()
-            ticks = 0
-            async for _ in bus.ticks(hz, spin_s=0.0):
-                if anyio.current_time() - start >= seconds:
-                    break
-                await bus.cycle(batch)
-                ticks += 1
-            return ticks / (anyio.current_time() - start), bus
+            return await _cycles_per_s(bus, batch, hz, seconds), bus
 
     rate, bus = virtual.run(main(), backend=backend)
     return rate, checked[0], checked[1], bus
@@ -303,14 +308,7 @@ def _run_real(
                         # known (counted foreign): their replies may still come now.
                         await anyio.sleep(0.05)
                         _watch_whose(bus, checked)
-                        start = anyio.current_time()
-                        ticks = 0
-                        async for _ in bus.ticks(hz, spin_s=0.0):
-                            if anyio.current_time() - start >= seconds:
-                                break
-                            await bus.cycle(batch)
-                            ticks += 1
-                        rate = ticks / (anyio.current_time() - start)
+                        rate = await _cycles_per_s(bus, batch, hz, seconds)
                     group.cancel_scope.cancel()
         finally:
             if port is not None:

@@ -31,7 +31,6 @@ class Clients:
         # requests (some sent before the stop, still on their way) do not take back (:meth:`command`)
         self.revoked: set[tuple[str, str, int]] = set()
         self._public: dict[str, str] = {}  # secret id -> public id
-        self._admitted: dict[bytes, str] = {}  # the same, by the raw bytes (read on Zenoh's threads)
 
     def public(self, secret: str) -> str:
         """The public id of the client whose messages carry ``secret``."""
@@ -43,14 +42,9 @@ class Clients:
         return found
 
     def admits(self, secret: bytes) -> bool:
-        """(Any thread) whether the client whose messages carry ``secret`` (its raw bytes) has a live
-        token: the bridge hands its set-points to the loop in slots of its own only then."""
-        found = self._admitted.get(secret)
-        if found is None:
-            if len(self._admitted) >= _CACHED:
-                self._admitted.clear()
-            found = self._admitted[secret] = wire.public_id(secret.hex())
-        return found in self.live
+        """Whether the client whose messages carry ``secret`` (its raw bytes) has a live token: the
+        bridge keeps its set-points in slots of its own only then."""
+        return self.public(secret.hex()) in self.live
 
     def holder(self, served: Served, mid: int, client: str) -> str | None:
         """The live client other than ``client`` that holds motor ``mid``; None: free to command."""

@@ -27,7 +27,6 @@ of callback is handed over by its own rule:
 from __future__ import annotations
 
 import logging
-import threading
 import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
@@ -35,7 +34,6 @@ from typing import TYPE_CHECKING, Any
 import anyio
 import zenoh
 
-from servobus import runtime
 from servobus.remote import _limits
 
 if TYPE_CHECKING:
@@ -52,16 +50,14 @@ TOKENLESS_PERIOD_S = 0.01  # how often the set-points of ids without a live toke
 
 
 class Handover:
-    """What Zenoh's threads hand to one bridge's event loop (``lane``)."""
+    """The set-points Zenoh's channels hold for one bridge's event loop (every method runs there)."""
 
-    def __init__(self, lane: runtime.Runtime, backlog: int) -> None:
-        self._lane = lane
+    def __init__(self, backlog: int) -> None:
         self._limit = backlog
         # (key, client id) -> [served, [(key, message, when it came), ...] oldest first, how many were
         # dropped]; (bus, None): the one slot of a bus's set-points from ids without a live token
         self._latest: dict[tuple[str, bytes | None], list[Any]] = {}
         self._slots: dict[tuple[str, bytes], int] = {}  # (bus, client id) -> its slots waiting
-        self._lock = threading.Lock()
         self._tokenless: dict[str, Callable[[Served, tuple[str, bytes, int]], object]] = {}  # bus -> handler
         self._pulled: dict[str, list[tuple[Any, Callable[[Any], None]]]] = {}  # bus -> (subscriber, callback)
         self._new: list[tuple[Callable[[Served, tuple[str, bytes, int]], object], tuple[str, bytes]]] = []
@@ -87,30 +83,28 @@ class Handover:
             client = payload[2:18]  # (the client's id: in wire.py's header, after version and kind)
             arrived_ns = time.time_ns()
             if not admits(client):
-                with self._lock:
-                    entry = self._latest.get((served.name, None))
-                    if entry is None:
-                        self._latest[(served.name, None)] = [served, [(key, payload, arrived_ns)], 0]
-                    else:
-                        entry[1][0] = (key, payload, arrived_ns)
-                        entry[2] += 1
+                entry = self._latest.get((served.name, None))
+                if entry is None:
+                    self._latest[(served.name, None)] = [served, [(key, payload, arrived_ns)], 0]
+                else:
+                    entry[1][0] = (key, payload, arrived_ns)
+                    entry[2] += 1
                 return
             slot = (key, client)
-            with self._lock:
-                entry = self._latest.get(slot)
-                if entry is not None:
-                    waiting = entry[1]
-                    waiting.append((key, payload, arrived_ns))
-                    if len(waiting) > PER_SLOT:
-                        del waiting[0]
-                        entry[2] += 1
-                    return
-                mine = self._slots.get((served.name, client), 0)
-                if len(self._latest) >= self._limit or mine >= per_client:
-                    self.dropped += 1
-                    return
-                self._slots[(served.name, client)] = mine + 1
-                self._latest[slot] = [served, [(key, payload, arrived_ns)], 0]
+            entry = self._latest.get(slot)
+            if entry is not None:
+                waiting = entry[1]
+                waiting.append((key, payload, arrived_ns))
+                if len(waiting) > PER_SLOT:
+                    del waiting[0]
+                    entry[2] += 1
+                return
+            mine = self._slots.get((served.name, client), 0)
+            if len(self._latest) >= self._limit or mine >= per_client:
+                self.dropped += 1
+                return
+            self._slots[(served.name, client)] = mine + 1
+            self._latest[slot] = [served, [(key, payload, arrived_ns)], 0]
             self._new.append((handler, slot))  # (taken at the end of this pull)
 
         return callback
@@ -159,13 +153,12 @@ class Handover:
         self, handler: Callable[[Served, tuple[str, bytes, int]], object], slot: tuple[str, bytes | None]
     ) -> int:
         """Hand the messages waiting in ``slot`` to ``handler``; how many."""
-        with self._lock:
-            served, waiting, overwritten = self._latest.pop(slot)
-            client = slot[1]
-            if client is not None:
-                mine = self._slots.pop((served.name, client)) - 1
-                if mine:
-                    self._slots[(served.name, client)] = mine
+        served, waiting, overwritten = self._latest.pop(slot)
+        client = slot[1]
+        if client is not None:
+            mine = self._slots.pop((served.name, client)) - 1
+            if mine:
+                self._slots[(served.name, client)] = mine
         served.counts["overwritten"] += overwritten
         for item in waiting:
             try:

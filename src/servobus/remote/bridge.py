@@ -133,7 +133,7 @@ class Bridge:
 
             self._config = bridge_config(self.node)
         self._lane = runtime.current()
-        self._handover = Handover(self._lane, _BACKLOG)
+        self._handover = Handover(_BACKLOG)
         self._queries = Queries(self._lane, self.clients.live.__contains__)
         self._session = await anyio.to_thread.run_sync(zenoh.open, self._config)
         try:
@@ -305,9 +305,10 @@ class Bridge:
             secret, count = wire.peek_setpoints(payload)
             if count > len(served.motors):
                 raise wire.WireError(f"{count} set-points for a bus of {len(served.motors)} motors")
-            if self.clients.public(secret) not in self.clients.live:
+            client = self.clients.public(secret)
+            if client not in self.clients.live:
                 self._take_tokens()  # (a token declared just before its first set-points)
-                if self.clients.public(secret) not in self.clients.live:
+                if client not in self.clients.live:
                     served.counts["refused"] += count
                     return
             message = wire.decode_setpoints(served.schemas.get, payload)
@@ -319,7 +320,6 @@ class Bridge:
             served.counts["malformed"] += 1
             logger.debug("%s: malformed set-points dropped: %s", key, exc)
             return
-        client = self.clients.public(message.client_id)
         left_ns = min(
             message.deadline_unix_ns - time.time_ns(),
             message.deadline_unix_ns - message.sent_unix_ns,
