@@ -1,7 +1,7 @@
-"""Zenoh's threads -> the bridge's event loop (:class:`Handover`).
+"""Zenoh -> the bridge's event loop (:class:`Handover`, for set-points).
 
-Zenoh calls its callbacks on its own threads; the bridge's state lives on its event loop. Each kind
-of callback is handed over by its own rule:
+Zenoh receives on its own threads; the bridge's state lives on its event loop. Each kind of message
+is handed over by its own rule:
 
 * set-points (:meth:`Handover.latest`): they wait in Zenoh's own ring channel of each subscriber
   (Rust: no Python, no GIL per message on Zenoh's side) and each bus's tick takes them first

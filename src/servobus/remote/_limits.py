@@ -1,5 +1,6 @@
 """What the bridge takes from a peer before it decodes anything: bytes per message on each key
-(:func:`oversized`, on Zenoh's thread), and the queues, flights and rate of queries (``_queries``).
+(:func:`oversized`: a query's on Zenoh's thread, a set-point's as the loop takes it from Zenoh's
+channel), and the queues, flights and rate of queries (``_queries``).
 
 The byte limits come from the largest legitimate message. The largest command of any family, its
 strings taken at 64 bytes (hollow's ``ModbusWrite`` carrying a ``HollowModel``), encodes in 183
@@ -61,7 +62,7 @@ _lock = threading.Lock()  # (the counters are written by Zenoh's threads too)
 
 
 def oversized(served: Served, key: str, payload: Any) -> bool:
-    """(Zenoh's thread) Whether ``payload`` (a ``zenoh.ZBytes``: its length, no copy; or None) is
+    """(Zenoh's thread or the loop) Whether ``payload`` (a ``zenoh.ZBytes``: its length, no copy; or None) is
     too big for ``key``'s kind; one that is is counted ``oversized`` and is to be dropped."""
     size = 0 if payload is None else len(payload)
     if size <= BYTES.get(key.rsplit("/", 1)[-1], 0):
