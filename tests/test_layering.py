@@ -122,6 +122,7 @@ def test_the_check_catches_violations() -> None:
 #               and the transports
 #   bus         the Bus and what runs beside it (ticks, signals, sync, logs, recording, a family's
 #               typed Motor): on the scheduler and the transports, never on the simulator
+#   tools       the DBC exporter, log decoding, recording: on the Bus and what is below it
 #   app         the command line and the DBC exporter (a family's cli and dbc parts too): any layer
 #
 # A module may also import any module of its own family's package (a family is one plug-in, whose
@@ -190,6 +191,8 @@ LAYERS: dict[str, list[str]] = {
     ],
     # buses served to other computers (issue 29): above the Bus, below the command line; no family
     "remote": ["servobus.remote"],
+    # what one does with a bus's traffic beside the control loop (issue 38): DBC, logs, recording
+    "tools": ["servobus.tools"],
     "app": [
         "servobus.cli",
         "servobus.dbc",
@@ -208,6 +211,7 @@ MAY_IMPORT: dict[str, set[str]] = {
     "sim-front": {"base", "protocols", "family", "sim", "sim-front", "transports"},
     "bus": {"base", "protocols", "family", "scheduler", "transports", "bus"},
     "remote": {"base", "protocols", "scheduler", "bus", "remote"},
+    "tools": {"base", "protocols", "scheduler", "transports", "bus", "tools"},
     "app": set(LAYERS),
 }
 #: the simulator modules a transport may import: the networks the in-process link runs and the
