@@ -88,7 +88,7 @@ def test_ctrl_c_at_a_question_exits_130_with_nothing_sent(
 def test_a_value_error_at_run_time_is_the_job_failing_exit_1(
     capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import servobus.cli.control as control
+    import servobus.cli._status_view as control
 
     def broken(*args: object, **kwargs: object) -> dict[str, object]:
         raise ValueError("a reply field out of its range")

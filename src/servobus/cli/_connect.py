@@ -20,6 +20,7 @@ import click
 
 from servobus.bus import Bus, Motor
 from servobus.cli._output import FloatRange, refused
+from servobus.cli._remote import remote_from, remote_options
 from servobus.protocols import DEFAULT_FAMILY, FAMILIES, available_families, get_family
 
 if TYPE_CHECKING:
@@ -370,8 +371,6 @@ _LOCAL = {
 
 
 def _connection_options(func: F, *, remote: bool) -> F:
-    from servobus.cli._remote import remote_from, remote_options
-
     @family_option
     @revision_option
     @click.option(

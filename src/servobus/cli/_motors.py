@@ -11,19 +11,23 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import signal
-from collections.abc import Coroutine, Mapping, Sequence
+from collections.abc import Callable, Coroutine, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol, TypeVar
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 import anyio
 import click
 
 from servobus.cli._connect import Connection, open_bus
-from servobus.cli._output import refused
+from servobus.cli._output import confirm, refused
+from servobus.cli._remote import Remote, open_remote
 from servobus.cli.plugin import STATUS_SOURCES, Op
 from servobus.errors import ServobusError
 from servobus.protocols import Command, Reply, get_family
 from servobus.signals import StopOn, stop_on
+
+if TYPE_CHECKING:
+    from servobus.cli._remote import RemoteCliMotor
 
 __all__ = [
     "BACKENDS",
@@ -35,6 +39,8 @@ __all__ = [
     "fail_if_any",
     "plan",
     "plan_codecs",
+    "plan_motors",
+    "remote_ask",
     "run",
     "status_of",
     "stop_scope",
@@ -172,6 +178,26 @@ def plan_codecs(bound: Sequence[Any], op: Op, values: Mapping[str, Any]) -> list
     return planned
 
 
+def plan_motors(
+    motors: Sequence[RemoteCliMotor], op_of: Callable[[str], Op], values: Mapping[str, Any]
+) -> list[Sequence[Command[Any]]]:
+    """:func:`plan_codecs` for a bridge's motors, ``op_of(family)`` saying what each motor's family
+    sends (a bridge's bus may mix families); built and checked before anything is sent.
+
+    Raises:
+        click.UsageError: a family without the command, a value out of range, a command the motor's
+            revision lacks (exit 2).
+    """
+    ops: dict[str, Op] = {}
+    planned = []
+    for motor in motors:
+        family = motor.codec.family
+        if family not in ops:
+            ops[family] = op_of(family)
+        planned.extend(plan_codecs([motor.codec], ops[family], values))
+    return planned
+
+
 async def ask_all(
     motors: Sequence[Asked], planned: Sequence[Sequence[Command]], *, timeout_s: float | None = None
 ) -> list[Outcome]:
@@ -188,6 +214,31 @@ async def ask_all(
                 break
         outcomes.append(outcome)
     return outcomes
+
+
+async def remote_ask(
+    conn: Connection,
+    remote: Remote,
+    op_of: Callable[[str], Op],
+    values: Mapping[str, Any],
+    *,
+    read_only: bool = False,
+    rom: tuple[str, bool] | None = None,
+) -> tuple[list[Sequence[Command]], list[Outcome], list[str]]:
+    """:func:`ask` through a bridge: each motor's commands (``op_of(family)``)
+    built once the bridge said the motors' families, sent as requests, their replies collected.
+    ``rom``: (the command's name, ``--yes``), to ask first where it writes the ROM.
+
+    Returns:
+        The commands sent, each motor's outcome, and the motors' families.
+    """
+    async with open_remote(conn.ids, remote, read_only=read_only) as (_, motors):
+        planned = plan_motors(motors, op_of, values)
+        families = sorted({motor.codec.family for motor in motors})
+        if rom is not None and any(op_of(family).rom for family in families):
+            ids = ", ".join(str(m.motor_id) for m in motors)
+            confirm(f"{rom[0]} writes the ROM of motor(s) {ids} of {remote.target}. Continue?", rom[1])
+        return planned, await ask_all(motors, planned, timeout_s=conn.timeout_s), families
 
 
 def ask(conn: Connection, planned: Sequence[Sequence[Command]]) -> list[Outcome]:

@@ -16,7 +16,7 @@ bridge sends its Bus's safe command to the motors this client commanded.
 from __future__ import annotations
 
 import contextlib
-from collections.abc import AsyncIterator, Callable, Iterator, Mapping, Sequence
+from collections.abc import AsyncIterator, Callable, Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -25,8 +25,6 @@ import click
 from servobus.cli._output import refused
 
 if TYPE_CHECKING:
-    from servobus.cli._connect import Connection
-    from servobus.cli.plugin import Op
     from servobus.protocols import Command
     from servobus.remote import RemoteBus, RemoteMotor
 
@@ -36,7 +34,6 @@ __all__ = [
     "Remote",
     "RemoteCliMotor",
     "open_remote",
-    "plan_motors",
     "remote_extra",
     "remote_from",
     "remote_options",
@@ -77,6 +74,15 @@ class Remote:
     def target(self) -> str:
         """``NODE/BUS``."""
         return f"{self.node}/{self.bus}"
+
+    def commanding(self, name: str) -> None:
+        """Refuse ``--read-only`` for command ``name``, which commands the motors (exit 2, nothing sent).
+
+        Raises:
+            click.UsageError: this connection was asked read-only.
+        """
+        if self.read_only:
+            raise click.UsageError(f"--read-only: {name} commands the motors; drop --read-only")
 
     def connect(self, *, read_only: bool = False, valid_for_s: float = 0.1) -> RemoteBus:
         """The :class:`~servobus.remote.RemoteBus` to enter (``read_only`` as well as ``--read-only``:
@@ -215,38 +221,16 @@ class RemoteCliMotor:
 
 @contextlib.asynccontextmanager
 async def open_remote(
-    conn: Connection, remote: Remote, *, read_only: bool = False, valid_for_s: float = 0.1
+    ids: tuple[int, ...], remote: Remote, *, read_only: bool = False, valid_for_s: float = 0.1
 ) -> AsyncIterator[tuple[RemoteBus, list[RemoteCliMotor]]]:
-    """The bridge's bus and the motors ``conn.ids`` names (all of the bus's without ``--ids``).
+    """The bridge's bus and its motors ``ids`` (``--ids``; all of the bus's when empty).
 
     Raises:
         click.UsageError: an id the bus has not, or a motor not of ``--family`` (exit 2).
         RemoteError: no bridge reachable, no such node or bus (exit 1).
     """
     async with remote.connect(read_only=read_only, valid_for_s=valid_for_s) as bus:
-        ids = conn.ids or tuple(sorted(bus.motors))
+        wanted = ids or tuple(sorted(bus.motors))
         with refused():
-            found = [bus.motor(remote.family, i) if remote.family else bus.motor(i) for i in ids]
+            found = [bus.motor(remote.family, i) if remote.family else bus.motor(i) for i in wanted]
         yield bus, [RemoteCliMotor(motor) for motor in found]
-
-
-def plan_motors(
-    motors: Sequence[RemoteCliMotor], op_of: Callable[[str], Op], values: Mapping[str, Any]
-) -> list[Sequence[Command[Any]]]:
-    """Each motor's commands (:func:`servobus.cli._motors.plan_codecs`), ``op_of(family)`` saying
-    what its family sends; built and checked before anything is sent.
-
-    Raises:
-        click.UsageError: a family without the command, a value out of range, a command the motor's
-            revision lacks (exit 2).
-    """
-    from servobus.cli._motors import plan_codecs
-
-    ops: dict[str, Op] = {}
-    planned = []
-    for motor in motors:
-        family = motor.codec.family
-        if family not in ops:
-            ops[family] = op_of(family)
-        planned.extend(plan_codecs([motor.codec], ops[family], values))
-    return planned

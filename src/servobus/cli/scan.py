@@ -175,7 +175,7 @@ async def _scan_remote(conn: Connection, remote: Remote) -> list[dict[str, Any]]
     from servobus.cli._remote import open_remote
 
     rows: list[dict[str, Any]] = []
-    async with open_remote(conn, remote, read_only=True) as (_, motors):
+    async with open_remote(conn.ids, remote, read_only=True) as (_, motors):
         for motor in motors:
             family = motor.codec.family
             probe = status_reads(family).first(motor.codec, {})[0]
