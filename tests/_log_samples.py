@@ -1,7 +1,7 @@
 """Frames of every family, both directions, with what the family's own decoders make of them.
 
 The oracle is the family's ``decode_request``/``decode_reply`` (never the code under test), so tests of
-``servobus.logs``, ``servobus decode`` and the log round trips compare byte-exactly against them.
+``servobus.tools.logs``, ``servobus decode`` and the log round trips compare byte-exactly against them.
 """
 
 from __future__ import annotations

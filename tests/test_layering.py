@@ -185,8 +185,6 @@ LAYERS: dict[str, list[str]] = {
         "servobus.ticks",
         "servobus.signals",
         "servobus.sync",
-        "servobus.logs",
-        "servobus.recording",
         "servobus.protocols.<family>._motor",
     ],
     # buses served to other computers (issue 29): above the Bus, below the command line; no family

@@ -1,4 +1,4 @@
-"""servobus.logs: frames of either direction decoded byte-exactly as the family decoders do; logs read
+"""servobus.tools.logs: frames of either direction decoded byte-exactly as the family decoders do; logs read
 through python-can's readers; frames typed on the command line."""
 
 from __future__ import annotations
@@ -11,10 +11,10 @@ import pytest
 
 from _log_samples import SAMPLES, Sample
 from servobus.frame import Frame
-from servobus.logs import FrameDecoder, message_values, parse_frame, read_log
 from servobus.protocols import hollow as ho
 from servobus.protocols import lk
 from servobus.protocols import myactuator as ma
+from servobus.tools.logs import FrameDecoder, message_values, parse_frame, read_log
 from servobus.transports.can import message_from_frame
 
 

@@ -26,13 +26,13 @@ from servobus.bus import Bus
 from servobus.cli.plugin import OPERATIONS
 from servobus.errors import MotorFault
 from servobus.frame import Frame
-from servobus.logs import FrameDecoder, read_log
 from servobus.protocols import FAMILIES, FrameKind, available_families, check_bus, get_family
 from servobus.protocols import myactuator as ma
 from servobus.protocols._calls import render
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.sim import virtual
 from servobus.sim.plant import Off, PositionControl
+from servobus.tools.logs import FrameDecoder, read_log
 from servobus.transports.sim import SimTransport
 
 SRC = Path(__file__).resolve().parents[1] / "src" / "servobus"

@@ -1,4 +1,4 @@
-"""servobus.recording: output files that never overwrite or remove what they did not create, CSV and
+"""servobus.tools.recording: output files that never overwrite or remove what they did not create, CSV and
 JSONL telemetry rows, candump frames with their direction, and a tap that leaves the Bus unchanged
 (a FrameLink itself: the sender's handles echoed, the inner link's rules and stats, on asyncio and trio)."""
 
@@ -16,10 +16,10 @@ import pytest
 from _backends import BACKENDS, virtual
 from servobus.bus import Bus
 from servobus.frame import Frame
-from servobus.logs import read_log
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
-from servobus.recording import CandumpWriter, NewFiles, TapLink, TelemetryWriter, telemetry_row
+from servobus.tools.logs import read_log
+from servobus.tools.recording import CandumpWriter, NewFiles, TapLink, TelemetryWriter, telemetry_row
 from servobus.transports.contract import FrameLink
 from servobus.transports.sim import SimTransport
 

@@ -165,7 +165,7 @@ def test_one_shots_send_the_family_command(
 def test_one_shot_replies_are_shown_as_decode_and_record_show_them(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    """One rendering of a reply's fields in the whole CLI: servobus.logs.message_values (flat scalars,
+    """One rendering of a reply's fields in the whole CLI: servobus.tools.logs.message_values (flat scalars,
     units in the names, flags as their int), under "fields" as in decode --json."""
     rows = run_json(capsys, ["clear-errors", "--family", "lk", "--sim", "1"])
     reply = rows[0]["replies"][0]

@@ -14,7 +14,7 @@ from click.testing import CliRunner
 from _cli_run import invoke, one_line_error
 from _log_samples import SAMPLES, Sample
 from servobus.cli import cli
-from servobus.logs import message_values
+from servobus.tools.logs import message_values
 from servobus.transports.can import message_from_frame
 
 FAMILIES = ("myactuator", "lk", "hollow")

@@ -24,7 +24,7 @@ import pytest
 from _backends import BACKENDS, virtual
 from servobus.errors import TransportError
 from servobus.frame import Frame
-from servobus.recording import TapLink
+from servobus.tools.recording import TapLink
 from servobus.transports import SimTransport, TransportState, TransportStats
 from servobus.transports.contract import FrameLink, LineRules
 from servobus.transports.link_base import LinkBase

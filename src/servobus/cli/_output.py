@@ -164,9 +164,9 @@ def jsonable(value: Any) -> Any:
 
 
 def message_fields(message: Message) -> dict[str, Any]:
-    """A command's or reply's fields as :func:`servobus.logs.message_values` gives them (scalars, units
+    """A command's or reply's fields as :func:`servobus.tools.logs.message_values` gives them (scalars, units
     in the names: the shape ``decode``, ``record`` and ``plot`` share), non-finite floats as text."""
-    from servobus.logs import message_values  # (python-can loads with it: only when needed)
+    from servobus.tools.logs import message_values  # (python-can loads with it: only when needed)
 
     return {name: jsonable(value) for name, value in message_values(message).items()}
 

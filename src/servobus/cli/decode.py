@@ -11,7 +11,7 @@ import click
 
 from servobus.cli._connect import family_option, parse_ids, revision_option
 from servobus.frame import Frame
-from servobus.logs import Decoded, FrameDecoder, LogFrames, parse_frame, read_log
+from servobus.tools.logs import Decoded, FrameDecoder, LogFrames, parse_frame, read_log
 
 __all__ = ["decode"]
 

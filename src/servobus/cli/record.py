@@ -19,8 +19,8 @@ from servobus.cli._motors import run
 from servobus.cli._output import FloatRange
 from servobus.errors import MotorTimeout, TransportError
 from servobus.protocols import Command, Reply, get_family
-from servobus.recording import CandumpWriter, NewFiles, TapLink, TelemetryWriter, telemetry_row
 from servobus.scheduler import Traffic
+from servobus.tools.recording import CandumpWriter, NewFiles, TapLink, TelemetryWriter, telemetry_row
 
 __all__ = ["record"]
 

@@ -385,13 +385,29 @@ def _check_candump(line: str) -> None:
         raise ValueError(f"{fields[2]}: an odd number of data hex digits (a line cut short?)")
 
 
+class _ResumedAsc(can.ASCReader):
+    """An ASC reader that goes on after a bad line: its header (base, start time) was read already."""
+
+    def _extract_header(self) -> None:
+        return None
+
+
+class _ResumedTrc(can.TRCReader):
+    """A TRC reader that goes on after a bad line: its header (version, columns) was read already."""
+
+    def _extract_header(self) -> None:  # type: ignore[override]  # (None: no first data line read)
+        return None
+
+
 def _resumed(reader: Any, lines: _Lines) -> Any:
     """A reader that goes on with ``lines`` where ``reader`` stopped, knowing what its header said."""
     again = copy.copy(reader)
     if isinstance(reader, can.CSVReader):
         lines.push("")  # what CSVReader skips as its header line
-    elif isinstance(reader, can.ASCReader | can.TRCReader):
-        again._extract_header = lambda: None  # the header was read: base, start time, columns
+    elif isinstance(reader, can.ASCReader):  # (the same reader, its header not read again)
+        again.__class__ = _ResumedAsc
+    elif isinstance(reader, can.TRCReader):
+        again.__class__ = _ResumedTrc
     return again
 
 

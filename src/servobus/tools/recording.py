@@ -4,9 +4,9 @@
   every frame that came in to a callback, before the Bus sees it; the Bus works as without it (a
   FrameLink itself: its send reports echo the Bus's handles).
 * :class:`CandumpWriter` writes those frames through python-can's ``CanutilsLogWriter``, ``R``/``T``
-  marking direction, so :class:`servobus.logs.FrameDecoder` tells requests from replies on reading.
+  marking direction, so :class:`servobus.tools.logs.FrameDecoder` tells requests from replies on reading.
 * :class:`TelemetryWriter` writes one row per decoded reply: ``time_s``, ``motor_id``, ``family``,
-  ``reply`` and the reply's fields (:func:`servobus.logs.message_values`: units in the names).
+  ``reply`` and the reply's fields (:func:`servobus.tools.logs.message_values`: units in the names).
 * :class:`NewFiles` opens outputs without overwriting what exists (unless told: then the old file is
   replaced only when the new one is kept) and, on failure, removes only the files it created.
 """
@@ -25,8 +25,8 @@ from typing import Any, Self, TextIO
 import can
 
 from servobus.frame import Frame
-from servobus.logs import Scalar, message_values
 from servobus.protocols import Reply
+from servobus.tools.logs import Scalar, message_values
 from servobus.transports.base import SendReporter
 from servobus.transports.can import message_from_frame
 from servobus.transports.contract import Consumer, LineRules
