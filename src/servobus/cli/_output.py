@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import enum
+import functools
 import json
 import math
 import re
@@ -80,16 +81,18 @@ class NegativeNumbers(click.Command):
 
     def make_parser(self, ctx: click.Context) -> Any:
         parser = super().make_parser(ctx)
-        process_opts = parser._process_opts
-
-        def process(arg: str, state: Any) -> None:
-            if _NEGATIVE.match(arg):
-                state.largs.append(arg)  # a value in its place among the arguments
-            else:
-                process_opts(arg, state)
-
-        parser._process_opts = process  # type: ignore[method-assign]
+        # click has no public hook for how an argument that starts with "-" is taken (its parser's
+        # own method decides): wrapped here, the one place the command line reaches into click
+        parser._process_opts = functools.partial(_negative_number, parser._process_opts)  # type: ignore[method-assign]  # noqa: SLF001 (click's parser: no public hook for a "-5" argument)
         return parser
+
+
+def _negative_number(process_opts: Callable[[str, Any], None], arg: str, state: Any) -> None:
+    """Click's option processing of ``arg``, except that a negative number is an argument."""
+    if _NEGATIVE.match(arg):
+        state.largs.append(arg)  # a value in its place among the arguments
+    else:
+        process_opts(arg, state)
 
 
 @contextlib.contextmanager
