@@ -16,17 +16,19 @@ messages on each key wait for the loop (an older one is dropped); queries wait i
 client and kind, served round-robin with quotas (``_queries``; beyond them they are dropped on
 Zenoh's thread, and counted); a message longer than its key allows is dropped before anything of it
 is decoded (``_limits``); a client's liveliness changes are never dropped.
+
+The :class:`Bridge` owns the session, the clients' tokens and the tasks; each bus's set-points are
+checked and sent by ``_setpoints``, the motors a client lost released and stopped by ``_stops``,
+requests answered by ``_requests``, states published by ``_served``.
 """
 
 from __future__ import annotations
 
 import functools
 import json
-import logging
 import math
-import time
 from collections import deque
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from types import TracebackType
 from typing import Any, Self
 
@@ -36,24 +38,19 @@ import zenoh
 
 from servobus import runtime
 from servobus.bus import Bus, Motor, MotorStatus
-from servobus.protocols import Command
-from servobus.remote import _requests, _tokens, wire
+from servobus.remote import _requests, _tokens
 from servobus.remote._clients import Clients
 from servobus.remote._handover import Handover
 from servobus.remote._queries import Queries
-from servobus.remote._served import Held, Served
+from servobus.remote._served import Served
 from servobus.remote._session import close_session
-from servobus.remote._withdraw import withdraw
+from servobus.remote._setpoints import Setpoints
+from servobus.remote._stops import LEFT, Stops
 from servobus.remote.keys import Keys
-from servobus.safety import stop_motors
-from servobus.ticks import ticks
 
 __all__ = ["Bridge"]
 
-logger = logging.getLogger(__name__)
-
 _BACKLOG = 4096  # set-point slots waiting for the loop; more are dropped (queries: _queries)
-_LEFT = "client left"  # why a motor is stopped when its client's token went
 _METRICS_EVERY_S = 0.5  # a metrics answer is computed again at most this often (it sorts 20k samples)
 
 
@@ -117,12 +114,12 @@ class Bridge:
         self.clients = Clients(allow_takeover)
         self._group: anyio.abc.TaskGroup | None = None
         self._lane: runtime.Runtime | None = None
-        self._stops, self._stops_in = anyio.create_memory_object_stream[tuple[Served, list[Motor]]](math.inf)
+        self._stops = Stops(node)
+        self._setpoints: Setpoints | None = None
         self._handover: Handover | None = None
         self._queries: Queries | None = None
         self._metrics: dict[str, tuple[float, bytes]] = {}  # bus -> (when, the metrics answer)
         self._tokens: _tokens.Tokens | None = None
-        self.stop_log: deque[tuple[int, str, int, str]] = deque(maxlen=1000)  # (unix ns, bus, id, why)
         self._closing = False
 
     # ---- life cycle ----
@@ -134,6 +131,18 @@ class Bridge:
             self._config = bridge_config(self.node)
         self._lane = runtime.current()
         self._handover = Handover(_BACKLOG)
+        self._setpoints = Setpoints(
+            node=self.node,
+            keys=self.keys,
+            clients=self.clients,
+            stops=self._stops,
+            lane=self._lane,
+            handover=self._handover,
+            take_tokens=self._take_tokens,
+            hz=self.hz,
+            stop_after_s=self.stop_after_s,
+            max_valid_s=self.max_valid_s,
+        )
         self._queries = Queries(self._lane, self.clients.live.__contains__)
         self._session = await anyio.to_thread.run_sync(zenoh.open, self._config)
         try:
@@ -147,9 +156,9 @@ class Bridge:
         self._group.start_soon(self._queries.run)
         self._group.start_soon(self._handover.drain)
         self._group.start_soon(self._tokens.run)
-        self._group.start_soon(self._take_stops)
+        self._group.start_soon(self._stops.run, self._group)
         for served in self.served.values():
-            self._group.start_soon(self._tick, served)
+            self._group.start_soon(self._setpoints.run, served)
             self._group.start_soon(self._publish_states, served)
         return self
 
@@ -164,10 +173,10 @@ class Bridge:
                     released = []  # (every bus's motors released before the first stop is awaited)
                     for served in self.served.values():
                         held = set(served.owners) | set(served.held) | set(served.stale_since)
-                        released.append((served, self._release(served, sorted(held), "bridge closing")))
+                        released.append((served, self._stops.release(served, sorted(held), "bridge closing")))
                     for served, motors in released:
                         if motors:
-                            await self._send_stop(served, motors)
+                            await self._stops.send(served, motors)
                 self._group.cancel_scope.cancel()
                 await self._group.__aexit__(exc_type, exc, tb)
         finally:
@@ -236,161 +245,15 @@ class Bridge:
             return
         for served in self.served.values():
             held = [mid for mid, owner in served.owners.items() if owner in gone]
-            self._stop(served, held, _LEFT)
-
-    def _stop(self, served: Served, motor_ids: Iterable[int], why: str) -> None:
-        """Release the motors (set-points, holder) and send each its safe command, in a task."""
-        motors = self._release(served, motor_ids, why)
-        if motors:
-            try:
-                self._stops.send_nowait((served, motors))
-            except (anyio.BrokenResourceError, anyio.ClosedResourceError):  # (closed: stopped on exit)
-                logger.warning("%s/%s: the bridge is closed: no stop for %s", self.node, served.name, motors)
-
-    def _release(self, served: Served, motor_ids: Iterable[int], why: str) -> list[Motor]:
-        """Release the motors, withdraw their holders' commands still queued (before the stop is
-        submitted: they would follow it) and write down why they are stopped; the motors."""
-        motors = [served.motors[mid] for mid in motor_ids]
-        for motor in motors:
-            withdraw(served, motor.motor_id, why, client_left=why == _LEFT)
-            served.release(motor.motor_id)
-        if motors:
-            served.counts["stops"] += len(motors)
-            now = time.time_ns()
-            self.stop_log.extend((now, served.name, m.motor_id, why) for m in motors)
-            ids = [m.motor_id for m in motors]
-            logger.warning("%s/%s: stopping motors %s (%s)", self.node, served.name, ids, why)
-        return motors
-
-    async def _take_stops(self) -> None:
-        assert self._group is not None
-        async with self._stops_in:
-            try:
-                async for served, motors in self._stops_in:
-                    self._group.start_soon(self._send_stop, served, motors)
-            finally:  # (cancelled: the stops queued meanwhile still go; _send_stop is shielded)
-                while True:
-                    try:
-                        served, motors = self._stops_in.receive_nowait()
-                    except (anyio.WouldBlock, anyio.EndOfStream):
-                        break
-                    self._group.start_soon(self._send_stop, served, motors)
-
-    async def _send_stop(self, served: Served, motors: list[Motor]) -> None:
-        """The motors' safe commands, past the watchdog, again until acknowledged or the Bus's
-        ``safe_timeout_s`` ended (what the Bus's own safe stop does); shielded."""
-        commands: dict[Motor, Command] = {}
-        for motor in motors:
-            command = served.stop_commands[motor.motor_id]
-            if command is not None:
-                commands[motor] = command
-        with anyio.CancelScope(shield=True):
-            try:
-                outcome = await stop_motors(served.bus, commands, served.bus.safe_timeout_s)
-            except Exception:  # the bridge must outlive a stop that failed; it is logged
-                logger.exception("%s/%s: the stop of %s failed", self.node, served.name, motors)
-                return
-        missing = [m.motor_id for m in commands if m not in outcome.acknowledged]
-        if missing:
-            logger.warning("%s/%s: motors %s did not acknowledge their stop", self.node, served.name, missing)
+            self._stops.stop(served, held, LEFT)
 
     # ---- set-points ----
 
     def _on_setpoints(self, served: Served, item: tuple[str, bytes, int]) -> None:
-        """Take a set-point message (``key``, ``payload``, the wall ns Zenoh handed it over)."""
-        key, payload, _ = item
-        try:
-            # (from the header alone, before the commands are decoded: no more set-points than the
-            # bus has motors, and a client without a live token costs no decoding at all)
-            secret, count = wire.peek_setpoints(payload)
-            if count > len(served.motors):
-                raise wire.WireError(f"{count} set-points for a bus of {len(served.motors)} motors")
-            client = self.clients.public(secret)
-            if client not in self.clients.live:
-                self._take_tokens()  # (a token declared just before its first set-points)
-                if client not in self.clients.live:
-                    served.counts["refused"] += count
-                    return
-            message = wire.decode_setpoints(served.schemas.get, payload)
-            if key.endswith("/setpoint"):
-                _, mid, _ = self.keys.parse_motor(key)
-                if [m for m, _ in message.items] != [mid]:
-                    raise wire.WireError(f"a set-point on motor {mid}'s key must be for motor {mid} alone")
-        except (wire.WireError, ValueError) as exc:
-            served.counts["malformed"] += 1
-            logger.debug("%s: malformed set-points dropped: %s", key, exc)
-            return
-        left_ns = min(
-            message.deadline_unix_ns - time.time_ns(),
-            message.deadline_unix_ns - message.sent_unix_ns,
-            int(self.max_valid_s * 1e9),
-        )
-        if left_ns <= 0:
-            served.counts["stale"] += len(message.items)
-            return
-        assert self._lane is not None
-        expires = self._lane.time() + left_ns / 1e9
-        for mid, command in message.items:
-            if self.clients.holder(served, mid, client) is not None:
-                served.counts["refused"] += 1
-                continue
-            try:  # what the motor's codec refuses (a command its revision lacks) never reaches a tick
-                served.motors[mid].codec.encode(command)
-            except ValueError as exc:
-                served.counts["malformed"] += 1
-                logger.debug("%s: set-point for motor %s refused by its codec: %s", key, mid, exc)
-                continue
-            held = served.held.get(mid)
-            if held is not None and held.client == client and _older(message.seq, held.seq):
-                served.counts["reordered"] += 1
-                continue
-            served.counts["setpoints"] += 1
-            served.commanded[mid] += 1
-            if served.owners.get(mid) != client:  # (a motor released or revoked has no owner)
-                self.clients.take(served, mid, client)
-            served.stale_since.pop(mid, None)
-            served.held[mid] = Held(client, message.seq, command, message.sent_unix_ns, expires)
-
-    async def _tick(self, served: Served) -> None:
-        assert self._lane is not None
-        clock = self._lane.time
-        handover = self._handover
-        assert handover is not None
-        async for _ in ticks(self.hz, spin_s=0.0):
-            self._take_tokens()  # (a client that left loses its motors before anything of it is sent)
-            handover.take(served)  # (the set-points that came since the last tick)
-            now = clock()
-            items = []
-            fresh: list[Held] = []
-            for mid, held in list(served.held.items()):
-                if now > held.expires:
-                    del served.held[mid]
-                    served.stale_since[mid] = held.expires
-                    served.counts["expired"] += 1
-                    continue
-                items.append((served.motors[mid], held.command))
-                if not held.applied:
-                    fresh.append(held)
-            due = [mid for mid, since in served.stale_since.items() if now - since >= self.stop_after_s]
-            if due:
-                for mid in due:
-                    self.clients.revoke(served, mid)
-                self._stop(served, due, f"set-points stale for {self.stop_after_s * 1e3:.0f} ms")
-            if not items:
-                continue
-            handed = time.time_ns()
-            for held in fresh:
-                held.applied = True
-                served.to_wire_ns.append(handed - held.sent_unix_ns)
-            served.counts["applied"] += len(fresh)
-            try:
-                await served.bus.cycle(items)
-            except ValueError:  # (checked on intake; if a codec still refuses, the tick must go on)
-                logger.exception("%s/%s: a tick's set-points were refused; dropped", self.node, served.name)
-                served.counts["malformed"] += len(items)
-                for motor, _ in items:  # stale from now: stopped after stop_after_s like any other
-                    served.held.pop(motor.motor_id, None)
-                    served.stale_since[motor.motor_id] = now
+        """(The loop) a set-point message (``key``, ``payload``, the wall ns Zenoh handed it over),
+        for :meth:`Setpoints.take <servobus.remote._setpoints.Setpoints.take>`."""
+        assert self._setpoints is not None
+        self._setpoints.take(served, item)
 
     # ---- requests, info, metrics ----
 
@@ -435,6 +298,11 @@ class Bridge:
     # ---- numbers ----
 
     @property
+    def stop_log(self) -> deque[tuple[int, str, int, str]]:
+        """The latest 1000 motors stopped: (unix ns, bus, motor id, why)."""
+        return self._stops.log
+
+    @property
     def dropped_events(self) -> int:
         """Set-points dropped on arrival because the backlog was full (queries refused on arrival
         are counted in each bus's ``shed`` and ``oversized``)."""
@@ -443,8 +311,3 @@ class Bridge:
     def metrics(self) -> dict[str, dict[str, Any]]:
         """Each served bus's metrics: the Bus's, the bridge's counters, set-point-to-wire latency."""
         return {name: served.metrics() for name, served in self.served.items()}
-
-
-def _older(seq: int, than: int) -> bool:
-    """Whether sequence number ``seq`` came before ``than`` (32-bit, wrapping)."""
-    return seq != than and ((than - seq) & 0xFFFFFFFF) < 0x80000000
