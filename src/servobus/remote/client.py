@@ -17,7 +17,6 @@ stops the motors this client commanded. If the bridge vanishes, every pending an
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 import os
@@ -35,7 +34,8 @@ from servobus import runtime
 from servobus.errors import MotorOffline, TransportError
 from servobus.protocols import Command, Family, Reply, get_family
 from servobus.remote import wire
-from servobus.remote._session import close_session, handed, sample_kind, to_loop
+from servobus.remote._asking import Asker
+from servobus.remote._session import close_session, handed, sample_kind
 from servobus.remote.keys import Keys, check_name
 from servobus.remote.security import DEFAULT_ENDPOINT, client_config, open_error
 
@@ -182,13 +182,11 @@ class RemoteBus:
         self.shown_id = wire.shown_id(self.token_id)  # what the bridge's metrics call it (owners)
         self.info: dict[str, Any] = {}
         self.motors: dict[int, RemoteMotor] = {}
-        self.lost: BridgeLost | None = None
         self._config = (user, password, tls, config_file)
         self._session: Any = None
         self._declared: list[Any] = []
         self._lane: runtime.Runtime | None = None
-        self._alive: anyio.Event | None = None
-        self._waiting: set[anyio.Event] = set()
+        self._asker: Asker | None = None  # (made on entering: it needs the loop)
         self._subscribers: list[Callable[[RemoteMotor, Reply], object]] = []
         self._status: list[Callable[[RemoteStatus], object]] = []
         self._setpoints: Any = None
@@ -210,6 +208,7 @@ class RemoteBus:
             connect_timeout_s=self.timeout_s,
         )
         self._lane = runtime.current()
+        self._asker = Asker(self._lane, self.timeout_s, self._gone)
         try:
             self._session = await anyio.to_thread.run_sync(zenoh.open, config)
         except zenoh.ZError as exc:
@@ -222,26 +221,25 @@ class RemoteBus:
         return self
 
     async def _start(self) -> None:
-        session, keys, lane = self._session, self.keys, self._lane
-        assert lane is not None
-        self._alive = anyio.Event()
+        session, keys, lane, asker = self._session, self.keys, self._lane, self._asker
+        assert lane is not None and asker is not None
         self._declared.append(
             session.liveliness().declare_subscriber(
-                keys.alive, handed(lane, self._on_alive, sample_kind), history=True
+                keys.alive, handed(lane, asker.on_alive, sample_kind), history=True
             )
         )
         with anyio.move_on_after(self.timeout_s):
-            await self._alive.wait()
-        if not self._alive.is_set():
+            await asker.alive.wait()
+        if not asker.alive.is_set():
             raise RemoteError(
                 f"no bridge named {self.node!r} at {', '.join(self.endpoints)} "
                 f"(none running, or this client may not see it)"
             )
         if not self.read_only:
             self._declared.append(session.liveliness().declare_token(keys.client(self.token_id)))
-        info = await self._get_json(keys.bus(self.name, "info"))
+        info = await asker.get_json(session, keys.bus(self.name, "info"))
         if info is None:
-            buses = await self._list_buses()
+            buses = await asker.list_buses(session, keys)
             raise RemoteError(
                 f"bridge {self.node!r} has no bus {self.name!r} (its buses: {', '.join(buses) or 'none'})"
             )
@@ -276,15 +274,15 @@ class RemoteBus:
         self._setpoints = None
         await close_session(session, declared)
 
-    def _on_alive(self, kind: str) -> None:
-        if kind == "PUT":
-            self.lost = None
-            if self._alive is not None:
-                self._alive.set()
-            return
-        self.lost = BridgeLost(f"bridge {self.node!r} is gone (its liveliness token vanished)")
-        for event in self._waiting:
-            event.set()
+    def _gone(self) -> BridgeLost:
+        return BridgeLost(f"bridge {self.node!r} is gone (its liveliness token vanished)")
+
+    @property
+    def lost(self) -> BridgeLost | None:
+        """Why every call raises now: the bridge's liveliness token vanished (None: it lives)."""
+        lost = self._asker.lost if self._asker is not None else None
+        assert lost is None or isinstance(lost, BridgeLost)
+        return lost
 
     def _check(self) -> None:
         if self.lost is not None:
@@ -366,7 +364,8 @@ class RemoteBus:
             )
         payload = wire.encode_request(motor.schema, wire.Request(self.client_id, command, timeout_s))
         key = self.keys.motor(self.name, motor.motor_id, leaf)
-        answers = await self._get(key, payload, (timeout_s or 1.0) + self.timeout_s)
+        assert self._asker is not None  # (connected: _check)
+        answers = await self._asker.get(self._session, key, payload, (timeout_s or 1.0) + self.timeout_s)
         if not answers:
             raise RemoteError(
                 f"no answer from {self.node}/{self.name} for {type(command).__name__} to motor "
@@ -419,65 +418,11 @@ class RemoteBus:
     async def metrics(self) -> dict[str, Any]:
         """The bridge's metrics of this bus: the Bus's counters and latency, the bridge's counters."""
         self._check()
-        found = await self._get_json(self.keys.bus(self.name, "metrics"))
+        assert self._asker is not None  # (connected: _check)
+        found = await self._asker.get_json(self._session, self.keys.bus(self.name, "metrics"))
         if found is None:
             raise RemoteError(f"no metrics from {self.node}/{self.name}")
         return found
-
-    # ---- queries ----
-
-    async def _get(self, key: str, payload: bytes | None, timeout_s: float) -> list[bytes]:
-        """The payloads of the answers to a query, gathered on Zenoh's thread, awaited here."""
-        lane = self._lane
-        assert lane is not None
-        done = anyio.Event()
-        answers: list[bytes] = []
-
-        def on_reply(reply: Any) -> None:
-            ok = reply.ok
-            if ok is not None:
-                answers.append(ok.payload.to_bytes())
-
-        def on_done() -> None:
-            to_loop(lane, done.set)
-
-        self._waiting.add(done)
-        try:
-            self._session.get(
-                key,
-                zenoh.handlers.Callback(on_reply, on_done),
-                payload=payload,
-                timeout=timeout_s,
-                express=True,
-                congestion_control=zenoh.CongestionControl.DROP,  # never block this loop
-            )
-            await done.wait()
-        finally:
-            self._waiting.discard(done)
-        if self.lost is not None and not answers:
-            raise self.lost
-        return answers
-
-    async def _get_json(self, key: str) -> dict[str, Any] | None:
-        answers = await self._get(key, None, self.timeout_s)
-        for raw in answers:
-            try:
-                found = json.loads(raw)
-            except ValueError:
-                continue
-            if isinstance(found, dict):
-                return found
-        return None
-
-    async def _list_buses(self) -> list[str]:
-        answers = await self._get(self.keys.bus("*", "info"), None, self.timeout_s)
-        names = []
-        for raw in answers:
-            try:
-                names.append(str(json.loads(raw)["bus"]))
-            except (ValueError, KeyError, TypeError):
-                continue
-        return sorted(names)
 
 
 def _check_valid(valid_for_s: float) -> float:
