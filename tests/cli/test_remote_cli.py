@@ -37,9 +37,7 @@ def bridge() -> Iterator[tuple[str, str]]:
     Stopped with SIGTERM at the end: exit 0, and a line on stderr."""
     endpoint = f"tcp/127.0.0.1:{_free_port()}"
     args = ["bridge", "--sim", "8", "--buses", "2", "--node", NODE, "--listen", endpoint]
-    process = subprocess.Popen(
-        [*SERVOBUS, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
-    )
+    process = subprocess.Popen([*SERVOBUS, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         assert process.stdout is not None
         ready, _, _ = select.select([process.stdout], [], [], 20)
