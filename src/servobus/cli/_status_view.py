@@ -24,6 +24,8 @@ Items = list[tuple[Any, Command]]
 
 
 def status_rows(outcomes: Sequence[Outcome]) -> list[dict[str, Any]]:
+    """One row per motor: its id, its status columns (:func:`~servobus.cli._motors.status_of`), its
+    error."""
     rows = []
     for o in outcomes:
         row: dict[str, Any] = {"id": o.motor_id, **status_of(o.replies)}
@@ -33,6 +35,7 @@ def status_rows(outcomes: Sequence[Outcome]) -> list[dict[str, Any]]:
 
 
 def status_table(rows: Sequence[Mapping[str, Any]], title: str | None = None) -> Any:
+    """The rows as a table of the columns some motor has (the error column only if one failed)."""
     columns = ("id", *STATUS_COLUMNS, "error")
     shown = [c for c in columns if c in ("id", "error") or any(r.get(c) is not None for r in rows)]
     if not any(r.get("error") for r in rows):
