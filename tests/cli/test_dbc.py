@@ -17,10 +17,11 @@ import pytest
 
 from _cli_run import invoke, moving_sim, one_line_error
 from _dbc_check import check_frame, values_of
-from servobus.dbc import Layout, MessageSpec, Plan, dbc_name, plan
 from servobus.frame import Frame
 from servobus.logs import FrameDecoder, read_log
 from servobus.protocols import hollow as ho
+from servobus.protocols.dbc import Layout, MessageSpec, dbc_name
+from servobus.tools.dbc import Plan, plan
 
 
 def _spec(p: Plan, frame: Frame) -> MessageSpec:

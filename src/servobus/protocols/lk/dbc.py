@@ -20,7 +20,8 @@ import enum
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any, cast
 
-from servobus.dbc import (
+from servobus.protocols._fields import IntField
+from servobus.protocols.dbc import (
     DbcFamily,
     DbcOption,
     DbcQuery,
@@ -39,7 +40,6 @@ from servobus.dbc import (
     request_keys,
     signal_spec,
 )
-from servobus.protocols._fields import IntField
 from servobus.protocols.lk import FAMILY
 from servobus.protocols.lk import commands_control as ctl
 from servobus.protocols.lk import params as lkp
