@@ -29,6 +29,7 @@ from servobus.protocols._bound import (
     frame_key,
     motor_ids_of,
 )
+from servobus.protocols._family import find_revision
 from servobus.protocols._fast import Slow, maker
 from servobus.protocols._fields import IntField, ScaledField, round_half_away
 from servobus.protocols._message import Command, Reply
@@ -74,6 +75,8 @@ from servobus.protocols.lk.states import BrakeAction
 __all__ = ["LINKS", "LkCodec", "bind", "broadcast"]
 
 LINKS = ("can",)
+#: the revisions, the default first (the Family\'s)
+REVISIONS = (Revision.V2_36, Revision.V2_35)
 
 DEFAULT_TIMEOUT_S = 0.02
 #: ROM writes and the brake (a class declaring ``SLOW``) take longer; 0x18 declares its own TIMEOUT_S.
@@ -440,11 +443,9 @@ def bind(
     Raises:
         ValueError: an id outside 1..32, an unknown revision or link, or ``revision`` contradicting ``model``.
     """
-    from servobus.protocols.lk import FAMILY
-
     if link not in LINKS:
         raise ValueError(f"lk has no link {link!r} (links: {', '.join(LINKS)})")
-    rev = FAMILY.revision(revision) if revision is not None else None
+    rev = find_revision("lk", REVISIONS, revision) if revision is not None else None
     return LkCodec(motor_id, resolve_model(rev, model))
 
 
