@@ -146,7 +146,7 @@ class Packed(Message):
     SIZE: ClassVar[int]
     WHAT: ClassVar[str]
     FIELDS: ClassVar[tuple[PackedField, ...]]
-    _VALUES: ClassVar[Callable[[Any], tuple[Any, ...]]]  # the field values in FIELDS order
+    _VALUES: ClassVar[attrgetter[tuple[Any, ...]]]  # the field values in FIELDS order (not a method)
     model: HollowModel
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
@@ -164,7 +164,7 @@ class Packed(Message):
                 object.__setattr__(self, spec.name, checked)
 
     def encode(self) -> bytes:
-        packed: bytes = getattr(packers(self.model), self.PACKER).pack(type(self)._VALUES(self))
+        packed: bytes = getattr(packers(self.model), self.PACKER).pack(self._VALUES(self))
         return packed
 
     @classmethod

@@ -356,6 +356,10 @@ class LkCodec(CodecBase):
         data = fast(message) if fast is not None else message.encode()  # (8 bytes: LK's payload())
         return classic_request(self._request_id, data)
 
+    def reply_code_key(self, code: int) -> int:
+        """The key of this motor's reply whose DATA[0] is ``code`` (a broadcast's replies)."""
+        return self._reply_base | code
+
     def reply_key(self, command: Command) -> Hashable | None:
         """The key of the reply to ``command`` (every single-motor LK command is answered).
 
@@ -474,5 +478,5 @@ def broadcast(command: Command, motors: Sequence[LkCodec]) -> Broadcast:
                 f"{motor!r} is {motor.model.motor_type.name}, the command {command.motor_type.name}"
             )
         check_available(command, model=motor.model)
-    replies: dict[int, Hashable] = {m.motor_id: m._reply_base | MULTI_MOTOR_REPLY_CODE for m in motors}
+    replies: dict[int, Hashable] = {m.motor_id: m.reply_code_key(MULTI_MOTOR_REPLY_CODE) for m in motors}
     return Broadcast(Frame(arbitration_id=MULTI_MOTOR_ID, data=command.encode(), is_rx=False), replies)
