@@ -118,6 +118,12 @@ class Flag:
         return int(raw)
 
 
+class _Getter(Protocol):
+    """A getter of field values (an ``attrgetter``): a callable object, not a method."""
+
+    def __call__(self, message: Any, /) -> tuple[Any, ...]: ...
+
+
 @dataclass(frozen=True, slots=True)
 class Choice:
     """An IntEnum byte; ``label`` names it in a decoding error (the manual's name, "Mode Sel")."""
@@ -146,7 +152,7 @@ class Packed(Message):
     SIZE: ClassVar[int]
     WHAT: ClassVar[str]
     FIELDS: ClassVar[tuple[PackedField, ...]]
-    _VALUES: ClassVar[attrgetter[tuple[Any, ...]]]  # the field values in FIELDS order (not a method)
+    _VALUES: ClassVar[_Getter]  # the field values in FIELDS order
     model: HollowModel
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
