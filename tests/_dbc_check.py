@@ -22,8 +22,9 @@ import math
 from collections import defaultdict
 from typing import Any
 
-from servobus.dbc import CONFIG_FIELDS, Layout, MessageSpec, SignalSpec, signal_table
 from servobus.protocols import Message
+from servobus.protocols.dbc import CONFIG_FIELDS, Layout, MessageSpec, SignalSpec
+from servobus.tools.dbc import signal_table
 
 __all__ = ["check_frame", "values_of"]
 

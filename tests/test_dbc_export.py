@@ -41,27 +41,15 @@ from _spec import SPEC_DIR
 from protocols.hollow import _strategies as hs
 from protocols.lk import _strategies as ls
 from protocols.myactuator import _strategies as ms
-from servobus.dbc import (
-    MUX,
-    Layout,
-    MessageSpec,
-    Placed,
-    Plan,
-    SignalSpec,
-    build_database,
-    database,
-    dbc_name,
-    dbc_text,
-    plan,
-    signal_table,
-)
 from servobus.errors import ProtocolError
 from servobus.protocols import hollow as ho
 from servobus.protocols import lk
 from servobus.protocols import myactuator as ma
+from servobus.protocols.dbc import MUX, Layout, MessageSpec, SignalSpec, dbc_name
 from servobus.protocols.hollow import CanMode
 from servobus.protocols.lk.codec import REPLY_CLASSES, REQUESTS
 from servobus.protocols.myactuator import codec as ma_codec
+from servobus.tools.dbc import Placed, Plan, build_database, database, dbc_text, plan, signal_table
 
 #: Encoder-built examples per class (each decodes through cantools and servobus, per revision).
 EXAMPLES = 40

@@ -20,9 +20,10 @@ import pytest
 
 from _dbc_check import check_frame
 from _toy import PLUGINS, SERVOBUS
-from servobus.dbc import DbcFamily, DbcOption, DbcQuery, Described, Layout, database, dbc_part, dbc_text, plan
 from servobus.protocols import get_family
 from servobus.protocols._bound import EXTENDED
+from servobus.protocols.dbc import DbcFamily, DbcOption, DbcQuery, Described, Layout, dbc_part
+from servobus.tools.dbc import database, dbc_text, plan
 
 
 def toy_commands(toy: ModuleType) -> list[Any]:

@@ -120,10 +120,14 @@ def test_the_check_catches_violations() -> None:
 #   sim         the simulator: networks, plant, device models (servobus.sim, a family's .sim)
 #   sim-front   the simulator's I/O (real clock, ptys, python-can, its command line): on the sim
 #               and the transports
-#   bus         the Bus and what runs beside it (ticks, signals, sync, logs, recording, a family's
-#               typed Motor): on the scheduler and the transports, never on the simulator
+#   bus         the Bus and what runs beside it (ticks, signals, sync, logs, recording): on the
+#               scheduler and the transports, never on the simulator
 #   tools       the DBC exporter, log decoding, recording: on the Bus and what is below it
-#   app         the command line and the DBC exporter (a family's cli and dbc parts too): any layer
+#   app         the command line: any layer
+#
+# A family's cli and dbc parts and its typed calls (_motor) are in the family layer: they implement
+# the contracts of the protocols layer (servobus.protocols.cli, .dbc, ._calls.TypedCalls), which the
+# command line, the DBC exporter and the Bus import from there.
 #
 # A module may also import any module of its own family's package (a family is one plug-in, whose
 # parts the contract loads by name; test_family_layering.py checks that nothing else imports one).
@@ -185,7 +189,6 @@ LAYERS: dict[str, list[str]] = {
         "servobus.ticks",
         "servobus.signals",
         "servobus.sync",
-        "servobus.protocols.<family>._motor",
     ],
     # buses served to other computers (issue 29): above the Bus, below the command line; no family
     "remote": ["servobus.remote"],
@@ -193,10 +196,8 @@ LAYERS: dict[str, list[str]] = {
     "tools": ["servobus.tools"],
     "app": [
         "servobus.cli",
-        "servobus.dbc",
+        "servobus.dbc",  # (the deprecated alias of servobus.protocols.dbc and servobus.tools.dbc)
         "servobus.__main__",
-        "servobus.protocols.<family>.cli",
-        "servobus.protocols.<family>.dbc",
     ],
 }
 MAY_IMPORT: dict[str, set[str]] = {
@@ -224,6 +225,14 @@ TRANSPORT_SIM = {
 }
 #: violations in modules this test does not own, reported to the coordinator: module -> reason
 KNOWN: dict[str, str] = {}
+#: imports up the layers a type checker alone sees (inside ``if TYPE_CHECKING:``): module -> {module:
+#: why}. Each is checked to stay type-only (test_type_only_imports_stay_type_only).
+TYPE_ONLY: dict[str, dict[str, str]] = {
+    "servobus.protocols._calls": {
+        "servobus.bus": "the typed calls are a Motor to a type checker (user code passes them where a "
+        "servobus.Motor is expected); at run time the Bus composes them with its Motor",
+    },
+}
 
 
 def _prefixes() -> list[tuple[str, str]]:
@@ -283,6 +292,16 @@ def imported_modules(source: str, module: str, *, package: bool = False) -> list
     return [(line, name) for line, name in found if name == PACKAGE or name.startswith(PACKAGE + ".")]
 
 
+def type_checking_lines(source: str) -> set[int]:
+    """The lines inside ``if TYPE_CHECKING:`` blocks (their ``else:`` aside) of ``source``."""
+    lines: set[int] = set()
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.If) and isinstance(node.test, ast.Name) and node.test.id == "TYPE_CHECKING":
+            for child in node.body:
+                lines.update(range(child.lineno, (child.end_lineno or child.lineno) + 1))
+    return lines
+
+
 def import_violations(source: str, module: str, *, package: bool = False) -> list[str]:
     """Line-numbered imports in ``source`` (module ``module``) against the direction of the layers."""
     mine = layer_of(module)
@@ -293,6 +312,8 @@ def import_violations(source: str, module: str, *, package: bool = False) -> lis
         if family_of(name) is not None and family_of(name) == family_of(module):
             continue  # a family's own parts
         if theirs in MAY_IMPORT[mine] or (mine == "transports" and name in TRANSPORT_SIM):
+            continue
+        if name in TYPE_ONLY.get(module, {}) and line in type_checking_lines(source):
             continue
         out.append(f"{line}: {mine} imports {name} ({theirs})")
     return out

@@ -186,6 +186,7 @@ def test_a_plug_in_motor_is_typed_for_a_user_s_type_checker(
     toy: ModuleType, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     import mypy.api as mypy_api
+
     user = tmp_path / "user.py"
     user.write_text(USER_FILE)
     monkeypatch.setenv("MYPYPATH", str(PLUGINS))
@@ -338,7 +339,6 @@ def test_a_plug_in_is_looked_up_once_not_per_motor_or_broadcast(
 # ---- the command line ----
 
 
-
 def test_the_cli_part_says_what_each_command_sends_or_why_not(toy: ModuleType) -> None:
     from servobus.cli.plugin import CliFamily
 
@@ -467,7 +467,7 @@ def _toy_frames(toy: ModuleType) -> list[tuple[int, Any]]:
 def test_the_dbc_of_a_plug_in_is_derived_from_its_declarations(toy: ModuleType) -> None:
     pytest.importorskip("cantools")
     from _dbc_check import check_frame
-    from servobus.dbc import database, plan
+    from servobus.tools.dbc import database, plan
 
     p = plan("toy", [1, 2])
     assert not p.left_out

@@ -17,9 +17,10 @@ import pytest
 
 from _cli_run import invoke, moving_sim, one_line_error
 from _dbc_check import check_frame, values_of
-from servobus.dbc import Layout, MessageSpec, Plan, dbc_name, plan
 from servobus.frame import Frame
 from servobus.protocols import hollow as ho
+from servobus.protocols.dbc import Layout, MessageSpec, dbc_name
+from servobus.tools.dbc import Plan, plan
 from servobus.tools.logs import FrameDecoder, read_log
 
 

@@ -79,7 +79,7 @@ def test_the_typed_motor_has_a_method_per_command(family: Family[Any]) -> None:
 
 def test_the_parts_load_as_their_contracts(family: Family[Any]) -> None:
     from servobus.cli.plugin import CliFamily
-    from servobus.dbc import DbcFamily
+    from servobus.protocols.dbc import DbcFamily
     from servobus.sim.family import SimFamily
 
     kinds = {"sim": SimFamily, "cli": CliFamily, "dbc": DbcFamily}

@@ -50,8 +50,8 @@ class _DbcCommand(click.Command):
 
     def format_epilog(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         super().format_epilog(ctx, formatter)
-        from servobus.dbc import dbc_part
         from servobus.protocols import available_families, get_family
+        from servobus.protocols.dbc import dbc_part
 
         for name in available_families():
             try:
@@ -129,8 +129,9 @@ def dbc(
         import cantools  # noqa: F401
     except ImportError:
         raise click.ClickException("dbc needs cantools: pip install 'servobus[dbc]'") from None
-    from servobus.dbc import database, dbc_part, dbc_text, option_owners, plan
     from servobus.protocols import get_family
+    from servobus.protocols.dbc import dbc_part
+    from servobus.tools.dbc import database, dbc_text, option_owners, plan
 
     part = dbc_part(get_family(family))
     given = {

@@ -1,9 +1,12 @@
 """The typed motor methods of a family, generated from its command declarations.
 
-``await motor.read_status2()`` is a method of the family's :class:`~servobus.Motor` subclass, one per
-command class, its parameters the command's fields and its return type the command's declared reply
+``await motor.read_status2()`` is a method of the family's typed calls class, one per command class,
+its parameters the command's fields and its return type the command's declared reply
 (``Command[StatusReply]``), so a type checker knows what comes back and refuses a misspelt name. The
-subclass is written into ``protocols/<family>/_motor.py`` by ::
+class subclasses :class:`TypedCalls`, not the Bus's Motor: a family never imports the Bus. The Bus
+composes the motor it hands out, ``type(name, (family.motor(), servobus.bus.Motor), {})``, so the
+generated methods come first in the MRO and their ``self.request`` is the Bus's. The class is
+written into ``protocols/<family>/_motor.py`` by ::
 
     python -m servobus.protocols._calls            # rewrite the built-in families' files
     python -m servobus.protocols._calls --check    # exit 1 if one is not current
@@ -24,12 +27,35 @@ import types
 import typing
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from servobus.protocols._family import Family
 from servobus.protocols._message import Command
 
-__all__ = ["DEFAULT", "given", "module_path", "render"]
+__all__ = ["DEFAULT", "TypedCalls", "given", "module_path", "render"]
+
+if TYPE_CHECKING:
+    # Type-only: to a type checker the typed calls are a Motor (user code passes them where a
+    # servobus.Motor is expected). At run time this module never imports the Bus.
+    from servobus.bus import Motor as _BusMotor
+
+    class TypedCalls(_BusMotor):
+        """The base of a family's generated typed calls, as a type checker sees it: a Motor."""
+
+else:
+
+    class TypedCalls:
+        """The base of a family's generated typed calls (``protocols/<family>/_motor.py``'s ``Motor``).
+
+        It adds nothing at run time: the Bus composes the class it hands out with its own Motor,
+        ``type(name, (family.motor(), servobus.bus.Motor), {})``, which follows in the MRO and gives
+        ``request`` and the rest, so the family's package never imports the Bus. A type checker sees
+        it as a subclass of the Bus's Motor (above): ``bus.motor(FAMILY, id)`` is typed as the
+        generated class, and user code passes it where a ``servobus.Motor`` is expected.
+        """
+
+        __slots__ = ()
+
 
 #: a generated method's default for a field whose own default a signature cannot spell (an object):
 #: the field is then left out, and the command fills it in
@@ -39,6 +65,7 @@ DEFAULT: Any = object()
 def given(**fields: Any) -> dict[str, Any]:
     """The fields a generated method was given (those not left at :data:`DEFAULT`)."""
     return {name: value for name, value in fields.items() if value is not DEFAULT}
+
 
 _BUILTINS = {int, float, bool, str, bytes, type(None), object}
 _NO_DEFAULT = dataclasses.MISSING
@@ -179,15 +206,16 @@ def render(family: Family[Any]) -> str:
         "",
         "from typing import Any, Literal  # noqa: F401",
         "",
-        "from servobus.bus import Motor as _Motor",
-        *(["from servobus.protocols._calls import DEFAULT, given"] if "**given(" in "".join(methods) else []),
+        "from servobus.protocols._calls import "
+        + ("DEFAULT, TypedCalls, given" if "**given(" in "".join(methods) else "TypedCalls"),
         *imports.lines(),
         "",
         '__all__ = ["Motor"]',
         "",
         "",
-        "class Motor(_Motor):",
-        f'    """A {family.name} motor on a Bus (``bus.motor(FAMILY, id)``): a typed method per command."""',
+        "class Motor(TypedCalls):",
+        f'    """A {family.name} motor on a Bus (``bus.motor(FAMILY, id)``): a typed method per command'
+        "\n    (the Bus's Motor, which the Bus composes after this class, sends them).\"\"\"",
         "",
     ]
     return "\n".join(head) + "\n" + "".join(methods)

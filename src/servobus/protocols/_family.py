@@ -169,13 +169,23 @@ class Family(Generic[M]):
         Raises:
             ValueError: no revision of this family has that name.
         """
-        if isinstance(name, Enum):
-            if name in self.revisions:
-                return name
-        else:
-            wanted = name.upper().replace(".", "_")
-            for revision in self.revisions:
-                if revision.name == wanted:
-                    return revision
-        known = ", ".join(r.name for r in self.revisions)
-        raise ValueError(f"{self.name} has no revision {name!r} (known: {known})")
+        return find_revision(self.name, self.revisions, name)
+
+
+def find_revision(family: str, revisions: tuple[Enum, ...], name: str | Enum) -> Any:
+    """The revision of ``revisions`` named ``name`` ("V4_3", "v4.3", or the enum member itself): what
+    :meth:`Family.revision` answers, for a family's ``bind``, which runs before its Family exists.
+
+    Raises:
+        ValueError: no revision of ``family`` has that name.
+    """
+    if isinstance(name, Enum):
+        if name in revisions:
+            return name
+    else:
+        wanted = name.upper().replace(".", "_")
+        for revision in revisions:
+            if revision.name == wanted:
+                return revision
+    known = ", ".join(r.name for r in revisions)
+    raise ValueError(f"{family} has no revision {name!r} (known: {known})")

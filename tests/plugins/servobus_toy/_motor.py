@@ -7,14 +7,15 @@ from __future__ import annotations
 
 from typing import Any, Literal  # noqa: F401
 
-from servobus.bus import Motor as _Motor
+from servobus.protocols._calls import TypedCalls
 from servobus_toy import messages
 
 __all__ = ["Motor"]
 
 
-class Motor(_Motor):
-    """A toy motor on a Bus (``bus.motor(FAMILY, id)``): a typed method per command."""
+class Motor(TypedCalls):
+    """A toy motor on a Bus (``bus.motor(FAMILY, id)``): a typed method per command
+    (the Bus's Motor, which the Bus composes after this class, sends them)."""
 
     # 0x10: read the state; changes nothing.
     async def read_state(self, *, timeout_s: float | None = None, retries: int = 0) -> messages.StateReply: return await self.request(messages.ReadState(), timeout_s=timeout_s, retries=retries)

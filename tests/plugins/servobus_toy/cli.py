@@ -9,7 +9,7 @@ safe commands.
 
 from __future__ import annotations
 
-from servobus.cli.plugin import CliFamily, build, once, setpoint, setting_of
+from servobus.protocols.cli import CliFamily, build, once, setpoint, setting_of
 from servobus_toy.messages import Restart, SetSpeed, WriteSpeedLimit
 
 __all__ = ["CLI"]

@@ -74,7 +74,7 @@ if TYPE_CHECKING:  # the typed motor class; imported when a Bus asks (it imports
 FAMILY: Family[Motor] = Family(
     name="hollow", package=__name__,  # the typed Motor (_motor.py) and the sim, cli, dbc parts are there
     description="hollow-series joint motors: CAN normal/extended, CAN FD, RS-485 transparent and Modbus RTU",
-    revisions=(Revision.HO_SERIES,), default_revision=Revision.HO_SERIES,
+    revisions=_bound.REVISIONS, default_revision=_bound.REVISIONS[0],
     decode_request=decode_request, decode_reply=decode_reply,
     links=_bound.LINKS, bind=_bound.bind, broadcast=_bound.broadcast, motor_ids=_MOTOR_IDS,
     # The requests a link of the bound codec carries; the whole serial frames (TransparentRequest) and

@@ -7,15 +7,15 @@ from __future__ import annotations
 
 from typing import Any, Literal  # noqa: F401
 
-from servobus.bus import Motor as _Motor
-from servobus.protocols._calls import DEFAULT, given
+from servobus.protocols._calls import DEFAULT, TypedCalls, given
 from servobus.protocols.hollow import commands, commands_fd, enums, model, replies, rs485
 
 __all__ = ["Motor"]
 
 
-class Motor(_Motor):
-    """A hollow motor on a Bus (``bus.motor(FAMILY, id)``): a typed method per command."""
+class Motor(TypedCalls):
+    """A hollow motor on a Bus (``bus.motor(FAMILY, id)``): a typed method per command
+    (the Bus's Motor, which the Bus composes after this class, sends them)."""
 
     # Select normal (absolute) or extended (incremental) CAN mode: extended id, DLC 8 (§5.1).
     async def can_mode_switch(self, mode: enums.CanMode, *, timeout_s: float | None = None, retries: int = 0) -> replies.NormalReply | replies.ExtendedReply: return await self.request(commands.CanModeSwitch(mode=mode), timeout_s=timeout_s, retries=retries)

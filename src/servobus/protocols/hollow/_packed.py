@@ -118,6 +118,12 @@ class Flag:
         return int(raw)
 
 
+class _Getter(Protocol):
+    """A getter of field values (an ``attrgetter``): a callable object, not a method."""
+
+    def __call__(self, message: Any, /) -> tuple[Any, ...]: ...
+
+
 @dataclass(frozen=True, slots=True)
 class Choice:
     """An IntEnum byte; ``label`` names it in a decoding error (the manual's name, "Mode Sel")."""
@@ -146,7 +152,7 @@ class Packed(Message):
     SIZE: ClassVar[int]
     WHAT: ClassVar[str]
     FIELDS: ClassVar[tuple[PackedField, ...]]
-    _VALUES: ClassVar[Callable[[Any], tuple[Any, ...]]]  # the field values in FIELDS order
+    _VALUES: ClassVar[_Getter]  # the field values in FIELDS order
     model: HollowModel
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
@@ -164,7 +170,7 @@ class Packed(Message):
                 object.__setattr__(self, spec.name, checked)
 
     def encode(self) -> bytes:
-        packed: bytes = getattr(packers(self.model), self.PACKER).pack(type(self)._VALUES(self))
+        packed: bytes = getattr(packers(self.model), self.PACKER).pack(self._VALUES(self))
         return packed
 
     @classmethod

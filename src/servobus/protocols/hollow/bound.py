@@ -38,10 +38,11 @@ from servobus.protocols._bound import (
     FrameKind,
     frame_key,
 )
+from servobus.protocols._family import find_revision
 from servobus.protocols._fast import Slow, maker
 from servobus.protocols._message import Command, Reply
 from servobus.protocols.hollow._packed import OnLinks
-from servobus.protocols.hollow.codec import decode_reply
+from servobus.protocols.hollow.codec import Revision, decode_reply
 from servobus.protocols.hollow.commands import HollowCommand, Stop
 from servobus.protocols.hollow.commands_fd import (
     FD_PAYLOAD_SIZE,
@@ -64,6 +65,8 @@ from servobus.protocols.hollow.rs485 import ModbusWrite, decode_modbus_reply, en
 __all__ = ["LINKS", "HollowCodec", "ModbusFraming", "TransparentFraming", "bind", "broadcast"]
 
 LINKS = ("can", "canfd", "rs485", "modbus")
+#: the revisions, the default first (the Family\'s)
+REVISIONS = (Revision.HO_SERIES,)
 MODBUS_BROADCAST = 0  # §9.5: address 0 reaches every slave and is never answered
 
 #: §3: the motor answers within 500 µs; the converter adds a serial round trip at 1 Mbaud.
@@ -415,9 +418,7 @@ def bind(
     Raises:
         ValueError: an id out of range, an unknown revision or link, or a model that is not a HollowModel.
     """
-    from servobus.protocols.hollow import FAMILY
-
-    rev = FAMILY.revision(revision) if revision is not None else FAMILY.default_revision
+    rev = find_revision("hollow", REVISIONS, revision) if revision is not None else REVISIONS[0]
     if link not in LINKS:
         raise ValueError(f"hollow has no link {link!r} (links: {', '.join(LINKS)})")
     model = DEFAULT_MODEL if model is None else model

@@ -2,7 +2,7 @@
 mode, §4), ``stop``/``off`` on every link, and why the rest is not there.
 
 Imported only when the CLI is asked for this family (``FAMILY.part("cli")``); the contract is
-:mod:`servobus.cli.plugin`'s.
+:mod:`servobus.protocols.cli`'s.
 """
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from servobus.cli.plugin import CliFamily, Op, Values
 from servobus.protocols import BoundCodec, Command
+from servobus.protocols.cli import CliFamily, Op, Values
 from servobus.protocols.hollow import ControlMode, SelectMode, Setpoint, SetZero, Start, Stop
 
 __all__ = ["CLI"]

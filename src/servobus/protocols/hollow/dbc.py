@@ -5,7 +5,7 @@ Per motor its requests on the motor id and one reply message on the host id, in 
 the motor model (``hollow.model.packers``) each frame's class names as its ``PACKER``, with its
 ``FIELDS`` and ``SIZE``: ``Setpoint``/``NormalReply`` (normal mode), ``IncrementalSetpoint``/
 ``ExtendedReply`` (extended mode), ``FdCommand``/``FdReply`` (CAN FD, 16 bytes); bit positions from
-:func:`servobus.dbc.packed_signals`. The extended-id frames (CAN
+:func:`servobus.protocols.dbc.packed_signals`. The extended-id frames (CAN
 mode switch, PI multiplier) are laid out in their classes' code; :func:`hollow_config` states them.
 Options: ``model`` (a ``HollowModel`` or a name of ``hollow.MODELS``), ``host_id`` (default 100).
 """
@@ -15,7 +15,8 @@ from __future__ import annotations
 import functools
 from typing import Any
 
-from servobus.dbc import (
+from servobus.protocols import hollow as ho
+from servobus.protocols.dbc import (
     DbcFamily,
     DbcOption,
     DbcQuery,
@@ -27,7 +28,6 @@ from servobus.dbc import (
     enum_choices,
     packed_signals,
 )
-from servobus.protocols import hollow as ho
 from servobus.protocols.hollow import CanMode, PiGain
 from servobus.protocols.hollow.ids import check_host_id, check_motor_id
 from servobus.protocols.hollow.model import packers

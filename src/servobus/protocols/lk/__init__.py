@@ -95,7 +95,7 @@ if TYPE_CHECKING:  # the typed motor class; imported when a Bus asks (it imports
 FAMILY: Family[Motor] = Family(
     name="lk", package=__name__,  # the typed Motor (_motor.py) and the sim, cli, dbc parts are there
     description="LK-TECH MS/MF/MH/MG CAN V2.36 and RMD-S/RMD-F V2.35 (0x140+ID -> 0x180+ID / 0x140+ID)",
-    revisions=(Revision.V2_36, Revision.V2_35), default_revision=Revision.V2_36,
+    revisions=_bound.REVISIONS, default_revision=_bound.REVISIONS[0],
     decode_request=decode_request, decode_reply=decode_reply,
     links=_bound.LINKS, bind=_bound.bind, broadcast=_bound.broadcast,
     commands=command_classes(globals().values()), motor_ids=_MOTOR_IDS,

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Any, Literal  # noqa: F401
 
-from servobus.bus import Motor as _Motor
+from servobus.protocols._calls import TypedCalls
 from servobus.protocols.lk import (
     commands,
     commands_control,
@@ -23,8 +23,9 @@ from servobus.protocols.lk import (
 __all__ = ["Motor"]
 
 
-class Motor(_Motor):
-    """A lk motor on a Bus (``bus.motor(FAMILY, id)``): a typed method per command."""
+class Motor(TypedCalls):
+    """A lk motor on a Bus (``bus.motor(FAMILY, id)``): a typed method per command
+    (the Bus's Motor, which the Bus composes after this class, sends them)."""
 
     # 0x8C, V2.36 only: engage or release the holding brake, or read its state (spec §4.8).
     async def brake_control(self, action: states.BrakeAction, *, timeout_s: float | None = None, retries: int = 0) -> replies.BrakeReply: return await self.request(commands.BrakeControl(action=action), timeout_s=timeout_s, retries=retries)

@@ -29,6 +29,7 @@ from servobus.protocols._bound import (
     frame_key,
     motor_ids_of,
 )
+from servobus.protocols._family import find_revision
 from servobus.protocols._fast import Slow, maker
 from servobus.protocols._fields import IntField, ScaledField, round_half_away
 from servobus.protocols._message import Command, Reply
@@ -74,6 +75,8 @@ from servobus.protocols.lk.states import BrakeAction
 __all__ = ["LINKS", "LkCodec", "bind", "broadcast"]
 
 LINKS = ("can",)
+#: the revisions, the default first (the Family\'s)
+REVISIONS = (Revision.V2_36, Revision.V2_35)
 
 DEFAULT_TIMEOUT_S = 0.02
 #: ROM writes and the brake (a class declaring ``SLOW``) take longer; 0x18 declares its own TIMEOUT_S.
@@ -353,6 +356,10 @@ class LkCodec(CodecBase):
         data = fast(message) if fast is not None else message.encode()  # (8 bytes: LK's payload())
         return classic_request(self._request_id, data)
 
+    def reply_code_key(self, code: int) -> int:
+        """The key of this motor's reply whose DATA[0] is ``code`` (a broadcast's replies)."""
+        return self._reply_base | code
+
     def reply_key(self, command: Command) -> Hashable | None:
         """The key of the reply to ``command`` (every single-motor LK command is answered).
 
@@ -440,11 +447,9 @@ def bind(
     Raises:
         ValueError: an id outside 1..32, an unknown revision or link, or ``revision`` contradicting ``model``.
     """
-    from servobus.protocols.lk import FAMILY
-
     if link not in LINKS:
         raise ValueError(f"lk has no link {link!r} (links: {', '.join(LINKS)})")
-    rev = FAMILY.revision(revision) if revision is not None else None
+    rev = find_revision("lk", REVISIONS, revision) if revision is not None else None
     return LkCodec(motor_id, resolve_model(rev, model))
 
 
@@ -473,5 +478,5 @@ def broadcast(command: Command, motors: Sequence[LkCodec]) -> Broadcast:
                 f"{motor!r} is {motor.model.motor_type.name}, the command {command.motor_type.name}"
             )
         check_available(command, model=motor.model)
-    replies: dict[int, Hashable] = {m.motor_id: m._reply_base | MULTI_MOTOR_REPLY_CODE for m in motors}
+    replies: dict[int, Hashable] = {m.motor_id: m.reply_code_key(MULTI_MOTOR_REPLY_CODE) for m in motors}
     return Broadcast(Frame(arbitration_id=MULTI_MOTOR_ID, data=command.encode(), is_rx=False), replies)

@@ -2,7 +2,7 @@
 ``servobus config`` reads and writes, and the status reads.
 
 Imported only when the CLI is asked for this family (``FAMILY.part("cli")``); the contract is
-:mod:`servobus.cli.plugin`'s.
+:mod:`servobus.protocols.cli`'s.
 """
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from servobus.cli import plugin
 from servobus.protocols import BoundCodec, Command, lk
+from servobus.protocols import cli as plugin
 from servobus.protocols.lk.commands_control import TORQUE_LIMIT
 
 __all__ = ["CLI"]

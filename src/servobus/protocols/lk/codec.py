@@ -26,12 +26,9 @@ from typing import TypeVar
 
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
-from servobus.protocols._family import command_classes
-from servobus.protocols.lk import commands as cmd
 from servobus.protocols.lk import commands_control as ctl
-from servobus.protocols.lk import params_v235 as p235
-from servobus.protocols.lk import params_v236 as p236
 from servobus.protocols.lk._base import LkCommand, LkReply
+from servobus.protocols.lk.classes import COMMAND_CLASSES, REQUESTS
 from servobus.protocols.lk.ids import (
     MULTI_MOTOR_ID,
     motor_id_from_reply_id,
@@ -58,13 +55,6 @@ __all__ = [
     "resolve_model",
 ]
 
-# Every command class of the family's modules, in their order (the classes state everything else).
-COMMAND_CLASSES: tuple[type[LkCommand], ...] = tuple(
-    cls
-    for cls in command_classes(value for module in (cmd, ctl, p236, p235) for value in vars(module).values())
-    if issubclass(cls, LkCommand)
-)
-
 
 def _reply_layouts() -> tuple[tuple[type[LkReply], frozenset[int]], ...]:
     replies = dict.fromkeys(reply for cls in COMMAND_CLASSES for reply in cls.reply_types())
@@ -81,21 +71,6 @@ INFERRED_LAYOUTS: Mapping[int, str] = MappingProxyType(
         for cls in COMMAND_CLASSES
         if cls.INFERRED
     }
-)
-
-
-def _request_table(revision: Revision) -> dict[int, type[LkCommand]]:
-    table: dict[int, type[LkCommand]] = {}
-    for cls in COMMAND_CLASSES:
-        if revision in cls.REVISIONS and cls.CODE is not None:
-            if cls.CODE in table:  # pragma: no cover - a table error, caught at import
-                raise AssertionError(f"0x{cls.CODE:02X}: {table[cls.CODE].__name__} and {cls.__name__}")
-            table[cls.CODE] = cls
-    return table
-
-
-REQUESTS: Mapping[Revision, Mapping[int, type[LkCommand]]] = MappingProxyType(
-    {revision: MappingProxyType(_request_table(revision)) for revision in Revision}
 )
 
 

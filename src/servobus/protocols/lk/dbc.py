@@ -20,7 +20,8 @@ import enum
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any, cast
 
-from servobus.dbc import (
+from servobus.protocols._fields import IntField
+from servobus.protocols.dbc import (
     DbcFamily,
     DbcOption,
     DbcQuery,
@@ -39,7 +40,6 @@ from servobus.dbc import (
     request_keys,
     signal_spec,
 )
-from servobus.protocols._fields import IntField
 from servobus.protocols.lk import FAMILY
 from servobus.protocols.lk import commands_control as ctl
 from servobus.protocols.lk import params as lkp
@@ -88,15 +88,15 @@ def _param_layouts(params: type[enum.IntEnum], layouts: Mapping[Any, Any] | None
 
 def _value_signals(layout: Any) -> tuple[SignalSpec, ...]:
     """The signals of an LK parameter ``ValueLayout`` (``params.py``): PID gains, an integer, a choice."""
-    if isinstance(layout, lkp._Pid):
+    if isinstance(layout, lkp.PidLayout):
         return tuple(
             le_signal(f"value.{gain}", offset, 2, minimum=0, maximum=layout.hi)
             for gain, offset in (("kp", 2), ("ki", 4), ("kd", 6))
         )
-    if isinstance(layout, lkp._Int):
+    if isinstance(layout, lkp.IntLayout):
         field = IntField("value", size=layout.size, signed=layout.signed, lo=layout.lo, hi=layout.hi)
         spec = signal_spec(layout.offset, field)
-    elif isinstance(layout, lkp._Choice):
+    elif isinstance(layout, lkp.ChoiceLayout):
         spec = signal_spec(layout.offset, EnumByte("value", layout.enum_cls))
     else:  # pragma: no cover - a new ValueLayout kind: describe it here
         raise TypeError(f"no signal for the LK parameter layout {layout!r}")

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from servobus.frame import Frame
 from servobus.protocols._fields import check_choice
+from servobus.protocols.lk.classes import REQUESTS
 from servobus.protocols.lk.model import Revision
 
 __all__ = [
@@ -49,7 +50,6 @@ MOTOR_IDS = range(1, 33)
 MULTI_MOTOR_ID = 0x280
 MULTI_MOTOR_IDS = range(1, 5)
 MULTI_MOTOR_REPLY_CODE = 0xA1  # spec §5: "same as the single motor torque closed-loop reply"
-
 
 
 def _check_motor_id(motor_id: int) -> None:
@@ -118,8 +118,6 @@ def request_keys(motor_id: int, command: int, revision: Revision) -> tuple[tuple
     Raises:
         ValueError: ``motor_id`` is not 1..32.
     """
-    from servobus.protocols.lk.codec import REQUESTS  # the codec's tables import this module
-
     cls = REQUESTS[revision].get(command)
     alias = cls.REPLY_ALIASES.get(revision) if cls is not None else None
     codes = (command,) if alias is None else (command, alias)

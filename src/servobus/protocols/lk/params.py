@@ -38,11 +38,14 @@ __all__ = [
     "WRITE_RESULT_V235",
     "BusType",
     "CanBaud",
+    "ChoiceLayout",
     "ControlParam",
+    "IntLayout",
     "ParamId",
     "ParamMessage",
     "ParamValue",
     "PidGains",
+    "PidLayout",
     "ResultField",
     "Rs485Baud",
     "SettingParam",
@@ -183,7 +186,7 @@ class ValueLayout:
 
 
 @dataclass(frozen=True, slots=True)
-class _Pid(ValueLayout):
+class PidLayout(ValueLayout):
     """3 x uint16 LE at DATA[2..7]: Kp, Ki, Kd (each at most ``hi``)."""
 
     hi: int
@@ -204,7 +207,7 @@ class _Pid(ValueLayout):
 
 
 @dataclass(frozen=True, slots=True)
-class _Int(ValueLayout):
+class IntLayout(ValueLayout):
     """A little-endian integer at DATA[offset..], optionally narrowed to [lo, hi]."""
 
     offset: int
@@ -227,7 +230,7 @@ class _Int(ValueLayout):
 
 
 @dataclass(frozen=True, slots=True)
-class _Choice(ValueLayout):
+class ChoiceLayout(ValueLayout):
     """A uint8 at DATA[offset] naming a member of ``enum_cls``."""
 
     offset: int
@@ -248,42 +251,42 @@ class _Choice(ValueLayout):
 _INT32_MAX = 2**31 - 1
 # Spec §6.1 (V2.36, 0xC0/0xC1): values after DATA[1] = id; single values from DATA[4] (DATA[2..3] = 0).
 CONTROL_LAYOUTS: Mapping[ControlParam, ValueLayout] = {
-    ControlParam.POSITION_PID: _Pid(2000),
-    ControlParam.SPEED_PID: _Pid(2000),
-    ControlParam.CURRENT_PID: _Pid(2000),
-    ControlParam.TORQUE_LIMIT: _Int(4, 2, lo=0, hi=2000),
-    ControlParam.SPEED_LIMIT: _Int(4, 4, lo=0, hi=600_000),
-    ControlParam.ANGLE_UPPER_LIMIT: _Int(4, 4),
-    ControlParam.ANGLE_LOWER_LIMIT: _Int(4, 4),
-    ControlParam.SPEED_RAMP: _Int(4, 4, lo=0, hi=600_000),
+    ControlParam.POSITION_PID: PidLayout(2000),
+    ControlParam.SPEED_PID: PidLayout(2000),
+    ControlParam.CURRENT_PID: PidLayout(2000),
+    ControlParam.TORQUE_LIMIT: IntLayout(4, 2, lo=0, hi=2000),
+    ControlParam.SPEED_LIMIT: IntLayout(4, 4, lo=0, hi=600_000),
+    ControlParam.ANGLE_UPPER_LIMIT: IntLayout(4, 4),
+    ControlParam.ANGLE_LOWER_LIMIT: IntLayout(4, 4),
+    ControlParam.SPEED_RAMP: IntLayout(4, 4, lo=0, hi=600_000),
 }
 # Spec §6.2 (V2.36, 0x40/0x42): single values from DATA[4] (DATA[3] = 0), PID groups from DATA[2].
 SETTING_LAYOUTS: Mapping[SettingParam, ValueLayout] = {
-    SettingParam.DRIVER_ID: _Int(4, 1, signed=False, lo=0, hi=32),
-    SettingParam.BUS_TYPE: _Choice(4, BusType),
-    SettingParam.RS485_BAUD: _Choice(4, Rs485Baud),
-    SettingParam.CAN_BAUD: _Choice(4, CanBaud),
-    SettingParam.MAX_POWER: _Int(4, 2, lo=0, hi=2000),
-    SettingParam.MAX_SPEED: _Int(4, 4, lo=0, hi=600_000),
-    SettingParam.MAX_ANGLE: _Int(4, 4, lo=0, hi=_INT32_MAX),
-    SettingParam.CURRENT_RAMP: _Int(4, 2, lo=0, hi=30_000),
-    SettingParam.SPEED_RAMP: _Int(4, 4, lo=0, hi=600_000),
-    SettingParam.POSITION_PID: _Pid(2000),
-    SettingParam.SPEED_PID: _Pid(2000),
-    SettingParam.CURRENT_PID: _Pid(2000),
+    SettingParam.DRIVER_ID: IntLayout(4, 1, signed=False, lo=0, hi=32),
+    SettingParam.BUS_TYPE: ChoiceLayout(4, BusType),
+    SettingParam.RS485_BAUD: ChoiceLayout(4, Rs485Baud),
+    SettingParam.CAN_BAUD: ChoiceLayout(4, CanBaud),
+    SettingParam.MAX_POWER: IntLayout(4, 2, lo=0, hi=2000),
+    SettingParam.MAX_SPEED: IntLayout(4, 4, lo=0, hi=600_000),
+    SettingParam.MAX_ANGLE: IntLayout(4, 4, lo=0, hi=_INT32_MAX),
+    SettingParam.CURRENT_RAMP: IntLayout(4, 2, lo=0, hi=30_000),
+    SettingParam.SPEED_RAMP: IntLayout(4, 4, lo=0, hi=600_000),
+    SettingParam.POSITION_PID: PidLayout(2000),
+    SettingParam.SPEED_PID: PidLayout(2000),
+    SettingParam.CURRENT_PID: PidLayout(2000),
 }
 # Spec §6.3 (V2.35): values from DATA[2]; no ranges stated, so the C types' ranges. maxAngle is an
 # 8-byte value split in two 4-byte halves: the low half unsigned, the high half signed (int64, inferred).
 PARAM_LAYOUTS: Mapping[ParamId, ValueLayout] = {
-    ParamId.ANGLE_PID: _Pid(_UINT16_MAX),
-    ParamId.SPEED_PID: _Pid(_UINT16_MAX),
-    ParamId.CURRENT_PID: _Pid(_UINT16_MAX),
-    ParamId.MAX_TORQUE_CURRENT: _Int(2, 2),
-    ParamId.MAX_SPEED: _Int(2, 4),
-    ParamId.MAX_ANGLE_LOW: _Int(2, 4, signed=False),
-    ParamId.MAX_ANGLE_HIGH: _Int(2, 4),
-    ParamId.CURRENT_RAMP: _Int(2, 2),
-    ParamId.SPEED_RAMP: _Int(2, 4),
+    ParamId.ANGLE_PID: PidLayout(_UINT16_MAX),
+    ParamId.SPEED_PID: PidLayout(_UINT16_MAX),
+    ParamId.CURRENT_PID: PidLayout(_UINT16_MAX),
+    ParamId.MAX_TORQUE_CURRENT: IntLayout(2, 2),
+    ParamId.MAX_SPEED: IntLayout(2, 4),
+    ParamId.MAX_ANGLE_LOW: IntLayout(2, 4, signed=False),
+    ParamId.MAX_ANGLE_HIGH: IntLayout(2, 4),
+    ParamId.CURRENT_RAMP: IntLayout(2, 2),
+    ParamId.SPEED_RAMP: IntLayout(2, 4),
 }
 _PID_GROUPS = {SettingParam.POSITION_PID, SettingParam.SPEED_PID, SettingParam.CURRENT_PID}
 

@@ -38,7 +38,6 @@ from servobus.protocols.myactuator.ids import IdKind
 from servobus.protocols.myactuator.motion import *  # noqa: F403
 from servobus.protocols.myactuator.replies import *  # noqa: F403
 from servobus.protocols.myactuator.revision import *  # noqa: F403
-from servobus.protocols.myactuator.revision import Revision
 from servobus.protocols.myactuator.rs485_motion import Crc32Rule, Rs485MotionCommand, Rs485MotionReply
 
 __all__ = [
@@ -66,7 +65,7 @@ if TYPE_CHECKING:  # the typed motor class; imported when a Bus asks (it imports
 FAMILY: Family[Motor] = Family(
     name="myactuator", package=__name__,  # the typed Motor (_motor.py) and the sim, cli, dbc parts are there
     description="MyActuator RMD-X and similar on V3 drivers, protocol V4.3/V4.4 (CAN, RS485, motion mode)",
-    revisions=(Revision.V4_4, Revision.V4_3), default_revision=Revision.V4_4,
+    revisions=_bound.REVISIONS, default_revision=_bound.REVISIONS[0],
     decode_request=decode_request, decode_reply=decode_reply,
     links=_bound.LINKS, bind=_bound.bind, broadcast=_bound.broadcast,
     commands=command_classes(globals().values()), motor_ids=_MOTOR_IDS,

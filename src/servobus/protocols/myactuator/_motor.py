@@ -7,15 +7,15 @@ from __future__ import annotations
 
 from typing import Any, Literal  # noqa: F401
 
-from servobus.bus import Motor as _Motor
-from servobus.protocols._calls import DEFAULT, given
+from servobus.protocols._calls import DEFAULT, TypedCalls, given
 from servobus.protocols.myactuator import commands, commands_control, enums, motion, replies, rs485_motion
 
 __all__ = ["Motor"]
 
 
-class Motor(_Motor):
-    """A myactuator motor on a Bus (``bus.motor(FAMILY, id)``): a typed method per command."""
+class Motor(TypedCalls):
+    """A myactuator motor on a Bus (``bus.motor(FAMILY, id)``): a typed method per command
+    (the Bus's Motor, which the Bus composes after this class, sends them)."""
 
     # 0xB6 active reply (CAN only): stream ``command``'s reply every ``interval_ms`` (10 ms/LSB).
     async def active_reply(self, command: enums.StreamableCommand, enabled: bool, interval_ms: int | None = None, *, timeout_s: float | None = None, retries: int = 0) -> None: return await self.request(commands.ActiveReply(command=command, enabled=enabled, interval_ms=interval_ms), timeout_s=timeout_s, retries=retries)

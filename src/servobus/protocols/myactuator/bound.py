@@ -40,6 +40,7 @@ from servobus.protocols._bound import (
     frame_key,
     motor_ids_of,
 )
+from servobus.protocols._family import find_revision
 from servobus.protocols._fast import Slow, maker
 from servobus.protocols._message import Command, Reply
 from servobus.protocols.myactuator import commands as cmd
@@ -86,6 +87,8 @@ from servobus.protocols.myactuator.rs485_motion import Rs485MotionCommand
 __all__ = ["LINKS", "MyActuatorCodec", "Rs485Framing", "bind", "broadcast"]
 
 LINKS = ("can", "rs485")
+#: the revisions, the default first (the Family\'s)
+REVISIONS = (Revision.V4_4, Revision.V4_3)
 
 #: Reply timeouts. A motor answers within a millisecond on CAN; the default leaves room for a loaded
 #: bus. Writes to ROM/flash and the brake take longer (tens of ms on the bench, not stated in the manual).
@@ -500,9 +503,9 @@ def bind(
     Raises:
         ValueError: an id outside 1..32, an unknown revision or link.
     """
-    from servobus.protocols.myactuator import FAMILY
-
-    rev: Revision = FAMILY.revision(revision) if revision is not None else Revision.V4_4
+    rev: Revision = (
+        find_revision("myactuator", REVISIONS, revision) if revision is not None else Revision.V4_4
+    )
     if link not in LINKS:
         raise ValueError(f"myactuator has no link {link!r} (links: {', '.join(LINKS)})")
     scales = MOTION_SCALES[rev] if model is None else model

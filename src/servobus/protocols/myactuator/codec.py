@@ -31,7 +31,7 @@ from servobus.protocols.myactuator import commands_control as ctl
 from servobus.protocols.myactuator import motion, rs485_motion
 from servobus.protocols.myactuator import replies as rep
 from servobus.protocols.myactuator._layout import LayoutMismatch, MyActuatorCommand, MyActuatorMessage
-from servobus.protocols.myactuator.enums import StatusCommand, StreamableCommand
+from servobus.protocols.myactuator.enums import STATUS_COMMAND_REVISIONS, StatusCommand, StreamableCommand
 from servobus.protocols.myactuator.ids import (
     BROADCAST_ID,
     ID_SETTING_CODE,
@@ -166,10 +166,8 @@ _STATUS_CODES = {
 _check_enum(StatusCommand, set(_STATUS_CODES), "MyActuatorCommand[StatusReply]")
 _check_enum(StreamableCommand, {c.CODE for c in _REQUEST_CLASSES if c.STREAMABLE and c.CODE}, "STREAMABLE")
 
-#: The revisions of each command answered with the shared R2 layout (its reply's availability).
-STATUS_COMMAND_REVISIONS: Mapping[StatusCommand, frozenset[Revision]] = {
-    StatusCommand(code): revisions for code, revisions in _STATUS_CODES.items()
-}
+if {StatusCommand(code): revisions for code, revisions in _STATUS_CODES.items()} != STATUS_COMMAND_REVISIONS:
+    raise TypeError("enums.STATUS_COMMAND_REVISIONS must be the status commands' declared REVISIONS")
 
 
 def expects_reply(command: MyActuatorMessage) -> bool:

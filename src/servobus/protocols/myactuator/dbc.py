@@ -1,13 +1,13 @@
 """The MyActuator DBC part (``FAMILY.part("dbc")``): what its classes' declarations do not say.
 
 * **Standard frames** (0x140 + ID requests, 0x240 + ID replies, the 0x280 broadcast): multiplexed on
-  DATA[0]; each layout is its class's ``FIELDS`` (:func:`servobus.dbc.keyed_layouts`): the family's
+  DATA[0]; each layout is its class's ``FIELDS`` (:func:`servobus.protocols.dbc.keyed_layouts`): the family's
   commands of the revision by ``CODE``, their declared replies (``reply_types()``) by theirs, the R2
   status layout under each command's byte, and the frames the motor sends of itself (``EVENTS``:
   0xF1). A command answered by ``Echo`` (its request's bytes) is its own fields, named ``command.<field>``.
 * **Motion mode** (0x400/0x500 + ID): the C core's ``MIT_COMMAND``/``MIT_REPLY`` packers with the
   revision's :class:`~servobus.protocols.myactuator.MotionScales` (option ``max_torque_nm`` for V4.4's
-  model-specific torque range), bit positions from :func:`servobus.dbc.packed_signals`.
+  model-specific torque range), bit positions from :func:`servobus.protocols.dbc.packed_signals`.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from __future__ import annotations
 import dataclasses
 from typing import cast
 
-from servobus.dbc import (
+from servobus.protocols.dbc import (
     DbcFamily,
     DbcOption,
     DbcQuery,

@@ -17,6 +17,7 @@ __all__ = [
     "ERROR_FLAG_INFO",
     "FAULTS",
     "FUNCTION_VALUES",
+    "STATUS_COMMAND_REVISIONS",
     "AccelIndex",
     "BaudRateSetting",
     "ErrorFlagInfo",
@@ -143,6 +144,21 @@ class StatusCommand(enum.IntEnum):
     FORCE_POSITION = 0xA9
     POSITION_SPEED_FEEDFORWARD = 0x72  # V4.4 only
     POSITION_TORQUE_FEEDFORWARD = 0x73  # V4.4 only
+
+
+#: The revisions of each command answered with the shared R2 layout (its reply's availability): the
+#: command classes' ``REVISIONS``, said here, below the replies, for ``StatusReply`` to read;
+#: ``codec.py`` checks at import that the two agree.
+STATUS_COMMAND_REVISIONS: dict[StatusCommand, frozenset[Revision]] = {
+    StatusCommand.READ_STATUS_2: ALL_REVISIONS,
+    StatusCommand.TORQUE_CONTROL: ALL_REVISIONS,
+    StatusCommand.SPEED_CONTROL: ALL_REVISIONS,
+    StatusCommand.ABSOLUTE_POSITION: ALL_REVISIONS,
+    StatusCommand.INCREMENTAL_POSITION: ALL_REVISIONS,
+    StatusCommand.FORCE_POSITION: ALL_REVISIONS,
+    StatusCommand.POSITION_SPEED_FEEDFORWARD: ONLY_V4_4,
+    StatusCommand.POSITION_TORQUE_FEEDFORWARD: ONLY_V4_4,
+}
 
 
 class StreamableCommand(enum.IntEnum):

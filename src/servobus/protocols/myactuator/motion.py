@@ -87,24 +87,6 @@ class MotionScales:
         """FieldScales of MIT_REPLY (motor id, p, v, t), in layout order."""
         return _reply_scales(self)
 
-    def _command_scales(self) -> tuple[FieldScale, ...]:
-        return (
-            FieldScale.linear("position_rad", -self.p_max_rad, self.p_max_rad, 16),
-            FieldScale.linear("velocity_rad_s", -self.v_max_rad_s, self.v_max_rad_s, 12),
-            FieldScale.linear("kp", 0.0, self.kp_max, 12),
-            FieldScale.linear("kd", 0.0, self.kd_max, 12),
-            FieldScale.linear("torque_ff_nm", -self.t_max_nm, self.t_max_nm, 12),
-        )
-
-    def _reply_scales(self) -> tuple[FieldScale, ...]:
-        p, v, _, _, t = self.command_scales()
-        return (
-            FieldScale.integer("motor_id", MOTOR_IDS.start, MOTOR_IDS.stop - 1),
-            FieldScale.linear("position_rad", p.lo, p.hi, 16),
-            FieldScale.linear("velocity_rad_s", v.lo, v.hi, 12),
-            FieldScale.linear("torque_nm", t.lo, t.hi, 12),
-        )
-
     def resolution(self, name: str) -> float:
         """One code of field ``name`` (``position_rad``, ``kd``, ``torque_nm``…) in its unit.
 
@@ -117,9 +99,27 @@ class MotionScales:
         raise KeyError(name)
 
 
-# Every command and reply checks its values against these: build them once per scales value.
-_command_scales = functools.cache(MotionScales._command_scales)
-_reply_scales = functools.cache(MotionScales._reply_scales)
+# Every command and reply checks its values against these: built once per scales value.
+@functools.cache
+def _command_scales(scales: MotionScales) -> tuple[FieldScale, ...]:
+    return (
+        FieldScale.linear("position_rad", -scales.p_max_rad, scales.p_max_rad, 16),
+        FieldScale.linear("velocity_rad_s", -scales.v_max_rad_s, scales.v_max_rad_s, 12),
+        FieldScale.linear("kp", 0.0, scales.kp_max, 12),
+        FieldScale.linear("kd", 0.0, scales.kd_max, 12),
+        FieldScale.linear("torque_ff_nm", -scales.t_max_nm, scales.t_max_nm, 12),
+    )
+
+
+@functools.cache
+def _reply_scales(scales: MotionScales) -> tuple[FieldScale, ...]:
+    p, v, _, _, t = _command_scales(scales)
+    return (
+        FieldScale.integer("motor_id", MOTOR_IDS.start, MOTOR_IDS.stop - 1),
+        FieldScale.linear("position_rad", p.lo, p.hi, 16),
+        FieldScale.linear("velocity_rad_s", v.lo, v.hi, 12),
+        FieldScale.linear("torque_nm", t.lo, t.hi, 12),
+    )
 
 
 MOTION_SCALES: dict[Revision, MotionScales] = {

@@ -47,6 +47,7 @@ from servobus.protocols.myactuator._layout import (
 )
 from servobus.protocols.myactuator.enums import (
     ACCELERATION_MIN_DPS_S,
+    STATUS_COMMAND_REVISIONS,
     AccelIndex,
     ErrorFlags,
     PidIndex,
@@ -441,9 +442,7 @@ class StatusReply(MyActuatorReply):
         return int(self.command)
 
     def unavailable_reason(self, revision: Revision) -> str | None:
-        # The revisions of the command it answers (its declaration): known once every command exists.
-        from servobus.protocols.myactuator.codec import STATUS_COMMAND_REVISIONS
-
+        # The revisions of the command it answers (its declaration, which codec.py checks this against).
         revisions = STATUS_COMMAND_REVISIONS[self.command]
         if revision in revisions:
             return None
