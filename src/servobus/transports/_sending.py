@@ -4,20 +4,19 @@ from __future__ import annotations
 
 import logging
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
 import anyio
 
 from servobus.errors import TransportError
+from servobus.frame import Frame
+from servobus.runtime import Runtime
 from servobus.transports._owned import LinkTasks
 from servobus.transports._waiters import Alarm, WaiterList
 from servobus.transports.events import FramesDropped, TransportEvent
 from servobus.transports.stats import TransportStats
-
-if TYPE_CHECKING:
-    from servobus.transports.base import Transport
 
 __all__ = [
     "BusOffError",
@@ -80,53 +79,76 @@ class Outgoing(Generic[TxT]):
 class SendQueue(Generic[TxT]):
     """Frames waiting for the wire, and the writer task (one per connection) that hands them over.
 
-    The writer takes up to ``transport.batch_size`` frames at a time, drops those older than
-    ``stale_after_s``, and awaits ``transport._transmit(batch)``. It runs in the transport's task
-    group, inside a cancel scope of its own that a loss or a close cancels.
+    The queue owns its items and its writer; the transport owns everything else and hands the
+    queue what it needs: ``transmit(batch)`` (its device), ``dropped(reason, handles)`` (its
+    reports and counters), ``lose(cause, generation)`` (its recovery) and its counters (a full
+    queue is counted in ``queue_full``). The writer takes up to ``batch_size`` frames at a time,
+    drops those older than ``stale_after_s``, and awaits ``transmit(batch)``. It runs in the
+    transport's task group, inside a cancel scope of its own that a loss or a close cancels
+    (:meth:`stop`).
     """
 
-    __slots__ = ("_alarm", "_scope", "_transport", "idle", "items", "size", "stale_after_s", "transmitting")
+    __slots__ = (
+        "_alarm",
+        "_dropped",
+        "_lose",
+        "_name",
+        "_scope",
+        "_stats",
+        "_transmit",
+        "batch_size",
+        "idle",
+        "items",
+        "size",
+        "stale_after_s",
+        "transmitting",
+    )
 
-    def __init__(self, transport: Transport[Any, TxT], size: int, stale_after_s: float | None) -> None:
-        self._transport = transport
+    def __init__(
+        self,
+        name: str,
+        size: int,
+        stale_after_s: float | None,
+        batch_size: int,
+        stats: TransportStats,
+        transmit: Callable[[list[Outgoing[TxT]]], Awaitable[None]],
+        dropped: Callable[[str, list[Any]], None],
+        lose: Callable[[BaseException, int], None],
+    ) -> None:
+        self._name = name
         self.size = size
         self.stale_after_s = stale_after_s
+        self.batch_size = batch_size
+        self._stats = stats
+        self._transmit = transmit
+        self._dropped = dropped
+        self._lose = lose
         self.items: deque[Outgoing[TxT]] = deque()
         self.transmitting = False
-        #: tasks in drain(), woken when the queue is empty and nothing is being written
+        #: tasks in the transport's drain(), woken when the queue is empty and nothing is being written
         self.idle = WaiterList()
         self._alarm = Alarm()  # the writer's, while the queue is empty
         self._scope: anyio.CancelScope | None = None
 
+    @property
+    def busy(self) -> bool:
+        """Frames are queued or being written."""
+        return bool(self.items) or self.transmitting
+
     def put(self, outgoing: Outgoing[TxT]) -> None:
         if len(self.items) >= self.size:
-            transport = self._transport
-            transport._stats.queue_full += 1
+            self._stats.queue_full += 1
             raise SendQueueFull(
-                f"{transport.name}: send queue full ({self.size} frames); await drain() before sending more"
+                f"{self._name}: send queue full ({self.size} frames); await drain() before sending more"
             )
         self.items.append(outgoing)
         self._alarm.ring()
 
-    async def drain(self) -> None:
-        """Until every queued frame has been written or dropped.
-
-        Raises:
-            TransportError: the transport is not open, or stops being open meanwhile.
-        """
-        transport = self._transport
-        while self.items or self.transmitting:
-            if not transport.is_open or transport._runtime is None:
-                raise transport._error()
-            await self.idle.park(transport._runtime)
-        if not transport.is_open:
-            raise transport._error()
-
-    def start(self, tasks: LinkTasks, generation: int) -> None:
+    def start(self, tasks: LinkTasks, runtime: Runtime, generation: int) -> None:
         """Start this connection's writer (a loss or a close stops it: :meth:`stop`)."""
         self.stop()
         self._scope = scope = anyio.CancelScope()
-        tasks.start_soon(self._run, scope, generation, name=f"{self._transport.name} writer")
+        tasks.start_soon(self._run, scope, runtime, generation, name=f"{self._name} writer")
 
     def stop(self) -> None:
         if self._scope is not None:
@@ -134,48 +156,52 @@ class SendQueue(Generic[TxT]):
             self._scope = None
         self.transmitting = False
 
+    def fail(self, error: Callable[[], BaseException]) -> None:
+        """The device is gone or the transport closed: stop the writer, purge what is queued (reported
+        ``"purged"``), and every task in drain() raises ``error()``."""
+        self.stop()
+        self.purge("purged")
+        self.idle.fail_all(error)
+
     def purge(self, reason: str) -> None:
         """Drop every queued frame (counted and reported with ``reason``)."""
         if self.items:
             dropped = list(self.items)
             self.items.clear()
-            self._transport._dropped(reason, [o.handle for o in dropped])
+            self._dropped(reason, [o.handle for o in dropped])
 
-    async def _run(self, scope: anyio.CancelScope, generation: int) -> None:
-        transport = self._transport
-        lane = transport._runtime
-        assert lane is not None  # started by an open transport
+    async def _run(self, scope: anyio.CancelScope, runtime: Runtime, generation: int) -> None:
         items = self.items
         with scope:
             while True:
                 if not items:
                     self.idle.wake_all()
-                    await self._alarm.wait(lane)
+                    await self._alarm.wait(runtime)
                     continue
-                batch = [items.popleft() for _ in range(min(transport.batch_size, len(items)))]
-                batch = self._drop_stale(batch, transport._now())
+                batch = [items.popleft() for _ in range(min(self.batch_size, len(items)))]
+                batch = self._drop_stale(batch, runtime.time())
                 if not batch:
                     continue
                 self.transmitting = True
                 try:
-                    await transport._transmit(batch)
+                    await self._transmit(batch)
                 except anyio.get_cancelled_exc_class():
                     raise
                 except Exception as exc:  # a transmit bug must not leave the queue stuck forever
-                    transport._lose(exc, generation)
+                    self._lose(exc, generation)
                     return
                 finally:
                     self.transmitting = False
                     # not written: lost, closed or failed
-                    transport._dropped("purged", [o.handle for o in batch])
-                if generation != transport._generation:  # _transmit lost the device
+                    self._dropped("purged", [o.handle for o in batch])
+                if scope.cancel_called:  # the transmit lost the device (stop() cancelled this writer)
                     return
 
     def _drop_stale(self, batch: list[Outgoing[TxT]], now: float) -> list[Outgoing[TxT]]:
         limit = self.stale_after_s
         if limit is None or now - batch[0].queued_at <= limit:  # the oldest is first
             return batch
-        self._transport._dropped("stale", [o.handle for o in batch if now - o.queued_at > limit])
+        self._dropped("stale", [o.handle for o in batch if now - o.queued_at > limit])
         return [o for o in batch if now - o.queued_at <= limit]
 
 
@@ -206,8 +232,13 @@ class SendReports:
                 for handle in handles:
                     self._call(reporter, handle, None, reason)
 
-    def _sent(self, handle: Any, sent_at: float) -> None:
-        """Report that the frame sent with ``handle`` left at ``sent_at`` (counting is the subclass's)."""
+    def _sent(self, handle: Any, sent_at: float, frame: Frame | None = None) -> None:
+        """Report that the frame sent with ``handle`` left at ``sent_at``; counting is the subclass's,
+        or give the ``frame`` to count it (``frames_out``, ``bytes_out``) here."""
+        if frame is not None:
+            stats = self._stats
+            stats.frames_out += 1
+            stats.bytes_out += len(frame.data)
         if self._reporter is not None:
             self._call(self._reporter, handle, sent_at, None)
 

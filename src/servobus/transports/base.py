@@ -57,7 +57,6 @@ outlives ``close()``, and an unexpected error of those tasks is raised by it, no
 
 from __future__ import annotations
 
-import abc
 import copy
 import logging
 import time
@@ -99,14 +98,36 @@ TxT = TypeVar("TxT")
 Consumer = Callable[[list[RxT]], object]
 
 
-class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, abc.ABC, Generic[RxT, TxT]):
+def report_handle(frame: object, handle: object) -> object:
+    """The handle a report of ``frame`` carries: the one given, else the frame."""
+    return frame if handle is None else handle
+
+
+def declared_rules(link: object, stale_after_s: float | None) -> LineRules:
+    """The rules a link declares with attributes or properties ``half_duplex``, ``bitrate``,
+    ``gap_s``, ``turnaround_s`` and ``exact_times`` (those it lacks take LineRules' defaults)."""
+    return LineRules(
+        half_duplex=bool(getattr(link, "half_duplex", False)),
+        bitrate=getattr(link, "bitrate", None),
+        gap_s=float(getattr(link, "gap_s", 0.0) or 0.0),
+        turnaround_s=float(getattr(link, "turnaround_s", 0.0) or 0.0),
+        stale_after_s=stale_after_s,
+        exact_times=bool(getattr(link, "exact_times", False)),
+    )
+
+
+class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, Generic[RxT, TxT]):
     """Frames out through a bounded queue, frames in through a consumer or a buffer, one device.
+
+    The one base of every link: the device transports, the in-process simulator, and the test and
+    bench links that override :meth:`send` and report by themselves (``_sent``, ``_dropped``,
+    ``_deliver``); a link with no device to open keeps the no-op ``_connect``/``_disconnect``.
 
     Use it as an async context manager (``async with CanTransport(...) as bus:``), or call
     :meth:`open` and :meth:`close` from the same task.
 
     Args:
-        name: a label for errors and logs.
+        name: a label for errors and logs (default: the class's ``name``).
         queue_size: frames the send queue holds before :meth:`send` raises :class:`SendQueueFull`.
         rx_buffer: received frames held for the reader before the oldest are dropped.
         stale_after_s: a queued frame older than this when its turn comes is dropped, not sent
@@ -118,11 +139,12 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, abc.ABC
     #: frames the writer hands to :meth:`_transmit` at once (a half-duplex line takes one at a time,
     #: so each frame's age is checked when its own transaction starts)
     batch_size: ClassVar[int] = 64
+    name: str = "link"
 
     def __init__(
         self,
         *,
-        name: str,
+        name: str | None = None,
         queue_size: int = 256,
         rx_buffer: int = 65536,
         stale_after_s: float | None = 0.5,
@@ -133,14 +155,29 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, abc.ABC
             raise ValueError(f"queue_size={queue_size} and rx_buffer={rx_buffer} must be at least 1")
         if stale_after_s is not None and stale_after_s <= 0:
             raise ValueError(f"stale_after_s={stale_after_s} must be positive (or None)")
-        self.name = name
+        if name is not None:
+            self.name = name
+        name = self.name
         self._stale_after_s = stale_after_s
-        self._recovery = Recovery(self, reopen, reopen_backoff_s)
+        self._rules: LineRules | None = None  # declared whole (``self.rules = ...``), else from attributes
+        lost = lambda: self._state is TransportState.LOST  # noqa: E731 (the recovery's "still lost?")
         self._state = TransportState.CLOSED
         self._stats = TransportStats()
+        self._recovery = Recovery(
+            name, reopen, reopen_backoff_s, self._stats, self._disconnect, lost, self._reopen_once
+        )
         self._load = LoadMeter()
         self._load_known = False  # subclasses set it when they know the line's bit rate
-        self._sending: SendQueue[TxT] = SendQueue(self, queue_size, stale_after_s)
+        self._sending: SendQueue[TxT] = SendQueue(
+            name,
+            queue_size,
+            stale_after_s,
+            self.batch_size,
+            self._stats,
+            self._transmit,
+            self._dropped,
+            self._lose,
+        )
         self._queue = self._sending.items  # the send queue itself (read on every send)
         self._inbox: Inbox[RxT] = Inbox(name, rx_buffer, lambda count: self._dropped("rx_overflow", count))
         self._open_waiters = WaiterList()
@@ -156,34 +193,20 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, abc.ABC
         #: nothing is queued ahead (see :meth:`_write_now`)
         self._direct = False
 
-    # ----------------------------------------------------------------- subclass interface
+    # ------------------------------------- subclass interface (each hook: see the module docstring)
 
-    @abc.abstractmethod
     async def _connect(self) -> None:
-        """Open the device and start reading (tasks in ``self._tasks``); tag callbacks with
-        ``self._generation``.
+        """Open the device and start reading; raise TransportError when it cannot."""
 
-        Raises:
-            TransportError: the device cannot be opened (chained to the cause).
-        """
-
-    @abc.abstractmethod
     async def _disconnect(self) -> None:
-        """Stop reading and release the device; must not raise for a device already gone."""
+        """Release the device; never raises for a device already gone."""
 
-    @abc.abstractmethod
     async def _transmit(self, batch: list[Outgoing[TxT]]) -> None:
-        """Write ``batch`` in order, count and report (``_sent(o.handle, at)``) each, and call
-        :meth:`_lose` if the device fails. Take each frame off the front of ``batch`` as it goes
-        out; whatever is left when this returns or is cancelled is reported purged by the base."""
+        """Write ``batch`` (only a link that queues, through :meth:`_enqueue`, writes one)."""
+        raise NotImplementedError
 
     def _write_now(self, item: TxT, handle: Any) -> bool:
-        """Write ``item`` from the caller's stack (only called while ``self._direct`` is True).
-
-        Returns:
-            True when written (counted, and reported with ``_sent(handle, now)``, by the subclass);
-            False to queue it instead (the device cannot take it now).
-        """
+        """Write ``item`` now (only while ``self._direct``): True when written, False to queue it."""
         raise NotImplementedError
 
     def _now(self) -> float:
@@ -200,10 +223,7 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, abc.ABC
     @property
     def _tasks(self) -> LinkTasks:
         """The transport's task group (from :meth:`_connect` on, until :meth:`close`)."""
-        tasks = self._owned.tasks
-        if tasks is None:
-            raise RuntimeError(f"{self.name}: no task group: the transport is not open")
-        return tasks
+        return self._owned.open_tasks()
 
     # ----------------------------------------------------------------- life cycle
 
@@ -222,17 +242,13 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, abc.ABC
 
         A subclass declares ``half_duplex``, ``bitrate``, ``gap_s`` and ``turnaround_s`` as
         attributes or properties (those it lacks take LineRules' defaults); ``stale_after_s`` is the
-        constructor's.
+        constructor's. Or it sets the rules whole (``self.rules = LineRules(...)``).
         """
-        half_duplex = bool(getattr(self, "half_duplex", False))
-        return LineRules(
-            half_duplex=half_duplex,
-            bitrate=getattr(self, "bitrate", None),
-            gap_s=float(getattr(self, "gap_s", 0.0) or 0.0),
-            turnaround_s=float(getattr(self, "turnaround_s", 0.0) or 0.0),
-            stale_after_s=self._stale_after_s,
-            exact_times=bool(getattr(self, "exact_times", False)),
-        )
+        return self._rules or declared_rules(self, self._stale_after_s)
+
+    @rules.setter
+    def rules(self, rules: LineRules) -> None:
+        self._rules = rules
 
     @property
     def is_open(self) -> bool:
@@ -291,10 +307,9 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, abc.ABC
             return await self._owned.leave(exc_type, exc, tb)
         finally:
             with anyio.CancelScope(shield=True):
-                self._sending.purge("purged")
+                self._sending.fail(self._error)
                 self._open_waiters.fail_all(self._error)
                 self._inbox.readers.fail_all(self._error)
-                self._sending.idle.fail_all(self._error)
                 await self._disconnect()  # also when LOST: the recovery task may not have got to it
                 self._set_state(TransportState.CLOSED)
 
@@ -329,8 +344,18 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, abc.ABC
         self._failure = None
         self._forget_bus_off()
         self._set_state(TransportState.OPEN)
-        self._sending.start(self._tasks, self._generation)
+        assert self._runtime is not None  # (set by open())
+        self._sending.start(self._tasks, self._runtime, self._generation)
         self._open_waiters.wake_all()
+
+    async def _reopen_once(self) -> bool:
+        """The recovery task's attempt to reopen: True when reopened (raises while the device is away)."""
+        self._generation += 1
+        await self._connect()
+        if self._state is not TransportState.LOST:  # closed meanwhile: close() releases it
+            return False
+        self._connected()
+        return True
 
     def _lose(self, cause: BaseException, generation: int | None = None) -> None:
         """The device failed: fail every waiter at once, purge the queue, start reopening.
@@ -339,7 +364,12 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, abc.ABC
         connection): only the first call for the current connection acts. Call it on the loop.
         """
         if self._state is TransportState.OPEN and generation in (None, self._generation):
-            self._recovery.lose(cause)
+            self._generation += 1
+            self._failure = ("device lost", cause)
+            self._set_state(TransportState.LOST, cause)
+            self._sending.fail(self._error)
+            self._inbox.readers.fail_all(self._error)
+            self._recovery.lost(cause)
 
     def _set_state(self, state: TransportState, cause: BaseException | None = None) -> None:
         self._state = state
@@ -384,7 +414,13 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, abc.ABC
         Raises:
             TransportError: the device was lost or the transport closed meanwhile.
         """
-        await self._sending.drain()
+        sending = self._sending
+        while sending.busy:
+            if self._state is not TransportState.OPEN or self._runtime is None:
+                raise self._error()
+            await sending.idle.park(self._runtime)
+        if self._state is not TransportState.OPEN:
+            raise self._error()
 
     # ----------------------------------------------------------------- counters
 
@@ -395,6 +431,8 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, abc.ABC
         snapshot.queue_depth = len(self._queue)
         snapshot.bus_load_pct = self._load.percent(self._now()) if self._load_known else None
         return snapshot
+
+    _handle = staticmethod(report_handle)
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name} {self._state.value}>"

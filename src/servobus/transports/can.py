@@ -57,7 +57,6 @@ from servobus.transports._can_readers import Batch, Reader, start_reader
 from servobus.transports._can_sender import BlockingSender, SendReport, buffer_full, controller_off
 from servobus.transports._watch import loop_context
 from servobus.transports.base import BusOffError, Outgoing, Transport, logger
-from servobus.transports.contract import LineRules
 from servobus.transports.events import CanErrorClass
 
 __all__ = ["CanTransport", "frame_from_message", "message_from_frame"]
@@ -195,11 +194,6 @@ class CanTransport(Transport[Frame, Frame]):
         self._reader: Reader | None = None
 
     # ----------------------------------------------------------------- public API
-
-    @property
-    def rules(self) -> LineRules:
-        """A full-duplex CAN bus at its nominal bit rate (None when not configured)."""
-        return LineRules(bitrate=self.bitrate, stale_after_s=self._stale_after_s)
 
     def send(self, frame: Frame, handle: object = None) -> None:
         """Queue ``frame``; it is written in order by the writer thread. The send report names

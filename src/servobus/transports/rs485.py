@@ -70,7 +70,6 @@ from servobus.timing import uart_time_s
 from servobus.transports._fresh_writer import FreshWriter
 from servobus.transports._serialport import SerialPort
 from servobus.transports.base import Outgoing, Transport
-from servobus.transports.contract import LineRules
 from servobus.transports.stats import TransportStats
 
 __all__ = ["SerialTransport", "find_serial_line", "serial_line_names"]
@@ -307,23 +306,6 @@ class SerialTransport(Transport[Frame, Frame]):
     def high_water_bytes(self) -> int:
         """Bytes the OS output buffer may hold when the next frame is written."""
         return self._writer_line.high_water_bytes
-
-    @property
-    def output_flushes(self) -> int:
-        """Times the OS output buffer was flushed: bytes it reported outlasted ``stale_after_s``,
-        or a frame could not be written whole before it went stale."""
-        return self._writer_line.flushes
-
-    @property
-    def rules(self) -> LineRules:
-        """Half duplex, with the gap, the turnaround and the staleness set here (no CAN bit rate: the
-        Bus's shortest round trip is a CAN frame's)."""
-        return LineRules(
-            half_duplex=True,
-            gap_s=self._gap_s,
-            turnaround_s=self._turnaround_s,
-            stale_after_s=self._stale_after_s,
-        )
 
     def wire_time_s(self, n_bytes: int) -> float:
         """Seconds ``n_bytes`` occupy this line."""

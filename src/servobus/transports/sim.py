@@ -162,10 +162,6 @@ class SimTransport(Transport[Frame, Frame]):
         rate = self.network.bus.bitrate
         return int(rate) if math.isfinite(rate) and rate > 0 else None
 
-    @property
-    def plugged(self) -> bool:
-        return self._plugged
-
     def unplug(self) -> None:
         """Pull the simulated adapter out: the transport is lost at once and cannot reopen until
         :meth:`replug`."""

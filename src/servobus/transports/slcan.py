@@ -46,7 +46,6 @@ from servobus.frame import Frame
 from servobus.timing import nominal_frame_time_s
 from servobus.transports._serialport import SerialPort
 from servobus.transports.base import Outgoing, Transport
-from servobus.transports.contract import LineRules
 from servobus.transports.stats import TransportStats
 
 __all__ = ["DATA_BITRATES", "NOMINAL_BITRATES", "SlcanTransport", "encode_line"]
@@ -170,11 +169,6 @@ class SlcanTransport(Transport[Frame, Frame]):
         self._answer: anyio.Event | None = None  # an open command waiting for OK or BEL
 
     # ----------------------------------------------------------------- public API
-
-    @property
-    def rules(self) -> LineRules:
-        """A full-duplex CAN bus at the adapter's bit rate (unknown when the adapter's own is kept)."""
-        return LineRules(bitrate=self.bitrate, stale_after_s=self._stale_after_s)
 
     def send(self, frame: Frame, handle: object = None) -> None:
         """Queue ``frame``; the writer puts it on the port in order. The send report names ``handle``
