@@ -217,9 +217,11 @@ class SlcanTransport(Transport[Frame, Frame]):
 
     async def _connect(self) -> None:
         assert self._runtime is not None  # set by open()
+        generation = self._generation  # (the lambdas look the methods up per call: tests wrap them)
         self._port = SerialPort.open(
-            self,
-            self._generation,
+            self.name,
+            lambda data: self._on_bytes(data, generation),
+            lambda cause: self._lose(cause, generation),
             self.port,
             self._runtime,
             self._tasks,
