@@ -2,20 +2,17 @@
 
 from __future__ import annotations
 
-import logging
 from collections import deque
-from collections.abc import Awaitable, Callable, Sequence
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Generic, TypeVar
+from typing import Any, Generic, TypeVar
 
 import anyio
 
 from servobus.errors import TransportError
-from servobus.frame import Frame
 from servobus.runtime import Runtime
 from servobus.transports._owned import LinkTasks
 from servobus.transports._waiters import Alarm, WaiterList
-from servobus.transports.events import FramesDropped, TransportEvent
 from servobus.transports.stats import TransportStats
 
 __all__ = [
@@ -24,11 +21,8 @@ __all__ = [
     "SendQueue",
     "SendQueueFull",
     "SendReporter",
-    "SendReports",
     "not_sent_error",
 ]
-
-logger = logging.getLogger("servobus.transports")
 
 #: ``reporter(handle, sent_at, reason)`` (contract.SendReporter; the handle typed Any, so that a
 #: sender whose reporter takes its own handle type, a Bus's Request, type-checks against it)
@@ -203,55 +197,3 @@ class SendQueue(Generic[TxT]):
             return batch
         self._dropped("stale", [o.handle for o in batch if now - o.queued_at > limit])
         return [o for o in batch if now - o.queued_at <= limit]
-
-
-class SendReports:
-    """A transport's send reports and drop counts (a base class of Transport): every frame
-    :meth:`send` accepted is reported once, by the handle it was sent with."""
-
-    name: str
-    _stats: TransportStats
-    _reporter: SendReporter | None
-
-    if TYPE_CHECKING:  # (the transport's; declared here for the type checker only)
-
-        def _now(self) -> float: ...
-
-        def _emit(self, event: TransportEvent) -> None: ...
-
-    def _dropped(self, reason: str, handles: Sequence[Any] | int, counter: str | None = None) -> None:
-        """Count frames that will never be sent (in the counter named ``counter``, or ``reason``),
-        and report each one whose handle is known with ``reason``."""
-        count = handles if isinstance(handles, int) else len(handles)
-        if count:
-            counter = counter or reason
-            setattr(self._stats, counter, getattr(self._stats, counter) + count)
-            self._emit(FramesDropped(counter, count, self._now()))
-            reporter = self._reporter
-            if reporter is not None and not isinstance(handles, int):
-                for handle in handles:
-                    self._call(reporter, handle, None, reason)
-
-    def _sent(self, handle: Any, sent_at: float, frame: Frame | None = None) -> None:
-        """Report that the frame sent with ``handle`` left at ``sent_at``; counting is the subclass's,
-        or give the ``frame`` to count it (``frames_out``, ``bytes_out``) here."""
-        if frame is not None:
-            stats = self._stats
-            stats.frames_out += 1
-            stats.bytes_out += len(frame.data)
-        if self._reporter is not None:
-            self._call(self._reporter, handle, sent_at, None)
-
-    def set_send_reporter(self, reporter: SendReporter | None) -> None:
-        """Call ``reporter(handle, sent_at, None)`` for every frame that left, and
-        ``reporter(handle, None, reason)`` for every one dropped after :meth:`send` accepted it.
-
-        Called on the loop; its exceptions are logged, never raised into the transport.
-        """
-        self._reporter = reporter
-
-    def _call(self, callback: Callable[..., object], *args: object) -> None:
-        try:
-            callback(*args)
-        except Exception:
-            logger.exception("%s: callback %r failed", self.name, callback)

@@ -1,4 +1,16 @@
-"""The transport base: one device, a bounded send queue and its writer, a receive side, loss and reopen.
+"""The one link base: one device, a bounded send queue and its writer, a receive side, loss and reopen.
+
+Every link is a :class:`Transport`: the device transports (CAN, SLCAN, RS485), the in-process
+simulator, and the test and bench links with no device (they override ``send`` and report by
+themselves). Who owns what: the transport owns its life (state, connection generation, open and
+close, loss and reopen) and the hot path of a send (``_enqueue``); its base
+:class:`~servobus.transports._send_side.SendSide` owns the counters, the send queue
+(:mod:`~servobus.transports._sending`), the send reports and the bus-off gate
+(:mod:`~servobus.transports._busoff`); its base :class:`~servobus.transports._inbox.ReceiveSide`
+owns the received frames (:class:`~servobus.transports._inbox.Inbox`); the events are
+:class:`~servobus.transports._listeners.EventSource`'s; the reopening is a task of
+:class:`~servobus.transports._recovery.Recovery`. Each part is handed what it needs of the others
+at construction (a clock, a callable), and none reaches into another's state.
 
 Everything here runs on anyio, on asyncio or on trio: the loop's hot-path operations come from
 :func:`servobus.runtime.current` (taken by :meth:`Transport.open`), background tasks live in a task
@@ -31,28 +43,34 @@ outlives ``close()``, and an unexpected error of those tasks is raised by it, no
 
 **The subclass interface** (what a concrete transport writes, and what it may call):
 
-* ``async _connect()``: open the device (tag callbacks with ``self._generation``); start its reader
-  tasks in ``self._tasks`` (the transport's task group, there from ``_connect`` on, on a first open
-  and on every reopen; ``_connect`` always runs in a task: ``open()``'s or the recovery task's, and
-  anyio starts no task from a bare loop callback); raise TransportError when it cannot.
-* ``async _disconnect()``: release the device; never raises for a device already gone. It runs
-  after the task group's tasks have ended on ``close()``, and in the recovery task after a loss
-  (the reader tasks of the lost connection must then stop by themselves: check the generation).
+* ``async _connect()`` (default: nothing to open): open the device (tag callbacks with
+  ``self._generation``); start its reader tasks in ``self._tasks`` (the transport's task group, there
+  from ``_connect`` on, on a first open and on every reopen; ``_connect`` always runs in a task:
+  ``open()``'s or the recovery task's, and anyio starts no task from a bare loop callback); raise
+  TransportError when it cannot.
+* ``async _disconnect()`` (default: nothing to release): release the device; never raises for a
+  device already gone. It runs after the task group's tasks have ended on ``close()``, and in the
+  recovery task after a loss (the reader tasks of the lost connection must then stop by themselves:
+  check the generation).
 * ``async _transmit(batch)``: write a list of :class:`Outgoing` in order, taking each off the front
   as it goes; report each with ``self._sent(outgoing.handle, sent_at)``; call ``_lose`` on failure.
   What is still in ``batch`` when it returns or is cancelled is reported purged by the base.
+  (Only a link that queues, through ``_enqueue``, writes one.)
 * ``_write_now(item, handle) -> bool`` (only while ``self._direct``): write from ``send()``'s
   stack; True when written (counted and reported with ``_sent(handle, now)`` by the subclass).
 * ``send(frame, handle=None, ...)``: a subclass's public send calls
-  ``self._enqueue(item, hold_s, handle)``.
+  ``self._enqueue(item, hold_s, handle)``, or writes and reports by itself (``self._handle(frame,
+  handle)`` is the handle a report carries; ``_sent(handle, at, frame)`` counts the frame too).
 * It calls (on the loop, from a task or a loop callback): ``_deliver(frames)``, ``_lose(cause,
   generation)`` (a loss wakes the recovery task, which runs from open to close), ``_sent(handle,
   sent_at)``, ``_dropped(reason, handles_or_count)``, ``_set_state``, ``_emit(event)``, ``_now()``,
-  ``_error()``; it counts into ``self._stats`` and ``self._load``; ``self._runtime`` (the
+  ``_error()``, and the bus-off state ``self._bus_off`` (``error_frame``, ``went_off``,
+  ``came_back``); it counts into ``self._stats`` and ``self._load``; ``self._runtime`` (the
   :class:`~servobus.runtime.Runtime`: ``time``, ``call_soon``, ``call_soon_threadsafe``,
   ``waiter``) replaces the asyncio loop; ``self._tasks`` is where its tasks start.
 * It declares its line: attributes or properties ``half_duplex``, ``bitrate``, ``gap_s``,
-  ``turnaround_s`` (and ``stale_after_s`` from the constructor) make :attr:`Transport.rules`.
+  ``turnaround_s``, ``exact_times`` (and ``stale_after_s`` from the constructor) make
+  :attr:`Transport.rules`; or it sets them whole (``self.rules = LineRules(...)``).
 """
 
 from __future__ import annotations
@@ -62,6 +80,7 @@ import logging
 import time
 import warnings
 from collections.abc import Callable
+from functools import partial
 from types import TracebackType
 from typing import Any, ClassVar, Generic, Self, TypeVar
 
@@ -69,18 +88,15 @@ import anyio
 
 from servobus import runtime as _runtime
 from servobus.errors import TransportError
-from servobus.transports._busoff import BusOffState
 from servobus.transports._inbox import Inbox, ReceiveSide
-from servobus.transports._listeners import EventSource, Listeners
 from servobus.transports._owned import LinkTasks, OwnedTaskGroup, owned_exit
 from servobus.transports._recovery import Recovery
+from servobus.transports._send_side import SendSide
 from servobus.transports._sending import (
     BusOffError,
     Outgoing,
-    SendQueue,
     SendQueueFull,
     SendReporter,
-    SendReports,
 )
 from servobus.transports._waiters import WaiterList
 from servobus.transports.contract import LineRules
@@ -98,11 +114,6 @@ TxT = TypeVar("TxT")
 Consumer = Callable[[list[RxT]], object]
 
 
-def report_handle(frame: object, handle: object) -> object:
-    """The handle a report of ``frame`` carries: the one given, else the frame."""
-    return frame if handle is None else handle
-
-
 def declared_rules(link: object, stale_after_s: float | None) -> LineRules:
     """The rules a link declares with attributes or properties ``half_duplex``, ``bitrate``,
     ``gap_s``, ``turnaround_s`` and ``exact_times`` (those it lacks take LineRules' defaults)."""
@@ -116,7 +127,7 @@ def declared_rules(link: object, stale_after_s: float | None) -> LineRules:
     )
 
 
-class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, Generic[RxT, TxT]):
+class Transport(ReceiveSide[RxT], SendSide[TxT], Generic[RxT, TxT]):
     """Frames out through a bounded queue, frames in through a consumer or a buffer, one device.
 
     The one base of every link: the device transports, the in-process simulator, and the test and
@@ -139,6 +150,8 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, Generic
     #: frames the writer hands to :meth:`_transmit` at once (a half-duplex line takes one at a time,
     #: so each frame's age is checked when its own transaction starts)
     batch_size: ClassVar[int] = 64
+    #: while bus-off, one frame this often still goes to the adapter (the others fail at once)
+    bus_off_probe_s: ClassVar[float] = 0.02
     name: str = "link"
 
     def __init__(
@@ -151,47 +164,38 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, Generic
         reopen: bool = True,
         reopen_backoff_s: tuple[float, float] = (0.05, 2.0),
     ) -> None:
-        if queue_size < 1 or rx_buffer < 1:
-            raise ValueError(f"queue_size={queue_size} and rx_buffer={rx_buffer} must be at least 1")
-        if stale_after_s is not None and stale_after_s <= 0:
-            raise ValueError(f"stale_after_s={stale_after_s} must be positive (or None)")
-        if name is not None:
-            self.name = name
-        name = self.name
-        self._stale_after_s = stale_after_s
+        name = self.name if name is None else name
+        self._state = TransportState.CLOSED
+        self._runtime: _runtime.Runtime | None = None
+        SendSide.__init__(  # the counters, the queue, the send reports, bus-off, the events
+            self,
+            name,
+            self._now,
+            self._serving,
+            queue_size=queue_size,
+            stale_after_s=stale_after_s,
+            batch_size=self.batch_size,
+            probe_s=self.bus_off_probe_s,
+            transmit=self._transmit,
+            lose=self._lose,
+        )
+        closed = lambda: self._state is TransportState.CLOSED  # noqa: E731 (an "async for" ends then)
+        ReceiveSide.__init__(
+            self, Inbox(name, rx_buffer, partial(self._dropped, "rx_overflow"), self._serving, closed)
+        )
         self._rules: LineRules | None = None  # declared whole (``self.rules = ...``), else from attributes
         lost = lambda: self._state is TransportState.LOST  # noqa: E731 (the recovery's "still lost?")
-        self._state = TransportState.CLOSED
-        self._stats = TransportStats()
         self._recovery = Recovery(
             name, reopen, reopen_backoff_s, self._stats, self._disconnect, lost, self._reopen_once
         )
         self._load = LoadMeter()
         self._load_known = False  # subclasses set it when they know the line's bit rate
-        self._sending: SendQueue[TxT] = SendQueue(
-            name,
-            queue_size,
-            stale_after_s,
-            self.batch_size,
-            self._stats,
-            self._transmit,
-            self._dropped,
-            self._lose,
-        )
-        self._queue = self._sending.items  # the send queue itself (read on every send)
-        self._inbox: Inbox[RxT] = Inbox(name, rx_buffer, lambda count: self._dropped("rx_overflow", count))
         self._open_waiters = WaiterList()
-        self._listeners = Listeners(name)
         self._owned = OwnedTaskGroup(name)
         self._failure: tuple[str, BaseException | None] | None = ("not open", None)
         self._generation = 0  # bumped per connection: callbacks of an old one are ignored
-        self._runtime: _runtime.Runtime | None = None
         self._ever_opened = False
-        self._reporter: SendReporter | None = None
-        self._off_since: float | None = None  # (BusOffState's; an instance attribute: read on every send)
-        #: set by a subclass whose device never blocks a write: send() then writes at once when
-        #: nothing is queued ahead (see :meth:`_write_now`)
-        self._direct = False
+        self._direct = False  # a subclass whose device never blocks a write sets it: see _write_now
 
     # ------------------------------------- subclass interface (each hook: see the module docstring)
 
@@ -232,11 +236,6 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, Generic
         return self._state
 
     @property
-    def stale_after_s(self) -> float | None:
-        """How long a queued frame may wait before it is dropped as stale (None: no limit)."""
-        return self._stale_after_s
-
-    @property
     def rules(self) -> LineRules:
         """The line's rules (the FrameLink contract), from what the subclass declares.
 
@@ -244,7 +243,7 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, Generic
         attributes or properties (those it lacks take LineRules' defaults); ``stale_after_s`` is the
         constructor's. Or it sets the rules whole (``self.rules = LineRules(...)``).
         """
-        return self._rules or declared_rules(self, self._stale_after_s)
+        return self._rules or declared_rules(self, self.stale_after_s)
 
     @rules.setter
     def rules(self, rules: LineRules) -> None:
@@ -342,7 +341,7 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, Generic
 
     def _connected(self) -> None:
         self._failure = None
-        self._forget_bus_off()
+        self._bus_off.forget()
         self._set_state(TransportState.OPEN)
         assert self._runtime is not None  # (set by open())
         self._sending.start(self._tasks, self._runtime, self._generation)
@@ -375,6 +374,16 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, Generic
         self._state = state
         self._emit(StateChanged(state, self._now(), cause))
 
+    def _serving(self) -> _runtime.Runtime:
+        """The loop, while the transport is open (what its waiters park on).
+
+        Raises:
+            TransportError: it is not open, and why.
+        """
+        if self._state is not TransportState.OPEN or self._runtime is None:
+            raise self._error()
+        return self._runtime
+
     def _error(self) -> TransportError:
         """A fresh TransportError saying why the transport cannot serve now, chained to the cause."""
         what, cause = self._failure or (self._state.value, None)
@@ -394,33 +403,14 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, Generic
         """
         if self._state is not TransportState.OPEN:
             raise self._error()
-        if self._off_since is not None:
-            self._bus_off_gate(self._now())
+        if self._bus_off.since is not None:
+            self._bus_off.gate(self._now())
         if handle is None:
             handle = item
         sending = self._sending
         if self._direct and not self._queue and not sending.transmitting and self._write_now(item, handle):
             return
         sending.put(Outgoing(item, self._now(), hold_s, handle))
-
-    @property
-    def queue_room(self) -> int:
-        """Frames :meth:`send` accepts now without raising :class:`SendQueueFull`."""
-        return self._sending.size - len(self._queue)
-
-    async def drain(self) -> None:
-        """Wait until every queued frame has been written (or dropped by policy).
-
-        Raises:
-            TransportError: the device was lost or the transport closed meanwhile.
-        """
-        sending = self._sending
-        while sending.busy:
-            if self._state is not TransportState.OPEN or self._runtime is None:
-                raise self._error()
-            await sending.idle.park(self._runtime)
-        if self._state is not TransportState.OPEN:
-            raise self._error()
 
     # ----------------------------------------------------------------- counters
 
@@ -431,8 +421,6 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, Generic
         snapshot.queue_depth = len(self._queue)
         snapshot.bus_load_pct = self._load.percent(self._now()) if self._load_known else None
         return snapshot
-
-    _handle = staticmethod(report_handle)
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name} {self._state.value}>"

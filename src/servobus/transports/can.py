@@ -182,7 +182,7 @@ class CanTransport(Transport[Frame, Frame]):
             self._load,
             generation=lambda: self._generation,
             deliver=self._deliver,
-            error_frame=self._note_error_frame,
+            error_frame=self._bus_off.error_frame,
             lose=self._lose,
         )
         intake.bitrate, intake.data_bitrate = self.bitrate, self.data_bitrate
@@ -311,8 +311,8 @@ class CanTransport(Transport[Frame, Frame]):
         stats = self._stats
         stats.frames_out += len(report.sent)
         stats.enobufs_waits += report.enobufs_waits
-        if report.sent and self._off_since is not None:  # a frame went through: the controller is back
-            self._came_back(report.sent[0][1])
+        if report.sent and self._bus_off.since is not None:  # a frame went through: the controller is back
+            self._bus_off.came_back(report.sent[0][1])
         for reason, items, counter in (
             ("stale", report.stale, None),
             ("queue_full", report.enobufs_dropped, "enobufs_dropped"),
@@ -321,7 +321,7 @@ class CanTransport(Transport[Frame, Frame]):
             self._dropped(reason, [o.handle for o in items], counter)
         if report.bus_off_cause is not None:
             if generation == self._generation:
-                self._went_bus_off(report.bus_off_at, report.bus_off_cause)
+                self._bus_off.went_off(report.bus_off_at, report.bus_off_cause)
             self._dropped("bus_off", [o.handle for o in report.bus_off], "bus_off_dropped")
         for outgoing, sent_at in report.sent:
             frame = outgoing.item
@@ -343,14 +343,14 @@ class CanTransport(Transport[Frame, Frame]):
             if buffer_full(exc):
                 return False  # queue it: the writer thread applies the ENOBUFS policy
             if controller_off(exc):
-                self._went_bus_off(self._now(), exc)
+                self._bus_off.went_off(self._now(), exc)
                 self._stats.bus_off_dropped += 1
                 raise BusOffError(f"{self.name}: the CAN controller is bus-off ({exc})") from exc
             self._lose(exc, self._generation)
             raise self._error() from exc
         now = self._now()
-        if self._off_since is not None:
-            self._came_back(now)
+        if self._bus_off.since is not None:
+            self._bus_off.came_back(now)
         stats = self._stats
         stats.frames_out += 1
         stats.bytes_out += len(frame.data)

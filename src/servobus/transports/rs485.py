@@ -408,7 +408,7 @@ class SerialTransport(Transport[Frame, Frame]):
 
     async def _transmit(self, batch: list[Outgoing[Frame]]) -> None:
         stats = self._stats
-        limit = self._stale_after_s
+        limit = self.stale_after_s
         generation = self._generation
         while batch:
             outgoing = batch[0]

@@ -240,9 +240,9 @@ class SimTransport(Transport[Frame, Frame]):
         assert self.episodes is not None
         why = self.episodes.refusal(now - self._t0)
         if why == "bus_off":
-            self._went_bus_off(now)
-        elif why is None and self._off_since is not None:
-            self._came_back(now)
+            self._bus_off.went_off(now)
+        elif why is None and self._bus_off.since is not None:
+            self._bus_off.came_back(now)
         return why
 
     def _put(self, frame: Frame, handle: Any, now: float) -> None:
@@ -320,7 +320,7 @@ class SimTransport(Transport[Frame, Frame]):
         """The controller's error frames due by ``until`` (network time), and what it received of
         ``received``: nothing while it is bus-off (counted ``ignored``)."""
         for at, classes in episodes.error_frames(until):
-            self._note_error_frame(CanErrorClass(classes), bytes(8), at + self._t0)
+            self._bus_off.error_frame(CanErrorClass(classes), bytes(8), at + self._t0)
         heard = [(at, frame) for at, frame in received if episodes.receiving(at)]
         self._stats.ignored += len(received) - len(heard)
         return heard

@@ -310,7 +310,7 @@ class SlcanTransport(Transport[Frame, Frame]):
     async def _transmit(self, batch: list[Outgoing[Frame]]) -> None:
         generation = self._generation
         stats = self._stats
-        limit = self._stale_after_s
+        limit = self.stale_after_s
         gap = self.min_gap_s
         while batch:
             port = self._port
