@@ -54,11 +54,14 @@ class SerialPort:
 
     def __init__(
         self,
+        name: str,
         on_bytes: Callable[[bytes], object],
         lose: Callable[[BaseException], object],
         serial: Any,
         fd: int,
         read_size: int,
+        runtime: Runtime,
+        tasks: LinkTasks,
     ) -> None:
         self.serial = serial
         self.fd = fd
@@ -66,7 +69,8 @@ class SerialPort:
         self._on_bytes = on_bytes
         self._lose = lose
         self._read_size = read_size
-        self._watch: ReadWatch | None = None
+        self._watch: ReadWatch | None = ReadWatch(runtime, tasks, fd, self._on_readable, name)
+        self._watch.start()
 
     @classmethod
     def open(
@@ -98,10 +102,7 @@ class SerialPort:
         except (AttributeError, OSError, ValueError, TypeError, NotImplementedError) as exc:
             device.close()
             raise TransportError(f"{name}: {port!r} has no file descriptor to read") from exc
-        line = cls(on_bytes, lose, device, fd, read_size)
-        line._watch = ReadWatch(runtime, tasks, fd, line._on_readable, name)
-        line._watch.start()
-        return line
+        return cls(name, on_bytes, lose, device, fd, read_size, runtime, tasks)
 
     def _on_readable(self) -> None:
         try:
