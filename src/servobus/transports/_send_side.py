@@ -74,10 +74,17 @@ class SendSide(EventSource, Generic[TxT]):
         #: the link's counters (every part of the link counts into them)
         self._stats = TransportStats()
         self._reporter: SendReporter | None = None
-        self._report_clock = clock
-        self._serving_loop = serving
         self._sending: SendQueue[TxT] = SendQueue(
-            name, queue_size, stale_after_s, batch_size, self._stats, transmit, self._dropped, lose
+            name,
+            queue_size,
+            stale_after_s,
+            batch_size,
+            self._stats,
+            transmit,
+            self._dropped,
+            lose,
+            clock,
+            serving,
         )
         self._queue = self._sending.items  # the send queue itself (read on every send)
         self._bus_off = BusOffState(name, self._stats, self._emit, probe_s)
@@ -98,10 +105,7 @@ class SendSide(EventSource, Generic[TxT]):
         Raises:
             TransportError: the device was lost or the transport closed meanwhile.
         """
-        sending, serving = self._sending, self._serving_loop
-        while sending.busy:
-            await sending.idle.park(serving())
-        serving()
+        await self._sending.drain()
 
     @property
     def bus_off(self) -> bool:
@@ -123,7 +127,7 @@ class SendSide(EventSource, Generic[TxT]):
         if count:
             counter = counter or reason
             setattr(self._stats, counter, getattr(self._stats, counter) + count)
-            self._emit(FramesDropped(counter, count, self._report_clock()))
+            self._emit(FramesDropped(counter, count, self._sending.clock()))
             reporter = self._reporter
             if reporter is not None and not isinstance(handles, int):
                 for handle in handles:

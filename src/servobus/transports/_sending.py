@@ -75,9 +75,10 @@ class SendQueue(Generic[TxT]):
 
     The queue owns its items and its writer; the transport owns everything else and hands the
     queue what it needs: ``transmit(batch)`` (its device), ``dropped(reason, handles)`` (its
-    reports and counters), ``lose(cause, generation)`` (its recovery) and its counters (a full
-    queue is counted in ``queue_full``). The writer takes up to ``batch_size`` frames at a time,
-    drops those older than ``stale_after_s``, and awaits ``transmit(batch)``. It runs in the
+    reports and counters), ``lose(cause, generation)`` (its recovery), its counters (a full queue
+    is counted in ``queue_full``), its ``clock`` and ``serving()`` (its loop while it is open, else
+    raises why not: what :meth:`drain` waits on). The writer takes up to ``batch_size`` frames at a
+    time, drops those older than ``stale_after_s``, and awaits ``transmit(batch)``. It runs in the
     transport's task group, inside a cancel scope of its own that a loss or a close cancels
     (:meth:`stop`).
     """
@@ -91,8 +92,10 @@ class SendQueue(Generic[TxT]):
         "_stats",
         "_transmit",
         "batch_size",
+        "clock",
         "idle",
         "items",
+        "serving",
         "size",
         "stale_after_s",
         "transmitting",
@@ -108,6 +111,8 @@ class SendQueue(Generic[TxT]):
         transmit: Callable[[list[Outgoing[TxT]]], Awaitable[None]],
         dropped: Callable[[str, list[Any]], None],
         lose: Callable[[BaseException, int], None],
+        clock: Callable[[], float],
+        serving: Callable[[], Runtime],
     ) -> None:
         self._name = name
         self.size = size
@@ -117,6 +122,8 @@ class SendQueue(Generic[TxT]):
         self._transmit = transmit
         self._dropped = dropped
         self._lose = lose
+        self.clock = clock
+        self.serving = serving
         self.items: deque[Outgoing[TxT]] = deque()
         self.transmitting = False
         #: tasks in the transport's drain(), woken when the queue is empty and nothing is being written
@@ -137,6 +144,17 @@ class SendQueue(Generic[TxT]):
             )
         self.items.append(outgoing)
         self._alarm.ring()
+
+    async def drain(self) -> None:
+        """Until every queued frame has been written or dropped.
+
+        Raises:
+            TransportError: the link is not open, or stops being open meanwhile.
+        """
+        serving = self.serving
+        while self.busy:
+            await self.idle.park(serving())
+        serving()
 
     def start(self, tasks: LinkTasks, runtime: Runtime, generation: int) -> None:
         """Start this connection's writer (a loss or a close stops it: :meth:`stop`)."""

@@ -153,6 +153,8 @@ class Transport(ReceiveSide[RxT], SendSide[TxT], Generic[RxT, TxT]):
     #: while bus-off, one frame this often still goes to the adapter (the others fail at once)
     bus_off_probe_s: ClassVar[float] = 0.02
     name: str = "link"
+    #: the rules when declared whole (``self.rules = ...``); else they come from attributes
+    _rules: LineRules | None = None
 
     def __init__(
         self,
@@ -164,6 +166,8 @@ class Transport(ReceiveSide[RxT], SendSide[TxT], Generic[RxT, TxT]):
         reopen: bool = True,
         reopen_backoff_s: tuple[float, float] = (0.05, 2.0),
     ) -> None:
+        # (A SimTransport's instance keeps under 30 attributes, CPython's shared-key limit: at 30 its
+        # send path measured 15% slower. test_one_base.py holds it there.)
         name = self.name if name is None else name
         self._state = TransportState.CLOSED
         self._runtime: _runtime.Runtime | None = None
@@ -183,7 +187,6 @@ class Transport(ReceiveSide[RxT], SendSide[TxT], Generic[RxT, TxT]):
         ReceiveSide.__init__(
             self, Inbox(name, rx_buffer, partial(self._dropped, "rx_overflow"), self._serving, closed)
         )
-        self._rules: LineRules | None = None  # declared whole (``self.rules = ...``), else from attributes
         lost = lambda: self._state is TransportState.LOST  # noqa: E731 (the recovery's "still lost?")
         self._recovery = Recovery(
             name, reopen, reopen_backoff_s, self._stats, self._disconnect, lost, self._reopen_once
