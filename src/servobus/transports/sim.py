@@ -198,7 +198,7 @@ class SimTransport(Transport[Frame, Frame]):
             name=f"{self.name} clock",
             task_lane=self.task_clock,
         )
-        self._rearm(self._generation)
+        self._rearm()
 
     async def _disconnect(self) -> None:
         self._direct = False
@@ -253,11 +253,11 @@ class SimTransport(Transport[Frame, Frame]):
         stats.frames_out += 1
         stats.bytes_out += len(frame.data)
         self._sent(handle, now)
-        self._arm(network.now_s if at < network.now_s else at, self._generation)
+        self._arm(network.now_s if at < network.now_s else at)
 
     # ----------------------------------------------------------------- the network's clock
 
-    def _arm(self, at: float, generation: int) -> None:
+    def _arm(self, at: float) -> None:
         """Have the clock fire at network time ``at`` (or earlier, if it already would)."""
         armed = self._timer_at
         if armed is not None and armed <= at:
@@ -276,12 +276,12 @@ class SimTransport(Transport[Frame, Frame]):
             clock.stop()
         self._timer_at = None
 
-    def _rearm(self, generation: int) -> None:
+    def _rearm(self) -> None:
         at = self.network.next_event_s()
         if at is not None:
-            self._arm(at, generation)
+            self._arm(at)
         if self.episodes is not None and (at := self.episodes.next_error_frame_s()) is not None:
-            self._arm(at, generation)
+            self._arm(at)
 
     def _on_timer(self, generation: int) -> None:
         armed, self._timer_at = self._timer_at, None
@@ -310,9 +310,9 @@ class SimTransport(Transport[Frame, Frame]):
             # Events the host can neither see nor change need no timer of their own.
             at = network.run_ahead(until)
             if at is not None:
-                self._arm(at, generation)
+                self._arm(at)
             if episodes is not None and (at := episodes.next_error_frame_s()) is not None:
-                self._arm(at, generation)
+                self._arm(at)
 
     def _controller(
         self, episodes: ControllerEpisodes, received: list[tuple[float, Frame]], until: float
