@@ -34,20 +34,20 @@ class Recovery:
         backoff_s: (first, longest) delay between reopen attempts; it doubles each time.
         stats: the transport's counters (``losses``, ``reopens`` are counted here).
         release: releases the lost device (never raises for one already gone).
-        still_lost: whether the transport still waits to be reopened (neither reopened nor closed).
-        reopen_once: one attempt to reopen: True when reopened, False when the transport closed
-            meanwhile; raises while the device is away.
+        reconnect: one attempt to reopen the device (raises while it is away): whether the
+            transport still waits for it (False: it was closed meanwhile).
+        reopened: the transport serves again (called once the reopen is counted).
     """
 
     __slots__ = (
         "_backoff_s",
         "_name",
         "_pending",
+        "_reconnect",
         "_release",
-        "_reopen_once",
+        "_reopened",
         "_signal",
         "_stats",
-        "_still_lost",
         "reopen",
     )
 
@@ -58,8 +58,8 @@ class Recovery:
         backoff_s: tuple[float, float],
         stats: TransportStats,
         release: Callable[[], Awaitable[None]],
-        still_lost: Callable[[], bool],
-        reopen_once: Callable[[], Awaitable[bool]],
+        reconnect: Callable[[], Awaitable[bool]],
+        reopened: Callable[[], None],
     ) -> None:
         first, longest = backoff_s
         if not 0 < first <= longest:
@@ -69,8 +69,8 @@ class Recovery:
         self._backoff_s = (first, longest)
         self._stats = stats
         self._release = release
-        self._still_lost = still_lost
-        self._reopen_once = reopen_once
+        self._reconnect = reconnect
+        self._reopened = reopened
         self._pending = False  # a loss not yet taken up by watch()
         self._signal: Waiter[None] | None = None  # what watch() waits on
 
@@ -103,16 +103,17 @@ class Recovery:
         if not self.reopen:
             return
         delay, longest = self._backoff_s
-        while self._still_lost():
+        while True:
             await anyio.sleep(delay)
             try:
-                reopened = await self._reopen_once()
+                waited_for = await self._reconnect()
             except Exception as exc:  # the device is still away (or refuses): try again later
                 log = logger.debug if isinstance(exc, TransportError) else logger.warning
                 log("%s: reopen failed: %s", self._name, exc)
                 delay = min(2 * delay, longest)
                 continue
-            if reopened:
+            if waited_for:
                 self._stats.reopens += 1
                 logger.info("%s: reopened", self._name)
+                self._reopened()
             return

@@ -187,9 +187,8 @@ class Transport(ReceiveSide[RxT], SendSide[TxT], Generic[RxT, TxT]):
         ReceiveSide.__init__(
             self, Inbox(name, rx_buffer, partial(self._dropped, "rx_overflow"), self._serving, closed)
         )
-        lost = lambda: self._state is TransportState.LOST  # noqa: E731 (the recovery's "still lost?")
         self._recovery = Recovery(
-            name, reopen, reopen_backoff_s, self._stats, self._disconnect, lost, self._reopen_once
+            name, reopen, reopen_backoff_s, self._stats, self._disconnect, self._reconnect, self._connected
         )
         self._load = LoadMeter()
         self._load_known = False  # subclasses set it when they know the line's bit rate
@@ -350,14 +349,14 @@ class Transport(ReceiveSide[RxT], SendSide[TxT], Generic[RxT, TxT]):
         self._sending.start(self._tasks, self._runtime, self._generation)
         self._open_waiters.wake_all()
 
-    async def _reopen_once(self) -> bool:
-        """The recovery task's attempt to reopen: True when reopened (raises while the device is away)."""
+    async def _reconnect(self) -> bool:
+        """The recovery task's attempt to reopen the device (raises while it is away): whether the
+        transport still waits for it (False: closed meanwhile, and close() releases it)."""
+        if self._state is not TransportState.LOST:
+            return False
         self._generation += 1
         await self._connect()
-        if self._state is not TransportState.LOST:  # closed meanwhile: close() releases it
-            return False
-        self._connected()
-        return True
+        return self._state is TransportState.LOST
 
     def _lose(self, cause: BaseException, generation: int | None = None) -> None:
         """The device failed: fail every waiter at once, purge the queue, start reopening.
@@ -366,12 +365,12 @@ class Transport(ReceiveSide[RxT], SendSide[TxT], Generic[RxT, TxT]):
         connection): only the first call for the current connection acts. Call it on the loop.
         """
         if self._state is TransportState.OPEN and generation in (None, self._generation):
+            self._recovery.lost(cause)  # (first: counted and logged before anyone hears of it)
             self._generation += 1
             self._failure = ("device lost", cause)
             self._set_state(TransportState.LOST, cause)
             self._sending.fail(self._error)
             self._inbox.readers.fail_all(self._error)
-            self._recovery.lost(cause)
 
     def _set_state(self, state: TransportState, cause: BaseException | None = None) -> None:
         self._state = state
