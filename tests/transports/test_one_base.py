@@ -24,7 +24,7 @@ from servobus.frame import Frame
 from servobus.transports import Transport, TransportState
 from servobus.transports._can_intake import CanIntake
 from servobus.transports.contract import FrameLink, LineRules
-from servobus.transports.events import CanErrorClass
+from servobus.transports.events import CanErrorClass, StateChanged
 from servobus.transports.sim import SimTransport
 from servobus.transports.stats import LoadMeter, TransportStats
 
@@ -200,3 +200,23 @@ def test_the_in_process_link_keeps_under_cpythons_shared_key_limit() -> None:
     """An instance with 30 attributes or more loses CPython's shared keys and inline values: the
     simulated link's send path measured 15% slower at 30 (2.3 us against 2.0 us per frame)."""
     assert len(vars(SimTransport())) < 30, sorted(vars(SimTransport()))
+
+
+async def test_a_loss_and_a_reopen_are_counted_before_anyone_hears_of_them() -> None:
+    link = Loopback(reopen_backoff_s=(0.01, 0.01))
+    seen: list[tuple[TransportState, int, int]] = []
+
+    def listener(event: object) -> None:
+        if isinstance(event, StateChanged):
+            stats = link.stats()
+            seen.append((event.state, stats.losses, stats.reopens))
+
+    link.add_listener(listener)
+    async with link:
+        link._lose(OSError("gone"))  # (what a device's reader calls)
+        await link.wait_open(timeout=1.0)
+    assert seen[-4:-1] == [
+        (TransportState.OPEN, 0, 0),
+        (TransportState.LOST, 1, 0),
+        (TransportState.OPEN, 1, 1),
+    ], seen
