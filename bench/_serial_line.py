@@ -24,6 +24,7 @@ efficiency bound is computed from.
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -31,7 +32,7 @@ from servobus.frame import Frame
 from servobus.protocols._bound import Framing
 from servobus.sim.device import SerialDevice, SerialEmission
 from servobus.timing import uart_time_s
-from servobus.transports.link_base import LinkBase
+from servobus.transports.base import Transport
 from servobus.transports.rs485 import SerialTransport
 
 __all__ = ["LineUse", "SerialLine"]
@@ -49,7 +50,7 @@ class LineUse:
     n_bytes: int
 
 
-class SerialLine(LinkBase):
+class SerialLine(Transport[Frame, Frame]):
     """A FrameLink: the host on one simulated half-duplex RS485 line with ``devices``.
 
     Args:
@@ -71,10 +72,15 @@ class SerialLine(LinkBase):
         self.log: list[LineUse] = []
         self._deframer = framing.deframer()
         self._free_at = 0.0
+        self._loop: asyncio.AbstractEventLoop | None = None  # (its timers are asyncio's call_at)
+
+    async def open(self) -> None:
+        await super().open()
+        self._loop = asyncio.get_running_loop()
 
     def send(self, frame: Frame, handle: object = None) -> None:
         loop = self._loop
-        assert loop is not None and self._open
+        assert loop is not None and self.is_open
         if not frame.is_serial:
             raise ValueError(f"{frame!r} is not a serial frame")
         data = self.framing.encode(frame)
@@ -108,5 +114,4 @@ class SerialLine(LinkBase):
         now = self._loop.time()
         for frame in frames:
             _SET_TIMESTAMP(frame, now)
-        if self._consumer is not None:
-            self._consumer(frames)
+        self._deliver(frames)

@@ -52,7 +52,7 @@ def _magnitude(rng: random.Random) -> float:
 
 
 def _fits(scale: FieldScale, bits: int) -> bool:
-    """Packer's own admission rule (servobus.core.packing._check_fits): before rounding, lo and hi
+    """Packer's own admission rule (FieldScale.check_fits): before rounding, lo and hi
     map no further than half a code below the field and one and a half above it (offset binary puts
     +full scale one code past the top). Used to pick scales, not tested."""
     cmin, cmax = ref.code_range(bits)

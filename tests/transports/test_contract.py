@@ -26,8 +26,8 @@ from servobus.errors import TransportError
 from servobus.frame import Frame
 from servobus.tools.recording import TapLink
 from servobus.transports import SimTransport, TransportState, TransportStats
+from servobus.transports.base import Transport as LinkBase
 from servobus.transports.contract import FrameLink, LineRules
-from servobus.transports.link_base import LinkBase
 from sim._standins import Responder
 
 from ._anyio_help import within

@@ -27,8 +27,8 @@ from servobus.errors import MotorTimeout, TransportError
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+from servobus.transports.base import Transport as LinkBase
 from servobus.transports.contract import FrameLink, LineRules
-from servobus.transports.link_base import LinkBase
 from servobus.transports.sim import SimTransport
 
 pytestmark = pytest.mark.anyio

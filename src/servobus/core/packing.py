@@ -116,6 +116,29 @@ class FieldScale:
     def _code(self, x: float) -> float:
         return (x - self.origin) * self.codes / self.span
 
+    def check_fits(self, bits: int, where: str) -> None:
+        """Refuse a range that maps past a field of ``bits`` bits (negative: signed) of ``where``:
+        it would silently saturate good values.
+
+        Compared before rounding, with the slack that rounding and clamping absorb: half a code at
+        the bottom, and one and a half at the top, where offset-binary fields put +full scale one
+        code past the last (hollow.md §4.3). Anything further would clamp values the scale claims
+        to carry.
+
+        Raises:
+            ValueError: the range does not fit (or overflows the codes).
+        """
+        width = abs(bits)
+        cmin, cmax = (-(1 << (width - 1)), (1 << (width - 1)) - 1) if bits < 0 else (0, (1 << width) - 1)
+        low, high = self._code(self.lo), self._code(self.hi)
+        if not (math.isfinite(low) and math.isfinite(high)):
+            raise ValueError(f"{where}: {self.name} range [{self.lo}, {self.hi}] overflows its codes")
+        if low < cmin - 0.5 or high > cmax + 1.5:
+            raise ValueError(
+                f"{where}: {self.name} range [{self.lo}, {self.hi}] maps to codes {low:g}..{high:g}, "
+                f"beyond the {width}-bit field's {cmin}..{cmax}"
+            )
+
 
 @dataclass(frozen=True, slots=True)
 class Layout:
@@ -218,7 +241,7 @@ class Packer:
         if len(scales) != len(layout.fields):
             raise ValueError(f"{layout.name} has {len(layout.fields)} fields, got {len(scales)} scales")
         for scale, bits in zip(scales, layout.bits, strict=True):
-            _check_fits(layout, scale, bits)
+            scale.check_fits(bits, layout.name)
         self.layout = layout
         self.scales = scales
         try:
@@ -393,22 +416,3 @@ class Packer:
                 raw=bytes(frames)[:64],
             )
         return n
-
-
-def _check_fits(layout: Layout, scale: FieldScale, bits: int) -> None:
-    """A scale whose range maps past the field's bits would silently saturate good values.
-
-    Compared before rounding, with the slack that rounding and clamping absorb: half a code at the
-    bottom, and one and a half at the top, where offset-binary fields put +full scale one code past
-    the last (hollow.md §4.3). Anything further would clamp values the scale claims to carry.
-    """
-    width = abs(bits)
-    cmin, cmax = (-(1 << (width - 1)), (1 << (width - 1)) - 1) if bits < 0 else (0, (1 << width) - 1)
-    low, high = scale._code(scale.lo), scale._code(scale.hi)
-    if not (math.isfinite(low) and math.isfinite(high)):
-        raise ValueError(f"{layout.name}: {scale.name} range [{scale.lo}, {scale.hi}] overflows its codes")
-    if low < cmin - 0.5 or high > cmax + 1.5:
-        raise ValueError(
-            f"{layout.name}: {scale.name} range [{scale.lo}, {scale.hi}] maps to codes {low:g}..{high:g}, "
-            f"beyond the {width}-bit field's {cmin}..{cmax}"
-        )

@@ -1,9 +1,9 @@
 """Transports: frames to and from real devices, on anyio (asyncio or trio), with counters and recovery.
 
 Every transport is a :class:`~servobus.transports.contract.FrameLink` (``rules``, ``stats()``,
-``send(frame, handle)`` with reports that echo the handle, open and close in one task). One
-interface (:class:`Transport`: ``open``/``close``, ``send``, ``drain``, ``receive``, ``async for``,
-``events``, ``stats``, ``rules``) over these lines:
+``send(frame, handle)`` with reports that echo the handle, open and close in one task), on one
+base class (:class:`Transport`: ``open``/``close``, ``send``, ``drain``, ``receive``, ``async for``,
+``events``, ``stats``, ``rules``), over these lines:
 
 * ``"can"``: :class:`CanTransport`, any python-can interface, CAN and CAN FD, carrying
   :class:`~servobus.frame.Frame`.

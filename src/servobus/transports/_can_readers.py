@@ -9,11 +9,12 @@ behind one small interface (private).
   ``call_soon_threadsafe`` (never blocks the thread).
 * :class:`NotifierReader`: the application's ``can.Notifier`` reads the bus: a listener on it.
 
-Each hands ``(message, time)`` pairs to the transport's ``_take`` with the connection's generation.
-Frames read on the loop are stamped on the loop's clock already (``shift`` 0); those from a thread on
+Each hands ``(message, time)`` pairs to its :class:`Sink`'s ``take`` (the transport's
+:class:`~servobus.transports._can_intake.CanIntake`) with the connection's generation. Frames read on
+the loop are stamped on the loop's clock already (``shift`` 0); those from a thread on
 ``time.monotonic``, shifted onto the loop's clock when they arrive there (trio's clock and a virtual
-clock are not ``time.monotonic``). A read that fails with an OS error is a lost device
-(``_lose``); one python-can cannot parse is a bad frame (``_count_bad``), and reading goes on.
+clock are not ``time.monotonic``). A read that fails with an OS error is a lost device (``lose``);
+one python-can cannot parse is a bad frame (``count_bad``), and reading goes on.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Protocol
 
 import anyio
@@ -44,17 +45,17 @@ Batch = Sequence[tuple[can.Message, float]]
 
 
 class Sink(Protocol):
-    """What a reader hands its frames and failures to (the transport)."""
+    """What a reader hands its frames and failures to (the transport's intake)."""
 
-    name: str
+    @property
+    def name(self) -> str: ...
 
-    def _now(self) -> float: ...
+    def take(self, batch: Batch, generation: int, shift: float = 0.0) -> None: ...
 
-    def _take(self, batch: Batch, generation: int, shift: float = 0.0) -> None: ...
+    def count_bad(self, count: int, generation: int, discarded_bytes: int = 0) -> None: ...
 
-    def _count_bad(self, count: int, generation: int) -> None: ...
-
-    def _lose(self, cause: BaseException, generation: int | None = None) -> None: ...
+    @property
+    def lose(self) -> Callable[[BaseException, int], None]: ...
 
 
 class Reader(Protocol):
@@ -90,6 +91,7 @@ class FdReader:
         self._sink = sink
         self._bus = bus
         self._generation = generation
+        self._time = runtime.time
         self._watch = ReadWatch(runtime, tasks, fd, self._on_readable, sink.name)
         self._slcan = _is_python_can_slcan(bus)  # (its line buffer is bounded here: see below)
 
@@ -105,16 +107,16 @@ class FdReader:
             message = bus.recv(0)
         except Exception as exc:
             if not device_failed(exc):  # a line python-can could not parse: one bad frame
-                sink._count_bad(1, self._generation)
+                sink.count_bad(1, self._generation)
                 return
             self._watch.cancel()  # a vanished device stays readable: stop watching it
-            sink._lose(exc, self._generation)
+            sink.lose(exc, self._generation)
             return
         finally:
             if self._slcan:
                 _bound_line_buffer(bus, sink, self._generation)
         if message is not None:
-            sink._take([(message, sink._now())], self._generation)
+            sink.take([(message, self._time())], self._generation)
 
 
 def _is_python_can_slcan(bus: can.BusABC) -> bool:
@@ -129,10 +131,7 @@ def _bound_line_buffer(bus: can.BusABC, sink: Sink, generation: int) -> None:
     # python-can's slcan keeps its partial line in ``_buffer``; it has no public bound or reset
     buffer = getattr(bus, "_buffer", None)
     if isinstance(buffer, bytearray) and len(buffer) > _SLCAN_MAX_LINE:
-        sink._count_bad(1, generation)
-        stats = getattr(sink, "_stats", None)
-        if stats is not None:
-            stats.discarded_bytes += len(buffer)
+        sink.count_bad(1, generation, len(buffer))
         buffer.clear()
 
 
@@ -144,6 +143,7 @@ class ThreadReader:
         self._bus = bus
         self._generation = generation
         self._call = runtime.call_soon_threadsafe
+        self._time = runtime.time
         self._stop = threading.Event()
         self._thread = threading.Thread(  # its hand-overs run in a context naming the backend
             target=loop_context(runtime).run, args=(self._run,), name=f"{sink.name} reader", daemon=True
@@ -175,22 +175,22 @@ class ThreadReader:
                 if device_failed(exc):
                     if not stop.is_set():
                         with contextlib.suppress(RuntimeError):  # the loop is gone
-                            self._call(sink._lose, exc, generation)
+                            self._call(sink.lose, exc, generation)
                     return
                 bad += 1  # a frame python-can could not parse: counted, the reader goes on
             try:
                 if bad:
-                    self._call(sink._count_bad, bad, generation)
+                    self._call(sink.count_bad, bad, generation)
                     bad = 0
                 if batch:
-                    self._call(_take_from_thread, sink, batch, generation)
+                    self._call(_take_from_thread, sink, batch, generation, self._time)
             except RuntimeError:  # the loop closed under us
                 return
 
 
-def _take_from_thread(sink: Sink, batch: Batch, generation: int) -> None:
+def _take_from_thread(sink: Sink, batch: Batch, generation: int, loop_time: Callable[[], float]) -> None:
     """On the loop: a thread's batch, its monotonic stamps shifted onto the loop's clock."""
-    sink._take(batch, generation, sink._now() - time.monotonic())
+    sink.take(batch, generation, loop_time() - time.monotonic())
 
 
 class NotifierReader(can.Listener):
@@ -228,7 +228,7 @@ class NotifierReader(can.Listener):
     def _flush(self) -> None:
         with self._lock:
             batch, self._pending = self._pending, []
-        _take_from_thread(self._sink, batch, self._generation)
+        _take_from_thread(self._sink, batch, self._generation, self._runtime.time)
 
     def on_error(self, exc: Exception) -> None:
         """A read failed in the notifier: a lost device (or one bad frame) for the transport.
@@ -239,9 +239,9 @@ class NotifierReader(can.Listener):
         sink, generation, call, run = self._sink, self._generation, self._call, self._context.copy().run
         with contextlib.suppress(RuntimeError):
             if device_failed(exc):
-                call(run, sink._lose, exc, generation)
+                call(run, sink.lose, exc, generation)
             else:  # a frame python-can could not parse
-                call(run, sink._count_bad, 1, generation)
+                call(run, sink.count_bad, 1, generation)
         raise NotImplementedError
 
     def stop(self) -> None:

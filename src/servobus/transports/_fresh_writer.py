@@ -43,8 +43,6 @@ class FreshWriter:
         self._clock = clock
         #: loop time the port last took bytes from us
         self.written_at = 0.0
-        #: times the OS output buffer was flushed
-        self.flushes = 0
         self._blocked = False  # the port's last write took nothing (or part): wait before the next
 
     def reset(self) -> None:
@@ -72,7 +70,7 @@ class FreshWriter:
             now = clock()
             if deadline is not None and now > deadline:  # went stale while we waited
                 if done:  # a cut frame must not sit in front of the next one
-                    self._flush(port)
+                    port.flush_output()
                 return None
             if self._blocked:
                 # The port took nothing last time: wait for room (event-driven) before writing again;
@@ -80,7 +78,7 @@ class FreshWriter:
                 timeout = None if deadline is None else max(deadline - now, 0.0)
                 if not await port.wait_writable(timeout):
                     if done:
-                        self._flush(port)
+                        port.flush_output()
                     return None  # stale before the port had room
                 self._blocked = False
             try:
@@ -112,9 +110,5 @@ class FreshWriter:
         limit = self._stale_after_s
         if limit is None or now - self.written_at <= limit:
             return
-        self._flush(port)
+        port.flush_output()
         self.written_at = now  # once per stall period, not on every poll
-
-    def _flush(self, port: SerialPort) -> None:
-        if port.flush_output():
-            self.flushes += 1

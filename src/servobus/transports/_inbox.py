@@ -5,12 +5,11 @@ from __future__ import annotations
 import logging
 from collections import deque
 from collections.abc import AsyncIterator, Callable, Sequence
-from typing import TYPE_CHECKING, Generic, TypeVar
+from typing import Generic, TypeVar
 
 from servobus.errors import TransportError
 from servobus.runtime import Runtime
 from servobus.transports._waiters import WaiterList
-from servobus.transports.events import TransportState
 
 __all__ = ["Inbox", "ReceiveSide"]
 
@@ -26,14 +25,31 @@ class Inbox(Generic[RxT]):
         name: the transport's, for logs.
         capacity: frames buffered for readers before the oldest are dropped.
         overflow: ``overflow(count)`` when frames were dropped for want of a reader.
+        serving: the transport's loop while it is open; else raises why it is not (a reader waits
+            only on an open transport).
+        closed: whether the transport is closed (an ``async for`` then ends instead of raising).
+
+    Raises:
+        ValueError: a capacity of no frames.
     """
 
-    __slots__ = ("_capacity", "_name", "_overflow", "consumer", "frames", "readers")
+    __slots__ = ("_capacity", "_name", "_overflow", "closed", "consumer", "frames", "readers", "serving")
 
-    def __init__(self, name: str, capacity: int, overflow: Callable[[int], object]) -> None:
+    def __init__(
+        self,
+        name: str,
+        capacity: int,
+        overflow: Callable[[int], object],
+        serving: Callable[[], Runtime],
+        closed: Callable[[], bool],
+    ) -> None:
+        if capacity < 1:
+            raise ValueError(f"rx_buffer={capacity} must be at least 1")
         self._name = name
         self._capacity = capacity
         self._overflow = overflow
+        self.serving = serving
+        self.closed = closed
         self.frames: deque[RxT] = deque()
         self.readers = WaiterList()
         self.consumer: Callable[[list[RxT]], object] | None = None
@@ -64,9 +80,13 @@ class Inbox(Generic[RxT]):
         except Exception:
             logger.exception("%s: consumer %r failed", self._name, consumer)
 
-    async def wait(self, runtime: Runtime) -> None:
-        """Until frames arrive (or the readers are failed)."""
-        await self.readers.park(runtime)
+    async def wait(self) -> None:
+        """Until frames arrive (or the readers are failed).
+
+        Raises:
+            TransportError: the transport is not open.
+        """
+        await self.readers.park(self.serving())
 
     def take(self, max_frames: int | None) -> list[RxT]:
         buffered = self.frames
@@ -78,15 +98,10 @@ class Inbox(Generic[RxT]):
 
 
 class ReceiveSide(Generic[RxT]):
-    """A transport's receiving API over its :class:`Inbox` (a base class of Transport)."""
+    """A link's receiving API over the :class:`Inbox` it owns (a base class of Transport)."""
 
-    _inbox: Inbox[RxT]
-    _state: TransportState
-    _runtime: Runtime | None
-
-    if TYPE_CHECKING:  # (the transport's; declared here for the type checker only)
-
-        def _error(self) -> TransportError: ...
+    def __init__(self, inbox: Inbox[RxT]) -> None:
+        self._inbox = inbox
 
     def set_consumer(self, consumer: Callable[[list[RxT]], object] | None) -> None:
         """Push delivery: call ``consumer(frames)`` on the loop with every received batch.
@@ -107,21 +122,18 @@ class ReceiveSide(Generic[RxT]):
         Raises:
             TransportError: the device is lost or the transport closed, and nothing is buffered.
         """
-        buffered = self._inbox.frames
+        inbox = self._inbox
+        buffered = inbox.frames
         while not buffered:
-            await self._wait_rx()
+            await inbox.wait()
         return buffered.popleft()
 
     async def receive_batch(self, max_frames: int | None = None) -> list[RxT]:
         """Every buffered frame (at most ``max_frames``), waiting for at least one."""
-        while not self._inbox.frames:
-            await self._wait_rx()
-        return self._inbox.take(max_frames)
-
-    async def _wait_rx(self) -> None:
-        if self._state is not TransportState.OPEN or self._runtime is None:
-            raise self._error()
-        await self._inbox.wait(self._runtime)
+        inbox = self._inbox
+        while not inbox.frames:
+            await inbox.wait()
+        return inbox.take(max_frames)
 
     async def __aiter__(self) -> AsyncIterator[RxT]:
         """Received frames until the transport is closed; a loss raises TransportError."""
@@ -129,6 +141,6 @@ class ReceiveSide(Generic[RxT]):
             try:
                 yield await self.receive()
             except TransportError:
-                if self._state is TransportState.CLOSED:
+                if self._inbox.closed():
                     return
                 raise

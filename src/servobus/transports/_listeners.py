@@ -67,9 +67,13 @@ class Listeners:
 
 
 class EventSource:
-    """A link's listener API over its :class:`Listeners` (a base class of Transport and LinkBase)."""
+    """A link's name and events: listeners called on the loop, or the same events as a stream (a base
+    class of Transport, which owns both)."""
 
-    _listeners: Listeners
+    def __init__(self, name: str) -> None:
+        #: a label for errors, logs and threads
+        self.name = name
+        self._listeners = Listeners(name)
 
     def add_listener(self, listener: Listener) -> None:
         """Call ``listener(event)`` on the loop for every event; its exceptions are logged, not raised."""

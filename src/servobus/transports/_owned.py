@@ -71,6 +71,16 @@ class OwnedTaskGroup:
         """Where the link starts its tasks (None while the group is not entered)."""
         return self._tasks
 
+    def open_tasks(self) -> LinkTasks:
+        """The group's task starter while it is open.
+
+        Raises:
+            RuntimeError: the link is not open (no group).
+        """
+        if self._tasks is None:
+            raise RuntimeError(f"{self._name}: no task group: the link is not open")
+        return self._tasks
+
     async def enter(self) -> TaskGroup:
         """Enter a new task group in the calling task.
 

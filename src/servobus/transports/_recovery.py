@@ -1,18 +1,19 @@
-"""A transport's loss and recovery: fail everything at once, then reopen with exponential backoff."""
+"""A transport's recovery: the task that reopens a lost device, with exponential backoff.
+
+The transport owns its state and does what a loss means to it (fail its waiters, purge its queue);
+this owns only the reopening: when to try again, and how long to wait between tries.
+"""
 
 from __future__ import annotations
 
 import logging
-from typing import TYPE_CHECKING, Any
+from collections.abc import Awaitable, Callable
 
 import anyio
 
 from servobus.errors import TransportError
 from servobus.runtime import Runtime, Waiter
-from servobus.transports.events import TransportState
-
-if TYPE_CHECKING:
-    from servobus.transports.base import Transport
+from servobus.transports.stats import TransportStats
 
 __all__ = ["Recovery"]
 
@@ -20,42 +21,63 @@ logger = logging.getLogger("servobus.transports")
 
 
 class Recovery:
-    """What a transport does when its device fails, and the task that brings it back.
+    """The task that brings a lost device back.
 
     The task (:meth:`watch`) runs from ``open()`` to ``close()`` in the transport's task group and
-    waits for a loss: a loss is often reported from a loop callback (a reader's ``add_reader``
-    callback, a thread's ``call_soon_threadsafe``), where no task can be started on asyncio.
+    waits for a loss (:meth:`lost`): a loss is often reported from a loop callback (a reader's
+    ``add_reader`` callback, a thread's ``call_soon_threadsafe``), where no task can be started on
+    asyncio.
 
     Args:
-        transport: the transport (its state, waiters, queue and ``_connect``/``_disconnect``).
+        name: the transport's, for logs.
         reopen: reopen by itself after a loss.
         backoff_s: (first, longest) delay between reopen attempts; it doubles each time.
+        stats: the transport's counters (``losses``, ``reopens`` are counted here).
+        release: releases the lost device (never raises for one already gone).
+        reconnect: one attempt to reopen the device (raises while it is away): whether the
+            transport still waits for it (False: it was closed meanwhile).
+        reopened: the transport serves again (called once the reopen is counted).
     """
 
-    __slots__ = ("_backoff_s", "_pending", "_signal", "_transport", "reopen")
+    __slots__ = (
+        "_backoff_s",
+        "_name",
+        "_pending",
+        "_reconnect",
+        "_release",
+        "_reopened",
+        "_signal",
+        "_stats",
+        "reopen",
+    )
 
-    def __init__(self, transport: Transport[Any, Any], reopen: bool, backoff_s: tuple[float, float]) -> None:
+    def __init__(
+        self,
+        name: str,
+        reopen: bool,
+        backoff_s: tuple[float, float],
+        stats: TransportStats,
+        release: Callable[[], Awaitable[None]],
+        reconnect: Callable[[], Awaitable[bool]],
+        reopened: Callable[[], None],
+    ) -> None:
         first, longest = backoff_s
         if not 0 < first <= longest:
             raise ValueError(f"reopen_backoff_s={backoff_s} must be 0 < first <= longest")
-        self._transport = transport
+        self._name = name
         self.reopen = reopen
         self._backoff_s = (first, longest)
+        self._stats = stats
+        self._release = release
+        self._reconnect = reconnect
+        self._reopened = reopened
         self._pending = False  # a loss not yet taken up by watch()
         self._signal: Waiter[None] | None = None  # what watch() waits on
 
-    def lose(self, cause: BaseException) -> None:
-        """The open connection's device failed (the transport checked it is the open one)."""
-        transport = self._transport
-        logger.warning("%s: device lost: %s", transport.name, cause)
-        transport._stats.losses += 1
-        transport._generation += 1
-        transport._failure = ("device lost", cause)
-        transport._set_state(TransportState.LOST, cause)
-        transport._sending.stop()
-        transport._sending.purge("purged")
-        transport._inbox.readers.fail_all(transport._error)
-        transport._sending.idle.fail_all(transport._error)
+    def lost(self, cause: BaseException) -> None:
+        """The open connection's device failed (the transport has done what a loss means to it)."""
+        logger.warning("%s: device lost: %s", self._name, cause)
+        self._stats.losses += 1
         self._pending = True
         if self._signal is not None and not self._signal.done():
             self._signal.set_result(None)
@@ -74,26 +96,24 @@ class Recovery:
 
     async def _run(self) -> None:
         """Release the lost device, then (if asked) reopen it until it answers or the transport closes."""
-        transport = self._transport
         try:
-            await transport._disconnect()
+            await self._release()
         except Exception as exc:  # the device is gone already: nothing to release
-            logger.debug("%s: disconnect after a loss: %s", transport.name, exc)
+            logger.debug("%s: disconnect after a loss: %s", self._name, exc)
         if not self.reopen:
             return
         delay, longest = self._backoff_s
-        while transport._state is TransportState.LOST:
+        while True:
             await anyio.sleep(delay)
-            transport._generation += 1
             try:
-                await transport._connect()
+                waited_for = await self._reconnect()
             except Exception as exc:  # the device is still away (or refuses): try again later
                 log = logger.debug if isinstance(exc, TransportError) else logger.warning
-                log("%s: reopen failed: %s", transport.name, exc)
+                log("%s: reopen failed: %s", self._name, exc)
                 delay = min(2 * delay, longest)
                 continue
-            if transport._state is not TransportState.LOST:  # closed meanwhile: close() releases it
-                return
-            transport._stats.reopens += 1
-            logger.info("%s: reopened", transport.name)
-            transport._connected()
+            if waited_for:
+                self._stats.reopens += 1
+                logger.info("%s: reopened", self._name)
+                self._reopened()
+            return

@@ -2,22 +2,18 @@
 
 from __future__ import annotations
 
-import logging
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Generic, TypeVar
+from typing import Any, Generic, TypeVar
 
 import anyio
 
 from servobus.errors import TransportError
+from servobus.runtime import Runtime
 from servobus.transports._owned import LinkTasks
 from servobus.transports._waiters import Alarm, WaiterList
-from servobus.transports.events import FramesDropped, TransportEvent
 from servobus.transports.stats import TransportStats
-
-if TYPE_CHECKING:
-    from servobus.transports.base import Transport
 
 __all__ = [
     "BusOffError",
@@ -25,11 +21,8 @@ __all__ = [
     "SendQueue",
     "SendQueueFull",
     "SendReporter",
-    "SendReports",
     "not_sent_error",
 ]
-
-logger = logging.getLogger("servobus.transports")
 
 #: ``reporter(handle, sent_at, reason)`` (contract.SendReporter; the handle typed Any, so that a
 #: sender whose reporter takes its own handle type, a Bus's Request, type-checks against it)
@@ -80,30 +73,74 @@ class Outgoing(Generic[TxT]):
 class SendQueue(Generic[TxT]):
     """Frames waiting for the wire, and the writer task (one per connection) that hands them over.
 
-    The writer takes up to ``transport.batch_size`` frames at a time, drops those older than
-    ``stale_after_s``, and awaits ``transport._transmit(batch)``. It runs in the transport's task
-    group, inside a cancel scope of its own that a loss or a close cancels.
+    The queue owns its items and its writer; the transport owns everything else and hands the
+    queue what it needs: ``transmit(batch)`` (its device), ``dropped(reason, handles)`` (its
+    reports and counters), ``lose(cause, generation)`` (its recovery), its counters (a full queue
+    is counted in ``queue_full``), its ``clock`` and ``serving()`` (its loop while it is open, else
+    raises why not: what :meth:`drain` waits on). The writer takes up to ``batch_size`` frames at a
+    time, drops those older than ``stale_after_s``, and awaits ``transmit(batch)``. It runs in the
+    transport's task group, inside a cancel scope of its own that a loss or a close cancels
+    (:meth:`stop`).
     """
 
-    __slots__ = ("_alarm", "_scope", "_transport", "idle", "items", "size", "stale_after_s", "transmitting")
+    __slots__ = (
+        "_alarm",
+        "_dropped",
+        "_lose",
+        "_name",
+        "_scope",
+        "_stats",
+        "_transmit",
+        "batch_size",
+        "clock",
+        "idle",
+        "items",
+        "serving",
+        "size",
+        "stale_after_s",
+        "transmitting",
+    )
 
-    def __init__(self, transport: Transport[Any, TxT], size: int, stale_after_s: float | None) -> None:
-        self._transport = transport
+    def __init__(
+        self,
+        name: str,
+        size: int,
+        stale_after_s: float | None,
+        batch_size: int,
+        stats: TransportStats,
+        transmit: Callable[[list[Outgoing[TxT]]], Awaitable[None]],
+        dropped: Callable[[str, list[Any]], None],
+        lose: Callable[[BaseException, int], None],
+        clock: Callable[[], float],
+        serving: Callable[[], Runtime],
+    ) -> None:
+        self._name = name
         self.size = size
         self.stale_after_s = stale_after_s
+        self.batch_size = batch_size
+        self._stats = stats
+        self._transmit = transmit
+        self._dropped = dropped
+        self._lose = lose
+        self.clock = clock
+        self.serving = serving
         self.items: deque[Outgoing[TxT]] = deque()
         self.transmitting = False
-        #: tasks in drain(), woken when the queue is empty and nothing is being written
+        #: tasks in the transport's drain(), woken when the queue is empty and nothing is being written
         self.idle = WaiterList()
         self._alarm = Alarm()  # the writer's, while the queue is empty
         self._scope: anyio.CancelScope | None = None
 
+    @property
+    def busy(self) -> bool:
+        """Frames are queued or being written."""
+        return bool(self.items) or self.transmitting
+
     def put(self, outgoing: Outgoing[TxT]) -> None:
         if len(self.items) >= self.size:
-            transport = self._transport
-            transport._stats.queue_full += 1
+            self._stats.queue_full += 1
             raise SendQueueFull(
-                f"{transport.name}: send queue full ({self.size} frames); await drain() before sending more"
+                f"{self._name}: send queue full ({self.size} frames); await drain() before sending more"
             )
         self.items.append(outgoing)
         self._alarm.ring()
@@ -112,21 +149,18 @@ class SendQueue(Generic[TxT]):
         """Until every queued frame has been written or dropped.
 
         Raises:
-            TransportError: the transport is not open, or stops being open meanwhile.
+            TransportError: the link is not open, or stops being open meanwhile.
         """
-        transport = self._transport
-        while self.items or self.transmitting:
-            if not transport.is_open or transport._runtime is None:
-                raise transport._error()
-            await self.idle.park(transport._runtime)
-        if not transport.is_open:
-            raise transport._error()
+        serving = self.serving
+        while self.busy:
+            await self.idle.park(serving())
+        serving()
 
-    def start(self, tasks: LinkTasks, generation: int) -> None:
+    def start(self, tasks: LinkTasks, runtime: Runtime, generation: int) -> None:
         """Start this connection's writer (a loss or a close stops it: :meth:`stop`)."""
         self.stop()
         self._scope = scope = anyio.CancelScope()
-        tasks.start_soon(self._run, scope, generation, name=f"{self._transport.name} writer")
+        tasks.start_soon(self._run, scope, runtime, generation, name=f"{self._name} writer")
 
     def stop(self) -> None:
         if self._scope is not None:
@@ -134,93 +168,50 @@ class SendQueue(Generic[TxT]):
             self._scope = None
         self.transmitting = False
 
+    def fail(self, error: Callable[[], BaseException]) -> None:
+        """The device is gone or the transport closed: stop the writer, purge what is queued (reported
+        ``"purged"``), and every task in drain() raises ``error()``."""
+        self.stop()
+        self.purge("purged")
+        self.idle.fail_all(error)
+
     def purge(self, reason: str) -> None:
         """Drop every queued frame (counted and reported with ``reason``)."""
         if self.items:
             dropped = list(self.items)
             self.items.clear()
-            self._transport._dropped(reason, [o.handle for o in dropped])
+            self._dropped(reason, [o.handle for o in dropped])
 
-    async def _run(self, scope: anyio.CancelScope, generation: int) -> None:
-        transport = self._transport
-        lane = transport._runtime
-        assert lane is not None  # started by an open transport
+    async def _run(self, scope: anyio.CancelScope, runtime: Runtime, generation: int) -> None:
         items = self.items
         with scope:
             while True:
                 if not items:
                     self.idle.wake_all()
-                    await self._alarm.wait(lane)
+                    await self._alarm.wait(runtime)
                     continue
-                batch = [items.popleft() for _ in range(min(transport.batch_size, len(items)))]
-                batch = self._drop_stale(batch, transport._now())
+                batch = [items.popleft() for _ in range(min(self.batch_size, len(items)))]
+                batch = self._drop_stale(batch, runtime.time())
                 if not batch:
                     continue
                 self.transmitting = True
                 try:
-                    await transport._transmit(batch)
+                    await self._transmit(batch)
                 except anyio.get_cancelled_exc_class():
                     raise
                 except Exception as exc:  # a transmit bug must not leave the queue stuck forever
-                    transport._lose(exc, generation)
+                    self._lose(exc, generation)
                     return
                 finally:
                     self.transmitting = False
                     # not written: lost, closed or failed
-                    transport._dropped("purged", [o.handle for o in batch])
-                if generation != transport._generation:  # _transmit lost the device
+                    self._dropped("purged", [o.handle for o in batch])
+                if scope.cancel_called:  # the transmit lost the device (stop() cancelled this writer)
                     return
 
     def _drop_stale(self, batch: list[Outgoing[TxT]], now: float) -> list[Outgoing[TxT]]:
         limit = self.stale_after_s
         if limit is None or now - batch[0].queued_at <= limit:  # the oldest is first
             return batch
-        self._transport._dropped("stale", [o.handle for o in batch if now - o.queued_at > limit])
+        self._dropped("stale", [o.handle for o in batch if now - o.queued_at > limit])
         return [o for o in batch if now - o.queued_at <= limit]
-
-
-class SendReports:
-    """A transport's send reports and drop counts (a base class of Transport): every frame
-    :meth:`send` accepted is reported once, by the handle it was sent with."""
-
-    name: str
-    _stats: TransportStats
-    _reporter: SendReporter | None
-
-    if TYPE_CHECKING:  # (the transport's; declared here for the type checker only)
-
-        def _now(self) -> float: ...
-
-        def _emit(self, event: TransportEvent) -> None: ...
-
-    def _dropped(self, reason: str, handles: Sequence[Any] | int, counter: str | None = None) -> None:
-        """Count frames that will never be sent (in the counter named ``counter``, or ``reason``),
-        and report each one whose handle is known with ``reason``."""
-        count = handles if isinstance(handles, int) else len(handles)
-        if count:
-            counter = counter or reason
-            setattr(self._stats, counter, getattr(self._stats, counter) + count)
-            self._emit(FramesDropped(counter, count, self._now()))
-            reporter = self._reporter
-            if reporter is not None and not isinstance(handles, int):
-                for handle in handles:
-                    self._call(reporter, handle, None, reason)
-
-    def _sent(self, handle: Any, sent_at: float) -> None:
-        """Report that the frame sent with ``handle`` left at ``sent_at`` (counting is the subclass's)."""
-        if self._reporter is not None:
-            self._call(self._reporter, handle, sent_at, None)
-
-    def set_send_reporter(self, reporter: SendReporter | None) -> None:
-        """Call ``reporter(handle, sent_at, None)`` for every frame that left, and
-        ``reporter(handle, None, reason)`` for every one dropped after :meth:`send` accepted it.
-
-        Called on the loop; its exceptions are logged, never raised into the transport.
-        """
-        self._reporter = reporter
-
-    def _call(self, callback: Callable[..., object], *args: object) -> None:
-        try:
-            callback(*args)
-        except Exception:
-            logger.exception("%s: callback %r failed", self.name, callback)

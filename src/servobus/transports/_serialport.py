@@ -26,7 +26,8 @@ import fcntl
 import os
 import struct
 import termios
-from typing import Any, Protocol
+from collections.abc import Callable
+from typing import Any
 
 import anyio
 
@@ -35,24 +36,15 @@ from servobus.runtime import Runtime
 from servobus.transports._owned import LinkTasks
 from servobus.transports._watch import ReadWatch
 
-__all__ = ["Owner", "SerialPort"]
+__all__ = ["SerialPort"]
 
 READ_SIZE = 16384  # bytes taken from the port per wake-up, at most
 _TIOCOUTQ_ARG = bytes(4)
 
 
-class Owner(Protocol):
-    """The transport a port's reads go to (tagged with its connection's generation)."""
-
-    name: str
-
-    def _on_bytes(self, data: bytes, generation: int) -> None: ...
-
-    def _lose(self, cause: BaseException, generation: int | None = None) -> None: ...
-
-
 class SerialPort:
-    """One open port: reads go to ``owner`` from :meth:`open` until :meth:`close`.
+    """One open port: what it reads goes to ``on_bytes(data)`` from :meth:`open` until :meth:`close`,
+    and its failure (EOF, an OS error) to ``lose(cause)``, once.
 
     Attributes:
         serial: the pyserial object (for the port's settings; never read or written through it).
@@ -60,20 +52,32 @@ class SerialPort:
         failed: the port failed (reported to the owner once) or was closed: write no more.
     """
 
-    def __init__(self, owner: Owner, generation: int, serial: Any, fd: int, read_size: int) -> None:
+    def __init__(
+        self,
+        name: str,
+        on_bytes: Callable[[bytes], object],
+        lose: Callable[[BaseException], object],
+        serial: Any,
+        fd: int,
+        read_size: int,
+        runtime: Runtime,
+        tasks: LinkTasks,
+    ) -> None:
         self.serial = serial
         self.fd = fd
         self.failed = False
-        self._owner = owner
-        self._generation = generation
+        self._on_bytes = on_bytes
+        self._lose = lose
         self._read_size = read_size
-        self._watch: ReadWatch | None = None
+        self._watch: ReadWatch | None = ReadWatch(runtime, tasks, fd, self._on_readable, name)
+        self._watch.start()
 
     @classmethod
     def open(
         cls,
-        owner: Owner,
-        generation: int,
+        name: str,
+        on_bytes: Callable[[bytes], object],
+        lose: Callable[[BaseException], object],
         port: str,
         runtime: Runtime,
         tasks: LinkTasks,
@@ -81,7 +85,7 @@ class SerialPort:
         read_size: int = READ_SIZE,
         **serial_options: Any,
     ) -> SerialPort:
-        """Open ``port`` with pyserial and start reading it.
+        """Open ``port`` with pyserial and start reading it (``name``: the owner's, for errors).
 
         Raises:
             TransportError: the port cannot be opened or has no file descriptor (chained to the cause).
@@ -91,17 +95,14 @@ class SerialPort:
         try:
             device = serial.serial_for_url(port, timeout=0, write_timeout=0, **serial_options)
         except (serial.SerialException, OSError, ValueError) as exc:
-            raise TransportError(f"{owner.name}: cannot open: {exc}") from exc
+            raise TransportError(f"{name}: cannot open: {exc}") from exc
         try:
             fd = device.fileno()
             os.set_blocking(fd, False)
         except (AttributeError, OSError, ValueError, TypeError, NotImplementedError) as exc:
             device.close()
-            raise TransportError(f"{owner.name}: {port!r} has no file descriptor to read") from exc
-        line = cls(owner, generation, device, fd, read_size)
-        line._watch = ReadWatch(runtime, tasks, fd, line._on_readable, owner.name)
-        line._watch.start()
-        return line
+            raise TransportError(f"{name}: {port!r} has no file descriptor to read") from exc
+        return cls(name, on_bytes, lose, device, fd, read_size, runtime, tasks)
 
     def _on_readable(self) -> None:
         try:
@@ -114,13 +115,13 @@ class SerialPort:
         if not data:
             self._fail(ConnectionError("the port closed (end of file)"))
             return
-        self._owner._on_bytes(data, self._generation)
+        self._on_bytes(data)
 
     def _fail(self, cause: BaseException) -> None:
         if self._watch is not None:
             self._watch.cancel()  # a vanished port stays readable: stop watching it
         self.failed = True
-        self._owner._lose(cause, self._generation)
+        self._lose(cause)
 
     # ----------------------------------------------------------------- writing
 

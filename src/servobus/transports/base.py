@@ -1,4 +1,16 @@
-"""The transport base: one device, a bounded send queue and its writer, a receive side, loss and reopen.
+"""The one link base: one device, a bounded send queue and its writer, a receive side, loss and reopen.
+
+Every link is a :class:`Transport`: the device transports (CAN, SLCAN, RS485), the in-process
+simulator, and the test and bench links with no device (they override ``send`` and report by
+themselves). Who owns what: the transport owns its life (state, connection generation, open and
+close, loss and reopen) and the hot path of a send (``_enqueue``); its base
+:class:`~servobus.transports._send_side.SendSide` owns the counters, the send queue
+(:mod:`~servobus.transports._sending`), the send reports and the bus-off gate
+(:mod:`~servobus.transports._busoff`); its base :class:`~servobus.transports._inbox.ReceiveSide`
+owns the received frames (:class:`~servobus.transports._inbox.Inbox`); the events are
+:class:`~servobus.transports._listeners.EventSource`'s; the reopening is a task of
+:class:`~servobus.transports._recovery.Recovery`. Each part is handed what it needs of the others
+at construction (a clock, a callable), and none reaches into another's state.
 
 Everything here runs on anyio, on asyncio or on trio: the loop's hot-path operations come from
 :func:`servobus.runtime.current` (taken by :meth:`Transport.open`), background tasks live in a task
@@ -31,38 +43,44 @@ outlives ``close()``, and an unexpected error of those tasks is raised by it, no
 
 **The subclass interface** (what a concrete transport writes, and what it may call):
 
-* ``async _connect()``: open the device (tag callbacks with ``self._generation``); start its reader
-  tasks in ``self._tasks`` (the transport's task group, there from ``_connect`` on, on a first open
-  and on every reopen; ``_connect`` always runs in a task: ``open()``'s or the recovery task's, and
-  anyio starts no task from a bare loop callback); raise TransportError when it cannot.
-* ``async _disconnect()``: release the device; never raises for a device already gone. It runs
-  after the task group's tasks have ended on ``close()``, and in the recovery task after a loss
-  (the reader tasks of the lost connection must then stop by themselves: check the generation).
+* ``async _connect()`` (default: nothing to open): open the device (tag callbacks with
+  ``self._generation``); start its reader tasks in ``self._tasks`` (the transport's task group, there
+  from ``_connect`` on, on a first open and on every reopen; ``_connect`` always runs in a task:
+  ``open()``'s or the recovery task's, and anyio starts no task from a bare loop callback); raise
+  TransportError when it cannot.
+* ``async _disconnect()`` (default: nothing to release): release the device; never raises for a
+  device already gone. It runs after the task group's tasks have ended on ``close()``, and in the
+  recovery task after a loss (the reader tasks of the lost connection must then stop by themselves:
+  check the generation).
 * ``async _transmit(batch)``: write a list of :class:`Outgoing` in order, taking each off the front
   as it goes; report each with ``self._sent(outgoing.handle, sent_at)``; call ``_lose`` on failure.
   What is still in ``batch`` when it returns or is cancelled is reported purged by the base.
+  (Only a link that queues, through ``_enqueue``, writes one.)
 * ``_write_now(item, handle) -> bool`` (only while ``self._direct``): write from ``send()``'s
   stack; True when written (counted and reported with ``_sent(handle, now)`` by the subclass).
 * ``send(frame, handle=None, ...)``: a subclass's public send calls
-  ``self._enqueue(item, hold_s, handle)``.
+  ``self._enqueue(item, hold_s, handle)``, or writes and reports by itself (``self._handle(frame,
+  handle)`` is the handle a report carries; ``_sent(handle, at, frame)`` counts the frame too).
 * It calls (on the loop, from a task or a loop callback): ``_deliver(frames)``, ``_lose(cause,
   generation)`` (a loss wakes the recovery task, which runs from open to close), ``_sent(handle,
   sent_at)``, ``_dropped(reason, handles_or_count)``, ``_set_state``, ``_emit(event)``, ``_now()``,
-  ``_error()``; it counts into ``self._stats`` and ``self._load``; ``self._runtime`` (the
+  ``_error()``, and the bus-off state ``self._bus_off`` (``error_frame``, ``went_off``,
+  ``came_back``); it counts into ``self._stats`` and ``self._load``; ``self._runtime`` (the
   :class:`~servobus.runtime.Runtime`: ``time``, ``call_soon``, ``call_soon_threadsafe``,
   ``waiter``) replaces the asyncio loop; ``self._tasks`` is where its tasks start.
 * It declares its line: attributes or properties ``half_duplex``, ``bitrate``, ``gap_s``,
-  ``turnaround_s`` (and ``stale_after_s`` from the constructor) make :attr:`Transport.rules`.
+  ``turnaround_s``, ``exact_times`` (and ``stale_after_s`` from the constructor) make
+  :attr:`Transport.rules`; or it sets them whole (``self.rules = LineRules(...)``).
 """
 
 from __future__ import annotations
 
-import abc
 import copy
 import logging
 import time
 import warnings
 from collections.abc import Callable
+from functools import partial
 from types import TracebackType
 from typing import Any, ClassVar, Generic, Self, TypeVar
 
@@ -70,18 +88,15 @@ import anyio
 
 from servobus import runtime as _runtime
 from servobus.errors import TransportError
-from servobus.transports._busoff import BusOffState
 from servobus.transports._inbox import Inbox, ReceiveSide
-from servobus.transports._listeners import EventSource, Listeners
 from servobus.transports._owned import LinkTasks, OwnedTaskGroup, owned_exit
 from servobus.transports._recovery import Recovery
+from servobus.transports._send_side import SendSide
 from servobus.transports._sending import (
     BusOffError,
     Outgoing,
-    SendQueue,
     SendQueueFull,
     SendReporter,
-    SendReports,
 )
 from servobus.transports._waiters import WaiterList
 from servobus.transports.contract import LineRules
@@ -99,14 +114,31 @@ TxT = TypeVar("TxT")
 Consumer = Callable[[list[RxT]], object]
 
 
-class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, abc.ABC, Generic[RxT, TxT]):
+def declared_rules(link: object, stale_after_s: float | None) -> LineRules:
+    """The rules a link declares with attributes or properties ``half_duplex``, ``bitrate``,
+    ``gap_s``, ``turnaround_s`` and ``exact_times`` (those it lacks take LineRules' defaults)."""
+    return LineRules(
+        half_duplex=bool(getattr(link, "half_duplex", False)),
+        bitrate=getattr(link, "bitrate", None),
+        gap_s=float(getattr(link, "gap_s", 0.0) or 0.0),
+        turnaround_s=float(getattr(link, "turnaround_s", 0.0) or 0.0),
+        stale_after_s=stale_after_s,
+        exact_times=bool(getattr(link, "exact_times", False)),
+    )
+
+
+class Transport(ReceiveSide[RxT], SendSide[TxT], Generic[RxT, TxT]):
     """Frames out through a bounded queue, frames in through a consumer or a buffer, one device.
+
+    The one base of every link: the device transports, the in-process simulator, and the test and
+    bench links that override :meth:`send` and report by themselves (``_sent``, ``_dropped``,
+    ``_deliver``); a link with no device to open keeps the no-op ``_connect``/``_disconnect``.
 
     Use it as an async context manager (``async with CanTransport(...) as bus:``), or call
     :meth:`open` and :meth:`close` from the same task.
 
     Args:
-        name: a label for errors and logs.
+        name: a label for errors and logs (default: the class's ``name``).
         queue_size: frames the send queue holds before :meth:`send` raises :class:`SendQueueFull`.
         rx_buffer: received frames held for the reader before the oldest are dropped.
         stale_after_s: a queued frame older than this when its turn comes is dropped, not sent
@@ -118,72 +150,69 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, abc.ABC
     #: frames the writer hands to :meth:`_transmit` at once (a half-duplex line takes one at a time,
     #: so each frame's age is checked when its own transaction starts)
     batch_size: ClassVar[int] = 64
+    #: while bus-off, one frame this often still goes to the adapter (the others fail at once)
+    bus_off_probe_s: ClassVar[float] = 0.02
+    name: str = "link"
+    #: the rules when declared whole (``self.rules = ...``); else they come from attributes
+    _rules: LineRules | None = None
 
     def __init__(
         self,
         *,
-        name: str,
+        name: str | None = None,
         queue_size: int = 256,
         rx_buffer: int = 65536,
         stale_after_s: float | None = 0.5,
         reopen: bool = True,
         reopen_backoff_s: tuple[float, float] = (0.05, 2.0),
     ) -> None:
-        if queue_size < 1 or rx_buffer < 1:
-            raise ValueError(f"queue_size={queue_size} and rx_buffer={rx_buffer} must be at least 1")
-        if stale_after_s is not None and stale_after_s <= 0:
-            raise ValueError(f"stale_after_s={stale_after_s} must be positive (or None)")
-        self.name = name
-        self._stale_after_s = stale_after_s
-        self._recovery = Recovery(self, reopen, reopen_backoff_s)
+        # (A SimTransport's instance keeps under 30 attributes, CPython's shared-key limit: at 30 its
+        # send path measured 15% slower. test_one_base.py holds it there.)
+        name = self.name if name is None else name
         self._state = TransportState.CLOSED
-        self._stats = TransportStats()
+        self._runtime: _runtime.Runtime | None = None
+        SendSide.__init__(  # the counters, the queue, the send reports, bus-off, the events
+            self,
+            name,
+            self._now,
+            self._serving,
+            queue_size=queue_size,
+            stale_after_s=stale_after_s,
+            batch_size=self.batch_size,
+            probe_s=self.bus_off_probe_s,
+            transmit=self._transmit,
+            lose=self._lose,
+        )
+        closed = lambda: self._state is TransportState.CLOSED  # noqa: E731 (an "async for" ends then)
+        ReceiveSide.__init__(
+            self, Inbox(name, rx_buffer, partial(self._dropped, "rx_overflow"), self._serving, closed)
+        )
+        self._recovery = Recovery(
+            name, reopen, reopen_backoff_s, self._stats, self._disconnect, self._reconnect, self._connected
+        )
         self._load = LoadMeter()
         self._load_known = False  # subclasses set it when they know the line's bit rate
-        self._sending: SendQueue[TxT] = SendQueue(self, queue_size, stale_after_s)
-        self._queue = self._sending.items  # the send queue itself (read on every send)
-        self._inbox: Inbox[RxT] = Inbox(name, rx_buffer, lambda count: self._dropped("rx_overflow", count))
         self._open_waiters = WaiterList()
-        self._listeners = Listeners(name)
         self._owned = OwnedTaskGroup(name)
         self._failure: tuple[str, BaseException | None] | None = ("not open", None)
         self._generation = 0  # bumped per connection: callbacks of an old one are ignored
-        self._runtime: _runtime.Runtime | None = None
         self._ever_opened = False
-        self._reporter: SendReporter | None = None
-        self._off_since: float | None = None  # (BusOffState's; an instance attribute: read on every send)
-        #: set by a subclass whose device never blocks a write: send() then writes at once when
-        #: nothing is queued ahead (see :meth:`_write_now`)
-        self._direct = False
+        self._direct = False  # a subclass whose device never blocks a write sets it: see _write_now
 
-    # ----------------------------------------------------------------- subclass interface
+    # ------------------------------------- subclass interface (each hook: see the module docstring)
 
-    @abc.abstractmethod
     async def _connect(self) -> None:
-        """Open the device and start reading (tasks in ``self._tasks``); tag callbacks with
-        ``self._generation``.
+        """Open the device and start reading; raise TransportError when it cannot."""
 
-        Raises:
-            TransportError: the device cannot be opened (chained to the cause).
-        """
-
-    @abc.abstractmethod
     async def _disconnect(self) -> None:
-        """Stop reading and release the device; must not raise for a device already gone."""
+        """Release the device; never raises for a device already gone."""
 
-    @abc.abstractmethod
     async def _transmit(self, batch: list[Outgoing[TxT]]) -> None:
-        """Write ``batch`` in order, count and report (``_sent(o.handle, at)``) each, and call
-        :meth:`_lose` if the device fails. Take each frame off the front of ``batch`` as it goes
-        out; whatever is left when this returns or is cancelled is reported purged by the base."""
+        """Write ``batch`` (only a link that queues, through :meth:`_enqueue`, writes one)."""
+        raise NotImplementedError
 
     def _write_now(self, item: TxT, handle: Any) -> bool:
-        """Write ``item`` from the caller's stack (only called while ``self._direct`` is True).
-
-        Returns:
-            True when written (counted, and reported with ``_sent(handle, now)``, by the subclass);
-            False to queue it instead (the device cannot take it now).
-        """
+        """Write ``item`` now (only while ``self._direct``): True when written, False to queue it."""
         raise NotImplementedError
 
     def _now(self) -> float:
@@ -200,10 +229,7 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, abc.ABC
     @property
     def _tasks(self) -> LinkTasks:
         """The transport's task group (from :meth:`_connect` on, until :meth:`close`)."""
-        tasks = self._owned.tasks
-        if tasks is None:
-            raise RuntimeError(f"{self.name}: no task group: the transport is not open")
-        return tasks
+        return self._owned.open_tasks()
 
     # ----------------------------------------------------------------- life cycle
 
@@ -212,27 +238,18 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, abc.ABC
         return self._state
 
     @property
-    def stale_after_s(self) -> float | None:
-        """How long a queued frame may wait before it is dropped as stale (None: no limit)."""
-        return self._stale_after_s
-
-    @property
     def rules(self) -> LineRules:
         """The line's rules (the FrameLink contract), from what the subclass declares.
 
         A subclass declares ``half_duplex``, ``bitrate``, ``gap_s`` and ``turnaround_s`` as
         attributes or properties (those it lacks take LineRules' defaults); ``stale_after_s`` is the
-        constructor's.
+        constructor's. Or it sets the rules whole (``self.rules = LineRules(...)``).
         """
-        half_duplex = bool(getattr(self, "half_duplex", False))
-        return LineRules(
-            half_duplex=half_duplex,
-            bitrate=getattr(self, "bitrate", None),
-            gap_s=float(getattr(self, "gap_s", 0.0) or 0.0),
-            turnaround_s=float(getattr(self, "turnaround_s", 0.0) or 0.0),
-            stale_after_s=self._stale_after_s,
-            exact_times=bool(getattr(self, "exact_times", False)),
-        )
+        return self._rules or declared_rules(self, self.stale_after_s)
+
+    @rules.setter
+    def rules(self, rules: LineRules) -> None:
+        self._rules = rules
 
     @property
     def is_open(self) -> bool:
@@ -291,10 +308,9 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, abc.ABC
             return await self._owned.leave(exc_type, exc, tb)
         finally:
             with anyio.CancelScope(shield=True):
-                self._sending.purge("purged")
+                self._sending.fail(self._error)
                 self._open_waiters.fail_all(self._error)
                 self._inbox.readers.fail_all(self._error)
-                self._sending.idle.fail_all(self._error)
                 await self._disconnect()  # also when LOST: the recovery task may not have got to it
                 self._set_state(TransportState.CLOSED)
 
@@ -327,10 +343,20 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, abc.ABC
 
     def _connected(self) -> None:
         self._failure = None
-        self._forget_bus_off()
+        self._bus_off.forget()
         self._set_state(TransportState.OPEN)
-        self._sending.start(self._tasks, self._generation)
+        assert self._runtime is not None  # (set by open())
+        self._sending.start(self._tasks, self._runtime, self._generation)
         self._open_waiters.wake_all()
+
+    async def _reconnect(self) -> bool:
+        """The recovery task's attempt to reopen the device (raises while it is away): whether the
+        transport still waits for it (False: closed meanwhile, and close() releases it)."""
+        if self._state is not TransportState.LOST:
+            return False
+        self._generation += 1
+        await self._connect()
+        return self._state is TransportState.LOST
 
     def _lose(self, cause: BaseException, generation: int | None = None) -> None:
         """The device failed: fail every waiter at once, purge the queue, start reopening.
@@ -339,11 +365,26 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, abc.ABC
         connection): only the first call for the current connection acts. Call it on the loop.
         """
         if self._state is TransportState.OPEN and generation in (None, self._generation):
-            self._recovery.lose(cause)
+            self._recovery.lost(cause)  # (first: counted and logged before anyone hears of it)
+            self._generation += 1
+            self._failure = ("device lost", cause)
+            self._set_state(TransportState.LOST, cause)
+            self._sending.fail(self._error)
+            self._inbox.readers.fail_all(self._error)
 
     def _set_state(self, state: TransportState, cause: BaseException | None = None) -> None:
         self._state = state
         self._emit(StateChanged(state, self._now(), cause))
+
+    def _serving(self) -> _runtime.Runtime:
+        """The loop, while the transport is open (what its waiters park on).
+
+        Raises:
+            TransportError: it is not open, and why.
+        """
+        if self._state is not TransportState.OPEN or self._runtime is None:
+            raise self._error()
+        return self._runtime
 
     def _error(self) -> TransportError:
         """A fresh TransportError saying why the transport cannot serve now, chained to the cause."""
@@ -364,27 +405,14 @@ class Transport(ReceiveSide[RxT], SendReports, BusOffState, EventSource, abc.ABC
         """
         if self._state is not TransportState.OPEN:
             raise self._error()
-        if self._off_since is not None:
-            self._bus_off_gate(self._now())
+        if self._bus_off.since is not None:
+            self._bus_off.gate(self._now())
         if handle is None:
             handle = item
         sending = self._sending
         if self._direct and not self._queue and not sending.transmitting and self._write_now(item, handle):
             return
         sending.put(Outgoing(item, self._now(), hold_s, handle))
-
-    @property
-    def queue_room(self) -> int:
-        """Frames :meth:`send` accepts now without raising :class:`SendQueueFull`."""
-        return self._sending.size - len(self._queue)
-
-    async def drain(self) -> None:
-        """Wait until every queued frame has been written (or dropped by policy).
-
-        Raises:
-            TransportError: the device was lost or the transport closed meanwhile.
-        """
-        await self._sending.drain()
 
     # ----------------------------------------------------------------- counters
 

@@ -9,7 +9,8 @@
 * **Receiving** runs inside the event loop: where the bus has a file descriptor (socketcan,
   slcan and other serial adapters) the loop watches it and reads one frame per readiness, with no
   thread. Buses without one (virtual, most vendor drivers) get a single reader thread, as
-  python-can's own ``Notifier`` does, which hands frames over in batches (``_can_readers``).
+  python-can's own ``Notifier`` does, which hands frames over in batches (``_can_readers``); what
+  they read becomes frames in :mod:`servobus.transports._can_intake`.
 * **Sending** never blocks the loop: python-can's ``send`` is a blocking call on most
   interfaces, so the queued frames go to a worker thread, a batch at a time, in order, with an
   optional minimum gap between frames (``_can_sender``). python-can's ``virtual`` bus never blocks
@@ -52,13 +53,11 @@ import can
 
 from servobus.errors import TransportError
 from servobus.frame import Frame
-from servobus.timing import nominal_frame_time_s
-from servobus.transports._can_readers import Batch, Reader, start_reader
+from servobus.transports._can_intake import CanIntake, exact_filters, wanted_ids
+from servobus.transports._can_readers import Reader, start_reader
 from servobus.transports._can_sender import BlockingSender, SendReport, buffer_full, controller_off
 from servobus.transports._watch import loop_context
 from servobus.transports.base import BusOffError, Outgoing, Transport, logger
-from servobus.transports.contract import LineRules
-from servobus.transports.events import CanErrorClass
 
 __all__ = ["CanTransport", "frame_from_message", "message_from_frame"]
 
@@ -177,6 +176,16 @@ class CanTransport(Transport[Frame, Frame]):
             reopen_backoff_s=reopen_backoff_s,
         )
         self._load_known = self.bitrate is not None
+        self._intake = intake = CanIntake(
+            self.name,
+            self._stats,
+            self._load,
+            generation=lambda: self._generation,
+            deliver=self._deliver,
+            error_frame=self._bus_off.error_frame,
+            lose=self._lose,
+        )
+        intake.bitrate, intake.data_bitrate = self.bitrate, self.data_bitrate
         self._min_gap_s = min_gap_s
         self._sender = BlockingSender(
             min_gap_s=min_gap_s,
@@ -188,18 +197,13 @@ class CanTransport(Transport[Frame, Frame]):
         self._send_lane = anyio.CapacityLimiter(1)  # one batch in the worker at a time
         self._filters: list[can.typechecking.CanFilter] | None = None
         if receive_ids is not None:
-            self._filters = _exact_filters(receive_ids, extended=False)
-        # An application's bus keeps its own filters: the identifiers are checked here instead.
-        self._wanted = _wanted(self._filters) if self._borrowed is not None else None
+            self._filters = exact_filters(receive_ids, extended=False)
+        # An application's bus keeps its own filters: the identifiers are checked by the intake instead.
+        intake.wanted = wanted_ids(self._filters) if self._borrowed is not None else None
         self._bus: can.BusABC | None = None
         self._reader: Reader | None = None
 
     # ----------------------------------------------------------------- public API
-
-    @property
-    def rules(self) -> LineRules:
-        """A full-duplex CAN bus at its nominal bit rate (None when not configured)."""
-        return LineRules(bitrate=self.bitrate, stale_after_s=self._stale_after_s)
 
     def send(self, frame: Frame, handle: object = None) -> None:
         """Queue ``frame``; it is written in order by the writer thread. The send report names
@@ -222,8 +226,8 @@ class CanTransport(Transport[Frame, Frame]):
 
         The filters stay across reopens.
         """
-        self._filters = None if ids is None else _exact_filters(ids, extended=extended)
-        self._wanted = _wanted(self._filters) if self._borrowed is not None else None
+        self._filters = None if ids is None else exact_filters(ids, extended=extended)
+        self._intake.wanted = wanted_ids(self._filters) if self._borrowed is not None else None
         if self._bus is not None and self._borrowed is None:
             self._bus.set_filters(self._filters)
 
@@ -266,7 +270,7 @@ class CanTransport(Transport[Frame, Frame]):
             running = [n for n in (find(bus) if find else ()) if not n.stopped]
             notifier = running[0] if running else None
         assert self._runtime is not None  # set by open()
-        self._reader = start_reader(self, bus, notifier, self._generation, self._runtime, self._tasks)
+        self._reader = start_reader(self._intake, bus, notifier, self._generation, self._runtime, self._tasks)
 
     async def _disconnect(self) -> None:
         bus, self._bus = self._bus, None
@@ -281,49 +285,6 @@ class CanTransport(Transport[Frame, Frame]):
                     await anyio.to_thread.run_sync(bus.shutdown)
             except Exception as exc:  # a vanished adapter cannot be told goodbye
                 logger.debug("%s: shutdown of a failed bus raised %s", self.name, exc)
-
-    # ----------------------------------------------------------------- receiving
-
-    def _count_bad(self, count: int, generation: int) -> None:
-        if generation == self._generation:
-            self._stats.bad_frames += count
-
-    def _take(self, batch: Batch, generation: int, shift: float = 0.0) -> None:
-        """Received messages (stamped on ``time.monotonic``, ``shift`` from the loop's clock) to frames."""
-        if generation != self._generation:
-            return
-        frames: list[Frame] = []
-        stats = self._stats
-        wanted = self._wanted
-        for message, stamp in batch:
-            timestamp = stamp + shift
-            if message.is_error_frame:
-                self._on_error_frame(message, timestamp)
-                continue
-            if message.is_remote_frame:
-                stats.ignored += 1
-                continue
-            if wanted is not None and (message.arbitration_id, message.is_extended_id) not in wanted:
-                continue  # another identifier on the application's bus
-            try:
-                frame = frame_from_message(message, timestamp)
-            except ValueError:
-                stats.bad_frames += 1
-                continue
-            frames.append(frame)
-            stats.bytes_in += len(frame.data)
-            if self._load_known:
-                self._load.add(timestamp, self._frame_time_s(frame))
-        if frames:
-            stats.frames_in += len(frames)
-            self._deliver(frames)
-
-    def _on_error_frame(self, message: can.Message, timestamp: float) -> None:
-        self._note_error_frame(CanErrorClass(message.arbitration_id & 0x3FF), bytes(message.data), timestamp)
-
-    def _frame_time_s(self, frame: Frame) -> float:
-        assert self.bitrate is not None
-        return nominal_frame_time_s(frame, self.bitrate, self.data_bitrate)
 
     # ----------------------------------------------------------------- sending
 
@@ -350,8 +311,8 @@ class CanTransport(Transport[Frame, Frame]):
         stats = self._stats
         stats.frames_out += len(report.sent)
         stats.enobufs_waits += report.enobufs_waits
-        if report.sent and self._off_since is not None:  # a frame went through: the controller is back
-            self._came_back(report.sent[0][1])
+        if report.sent and self._bus_off.since is not None:  # a frame went through: the controller is back
+            self._bus_off.came_back(report.sent[0][1])
         for reason, items, counter in (
             ("stale", report.stale, None),
             ("queue_full", report.enobufs_dropped, "enobufs_dropped"),
@@ -360,13 +321,13 @@ class CanTransport(Transport[Frame, Frame]):
             self._dropped(reason, [o.handle for o in items], counter)
         if report.bus_off_cause is not None:
             if generation == self._generation:
-                self._went_bus_off(report.bus_off_at, report.bus_off_cause)
+                self._bus_off.went_off(report.bus_off_at, report.bus_off_cause)
             self._dropped("bus_off", [o.handle for o in report.bus_off], "bus_off_dropped")
         for outgoing, sent_at in report.sent:
             frame = outgoing.item
             stats.bytes_out += len(frame.data)
             if self._load_known:
-                self._load.add(sent_at, self._frame_time_s(frame))
+                self._load.add(sent_at, self._intake.frame_time_s(frame))
             self._sent(outgoing.handle, sent_at)
         if report.error is not None:
             self._lose(report.error, generation)
@@ -382,19 +343,19 @@ class CanTransport(Transport[Frame, Frame]):
             if buffer_full(exc):
                 return False  # queue it: the writer thread applies the ENOBUFS policy
             if controller_off(exc):
-                self._went_bus_off(self._now(), exc)
+                self._bus_off.went_off(self._now(), exc)
                 self._stats.bus_off_dropped += 1
                 raise BusOffError(f"{self.name}: the CAN controller is bus-off ({exc})") from exc
             self._lose(exc, self._generation)
             raise self._error() from exc
         now = self._now()
-        if self._off_since is not None:
-            self._came_back(now)
+        if self._bus_off.since is not None:
+            self._bus_off.came_back(now)
         stats = self._stats
         stats.frames_out += 1
         stats.bytes_out += len(frame.data)
         if self._load_known:
-            self._load.add(now, self._frame_time_s(frame))
+            self._load.add(now, self._intake.frame_time_s(frame))
         self._sent(handle, now)
         return True
 
@@ -484,19 +445,3 @@ def _interface_name(bus: can.BusABC) -> str:
         if class_name == kind.__name__ and module == kind.__module__:
             return name
     return kind.__name__
-
-
-def _wanted(filters: list[can.typechecking.CanFilter] | None) -> frozenset[tuple[int, bool]] | None:
-    if filters is None:
-        return None
-    return frozenset((f["can_id"], bool(f.get("extended"))) for f in filters)
-
-
-def _exact_filters(ids: Iterable[int], *, extended: bool) -> list[can.typechecking.CanFilter]:
-    mask = 0x1FFFFFFF if extended else 0x7FF
-    filters: list[can.typechecking.CanFilter] = []
-    for can_id in sorted(set(ids)):
-        if not 0 <= can_id <= mask:
-            raise ValueError(f"receive id 0x{can_id:X} is outside 0..0x{mask:X}")
-        filters.append({"can_id": can_id, "can_mask": mask, "extended": extended})
-    return filters

@@ -70,7 +70,6 @@ from servobus.timing import uart_time_s
 from servobus.transports._fresh_writer import FreshWriter
 from servobus.transports._serialport import SerialPort
 from servobus.transports.base import Outgoing, Transport
-from servobus.transports.contract import LineRules
 from servobus.transports.stats import TransportStats
 
 __all__ = ["SerialTransport", "find_serial_line", "serial_line_names"]
@@ -267,7 +266,6 @@ class SerialTransport(Transport[Frame, Frame]):
         )
         self._tx_quiet_at = 0.0  # loop time our last byte ends on the wire
         self._rx_quiet_at = 0.0  # loop time the far end's last byte came
-        self._last_rx = 0.0
         self._quiet: _QuietWatch | None = None
         self._reply: anyio.Event | None = None
 
@@ -307,23 +305,6 @@ class SerialTransport(Transport[Frame, Frame]):
     def high_water_bytes(self) -> int:
         """Bytes the OS output buffer may hold when the next frame is written."""
         return self._writer_line.high_water_bytes
-
-    @property
-    def output_flushes(self) -> int:
-        """Times the OS output buffer was flushed: bytes it reported outlasted ``stale_after_s``,
-        or a frame could not be written whole before it went stale."""
-        return self._writer_line.flushes
-
-    @property
-    def rules(self) -> LineRules:
-        """Half duplex, with the gap, the turnaround and the staleness set here (no CAN bit rate: the
-        Bus's shortest round trip is a CAN frame's)."""
-        return LineRules(
-            half_duplex=True,
-            gap_s=self._gap_s,
-            turnaround_s=self._turnaround_s,
-            stale_after_s=self._stale_after_s,
-        )
 
     def wire_time_s(self, n_bytes: int) -> float:
         """Seconds ``n_bytes`` occupy this line."""
@@ -365,9 +346,11 @@ class SerialTransport(Transport[Frame, Frame]):
         self._old_counts[1] += _count(self._deframer, "crc_errors")
         self._deframer = self._framing.deframer()
         assert self._runtime is not None  # set by open()
+        generation = self._generation  # (the lambdas look the methods up per call: tests wrap them)
         self._port = SerialPort.open(
-            self,
-            self._generation,
+            self.name,
+            lambda data: self._on_bytes(data, generation),
+            lambda cause: self._lose(cause, generation),
             self.port,
             self._runtime,
             self._tasks,
@@ -378,7 +361,7 @@ class SerialTransport(Transport[Frame, Frame]):
             stopbits=1,
             **self._serial_options,
         )
-        self._quiet = _QuietWatch(self, self._generation)
+        self._quiet = _QuietWatch(self.idle_s, self._now, lambda: self._on_quiet(generation))
         self._tasks.start_soon(self._quiet.run, name=f"{self.name} idle")
         self._writer_line.reset()
 
@@ -398,14 +381,18 @@ class SerialTransport(Transport[Frame, Frame]):
         now = self._now()
         self._stats.bytes_in += len(data)
         self._load.add(now, uart_time_s(len(data), self.baud, bits_per_byte=self.bits_per_char))
-        self._last_rx = self._rx_quiet_at = now
-        self._take(self._deframer.feed(data), now)
+        self._rx_quiet_at = now
         if self._quiet is not None:
-            self._quiet.arm()
+            self._quiet.arm(now)
+        self._take(self._deframer.feed(data), now)
 
-    def _on_quiet(self) -> None:
-        """No byte for ``idle_s``: the de-framer drops (or ends) the partial frame it holds."""
+    def _on_quiet(self, generation: int) -> bool:
+        """No byte for ``idle_s``: the de-framer drops (or ends) the partial frame it holds.
+        False (nothing done) when the connection that timed it is no longer the current one."""
+        if generation != self._generation:
+            return False
         self._take(self._deframer.idle(), self._now())
+        return True
 
     def _take(self, frames: list[Frame], now: float) -> None:
         if not frames:
@@ -421,7 +408,7 @@ class SerialTransport(Transport[Frame, Frame]):
 
     async def _transmit(self, batch: list[Outgoing[Frame]]) -> None:
         stats = self._stats
-        limit = self._stale_after_s
+        limit = self.stale_after_s
         generation = self._generation
         while batch:
             outgoing = batch[0]
@@ -460,21 +447,26 @@ class SerialTransport(Transport[Frame, Frame]):
 
 
 class _QuietWatch:
-    """One connection's silence timer: ``idle_s`` after the last byte, the transport's ``_on_quiet``.
+    """One connection's silence timer: ``idle_s`` after the last byte (on ``clock``), ``on_quiet()``;
+    it ends when that returns False (the connection is no longer the current one).
 
     A task in the transport's task group that sleeps while bytes come and waits while none are
     expected, so a burst costs one flag, not a timer per read.
     """
 
-    def __init__(self, transport: SerialTransport, generation: int) -> None:
-        self._transport = transport
-        self._generation = generation
+    def __init__(self, idle_s: float, clock: Callable[[], float], on_quiet: Callable[[], bool]) -> None:
+        self._idle_s = idle_s
+        self._clock = clock
+        self._on_quiet = on_quiet
+        #: when the last byte came (the clock's time)
+        self.last_rx = 0.0
         self._armed = False
         self._wake = anyio.Event()
         self._scope = anyio.CancelScope()
 
-    def arm(self) -> None:
-        """Bytes came: time the silence after them (no-op while it is being timed)."""
+    def arm(self, now: float) -> None:
+        """Bytes came at ``now``: time the silence after them (the silence restarts while timed)."""
+        self.last_rx = now
         if not self._armed:
             self._armed = True
             self._wake.set()
@@ -483,14 +475,13 @@ class _QuietWatch:
         self._scope.cancel()
 
     async def run(self) -> None:
-        transport = self._transport
+        clock, idle_s = self._clock, self._idle_s
         with self._scope:
             while True:
                 await self._wake.wait()
                 self._wake = anyio.Event()
-                while (still := transport._last_rx + transport.idle_s - transport._now()) > 0:
+                while (still := self.last_rx + idle_s - clock()) > 0:
                     await anyio.sleep(still)  # bytes came meanwhile: the silence starts over
                 self._armed = False
-                if transport._generation != self._generation:
+                if not self._on_quiet():
                     return
-                transport._on_quiet()

@@ -162,10 +162,6 @@ class SimTransport(Transport[Frame, Frame]):
         rate = self.network.bus.bitrate
         return int(rate) if math.isfinite(rate) and rate > 0 else None
 
-    @property
-    def plugged(self) -> bool:
-        return self._plugged
-
     def unplug(self) -> None:
         """Pull the simulated adapter out: the transport is lost at once and cannot reopen until
         :meth:`replug`."""
@@ -202,7 +198,7 @@ class SimTransport(Transport[Frame, Frame]):
             name=f"{self.name} clock",
             task_lane=self.task_clock,
         )
-        self._rearm(self._generation)
+        self._rearm()
 
     async def _disconnect(self) -> None:
         self._direct = False
@@ -244,9 +240,9 @@ class SimTransport(Transport[Frame, Frame]):
         assert self.episodes is not None
         why = self.episodes.refusal(now - self._t0)
         if why == "bus_off":
-            self._went_bus_off(now)
-        elif why is None and self._off_since is not None:
-            self._came_back(now)
+            self._bus_off.went_off(now)
+        elif why is None and self._bus_off.since is not None:
+            self._bus_off.came_back(now)
         return why
 
     def _put(self, frame: Frame, handle: Any, now: float) -> None:
@@ -257,11 +253,11 @@ class SimTransport(Transport[Frame, Frame]):
         stats.frames_out += 1
         stats.bytes_out += len(frame.data)
         self._sent(handle, now)
-        self._arm(network.now_s if at < network.now_s else at, self._generation)
+        self._arm(network.now_s if at < network.now_s else at)
 
     # ----------------------------------------------------------------- the network's clock
 
-    def _arm(self, at: float, generation: int) -> None:
+    def _arm(self, at: float) -> None:
         """Have the clock fire at network time ``at`` (or earlier, if it already would)."""
         armed = self._timer_at
         if armed is not None and armed <= at:
@@ -280,12 +276,12 @@ class SimTransport(Transport[Frame, Frame]):
             clock.stop()
         self._timer_at = None
 
-    def _rearm(self, generation: int) -> None:
+    def _rearm(self) -> None:
         at = self.network.next_event_s()
         if at is not None:
-            self._arm(at, generation)
+            self._arm(at)
         if self.episodes is not None and (at := self.episodes.next_error_frame_s()) is not None:
-            self._arm(at, generation)
+            self._arm(at)
 
     def _on_timer(self, generation: int) -> None:
         armed, self._timer_at = self._timer_at, None
@@ -314,9 +310,9 @@ class SimTransport(Transport[Frame, Frame]):
             # Events the host can neither see nor change need no timer of their own.
             at = network.run_ahead(until)
             if at is not None:
-                self._arm(at, generation)
+                self._arm(at)
             if episodes is not None and (at := episodes.next_error_frame_s()) is not None:
-                self._arm(at, generation)
+                self._arm(at)
 
     def _controller(
         self, episodes: ControllerEpisodes, received: list[tuple[float, Frame]], until: float
@@ -324,7 +320,7 @@ class SimTransport(Transport[Frame, Frame]):
         """The controller's error frames due by ``until`` (network time), and what it received of
         ``received``: nothing while it is bus-off (counted ``ignored``)."""
         for at, classes in episodes.error_frames(until):
-            self._note_error_frame(CanErrorClass(classes), bytes(8), at + self._t0)
+            self._bus_off.error_frame(CanErrorClass(classes), bytes(8), at + self._t0)
         heard = [(at, frame) for at, frame in received if episodes.receiving(at)]
         self._stats.ignored += len(received) - len(heard)
         return heard

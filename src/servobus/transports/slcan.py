@@ -46,7 +46,6 @@ from servobus.frame import Frame
 from servobus.timing import nominal_frame_time_s
 from servobus.transports._serialport import SerialPort
 from servobus.transports.base import Outgoing, Transport
-from servobus.transports.contract import LineRules
 from servobus.transports.stats import TransportStats
 
 __all__ = ["DATA_BITRATES", "NOMINAL_BITRATES", "SlcanTransport", "encode_line"]
@@ -171,11 +170,6 @@ class SlcanTransport(Transport[Frame, Frame]):
 
     # ----------------------------------------------------------------- public API
 
-    @property
-    def rules(self) -> LineRules:
-        """A full-duplex CAN bus at the adapter's bit rate (unknown when the adapter's own is kept)."""
-        return LineRules(bitrate=self.bitrate, stale_after_s=self._stale_after_s)
-
     def send(self, frame: Frame, handle: object = None) -> None:
         """Queue ``frame``; the writer puts it on the port in order. The send report names ``handle``
         (the frame itself when None).
@@ -223,9 +217,11 @@ class SlcanTransport(Transport[Frame, Frame]):
 
     async def _connect(self) -> None:
         assert self._runtime is not None  # set by open()
+        generation = self._generation  # (the lambdas look the methods up per call: tests wrap them)
         self._port = SerialPort.open(
-            self,
-            self._generation,
+            self.name,
+            lambda data: self._on_bytes(data, generation),
+            lambda cause: self._lose(cause, generation),
             self.port,
             self._runtime,
             self._tasks,
@@ -314,7 +310,7 @@ class SlcanTransport(Transport[Frame, Frame]):
     async def _transmit(self, batch: list[Outgoing[Frame]]) -> None:
         generation = self._generation
         stats = self._stats
-        limit = self._stale_after_s
+        limit = self.stale_after_s
         gap = self.min_gap_s
         while batch:
             port = self._port
