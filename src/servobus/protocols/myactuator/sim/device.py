@@ -11,8 +11,9 @@ The model is told in parts by concern, all on the motor's one state
 (:mod:`~servobus.protocols.myactuator.sim.base`): the frames it takes
 (:mod:`~servobus.protocols.myactuator.sim.intake`), its output (``drive``), its faults and 0xB3
 protection (``faults``), and the command handlers it dispatches to (``handlers``: ``reads``,
-``loops``, ``settings``, ``streams``). This module joins them: the device protocol, the C twin's
-entry points, power-up and the dispatch.
+``loops``, ``settings``, ``streams``; typed against ``handlers.HandledMotor``, so none of them
+imports this module). This module joins them: the device protocol, the C twin's entry points (the
+motor moves its own plant and class onto the twin; ``core.MaCore`` only copies state) and power-up.
 
 Identifiers (§1.1): 0x140+ID requests and 0x400+ID motion commands of this motor are taken; 0x280
 and 0x300 (0x79, V4.3) only while the CAN-ID filter is off (0x20 index 2 value 0), otherwise they
