@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 from servobus.core._lib import ffi, lib
 from servobus.protocols.hollow import CanMode, ControlMode, HollowModel
 from servobus.sim.device import BusLink, ListeningDevice
+from servobus.sim.power import PowerCuts
 
 if TYPE_CHECKING:
     from servobus.sim.coreplant import CorePlant
@@ -55,7 +56,7 @@ class HeldSetpoint:
     kd: int
 
 
-class HollowCore(ListeningDevice):
+class HollowCore(PowerCuts):
     """The C-twin half of :class:`~servobus.protocols.hollow.sim.device.HollowMotor` (the engine's
     contract: ``CORE_FAMILY``, :meth:`core_attach`, :meth:`core_detach`, :meth:`core_push`)."""
 
@@ -68,7 +69,6 @@ class HollowCore(ListeningDevice):
     fd_enabled: bool
     turnaround_s: float
     turnaround_jitter_s: float
-    power_back_s: float | None  # (servobus.sim.power.PowerCuts: set while a brownout lasts)
     fd_current_a_per_count: float
 
     # The C twin (cdata sb_simmotor *) and its sb_hollow_state, while attached.
