@@ -174,6 +174,7 @@ LAYERS: dict[str, list[str]] = {
         "servobus.sim.pty",
         "servobus.sim.virtual",
         "servobus.sim.__main__",
+        "servobus.sim.command",
         "servobus.sim.canfaults",
     ],
     "bus": [

@@ -19,14 +19,20 @@ from servobus.sim.slcan import SlcanAdapter, format_frame, parse_frame
 
 
 def _read_all(port: Any) -> bytes:
-    """What python-can wrote to its loop:// port. pyserial's loop read gives up at the port's own
-    timeout (a wall-clock one), so one read on a loaded machine can return part of it: read on
-    until every byte that was waiting came."""
+    """What python-can wrote to its loop:// port, every byte of it.
+
+    python-can opens the port with a 1 ms read timeout, and pyserial's loop read checks that
+    timeout on the wall clock after each byte: a thread descheduled for a millisecond on a loaded
+    machine came back with part of the line (the race). Every byte is already queued when
+    ``in_waiting`` counts it (the write is synchronous), so the read is made non-blocking
+    (timeout 0): it takes exactly those bytes, with no clock involved."""
     waiting = port.in_waiting
-    written = b""
-    while len(written) < waiting:
-        written += port.read(waiting - len(written))
-    return written
+    timeout = port.timeout
+    port.timeout = 0
+    try:
+        return bytes(port.read(waiting))
+    finally:
+        port.timeout = timeout
 
 
 def _python_can_slcan() -> can.BusABC:

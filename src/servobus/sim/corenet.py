@@ -22,7 +22,7 @@ import heapq
 import itertools
 import math
 import struct
-from collections.abc import Hashable, Iterable
+from collections.abc import Callable, Hashable, Iterable
 from typing import Any, NoReturn
 
 from servobus.core._lib import ffi, lib
@@ -88,31 +88,39 @@ def _made(cache: dict[tuple[int, int, bytes], Frame], can_id: int, flags: int, d
 class _CoreLog:
     """What :class:`~servobus.sim.device.ListeningDevice` reads of a link's log: its frame count."""
 
-    __slots__ = ("_net",)
+    __slots__ = ("net",)
 
     def __init__(self, net: Any) -> None:
-        self._net = net
+        self.net = net
 
     @property
     def count(self) -> int:
-        return int(self._net.log_count)
+        return int(self.net.log_count)
 
 
 class CoreLink:
     """One device's account with a :class:`CoreCanNetwork`: :class:`~servobus.sim.device.BusLink`'s
-    interface over the counts the C engine keeps for the node."""
+    interface over the counts the C engine keeps for the node.
 
-    __slots__ = ("_count", "_ends", "_lib_net", "_log", "_missed", "_node", "_notify", "_state", "name")
+    Args:
+        net: the network's ``sb_simnet *``.
+        node: the device's node in it.
+        name: the device's name.
+        buffers: the network's scratch cdata for :meth:`catch_up` (end times, missed counts, count).
+        notify: what :meth:`changed` calls with the name (the network's dirty list).
+    """
 
-    def __init__(self, network: CoreCanNetwork, node: int, name: str) -> None:
-        self._lib_net = network._net
+    __slots__ = ("_count", "_ends", "_lib_net", "_missed", "_node", "_notify", "_state", "log", "name")
+
+    def __init__(
+        self, net: Any, node: int, name: str, buffers: tuple[Any, Any, Any], notify: Callable[[str], None]
+    ) -> None:
+        self._lib_net = net
         self._node = node
-        self._state = network._net.nodes + node
-        self._log = _CoreLog(network._net)
-        self._ends = network._ends
-        self._missed = network._missed
-        self._count = network._count
-        self._notify = network._nodes.dirty.append
+        self._state = net.nodes + node
+        self.log = _CoreLog(net)
+        self._ends, self._missed, self._count = buffers
+        self._notify = notify
         self.name = name
 
     @property
@@ -151,9 +159,9 @@ class CoreLink:
 class CoreBus:
     """The bus model of a :class:`CoreCanNetwork` as :class:`~servobus.sim.canbus.CanBusModel` reads."""
 
-    def __init__(self, network: CoreCanNetwork) -> None:
-        self._network = network
-        self._net = network._net
+    def __init__(self, net: Any, nodes: CoreNodes) -> None:
+        self._net = net
+        self._nodes = nodes
 
     @property
     def busy_s(self) -> float:
@@ -201,12 +209,12 @@ class CoreBus:
 
     def queued(self, source: Hashable) -> int:
         """Frames node ``source`` has queued and not yet on the wire."""
-        node = self._network._nodes.source_node(source)
+        node = self._nodes.source_node(source)
         return 0 if node is None else int(self._net.nodes[node].queued)
 
     def head(self, source: Hashable) -> tuple[float, float] | None:
         """(joined_s, ready_s) of the frame node ``source`` sends next, or None if it has none queued."""
-        node = self._network._nodes.source_node(source)
+        node = self._nodes.source_node(source)
         if node is None or self._net.nodes[node].head < 0:
             return None
         slot = self._net.slots[self._net.nodes[node].head]
@@ -217,7 +225,7 @@ class CoreBus:
         out = ffi.new("double *"), ffi.new("int *")
         if lib.sb_simnet_next_completion(self._net, out[0], out[1]) != 1:
             return None
-        return float(out[0][0]), self._network._nodes.names[out[1][0]]
+        return float(out[0][0]), self._nodes.names[out[1][0]]
 
     def next_event_s(self) -> float | None:
         """When the next transmission will complete, as far as the bus knows now (None: idle)."""
@@ -258,8 +266,11 @@ class CoreCanNetwork:
         self._ends = ffi.new("double[]", lib.SB_NET_LOG)
         self._missed = ffi.new("int64_t[]", 2)  # a link's catch_up: missed, missed odd
         self._count = ffi.new("int *")
-        self.bus = CoreBus(self)
-        self._nodes = nodes = CoreNodes(self._net, lambda node, name: CoreLink(self, node, name))
+        net, buffers = self._net, (self._ends, self._missed, self._count)
+        self._nodes = nodes = CoreNodes(
+            net, lambda node, name: CoreLink(net, node, name, buffers, nodes.dirty.append)
+        )
+        self.bus = CoreBus(net, nodes)
         self.devices: dict[str, Device] = nodes.devices
         self._core = nodes.core  # which nodes run a C path (the tests read it)
         self._by_node, self._filter = nodes.by_node, nodes.filter  # the event handlers' lookups

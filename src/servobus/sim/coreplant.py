@@ -20,22 +20,23 @@ from typing import Any
 
 from servobus.core._lib import ffi, lib
 from servobus.sim.plant import (
+    STATE_FIELDS,
     Brake,
     Control,
     CurrentControl,
     Impedance,
     Off,
     Plant,
+    PlantGrid,
     PlantParams,
     PositionControl,
     SpeedControl,
 )
 
-__all__ = ["CorePlant"]
+__all__ = ["CorePlant", "control_fields", "control_from_fields"]
 
 _OFF, _BRAKE = Off(), Brake()
 _PLANT_TYPE = ffi.typeof("sb_plant")
-_STATE_FIELDS = ("position_deg", "speed_dps", "current_a", "temperature_c", "speed_integral", "speed_ref")
 
 
 def _limit(value: float | None) -> float:
@@ -46,7 +47,7 @@ def _optional(value: float) -> float | None:
     return None if math.isnan(value) else value
 
 
-def _control_fields(control: Control) -> tuple[int, float, float, float, float, float]:
+def control_fields(control: Control) -> tuple[int, float, float, float, float, float]:
     """(mode, a, b, c, d, e) of ``sb_control`` (csrc/sim_plant.h) for a Control."""
     if isinstance(control, Off):
         return (lib.SB_CONTROL_OFF, 0.0, 0.0, 0.0, 0.0, 0.0)
@@ -77,7 +78,7 @@ def _control_fields(control: Control) -> tuple[int, float, float, float, float, 
     raise TypeError(f"not a plant control: {control!r}")
 
 
-def _control(c: Any) -> Control:
+def control_from_fields(c: Any) -> Control:
     """The Control dataclass an ``sb_control`` holds."""
     mode = c.mode
     if mode == lib.SB_CONTROL_OFF:
@@ -155,38 +156,58 @@ class CorePlant(Plant):
     def adopt(cls, plant: Plant, ptr: Any = None, owner: Any = None) -> CorePlant:
         """A CorePlant in ``ptr`` (None: its own) with ``plant``'s whole state, grid included: it
         goes on exactly as ``plant`` would have. ``plant`` may be a CorePlant (its struct is copied)."""
-        core = cls.__new__(cls)
-        core._bind(plant.params, ptr, owner)
-        pl = core._pl
         if isinstance(plant, CorePlant):
-            pl[0] = plant._pl[0]
+            source = plant.ptr
+            core = cls(
+                plant.params, now_s=source.anchor_s, max_step_s=source.max_step_s, ptr=ptr, owner=owner
+            )
+            core.ptr[0] = source[0]
             return core
-        if lib.sb_plant_init(pl, _params(plant.params), plant._anchor, plant._max_step) != lib.SB_OK:
-            raise ValueError(f"sb_plant_init refused {plant.params!r}")  # pragma: no cover
-        pl.control = _control_fields(plant.control)
-        pl.acceleration_dps2 = plant._accel
-        pl.external_torque_nm = plant._load
-        pl.steps = plant._steps
-        pl.resting = int(plant._resting)
-        pl.committed = [getattr(plant._committed, name) for name in _STATE_FIELDS]
-        pl.now_s = plant._now
-        pl.now = [getattr(plant._obs, name) for name in _STATE_FIELDS]
+        core = cls(plant.params, now_s=plant.now_s, ptr=ptr, owner=owner)
+        core.restore(plant.grid())
         return core
+
+    @classmethod
+    def from_grid(cls, params: PlantParams, grid: PlantGrid) -> CorePlant:
+        """A CorePlant of its own with ``grid``'s whole state, as :meth:`Plant.from_grid
+        <servobus.sim.plant.Plant.from_grid>`."""
+        core = cls(params, now_s=grid.anchor_s, max_step_s=grid.max_step_s)
+        core.restore(grid)
+        return core
+
+    def restore(self, grid: PlantGrid) -> None:
+        """Take ``grid``'s whole state, grid included (the params stay this plant's own)."""
+        pl = self._pl
+        if lib.sb_plant_init(pl, _params(self.params), grid.anchor_s, grid.max_step_s) != lib.SB_OK:
+            raise ValueError(f"sb_plant_init refused {self.params!r}")  # pragma: no cover
+        pl.control = control_fields(grid.control)
+        pl.acceleration_dps2 = grid.acceleration_dps2
+        pl.external_torque_nm = grid.external_torque_nm
+        pl.steps = grid.steps
+        pl.resting = int(grid.resting)
+        pl.committed = list(grid.committed)
+        pl.now_s = grid.now_s
+        pl.now = list(grid.now)
+
+    def grid(self) -> PlantGrid:
+        """The whole state, grid included, as :meth:`Plant.grid <servobus.sim.plant.Plant.grid>`."""
+        pl = self._pl
+        return PlantGrid(
+            control=self.control,
+            acceleration_dps2=float(pl.acceleration_dps2),
+            external_torque_nm=float(pl.external_torque_nm),
+            max_step_s=float(pl.max_step_s),
+            anchor_s=float(pl.anchor_s),
+            steps=int(pl.steps),
+            resting=bool(pl.resting),
+            committed=tuple(float(getattr(pl.committed, name)) for name in STATE_FIELDS),
+            now_s=float(pl.now_s),
+            now=tuple(float(getattr(pl.now, name)) for name in STATE_FIELDS),
+        )
 
     def to_python(self) -> Plant:
         """A Python :class:`~servobus.sim.plant.Plant` with this plant's whole state (grid included)."""
-        pl = self._pl
-        plant = Plant(self.params, now_s=pl.anchor_s, max_step_s=pl.max_step_s)
-        plant._control = self.control
-        plant._accel = pl.acceleration_dps2
-        plant._load = pl.external_torque_nm
-        plant._steps = int(pl.steps)
-        plant._resting = bool(pl.resting)
-        plant._now = pl.now_s
-        for name in _STATE_FIELDS:
-            setattr(plant._committed, name, getattr(pl.committed, name))
-            setattr(plant._obs, name, getattr(pl.now, name))
-        return plant
+        return Plant.from_grid(self.params, self.grid())
 
     @property
     def ptr(self) -> Any:
@@ -202,7 +223,7 @@ class CorePlant(Plant):
     @property
     def control(self) -> Control:
         """What the drive is asked to do (as C holds it: the C paths may have changed it)."""
-        return _control(self._pl.control)
+        return control_from_fields(self._pl.control)
 
     @property
     def position_deg(self) -> float:
@@ -278,7 +299,7 @@ class CorePlant(Plant):
 
     def set_control(self, control: Control) -> None:
         c = self._control_in
-        c.mode, c.a, c.b, c.c, c.d, c.e = _control_fields(control)
+        c.mode, c.a, c.b, c.c, c.d, c.e = control_fields(control)
         lib.sb_plant_set_control(self._pl, c)
 
     def advance(self, now_s: float) -> None:

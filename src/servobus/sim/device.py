@@ -134,13 +134,13 @@ class BusLink:
 
     The network counts, per device, the frames it sent (``own``) and the frames it handed it
     (``taken``); every other frame on the bus was "missed" and the device settles up for those with
-    :meth:`catch_up`.
+    :meth:`catch_up`. ``log`` is the network's :class:`FrameLog`, which the device only reads.
     """
 
-    __slots__ = ("_log", "_marks", "_notify", "cursor", "name", "own", "own_odd", "taken", "taken_odd")
+    __slots__ = ("_marks", "_notify", "cursor", "log", "name", "own", "own_odd", "taken", "taken_odd")
 
     def __init__(self, log: FrameLog, name: str, notify: Callable[[str], None]) -> None:
-        self._log = log
+        self.log = log
         self._notify = notify
         self.name = name
         self.own = self.own_odd = self.taken = self.taken_odd = 0
@@ -150,7 +150,7 @@ class BusLink:
     @property
     def behind(self) -> bool:
         """Frames have gone by since the last :meth:`catch_up`."""
-        return self.cursor != self._log.count
+        return self.cursor != self.log.count
 
     def catch_up(self, *, every_end: bool) -> tuple[int, int, list[float]]:
         """Settle up: (frames missed, of which odd, end times) since the last call.
@@ -159,7 +159,7 @@ class BusLink:
         device has already advanced to those, so they cost it nothing); with ``every_end`` False only
         the last of them (enough for a device whose state does not depend on the steps).
         """
-        log = self._log
+        log = self.log
         start, self.cursor = self.cursor, log.count
         odd, own, own_odd, taken, taken_odd = self._marks
         self._marks = (log.odd, self.own, self.own_odd, self.taken, self.taken_odd)
@@ -226,7 +226,7 @@ class ListeningDevice:
     def settle(self) -> None:
         """Settle up with the network for the frames it did not hand this device (cheap if none)."""
         link = self._link
-        if link is None or link.cursor == link._log.count:
+        if link is None or link.cursor == link.log.count:
             return
         # The plant's state at a time does not depend on the times it was advanced to (its grid
         # starts at its last change), so the last frame end is enough.
@@ -240,6 +240,11 @@ class ListeningDevice:
                 counters["ignored_id"] += missed - odd
         for end in ends:
             self._overhear(end)
+
+    def tally(self, kind: str, n: int = 1) -> None:
+        """Count ``n`` frames or events of ``kind`` (a key of :attr:`counters`) without settling up:
+        for the model's own parts (its handlers, its C twin) while it acts on a frame."""
+        self._counters[kind] += n
 
     def _overhear(self, now_s: float) -> None:
         """What receiving a frame on another identifier at ``now_s`` does (advance the plant)."""

@@ -18,12 +18,14 @@ import math
 from dataclasses import dataclass
 
 __all__ = [
+    "STATE_FIELDS",
     "Brake",
     "Control",
     "CurrentControl",
     "Impedance",
     "Off",
     "Plant",
+    "PlantGrid",
     "PlantParams",
     "PositionControl",
     "SpeedControl",
@@ -130,6 +132,30 @@ class Impedance:
 Control = Off | Brake | CurrentControl | SpeedControl | PositionControl | Impedance
 
 
+#: the integrated quantities, in csrc/sim_plant.h ``sb_plant_state``'s order
+STATE_FIELDS = ("position_deg", "speed_dps", "current_a", "temperature_c", "speed_integral", "speed_ref")
+
+
+@dataclass(frozen=True, slots=True)
+class PlantGrid:
+    """A plant's whole state, its integration grid included: a plant made from it (``Plant.from_grid``,
+    or the C plant's ``CorePlant.adopt``) goes on exactly as the one it was taken from (``Plant.grid``).
+
+    ``committed`` and ``now`` are the :data:`STATE_FIELDS` at ``anchor_s + steps * max_step_s`` and at
+    ``now_s``."""
+
+    control: Control
+    acceleration_dps2: float
+    external_torque_nm: float
+    max_step_s: float
+    anchor_s: float
+    steps: int
+    resting: bool
+    committed: tuple[float, ...]
+    now_s: float
+    now: tuple[float, ...]
+
+
 class _State:
     """The integrated quantities (csrc/sim_plant.h ``sb_plant_state``), committed or observed."""
 
@@ -188,6 +214,42 @@ class Plant:
         self._resting = True  # the committed state is at rest: no more steps, only cooling
         self._now = now_s
         self._obs = _State(self.params.ambient_c)  # the state at _now
+
+    def grid(self) -> PlantGrid:
+        """The whole state, grid included (for a copy that goes on exactly as this plant would)."""
+        return PlantGrid(
+            control=self._control,
+            acceleration_dps2=self._accel,
+            external_torque_nm=self._load,
+            max_step_s=self._max_step,
+            anchor_s=self._anchor,
+            steps=self._steps,
+            resting=self._resting,
+            committed=tuple(getattr(self._committed, name) for name in STATE_FIELDS),
+            now_s=self._now,
+            now=tuple(getattr(self._obs, name) for name in STATE_FIELDS),
+        )
+
+    @classmethod
+    def from_grid(cls, params: PlantParams, grid: PlantGrid) -> Plant:
+        """A plant with ``grid``'s whole state: it goes on exactly as the one :meth:`grid` was read from."""
+        plant = cls(params, now_s=grid.anchor_s, max_step_s=grid.max_step_s)
+        plant.restore(grid)
+        return plant
+
+    def restore(self, grid: PlantGrid) -> None:
+        """Take ``grid``'s whole state (the params stay this plant's own)."""
+        self._control = grid.control
+        self._accel = grid.acceleration_dps2
+        self._load = grid.external_torque_nm
+        self._max_step = grid.max_step_s
+        self._anchor = grid.anchor_s
+        self._steps = grid.steps
+        self._resting = grid.resting
+        self._now = grid.now_s
+        for name, committed, now in zip(STATE_FIELDS, grid.committed, grid.now, strict=True):
+            setattr(self._committed, name, committed)
+            setattr(self._obs, name, now)
 
     # ---- what the device model reads (the state at now_s) ----
 

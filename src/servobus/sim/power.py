@@ -12,20 +12,23 @@ holds it); from ``now_s + duration_s`` on it is the device just powered up (its 
 comes back when the device is next used (a frame, a poll) at or after the return, as ``reboot`` at
 the return time would have left it. Deterministic: the same calls give the same device.
 
-A family's device mixes this in and supplies :meth:`PowerCuts._power_cut` (the output off at the
-cut) and ``reboot(now_s)`` (its power-on state); a device with a C twin keeps the twin out of the
-way while the power is cut (its guard reads :attr:`PowerCuts.power_back_s`).
+A family's device is a PowerCuts (a :class:`~servobus.sim.device.ListeningDevice` with a supply,
+so the counters it adds to are its own base's, not a re-declared copy) and supplies
+:meth:`PowerCuts._power_cut` (the output off at the cut) and ``reboot(now_s)`` (its power-on
+state); a device with a C twin keeps the twin out of the way while the power is cut (its guard
+reads :attr:`PowerCuts.power_back_s`).
 """
 
 from __future__ import annotations
 
 import math
-from collections import Counter
+
+from servobus.sim.device import ListeningDevice
 
 __all__ = ["PowerCuts"]
 
 
-class PowerCuts:
+class PowerCuts(ListeningDevice):
     """The brownout knob of a simulated device (see the module docstring).
 
     Counters (the device's own ``counters``): ``brownouts`` (cuts), ``unpowered`` (frames and polls
@@ -34,7 +37,6 @@ class PowerCuts:
 
     #: when the power comes back (None: it is on)
     power_back_s: float | None = None
-    _counters: Counter[str]
 
     def brownout(self, now_s: float, duration_s: float) -> None:
         """The supply is cut at ``now_s`` for ``duration_s``: silent meanwhile, then powered up afresh.

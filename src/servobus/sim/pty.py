@@ -34,6 +34,14 @@ __all__ = ["PtyPort"]
 _READ_SIZE = 4096
 
 
+def _running_loop() -> asyncio.AbstractEventLoop | None:
+    """The running asyncio loop, or None (trio, or no loop): only when a write found the pty full."""
+    try:
+        return asyncio.get_running_loop()
+    except RuntimeError:
+        return None
+
+
 class PtyPort:
     """The simulator's end of one pseudo-terminal.
 
@@ -96,7 +104,7 @@ class PtyPort:
                     raise
                 sent = 0
             if sent == 0:
-                loop = asyncio._get_running_loop()  # (None: trio, or no loop; see the module's docstring)
+                loop = _running_loop()  # (None: trio, or no loop; see the module's docstring)
                 if not self._writer_armed and loop is not None:
                     loop.add_writer(self._master, self._on_writable)
                     self._writer_armed = True
@@ -117,7 +125,7 @@ class PtyPort:
             self._drain()
 
     def _disarm(self) -> None:
-        if self._writer_armed and (loop := asyncio._get_running_loop()) is not None:
+        if self._writer_armed and (loop := _running_loop()) is not None:
             loop.remove_writer(self._master)
             self._writer_armed = False
 

@@ -312,7 +312,7 @@ def test_readings_on_a_tie_round_as_the_model(revision: Revision, motor_type: Mo
     model = LkModel(revision=revision, motor_type=motor_type)
     for k, tie in enumerate((0.5, 1.5, 2.5, -0.5, -2.5)):
         twin = Twin(1, model)
-        apc = twin.py._amps_per_count
+        apc = twin.py.amps_per_count
         for motor in (twin.py, twin.c):
             motor.plant.advance(0.001)
             motor.plant.current_a = tie * apc

@@ -13,8 +13,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import Any, Protocol, TypeVar
 
 from servobus.protocols.hollow import (
     CanMode,
@@ -22,7 +21,9 @@ from servobus.protocols.hollow import (
     ControlMode,
     FdCommand,
     HollowCommand,
+    HollowModel,
     IncrementalSetpoint,
+    PiGain,
     PiMultiplier,
     SelectMode,
     Setpoint,
@@ -30,11 +31,31 @@ from servobus.protocols.hollow import (
     Start,
     Stop,
 )
+from servobus.protocols.hollow.sim.core import HeldSetpoint
+from servobus.sim.plant import Plant
 
-if TYPE_CHECKING:
-    from servobus.protocols.hollow.sim.device import HollowMotor
+__all__ = ["BEHAVIOUR", "HeldSetpoint", "HollowMotor", "apply", "implemented"]
 
-__all__ = ["BEHAVIOUR", "HeldSetpoint", "apply", "implemented"]
+
+class HollowMotor(Protocol):
+    """What the behaviours read and change of the simulated hollow motor (the model's HollowMotor
+    is one): typed here, so the model imports its behaviours and nothing here imports the model."""
+
+    model: HollowModel
+    enabled: bool
+    can_mode: CanMode
+    ctrl_mode: ControlMode
+    setpoint: HeldSetpoint | None
+    zero_offset_deg: float
+    pi_multipliers: dict[PiGain, float]
+    fd_current_a_per_count: float
+
+    @property
+    def plant(self) -> Plant: ...
+    @property
+    def position_deg(self) -> float: ...
+    def tally(self, kind: str, n: int = 1) -> None: ...
+
 
 DPS_PER_RAD_S = 180.0 / math.pi
 DPS_PER_RPM = 6.0
@@ -71,25 +92,6 @@ def apply(motor: HollowMotor, command: HollowCommand[Any]) -> None:
     behaviour(motor, command)
 
 
-@dataclass(frozen=True, slots=True, kw_only=True)
-class HeldSetpoint:
-    """The motor's last setpoint, in the plant's units (one form for normal, extended and FD frames).
-
-    Attributes:
-        target_deg: position target from the mechanical zero: absolute (normal mode, CAN FD, A29)
-            or the sum of the increments (extended mode, A11).
-        speed_dps: V / Vel: target speed (speed mode) or speed limit (position mode).
-        current_a: T / Cur: target current (torque mode) or current limit (speed, position).
-        kp, kd: the position gains as received (CAN 0..4095, CAN FD 0..255, A16).
-    """
-
-    target_deg: float
-    speed_dps: float
-    current_a: float
-    kp: int
-    kd: int
-
-
 @_does(Start)
 def _start(motor: HollowMotor, command: Start) -> None:
     motor.enabled = True
@@ -104,7 +106,7 @@ def _start(motor: HollowMotor, command: Start) -> None:
             kd=held.kd if held else 0,
         )
     elif motor.setpoint is None:
-        motor._counters["start_without_setpoint"] += 1
+        motor.tally("start_without_setpoint")
 
 
 @_does(Stop)
@@ -125,7 +127,7 @@ def _set_zero_command(motor: HollowMotor, command: SetZero) -> None:
 def _set_zero(motor: HollowMotor) -> None:
     # §4.1 / A33: only while not enabled; not persisted. The multi-turn count is cleared with it.
     if motor.enabled:
-        motor._counters["zero_refused"] += 1
+        motor.tally("zero_refused")
         return
     motor.zero_offset_deg = motor.plant.position_deg
 

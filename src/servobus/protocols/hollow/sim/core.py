@@ -12,17 +12,18 @@ properties are plain attributes and the model behaves exactly as without C.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from servobus.core._lib import ffi, lib
 from servobus.protocols.hollow import CanMode, ControlMode, HollowModel
 from servobus.sim.device import BusLink, ListeningDevice
+from servobus.sim.power import PowerCuts
 
 if TYPE_CHECKING:
-    from servobus.protocols.hollow.sim.device import HeldSetpoint
     from servobus.sim.coreplant import CorePlant
 
-__all__ = ["COUNTER_KEYS", "HollowCore"]
+__all__ = ["COUNTER_KEYS", "HeldSetpoint", "HollowCore"]
 
 # The model's counters C moves, indexed as csrc/sim_hollow.h's SB_HOLLOW_* (sb_simmotor.counters).
 COUNTER_KEYS = (
@@ -36,7 +37,26 @@ COUNTER_KEYS = (
 )
 
 
-class HollowCore(ListeningDevice):
+@dataclass(frozen=True, slots=True, kw_only=True)
+class HeldSetpoint:
+    """The motor's last setpoint, in the plant's units (one form for normal, extended and FD frames).
+
+    Attributes:
+        target_deg: position target from the mechanical zero: absolute (normal mode, CAN FD, A29)
+            or the sum of the increments (extended mode, A11).
+        speed_dps: V / Vel: target speed (speed mode) or speed limit (position mode).
+        current_a: T / Cur: target current (torque mode) or current limit (speed, position).
+        kp, kd: the position gains as received (CAN 0..4095, CAN FD 0..255, A16).
+    """
+
+    target_deg: float
+    speed_dps: float
+    current_a: float
+    kp: int
+    kd: int
+
+
+class HollowCore(PowerCuts):
     """The C-twin half of :class:`~servobus.protocols.hollow.sim.device.HollowMotor` (the engine's
     contract: ``CORE_FAMILY``, :meth:`core_attach`, :meth:`core_detach`, :meth:`core_push`)."""
 
@@ -49,7 +69,6 @@ class HollowCore(ListeningDevice):
     fd_enabled: bool
     turnaround_s: float
     turnaround_jitter_s: float
-    power_back_s: float | None  # (servobus.sim.power.PowerCuts: set while a brownout lasts)
     fd_current_a_per_count: float
 
     # The C twin (cdata sb_simmotor *) and its sb_hollow_state, while attached.
@@ -194,8 +213,6 @@ class HollowCore(ListeningDevice):
             return self._py_setpoint
         if not state.has_setpoint:
             return None
-        from servobus.protocols.hollow.sim.device import HeldSetpoint  # here: device imports this module
-
         return HeldSetpoint(
             target_deg=state.target_deg,
             speed_dps=state.speed_dps,

@@ -81,7 +81,6 @@ from servobus.sim.plant import (
     PositionControl,
     SpeedControl,
 )
-from servobus.sim.power import PowerCuts
 
 __all__ = [
     "DEFAULT_FD_CURRENT_A_PER_COUNT",
@@ -120,7 +119,7 @@ _TEMPERATURE_LIMITS_C = (-125, 125)  # §7.3
 _INT16 = (-(1 << 15), (1 << 15) - 1)
 
 
-class HollowMotor(HollowCore, PowerCuts):
+class HollowMotor(HollowCore):
     """One hollow-series motor on a CAN or CAN FD bus (implements :class:`~servobus.sim.device.Device`).
 
     Args:

@@ -12,19 +12,19 @@ origin) before Python reads any of it.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any, cast
+from typing import Any, Protocol, cast
 
 from servobus.core._lib import ffi, lib
-from servobus.protocols.lk.model import IQ_AMPS_PER_COUNT, MotorType, Revision
+from servobus.protocols.lk.model import IQ_AMPS_PER_COUNT, LkModel, MotorType, Revision
+from servobus.protocols.lk.sim.state import AngleFrame, LkMemory, RunState
+from servobus.sim.coreplant import CorePlant
 from servobus.sim.plant import Brake, Control, CurrentControl, Off, Plant, PositionControl, SpeedControl
-
-if TYPE_CHECKING:
-    from servobus.protocols.lk.sim.device import LkMotor
 
 __all__ = [
     "CORE_FAMILY",
     "COUNTER_NAMES",
     "LkCore",
+    "LkTwinned",
     "adopt_plant",
     "control_from_c",
     "control_to_c",
@@ -99,6 +99,33 @@ def control_from_c(c: Any) -> Control:
     return Off()
 
 
+class LkTwinned(Protocol):
+    """What the C twin reads of the model and hands back to it (LkMotor is one)."""
+
+    model: LkModel
+    memory: LkMemory
+    motor_id: int
+    brake_engaged: bool
+    busy_until_s: float
+    latched_errors: int
+    power_back_s: float | None
+
+    @property
+    def angles(self) -> AngleFrame: ...
+    @property
+    def amps_per_count(self) -> float: ...
+    @property
+    def unresponsive(self) -> bool: ...
+    @property
+    def turnaround_s(self) -> float: ...
+    @property
+    def state(self) -> RunState: ...
+    @property
+    def held(self) -> Control | None: ...
+    def tally(self, kind: str, n: int = 1) -> None: ...
+    def take_from_twin(self, state: RunState, held: Control | None, angle_origin: int) -> None: ...
+
+
 class LkCore:
     """One motor's ``sb_simmotor`` (cdata, owned by the network or the test) and the copying.
 
@@ -109,9 +136,7 @@ class LkCore:
 
     __slots__ = ("_device", "_run_states", "motor", "state")
 
-    def __init__(self, device: LkMotor, motor: Any) -> None:
-        from servobus.protocols.lk.sim.device import RunState  # device.py imports this module
-
+    def __init__(self, device: LkTwinned, motor: Any) -> None:
         self._device = device
         self._run_states = tuple(RunState(value) for value in _RUN_STATES)
         self.motor = motor
@@ -127,9 +152,9 @@ class LkCore:
         s.revision = _REVISIONS[model.revision]
         s.motor_type = _MOTOR_TYPES[model.motor_type]
         s.motor_id = device.motor_id
-        angles = device._angles
+        angles = device.angles
         s.per_turn = angles.per_turn
-        s.amps_per_count = device._amps_per_count
+        s.amps_per_count = device.amps_per_count
         iq_amps = IQ_AMPS_PER_COUNT.get(model.motor_type)
         s.iq_counts_per_amp = 0.0 if iq_amps is None else 1 / iq_amps  # as model.iq_field divides
         limits = device.memory.limits()
@@ -137,22 +162,22 @@ class LkCore:
         s.speed_limit_dps = limits.speed_dps
         s.angle_lo_deg, s.angle_hi_deg = limits.angle_deg
         s.brake_engaged = device.brake_engaged
-        s.unresponsive = device._unresponsive
-        s.busy_until_s = device._busy_until_s
-        s.run_state = self._run_states.index(device._state)
-        held = device._held
+        s.unresponsive = device.unresponsive
+        s.busy_until_s = device.busy_until_s
+        s.run_state = self._run_states.index(device.state)
+        held = device.held
         s.has_held = held is not None
         if held is not None:
             control_to_c(held, s.held)
         s.angle_offset = angles.offset
         s.angle_origin = angles.origin
         s.pending = 0
-        motor.turnaround_s = device._turnaround_s
+        motor.turnaround_s = device.turnaround_s
         motor.listen[0] = _REQUEST_BASE + device.motor_id
         motor.listen[1] = _MULTI_MOTOR_ID
         motor.n_listen = 2
         motor.py_deadline_s = math.inf  # the model has no deadlines of its own
-        motor.hot = not device._latched and device.power_back_s is None
+        motor.hot = not device.latched_errors and device.power_back_s is None
 
     def pull(self) -> None:
         """Take what C changed since the last pull (nothing to do unless it acted)."""
@@ -161,27 +186,21 @@ class LkCore:
             return
         s.pending = 0
         device, counts = self._device, self.motor.counters
-        counters = device._counters
         for i, name in enumerate(COUNTER_NAMES):
             n = counts[i]
             if n:
-                counters[name] += n
+                device.tally(name, n)
                 counts[i] = 0
-        device._state = self._run_states[s.run_state]
-        device._held = control_from_c(s.held) if s.has_held else None
-        device._angles.origin = s.angle_origin
+        held = control_from_c(s.held) if s.has_held else None
+        device.take_from_twin(self._run_states[s.run_state], held, s.angle_origin)
 
 
 def adopt_plant(plant: Plant, motor: Any) -> Plant:
     """The plant moved into ``motor.plant``: the same API, its state in C from now on."""
-    from servobus.sim.coreplant import CorePlant
-
     # CorePlant has Plant's API (duck-typed): the model keeps reading it as its Plant.
     return cast(Plant, CorePlant.adopt(plant, ffi.addressof(motor, "plant"), motor))
 
 
 def release_plant(plant: Plant) -> Plant:
     """A Python :class:`Plant` with the state of ``plant`` (a CorePlant leaving its C twin)."""
-    from servobus.sim.coreplant import CorePlant
-
     return plant.to_python() if isinstance(plant, CorePlant) else plant

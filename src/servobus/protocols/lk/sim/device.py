@@ -58,19 +58,21 @@ from servobus.protocols.lk import (
     SettingParam,
     decode_request,
 )
-from servobus.protocols.lk.codec import REQUESTS, reply_frame
-from servobus.protocols.lk.ids import MULTI_MOTOR_ID, MULTI_MOTOR_IDS, request_id
+from servobus.protocols.lk.codec import reply_frame
+from servobus.protocols.lk.ids import MULTI_MOTOR_ID, request_id
 from servobus.protocols.lk.model import encoder_counts_per_turn
 from servobus.protocols.lk.sim.handlers import handle
+from servobus.protocols.lk.sim.intake import ignore_reason, undecodable_reason
 from servobus.protocols.lk.sim.replies import status2
 from servobus.protocols.lk.sim.state import (
     LK_PLANT_PARAMS,
     AngleFrame,
     LkMemory,
+    RunState,
     amps_per_count,
     default_settings,
 )
-from servobus.protocols.lk.sim.twin import RunState, TwinnedMotor
+from servobus.protocols.lk.sim.twin import TwinnedMotor
 from servobus.sim.device import Emission
 from servobus.sim.plant import (
     Brake,
@@ -122,6 +124,9 @@ class LkMotor(TwinnedMotor, PowerCuts):
         counters: frames by fate (``received``, ``accepted``, ``replied``, ``unanswered`` and the
             ignore reasons of the module docstring, ``not_executed_off``, ``not_executed_fault``,
             ``not_implemented``, ``refused``, ``reboots``).
+        latched_errors: the error bits latched (0x9A reports them; 0x9B clears those whose fault
+            has ended, :meth:`clear_errors`).
+        busy_until_s: until when the motor ignores requests (0x18 calibration).
 
     Raises:
         ValueError: ``motor_id`` outside 1..32, a negative time, or a setting of the wrong scheme.
@@ -177,8 +182,8 @@ class LkMotor(TwinnedMotor, PowerCuts):
         self._state = RunState.ON
         self._held: Control | None = None
         self.brake_engaged = brake_engaged
-        self._latched = 0
-        self._busy_until_s = -math.inf
+        self.latched_errors = 0
+        self.busy_until_s = -math.inf
         self._power_up()
 
     # ---- Device protocol ----
@@ -205,14 +210,16 @@ class LkMotor(TwinnedMotor, PowerCuts):
             return []
         self.plant.advance(now_s)
         self._counters["received"] += 1
-        reason = self._ignore_reason(frame, now_s)
+        reason = ignore_reason(frame, self.revision, self.motor_id, busy=now_s < self.busy_until_s)
         if reason is not None:
             self._counters[reason] += 1
             return []
         try:
             command = decode_request(frame.arbitration_id, frame.data, model=self.model)
         except ProtocolError:
-            reply = self._undecodable(frame)
+            reason, code = undecodable_reason(frame, self.revision, self.model.motor_type)
+            self._counters[reason] += 1
+            reply = None if code is None else self.status2_reply(code)
         else:
             self._counters["accepted"] += 1
             reply = handle(self, command, now_s)
@@ -283,7 +290,7 @@ class LkMotor(TwinnedMotor, PowerCuts):
         self.plant.advance(now_s)
         if persistent:
             self._conditions |= bits
-        self._latched |= bits
+        self.latched_errors |= bits
         self.held = None
         self.plant.set_control(self._control(now_s))
         self.core_push()  # a latched flag: C leaves every frame to Python
@@ -294,24 +301,32 @@ class LkMotor(TwinnedMotor, PowerCuts):
         self._conditions &= ~int(flags)
         self.core_push()
 
+    def clear_errors(self) -> None:
+        """0x9B: the latched error bits clear, but for the faults still present (spec §4.2)."""
+        self.latched_errors &= self._conditions
+
     @property
     def error_state(self) -> ErrorState | ErrorStateV235:
         """The latched error flags as the revision reports them (spec §7.1, §7.2)."""
-        return ErrorState(self._latched) if self.revision is Revision.V2_36 else ErrorStateV235(self._latched)
+        return (
+            ErrorState(self.latched_errors)
+            if self.revision is Revision.V2_36
+            else ErrorStateV235(self.latched_errors)
+        )
 
     # ---- readings (what the replies carry) ----
 
     @property
     def multi_turn_deg(self) -> float:
         """0x92's motorAngle: cumulative motor-shaft angle from the zero, encoder-quantised."""
-        return self.angles.multi_turn_deg(self._total())
+        return self.angles.multi_turn_deg(self.total_counts())
 
     @property
     def encoder_counts(self) -> int:
         """0x90's encoder: encoderRaw - encoderOffset."""
-        return self.angles.encoder(self._total())
+        return self.angles.encoder(self.total_counts())
 
-    def _total(self) -> int:
+    def total_counts(self) -> int:
         return self.angles.total(self.plant.motor_position_deg)
 
     # ---- power-up and the effective control ----
@@ -325,16 +340,16 @@ class LkMotor(TwinnedMotor, PowerCuts):
             if isinstance(driver_id, int) and 1 <= driver_id <= 32:  # 0 is not addressable (A29)
                 self.motor_id = driver_id
         self.angles.offset = memory.encoder_offset_counts
-        self.angles.clear_turns(self._total())
+        self.angles.clear_turns(self.total_counts())
         self.state = RunState.ON
         self.held = None
         self.brake_engaged = self.brake_at_power_up
-        self._latched = self._conditions
-        self._busy_until_s = -math.inf
-        self._apply_acceleration()
+        self.latched_errors = self._conditions
+        self.busy_until_s = -math.inf
+        self.apply_acceleration()
         self.plant.set_control(self._control(self.plant.now_s))
 
-    def _apply_acceleration(self) -> None:
+    def apply_acceleration(self) -> None:
         params = self.plant.params
         limit = self.memory.limits().acceleration_dps2
         self.plant.acceleration_dps2 = (
@@ -344,51 +359,18 @@ class LkMotor(TwinnedMotor, PowerCuts):
     def _control(self, now_s: float) -> Control:
         if self.brake_engaged:
             return Brake()
-        if self._latched or self.state is RunState.OFF or now_s < self._busy_until_s:
+        if self.latched_errors or self.state is RunState.OFF or now_s < self.busy_until_s:
             return Off()
         if self.state is RunState.STOPPED:
             return SpeedControl(speed_dps=0.0, max_current_a=self._torque_limit_a())
         return self.held or Off()
 
     def _torque_limit_a(self) -> float:
-        return self.memory.limits().torque_counts * self._amps_per_count
+        return self.memory.limits().torque_counts * self.amps_per_count
 
     @property
-    def _amps_per_count(self) -> float:
+    def amps_per_count(self) -> float:
         return amps_per_count(self.model.motor_type, self.plant.params)
 
-    # ---- frame filtering ----
-
-    def _ignore_reason(self, frame: Frame, now_s: float) -> str | None:
-        if frame.is_extended_id or frame.is_fd:
-            return "ignored_kind"
-        if frame.arbitration_id == MULTI_MOTOR_ID:
-            if self.revision not in lk.MultiMotorTorque.REVISIONS:
-                return "other_revision"
-            if self.motor_id not in MULTI_MOTOR_IDS:
-                return "ignored_id"
-        elif frame.arbitration_id != request_id(self.motor_id):
-            return "ignored_id"
-        if now_s < self._busy_until_s:
-            return "busy"
-        return None
-
-    def _undecodable(self, frame: Frame) -> LkReply | None:
-        data = frame.data
-        code = data[0] if data and frame.arbitration_id != MULTI_MOTOR_ID else None
-        ours = REQUESTS[self.revision]
-        if code is not None and code not in ours and any(code in REQUESTS[r] for r in Revision):
-            self._counters["other_revision"] += 1
-            return None
-        if code is not None and code in ours and len(data) == 8:
-            # 0xA1 is "only implemented on MF, MH, MG" ([001] §10; the codec has no iq for MS on
-            # either revision). The motor still answers (one reply per request, spec §1.1), idle.
-            allowed = ours[code].MOTOR_TYPES.get(self.revision)
-            if allowed is not None and self.model.motor_type not in allowed:
-                self._counters["not_implemented"] += 1
-                return self._status2(code)
-        self._counters["undecodable"] += 1
-        return None
-
-    def _status2(self, code: int) -> LkReply:
+    def status2_reply(self, code: int) -> LkReply:
         return status2(code, self.model, self.plant, encoder_counts=self.encoder_counts)

@@ -17,22 +17,51 @@ handler up; a handler works on the motor's state through the names a C twin keep
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import Any, Protocol, TypeVar
 
 from servobus.protocols import lk
 from servobus.protocols.lk import BrakeAction, BrakeState, LkCommand, LkReply, Revision
 from servobus.protocols.lk.codec import check_available
 from servobus.protocols.lk.ids import MULTI_MOTOR_REPLY_CODE
+from servobus.protocols.lk.model import LkModel
 from servobus.protocols.lk.sim.control import CONTROL_COMMANDS, MotionContext, plant_control
 from servobus.protocols.lk.sim.replies import encoder_reply, single_turn_deg, status1, status3
-from servobus.protocols.lk.sim.state import MEMORY_COMMANDS
-from servobus.protocols.lk.sim.twin import RunState
-from servobus.sim.plant import Control, CurrentControl, PositionControl
+from servobus.protocols.lk.sim.state import MEMORY_COMMANDS, AngleFrame, LkMemory, RunState
+from servobus.sim.plant import Control, CurrentControl, Plant, PositionControl
 
-if TYPE_CHECKING:
-    from servobus.protocols.lk.sim.device import LkMotor
+__all__ = ["HANDLERS", "LkMotor", "handle"]
 
-__all__ = ["HANDLERS", "handle"]
+
+class LkMotor(Protocol):
+    """What the handlers read and change of the simulated LK motor (the model's LkMotor is one):
+    typed here, so the model imports its handlers and nothing here imports the model."""
+
+    model: LkModel
+    memory: LkMemory
+    motor_id: int
+    brake_engaged: bool
+    calibration_s: float
+    busy_until_s: float
+    latched_errors: int
+    state: RunState
+    held: Control | None
+
+    @property
+    def revision(self) -> Revision: ...
+    @property
+    def plant(self) -> Plant: ...
+    @property
+    def angles(self) -> AngleFrame: ...
+    @property
+    def multi_turn_deg(self) -> float: ...
+    @property
+    def amps_per_count(self) -> float: ...
+    def total_counts(self) -> int: ...
+    def clear_errors(self) -> None: ...
+    def status2_reply(self, code: int) -> LkReply: ...
+    def apply_acceleration(self) -> None: ...
+    def tally(self, kind: str, n: int = 1) -> None: ...
+
 
 _H = TypeVar("_H", bound=Callable[..., LkReply])
 
@@ -62,15 +91,17 @@ def handle(motor: LkMotor, command: LkCommand, now_s: float) -> LkReply:
 @_handles(lk.ReadStatus1, lk.ClearErrors)
 def _status1(motor: LkMotor, command: LkCommand, now_s: float) -> LkReply:
     if isinstance(command, lk.ClearErrors):
-        motor._latched &= motor._conditions  # spec §4.2: persisting faults stay set
+        motor.clear_errors()  # spec §4.2: persisting faults stay set
     code = type(command).CODE
     assert code is not None
-    return status1(code, motor.model, motor.plant, off=motor.state is RunState.OFF, errors=motor._latched)
+    return status1(
+        code, motor.model, motor.plant, off=motor.state is RunState.OFF, errors=motor.latched_errors
+    )
 
 
 @_handles(lk.ReadStatus2)
 def _read_status2(motor: LkMotor, command: LkCommand, now_s: float) -> LkReply:
-    return motor._status2(0x9C)
+    return motor.status2_reply(0x9C)
 
 
 @_handles(lk.ReadStatus3)
@@ -82,7 +113,7 @@ def _read_status3(motor: LkMotor, command: LkCommand, now_s: float) -> LkReply:
 def _off(motor: LkMotor, command: LkCommand, now_s: float) -> LkReply:
     motor.state, motor.held = RunState.OFF, None
     if motor.revision is Revision.V2_36:
-        motor.angles.clear_turns(motor._total())  # [001] §5: "clear the number of turns"
+        motor.angles.clear_turns(motor.total_counts())  # [001] §5: "clear the number of turns"
     return lk.EchoReply(command=0x80)
 
 
@@ -103,7 +134,7 @@ def _run(motor: LkMotor, command: LkCommand, now_s: float) -> LkReply:
 
 @_handles(lk.SetZeroRam)
 def _zero_ram(motor: LkMotor, command: LkCommand, now_s: float) -> LkReply:
-    motor.angles.zero_here(motor._total())
+    motor.angles.zero_here(motor.total_counts())
     if motor.revision is Revision.V2_36 and motor.state is RunState.ON:
         motor.state = RunState.STOPPED  # [001] §25, A30
     return lk.EchoReply(command=0x95)
@@ -122,9 +153,9 @@ def _multi_motor(motor: LkMotor, command: lk.MultiMotorTorque, now_s: float) -> 
     if command.currents_a is not None:
         current = command.currents_a[slot]
     else:
-        current = (command.iq_counts or (0, 0, 0, 0))[slot] * motor._amps_per_count
+        current = (command.iq_counts or (0, 0, 0, 0))[slot] * motor.amps_per_count
     _execute(motor, command, CurrentControl(current_a=current))
-    return motor._status2(MULTI_MOTOR_REPLY_CODE)
+    return motor.status2_reply(MULTI_MOTOR_REPLY_CODE)
 
 
 @_handles(*CONTROL_COMMANDS)
@@ -132,28 +163,28 @@ def _set_point(motor: LkMotor, command: LkCommand, now_s: float) -> LkReply:
     code = type(command).CODE
     assert code is not None
     _execute(motor, command, plant_control(command, _motion_context(motor)))
-    return motor._status2(code)
+    return motor.status2_reply(code)
 
 
 @_handles(lk.CalibrateEncoder)
 def _calibrate(motor: LkMotor, command: LkCommand, now_s: float) -> LkReply:
     # [001] §21: busy for several seconds, then the result (ROM). The sim does not rotate the
     # shaft; the calibration always succeeds.
-    motor._busy_until_s = now_s + motor.calibration_s
+    motor.busy_until_s = now_s + motor.calibration_s
     motor.held = None
-    raw = motor.angles.raw(motor._total())
+    raw = motor.angles.raw(motor.total_counts())
     return lk.CalibrationReply(align_value=raw, align_ratio=1000, align_state=lk.AlignState.SUCCESS)
 
 
 @_handles(lk.ReadEncoder)
 def _read_encoder(motor: LkMotor, command: LkCommand, now_s: float) -> LkReply:
-    return encoder_reply(motor.model, motor.angles, motor._total())
+    return encoder_reply(motor.model, motor.angles, motor.total_counts())
 
 
 @_handles(lk.SetZeroRom)
 def _zero_rom(motor: LkMotor, command: LkCommand, now_s: float) -> LkReply:
     # spec §4.22: ROM only, "needs to be powered on again before it can take effect".
-    offset = motor.memory.rom_encoder_offset_counts = motor.angles.raw(motor._total())
+    offset = motor.memory.rom_encoder_offset_counts = motor.angles.raw(motor.total_counts())
     return lk.EncoderOffsetReply(command=0x19, encoder_bits=motor.model.encoder_bits, offset_counts=offset)
 
 
@@ -184,8 +215,8 @@ def _parameter(motor: LkMotor, command: LkCommand, now_s: float) -> LkReply:
     reply = motor.memory.answer(command)
     assert reply is not None  # registered for MEMORY_COMMANDS only
     if isinstance(reply, lk.ParamWriteReply) and not reply.ok:
-        motor._counters["refused"] += 1
-    motor._apply_acceleration()  # 0xC1, 0x42/0x44 (V2.35) and 0x34 may change it
+        motor.tally("refused")
+    motor.apply_acceleration()  # 0xC1, 0x42/0x44 (V2.35) and 0x34 may change it
     return reply
 
 
@@ -193,13 +224,13 @@ def _execute(motor: LkMotor, command: LkCommand, control: Control) -> None:
     try:
         check_available(command, model=motor.model)
     except ValueError:
-        motor._counters["not_implemented"] += 1  # [001] 0xA0 on MF/MH/MG: "invalid"
+        motor.tally("not_implemented")  # [001] 0xA0 on MF/MH/MG: "invalid"
         return
-    if motor._latched:
-        motor._counters["not_executed_fault"] += 1
+    if motor.latched_errors:
+        motor.tally("not_executed_fault")
         return
     if motor.revision is Revision.V2_36 and motor.state is RunState.OFF:
-        motor._counters["not_executed_off"] += 1  # [001] §5: replies, "will not perform the action"
+        motor.tally("not_executed_off")  # [001] §5: replies, "will not perform the action"
         return
     motor.state, motor.held = RunState.ON, control
 
@@ -209,7 +240,7 @@ def _motion_context(motor: LkMotor) -> MotionContext:
     return MotionContext(
         revision=motor.revision,
         gear_ratio=motor.plant.params.gear_ratio,
-        amps_per_count=motor._amps_per_count,
+        amps_per_count=motor.amps_per_count,
         limits=motor.memory.limits(),
         multi_turn_deg=motor.multi_turn_deg,
         origin_deg=motor.angles.origin_deg(),

@@ -72,6 +72,7 @@ __all__ = [
     "AngleFrame",
     "Limits",
     "LkMemory",
+    "RunState",
     "amps_per_count",
     "default_settings",
     "single_turn_period_deg",
@@ -194,6 +195,14 @@ def _answers(*classes: type[LkCommand]) -> Callable[[_A], _A]:
         return handler
 
     return register
+
+
+class RunState(enum.Enum):
+    """The motor's run state (spec §4.5..§4.7)."""
+
+    ON = "on"
+    STOPPED = "stopped"
+    OFF = "off"
 
 
 @dataclass(frozen=True, slots=True)

@@ -10,26 +10,14 @@ set. Without a twin these are plain attributes and the model runs exactly the re
 
 from __future__ import annotations
 
-import enum
-from typing import TYPE_CHECKING, Any, ClassVar, cast
+from typing import Any, ClassVar, cast
 
-from servobus.protocols.lk.sim.core import CORE_FAMILY, LkCore, adopt_plant, release_plant
-from servobus.protocols.lk.sim.state import AngleFrame
+from servobus.protocols.lk.sim.core import CORE_FAMILY, LkCore, LkTwinned, adopt_plant, release_plant
+from servobus.protocols.lk.sim.state import AngleFrame, RunState
 from servobus.sim.device import BusLink, ListeningDevice
 from servobus.sim.plant import Control
 
-if TYPE_CHECKING:
-    from servobus.protocols.lk.sim.device import LkMotor
-
 __all__ = ["RunState", "TwinnedMotor"]
-
-
-class RunState(enum.Enum):
-    """The motor's run state (spec §4.5..§4.7)."""
-
-    ON = "on"
-    STOPPED = "stopped"
-    OFF = "off"
 
 
 class TwinnedMotor(ListeningDevice):
@@ -105,7 +93,7 @@ class TwinnedMotor(ListeningDevice):
             self.attach(link)
         self.settle()
         self._plant = adopt_plant(self._plant, motor)
-        self._twin = LkCore(cast("LkMotor", self), motor)
+        self._twin = LkCore(cast(LkTwinned, self), motor)  # (the motor this class is half of)
         self._twin.push()
 
     def core_detach(self) -> None:
@@ -118,6 +106,12 @@ class TwinnedMotor(ListeningDevice):
         self._plant = release_plant(self._plant)
         if self._link is not None:
             self.attach(None)
+
+    def take_from_twin(self, state: RunState, held: Control | None, angle_origin: int) -> None:
+        """What the C twin changed (its ``pull``): the run state, the held control, the multi-turn
+        origin; the plain values, without pulling again."""
+        self._state, self._held = state, held
+        self._angles.origin = angle_origin
 
     def core_push(self) -> None:
         """Write into the C twin everything it reads (nothing without one)."""

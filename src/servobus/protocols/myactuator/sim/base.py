@@ -7,23 +7,18 @@ takes (:mod:`~servobus.protocols.myactuator.sim.intake`) and the command handler
 (:mod:`~servobus.protocols.myactuator.sim.handlers`). They all work on one state, the motor's
 attributes, declared here and set by the motor's ``__init__`` and power-up. The state stays on the
 motor itself because its C twin (:mod:`~servobus.protocols.myactuator.sim.core`) reads and writes
-it there by name, some of it through :class:`~servobus.protocols.myactuator.sim.core.Pulled`
-attributes.
+it there by name, some of it through pulled attributes
+(:func:`~servobus.protocols.myactuator.sim.core.attached_class`).
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from servobus.protocols import myactuator as ma
 from servobus.protocols._message import Command, Reply
 from servobus.protocols.myactuator import ErrorFlags, Revision, StreamableCommand
-from servobus.protocols.myactuator.sim.state import EncoderFrame, ErrorLatch, Settings
+from servobus.protocols.myactuator.sim.state import EncoderFrame, ErrorLatch, Settings, Stream
 from servobus.sim.device import ListeningDevice
 from servobus.sim.plant import Control
-
-if TYPE_CHECKING:
-    from servobus.protocols.myactuator.sim.streams import Stream
 
 __all__ = ["MotorBase"]
 
@@ -56,9 +51,9 @@ class MotorBase(ListeningDevice):
     comm_tripped: bool
     trip_echo: bool
     _next_trip_frame_s: float | None
-    _boot_s: float
+    boot_s: float
     _last_heard_s: float
-    _next_report_s: float | None
+    next_report_s: float | None
     # memos
     _decoded: dict[tuple[int, bytes] | None, Command | tuple[Revision, ma.MotionScales]]
     _status1_key: tuple[float, float, bool, ErrorFlags] | None

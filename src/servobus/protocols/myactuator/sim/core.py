@@ -13,7 +13,7 @@ the model's guards allow it (:func:`c_may_act`), and hands everything else to th
   (0xB3) and the streams.
 
 While attached, the model's class is its "attached" subclass (:func:`attached_class`): the same
-class but for :class:`Pulled` attributes (``control``, ``run_mode``, ``brake_released``,
+class but for pulled attributes (``control``, ``run_mode``, ``brake_released``,
 ``feedforward_pct``, ``streams``, ``_last_heard_s``: a read or a write pulls first), a ``settle``
 that pulls, and an ``unresponsive`` whose change reaches C at once. Detached, it is its own class
 again, with plain attributes: a model without a C twin runs exactly the reference code. The plant
@@ -25,19 +25,40 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, Generic, TypeVar, cast, overload
+from typing import Any, Protocol, TypeVar, cast
 
 from servobus.core._lib import ffi, lib
+from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.enums import AccelIndex, RunMode, StreamableCommand
 from servobus.protocols.myactuator.revision import Revision
-from servobus.sim.coreplant import CorePlant, _control, _control_fields
+from servobus.protocols.myactuator.sim.state import EncoderFrame, ErrorLatch, Settings, Stream
+from servobus.sim.coreplant import control_fields, control_from_fields
 
-if TYPE_CHECKING:
-    from servobus.protocols.myactuator.sim.device import MyActuatorMotor
-    from servobus.sim.device import BusLink
-    from servobus.sim.plant import Plant
+__all__ = ["COUNTER_NAMES", "MaCore", "Twinned", "attached_class", "c_may_act", "register_model"]
 
-__all__ = ["COUNTER_NAMES", "MaCore", "Pulled", "attached_class", "c_may_act", "register_model"]
+
+class Twinned(Protocol):
+    """What the C twin reads of the model (MyActuatorMotor is one): its configuration and guards."""
+
+    revision: Revision
+    has_brake: bool
+    pole_pairs: int
+    turnaround_s: float
+    rated_current_a: float
+    motion_scales: ma.MotionScales
+    ram: Settings
+    encoder: EncoderFrame
+    errors: ErrorLatch
+    comm_tripped: bool
+    next_report_s: float | None
+    power_back_s: float | None
+    __dict__: dict[str, Any]
+
+    def settle(self) -> None: ...
+    def tally(self, kind: str, n: int = 1) -> None: ...
+    def listen_ids(self) -> frozenset[int]: ...
+    def next_deadline_s(self) -> float | None: ...
+
 
 #: The model's Counter keys the C path counts, by their index in ``motor.counters`` (SB_MA_CTR_*).
 COUNTER_NAMES = (
@@ -58,41 +79,25 @@ _INT64 = 1 << 62  # encoder counts the C path takes (sim_myactuator.c COUNT_LIMI
 _COUNT_LIMIT = 4 * 10**18
 _INT32 = 1 << 31
 
-T = TypeVar("T")
-M = TypeVar("M", bound="MyActuatorMotor")
+M = TypeVar("M", bound=Twinned)
 
 
-class Pulled(Generic[T]):
+def _pulled(name: str) -> property:
     """An attribute of an attached model that its C twin may change: a read or a write pulls first.
 
     The value stays in the instance's ``__dict__`` under its own name (where the plain attribute of
     a detached model keeps it); :meth:`MaCore.pull` writes there directly.
     """
 
-    __slots__ = ("name",)
+    def get(self: Any) -> Any:
+        self._core.pull()
+        return self.__dict__[name]
 
-    def __init__(self) -> None:
-        self.name = ""
+    def set_(self: Any, value: Any) -> None:
+        self._core.pull()  # C's changes first, or a later pull would undo this
+        self.__dict__[name] = value
 
-    def __set_name__(self, owner: type, name: str) -> None:
-        self.name = name
-
-    @overload
-    def __get__(self, obj: None, owner: type | None = None) -> Pulled[T]: ...
-
-    @overload
-    def __get__(self, obj: object, owner: type | None = None) -> T: ...
-
-    def __get__(self, obj: object | None, owner: type | None = None) -> T | Pulled[T]:
-        if obj is None:
-            return self
-        obj._core.pull()  # type: ignore[attr-defined]
-        value: T = obj.__dict__[self.name]
-        return value
-
-    def __set__(self, obj: object, value: T) -> None:
-        obj._core.pull()  # type: ignore[attr-defined]  # C's changes first, or a later pull would undo this
-        obj.__dict__[self.name] = value
+    return property(get, set_)
 
 
 _PULLED = ("control", "run_mode", "brake_released", "feedforward_pct", "streams", "_last_heard_s")
@@ -119,7 +124,7 @@ def attached_class(cls: type[M]) -> type[M]:
         self._core.push()  # set from outside the network's calls: C stops (or starts) answering now
         self._changed()
 
-    namespace: dict[str, Any] = {name: Pulled() for name in _PULLED}
+    namespace: dict[str, Any] = {name: _pulled(name) for name in _PULLED}
     namespace.update(
         __module__=cls.__module__,
         __qualname__=cls.__qualname__,
@@ -146,14 +151,13 @@ _MODELLED = (
     "settle",
     "_route",
     "_decode",
-    "_execute",
-    "_control_command",
-    "_set_control",
-    "_apply_plant",
+    "control_command",
+    "set_control",
+    "apply_plant",
     "_heard",
-    "_current_limit",
-    "_target",
-    "_status1",
+    "current_limit_a",
+    "target_deg",
+    "status1_reply",
 )
 _ORIGINALS: list[tuple[str, object]] = []
 
@@ -168,7 +172,7 @@ def _class_ok(cls: type) -> bool:
     return bool(_ORIGINALS) and all(getattr(cls, name) is method for name, method in _ORIGINALS)
 
 
-def c_may_act(device: MyActuatorMotor) -> bool:
+def c_may_act(device: Twinned) -> bool:
     """The model's guards: the C path reproduces the model in this state (no error flag latched or
     reported, not unresponsive, powered, not cut off by 0xB3, an encoder and ids the C state holds)."""
     encoder = device.encoder
@@ -177,7 +181,7 @@ def c_may_act(device: MyActuatorMotor) -> bool:
         and device.power_back_s is None
         and not device.errors.flags
         and not device.comm_tripped
-        and device._next_report_s is None
+        and device.next_report_s is None
         and 1 <= encoder.counts_per_turn <= 65536
         and -_COUNT_LIMIT < encoder.base_counts < _COUNT_LIMIT
         and -_COUNT_LIMIT < encoder.offset_counts < _COUNT_LIMIT
@@ -201,9 +205,7 @@ class MaCore:
 
     __slots__ = ("_config", "_control", "_stream", "device", "motor", "state")
 
-    def __init__(self, device: MyActuatorMotor, motor: Any) -> None:
-        from servobus.protocols.myactuator.sim.device import Stream
-
+    def __init__(self, device: Twinned, motor: Any) -> None:
         self.device = device
         self.motor = motor
         self.state = ffi.cast("sb_ma_state *", motor.state)
@@ -224,16 +226,18 @@ class MaCore:
         st.dirty = 0
         values = self.device.__dict__
         if dirty & lib.SB_MA_DIRTY_COUNTERS:
-            counts, counters = self.motor.counters, self.device._counters
+            counts, tally = self.motor.counters, self.device.tally
+            streamed = False
             for i, name in enumerate(COUNTER_NAMES):
                 n = counts[i]
                 if n:
-                    counters[name] += n
+                    tally(name, n)
                     counts[i] = 0
-            if "stream_frames" in counters and "stream_skipped" not in counters:
-                counters["stream_skipped"] += 0  # the model adds its (often 0) skips with every frame
+                    streamed = streamed or name == "stream_frames"
+            if streamed:
+                tally("stream_skipped", 0)  # the model adds its (often 0) skips with every frame
         if dirty & lib.SB_MA_DIRTY_CONTROL:
-            values["control"] = self._control = _control(st.control)
+            values["control"] = self._control = control_from_fields(st.control)
             values["run_mode"] = RunMode(st.run_mode)
             values["brake_released"] = bool(st.brake_released)
             values["feedforward_pct"] = int(st.feedforward_pct) if st.has_feedforward else None
@@ -279,7 +283,7 @@ class MaCore:
             self._write_config(config)
         control = values["control"]
         if control is not self._control:  # the model set a control of its own (or pulled C's)
-            st.control = _control_fields(control)
+            st.control = control_fields(control)
             self._control = control
         st.brake_released = int(bool(values["brake_released"]))
         st.run_mode = int(values["run_mode"])
@@ -322,29 +326,3 @@ class MaCore:
         st.motion_command = _fields(scales.command_scales())
         st.motion_reply = _fields(scales.reply_scales())
         self._config = config
-
-    @classmethod
-    def attach(cls, device: MyActuatorMotor, motor: Any, link: BusLink | None) -> None:
-        """Attach ``device`` to ``motor`` (MyActuatorMotor.core_attach): settled, its class the
-        attached one, its plant moved into ``motor.plant``, its link set, its state pushed."""
-        device.settle()
-        core = cls(device, motor)
-        # CorePlant is Plant's API over C memory (not a subclass): the model uses it as its Plant
-        device._plant = cast("Plant", CorePlant.adopt(device._plant, motor.plant, motor))
-        device._core = core
-        device.__class__ = attached_class(type(device))
-        if link is not None:
-            device._link = link
-        core.push()
-
-    def detach(self) -> None:
-        """Leave the twin and its network (MyActuatorMotor.core_detach): settled and pulled, the
-        plant copied back into a Python Plant, the model's own class again."""
-        device = self.device
-        device.settle()
-        plant: object = device._plant
-        if isinstance(plant, CorePlant):
-            device._plant = plant.to_python()
-        device.__class__ = device._core_base  # type: ignore[attr-defined]
-        device._core = None
-        device._link = None

@@ -11,8 +11,9 @@ The model is told in parts by concern, all on the motor's one state
 (:mod:`~servobus.protocols.myactuator.sim.base`): the frames it takes
 (:mod:`~servobus.protocols.myactuator.sim.intake`), its output (``drive``), its faults and 0xB3
 protection (``faults``), and the command handlers it dispatches to (``handlers``: ``reads``,
-``loops``, ``settings``, ``streams``). This module joins them: the device protocol, the C twin's
-entry points, power-up and the dispatch.
+``loops``, ``settings``, ``streams``; typed against ``handlers.HandledMotor``, so none of them
+imports this module). This module joins them: the device protocol, the C twin's entry points (the
+motor moves its own plant and class onto the twin; ``core.MaCore`` only copies state) and power-up.
 
 Identifiers (§1.1): 0x140+ID requests and 0x400+ID motion commands of this motor are taken; 0x280
 and 0x300 (0x79, V4.3) only while the CAN-ID filter is off (0x20 index 2 value 0), otherwise they
@@ -89,27 +90,21 @@ when the error appears (or reporting is switched on).
 from __future__ import annotations
 
 import functools
-import math
 from collections import Counter
-from typing import Any, ClassVar, cast
+from typing import Any, ClassVar
 
 from servobus.core._lib import lib
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
 from servobus.protocols._message import Command, Reply
-from servobus.protocols.myactuator import ErrorFlags, IdKind, Revision, StreamableCommand
-from servobus.protocols.myactuator.ids import (
-    ID_SETTING_ID,
-    check_motor_id,
-    motion_reply_id,
-    reply_id,
-)
+from servobus.protocols.myactuator import ErrorFlags, Revision, StreamableCommand
+from servobus.protocols.myactuator.ids import check_motor_id, reply_id
 from servobus.protocols.myactuator.sim import loops, reads, settings, streams
-from servobus.protocols.myactuator.sim.core import MaCore, register_model
-from servobus.protocols.myactuator.sim.faults import Faults
-from servobus.protocols.myactuator.sim.handlers import HANDLERS
-from servobus.protocols.myactuator.sim.intake import CACHE_SIZE, Intake
+from servobus.protocols.myactuator.sim.core import MaCore, attached_class, register_model
+from servobus.protocols.myactuator.sim.faults import ERROR_REPORT_PERIOD_S, Faults
+from servobus.protocols.myactuator.sim.handlers import execute
+from servobus.protocols.myactuator.sim.intake import CACHE_SIZE, Intake, reply_can_id
 from servobus.protocols.myactuator.sim.reads import model_replies
 from servobus.protocols.myactuator.sim.state import (
     DEFAULT_ENCODER_COUNTS_PER_TURN,
@@ -120,8 +115,10 @@ from servobus.protocols.myactuator.sim.state import (
     EncoderFrame,
     ErrorLatch,
     Settings,
+    Stream,
 )
-from servobus.protocols.myactuator.sim.streams import STREAMED, Stream
+from servobus.protocols.myactuator.sim.streams import stream_replies
+from servobus.sim.coreplant import CorePlant
 from servobus.sim.device import BusLink, Emission
 from servobus.sim.plant import (
     Control,
@@ -136,7 +133,6 @@ __all__ = ["DEFAULT_TURNAROUND_S", "ERROR_REPORT_PERIOD_S", "MyActuatorMotor", "
 # The manuals state no turnaround. 200 µs is what a V3 driver's 1 ms-or-faster command loop plus a CAN
 # transmit-queue hop gives in practice [I]; the LK sibling states "within 0.25 ms" for its V2.36 drives.
 DEFAULT_TURNAROUND_S = 200e-6
-ERROR_REPORT_PERIOD_S = 0.1  # 0x20 index 3: "every 100 ms" (§4.37)
 # [I] The manuals define three run modes and no other (§4.27: "has the following 3 states"), so 0x70
 # always reports one: after 0x80 (or a fault or comm trip) the last loop's mode stays; at power-up,
 # before any control command, the position loop (the manuals' only 0x70 example reads 0x03).
@@ -191,6 +187,7 @@ class MyActuatorMotor(Intake, Faults, PowerCuts):
     #: The family's C path (csrc/sim_myactuator.c), run by a network that has one (core.py).
     CORE_FAMILY: ClassVar[int] = lib.SB_FAMILY_MYACTUATOR
     _core: MaCore | None = None
+    _core_base: ClassVar[type[MyActuatorMotor]]  # (the attached class's: the model's own class)
 
     def __init__(
         self,
@@ -252,10 +249,10 @@ class MyActuatorMotor(Intake, Faults, PowerCuts):
         self._next_trip_frame_s: float | None = None
         self.streams: dict[StreamableCommand, Stream] = {}
         self.feedforward_pct: int | None = None
-        self._boot_s = now_s
+        self.boot_s = now_s
         self._last_heard_s = now_s
-        self._next_report_s: float | None = None
-        self._power_up(now_s)
+        self.next_report_s: float | None = None
+        self.power_up(now_s)
 
     # ---- Device protocol ----
 
@@ -292,23 +289,8 @@ class MyActuatorMotor(Intake, Faults, PowerCuts):
             data = None if reply is None else _encode(reply)
         if data is None:
             return []
-        if kind is IdKind.MOTION_REQUEST:
-            can_id = motion_reply_id(motor_id)
-        elif kind is IdKind.ID_SETTING:
-            can_id = ID_SETTING_ID  # the 0x79 examples print the reply on 0x300 (§4.38)
-        else:
-            can_id = _reply_id(motor_id)
+        can_id = reply_can_id(kind, motor_id)
         return [Emission(now_s + self.turnaround_s, Frame(arbitration_id=can_id, data=data))]
-
-    def _echo_unexecuted(self, data: bytes, now_s: float) -> bytes | None:
-        """The first frame after a 0xB3 trip: communication is back, the command is not executed,
-        its bytes go back as they came (None: nothing is sent)."""
-        self._counters["comm_echoed"] += 1
-        self._heard(now_s)
-        if self.unresponsive:
-            self._counters["unanswered"] += 1
-            return None
-        return data
 
     def poll(self, now_s: float) -> list[Emission]:
         """Spontaneous frames due by ``now_s``: 0xB6 streams, 0x9A error reports and 0xF1 trip frames
@@ -321,7 +303,7 @@ class MyActuatorMotor(Intake, Faults, PowerCuts):
     def next_deadline_s(self) -> float | None:
         """The earliest of: the 0xB3 trip (or, tripped, the next 0xF1 frame), the next stream frame,
         the next error report."""
-        protection, report = self.protection_deadline_s(), self._next_report_s
+        protection, report = self.protection_deadline_s(), self.next_report_s
         if protection is None:  # (tripped: the next 0xF1 frame instead)
             protection = self._next_trip_frame_s
         streams = self.streams
@@ -345,12 +327,25 @@ class MyActuatorMotor(Intake, Faults, PowerCuts):
         """
         if self._core is not None or (link is not None and self._link not in (None, link)):
             raise ValueError(f"{self!r} is already on a network: remove it from that one first")
-        MaCore.attach(self, motor, link)
+        self.settle()
+        # CorePlant is Plant's API over C memory (not a subclass): the model uses it as its Plant
+        self._plant = CorePlant.adopt(self._plant, motor.plant, motor)
+        self._core = MaCore(self, motor)
+        self.__class__ = attached_class(type(self))  # (its C twin's pulled attributes)
+        if link is not None:
+            self._link = link
+        self._core.push()
 
     def core_detach(self) -> None:
         """Leave the C twin and its network: its changes pulled, the plant back in Python."""
-        if self._core is not None:
-            self._core.detach()
+        if self._core is None:
+            return
+        self.settle()
+        if isinstance(self._plant, CorePlant):
+            self._plant = self._plant.to_python()
+        self.__class__ = self._core_base
+        self._core = None
+        self._link = None
 
     def core_push(self) -> None:
         """Write what the C path reads into the twin (the network calls this after each call in)."""
@@ -372,20 +367,9 @@ class MyActuatorMotor(Intake, Faults, PowerCuts):
         streams = self.streams
         if streams and self._core is not None and self._core.runs_streams():
             streams = {}  # its C twin runs them (sb_ma_poll)
-        for command, stream in streams.items():
-            if stream.next_s <= now_s:
-                self._counters["stream_skipped"] += stream.advance_past(now_s)
-                self._counters["stream_frames"] += 1
-                reply = self._execute(STREAMED[command](), now_s, rs485=False)
-                assert reply is not None
-                out.append((now_s, reply))
-        if self._next_trip_frame_s is not None:
-            out += self._trip_frames(now_s)
-        if self._next_report_s is not None and self._next_report_s <= now_s:
-            periods = math.floor((now_s - self._next_report_s) / ERROR_REPORT_PERIOD_S + 1e-9) + 1
-            self._next_report_s += periods * ERROR_REPORT_PERIOD_S
-            self._counters["error_reports"] += 1
-            out.append((now_s, self._status1()))
+        if streams:
+            stream_replies(self, streams, now_s, out)
+        self._fault_frames(now_s, out)
         if out and self.unresponsive:
             self._counters["unanswered"] += len(out)
             return []
@@ -397,7 +381,7 @@ class MyActuatorMotor(Intake, Faults, PowerCuts):
             return None  # (the RS485 front's way in: its line is dead too)
         self._counters["accepted"] += 1
         self._heard(now_s)
-        reply = self._execute(command, now_s, rs485=rs485)
+        reply = execute(self, command, now_s, rs485=rs485)
         if reply is None:
             return None
         if self.unresponsive:
@@ -416,7 +400,7 @@ class MyActuatorMotor(Intake, Faults, PowerCuts):
         brake locked (§4.30), the run time restarts. Physical shaft angle and speed are kept."""
         self.advance(now_s)
         self._counters["reboots"] += 1
-        self._power_up(now_s)
+        self.power_up(now_s)
 
     def _power_cut(self, now_s: float) -> None:
         # No supply: the output is off and the power-off brake holds (a brake is locked unpowered,
@@ -424,15 +408,15 @@ class MyActuatorMotor(Intake, Faults, PowerCuts):
         self.advance(now_s)
         self.brake_released = False
         self.streams = {}
-        self._next_report_s = None
-        self._set_control(Off(), self.run_mode)
+        self.next_report_s = None
+        self.set_control(Off(), self.run_mode)
 
     def _power_changed(self) -> None:
         self._changed()
         if self._core is not None:
             self._core.push()  # its C twin stands aside while the power is cut, and acts again after
 
-    def _power_up(self, now_s: float) -> None:
+    def power_up(self, now_s: float) -> None:
         keep_turns = self.rom.save_multi_turn and not self.rom.clear_multi_turn
         self.rom.clear_multi_turn = False
         self.ram = self.rom.copy()
@@ -444,25 +428,10 @@ class MyActuatorMotor(Intake, Faults, PowerCuts):
         self._next_trip_frame_s = None
         self.streams = {}
         self.feedforward_pct = None
-        self._boot_s = self._last_heard_s = now_s
-        self._next_report_s = None
-        self._set_control(Off(), RUN_MODE_POWER_UP)
-        self._update_reports(now_s)
-
-    def _execute(self, command: Command, now_s: float, *, rs485: bool) -> Reply | None:
-        # The handler acts; what comes back follows the command's declaration: nothing for NO_REPLY,
-        # an echo of the request for ``[Echo]``, otherwise the reply the handler built.
-        cls = type(command)
-        handler = HANDLERS.get(cls)
-        if handler is None:
-            raise TypeError(f"the simulated motor has no handler for {cls.__name__}")
-        reply = handler(self, command, now_s, rs485)
-        if cls.NO_REPLY is not None:
-            return None
-        if cls.REPLY is ma.Echo:
-            return ma.Echo(command=cast(ma.MyActuatorCommand[Any], command))
-        assert reply is not None, cls
-        return reply
+        self.boot_s = self._last_heard_s = now_s
+        self.next_report_s = None
+        self.set_control(Off(), RUN_MODE_POWER_UP)
+        self.update_reports(now_s)
 
     def __repr__(self) -> str:
         state = "on" if self.enabled else "off"
@@ -471,7 +440,6 @@ class MyActuatorMotor(Intake, Faults, PowerCuts):
 
 
 register_model(MyActuatorMotor)  # what the C path reproduces (core.py), before anything can patch it
-_reply_id = functools.lru_cache(maxsize=None)(reply_id)  # a bad id still raises (errors are not cached)
 
 
 # A motor encodes the same few replies over and over (and decodes the same few requests, intake.py):

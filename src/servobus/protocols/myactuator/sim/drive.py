@@ -1,7 +1,7 @@
 """The simulated MyActuator motor's output: the control it runs, its run mode, the brake, the plant.
 
 A closed-loop command (``@loop`` in :mod:`~servobus.protocols.myactuator.sim.handlers`) gives a
-plant control and a run mode; :meth:`Drive._control_command` runs it unless an error flag is set and
+plant control and a run mode; :meth:`Drive.control_command` runs it unless an error flag is set and
 answers with the status either way. A locked brake holds the shaft whatever the command; the slew is
 the acceleration (RAM) of the loop that runs.
 """
@@ -57,13 +57,13 @@ class Drive(MotorBase):
             counts_per_turn=self.encoder.counts_per_turn,
         )
 
-    def _control_command(self, command: Command, loop: Loop, *, releases_brake: bool) -> Reply:
+    def control_command(self, command: Command, loop: Loop, *, releases_brake: bool) -> Reply:
         if self.errors.flags:
             self._counters["refused_fault"] += 1
         else:
             # Every control command but 0xA1 releases the brake: the manuals name only 0xA1 as unable [I].
             self.brake_released = self.brake_released or releases_brake
-            self._set_control(*loop(self, command))
+            self.set_control(*loop(self, command))
         readings = self.readings()
         reply = type(command).REPLY
         if reply is ma.MotionReply:
@@ -73,12 +73,12 @@ class Drive(MotorBase):
         assert reply is ma.StatusReply and command.CODE is not None, command
         return status_reply(ma.StatusCommand(command.CODE), readings)
 
-    def _set_control(self, control: Control, run_mode: ma.RunMode) -> None:
+    def set_control(self, control: Control, run_mode: ma.RunMode) -> None:
         self.control = control
         self.run_mode = run_mode
-        self._apply_plant()
+        self.apply_plant()
 
-    def _apply_plant(self) -> None:
+    def apply_plant(self) -> None:
         accel = self.ram.acceleration_dps_s
         if isinstance(self.control, PlantSpeedControl):
             slew = accel[ma.AccelIndex.SPEED_ACCELERATION]
@@ -88,11 +88,11 @@ class Drive(MotorBase):
         locked = self.has_brake and not self.brake_released
         self.plant.set_control(Brake() if locked else self.control)
 
-    def _current_limit(self, pct: int | None) -> float | None:
+    def current_limit_a(self, pct: int | None) -> float | None:
         if pct is None:  # maxTorque 0: force-limit mode off (§4.20)
             return None
         limit = pct / 100.0 * self.rated_current_a
         return limit if 0 < limit < self.plant.params.max_current_a else None
 
-    def _target(self, angle_deg: float) -> float:
+    def target_deg(self, angle_deg: float) -> float:
         return self.encoder.output_deg_for(angle_deg)

@@ -3,7 +3,7 @@
 Error flags (§7): :meth:`Faults.inject_error` starts a condition (its flags set, the output cut);
 :meth:`Faults.clear_error` ends it (auto-recoverable flags clear, latched ones wait for a restart).
 While a flag is set and 0x20 index 3 is on, the motor reports 0x9A every 100 ms (the deadline is
-``_next_report_s``; the reports themselves go out with the streams, in the motor's ``spontaneous``).
+``next_report_s``; the reports themselves go out with the streams, in the motor's ``spontaneous``).
 
 0xB3 communication protection: with no frame for this motor within the set time, the output goes off
 and the brake locks at that exact time (:meth:`Faults.advance`); the next frame restores it.
@@ -23,10 +23,11 @@ from servobus.protocols.myactuator.sim.drive import Drive
 from servobus.protocols.myactuator.sim.state import status1
 from servobus.sim.plant import Off
 
-__all__ = ["TRIP_FRAME_PERIOD_S", "Faults"]
+__all__ = ["ERROR_REPORT_PERIOD_S", "TRIP_FRAME_PERIOD_S", "Faults"]
 
 #: 0xF1 frames while the 0xB3 protection holds: "repeat this frame every second" (the report above).
 TRIP_FRAME_PERIOD_S = 1.0
+ERROR_REPORT_PERIOD_S = 0.1  # 0x20 index 3: "every 100 ms" (§4.37)
 
 
 class Faults(Drive):
@@ -37,8 +38,8 @@ class Faults(Drive):
         self.advance(now_s)
         self.errors.start(ErrorFlags(flags))
         self._counters["errors_injected"] += 1
-        self._set_control(Off(), self.run_mode)
-        self._update_reports(now_s)
+        self.set_control(Off(), self.run_mode)
+        self.update_reports(now_s)
 
     def clear_error(self, flags: ErrorFlags, now_s: float) -> None:
         """The conditions ``flags`` end at ``now_s``: auto-recoverable flags clear (unless 0x20 index 8
@@ -46,7 +47,7 @@ class Faults(Drive):
         self.advance(now_s)
         auto = self.ram.error_auto_recovery or self.revision is Revision.V4_3
         self.errors.end(ErrorFlags(flags), auto_recovery=auto)
-        self._update_reports(now_s)
+        self.update_reports(now_s)
 
     def advance(self, now_s: float) -> None:
         """Bring the plant (and a due 0xB3 trip, at its exact time) up to ``now_s``."""
@@ -79,7 +80,28 @@ class Faults(Drive):
             self._next_trip_frame_s = at_s  # the first 0xF1 at the trip
         self._counters["comm_timeouts"] += 1
         self.brake_released = False
-        self._set_control(Off(), self.run_mode)
+        self.set_control(Off(), self.run_mode)
+
+    def _echo_unexecuted(self, data: bytes, now_s: float) -> bytes | None:
+        """The first frame after a 0xB3 trip: communication is back, the command is not executed,
+        its bytes go back as they came (None: nothing is sent)."""
+        self._counters["comm_echoed"] += 1
+        self._heard(now_s)
+        if self.unresponsive:
+            self._counters["unanswered"] += 1
+            return None
+        return data
+
+    def _fault_frames(self, now_s: float, out: list[tuple[float, Reply]]) -> None:
+        """Add to ``out`` the 0xF1 trip frame and the 0x9A error report due by ``now_s``."""
+        if self._next_trip_frame_s is not None:
+            out += self._trip_frames(now_s)
+        due = self.next_report_s
+        if due is not None and due <= now_s:
+            periods = math.floor((now_s - due) / ERROR_REPORT_PERIOD_S + 1e-9) + 1
+            self.next_report_s = due + periods * ERROR_REPORT_PERIOD_S
+            self._counters["error_reports"] += 1
+            out.append((now_s, self.status1_reply()))
 
     def _trip_frames(self, now_s: float) -> list[tuple[float, Reply]]:
         """The 0xF1 frame due by ``now_s`` while the protection holds (one, however late the poll)."""
@@ -91,14 +113,14 @@ class Faults(Drive):
         self._counters["comm_trip_frames"] += 1
         return [(now_s, CommunicationTimeoutTripped())]
 
-    def _update_reports(self, now_s: float) -> None:
+    def update_reports(self, now_s: float) -> None:
         self._changed()  # the report deadline, and after a restart the identifiers
         if not (self.errors.flags and self.ram.error_reporting):
-            self._next_report_s = None
-        elif self._next_report_s is None:
-            self._next_report_s = now_s
+            self.next_report_s = None
+        elif self.next_report_s is None:
+            self.next_report_s = now_s
 
-    def _status1(self) -> Reply:
+    def status1_reply(self) -> Reply:
         """The 0x9A reply now (errors, brake, temperature, voltage): what 0x9A and the reports carry."""
         plant = self.plant
         key = (plant.temperature_c, plant.voltage_v, self.brake_released, self.errors.flags)

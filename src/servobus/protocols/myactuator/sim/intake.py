@@ -21,17 +21,31 @@ from servobus.protocols.myactuator.ids import (
     BROADCAST_ID,
     ID_SETTING_ID,
     classify_id,
+    motion_reply_id,
     motion_request_id,
+    reply_id,
     request_id,
 )
 from servobus.protocols.myactuator.sim.base import MotorBase
 
-__all__ = ["CACHE_SIZE", "Intake"]
+__all__ = ["CACHE_SIZE", "Intake", "reply_can_id"]
 
 #: distinct requests a motor keeps decoded (and replies encoded, device.py): both are pure
 CACHE_SIZE = 4096
 _OTHER_REVISION = {Revision.V4_3: Revision.V4_4, Revision.V4_4: Revision.V4_3}
 _classify_id = functools.lru_cache(maxsize=None)(classify_id)  # at most 0x800 standard identifiers
+
+
+_reply_id = functools.lru_cache(maxsize=None)(reply_id)  # a bad id still raises (errors are not cached)
+
+
+def reply_can_id(kind: IdKind, motor_id: int) -> int:
+    """Where the reply to a request that came on a ``kind`` identifier goes (§1.1)."""
+    if kind is IdKind.MOTION_REQUEST:
+        return motion_reply_id(motor_id)
+    if kind is IdKind.ID_SETTING:
+        return ID_SETTING_ID  # the 0x79 examples print the reply on 0x300 (§4.38)
+    return _reply_id(motor_id)
 
 
 @functools.cache

@@ -3,23 +3,20 @@
 Each closed-loop command gives the plant control and run mode it asks for (the table in
 :mod:`~servobus.protocols.myactuator.sim.device`'s docstring); the motor runs it unless an error
 flag is set and answers with its status either way
-(:meth:`~servobus.protocols.myactuator.sim.drive.Drive._control_command`).
+(:meth:`~servobus.protocols.myactuator.sim.drive.Drive.control_command`).
 """
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from servobus.protocols import myactuator as ma
 from servobus.protocols._message import Command
 from servobus.protocols.myactuator import MotionCommand
-from servobus.protocols.myactuator.sim.handlers import handles, loop
+from servobus.protocols.myactuator.sim.handlers import HandledMotor, handles, loop
 from servobus.sim.plant import Control, CurrentControl, Impedance, Off, PositionControl
 from servobus.sim.plant import SpeedControl as PlantSpeedControl
-
-if TYPE_CHECKING:
-    from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 
 __all__: list[str] = []  # the handlers register themselves (handlers.py)
 
@@ -28,16 +25,16 @@ _RUN_MODE_MOTION = ma.RunMode.CURRENT_LOOP
 
 
 @loop(ma.TorqueControl, releases_brake=False)
-def _torque(motor: MyActuatorMotor, command: ma.TorqueControl) -> tuple[Control, ma.RunMode]:
+def _torque(motor: HandledMotor, command: ma.TorqueControl) -> tuple[Control, ma.RunMode]:
     # §4.19: 0xA1 cannot release the brake; a locked brake keeps the shaft held.
     if motor.has_brake and not motor.brake_released:
-        motor._counters["brake_locked"] += 1
+        motor.tally("brake_locked")
     return CurrentControl(current_a=command.current_a), ma.RunMode.CURRENT_LOOP
 
 
 @loop(MotionCommand)
-def _impedance(motor: MyActuatorMotor, command: MotionCommand) -> tuple[Control, ma.RunMode]:
-    p_des_deg = motor._target(math.degrees(command.position_rad))
+def _impedance(motor: HandledMotor, command: MotionCommand) -> tuple[Control, ma.RunMode]:
+    p_des_deg = motor.target_deg(math.degrees(command.position_rad))
     control = Impedance(
         position_rad=math.radians(p_des_deg),
         velocity_rad_s=command.velocity_rad_s,
@@ -49,8 +46,8 @@ def _impedance(motor: MyActuatorMotor, command: MotionCommand) -> tuple[Control,
 
 
 @loop(ma.SpeedControl)
-def _speed(motor: MyActuatorMotor, command: ma.SpeedControl) -> tuple[Control, ma.RunMode]:
-    limit = motor._current_limit(command.max_torque_pct)
+def _speed(motor: HandledMotor, command: ma.SpeedControl) -> tuple[Control, ma.RunMode]:
+    limit = motor.current_limit_a(command.max_torque_pct)
     return PlantSpeedControl(speed_dps=command.speed_dps, max_current_a=limit), ma.RunMode.SPEED_LOOP
 
 
@@ -60,26 +57,24 @@ def _speed(motor: MyActuatorMotor, command: ma.SpeedControl) -> tuple[Control, m
     ma.PositionSpeedFeedforward,
     ma.PositionTorqueFeedforward,
 )
-def _absolute(motor: MyActuatorMotor, command: Any) -> tuple[Control, ma.RunMode]:
+def _absolute(motor: HandledMotor, command: Any) -> tuple[Control, ma.RunMode]:
     limit = None
     if isinstance(command, ma.ForcePositionControl):
-        limit = motor._current_limit(command.max_torque_pct)
+        limit = motor.current_limit_a(command.max_torque_pct)
     if isinstance(command, ma.PositionSpeedFeedforward):
         motor.feedforward_pct = command.feedforward_speed_pct
     elif isinstance(command, ma.PositionTorqueFeedforward):
         motor.feedforward_pct = command.feedforward_torque_pct
-    return _position(motor._target(command.angle_deg), command.max_speed_dps, limit)
+    return _position(motor.target_deg(command.angle_deg), command.max_speed_dps, limit)
 
 
 @loop(ma.IncrementalPositionControl)
-def _incremental(
-    motor: MyActuatorMotor, command: ma.IncrementalPositionControl
-) -> tuple[Control, ma.RunMode]:
+def _incremental(motor: HandledMotor, command: ma.IncrementalPositionControl) -> tuple[Control, ma.RunMode]:
     return _position(motor.plant.position_deg + command.angle_deg, command.max_speed_dps)
 
 
 @loop(ma.SingleTurnPositionControl)
-def _single_turn(motor: MyActuatorMotor, command: ma.SingleTurnPositionControl) -> tuple[Control, ma.RunMode]:
+def _single_turn(motor: HandledMotor, command: ma.SingleTurnPositionControl) -> tuple[Control, ma.RunMode]:
     here = motor.angle_deg % 360.0
     wanted = command.angle_deg % 360.0
     if command.direction is ma.SpinDirection.CLOCKWISE:
@@ -98,17 +93,17 @@ def _position(
 
 
 @handles(ma.MotorShutdown)
-def _on_shutdown(motor: MyActuatorMotor, _command: Command, _now_s: float, _rs485: bool) -> None:
-    motor._set_control(Off(), motor.run_mode)
+def _on_shutdown(motor: HandledMotor, _command: Command, _now_s: float, _rs485: bool) -> None:
+    motor.set_control(Off(), motor.run_mode)
 
 
 @handles(ma.MotorStop)
-def _on_stop(motor: MyActuatorMotor, _command: Command, _now_s: float, _rs485: bool) -> None:
+def _on_stop(motor: HandledMotor, _command: Command, _now_s: float, _rs485: bool) -> None:
     if motor.enabled and not motor.errors.flags:  # hold where it is; the loop stays (§4.18)
-        motor._set_control(PositionControl(position_deg=motor.plant.position_deg), motor.run_mode)
+        motor.set_control(PositionControl(position_deg=motor.plant.position_deg), motor.run_mode)
 
 
 @handles(ma.BrakeRelease, ma.BrakeLock)
-def _on_brake(motor: MyActuatorMotor, command: Command, _now_s: float, _rs485: bool) -> None:
+def _on_brake(motor: HandledMotor, command: Command, _now_s: float, _rs485: bool) -> None:
     motor.brake_released = isinstance(command, ma.BrakeRelease)
-    motor._apply_plant()
+    motor.apply_plant()

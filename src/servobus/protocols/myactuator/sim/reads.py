@@ -6,12 +6,11 @@ Every value comes from the plant and the motor's memory at the time the request 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 from servobus.protocols import myactuator as ma
 from servobus.protocols._message import Command, Reply
 from servobus.protocols.myactuator import Revision
-from servobus.protocols.myactuator.sim.handlers import handles
+from servobus.protocols.myactuator.sim.handlers import HandledMotor, handles
 from servobus.protocols.myactuator.sim.state import (
     int32,
     single_turn_encoder_reply,
@@ -19,9 +18,6 @@ from servobus.protocols.myactuator.sim.state import (
     status3_reply,
     status_reply,
 )
-
-if TYPE_CHECKING:
-    from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 
 __all__ = ["model_replies"]
 
@@ -40,32 +36,32 @@ def model_replies(revision: Revision, model: str) -> list[Reply]:
 
 
 @handles(ma.ReadStatus1)
-def _on_status1(motor: MyActuatorMotor, _command: Command, _now_s: float, _rs485: bool) -> Reply:
-    return motor._status1()
+def _on_status1(motor: HandledMotor, _command: Command, _now_s: float, _rs485: bool) -> Reply:
+    return motor.status1_reply()
 
 
 @handles(ma.ReadStatus2)
-def _on_status2(motor: MyActuatorMotor, _command: Command, _now_s: float, _rs485: bool) -> Reply:
+def _on_status2(motor: HandledMotor, _command: Command, _now_s: float, _rs485: bool) -> Reply:
     return status_reply(ma.StatusCommand.READ_STATUS_2, motor.readings())
 
 
 @handles(ma.ReadStatus3)
-def _on_status3(motor: MyActuatorMotor, _command: Command, _now_s: float, _rs485: bool) -> Reply:
+def _on_status3(motor: HandledMotor, _command: Command, _now_s: float, _rs485: bool) -> Reply:
     return status3_reply(motor.readings(), motor.pole_pairs)
 
 
 @handles(ma.ReadMultiTurnAngle)
-def _on_multi_turn_angle(motor: MyActuatorMotor, _command: Command, _now_s: float, _rs485: bool) -> Reply:
+def _on_multi_turn_angle(motor: HandledMotor, _command: Command, _now_s: float, _rs485: bool) -> Reply:
     return ma.MultiTurnAngleReply(angle_deg=int32(motor.angle_deg * 100) / 100)
 
 
 @handles(ma.ReadSingleTurnAngle)
-def _on_single_turn_angle(motor: MyActuatorMotor, _command: Command, _now_s: float, _rs485: bool) -> Reply:
+def _on_single_turn_angle(motor: HandledMotor, _command: Command, _now_s: float, _rs485: bool) -> Reply:
     return single_turn_reply(motor.readings(), motor.revision)
 
 
 @handles(ma.ReadEncoderPosition, ma.ReadEncoderRaw, ma.ReadEncoderOffset, ma.ReadSingleTurnEncoder)
-def _on_encoder(motor: MyActuatorMotor, command: Command, _now_s: float, _rs485: bool) -> Reply:
+def _on_encoder(motor: HandledMotor, command: Command, _now_s: float, _rs485: bool) -> Reply:
     encoder, rotor = motor.encoder, motor.plant.motor_position_deg
     if isinstance(command, ma.ReadEncoderPosition):
         return ma.EncoderPositionReply(encoder_counts=int32(encoder.position_counts(rotor)))
@@ -77,41 +73,41 @@ def _on_encoder(motor: MyActuatorMotor, command: Command, _now_s: float, _rs485:
 
 
 @handles(ma.ReadPid)
-def _on_read_pid(motor: MyActuatorMotor, command: ma.ReadPid, _now_s: float, _rs485: bool) -> Reply:
+def _on_read_pid(motor: HandledMotor, command: ma.ReadPid, _now_s: float, _rs485: bool) -> Reply:
     return ma.PidReply(index=command.index, value=motor.ram.pid[command.index])
 
 
 @handles(ma.ReadAcceleration)
 def _on_read_acceleration(
-    motor: MyActuatorMotor, command: ma.ReadAcceleration, _now_s: float, _rs485: bool
+    motor: HandledMotor, command: ma.ReadAcceleration, _now_s: float, _rs485: bool
 ) -> Reply:
     value = motor.ram.acceleration_dps_s[command.index]
     return ma.AccelerationReply(index=command.index, acceleration_dps_s=value)
 
 
 @handles(ma.ReadRunMode)
-def _on_run_mode(motor: MyActuatorMotor, _command: Command, _now_s: float, _rs485: bool) -> Reply:
+def _on_run_mode(motor: HandledMotor, _command: Command, _now_s: float, _rs485: bool) -> Reply:
     return ma.RunModeReply(mode=motor.run_mode)
 
 
 @handles(ma.ReadRunTime)
-def _on_run_time(motor: MyActuatorMotor, _command: Command, now_s: float, _rs485: bool) -> Reply:
-    return ma.RunTimeReply(run_time_ms=math.floor((now_s - motor._boot_s) * 1000 + 1e-6) % (1 << 32))
+def _on_run_time(motor: HandledMotor, _command: Command, now_s: float, _rs485: bool) -> Reply:
+    return ma.RunTimeReply(run_time_ms=math.floor((now_s - motor.boot_s) * 1000 + 1e-6) % (1 << 32))
 
 
 @handles(ma.ReadVersionDate)
-def _on_version_date(motor: MyActuatorMotor, _command: Command, _now_s: float, _rs485: bool) -> Reply:
+def _on_version_date(motor: HandledMotor, _command: Command, _now_s: float, _rs485: bool) -> Reply:
     return ma.VersionDateReply(version_date=motor.version_date)
 
 
 @handles(ma.ReadModel, ma.ReadModelPart)
-def _on_model(motor: MyActuatorMotor, command: Command, _now_s: float, _rs485: bool) -> Reply:
+def _on_model(motor: HandledMotor, command: Command, _now_s: float, _rs485: bool) -> Reply:
     part = command.part if isinstance(command, ma.ReadModelPart) else 1
     return model_replies(motor.revision, motor.model)[part - 1]
 
 
 @handles(ma.ReadCanId)
-def _on_read_can_id(motor: MyActuatorMotor, _command: Command, _now_s: float, rs485: bool) -> Reply:
+def _on_read_can_id(motor: HandledMotor, _command: Command, _now_s: float, rs485: bool) -> Reply:
     # The RS485 example puts the id in DATA[7]; the CAN example sends 0x240+ID (§4.38).
     layout = ma.CanIdLayout.DATA7 if rs485 else ma.CanIdLayout.REPLY_IDENTIFIER
     return ma.CanIdReply(motor_id=motor.motor_id, layout=layout)

@@ -8,16 +8,11 @@ the baud index act after a restart (0x76, or a power cycle).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from servobus.protocols import myactuator as ma
 from servobus.protocols._message import Command, Reply
 from servobus.protocols.myactuator import Revision
-from servobus.protocols.myactuator.sim.handlers import handles
+from servobus.protocols.myactuator.sim.handlers import HandledMotor, handles
 from servobus.protocols.myactuator.sim.state import int32
-
-if TYPE_CHECKING:
-    from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 
 __all__: list[str] = []  # the handlers register themselves (handlers.py)
 
@@ -31,18 +26,16 @@ _IMMEDIATE: dict[ma.FunctionIndex, tuple[str, type[bool] | type[int]]] = {
 }
 
 
-def _rom_ok(motor: MyActuatorMotor) -> bool:
+def _rom_ok(motor: HandledMotor) -> bool:
     # [000]: "the parameters can only be saved to ROM successfully when the motor is disabled".
     if motor.revision is Revision.V4_4 and motor.enabled:
-        motor._counters["rom_write_refused"] += 1
+        motor.tally("rom_write_refused")
         return False
     return True
 
 
 @handles(ma.FunctionControl)
-def _function(
-    motor: MyActuatorMotor, command: ma.FunctionControl, now_s: float, _rs485: bool = False
-) -> None:
+def _function(motor: HandledMotor, command: ma.FunctionControl, now_s: float, _rs485: bool = False) -> None:
     index, value = command.index, command.value
     saved = _rom_ok(motor)
     if index is ma.FunctionIndex.CLEAR_MULTI_TURN:
@@ -57,12 +50,12 @@ def _function(
         attribute, typed = _IMMEDIATE[index]
         for image in (motor.ram, motor.rom) if saved else (motor.ram,):
             setattr(image, attribute, typed(value))
-    motor._update_reports(now_s)
+    motor.update_reports(now_s)
 
 
 @handles(ma.WritePidRam, ma.WritePidRom)
 def _on_write_pid(
-    motor: MyActuatorMotor, command: ma.WritePidRam | ma.WritePidRom, _now_s: float, _rs485: bool
+    motor: HandledMotor, command: ma.WritePidRam | ma.WritePidRom, _now_s: float, _rs485: bool
 ) -> None:
     motor.ram.pid[command.index] = command.value
     if isinstance(command, ma.WritePidRom) and _rom_ok(motor):
@@ -71,25 +64,23 @@ def _on_write_pid(
 
 @handles(ma.WriteAcceleration)
 def _on_write_acceleration(
-    motor: MyActuatorMotor, command: ma.WriteAcceleration, _now_s: float, _rs485: bool
+    motor: HandledMotor, command: ma.WriteAcceleration, _now_s: float, _rs485: bool
 ) -> None:
     accel = 0.0 if command.acceleration_dps_s is None else command.acceleration_dps_s  # None: 0
     motor.ram.acceleration_dps_s[command.index] = accel
     if _rom_ok(motor):
         motor.rom.acceleration_dps_s[command.index] = accel
-    motor._apply_plant()
+    motor.apply_plant()
 
 
 @handles(ma.WriteEncoderZero)
-def _on_encoder_zero(
-    motor: MyActuatorMotor, command: ma.WriteEncoderZero, _now_s: float, _rs485: bool
-) -> None:
+def _on_encoder_zero(motor: HandledMotor, command: ma.WriteEncoderZero, _now_s: float, _rs485: bool) -> None:
     if _rom_ok(motor):  # takes effect after a restart (§4.9)
         motor.rom.encoder_offset_counts = command.offset_counts
 
 
 @handles(ma.WriteCurrentPositionAsZero)
-def _on_position_as_zero(motor: MyActuatorMotor, _command: Command, _now_s: float, _rs485: bool) -> Reply:
+def _on_position_as_zero(motor: HandledMotor, _command: Command, _now_s: float, _rs485: bool) -> Reply:
     offset = int32(motor.encoder.raw_counts(motor.plant.motor_position_deg))
     if _rom_ok(motor):  # takes effect after 0x76 (§4.10)
         motor.rom.encoder_offset_counts = offset
@@ -97,24 +88,24 @@ def _on_position_as_zero(motor: MyActuatorMotor, _command: Command, _now_s: floa
 
 
 @handles(ma.SetCommTimeout)
-def _on_comm_timeout(motor: MyActuatorMotor, command: ma.SetCommTimeout, _now_s: float, _rs485: bool) -> None:
+def _on_comm_timeout(motor: HandledMotor, command: ma.SetCommTimeout, _now_s: float, _rs485: bool) -> None:
     # ROM, and not in [000]'s "only when disabled" list (§8 item 15).
     timeout = 0 if command.timeout_ms is None else command.timeout_ms  # None: protection off
     motor.ram.comm_timeout_ms = motor.rom.comm_timeout_ms = timeout
 
 
 @handles(ma.SetCanId)
-def _on_set_can_id(motor: MyActuatorMotor, command: ma.SetCanId, _now_s: float, _rs485: bool) -> None:
+def _on_set_can_id(motor: HandledMotor, command: ma.SetCanId, _now_s: float, _rs485: bool) -> None:
     motor.rom.motor_id = command.motor_id  # V4.3 only, which has no "only when disabled" rule
 
 
 @handles(ma.SetBaudRate)
-def _on_baud_rate(motor: MyActuatorMotor, command: ma.SetBaudRate, _now_s: float, _rs485: bool) -> None:
+def _on_baud_rate(motor: HandledMotor, command: ma.SetBaudRate, _now_s: float, _rs485: bool) -> None:
     if _rom_ok(motor):  # used from the next power-up (§4.34)
         motor.rom.baud_index = command.baud_index
 
 
 @handles(ma.SystemReset)
-def _on_reset(motor: MyActuatorMotor, _command: Command, now_s: float, _rs485: bool) -> None:
-    motor._counters["resets"] += 1
-    motor._power_up(now_s)  # §4.28: the program restarts
+def _on_reset(motor: HandledMotor, _command: Command, now_s: float, _rs485: bool) -> None:
+    motor.tally("resets")
+    motor.power_up(now_s)  # §4.28: the program restarts

@@ -9,6 +9,7 @@ small. Everything here is sans-IO data and arithmetic over a :class:`~servobus.s
   give (0x92, R2), over the plant's physical shaft angle.
 * :class:`ErrorLatch`: which fault conditions are present and which 0x9A flags are reported
   (spec §4.14 recovery rules, §7 levels).
+* :class:`Stream`: one 0xB6 active-reply stream's timer (the handler is in ``streams``).
 * :func:`status_reply`, :func:`status1_reply`, ...: replies filled from the plant, every field
   clamped to what its integer holds (a reply reports what the motor measured).
 
@@ -49,10 +50,12 @@ __all__ = [
     "DEFAULT_VERSION_DATES",
     "MYACTUATOR_PLANT_PARAMS",
     "RECOVERY_SWITCHABLE",
+    "STREAM_STEP_S",
     "EncoderFrame",
     "ErrorLatch",
     "Readings",
     "Settings",
+    "Stream",
     "int32",
     "motion_reply",
     "phase_currents",
@@ -376,3 +379,26 @@ def motion_reply(motor_id: int, r: Readings, torque_nm: float, scales: MotionSca
 def int32(value: float) -> int:
     """``value`` rounded and saturated to int32 (the 0x60-0x64 and 0x92 fields)."""
     return _int(value, _INT32)
+
+
+STREAM_STEP_S = 0.01  # 0xB6 interval unit: 10 ms/LSB (§4.36, §9 item 29)
+
+
+@dataclass(slots=True)
+class Stream:
+    """One 0xB6 active-reply stream: the next frame is due at ``origin_s + count * interval_s``."""
+
+    interval_s: float
+    origin_s: float
+    count: int = 1
+
+    @property
+    def next_s(self) -> float:
+        return self.origin_s + self.count * self.interval_s
+
+    def advance_past(self, now_s: float) -> int:
+        """Move the schedule past ``now_s``; return how many due slots were skipped (late poll)."""
+        due = math.floor((now_s - self.origin_s) / self.interval_s + 1e-9) + 1
+        skipped = max(0, due - self.count - 1)
+        self.count = max(self.count + 1, due)
+        return skipped

@@ -7,54 +7,42 @@ motor answers nothing else (the motor's ``handle``, spec §9 item 18).
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
-
 from servobus.protocols import myactuator as ma
-from servobus.protocols._message import Command
+from servobus.protocols._message import Command, Reply
 from servobus.protocols.myactuator import StreamableCommand
 from servobus.protocols.myactuator.codec import COMMANDS
-from servobus.protocols.myactuator.sim.handlers import handles
+from servobus.protocols.myactuator.sim.handlers import HandledMotor, execute, handles
+from servobus.protocols.myactuator.sim.state import STREAM_STEP_S, Stream
 
-if TYPE_CHECKING:
-    from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+__all__ = ["STREAMED", "STREAM_STEP_S", "Stream", "stream_replies"]
 
-__all__ = ["STREAMED", "STREAM_STEP_S", "Stream"]
-
-STREAM_STEP_S = 0.01  # 0xB6 interval unit: 10 ms/LSB (§4.36, §9 item 29)
 #: what each streamable command's frames carry: its normal reply (§4.36)
 STREAMED: dict[StreamableCommand, type[Command]] = {
     StreamableCommand(c.CODE): c for c in COMMANDS if c.STREAMABLE and c.CODE is not None
 }
 
 
-@dataclass(slots=True)
-class Stream:
-    """One 0xB6 active-reply stream: the next frame is due at ``origin_s + count * interval_s``."""
-
-    interval_s: float
-    origin_s: float
-    count: int = 1
-
-    @property
-    def next_s(self) -> float:
-        return self.origin_s + self.count * self.interval_s
-
-    def advance_past(self, now_s: float) -> int:
-        """Move the schedule past ``now_s``; return how many due slots were skipped (late poll)."""
-        due = math.floor((now_s - self.origin_s) / self.interval_s + 1e-9) + 1
-        skipped = max(0, due - self.count - 1)
-        self.count = max(self.count + 1, due)
-        return skipped
-
-
 @handles(ma.ActiveReply)
-def _active_reply(
-    motor: MyActuatorMotor, command: ma.ActiveReply, now_s: float, _rs485: bool = False
-) -> None:
+def _active_reply(motor: HandledMotor, command: ma.ActiveReply, now_s: float, _rs485: bool = False) -> None:
     if not command.enabled:
         motor.streams.pop(command.command, None)
         return
     interval_s = command.interval_code * STREAM_STEP_S  # >= 1 step: enabled streams need one
     motor.streams[command.command] = Stream(interval_s=interval_s, origin_s=now_s)
+
+
+def stream_replies(
+    motor: HandledMotor,
+    streams: dict[StreamableCommand, Stream],
+    now_s: float,
+    out: list[tuple[float, Reply]],
+) -> None:
+    """Add to ``out`` the frame of each of ``streams`` due by ``now_s`` (one per stream, however late
+    the poll: the slots it slept through count as ``stream_skipped``)."""
+    for command, stream in streams.items():
+        if stream.next_s <= now_s:
+            motor.tally("stream_skipped", stream.advance_past(now_s))
+            motor.tally("stream_frames")
+            reply = execute(motor, STREAMED[command](), now_s, rs485=False)
+            assert reply is not None
+            out.append((now_s, reply))
