@@ -228,7 +228,7 @@ class Keys:
     def measured(self) -> None:
         """The bus's first round trip was measured: requests timed by the first value are timed again."""
         self.estimates.first_measured()
-        self.table.retime(self.estimates)
+        self.table.retime()
 
     # ---- frames that answer no request ----
 

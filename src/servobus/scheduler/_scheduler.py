@@ -70,12 +70,12 @@ class Scheduler:
         # are their sum (and the other hosts' part's), so the hot path counts once.
         self.motor_counts: dict[int, Counter[str]] = {}
         self.motor_latency: dict[int, LatencyWindow] = {}
-        self.estimates = Estimates(initial_timeout_s, min_timeout_s, max_timeout_s)
-        self.table = RequestTable(
-            name, max_in_flight, one_at_a_time, gap_s, min_reply_s, stale_after_s, report_within_s
-        )
-        self.keys = Keys(late_hold_s, late_window_s, report_within_s, self.estimates, self.table, self.count)
-        self.hosts = OtherHosts(name, exact_order, self.table, self.keys, self.estimates, self.count)
+        # The parts, each the owner of its data (servobus.scheduler's docstring says which).
+        rtts = self.estimates = Estimates(initial_timeout_s, min_timeout_s, max_timeout_s)
+        pacing = (max_in_flight, one_at_a_time, gap_s, min_reply_s, stale_after_s, report_within_s)
+        table = self.table = RequestTable(name, *pacing, rtts)
+        self.keys = Keys(late_hold_s, late_window_s, report_within_s, rtts, table, self.count)
+        self.hosts = OtherHosts(name, exact_order, table, self.keys, rtts, self.count)
         self.seen = self.hosts.seen  # (frames of no motor, for the diagnosis of a silent one)
         self.max_in_flight, self.one_at_a_time = self.table.max_in_flight, one_at_a_time
         for codec in codecs:
@@ -90,8 +90,6 @@ class Scheduler:
         self.estimates.add_motor(id(codec))
         self.table.add_motor(codec)
         self.hosts.add_motor(codec)
-
-    # ---- requests ----
 
     def request(
         self,
@@ -205,23 +203,8 @@ class Scheduler:
             self.keys.end(request, _REPLIED, at)
             self.motor_counts[id(request.codec)]["replies"] += 1
             return None
-        rtt = request.rtt
-        if request.adaptive and rtt is not None:
-            estimates = self.estimates
-            if rtt.samples:  # (Estimates.timeout_s, written out for the hot path)
-                timeout = rtt.rto_s
-                if timeout < rtt.floor_s:
-                    timeout = rtt.floor_s
-                elif timeout > estimates.max_timeout_s:
-                    timeout = estimates.max_timeout_s
-            elif (first := estimates.timeout_s(rtt)) is not None:
-                timeout = first
-            else:  # nothing measured on the bus yet: a conservative first value, timed again then
-                self.table.time_provisionally(request)
-                timeout = max(rtt.base_s, estimates.initial_timeout_s)
-            request.timeout_s = timeout
         table = self.table
-        table.move(request, _SENT, at)
+        table.move(request, _SENT, at)  # (an adaptive request is timed by the estimates there)
         early = table.take_early(request.key) if table.early else None
         if early is None:
             return None
@@ -291,8 +274,6 @@ class Scheduler:
         if keys.doubtful and key in keys.doubtful and keys.ambiguous(request, now):
             counts["ambiguous"] += 1
         return Received(traffic, frame, codec, reply, request)
-
-    # ---- what waits, and the counts ----
 
     def blocking(self, keys: Iterable[Hashable], now: float) -> tuple[float | None, list[Request]]:
         """What a frame that skips the queue (a broadcast) waits for before it may go out: the requests

@@ -163,8 +163,10 @@ class RequestTable:
         min_reply_s: float,
         stale_after_s: float | None,
         report_within_s: float | None,
+        estimates: Estimates,
     ) -> None:
         self.name = name
+        self.estimates = estimates  # (what times an adaptive request when it leaves)
         self.max_in_flight = 1 if one_at_a_time else max_in_flight
         self.one_at_a_time = one_at_a_time
         self.gap_s = gap_s
@@ -192,7 +194,8 @@ class RequestTable:
     def move(self, request: Request, to: RequestState, now: float) -> tuple[BoundCodec, Frame] | None:
         """Move ``request`` to ``to`` at ``now``, and keep the table in step: handed over (SENDING:
         in flight), its frame left (SENT at ``now``: its deadline, ``now`` plus its ``timeout_s``,
-        starts), or out of the queue or out of flight (back to the queue's front for a retry).
+        starts; an adaptive request's timeout is set then, from the estimates), or out of the queue
+        or out of flight (back to the queue's front for a retry).
 
         Returns:
             A reply-shaped frame with its key that came before a send report that never came (the
@@ -207,6 +210,17 @@ class RequestTable:
         request.state = to
         if to is _SENT:
             request.sent_at = now
+            rtt = request.rtt
+            if request.adaptive and rtt is not None:
+                if rtt.samples:  # (Estimates.timeout_s, written out for the hot path)
+                    timeout = rtt.rto_s
+                    if timeout < rtt.floor_s:
+                        timeout = rtt.floor_s
+                    elif timeout > self.estimates.max_timeout_s:
+                        timeout = self.estimates.max_timeout_s
+                    request.timeout_s = timeout
+                else:
+                    request.timeout_s = self._first_timeout(request, rtt)
             request.deadline = deadline = now + request.timeout_s
             self._sent_count += 1
             heap = self.deadlines
@@ -300,13 +314,13 @@ class RequestTable:
         """``request`` timed out by a reply stamped after its deadline: :meth:`overdue` says so next."""
         self._overtaken.append(request)
 
-    def retime(self, estimates: Estimates) -> None:
+    def retime(self) -> None:
         """The bus's first round trip was measured: requests timed by the conservative first value
         get the timeouts the estimates give now (if shorter)."""
         for waiting in self.provisional:
             if waiting.state is _SENT and waiting.adaptive and waiting.sent_at is not None:
                 assert waiting.rtt is not None
-                timeout = estimates.timeout_s(waiting.rtt)
+                timeout = self.estimates.timeout_s(waiting.rtt)
                 if timeout is not None and timeout < waiting.timeout_s:
                     waiting.timeout_s = timeout
                     waiting.deadline = deadline = waiting.sent_at + timeout
@@ -314,13 +328,17 @@ class RequestTable:
                     heappush(self.deadlines, (deadline, self._sent_count, waiting))
         self.provisional = []
 
-    def time_provisionally(self, request: Request) -> None:
-        """``request`` leaves timed by the first value (nothing measured yet): timed again by
-        :meth:`retime`."""
+    def _first_timeout(self, request: Request, rtt: RoundTrip) -> float:
+        """The timeout of an adaptive request whose command class was never measured; while nothing
+        on the bus was, a conservative first value, and the request is timed again by :meth:`retime`."""
+        timeout = self.estimates.timeout_s(rtt)
+        if timeout is not None:
+            return timeout
         provisional = self.provisional
         if len(provisional) >= 64:  # (nothing answers: keep only those still waiting)
             provisional[:] = [r for r in provisional if r.state is _SENT]
         provisional.append(request)
+        return max(rtt.base_s, self.estimates.initial_timeout_s)
 
     # ---- deadlines ----
 
