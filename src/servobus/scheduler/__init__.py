@@ -81,8 +81,10 @@ servobus.rtt, ...), the family contract servobus.protocols, and servobus.diagnos
 instead of a reply, asked through that contract). Never a family, a link or the Bus: the Bus
 (servobus.bus) calls it, never the other way round.
 
-**Its parts**, split by the data each owns; the :class:`Scheduler` composes them (under 300 lines, no
-mixins) and is the only one that changes more than one of them:
+**Its parts**, split by the data each owns (its private members touched by none other); the
+:class:`Scheduler` composes them (under 300 lines, no mixins). A part is handed the parts it reads
+or changes when it is made, never the Scheduler (it counts through ``Scheduler.count``, handed in);
+the imports go one way: ``_table`` <- ``_keys`` <- ``_match``, ``_hosts`` <- ``_scheduler``.
 
 * ``_table``: the vocabulary (:class:`Request`, :class:`RequestState`, :data:`TRANSITIONS`,
   :class:`Traffic`, :class:`Received`) and the **request table** (``RequestTable``): the queue, the
@@ -93,9 +95,11 @@ mixins) and is the only one that changes more than one of them:
 * ``_match``: **matching**, a pure function of (table, frame, now) that returns a decision, which
   the Scheduler carries out (one call per received frame).
 * ``_keys``: the **keys' memory** (``Keys``): which reply keys were answered or given up on lately
-  (late, duplicate, unsolicited), and the holds for late replies.
+  (late, duplicate, unsolicited), the holds for late replies, and so the ends of requests off the
+  hot path (timed out, retried, cancelled, failed). ``_match.judge`` carries out the decisions that
+  are not a plain answer on the table and this memory.
 * ``_hosts``: **other hosts** (``OtherHosts``): their requests to our motors, as placeholders in
-  our motors' order of replies.
+  our motors' order of replies, and the frames no motor claims (``seen``, counted ``foreign``).
 
 On one control tick (a ``Bus.cycle`` of many motors) only the Scheduler's module, ``_table``,
 ``_match`` and servobus.rtt run; ``_keys`` and ``_hosts`` run on timeouts, late or foreign frames.

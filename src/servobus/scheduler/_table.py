@@ -146,7 +146,8 @@ class RequestTable:
     and by reply key: the FIFO of requests waiting for a key), their deadlines (a heap), and the
     pacing of what leaves when. Every move of a request is made by :meth:`move`.
 
-    Attributes (read by the scheduler's parts; written only here):
+    Attributes (read by the scheduler's parts; changed only here, but for ``queue``, which
+    ``Scheduler.submit`` appends to):
         motors: reply identifier -> the motors answering on it (their bound codecs).
         queue: the requests not yet handed to the link, in order.
         pending: reply key -> the requests in flight with that key, oldest first.
