@@ -345,12 +345,12 @@ class _Soak:
             scheduler = bus.scheduler
             result.max_pending = max(result.max_pending, scheduler.pending)
             tables = {
-                "pending_keys": len(scheduler._pending),
-                "deadlines": len(scheduler._deadlines),
-                "held": len(scheduler._held),
-                "late_keys": len(scheduler._recent.late),
-                "replied_keys": len(scheduler._recent.replied),
-                "in_flight": len(scheduler._in_flight),
+                "pending_keys": len(scheduler.table.pending),
+                "deadlines": len(scheduler.table.deadlines),
+                "held": len(scheduler.keys.held),
+                "late_keys": len(scheduler.keys.late),
+                "replied_keys": len(scheduler.keys.replied),
+                "in_flight": len(scheduler.table.in_flight),
             }
             for name, size in tables.items():
                 result.max_tables[name] = max(result.max_tables.get(name, 0), size)

@@ -409,7 +409,7 @@ def test_the_first_exchange_may_be_slow_and_later_ones_get_a_measured_timeout(fi
                 await bus.cycle([(one, ma.ReadStatus2()), (two, ma.ReadStatus2())])
             timeouts = []
             for motor in (one, two):
-                estimate = bus.scheduler.round_trip(motor.codec, ma.ReadStatus2)
+                estimate = bus.scheduler.estimates.get(id(motor.codec), ma.ReadStatus2)
                 assert estimate is not None and estimate.samples >= 20
                 timeouts.append(max(bus.scheduler.min_timeout_s, estimate.timeout_s()))
             return first, timeouts

@@ -101,7 +101,7 @@ def test_a_second_controller_s_replies_are_never_taken_as_ours(
     assert "0x141" in " ".join(warnings) and "per second" in warnings[0]
 
 
-# ---- the rules, without I/O (servobus._scheduler_hosts) ----
+# ---- the rules, without I/O (servobus.scheduler._hosts) ----
 
 STATUS_A2 = bytes.fromhex("A2 32 64 00 F4 01 2D 00")
 
@@ -255,7 +255,7 @@ def test_our_own_frame_looped_back_orders_ours_against_another_host_s_exactly() 
 # Here our request and another host's cross with the adapters' latencies in between (a reader
 # thread, the simulator's own hand-overs, a serial line): milliseconds, not one frame's time. What
 # cannot be ordered is answered with the later of the two replies and counted ``ambiguous``
-# (servobus._scheduler_hosts); what can be ordered must be right.
+# (servobus.scheduler._hosts); what can be ordered must be right.
 
 
 def _run_real(

@@ -211,7 +211,7 @@ def test_with_the_device_model_in_a_thread_no_late_reply_answers_the_next_reques
     )
 
 
-# ---- the rules, without I/O (servobus._scheduler_time) ----
+# ---- the rules, without I/O (servobus.scheduler._keys) ----
 
 
 def _status(t: float) -> Frame:

@@ -159,12 +159,7 @@ LAYERS: dict[str, list[str]] = {
     "family": ["servobus.protocols.<family>"],
     # the scheduler's and the Bus's parts (issue 28) are named here before they land
     "scheduler": [
-        "servobus.scheduler",
-        "servobus._request",
-        "servobus._scheduler_match",
-        "servobus._scheduler_hosts",
-        "servobus._scheduler_pace",
-        "servobus._scheduler_time",
+        "servobus.scheduler",  # (the package: its parts servobus.scheduler._table, _match, _keys, _hosts)
         "servobus.diagnosis",  # (what the bus saw instead of a reply: sans-IO, asks the registry)
     ],
     "transports": ["servobus.transports"],

@@ -92,7 +92,7 @@ def test_the_late_and_duplicate_windows_forget_expired_keys() -> None:
         scheduler.submit(request, 0.0)
         _send_all(scheduler, now)
         assert scheduler.receive(_echo(1, command, now), now).request is request
-    assert len(scheduler._recent.replied) <= 64  # ~10 live in the window, pruned past 64
+    assert len(scheduler.keys.replied) <= 64  # ~10 live in the window, pruned past 64
 
 
 def test_a_reply_stamped_at_a_virtual_clocks_first_instant_is_not_taken_for_an_unstamped_one() -> None:
@@ -455,7 +455,7 @@ def test_answered_requests_under_a_long_timeout_do_not_pile_up_in_the_deadline_h
         _send_all(scheduler, now)
         scheduler.receive(_reply(2, t=now + 0.0005), now + 0.0005)
         assert request.state is S.REPLIED
-    assert len(scheduler._deadlines) <= 64 + 4 * 2
+    assert len(scheduler.table.deadlines) <= 64 + 4 * 2
     assert scheduler.next_deadline() == pytest.approx(60.0)
 
 
@@ -517,7 +517,7 @@ def test_with_nothing_measured_the_requests_waiting_to_be_timed_again_stay_bound
         scheduler.submit(request, 0.0)
         _send_all(scheduler, i * 2.0)
         scheduler.expire(i * 2.0 + 1.5)  # the motor never answers
-    assert len(scheduler._provisional) <= 64
+    assert len(scheduler.table.provisional) <= 64
 
 
 def test_a_late_reply_after_a_given_up_one_keeps_the_key_ambiguous() -> None:
@@ -556,8 +556,8 @@ def test_an_undecodable_reply_before_the_send_report_fails_its_request_at_the_re
 def test_every_move_goes_through_the_table_and_an_illegal_one_is_a_typed_error(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    from servobus import _scheduler_time
     from servobus.errors import RequestStateError, ServobusError
+    from servobus.scheduler import _table
 
     assert not any(hasattr(state, "next") for state in S)  # (the table is the only place)
     codec = MA.bind(1)
@@ -565,20 +565,18 @@ def test_every_move_goes_through_the_table_and_an_illegal_one_is_a_typed_error(
     request = scheduler.request(codec, ma.ReadStatus2())
     scheduler.submit(request, 0.0)
     with pytest.raises(RequestStateError, match=r"myactuator motor 1 ReadStatus2: queued -> replied"):
-        scheduler._move(request, S.REPLIED)
+        scheduler.table.move(request, S.REPLIED, 0.0)
     assert issubclass(RequestStateError, RuntimeError) and issubclass(RequestStateError, ServobusError)
     # The hot moves read the table too: one it does not allow fails, typed, naming both states
     # (a send report it does not allow is taken for none).
-    from servobus import _scheduler_pace
-
-    monkeypatch.setattr(_scheduler_pace, "_TO_SENDING", ())
+    monkeypatch.setitem(_table.FROM, S.SENDING, ())
     with pytest.raises(RequestStateError, match="queued -> sending is not allowed"):
         scheduler.poll(0.0)
     monkeypatch.undo()
     scheduler = Scheduler([codec])
     scheduler.submit(scheduler.request(codec, ma.ReadStatus2()), 0.0)
     (sending,) = scheduler.poll(0.0)[0]
-    monkeypatch.setattr(_scheduler_time, "_TO_SENT", ())
+    monkeypatch.setitem(_table.FROM, S.SENT, ())
     assert scheduler.sent(sending, 0.0) is None and sending.state is S.SENDING
 
 

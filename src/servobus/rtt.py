@@ -12,12 +12,18 @@ came), so the estimate follows a slow adapter instead of timing out on every rep
 keeps the longest recent late one (:meth:`add_late`), decaying slowly, for how long a late reply
 may still come (a reply in time is within the timeout, which :meth:`late_s` covers anyway).
 
+:class:`Estimates` keeps one :class:`RoundTrip` per motor and command class for a bus (the
+scheduler's), and the rules that turn them into timeouts and late holds.
+
 Sans-IO: the caller gives every sample.
 """
 
 from __future__ import annotations
 
-__all__ = ["RoundTrip"]
+__all__ = ["TRUSTED_SAMPLES", "Estimates", "RoundTrip"]
+
+#: Round trips an estimate must rest on before it bounds how late a reply may come (a late hold).
+TRUSTED_SAMPLES = 16
 
 #: A timer cannot be finer than the event loop's wake-ups (epoll counts milliseconds).
 GRANULARITY_S = 0.001
@@ -86,3 +92,79 @@ class RoundTrip:
             f"<RoundTrip {self.samples} samples, srtt {self.srtt_s * 1e3:.2f} ms, "
             f"rttvar {self.rttvar_s * 1e3:.2f} ms, peak {self.peak_s * 1e3:.2f} ms>"
         )
+
+
+class Estimates:
+    """The round-trip estimates of one bus: one :class:`RoundTrip` per motor (by the identity of
+    its codec: a plug-in's codec need not be hashable) and command class, and the timeouts they give.
+
+    Attributes:
+        motors: motor -> command class -> estimate (a class appears once a request for it was made).
+        any_measured: a round trip was measured on the bus (before: ``initial_timeout_s``).
+        initial_timeout_s, min_timeout_s, max_timeout_s: see :class:`~servobus.scheduler.Scheduler`.
+    """
+
+    __slots__ = ("any_measured", "initial_timeout_s", "max_timeout_s", "min_timeout_s", "motors")
+
+    def __init__(self, initial_timeout_s: float, min_timeout_s: float, max_timeout_s: float) -> None:
+        self.initial_timeout_s = initial_timeout_s
+        self.min_timeout_s = min_timeout_s
+        self.max_timeout_s = max_timeout_s
+        self.motors: dict[int, dict[type, RoundTrip]] = {}
+        self.any_measured = False
+
+    def add_motor(self, motor: int) -> None:
+        self.motors[motor] = {}
+
+    def new(self, motor: int, command_class: type, base_s: float) -> RoundTrip:
+        """The estimate of a command class not measured before on ``motor`` (``base_s``: the codec's
+        own time for it); the least timeout of each class of the motor is set again: ``min_timeout_s``,
+        and for a class its codec gives more time than its quickest class (a ROM write), that time."""
+        rtts = self.motors[motor]
+        rtt = rtts[command_class] = RoundTrip(base_s)
+        quickest = min(r.base_s for r in rtts.values())
+        for each in rtts.values():
+            each.floor_s = max(self.min_timeout_s, each.base_s if each.base_s > quickest else 0.0)
+        return rtt
+
+    def get(self, motor: int, command_class: type) -> RoundTrip | None:
+        """The estimate of ``motor`` for ``command_class`` (None: never requested)."""
+        return self.motors.get(motor, {}).get(command_class)
+
+    def motor_timeout_s(self, motor: int) -> float:
+        """The longest timeout measured round trips give any command class of ``motor``
+        (``min_timeout_s`` while none was measured)."""
+        times = [r.timeout_s() for r in self.motors.get(motor, {}).values() if r.samples]
+        return max([self.min_timeout_s, *times])
+
+    def measured(self) -> list[RoundTrip]:
+        """Every estimate with a sample, of every motor and command class."""
+        return [r for rtts in self.motors.values() for r in rtts.values() if r.samples]
+
+    def first_measured(self) -> None:
+        """The bus's first round trip was measured: timeouts come from estimates from now on."""
+        self.any_measured = True
+
+    def timeout_s(self, rtt: RoundTrip) -> float | None:
+        """The timeout of a request timed by ``rtt`` leaving now: its estimate's, at least its floor;
+        not measured yet, the codec's own time or twice the slowest measured on this bus if longer
+        (the adapter's and the host's share is the same for all); None while nothing on the bus was
+        measured (the caller's first value, ``max(rtt.base_s, initial_timeout_s)``, is provisional)."""
+        if rtt.samples:
+            timeout = max(rtt.timeout_s(), rtt.floor_s)
+        elif self.any_measured:
+            link = max(r.timeout_s() for r in self.measured())
+            timeout = max(rtt.base_s, 2.0 * link)
+        else:
+            return None
+        return min(max(timeout, self.min_timeout_s), self.max_timeout_s)
+
+    def late_s(self, rtt: RoundTrip | None) -> float:
+        """How late a reply timed by ``rtt`` may come after its request left: from its estimate once
+        that rests on ``TRUSTED_SAMPLES`` round trips; before, twice the codec's own time for the
+        command, or the bus's slowest trusted estimate if longer. A tail guessed from a few samples
+        is too short: the first replies through a jittery adapter said 1.1 ms where 11 ms came."""
+        if rtt is not None and rtt.samples >= TRUSTED_SAMPLES:
+            return rtt.late_s()
+        trusted = [r.late_s() for r in self.measured() if r.samples >= TRUSTED_SAMPLES]
+        return max([2.0 * rtt.base_s if rtt is not None else 0.0, *trusted])

@@ -1,4 +1,4 @@
-"""The scheduler's part that knows other hosts on the bus (:class:`OtherHosts`, a part of
+"""The scheduler's part that knows other hosts on the bus (:class:`OtherHosts`, owned by the
 :class:`~servobus.scheduler.Scheduler`).
 
 CAN is a broadcast medium: the adapter receives the requests another controller (a second PC, a
@@ -50,12 +50,14 @@ from __future__ import annotations
 import dataclasses
 import logging
 from collections import Counter, deque
-from collections.abc import Hashable
-from typing import TYPE_CHECKING
+from collections.abc import Callable, Hashable
 
-from servobus._request import Received, Recent, Request, RequestState, Traffic
+from servobus.diagnosis import Seen
 from servobus.frame import Frame
 from servobus.protocols import BoundCodec, Reply
+from servobus.rtt import Estimates
+from servobus.scheduler._keys import Keys
+from servobus.scheduler._table import Received, RequestState, RequestTable, Traffic
 
 __all__ = ["RATE_WINDOW_S", "WARN_AFTER", "OtherHosts"]
 
@@ -74,37 +76,53 @@ _T_FOREIGN = Traffic.FOREIGN
 
 
 class OtherHosts:
-    """Other hosts' requests to our motors (the scheduler's state is declared here for the type
-    checker)."""
+    """Other hosts' requests to our motors: the placeholders they take in our motors' order of
+    replies. It reads the request table (ours in flight) and the keys' memory (late replies of ours
+    still due), and counts through ``count`` (the scheduler's per-motor counters).
 
-    name: str
-    min_reply_s: float
-    exact_order: bool
-    _pending: dict[Hashable, deque[Request]]
-    _recent: Recent
-    _bus_counts: Counter[str]
-    motor_counts: dict[int, Counter[str]]
-    _by_request_id: dict[int, list[BoundCodec]]
-    # key -> another host's requests still to be answered, oldest first: (when it ended on the
-    # wire, until when its reply is expected)
-    _foreign: dict[Hashable, deque[tuple[float, float]]]
-    # motor (codec id) -> (requests seen, first stamp); -1 requests: warned already
-    _hosts_seen: dict[int, tuple[int, float]]
+    It owns what the bus knows of frames no motor of ours claims: ``seen`` (per arbitration id,
+    for the diagnosis of a silent motor: servobus.diagnosis) and ``counts`` (``foreign``).
 
-    if TYPE_CHECKING:
+    Attributes:
+        foreign: key -> another host's requests still to be answered, oldest first: (when it ended
+            on the wire, until when its reply is expected). Empty: nothing to contend with.
+    """
 
-        def motor_timeout_s(self, codec: BoundCodec) -> float: ...
+    def __init__(
+        self,
+        name: str,
+        exact_order: bool,
+        table: RequestTable,
+        keys: Keys,
+        estimates: Estimates,
+        count: Callable[[BoundCodec, str], None],
+    ) -> None:
+        self.name = name
+        self.exact_order = exact_order
+        self.table = table
+        self.keys = keys
+        self.estimates = estimates
+        self.count = count
+        self.foreign: dict[Hashable, deque[tuple[float, float]]] = {}
+        self.seen = Seen()
+        self.counts: Counter[str] = Counter()
+        self._by_request_id: dict[int, list[BoundCodec]] = {}
+        # motor (codec id) -> (requests seen, first stamp); -1 requests: warned already
+        self._hosts_seen: dict[int, tuple[int, float]] = {}
 
-    def _index_requests(self, codec: BoundCodec) -> None:
+    def add_motor(self, codec: BoundCodec) -> None:
         """Listen for other hosts' requests to ``codec``'s motor (a family that can tell them)."""
         if getattr(codec, "request_key", None) is None:
             return  # (a plug-in family without it: such frames stay ``foreign``)
         for ident in {i & 0x1FFFFFFF for i in codec.request_ids}:
             self._by_request_id.setdefault(ident, []).append(codec)
 
-    def _other_host(self, frame: Frame, now: float) -> Received:
-        """A frame on no motor's reply identifier: another host's request to one of our motors (a
-        placeholder in its order of replies), or ``foreign``."""
+    def not_ours(self, frame: Frame, now: float) -> Received:
+        """A frame no motor claims: kept for a timeout's diagnosis (an old LK motor answers on its
+        request id: seen either way; our own frames looped back are not news), then another host's
+        request to one of our motors (a placeholder in its order of replies), or ``foreign``."""
+        if frame.is_rx:
+            self.seen.note(frame, now)
         for codec in self._by_request_id.get(frame.arbitration_id, ()):
             if not frame.is_rx:  # our own frame, looped back: when it was on the wire
                 as_received = dataclasses.replace(frame, is_rx=True)  # (how the codec judges it)
@@ -117,12 +135,12 @@ class OtherHosts:
             at = frame.timestamp or now
             if self._looped(key, frame, at):
                 break
-            self._foreign.setdefault(key, deque()).append((at, at + 2.0 * self.motor_timeout_s(codec)))
-            counts = self.motor_counts[id(codec)]
-            counts["foreign_requests"] += 1
+            reply_s = 2.0 * self.estimates.motor_timeout_s(id(codec))
+            self.foreign.setdefault(key, deque()).append((at, at + reply_s))
+            self.count(codec, "foreign_requests")
             self._seen(codec, at)
             return Received(_T_OTHER_HOST, frame, codec)
-        self._bus_counts["foreign"] += 1
+        self.counts["foreign"] += 1
         return Received(_T_FOREIGN, frame)
 
     def _looped(self, key: Hashable | None, frame: Frame, at: float) -> bool:
@@ -131,7 +149,7 @@ class OtherHosts:
         it left; its stamp is when ours was on the wire (what orders it against another host's)."""
         if key is None:
             return False
-        for request in self._pending.get(key, ()):
+        for request in self.table.pending.get(key, ()):
             if (
                 not request.looped
                 and request.frame.data == frame.data
@@ -166,13 +184,13 @@ class OtherHosts:
                 rate,
             )
 
-    def _contended(
+    def contended(
         self, codec: BoundCodec, key: Hashable, frame: Frame, reply: Reply, now: float
     ) -> Received | None:
         """The reply ``frame`` with ``key``, while another host's request with that key waits: the
         verdict if it answers that one (it reached the motor before our request waiting for the key,
         and after any of ours whose late reply is held for), else None (matched as usual)."""
-        placeholders = self._foreign[key]
+        placeholders = self.foreign[key]
         at = frame.timestamp or now
         # Never answered (lost, or not to be), by the reply's own stamp. Or answered this late (a
         # stalled host, a slow adapter): then this reply may be its answer, so a request of ours
@@ -181,19 +199,19 @@ class OtherHosts:
             expected = 0.0
             while placeholders and placeholders[0][1] < at:
                 expected = placeholders.popleft()[1]
-            waiting = self._pending.get(key)
+            waiting = self.table.pending.get(key)
             if waiting:
                 ours = waiting[0]
                 if ours.handed_at is not None and ours.handed_at < expected and not ours.crossed:
                     ours.crossed = True
-                    self.motor_counts[id(codec)]["ambiguous"] += 1
+                    self.count(codec, "ambiguous")
         if not placeholders:
-            del self._foreign[key]
+            del self.foreign[key]
             return None
         stamp = placeholders[0][0]
-        if at < stamp + self.min_reply_s and self.exact_order:
+        if at < stamp + self.table.min_reply_s and self.exact_order:
             return None  # too early to answer it (through an adapter, stamps of one read are alike)
-        waiting = self._pending.get(key)
+        waiting = self.table.pending.get(key)
         if waiting:
             ours = waiting[0]
             if ours.on_wire_at is not None:  # (looped back: its end on the wire, as theirs)
@@ -202,7 +220,7 @@ class OtherHosts:
             elif self.exact_order:
                 left = ours.sent_at if ours.state is _SENT else ours.handed_at
                 # one frame's time: it may still have been on the wire when ours was handed over
-                if left is not None and stamp > left + 1.5 * self.min_reply_s:
+                if left is not None and stamp > left + 1.5 * self.table.min_reply_s:
                     return None  # ours reached the motor first
             elif ours.handed_at is not None and stamp > ours.handed_at:
                 # Theirs came in after ours was handed over, before this reply: the order the two
@@ -210,12 +228,12 @@ class OtherHosts:
                 if ours.crossed:
                     return None  # (the later one: another host's request after that is after ours)
                 ours.crossed = True
-                self.motor_counts[id(codec)]["ambiguous"] += 1
-        late = self._recent.late.get(key)
+                self.count(codec, "ambiguous")
+        late = self.keys.late.get(key)
         if late and any(e[1] is not None and e[1] < stamp and e[3] >= now for e in late):
             return None  # a late reply of ours is due first
         placeholders.popleft()
         if not placeholders:
-            del self._foreign[key]
-        self.motor_counts[id(codec)]["contended"] += 1
+            del self.foreign[key]
+        self.count(codec, "contended")
         return Received(_T_CONTENDED, frame, codec, reply)
