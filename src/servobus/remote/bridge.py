@@ -36,6 +36,7 @@ import zenoh
 
 from servobus import runtime
 from servobus.bus import Bus, Motor, MotorStatus
+from servobus.bus.safety import stop_motors
 from servobus.protocols import Command
 from servobus.remote import _requests, _tokens, wire
 from servobus.remote._clients import Clients
@@ -45,7 +46,6 @@ from servobus.remote._served import Held, Served
 from servobus.remote._session import close_session
 from servobus.remote._withdraw import withdraw
 from servobus.remote.keys import Keys
-from servobus.safety import stop_motors
 from servobus.ticks import ticks
 
 __all__ = ["Bridge"]
