@@ -1,9 +1,11 @@
 """The outcomes of one ``Bus.cycle()`` gathered into one waiter (:class:`Tick`), each request's
-place in it (:class:`Slot`), and the waiters of requests nobody awaits (:func:`detached`).
+place in it (:class:`Slot`), how a cycle's items are sorted (:func:`triage`), and the waiters of
+requests nobody awaits (:func:`detached`).
 
 A cycle wakes once, when its last request ends, not once per motor (what gathering one future per
-request costs). The waiter is the runtime's (:mod:`servobus.runtime`): an ``asyncio.Future`` on
-asyncio, a ``TrioWaiter`` on trio; nothing here imports either.
+request costs: measured in :class:`Slot`'s docstring). The waiter is the runtime's
+(:mod:`servobus.runtime`): an ``asyncio.Future`` on asyncio, a ``TrioWaiter`` on trio; nothing here
+imports either.
 """
 
 from __future__ import annotations
@@ -38,7 +40,13 @@ class Tick:
 
 class Slot:
     """One request's place in a :class:`Tick`, with the part of a waiter's interface the Bus and
-    an observer of the request (``request.context``) use: its outcome is the tick's result there."""
+    an observer of the request (``request.context``) use: its outcome is the tick's result there.
+
+    Kept beside anyio's and the runtime's primitives because the hot path needs it: one
+    ``Bus.cycle`` of 32 ReadStatus2 on the bench's reflector (3,000 cycles, process CPU time, best
+    of 3, issue 38) ran 55,600 to 64,600 transactions/s with Slots and 43,700 to 49,300 with one
+    runtime waiter and done callback per request instead (about 20 % slower: a future per request,
+    and a loop turn per callback)."""
 
     __slots__ = ("_callbacks", "_state", "index", "tick")
 
