@@ -51,7 +51,6 @@ logger = logging.getLogger("servobus.bus")
 
 # RequestState members as globals for the per-frame paths (an Enum member lookup is a metaclass call).
 _SENDING, _SENT, _REPLIED = RequestState.SENDING, RequestState.SENT, RequestState.REPLIED
-_TIMED_OUT = RequestState.TIMED_OUT
 _NOT_EXECUTED = Traffic.NOT_EXECUTED
 
 #: turns of the loop the timer lets pass before it times a request out (see Timer.run)
