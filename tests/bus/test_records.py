@@ -110,7 +110,7 @@ async def test_a_calls_class_that_is_not_a_motor_becomes_one_once_per_family(cal
     async with Bus(SimTransport(devices=[device])) as bus:
         codec = ma.FAMILY.bind(1)
         bus.scheduler.add(codec)
-        motor = bus.registry.add(made, bus, codec, ma.FAMILY.methods())
+        motor = bus.registry.add(("myactuator", 1), made, bus, codec, ma.FAMILY.methods())
         assert isinstance(motor, calls) and isinstance(motor, Motor)
         reply = await motor.read_status2()  # type: ignore[attr-defined]
         assert isinstance(reply, ma.ReadStatus2.REPLY)

@@ -344,7 +344,7 @@ class Bus:
             return self.motors[key]
         codec = found.bind(motor_id, **options)
         self.scheduler.add(codec)
-        return self.registry.add(motor_class(found), self, codec, found.methods())
+        return self.registry.add(key, motor_class(found), self, codec, found.methods())
 
     @property
     def commanded(self) -> tuple[Motor, ...]:

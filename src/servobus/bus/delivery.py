@@ -67,6 +67,7 @@ class Delivery:
         self.engine = engine
         self.name = engine.name
         self._timed_out = engine.timed_out
+        self._settle = self.settle  # (once per reply: bound here)
         self._records = records
         self._watchdog = watchdog
         self._subscribers = subscribers
@@ -123,7 +124,7 @@ class Delivery:
                 except Exception:  # a subscriber's bug must not stop the reader
                     logger.exception("%s: subscriber %r failed", self.name, callback)
         if got.request is not None:
-            self.settle(got.request, None)
+            self._settle(got.request, None)
 
     def fail(self, requests: Iterable[Request]) -> None:
         """Each of ``requests`` ended with its error."""

@@ -108,13 +108,18 @@ class Registry:
         self._commands = 0  # how many motors were commanded (their order)
 
     def add(
-        self, cls: type[Motor], host: MotorHost, codec: BoundCodec, commands: dict[str, type[Command]]
+        self,
+        key: tuple[str, int],
+        cls: type[Motor],
+        host: MotorHost,
+        codec: BoundCodec,
+        commands: dict[str, type[Command]],
     ) -> Motor:
-        """A new motor of class ``cls`` for ``codec``, with its record."""
+        """A new motor of class ``cls`` for ``codec``, with its record, named ``key`` (family, id)."""
         record = MotorRecord(codec)
         record.motor = motor = cls(host, codec, commands, record)
         self.records[id(codec)] = record
-        self.named[(codec.family, codec.motor_id)] = motor
+        self.named[key] = motor
         return motor
 
     def of(self, motor: Motor) -> MotorRecord:
