@@ -187,8 +187,7 @@ class Engine:
         return request
 
     def send_unawaited(self, motor: Motor, command: Command) -> None:
-        """Queue ``command`` for ``motor`` with nobody waiting for it (a stream's "off" sent again;
-        nothing before the Bus is entered)."""
+        """Queue ``command`` for ``motor``, nobody waiting for it (a stream's "off" again; once entered)."""
         if self.runtime is not None:
             self.enqueue(motor, self.prepare(motor, command, None, 0, detached(self.runtime)))
 
@@ -241,8 +240,6 @@ class Engine:
     def send_broadcast(self, frame: Frame, commanded: Iterable[Motor]) -> None:
         """Send a broadcast's ``frame``, past the scheduler (its replies are :meth:`expect`'s);
         ``commanded``: the motors it commands (they get the safe command)."""
-        if self.closing:  # (the block was left while it waited)
-            raise self.closed_error()
         for motor in commanded:
             self.registry.command(motor)
         self.link.send(frame)
