@@ -415,9 +415,7 @@ class _Soak:
                 group.create_task(self.checkpoints(end))
             await asyncio.sleep(0.2)  # the last delayed frames arrive (counted late)
             self.result.virtual_s = self.loop.time()
-            self.commanded = {
-                b: {m.motor_id for m in bus._commanded.values()} for b, bus in enumerate(self.buses)
-            }
+            self.commanded = {b: {m.motor_id for m in bus.commanded} for b, bus in enumerate(self.buses)}
         # The Buses have left: each sent its safe stop.
         for b, watch in enumerate(self.watches):
             for motor_id in sorted(self.commanded[b] - watch.stops):

@@ -527,7 +527,7 @@ async def test_an_error_in_the_bus_s_own_task_is_raised_from_its_block_not_lost(
             def broken(now: float | None = None) -> None:
                 raise ZeroDivisionError("a bug in the timer")
 
-            bus._engine.on_timer = broken  # type: ignore[method-assign]
+            bus.engine.on_timer = broken  # type: ignore[method-assign]
             await bus.motor("myactuator", 1).read_status2(timeout_s=0.01)  # its timeout fires the timer
     assert [type(e) for e in caught.value.exceptions] == [ZeroDivisionError]
     assert _stops(sniffer) == {2}  # the safe stop went out all the same

@@ -232,7 +232,7 @@ async def test_tasks_inside_the_block_are_cancelled_and_both_motors_stop() -> No
 async def test_a_second_sigterm_during_the_safe_stop_is_ignored(monkeypatch: pytest.MonkeyPatch) -> None:
     """The handler is let go only after the safe stop: a second SIGTERM (an impatient operator, a
     script that sends two) does not kill the process before the stop went out."""
-    import servobus.bus as bus_module
+    import servobus.bus.core as bus_module
 
     safe_stop = bus_module.safe_stop
 

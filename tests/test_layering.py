@@ -174,14 +174,7 @@ LAYERS: dict[str, list[str]] = {
     ],
     "bus": [
         "servobus",
-        "servobus.bus",
-        "servobus._tick",
-        "servobus.broadcast",
-        "servobus.delivery",
-        "servobus.engine",
-        "servobus.motor",
-        "servobus.safety",
-        "servobus.watchdog",
+        "servobus.bus",  # the package: Bus, Motor, engine, tick, delivery, safety, watchdog, ...
         "servobus.ticks",
         "servobus.signals",
         "servobus.sync",

@@ -97,7 +97,7 @@ class Metrics:
         latency: request-to-reply time of the last replies.
         bus_load_pct: share of the line used in the last second, from the transport (bus only;
             None when unknown).
-        restarts: times a motor came back online from a restart (servobus.restarts).
+        restarts: times a motor came back online from a restart (servobus.bus.restarts).
         not_executed: requests a motor echoed back instead of executing them (MotorNotExecuted;
             part of ``failed``).
         comm_tripped: frames in which a motor said its communication watchdog tripped (MyActuator

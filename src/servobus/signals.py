@@ -187,6 +187,14 @@ class SigtermTaken:
         oldest open when it came: the others are left quietly, inside it or beside it)."""
         return _SIGTERM.exiting is self
 
+    def cancel_soon(self) -> None:
+        """Cancel the block's scope from its own loop, soon (the signal handler calls this).
+
+        Raises:
+            RuntimeError: that loop is closed.
+        """
+        self._call_soon(self.scope.cancel)
+
     def release(self) -> None:
         """The block was left: the default disposition is back when it was the last one."""
         _SIGTERM.release(self)
@@ -233,7 +241,7 @@ class _SigtermDefault:
         reached = False
         for taken in self.received_by:
             try:
-                taken._call_soon(taken.scope.cancel)
+                taken.cancel_soon()
                 reached = True
             except RuntimeError:  # its loop is closed (a Bus never left): nothing to stop there
                 continue

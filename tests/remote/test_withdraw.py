@@ -96,7 +96,7 @@ async def test_a_set_point_queued_behind_a_request_does_not_follow_a_stop_once_w
             group.start_soon(tick)  # queued behind it (its key is not in flight yet)
             await anyio.lowlevel.checkpoint()
             await read3.wait()  # the request took a slot, the set-point waits for its reply
-            withdrawn = bus._engine.withdraw(m1, PermissionError("released"), lambda request: False)
+            withdrawn = bus.engine.withdraw(m1, PermissionError("released"), lambda request: False)
             group.start_soon(request, "stop", m1, ma.MotorStop())
         assert [type(r.command) for r in withdrawn] == [ma.SpeedControl]
         assert isinstance(outcomes["tick"][0], PermissionError), outcomes  # the tick's slot: the error

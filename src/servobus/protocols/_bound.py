@@ -266,7 +266,7 @@ class CodecBase:
     def decode(self, frame: Frame) -> Reply:
         raise NotImplementedError
 
-    #: what proves that the motor restarted, per family (servobus.restarts; None: nothing does)
+    #: what proves that the motor restarted, per family (servobus.bus.restarts; None: nothing does)
     RESTART: ClassVar[RestartEvidence | None] = None
 
     #: kind -> a function building the command, per family (see :meth:`safe_command`)

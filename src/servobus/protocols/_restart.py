@@ -4,7 +4,7 @@ A motor whose supply sagged comes back in its power-on state (set-points lost, t
 turn count folded to one turn). To the host it was only silent for a while, like a motor whose cable
 was pulled and put back, which keeps what it held. When a motor comes back online the Bus reads the
 family's ``probes`` and hands :meth:`RestartEvidence.judge` what it saw before the silence and what
-it sees now (servobus.restarts); the family says whether that proves a restart.
+it sees now (servobus.bus.restarts); the family says whether that proves a restart.
 
 Each family declares its evidence as its bound codec's ``RESTART`` (None: a family that has none);
 nothing else names a family. Sans-IO: replies and clock values in, a verdict out.

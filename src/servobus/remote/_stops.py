@@ -24,7 +24,7 @@ from servobus.bus import Motor
 from servobus.protocols import Command
 from servobus.remote._served import Served
 from servobus.remote._withdraw import withdraw
-from servobus.safety import stop_motors
+from servobus.bus.safety import stop_motors
 
 __all__ = ["LEFT", "Stops"]
 

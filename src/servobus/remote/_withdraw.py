@@ -43,6 +43,6 @@ def withdraw(served: Served, mid: int, why: str, client_left: bool = False) -> i
         f"motor {mid} on {served.name} was released ({why}): this command was withdrawn before it was sent",
         client_left,
     )
-    withdrawn = served.bus._engine.withdraw(served.motors[mid], error, spare)
+    withdrawn = served.bus.engine.withdraw(served.motors[mid], error, spare)
     served.counts["withdrawn"] += len(withdrawn)
     return len(withdrawn)

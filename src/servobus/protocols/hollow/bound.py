@@ -162,7 +162,7 @@ class HollowCodec(CodecBase):
     """One hollow motor on one link. Build it with :func:`bind` (or ``FAMILY.bind``)."""
 
     family = "hollow"
-    RESTART = RESTART  # what proves a restart (servobus.restarts)
+    RESTART = RESTART  # what proves a restart (servobus.bus.restarts)
     # Classic CAN has the special Stop frame; an FD motor (and the converter) is stopped by a control
     # frame with Run Cmd off. The hollow motors have no brake command and no separate power-off.
     SAFE_COMMANDS = {  # noqa: RUF012 - a class table, not per instance

@@ -284,7 +284,7 @@ class LkCodec(CodecBase):
     """One LK motor on CAN. Build it with :func:`bind` (or ``FAMILY.bind``)."""
 
     family = "lk"
-    RESTART = RESTART  # what proves a restart (servobus.restarts)
+    RESTART = RESTART  # what proves a restart (servobus.bus.restarts)
     SAFE_COMMANDS = {  # noqa: RUF012 - a class table, not per instance
         "stop": lambda codec: cmd.MotorStop(),
         "shutdown": lambda codec: cmd.MotorOff(),

@@ -148,7 +148,7 @@ class MyActuatorCodec(CodecBase):
     """One MyActuator motor on one link. Build it with :func:`bind` (or ``FAMILY.bind``)."""
 
     family = "myactuator"
-    RESTART = RESTART  # what proves a restart (servobus.restarts)
+    RESTART = RESTART  # what proves a restart (servobus.bus.restarts)
     SAFE_COMMANDS = {  # noqa: RUF012 - a class table, not per instance
         "stop": lambda codec: cmd.MotorStop(),
         "shutdown": lambda codec: cmd.MotorShutdown(),

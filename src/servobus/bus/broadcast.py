@@ -5,58 +5,53 @@ resolved by done callbacks (no gathering of one future per request, nothing back
 from __future__ import annotations
 
 import math
-from collections.abc import Hashable, Sequence
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 import anyio
 
-from servobus._tick import Result
-from servobus.frame import Frame
+from servobus.bus.tick import Result
 from servobus.protocols import Command, get_family
 from servobus.runtime import Runtime
 from servobus.scheduler import Request
 
 if TYPE_CHECKING:
-    from servobus.bus import Bus
-    from servobus.engine import Engine
-    from servobus.motor import Motor
+    from servobus.bus.engine import Engine
+    from servobus.bus.motor import Motor
 
 __all__ = ["broadcast", "wait_all", "wait_any"]
 
 
 async def broadcast(
-    bus: Bus, command: Command, motors: Sequence[Motor], timeout_s: float | None
+    engine: Engine, command: Command, motors: Sequence[Motor], timeout_s: float | None
 ) -> dict[int, Result]:
-    """:meth:`servobus.bus.Bus.broadcast` (the caller checked the loop)."""
+    """:meth:`servobus.bus.Bus.broadcast` (the caller checked the loop): waits while a reply's key
+    is in flight or held, then the engine sends the frame past its queue and awaits the replies."""
     families = {m.codec.family for m in motors}
     if len(families) != 1:
         raise ValueError(f"a broadcast goes to motors of one family, not {sorted(families)}")
     plan = get_family(families.pop()).broadcast(command, [m.codec for m in motors])
-    engine = bus._engine
     runtime, now = engine.runtime, engine.time
     assert runtime is not None
     keys = list(plan.replies.values())
     while True:
-        held_until, flying = bus.scheduler.blocking(keys, now())
+        held_until, flying = engine.blocking(keys)
         if flying:
             await wait_any(runtime, flying, math.inf if held_until is None else held_until - now())
         elif held_until is not None:
             await anyio.sleep(max(0.0, held_until - now()))
         else:
             break
-    if bus._closing:  # (the block was left while it waited)
-        raise bus._closed_error()
+    if engine.closing:  # (the block was left while it waited)
+        raise engine.closed_error()
     by_id = {m.motor_id: m for m in motors}
     timeout = timeout_s if timeout_s is not None else max(m.codec.timeout_s(command) for m in motors)
     expected = {
-        motor_id: _expect(engine, by_id[motor_id], command, key, timeout)
+        motor_id: engine.expect(by_id[motor_id], command, key, timeout)
         for motor_id, key in plan.replies.items()
     }
-    for motor in motors:
-        if not motor.codec.retry_safe(command):
-            bus._commanded[id(motor.codec)] = motor
     try:
-        bus.transport.send(plan.frame)
+        engine.send_broadcast(plan.frame, [m for m in motors if not m.codec.retry_safe(command)])
         results = await wait_all(runtime, [r.context for r in expected.values()])
     except BaseException:
         engine.abandon(expected.values())
@@ -97,20 +92,3 @@ async def wait_all(runtime: Runtime, contexts: Sequence[Any]) -> list[Result]:
             context.add_done_callback(ended)
         await waiter
     return [context.exception() or context.result() for context in contexts]
-
-
-def _expect(engine: Engine, motor: Motor, command: Command, key: Hashable, timeout_s: float) -> Request:
-    """A request whose frame is sent by someone else (a broadcast): it only awaits ``key``."""
-    assert engine.runtime is not None
-    # (its frame is never sent: the request goes into flight directly, past the queue)
-    request = Request(
-        motor.codec, command, Frame(arbitration_id=0), key, timeout_s, context=engine.runtime.waiter()
-    )
-    # each motor echoes the broadcast's bytes (its own request's); a plug-in codec from before
-    # ``may_echo`` answers as it always did
-    may_echo = getattr(motor.codec, "may_echo", None)
-    if may_echo is not None and may_echo(command):
-        request.echo = motor.codec.encode(command).data
-    engine.scheduler.expect(request, engine.time())
-    engine.kick()
-    return request

@@ -6,28 +6,29 @@ held are lost (issue [field] case 2). To the watchdog it was offline and is onli
 a motor whose cable was pulled and put back, which keeps running. So when the watchdog reports a
 motor online again (after it was offline), the family's probes are read in a task of the Bus, and
 the family judges what was remembered before the silence against what came since. A restart is
-reported once: a :class:`~servobus.watchdog.MotorStatus` with reason ``"restarted"`` to
+reported once: a :class:`~servobus.bus.watchdog.MotorStatus` with reason ``"restarted"`` to
 ``bus.subscribe_status`` callbacks, the motor's ``restarts`` counter, ``motor.restarted_at`` and one
 warning. What to send the motor again is the user's decision (docs/restarts.md has the recipe).
 
 Nothing here runs per reply: what is judged is the motor's last reply before its silence, the reply
 that brought it back, the probes' replies, and the last reply of each type the family names for the
-intake to remember (``Motor._remembered``: LK's 0x92, which its probes cannot give before the
+intake to remember (``MotorRecord.remembered``: LK's 0x92, which its probes cannot give before the
 silence); the rest runs on the watchdog's transitions.
 """
 
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
+from servobus.bus.watchdog import MotorStatus
 from servobus.errors import ServobusError
 from servobus.protocols._restart import RestartEvidence, Seen
-from servobus.watchdog import MotorStatus
 
 if TYPE_CHECKING:
-    from servobus.bus import Bus
-    from servobus.motor import Motor
+    from servobus.bus.engine import Engine
+    from servobus.bus.motor import Motor, MotorRecord
 
 __all__ = ["Restarts"]
 
@@ -43,14 +44,16 @@ class Restarts:
     """The restart checks of one Bus: a watchdog listener that checks each motor that came back.
 
     Args:
-        bus: the Bus (its task group runs the checks, its watchdog reports them).
+        engine: the Bus's engine (its clock, counters, whether the block is being left).
+        spawn: ``spawn(fn, *args)`` runs ``fn(*args)`` in a task of the Bus's task group; False when
+            the Bus has none (it is not open).
     """
 
-    def __init__(self, bus: Bus) -> None:
-        self.bus = bus
-        self._known_since: dict[int, float] = {}  # by codec id: running without a restart since
-        self._readings: dict[int, dict[type, Seen]] = {}  # by codec id: its probes' last replies
-        self._before: dict[int, dict[type, Seen]] = {}  # by codec id: what it said before its silence
+    def __init__(self, engine: Engine, spawn: Callable[..., bool]) -> None:
+        self.engine = engine
+        self.name = engine.name
+        self._records = engine.registry.records
+        self._spawn = spawn
 
     def on_status(self, status: MotorStatus) -> None:
         """The watchdog's verdict on a motor: remember it at its first sighting and when it falls
@@ -58,48 +61,46 @@ class Restarts:
         motor = status.motor
         if status.reason == "restarted" or evidence_of(motor) is None:
             return
-        key = id(motor.codec)
+        record = self._records[id(motor.codec)]
         if not status.online:
-            said = {**self._readings.get(key, {}), **motor._remembered}
+            said = {**record.readings, **record.remembered}
             if motor.state is not None:  # its last word (dated late, which only weakens a proof)
                 said[type(motor.state)] = Seen(motor.state, status.at)
-            self._before[key] = said
+            record.before = said
             return
-        if key not in self._known_since:  # first seen: its run time (if any) starts before now
-            self._known_since[key] = status.at
-            self._before.pop(key, None)
+        if record.known_since is None:  # first seen: its run time (if any) starts before now
+            record.known_since = status.at
+            record.before = None
             return
-        before = self._before.pop(key, None)
-        group = self.bus._group
-        if before is None or group is None or self.bus._closing or motor.state is None:
+        before, record.before = record.before, None
+        if before is None or self.engine.closing or motor.state is None:
             return
         back = Seen(motor.state, status.at)  # the reply that brought it back
-        group.start_soon(self._check, motor, before, back)
+        self._spawn(self._check, record, before, back)
 
-    async def _check(self, motor: Motor, before: dict[type, Seen], back: Seen) -> None:
-        """Read the family's probes of ``motor`` (back online with ``back``) and judge."""
+    async def _check(self, record: MotorRecord, before: dict[type, Seen], back: Seen) -> None:
+        """Read the family's probes of ``record``'s motor (back online with ``back``) and judge."""
+        motor = record.motor
         evidence = evidence_of(motor)
-        assert evidence is not None
-        key = id(motor.codec)
-        after = {kind: seen for kind, seen in motor._remembered.items() if seen.at >= back.at}
+        assert evidence is not None and record.known_since is not None
+        after = {kind: seen for kind, seen in record.remembered.items() if seen.at >= back.at}
         after[type(back.reply)] = back
         for probe in evidence.probes:
             try:
                 reply = await motor.request(probe(), retries=1)
             except ServobusError as exc:  # offline again, streaming, the Bus closing: no verdict
-                logger.debug("%s: %r: restart check not done (%s)", self.bus.name, motor, exc)
+                logger.debug("%s: %r: restart check not done (%s)", self.name, motor, exc)
                 return
             if reply is not None:  # (kept: the next silence's "before")
-                seen = after[type(reply)] = Seen(reply, self.bus._now())
-                self._readings.setdefault(key, {})[type(reply)] = seen
+                after[type(reply)] = record.readings[type(reply)] = Seen(reply, self.engine.time())
         try:
-            why = evidence.judge(before, after, self._known_since[key])
+            why = evidence.judge(before, after, record.known_since)
         except Exception:  # a family's bug: no verdict, and never the end of the Bus's task group
-            logger.exception("%s: %r: the restart evidence of its family failed", self.bus.name, motor)
+            logger.exception("%s: %r: the restart evidence of its family failed", self.name, motor)
             return
-        if why is None or self.bus._closing:
+        if why is None or self.engine.closing:
             return
-        self._known_since[key] = back.at
+        record.known_since = back.at
         motor.restarted_at = back.at
-        self.bus.scheduler.motor_counts[key]["restarts"] += 1
-        self.bus._watchdog.restarted(motor, self.bus._now(), why)
+        self.engine.count(record.codec, "restarts")
+        self.engine.watchdog.restarted(motor, self.engine.time(), why)

@@ -30,43 +30,51 @@ then:
   Python's default disposition, the signal cancels the block, the safe stop goes out and the process
   exits with status 143 (``sigterm=False``: not this Bus; :mod:`servobus.signals`).
 
-The Bus is a thin router between its parts: the sans-IO :class:`~servobus.scheduler.Scheduler`
-matches, paces and times out; the :class:`~servobus.engine.Engine` moves frames and decisions
-between it and the link and owns the Bus's one timer task; the :class:`~servobus.watchdog.Watchdog`
-says which motors are offline; ``servobus._tick`` gathers a cycle's outcomes; ``servobus.safety``
-stops the motors. The Bus owns a task group (entered with its block, left after the safe stop)
-that runs the timer: nothing outlives the block, and an error of that task is raised from it. No
-global state but SIGTERM's default handler (one for the process, only where the program set none):
-a Bus lives inside the user's loop and task groups.
+The Bus is a thin router between its parts (the walk of one tick is in :mod:`servobus.bus`): the
+sans-IO :class:`~servobus.scheduler.Scheduler` matches, paces and times out; the
+:class:`~servobus.bus.engine.Engine` is the one object that talks to it and to the link, and owns the
+Bus's one timer task; the :class:`~servobus.bus.motor.Registry` holds one record per motor; the
+:class:`~servobus.bus.watchdog.Watchdog` says which motors are offline; ``servobus.bus.tick``
+gathers a cycle's outcomes; ``servobus.bus.safety`` stops the motors. The Bus owns a task group
+(entered with its block, left after the safe stop) that runs the timer: nothing outlives the block,
+and an error of that task is raised from it. No global state but SIGTERM's default handler (one for
+the process, only where the program set none): a Bus lives inside the user's loop and task groups.
 """
 
 from __future__ import annotations
 
 import logging
 import signal
-from collections.abc import AsyncIterator, Callable, Iterable, Sequence
+import sys
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterable, Sequence
 from types import TracebackType
 from typing import Any, NoReturn, Self, TypeVar, cast, overload
 
 import anyio
 
-from servobus import _tick
-from servobus import broadcast as _broadcast
 from servobus import runtime as _runtime
-from servobus._tick import Result
-from servobus.engine import Engine
-from servobus.errors import TransportError
+from servobus.bus.broadcast import broadcast as _broadcast
+from servobus.bus.engine import Engine
+from servobus.bus.motor import (
+    Motor,
+    MotorFrames,
+    NamedMotor,
+    Registry,
+    command_classes,
+    motor_class,
+    refuse_coroutine,
+)
+from servobus.bus.restarts import Restarts
+from servobus.bus.safety import safe_stop
+from servobus.bus.tick import Result, Slot
+from servobus.bus.watchdog import MotorStatus, Watchdog
 from servobus.metrics import Metrics
-from servobus.motor import Motor, MotorFrames, NamedMotor, _motor_class, _refuse_coroutine, command_classes
 from servobus.protocols import Command, Family, Reply, get_family
-from servobus.restarts import Restarts
-from servobus.safety import safe_stop
 from servobus.scheduler import Scheduler, Traffic
 from servobus.signals import SigtermTaken, take_sigterm
 from servobus.ticks import Tick as PacerTick
 from servobus.ticks import ticks
 from servobus.transports.contract import FrameLink, LineRules
-from servobus.watchdog import MotorStatus, Watchdog
 
 __all__ = ["Bus", "FrameLink", "Motor", "MotorFrames", "MotorStatus", "command_classes"]
 
@@ -130,6 +138,24 @@ _DEFAULT = _Default()
 
 def _elsewhere() -> bool:
     return False
+
+
+def _loop_check(runtime: _runtime.Runtime) -> Callable[[], bool]:
+    """True when called from ``runtime``'s loop: on asyncio one C call (the running loop, compared),
+    so a cycle's path enters no other module; elsewhere the runtime's own check."""
+    loop = getattr(runtime, "loop", None)
+    asyncio = sys.modules.get("asyncio")
+    if runtime.name != "asyncio" or loop is None or asyncio is None:
+        return runtime.is_current
+    running = asyncio.get_running_loop
+
+    def is_current() -> bool:
+        try:
+            return running() is loop
+        except RuntimeError:  # no asyncio loop runs here (trio's, or none)
+            return False
+
+    return is_current
 
 
 class Bus:
@@ -208,7 +234,8 @@ class Bus:
         self.name = name or transport.name
         self.safe = safe
         self.safe_timeout_s = safe_timeout_s
-        self.motors: dict[tuple[str, int], Motor] = {}
+        self.registry = Registry()
+        self.motors: dict[tuple[str, int], Motor] = self.registry.named
         self._watchdog = Watchdog(
             self.name,
             self.motors.values,
@@ -224,15 +251,15 @@ class Bus:
             stale_after_s=stale_after_s,
             timeouts_s=(initial_timeout_s, min_timeout_s, max_timeout_s),
         )
-        self._by_codec: dict[int, Motor] = {}
-        self._commanded: dict[int, Motor] = {}
         self._subscribers: list[Callable[[Motor, Traffic, Reply], object]] = []
-        self._engine = Engine(self, self.scheduler, transport, self._watchdog)
-        self._watchdog.listeners.append(Restarts(self).on_status)  # (first: before the users')
-        self._runtime: _runtime.Runtime | None = None
+        #: the one object that talks to the scheduler and the link (servobus.bus.engine)
+        self.engine = Engine(
+            self.name, self.scheduler, transport, self._watchdog, self.registry, self._subscribers
+        )
+        restarts = Restarts(self.engine, self._spawn)
+        self._watchdog.listeners.append(restarts.on_status)  # (first: before the users')
         self._is_current: Callable[[], bool] = _elsewhere
         self._group: anyio.abc.TaskGroup | None = None
-        self._closing = False  # the block is being left: only the safe commands may still go out
         self.safe_sent: tuple[Motor, ...] = ()
         self.safe_acknowledged: tuple[Motor, ...] = ()
 
@@ -246,31 +273,13 @@ class Bus:
         """Silence after which a motor that answered before is marked offline (None: never)."""
         return self._watchdog.offline_after_s
 
-    # ---- life cycle ----
-
     async def __aenter__(self) -> Self:
         runtime = _runtime.current()
-        self._runtime, self._is_current = runtime, runtime.is_current
-        self._closing = False
+        self._is_current = _loop_check(runtime)
         self.safe_sent = self.safe_acknowledged = ()
-        group = anyio.create_task_group()
-        await group.__aenter__()
-        try:
-            if not self.transport.is_open:  # opened (and closed) by a task of the Bus's
-                await self._engine.keeper.open(group)
-            self._engine.attach(runtime)
-            await group.start(self._engine.run)
-        except BaseException as exc:
-            self._engine.abort()
-            await _leave(group, type(exc), exc, exc.__traceback__)
-            raise
-        self._group = group
+        self._group = await _start(self.engine, runtime)
         if self.sigterm:  # (last: the block's scope is the innermost, left first)
-            scope = anyio.CancelScope()
-            scope.__enter__()
-            self._sigterm = take_sigterm(scope, runtime.call_soon_threadsafe)
-            if self._sigterm is None:
-                scope.__exit__(None, None, None)
+            self._sigterm = _take_sigterm(runtime)
         return self
 
     async def __aexit__(
@@ -279,42 +288,32 @@ class Bus:
         taken, self._sigterm = self._sigterm, None
         if taken is None:
             return await self._close(exc_type, exc, tb)
-        try:  # (SIGTERM's handler is let go after the safe stop: a second SIGTERM meanwhile is ignored)
-            signalled = bool(taken.scope.__exit__(exc_type, exc, tb))  # its cancellation, ended here
-            if signalled:
-                await self._close(None, None, None)
-                suppress: bool | None = True
-            else:
-                suppress = await self._close(exc_type, exc, tb)
-        finally:
-            taken.release()
-        if taken.exits and (exc is None or signalled):
-            raise SystemExit(128 + signal.SIGTERM)  # after the safe stop, as Ctrl-C's KeyboardInterrupt
-        return suppress
+        return await _close_taken(taken, self._close, exc_type, exc, tb)
 
     async def _close(
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> bool | None:
         """Leave the block: the safe stop, then the Bus's task group (``exc``: how the block ended)."""
-        engine, group = self._engine, self._group
-        self._closing, self._group = True, None
+        engine, group = self.engine, self._group
+        self._group = None
         suppress: bool | None = None
         try:
-            # What is still queued would go out with the safe commands, or after them.
-            engine.fail(self.scheduler.fail(self._closed_error(), engine.time(), queued_only=True))
+            engine.close()  # (what is still queued would go out with the safe commands, or after them)
             with anyio.CancelScope(shield=True):
                 await safe_stop(self)
         finally:
-            engine.detach(self._closed_error())
-            engine.stop()
+            engine.detach(engine.closed_error())
+            _stop(engine)
             if group is not None:
                 suppress = await _leave(group, exc_type, exc, tb)
         return suppress
 
-    def _closed_error(self) -> TransportError:
-        return TransportError(f"{self.name}: the Bus is closed (its block was left)")
-
-    # ---- motors ----
+    def _spawn(self, fn: Callable[..., Any], *args: Any) -> bool:
+        """Run ``fn(*args)`` in a task of the Bus's task group; False when it has none (not open)."""
+        if self._group is None:
+            return False
+        self._group.start_soon(fn, *args)
+        return True
 
     @overload
     def motor(self, family: Family[M], motor_id: int, **options: Any) -> M: ...
@@ -345,15 +344,12 @@ class Bus:
             return self.motors[key]
         codec = found.bind(motor_id, **options)
         self.scheduler.add(codec)
-        motor = _motor_class(found)(self, codec, found.methods())
-        self.motors[key] = motor
-        self._by_codec[id(codec)] = motor
-        return motor
+        return self.registry.add(key, motor_class(found), self, codec, found.methods())
 
     @property
     def commanded(self) -> tuple[Motor, ...]:
         """The motors this Bus sent a command that is not a read: the safe command goes to them."""
-        return tuple(self._commanded.values())
+        return self.registry.commanded()
 
     def subscribe(self, callback: Callable[[Motor, Traffic, Reply], object]) -> None:
         """Call ``callback(motor, traffic, reply)`` for every decoded frame of a motor on this bus.
@@ -362,7 +358,7 @@ class Bus:
             TypeError: ``callback`` is a coroutine function (it is called on the receive path and
                 never awaited: wrap it in a plain function that hands it to a task group).
         """
-        _refuse_coroutine(callback, "subscribe")
+        refuse_coroutine(callback, "subscribe")
         self._subscribers.append(callback)
 
     def subscribe_status(self, callback: Callable[[MotorStatus], object]) -> None:
@@ -371,7 +367,7 @@ class Bus:
         Raises:
             TypeError: ``callback`` is a coroutine function (see :meth:`subscribe`).
         """
-        _refuse_coroutine(callback, "subscribe_status")
+        refuse_coroutine(callback, "subscribe_status")
         self._watchdog.listeners.append(callback)
 
     def ticks(
@@ -380,19 +376,17 @@ class Bus:
         """A fixed-rate pacer: :func:`servobus.ticks.ticks` (one pacer may drive several buses)."""
         return ticks(hz, spin_s=spin_s, count=count)
 
-    # ---- requests ----
-
     async def request(
         self, motor: Motor, command: Command[R], *, timeout_s: float | None = None, retries: int = 0
     ) -> R:
         """:meth:`Motor.request`."""
         if not self._is_current():
-            _not_our_loop(self)
-        request = self._engine.submit(motor, command, timeout_s, retries)
+            _not_our_loop(self.name, self.engine.runtime is not None)
+        request = self.engine.submit(motor, command, timeout_s, retries)
         try:
             reply: Reply | None = await request.context
         except BaseException:  # cancelled or interrupted: given up, not left in flight (a no-op if it ended)
-            self._engine.abandon((request,))
+            self.engine.abandon((request,))
             raise
         return cast(R, reply)
 
@@ -416,15 +410,15 @@ class Bus:
             RuntimeError: called from another event loop than the Bus's (servobus.sync.Bus is for threads).
         """
         if not self._is_current():
-            _not_our_loop(self)
+            _not_our_loop(self.name, self.engine.runtime is not None)
         items = list(items)
         if not items:
             return []
-        tick, queued = _tick.start(self._engine, items, timeout_s, self.probe_interval_s)
+        tick, queued = self.engine.cycle(items, timeout_s, self.probe_interval_s)
         try:
             return await tick.future
         except BaseException:
-            self._engine.abandon(r for _, r in queued if r.context.__class__ is _tick.Slot)  # (not probes)
+            self.engine.abandon(r for r in queued if r.context.__class__ is Slot)  # (not probes)
             raise
 
     async def broadcast(
@@ -440,13 +434,12 @@ class Bus:
             RuntimeError: called from another event loop than the Bus's (servobus.sync.Bus is for threads).
         """
         if not self._is_current():
-            _not_our_loop(self)
-        return await _broadcast.broadcast(self, command, motors, timeout_s)
+            _not_our_loop(self.name, self.engine.runtime is not None)
+        return await _broadcast(self.engine, command, motors, timeout_s)
 
-    def _now(self) -> float:
-        return self._runtime.time() if self._runtime is not None else 0.0
-
-    # ---- numbers ----
+    def time(self) -> float:
+        """The Bus's clock: its loop's (0.0 before the block is entered)."""
+        return self.engine.time()
 
     def stats(self) -> dict[str, int]:
         """The scheduler's counters: requests, replies, timeouts, retries and every kind of frame."""
@@ -456,6 +449,67 @@ class Bus:
         """This bus's counters, request-to-reply latency and the line's load (from the link)."""
         load = self.transport.stats().bus_load_pct
         return Metrics.of(self.scheduler.counts, self.scheduler.latency().snapshot(), load)
+
+
+async def _start(engine: Engine, runtime: _runtime.Runtime) -> anyio.abc.TaskGroup:
+    """The Bus's task group, entered, with the link open (by a task of it, unless it was) and the
+    engine's timer running in it; left again if that fails."""
+    group = anyio.create_task_group()
+    await group.__aenter__()
+    try:
+        if not engine.link.is_open:  # opened (and closed) by a task of the Bus's
+            await engine.keeper.open(group)
+        engine.attach(runtime)
+        await group.start(engine.timer.run)
+    except BaseException as exc:
+        _stop(engine, abort=True)
+        await _leave(group, type(exc), exc, exc.__traceback__)
+        raise
+    return group
+
+
+def _stop(engine: Engine, abort: bool = False) -> None:
+    """End the timer task and release the link (the Bus's task group is being left); ``abort``: an
+    opening of the link still under way is cancelled (entering the Bus failed, or was cancelled)."""
+    engine.timer.stop()
+    engine.keeper.release()
+    if abort:
+        engine.keeper.cancel()
+
+
+def _take_sigterm(runtime: _runtime.Runtime) -> SigtermTaken | None:
+    """This block's share of SIGTERM's default handler: a cancel scope, entered, that the signal
+    cancels (None: the signal is not the Bus's to take)."""
+    scope = anyio.CancelScope()
+    scope.__enter__()
+    taken = take_sigterm(scope, runtime.call_soon_threadsafe)
+    if taken is None:
+        scope.__exit__(None, None, None)
+    return taken
+
+
+async def _close_taken(
+    taken: SigtermTaken,
+    close: Callable[..., Awaitable[bool | None]],
+    exc_type: type[BaseException] | None,
+    exc: BaseException | None,
+    tb: TracebackType | None,
+) -> bool | None:
+    """Leave a block that took SIGTERM: its scope, then ``close`` (the safe stop...); SystemExit(143)
+    after it when the signal came. SIGTERM's handler is let go after the safe stop: a second SIGTERM
+    meanwhile is ignored."""
+    try:
+        signalled = bool(taken.scope.__exit__(exc_type, exc, tb))  # its cancellation, ended here
+        if signalled:
+            await close(None, None, None)
+            suppress: bool | None = True
+        else:
+            suppress = await close(exc_type, exc, tb)
+    finally:
+        taken.release()
+    if taken.exits and (exc is None or signalled):
+        raise SystemExit(128 + signal.SIGTERM)  # after the safe stop, as Ctrl-C's KeyboardInterrupt
+    return suppress
 
 
 async def _leave(
@@ -474,7 +528,7 @@ async def _leave(
     return None
 
 
-def _not_our_loop(bus: Bus) -> NoReturn:
+def _not_our_loop(name: str, entered: bool) -> NoReturn:
     """A call from another event loop than the one the Bus was entered in (or outside the block):
     refused at once, before anything is queued (its waiter, made on the Bus's loop, could not be
     awaited here).
@@ -482,10 +536,10 @@ def _not_our_loop(bus: Bus) -> NoReturn:
     Raises:
         RuntimeMismatch: always (a RuntimeError).
     """
-    if bus._runtime is None:
-        raise _runtime.RuntimeMismatch(f"{bus.name}: use the Bus inside 'async with'")
+    if not entered:
+        raise _runtime.RuntimeMismatch(f"{name}: use the Bus inside 'async with'")
     raise _runtime.RuntimeMismatch(
-        f"{bus.name}: this Bus runs on another event loop (the one its 'async with' entered); "
+        f"{name}: this Bus runs on another event loop (the one its 'async with' entered); "
         "a Bus is used from its own loop only: use servobus.sync.Bus from other threads, or hand "
         "the call to the Bus's loop (anyio.from_thread with a portal, or the loop's own way)"
     )

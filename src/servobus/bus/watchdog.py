@@ -2,7 +2,7 @@
 offline; one that answers is online again (:class:`Watchdog`).
 
 It keeps no timer of its own: :attr:`Watchdog.silence_at` says when the silence check is next due,
-and the Bus's one timer task (servobus.engine) calls :meth:`Watchdog.check_silence` then.
+and the Bus's one timer task (servobus.bus.engine) calls :meth:`Watchdog.check_silence` then.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from servobus.motor import Motor
+    from servobus.bus.motor import Motor, MotorRecord
 
 __all__ = ["MotorStatus", "Watchdog"]
 
@@ -30,7 +30,7 @@ class MotorStatus:
         online: its new state.
         at: when (the loop's clock).
         reason: why, in words (``"3 replies missed"``, ``"silent for 0.5 s"``, ``"answered"``), or
-            ``"restarted"``: the motor, back online, had restarted (servobus.restarts; it follows
+            ``"restarted"``: the motor, back online, had restarted (servobus.bus.restarts; it follows
             its ``"answered"``), so the set-points it held are lost; or
             what the motor said of itself while it stays online or offline (``"communication
             watchdog tripped (0xF1)"``: its output is off until it executes a command again).
@@ -76,15 +76,17 @@ class Watchdog:
         self._motors = motors
         self.rearm = rearm
 
-    def missed(self, motor: Motor, now: float) -> None:
-        """``motor`` missed a reply (its request timed out)."""
-        motor._misses += 1
-        if motor._misses >= self.offline_after_misses and motor.online is not False:
-            self.set_status(motor, False, now, f"{motor._misses} replies missed")
+    def missed(self, record: MotorRecord, now: float) -> None:
+        """``record``'s motor missed a reply (its request timed out)."""
+        record.misses += 1
+        motor = record.motor
+        if record.misses >= self.offline_after_misses and motor.online is not False:
+            self.set_status(motor, False, now, f"{record.misses} replies missed")
 
-    def answered(self, motor: Motor, now: float) -> None:
-        """A frame of ``motor`` came (its ``last_seen`` is set)."""
-        motor._misses = 0
+    def answered(self, record: MotorRecord, now: float) -> None:
+        """A frame of ``record``'s motor came (its ``last_seen`` is set)."""
+        record.misses = 0
+        motor = record.motor
         if motor.online is not True:
             self.set_status(motor, True, now, "answered")
 
@@ -99,9 +101,10 @@ class Watchdog:
             self.arm_silence()
 
     def restarted(self, motor: Motor, at: float, evidence: str) -> None:
-        """``motor``, back online, had restarted (servobus.restarts found ``evidence``): told once."""
+        """``motor``, back online, had restarted (servobus.bus.restarts found ``evidence``): told once."""
         logger.warning("%s: %r restarted (%s): what it was told before is lost", self.name, motor, evidence)
         self._tell(MotorStatus(motor, True, at, "restarted"))
+
     def event(self, motor: Motor, at: float, reason: str) -> None:
         """Tell the listeners what happened to ``motor`` that leaves it online as it is (``reason``:
         ``"communication watchdog tripped (0xF1)"``; the caller logs it)."""

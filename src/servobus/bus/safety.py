@@ -8,40 +8,62 @@ import contextlib
 import logging
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import anyio
 
-from servobus._tick import awaitable
+from servobus.bus.tick import awaitable
 from servobus.errors import MotorNotExecuted, MotorTimeout, TransportError
 from servobus.protocols import Command
 
 if TYPE_CHECKING:
-    from servobus.bus import Bus
-    from servobus.motor import Motor
+    from servobus.bus.engine import Engine
+    from servobus.bus.motor import Motor
     from servobus.scheduler import Request
 
-__all__ = ["StopOutcome", "safe_stop", "stop_motors"]
+__all__ = ["SafeStopHost", "StopHost", "StopOutcome", "safe_stop", "stop_motors"]
 
 logger = logging.getLogger("servobus.bus")
 
 
-async def safe_stop(bus: Bus) -> None:
+class StopHost(Protocol):
+    """What :func:`stop_motors` asks of a Bus (:class:`servobus.bus.Bus` is one): its engine."""
+
+    @property
+    def engine(self) -> Engine: ...
+
+
+class SafeStopHost(StopHost, Protocol):
+    """What :func:`safe_stop` asks of a Bus: its safe command, the motors it commanded, and where the
+    outcome goes."""
+
+    name: str
+    safe: str | None
+    safe_timeout_s: float
+    safe_sent: tuple[Motor, ...]
+    safe_acknowledged: tuple[Motor, ...]
+
+    @property
+    def commanded(self) -> tuple[Motor, ...]: ...
+
+
+async def safe_stop(bus: SafeStopHost) -> None:
     """Send ``bus.safe`` to every motor the Bus commanded, again to each one that did not answer,
     until all answered or ``bus.safe_timeout_s`` ended; sets ``bus.safe_sent`` and
     ``bus.safe_acknowledged``, and names the motors that did not answer in a warning."""
-    if bus.safe is None or not bus._commanded:
+    commanded = bus.commanded
+    if bus.safe is None or not commanded:
         return
-    if not bus.transport.is_open:
+    if not bus.engine.link.is_open:
         logger.warning(
             "%s: the link is not open: the %s command cannot reach %s",
             bus.name,
             bus.safe,
-            ", ".join(repr(m) for m in bus._commanded.values()),
+            ", ".join(repr(m) for m in commanded),
         )
         return
     commands: dict[Motor, Command] = {}
-    for motor in list(bus._commanded.values()):
+    for motor in commanded:
         with contextlib.suppress(ValueError):
             commands[motor] = motor.codec.safe_command(bus.safe)
     outcome = StopOutcome()
@@ -70,7 +92,7 @@ class StopOutcome:
 
 
 async def stop_motors(
-    bus: Bus, commands: Mapping[Motor, Command], timeout_s: float, outcome: StopOutcome | None = None
+    bus: StopHost, commands: Mapping[Motor, Command], timeout_s: float, outcome: StopOutcome | None = None
 ) -> StopOutcome:
     """Send each motor its (safe) command, past the watchdog (an offline motor gets it too), again to
     each one that did not answer, until all answered or ``timeout_s`` ended.
@@ -78,12 +100,13 @@ async def stop_motors(
     ``outcome`` (a new one when None) is filled in even when the caller is cancelled meanwhile.
     """
     outcome = StopOutcome() if outcome is None else outcome
+    engine = bus.engine
     attempts: dict[Motor, list[Request]] = {motor: [] for motor in commands}
     acknowledged: set[Motor] = set()
 
     async def stop(motor: Motor, command: Command) -> None:
         while True:
-            request = bus._engine.submit(motor, command, None, 0, safe=True)
+            request = engine.submit(motor, command, None, 0, safe=True)
             attempts[motor].append(request)
             try:
                 await awaitable(request.context)
@@ -92,9 +115,9 @@ async def stop_motors(
             except MotorNotExecuted:
                 continue  # echoed back, not executed (a tripped watchdog): not acknowledged
             except TransportError:
-                if not bus.transport.is_open:
+                if not engine.link.is_open:
                     return
-                await anyio.sleep(bus.scheduler.min_timeout_s)  # refused (a full queue): again
+                await anyio.sleep(engine.scheduler.min_timeout_s)  # refused (a full queue): again
                 continue
             except Exception:  # (an undecodable answer: not an acknowledgement, and no retry)
                 return
@@ -108,7 +131,7 @@ async def stop_motors(
                 for motor, command in commands.items():
                     group.start_soon(stop, motor, command)
     finally:
-        bus._engine.abandon(r for sent in attempts.values() for r in sent)
+        engine.abandon(r for sent in attempts.values() for r in sent)
         outcome.sent = tuple(m for m, tried in attempts.items() if any(r.sent_at is not None for r in tried))
         outcome.acknowledged = tuple(m for m in commands if m in acknowledged)
     return outcome

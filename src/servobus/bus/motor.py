@@ -1,5 +1,10 @@
 """A motor on a Bus (:class:`Motor`: its codec, its latest telemetry, a method per command of its
-family) and its frames as an async iterator (:class:`MotorFrames`); servobus.bus re-exports both."""
+family), its frames as an async iterator (:class:`MotorFrames`), and what the Bus knows of it
+beside (:class:`MotorRecord`, one per motor, held in the Bus's :class:`Registry`); servobus.bus
+re-exports Motor and MotorFrames.
+
+A Motor knows its Bus only as a :class:`MotorHost` (its name, clock, scheduler and
+``request``): this module imports nothing of the bus package above it."""
 
 from __future__ import annotations
 
@@ -8,7 +13,7 @@ import dataclasses
 import inspect
 from collections import deque
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterable
-from typing import TYPE_CHECKING, Any, Self, TypeVar
+from typing import TYPE_CHECKING, Any, Protocol, Self, TypeVar
 
 import anyio
 
@@ -16,14 +21,128 @@ from servobus.errors import MotorFault, MotorTimeout, TransportError
 from servobus.metrics import Metrics
 from servobus.protocols import BoundCodec, Command, Family, Reply, get_family
 from servobus.protocols._restart import Seen
-from servobus.scheduler import Traffic
+from servobus.scheduler import Scheduler, Traffic
 
-if TYPE_CHECKING:
-    from servobus.bus import Bus
-
-__all__ = ["Motor", "MotorFrames", "NamedMotor", "command_classes"]
+__all__ = ["Motor", "MotorFrames", "MotorHost", "MotorRecord", "NamedMotor", "Registry", "command_classes"]
 
 R = TypeVar("R")
+
+
+class MotorHost(Protocol):
+    """What a :class:`Motor` asks of its Bus (:class:`servobus.bus.Bus` is one)."""
+
+    name: str
+    scheduler: Scheduler
+
+    def time(self) -> float: ...
+
+    async def request(
+        self, motor: Motor, command: Command[R], *, timeout_s: float | None = None, retries: int = 0
+    ) -> R: ...
+
+
+class MotorRecord:
+    """What the Bus knows of one motor beyond what the :class:`Motor` shows (its ``state``,
+    ``last_seen``, ``online``, ``fault``, ``restarted_at``): one record per motor, in the Bus's
+    :class:`Registry`, each field written by one part of the bus package.
+
+    Attributes:
+        motor, codec: the motor and its codec.
+        misses: replies missed in a row (the watchdog's).
+        probe_at: while offline, when a cycle may next send it a command as a probe (the engine's).
+        remembers: the reply types its family's restart evidence asks the intake to remember;
+            remembered: the last reply of each (the intake's; read by servobus.bus.restarts).
+        known_since, readings, before: the restart check's (servobus.bus.restarts): running
+            without a restart since; its probes' last replies; what it said before its silence.
+        ending: streams switched off: the command byte -> (the "off" command, when it was last
+            sent, the stream's interval in s) (the motor's; the intake sends a lost "off" again).
+        watchers: the frame iterators open on it (:class:`MotorFrames`: each adds and removes itself).
+        commanded: the order in which the Bus first sent it a command that is not a read (0: never).
+        undecodable_logged, echo_logged: its undecodable reply, its echoed request, logged once.
+    """
+
+    __slots__ = (
+        "before",
+        "codec",
+        "commanded",
+        "echo_logged",
+        "ending",
+        "known_since",
+        "misses",
+        "motor",
+        "probe_at",
+        "readings",
+        "remembered",
+        "remembers",
+        "undecodable_logged",
+        "watchers",
+    )
+
+    def __init__(self, codec: BoundCodec) -> None:
+        self.codec = codec
+        self.motor: Motor = None  # type: ignore[assignment]  # (set by the Registry, at once)
+        self.misses = 0
+        self.probe_at = 0.0
+        evidence = getattr(codec, "RESTART", None)
+        self.remembers: frozenset[type] = evidence.remembers if evidence is not None else frozenset()
+        self.remembered: dict[type, Seen] = {}
+        self.known_since: float | None = None
+        self.readings: dict[type, Seen] = {}
+        self.before: dict[type, Seen] | None = None
+        self.ending: dict[int, tuple[Command, float, float]] = {}
+        self.watchers: list[MotorFrames] = []
+        self.commanded = 0
+        self.undecodable_logged = self.echo_logged = False
+
+
+class Registry:
+    """The motors of one Bus, one :class:`MotorRecord` each, keyed once: by their codec (what every
+    frame and request names). :attr:`named` is the index ``bus.motor(family, id)`` looks up.
+    """
+
+    def __init__(self) -> None:
+        #: id(codec) -> its record (read by the intake on every reply)
+        self.records: dict[int, MotorRecord] = {}
+        #: (family, motor id) -> the motor (``Bus.motors``)
+        self.named: dict[tuple[str, int], Motor] = {}
+        self._commands = 0  # how many motors were commanded (their order)
+
+    def add(
+        self,
+        key: tuple[str, int],
+        cls: type[Motor],
+        host: MotorHost,
+        codec: BoundCodec,
+        commands: dict[str, type[Command]],
+    ) -> Motor:
+        """A new motor of class ``cls`` for ``codec``, with its record, named ``key`` (family, id)."""
+        record = MotorRecord(codec)
+        record.motor = motor = cls(host, codec, commands, record)
+        self.records[id(codec)] = record
+        self.named[key] = motor
+        return motor
+
+    def of(self, motor: Motor) -> MotorRecord:
+        """``motor``'s record."""
+        return self.records[id(motor.codec)]
+
+    def command(self, motor: Motor) -> None:
+        """The Bus sent ``motor`` a command that is not a read: it gets the safe command."""
+        record = self.records.get(id(motor.codec))
+        if record is not None and not record.commanded:
+            self._commands += 1
+            record.commanded = self._commands
+
+    def commanded(self) -> tuple[Motor, ...]:
+        """The motors commanded, in the order they first were."""
+        found = sorted((r for r in self.records.values() if r.commanded), key=lambda r: r.commanded)
+        return tuple(r.motor for r in found)
+
+    def end_watchers(self) -> None:
+        """The Bus closed: every frame iterator over its motors ends (not hangs)."""
+        for record in self.records.values():
+            for watcher in list(record.watchers):
+                watcher.end()
 
 
 def command_classes(family: str) -> dict[str, type[Command]]:
@@ -44,10 +163,13 @@ class MotorFrames:
     holds memory without end or slows the Bus.
     """
 
-    def __init__(self, motor: Motor, size: int, kinds: frozenset[Traffic]) -> None:
+    def __init__(
+        self, motor: Motor, size: int, kinds: frozenset[Traffic], watchers: list[MotorFrames]
+    ) -> None:
         if size < 1:
             raise ValueError(f"size={size} must be at least 1")
         self.motor = motor
+        self._watchers = watchers  # the motor's (MotorRecord.watchers): joined while open
         self.kinds = kinds
         self.dropped = 0
         self._size = size
@@ -55,7 +177,8 @@ class MotorFrames:
         self._ready: anyio.Event | None = None  # (anyio's events are one-shot: a new one per wait)
         self._closed = False
 
-    def _push(self, traffic: Traffic, reply: Reply) -> None:
+    def push(self, traffic: Traffic, reply: Reply) -> None:
+        """A decoded frame of the motor (the Bus's intake calls this): kept if of :attr:`kinds`."""
         if traffic not in self.kinds:
             return
         if len(self._items) >= self._size:
@@ -66,17 +189,17 @@ class MotorFrames:
             self._ready.set()
 
     async def __aenter__(self) -> Self:
-        self.motor._watchers.append(self)
+        self._watchers.append(self)
         return self
 
     async def __aexit__(self, *exc: object) -> None:
-        self._end()
+        self.end()
 
-    def _end(self) -> None:
+    def end(self) -> None:
         """No more frames (the block was left, or the Bus closed): the iteration ends."""
         self._closed = True
         with contextlib.suppress(ValueError):
-            self.motor._watchers.remove(self)
+            self._watchers.remove(self)
         if self._ready is not None:
             self._ready.set()
 
@@ -109,29 +232,26 @@ class Motor:
             ``offline_after_misses`` missed replies in a row or ``offline_after_s`` of silence, None
             before either happened. A motor that answers again is online again.
         restarted_at: when the motor last came back online from a restart (the loop's clock; None:
-            none was found). Its ``"restarted"`` MotorStatus says so too (servobus.restarts).
+            none was found). Its ``"restarted"`` MotorStatus says so too (servobus.bus.restarts).
     """
 
-    def __init__(self, bus: Bus, codec: BoundCodec, commands: dict[str, type[Command]] | None = None) -> None:
+    def __init__(
+        self,
+        bus: MotorHost,
+        codec: BoundCodec,
+        commands: dict[str, type[Command]] | None = None,
+        record: MotorRecord | None = None,
+    ) -> None:
         self.bus = bus
         self.codec = codec
         self.state: Reply | None = None
         self.last_seen: float | None = None
         self.online: bool | None = None
         self.fault: MotorFault | None = None
-        self._misses = 0
         self.restarted_at: float | None = None
-        # the last reply of each type its family's restart evidence remembers (servobus.restarts)
-        evidence = getattr(codec, "RESTART", None)
-        self._remembers: frozenset[type] = evidence.remembers if evidence is not None else frozenset()
-        self._remembered: dict[type, Seen] = {}
         # by method name; from the Family the Bus bound it with (a plug-in may be unregistered)
         self._commands = command_classes(codec.family) if commands is None else commands
-        self._watchers: list[MotorFrames] = []
-        self._probe_at = 0.0  # while offline: when cycle() may next send it a command, as a probe
-        # Streams switched off: the command byte -> (the "off" command, when it was last sent, the
-        # stream's interval in s).
-        self._ending: dict[int, tuple[Command, float, float]] = {}
+        self._record = MotorRecord(codec) if record is None else record  # (the Bus's Registry's)
 
     def metrics(self) -> Metrics:
         """This motor's counters and request-to-reply latency (see :class:`~servobus.metrics.Metrics`)."""
@@ -162,7 +282,7 @@ class Motor:
         on = active_reply(command=code, enabled=True, interval_ms=interval_ms)
         off = active_reply(command=code, enabled=False)
         async with self.frames(size=size, kinds=(Traffic.STREAM,)) as frames:
-            self._ending.pop(code, None)
+            self._record.ending.pop(code, None)
             await self.request(on)
             try:
                 yield frames
@@ -170,8 +290,8 @@ class Motor:
                 with anyio.CancelScope(shield=True), contextlib.suppress(TransportError, MotorTimeout):
                     await self.request(off)
                     # "off" gets no reply: if it was lost, the frames that keep coming say so, and
-                    # the Bus sends it again (Bus._stream_goes_on).
-                    self._ending[code] = (off, self.bus._now(), interval_ms / 1000)
+                    # the Bus sends it again (servobus.bus.delivery).
+                    self._record.ending[code] = (off, self.bus.time(), interval_ms / 1000)
 
     def frames(
         self, *, size: int = 64, kinds: Iterable[Traffic] = (Traffic.STREAM, Traffic.REPORT)
@@ -182,7 +302,7 @@ class Motor:
         Raises:
             ValueError: ``size`` below 1.
         """
-        return MotorFrames(self, size, frozenset(kinds))
+        return MotorFrames(self, size, frozenset(kinds), self._record.watchers)
 
     @property
     def motor_id(self) -> int:
@@ -239,21 +359,49 @@ else:
     NamedMotor = Motor
 
 
-def _motor_class(family: Family[Any]) -> type[Motor]:
+#: a family's typed calls class that is not a Motor -> the Motor class made for it (once)
+_MADE: dict[type, type[Motor]] = {}
+#: the typed classes whose methods got their commands' docstrings
+_DOCUMENTED: set[type] = set()
+
+
+def motor_class(family: Family[Any]) -> type[Motor]:
     """The family's typed Motor class (Motor itself where it has none), its methods documented
-    with their commands' docstrings (the generated file keeps one line a method)."""
+    with their commands' docstrings (the generated file keeps one line a method).
+
+    A family's typed class (``family.motor()``) is either a Motor subclass, used as it is, or a
+    calls class that only spells the methods (``servobus.protocols._calls``): then a class of both
+    is made once per family, so ``isinstance(motor, family.motor())`` holds and the Bus's Motor
+    answers what both define (``request``, ``__init__``, ...).
+    """
     if family.motor is None:
         return Motor
-    cls: type[Motor] = family.motor()
-    if "_documented" not in cls.__dict__:
+    calls: type = family.motor()
+    if calls not in _DOCUMENTED:
         for name, command in family.methods().items():
             if name in Motor.__dict__:
                 raise TypeError(f"{family.name}: command {command.__name__} would hide Motor.{name}")
-            method = cls.__dict__.get(name)
+            method = calls.__dict__.get(name)
             if method is not None and method.__doc__ is None:
                 method.__doc__ = f"Send {command.__name__} and await its reply.\n\n{command.__doc__ or ''}"
-        cls._documented = True  # type: ignore[attr-defined]
-    return cls
+        _DOCUMENTED.add(calls)
+    if issubclass(calls, Motor):
+        return calls
+    made = _MADE.get(calls)
+    if made is None:
+        ours = {  # what Motor defines that the calls class (or its bases) defines too: Motor's wins
+            name: value
+            for name, value in Motor.__dict__.items()
+            if not name.startswith("__") or name in ("__init__", "__repr__", "__getattr__", "__dir__")
+            if any(name in vars(base) for base in calls.__mro__[:-1])
+        }
+        namespace = {
+            "__module__": calls.__module__,
+            "__doc__": calls.__doc__,
+            "__qualname__": calls.__qualname__,
+        }
+        made = _MADE[calls] = type(calls.__name__, (calls, Motor), {**namespace, **ours})
+    return made
 
 
 def _positional_fields(
@@ -271,7 +419,7 @@ def _positional_fields(
     return fields
 
 
-def _refuse_coroutine(callback: Callable[..., object], method: str) -> None:
+def refuse_coroutine(callback: Callable[..., object], method: str) -> None:
     if inspect.iscoroutinefunction(callback) or inspect.iscoroutinefunction(type(callback).__call__):
         raise TypeError(
             f"{method}() takes a plain function: {callback!r} is async and would never be awaited "
