@@ -23,7 +23,7 @@ NAMES = sorted(FAMILIES)
 FAMILY_DIRS = [SRC / "protocols" / name for name in NAMES]
 WORD = re.compile(r"(?<![a-z])(" + "|".join(NAMES) + r")(?![a-z])", re.IGNORECASE)
 #: the family-blind layers the issue names, and the simulator's and the transports' generic modules
-BLIND = ["bus", "scheduler.py", "sync.py", "dbc.py", "transports", "cli", "sim"]
+BLIND = ["bus", "scheduler", "sync.py", "dbc.py", "tools", "transports", "cli", "sim"]
 #: keyword arguments whose strings are documentation (click's and argparse's)
 DOC_KEYWORDS = {"help", "epilog", "short_help", "description", "usage", "metavar"}
 DOC_CALLS = {"examples"}

@@ -21,10 +21,10 @@ import anyio
 import anyio.abc
 
 from servobus.bus import Motor
+from servobus.bus.safety import stop_motors
 from servobus.protocols import Command
 from servobus.remote._served import Served
 from servobus.remote._withdraw import withdraw
-from servobus.bus.safety import stop_motors
 
 __all__ = ["LEFT", "Stops"]
 
