@@ -87,11 +87,6 @@ class Keys:
         if len(self.replied) > self.limit:
             self.prune(now)
 
-    def busy(self, key: Hashable, now: float) -> bool:
-        """Is ``key`` held for a late reply now?"""
-        until = self.held.get(key)
-        return until is not None and until > now
-
     def held_until(self, keys: Iterable[Hashable], now: float) -> float | None:
         """When the last hold of one of ``keys`` ends (None: none held)."""
         held = self.held

@@ -294,7 +294,7 @@ class Scheduler:
             return False
         if key in self.table.pending:
             return True
-        until = self.keys.held.get(key)  # (Keys.busy, written out: the tick asks per request)
+        until = self.keys.held.get(key)  # (held for a late reply until then)
         return until is not None and until > now
 
     def count(self, codec: BoundCodec, counter: str, n: int = 1) -> None:
