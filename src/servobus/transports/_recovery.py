@@ -75,7 +75,8 @@ class Recovery:
         self._signal: Waiter[None] | None = None  # what watch() waits on
 
     def lost(self, cause: BaseException) -> None:
-        """The open connection's device failed (the transport has done what a loss means to it)."""
+        """The open connection's device failed: counted and logged here, released and reopened by
+        the task; what the loss means to the transport's state, the transport does itself."""
         logger.warning("%s: device lost: %s", self._name, cause)
         self._stats.losses += 1
         self._pending = True
