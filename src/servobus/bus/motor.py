@@ -78,9 +78,10 @@ class MotorRecord:
         "watchers",
     )
 
+    motor: Motor  # (set by the Motor it is the record of, as it is made)
+
     def __init__(self, codec: BoundCodec) -> None:
         self.codec = codec
-        self.motor: Motor = None  # type: ignore[assignment]  # (set by the Registry, at once)
         self.misses = 0
         self.probe_at = 0.0
         evidence = getattr(codec, "RESTART", None)
@@ -117,7 +118,7 @@ class Registry:
     ) -> Motor:
         """A new motor of class ``cls`` for ``codec``, with its record, named ``key`` (family, id)."""
         record = MotorRecord(codec)
-        record.motor = motor = cls(host, codec, commands, record)
+        motor = cls(host, codec, commands, record)
         self.records[id(codec)] = record
         self.named[key] = motor
         return motor
@@ -252,6 +253,7 @@ class Motor:
         # by method name; from the Family the Bus bound it with (a plug-in may be unregistered)
         self._commands = command_classes(codec.family) if commands is None else commands
         self._record = MotorRecord(codec) if record is None else record  # (the Bus's Registry's)
+        self._record.motor = self
 
     def metrics(self) -> Metrics:
         """This motor's counters and request-to-reply latency (see :class:`~servobus.metrics.Metrics`)."""
