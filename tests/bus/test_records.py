@@ -62,13 +62,13 @@ async def test_a_missed_reply_is_counted_on_the_motor_s_record() -> None:
 
 
 @pytest.mark.anyio
-async def test_the_engine_counts_through_the_scheduler_s_count_when_it_has_one() -> None:
+async def test_the_engine_counts_through_the_scheduler_s_count() -> None:
     async with Bus(SimTransport(devices=[MyActuatorMotor(1)])) as bus:
         motor = bus.motor("myactuator", 1)
         bus.engine.count(motor.codec, "restarts")
         assert motor.metrics().restarts == 1
         counted: list[tuple[Any, str]] = []
-        bus.scheduler.count = lambda codec, counter, n=1: counted.append((codec, counter))  # type: ignore[attr-defined]
+        bus.scheduler.count = lambda codec, counter, n=1: counted.append((codec, counter))  # type: ignore[method-assign]
         bus.engine.count(motor.codec, "restarts")
         assert counted == [(motor.codec, "restarts")]
         assert motor.metrics().restarts == 1
@@ -87,7 +87,7 @@ class _Calls:
 @typing.runtime_checkable
 class _ProtocolCalls(typing.Protocol):
     async def read_status2(self, *, timeout_s: float | None = None, retries: int = 0) -> Any:
-        return await self.request(ma.ReadStatus2(), timeout_s=timeout_s, retries=retries)  # type: ignore[attr-defined]
+        return await self.request(ma.ReadStatus2(), timeout_s=timeout_s, retries=retries)  # type: ignore[method-assign]
 
 
 def _family(calls: type) -> Any:
@@ -112,7 +112,7 @@ async def test_a_calls_class_that_is_not_a_motor_becomes_one_once_per_family(cal
         bus.scheduler.add(codec)
         motor = bus.registry.add(("myactuator", 1), made, bus, codec, ma.FAMILY.methods())
         assert isinstance(motor, calls) and isinstance(motor, Motor)
-        reply = await motor.read_status2()  # type: ignore[attr-defined]
+        reply = await motor.read_status2()  # type: ignore[method-assign]
         assert isinstance(reply, ma.ReadStatus2.REPLY)
 
 

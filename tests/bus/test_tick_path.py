@@ -13,7 +13,6 @@ from typing import Any
 
 import pytest
 
-import servobus.scheduler
 from servobus.bus import Bus
 from servobus.frame import Frame
 from servobus.protocols import get_family
@@ -130,12 +129,6 @@ async def test_the_bus_side_of_a_tick_is_the_bus_its_engine_the_tick_and_the_int
 
 @pytest.mark.anyio
 @pytest.mark.parametrize("anyio_backend", ["asyncio"])
-@pytest.mark.xfail(
-    not hasattr(servobus.scheduler, "__path__"),
-    reason="the scheduler is still six flat modules: its package (issue 38, another branch) takes 4",
-    raises=AssertionError,
-    strict=True,
-)
 async def test_one_tick_visits_at_most_eight_modules_between_the_bus_and_the_link() -> None:
     visited = await _visited()
     assert len(visited) <= BUDGET, f"{len(visited)} modules: {sorted(visited)}"

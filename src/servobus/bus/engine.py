@@ -143,11 +143,7 @@ class Engine:
 
     def count(self, codec: BoundCodec, counter: str) -> None:
         """One more ``counter`` in ``codec``'s motor's counts (``Motor.metrics``)."""
-        count = getattr(self.scheduler, "count", None)  # until the scheduler's count lands
-        if count is not None:
-            count(codec, counter)
-        else:
-            self.scheduler.motor_counts[id(codec)][counter] += 1
+        self.scheduler.count(codec, counter)
 
     def reach_s(self, codec: BoundCodec) -> float:
         """The longest a reply of ``codec``'s motor is waited for now (its measured timeout)."""
