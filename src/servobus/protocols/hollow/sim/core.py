@@ -62,15 +62,6 @@ class HollowCore(PowerCuts):
 
     CORE_FAMILY: ClassVar[int] = lib.SB_FAMILY_HOLLOW
 
-    # What HollowMotor's __init__ sets.
-    motor_id: int
-    host_id: int
-    model: HollowModel
-    fd_enabled: bool
-    turnaround_s: float
-    turnaround_jitter_s: float
-    fd_current_a_per_count: float
-
     # The C twin (cdata sb_simmotor *) and its sb_hollow_state, while attached.
     _core: Any = None
     _core_state: Any = None
@@ -81,6 +72,26 @@ class HollowCore(PowerCuts):
     _py_setpoint: HeldSetpoint | None = None
     _py_zero_offset_deg = 0.0
     _py_unresponsive = False
+
+    def __init__(
+        self,
+        *,
+        motor_id: int,
+        host_id: int,
+        model: HollowModel,
+        fd_enabled: bool,
+        turnaround_s: float,
+        turnaround_jitter_s: float,
+        fd_current_a_per_count: float,
+    ) -> None:
+        """The configuration the C twin reads (checked by the motor, which passes it on)."""
+        self.motor_id = motor_id
+        self.host_id = host_id
+        self.model = model
+        self.fd_enabled = fd_enabled
+        self.turnaround_s = turnaround_s
+        self.turnaround_jitter_s = turnaround_jitter_s
+        self.fd_current_a_per_count = fd_current_a_per_count
 
     # ---- the engine's contract ----
 

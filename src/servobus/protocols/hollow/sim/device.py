@@ -162,8 +162,8 @@ class HollowMotor(HollowCore):
         name: str | None = None,
         now_s: float = 0.0,
     ) -> None:
-        self.motor_id = check_motor_id(motor_id)
-        self.host_id = check_host_id(host_id)
+        check_motor_id(motor_id)
+        check_host_id(host_id)
         if not 0.0 <= turnaround_jitter_s <= turnaround_s:
             raise ValueError(
                 f"need 0 <= turnaround_jitter_s <= turnaround_s "
@@ -171,12 +171,16 @@ class HollowMotor(HollowCore):
             )
         if not fd_current_a_per_count > 0:
             raise ValueError(f"fd_current_a_per_count={fd_current_a_per_count!r} must be > 0")
-        self.model = model
-        self.fd_enabled = fd_enabled
+        super().__init__(
+            motor_id=motor_id,
+            host_id=host_id,
+            model=model,
+            fd_enabled=fd_enabled,
+            turnaround_s=turnaround_s,
+            turnaround_jitter_s=turnaround_jitter_s,
+            fd_current_a_per_count=fd_current_a_per_count,
+        )
         self.power_up_mode = ControlMode(control_mode)
-        self.turnaround_s = turnaround_s
-        self.turnaround_jitter_s = turnaround_jitter_s
-        self.fd_current_a_per_count = fd_current_a_per_count
         self.console_zero_deg = console_zero_deg
         self._name = name or f"hollow{motor_id}"
         self._rng = random.Random(seed)

@@ -66,7 +66,6 @@ from servobus.protocols.lk.sim.intake import ignore_reason, undecodable_reason
 from servobus.protocols.lk.sim.replies import status2
 from servobus.protocols.lk.sim.state import (
     LK_PLANT_PARAMS,
-    AngleFrame,
     LkMemory,
     RunState,
     amps_per_count,
@@ -158,7 +157,7 @@ class LkMotor(TwinnedMotor, PowerCuts):
             raise ValueError(f"encoder_offset_counts={encoder_offset_counts} is outside 0..{per_turn - 1}")
         self.motor_id = motor_id
         self.model = model
-        self.turnaround_s = turnaround_s
+        super().__init__(turnaround_s=turnaround_s, counts_per_turn=per_turn)
         self.calibration_s = calibration_s
         self._name = name or f"lk{motor_id}"
         self._plant = Plant(params, now_s=now_s)
@@ -173,14 +172,10 @@ class LkMotor(TwinnedMotor, PowerCuts):
             if acceleration_dps2 is not None
             else params.max_acceleration_dps2 * params.gear_ratio,
         )
-        self._angles = AngleFrame(per_turn)
         self.brake_at_power_up = brake_engaged
-        self.unresponsive = False  # a fault knob, not motor RAM: a reboot keeps it
         self._counters: Counter[str] = Counter()
         self._conditions = 0  # fault conditions present now (bits of ErrorState)
-        # RAM state, set by _power_up.
-        self._state = RunState.ON
-        self._held: Control | None = None
+        # RAM state, set by _power_up (the run state and the held control: TwinnedMotor's).
         self.brake_engaged = brake_engaged
         self.latched_errors = 0
         self.busy_until_s = -math.inf

@@ -23,15 +23,17 @@ __all__ = ["RunState", "TwinnedMotor"]
 class TwinnedMotor(ListeningDevice):
     """The half of :class:`~servobus.protocols.lk.sim.device.LkMotor` its C twin shares: the network's
     contract (``CORE_FAMILY``, :meth:`core_attach`, :meth:`core_detach`, :meth:`core_push`) and the
-    attributes C changes or reads (see the module docstring). The model's ``__init__`` sets them."""
+    attributes C changes or reads (see the module docstring), which it sets and owns."""
 
     CORE_FAMILY: ClassVar[int] = CORE_FAMILY
     _twin: LkCore | None = None  # the C twin while on a C-core network
-    _state: RunState
-    _held: Control | None
-    _angles: AngleFrame
-    _unresponsive: bool
-    _turnaround_s: float
+
+    def __init__(self, *, turnaround_s: float, counts_per_turn: int) -> None:
+        self._state = RunState.ON
+        self._held: Control | None = None
+        self._angles = AngleFrame(counts_per_turn)
+        self._unresponsive = False  # a fault knob, not motor RAM: a reboot keeps it
+        self._turnaround_s = turnaround_s
 
     @property
     def state(self) -> RunState:

@@ -90,7 +90,6 @@ when the error appears (or reporting is switched on).
 from __future__ import annotations
 
 import functools
-from collections import Counter
 from typing import Any, ClassVar
 
 from servobus.core._lib import lib
@@ -98,9 +97,10 @@ from servobus.errors import ProtocolError
 from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
 from servobus.protocols._message import Command, Reply
-from servobus.protocols.myactuator import ErrorFlags, Revision, StreamableCommand
+from servobus.protocols.myactuator import Revision
 from servobus.protocols.myactuator.ids import check_motor_id, reply_id
 from servobus.protocols.myactuator.sim import loops, reads, settings, streams
+from servobus.protocols.myactuator.sim.base import RUN_MODE_POWER_UP
 from servobus.protocols.myactuator.sim.core import MaCore, attached_class, register_model
 from servobus.protocols.myactuator.sim.faults import ERROR_REPORT_PERIOD_S, Faults
 from servobus.protocols.myactuator.sim.handlers import execute
@@ -113,7 +113,6 @@ from servobus.protocols.myactuator.sim.state import (
     DEFAULT_VERSION_DATES,
     MYACTUATOR_PLANT_PARAMS,
     EncoderFrame,
-    ErrorLatch,
     Settings,
     Stream,
 )
@@ -121,7 +120,6 @@ from servobus.protocols.myactuator.sim.streams import stream_replies
 from servobus.sim.coreplant import CorePlant
 from servobus.sim.device import BusLink, Emission
 from servobus.sim.plant import (
-    Control,
     Off,
     Plant,
     PlantParams,
@@ -133,10 +131,6 @@ __all__ = ["DEFAULT_TURNAROUND_S", "ERROR_REPORT_PERIOD_S", "MyActuatorMotor", "
 # The manuals state no turnaround. 200 µs is what a V3 driver's 1 ms-or-faster command loop plus a CAN
 # transmit-queue hop gives in practice [I]; the LK sibling states "within 0.25 ms" for its V2.36 drives.
 DEFAULT_TURNAROUND_S = 200e-6
-# [I] The manuals define three run modes and no other (§4.27: "has the following 3 states"), so 0x70
-# always reports one: after 0x80 (or a fault or comm trip) the last loop's mode stays; at power-up,
-# before any control command, the position loop (the manuals' only 0x70 example reads 0x03).
-RUN_MODE_POWER_UP = ma.RunMode.POSITION_LOOP
 #: the handlers, by concern: importing them fills HANDLERS (handlers.py)
 HANDLER_MODULES = (reads, loops, settings, streams)
 
@@ -216,42 +210,28 @@ class MyActuatorMotor(Intake, Faults, PowerCuts):
             raise ValueError(f"turnaround_s={turnaround_s!r} must be >= 0")
         if not (rated_current_a > 0 and rated_speed_dps > 0 and pole_pairs > 0):
             raise ValueError("rated_current_a, rated_speed_dps and pole_pairs must be > 0")
-        self.revision = revision
-        self.version_date = DEFAULT_VERSION_DATES[revision] if version_date is None else version_date
-        if ma.revision_from_version_date(self.version_date) is not revision:
-            raise ValueError(
-                f"version_date={self.version_date} reads as another revision than {revision.name}"
-            )
-        self.model = model
+        version_date = DEFAULT_VERSION_DATES[revision] if version_date is None else version_date
+        if ma.revision_from_version_date(version_date) is not revision:
+            raise ValueError(f"version_date={version_date} reads as another revision than {revision.name}")
         model_replies(revision, model)  # refuse a model string the 0xB5 reply cannot carry, now
-        self.turnaround_s = turnaround_s
-        self.motion_scales = motion_scales or ma.MOTION_SCALES[revision]
-        self.has_brake = has_brake
-        self.rated_current_a = rated_current_a
-        self.rated_speed_dps = rated_speed_dps
-        self.pole_pairs = pole_pairs
-        self._name = name or f"myactuator{motor_id}"
-        self._plant = Plant(plant_params or MYACTUATOR_PLANT_PARAMS, now_s=now_s)
-        self.encoder = EncoderFrame(encoder_counts_per_turn, self.plant.params.gear_ratio)
-        self.rom = Settings(motor_id=motor_id, can_id_filter=can_id_filter)
-        self.ram = self.rom.copy()
-        self.errors = ErrorLatch()
-        self.unresponsive = False
-        self._counters: Counter[str] = Counter()
-        self._decoded: dict[tuple[int, bytes] | None, Command | tuple[Revision, ma.MotionScales]] = {}
-        self._status1_key: tuple[float, float, bool, ErrorFlags] | None = None  # the last 0x9A's inputs
-        self._status1_reply: Reply | None = None
-        self.control: Control = Off()
-        self.run_mode = RUN_MODE_POWER_UP
-        self.brake_released = False
-        self.comm_tripped = False
-        self.trip_echo = trip_echo
-        self._next_trip_frame_s: float | None = None
-        self.streams: dict[StreamableCommand, Stream] = {}
-        self.feedforward_pct: int | None = None
-        self.boot_s = now_s
-        self._last_heard_s = now_s
-        self.next_report_s: float | None = None
+        plant = Plant(plant_params or MYACTUATOR_PLANT_PARAMS, now_s=now_s)
+        super().__init__(
+            name=name or f"myactuator{motor_id}",
+            plant=plant,
+            encoder=EncoderFrame(encoder_counts_per_turn, plant.params.gear_ratio),
+            rom=Settings(motor_id=motor_id, can_id_filter=can_id_filter),
+            revision=revision,
+            version_date=version_date,
+            model=model,
+            turnaround_s=turnaround_s,
+            motion_scales=motion_scales or ma.MOTION_SCALES[revision],
+            has_brake=has_brake,
+            rated_current_a=rated_current_a,
+            rated_speed_dps=rated_speed_dps,
+            pole_pairs=pole_pairs,
+            trip_echo=trip_echo,
+            now_s=now_s,
+        )
         self.power_up(now_s)
 
     # ---- Device protocol ----
