@@ -26,25 +26,27 @@ link's currency, aside):
 3. ``servobus.bus.tick``: ``triage`` gives each item a ``Slot`` of the ``Tick`` and has the engine
    prepare its request (``Engine.prepare`` -> ``Scheduler.request``: the codec encodes the frame);
    an offline, busy or streaming motor's slot gets its outcome at once;
-4. the scheduler: ``Engine.enqueue`` -> ``Scheduler.submit``, then ``Engine.pump`` ->
-   ``Scheduler.poll`` (pacing, timeouts from the round-trip estimates), and the engine hands each
-   frame to the link: ``link.send(frame, request)``. The link's send report comes back to
-   ``Engine.on_report`` -> ``Scheduler.sent`` (the request's deadline starts).
-5. Back: the link hands its frames to ``Engine.on_frames`` -> ``Scheduler.receive`` (matching:
-   the reply is decoded and paired with its request) -> ``servobus.bus.delivery``:
+4. the scheduler (``servobus.scheduler._scheduler``, its request table ``_table``):
+   ``Engine.enqueue`` -> ``Scheduler.submit``, then ``Engine.pump`` -> ``Scheduler.poll``
+   (pacing: the table moves each request to SENDING), and the engine hands each frame to the link:
+   ``link.send(frame, request)``. The link's send report comes back to ``Engine.on_report`` ->
+   ``Scheduler.sent``: the table moves the request to SENT and its deadline starts, its timeout
+   taken from the round-trip estimates (``servobus.rtt``).
+5. Back: the link hands its frames to ``Engine.on_frames`` -> ``Scheduler.receive`` (matching,
+   ``servobus.scheduler._match``: the reply is decoded and paired with its request; its round
+   trip goes to the estimates) -> ``servobus.bus.delivery``:
    ``Delivery.deliver`` (the motor's state, record, watchers, subscribers) -> ``Delivery.settle``
    -> ``Slot.set_result`` (``servobus.bus.tick``): the last one wakes ``Bus.cycle``, once.
 
-The bus side is 4 modules (core, engine, tick, delivery); the scheduler's share is today 6
-(``servobus.scheduler``, ``_request``, ``_scheduler_match``, ``_scheduler_pace``,
-``_scheduler_time``, ``rtt``) and at most 4 once it is its own package (issue 38): 8 in all at most.
+8 modules in all: the bus side's 4 (core, engine, tick, delivery) and the scheduler's 4
+(``servobus.scheduler._scheduler``, ``._table``, ``._match`` and ``servobus.rtt``).
 No call into ``servobus.runtime``, ``servobus.bus.watchdog`` (only on a miss or a motor's return) or
 ``servobus.bus.motor`` (records are read as data) on the way.
 
 What this layer may import (``tests/test_layering.py``): servobus's base modules (errors, frame,
 runtime, metrics, ...), the protocol contracts and families (a family's typed motor), the scheduler
 and the transports' contract; never the simulator, the remote bridge, the tools or the command line.
-Inside the package each module imports only those below it: tick, watchdog, motor; events;
+Inside the package each module imports only those below it: motor; tick, watchdog; events;
 delivery; engine; broadcast, safety, restarts; core (no cycle: ``tests/bus/test_records.py``).
 """
 

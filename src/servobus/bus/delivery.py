@@ -78,8 +78,9 @@ class Delivery:
         request = got.request
         assert request is not None and got.codec is not None
         record = self._records.get(id(got.codec))
-        if record is not None and not record.undecodable_logged:  # once per motor: a wrong revision repeats
-            record.undecodable_logged = True
+        if record is None or not record.undecodable_logged:  # once per motor: a wrong revision repeats
+            if record is not None:
+                record.undecodable_logged = True
             logger.warning(
                 "%s: %s: the reply does not decode (%s); check the motor's revision and model (bound as %s)",
                 self.name,

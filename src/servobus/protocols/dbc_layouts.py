@@ -474,7 +474,7 @@ def fields_layout(
 
 
 def _scalar(value: Any) -> Any:
-    """A decoded value as :func:`servobus.logs.message_values` gives it (enums by name, flags as int)."""
+    """A value as :func:`servobus.tools.logs.message_values` gives it (enums by name, flags as ints)."""
     if isinstance(value, enum.Flag):
         return int(value.value)
     if isinstance(value, enum.Enum):

@@ -188,9 +188,14 @@ class Keys:
         is counted (replies and timeouts are counted where found)."""
         dropped = self.table.move(request, state, now)
         if dropped is not None:
-            self.count(dropped[0], self.unmatched(request.key, now).value)
+            self.end_early(dropped[0], request.key, now)
         if state is _CANCELLED or state is _FAILED:
             self.count(request.codec, state.value)
+
+    def end_early(self, codec: BoundCodec, key: Hashable, now: float) -> None:
+        """A frame of ``key`` that came before a send report is judged, and counted, as its request
+        leaves flight without it."""
+        self.count(codec, self.unmatched(key, now).value)
 
     def miss(self, request: Request, now: float) -> bool:
         """``request`` (SENT or SENDING) missed its deadline: TIMED_OUT (True), or back in the
@@ -207,7 +212,10 @@ class Keys:
         :meth:`~servobus.scheduler.Scheduler.expire`)."""
         expired, due = self.table.overdue(now)
         for request in due:
-            if request.state is _SENDING:  # its send report never came
+            state = request.state
+            if state is not _SENDING and state is not _SENT:  # (a second deadline of one just missed)
+                continue
+            if state is _SENDING:  # its send report never came
                 self.count(request.codec, "unreported")
             if self.miss(request, now):
                 expired.append(request)

@@ -8,8 +8,8 @@ Sans-IO: ``now`` is always an argument.
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Hashable, Iterable, Sequence
-from typing import Any, NoReturn
+from collections.abc import Collection, Hashable, Iterable, Sequence
+from typing import Any
 
 from servobus.errors import RequestStateError, TransportError
 from servobus.frame import Frame
@@ -77,9 +77,18 @@ class Scheduler:
         self.keys = Keys(late_hold_s, late_window_s, report_within_s, rtts, table, self.count)
         self.hosts = OtherHosts(name, exact_order, table, self.keys, rtts, self.count)
         self.seen = self.hosts.seen  # (frames of no motor, for the diagnosis of a silent one)
-        self.max_in_flight, self.one_at_a_time = self.table.max_in_flight, one_at_a_time
         for codec in codecs:
             self.add(codec)
+
+    @property
+    def max_in_flight(self) -> int:
+        """Requests SENDING or SENT at once (1 on a half-duplex line): the table's pacing."""
+        return self.table.max_in_flight
+
+    @property
+    def one_at_a_time(self) -> bool:
+        """A half-duplex line: one exchange at a time, ``gap_s`` of rest after each."""
+        return self.table.one_at_a_time
 
     def add(self, codec: BoundCodec) -> None:
         """Put a motor on the bus (ValueError: it collides with a motor already there, both named)."""
@@ -128,9 +137,7 @@ class Scheduler:
     def submit(self, request: Request, now: float) -> None:
         """Queue ``request`` behind the others (FIFO); a command's freshness counts from ``now``
         (RequestStateError: it was submitted before)."""
-        if request.submitted:
-            _twice(request, "already queued" if request.state is _QUEUED else request.state.value)
-        request.submitted = True
+        _submit_once(request)
         if request.writes:
             request.queued_at = now
         self.table.queue.append(request)
@@ -140,11 +147,10 @@ class Scheduler:
         """``request``'s frame was sent by someone else at ``at`` (a broadcast): it is in flight from
         then, past the queue and its pacing, and only awaits its reply. Nothing of :meth:`blocking`
         may be left for its key (the caller waited). RequestStateError: it was submitted before."""
-        if request.submitted:
-            _twice(request, request.state.value)
-        request.submitted = True
+        _submit_once(request)
         self.motor_counts[id(request.codec)]["requests"] += 1
         self.table.move(request, _SENDING, at)
+        request.handed_at = None  # (not handed over by this Bus: the other-hosts rules read it)
         self.sent(request, at)
 
     def not_sent(
@@ -208,8 +214,7 @@ class Scheduler:
         early = table.take_early(request.key) if table.early else None
         if early is None:
             return None
-        # An unstamped early reply came after the request was handed over, at an unknown time: in time.
-        frame = early[1]
+        frame = early[1]  # (unstamped, it came after the hand-over at an unknown time: in time)
         return self.receive(frame, frame.timestamp or at + table.min_reply_s)
 
     def sent_after_all(self, request: Request, at: float) -> None:
@@ -249,7 +254,8 @@ class Scheduler:
                 return hosts.not_ours(frame, now)
             return judge((what, codec, kind, key, reply, request, error), frame, now, self.table, keys)
         assert request is not None and codec is not None and kind is not None
-        self.table.move(request, _REPLIED, now)
+        if self.table.move(request, _REPLIED, now) is not None:  # (an early frame of its key, unjudged)
+            keys.end_early(codec, key, now)
         request.reply = reply
         replied = keys.replied  # (Keys.answered, written out for the hot path)
         replied[key] = now + keys.late_window_s
@@ -311,10 +317,7 @@ class Scheduler:
 
     def latency(self) -> LatencyWindow:
         """The latencies of every motor's last replies, in one window."""
-        window = LatencyWindow(sum(len(w) for w in self.motor_latency.values()) or 1)
-        for motor in self.motor_latency.values():
-            window.extend(motor)
-        return window
+        return _merged(self.motor_latency.values())
 
     @property
     def pending(self) -> int:
@@ -327,8 +330,19 @@ class Scheduler:
         return self.estimates.motor_timeout_s(id(codec))
 
 
-def _twice(request: Request, where: str) -> NoReturn:
-    raise RequestStateError(f"{request.describe()} is {where}: a request is submitted once")
+def _merged(windows: Collection[LatencyWindow]) -> LatencyWindow:
+    merged = LatencyWindow(sum(len(w) for w in windows) or 1)
+    for window in windows:
+        merged.extend(window)
+    return merged
+
+
+def _submit_once(request: Request) -> None:
+    """Mark ``request`` submitted (RequestStateError: it was before)."""
+    if request.submitted:
+        where = "already queued" if request.state is _QUEUED else request.state.value
+        raise RequestStateError(f"{request.describe()} is {where}: a request is submitted once")
+    request.submitted = True
 
 
 def _check(

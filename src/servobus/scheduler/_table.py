@@ -113,7 +113,7 @@ class Request:
     looped: bool = False  # its own frame came back from the link already (an adapter's loop-back)
     on_wire_at: float | None = None  # when that loop-back says it ended on the wire (None: unknown)
     # Another host's request crossed it in an order that cannot be known: it takes the later reply
-    # (counted ``ambiguous`` once; servobus._scheduler_hosts).
+    # (counted ``ambiguous`` once; servobus.scheduler._hosts).
     crossed: bool = False
 
     def describe(self) -> str:

@@ -12,7 +12,7 @@ parameter frames whose value layout depends on a parameter byte are multiplexed 
 (extended multiplexing, ``SG_MUL_VAL_``). A multiplexer value's name is unique (``Status2Reply_A0``):
 cantools reads a decoded name back by the name.
 
-**Signal names are servobus' field names** (what ``decode`` and ``servobus.logs`` call them), with two
+**Signal names are servobus' field names** (what ``decode`` and ``servobus.tools.logs`` call them), with two
 rules the DBC format forces, and :func:`signal_table` applies:
 
 * a DBC name is an identifier: an item of a tuple value or a field of a field is spelled with ``_``
