@@ -7,6 +7,16 @@ one family never pays for the others.
 
 Third-party families register under the ``servobus.families`` entry-point group; one that fails to
 load is skipped with a warning rather than breaking the built-in ones.
+
+The contracts a family's parts implement live here too, where both sides import them, so a family
+never imports what uses it: :mod:`servobus.protocols.cli` (its ``cli`` part, for the command line),
+:mod:`servobus.protocols.dbc` with :mod:`servobus.protocols.dbc_layouts` (its ``dbc`` part, for the
+DBC exporter in ``servobus.tools``) and :class:`servobus.protocols._calls.TypedCalls` (the base of its
+generated typed calls, which the Bus composes with its Motor).
+
+Layer: the protocols layer imports only the base (errors, Frame, the C core; TypedCalls names the
+Bus's Motor for a type checker only, under ``TYPE_CHECKING``); a family's package
+(its codec and its parts, its simulator aside) imports only the base and this layer.
 """
 
 from __future__ import annotations

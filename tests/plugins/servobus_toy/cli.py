@@ -1,5 +1,5 @@
 """The toy family's part of the command line (``FAMILY.part("cli")``): what ``servobus speed``,
-``reset`` and ``config`` send. The contract is :mod:`servobus.cli.plugin`'s.
+``reset`` and ``config`` send. The contract is :mod:`servobus.protocols.cli`'s.
 
 ``status``, ``monitor`` and ``scan`` need nothing here: their reads are derived from the commands'
 declarations (:class:`~servobus_toy.messages.ReadState` is ``READ``, takes no argument and its reply
