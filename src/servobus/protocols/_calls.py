@@ -215,7 +215,7 @@ def render(family: Family[Any]) -> str:
         "",
         "class Motor(TypedCalls):",
         f'    """A {family.name} motor on a Bus (``bus.motor(FAMILY, id)``): a typed method per command'
-        "\n    (the Bus's Motor, which the Bus composes after this class, sends them).\"\"\"",
+        '\n    (the Bus\'s Motor, which the Bus composes after this class, sends them)."""',
         "",
     ]
     return "\n".join(head) + "\n" + "".join(methods)
