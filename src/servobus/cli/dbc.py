@@ -1,7 +1,7 @@
 """``servobus dbc``: a DBC of a family's CAN frames, generated from its codec's definitions (cantools).
 
 The family is any registered one (built-in or by entry point); its DBC options are its dbc part's
-(``servobus.dbc.DbcFamily.options``): the flags below for the built-in ones, ``--option NAME=VALUE``
+(``servobus.protocols.dbc.DbcFamily.options``): the flags below for the built-in ones, ``--option NAME=VALUE``
 for any.
 """
 
