@@ -1,9 +1,8 @@
 """The bus package's shape (issue 38): one record per motor in one registry, a family's typed calls
-class made a Motor once, the engine's per-motor counter, and no import cycle among its modules."""
+class made a Motor once, the engine's per-motor counter."""
 
 from __future__ import annotations
 
-import ast
 import typing
 from pathlib import Path
 from types import SimpleNamespace
@@ -123,34 +122,3 @@ def test_a_family_motor_that_is_a_motor_is_used_as_it_is() -> None:
 
     assert motor_class(_family(Typed)) is Typed
     assert "Send ReadStatus2 and await its reply." in (Typed.read_status2.__doc__ or "")
-
-
-def _ours(module: str) -> bool:
-    return module == "servobus.bus" or module.startswith("servobus.bus.")
-
-
-def _module(path: Path) -> str:
-    return "servobus.bus" if path.stem == "__init__" else f"servobus.bus.{path.stem}"
-
-
-def _imports(path: Path) -> set[str]:
-    found = set()
-    for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.ImportFrom) and node.module and _ours(node.module):
-            found.add(node.module)
-        elif isinstance(node, ast.Import):
-            found |= {a.name for a in node.names if _ours(a.name)}
-    return found
-
-
-def test_no_import_cycle_among_the_bus_modules() -> None:
-    """Every import counted (function-local and TYPE_CHECKING too): each module imports only those
-    below it, so the graph has an order."""
-    graph = {_module(p): _imports(p) - {_module(p)} for p in BUS_PACKAGE.glob("*.py")}
-    order: list[str] = []
-    while graph:
-        ready = [m for m, deps in graph.items() if not deps - set(order)]
-        assert ready, f"an import cycle among {sorted(graph)}"
-        order += sorted(ready)
-        for module in ready:
-            del graph[module]

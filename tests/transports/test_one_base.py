@@ -5,14 +5,11 @@
   and declares its rules whole (``self.rules = ...``) or by attributes.
 * The receive side of a CAN link (:class:`~servobus.transports._can_intake.CanIntake`) ignores a
   batch of an older connection, keeps to the identifiers wanted, and hands error frames on.
-* The transports' modules import each other without a cycle (every import counted, in functions
-  and under TYPE_CHECKING too), and none of them reaches into another object's private members.
+* (That no module reaches into another object's private members, or imports in a cycle, is
+  tests/test_shape.py's check, for every module.)
 """
 
 from __future__ import annotations
-
-import ast
-from pathlib import Path
 
 import anyio
 import can
@@ -29,8 +26,6 @@ from servobus.transports.sim import SimTransport
 from servobus.transports.stats import LoadMeter, TransportStats
 
 pytestmark = pytest.mark.anyio
-
-PACKAGE = Path(__file__).resolve().parents[2] / "src" / "servobus" / "transports"
 
 
 @pytest.fixture(params=BACKENDS)
@@ -142,58 +137,6 @@ def test_the_can_intake_ignores_an_old_connection_and_unwanted_ids() -> None:
     intake.count_bad(1, generation=1, discarded_bytes=99)  # old news
     intake.count_bad(2, generation=2, discarded_bytes=7)
     assert (stats.frames_in, stats.ignored, stats.bad_frames, stats.discarded_bytes) == (1, 1, 2, 7)
-
-
-def _imports(path: Path, package: str) -> set[str]:
-    """The servobus.transports modules ``path`` imports, anywhere in it."""
-    module = package + "." + path.stem if path.stem != "__init__" else package
-    found: set[str] = set()
-    for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.Import):
-            found |= {alias.name for alias in node.names}
-        elif isinstance(node, ast.ImportFrom) and node.module:
-            base = node.module
-            if node.level:
-                base = ".".join([*module.split(".")[: -node.level], node.module])
-            found.add(base)
-            found |= {f"{base}.{alias.name}" for alias in node.names}
-    return {name for name in found if name.startswith(package + ".")}
-
-
-def test_the_transports_import_each_other_without_a_cycle() -> None:
-    package = "servobus.transports"
-    modules = {f"{package}.{p.stem}": p for p in PACKAGE.glob("*.py") if p.stem != "__init__"}
-    graph = {name: _imports(path, package) & modules.keys() for name, path in modules.items()}
-    done: set[str] = set()
-
-    def visit(name: str, path: tuple[str, ...]) -> None:
-        assert name not in path, f"import cycle: {' -> '.join((*path, name))}"
-        if name in done:
-            return
-        for imported in graph[name]:
-            visit(imported, (*path, name))
-        done.add(name)
-
-    for name in graph:
-        visit(name, ())
-
-
-def test_no_transport_module_reaches_into_another_objects_private_members() -> None:
-    reached: list[str] = []
-    for path in sorted(PACKAGE.glob("*.py")):
-        for node in ast.walk(ast.parse(path.read_text())):
-            if not isinstance(node, ast.Attribute):
-                continue
-            name = node.attr
-            if not name.startswith("_") or name.startswith("__"):
-                continue
-            owner = node.value
-            if isinstance(owner, ast.Name) and owner.id in ("self", "cls"):
-                continue
-            if isinstance(owner, ast.Call) and isinstance(owner.func, ast.Name) and owner.func.id == "super":
-                continue
-            reached.append(f"{path.name}:{node.lineno}: .{name}")
-    assert reached == []
 
 
 def test_the_in_process_link_keeps_under_cpythons_shared_key_limit() -> None:
