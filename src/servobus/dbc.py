@@ -37,6 +37,7 @@ from servobus.protocols.dbc import (
     request_keys,
     signal_spec,
 )
+from servobus.protocols.dbc_layouts import UNITS, ByteOrder, message_fields
 from servobus.tools.dbc import (
     Placed,
     Plan,
@@ -52,6 +53,8 @@ __all__ = [
     "CONFIG_FIELDS",
     "DIRECTIONS",
     "MUX",
+    "UNITS",
+    "ByteOrder",
     "DbcFamily",
     "DbcOption",
     "DbcQuery",
@@ -76,6 +79,7 @@ __all__ = [
     "fields_layout",
     "keyed_layouts",
     "le_signal",
+    "message_fields",
     "muxed",
     "option_owners",
     "packed_signals",

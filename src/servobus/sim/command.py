@@ -24,7 +24,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import anyio
 import anyio.abc
@@ -64,12 +64,19 @@ class Served:
     link: Path | None
 
 
-class _FamilyName(click.ParamType[str]):
+if TYPE_CHECKING:
+    _StrParam = click.ParamType[str]
+else:  # (click's ParamType is generic from 8.4 on; the project supports 8.1)
+    _StrParam = click.ParamType
+
+
+class _FamilyName(_StrParam):
     """A family's name, among those installed when the command runs (plug-ins included)."""
 
     name = "family"
 
-    def get_metavar(self, param: click.Parameter, ctx: click.Context) -> str:
+    def get_metavar(self, param: click.Parameter, ctx: click.Context | None = None) -> str:
+        # (``ctx``: click 8.2 and later pass it)
         return "[" + "|".join(sorted(available_families())) + "]"
 
     def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> str:

@@ -308,7 +308,7 @@ class MyActuatorMotor(Intake, Faults, PowerCuts):
         if self._core is not None or (link is not None and self._link not in (None, link)):
             raise ValueError(f"{self!r} is already on a network: remove it from that one first")
         self.settle()
-        # CorePlant is Plant's API over C memory (not a subclass): the model uses it as its Plant
+        # CorePlant is a Plant over C memory: the model uses it as its Plant, the twin shares it
         self._plant = CorePlant.adopt(self._plant, motor.plant, motor)
         self._core = MaCore(self, motor)
         self.__class__ = attached_class(type(self))  # (its C twin's pulled attributes)
