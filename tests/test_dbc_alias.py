@@ -9,6 +9,7 @@ import sys
 import pytest
 
 import servobus.protocols.dbc as contract
+import servobus.protocols.dbc_layouts as layouts
 import servobus.tools.dbc as exporter
 
 
@@ -21,7 +22,9 @@ def test_importing_servobus_dbc_warns_and_gives_the_old_names() -> None:
     assert alias.plan is exporter.plan
     assert alias.dbc_text is exporter.dbc_text
     for name in alias.__all__:
-        assert getattr(alias, name) is getattr(contract, name, None) or getattr(exporter, name)
+        found = [getattr(m, name) for m in (contract, layouts, exporter) if hasattr(m, name)]
+        assert found and getattr(alias, name) is found[0], name
+    assert alias.message_fields is layouts.message_fields and alias.UNITS is layouts.UNITS
 
 
 def test_servobus_cli_plugin_gives_the_cli_contract() -> None:
