@@ -137,7 +137,9 @@ class Scheduler:
     def submit(self, request: Request, now: float) -> None:
         """Queue ``request`` behind the others (FIFO); a command's freshness counts from ``now``
         (RequestStateError: it was submitted before)."""
-        _submit_once(request)
+        if request.submitted:  # (the check written out: submit is on the hot path)
+            _submit_once(request)
+        request.submitted = True
         if request.writes:
             request.queued_at = now
         self.table.queue.append(request)
