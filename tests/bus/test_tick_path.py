@@ -1,5 +1,6 @@
 """The path of one control tick (issue 38): the modules one ``Bus.cycle`` of 32 motors visits,
-traced with ``sys.setprofile`` on a zero-latency link, so that a new hop on the hot path fails here.
+traced with ``sys.setprofile`` on the benchmark's zero-latency link, so that a new hop on the hot
+path fails here.
 
 The servobus.bus package's docstring walks this path module by module; these tests keep it true.
 """
@@ -7,88 +8,26 @@ The servobus.bus package's docstring walks this path module by module; these tes
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable
+from pathlib import Path
 from types import FrameType
-from typing import Any
 
 import pytest
 
 from servobus.bus import Bus
-from servobus.frame import Frame
-from servobus.protocols import get_family
 from servobus.protocols import myactuator as ma
-from servobus.protocols.myactuator.sim import MyActuatorMotor
-from servobus.runtime import current
-from servobus.transports.contract import LineRules
-from servobus.transports.stats import TransportStats
 
-MOTORS = 32
+BENCH = Path(__file__).resolve().parents[2] / "bench"
+if str(BENCH) not in sys.path:
+    sys.path.insert(0, str(BENCH))
+
+# The link the benchmark measures the tick on (bench_bus.Reflector: it reports each send when
+# handed the frame and answers with a prebuilt reply), so the path traced is the one measured.
+from bench_bus import MOTORS, Reflector, prebuilt_replies  # noqa: E402
+
 #: the bus package's share of the tick: the Bus, its engine, the tick's waiter and the intake
 BUS_SIDE = {"servobus.bus.core", "servobus.bus.engine", "servobus.bus.tick", "servobus.bus.delivery"}
 #: the whole tick, the family's codec and the frame type aside (issue 38: at most 8)
 BUDGET = 8
-
-
-class ZeroLatencyLink:
-    """A FrameLink that answers each frame at once with the reply a motor at rest gives: it reports
-    the send when handed the frame, and hands the replies of one loop turn over in one call."""
-
-    name = "zero-latency"
-    rules = LineRules()
-
-    def __init__(self, replies: dict[int, Frame]) -> None:
-        self.replies = replies
-        self.is_open = False
-        self._out: list[Frame] = []
-        self._consumer: Callable[[list[Frame]], object] | None = None
-        self._reporter: Callable[[object, float | None, str | None], object] | None = None
-
-    async def open(self) -> None:
-        runtime = current()
-        self._time, self._call_soon = runtime.time, runtime.call_soon
-        self.is_open = True
-
-    async def close(self) -> None:
-        self.is_open = False
-
-    def set_consumer(self, consumer: Callable[[list[Frame]], object] | None) -> None:
-        self._consumer = consumer
-
-    def set_send_reporter(
-        self, reporter: Callable[[object, float | None, str | None], object] | None
-    ) -> None:
-        self._reporter = reporter
-
-    def add_listener(self, listener: Callable[[Any], object]) -> None:
-        pass
-
-    def remove_listener(self, listener: Callable[[Any], object]) -> None:
-        pass
-
-    def stats(self) -> TransportStats:
-        return TransportStats()
-
-    def send(self, frame: Frame, handle: object = None) -> None:
-        if self._reporter is not None:
-            self._reporter(frame if handle is None else handle, self._time(), None)
-        if not self._out:
-            self._call_soon(self._flush)
-        self._out.append(self.replies[frame.arbitration_id])
-
-    def _flush(self) -> None:
-        out, self._out = self._out, []
-        if self._consumer is not None:
-            self._consumer(out)
-
-
-def _replies(command: ma.ReadStatus2) -> dict[int, Frame]:
-    family = get_family("myactuator")
-    out = {}
-    for motor_id in range(1, MOTORS + 1):
-        request = family.bind(motor_id).encode(command)
-        (emission,) = MyActuatorMotor(motor_id).receive(request, 0.0)
-        out[request.arbitration_id] = emission.frame
-    return out
 
 
 async def _visited() -> dict[str, int]:
@@ -102,7 +41,7 @@ async def _visited() -> dict[str, int]:
                 seen[module] = seen.get(module, 0) + 1
 
     command = ma.ReadStatus2()
-    async with Bus(ZeroLatencyLink(_replies(command))) as bus:
+    async with Bus(Reflector(prebuilt_replies(command))) as bus:
         items = [(bus.motor("myactuator", i), command) for i in range(1, MOTORS + 1)]
         for _ in range(3):  # warm: every round trip measured, every cache filled
             await bus.cycle(items)
