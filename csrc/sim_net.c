@@ -112,6 +112,17 @@ static double family_deadline(const sb_simmotor *m)
     return INFINITY;
 }
 
+/* A live node's deadline_s, the earliest of them kept (next_deadline) where it stays known cheaply. */
+static void set_deadline(sb_simnet *net, int node, double d)
+{
+    double old = net->nodes[node].deadline_s;
+    net->nodes[node].deadline_s = d;
+    if (d < net->deadline_min)
+        net->deadline_min = d;
+    else if (old == net->deadline_min && d != old)
+        net->deadline_known = 0;  /* the earliest moved later: ask every node again when needed */
+}
+
 static void node_deadline(sb_simnet *net, int node)
 {
     double d = net->motors[node].py_deadline_s;
@@ -122,7 +133,7 @@ static void node_deadline(sb_simnet *net, int node)
         if (f < d)
             d = f;
     }
-    net->nodes[node].deadline_s = d;
+    set_deadline(net, node, d);
 }
 
 /* ---- the bus: CanBusModel ---- */
@@ -329,8 +340,14 @@ static int join(sb_simnet *net, int node, uint32_t id, int flags, const uint8_t 
  * timing counts them, so every queued frame has a positive wire time. */
 static int check_frame(uint32_t id, int flags, const uint8_t *data, size_t len)
 {
-    int nominal_bits, data_bits;
-    return sb_can_frame_bits(id, flags, data, len, &nominal_bits, &data_bits) == SB_OK;
+    /* sb_can_frame_bits' refusals, without counting the bits (frame_time does, once per content) */
+    int fd = (flags & SB_FRAME_FD) != 0;
+    if ((data == NULL && len > 0) || (flags & ~(SB_FRAME_EXT | SB_FRAME_FD | SB_FRAME_BRS)) != 0
+        || ((flags & SB_FRAME_BRS) && !fd) || id > ((flags & SB_FRAME_EXT) ? 0x1FFFFFFFu : 0x7FFu))
+        return 0;
+    if (len <= 8)
+        return 1;
+    return fd && (len == 12 || len == 16 || len == 20 || len == 24 || len == 32 || len == 48 || len == 64);
 }
 
 int sb_simnet_send(sb_simnet *net, int node, uint32_t id, int flags, const uint8_t *data, size_t len,
@@ -382,6 +399,7 @@ int sb_simnet_add(sb_simnet *net, int kind, int linked, int has_first, double fi
     memset(&net->motors[node], 0, sizeof net->motors[node]);
     net->motors[node].py_deadline_s = INFINITY;
     net->order[net->n_order++] = (int16_t)node;
+    net->deadline_known = 0;
     routes_clear(net);
     return node;
 }
@@ -395,6 +413,7 @@ int sb_simnet_remove(sb_simnet *net, int node)
         if (net->order[i] != node)
             net->order[j++] = net->order[i];
     net->n_order = j;
+    net->deadline_known = 0;
     net->nodes[node].kind = SB_NODE_GONE;
     net->nodes[node].linked = 0;
     net->nodes[node].deadline_s = INFINITY;
@@ -424,14 +443,18 @@ int sb_simnet_touch(sb_simnet *net, int node)
 
 /* ---- the step: SimCanNetwork._step ---- */
 
-static double next_deadline(const sb_simnet *net)
+static double next_deadline(sb_simnet *net)
 {
+    if (net->deadline_known)
+        return net->deadline_min;
     double d = INFINITY;
     for (int i = 0; i < net->n_order; i++) {
         double x = net->nodes[net->order[i]].deadline_s;
         if (x < d)
             d = x;
     }
+    net->deadline_min = d;
+    net->deadline_known = 1;
     return d;
 }
 
@@ -550,7 +573,7 @@ static int run_polls(sb_simnet *net, evbuf *b)
         }
         if (python) {
             emit(b, SB_EV_POLL, k, t);
-            net->nodes[k].deadline_s = INFINITY;  /* asked again after its poll (touch) */
+            set_deadline(net, k, INFINITY);  /* asked again after its poll (touch) */
             return SB_RUN_STOPPED;
         }
         node_deadline(net, k);
@@ -655,10 +678,12 @@ static void begin_step(sb_simnet *net, double t)
     if (t > net->now_s)
         net->now_s = t;
     uint64_t due = 0;
-    for (int i = 0; i < net->n_order; i++) {
-        int k = net->order[i];
-        if (net->nodes[k].deadline_s <= t)
-            due |= (uint64_t)1 << k;
+    if (next_deadline(net) <= t) {
+        for (int i = 0; i < net->n_order; i++) {
+            int k = net->order[i];
+            if (net->nodes[k].deadline_s <= t)
+                due |= (uint64_t)1 << k;
+        }
     }
     net->phase_t = t;
     if (due) {
@@ -707,6 +732,44 @@ int sb_simnet_run(sb_simnet *net, double until_s, double before_s, double host_t
     }
     *n_events = b.n;
     return r;
+}
+
+/* ---- the host's turn: SimTransport's timer in one call ---- */
+
+static int turn(sb_simnet *net, double until_s, int64_t log_limit, sb_netturn *out)
+{
+    sb_netevent *ev = out->ev;
+    int cap = SB_TURN_EVENTS;
+    out->stage = SB_TURN_ADVANCE;
+    out->next_s = INFINITY;
+    int r = sb_simnet_run(net, until_s, INFINITY, INFINITY, SB_RUN_ADVANCE, ev, cap, &out->n_events);
+    if (r != SB_RUN_IDLE)
+        return r;
+    if (until_s > net->now_s)  /* CoreCanNetwork.advance: the network's time reaches until_s */
+        net->now_s = until_s;
+    out->stage = SB_TURN_BETWEEN;
+    if (net->log_count - net->log_base >= log_limit)
+        return SB_RUN_LOG_FULL;  /* the caller settles its links up first (its _tidy) */
+    if (isfinite(net->bitrate)) {  /* run_ahead: over what the host can neither see nor change */
+        out->stage = SB_TURN_AHEAD;
+        int n = out->n_events, more = 0;
+        r = sb_simnet_run(net, INFINITY, INFINITY, until_s, SB_RUN_AHEAD, ev + n, cap - n, &more);
+        out->n_events = n + more;
+        if (r != SB_RUN_IDLE)
+            return r;
+    }
+    out->stage = SB_TURN_DONE;
+    out->next_s = sb_simnet_next_event(net, 0);
+    return net->log_count - net->log_base >= log_limit ? SB_RUN_LOG_FULL : SB_RUN_IDLE;
+}
+
+int sb_simnet_turn(sb_simnet *net, double until_s, int64_t log_limit, sb_netturn *out)
+{
+    if (!net || !out || isnan(until_s))
+        return SB_E_ARG;
+    out->n_events = 0;
+    out->status = turn(net, until_s, log_limit, out);
+    return out->status;
 }
 
 /* ---- links: BusLink ---- */

@@ -115,6 +115,8 @@ typedef struct {
     uint64_t active;         /* nodes with frames queued */
     int32_t n_order;
     int16_t order[64];       /* live device nodes, in the order they were added */
+    int32_t deadline_known;  /* deadline_min holds: the earliest deadline_s of the nodes in order */
+    double deadline_min;
     int32_t n_routes;
     int64_t log_base, log_count, log_odd;
     double log_end[16384];
@@ -148,6 +150,30 @@ int sb_simnet_send(sb_simnet *net, int node, uint32_t id, int flags, const uint8
  * Returns SB_RUN_* or a negative status. */
 int sb_simnet_run(sb_simnet *net, double until_s, double before_s, double host_time_s, int mode,
                   sb_netevent *ev, int cap, int *n_events);
+/* The host's turn (CoreCanNetwork.host_turn): run to until_s as SB_RUN_ADVANCE (before_s and
+ * host_time_s INFINITY) and bring now_s up to it; then, on a finite bit rate, as SB_RUN_AHEAD past
+ * host_time_s = until_s; then next_s = sb_simnet_next_event(net, 0). Events of both runs go into
+ * out->ev, out->n_events of them. It stops where a run returns anything but SB_RUN_IDLE (that status),
+ * or with SB_RUN_LOG_FULL between the runs once the log holds log_limit entries; out->stage says where
+ * it stopped, and the caller goes on from there with sb_simnet_run. Done, the status is SB_RUN_LOG_FULL
+ * if the log holds log_limit entries (the caller settles its links up and drops it), else SB_RUN_IDLE.
+ * Everything the caller reads comes in out, header first (one read), and the status is returned too. */
+#define SB_TURN_ADVANCE 0    /* stopped in the advance */
+#define SB_TURN_BETWEEN 1    /* the advance is done; the run-ahead has not started */
+#define SB_TURN_AHEAD 2      /* stopped in the run-ahead */
+#define SB_TURN_DONE 3       /* all done: next_s is valid */
+#define SB_TURN_EVENTS 256
+
+typedef struct {
+    int32_t status;          /* SB_RUN_* or a negative status (SB_E_ARG: nothing was done) */
+    int32_t stage;           /* SB_TURN_* */
+    int32_t n_events;
+    int32_t pad;
+    double next_s;           /* stage SB_TURN_DONE: when the next event happens (INFINITY: none) */
+    sb_netevent ev[256];     /* SB_TURN_EVENTS */
+} sb_netturn;
+
+int sb_simnet_turn(sb_simnet *net, double until_s, int64_t log_limit, sb_netturn *out);
 /* When the next event of the network happens (INFINITY: none): a step in progress, a transmission
  * ending, a node's deadline. bus_only: the bus's own (CanBusModel.next_event_s). */
 double sb_simnet_next_event(sb_simnet *net, int bus_only);

@@ -12,7 +12,9 @@ Which device is on which C node, and what C knows of each, is :mod:`~servobus.si
 
 Python :class:`~servobus.frame.Frame` objects the host or a Python device sends are kept by their
 slot in C and handed back as the same objects; frames made in C become Frame objects only when the
-host or a Python model receives them. Fault injectors act in Python, in the reference's order, so a
+host or a Python model receives them. The host's raw path is :meth:`CoreCanNetwork.host_turn`: one C
+call runs the network to the host's time and ahead past it, and the replies come back as bytes
+from which the host's Frames (stamped with the time each ended) are made once, at the edge. Fault injectors act in Python, in the reference's order, so a
 seed gives the same trace.
 """
 
@@ -31,12 +33,12 @@ from servobus.sim.canbus import CanBusModel
 from servobus.sim.corenodes import CoreNodes
 from servobus.sim.device import Device, Emission
 from servobus.sim.faults import FaultInjector
-from servobus.sim.network import LOG_LIMIT
+from servobus.sim.network import LOG_LIMIT, stamped
 
 __all__ = ["CoreBus", "CoreCanNetwork", "CoreLink"]
 
 #: events one C call may return before Python takes them
-EVENTS = 256
+EVENTS = lib.SB_TURN_EVENTS
 _INF = math.inf
 # sb_netevent as bytes: kind, node, t, then the sb_simframe (t, id, flags, len, node, tag, data).
 _EVENT = struct.Struct("<iiddIBBhI64s4x")
@@ -46,6 +48,16 @@ assert ffi.offsetof("sb_simframe", "data") == 20
 _RX, _DELIVER, _POLL = lib.SB_EV_RX, lib.SB_EV_DELIVER, lib.SB_EV_POLL
 _IDLE, _LOG_FULL = lib.SB_RUN_IDLE, lib.SB_RUN_LOG_FULL
 _ADVANCE, _AHEAD, _STOP_RX = lib.SB_RUN_ADVANCE, lib.SB_RUN_AHEAD, lib.SB_RUN_STOP_RX
+_TURN, _TURN_DONE = lib.sb_simnet_turn, lib.SB_TURN_DONE
+_TURN_HEAD = struct.Struct("<iii4xd")  # sb_netturn before its events: status, stage, n_events, next_s
+assert ffi.offsetof("sb_netturn", "ev") == _TURN_HEAD.size and ffi.offsetof("sb_netturn", "next_s") == 16
+_TURN_ADVANCE, _TURN_AHEAD = lib.SB_TURN_ADVANCE, lib.SB_TURN_AHEAD
+# What the host's edge reads of an SB_EV_RX event: its time, the frame's id, flags, length and tag,
+# and its first 8 data bytes (a classic frame's all); a longer frame's data are read at _RX_DATA.
+_RX_EVENT = struct.Struct("<8xd8xIBB2xI8s")
+_RX_DATA = ffi.offsetof("sb_netevent", "frame") + ffi.offsetof("sb_simframe", "data")
+assert _RX_EVENT.size == _RX_DATA + 8
+_FLAG_BITS = tuple((f & 1 == 1, f & 2 == 2, f & 4 == 4) for f in range(8))  # extended, FD, BRS
 
 # A frame made in C, built without Frame's checks (C checked it): through the slot descriptors.
 _NEW = object.__new__
@@ -64,6 +76,45 @@ _MADE_CACHE = 4096  # frames made in C kept by content (replies repeat; a Frame 
 
 def _flags(frame: Frame) -> int:
     return frame.is_extended_id | (frame.is_fd << 1) | (frame.bitrate_switch << 2)
+
+
+def _host_frames(view: Any, n: int, frames: list[Frame | None], stamp_s: float) -> list[Frame]:
+    """The host's frames of ``n`` SB_EV_RX events in ``view``, each stamped with its end + ``stamp_s``:
+    a frame made in C becomes its one Frame here, at the edge (unchecked: C checked it)."""
+    unpack, size = _RX_EVENT.unpack_from, _EVENT.size
+    out: list[Frame] = []
+    append = out.append
+    for at in range(0, n * size, size):
+        t, can_id, flags, length, tag, data = unpack(view, at)
+        if tag:  # the sender's own object (a Python model's)
+            append(stamped(frames[tag - 1], t + stamp_s))
+            continue
+        if length != 8:
+            data = data[:length] if length < 8 else view[at + _RX_DATA : at + _RX_DATA + length]
+        extended, fd, brs = _FLAG_BITS[flags]
+        frame = _NEW(Frame)
+        _SET_ID(frame, can_id)
+        _SET_DATA(frame, data)
+        _SET_EXT(frame, extended)
+        _SET_FD(frame, fd)
+        _SET_BRS(frame, brs)
+        _SET_SERIAL(frame, False)
+        _SET_TS(frame, t + stamp_s)
+        _SET_RX(frame, True)
+        _SET_ESI(frame, False)
+        append(frame)
+    return out
+
+
+def _refused(status: int, frame: Frame, ready_s: float, bus_now_s: float) -> NoReturn:
+    """Raise what sb_simnet_send's ``status`` means."""
+    if status == lib.SB_E_RANGE:
+        raise ValueError(f"ready_s={ready_s} is before the bus time {bus_now_s} (time runs forward)")
+    if status == lib.SB_E_FULL:
+        raise RuntimeError(
+            f"the simulated bus holds {lib.SB_NET_FRAMES} queued frames: {frame!r} is one too many"
+        )
+    raise ValueError(f"the simulated bus cannot queue {frame!r} at {ready_s}")
 
 
 def _made(cache: dict[tuple[int, int, bytes], Frame], can_id: int, flags: int, data: bytes) -> Frame:
@@ -260,7 +311,9 @@ class CoreCanNetwork:
         self._net = ffi.new("sb_simnet *")
         if lib.sb_simnet_init(self._net, model.bitrate, model.data_bitrate or 0.0) != lib.SB_OK:
             raise ValueError(f"bad bit rates (bitrate={model.bitrate}, data_bitrate={model.data_bitrate})")
-        self._events = ffi.new("sb_netevent[]", EVENTS)
+        self._turn = ffi.new("sb_netturn *")  # sb_simnet_turn's; its events are every run's
+        self._turn_head = ffi.buffer(self._turn, _TURN_HEAD.size)
+        self._events = self._turn.ev
         self._event_bytes = ffi.buffer(self._events)
         self._n_events = ffi.new("int *")
         self._ends = ffi.new("double[]", lib.SB_NET_LOG)
@@ -332,7 +385,7 @@ class CoreCanNetwork:
             1,
         )
         if slot < 0:
-            self._refused(slot, frame, at)
+            _refused(slot, frame, at, self._net.bus_now_s)
         self._frames[slot] = frame
 
     def next_event_s(self) -> float | None:
@@ -367,6 +420,45 @@ class CoreCanNetwork:
             self._tidy()
         return self.next_event_s()
 
+    def host_turn(self, until_s: float, stamp_s: float = 0.0) -> tuple[list[Frame], float | None]:
+        """:meth:`SimCanNetwork.host_turn <servobus.sim.network.SimCanNetwork.host_turn>`: advance,
+        then run ahead, in one C call while nothing needs Python, the host's Frames made here once."""
+        nodes = self._nodes
+        plain = self.to_devices is None and self.to_host is None and not self._host_pending
+        if not plain or nodes.dirty or nodes.unlinked:
+            received = self.advance(until_s)
+            return [stamped(frame, at + stamp_s) for at, frame in received], self.run_ahead(until_s)
+        _TURN(self._net, until_s, LOG_LIMIT, self._turn)
+        status, stage, n, at = _TURN_HEAD.unpack_from(self._turn_head)
+        if stage != _TURN_DONE:
+            return self._turn_on(status, stage, n, until_s, stamp_s)
+        frames = _host_frames(self._event_bytes, n, self._frames, stamp_s) if n else []
+        if (model := self._model) is not None:
+            model.busy_s, model.frames = float(self._net.busy_s), int(self._net.frames)
+        if status == _LOG_FULL:  # (C checked the log against LOG_LIMIT: _tidy's test)
+            self._drop_log()
+        if nodes.dirty:  # a device settled up by the tidy changed: ask it again
+            return frames, self.next_event_s()
+        return frames, None if at == _INF else at
+
+    def _turn_on(
+        self, status: int, stage: int, n: int, until_s: float, stamp_s: float
+    ) -> tuple[list[Frame], float | None]:
+        """Go on with a turn C stopped for Python (its events handled first), as advance and run_ahead."""
+        received: list[tuple[float, Frame]] = []
+        if n:
+            self._handle(n, received)
+        if stage == _TURN_ADVANCE:
+            self._after(status)
+            self._run(until_s, _ADVANCE, _INF, received)
+            self._net.now_s = max(until_s, self._net.now_s)
+        elif stage == _TURN_AHEAD:
+            self._after(status)
+            self._run(_INF, _AHEAD, until_s, received)
+        self._tidy()
+        at = self.next_event_s() if stage == _TURN_AHEAD else self.run_ahead(until_s)
+        return [stamped(frame, t + stamp_s) for t, frame in received], at
+
     def run_until_idle(self, limit_s: float = 1.0) -> list[tuple[float, Frame]]:
         """Advance until nothing is pending or ``limit_s`` of virtual time has passed."""
         received: list[tuple[float, Frame]] = []
@@ -385,18 +477,8 @@ class CoreCanNetwork:
         flags = frame.is_extended_id | frame.is_fd << 1 | frame.bitrate_switch << 2
         slot = _SEND(self._net, node, frame.arbitration_id, flags, data, len(data), ready_s, 1)
         if slot < 0:
-            self._refused(slot, frame, ready_s)
+            _refused(slot, frame, ready_s, self._net.bus_now_s)
         self._frames[slot] = frame
-
-    def _refused(self, status: int, frame: Frame, ready_s: float) -> NoReturn:
-        if status == lib.SB_E_RANGE:
-            now = float(self._net.bus_now_s)
-            raise ValueError(f"ready_s={ready_s} is before the bus time {now} (time runs forward)")
-        if status == lib.SB_E_FULL:
-            raise RuntimeError(
-                f"the simulated bus holds {lib.SB_NET_FRAMES} queued frames: {frame!r} is one too many"
-            )
-        raise ValueError(f"the simulated bus cannot queue {frame!r} at {ready_s}")
 
     def _run(
         self, until_s: float, mode: int, host_time_s: float, received: list[tuple[float, Frame]]
@@ -423,15 +505,19 @@ class CoreCanNetwork:
                     received.append((at, frame))
                     continue
                 return
-            if status == _LOG_FULL:
-                base = net.log_base
-                self._drop_log()
-                if net.log_base == base:
-                    raise RuntimeError("a device on the simulated bus does not settle up with its link")
-            elif status < 0:
-                raise RuntimeError(
-                    f"the simulated network failed (status {status}): a C family path answered badly"
-                )
+            self._after(status)
+
+    def _after(self, status: int) -> None:
+        """What a run that stopped with ``status`` needs before the next: the log dropped, or an error."""
+        if status == _LOG_FULL:
+            base = self._net.log_base
+            self._drop_log()
+            if self._net.log_base == base:
+                raise RuntimeError("a device on the simulated bus does not settle up with its link")
+        elif status < 0:
+            raise RuntimeError(
+                f"the simulated network failed (status {status}): a C family path answered badly"
+            )
 
     def _handle(self, n: int, received: list[tuple[float, Frame]]) -> None:
         unpack, view, size = _EVENT.unpack_from, self._event_bytes, _EVENT.size

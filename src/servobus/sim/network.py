@@ -31,12 +31,31 @@ from servobus.sim.deadlines import DeadlineHeap
 from servobus.sim.device import BusLink, Device, Emission, FrameLog, Listener
 from servobus.sim.faults import FaultInjector
 
-__all__ = ["HOST", "SimCanNetwork"]
+__all__ = ["HOST", "SimCanNetwork", "stamped"]
 
 HOST = "host"
 
 #: frame end times kept for listening devices before the network settles them all up and drops them
 LOG_LIMIT = 4096
+
+# A received frame is the sender's own object: the host gets a copy stamped with the time it ended.
+# Copied slot by slot through the descriptors (a frozen dataclass has no cheaper copy; replace()
+# re-runs the checks and costs ~5x as much).
+_FRAME_SLOTS = tuple(
+    (getattr(Frame, name).__get__, getattr(Frame, name).__set__)
+    for name in Frame.__slots__
+    if name != "timestamp"
+)
+_SET_TIMESTAMP = Frame.timestamp.__set__  # type: ignore[attr-defined,misc]
+
+
+def stamped(frame: Frame, timestamp: float) -> Frame:
+    """A copy of ``frame`` with ``timestamp`` (the frame itself is left as it is)."""
+    copy = object.__new__(Frame)
+    for get, put in _FRAME_SLOTS:
+        put(copy, get(frame))
+    _SET_TIMESTAMP(copy, timestamp)
+    return copy
 
 
 class SimCanNetwork:
@@ -209,6 +228,20 @@ class SimCanNetwork:
             assert not received, "run_ahead() went past a frame the host receives"
         self._tidy()
         return self.next_event_s()
+
+    def host_turn(self, until_s: float, stamp_s: float = 0.0) -> tuple[list[Frame], float | None]:
+        """The host's turn: :meth:`advance` to ``until_s``, then :meth:`run_ahead` past it.
+
+        A driver delivers the frames after the run-ahead: what the host sends in answer is queued at
+        the network's time, behind the frames the run-ahead went past, which changes nothing
+        (:meth:`run_ahead`).
+
+        Returns:
+            The frames the host received, each a copy stamped with the time its transmission ended
+            plus ``stamp_s`` (a driver's clock offset), and what :meth:`run_ahead` returned.
+        """
+        received = self.advance(until_s)
+        return [stamped(frame, at + stamp_s) for at, frame in received], self.run_ahead(until_s)
 
     def run_until_idle(self, limit_s: float = 1.0) -> list[tuple[float, Frame]]:
         """Advance until nothing is pending or ``limit_s`` of virtual time has passed."""

@@ -9,15 +9,16 @@ given a network, or a :class:`~servobus.sim.network.SimCanNetwork` (the Python r
   network's bus model then gives it its exact bit time and arbitration.
 * **One clock in**: the transport keeps one wake-up armed on the network's next event: a task in
   its task group (any backend) or, on asyncio, the loop's ``call_at`` (the measured fast lane:
-  :mod:`servobus.transports._simclock`). When it fires, the network runs up to the loop's time and
-  the frames the host received are delivered as one batch, stamped with the time their
-  transmission ended (on the loop's clock). Nothing polls: an idle network arms nothing. Then the
-  network runs ahead over what the host can neither see nor change
+  :mod:`servobus.transports._simclock`). When it fires, one call
+  (:meth:`~servobus.sim.corenet.CoreCanNetwork.host_turn`: one C call on the C engine) runs the
+  network up to the loop's time and then ahead over what the host can neither see nor change
   (:meth:`~servobus.sim.network.SimCanNetwork.run_ahead`: while the host still has a frame queued,
-  its later frames wait behind it), so the clock is next armed for the next frame the host
-  receives rather than for every frame on the wire: a burst of requests costs one wake-up, not one
-  per request. The trace is the same; device state (a simulated motor's counters, say) may read
-  ahead of the loop's clock by the host's queued burst.
+  its later frames wait behind it), and the frames the host received come back as the host's
+  Frames, made once at that edge, stamped with the time their transmission ended (on the loop's
+  clock); they are delivered as one batch. Nothing polls: an idle network arms nothing. The clock
+  is next armed for the next frame the host receives rather than for every frame on the wire: a
+  burst of requests costs one wake-up, not one per request. The trace is the same; device state (a
+  simulated motor's counters, say) may read ahead of the loop's clock by the host's queued burst.
 * **Time**: network time = loop time - ``t0``, where ``t0`` is fixed the first time the transport
   opens on a loop (so that the network's clock continues from its ``now_s`` at that moment; a fresh
   network on a virtual clock that starts at 0 gets ``t0 = 0``, and the two clocks are the same
@@ -55,7 +56,7 @@ from servobus.sim.corenet import CoreCanNetwork
 from servobus.sim.device import Device
 from servobus.sim.episodes import ControllerEpisodes
 from servobus.sim.faults import FaultInjector
-from servobus.sim.network import SimCanNetwork
+from servobus.sim.network import SimCanNetwork, stamped
 from servobus.transports._simclock import Clock, start_clock
 from servobus.transports.base import BusOffError, Outgoing, SendQueueFull, Transport
 from servobus.transports.events import CanErrorClass
@@ -287,32 +288,38 @@ class SimTransport(Transport[Frame, Frame]):
         armed, self._timer_at = self._timer_at, None
         if generation != self._generation or armed is None:
             return
-        network = self.network
+        network, t0, episodes = self.network, self._t0, self.episodes
         # asyncio runs a timer that is due within its clock's resolution: never run short of the
         # event the clock was armed for, or it would be re-armed for the same instant.
-        until = max(self._now() - self._t0, armed)
-        received = network.advance(until)
-        episodes = self.episodes
-        if episodes is not None:
-            received = self._controller(episodes, received, until)
+        until = max(self._now() - t0, armed)
+        if episodes is None:
+            # One call: the network runs to now, then ahead over what the host can neither see nor
+            # change (so the next timer is for the next frame the host receives), and the frames
+            # received come as the host's Frames, stamped on the loop's clock. A consumer sending
+            # from the delivery below queues behind the host's frames the run-ahead went past, where
+            # it changes nothing (SimCanNetwork.run_ahead), and arms the clock itself.
+            frames, at = network.host_turn(until, t0)
+        else:
+            received = self._controller(episodes, network.advance(until), until)
+            frames = [stamped(frame, end + t0) for end, frame in received]
+            at = None
         busy = network.bus.busy_s
         if busy != self._busy_s:
-            self._load.add(until + self._t0, busy - self._busy_s)
+            self._load.add(until + t0, busy - self._busy_s)
             self._busy_s = busy
-        if received:
-            t0 = self._t0
-            frames = [_stamped(frame, at + t0) for at, frame in received]
+        if frames:
             stats = self._stats
             stats.frames_in += len(frames)
             stats.bytes_in += sum(len(frame.data) for frame in frames)
             self._deliver(frames)  # a consumer may send (and arm) from here
-        if generation == self._generation:
-            # Events the host can neither see nor change need no timer of their own.
-            at = network.run_ahead(until)
-            if at is not None:
-                self._arm(at)
-            if episodes is not None and (at := episodes.next_error_frame_s()) is not None:
-                self._arm(at)
+        if generation != self._generation:
+            return
+        if episodes is not None:
+            at = network.run_ahead(until)  # after the consumer's sends, as host_turn's docstring says
+            if (error_at := episodes.next_error_frame_s()) is not None:
+                self._arm(error_at)
+        if at is not None:
+            self._arm(at)
 
     def _controller(
         self, episodes: ControllerEpisodes, received: list[tuple[float, Frame]], until: float
@@ -324,22 +331,3 @@ class SimTransport(Transport[Frame, Frame]):
         heard = [(at, frame) for at, frame in received if episodes.receiving(at)]
         self._stats.ignored += len(received) - len(heard)
         return heard
-
-
-# A received frame is the sender's own object: the host gets a copy stamped with the time it ended.
-# Copied slot by slot through the descriptors (a frozen dataclass has no cheaper copy; replace()
-# re-runs the checks and costs ~5x as much).
-_FRAME_SLOTS = tuple(
-    (getattr(Frame, name).__get__, getattr(Frame, name).__set__)
-    for name in Frame.__slots__
-    if name != "timestamp"
-)
-_SET_TIMESTAMP = Frame.timestamp.__set__  # type: ignore[attr-defined,misc]
-
-
-def _stamped(frame: Frame, timestamp: float) -> Frame:
-    copy = object.__new__(Frame)
-    for get, put in _FRAME_SLOTS:
-        put(copy, get(frame))
-    _SET_TIMESTAMP(copy, timestamp)
-    return copy
