@@ -14,8 +14,8 @@ Python :class:`~servobus.frame.Frame` objects the host or a Python device sends 
 slot in C and handed back as the same objects; frames made in C become Frame objects only when the
 host or a Python model receives them. The host's raw path is :meth:`CoreCanNetwork.host_turn`: one C
 call runs the network to the host's time and ahead past it, and the replies come back as bytes
-from which the host's Frames (stamped with the time each ended) are made once, at the edge. Fault injectors act in Python, in the reference's order, so a
-seed gives the same trace.
+from which the host's Frames (stamped with the time each ended) are made once, at the edge. Fault
+injectors act in Python, in the reference's order, so a seed gives the same trace.
 """
 
 from __future__ import annotations
