@@ -765,11 +765,22 @@ static int turn(sb_simnet *net, double until_s, int64_t log_limit, sb_netturn *o
 
 int sb_simnet_turn(sb_simnet *net, double until_s, int64_t log_limit, sb_netturn *out)
 {
-    if (!net || !out || isnan(until_s))
+    if (!out)
         return SB_E_ARG;
     out->n_events = 0;
+    if (!net || isnan(until_s)) {
+        out->stage = SB_TURN_ADVANCE;
+        return out->status = SB_E_ARG;
+    }
     out->status = turn(net, until_s, log_limit, out);
-    return out->status;
+    if (out->status == SB_RUN_IDLE && out->stage == SB_TURN_DONE)
+        return out->n_events;
+    return out->status < 0 ? out->status : SB_TURN_MORE;
+}
+
+int sb_simnet_host_send(sb_simnet *net, uint32_t key, const uint8_t *data, size_t len, double ready_s)
+{
+    return sb_simnet_send(net, 0, key & 0x1FFFFFFFu, (int)(key >> 29), data, len, ready_s, 1);
 }
 
 /* ---- links: BusLink ---- */

@@ -157,12 +157,14 @@ int sb_simnet_run(sb_simnet *net, double until_s, double before_s, double host_t
  * or with SB_RUN_LOG_FULL between the runs once the log holds log_limit entries; out->stage says where
  * it stopped, and the caller goes on from there with sb_simnet_run. Done, the status is SB_RUN_LOG_FULL
  * if the log holds log_limit entries (the caller settles its links up and drops it), else SB_RUN_IDLE.
- * Everything the caller reads comes in out, header first (one read), and the status is returned too. */
+ * Returns out->n_events when it is all done with SB_RUN_IDLE (every event then is an SB_EV_RX), else a
+ * negative status (SB_E_ARG: nothing was done) or SB_TURN_MORE: out says the rest. */
 #define SB_TURN_ADVANCE 0    /* stopped in the advance */
 #define SB_TURN_BETWEEN 1    /* the advance is done; the run-ahead has not started */
 #define SB_TURN_AHEAD 2      /* stopped in the run-ahead */
 #define SB_TURN_DONE 3       /* all done: next_s is valid */
 #define SB_TURN_EVENTS 256
+#define SB_TURN_MORE -100    /* returned: not done, or done with the log to drop (out->status) */
 
 typedef struct {
     int32_t status;          /* SB_RUN_* or a negative status (SB_E_ARG: nothing was done) */
@@ -174,6 +176,9 @@ typedef struct {
 } sb_netturn;
 
 int sb_simnet_turn(sb_simnet *net, double until_s, int64_t log_limit, sb_netturn *out);
+/* The host's sb_simnet_send (node 0, its frame kept by slot: tag 1) with id and flags in one key:
+ * id | flags << 29. */
+int sb_simnet_host_send(sb_simnet *net, uint32_t key, const uint8_t *data, size_t len, double ready_s);
 /* When the next event of the network happens (INFINITY: none): a step in progress, a transmission
  * ending, a node's deadline. bus_only: the bus's own (CanBusModel.next_event_s). */
 double sb_simnet_next_event(sb_simnet *net, int bus_only);

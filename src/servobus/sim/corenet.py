@@ -33,7 +33,7 @@ from servobus.sim.canbus import CanBusModel
 from servobus.sim.corenodes import CoreNodes
 from servobus.sim.device import Device, Emission
 from servobus.sim.faults import FaultInjector
-from servobus.sim.network import LOG_LIMIT, stamped
+from servobus.sim.network import LOG_LIMIT, FrameSlots, stamped
 
 __all__ = ["CoreBus", "CoreCanNetwork", "CoreLink"]
 
@@ -48,7 +48,7 @@ assert ffi.offsetof("sb_simframe", "data") == 20
 _RX, _DELIVER, _POLL = lib.SB_EV_RX, lib.SB_EV_DELIVER, lib.SB_EV_POLL
 _IDLE, _LOG_FULL = lib.SB_RUN_IDLE, lib.SB_RUN_LOG_FULL
 _ADVANCE, _AHEAD, _STOP_RX = lib.SB_RUN_ADVANCE, lib.SB_RUN_AHEAD, lib.SB_RUN_STOP_RX
-_TURN, _TURN_DONE = lib.sb_simnet_turn, lib.SB_TURN_DONE
+_TURN, _HOST_SEND = lib.sb_simnet_turn, lib.sb_simnet_host_send
 _TURN_HEAD = struct.Struct("<iii4xd")  # sb_netturn before its events: status, stage, n_events, next_s
 assert ffi.offsetof("sb_netturn", "ev") == _TURN_HEAD.size and ffi.offsetof("sb_netturn", "next_s") == 16
 _TURN_ADVANCE, _TURN_AHEAD = lib.SB_TURN_ADVANCE, lib.SB_TURN_AHEAD
@@ -70,7 +70,6 @@ _SET_SERIAL, _SET_TS, _SET_RX, _SET_ESI = (
     _SETTERS["is_rx"],
     _SETTERS["error_state_indicator"],
 )
-_SEND = lib.sb_simnet_send
 _MADE_CACHE = 4096  # frames made in C kept by content (replies repeat; a Frame is immutable)
 
 
@@ -91,18 +90,16 @@ def _host_frames(view: Any, n: int, frames: list[Frame | None], stamp_s: float) 
             continue
         if length != 8:
             data = data[:length] if length < 8 else view[at + _RX_DATA : at + _RX_DATA + length]
-        extended, fd, brs = _FLAG_BITS[flags]
-        frame = _NEW(Frame)
-        _SET_ID(frame, can_id)
-        _SET_DATA(frame, data)
-        _SET_EXT(frame, extended)
-        _SET_FD(frame, fd)
-        _SET_BRS(frame, brs)
-        _SET_SERIAL(frame, False)
-        _SET_TS(frame, t + stamp_s)
-        _SET_RX(frame, True)
-        _SET_ESI(frame, False)
-        append(frame)
+        frame = FrameSlots()
+        frame.arbitration_id = can_id
+        frame.data = data
+        frame.is_extended_id, frame.is_fd, frame.bitrate_switch = _FLAG_BITS[flags]
+        frame.is_serial = False
+        frame.timestamp = t + stamp_s
+        frame.is_rx = True
+        frame.error_state_indicator = False
+        frame.__class__ = Frame  # type: ignore[assignment]
+        append(frame)  # type: ignore[arg-type]
     return out
 
 
@@ -373,17 +370,11 @@ class CoreCanNetwork:
                 assert isinstance(item, Frame)
                 self._schedule(item, when, 0)
             return
-        data = frame.data  # _schedule inlined: the host's path, once per request
-        slot = _SEND(
-            self._net,
-            0,
-            frame.arbitration_id,
-            frame.is_extended_id | frame.is_fd << 1 | frame.bitrate_switch << 2,
-            data,
-            len(data),
-            at,
-            1,
+        data = frame.data  # _schedule inlined (node 0), id and flags in one key: once per request
+        key = (
+            frame.arbitration_id | (frame.is_extended_id | frame.is_fd << 1 | frame.bitrate_switch << 2) << 29
         )
+        slot = _HOST_SEND(self._net, key, data, len(data), at)
         if slot < 0:
             _refused(slot, frame, at, self._net.bus_now_s)
         self._frames[slot] = frame
@@ -428,23 +419,20 @@ class CoreCanNetwork:
         if not plain or nodes.dirty or nodes.unlinked:
             received = self.advance(until_s)
             return [stamped(frame, at + stamp_s) for at, frame in received], self.run_ahead(until_s)
-        _TURN(self._net, until_s, LOG_LIMIT, self._turn)
-        status, stage, n, at = _TURN_HEAD.unpack_from(self._turn_head)
-        if stage != _TURN_DONE:
-            return self._turn_on(status, stage, n, until_s, stamp_s)
+        turn = self._turn
+        n = _TURN(self._net, until_s, LOG_LIMIT, turn)  # < 0: not all done (turn's header says)
+        if n < 0:
+            return self._turn_on(until_s, stamp_s)
         frames = _host_frames(self._event_bytes, n, self._frames, stamp_s) if n else []
         if (model := self._model) is not None:
             model.busy_s, model.frames = float(self._net.busy_s), int(self._net.frames)
-        if status == _LOG_FULL:  # (C checked the log against LOG_LIMIT: _tidy's test)
-            self._drop_log()
-        if nodes.dirty:  # a device settled up by the tidy changed: ask it again
-            return frames, self.next_event_s()
+        at = turn.next_s
         return frames, None if at == _INF else at
 
-    def _turn_on(
-        self, status: int, stage: int, n: int, until_s: float, stamp_s: float
-    ) -> tuple[list[Frame], float | None]:
-        """Go on with a turn C stopped for Python (its events handled first), as advance and run_ahead."""
+    def _turn_on(self, until_s: float, stamp_s: float) -> tuple[list[Frame], float | None]:
+        """Go on with a turn C stopped for Python (its events handled first), as advance and run_ahead
+        (or done with the log to drop: as run_ahead's end)."""
+        status, stage, n, _ = _TURN_HEAD.unpack_from(self._turn_head)
         received: list[tuple[float, Frame]] = []
         if n:
             self._handle(n, received)
@@ -456,7 +444,7 @@ class CoreCanNetwork:
             self._after(status)
             self._run(_INF, _AHEAD, until_s, received)
         self._tidy()
-        at = self.next_event_s() if stage == _TURN_AHEAD else self.run_ahead(until_s)
+        at = self.next_event_s() if stage >= _TURN_AHEAD else self.run_ahead(until_s)
         return [stamped(frame, t + stamp_s) for t, frame in received], at
 
     def run_until_idle(self, limit_s: float = 1.0) -> list[tuple[float, Frame]]:
@@ -475,7 +463,7 @@ class CoreCanNetwork:
     def _schedule(self, frame: Frame, ready_s: float, node: int) -> None:
         data = frame.data
         flags = frame.is_extended_id | frame.is_fd << 1 | frame.bitrate_switch << 2
-        slot = _SEND(self._net, node, frame.arbitration_id, flags, data, len(data), ready_s, 1)
+        slot = lib.sb_simnet_send(self._net, node, frame.arbitration_id, flags, data, len(data), ready_s, 1)
         if slot < 0:
             _refused(slot, frame, ready_s, self._net.bus_now_s)
         self._frames[slot] = frame
