@@ -7,8 +7,12 @@ What is measured (both networks get the same seeded trace, repeats alternated, m
   loop's traffic: every cycle each motor gets a position set-point (0xA4, a sine with seeded noise and
   speed limit) or, every fourth cycle, a status read (0x9C), and the next cycle starts when the 32 replies
   are in (the bus saturated). The network is driven the way :class:`~servobus.transports.sim.SimTransport`
-  drives it: ``next_event_s`` -> ``advance`` -> ``run_ahead``, request frames built before the clock
-  starts, reply :class:`~servobus.frame.Frame` objects made by the network counted in.
+  drives it: requests ``send`` one by one, then ``host_turn`` per wake-up (the network run to the
+  host's time and ahead past it, one C call) until the replies are in, request frames built before
+  the clock starts, the host's reply :class:`~servobus.frame.Frame` objects (stamped) counted in.
+  A tree from before ``host_turn`` (``--before``) is driven as this bench drove it then:
+  ``next_event_s`` -> ``advance`` -> ``run_ahead``, the network's (cached, unstamped) reply Frames
+  counted in and the transport's stamped copy of each not (so its figure is, if anything, low).
   ``sim.python_us_per_exchange``: the same through the Python reference
   (:class:`~servobus.sim.network.SimCanNetwork` and the device models alone); ``sim.vs_python`` = the ratio.
   The replies (time, id, bytes) of an untimed run of the trace must be identical between the two, or
@@ -19,10 +23,15 @@ What is measured (both networks get the same seeded trace, repeats alternated, m
   the same seed (checked: two runs, one digest). ``sim.virtual_speedup_python``: the same through the
   Python models. ``sim.virtual_speedup_transport``: the same scenario through ``SimTransport`` on a
   virtual-time asyncio loop (``servobus.sim.virtual``), for the cost the event loop adds (info).
+* ``sim.before``: with ``--before TREE``, the same figures of the code in TREE (e.g. the main branch
+  before this issue), measured by this script in a child process with ``PYTHONPATH=TREE/src``, once
+  before and once after this tree's run (its repeats pooled); ``sim.vs_before`` = its exchange
+  figure / this tree's.
 
 Usage (from the repository root)::
 
     python bench/bench_sim.py            # full: 7 repeats, writes bench/RESULTS.md and results.json
+    python bench/bench_sim.py --before /work/main   # the same, beside the code in that tree
     python bench/bench_sim.py --quick    # CI smoke run, writes nothing
 """
 
@@ -33,9 +42,12 @@ import asyncio
 import contextlib
 import gc
 import hashlib
+import json
 import math
+import os
 import random
 import statistics
+import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -290,31 +302,77 @@ def measure(cfg: Config, log: Callable[[str], None]) -> dict[str, Any]:
     return figures
 
 
+def before(tree: Path, cfg: Config, log: Callable[[str], None]) -> dict[str, Any]:
+    """This script's figures of the code in ``tree``, from a child process (``--child``)."""
+    env = {**os.environ, "PYTHONPATH": str(tree / "src")}
+    args = [sys.executable, __file__, "--child", *(["--quick"] if cfg is QUICK else [])]
+    done = subprocess.run(args, env=env, capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        raise SystemExit(f"bench_sim: the run on {tree} failed:\n{done.stderr[-2000:]}")
+    figures: dict[str, Any] = json.loads(done.stdout.strip().splitlines()[-1])
+    log(f"  before ({tree}): {figures['us_per_exchange']:.2f} µs/pair, {figures['virtual_speedup']:.1f}x")
+    return figures
+
+
+def pooled(runs: Sequence[dict[str, Any]], tree: Path) -> dict[str, Any]:
+    """The child runs on the tree before, as one: exchange repeats pooled, speed-ups' median."""
+    exchange = [x for run in runs for x in run["us_per_exchange_runs"]]
+    python = [x for run in runs for x in run["python_us_per_exchange_runs"]]
+    rev = subprocess.run(
+        ["git", "-C", str(tree), "rev-parse", "--short", "HEAD"], capture_output=True, text=True
+    )
+    return {
+        "tree": str(tree),
+        "commit": rev.stdout.strip() or None,
+        "us_per_exchange": round(statistics.median(exchange), 3),
+        "python_us_per_exchange": round(statistics.median(python), 2),
+        "us_per_exchange_runs": exchange,
+        **{
+            name: round(statistics.median(run[name] for run in runs), 1)
+            for name in ("virtual_speedup", "virtual_speedup_python", "virtual_speedup_transport")
+        },
+    }
+
+
 def render_markdown(f: dict[str, Any], info: dict[str, Any]) -> str:
+    b = f.get("before", {})
+
+    def was(name: str, unit: str) -> str:
+        return (f"{b[name]:.2f}" if unit == " µs" else f"{b[name]:.1f}") + unit if name in b else "-"
+
     rows = [
         ("CPU per request/reply pair, C engine (`sim.us_per_exchange`)", f"{f['us_per_exchange']:.2f} µs",
-         "<= 3 µs"),
+         was("us_per_exchange", " µs"), "<= 3 µs"),
         ("the same, Python models (`sim.python_us_per_exchange`)",
-         f"{f['python_us_per_exchange']:.2f} µs", "-"),
-        ("Python / C (`sim.vs_python`)", f"{f['vs_python']:.1f}x", ">= 20x"),
+         f"{f['python_us_per_exchange']:.2f} µs", was("python_us_per_exchange", " µs"), "-"),
+        ("Python / C (`sim.vs_python`)", f"{f['vs_python']:.1f}x", "-", ">= 20x"),
         ("virtual scenario, C engine (`sim.virtual_speedup`)", f"{f['virtual_speedup']:.1f}x real time",
-         ">= 50x"),
+         was("virtual_speedup", "x"), ">= 50x"),
         ("the same, Python models (`sim.virtual_speedup_python`)",
-         f"{f['virtual_speedup_python']:.1f}x", "-"),
+         f"{f['virtual_speedup_python']:.1f}x", was("virtual_speedup_python", "x"), "-"),
         ("the same through `SimTransport` on a virtual-time loop (`sim.virtual_speedup_transport`)",
-         f"{f['virtual_speedup_transport']:.1f}x", "(info)"),
+         f"{f['virtual_speedup_transport']:.1f}x", was("virtual_speedup_transport", "x"), "(info)"),
     ]  # fmt: skip
     doc = (__doc__ or "").split("What is measured", 1)[1].split("\n\nUsage", 1)[0]
+    before_note = (
+        f"Before: `{b['tree']}` at {b['commit']}, the same script in a child process, run before and after "
+        f"this tree's; its exchange runs: {', '.join(f'{x:.2f}' for x in b['us_per_exchange_runs'])}; "
+        f"before / now (`sim.vs_before`): {f['vs_before']:.2f}x."
+        if b
+        else "No tree before was measured (`--before`)."
+    )
     lines = [
         *_meta.header_lines("## The simulator's cost (`bench/bench_sim.py`)", info),
         "",
         "What is measured" + doc.rstrip(),
         "",
-        _results.markdown_table(["figure", "value", "target"], rows, "lrl"),
+        _results.markdown_table(["figure", "value", "before", "target"], rows, "lrrl"),
         f"Runs (µs per pair, C): {', '.join(f'{x:.2f}' for x in f['us_per_exchange_runs'])}; "
         f"Python: {', '.join(f'{x:.2f}' for x in f['python_us_per_exchange_runs'])}. "
         f"Virtual scenario: {f['virtual_pairs']:,} pairs ({f['virtual_pairs_per_s']:,} per virtual second); "
         f"same trace for the same seed, and the same as the Python models': {f['virtual_same_trace']}.",
+        "",
+        before_note,
         "",
         "Targets missed: " + ("; ".join(f["targets_missed"]) if f["targets_missed"] else "none."),
     ]
@@ -326,7 +384,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="a few cycles (CI smoke run), writes nothing")
     parser.add_argument("--output", type=Path, help="write RESULTS.md and results.json to this directory")
     parser.add_argument("--check", action="store_true", help="exit with status 1 when a target is missed")
+    parser.add_argument(
+        "--before", type=Path, metavar="TREE", help="measure the code in TREE (a checkout) beside this one"
+    )
+    parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)  # --before's run: JSON out
     args = parser.parse_args(argv)
+    if args.child:
+        cfg = QUICK if args.quick else FULL
+        print(json.dumps(measure(cfg, lambda line: print(line, file=sys.stderr))))
+        return 0
     started = time.perf_counter()
     load = _meta.load_average()
     cfg = QUICK if args.quick else FULL
@@ -334,7 +400,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(
         f"bench_sim ({cfg.mode}): {cfg.repeats} repeats of {cfg.cycles} cycles x {MOTORS} motors", flush=True
     )
-    figures = measure(cfg, lambda line: print(line, flush=True))
+    log = lambda line: print(line, flush=True)  # noqa: E731
+    runs_before = [before(args.before, cfg, log)] if args.before else []
+    figures = measure(cfg, log)
+    if args.before:
+        runs_before.append(before(args.before, cfg, log))
+        figures["before"] = pooled(runs_before, args.before)
+        figures["vs_before"] = round(figures["before"]["us_per_exchange"] / figures["us_per_exchange"], 2)
     arguments = list(sys.argv[1:] if argv is None else argv)
     info = _meta.meta(
         "bench/bench_sim.py",

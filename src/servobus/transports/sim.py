@@ -249,12 +249,14 @@ class SimTransport(Transport[Frame, Frame]):
     def _put(self, frame: Frame, handle: Any, now: float) -> None:
         network = self.network
         at = now - self._t0
-        network.send(frame, at if at > network.now_s else network.now_s)
+        if at < (network_now := network.now_s):  # the network ran ahead: queued at its time
+            at = network_now
+        network.send(frame, at)
         stats = self._stats
         stats.frames_out += 1
         stats.bytes_out += len(frame.data)
         self._sent(handle, now)
-        self._arm(network.now_s if at < network.now_s else at)
+        self._arm(at)
 
     # ----------------------------------------------------------------- the network's clock
 
@@ -310,7 +312,8 @@ class SimTransport(Transport[Frame, Frame]):
         if frames:
             stats = self._stats
             stats.frames_in += len(frames)
-            stats.bytes_in += sum(len(frame.data) for frame in frames)
+            for frame in frames:
+                stats.bytes_in += len(frame.data)
             self._deliver(frames)  # a consumer may send (and arm) from here
         if generation != self._generation:
             return
