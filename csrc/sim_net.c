@@ -195,23 +195,29 @@ static void arbitrate(sb_simnet *net)
     if (net->chosen)
         return;
     int best = -1;
-    double start = net->free_at_s;
+    uint32_t best_key = 0;
+    double start = net->free_at_s, first = INFINITY;  /* first: the earliest ready time after start */
     for (uint64_t m = net->active; m; m &= m - 1) {
         int k = __builtin_ctzll(m);
-        if (net->slots[net->nodes[k].head].f.t <= start && (best < 0 || rank_cmp(net, k, best) < 0))
+        const sb_netnode *n = &net->nodes[k];
+        if (n->head_t > start) {
+            if (n->head_t < first)
+                first = n->head_t;
+        } else if (best < 0 || n->head_key < best_key || (n->head_key == best_key && rank_cmp(net, k, best) < 0)) {
             best = k;
+            best_key = n->head_key;
+        }
     }
     if (best < 0 && net->active) {  /* none ready while the wire is busy: idle until the first is ready */
-        start = INFINITY;
-        for (uint64_t m = net->active; m; m &= m - 1) {
-            double ready = net->slots[net->nodes[__builtin_ctzll(m)].head].f.t;
-            if (ready < start)
-                start = ready;
-        }
+        start = first;
         for (uint64_t m = net->active; m; m &= m - 1) {
             int k = __builtin_ctzll(m);
-            if (net->slots[net->nodes[k].head].f.t <= start && (best < 0 || rank_cmp(net, k, best) < 0))
+            const sb_netnode *n = &net->nodes[k];
+            if (n->head_t <= start
+                && (best < 0 || n->head_key < best_key || (n->head_key == best_key && rank_cmp(net, k, best) < 0))) {
                 best = k;
+                best_key = n->head_key;
+            }
         }
     }
     net->choice_node = best;
@@ -234,6 +240,7 @@ static void start_choice(sb_simnet *net)
         net->active &= ~((uint64_t)1 << k);
     } else {
         n->head_key = priority_key(&net->slots[n->head].f);
+        n->head_t = net->slots[n->head].f.t;
     }
     n->queued--;
     net->slots[s].next = -1;
@@ -316,6 +323,7 @@ static int join(sb_simnet *net, int node, uint32_t id, int flags, const uint8_t 
     if (n->tail < 0) {
         n->head = n->tail = s;
         n->head_key = priority_key(&slot->f);
+        n->head_t = ready_s;
         net->active |= (uint64_t)1 << node;
         net->chosen = 0;
     } else if (net->slots[n->tail].joined_s <= ready_s) {  /* the usual case: behind every other */
@@ -325,6 +333,7 @@ static int join(sb_simnet *net, int node, uint32_t id, int flags, const uint8_t 
         slot->next = n->head;
         n->head = s;
         n->head_key = priority_key(&slot->f);
+        n->head_t = ready_s;
         net->chosen = 0;
     } else {
         int p = n->head;

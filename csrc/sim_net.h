@@ -61,6 +61,7 @@ typedef struct {
     int32_t tail;
     int32_t queued;
     uint32_t head_key;       /* the head frame's arbitration priority as one number */
+    double head_t;           /* the head frame's ready time (arbitration reads it for every node) */
     int32_t has_first;
     double first_joined_s;   /* the node's first (joined_s, seq) ever: ties between nodes' equal ids */
     int64_t first_seq;
