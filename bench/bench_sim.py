@@ -23,15 +23,18 @@ What is measured (both networks get the same seeded trace, repeats alternated, m
   the same seed (checked: two runs, one digest). ``sim.virtual_speedup_python``: the same through the
   Python models. ``sim.virtual_speedup_transport``: the same scenario through ``SimTransport`` on a
   virtual-time asyncio loop (``servobus.sim.virtual``), for the cost the event loop adds (info).
-* ``sim.before``: with ``--before TREE``, the same figures of the code in TREE (e.g. the main branch
-  before this issue), measured by this script in a child process with ``PYTHONPATH=TREE/src``, once
-  before and once after this tree's run (its repeats pooled); ``sim.vs_before`` = its exchange
-  figure / this tree's.
+* ``sim.before``: with ``--before TREE``, the C engine's figures of the code in TREE (e.g. the main
+  branch before this issue), each measured by this script in a child process with
+  ``PYTHONPATH=TREE/src`` right next to this tree's own run of the same figure (exchange: one child
+  run per repeat, alternately before and after; speed-ups: before each of the three), medians;
+  ``sim.vs_before`` = its exchange figure / this tree's, ``sim.speedup_vs_before`` = this tree's
+  speed-up / its.
 
 Usage (from the repository root)::
 
     python bench/bench_sim.py            # full: 7 repeats, writes bench/RESULTS.md and results.json
     python bench/bench_sim.py --before /work/main   # the same, beside the code in that tree
+    SERVOBUS_BENCH_BEFORE=/work/main python -m bench --only sim   # the same through the runner
     python bench/bench_sim.py --quick    # CI smoke run, writes nothing
 """
 
@@ -42,7 +45,6 @@ import asyncio
 import contextlib
 import gc
 import hashlib
-import json
 import math
 import os
 import random
@@ -69,6 +71,7 @@ from servobus.sim.corenet import CoreCanNetwork  # noqa: E402
 from servobus.sim.network import SimCanNetwork  # noqa: E402
 
 KEY = "sim"
+BEFORE_ENV = "SERVOBUS_BENCH_BEFORE"  # a tree --before measures by default (python -m bench passes no flags)
 MOTORS = 32
 TARGETS = {"us_per_exchange": 3.0, "vs_python": 20.0, "virtual_speedup": 50.0}
 
@@ -251,7 +254,7 @@ def transport_speedup(seconds: float, seed: int) -> tuple[float, int]:
     return seconds / (time.perf_counter() - start), pairs
 
 
-def measure(cfg: Config, log: Callable[[str], None]) -> dict[str, Any]:
+def measure(cfg: Config, log: Callable[[str], None], was: Before | None = None) -> dict[str, Any]:
     cycles = trace(1, cfg.cycles + 1)
     if trace_digest(CoreCanNetwork, cycles) != trace_digest(SimCanNetwork, cycles):
         raise SystemExit("bench_sim: the C engine's replies differ from the Python models'")
@@ -259,11 +262,15 @@ def measure(cfg: Config, log: Callable[[str], None]) -> dict[str, Any]:
     py_us: list[float] = []
     for r in range(cfg.repeats):
         order = (CoreCanNetwork, SimCanNetwork) if r % 2 == 0 else (SimCanNetwork, CoreCanNetwork)
+        b_us = was.run("exchange") if was is not None and r % 2 == 0 else None
         got = {kind: exchange_us(kind, cycles) for kind in order}
+        if was is not None and r % 2 == 1:
+            b_us = was.run("exchange")
         c_us, p_us = got[CoreCanNetwork], got[SimCanNetwork]
         core_us.append(c_us)
         py_us.append(p_us)
-        log(f"  repeat {r + 1}: C {c_us:.2f} µs/pair, Python {p_us:.2f} µs/pair ({p_us / c_us:.1f}x)")
+        log(f"  repeat {r + 1}: C {c_us:.2f} µs/pair, Python {p_us:.2f} µs/pair ({p_us / c_us:.1f}x)"
+            + (f", before {b_us:.2f} µs/pair" if b_us is not None else ""))  # fmt: skip
     scenario = trace(7, 200)
     c_pairs, c_digest = trace_digest(CoreCanNetwork, scenario, cfg.virtual_s)
     same = (
@@ -271,11 +278,20 @@ def measure(cfg: Config, log: Callable[[str], None]) -> dict[str, Any]:
         == trace_digest(CoreCanNetwork, scenario, cfg.virtual_s)
         == trace_digest(SimCanNetwork, scenario, cfg.virtual_s)
     )
-    c_speed = statistics.median(speedup(CoreCanNetwork, cfg.virtual_s, seed=7) for _ in range(3))
+    speeds = []
+    for _ in range(3):
+        if was is not None:
+            was.run("speedup")
+        speeds.append(speedup(CoreCanNetwork, cfg.virtual_s, seed=7))
+    c_speed = statistics.median(speeds)
     p_speed = speedup(SimCanNetwork, cfg.virtual_s, seed=7)
+    if was is not None:
+        was.run("transport")
     t_speed, t_pairs = transport_speedup(cfg.virtual_s, seed=7)
     log(f"  {cfg.virtual_s:g} virtual s: C {c_speed:.1f}x ({c_pairs} pairs), Python {p_speed:.1f}x, "
-        f"through SimTransport {t_speed:.1f}x")  # fmt: skip
+        f"through SimTransport {t_speed:.1f}x"
+        + (f"; before: C {statistics.median(was.runs['speedup']):.1f}x, through SimTransport "
+           f"{was.runs['transport'][-1]:.1f}x" if was is not None else ""))  # fmt: skip
     c_med, p_med = statistics.median(core_us), statistics.median(py_us)
     figures: dict[str, Any] = {
         "us_per_exchange": round(c_med, 3),
@@ -302,36 +318,48 @@ def measure(cfg: Config, log: Callable[[str], None]) -> dict[str, Any]:
     return figures
 
 
-def before(tree: Path, cfg: Config, log: Callable[[str], None]) -> dict[str, Any]:
-    """This script's figures of the code in ``tree``, from a child process (``--child``)."""
-    env = {**os.environ, "PYTHONPATH": str(tree / "src")}
-    args = [sys.executable, __file__, "--child", *(["--quick"] if cfg is QUICK else [])]
-    done = subprocess.run(args, env=env, capture_output=True, text=True, check=False)
-    if done.returncode != 0:
-        raise SystemExit(f"bench_sim: the run on {tree} failed:\n{done.stderr[-2000:]}")
-    figures: dict[str, Any] = json.loads(done.stdout.strip().splitlines()[-1])
-    log(f"  before ({tree}): {figures['us_per_exchange']:.2f} µs/pair, {figures['virtual_speedup']:.1f}x")
-    return figures
+def child(mode: str, cfg: Config) -> float:
+    """One figure of this tree, for a parent run's ``--before`` (``--child MODE``)."""
+    if mode == "exchange":
+        return exchange_us(CoreCanNetwork, trace(1, cfg.cycles + 1))
+    if mode == "speedup":
+        return speedup(CoreCanNetwork, cfg.virtual_s, seed=7)
+    return transport_speedup(cfg.virtual_s, seed=7)[0]
 
 
-def pooled(runs: Sequence[dict[str, Any]], tree: Path) -> dict[str, Any]:
-    """The child runs on the tree before, as one: exchange repeats pooled, speed-ups' median."""
-    exchange = [x for run in runs for x in run["us_per_exchange_runs"]]
-    python = [x for run in runs for x in run["python_us_per_exchange_runs"]]
-    rev = subprocess.run(
-        ["git", "-C", str(tree), "rev-parse", "--short", "HEAD"], capture_output=True, text=True
-    )
-    return {
-        "tree": str(tree),
-        "commit": rev.stdout.strip() or None,
-        "us_per_exchange": round(statistics.median(exchange), 3),
-        "python_us_per_exchange": round(statistics.median(python), 2),
-        "us_per_exchange_runs": exchange,
-        **{
-            name: round(statistics.median(run[name] for run in runs), 1)
-            for name in ("virtual_speedup", "virtual_speedup_python", "virtual_speedup_transport")
-        },
-    }
+class Before:
+    """The code in another tree, measured figure by figure by this script in a child process
+    (``PYTHONPATH=TREE/src``), each run next to this tree's own of the same figure."""
+
+    def __init__(self, tree: Path, cfg: Config) -> None:
+        self.tree = tree
+        self.cfg = cfg
+        self.runs: dict[str, list[float]] = {"exchange": [], "speedup": [], "transport": []}
+
+    def run(self, mode: str) -> float:
+        env = {**os.environ, "PYTHONPATH": str(self.tree / "src")}
+        args = [sys.executable, __file__, "--child", mode, *(["--quick"] if self.cfg is QUICK else [])]
+        done = subprocess.run(args, env=env, capture_output=True, text=True, check=False)
+        if done.returncode != 0:
+            raise SystemExit(f"bench_sim: the run on {self.tree} failed:\n{done.stderr[-2000:]}")
+        value = float(done.stdout.strip().splitlines()[-1])
+        self.runs[mode].append(value)
+        return value
+
+    def figures(self) -> dict[str, Any]:
+        rev = subprocess.run(
+            ["git", "-C", str(self.tree), "rev-parse", "--short", "HEAD"], capture_output=True, text=True
+        )
+        runs = self.runs
+        return {
+            "tree": str(self.tree),
+            "commit": rev.stdout.strip() or None,
+            "us_per_exchange": round(statistics.median(runs["exchange"]), 3),
+            "us_per_exchange_runs": [round(x, 3) for x in runs["exchange"]],
+            "virtual_speedup": round(statistics.median(runs["speedup"]), 1),
+            "virtual_speedup_runs": [round(x, 1) for x in runs["speedup"]],
+            "virtual_speedup_transport": round(statistics.median(runs["transport"]), 1),
+        }
 
 
 def render_markdown(f: dict[str, Any], info: dict[str, Any]) -> str:
@@ -355,9 +383,11 @@ def render_markdown(f: dict[str, Any], info: dict[str, Any]) -> str:
     ]  # fmt: skip
     doc = (__doc__ or "").split("What is measured", 1)[1].split("\n\nUsage", 1)[0]
     before_note = (
-        f"Before: `{b['tree']}` at {b['commit']}, the same script in a child process, run before and after "
-        f"this tree's; its exchange runs: {', '.join(f'{x:.2f}' for x in b['us_per_exchange_runs'])}; "
-        f"before / now (`sim.vs_before`): {f['vs_before']:.2f}x."
+        f"Before: `{b['tree']}` at {b['commit']}, this script in a child process next to each of this "
+        f"tree's runs; its exchange runs (µs per pair): "
+        f"{', '.join(f'{x:.2f}' for x in b['us_per_exchange_runs'])}; speed-ups: "
+        f"{', '.join(f'{x:.1f}' for x in b['virtual_speedup_runs'])}; before / now (`sim.vs_before`): "
+        f"{f['vs_before']:.2f}x; now / before (`sim.speedup_vs_before`): {f['speedup_vs_before']:.2f}x."
         if b
         else "No tree before was measured (`--before`)."
     )
@@ -385,13 +415,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--output", type=Path, help="write RESULTS.md and results.json to this directory")
     parser.add_argument("--check", action="store_true", help="exit with status 1 when a target is missed")
     parser.add_argument(
-        "--before", type=Path, metavar="TREE", help="measure the code in TREE (a checkout) beside this one"
+        "--before",
+        type=Path,
+        metavar="TREE",
+        default=os.environ.get(BEFORE_ENV) or None,
+        help=f"measure the code in TREE (a checkout) beside this one (default: ${BEFORE_ENV}, if set)",
     )
-    parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)  # --before's run: JSON out
+    parser.add_argument("--child", choices=["exchange", "speedup", "transport"], help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    if args.child:
-        cfg = QUICK if args.quick else FULL
-        print(json.dumps(measure(cfg, lambda line: print(line, file=sys.stderr))))
+    if args.child:  # one figure for a parent's --before
+        print(child(args.child, QUICK if args.quick else FULL))
         return 0
     started = time.perf_counter()
     load = _meta.load_average()
@@ -400,13 +433,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(
         f"bench_sim ({cfg.mode}): {cfg.repeats} repeats of {cfg.cycles} cycles x {MOTORS} motors", flush=True
     )
-    log = lambda line: print(line, flush=True)  # noqa: E731
-    runs_before = [before(args.before, cfg, log)] if args.before else []
-    figures = measure(cfg, log)
-    if args.before:
-        runs_before.append(before(args.before, cfg, log))
-        figures["before"] = pooled(runs_before, args.before)
+    was = Before(args.before, cfg) if args.before else None
+    figures = measure(cfg, lambda line: print(line, flush=True), was)
+    if was is not None:
+        figures["before"] = was.figures()
         figures["vs_before"] = round(figures["before"]["us_per_exchange"] / figures["us_per_exchange"], 2)
+        figures["speedup_vs_before"] = round(
+            figures["virtual_speedup"] / figures["before"]["virtual_speedup"], 2
+        )
     arguments = list(sys.argv[1:] if argv is None else argv)
     info = _meta.meta(
         "bench/bench_sim.py",
