@@ -23,6 +23,9 @@ What is measured (both networks get the same seeded trace, repeats alternated, m
   the same seed (checked: two runs, one digest). ``sim.virtual_speedup_python``: the same through the
   Python models. ``sim.virtual_speedup_transport``: the same scenario through ``SimTransport`` on a
   virtual-time asyncio loop (``servobus.sim.virtual``), for the cost the event loop adds (info).
+* ``sim.instructions_per_exchange`` (with ``--instructions``): instructions per pair of the exchange
+  trace, counted by valgrind's callgrind (two repeats minus none), and ``sim.before``'s: a figure the
+  load of this shared machine does not move.
 * ``sim.before``: with ``--before TREE``, the C engine's figures of the code in TREE (e.g. the main
   branch before this issue), each measured by this script in a child process with
   ``PYTHONPATH=TREE/src`` right next to this tree's own run of the same figure (exchange: one child
@@ -71,6 +74,7 @@ from servobus.sim.corenet import CoreCanNetwork  # noqa: E402
 from servobus.sim.network import SimCanNetwork  # noqa: E402
 
 KEY = "sim"
+REPO = BENCH_DIR.parent
 BEFORE_ENV = "SERVOBUS_BENCH_BEFORE"  # a tree --before measures by default (python -m bench passes no flags)
 MOTORS = 32
 TARGETS = {"us_per_exchange": 3.0, "vs_python": 20.0, "virtual_speedup": 50.0}
@@ -319,12 +323,36 @@ def measure(cfg: Config, log: Callable[[str], None], was: Before | None = None) 
 
 
 def child(mode: str, cfg: Config) -> float:
-    """One figure of this tree, for a parent run's ``--before`` (``--child MODE``)."""
+    """One figure of this tree, for a parent run's ``--before`` or ``--instructions`` (``--child MODE``)."""
+    if mode.startswith("drive"):  # the exchange trace, repeated N times, untimed: for callgrind
+        cycles = trace(1, cfg.cycles + 1)
+        net = network(CoreCanNetwork)
+        drive(net, cycles[:1])
+        with frozen():
+            return float(sum(drive(net, cycles[1:]).count for _ in range(int(mode[5:]))))
     if mode == "exchange":
         return exchange_us(CoreCanNetwork, trace(1, cfg.cycles + 1))
     if mode == "speedup":
         return speedup(CoreCanNetwork, cfg.virtual_s, seed=7)
     return transport_speedup(cfg.virtual_s, seed=7)[0]
+
+
+def instructions(tree: Path, cfg: Config) -> int:
+    """Instructions per pair of the exchange trace through ``tree``'s code, counted by valgrind's
+    callgrind (a run of 2 repeats minus a run of none: start-up and imports cancel out)."""
+    env = {**os.environ, "PYTHONPATH": str(tree / "src")}
+
+    def count(repeats: int) -> tuple[int, int]:
+        args = ["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", sys.executable, __file__]
+        done = subprocess.run(
+            [*args, "--child", f"drive{repeats}", *(["--quick"] if cfg is QUICK else [])],
+            env=env, capture_output=True, text=True, check=True,
+        )  # fmt: skip
+        collected = [line for line in done.stderr.splitlines() if "Collected :" in line]
+        return int(collected[-1].split(":")[-1].replace(",", "").strip()), int(float(done.stdout.split()[-1]))
+
+    (base, _), (total, pairs) = count(0), count(2)
+    return round((total - base) / pairs)
 
 
 class Before:
@@ -381,6 +409,11 @@ def render_markdown(f: dict[str, Any], info: dict[str, Any]) -> str:
         ("the same through `SimTransport` on a virtual-time loop (`sim.virtual_speedup_transport`)",
          f"{f['virtual_speedup_transport']:.1f}x", was("virtual_speedup_transport", "x"), "(info)"),
     ]  # fmt: skip
+    if "instructions_per_exchange" in f:
+        before_ir = b.get("instructions_per_exchange")
+        was_ir = f"{before_ir:,}" if before_ir else "-"
+        rows.append(("instructions per pair, C engine (`sim.instructions_per_exchange`)",
+                     f"{f['instructions_per_exchange']:,}", was_ir, "(info)"))  # fmt: skip
     doc = (__doc__ or "").split("What is measured", 1)[1].split("\n\nUsage", 1)[0]
     before_note = (
         f"Before: `{b['tree']}` at {b['commit']}, this script in a child process next to each of this "
@@ -421,7 +454,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         default=os.environ.get(BEFORE_ENV) or None,
         help=f"measure the code in TREE (a checkout) beside this one (default: ${BEFORE_ENV}, if set)",
     )
-    parser.add_argument("--child", choices=["exchange", "speedup", "transport"], help=argparse.SUPPRESS)
+    parser.add_argument(
+        "--instructions",
+        action="store_true",
+        help="also count instructions per pair under valgrind (load-independent; with --before, both trees)",
+    )
+    parser.add_argument("--child", help=argparse.SUPPRESS)  # exchange, speedup, transport, driveN
     args = parser.parse_args(argv)
     if args.child:  # one figure for a parent's --before
         print(child(args.child, QUICK if args.quick else FULL))
@@ -441,6 +479,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         figures["speedup_vs_before"] = round(
             figures["virtual_speedup"] / figures["before"]["virtual_speedup"], 2
         )
+    if args.instructions:
+        figures["instructions_per_exchange"] = instructions(REPO, cfg)
+        if args.before:
+            figures["before"]["instructions_per_exchange"] = instructions(args.before, cfg)
+        was_ir = f", before {figures['before']['instructions_per_exchange']:,}" if args.before else ""
+        print(f"instructions per pair: {figures['instructions_per_exchange']:,}{was_ir}")
     arguments = list(sys.argv[1:] if argv is None else argv)
     info = _meta.meta(
         "bench/bench_sim.py",
