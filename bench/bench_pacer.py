@@ -240,7 +240,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     print("TARGETS MISSED: " + "; ".join(missed) if missed else "All pacer targets met.")
     print(
         f"pacer.cpu_pct {figures['cpu_pct']} % (spin {figures['spin_cpu_pct']} %, floor "
-        f"{figures['floor_cpu_pct']} %), late p50/p99 {figures['late_p50_us']}/{figures['late_p99_us']} µs (spin "
+        f"{figures['floor_cpu_pct']} %), late p50/p99 {figures['late_p50_us']}/{figures['late_p99_us']} µs "
+        "(spin "
         f"{figures['spin_late_p50_us']}/{figures['spin_late_p99_us']}); trio {figures['trio_cpu_pct']} %, "
         f"{figures['trio_late_p50_us']}/{figures['trio_late_p99_us']} µs"
     )
