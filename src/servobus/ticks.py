@@ -105,8 +105,8 @@ async def ticks(
         raise ValueError(f"spin_s={spin_s!r} must be >= 0")
     lane = runtime.current()
     clock = lane.time
-    waiter = await _timer_wait(lane, precise, spin_s)
     period = 1.0 / hz
+    waiter = await _timer_wait(lane, precise, spin_s, period)
     start = clock()
     index = 0
     yielded = 0
@@ -181,7 +181,9 @@ async def _is_real(clock: Callable[[], float]) -> tuple[int, int] | None:
     return again if abs(again[0] - offset) <= CLOCK_DRIFT_S * 1e9 else None
 
 
-async def _timer_wait(lane: runtime.Runtime, precise: bool | None, spin_s: float) -> _TimerWait | None:
+async def _timer_wait(
+    lane: runtime.Runtime, precise: bool | None, spin_s: float, period_s: float
+) -> _TimerWait | None:
     """The timer wait for this loop, or None for the spin (asked for, no timer, or a virtual clock)."""
     if precise is False:
         return None
@@ -192,7 +194,7 @@ async def _timer_wait(lane: runtime.Runtime, precise: bool | None, spin_s: float
     offset = await _is_real(lane.time)
     if offset is None:
         return None
-    return _TimerWait(lane, offset, spin_s)
+    return _TimerWait(lane, offset, spin_s, period_s)
 
 
 class _AsyncioReady:
@@ -266,7 +268,8 @@ class _TimerWait:
 
     Waking takes time (the kernel's wake-up, the loop's turn: a median of 40-90 µs on the machine of
     bench/RESULTS.md), so the timer is armed that much early (``lead``: the median wake-up delay of the
-    last :data:`LEAD_WINDOW` waits, at most :data:`LEAD_MAX_S`) and the rest is yielded to the loop.
+    last :data:`LEAD_WINDOW` waits, at most :data:`LEAD_MAX_S` or a quarter period) and the rest is
+    yielded to the loop.
     Each wake-up checks the offset again: a clock that drifted (not the real one after all) turns the
     timer off and the pacer back to yielding (``usable``).
     """
@@ -285,13 +288,16 @@ class _TimerWait:
         "usable",
     )
 
-    def __init__(self, lane: runtime.Runtime, offset: tuple[int, int], spin_s: float) -> None:
+    def __init__(
+        self, lane: runtime.Runtime, offset: tuple[int, int], spin_s: float, period_s: float
+    ) -> None:
         self._clock = lane.time
         self._offset_ns, uncertainty_ns = offset
         self._margin_ns = (uncertainty_ns + 1) // 2
         self._spin_s = spin_s
         self._lead_ns = 0
-        self._lead_max_ns = round(LEAD_MAX_S * 1e9)
+        # (at most a quarter period: at very high rates the timer cannot beat the yield anyway)
+        self._lead_max_ns = round(min(LEAD_MAX_S, period_s / 4) * 1e9)
         self._delays_ns: list[int] = []
         self._closed = False
         self._timer = _timer.MonotonicTimer()
