@@ -41,7 +41,7 @@ import asyncio
 import contextlib
 import math
 import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncGenerator, AsyncIterator, Callable
 from dataclasses import dataclass
 
 import anyio
@@ -79,7 +79,7 @@ class Tick:
     skipped: int
 
 
-async def ticks(
+def ticks(
     hz: float, *, spin_s: float = 0.0012, count: int | None = None, precise: bool | None = None
 ) -> AsyncIterator[Tick]:
     """Yield a :class:`Tick` at ``hz`` per second, on absolute deadlines, until ``count`` (or forever).
@@ -98,8 +98,50 @@ async def ticks(
     Raises:
         ValueError: a rate or spin that is not a positive finite number (spin may be 0).
         servobus.core.timer.TimerUnsupported: ``precise=True`` on a platform without the timer.
+
+    Both are raised by the first iteration. The iterator's ``aclose()`` may be called while another
+    task's ``__anext__`` waits for a deadline (a blocking caller interrupted, as servobus.sync's): it
+    waits for that tick, then closes.
     """
-    if not (isinstance(hz, int | float) and math.isfinite(hz) and hz > 0):
+    return _Pacer(_ticks(hz, spin_s, count, precise), 1.0 / hz if _valid_rate(hz) else 0.0)
+
+
+def _valid_rate(hz: object) -> bool:
+    return isinstance(hz, int | float) and math.isfinite(hz) and hz > 0
+
+
+class _Pacer:
+    """The pacer's async iterator: the generator below, with an ``aclose()`` that is safe while an
+    ``__anext__`` is in flight (an async generator's own raises "already running" then)."""
+
+    __slots__ = ("_gen", "_in_flight", "_period_s")
+
+    def __init__(self, gen: AsyncGenerator[Tick, None], period_s: float) -> None:
+        self._gen = gen
+        self._period_s = period_s
+        self._in_flight = False
+
+    def __aiter__(self) -> _Pacer:
+        return self
+
+    async def __anext__(self) -> Tick:
+        self._in_flight = True
+        try:
+            return await self._gen.__anext__()
+        finally:
+            self._in_flight = False
+
+    async def aclose(self) -> None:
+        while self._in_flight:  # ends at the tick it waits for: at most about a period
+            await anyio.sleep(min(self._period_s, 0.01))
+        await self._gen.aclose()
+
+
+async def _ticks(
+    hz: float, spin_s: float, count: int | None, precise: bool | None
+) -> AsyncGenerator[Tick, None]:
+    """:func:`ticks`' generator."""
+    if not _valid_rate(hz):
         raise ValueError(f"hz={hz!r} must be a positive number")
     if not (math.isfinite(spin_s) and spin_s >= 0):
         raise ValueError(f"spin_s={spin_s!r} must be >= 0")
