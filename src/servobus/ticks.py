@@ -257,12 +257,11 @@ class _AsyncioReady:
         if future is not None and not future.done():
             future.set_result(None)
 
-    async def __call__(self) -> None:
-        self._future = self._loop.create_future()
-        try:
-            await self._future
-        finally:
-            self._future = None
+    def __call__(self) -> asyncio.Future[None]:
+        # The future itself, awaited by the caller: no coroutine of its own to step through at each
+        # tick. One that ends otherwise (cancelled) is done, and the callback leaves it alone.
+        self._future = future = self._loop.create_future()
+        return future
 
     def close(self) -> None:
         # Before the descriptor is closed; or just after, when a garbage collection closed the timer
