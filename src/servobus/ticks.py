@@ -15,15 +15,17 @@ deadlines are converted to CLOCK_MONOTONIC through an offset measured at the sta
 ``time.monotonic()``, trio's ``perf_counter()`` plus a random offset); the timer is armed early by the
 median wake-up delay it has seen, and the last microseconds are yielded to the loop.
 
-Measured (``python bench/bench_pacer.py``, bench/RESULTS.md, "The pacer"; 2-core VM shared with other
-work, load 2.6, medians of 5 runs of 3 s): an idle 1 kHz pacer costs 8.1% of a core on asyncio (9.1%
-on trio) where the spin of before got 51% (all of the core it could get) and a bare timerfd loop
-without an event loop costs 4.1%; ticks start 10 µs late (median; trio 13 µs). The p99 (4.4 ms
-there) is the wait for a core on a loaded machine, which a sleeping process pays and a spinning one
-does not: the same runs at SCHED_FIFO priority 10 (``chrt -f 10``, safe for a pacer that sleeps)
-give p99 77 µs (trio 76 µs).
+Measured (``python bench/bench_pacer.py``, bench/RESULTS.md, "The pacer"; a 2-core VM shared with
+other work, load 3.5, medians of 5 runs of 3 s): an idle 1 kHz pacer costs 10.3% of a core on asyncio
+(10.7% on trio; 8.1% and 9.1% in an earlier run at load 2.6), 0.15 of what the spin of before took
+in the same runs (69%: all of the core it could get) and 2.3 times a bare timerfd loop without an
+event loop (4.5%, the machine's cost of 1,000 sleeps and wake-ups a second). Ticks start 11 µs late
+(median, both backends). The p99 (2.5 ms there) is the wait for a core on a loaded machine, which a
+sleeping process pays and a spinning one does not: the same runs at SCHED_FIFO priority 10 (``chrt
+-f 10``, safe for a pacer that sleeps) give p99 81 µs (trio 73 µs).
 
-Elsewhere (no timerfd), or with ``precise=False``, the pacer spins as it always did: it sleeps until
+Elsewhere (no timerfd, or a C core built before it), or with ``precise=False``, the pacer spins as it
+always did: it sleeps until
 ``spin_s`` (default 1.2 ms) before the deadline and then yields to the loop (``anyio.sleep(0)``) until
 the deadline has come. At 1 kHz that holds one core at 100%, with ticks 2 µs late (median; p99 13
 µs); ``spin_s=0.0005`` takes the CPU down to 15% and the median lateness up to 0.3 ms.
