@@ -24,11 +24,11 @@ event loop (4.5%, the machine's cost of 1,000 sleeps and wake-ups a second). Tic
 sleeping process pays and a spinning one does not: the same runs at SCHED_FIFO priority 10 (``chrt
 -f 10``, safe for a pacer that sleeps) give p99 81 µs (trio 73 µs).
 
-Elsewhere (no timerfd, or a C core built before it), or with ``precise=False``, the pacer spins as it
-always did: it sleeps until
-``spin_s`` (default 1.2 ms) before the deadline and then yields to the loop (``anyio.sleep(0)``) until
-the deadline has come. At 1 kHz that holds one core at 100%, with ticks 2 µs late (median; p99 13
-µs); ``spin_s=0.0005`` takes the CPU down to 15% and the median lateness up to 0.3 ms.
+Elsewhere (no timerfd, or a C core built before it), or with ``precise=False``, the pacer spins as
+it always did: it sleeps until ``spin_s`` (default 1.2 ms) before the deadline and then yields to the
+loop (``anyio.sleep(0)``) until the deadline has come. At 1 kHz that holds one core at 100%, with
+ticks 2 µs late (median; p99 13 µs); ``spin_s=0.0005`` takes the CPU down to 15% and the median
+lateness up to 0.3 ms.
 
 Runs on asyncio and trio (through anyio; the clock is the loop's, :func:`servobus.runtime.current`),
 including virtual time (looptime, ``servobus.sim.virtual``, or trio's ``MockClock``), where every tick
