@@ -1,0 +1,79 @@
+"""bench/bench_loop.py: each runner (the Loop, the floor, ``Bus.cycle``) runs on the reflectors on both
+backends and checks what it measured; the figures and targets come from the samples as documented.
+
+CPU figures are machine-dependent and are not asserted; what is asserted is that every path did its
+work (typed replies, every reply counted, fresh state each tick) and that the ratio and the targets are
+computed from the medians the way the docstring says.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+from servobus.protocols import myactuator as ma
+from servobus.sim import virtual
+
+BENCH = Path(__file__).resolve().parents[1] / "bench"
+if str(BENCH) not in sys.path:
+    sys.path.insert(0, str(BENCH))
+
+import bench_loop  # noqa: E402
+
+BACKENDS = ("asyncio", "trio")
+
+
+def test_the_layout_is_32_motors_on_11_buses_3_per_bus_the_last_2() -> None:
+    ids = bench_loop.bus_ids()
+    assert [len(r) for r in ids] == [3] * 10 + [2]
+    flat = [i for r in ids for i in r]
+    assert flat == list(range(1, 33))  # distinct ids: one prebuilt reply table answers every bus
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("name", ["floor", "cycle"])
+def test_the_baselines_run_on_the_reflectors(backend: str, name: str) -> None:
+    replies = bench_loop.prebuilt_replies(ma.ReadStatus2())
+    sample = virtual.run(bench_loop.RUN[name](30, 5, replies), backend=backend)
+    assert sample.cpu_us > 0 and sample.wall_us > 0
+
+
+def _samples(loop: float, floor: float, cycle: float, repeats: int = 3) -> dict[str, list[bench_loop.Sample]]:
+    spread = [0.9, 1.0, 1.1][:repeats]
+    return {
+        name: [bench_loop.Sample(value * k, value * k) for k in spread]
+        for name, value in (("loop", loop), ("floor", floor), ("cycle", cycle))
+    }
+
+
+def test_figures_are_medians_and_the_ratio_is_loop_over_floor() -> None:
+    cfg = bench_loop.QUICK
+    figures = bench_loop.summarise(
+        {"asyncio": _samples(120.0, 80.0, 900.0), "trio": _samples(200.0, 150.0, 1200.0)}, cfg
+    )
+    assert figures["host_us_per_tick"] == 120.0
+    assert figures["floor_us_per_tick"] == 80.0
+    assert figures["cycle_us_per_tick"] == 900.0
+    assert figures["host_vs_floor"] == 1.5
+    assert figures["trio_host_vs_floor"] == pytest.approx(1.33)
+    assert figures["backends"]["asyncio"]["host_vs_floor_per_repeat"] == [1.5, 1.5]
+    assert figures["targets_missed"] == []
+    text = bench_loop.render_markdown(figures, _info())
+    assert "`loop.host_us_per_tick`" in text and "Met." in text and "| trio |" in text
+
+
+def test_a_missed_target_is_named() -> None:
+    figures = bench_loop.summarise({"asyncio": _samples(300.0, 100.0, 900.0)}, bench_loop.QUICK)
+    assert figures["targets_missed"] == [
+        "loop.host_us_per_tick = 300.0 (target <= 150)",
+        "loop.host_vs_floor = 3.0 (target <= 2)",
+    ]
+    assert "**Not met**" in bench_loop.render_markdown(figures, _info())
+
+
+def _info() -> dict[str, object]:
+    import _meta
+
+    return _meta.meta("bench/bench_loop.py", ["--quick"], load_average_at_start=[0.0, 0.0, 0.0])
