@@ -1,17 +1,19 @@
 """Host CPU per tick of the pipelined loop: 32 motors on 11 buses, in-process zero-latency reflectors.
 
 What is measured (each figure against baselines measured in the same run, runners alternated repeat by
-repeat, each repeat on a fresh event loop):
+repeat, each repeat on a fresh event loop; every runner paced by the same ``servobus.ticks.ticks(1000)``):
 
 * ``loop``: ``servobus.Loop(hz=1000)`` over 32 MyActuator motors on 11 buses (3 per bus, the last 2),
   one ``ReadStatus2`` per motor per tick, the body reading every motor's state (what a controller
-  does) and giving the next command: ``host_us_per_tick`` = process CPU µs per tick.
+  does) and giving the next command: ``host_us_per_tick``.
 * ``floor``: the least any host must do per tick on the same reflectors: the prebuilt request frames
-  written to each bus's reflector (``Reflector.send``), the replies read (a consumer that counts them),
-  one sleep to the next deadline; nothing encoded, decoded or matched. ``host_vs_floor`` = loop CPU per
-  tick / floor CPU per tick.
+  written to each bus's reflector (``Reflector.send``), the replies read (a consumer keeping each as
+  its sender's latest frame); nothing encoded, decoded or matched. ``host_vs_floor`` = the Loop's µs
+  per tick / the floor's.
 * ``cycle``: today's send-and-wait ``Bus.cycle`` over the same 11 buses each tick (all buses' cycles
-  awaited together, then one sleep to the next deadline as the floor's): the issue's "~400".
+  awaited together): the issue's "~400" (``cycle_us_per_tick``).
+* ``pacer``: ``ticks(1000)`` with an empty body: what the pacer alone costs per tick on this clock,
+  shown beside (``pacer_us_per_tick``; each figure net of it is in results.json).
 
 The buses' links are :class:`bench_bus.Reflector` (a FrameLink answering every frame with the reply a
 simulated motor at rest gives, looked up by arbitration id: ``bench_bus.prebuilt_replies``), so every
@@ -19,17 +21,19 @@ CPU µs is the host's.
 
 **Clock: virtual time** (``servobus.sim.virtual``: looptime's loop on asyncio, trio's
 ``MockClock(autojump_threshold=0)`` on trio). With a real clock the pacer's waiting would be part of
-the run: a spinning pacer would count as 1,000 µs per tick whatever the hot path costs, and even a
-sleeping one adds the wake-up's system calls, which belong to ``pacer.cpu_pct`` (measured by the pacer
-bench, not here). On a virtual clock every wait ends at once when nothing else is ready, so the ticks
-run back to back at 1 kHz of loop time and process CPU over them is the host's work per tick (the
-pacer's own bookkeeping included, its sleeping not). The replies come back in the same loop iteration
-(zero latency), so every tick's body sees the state its previous tick's commands asked for; the runner
-checks that (fresh state for every motor, no loss).
+the run: a spinning pacer counts 1,000 µs per tick whatever the hot path costs, and a sleeping one
+adds its wake-ups, which are ``pacer.cpu_pct`` (the pacer's own bench). On a virtual clock every wait
+ends at once when nothing else is ready, so the ticks run back to back at 1 kHz of loop time: process
+CPU over them is the host's work per tick with the pacer's bookkeeping counted and its sleeping not.
+That bookkeeping includes the pacer's test for a virtual clock (a yield, then a sleep) and the virtual
+loop's clock jump, tens of µs per tick: it is in the floor and ``cycle`` too (same pacer, same clock),
+so the ratio compares like with like, and the idle pacer's own figure says how much of each it is. The
+replies come back in the same loop iteration (zero latency), so every tick's body sees the state its
+previous tick's commands asked for; the runner checks that (fresh state for every motor, no loss).
 
-CPU = ``time.process_time`` over the measured ticks (after ``warm-up`` ticks), / ticks. Medians of
-repeats; the ratio is also given repeat by repeat (each pair ran back to back). The garbage collector
-stays on. asyncio is the figure; trio is measured beside it.
+CPU = ``time.process_time`` over the measured ticks (after warm-up ticks), / ticks; medians of repeats;
+the ratio is also given repeat by repeat (each pair ran back to back). The garbage collector stays on.
+asyncio is the figure; trio is measured beside it.
 
 Targets (issue 39): ``loop.host_us_per_tick`` <= 150; ``loop.host_vs_floor`` <= 2. When one is missed a
 py-spy profile of the loop is taken (a child process running only the loop) and shown.
@@ -55,6 +59,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import anyio
+
 BENCH_DIR = Path(__file__).resolve().parent
 if str(BENCH_DIR) not in sys.path:
     sys.path.insert(0, str(BENCH_DIR))
@@ -67,8 +73,8 @@ from servobus.bus import Bus  # noqa: E402
 from servobus.frame import Frame  # noqa: E402
 from servobus.protocols import get_family  # noqa: E402
 from servobus.protocols import myactuator as ma  # noqa: E402
-from servobus.runtime import current  # noqa: E402
 from servobus.sim import virtual  # noqa: E402
+from servobus.ticks import ticks  # noqa: E402
 
 KEY = "loop"
 HZ = 1000
@@ -76,7 +82,7 @@ FAMILY = "myactuator"
 MOTORS_PER_BUS = (3,) * 10 + (2,)  # 32 motors: 3 per bus keep a classic 1 Mbit/s bus inside 1 ms
 HOST_US_TARGET = 150.0
 VS_FLOOR_TARGET = 2.0
-RUNNERS = ("loop", "floor", "cycle")
+RUNNERS = ("loop", "floor", "cycle", "pacer")
 BACKENDS = ("asyncio", "trio")
 
 
@@ -157,9 +163,7 @@ async def run_loop(n: int, warmup: int, replies: dict[int, Frame]) -> Sample:
 
 
 async def run_cycle(n: int, warmup: int, replies: dict[int, Frame]) -> Sample:
-    """Today's send-and-wait: every bus's ``cycle`` each tick, awaited together, then one sleep to the
-    next deadline, paced as the floor is (``servobus.ticks`` would add its own test for a virtual
-    clock, a yield per tick: a cost of the test clock, not of ``cycle``)."""
+    """Today's send-and-wait: every bus's ``cycle`` each tick, awaited together, paced by ``ticks``."""
     command = ma.ReadStatus2()
     window = _Window()
     async with contextlib.AsyncExitStack() as stack:
@@ -169,15 +173,12 @@ async def run_cycle(n: int, warmup: int, replies: dict[int, Frame]) -> Sample:
             for bus, ids in zip(buses, bus_ids(), strict=True)
         ]
         gather = _gather_all()
-        sleep = _sleep_until()
         wrong = 0
-        start = current().time()
-        for index in range(warmup + n):
-            if index == warmup:
+        async for tick in ticks(HZ, count=warmup + n):
+            if tick.index == warmup:
                 window.start()
             results = await gather([bus.cycle(items) for bus, items in plan])
             wrong += sum(1 for per_bus in results for r in per_bus if not isinstance(r, ma.StatusReply))
-            await sleep(start + (index + 1) / HZ)
         sample = window.sample(n)
     if wrong:
         raise RuntimeError(f"cycle on the reflector: {wrong} results are not a StatusReply")
@@ -185,14 +186,18 @@ async def run_cycle(n: int, warmup: int, replies: dict[int, Frame]) -> Sample:
 
 
 async def run_floor(n: int, warmup: int, replies: dict[int, Frame]) -> Sample:
-    """The bare floor on the same reflectors: prebuilt request frames written, replies counted as
-    they are handed over, one sleep to each deadline; nothing encoded, decoded or matched."""
+    """The bare floor on the same reflectors, paced by ``ticks``: the prebuilt request frames written,
+    each reply kept as its sender's latest frame as it is handed over; nothing encoded, decoded or
+    matched."""
     family = get_family(FAMILY)
     command = ma.ReadStatus2()
     plan: list[tuple[Reflector, list[Frame]]] = []
     received = [0]
+    latest: dict[int, Frame] = {}
 
     def consumer(frames: Sequence[Frame]) -> None:
+        for frame in frames:  # read: each reply kept as its sender's latest, nothing decoded
+            latest[frame.arbitration_id] = frame
         received[0] += len(frames)
 
     for ids in bus_ids():
@@ -200,25 +205,31 @@ async def run_floor(n: int, warmup: int, replies: dict[int, Frame]) -> Sample:
         await reflector.open()
         reflector.set_consumer(consumer)
         plan.append((reflector, [family.bind(i).encode(command) for i in ids]))
-    runtime = current()
-    sleep = _sleep_until()
     window = _Window()
-    start = runtime.time()
-    for index in range(warmup + n):
-        if index == warmup:
+    async for tick in ticks(HZ, count=warmup + n):
+        if tick.index == warmup:
             window.start()
         for reflector, frames in plan:
             send = reflector.send
             for frame in frames:
                 send(frame)
-        await sleep(start + (index + 1) / HZ)
     sample = window.sample(n)
+    await anyio.sleep(1 / HZ)  # the last tick's replies (virtual time: at once)
     sent = sum(r.sent for r, _ in plan)
     for reflector, _ in plan:
         await reflector.close()
     if received[0] != sent:
         raise RuntimeError(f"floor: {received[0]} replies for {sent} requests")
     return sample
+
+
+async def run_pacer(n: int, warmup: int, replies: dict[int, Frame]) -> Sample:
+    """``ticks(1000)`` with an empty body: the pacer's own cost per tick on this clock (information)."""
+    window = _Window()
+    async for tick in ticks(HZ, count=warmup + n):
+        if tick.index == warmup:
+            window.start()
+    return window.sample(n)
 
 
 def _gather_all() -> Callable[[list[Coroutine[Any, Any, Any]]], Coroutine[Any, Any, list[Any]]]:
@@ -247,25 +258,11 @@ def _gather_all() -> Callable[[list[Coroutine[Any, Any, Any]]], Coroutine[Any, A
     return gather_trio
 
 
-def _sleep_until() -> Callable[[float], Coroutine[Any, Any, None]]:
-    import sniffio
-
-    if sniffio.current_async_library() == "asyncio":
-        loop = asyncio.get_running_loop()
-
-        async def sleep_asyncio(deadline: float) -> None:
-            await asyncio.sleep(max(0.0, deadline - loop.time()))
-
-        return sleep_asyncio
-    import trio
-
-    return trio.sleep_until
-
-
 RUN: dict[str, Callable[[int, int, dict[int, Frame]], Coroutine[Any, Any, Sample]]] = {
     "loop": run_loop,
     "floor": run_floor,
     "cycle": run_cycle,
+    "pacer": run_pacer,
 }
 
 
@@ -287,20 +284,29 @@ def measure(
     return samples
 
 
+def _net(runs: dict[str, list[Sample]], name: str) -> list[float]:
+    """CPU µs per tick of ``name`` minus the idle pacer's, repeat by repeat (they ran back to back)."""
+    return [a.cpu_us - p.cpu_us for a, p in zip(runs[name], runs["pacer"], strict=True)]
+
+
 def summarise(samples: dict[str, dict[str, list[Sample]]], cfg: Config) -> dict[str, Any]:
     per_backend: dict[str, Any] = {}
     for backend, runs in samples.items():
         cpu = {name: statistics.median(s.cpu_us for s in runs[name]) for name in RUNNERS}
-        wall = {name: statistics.median(s.wall_us for s in runs[name]) for name in RUNNERS}
+        net = {name: statistics.median(_net(runs, name)) for name in ("loop", "floor", "cycle")}
         pairs = [a.cpu_us / b.cpu_us for a, b in zip(runs["loop"], runs["floor"], strict=True)]
         per_backend[backend] = {
             "host_us_per_tick": round(cpu["loop"], 1),
             "floor_us_per_tick": round(cpu["floor"], 1),
             "cycle_us_per_tick": round(cpu["cycle"], 1),
+            "pacer_us_per_tick": round(cpu["pacer"], 1),
             "host_vs_floor": round(cpu["loop"] / cpu["floor"], 2),
             "host_vs_floor_per_repeat": [round(min(pairs), 2), round(max(pairs), 2)],
             "cycle_vs_host": round(cpu["cycle"] / cpu["loop"], 2),
-            "wall_us_per_tick": {k: round(v, 1) for k, v in wall.items()},
+            "net_of_pacer_us_per_tick": {name: round(value, 1) for name, value in net.items()},
+            "wall_us_per_tick": {
+                name: round(statistics.median(s.wall_us for s in runs[name]), 1) for name in RUNNERS
+            },
             "cpu_us_per_tick_runs": {k: [round(s.cpu_us, 1) for s in v] for k, v in runs.items()},
         }
     main = per_backend["asyncio"]
@@ -309,9 +315,12 @@ def summarise(samples: dict[str, dict[str, list[Sample]]], cfg: Config) -> dict[
         "host_vs_floor": main["host_vs_floor"],
         "floor_us_per_tick": main["floor_us_per_tick"],
         "cycle_us_per_tick": main["cycle_us_per_tick"],
+        "pacer_us_per_tick": main["pacer_us_per_tick"],
         "cycle_vs_host": main["cycle_vs_host"],
-        "basis": "process CPU µs per tick (time.process_time over the measured ticks), median of repeats, "
-        "virtual clock (ticks back to back at 1 kHz of loop time), asyncio",
+        "host_net_of_pacer_us_per_tick": main["net_of_pacer_us_per_tick"]["loop"],
+        "basis": "process CPU µs per tick (time.process_time over the measured ticks), median of repeats; "
+        "every runner paced by servobus.ticks.ticks(1000) on a virtual clock (ticks back to back at 1 kHz "
+        "of loop time: the pacer's bookkeeping counted, its sleeping not); asyncio",
         "layout": f"{sum(MOTORS_PER_BUS)} MyActuator motors on {len(MOTORS_PER_BUS)} buses "
         f"({'/'.join(map(str, MOTORS_PER_BUS))}), ReadStatus2 each per tick, bench_bus.Reflector per bus",
         "backends": per_backend,
@@ -368,11 +377,15 @@ def render_markdown(figures: dict[str, Any], info: dict[str, Any]) -> str:
         "last 2), one `ReadStatus2` per motor per tick and every motor's state read by the body, each bus's "
         "link a zero-latency reflector (`bench_bus.Reflector`, replies prebuilt by `prebuilt_replies`). "
         "Beside it, in the same run: the **floor** (the prebuilt request frames written to each reflector, "
-        "the replies counted as handed over, one sleep per tick: nothing encoded, decoded or matched) and "
-        "today's send-and-wait **`Bus.cycle`** over the same 11 buses each tick. Virtual clock (ticks back "
-        "to back at 1 kHz of loop time): the pacer's sleeping is not counted, its bookkeeping is. CPU = "
-        f"`time.process_time` over {sizes['ticks']:,} ticks after {sizes['warmup']} of warm-up, median of "
-        f"{sizes['repeats']} repeats, runners alternated, GC on.",
+        "the replies counted as handed over: nothing encoded, decoded or matched) and today's "
+        "send-and-wait **`Bus.cycle`** over the same 11 buses each tick. All paced by "
+        "`servobus.ticks.ticks(1000)` on a virtual clock (ticks back to back at 1 kHz of loop time); on "
+        "such a clock the pacer's sleeping costs nothing and its bookkeeping counts: its test for a "
+        "virtual clock and the clock's jump, the same in every runner; an idle pacer (`ticks(1000)`, "
+        f"empty body) costs {figures['pacer_us_per_tick']:.1f} µs per tick of each figure (net of it: the "
+        "last column). The pacer's wake-ups on a real clock are `pacer.cpu_pct`. CPU = "
+        f"`time.process_time` over {sizes['ticks']:,} ticks after "
+        f"{sizes['warmup']} of warm-up, median of {sizes['repeats']} repeats, runners alternated, GC on.",
         "",
     ]
     rows = []
@@ -385,6 +398,7 @@ def render_markdown(figures: dict[str, Any], info: dict[str, Any]) -> str:
                 "**{:.2f}** ({:.2f} to {:.2f})".format(b["host_vs_floor"], *b["host_vs_floor_per_repeat"]),
                 f"{b['cycle_us_per_tick']:.1f}",
                 f"{b['cycle_vs_host']:.2f}",
+                "{loop:.1f} / {floor:.1f} / {cycle:.1f}".format(**b["net_of_pacer_us_per_tick"]),
             )
         )
     lines += [
@@ -396,9 +410,10 @@ def render_markdown(figures: dict[str, Any], info: dict[str, Any]) -> str:
                 "Loop / floor (`loop.host_vs_floor`; per repeat)",
                 "`Bus.cycle` CPU µs/tick (`loop.cycle_us_per_tick`)",
                 "cycle / Loop",
+                "net of the idle pacer: Loop / floor / cycle",
             ],
             rows,
-            "lrrrrr",
+            "lrrrrrr",
         ),
         f"Targets (asyncio): `loop.host_us_per_tick` <= {HOST_US_TARGET:g} µs, `loop.host_vs_floor` <= "
         f"{VS_FLOOR_TARGET:g}. "

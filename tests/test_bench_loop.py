@@ -33,39 +33,47 @@ def test_the_layout_is_32_motors_on_11_buses_3_per_bus_the_last_2() -> None:
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
-@pytest.mark.parametrize("name", ["floor", "cycle"])
+@pytest.mark.parametrize("name", ["floor", "cycle", "pacer"])
 def test_the_baselines_run_on_the_reflectors(backend: str, name: str) -> None:
     replies = bench_loop.prebuilt_replies(ma.ReadStatus2())
     sample = virtual.run(bench_loop.RUN[name](30, 5, replies), backend=backend)
     assert sample.cpu_us > 0 and sample.wall_us > 0
 
 
-def _samples(loop: float, floor: float, cycle: float, repeats: int = 3) -> dict[str, list[bench_loop.Sample]]:
-    spread = [0.9, 1.0, 1.1][:repeats]
+def _samples(
+    loop: float, floor: float, cycle: float, pacer: float = 0.0
+) -> dict[str, list[bench_loop.Sample]]:
+    """Three repeats: each runner's CPU µs per tick (its gross value: the idle pacer's added)."""
+    spread = [0.9, 1.0, 1.1]
     return {
-        name: [bench_loop.Sample(value * k, value * k) for k in spread]
+        name: [bench_loop.Sample(value * k + pacer, value * k + pacer) for k in spread]
         for name, value in (("loop", loop), ("floor", floor), ("cycle", cycle))
-    }
+    } | {"pacer": [bench_loop.Sample(pacer, pacer)] * 3}
 
 
-def test_figures_are_medians_and_the_ratio_is_loop_over_floor() -> None:
+def test_figures_are_medians_the_idle_pacer_beside_and_the_ratio_is_loop_over_floor() -> None:
     cfg = bench_loop.QUICK
     figures = bench_loop.summarise(
-        {"asyncio": _samples(120.0, 80.0, 900.0), "trio": _samples(200.0, 150.0, 1200.0)}, cfg
+        {"asyncio": _samples(60.0, 40.0, 900.0, 50.0), "trio": _samples(100.0, 75.0, 1200.0, 50.0)}, cfg
     )
-    assert figures["host_us_per_tick"] == 120.0
-    assert figures["floor_us_per_tick"] == 80.0
-    assert figures["cycle_us_per_tick"] == 900.0
-    assert figures["host_vs_floor"] == 1.5
-    assert figures["trio_host_vs_floor"] == pytest.approx(1.33)
-    assert figures["backends"]["asyncio"]["host_vs_floor_per_repeat"] == [1.5, 1.5]
+    # the figures count the pacer's bookkeeping (every runner has it); net of it beside
+    assert figures["host_us_per_tick"] == 110.0
+    assert figures["floor_us_per_tick"] == 90.0
+    assert figures["cycle_us_per_tick"] == 950.0
+    assert figures["pacer_us_per_tick"] == 50.0
+    assert figures["host_net_of_pacer_us_per_tick"] == 60.0
+    net = figures["backends"]["asyncio"]["net_of_pacer_us_per_tick"]
+    assert net == {"loop": 60.0, "floor": 40.0, "cycle": 900.0}
+    assert figures["host_vs_floor"] == 1.22
+    assert figures["trio_host_vs_floor"] == 1.2
+    assert figures["backends"]["asyncio"]["host_vs_floor_per_repeat"] == [1.21, 1.23]
     assert figures["targets_missed"] == []
     text = bench_loop.render_markdown(figures, _info())
     assert "`loop.host_us_per_tick`" in text and "Met." in text and "| trio |" in text
 
 
 def test_a_missed_target_is_named() -> None:
-    figures = bench_loop.summarise({"asyncio": _samples(300.0, 100.0, 900.0)}, bench_loop.QUICK)
+    figures = bench_loop.summarise({"asyncio": _samples(250.0, 50.0, 900.0, 50.0)}, bench_loop.QUICK)
     assert figures["targets_missed"] == [
         "loop.host_us_per_tick = 300.0 (target <= 150)",
         "loop.host_vs_floor = 3.0 (target <= 2)",
