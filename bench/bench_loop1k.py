@@ -6,10 +6,14 @@ Set-up (each run):
   a simulated bus behind it: the simulator's own bit-exact bus model and motor models, clocked in real
   time (see that file for why it is not ``python -m servobus.sim``: the same models, a leaner I/O loop).
   python-can's ``virtual`` interface cannot be used: its channels are a dict inside one process.
-* **Host**: a separate process runs servobus: one ``Bus(SlcanTransport(pty))`` per bus, and one pacer,
-  ``servobus.ticks.ticks(1000)`` (default spin: the last 1.2 ms before each tick are spent yielding to
-  the loop, so at 1 kHz it never sleeps), driving every bus each tick with
-  ``asyncio.gather(*(bus.cycle(items) for each bus))``. The items (motor, command) are built once.
+* **Host** (``--mode loop``, the figures): a separate process runs servobus: one
+  ``Bus(SlcanTransport(pty))`` per bus and one pipelined ``servobus.Loop(hz=1000)`` over all of them.
+  Each tick the body reads every motor's state (``tick.state``) and gives each motor its command for the
+  next tick (``tick.command``); the Loop sends each tick's commands at its deadline, one batch per bus,
+  and hands the body the latest state with its age. The command is built once.
+* **The code before** (``--mode cycle``, measured beside in the same run, runs alternated): the same
+  buses driven by one pacer, ``servobus.ticks.ticks(1000)``, and
+  ``asyncio.gather(*(bus.cycle(items) for each bus))`` each tick (send and wait).
 * ``loop1k``: classic CAN 1 Mbit/s, 3 MyActuator motors per bus (11 buses, the last with 2: 32 motors),
   ``ReadStatus2`` to each every tick. 3 motors are 6 frames, ~750 µs of a bus's 1000 µs (4 would be 8
   frames, ~1000 µs: more than the period).
@@ -21,24 +25,31 @@ Set-up (each run):
   reason is reported. ``loop1k_fd_4pb`` (4 motors per bus, 8 buses; bound ~1,190 cycles/s) is the same
   32 hollow motors in a layout the buses can carry.
 
-Per tick, the host records the pacer's lateness (tick start - deadline: the **jitter**), whether it was
-**on time** (it ran, not skipped, and every reply of every bus was in before the next tick was due; a
-result that is not a typed reply counts as not on time), and when the tick's last reply came. Per run:
-ticks due = ``seconds x 1000``; on-time % = on-time ticks / ticks due; achieved rate = ticks run / wall
-time; jitter p50/p99/max; **reply latency** p50/p99/max (servobus's own request-to-reply time: from the
-transport's send report to the reply frame's receive time, pooled over all motors; it includes the pty
-hops and the device process's scheduling); **CPU %** of the host process (user + system time / wall, in %
-of one core; the pacer's spin is part of it) and of the device process. Medians over the runs.
+Per tick (Loop), the host records the pacer's lateness (tick start - deadline: the **jitter**), whether
+it was **on time** (started <= 200 µs late, and every command given for it was handed to its bus at its
+deadline: ``tick.sent`` equals the motors commanded; the Loop's ``commands_on_time`` / ``commands_sent``
+over the window is given beside), and every motor's **state age** (``state.age_s``: tick start - when
+the command the state answers left; what the body sees). A fresh state also gives the **reply latency**
+(``received_at`` - when its command left: the pty hops and the device process included). Per run: ticks
+due = ``seconds x 1000`` after 300 warm-up ticks; on-time % = on-time ticks / ticks due; achieved rate =
+ticks run / wall time; jitter, state age and latency p50/p99/max; the Loop's counts over the window
+(``loop.metrics()`` at its end minus its start: overruns, superseded, not sent, lost, stale states);
+**CPU %** of the host process (user + system time / wall, % of one core; the pacer's waiting is part of
+it) and of the device process. For ``--mode cycle`` (unchanged from before issue 39): on time = the tick
+ran and every reply of every bus was in before the next tick was due; reply latency from the
+transport's send report to the reply's receipt. Medians over the runs.
 
-Targets (the issue): ``loop1k``: >= 99.5 % of ticks on time and p99 jitter <= 200 µs on this 2-core
-machine. Reported as met or not, with a py-spy profile of the host (and of the device process) from an
-extra run.
+Targets (issue 39), on the Loop's figures: ``loop1k``: >= 99.5 % of ticks on time, state age p99 <= 2.5
+ms, host CPU <= 50 % of one core, jitter p99 <= 200 µs (the earlier target, kept); ``loop1k_fd*``: >=
+99.5 % on time. Reported as met or not, with a py-spy profile of the host (and of the device process)
+from an extra run of the Loop.
 
 Usage (from the repository root)::
 
-    python bench/bench_loop1k.py             # 5 runs x 30 s per layout, a profile run: ~10 min
-    python bench/bench_loop1k.py --quick     # 1 run x 1 s per layout (CI smoke), writes nothing
-    python bench/bench_loop1k.py --runs 5 --seconds 30 --only loop1k
+    python bench/bench_loop1k.py             # 5 runs x 15 s per layout and mode, a profile run: ~10 min
+    python bench/bench_loop1k.py --quick     # 1 run x 1 s per layout (CI smoke; the code before only
+                                             # for loop1k), writes nothing
+    python bench/bench_loop1k.py --runs 5 --seconds 30 --only loop1k --no-cycle
 """
 
 from __future__ import annotations

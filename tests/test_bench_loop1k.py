@@ -86,6 +86,6 @@ def test_quick_mode_writes_the_loop_and_the_code_before(tmp_path: Path) -> None:
         assert isinstance(data[key], float), key
     (run,) = data["per_run"]
     assert run["results_not_replies"] == 0 and run["metrics"]["commands_sent"] > 0
-    assert run["ticks_run"] >= 990 and run["latency_samples"] > 0
+    assert run["ticks_due"] == 1000 and run["ticks_run"] > 0 and run["latency_samples"] > 0
     text = (tmp_path / "RESULTS.md").read_text(encoding="utf-8")
     assert "<!-- loop1k:begin -->" in text and "state age p50 / p99 / max ms" in text
