@@ -130,18 +130,24 @@ class _Window:
         return Sample(cpu / ticks_run * 1e6, wall / ticks_run * 1e6)
 
 
-async def _open_buses(stack: contextlib.AsyncExitStack, replies: dict[int, Frame]) -> list[Bus]:
-    return [await stack.enter_async_context(Bus(Reflector(replies), safe=None)) for _ in MOTORS_PER_BUS]
+async def _open_buses(
+    stack: contextlib.AsyncExitStack, replies: dict[int, Frame], link: type[Reflector] = Reflector
+) -> list[Bus]:
+    return [await stack.enter_async_context(Bus(link(replies), safe=None)) for _ in MOTORS_PER_BUS]
 
 
-async def run_loop(n: int, warmup: int, replies: dict[int, Frame]) -> Sample:
-    """The pipelined Loop: every motor's state read, one ReadStatus2 per motor per tick."""
+async def run_loop(
+    n: int, warmup: int, replies: dict[int, Frame], link: type[Reflector] = Reflector
+) -> Sample:
+    """The pipelined Loop: every motor's state read, one ReadStatus2 per motor per tick. Raises when a
+    state was not fresh on a measured tick, a reply was lost or a tick overran (``link``: the
+    reflector class, for tests)."""
     from servobus.loop import Loop
 
     command = ma.ReadStatus2()
     window = _Window()
     async with contextlib.AsyncExitStack() as stack:
-        buses = await _open_buses(stack, replies)
+        buses = await _open_buses(stack, replies, link)
         motors = [bus.motor(FAMILY, i) for bus, ids in zip(buses, bus_ids(), strict=True) for i in ids]
         not_fresh = 0
         async with Loop(hz=HZ) as loop:
