@@ -25,8 +25,8 @@ young). An entry with no reply within its horizon (twice its request's timeout, 
 late reply could come that long after) is dropped and counted ``lost``.
 
 Nothing here awaits per bus or per request: a request's outcome comes to the loop through a slotted
-context (the motor's record in the loop, one per motor), the batch of each bus is sent synchronously at the deadline
-(:mod:`servobus.bus.pipeline`), and the only await is the pacer's
+context (the motor's record in the loop, one per motor), the batch of each bus is sent synchronously
+at the deadline (:mod:`servobus.bus.pipeline`), and the only await is the pacer's
 (:func:`servobus.ticks.ticks`).
 """
 
@@ -43,7 +43,7 @@ import anyio
 from servobus import runtime as _runtime
 from servobus.bus.pipeline import Superseded, prepare, send
 from servobus.bus.safety import stop_motors
-from servobus.errors import MotorNotExecuted, ProtocolError, TransportError
+from servobus.errors import MotorNotExecuted, ProtocolError
 from servobus.metrics import LatencyWindow
 from servobus.protocols import Command, Reply
 from servobus.scheduler import RequestState
@@ -447,8 +447,8 @@ class Loop:
             fifo = track.fifo
             if fifo:  # (expire() written out for its common case: the oldest within its horizon)
                 request = fifo[0][1]
-                left = request.sent_at
-                if left is None or started - left > 2.0 * request.timeout_s + track.period_s:
+                sent_at = request.sent_at
+                if sent_at is None or started - sent_at > 2.0 * request.timeout_s + track.period_s:
                     track.expire(started)
             if track.commanded:
                 if track.received_at < since:
