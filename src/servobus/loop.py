@@ -438,7 +438,6 @@ class Loop:
                     on_time += 1
         n["sent"] += left
         n["on_time"] += on_time
-        sent = self._send(index)
         started = pace.started
         since = last.started if last is not None else started
         stale = 0
@@ -455,6 +454,7 @@ class Loop:
                     stale += 1
                 if track.reply is not None:
                     add_age(started - track.sent_s)
+        sent = self._send(index)  # (after: a motor commanded first now is not stale yet)
         n["ticks"] += 1
         n["skipped"] += pace.skipped
         n["stale"] += stale
