@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from servobus.frame import Frame
 from servobus.protocols import myactuator as ma
 from servobus.sim import virtual
 
@@ -38,6 +39,30 @@ def test_the_baselines_run_on_the_reflectors(backend: str, name: str) -> None:
     replies = bench_loop.prebuilt_replies(ma.ReadStatus2())
     sample = virtual.run(bench_loop.RUN[name](30, 5, replies), backend=backend)
     assert sample.cpu_us > 0 and sample.wall_us > 0
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_the_loop_runs_on_the_reflectors_every_state_fresh(backend: str) -> None:
+    """run_loop raises unless every motor's state was fresh on every measured tick, nothing lost and
+    no overrun (the reflectors answer at once): so a Loop that lost or misattributed replies fails."""
+    replies = bench_loop.prebuilt_replies(ma.ReadStatus2())
+    sample = virtual.run(bench_loop.run_loop(30, 5, replies), backend=backend)
+    assert sample.cpu_us > 0 and sample.wall_us > 0
+
+
+class _Silent(bench_loop.Reflector):
+    """Motor 32 never answers: its request is reported sent, its reply dropped."""
+
+    def send(self, frame: Frame, handle: object = None) -> None:
+        super().send(frame, handle)
+        if frame.arbitration_id == 0x140 + 32:
+            self._out.pop()
+
+
+def test_the_loop_runner_fails_when_a_motor_never_answers() -> None:
+    replies = bench_loop.prebuilt_replies(ma.ReadStatus2())
+    with pytest.raises(RuntimeError, match="states not fresh"):
+        virtual.run(bench_loop.run_loop(30, 5, replies, _Silent))
 
 
 def _samples(
