@@ -383,7 +383,7 @@ def render_markdown(figures: dict[str, Any], info: dict[str, Any]) -> str:
         "last 2), one `ReadStatus2` per motor per tick and every motor's state read by the body, each bus's "
         "link a zero-latency reflector (`bench_bus.Reflector`, replies prebuilt by `prebuilt_replies`). "
         "Beside it, in the same run: the **floor** (the prebuilt request frames written to each reflector, "
-        "the replies counted as handed over: nothing encoded, decoded or matched) and today's "
+        "each reply kept as its sender's latest frame: nothing encoded, decoded or matched) and today's "
         "send-and-wait **`Bus.cycle`** over the same 11 buses each tick. All paced by "
         "`servobus.ticks.ticks(1000)` on a virtual clock (ticks back to back at 1 kHz of loop time); on "
         "such a clock the pacer's sleeping costs nothing and its bookkeeping counts: its test for a "
