@@ -441,7 +441,29 @@ def render_markdown(figures: dict[str, Any], info: dict[str, Any]) -> str:
             "",
             *_profile.markdown(prof, 16, unit_us=unit_us, unit="tick"),
         ]
+        halves = _halves(prof, unit_us)
+        if halves:
+            lines += ["", "The halves of a tick (inclusive shares): " + "; ".join(halves) + "."]
     return "\n".join(lines) + "\n"
+
+
+#: (function name prefix in a profile, what it stands for): the two halves of a tick and the timers
+HALVES = (
+    ("Loop._send ", "the send side, `Loop._send` (encoding, the scheduler's request and submit, the pump)"),
+    ("Reflector._flush ", "the receive side, `Reflector._flush` into `Engine.on_frames` (matching, "
+     "decoding, the loop's attribution)"),
+    ("Timer.run ", "the engine's timers, `Timer.run` (the requests' deadlines)"),
+)  # fmt: skip
+
+
+def _halves(prof: dict[str, Any], unit_us: float) -> list[str]:
+    """Where a tick's time goes, from a profile's inclusive list: each of :data:`HALVES` found."""
+    out = []
+    for prefix, label in HALVES:
+        entry = next((e for e in prof.get("inclusive", []) if e["function"].startswith(prefix)), None)
+        if entry is not None:
+            out.append(f"{label} {entry['pct']:.0f} % ({entry['pct'] / 100 * unit_us:.0f} µs)")
+    return out
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -110,3 +110,16 @@ def _info() -> dict[str, object]:
     import _meta
 
     return _meta.meta("bench/bench_loop.py", ["--quick"], load_average_at_start=[0.0, 0.0, 0.0])
+
+
+def test_the_halves_of_a_tick_are_read_from_the_profile() -> None:
+    prof = {
+        "inclusive": [
+            {"function": "run_loop (bench_loop.py)", "pct": 90.0},
+            {"function": "Loop._send (servobus/loop.py)", "pct": 40.0},
+            {"function": "Reflector._flush (bench_bus.py)", "pct": 25.0},
+        ]
+    }
+    halves = bench_loop._halves(prof, 200.0)
+    assert len(halves) == 2  # no Timer.run in this profile: not named
+    assert halves[0].endswith("40 % (80 µs)") and halves[1].endswith("25 % (50 µs)")

@@ -78,6 +78,28 @@ def test_targets_are_judged_on_the_loop_with_the_code_before_beside() -> None:
     assert "cycle" not in slow
 
 
+def test_a_missed_target_is_read_from_the_loop_s_counts_and_the_host_cost() -> None:
+    runs = [{**_loop_run(0.0, 900.0, 60.0), "wall_s": 15.0} for _ in range(3)]
+    for r, superseded in zip(runs, (10, 20, 30), strict=True):
+        r["metrics"] = {**r["metrics"], "superseded": superseded, "overruns": 5}
+    f = b.summarise(b.LAYOUTS["loop1k"], runs, [], None)
+    f["profile"] = {"devices": {"by_area": [{"area": "waiting in select/epoll (idle)", "pct": 88.0}]}}
+    text = b.why_missed(f, 1168.0)
+    assert "20 commands were superseded" in text and "5 bodies ran past" in text
+    assert "waited in select 88 %" in text and "1,168 µs" in text and "more than the 1,000 µs" in text
+    assert "within the 1,000 µs" in b.why_missed(f, 120.0)
+    del f["profile"]  # (a profile needs its own run's figures to render)
+    assert "Reading: the host ran" in b.render_markdown({"loop1k": f}, _info(), 1168.0)
+
+
+def _info() -> dict[str, Any]:
+    import _meta
+
+    return _meta.meta(
+        "bench/bench_loop1k.py", ["--quick"], load_average_at_start=[0.0] * 3, runs=1, seconds=1
+    )
+
+
 def test_a_layout_its_bus_cannot_carry_says_no_host_can() -> None:
     figures = b.summarise(b.LAYOUTS["loop1k_fd"], [_loop_run(50.0, 9.0, 30.0)], [], None)
     assert not figures["feasible_at_1khz"]
