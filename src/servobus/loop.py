@@ -200,7 +200,10 @@ class _Track:
         """A reply came (the Bus matched it to one of this motor's requests, or it is the late reply
         of one that timed out: ``MotorRecord.late``): it answers the OLDEST outstanding command
         (``reply`` None: it answered, in a way that does not decode)."""
-        now = self.time()
+        # (when it came in: the intake stamped the motor just before; no clock read per reply)
+        now = self.motor.last_seen if reply is not None else None
+        if now is None:
+            now = self.time()
         fifo = self.fifo
         while fifo:
             tick, request = fifo[0]

@@ -111,8 +111,8 @@ def send(
             engine.count(motor.codec, "probes")
         # (Engine.enqueue written out: a call less per request)
         if request.writes:
-            record = records.get(id(codec))
-            if record is not None and not record.commanded:
+            known = records.get(id(codec))
+            if known is not None and not known.commanded:
                 engine.registry.command(motor)
         codec.note_sent(command)
         submit(request, now)
