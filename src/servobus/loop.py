@@ -44,6 +44,7 @@ from servobus import runtime as _runtime
 from servobus.bus.pipeline import Superseded, prepare, send
 from servobus.bus.safety import stop_motors
 from servobus.errors import MotorNotExecuted, ProtocolError
+from servobus.frame import Frame
 from servobus.metrics import LatencyWindow
 from servobus.protocols import Command, Reply
 from servobus.scheduler import RequestState
@@ -224,6 +225,14 @@ class _Track:
                 self.reply, self.tick, self.received_at, self.sent_s = reply, tick, now, left
             return
 
+    def late(self, reply: Reply, frame: Frame) -> None:
+        """The late reply of one of the motor's requests that timed out (``MotorRecord.late``, called
+        by the Bus's intake): taken in order if it has the key of the loop's commands (else it was
+        another caller's)."""
+        key = self.motor.codec.classify(frame)[1]
+        if any(request.key == key for _, request in self.fifo):
+            self.answered(reply)
+
     def dropped(self, request: Request) -> None:
         """The FIFO's front never left: withdrawn (counted superseded), or the link refused it."""
         self.fifo.popleft()
@@ -379,7 +388,7 @@ class Loop:
         pacer, self._pacer = self._pacer, None
         for motor, track in self.tracks.items():
             record = track.bus.engine.registry.records.get(id(motor.codec))
-            if record is not None and record.late == track.answered:
+            if record is not None and record.late == track.late:
                 record.late = None
         with anyio.CancelScope(shield=True):
             if pacer is not None:
@@ -394,7 +403,7 @@ class Loop:
         track = self.tracks[motor] = _Track(motor, self.counts, self._time, self.period_s)
         record = track.bus.engine.registry.records.get(id(motor.codec))
         if record is not None:
-            record.late = track.answered  # (undone when the loop's block is left)
+            record.late = track.late  # (undone when the loop's block is left)
         return track
 
     def __aiter__(self) -> Self:
