@@ -349,14 +349,15 @@ async def test_a_cancelled_loop_sends_the_safe_stop_to_every_motor_it_commanded(
             group.start_soon(link.run)
         async with Bus(links[0], name="a") as a, Bus(links[1], name="b") as b:
             commanded = [a.motor("myactuator", 1), b.motor("myactuator", 2)]
-            idle = a.motor("myactuator", 3)  # only read by the loop: never commanded, never stopped
+            read = a.motor("myactuator", 3)  # only read by the loop: never commanded, never stopped
             with anyio.move_on_after(0.0205):
                 async with Loop(HZ) as loop:
                     async for tick in loop:
                         for m in commanded:
                             tick.command(m, ma.SpeedControl(speed_dps=10.0))
+                        tick.command(read, ma.ReadStatus2())
             stops_after_loop = [link.frames_of(0x81) for link in links]
-            assert loop.tracks.keys() == set(commanded) and idle not in loop.tracks
+            assert loop.tracks.keys() == {*commanded, read} and len(links[0].frames_of(0x9C)) > 10
             # ... and no stale command after the stop
             for link in links:
                 ((stop_at, _),) = link.frames_of(0x81)

@@ -155,6 +155,7 @@ class _Track:
         "sent_s",
         "tick",
         "time",
+        "wrote",
     )
 
     def __init__(self, motor: Motor, counts: _Counts, time: Any, period_s: float) -> None:
@@ -169,6 +170,7 @@ class _Track:
         self.sent_s = 0.0
         self.received_at = -1.0
         self.commanded = False
+        self.wrote = False  # (a command that is not a read: the motor gets the safe stop)
         self.command: Command | None = None  # (the next tick's, while it is being sent)
         self.last: Request | None = None  # its last request sent (withdrawn if still queued when superseded)
 
@@ -509,6 +511,8 @@ class Loop:
                 track = request.context
                 track.commanded = True
                 track.last = request
+                if request.writes:
+                    track.wrote = True
                 if request.key is not None:
                     track.fifo.append((index, request))
             sent += queued
@@ -521,12 +525,14 @@ class Loop:
         return left
 
     async def stop_motors(self) -> None:
-        """The safe stop (each Bus's ``safe`` command) to every motor the loop commanded, on all its
-        buses at once; the loop's commands still queued are withdrawn first."""
+        """The safe stop (each Bus's ``safe`` command) to every motor the loop sent a command that is
+        not a read (as the Bus's own safe stop), on all its buses at once; the loop's commands still
+        queued are withdrawn first."""
         by_bus: dict[Bus, dict[Motor, Command]] = {}
         for motor, track in self.tracks.items():
             bus = track.bus
-            if bus.safe is None or not bus.engine.link.is_open or bus.engine.runtime is None:
+            engine = bus.engine
+            if not track.wrote or bus.safe is None or not engine.link.is_open or engine.runtime is None:
                 continue
             bus.engine.withdraw(motor, Superseded(f"{bus.name}: the loop stops"), _not_pipelined)
             try:
