@@ -32,6 +32,7 @@ at the deadline (:mod:`servobus.bus.pipeline`), and the only await is the pacer'
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
@@ -202,7 +203,10 @@ class _Track:
     def answered(self, reply: Reply | None) -> None:
         """A reply came (the Bus matched it to one of this motor's requests, or it is the late reply
         of one that timed out: ``MotorRecord.late``): it answers the OLDEST outstanding command
-        (``reply`` None: it answered, in a way that does not decode)."""
+        (``reply`` None: it answered, in a way that does not decode). No command is given up on
+        here, however old: a reply taken in after a stall of the loop may be the oldest's, and
+        skipping it would make the state younger than it is (:meth:`expire` gives them up, at a
+        tick's start)."""
         # (when it came in: the intake stamped the motor just before; no clock read per reply)
         now = self.motor.last_seen if reply is not None else None
         if now is None:
@@ -218,10 +222,6 @@ class _Track:
                         return  # (nothing older is outstanding: not ours to attribute)
                     self.dropped(request)
                     continue
-            if now - left > 2.0 * request.timeout_s + self.period_s:
-                fifo.popleft()
-                self.counts.lost += 1
-                continue
             fifo.popleft()
             if reply is not None and tick >= self.tick:
                 self.reply, self.tick, self.received_at, self.sent_s = reply, tick, now, left
@@ -454,13 +454,17 @@ class Loop:
         since = last.started if last is not None else started
         stale = 0
         add_age = self._ages.add
+        # Commands past their horizon are given up on as of the previous tick's start: the replies
+        # that came before it were taken in since, while the pacer waited (after an overrun it may
+        # not have: none is given up on then).
+        expiry = -math.inf if overrun else since
         for track in self.tracks.values():
             fifo = track.fifo
             if fifo:  # (expire() written out for its common case: the oldest within its horizon)
                 request = fifo[0][1]
                 sent_at = request.sent_at
-                if sent_at is None or started - sent_at > 2.0 * request.timeout_s + track.period_s:
-                    track.expire(started)
+                if sent_at is None or expiry - sent_at > 2.0 * request.timeout_s + track.period_s:
+                    track.expire(expiry)
             if track.commanded:
                 if track.received_at < since:
                     stale += 1
