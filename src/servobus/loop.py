@@ -184,29 +184,28 @@ class _Track:
     def cancel(self) -> bool:
         return False
 
-    def set_result(self, reply: Reply | None) -> None:
-        """A reply came for one of the motor's requests (None: a command with no reply left)."""
-        if reply is not None:
-            self.answered(reply)
-
     def set_exception(self, error: BaseException) -> None:
         """One of the motor's requests ended without a reply: a timeout stays outstanding (its late
         reply may still come, in order); a reply that does not decode answered, in order; the others
         never left (dropped from the FIFO when they come to its front)."""
         if isinstance(error, ProtocolError | MotorNotExecuted):
-            self.answered(None)
+            self.answered(None, spoiled=True)
         elif isinstance(error, Superseded):
             self.counts.superseded += 1
 
     # ---- attribution ----
 
-    def answered(self, reply: Reply | None) -> None:
+    def answered(self, reply: Reply | None, spoiled: bool = False) -> None:
         """A reply came (the Bus matched it to one of this motor's requests, or it is the late reply
-        of one that timed out: ``MotorRecord.late``): it answers the OLDEST outstanding command
-        (``reply`` None: it answered, in a way that does not decode). No command is given up on
-        here, however old: a reply taken in after a stall of the loop may be the oldest's, and
-        skipping it would make the state younger than it is (:meth:`expire` gives them up, at a
-        tick's start)."""
+        of one that timed out: :meth:`late`): it answers the OLDEST outstanding command. ``reply``
+        None: a command with no reply left (nothing to attribute), or with ``spoiled`` the motor
+        answered in a way that does not decode (it took its place in the order all the same).
+
+        No command is given up on here, however old: a reply taken in after a stall of the loop may
+        be the oldest's, and skipping it would make the state younger than it is (:meth:`expire`
+        gives them up, at a tick's start)."""
+        if reply is None and not spoiled:
+            return
         # (when it came in: the intake stamped the motor just before; no clock read per reply)
         now = self.motor.last_seen if reply is not None else None
         if now is None:
@@ -226,6 +225,9 @@ class _Track:
             if reply is not None and tick >= self.tick:
                 self.reply, self.tick, self.received_at, self.sent_s = reply, tick, now, left
             return
+
+    #: the Bus settles a request's reply here (None: a command with no reply left)
+    set_result = answered
 
     def late(self, reply: Reply, frame: Frame) -> None:
         """The late reply of one of the motor's requests that timed out (``MotorRecord.late``, called
