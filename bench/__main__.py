@@ -65,6 +65,7 @@ PARTS = {
     "loop1k": "bench_loop1k",
     "scaling": "bench_scaling",
     "remote": "bench_remote",
+    "pacer": "bench_pacer",
 }
 SUMMARY = "summary"
 

@@ -210,3 +210,27 @@ int sb_slcan_reset(sb_slcan *s);
  * *consumed is 0 after an error. */
 int sb_slcan_feed(sb_slcan *s, const char *data, size_t len, size_t *consumed, sb_slcan_frame *out,
                   size_t max_frames);
+
+/* ---- precise timer (timer.c) ----
+ * The exception to "no system calls" above: a CLOCK_MONOTONIC timer an event loop can wait on, for
+ * the pacer (servobus/ticks.py) to sleep to a deadline without spinning. On Linux a timerfd, created
+ * non-blocking and close-on-exec; the caller owns the descriptor and closes it (os.close). It reads
+ * as ready once its deadline has passed, until sb_timer_clear. Elsewhere every function returns
+ * SB_E_UNSUPPORTED. System errors return SB_E_OS with errno in *err (err may be NULL). */
+#define SB_E_OS -5           /* a system call failed: errno in *err */
+#define SB_E_UNSUPPORTED -6  /* no such timer on this platform */
+
+/* A new timer (disarmed): its descriptor (>= 0), SB_E_OS or SB_E_UNSUPPORTED. */
+int sb_timer_open(int *err);
+/* Arm it at an ABSOLUTE CLOCK_MONOTONIC time in ns (TFD_TIMER_ABSTIME), replacing any earlier
+ * deadline and dropping an expiry not yet cleared; a deadline already passed (0 included) expires
+ * at once. SB_OK, SB_E_ARG for fd < 0 or deadline_ns < 0, SB_E_OS, SB_E_UNSUPPORTED. */
+int sb_timer_arm(int fd, int64_t deadline_ns, int *err);
+/* Disarm it, dropping an expiry not yet cleared. SB_OK, SB_E_ARG, SB_E_OS, SB_E_UNSUPPORTED. */
+int sb_timer_disarm(int fd, int *err);
+/* Clear its expiry (read): how many deadlines expired since the last clear (>= 1), 0 when none has
+ * (it does not block), or SB_E_ARG / SB_E_OS / SB_E_UNSUPPORTED. */
+int64_t sb_timer_clear(int fd, int *err);
+/* CLOCK_MONOTONIC now, in ns (the clock sb_timer_arm takes; time.monotonic_ns() reads the same on
+ * Linux), or SB_E_UNSUPPORTED. */
+int64_t sb_timer_now_ns(void);
