@@ -808,8 +808,13 @@ def why_missed(f: dict[str, Any], loop_host_us: float | None) -> str:
         for name in ("overruns", "superseded", "not_sent", "lost")
     }
     seconds = statistics.median(r["wall_s"] for r in f["per_run"])
+    cpu_us = f["host_cpu_pct"] / 100 * 1e6 / f["achieved_hz"] if f["achieved_hz"] else math.nan
+    loads = [r["load_before"][0] for r in f["per_run"] if "load_before" in r]
     text = (
-        f"Reading: the host ran {f['achieved_hz']:,.0f} of 1,000 ticks/s, {counts['overruns']:,.0f} bodies "
+        f"Reading: the host ran {f['achieved_hz']:,.0f} of 1,000 ticks/s at {f['host_cpu_pct']:.0f} % of a "
+        f"core, {cpu_us:,.0f} CPU µs per tick run (1-minute load {min(loads, default=0):.1f}-"
+        f"{max(loads, default=0):.1f} on the machine's cores: a runnable host also waits for a core); "
+        f"{counts['overruns']:,.0f} bodies "
         f"ran past the next deadline in {seconds:.0f} s; {counts['superseded']:,.0f} commands were "
         "superseded (given while the motor's previous one was still queued), "
         f"{counts['not_sent']:,.0f} not sent (motors the Bus took offline after missed replies: probed, "
