@@ -436,3 +436,20 @@ async def test_a_reply_that_does_not_decode_takes_its_place_in_the_order() -> No
     loop, seen = await _run(links, 60)
     assert _check_attribution(seen, exact=True) > 90
     assert loop.metrics().lost == 0
+
+
+async def test_a_tick_shows_the_states_as_of_its_start_while_its_body_awaits() -> None:
+    # Replies take half a tick: this tick's own reply comes while the body sleeps 0.8 of a period.
+    before_after: list[tuple[MotorState | None, MotorState | None]] = []
+
+    async def body(tick: LoopTick, motors: list[Any]) -> None:
+        if tick.index in (10, 11, 12):
+            before = tick.state(motors[0])
+            await anyio.sleep(0.8 * PERIOD)
+            before_after.append((before, tick.state(motors[0])))
+
+    links = [DelayLink(lambda i: 0.5 * PERIOD)]
+    await _run(links, 20, body=body)
+    assert len(before_after) == 3
+    for before, after in before_after:
+        assert before is not None and after == before and after.age_ticks == 1

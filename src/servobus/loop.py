@@ -151,6 +151,7 @@ class _Track:
         "last",
         "motor",
         "period_s",
+        "previous",
         "received_at",
         "reply",
         "sent_s",
@@ -170,6 +171,9 @@ class _Track:
         self.tick = -1
         self.sent_s = 0.0
         self.received_at = -1.0
+        #: the state before the latest: (reply, tick, received_at, sent_s), for a tick that asks
+        #: after a newer reply came in during its body (it sees the state as of its start)
+        self.previous: tuple[Reply, int, float, float] | None = None
         self.commanded = False
         self.wrote = False  # (a command that is not a read: the motor gets the safe stop)
         self.command: Command | None = None  # (the next tick's, while it is being sent)
@@ -223,6 +227,8 @@ class _Track:
                     continue
             fifo.popleft()
             if reply is not None and tick >= self.tick:
+                if self.reply is not None:
+                    self.previous = (self.reply, self.tick, self.received_at, self.sent_s)
                 self.reply, self.tick, self.received_at, self.sent_s = reply, tick, now, left
             return
 
@@ -312,17 +318,20 @@ class LoopTick:
         self._since = since
 
     def state(self, motor: Motor) -> MotorState | None:
-        """``motor``'s latest state (None: no reply yet, or a motor the loop never commanded)."""
+        """``motor``'s latest state as of this tick's start (None: no reply by then, or a motor the
+        loop never commanded). A reply taken in while the body awaits is the next tick's."""
         track = self._loop.tracks.get(motor)
         if track is None or track.reply is None:
             return None
+        started = self.started
+        if track.received_at <= started:  # (the common case)
+            reply, tick, received_at, sent_s = track.reply, track.tick, track.received_at, track.sent_s
+        elif track.previous is not None:  # (if it came during the body too, it is the older one)
+            reply, tick, received_at, sent_s = track.previous
+        else:
+            return None
         return MotorState(
-            track.reply,
-            track.tick,
-            self.index - track.tick,
-            self.started - track.sent_s,
-            track.received_at,
-            track.received_at >= self._since,
+            reply, tick, self.index - tick, started - sent_s, received_at, received_at >= self._since
         )
 
     def command(self, motor: Motor, command: Command) -> None:
