@@ -235,6 +235,7 @@ async def test_each_state_answers_the_tick_whose_command_left_with_its_exact_age
     assert metrics.state_age_max_s is not None
     assert metrics.state_age_max_s <= (math.ceil(latency_ticks) + 1) * PERIOD + 1e-9
     assert all(tick.sent == (4 if tick.index else 0) for tick, _ in seen)
+    assert all(tick.commands_late == 0 for tick, _ in seen)
 
 
 async def test_jitter_loss_and_a_silent_motor_never_make_a_state_younger_than_its_command() -> None:
@@ -315,7 +316,7 @@ async def test_a_command_still_queued_at_the_next_deadline_is_superseded_never_s
     # A half-duplex line, replies 2 ticks late: of two motors' commands one waits its turn, and the
     # next tick's command for that motor replaces it.
     link = DelayLink(lambda i: 2 * PERIOD, rules=LineRules(half_duplex=True))
-    loop, _ = await _run([link], 40)
+    loop, seen = await _run([link], 40)
     metrics = loop.metrics()
     assert metrics.superseded > 10
     for t, frame in link.frames_of(0xA2):
@@ -325,6 +326,10 @@ async def test_a_command_still_queued_at_the_next_deadline_is_superseded_never_s
         assert t <= (given + 1) * PERIOD + 1e-9, (t, given)
     # (bodies 0..39 gave 80: the last body's never leave, the one before's are judged at no tick)
     assert 76 <= metrics.commands_sent + metrics.superseded + metrics.not_sent <= 78
+    # (a tick whose commands did not all leave within it says so at the next)
+    late = [tick for tick, _ in seen if tick.commands_late]
+    # (ticks 1..38's commands, judged at ticks 2..39)
+    assert late and sum(tick.commands_late for tick in late) == 38 * 2 - metrics.commands_on_time
 
 
 async def test_a_refused_command_raises_before_any_frame_of_the_tick_leaves() -> None:

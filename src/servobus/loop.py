@@ -279,11 +279,14 @@ class LoopTick:
         overrun: the previous body ran past this tick's deadline.
         stale: motors commanded before with no fresh state (no reply since the previous tick started).
         sent: requests handed to their links at this deadline.
+        commands_late: of the previous tick's commands, those that did not leave before this
+            tick's deadline (0: every one left within its tick).
     """
 
     __slots__ = (
         "_loop",
         "_since",
+        "commands_late",
         "deadline",
         "index",
         "late_s",
@@ -305,8 +308,10 @@ class LoopTick:
         stale: int,
         sent: int,
         since: float,
+        commands_late: int,
     ) -> None:
         self._loop = loop
+        self.commands_late = commands_late
         self.index = index
         self.deadline = deadline
         self.started = started
@@ -452,12 +457,16 @@ class Loop:
         index = self._offset + pace.index
         deadline = pace.deadline
         overrun = last is not None and body_end > last.deadline + self.period_s
+        # The last tick's commands, judged now (a send report may come after the hand-over): out
+        # within their tick, i.e. before the next deadline of the grid (this one, unless skipped).
+        within = last.deadline + self.period_s if last is not None else deadline
         left = on_time = 0
-        for request in self._previous:  # (judged now: a send report may come after the hand-over)
+        previous = self._previous
+        for request in previous:
             if request.handed_at is not None:
                 left += 1
                 sent_at = request.sent_at
-                if sent_at is not None and sent_at <= deadline:
+                if sent_at is not None and sent_at <= within:
                     on_time += 1
         n["sent"] += left
         n["on_time"] += on_time
@@ -491,8 +500,9 @@ class Loop:
         self._lates.add(late_s)
         if late_s > LATE_TICK_S:
             n["late"] += 1
+        commands_late = len(previous) - on_time
         tick = self._last = LoopTick(
-            self, index, deadline, started, pace.skipped, overrun, stale, sent, since
+            self, index, deadline, started, pace.skipped, overrun, stale, sent, since, commands_late
         )
         return tick
 
