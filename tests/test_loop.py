@@ -458,3 +458,28 @@ async def test_a_tick_shows_the_states_as_of_its_start_while_its_body_awaits() -
     assert len(before_after) == 3
     for before, after in before_after:
         assert before is not None and after == before and after.age_ticks == 1
+
+
+async def test_a_second_iteration_goes_on_on_the_same_grid() -> None:
+    link = DelayLink(lambda i: 0.5 * PERIOD)
+    indices: list[list[int]] = []
+    async with anyio.create_task_group() as group:
+        group.start_soon(link.run)
+        async with Bus(link, name="a", safe=None) as bus:
+            m = bus.motor("myactuator", 1)
+            async with Loop(HZ) as loop:
+                for count in (3, None, 2):
+                    run: list[int] = []
+                    async for tick in loop.ticks(count=count):
+                        run.append(tick.index)
+                        tick.command(m, ma.SpeedControl(speed_dps=float(tick.index)))
+                        if count is None and tick.index == 5:
+                            break
+                    indices.append(run)
+                    await anyio.sleep(2.5 * PERIOD)  # (two ticks' time passes between runs)
+        group.cancel_scope.cancel()
+    # (each pause of 2.5 periods skips one tick whole and makes the next late; the time between
+    # two iterations counts as the last body's: an overrun)
+    assert indices == [[0, 1, 2], [4, 5], [7, 8]]
+    metrics = loop.metrics()
+    assert (metrics.ticks, metrics.skipped, metrics.overruns, metrics.late_ticks) == (7, 2, 2, 2)

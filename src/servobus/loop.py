@@ -389,7 +389,6 @@ class Loop:
         self._time: Any = None
         self._pacer: AsyncIterator[Any] | None = None
         self._count: int | None = None
-        self._offset = 0  # (tick indices go on across runs of ticks())
         self._last: LoopTick | None = None
         self._previous: list[Request] = []  # the last tick's requests (on time at the next?)
         self._ages = LatencyWindow(4096)
@@ -428,7 +427,9 @@ class Loop:
         return self
 
     def ticks(self, count: int | None = None) -> Self:
-        """Iterate ``count`` ticks (None: until the body breaks out)."""
+        """Iterate ``count`` ticks (None: until the body breaks out). The pacer runs on between
+        iterations of one block: a later ``async for`` goes on on the same grid (the ticks whose
+        time passed meanwhile are counted ``skipped``, the time between as the last body's)."""
         if count is not None and count < 0:
             raise ValueError(f"count={count} must be >= 0")
         self._count = count
@@ -436,25 +437,24 @@ class Loop:
 
     async def __anext__(self) -> LoopTick:
         body_end = self._time() if self._time is not None else 0.0
+        count = self._count
+        if count is not None:
+            if count == 0:
+                self._count = None  # (the next iteration, unless told, has no end)
+                raise StopAsyncIteration
+            self._count = count - 1
         if self._pacer is None:
             if self._time is None:
                 raise RuntimeError("use the Loop inside 'async with'")
-            self._pacer = ticks(self.hz, count=self._count).__aiter__()
-            self._count = None
-        try:
-            pace = await self._pacer.__anext__()
-        except StopAsyncIteration:
-            self._pacer = None
-            if self._last is not None:
-                self._offset = self._last.index + 1
-            raise
+            self._pacer = ticks(self.hz).__aiter__()
+        pace = await self._pacer.__anext__()
         return self._begin(pace, body_end)
 
     def _begin(self, pace: Any, body_end: float) -> LoopTick:
         """The tick the pacer gave: the last tick's requests judged, this one's sent, its view made."""
         n = self._n
         last = self._last
-        index = self._offset + pace.index
+        index = pace.index
         deadline = pace.deadline
         overrun = last is not None and body_end > last.deadline + self.period_s
         # The last tick's commands, judged now (a send report may come after the hand-over): out
