@@ -12,6 +12,9 @@ What is measured (every configuration in each repeat, their order alternated, me
 * ``pacer.floor_*``: the machine's own floor, no event loop: a loop that arms the same timerfd and
   blocks in ``epoll_wait`` on it (the CPU a sleep and a wake-up 1,000 times a second cost here, and
   how late the kernel wakes a process).
+* ``pacer.rt_*``, ``pacer.rt_trio_*`` (info, where the process may take a real-time priority): the
+  timer's runs again with the process at SCHED_FIFO priority 10 (``chrt -f 10``), which a sleeping
+  pacer can use safely (a spinning one at that priority would starve the machine's other work).
 * ``pacer.cpu_vs_spin``: ``cpu_pct / spin_cpu_pct``; ``pacer.cpu_vs_floor``: ``cpu_pct / floor_cpu_pct``.
 
 The machine is shared (2 cores, other work running): a process that sleeps waits for a core when it
@@ -27,6 +30,7 @@ Usage (from the repository root)::
 from __future__ import annotations
 
 import argparse
+import os
 import select
 import statistics
 import sys
@@ -51,6 +55,7 @@ KEY = "pacer"
 HZ = 1000
 TARGET_CPU_PCT = 5.0
 TARGET_LATE_P99_US = 100.0
+RT_PRIORITY = 10
 
 
 @dataclass(frozen=True, slots=True)
@@ -129,6 +134,30 @@ def run_floor(seconds: float) -> Run:
             poller.close()
 
 
+def can_run_realtime() -> bool:
+    """True when this process may take SCHED_FIFO (root, or CAP_SYS_NICE, on Linux)."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(RT_PRIORITY))
+    except (AttributeError, OSError):
+        return False
+    os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    return True
+
+
+def realtime(run: Callable[[float], Run]) -> Callable[[float], Run]:
+    """``run`` with this process at SCHED_FIFO priority RT_PRIORITY (a sleeping pacer: it cannot
+    starve the machine, as a spinning one at that priority would), then back to SCHED_OTHER."""
+
+    def wrapped(seconds: float) -> Run:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(RT_PRIORITY))
+        try:
+            return run(seconds)
+        finally:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+    return wrapped
+
+
 CONFIGS: dict[str, Callable[[float], Run]] = {
     "": lambda s: run_pacer("asyncio", True, s),
     "trio_": lambda s: run_pacer("trio", True, s),
@@ -136,14 +165,21 @@ CONFIGS: dict[str, Callable[[float], Run]] = {
     "spin_trio_": lambda s: run_pacer("trio", False, s),
     "floor_": run_floor,
 }
+#: the timer again with a real-time priority (SCHED_FIFO), where the process may take one: how late the
+#: ticks are when the process does not wait for a core behind others' work
+RT_CONFIGS: dict[str, Callable[[float], Run]] = {
+    "rt_": realtime(CONFIGS[""]),
+    "rt_trio_": realtime(CONFIGS["trio_"]),
+}
 
 
 def measure(cfg: Config, say: Callable[[str], None]) -> dict[str, Any]:
-    runs: dict[str, list[Run]] = {prefix: [] for prefix in CONFIGS}
-    order = list(CONFIGS)
+    configs = {**CONFIGS, **(RT_CONFIGS if can_run_realtime() else {})}
+    runs: dict[str, list[Run]] = {prefix: [] for prefix in configs}
+    order = list(configs)
     for repeat in range(cfg.repeats):
         for prefix in order if repeat % 2 == 0 else reversed(order):
-            run = CONFIGS[prefix](cfg.seconds)
+            run = configs[prefix](cfg.seconds)
             runs[prefix].append(run)
             say(
                 f"  repeat {repeat + 1} {prefix or 'timer_'}: cpu {run.cpu_pct:.1f} %, late p50 "
@@ -160,6 +196,7 @@ def measure(cfg: Config, say: Callable[[str], None]) -> dict[str, Any]:
     figures["cpu_vs_spin"] = round(figures["cpu_pct"] / figures["spin_cpu_pct"], 3)
     figures["trio_cpu_vs_spin"] = round(figures["trio_cpu_pct"] / figures["spin_trio_cpu_pct"], 3)
     figures["cpu_vs_floor"] = round(figures["cpu_pct"] / figures["floor_cpu_pct"], 2)
+    figures["realtime_measured"] = "rt_" in runs
     figures["hz"] = HZ
     figures["seconds_per_run"] = cfg.seconds
     figures["repeats"] = cfg.repeats
@@ -190,6 +227,11 @@ def render_markdown(f: dict[str, Any], info: dict[str, Any]) -> str:
         row("spin (before), trio (`pacer.spin_trio_*`)", "spin_trio_"),
         row("floor: timerfd + epoll_wait, no event loop (`pacer.floor_*`)", "floor_"),
     ]
+    if f["realtime_measured"]:
+        rows += [
+            row(f"timer, asyncio, SCHED_FIFO {RT_PRIORITY} (`pacer.rt_*`, info)", "rt_"),
+            row(f"timer, trio, SCHED_FIFO {RT_PRIORITY} (`pacer.rt_trio_*`, info)", "rt_trio_"),
+        ]
     doc = (__doc__ or "").split("What is measured", 1)[1].split("\n\nUsage", 1)[0]
     lines = [
         *_meta.header_lines("## The pacer: an idle 1 kHz `ticks()` (`bench/bench_pacer.py`)", info),

@@ -246,3 +246,31 @@ def test_the_offset_is_measured_not_assumed() -> None:
     assert abs(seen_s) > 1.0
     assert offset_ns / 1e9 == pytest.approx(seen_s, abs=0.001)
     assert 0 <= uncertainty_ns < 1_000_000
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_aclose_while_another_task_waits_for_a_tick_waits_for_it_then_closes(backend: str) -> None:
+    """A blocking caller interrupted mid-wait (servobus.sync's ``for tick in bus.ticks()`` taking a
+    signal) closes the pacer from another task: the tick in flight still comes, then the pacer closes
+    (an async generator's own aclose() raises "already running" there)."""
+
+    async def main() -> tuple[list[Tick], int, int]:
+        pacer = ticks(100)
+        got: list[Tick] = [await pacer.__anext__()]
+
+        async def next_one() -> None:
+            got.append(await pacer.__anext__())
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(next_one)
+            await anyio.sleep(0.002)  # next_one now waits for tick 1 (due 10 ms after tick 0)
+            during = _timerfds()
+            await pacer.aclose()  # type: ignore[attr-defined]
+        with pytest.raises(StopAsyncIteration):
+            await pacer.__anext__()
+        return got, during, _timerfds()
+
+    before = _timerfds()
+    got, during, after = _run(backend, main)
+    assert [t.index for t in got][:1] == [0] and len(got) == 2
+    assert (during, after) == (before + 1, before)

@@ -7,6 +7,10 @@
 
 Sans-IO: nothing here awaits, sleeps or reads a clock. Only servobus.core._lib imports the
 compiled module, and nothing above this package sees cdata.
+
+The one exception, imported by name and not re-exported here: :mod:`servobus.core.timer`, the
+pacer's CLOCK_MONOTONIC timerfd (system calls to arm and clear it; it never waits: the event loop
+does, in servobus.ticks).
 """
 
 from servobus.core.crc import crc16_modbus, crc32_ieee

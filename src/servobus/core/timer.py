@@ -21,14 +21,12 @@ from servobus.core._lib import ffi, lib, raise_status
 
 __all__ = ["MonotonicTimer", "TimerUnsupported", "available", "now_ns"]
 
-if not hasattr(lib, "sb_timer_open"):  # pragma: no cover - a core built before csrc/timer.c existed
-    raise ImportError(
-        "servobus._core has no sb_timer_* (csrc/timer.c): the compiled core is stale; rebuild it "
-        "(`pip install -e .` in a checkout)."
-    )
-
-_E_OS: int = lib.SB_E_OS
-_E_UNSUPPORTED: int = lib.SB_E_UNSUPPORTED
+# A core compiled before csrc/timer.c has no timer: the pacer then spins, as where there is no timerfd,
+# rather than the whole package failing to import (rebuild it: `pip install -e .` in a checkout).
+_BUILT_WITH_TIMER = hasattr(lib, "sb_timer_open")
+_STALE = "the compiled core predates csrc/timer.c: rebuild it (`pip install -e .` in a checkout)"
+_E_OS: int = lib.SB_E_OS if _BUILT_WITH_TIMER else -5
+_E_UNSUPPORTED: int = lib.SB_E_UNSUPPORTED if _BUILT_WITH_TIMER else -6
 
 
 class TimerUnsupported(OSError):
@@ -48,8 +46,8 @@ def _check(status: int, err: Any, what: str) -> None:
 
 
 def available() -> bool:
-    """True when this platform has the timer (the C core was built for Linux)."""
-    return bool(lib.sb_timer_now_ns() != _E_UNSUPPORTED)
+    """True when this platform has the timer (the C core was built for Linux, with csrc/timer.c)."""
+    return _BUILT_WITH_TIMER and bool(lib.sb_timer_now_ns() != _E_UNSUPPORTED)
 
 
 def now_ns() -> int:
@@ -58,6 +56,8 @@ def now_ns() -> int:
     Raises:
         TimerUnsupported: no timer on this platform.
     """
+    if not _BUILT_WITH_TIMER:  # pragma: no cover - a stale build
+        raise TimerUnsupported(_STALE)
     now: int = lib.sb_timer_now_ns()
     _check(now, None, "now_ns")
     return now
@@ -78,6 +78,8 @@ class MonotonicTimer:
 
     def __init__(self) -> None:
         self._fd = -1  # (set before anything can fail: __del__ reads it)
+        if not _BUILT_WITH_TIMER:  # pragma: no cover - a stale build
+            raise TimerUnsupported(_STALE)
         self._err = ffi.new("int *")
         fd: int = lib.sb_timer_open(self._err)
         _check(fd, self._err, "timerfd_create")
