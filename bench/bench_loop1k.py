@@ -26,9 +26,10 @@ Set-up (each run):
   32 hollow motors in a layout the buses can carry.
 
 Per tick (Loop), the host records the pacer's lateness (tick start - deadline: the **jitter**), whether
-it was **on time** (started <= 200 µs late, and every command given for it was handed to its bus at its
-deadline: ``tick.sent`` equals the motors commanded; the Loop's ``commands_on_time`` / ``commands_sent``
-over the window is given beside), and every motor's **state age** (``state.age_s``: tick start - when
+it was **on time** (started <= 200 µs late, every command given for it handed to its bus at its deadline:
+``tick.sent`` equals the motors commanded, and every one left before the next deadline: the next tick's
+``commands_late`` is 0; the Loop's ``commands_on_time`` / ``commands_sent`` over the window is given
+beside), and every motor's **state age** (``state.age_s``: tick start - when
 the command the state answers left; what the body sees). A fresh state also gives the **reply latency**
 (``received_at`` - when its command left: the pty hops and the device process included). Per run: ticks
 due = ``seconds x 1000`` after 300 warm-up ticks; on-time % = on-time ticks / ticks due; achieved rate =
@@ -209,7 +210,8 @@ async def host_loop(layout: Layout, paths: Sequence[str], seconds: float, device
         late = array.array("d")
         ages = array.array("d")
         latency = array.array("d")
-        on_time = late_ticks = not_out = no_state = wrong = 0
+        on_time = late_ticks = not_out = left_late = no_state = wrong = 0
+        prev_ok: bool | None = None  # the previous tick's start and hand-over: judged whole at this one
         wrong_types: set[str] = set()
         window = _Window(device_pid)
         loop = Loop(hz=HZ)
@@ -221,10 +223,13 @@ async def host_loop(layout: Layout, paths: Sequence[str], seconds: float, device
                         window.open(loop.metrics())
                     late_s = tick.late_s
                     late.append(late_s)
+                    if prev_ok is not None:  # did the previous tick's commands all leave within it?
+                        on_time += prev_ok and not tick.commands_late
+                        left_late += tick.commands_late > 0
                     out = tick.sent == expected
                     not_out += not out
                     late_ticks += late_s > LATE_S
-                    on_time += late_s <= LATE_S and out
+                    prev_ok = late_s <= LATE_S and out
                     started = tick.started
                     for motor in motors:
                         state = tick.state(motor)
@@ -238,6 +243,8 @@ async def host_loop(layout: Layout, paths: Sequence[str], seconds: float, device
                                 wrong += 1  # of a motor it took offline: another reply type
                                 wrong_types.add(type(state.reply).__name__)
                 elif index >= end and window.after is None and window.before is not None:
+                    on_time += bool(prev_ok) and not tick.commands_late
+                    left_late += tick.commands_late > 0
                     window.close(loop.metrics())
                 for motor in motors:
                     tick.command(motor, command)
@@ -264,6 +271,7 @@ async def host_loop(layout: Layout, paths: Sequence[str], seconds: float, device
         "on_time_pct": 100 * on_time / due,
         "ticks_late": late_ticks,
         "ticks_not_all_out": not_out,
+        "ticks_commands_left_late": left_late,
         "achieved_hz": len(late) / wall,
         "jitter_p50_us": jitter["p50"] * 1e6,
         "jitter_p99_us": jitter["p99"] * 1e6,
@@ -540,6 +548,7 @@ LOOP_KEYS = (
     "on_time_pct", "achieved_hz", "jitter_p50_us", "jitter_p99_us", "jitter_max_us", "state_age_p50_ms",
     "state_age_p99_ms", "state_age_max_ms", "latency_p50_us", "latency_p99_us", "latency_max_us",
     "host_cpu_pct", "device_cpu_pct", "commands_on_time_pct", "ticks_late", "ticks_not_all_out",
+    "ticks_commands_left_late",
 )  # fmt: skip
 CYCLE_KEYS = (
     "on_time_pct", "achieved_hz", "jitter_p50_us", "jitter_p99_us", "jitter_max_us", "latency_p50_us",
@@ -638,7 +647,8 @@ def render_markdown(
         "its command for the next tick (`tick.command`; classic CAN: `ReadStatus2`). Devices: one other "
         "process (`bench/_can_devices.py`) serving one SLCAN pty per bus, each with the simulator's "
         "bit-exact bus model and motor models in real time. **On time** = the tick started <= 200 µs after "
-        "its deadline and every command given for it was handed to its bus at that deadline (`tick.sent`); "
+        "its deadline, every command given for it was handed to its bus at that deadline (`tick.sent`) and "
+        "left before the next one (the next tick's `commands_late` is 0); "
         "**jitter** = tick start - deadline; **state age** = what the body sees, `state.age_s` (tick start "
         "- when the command the state answers left), every motor every tick; **reply latency** = a fresh "
         "state's `received_at` - when its command left (pty hops and the device process included); "
@@ -707,7 +717,7 @@ def render_markdown(
             f"`{key}`",
             f"{f['commands_on_time_pct']:.2f}",
             f"{f['ticks_late']:.0f}",
-            f"{f['ticks_not_all_out']:.0f}",
+            f"{f['ticks_not_all_out']:.0f} / {f.get('ticks_commands_left_late', math.nan):.0f}",
             ", ".join(
                 f"{name} {statistics.median(r['metrics'][name] for r in f['per_run']):,.0f}"
                 for name in ("overruns", "superseded", "not_sent", "lost", "stale_states")
@@ -726,7 +736,7 @@ def render_markdown(
                     "key",
                     "commands on time % (`commands_on_time` / `commands_sent`)",
                     "ticks > 200 µs late",
-                    "ticks with a command not out",
+                    "ticks with a command not handed over / not out within the tick",
                     "overruns, superseded, not sent, lost, stale states",
                 ],
                 detail,
