@@ -6,10 +6,14 @@ Set-up (each run):
   a simulated bus behind it: the simulator's own bit-exact bus model and motor models, clocked in real
   time (see that file for why it is not ``python -m servobus.sim``: the same models, a leaner I/O loop).
   python-can's ``virtual`` interface cannot be used: its channels are a dict inside one process.
-* **Host**: a separate process runs servobus: one ``Bus(SlcanTransport(pty))`` per bus, and one pacer,
-  ``servobus.ticks.ticks(1000)`` (default spin: the last 1.2 ms before each tick are spent yielding to
-  the loop, so at 1 kHz it never sleeps), driving every bus each tick with
-  ``asyncio.gather(*(bus.cycle(items) for each bus))``. The items (motor, command) are built once.
+* **Host** (``--mode loop``, the figures): a separate process runs servobus: one
+  ``Bus(SlcanTransport(pty))`` per bus and one pipelined ``servobus.Loop(hz=1000)`` over all of them.
+  Each tick the body reads every motor's state (``tick.state``) and gives each motor its command for the
+  next tick (``tick.command``); the Loop sends each tick's commands at its deadline, one batch per bus,
+  and hands the body the latest state with its age. The command is built once.
+* **The code before** (``--mode cycle``, measured beside in the same run, runs alternated): the same
+  buses driven by one pacer, ``servobus.ticks.ticks(1000)``, and
+  ``asyncio.gather(*(bus.cycle(items) for each bus))`` each tick (send and wait).
 * ``loop1k``: classic CAN 1 Mbit/s, 3 MyActuator motors per bus (11 buses, the last with 2: 32 motors),
   ``ReadStatus2`` to each every tick. 3 motors are 6 frames, ~750 µs of a bus's 1000 µs (4 would be 8
   frames, ~1000 µs: more than the period).
@@ -21,24 +25,32 @@ Set-up (each run):
   reason is reported. ``loop1k_fd_4pb`` (4 motors per bus, 8 buses; bound ~1,190 cycles/s) is the same
   32 hollow motors in a layout the buses can carry.
 
-Per tick, the host records the pacer's lateness (tick start - deadline: the **jitter**), whether it was
-**on time** (it ran, not skipped, and every reply of every bus was in before the next tick was due; a
-result that is not a typed reply counts as not on time), and when the tick's last reply came. Per run:
-ticks due = ``seconds x 1000``; on-time % = on-time ticks / ticks due; achieved rate = ticks run / wall
-time; jitter p50/p99/max; **reply latency** p50/p99/max (servobus's own request-to-reply time: from the
-transport's send report to the reply frame's receive time, pooled over all motors; it includes the pty
-hops and the device process's scheduling); **CPU %** of the host process (user + system time / wall, in %
-of one core; the pacer's spin is part of it) and of the device process. Medians over the runs.
+Per tick (Loop), the host records the pacer's lateness (tick start - deadline: the **jitter**), whether
+it was **on time** (started <= 200 µs late, every command given for it handed to its bus at its deadline:
+``tick.sent`` equals the motors commanded, and every one left before the next deadline: the next tick's
+``commands_late`` is 0; the Loop's ``commands_on_time`` / ``commands_sent`` over the window is given
+beside), and every motor's **state age** (``state.age_s``: tick start - when
+the command the state answers left; what the body sees). A fresh state also gives the **reply latency**
+(``received_at`` - when its command left: the pty hops and the device process included). Per run: ticks
+due = ``seconds x 1000`` after 300 warm-up ticks; on-time % = on-time ticks / ticks due; achieved rate =
+ticks run / wall time; jitter, state age and latency p50/p99/max; the Loop's counts over the window
+(``loop.metrics()`` at its end minus its start: overruns, superseded, not sent, lost, stale states);
+**CPU %** of the host process (user + system time / wall, % of one core; the pacer's waiting is part of
+it) and of the device process. For ``--mode cycle`` (unchanged from before issue 39): on time = the tick
+ran and every reply of every bus was in before the next tick was due; reply latency from the
+transport's send report to the reply's receipt. Medians over the runs.
 
-Targets (the issue): ``loop1k``: >= 99.5 % of ticks on time and p99 jitter <= 200 µs on this 2-core
-machine. Reported as met or not, with a py-spy profile of the host (and of the device process) from an
-extra run.
+Targets (issue 39), on the Loop's figures: ``loop1k``: >= 99.5 % of ticks on time, state age p99 <= 2.5
+ms, host CPU <= 50 % of one core, jitter p99 <= 200 µs (the earlier target, kept); ``loop1k_fd*``: >=
+99.5 % on time. Reported as met or not, with a py-spy profile of the host (and of the device process)
+from an extra run of the Loop.
 
 Usage (from the repository root)::
 
-    python bench/bench_loop1k.py             # 5 runs x 30 s per layout, a profile run: ~10 min
-    python bench/bench_loop1k.py --quick     # 1 run x 1 s per layout (CI smoke), writes nothing
-    python bench/bench_loop1k.py --runs 5 --seconds 30 --only loop1k
+    python bench/bench_loop1k.py             # 5 runs x 15 s per layout and mode, a profile run: ~10 min
+    python bench/bench_loop1k.py --quick     # 1 run x 1 s per layout (CI smoke; the code before only
+                                             # for loop1k), writes nothing
+    python bench/bench_loop1k.py --runs 5 --seconds 30 --only loop1k --no-cycle
 """
 
 from __future__ import annotations
@@ -82,6 +94,11 @@ from servobus.transports import SlcanTransport  # noqa: E402
 HZ = 1000
 ON_TIME_TARGET = 99.5
 JITTER_P99_TARGET_US = 200.0
+STATE_AGE_P99_TARGET_MS = 2.5
+HOST_CPU_TARGET_PCT = 50.0
+LATE_S = 200e-6  # a tick started later than this is not on time
+WARMUP_TICKS = 300  # 0.3 s at the full rate first: connections, caches, the devices' first replies
+MODES = ("loop", "cycle")
 DEVICES = BENCH_DIR / "_can_devices.py"
 
 
@@ -137,20 +154,23 @@ class Config:
     seconds: float
     profile_seconds: float  # 0: no profile run
     sweep_seconds: float  # 0: no sweep
+    cycle_layouts: tuple[str, ...]  # the layouts also measured the way before issue 39 (--mode cycle)
 
 
-FULL = Config("full", 5, 30.0, 10.0, 5.0)
-QUICK = Config("quick", 1, 1.0, 0.0, 0.0)
+FULL = Config("full", 5, 15.0, 10.0, 5.0, tuple(LAYOUTS))
+QUICK = Config("quick", 1, 1.0, 0.0, 0.0, ("loop1k",))
 
 #: the classic layout with fewer buses (and 11 buses of one motor): where 1 kHz stops being reachable
+#: for the code before issue 39 (send and wait)
 SWEEP = ((3,), (3,) * 2, (3,) * 4, (3,) * 7, (1,) * 11)
 
 
 def sweep(layout: Layout, seconds: float) -> list[dict[str, Any]]:
-    """One run of ``seconds`` per smaller layout of the same motors (information, one run each)."""
+    """One run of ``seconds`` per smaller layout of the same motors, send and wait (the code before
+    issue 39: where it stopped reaching 1 kHz; information, one run each)."""
     out = []
     for motors in SWEEP:
-        result = one_run(dataclasses.replace(layout, motors=motors), seconds)
+        result = one_run(dataclasses.replace(layout, motors=motors), seconds, "cycle")
         out.append({"buses": len(motors), "motors_per_bus": motors[0], **result})
         print(
             f"  sweep {len(motors):>2} bus(es) x {motors[0]}: on time {result['on_time_pct']:6.2f} %, "
@@ -175,8 +195,158 @@ def _percentiles(values: Sequence[float]) -> dict[str, float]:
     return {"p50": rank(0.5), "p99": rank(0.99), "max": ordered[-1]}
 
 
-async def host(layout: Layout, paths: Sequence[str], seconds: float, device_pid: int) -> dict[str, Any]:
-    """The measured loop: every bus's cycle each tick for ``seconds``; the figures of one run."""
+async def host_loop(layout: Layout, paths: Sequence[str], seconds: float, device_pid: int) -> dict[str, Any]:
+    """The pipelined loop (``--mode loop``): one ``Loop(hz=1000)`` over every bus, each motor's command
+    given every tick, every motor's state read by the body, for ``seconds``; the figures of one run."""
+    from servobus.loop import Loop
+
+    async with contextlib.AsyncExitStack() as stack:
+        motors = await _open_motors(stack, layout, paths)
+        command = layout.command()
+        reply_type = layout.reply
+        expected = len(motors)
+        due = round(seconds * HZ)
+        first, end = WARMUP_TICKS, WARMUP_TICKS + due
+        late = array.array("d")
+        ages = array.array("d")
+        latency = array.array("d")
+        on_time = late_ticks = not_out = left_late = no_state = wrong = 0
+        prev_ok: bool | None = None  # the previous tick's start and hand-over: judged whole at this one
+        wrong_types: set[str] = set()
+        window = _Window(device_pid)
+        loop = Loop(hz=HZ)
+        async with loop:
+            async for tick in loop.ticks(count=end + 1):
+                index = tick.index
+                if first <= index < end:
+                    if window.before is None:  # opens at the first tick past the warm-up
+                        window.open(loop.metrics())
+                    late_s = tick.late_s
+                    late.append(late_s)
+                    if prev_ok is not None:  # did the previous tick's commands all leave within it?
+                        on_time += prev_ok and not tick.commands_late
+                        left_late += tick.commands_late > 0
+                    out = tick.sent == expected
+                    not_out += not out
+                    late_ticks += late_s > LATE_S
+                    prev_ok = late_s <= LATE_S and out
+                    started = tick.started
+                    for motor in motors:
+                        state = tick.state(motor)
+                        if state is None:
+                            no_state += 1
+                            continue
+                        ages.append(state.age_s)
+                        if state.fresh:  # each reply once: received - when its command left
+                            latency.append(state.received_at - (started - state.age_s))
+                            if not isinstance(state.reply, reply_type):  # e.g. the Bus's probe
+                                wrong += 1  # of a motor it took offline: another reply type
+                                wrong_types.add(type(state.reply).__name__)
+                elif index >= end and window.after is None and window.before is not None:
+                    on_time += bool(prev_ok) and not tick.commands_late
+                    left_late += tick.commands_late > 0
+                    window.close(loop.metrics())
+                for motor in motors:
+                    tick.command(motor, command)
+    before, after = window.before, window.after
+    if before is None or after is None:
+        raise RuntimeError(f"the loop ended before its window closed: {loop.metrics()}")
+    wall, cpu, dev = window.wall_s, window.cpu_s, window.device_s
+    jitter = _percentiles(late)
+    age = _percentiles(ages)
+    lat = _percentiles(latency)
+    counts = {
+        name: getattr(after, name) - getattr(before, name)
+        for name in (
+            "ticks", "late_ticks", "skipped", "overruns", "commands_sent", "commands_on_time", "superseded",
+            "not_sent", "lost", "stale_states",
+        )
+    }  # fmt: skip
+    return {
+        "mode": "loop",
+        "ticks_due": due,
+        "ticks_run": len(late),
+        "ticks_skipped": counts["skipped"],
+        "on_time": on_time,
+        "on_time_pct": 100 * on_time / due,
+        "ticks_late": late_ticks,
+        "ticks_not_all_out": not_out,
+        "ticks_commands_left_late": left_late,
+        "achieved_hz": len(late) / wall,
+        "jitter_p50_us": jitter["p50"] * 1e6,
+        "jitter_p99_us": jitter["p99"] * 1e6,
+        "jitter_max_us": jitter["max"] * 1e6,
+        "state_age_p50_ms": age["p50"] * 1e3,
+        "state_age_p99_ms": age["p99"] * 1e3,
+        "state_age_max_ms": age["max"] * 1e3,
+        "latency_p50_us": lat["p50"] * 1e6,
+        "latency_p99_us": lat["p99"] * 1e6,
+        "latency_max_us": lat["max"] * 1e6,
+        "latency_samples": len(latency),
+        "states_missing": no_state,
+        "results_not_replies": wrong,
+        "not_replies": sorted(wrong_types),
+        "commands_on_time_pct": 100 * counts["commands_on_time"] / max(1, counts["commands_sent"]),
+        "metrics": counts,
+        "metrics_recent_window": {  # the Loop's own percentiles (its recent window, not ours)
+            "state_age_p50_ms": _scaled(after.state_age_p50_s, 1e3),
+            "state_age_p99_ms": _scaled(after.state_age_p99_s, 1e3),
+            "late_p99_us": _scaled(after.late_p99_s, 1e6),
+        },
+        "host_cpu_pct": 100 * cpu / wall,
+        "cpu_pct": 100 * cpu / wall,
+        "device_cpu_pct": 100 * dev / wall,
+        "wall_s": wall,
+        "load_before": [round(x, 2) for x in window.load_before],
+        "load_after": [round(x, 2) for x in window.load_after],
+    }
+
+
+def _scaled(value: float | None, unit: float) -> float:
+    return math.nan if value is None else value * unit
+
+
+class _Window:
+    """The measured window of a loop run: metrics, process CPU, wall, device CPU and load at its ends."""
+
+    def __init__(self, device_pid: int) -> None:
+        self.device_pid = device_pid
+        self.before: Any = None
+        self.after: Any = None
+        self.cpu_s = self.wall_s = self.device_s = 0.0
+        self.load_before = self.load_after = (0.0, 0.0, 0.0)
+
+    def open(self, metrics: Any) -> None:
+        self.before = metrics
+        self.load_before = os.getloadavg()
+        self.device_s = -_profile.proc_cpu_s(self.device_pid)
+        self.cpu_s, self.wall_s = -time.process_time(), -time.perf_counter()
+
+    def close(self, metrics: Any) -> None:
+        self.wall_s += time.perf_counter()
+        self.cpu_s += time.process_time()
+        self.device_s += _profile.proc_cpu_s(self.device_pid)
+        self.load_after = os.getloadavg()
+        self.after = metrics
+
+
+async def _open_motors(stack: contextlib.AsyncExitStack, layout: Layout, paths: Sequence[str]) -> list[Any]:
+    """One ``Bus(SlcanTransport(pty))`` per bus of ``layout``, motor ids 1, 2, ... across them."""
+    motors = []
+    first = 1
+    for path, n in zip(paths, layout.motors, strict=True):
+        transport = SlcanTransport(
+            path, bitrate=1_000_000, data_bitrate=5_000_000 if layout.fd else None, fd=layout.fd
+        )
+        bus = await stack.enter_async_context(Bus(transport, safe=None))
+        motors += [bus.motor(layout.family, i, **layout.bind) for i in range(first, first + n)]
+        first += n
+    return motors
+
+
+async def host_cycle(layout: Layout, paths: Sequence[str], seconds: float, device_pid: int) -> dict[str, Any]:
+    """The code before issue 39 (``--mode cycle``): every bus's send-and-wait ``cycle`` each tick,
+    paced by ``ticks(1000)``, for ``seconds``; the figures of one run."""
     loop = asyncio.get_running_loop()
     period = 1 / HZ
     async with contextlib.AsyncExitStack() as stack:
@@ -252,7 +422,9 @@ async def host(layout: Layout, paths: Sequence[str], seconds: float, device_pid:
         "latency_samples": latency.samples,
         "results_not_replies": bad,
         "timeouts": sum(s.get("timeouts", 0) for s in stats),
+        "mode": "cycle",
         "cpu_pct": 100 * cpu / wall,
+        "host_cpu_pct": 100 * cpu / wall,
         "device_cpu_pct": 100 * dev / wall,
         "wall_s": wall,
         "load_before": [round(x, 2) for x in load0],
@@ -268,10 +440,14 @@ def host_main(argv: Sequence[str]) -> int:
     parser.add_argument("--seconds", type=float, required=True)
     parser.add_argument("--device-pid", type=int, required=True)
     parser.add_argument("--motors", help="motors per bus, comma-separated: overrides the layout's")
+    parser.add_argument(
+        "--mode", choices=MODES, default="loop", help="loop: the pipelined Loop; cycle: the code before"
+    )
     args = parser.parse_args(argv)
     layout = LAYOUTS[args.layout]
     if args.motors:
         layout = dataclasses.replace(layout, motors=tuple(int(n) for n in args.motors.split(",")))
+    host = host_loop if args.mode == "loop" else host_cycle
     result = asyncio.run(host(layout, json.loads(args.paths), args.seconds, args.device_pid))
     print(json.dumps(result), flush=True)
     return 0
@@ -321,18 +497,20 @@ def _device_pid(process: subprocess.Popen[str], wrapped: bool) -> int:
     return process.pid
 
 
-def host_command(layout: Layout, paths: Sequence[str], seconds: float, device_pid: int) -> list[str]:
+def host_command(
+    layout: Layout, paths: Sequence[str], seconds: float, device_pid: int, mode: str = "loop"
+) -> list[str]:
     return [
-        sys.executable, str(Path(__file__).resolve()), "--host", "--layout", layout.key,
+        sys.executable, str(Path(__file__).resolve()), "--host", "--layout", layout.key, "--mode", mode,
         "--paths", json.dumps(list(paths)), "--seconds", str(seconds), "--device-pid", str(device_pid),
     ]  # fmt: skip
 
 
-def one_run(layout: Layout, seconds: float) -> dict[str, Any]:
+def one_run(layout: Layout, seconds: float, mode: str = "loop") -> dict[str, Any]:
     with devices(layout) as (process, paths):
         done = subprocess.run(
             [
-                *host_command(layout, paths, seconds, process.pid),
+                *host_command(layout, paths, seconds, process.pid, mode),
                 "--motors",
                 ",".join(map(str, layout.motors)),
             ],
@@ -342,7 +520,7 @@ def one_run(layout: Layout, seconds: float) -> dict[str, Any]:
             check=False,
         )
     if done.returncode != 0:
-        raise RuntimeError(f"{layout.key} host failed ({done.returncode}): {done.stderr[-2000:]}")
+        raise RuntimeError(f"{layout.key} {mode} host failed ({done.returncode}): {done.stderr[-2000:]}")
     return dict(json.loads(done.stdout.strip().splitlines()[-1]))
 
 
@@ -354,7 +532,7 @@ def profile_run(layout: Layout, seconds: float, work: Path) -> dict[str, Any]:
     wrap = _profile.pyspy_wrap(dev_out)
     with devices(layout, wrap) as (process, paths):
         pid = _device_pid(process, True)
-        done = _profile.pyspy_record(host_command(layout, paths, seconds, pid), host_out)
+        done = _profile.pyspy_record(host_command(layout, paths, seconds, pid, "loop"), host_out)
     out: dict[str, Any] = {"seconds": seconds}
     if done.returncode != 0 or not host_out.exists():
         out["error"] = f"py-spy/host failed ({done.returncode}): {done.stderr[-1500:]}"
@@ -366,9 +544,16 @@ def profile_run(layout: Layout, seconds: float, work: Path) -> dict[str, Any]:
     return out
 
 
-MEDIAN_KEYS = (
+LOOP_KEYS = (
+    "on_time_pct", "achieved_hz", "jitter_p50_us", "jitter_p99_us", "jitter_max_us", "state_age_p50_ms",
+    "state_age_p99_ms", "state_age_max_ms", "latency_p50_us", "latency_p99_us", "latency_max_us",
+    "host_cpu_pct", "device_cpu_pct", "commands_on_time_pct", "ticks_late", "ticks_not_all_out",
+    "ticks_commands_left_late",
+)  # fmt: skip
+CYCLE_KEYS = (
     "on_time_pct", "achieved_hz", "jitter_p50_us", "jitter_p99_us", "jitter_max_us", "latency_p50_us",
-    "latency_p99_us", "latency_max_us", "tick_done_p50_us", "tick_done_p99_us", "cpu_pct", "device_cpu_pct",
+    "latency_p99_us", "latency_max_us", "tick_done_p50_us", "tick_done_p99_us", "host_cpu_pct",
+    "device_cpu_pct",
 )  # fmt: skip
 
 
@@ -383,40 +568,59 @@ def bus_bound_hz(layout: Layout) -> float:
     return float(run["bound_cycles_s"])
 
 
-def summarise(layout: Layout, runs: list[dict[str, Any]], profile: dict[str, Any] | None) -> dict[str, Any]:
-    med = {k: round(statistics.median(r[k] for r in runs), 2) for k in MEDIAN_KEYS}
+def _medians(runs: list[dict[str, Any]], keys: Sequence[str]) -> dict[str, Any]:
+    return {
+        **{k: round(statistics.median(r[k] for r in runs), 2) for k in keys},
+        "runs": len(runs),
+        "statistic": "median over runs",
+        "spread": {k: [round(min(r[k] for r in runs), 2), round(max(r[k] for r in runs), 2)] for k in keys},
+        "per_run": [
+            {k: (round(v, 3) if isinstance(v, float) else v) for k, v in r.items() if k != "mode"}
+            for r in runs
+        ],
+    }
+
+
+def summarise(
+    layout: Layout,
+    runs: list[dict[str, Any]],
+    cycle_runs: list[dict[str, Any]],
+    profile: dict[str, Any] | None,
+) -> dict[str, Any]:
+    """The Loop's medians at the top of ``layout``'s key; the code before (send and wait, measured in
+    the same run, runs alternated) under ``cycle``; targets judged on the Loop's figures."""
+    med = _medians(runs, LOOP_KEYS)
     bound = bus_bound_hz(layout)
     out: dict[str, Any] = {
         **med,
+        "mode": "pipelined servobus.Loop(hz=1000), one command per motor per tick",
         "bus_bound_hz": round(bound, 1),
         "feasible_at_1khz": bound >= HZ,
         "layout": layout.label,
         "buses": len(layout.motors),
         "motors": sum(layout.motors),
         "motors_per_bus": list(layout.motors),
-        "runs": len(runs),
-        "statistic": "median over runs",
-        "spread": {
-            k: [round(min(r[k] for r in runs), 2), round(max(r[k] for r in runs), 2)] for k in MEDIAN_KEYS
-        },
-        "per_run": [{k: (round(v, 3) if isinstance(v, float) else v) for k, v in r.items()} for r in runs],
     }
+    if cycle_runs:
+        before = _medians(cycle_runs, CYCLE_KEYS)
+        out["cycle"] = {"mode": "send and wait: every bus's Bus.cycle each tick (the code before)", **before}
+        out["on_time_pct_cycle"] = before["on_time_pct"]
+        out["host_cpu_pct_cycle"] = before["host_cpu_pct"]
+    limits: dict[str, dict[str, Any]] = {"on_time_pct": {"min": ON_TIME_TARGET}}
     if layout.key == "loop1k":
-        targets = {
-            "on_time_pct": {"min": ON_TIME_TARGET, "met": med["on_time_pct"] >= ON_TIME_TARGET},
-            "jitter_p99_us": {
-                "max": JITTER_P99_TARGET_US,
-                "met": med["jitter_p99_us"] <= JITTER_P99_TARGET_US,
-            },
+        limits |= {
+            "state_age_p99_ms": {"max": STATE_AGE_P99_TARGET_MS},
+            "host_cpu_pct": {"max": HOST_CPU_TARGET_PCT},
+            "jitter_p99_us": {"max": JITTER_P99_TARGET_US},
         }
-    else:
-        targets = {"on_time_pct": {"min": ON_TIME_TARGET, "met": med["on_time_pct"] >= ON_TIME_TARGET}}
-    out["targets"] = targets
+    for name, t in limits.items():
+        t["met"] = med[name] >= t["min"] if "min" in t else med[name] <= t["max"]
+    out["targets"] = limits
     infeasible = "" if bound >= HZ else f"; its bus can carry at most {bound:.0f} cycles/s, so no host can"
     out["targets_missed"] = [
         f"{layout.key}.{name} = {med[name]} (target "
         f"{'>=' if 'min' in t else '<='} {t.get('min', t.get('max'))}{infeasible})"
-        for name, t in targets.items()
+        for name, t in limits.items()
         if not t["met"]
     ]
     if profile is not None:
@@ -424,36 +628,61 @@ def summarise(layout: Layout, runs: list[dict[str, Any]], profile: dict[str, Any
     return out
 
 
-def render_markdown(figures: dict[str, dict[str, Any]], info: dict[str, Any]) -> str:
+def _pair(a: Any, b: Any, form: str) -> str:
+    return "-" if a is None or b is None else f"{form.format(a)} / {form.format(b)}"
+
+
+def render_markdown(
+    figures: dict[str, dict[str, Any]], info: dict[str, Any], loop_host_us: float | None = None
+) -> str:
+    """The loop1k section. ``loop_host_us``: bench_loop's ``loop.host_us_per_tick`` (results.json), for
+    the reading of a missed target."""
     lines = _meta.header_lines(
         "## 1 kHz loop in real time, 32 motors in another process (`bench/bench_loop1k.py`)", info
     )
     lines += [
         "",
-        "Host: one process, one `Bus(SlcanTransport(pty))` per bus, one pacer (`servobus.ticks.ticks(1000)`) "
-        "driving every bus each tick with `asyncio.gather(*(bus.cycle(items) ...))`. Devices: one other "
+        "Host: one process, one `Bus(SlcanTransport(pty))` per bus and one `servobus.Loop(hz=1000)` over "
+        "all of them: each tick the body reads every motor's state (`tick.state`) and gives each motor "
+        "its command for the next tick (`tick.command`; classic CAN: `ReadStatus2`). Devices: one other "
         "process (`bench/_can_devices.py`) serving one SLCAN pty per bus, each with the simulator's "
-        "bit-exact bus model and motor models in real time. **On time** = the tick ran (not skipped) and "
-        "every reply of every bus was in before the next tick was due; **jitter** = tick start - deadline; "
-        "**reply latency** = servobus's send report to reply receipt (pty hops and the device process "
-        "included); **CPU** = process CPU time / wall time, % of one core (the pacer spins the last 1.2 ms "
-        f"before each tick, so at 1 kHz it never sleeps). Median of {info['runs']} runs of "
-        f"{info['seconds']:g} s each per layout; load average at each run's start and end in results.json.",
+        "bit-exact bus model and motor models in real time. **On time** = the tick started <= 200 µs after "
+        "its deadline, every command given for it was handed to its bus at that deadline (`tick.sent`) and "
+        "left before the next one (the next tick's `commands_late` is 0); "
+        "**jitter** = tick start - deadline; **state age** = what the body sees, `state.age_s` (tick start "
+        "- when the command the state answers left), every motor every tick; **reply latency** = a fresh "
+        "state's `received_at` - when its command left (pty hops and the device process included); "
+        "**CPU** = process CPU time / wall time over the measured ticks, % of one core. Beside each, in "
+        "the same run (runs alternated), the code before issue 39: the same buses driven by "
+        "`asyncio.gather(*(bus.cycle(items) ...))` each tick on `servobus.ticks.ticks(1000)` (send and "
+        "wait: on time = every reply in before the next tick was due). Median of "
+        f"{info['runs']} runs of {info['seconds']:g} s each per layout and mode (after "
+        f"{WARMUP_TICKS} warm-up ticks); load average at each run's start and end in results.json.",
         "",
     ]
     rows = []
     for key, f in figures.items():
+        c = f.get("cycle", {})
         rows.append(
             (
                 f"`{key}`",
                 f["layout"],
-                f"**{f['on_time_pct']:.2f}**",
-                f"{f['achieved_hz']:,.0f}",
+                f"**{f['on_time_pct']:.2f}**" + (f" ({c['on_time_pct']:.2f})" if c else ""),
+                f"{f['achieved_hz']:,.0f}" + (f" ({c['achieved_hz']:,.0f})" if c else ""),
                 f"{f['bus_bound_hz']:,.0f}" if "bus_bound_hz" in f else "-",
-                f"{f['jitter_p50_us']:.0f} / **{f['jitter_p99_us']:.0f}** / {f['jitter_max_us']:,.0f}",
-                f"{f['latency_p50_us']:,.0f} / {f['latency_p99_us']:,.0f}",
-                f"{f['tick_done_p50_us']:,.0f} / {f['tick_done_p99_us']:,.0f}",
-                f"{f['cpu_pct']:.0f} / {f['device_cpu_pct']:.0f}",
+                f"{f['jitter_p50_us']:.0f} / **{f['jitter_p99_us']:.0f}** / {f['jitter_max_us']:,.0f}"
+                + (
+                    f" ({c['jitter_p50_us']:.0f} / {c['jitter_p99_us']:.0f} / {c['jitter_max_us']:,.0f})"
+                    if c
+                    else ""
+                ),
+                "{:.2f} / **{:.2f}** / {:.2f}".format(
+                    f["state_age_p50_ms"], f["state_age_p99_ms"], f["state_age_max_ms"]
+                ),
+                f"{f['latency_p50_us']:,.0f} / {f['latency_p99_us']:,.0f}"
+                + (f" ({c['latency_p50_us']:,.0f} / {c['latency_p99_us']:,.0f})" if c else ""),
+                f"**{f['host_cpu_pct']:.0f}** / {f['device_cpu_pct']:.0f}"
+                + (f" ({c['host_cpu_pct']:.0f} / {c['device_cpu_pct']:.0f})" if c else ""),
                 f.get("meta", {}).get("machine", {}).get("date_utc", "this run"),
             )
         )
@@ -462,31 +691,62 @@ def render_markdown(figures: dict[str, dict[str, Any]], info: dict[str, Any]) ->
             [
                 "key",
                 "layout",
-                "ticks on time %",
-                "ticks/s",
+                "ticks on time % (before)",
+                "ticks/s (before)",
                 "one bus's bound, cycles/s",
-                "jitter p50 / p99 / max µs",
-                "reply latency p50 / p99 µs",
-                "tick done after deadline p50 / p99 µs",
-                "CPU % host / devices",
+                "jitter p50 / p99 / max µs (before)",
+                "state age p50 / p99 / max ms",
+                "reply latency p50 / p99 µs (before)",
+                "CPU % host / devices (before)",
                 "measured (UTC)",
             ],
             rows,
             "llrrrrrrrl",
         ),
-    ]
-    lines += [
+        "(before): the same layout driven by `Bus.cycle` each tick, send and wait, in the same run. "
         "One bus's bound: the most cycles per second the layout's fullest bus can carry, from "
         "bench_efficiency's bound (bit-exact wire time of the cycle's frames, the motors' turnaround), on "
-        "virtual time. Below 1,000 the layout cannot run at 1 kHz on any host: 8 hollow motors on CAN FD "
-        "1/5 Mbit/s are 16 frames of ~68 µs (16 data bytes with bit-rate switching) = ~1,090 µs of wire per "
-        "cycle, plus the 500 µs turnaround on the critical path.",
+        "virtual time. Below 1,000 the layout cannot carry a command and a reply per motor every "
+        "millisecond on any host: 8 hollow motors on CAN FD 1/5 Mbit/s are 16 frames of ~68 µs (16 data "
+        "bytes with bit-rate switching) = ~1,090 µs of wire per cycle; the Loop still starts its ticks on "
+        "time there, and the state age shows what the wire costs.",
         "",
     ]
+    detail = [
+        (
+            f"`{key}`",
+            f"{f['commands_on_time_pct']:.2f}",
+            f"{f['ticks_late']:.0f}",
+            f"{f['ticks_not_all_out']:.0f} / {f.get('ticks_commands_left_late', math.nan):.0f}",
+            ", ".join(
+                f"{name} {statistics.median(r['metrics'][name] for r in f['per_run']):,.0f}"
+                for name in ("overruns", "superseded", "not_sent", "lost", "stale_states")
+            ),
+        )
+        for key, f in figures.items()
+        if "commands_on_time_pct" in f and f.get("per_run") and "metrics" in f["per_run"][0]
+    ]
+    if detail:
+        lines += [
+            "The Loop's own counts over the measured ticks (`loop.metrics()` at the window's end minus its "
+            "start; medians of runs):",
+            "",
+            _results.markdown_table(
+                [
+                    "key",
+                    "commands on time % (`commands_on_time` / `commands_sent`)",
+                    "ticks > 200 µs late",
+                    "ticks with a command not handed over / not out within the tick",
+                    "overruns, superseded, not sent, lost, stale states",
+                ],
+                detail,
+                "lrrrl",
+            ),
+        ]
     swept = figures.get("loop1k", {}).get("sweep")
     if swept:
         lines += [
-            "Where 1 kHz stops being reachable (classic CAN, one run of "
+            "Where the code before issue 39 (send and wait) stopped reaching 1 kHz (classic CAN, one run of "
             f"{swept[0]['wall_s']:.0f} s each, information): the same set-up with fewer buses.",
             "",
             _results.markdown_table(
@@ -514,36 +774,22 @@ def render_markdown(figures: dict[str, dict[str, Any]], info: dict[str, Any]) ->
         ]
     missed = [m for f in figures.values() for m in f["targets_missed"]]
     lines += [
-        f"Targets: `loop1k` >= {ON_TIME_TARGET} % on time and p99 jitter <= {JITTER_P99_TARGET_US:.0f} µs; "
-        f"`loop1k_fd` >= {ON_TIME_TARGET} % on time. "
+        f"Targets (the Loop's figures): `loop1k` >= {ON_TIME_TARGET} % of ticks on time, state age p99 <= "
+        f"{STATE_AGE_P99_TARGET_MS} ms, host CPU <= {HOST_CPU_TARGET_PCT:.0f} % of one core, jitter p99 <= "
+        f"{JITTER_P99_TARGET_US:.0f} µs; `loop1k_fd` >= {ON_TIME_TARGET} % on time. "
         + ("**Not met**: " + "; ".join(missed) + "." if missed else "Met."),
     ]
     classic = figures.get("loop1k", {})
-    if classic.get("targets_missed") and classic.get("profile", {}).get("host"):
-        areas = {a["area"]: a["pct"] for a in classic["profile"]["host"]["by_area"]}
-        waiting = next((v for k, v in areas.items() if k.startswith("waiting")), 0.0)
-        syscalls = next((v for k, v in areas.items() if k.startswith("os.write")), 0.0)
-        wire_us = 1e6 / classic["bus_bound_hz"]
-        lines += [
-            "",
-            "Why, and what would close the gap: each classic bus's own cycle takes "
-            f"{wire_us:,.0f} µs of every 1,000 µs tick (its wire time and the motors' turnaround, the bound "
-            f"above), which leaves ~{1000 - wire_us:,.0f} µs for writing {classic['buses']} ptys, the tty "
-            "layer's hops to the device process and back, that process's own scheduling and the host's "
-            f"work; the replies took {classic['latency_p50_us']:,.0f} µs (p50) from send report to receipt. "
-            f"The host is not short of CPU for servobus itself ({classic['cpu_pct']:.0f} % of a core, "
-            f"{waiting:.0f} % of its samples waiting in epoll, {syscalls:.0f} % in pty system calls), and "
-            f"the device process takes {classic['device_cpu_pct']:.0f} % of the other core. Closing it "
-            "needs fewer hops per frame rather than a faster Bus: a kernel CAN socket (vcan or SocketCAN; "
-            "this machine's kernel has none) or one multi-channel adapter instead of a tty per bus.",
-        ]
+    if classic.get("targets_missed") and "state_age_p99_ms" in classic:
+        lines += ["", why_missed(classic, loop_host_us)]
     for key, f in figures.items():
         profile = f.get("profile")
         if not profile:
             continue
         lines += [
             "",
-            f"### Where the time goes: `{key}` (py-spy, one extra run of {profile.get('seconds', 0):g} s)",
+            f"### Where the time goes: `{key}`, the Loop (py-spy, one extra run of "
+            f"{profile.get('seconds', 0):g} s)",
             "",
         ]
         if "error" in profile:
@@ -551,9 +797,10 @@ def render_markdown(figures: dict[str, dict[str, Any]], info: dict[str, Any]) ->
             continue
         run = profile["run"]
         lines += [
-            f"That run: {run['on_time_pct']:.1f} % on time, jitter p99 {run['jitter_p99_us']:.0f} µs, "
-            f"host CPU {run['cpu_pct']:.0f} %, device process {run['device_cpu_pct']:.0f} % (py-spy samples "
-            "without pausing the process; its own reading of memory still costs some CPU).",
+            f"That run: {run['on_time_pct']:.1f} % on time, jitter p99 {run['jitter_p99_us']:.0f} µs, state "
+            f"age p99 {run['state_age_p99_ms']:.2f} ms, host CPU {run['host_cpu_pct']:.0f} %, device process "
+            f"{run['device_cpu_pct']:.0f} % (py-spy samples without pausing the process; its own reading of "
+            "memory still costs some CPU).",
             "",
             "Host process:",
             "",
@@ -562,6 +809,53 @@ def render_markdown(figures: dict[str, dict[str, Any]], info: dict[str, Any]) ->
         if "devices" in profile:
             lines += ["", "Device process:", "", *_profile.markdown(profile["devices"], top=6)]
     return "\n".join(lines) + "\n"
+
+
+def why_missed(f: dict[str, Any], loop_host_us: float | None) -> str:
+    """A reading of the classic layout's missed targets, from its figures (and bench_loop's)."""
+    counts = {
+        name: statistics.median(r["metrics"][name] for r in f["per_run"] if "metrics" in r)
+        for name in ("overruns", "superseded", "not_sent", "lost")
+    }
+    seconds = statistics.median(r["wall_s"] for r in f["per_run"])
+    cpu_us = f["host_cpu_pct"] / 100 * 1e6 / f["achieved_hz"] if f["achieved_hz"] else math.nan
+    loads = [r["load_before"][0] for r in f["per_run"] if "load_before" in r]
+    text = (
+        f"Reading: the host ran {f['achieved_hz']:,.0f} of 1,000 ticks/s at {f['host_cpu_pct']:.0f} % of a "
+        f"core, {cpu_us:,.0f} CPU µs per tick run (1-minute load {min(loads, default=0):.1f}-"
+        f"{max(loads, default=0):.1f} on the machine's cores: a runnable host also waits for a core); "
+        f"{counts['overruns']:,.0f} bodies "
+        f"ran past the next deadline in {seconds:.0f} s; {counts['superseded']:,.0f} commands were "
+        "superseded (given while the motor's previous one was still queued), "
+        f"{counts['not_sent']:,.0f} not sent (motors the Bus took offline after missed replies: probed, "
+        f"not commanded) and {counts['lost']:,.0f} lost, so a state ages until its motor's next reply "
+        f"(p99 {f['state_age_p99_ms']:,.2f} ms). "
+    )
+    devices = f.get("profile", {}).get("devices", {}).get("by_area", [])
+    idle = next((a["pct"] for a in devices if a["area"].startswith("waiting")), None)
+    if idle is not None:
+        text += f"The device process waited in select {idle:.0f} % of its profiled samples: it keeps up. "
+    if loop_host_us is not None:
+        verdict = "more than" if loop_host_us > 1e6 / HZ else "within"
+        text += (
+            "The Loop's own CPU per tick for these 32 motors on in-process reflectors is "
+            f"{loop_host_us:,.0f} µs (`loop.host_us_per_tick`, bench_loop.py), {verdict} the 1,000 µs "
+            "period before any pty I/O, on a core shared with the device process and the machine's other "
+            "work."
+        )
+    return text
+
+
+def _log_run(key: str, mode: str, i: int, runs: int, r: dict[str, Any]) -> None:
+    age = f"state age p99 {r['state_age_p99_ms']:.2f} ms, " if mode == "loop" else ""
+    print(
+        f"  {key:<14} {mode:<5} run {i + 1}/{runs}: on time {r['on_time_pct']:6.2f} %, "
+        f"{r['achieved_hz']:7.1f} ticks/s, jitter p50/p99/max {r['jitter_p50_us']:.0f}/"
+        f"{r['jitter_p99_us']:.0f}/{r['jitter_max_us']:.0f} µs, {age}latency p99 "
+        f"{r['latency_p99_us']:.0f} µs, CPU host {r['host_cpu_pct']:.0f} % devices "
+        f"{r['device_cpu_pct']:.0f} %, load {r['load_before'][0]:.2f}",
+        flush=True,
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -577,9 +871,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--only", action="append", choices=sorted(LAYOUTS), help="layouts to run (repeatable)"
     )
-    parser.add_argument("--runs", type=int, help="runs per layout")
+    parser.add_argument("--runs", type=int, help="runs per layout and mode")
     parser.add_argument("--seconds", type=float, help="seconds per run")
     parser.add_argument("--profile-seconds", type=float, help="seconds of the py-spy run (0: none)")
+    parser.add_argument("--no-cycle", action="store_true", help="leave out the code before (--mode cycle)")
     args = parser.parse_args(argv)
     started = time.perf_counter()
     load = _meta.load_average()
@@ -590,33 +885,34 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.seconds or base.seconds,
         base.profile_seconds if args.profile_seconds is None else args.profile_seconds,
         base.sweep_seconds,
+        () if args.no_cycle else base.cycle_layouts,
     )
     out_dir: Path | None = args.output if args.output is not None else (None if args.quick else BENCH_DIR)
     keys = args.only or list(LAYOUTS)
     print(
-        f"bench_loop1k ({cfg.mode}): {cfg.runs} run(s) x {cfg.seconds:g} s per layout at {HZ} Hz", flush=True
+        f"bench_loop1k ({cfg.mode}): {cfg.runs} run(s) x {cfg.seconds:g} s per layout at {HZ} Hz; the code "
+        f"before beside it for {', '.join(cfg.cycle_layouts) or 'none'}",
+        flush=True,
     )
     figures: dict[str, dict[str, Any]] = {}
     with tempfile.TemporaryDirectory(prefix="bench-loop1k-") as tmp:
         for key in keys:
             layout = LAYOUTS[key]
-            runs = []
+            modes = MODES if key in cfg.cycle_layouts else ("loop",)
+            runs: dict[str, list[dict[str, Any]]] = {mode: [] for mode in MODES}
             for i in range(cfg.runs):
-                result = one_run(layout, cfg.seconds)
-                runs.append(result)
-                print(
-                    f"  {key:<14} run {i + 1}/{cfg.runs}: on time {result['on_time_pct']:6.2f} %, "
-                    f"{result['achieved_hz']:7.1f} ticks/s, jitter p50/p99/max {result['jitter_p50_us']:.0f}/"
-                    f"{result['jitter_p99_us']:.0f}/{result['jitter_max_us']:.0f} µs, latency p99 "
-                    f"{result['latency_p99_us']:.0f} µs, CPU host {result['cpu_pct']:.0f} % devices "
-                    f"{result['device_cpu_pct']:.0f} %, load {result['load_before'][0]:.2f}",
-                    flush=True,
-                )
+                for mode in modes:  # alternated: the machine's load falls on both alike
+                    result = one_run(layout, cfg.seconds, mode)
+                    runs[mode].append(result)
+                    _log_run(key, mode, i, cfg.runs, result)
             profile = None
             if cfg.profile_seconds > 0:
-                print(f"  {key:<14} profile run ({cfg.profile_seconds:g} s under py-spy)", flush=True)
+                print(
+                    f"  {key:<14} profile run of the Loop ({cfg.profile_seconds:g} s under py-spy)",
+                    flush=True,
+                )
                 profile = profile_run(layout, cfg.profile_seconds, Path(tmp))
-            figures[key] = summarise(layout, runs, profile)
+            figures[key] = summarise(layout, runs["loop"], runs["cycle"], profile)
             if key == "loop1k" and cfg.sweep_seconds > 0:
                 figures[key]["sweep"] = sweep(layout, cfg.sweep_seconds)
     info = _meta.meta(
@@ -634,12 +930,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     if out_dir is not None:
         for key, value in figures.items():
             _results.update_results_json(out_dir / "results.json", key, {**value, "meta": info})
-        shown = dict(figures)
-        stored = out_dir / "results.json"
-        if stored.exists():  # layouts not run this time keep their last figures in the section
-            data = json.loads(stored.read_text(encoding="utf-8"))
-            shown = {k: data[k] for k in LAYOUTS if k in data and (k in figures or "on_time_pct" in data[k])}
-        _results.replace_markdown_section(out_dir / "RESULTS.md", "loop1k", render_markdown(shown, info))
+        # layouts not run this time keep their last figures (of the Loop) in the section
+        data = json.loads((out_dir / "results.json").read_text(encoding="utf-8"))
+        shown = {k: data[k] for k in LAYOUTS if k in data and (k in figures or "state_age_p99_ms" in data[k])}
+        loop_us = data.get("loop", {}).get("host_us_per_tick")
+        _results.replace_markdown_section(
+            out_dir / "RESULTS.md", "loop1k", render_markdown(shown, info, loop_us)
+        )
         print(f"Wrote {out_dir / 'RESULTS.md'} and {out_dir / 'results.json'} (keys {', '.join(figures)}).")
     print(f"Total runtime: {time.perf_counter() - started:.1f} s")
     return 1 if args.check and missed else 0

@@ -115,6 +115,9 @@ class Request:
     # Another host's request crossed it in an order that cannot be known: it takes the later reply
     # (counted ``ambiguous`` once; servobus.scheduler._hosts).
     crossed: bool = False
+    # It may leave while requests with its key are in flight or held (a pipelined loop's command,
+    # repeated every tick): its reply is matched in order like any other, the oldest first.
+    pipelined: bool = False
 
     def describe(self) -> str:
         return f"{self.codec.family} motor {self.codec.motor_id} {type(self.command).__name__}"
@@ -153,6 +156,8 @@ class RequestTable:
         pending: reply key -> the requests in flight with that key, oldest first.
         in_flight: the requests SENDING or SENT, in send order.
         early: reply key -> a reply-shaped frame that came before its request's send report.
+        answers: reply key -> when the last reply a pipelined request took ended, and its bytes (a
+            frame with both again is a duplicate: the next request's reply is still to come).
     """
 
     def __init__(
@@ -179,6 +184,8 @@ class RequestTable:
         self.pending: dict[Hashable, deque[Request]] = {}
         self.in_flight: dict[Request, None] = {}
         self.early: dict[Hashable, tuple[BoundCodec, Frame]] = {}
+        #: reply key -> (stamp, data) of the last reply a pipelined request with it took
+        self.answers: dict[Hashable, tuple[float, bytes]] = {}
         self.deadlines: list[tuple[float, int, Request]] = []  # a heap; entries of left requests stay
         self.provisional: list[Request] = []  # sent before anything was measured: timed again then
         self._overtaken: list[Request] = []  # timed out by a reply stamped after their deadline
@@ -267,7 +274,8 @@ class RequestTable:
         """Pacing: the requests that may leave now, in order (moved to SENDING), and the commands that
         waited longer than ``stale_after_s`` for their turn (moved to FAILED). At most
         ``max_in_flight`` out at once; a half-duplex line rests ``gap_s`` after each exchange; a
-        request whose key is in flight or ``held`` (for a late reply) waits, keeping its place."""
+        request whose key is in flight or ``held`` (for a late reply) waits, keeping its place,
+        unless it is ``pipelined``."""
         if self._rest_until:
             if now < self._rest_until:
                 return _NOTHING
@@ -291,7 +299,7 @@ class RequestTable:
                 stale.append(request)
                 continue
             key = request.key
-            if key is not None and (key in pending or key in held):
+            if key is not None and (key in pending or key in held) and not request.pipelined:
                 waiting.append(request)
                 continue
             move(request, _SENDING, now)
