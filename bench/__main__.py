@@ -136,7 +136,7 @@ HEADLINES: tuple[tuple[str, str, str, str], ...] = (
      "{:.2f} µs", "-"),
 )  # fmt: skip
 
-MISSED_KEYS = ("codec", "bus", "efficiency", "sim", "loop", "loop1k", "loop1k_fd", "remote")
+MISSED_KEYS = ("codec", "bus", "efficiency", "sim", "loop", "loop1k", "loop1k_fd", "remote", "pacer")
 
 
 def summary_markdown(results: dict[str, Any], command: str, load: list[float], runtime_s: float) -> str:
