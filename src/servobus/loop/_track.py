@@ -108,6 +108,8 @@ class Track:
         gives them up, at a tick's start)."""
         if reply is None and not spoiled:
             return
+        if reply is not None and reply is self.reply:
+            return  # (the same outcome settled again: one reply answers one command)
         # (when it came in: the intake stamped the motor just before; no clock read per reply)
         now = self.motor.last_seen if reply is not None else None
         if now is None:

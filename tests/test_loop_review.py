@@ -1,0 +1,67 @@
+"""Regression tests for the pipelined loop's review (issue 39): each scenario ran wrong before its
+fix. The link and the truth are test_loop's: the body commands the speed ``tick.index``, the reply
+says it, so ``_truth(state)`` is the tick whose command a state's reply really answers."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import anyio
+import pytest
+
+from servobus.frame import Frame
+from servobus.loop import LoopTick, MotorState
+from test_loop import PERIOD, DelayLink, _run, _truth
+from test_loop import anyio_backend as anyio_backend  # (the fixture, on both backends)
+
+pytestmark = pytest.mark.anyio
+
+
+def _younger(seen: list[tuple[LoopTick, list[MotorState | None]]]) -> list[tuple[int, int, int]]:
+    """(tick, the state's tick, the truth) of every state that claims a later command than it answers."""
+    states = [(t.index, s) for t, ss in seen for s in ss if s is not None]
+    return [(index, s.tick, _truth(s)) for index, s in states if s.tick > _truth(s)]
+
+
+class LateReport(DelayLink):
+    """Send reports come ``lag`` periods after the frame left (a writer thread behind), stamped with
+    when it left: a reply may come before its request's report."""
+
+    def __init__(self, *args: Any, lag: float = 1.2, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.lag = lag
+        self.reports: list[tuple[float, object, float]] = []
+
+    def send(self, frame: Frame, handle: object = None) -> None:
+        reporter, self._reporter = self._reporter, None
+        super().send(frame, handle)
+        self._reporter = reporter
+        now = self._time()
+        self.reports.append((now + self.lag * PERIOD, frame if handle is None else handle, now))
+
+    async def run(self) -> None:
+        async with anyio.create_task_group() as group:
+            group.start_soon(super().run)
+            while True:
+                await anyio.sleep(PERIOD / 10)
+                now = self._time()
+                due = [r for r in self.reports if r[0] <= now]
+                self.reports = [r for r in self.reports if r[0] > now]
+                for _, handle, at in due:
+                    self._reporter(handle, at, None)
+
+
+# ---- 1. a reply before its send report is settled once ----
+
+
+@pytest.mark.parametrize("lag", [1.2, 0.5])
+async def test_reply_before_its_report_is_attributed_once(lag: float) -> None:
+    link = LateReport(lambda i: 0.3 * PERIOD, lag=lag)
+    loop, seen = await _run([link], 60, motors_per_bus=2)
+    assert _younger(seen) == []
+    # every reply came: each state says exactly which command it answers (a report later than a
+    # period delays the state a tick, it never shifts it)
+    tail = [(s.tick, _truth(s)) for _, ss in seen[10:] for s in ss if s is not None]
+    assert len(tail) == 2 * len(seen[10:])
+    assert all(tick == truth for tick, truth in tail)
+    assert loop.metrics().lost == 0
