@@ -10,7 +10,12 @@ import anyio
 import pytest
 
 from servobus.frame import Frame
-from servobus.loop import LoopTick, MotorState
+from servobus.loop import Loop, LoopTick, MotorState
+from servobus.protocols import myactuator as ma
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+from servobus.protocols.myactuator.sim.rs485 import MyActuatorRs485Motor
+from servobus.transports import LineRules
+from test_bus_pty import MA_IDS, Heard, rs485_bus
 from test_loop import PERIOD, DelayLink, _run, _truth
 from test_loop import anyio_backend as anyio_backend  # (the fixture, on both backends)
 
@@ -65,3 +70,40 @@ async def test_reply_before_its_report_is_attributed_once(lag: float) -> None:
     assert len(tail) == 2 * len(seen[10:])
     assert all(tick == truth for tick, truth in tail)
     assert loop.metrics().lost == 0
+
+
+# ---- 2. a command queued behind others on a half-duplex line still leaves in its tick ----
+
+
+@pytest.mark.parametrize("delay_periods", [0.2, 0.3])
+async def test_half_duplex_commands_every_motor(delay_periods: float) -> None:
+    link = DelayLink(lambda i: delay_periods * PERIOD, rules=LineRules(half_duplex=True))
+    loop, seen = await _run([link], 60, motors_per_bus=3)
+    per_motor: dict[int, int] = {}
+    for _, frame in link.frames_of(0xA2):
+        per_motor[frame.arbitration_id] = per_motor.get(frame.arbitration_id, 0) + 1
+    # one exchange at a time, 3 of them fit in a period: every motor is commanded every tick
+    assert sorted(per_motor) == [0x141, 0x142, 0x143]
+    assert min(per_motor.values()) >= 55, per_motor
+    assert all(s is not None for s in seen[-1][1])
+    assert _younger(seen) == []
+    assert loop.metrics().superseded == 0
+
+
+@pytest.mark.parametrize("anyio_backend", ["asyncio"])  # (real time: a pty)
+async def test_the_loop_commands_every_motor_of_a_real_rs485_line(anyio_backend: str) -> None:
+    fronts = [MyActuatorRs485Motor(MyActuatorMotor(i)) for i in MA_IDS]
+    heard = Heard()
+    hz = 50  # (a period holds the line's three exchanges on a loaded machine)
+    last: list[MotorState | None] = []
+    async with rs485_bus([*fronts, heard], "myactuator", safe=None) as bus:
+        motors = [bus.motor("myactuator", i, link="rs485") for i in MA_IDS]
+        async with Loop(hz, timeout_s=0.5) as loop:
+            async for tick in loop.ticks(count=30):
+                last = [tick.state(m) for m in motors]
+                for m in motors:
+                    tick.command(m, ma.SpeedControl(speed_dps=10.0 * m.motor_id))
+    commanded = [i for i, command in heard.requests if isinstance(command, ma.SpeedControl)]
+    assert {i: commanded.count(i) >= 20 for i in MA_IDS} == dict.fromkeys(MA_IDS, True), commanded
+    assert all(state is not None for state in last)
+    assert loop.metrics().commands_sent >= 3 * 25
