@@ -4,11 +4,13 @@ says it, so ``_truth(state)`` is the tick whose command a state's reply really a
 
 from __future__ import annotations
 
+import struct
 from typing import Any
 
 import anyio
 import pytest
 
+from servobus.errors import MotorTimeout
 from servobus.frame import Frame
 from servobus.loop import Loop, LoopTick, MotorState
 from servobus.protocols import myactuator as ma
@@ -107,3 +109,52 @@ async def test_the_loop_commands_every_motor_of_a_real_rs485_line(anyio_backend:
     assert {i: commanded.count(i) >= 20 for i in MA_IDS} == dict.fromkeys(MA_IDS, True), commanded
     assert all(state is not None for state in last)
     assert loop.metrics().commands_sent >= 3 * 25
+
+
+# ---- 3. a pipelined request never shares its key's flight with an ordinary request ----
+
+
+class SlowFor1000(DelayLink):
+    """Answers the SpeedControl of 1000 dps (an ordinary request beside the loop) two periods late."""
+
+    def send(self, frame: Frame, handle: object = None) -> None:
+        if frame.data[0] == 0xA2 and struct.unpack_from("<i", frame.data, 4)[0] == 100_000:
+            delay, self.delay = self.delay, lambda i: 2.0 * PERIOD
+            try:
+                super().send(frame, handle)
+            finally:
+                self.delay = delay
+            return
+        super().send(frame, handle)
+
+
+@pytest.mark.parametrize("timeout_s", [0.0005, 0.01])
+async def test_an_ordinary_request_with_the_loops_key_is_kept_apart(timeout_s: float) -> None:
+    link = SlowFor1000(lambda i: 0.3 * PERIOD)
+    outcome: list[object] = []
+
+    async def body(tick: LoopTick, motors: list[Any]) -> None:
+        if tick.index == 10:
+            command = ma.SpeedControl(speed_dps=1000.0)
+            try:
+                outcome.append(await motors[0].request(command, timeout_s=timeout_s))
+            except MotorTimeout as error:
+                outcome.append(error)
+
+    _, seen = await _run([link], 30, motors_per_bus=1, body=body)
+    # (a body that overran gives its commands for the tick after the next: one tick more)
+    overrun = {t.index for t, _ in seen if t.overrun or t.skipped}
+    wrong = [
+        (t.index, s.tick)
+        for t, ss in seen
+        for s in ss
+        if s is not None and (s.reply.speed_dps == 1000 or s.tick > _truth(s) + (s.tick in overrun))  # type: ignore[attr-defined]
+    ]
+    assert wrong == []
+    # the ordinary request got its own reply (or timed out): never one of the loop's
+    [got] = outcome
+    assert isinstance(got, MotorTimeout) or got.speed_dps == 1000  # type: ignore[attr-defined]
+    if timeout_s > 2 * PERIOD:
+        assert not isinstance(got, MotorTimeout)
+    # and the loop goes on after it
+    assert seen[-1][1][0] is not None and seen[-1][1][0].tick >= 25

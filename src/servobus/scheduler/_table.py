@@ -186,6 +186,9 @@ class RequestTable:
         self.early: dict[Hashable, tuple[BoundCodec, Frame]] = {}
         #: reply key -> (stamp, data) of the last reply a pipelined request with it took
         self.answers: dict[Hashable, tuple[float, bytes]] = {}
+        #: reply key -> until when it is held for the late reply of an ORDINARY request (a
+        #: pipelined request passes only holds that pipelined requests caused)
+        self.ordinary_held: dict[Hashable, float] = {}
         self.deadlines: list[tuple[float, int, Request]] = []  # a heap; entries of left requests stay
         self.provisional: list[Request] = []  # sent before anything was measured: timed again then
         self._overtaken: list[Request] = []  # timed out by a reply stamped after their deadline
@@ -275,7 +278,8 @@ class RequestTable:
         waited longer than ``stale_after_s`` for their turn (moved to FAILED). At most
         ``max_in_flight`` out at once; a half-duplex line rests ``gap_s`` after each exchange; a
         request whose key is in flight or ``held`` (for a late reply) waits, keeping its place,
-        unless it is ``pipelined``."""
+        unless it is ``pipelined`` and only pipelined requests are in flight with its key or caused
+        its hold."""
         if self._rest_until:
             if now < self._rest_until:
                 return _NOTHING
@@ -299,7 +303,13 @@ class RequestTable:
                 stale.append(request)
                 continue
             key = request.key
-            if key is not None and (key in pending or key in held) and not request.pipelined:
+            # (a pipelined one passes only pipelined requests of its key, and their holds: an
+            # ordinary request's reply, or late reply, must never answer it, nor it the other's)
+            if (
+                key is not None
+                and (key in pending or key in held)
+                and (not request.pipelined or not self._passes(key, now))
+            ):
                 waiting.append(request)
                 continue
             move(request, _SENDING, now)
@@ -309,6 +319,12 @@ class RequestTable:
         if out and self._audit_at is None and self.report_within_s is not None:
             self._audit_at = now + self.report_within_s  # (see overdue)
         return out, stale
+
+    def _passes(self, key: Hashable, now: float) -> bool:
+        """Whether a pipelined request with ``key`` may leave past what is in flight or held with it."""
+        if self.ordinary_held.get(key, 0.0) > now:
+            return False
+        return all(request.pipelined for request in self.pending.get(key, ()))
 
     def take_early(self, key: Hashable) -> tuple[BoundCodec, Frame] | None:
         """The frame with ``key`` that came before its request's send report, if one did (once)."""
