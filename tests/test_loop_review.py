@@ -158,3 +158,18 @@ async def test_an_ordinary_request_with_the_loops_key_is_kept_apart(timeout_s: f
         assert not isinstance(got, MotorTimeout)
     # and the loop goes on after it
     assert seen[-1][1][0] is not None and seen[-1][1][0].tick >= 25
+
+
+# ---- 4. a timeout shorter than the real latency gives up on no reply still coming ----
+
+
+@pytest.mark.parametrize(("timeout_s", "latency_ticks"), [(0.0005, 3.0), (0.0005, 2.6), (0.001, 3.5)])
+async def test_a_short_timeout_gives_up_on_no_reply_still_coming(
+    timeout_s: float, latency_ticks: float
+) -> None:
+    links = [DelayLink(lambda i: latency_ticks * PERIOD)]
+    loop, seen = await _run(links, 80, motors_per_bus=1, loop_options={"timeout_s": timeout_s})
+    assert _younger(seen) == []
+    # nothing is lost: every state says exactly which command it answers
+    assert loop.metrics().lost == 0
+    assert all(s.tick == _truth(s) for _, ss in seen for s in ss if s is not None)

@@ -22,7 +22,9 @@ sequence numbers, so each motor keeps a FIFO of its commands that left (their ti
 a reply the Bus matched to one of them is attributed to the OLDEST entry still outstanding (an
 earlier command whose reply was lost takes it: the age reported is then a tick too old, never too
 young). An entry with no reply within its horizon (twice its request's timeout, plus a period: a
-late reply could come that long after) is dropped and counted ``lost``.
+late reply could come that long after; at least twice the longest round trip seen of the motor, so
+a timeout shorter than the real latency gives up on no reply still coming) is dropped and counted
+``lost``.
 
 Nothing here awaits per bus or per request: a request's outcome comes to the loop through a slotted
 context (the motor's record in the loop, one per motor), the batch of each bus is sent synchronously
@@ -224,7 +226,8 @@ class Loop:
             if fifo:  # (expire() written out for its common case: the oldest within its horizon)
                 request = fifo[0][1]
                 sent_at = request.sent_at
-                if sent_at is None or expiry - sent_at > 2.0 * request.timeout_s + track.period_s:
+                horizon_s = max(2.0 * request.timeout_s, 2.0 * track.rtt_max_s) + track.period_s
+                if sent_at is None or expiry - sent_at > horizon_s:
                     track.expire(expiry)
             if track.commanded:
                 if track.received_at < since:

@@ -52,6 +52,7 @@ class Track:
         "previous",
         "received_at",
         "reply",
+        "rtt_max_s",
         "sent_s",
         "tick",
         "time",
@@ -69,6 +70,8 @@ class Track:
         self.tick = -1
         self.sent_s = 0.0
         self.received_at = -1.0
+        #: the longest round trip a reply attributed here took (the horizon is at least twice it)
+        self.rtt_max_s = 0.0
         #: the state before the latest: (reply, tick, received_at, sent_s), for a tick that asks
         #: after a newer reply came in during its body (it sees the state as of its start)
         self.previous: tuple[Reply, int, float, float] | None = None
@@ -126,6 +129,8 @@ class Track:
                     self.dropped(request)
                     continue
             fifo.popleft()
+            if reply is not None and now - left > self.rtt_max_s:
+                self.rtt_max_s = now - left
             if reply is not None and tick >= self.tick:
                 if self.reply is not None:
                     self.previous = (self.reply, self.tick, self.received_at, self.sent_s)
@@ -152,7 +157,8 @@ class Track:
     def expire(self, now: float) -> None:
         """Drop the commands that can no longer be answered: never left (superseded, refused), or
         outstanding past their horizon (twice the request's timeout, as the scheduler holds a key
-        for a late reply, plus a period; counted ``lost``)."""
+        for a late reply, or twice the longest round trip seen of the motor if longer, plus a
+        period; counted ``lost``): a reply still coming is never given up on."""
         fifo = self.fifo
         while fifo:
             request = fifo[0][1]
@@ -164,7 +170,7 @@ class Track:
                         return  # (waits for its turn)
                     self.dropped(request)
                     continue
-            if now - left <= 2.0 * request.timeout_s + self.period_s:
+            if now - left <= max(2.0 * request.timeout_s, 2.0 * self.rtt_max_s) + self.period_s:
                 return
             fifo.popleft()
             self.counts.lost += 1
