@@ -156,8 +156,9 @@ class RequestTable:
         pending: reply key -> the requests in flight with that key, oldest first.
         in_flight: the requests SENDING or SENT, in send order.
         early: reply key -> a reply-shaped frame that came before its request's send report.
-        answers: reply key -> when the last reply a pipelined request took ended, and its bytes (a
-            frame with both again is a duplicate: the next request's reply is still to come).
+        answers: reply key -> the shortest round trip a reply of a pipelined request with it took,
+            and the bytes of the last (those bytes again, sooner after the next request left than
+            that round trip, are a duplicate: the next request's reply is still to come).
     """
 
     def __init__(
@@ -184,7 +185,7 @@ class RequestTable:
         self.pending: dict[Hashable, deque[Request]] = {}
         self.in_flight: dict[Request, None] = {}
         self.early: dict[Hashable, tuple[BoundCodec, Frame]] = {}
-        #: reply key -> (stamp, data) of the last reply a pipelined request with it took
+        #: reply key -> (shortest round trip, data of the last reply) of its pipelined requests
         self.answers: dict[Hashable, tuple[float, bytes]] = {}
         #: reply key -> until when it is held for the late reply of an ORDINARY request (a
         #: pipelined request passes only holds that pipelined requests caused)
@@ -319,6 +320,11 @@ class RequestTable:
         if out and self._audit_at is None and self.report_within_s is not None:
             self._audit_at = now + self.report_within_s  # (see overdue)
         return out, stale
+
+    def answered(self, key: Hashable, rtt_s: float, data: bytes) -> None:
+        """A pipelined request with ``key`` took a reply of ``data`` after ``rtt_s`` (see ``answers``)."""
+        last = self.answers.get(key)
+        self.answers[key] = (rtt_s if last is None or rtt_s < last[0] else last[0], data)
 
     def _passes(self, key: Hashable, now: float) -> bool:
         """Whether a pipelined request with ``key`` may leave past what is in flight or held with it."""
