@@ -5,6 +5,7 @@ says it, so ``_truth(state)`` is the tick whose command a state's reply really a
 from __future__ import annotations
 
 import heapq
+import random
 import struct
 from typing import Any
 
@@ -231,3 +232,50 @@ async def test_two_real_replies_in_one_chunk_are_both_taken() -> None:
     assert loop.metrics().lost == 0
     # (at rest the reply says nothing of its tick: the states answer the last tick's command)
     assert [s.age_ticks for _, ss in seen[24:] for s in ss if s is not None] == [1] * 16
+
+
+# ---- 6. a lost reply is found out: the states are exact again, and it is counted ----
+
+
+@pytest.mark.parametrize("losses", [{20}, {20, 60, 100, 140}])
+async def test_a_lost_reply_is_counted_and_the_states_come_back_exact(losses: set[int]) -> None:
+    link = DelayLink(lambda i: 1.5 * PERIOD, lose=losses.__contains__)
+    loop, seen = await _run([link], 200, motors_per_bus=1)
+    assert _younger(seen) == []
+    lag = {t.index: _truth(s) - s.tick for t, ss in seen for s in ss if s is not None}
+    # exact again a few ticks after each loss (before the fix: a tick older per loss, for good)
+    assert all(lag[index] == 0 for index in range(max(losses) + 8, 200)), lag
+    assert loop.metrics().lost == len(losses)
+
+
+async def test_a_resync_never_makes_a_state_younger_under_jitter_and_loss() -> None:
+    rng = random.Random(11)
+    delays = [rng.uniform(0.5, 2.5) * PERIOD for _ in range(10_000)]
+    lost = {i for i in range(10_000) if rng.random() < 0.05}
+    link = DelayLink(delays.__getitem__, lost.__contains__)
+    _, seen = await _run([link], 300, motors_per_bus=2)
+    assert _younger(seen) == []
+
+
+class Stalls(DelayLink):
+    """Replies due within a stall of the host come at its end, stamped then (as a link that stamps
+    a read chunk when it is read): a period late, one reply at a time."""
+
+    stalls = tuple((0.001 * k + 0.0004, 0.001 * k + 0.0015) for k in (40, 80, 120, 121, 122))
+
+    def send(self, frame: Frame, handle: object = None) -> None:
+        super().send(frame, handle)
+        at, i, reply = self._due.pop()  # (the one just pushed: the latest)
+        heapq.heapify(self._due)
+        for start, end in self.stalls:
+            if start <= at < end:
+                at = end
+                reply = Frame(arbitration_id=reply.arbitration_id, data=reply.data, timestamp=at)
+        heapq.heappush(self._due, (at, i, reply))
+
+
+async def test_a_host_stall_does_not_pass_for_a_loss() -> None:
+    link = Stalls(lambda i: 1.5 * PERIOD)
+    loop, seen = await _run([link], 160, motors_per_bus=1)
+    assert _younger(seen) == []
+    assert loop.metrics().lost == 0

@@ -77,7 +77,8 @@ class LoopMetrics:
         commands_on_time: of those, the ones whose frame left before the next tick's deadline.
         superseded: commands replaced by the next one for their motor before they left (never sent).
         not_sent: commands not sent (the motor offline between probes, streaming, a link refusing).
-        lost: commands with no reply within their horizon.
+        lost: commands with no reply within their horizon, or whose reply the replies after it
+            showed lost (the attribution resynchronised: docs/loop.md).
         stale_states: per tick, the motors commanded before with no fresh state, summed.
         state_age_p50_s, state_age_p99_s, state_age_max_s: the age (``MotorState.age_s``) of the
             state of every commanded motor at each tick's start (recent window; None: none yet).
