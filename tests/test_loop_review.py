@@ -279,3 +279,16 @@ async def test_a_host_stall_does_not_pass_for_a_loss() -> None:
     loop, seen = await _run([link], 160, motors_per_bus=1)
     assert _younger(seen) == []
     assert loop.metrics().lost == 0
+
+
+# ---- 8. a command is judged on time by when it left, however late its send report ----
+
+
+@pytest.mark.parametrize("lag", [1.2, 2.5, 0.5])
+async def test_a_late_send_report_does_not_make_a_command_late(lag: float) -> None:
+    link = LateReport(lambda i: 0.3 * PERIOD, lag=lag)
+    loop, _ = await _run([link], 60, motors_per_bus=2)
+    metrics = loop.metrics()
+    # (every frame left at its deadline; the last ticks' reports may still be due at the end)
+    assert metrics.commands_sent >= 2 * 57
+    assert metrics.commands_on_time >= metrics.commands_sent - 2 * 3

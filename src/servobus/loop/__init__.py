@@ -52,6 +52,7 @@ from servobus.loop._tick import LoopTick, MotorState
 from servobus.loop._track import Counts, Track, not_pipelined
 from servobus.metrics import LatencyWindow
 from servobus.protocols import Command
+from servobus.scheduler import RequestState
 from servobus.ticks import ticks
 
 if TYPE_CHECKING:
@@ -59,6 +60,8 @@ if TYPE_CHECKING:
     from servobus.scheduler import Request
 
 __all__ = ["Loop", "LoopMetrics", "LoopTick", "MotorState"]
+
+_SENDING = RequestState.SENDING
 
 #: a tick that starts later than this after its deadline is counted late (``late_ticks``)
 LATE_TICK_S = 200e-6
@@ -74,7 +77,9 @@ class LoopMetrics:
         skipped: ticks dropped whole because their time had passed (the pacer's).
         overruns: bodies that ran past the next tick's deadline.
         commands_sent: commands handed to their link (judged at the next tick).
-        commands_on_time: of those, the ones whose frame left before the next tick's deadline.
+        commands_on_time: of those, the ones whose frame left before the next tick's deadline
+            (each judged when its send report is known: one that comes later than the next tick
+            is judged at a later tick, by when the frame left).
         superseded: commands replaced by the next one for their motor before they left (never sent).
         not_sent: commands not sent (the motor offline between probes, streaming, a link refusing).
         lost: commands with no reply within their horizon, or whose reply the replies after it
@@ -135,6 +140,8 @@ class Loop:
         self._count: int | None = None
         self._last: LoopTick | None = None
         self._previous: list[Request] = []  # the last tick's requests (on time at the next?)
+        #: requests whose send report had not come when their tick was judged, with its end
+        self._undecided: list[tuple[Request, float]] = []
         self._ages = LatencyWindow(4096)
         self._lates = LatencyWindow(4096)
         self._n = dict.fromkeys(("ticks", "late", "skipped", "overruns", "sent", "on_time", "stale"), 0)
@@ -206,14 +213,19 @@ class Loop:
         within = last.deadline + self.period_s if last is not None else deadline
         left = on_time = 0
         previous = self._previous
+        undecided = self._undecided
         for request in previous:
             if request.handed_at is not None:
                 left += 1
                 sent_at = request.sent_at
                 if sent_at is not None and sent_at <= within:
                     on_time += 1
+                elif sent_at is None and request.state is _SENDING:  # (its report is still to come)
+                    undecided.append((request, within))
         n["sent"] += left
         n["on_time"] += on_time
+        if undecided:
+            n["on_time"] += self._judge_undecided()
         started = pace.started
         since = last.started if last is not None else started
         stale = 0
@@ -250,6 +262,22 @@ class Loop:
             self, index, deadline, started, pace.skipped, overrun, stale, sent, since, commands_late
         )
         return tick
+
+    def _judge_undecided(self) -> int:
+        """The commands whose send report had not come when their tick was judged, judged now that
+        it has (each against its own tick's end); returns how many left on time. Those still
+        unreported wait; those that ended unreported never count."""
+        on_time = 0
+        waiting: list[tuple[Request, float]] = []
+        for request, within in self._undecided:
+            sent_at = request.sent_at
+            if sent_at is not None:
+                if sent_at <= within:
+                    on_time += 1
+            elif request.state is _SENDING:
+                waiting.append((request, within))
+        self._undecided = waiting
+        return on_time
 
     def _send(self, index: int) -> int:
         """The commands given for tick ``index``, one batch per bus; returns how many left now."""

@@ -58,7 +58,8 @@ class LoopTick:
         stale: motors commanded before with no fresh state (no reply since the previous tick started).
         sent: requests handed to their links at this deadline.
         commands_late: of the previous tick's commands, those that did not leave before this
-            tick's deadline (0: every one left within its tick).
+            tick's deadline (0: every one left within its tick); one whose send report has not
+            come yet counts here (``LoopMetrics.commands_on_time`` judges it when it comes).
     """
 
     __slots__ = (
