@@ -12,9 +12,11 @@ from typing import Any
 import anyio
 import pytest
 
+from servobus import Bus
 from servobus.errors import MotorTimeout
 from servobus.frame import Frame
 from servobus.loop import Loop, LoopTick, MotorState
+from servobus.protocols import lk
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.protocols.myactuator.sim.rs485 import MyActuatorRs485Motor
@@ -292,3 +294,54 @@ async def test_a_late_send_report_does_not_make_a_command_late(lag: float) -> No
     # (every frame left at its deadline; the last ticks' reports may still be due at the end)
     assert metrics.commands_sent >= 2 * 57
     assert metrics.commands_on_time >= metrics.commands_sent - 2 * 3
+
+
+# ---- 9. a refused tick, a loop entered again, a command after the block ----
+
+
+async def test_a_refused_tick_caught_and_iterated_again_counts_each_command_once() -> None:
+    link = DelayLink(lambda i: 0.3 * PERIOD)
+    async with anyio.create_task_group() as group:
+        group.start_soon(link.run)
+        async with Bus(link, name="a", safe=None) as bus:
+            m1, m2 = bus.motor("myactuator", 1), bus.motor("myactuator", 2)
+            async with Loop(1000) as loop:
+                for _ in range(3):
+                    with pytest.raises(ValueError, match="not a MyActuator command"):
+                        async for tick in loop.ticks(count=10):
+                            tick.command(m1, ma.SpeedControl(speed_dps=1.0))
+                            if tick.index % 10 == 5:
+                                tick.command(m2, lk.ReadStatus1())  # one its codec refuses
+                sent = len(link.frames_of(0xA2))
+                metrics = loop.metrics()
+        group.cancel_scope.cancel()
+    # (each refused tick sends nothing; the others' commands are each counted once, when judged)
+    assert metrics.commands_sent <= sent
+    assert metrics.commands_sent >= sent - 3
+
+
+async def test_a_loop_entered_again_takes_its_late_replies_and_refuses_commands_outside() -> None:
+    link = DelayLink(lambda i: 0.3 * PERIOD)
+    async with anyio.create_task_group() as group:
+        group.start_soon(link.run)
+        async with Bus(link, name="a", safe=None) as bus:
+            m1, m2 = bus.motor("myactuator", 1), bus.motor("myactuator", 2)
+            records = bus.engine.registry.records
+            loop = Loop(1000)
+            for _ in range(2):
+                async with loop:
+                    async for tick in loop.ticks(count=5):
+                        tick.command(m1, ma.SpeedControl(speed_dps=1.0))
+                    track = loop.tracks[m1]
+                    assert records[id(m1.codec)].late == track.late  # (installed each time)
+                assert records[id(m1.codec)].late is None
+            with pytest.raises(RuntimeError, match="inside 'async with'"):
+                tick.command(m2, ma.SpeedControl(speed_dps=1.0))
+            assert records[id(m2.codec)].late is None
+            # a command given after the block is never sent
+            tick.command(m1, ma.SpeedControl(speed_dps=7.0))
+            async with loop:
+                async for _ in loop.ticks(count=3):
+                    pass
+            assert not [f for _, f in link.frames_of(0xA2) if f.data[4:6] == bytes.fromhex("bc02")]
+        group.cancel_scope.cancel()

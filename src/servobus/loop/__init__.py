@@ -148,6 +148,9 @@ class Loop:
 
     async def __aenter__(self) -> Self:
         self._time = _runtime.current().time
+        self.commands = {}  # (given after a block was left: never sent)
+        for track in self.tracks.values():  # (entered again: the late replies come here again)
+            self._install(track)
         return self
 
     async def __aexit__(
@@ -163,16 +166,20 @@ class Loop:
                 await pacer.aclose()  # type: ignore[attr-defined]
             if exc is not None and self.safe_stop:
                 await self.stop_motors()
+        self._time = None  # (a command for a new motor now is refused: Loop.add)
 
     def add(self, motor: Motor) -> Track:
         """Track ``motor`` (done by its first command)."""
         if self._time is None:
             raise RuntimeError("use the Loop inside 'async with'")
         track = self.tracks[motor] = Track(motor, self.counts, self._time, self.period_s)
-        record = track.bus.engine.registry.records.get(id(motor.codec))
+        self._install(track)
+        return track
+
+    def _install(self, track: Track) -> None:
+        record = track.bus.engine.registry.records.get(id(track.motor.codec))
         if record is not None:
             record.late = track.late  # (undone when the loop's block is left)
-        return track
 
     def __aiter__(self) -> Self:
         return self
@@ -282,8 +289,8 @@ class Loop:
     def _send(self, index: int) -> int:
         """The commands given for tick ``index``, one batch per bus; returns how many left now."""
         commands = self.commands
+        self._previous = []  # (judged: a ValueError below must not have them judged again)
         if not commands:
-            self._previous = []
             return 0
         self.commands = {}
         tracks = self.tracks
