@@ -345,3 +345,22 @@ async def test_a_loop_entered_again_takes_its_late_replies_and_refuses_commands_
                     pass
             assert not [f for _, f in link.frames_of(0xA2) if f.data[4:6] == bytes.fromhex("bc02")]
         group.cancel_scope.cancel()
+
+
+# ---- 10. replies of two requests that both await their send report are both kept ----
+
+
+async def test_replies_before_two_late_send_reports_are_both_taken() -> None:
+    link = LateReport(lambda i: 0.3 * PERIOD, lag=2.5)  # (two of a motor's requests unreported at once)
+    duplicates: list[int] = []
+
+    async def body(tick: LoopTick, motors: list[Any]) -> None:
+        if tick.index == 59:
+            duplicates.append(motors[0].bus.stats().get("duplicate", 0))
+
+    loop, seen = await _run([link], 60, motors_per_bus=2, body=body)
+    assert duplicates == [0]
+    assert _younger(seen) == []
+    assert loop.metrics().lost == 0
+    tail = [(s.tick, _truth(s)) for _, ss in seen[10:] for s in ss if s is not None]
+    assert len(tail) == 2 * len(seen[10:]) and all(tick == truth for tick, truth in tail)

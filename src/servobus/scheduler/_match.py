@@ -16,7 +16,7 @@ from servobus.frame import Frame
 from servobus.protocols import BoundCodec, FrameKind, Reply
 from servobus.protocols._bound import KIND_NOT_OURS, KIND_REPLY, KIND_REPORT, KIND_STREAM
 from servobus.scheduler._keys import Keys
-from servobus.scheduler._table import Received, Request, RequestState, RequestTable, Traffic
+from servobus.scheduler._table import Received, Request, RequestState, RequestTable, Traffic, early_room
 
 __all__ = [
     "ALONE",
@@ -92,7 +92,8 @@ def match(table: RequestTable, frame: Frame, now: float) -> Decision:
         request = waiting[0]
         if request.state is _SENDING and kind is KIND_REPLY:
             # It beat the transport's send report (a reader and a writer thread).
-            return (EARLY_AGAIN if key in table.early else EARLY, codec, kind, key, reply, request, None)
+            again = key in table.early and not early_room(table, key)
+            return (EARLY_AGAIN if again else EARLY, codec, kind, key, reply, request, None)
         sent_at = request.sent_at
         if kind is KIND_REPLY:
             # (an unstamped frame counts from ``now``, when it was taken in: 0.0 is no time)
