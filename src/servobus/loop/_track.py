@@ -62,6 +62,7 @@ class Track:
         "samples",
         "sent_s",
         "suspect",
+        "taken",
         "tick",
         "time",
         "wrote",
@@ -83,6 +84,7 @@ class Track:
         self.rtt_min_s = math.inf  # (and the shortest)
         self.samples = 0  # (how many round trips those two were taken from)
         self.suspect = 0  # replies in a row that showed the front's reply lost (``shifted``)
+        self.taken: Reply | None = None  # the last reply taken (settled twice, it counts once)
         #: the state before the latest: (reply, tick, received_at, sent_s), for a tick that asks
         #: after a newer reply came in during its body (it sees the state as of its start)
         self.previous: tuple[Reply, int, float, float] | None = None
@@ -122,8 +124,10 @@ class Track:
         gives them up, at a tick's start)."""
         if reply is None and not spoiled:
             return
-        if reply is not None and reply is self.reply:
-            return  # (the same outcome settled again: one reply answers one command)
+        if reply is not None:
+            if reply is self.taken:
+                return  # (the same outcome settled again: one reply answers one command)
+            self.taken = reply
         # (when it came in: the intake stamped the motor just before; no clock read per reply)
         now = self.motor.last_seen if reply is not None else None
         if now is None:
