@@ -321,9 +321,10 @@ async def test_a_command_still_queued_at_the_next_deadline_is_superseded_never_s
     assert metrics.superseded > 10
     for t, frame in link.frames_of(0xA2):
         given = round(struct.unpack_from("<i", frame.data, 4)[0] / 100)
-        # given in tick ``given``'s body, for tick given + 1: withdrawn when the next tick's body gives
-        # the next one (a reply that comes at that deadline lets the line's next frame go first)
-        assert t <= (given + 1) * PERIOD + 1e-9, (t, given)
+        # given in tick ``given``'s body, for tick given + 1: it may leave within that tick, and is
+        # withdrawn at the next deadline, where the next one leaves (a reply that comes at that
+        # deadline lets the line's next frame go first)
+        assert t <= (given + 2) * PERIOD + 1e-9, (t, given)
     # (bodies 0..39 gave 80: the last body's never leave, the one before's are judged at no tick)
     assert 76 <= metrics.commands_sent + metrics.superseded + metrics.not_sent <= 78
     # (a tick whose commands did not all leave within it says so at the next)

@@ -329,8 +329,10 @@ class Engine:
     def _judged(self, request: Request, early: Received | None) -> bool:
         """``request`` was reported sent (its deadline starts); ``early``, a reply before the report, is
         delivered. True when nothing more is to be done (it waits, and the timer fires in time)."""
+        settled = False  # (the early reply's delivery settled it: settled once, never twice)
         if early is not None and early.reply is not None:  # its reply came before this report
             self._deliver(early, self.time())
+            settled = early.request is request
         elif early is not None and early.request is not None:  # ... and did not decode
             self.delivery.undecodable(early)
         if request.state is _SENT:
@@ -338,7 +340,7 @@ class Engine:
                 return True  # the timer already fires first (the common case: one per burst)
             self.kick()
             return True
-        if request.state is _REPLIED:  # nothing to wait for, or the early reply
+        if request.state is _REPLIED and not settled:  # nothing to wait for, or the early reply
             self.settle(request, None)
         return False
 

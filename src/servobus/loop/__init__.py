@@ -22,7 +22,9 @@ sequence numbers, so each motor keeps a FIFO of its commands that left (their ti
 a reply the Bus matched to one of them is attributed to the OLDEST entry still outstanding (an
 earlier command whose reply was lost takes it: the age reported is then a tick too old, never too
 young). An entry with no reply within its horizon (twice its request's timeout, plus a period: a
-late reply could come that long after) is dropped and counted ``lost``.
+late reply could come that long after; at least twice the longest round trip seen of the motor, so
+a timeout shorter than the real latency gives up on no reply still coming) is dropped and counted
+``lost``.
 
 Nothing here awaits per bus or per request: a request's outcome comes to the loop through a slotted
 context (the motor's record in the loop, one per motor), the batch of each bus is sent synchronously
@@ -50,6 +52,7 @@ from servobus.loop._tick import LoopTick, MotorState
 from servobus.loop._track import Counts, Track, not_pipelined
 from servobus.metrics import LatencyWindow
 from servobus.protocols import Command
+from servobus.scheduler import RequestState
 from servobus.ticks import ticks
 
 if TYPE_CHECKING:
@@ -57,6 +60,8 @@ if TYPE_CHECKING:
     from servobus.scheduler import Request
 
 __all__ = ["Loop", "LoopMetrics", "LoopTick", "MotorState"]
+
+_SENDING = RequestState.SENDING
 
 #: a tick that starts later than this after its deadline is counted late (``late_ticks``)
 LATE_TICK_S = 200e-6
@@ -72,10 +77,13 @@ class LoopMetrics:
         skipped: ticks dropped whole because their time had passed (the pacer's).
         overruns: bodies that ran past the next tick's deadline.
         commands_sent: commands handed to their link (judged at the next tick).
-        commands_on_time: of those, the ones whose frame left before the next tick's deadline.
+        commands_on_time: of those, the ones whose frame left before the next tick's deadline
+            (each judged when its send report is known: one that comes later than the next tick
+            is judged at a later tick, by when the frame left).
         superseded: commands replaced by the next one for their motor before they left (never sent).
         not_sent: commands not sent (the motor offline between probes, streaming, a link refusing).
-        lost: commands with no reply within their horizon.
+        lost: commands with no reply within their horizon, or whose reply the replies after it
+            showed lost (the attribution resynchronised: docs/loop.md).
         stale_states: per tick, the motors commanded before with no fresh state, summed.
         state_age_p50_s, state_age_p99_s, state_age_max_s: the age (``MotorState.age_s``) of the
             state of every commanded motor at each tick's start (recent window; None: none yet).
@@ -132,12 +140,17 @@ class Loop:
         self._count: int | None = None
         self._last: LoopTick | None = None
         self._previous: list[Request] = []  # the last tick's requests (on time at the next?)
+        #: requests whose send report had not come when their tick was judged, with its end
+        self._undecided: list[tuple[Request, float]] = []
         self._ages = LatencyWindow(4096)
         self._lates = LatencyWindow(4096)
         self._n = dict.fromkeys(("ticks", "late", "skipped", "overruns", "sent", "on_time", "stale"), 0)
 
     async def __aenter__(self) -> Self:
         self._time = _runtime.current().time
+        self.commands = {}  # (given after a block was left: never sent)
+        for track in self.tracks.values():  # (entered again: the late replies come here again)
+            self._install(track)
         return self
 
     async def __aexit__(
@@ -153,16 +166,20 @@ class Loop:
                 await pacer.aclose()  # type: ignore[attr-defined]
             if exc is not None and self.safe_stop:
                 await self.stop_motors()
+        self._time = None  # (a command for a new motor now is refused: Loop.add)
 
     def add(self, motor: Motor) -> Track:
         """Track ``motor`` (done by its first command)."""
         if self._time is None:
             raise RuntimeError("use the Loop inside 'async with'")
         track = self.tracks[motor] = Track(motor, self.counts, self._time, self.period_s)
-        record = track.bus.engine.registry.records.get(id(motor.codec))
+        self._install(track)
+        return track
+
+    def _install(self, track: Track) -> None:
+        record = track.bus.engine.registry.records.get(id(track.motor.codec))
         if record is not None:
             record.late = track.late  # (undone when the loop's block is left)
-        return track
 
     def __aiter__(self) -> Self:
         return self
@@ -203,14 +220,19 @@ class Loop:
         within = last.deadline + self.period_s if last is not None else deadline
         left = on_time = 0
         previous = self._previous
+        undecided = self._undecided
         for request in previous:
             if request.handed_at is not None:
                 left += 1
                 sent_at = request.sent_at
                 if sent_at is not None and sent_at <= within:
                     on_time += 1
+                elif sent_at is None and request.state is _SENDING:  # (its report is still to come)
+                    undecided.append((request, within))
         n["sent"] += left
         n["on_time"] += on_time
+        if undecided:
+            n["on_time"] += self._judge_undecided()
         started = pace.started
         since = last.started if last is not None else started
         stale = 0
@@ -224,7 +246,8 @@ class Loop:
             if fifo:  # (expire() written out for its common case: the oldest within its horizon)
                 request = fifo[0][1]
                 sent_at = request.sent_at
-                if sent_at is None or expiry - sent_at > 2.0 * request.timeout_s + track.period_s:
+                horizon_s = max(2.0 * request.timeout_s, 2.0 * track.rtt_max_s) + track.period_s
+                if sent_at is None or expiry - sent_at > horizon_s:
                     track.expire(expiry)
             if track.commanded:
                 if track.received_at < since:
@@ -247,11 +270,27 @@ class Loop:
         )
         return tick
 
+    def _judge_undecided(self) -> int:
+        """The commands whose send report had not come when their tick was judged, judged now that
+        it has (each against its own tick's end); returns how many left on time. Those still
+        unreported wait; those that ended unreported never count."""
+        on_time = 0
+        waiting: list[tuple[Request, float]] = []
+        for request, within in self._undecided:
+            sent_at = request.sent_at
+            if sent_at is not None:
+                if sent_at <= within:
+                    on_time += 1
+            elif request.state is _SENDING:
+                waiting.append((request, within))
+        self._undecided = waiting
+        return on_time
+
     def _send(self, index: int) -> int:
         """The commands given for tick ``index``, one batch per bus; returns how many left now."""
         commands = self.commands
+        self._previous = []  # (judged: a ValueError below must not have them judged again)
         if not commands:
-            self._previous = []
             return 0
         self.commands = {}
         tracks = self.tracks

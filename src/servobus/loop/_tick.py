@@ -5,17 +5,13 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, NamedTuple, Protocol
 
-from servobus.bus.pipeline import Superseded
-from servobus.loop._track import Counts, Track, not_pipelined
+from servobus.loop._track import Counts, Track
 from servobus.protocols import Command, Reply
-from servobus.scheduler import RequestState
 
 if TYPE_CHECKING:
     from servobus.bus import Motor
 
 __all__ = ["LoopHost", "LoopTick", "MotorState"]
-
-_QUEUED = RequestState.QUEUED
 
 
 class LoopHost(Protocol):
@@ -62,7 +58,8 @@ class LoopTick:
         stale: motors commanded before with no fresh state (no reply since the previous tick started).
         sent: requests handed to their links at this deadline.
         commands_late: of the previous tick's commands, those that did not leave before this
-            tick's deadline (0: every one left within its tick).
+            tick's deadline (0: every one left within its tick); one whose send report has not
+            come yet counts here (``LoopMetrics.commands_on_time`` judges it when it comes).
     """
 
     __slots__ = (
@@ -123,18 +120,13 @@ class LoopTick:
 
     def command(self, motor: Motor, command: Command) -> None:
         """``command`` goes to ``motor`` at the next tick's deadline (a second one this tick replaces
-        it, counted ``superseded``). A command out of range raises ValueError at that deadline,
-        before any frame of the tick leaves."""
+        it, counted ``superseded``; the motor's command of this tick, if still queued then, is
+        withdrawn there, not here: it may still leave within its own tick). A command out of range
+        raises ValueError at that deadline, before any frame of the tick leaves."""
         loop = self._loop
         track = loop.tracks.get(motor)
         if track is None:
             track = loop.add(motor)
-        last = track.last
-        if last is not None and last.state is _QUEUED:  # the last tick's command has not left yet
-            track.last = None
-            track.bus.engine.withdraw(
-                motor, Superseded(f"{motor!r}: superseded before it left"), not_pipelined
-            )
         if loop.commands.setdefault(motor, command) is not command:
             loop.commands[motor] = command
             loop.counts.superseded += 1

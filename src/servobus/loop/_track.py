@@ -4,6 +4,7 @@ it is also the context the Bus settles those requests' outcomes into."""
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from typing import TYPE_CHECKING, Any
 
@@ -20,6 +21,10 @@ if TYPE_CHECKING:
 __all__ = ["Counts", "Track", "not_pipelined"]
 
 _QUEUED, _FAILED = RequestState.QUEUED, RequestState.FAILED
+#: round trips a motor's replies must have shown before a reply is taken to show a loss (resync)
+_RESYNC_SAMPLES = 16
+#: replies in a row that show the FIFO's front lost before it is dropped (resync)
+_RESYNC_REPLIES = 3
 
 
 class Counts:
@@ -52,7 +57,12 @@ class Track:
         "previous",
         "received_at",
         "reply",
+        "rtt_max_s",
+        "rtt_min_s",
+        "samples",
         "sent_s",
+        "suspect",
+        "taken",
         "tick",
         "time",
         "wrote",
@@ -69,13 +79,19 @@ class Track:
         self.tick = -1
         self.sent_s = 0.0
         self.received_at = -1.0
+        #: the longest round trip a reply attributed here took (the horizon is at least twice it)
+        self.rtt_max_s = 0.0
+        self.rtt_min_s = math.inf  # (and the shortest)
+        self.samples = 0  # (how many round trips those two were taken from)
+        self.suspect = 0  # replies in a row that showed the front's reply lost (``shifted``)
+        self.taken: Reply | None = None  # the last reply taken (settled twice, it counts once)
         #: the state before the latest: (reply, tick, received_at, sent_s), for a tick that asks
         #: after a newer reply came in during its body (it sees the state as of its start)
         self.previous: tuple[Reply, int, float, float] | None = None
         self.commanded = False
         self.wrote = False  # (a command that is not a read: the motor gets the safe stop)
         self.command: Command | None = None  # (the next tick's, while it is being sent)
-        self.last: Request | None = None  # its last request sent (withdrawn if still queued when superseded)
+        self.last: Request | None = None  # its last request sent
 
     # ---- a waiter's interface, for the Bus (servobus.bus.delivery.Delivery.settle) ----
 
@@ -108,6 +124,10 @@ class Track:
         gives them up, at a tick's start)."""
         if reply is None and not spoiled:
             return
+        if reply is not None:
+            if reply is self.taken:
+                return  # (the same outcome settled again: one reply answers one command)
+            self.taken = reply
         # (when it came in: the intake stamped the motor just before; no clock read per reply)
         now = self.motor.last_seen if reply is not None else None
         if now is None:
@@ -123,12 +143,45 @@ class Track:
                         return  # (nothing older is outstanding: not ours to attribute)
                     self.dropped(request)
                     continue
-            fifo.popleft()
+            if reply is not None and now - left > self.rtt_max_s + 0.5 * self.period_s and self.shifted(now):
+                self.suspect += 1
+                if self.suspect >= _RESYNC_REPLIES:  # the front's reply was lost: this is the next's
+                    self.suspect = 0
+                    fifo.popleft()
+                    self.counts.lost += 1
+                    continue
+                fifo.popleft()  # (in doubt meanwhile: the front's, a tick older, never younger)
+            else:
+                self.suspect = 0
+                fifo.popleft()
+                if reply is not None:
+                    rtt_s = now - left
+                    self.samples += 1
+                    if rtt_s > self.rtt_max_s:
+                        self.rtt_max_s = rtt_s
+                    if rtt_s < self.rtt_min_s:
+                        self.rtt_min_s = rtt_s
             if reply is not None and tick >= self.tick:
                 if self.reply is not None:
                     self.previous = (self.reply, self.tick, self.received_at, self.sent_s)
                 self.reply, self.tick, self.received_at, self.sent_s = reply, tick, now, left
             return
+
+    def shifted(self, now: float) -> bool:
+        """A reply came ``now``, later after the FIFO's front left than any of enough replies of the
+        motor took, by more than their spread (and half a period), yet the next entry left a round
+        trip within those seen before: the front's reply may have been lost. Only
+        ``_RESYNC_REPLIES`` such replies in a row drop the front (counted ``lost``): a stall of
+        the host delays replies once, a loss shifts every later one."""
+        fifo = self.fifo
+        if self.samples < _RESYNC_SAMPLES or len(fifo) < 2:
+            return False
+        left, after = fifo[0][1].sent_at, fifo[1][1].sent_at
+        if left is None or after is None:
+            return False
+        if now - left <= self.rtt_max_s + max(0.5 * self.period_s, self.rtt_max_s - self.rtt_min_s):
+            return False
+        return self.rtt_min_s <= now - after <= self.rtt_max_s
 
     #: the Bus settles a request's reply here (None: a command with no reply left)
     set_result = answered
@@ -150,7 +203,8 @@ class Track:
     def expire(self, now: float) -> None:
         """Drop the commands that can no longer be answered: never left (superseded, refused), or
         outstanding past their horizon (twice the request's timeout, as the scheduler holds a key
-        for a late reply, plus a period; counted ``lost``)."""
+        for a late reply, or twice the longest round trip seen of the motor if longer, plus a
+        period; counted ``lost``): a reply still coming is never given up on."""
         fifo = self.fifo
         while fifo:
             request = fifo[0][1]
@@ -162,7 +216,7 @@ class Track:
                         return  # (waits for its turn)
                     self.dropped(request)
                     continue
-            if now - left <= 2.0 * request.timeout_s + self.period_s:
+            if now - left <= max(2.0 * request.timeout_s, 2.0 * self.rtt_max_s) + self.period_s:
                 return
             fifo.popleft()
             self.counts.lost += 1

@@ -99,6 +99,7 @@ class Keys:
         held = self.held
         for key in [k for k, until in held.items() if until <= now]:
             del held[key]
+            self.table.ordinary_held.pop(key, None)
             if any(e[0] > now for e in self.late.get(key, ())):
                 self.doubtful.add(key)
 
@@ -129,6 +130,8 @@ class Keys:
             self.prune(now)
         if until > now:
             self.held[key] = max(until, self.held.get(key, until))
+            if not request.pipelined:
+                self._hold_ordinary(key, until)
         else:  # (a hold over before it began: the next reply with the key is in doubt)
             self.doubtful.add(key)
 
@@ -158,7 +161,13 @@ class Keys:
         late.extend([(window, sent_at, None, until)] * len(earlier))
         if all(e[2] is not None for e in earlier):  # a new episode: hold once
             self.held[key] = max(until, self.held.get(key, until))
+            if not request.pipelined:
+                self._hold_ordinary(key, until)
         return True
+
+    def _hold_ordinary(self, key: Hashable, until: float) -> None:
+        ordinary = self.table.ordinary_held
+        ordinary[key] = max(until, ordinary.get(key, until))
 
     def sent_after_all(self, request: Request, at: float) -> None:
         """The send report of a request given up on before it came (cancelled, or timed out
@@ -256,6 +265,7 @@ class Keys:
                         self.measured()
                 if len(held) <= 1:  # the reply the key was held for came: the next exchange may go
                     self.held.pop(key, None)
+                    self.table.ordinary_held.pop(key, None)
                     if late:  # a request given up on before may still be answered: in doubt
                         self.doubtful.add(key)
                     else:

@@ -16,7 +16,7 @@ from servobus.frame import Frame
 from servobus.protocols import BoundCodec, FrameKind, Reply
 from servobus.protocols._bound import KIND_NOT_OURS, KIND_REPLY, KIND_REPORT, KIND_STREAM
 from servobus.scheduler._keys import Keys
-from servobus.scheduler._table import Received, Request, RequestState, RequestTable, Traffic
+from servobus.scheduler._table import Received, Request, RequestState, RequestTable, Traffic, early_room
 
 __all__ = [
     "ALONE",
@@ -44,7 +44,7 @@ MALFORMED = 5  # does not decode (``error``); ``request``: the one it answered a
 OVERTAKEN = 6  # ``request``'s reply, stamped after its deadline: it timed out, this is its late reply
 ALONE = 7  # a stream or report frame that answers no request
 UNMATCHED = 8  # a reply that answers no request: late, duplicate or unsolicited (the keys' memory says)
-REPEATED = 9  # the reply a pipelined request's key just took, again at the same instant: a duplicate
+REPEATED = 9  # the reply a pipelined request's key last took, again too soon to be the next one's
 
 #: (what, codec, kind, key, reply, request, error): the motor whose frame it is, its kind and reply
 #: key, the decoded reply, the request it concerns, the codec's error if it does not decode.
@@ -92,7 +92,8 @@ def match(table: RequestTable, frame: Frame, now: float) -> Decision:
         request = waiting[0]
         if request.state is _SENDING and kind is KIND_REPLY:
             # It beat the transport's send report (a reader and a writer thread).
-            return (EARLY_AGAIN if key in table.early else EARLY, codec, kind, key, reply, request, None)
+            again = key in table.early and not early_room(table, key)
+            return (EARLY_AGAIN if again else EARLY, codec, kind, key, reply, request, None)
         sent_at = request.sent_at
         if kind is KIND_REPLY:
             # (an unstamped frame counts from ``now``, when it was taken in: 0.0 is no time)
@@ -106,9 +107,14 @@ def match(table: RequestTable, frame: Frame, now: float) -> Decision:
             echo = request.echo
             if echo is not None and frame.data == echo:
                 return (ECHOED, codec, kind, key, reply, request, None)
-            if request.pipelined and stamp and table.answers.get(key) == (stamp, frame.data):
-                # (two replies cannot end on the wire at once: the next request's is still to come)
-                return (REPEATED, codec, kind, key, reply, request, None)
+            if request.pipelined and sent_at is not None:
+                # The bytes of the key's last answer, sooner after this request left than any reply
+                # of it ever took: that answer again (a duplicate), not this request's reply. (Not
+                # "the same stamp": a link stamps every frame of one read alike, two real replies
+                # among them.)
+                last = table.answers.get(key)
+                if last is not None and last[1] == frame.data and (stamp or now) < sent_at + last[0]:
+                    return (REPEATED, codec, kind, key, reply, request, None)
             return (ANSWER, codec, kind, key, reply, request, None)
     if kind is KIND_STREAM or kind is KIND_REPORT:
         return (ALONE, codec, kind, key, reply, None, None)

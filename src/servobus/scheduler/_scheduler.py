@@ -20,7 +20,16 @@ from servobus.rtt import Estimates
 from servobus.scheduler._hosts import OtherHosts
 from servobus.scheduler._keys import Keys
 from servobus.scheduler._match import ANSWER, NO_MOTOR, judge, match
-from servobus.scheduler._table import FINAL, FROM, Received, Request, RequestState, RequestTable, Traffic
+from servobus.scheduler._table import (
+    FINAL,
+    FROM,
+    Received,
+    Request,
+    RequestState,
+    RequestTable,
+    Traffic,
+    note_answer,
+)
 
 __all__ = ["Scheduler"]
 
@@ -258,8 +267,8 @@ class Scheduler:
         if self.table.move(request, _REPLIED, now) is not None:  # (an early frame of its key, unjudged)
             keys.end_early(codec, key, now)
         request.reply = reply
-        if request.pipelined and frame.timestamp:  # (a duplicate of it is told apart: _match.REPEATED)
-            self.table.answers[key] = (frame.timestamp, frame.data)
+        if request.pipelined and request.sent_at is not None:  # (its duplicate is told: _match.REPEATED)
+            note_answer(self.table, key, (frame.timestamp or now) - request.sent_at, frame.data)
         replied = keys.replied  # (Keys.answered, written out for the hot path)
         replied[key] = now + keys.late_window_s
         if len(replied) > keys.limit:

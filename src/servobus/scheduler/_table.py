@@ -21,7 +21,19 @@ from servobus.frame import Frame
 from servobus.protocols import BoundCodec, Command, Reply
 from servobus.rtt import Estimates, RoundTrip
 
-__all__ = ["FINAL", "FROM", "TRANSITIONS", "Received", "Request", "RequestState", "RequestTable", "Traffic"]
+__all__ = [
+    "FINAL",
+    "FROM",
+    "TRANSITIONS",
+    "Received",
+    "Request",
+    "RequestState",
+    "RequestTable",
+    "Traffic",
+    "early_room",
+    "note_answer",
+    "passes",
+]
 
 
 class RequestState(enum.Enum):
@@ -156,8 +168,8 @@ class RequestTable:
         pending: reply key -> the requests in flight with that key, oldest first.
         in_flight: the requests SENDING or SENT, in send order.
         early: reply key -> a reply-shaped frame that came before its request's send report.
-        answers: reply key -> when the last reply a pipelined request took ended, and its bytes (a
-            frame with both again is a duplicate: the next request's reply is still to come).
+        answers: reply key -> the shortest round trip a reply of a pipelined request took, and the
+            bytes of the last (again, sooner after the next one left than that: a duplicate).
     """
 
     def __init__(
@@ -184,8 +196,11 @@ class RequestTable:
         self.pending: dict[Hashable, deque[Request]] = {}
         self.in_flight: dict[Request, None] = {}
         self.early: dict[Hashable, tuple[BoundCodec, Frame]] = {}
-        #: reply key -> (stamp, data) of the last reply a pipelined request with it took
+        self.early_more: dict[Hashable, deque[tuple[BoundCodec, Frame]]] = {}  # (later requests')
+        #: reply key -> (shortest round trip, data of the last reply) of its pipelined requests
         self.answers: dict[Hashable, tuple[float, bytes]] = {}
+        #: reply key -> until when it is held for an ORDINARY request's late reply (see ``passes``)
+        self.ordinary_held: dict[Hashable, float] = {}
         self.deadlines: list[tuple[float, int, Request]] = []  # a heap; entries of left requests stay
         self.provisional: list[Request] = []  # sent before anything was measured: timed again then
         self._overtaken: list[Request] = []  # timed out by a reply stamped after their deadline
@@ -252,8 +267,10 @@ class RequestTable:
             elif request in self.queue:  # (a stale one was taken off the queue already)
                 self.queue.remove(request)
             return None
-        # Out of flight (SENDING or SENT to anything but SENT).
-        dropped = self.early.pop(key, None) if self.early and key in self.early else None
+        # Out of flight (SENDING or SENT to anything but SENT). (A SENT one's: a later request's.)
+        dropped = self.early.pop(key, None) if at is _SENDING and self.early and key in self.early else None
+        if dropped is not None:
+            self.early_more.pop(key, None)
         if self.in_flight.pop(request, 0) is None and self.one_at_a_time:  # None: it was in flight
             self._rest_until = now + self.gap_s
         if key is not None:
@@ -275,7 +292,7 @@ class RequestTable:
         waited longer than ``stale_after_s`` for their turn (moved to FAILED). At most
         ``max_in_flight`` out at once; a half-duplex line rests ``gap_s`` after each exchange; a
         request whose key is in flight or ``held`` (for a late reply) waits, keeping its place,
-        unless it is ``pipelined``."""
+        unless it is ``pipelined`` and :func:`passes` lets it."""
         if self._rest_until:
             if now < self._rest_until:
                 return _NOTHING
@@ -299,7 +316,8 @@ class RequestTable:
                 stale.append(request)
                 continue
             key = request.key
-            if key is not None and (key in pending or key in held) and not request.pipelined:
+            busy = key is not None and (key in pending or key in held)
+            if busy and not (request.pipelined and passes(self, key, now)):
                 waiting.append(request)
                 continue
             move(request, _SENDING, now)
@@ -312,12 +330,18 @@ class RequestTable:
 
     def take_early(self, key: Hashable) -> tuple[BoundCodec, Frame] | None:
         """The frame with ``key`` that came before its request's send report, if one did (once)."""
-        return self.early.pop(key, None)
+        first = self.early.pop(key, None)
+        if first is not None and self.early_more.get(key):  # (the next request's comes first next)
+            self.early[key] = self.early_more[key].popleft()
+        return first
 
     def keep_early(self, key: Hashable, codec: BoundCodec, frame: Frame) -> None:
         """A reply-shaped ``frame`` with ``key`` came before its request's send report: kept to be
-        judged when the report says when the request left."""
-        self.early[key] = (codec, frame)
+        judged when the report says when the request left (in order: :func:`early_room`)."""
+        if key in self.early:
+            self.early_more.setdefault(key, deque()).append((codec, frame))
+        else:
+            self.early[key] = (codec, frame)
 
     def overtaken(self, request: Request) -> None:
         """``request`` timed out by a reply stamped after its deadline: :meth:`overdue` says so next."""
@@ -435,3 +459,25 @@ class RequestTable:
 
 
 _OUT = frozenset({_SENDING, _SENT})
+
+
+def passes(table: RequestTable, key: Hashable, now: float) -> bool:
+    """Whether a pipelined request with ``key`` may leave past what is in flight or held with it:
+    only pipelined requests of its key and the holds they caused (an ordinary request's reply, or
+    late reply, must never answer it, nor it the other's)."""
+    if table.ordinary_held.get(key, 0.0) > now:
+        return False
+    return all(request.pipelined for request in table.pending.get(key, ()))
+
+
+def note_answer(table: RequestTable, key: Hashable, rtt_s: float, data: bytes) -> None:
+    """A pipelined request with ``key`` took a reply of ``data`` after ``rtt_s`` (``table.answers``)."""
+    last = table.answers.get(key)
+    table.answers[key] = (rtt_s if last is None or rtt_s < last[0] else last[0], data)
+
+
+def early_room(table: RequestTable, key: Hashable) -> bool:
+    """Whether an early frame with ``key`` may be kept: fewer are than requests with it await their
+    send report (more is a duplicate)."""
+    kept = (key in table.early) + len(table.early_more.get(key, ()))
+    return kept < sum(1 for request in table.pending.get(key, ()) if request.state is _SENDING)
