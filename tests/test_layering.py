@@ -179,6 +179,8 @@ LAYERS: dict[str, list[str]] = {
         "servobus.signals",
         "servobus.sync",
     ],
+    # the pipelined fixed-rate loop over many buses (issue 39): above the Bus
+    "loop": ["servobus.loop"],
     # buses served to other computers (issue 29): above the Bus, below the command line; no family
     "remote": ["servobus.remote"],
     # what one does with a bus's traffic beside the control loop (issue 38): DBC, logs, recording
@@ -198,6 +200,7 @@ MAY_IMPORT: dict[str, set[str]] = {
     "sim": {"base", "protocols", "family", "sim"},
     "sim-front": {"base", "protocols", "family", "sim", "sim-front", "transports"},
     "bus": {"base", "protocols", "family", "scheduler", "transports", "bus"},
+    "loop": {"base", "protocols", "scheduler", "transports", "bus", "loop"},
     "remote": {"base", "protocols", "scheduler", "bus", "remote"},
     "tools": {"base", "protocols", "scheduler", "transports", "bus", "tools"},
     "app": set(LAYERS),

@@ -4,6 +4,7 @@ Layers (see the README's map): ``servobus.core`` wraps the C core (CRCs, bit pac
 protocol families, the scheduler, transports, the simulator and the Bus build on it.
 """
 
+import importlib
 from typing import TYPE_CHECKING
 
 from servobus._version import __version__
@@ -28,6 +29,7 @@ __all__ = [
     "Bus",
     "Frame",
     "FrameLink",
+    "Loop",
     "Motor",
     "MotorBusy",
     "MotorFault",
@@ -50,4 +52,6 @@ def __getattr__(name: str) -> object:
         from servobus import bus
 
         return getattr(bus, name)
+    if name == "Loop":  # (the loop's layer is above this package's: imported by name, when used)
+        return importlib.import_module("servobus.loop").Loop
     raise AttributeError(f"module 'servobus' has no attribute {name!r}")

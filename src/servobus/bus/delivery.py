@@ -26,7 +26,7 @@ __all__ = ["Delivery", "IntakeHost"]
 
 logger = logging.getLogger("servobus.bus")
 
-_STREAM = Traffic.STREAM
+_STREAM, _LATE = Traffic.STREAM, Traffic.LATE
 # RequestState members as globals for the per-reply path (an Enum member lookup is a metaclass call).
 _REPLIED, _TIMED_OUT = RequestState.REPLIED, RequestState.TIMED_OUT
 
@@ -126,6 +126,8 @@ class Delivery:
                     logger.exception("%s: subscriber %r failed", self.name, callback)
         if got.request is not None:
             self._settle(got.request, None)
+        elif got.traffic is _LATE and record is not None and record.late is not None:
+            record.late(reply)
 
     def fail(self, requests: Iterable[Request]) -> None:
         """Each of ``requests`` ended with its error."""

@@ -59,6 +59,8 @@ class MotorRecord:
         watchers: the frame iterators open on it (:class:`MotorFrames`: each adds and removes itself).
         commanded: the order in which the Bus first sent it a command that is not a read (0: never).
         undecodable_logged, echo_logged: its undecodable reply, its echoed request, logged once.
+        late: who takes its late replies (the reply of a request that timed out), besides its state:
+            a pipelined loop tracking it (servobus.loop), which attributes replies in order.
     """
 
     __slots__ = (
@@ -68,6 +70,7 @@ class MotorRecord:
         "echo_logged",
         "ending",
         "known_since",
+        "late",
         "misses",
         "motor",
         "probe_at",
@@ -84,6 +87,7 @@ class MotorRecord:
         self.codec = codec
         self.misses = 0
         self.probe_at = 0.0
+        self.late: Callable[[Reply], object] | None = None
         evidence = getattr(codec, "RESTART", None)
         self.remembers: frozenset[type] = evidence.remembers if evidence is not None else frozenset()
         self.remembered: dict[type, Seen] = {}

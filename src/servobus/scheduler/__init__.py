@@ -36,6 +36,16 @@ when to ask again: :meth:`Scheduler.next_deadline`) and keeps every rule about m
   earlier one's.
 * **Pacing**: at most ``max_in_flight`` requests SENDING or SENT at once; a half-duplex line
   (``one_at_a_time``) allows one, and rests ``gap_s`` after each exchange before the next frame.
+* **Pipelined requests** (``request.pipelined``: a fixed-rate loop's command, one per motor per
+  tick, servobus.loop): such a request leaves while requests with its key are in flight or held,
+  so several with one key to one motor are out at once. Their replies are matched as any other's:
+  to the oldest request in flight with the key that the frame could answer (fresh by
+  ``min_reply_s``), first in, first answered, since a motor answers in the order it was asked. A
+  reply to one that timed out can therefore be taken by the next one in flight (a late reply is
+  matched as the next's): the loop attributes replies by its own record of what left, never to a
+  younger command than the oldest it could answer. Everything else (echoes, other hosts' requests,
+  late, duplicate and overtaken frames) is judged as for any request; an ordinary request with the
+  key of pipelined ones in flight waits until none is.
 * **Streams**: a request whose key a motor streams (0xB6) is answered by the first stream frame that
   arrives after the request left (the same fact, fresh), as design.md's matching rule says.
 

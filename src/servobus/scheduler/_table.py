@@ -115,6 +115,9 @@ class Request:
     # Another host's request crossed it in an order that cannot be known: it takes the later reply
     # (counted ``ambiguous`` once; servobus.scheduler._hosts).
     crossed: bool = False
+    # It may leave while requests with its key are in flight or held (a pipelined loop's command,
+    # repeated every tick): its reply is matched in order like any other, the oldest first.
+    pipelined: bool = False
 
     def describe(self) -> str:
         return f"{self.codec.family} motor {self.codec.motor_id} {type(self.command).__name__}"
@@ -267,7 +270,8 @@ class RequestTable:
         """Pacing: the requests that may leave now, in order (moved to SENDING), and the commands that
         waited longer than ``stale_after_s`` for their turn (moved to FAILED). At most
         ``max_in_flight`` out at once; a half-duplex line rests ``gap_s`` after each exchange; a
-        request whose key is in flight or ``held`` (for a late reply) waits, keeping its place."""
+        request whose key is in flight or ``held`` (for a late reply) waits, keeping its place,
+        unless it is ``pipelined``."""
         if self._rest_until:
             if now < self._rest_until:
                 return _NOTHING
@@ -291,7 +295,7 @@ class RequestTable:
                 stale.append(request)
                 continue
             key = request.key
-            if key is not None and (key in pending or key in held):
+            if key is not None and (key in pending or key in held) and not request.pipelined:
                 waiting.append(request)
                 continue
             move(request, _SENDING, now)

@@ -1,0 +1,565 @@
+"""The pipelined fixed-rate control loop (:class:`Loop`): one pacer drives every bus; each tick's
+commands leave at the tick's deadline, and the body gets the latest state of every motor with its
+age, without waiting for this tick's replies.
+
+::
+
+    async with Bus(t1, name="a") as bus_a, Bus(t2, name="b") as bus_b:
+        motors = [bus_a.motor("myactuator", 1), bus_b.motor("myactuator", 1)]
+        async with Loop(hz=1000) as loop:
+            async for tick in loop:                  # or loop.ticks(count=N)
+                for m in motors:
+                    state = tick.state(m)            # MotorState | None (no reply yet)
+                    tick.command(m, ma.SpeedControl(speed_dps=30.0))  # leaves at the NEXT deadline
+
+``Bus.cycle`` sends and waits: right when a tick's decision needs this tick's measurement and the
+replies come well inside the period. The Loop is for when they do not (a reply takes longer than a
+period on most USB adapters and ptys): what upkie's spine, EtherCAT masters and ros2_control's
+read, update, write do. docs/loop.md compares the two.
+
+How a reply is attributed: motors answer in the order they are asked and these protocols carry no
+sequence numbers, so each motor keeps a FIFO of its commands that left (their tick, their request);
+a reply the Bus matched to one of them is attributed to the OLDEST entry still outstanding (an
+earlier command whose reply was lost takes it: the age reported is then a tick too old, never too
+young). An entry with no reply within its horizon (twice its request's timeout, plus a period: a
+late reply could come that long after) is dropped and counted ``lost``.
+
+Nothing here awaits per bus or per request: a request's outcome comes to the loop through a slotted
+context (:class:`_Out`), the batch of each bus is sent synchronously at the deadline
+(:mod:`servobus.bus.pipeline`), and the only await is the pacer's
+(:func:`servobus.ticks.ticks`).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import AsyncIterator
+from dataclasses import dataclass
+from types import TracebackType
+from typing import TYPE_CHECKING, Any, Self
+
+import anyio
+
+from servobus import runtime as _runtime
+from servobus.bus.pipeline import Superseded, prepare, send
+from servobus.bus.safety import stop_motors
+from servobus.errors import MotorNotExecuted, ProtocolError, TransportError
+from servobus.metrics import LatencyWindow
+from servobus.protocols import Command, Reply
+from servobus.scheduler import RequestState
+from servobus.ticks import ticks
+
+if TYPE_CHECKING:
+    from servobus.bus import Bus, Motor
+    from servobus.scheduler import Request
+
+__all__ = ["Loop", "LoopMetrics", "LoopTick", "MotorState"]
+
+#: a tick that starts later than this after its deadline is counted late (``late_ticks``)
+LATE_TICK_S = 200e-6
+
+_QUEUED = RequestState.QUEUED
+
+
+@dataclass(frozen=True, slots=True)
+class MotorState:
+    """A motor's latest state, as a tick's body sees it (:meth:`LoopTick.state`).
+
+    Attributes:
+        reply: the decoded reply (typed, the family's).
+        tick: the index of the tick whose command it answers (the tick at whose deadline it left).
+        age_ticks: the asking tick's index minus ``tick``.
+        age_s: the asking tick's start minus when that command left: an upper bound on the
+            measurement's age.
+        received_at: when the reply came in (the loop's clock).
+        fresh: a reply came since the previous tick started.
+    """
+
+    reply: Reply
+    tick: int
+    age_ticks: int
+    age_s: float
+    received_at: float
+    fresh: bool
+
+
+@dataclass(frozen=True, slots=True)
+class LoopMetrics:
+    """What a :class:`Loop` counted since it was made.
+
+    Attributes:
+        ticks: ticks given to the body.
+        late_ticks: ticks started more than 200 µs after their deadline.
+        skipped: ticks dropped whole because their time had passed (the pacer's).
+        overruns: bodies that ran past the next tick's deadline.
+        commands_sent: commands handed to their link (judged at the next tick).
+        commands_on_time: of those, the ones whose frame left before the next tick's deadline.
+        superseded: commands replaced by the next one for their motor before they left (never sent).
+        not_sent: commands not sent (the motor offline between probes, streaming, a link refusing).
+        lost: commands with no reply within their horizon.
+        stale_states: per tick, the motors commanded before with no fresh state, summed.
+        state_age_p50_s, state_age_p99_s, state_age_max_s: the age (``MotorState.age_s``) of the
+            state of every commanded motor at each tick's start (recent window; None: none yet).
+        late_p50_s, late_p99_s: how late ticks started (recent window).
+    """
+
+    ticks: int
+    late_ticks: int
+    skipped: int
+    overruns: int
+    commands_sent: int
+    commands_on_time: int
+    superseded: int
+    not_sent: int
+    lost: int
+    stale_states: int
+    state_age_p50_s: float | None
+    state_age_p99_s: float | None
+    state_age_max_s: float | None
+    late_p50_s: float | None
+    late_p99_s: float | None
+
+
+class _Counts:
+    """The counters the motors' records and the contexts add to (one object, shared)."""
+
+    __slots__ = ("lost", "not_sent", "superseded")
+
+    def __init__(self) -> None:
+        self.lost = 0
+        self.not_sent = 0
+        self.superseded = 0
+
+
+class _Track:
+    """What the loop knows of one motor: its latest reply (which tick it answers, when that command
+    left, when it came) and the FIFO of its commands still outstanding (:class:`_Out`, oldest first)."""
+
+    __slots__ = (
+        "bus",
+        "commanded",
+        "counts",
+        "fifo",
+        "last",
+        "motor",
+        "received_at",
+        "reply",
+        "sent_s",
+        "tick",
+        "time",
+    )
+
+    def __init__(self, motor: Motor, counts: _Counts, time: Any) -> None:
+        self.motor = motor
+        self.bus: Bus = motor.bus  # type: ignore[assignment]
+        self.counts = counts
+        self.time = time
+        self.fifo: deque[_Out] = deque()
+        self.reply: Reply | None = None
+        self.tick = -1
+        self.sent_s = 0.0
+        self.received_at = -1.0
+        self.commanded = False
+        self.last: Request | None = None  # its last request sent (withdrawn if still queued when superseded)
+
+    def answered(self, reply: Reply | None, context: _Out | None = None) -> None:
+        """A reply came for one of this motor's requests (``context``'s, as the Bus matched it; None:
+        the late reply of one that timed out): it answers the oldest outstanding command (``reply``
+        None: it answered, in a way that does not decode)."""
+        now = self.time()
+        fifo = self.fifo
+        self.expire(now)
+        if fifo and fifo[0].left_s() is not None:
+            front = fifo.popleft()
+            tick, left = front.tick, front.left_s()
+        elif context is not None:  # (not one of the FIFO's: a probe, or answered within its batch)
+            tick, left = context.tick, context.left_s()
+        else:
+            return  # (a late reply to a command past its horizon: counted lost already)
+        if reply is not None and tick >= self.tick:
+            self.reply, self.tick, self.received_at = reply, tick, now
+            self.sent_s = left if left is not None else now
+
+    def late(self, reply: Reply) -> None:
+        """The late reply of one of the motor's requests that timed out (the Bus's intake calls
+        this, ``MotorRecord.late``): it answers the oldest outstanding command, in order."""
+        self.answered(reply)
+
+    def expire(self, now: float) -> None:
+        """Drop the commands that can no longer be answered: never left (superseded, refused), or
+        outstanding past their horizon (counted ``lost``)."""
+        fifo = self.fifo
+        while fifo:
+            front = fifo[0]
+            left = front.left_s()
+            if left is None:
+                if not front.state:  # (still queued: waits for its turn)
+                    return
+            elif now - left <= front.horizon_s():
+                return
+            else:
+                self.counts.lost += 1
+            fifo.popleft()
+
+
+class _Out:
+    """One pipelined request's context (``request.context``): where the Bus settles its outcome, as
+    into a waiter (``done``, ``set_result``, ``set_exception``, ``cancel``, ``cancelled``)."""
+
+    __slots__ = ("period_s", "request", "state", "tick", "track")
+
+    def __init__(self, track: _Track, tick: int, period_s: float) -> None:
+        self.track = track
+        self.tick = tick
+        self.period_s = period_s
+        self.request: Request | None = None
+        self.state = 0  # 0 pending, 1 answered, 2 failed or cancelled
+
+    def left_s(self) -> float | None:
+        """When its frame left (handed to the link, when no send report says it); None: never."""
+        request = self.request
+        if request is None:
+            return None
+        sent_at = request.sent_at
+        return sent_at if sent_at is not None else request.handed_at
+
+    def horizon_s(self) -> float:
+        """How long after it left a reply can still come: twice its timeout (as the scheduler holds
+        a key for a late reply), plus a period."""
+        request = self.request
+        assert request is not None
+        return 2.0 * request.timeout_s + self.period_s
+
+    def done(self) -> bool:
+        return self.state != 0
+
+    def cancelled(self) -> bool:
+        return self.state == 2
+
+    def set_result(self, reply: Reply | None) -> None:
+        self.state = 1
+        if reply is not None:
+            self.track.answered(reply, self)
+
+    def set_exception(self, error: BaseException) -> None:
+        self.state = 2
+        counts = self.track.counts
+        if isinstance(error, ProtocolError | MotorNotExecuted):  # the motor answered: in order
+            self.track.answered(None, self)
+        elif isinstance(error, Superseded):
+            counts.superseded += 1
+        elif isinstance(error, TransportError) and self.left_s() is None:
+            counts.not_sent += 1
+        # (a timeout stays outstanding: its late reply may come, in order; MotorOffline and
+        # MotorStreaming were counted when the batch was sent)
+
+    def cancel(self) -> bool:
+        if self.state:
+            return False
+        self.state = 2
+        return True
+
+
+class LoopTick:
+    """One tick of a :class:`Loop`: the pacer's (:class:`servobus.ticks.Tick`) fields, what the loop
+    saw, the motors' states, and where the next tick's commands are given.
+
+    Attributes:
+        index, deadline, started, late_s, skipped: as :class:`servobus.ticks.Tick`.
+        overrun: the previous body ran past this tick's deadline.
+        stale: motors commanded before with no fresh state (no reply since the previous tick started).
+        sent: requests handed to their links at this deadline.
+    """
+
+    __slots__ = (
+        "_loop",
+        "_since",
+        "deadline",
+        "index",
+        "late_s",
+        "overrun",
+        "sent",
+        "skipped",
+        "stale",
+        "started",
+    )
+
+    def __init__(
+        self,
+        loop: Loop,
+        index: int,
+        deadline: float,
+        started: float,
+        skipped: int,
+        overrun: bool,
+        stale: int,
+        sent: int,
+        since: float,
+    ) -> None:
+        self._loop = loop
+        self.index = index
+        self.deadline = deadline
+        self.started = started
+        self.late_s = started - deadline
+        self.skipped = skipped
+        self.overrun = overrun
+        self.stale = stale
+        self.sent = sent
+        self._since = since
+
+    def state(self, motor: Motor) -> MotorState | None:
+        """``motor``'s latest state (None: no reply yet, or a motor the loop never commanded)."""
+        track = self._loop.tracks.get(motor)
+        if track is None or track.reply is None:
+            return None
+        return MotorState(
+            track.reply,
+            track.tick,
+            self.index - track.tick,
+            self.started - track.sent_s,
+            track.received_at,
+            track.received_at >= self._since,
+        )
+
+    def command(self, motor: Motor, command: Command) -> None:
+        """``command`` goes to ``motor`` at the next tick's deadline (a second one this tick replaces
+        it, counted ``superseded``). A command out of range raises ValueError at that deadline,
+        before any frame of the tick leaves."""
+        loop = self._loop
+        track = loop.tracks.get(motor)
+        if track is None:
+            track = loop.add(motor)
+        last = track.last
+        if last is not None and last.state is _QUEUED:  # the last tick's command has not left yet
+            track.last = None
+            track.bus.engine.withdraw(
+                motor, Superseded(f"{motor!r}: superseded before it left"), _not_pipelined
+            )
+        if loop.commands.setdefault(motor, command) is not command:
+            loop.commands[motor] = command
+            loop.counts.superseded += 1
+
+
+class Loop:
+    """A pipelined fixed-rate control loop over the buses of the motors it commands.
+
+    Args:
+        hz: the tick rate.
+        timeout_s: each request's timeout (None: the Bus's adaptive one, from measured round trips).
+        safe_stop: leaving the ``async with`` block by an exception or a cancellation sends the safe
+            stop (the Bus's ``safe`` command) to every motor the loop commanded, shielded; a clean
+            exit leaves the motors as they are (the Bus's own exit stops them).
+
+    Buses are found from the motors commanded (``motor.bus``); they must be entered (``async with``)
+    around the loop, on the same event loop.
+    """
+
+    def __init__(self, hz: float, *, timeout_s: float | None = None, safe_stop: bool = True) -> None:
+        if not (hz > 0 and hz != float("inf")):
+            raise ValueError(f"hz={hz!r} must be a positive number")
+        if timeout_s is not None and not timeout_s > 0:
+            raise ValueError(f"timeout_s={timeout_s!r} must be positive")
+        self.hz = hz
+        self.period_s = 1.0 / hz
+        self.timeout_s = timeout_s
+        self.safe_stop = safe_stop
+        #: every motor the loop commanded, with what it knows of it
+        self.tracks: dict[Motor, _Track] = {}
+        #: the commands given for the next tick
+        self.commands: dict[Motor, Command] = {}
+        self.counts = _Counts()
+        self._time: Any = None
+        self._pacer: AsyncIterator[Any] | None = None
+        self._count: int | None = None
+        self._offset = 0  # (tick indices go on across runs of ticks())
+        self._last: LoopTick | None = None
+        self._previous: list[Request] = []  # the last tick's requests (on time at the next?)
+        self._ages = LatencyWindow(4096)
+        self._lates = LatencyWindow(4096)
+        self._n = dict.fromkeys(("ticks", "late", "skipped", "overruns", "sent", "on_time", "stale"), 0)
+
+    async def __aenter__(self) -> Self:
+        self._time = _runtime.current().time
+        return self
+
+    async def __aexit__(
+        self, kind: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        pacer, self._pacer = self._pacer, None
+        for motor, track in self.tracks.items():
+            record = track.bus.engine.registry.records.get(id(motor.codec))
+            if record is not None and record.late == track.late:
+                record.late = None
+        with anyio.CancelScope(shield=True):
+            if pacer is not None:
+                await pacer.aclose()  # type: ignore[attr-defined]
+            if exc is not None and self.safe_stop:
+                await self.stop_motors()
+
+    def add(self, motor: Motor) -> _Track:
+        """Track ``motor`` (done by its first command)."""
+        if self._time is None:
+            raise RuntimeError("use the Loop inside 'async with'")
+        track = self.tracks[motor] = _Track(motor, self.counts, self._time)
+        record = track.bus.engine.registry.records.get(id(motor.codec))
+        if record is not None:
+            record.late = track.late  # (undone when the loop's block is left)
+        return track
+
+    def __aiter__(self) -> Self:
+        return self
+
+    def ticks(self, count: int | None = None) -> Self:
+        """Iterate ``count`` ticks (None: until the body breaks out)."""
+        if count is not None and count < 0:
+            raise ValueError(f"count={count} must be >= 0")
+        self._count = count
+        return self
+
+    async def __anext__(self) -> LoopTick:
+        body_end = self._time() if self._time is not None else 0.0
+        if self._pacer is None:
+            if self._time is None:
+                raise RuntimeError("use the Loop inside 'async with'")
+            self._pacer = ticks(self.hz, count=self._count).__aiter__()
+            self._count = None
+        try:
+            pace = await self._pacer.__anext__()
+        except StopAsyncIteration:
+            self._pacer = None
+            if self._last is not None:
+                self._offset = self._last.index + 1
+            raise
+        return self._begin(pace, body_end)
+
+    def _begin(self, pace: Any, body_end: float) -> LoopTick:
+        """The tick the pacer gave: the last tick's requests judged, this one's sent, its view made."""
+        n = self._n
+        last = self._last
+        index = self._offset + pace.index
+        deadline = pace.deadline
+        overrun = last is not None and body_end > last.deadline + self.period_s
+        left = on_time = 0
+        for request in self._previous:  # (judged now: a send report may come after the hand-over)
+            if request.handed_at is not None:
+                left += 1
+                sent_at = request.sent_at
+                if sent_at is not None and sent_at <= deadline:
+                    on_time += 1
+        n["sent"] += left
+        n["on_time"] += on_time
+        sent = self._send(index)
+        started = pace.started
+        since = last.started if last is not None else started
+        stale = 0
+        add_age = self._ages.add
+        for track in self.tracks.values():
+            if track.fifo:
+                track.expire(started)
+            if track.commanded:
+                if track.received_at < since:
+                    stale += 1
+                if track.reply is not None:
+                    add_age(started - track.sent_s)
+        n["ticks"] += 1
+        n["skipped"] += pace.skipped
+        n["stale"] += stale
+        if overrun:
+            n["overruns"] += 1
+        late_s = started - deadline
+        self._lates.add(late_s)
+        if late_s > LATE_TICK_S:
+            n["late"] += 1
+        tick = self._last = LoopTick(
+            self, index, deadline, started, pace.skipped, overrun, stale, sent, since
+        )
+        return tick
+
+    def _send(self, index: int) -> int:
+        """The commands given for tick ``index``, one batch per bus; returns how many left now."""
+        commands = self.commands
+        if not commands:
+            self._previous = []
+            return 0
+        self.commands = {}
+        tracks = self.tracks
+        period = self.period_s
+        batches: dict[Bus, tuple[list[tuple[Motor, Command]], list[_Out]]] = {}
+        for motor, command in commands.items():
+            track = tracks[motor]
+            batch = batches.get(track.bus)
+            if batch is None:
+                batch = batches[track.bus] = ([], [])
+            batch[0].append((motor, command))
+            batch[1].append(_Out(track, index, period))
+        timeout_s = self.timeout_s
+        # every bus's commands encoded before any leaves: a ValueError sends nothing of the tick
+        prepared = [
+            prepare(bus.engine, items, contexts, timeout_s) for bus, (items, contexts) in batches.items()
+        ]
+        sent: list[Request] = []
+        not_sent = 0
+        for (bus, (items, contexts)), requests in zip(batches.items(), prepared, strict=True):
+            queued, skipped = send(bus.engine, items, requests, contexts, bus.probe_interval_s)
+            not_sent += skipped
+            for request in queued:
+                context: _Out = request.context
+                context.request = request
+                track = context.track
+                track.commanded = True
+                track.last = request
+                if request.key is not None and not context.state:
+                    track.fifo.append(context)
+            sent += queued
+        self.counts.not_sent += not_sent
+        self._previous = sent
+        left = 0
+        for request in sent:
+            if request.handed_at is not None:
+                left += 1
+        return left
+
+    async def stop_motors(self) -> None:
+        """The safe stop (each Bus's ``safe`` command) to every motor the loop commanded, on all its
+        buses at once; the loop's commands still queued are withdrawn first."""
+        by_bus: dict[Bus, dict[Motor, Command]] = {}
+        for motor, track in self.tracks.items():
+            bus = track.bus
+            if bus.safe is None or not bus.engine.link.is_open or bus.engine.runtime is None:
+                continue
+            bus.engine.withdraw(motor, Superseded(f"{bus.name}: the loop stops"), _not_pipelined)
+            try:
+                by_bus.setdefault(bus, {})[motor] = motor.codec.safe_command(bus.safe)
+            except ValueError:
+                continue
+        if not by_bus:
+            return
+        async with anyio.create_task_group() as group:
+            for bus, commands in by_bus.items():
+                group.start_soon(stop_motors, bus, commands, bus.safe_timeout_s)
+
+    def metrics(self) -> LoopMetrics:
+        """What the loop counted since it was made."""
+        n, counts = self._n, self.counts
+        ages, lates = self._ages.snapshot(), self._lates.snapshot()
+        return LoopMetrics(
+            ticks=n["ticks"],
+            late_ticks=n["late"],
+            skipped=n["skipped"],
+            overruns=n["overruns"],
+            commands_sent=n["sent"],
+            commands_on_time=n["on_time"],
+            superseded=counts.superseded,
+            not_sent=counts.not_sent,
+            lost=counts.lost,
+            stale_states=n["stale"],
+            state_age_p50_s=ages.p50_s,
+            state_age_p99_s=ages.p99_s,
+            state_age_max_s=ages.max_s,
+            late_p50_s=lates.p50_s,
+            late_p99_s=lates.p99_s,
+        )
+
+
+def _not_pipelined(request: Request) -> bool:
+    return not request.pipelined
