@@ -120,7 +120,7 @@ class Summary:
     overruns: int = 0  # a body ran past the next tick's deadline
     stale_states: int = 0  # (motor, tick): a commanded motor without fresh state
     superseded: int = 0  # commands withdrawn for a newer one before they left
-    lost: int = 0  # requests that got no reply within the loop's horizon
+    lost: int = 0  # the loop's: commands with no reply within its horizon (the Bus timed them out)
     preempted: int = 0  # involuntary context switches: the kernel gave the core to other work
     interrupted: bool = False
     live: bool = False  # the live view was drawn (not under --duration)
@@ -131,7 +131,8 @@ class Summary:
 
     @property
     def errors(self) -> int:
-        return self.timeouts + self.not_sent + self.malformed + self.faults + self.lost
+        # (the Bus's counts: a command the loop calls lost timed out there first, counted once)
+        return self.timeouts + self.not_sent + self.malformed + self.faults
 
     @property
     def run_pct(self) -> float:
@@ -228,12 +229,13 @@ def summary_lines(s: Summary) -> list[str]:
         f"{s.simulator_us_per_tick:,.0f} µs apart ({s.cpu_pct:.0f} % of a core in all; "
         f"preempted {s.preempted:,} times)",
         f"state age   p50 {_ms(s.state_age_p50_ms)}, p99 {_ms(s.state_age_p99_ms)}, max "
-        f"{_ms(s.state_age_max_ms)} (tick start - its state's command left; {s.stale_states:,} stale)",
+        f"{_ms(s.state_age_max_ms)} (tick start - its state's command left; {s.stale_states:,} stale, "
+        f"{s.lost:,} lost)",
         f"latency     p50 {_ms(s.latency_p50_ms)}, p99 {_ms(s.latency_p99_ms)} "
         "(request left -> reply in; worst bus)",
         f"bus load    mean {_pct(s.bus_load_mean_pct)}, max {_pct(s.bus_load_max_pct)}",
-        f"errors      {s.errors} (timeouts {s.timeouts}, lost {s.lost}, not sent {s.not_sent}, "
-        f"malformed {s.malformed}, motor faults {s.faults})",
+        f"errors      {s.errors} (timeouts {s.timeouts}, not sent {s.not_sent}, malformed {s.malformed}, "
+        f"motor faults {s.faults})",
     ]
     why = s.why()
     if why:
