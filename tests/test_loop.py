@@ -105,7 +105,7 @@ class DelayLink:
             return
         at = max(now + self.delay(i), self._last.get(motor_id, 0.0))
         self._last[motor_id] = at
-        reply = _reply(frame)
+        reply = _reply(frame, at)
         heapq.heappush(self._due, (at, i, reply))
         if self.duplicate(i):
             heapq.heappush(self._due, (at, i, reply))
@@ -135,14 +135,14 @@ class DelayLink:
         return [(t, f) for t, f in self.sent if f.data[0] == code]
 
 
-def _reply(frame: Frame) -> Frame:
-    """A MyActuator motor's answer: a SpeedControl's status says the commanded speed (whole dps);
-    anything else is echoed (as 0x81's and 0x80's replies are)."""
+def _reply(frame: Frame, at: float) -> Frame:
+    """A MyActuator motor's answer, ending on the wire ``at``: a SpeedControl's status says the
+    commanded speed (whole dps); anything else is echoed (as 0x81's and 0x80's replies are)."""
     data = frame.data
     if data[0] == 0xA2:
         speed_dps = round(struct.unpack_from("<i", data, 4)[0] / 100)
         data = bytes([0xA2, 25, 0, 0]) + struct.pack("<hh", speed_dps, 0)
-    return Frame(arbitration_id=frame.arbitration_id + 0x100, data=data, timestamp=0.0)
+    return Frame(arbitration_id=frame.arbitration_id + 0x100, data=data, timestamp=at)
 
 
 def _truth(state: MotorState) -> int:
@@ -276,6 +276,16 @@ async def test_a_reply_later_than_its_deadline_is_never_taken_as_a_newer_command
     for _, states in seen[-20:]:
         for state in states:
             assert state is not None and state.tick == _truth(state)
+
+
+async def test_a_duplicated_reply_is_not_taken_as_the_next_commands() -> None:
+    # Every 7th reply arrives twice (a frame retransmitted), replies 2.5 ticks late.
+    links = [DelayLink(lambda i: 2.5 * PERIOD, duplicate=lambda i: i % 7 == 3)]
+    loop, seen = await _run(links, 80)
+    assert _check_attribution(seen, exact=True) > 140
+    assert loop.metrics().lost == 0
+    bus_counts = sum(1 for _, f in links[0].sent if f.data[0] == 0xA2)
+    assert bus_counts > 150
 
 
 @pytest.mark.parametrize(("sleep_ticks", "shown_at", "skipped"), [(1.5, 11, 0), (2.5, 12, 1)])

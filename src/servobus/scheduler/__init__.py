@@ -44,8 +44,10 @@ when to ask again: :meth:`Scheduler.next_deadline`) and keeps every rule about m
   reply to one that timed out can therefore be taken by the next one in flight (a late reply is
   matched as the next's): the loop attributes replies by its own record of what left, never to a
   younger command than the oldest it could answer. Everything else (echoes, other hosts' requests,
-  late, duplicate and overtaken frames) is judged as for any request; an ordinary request with the
-  key of pipelined ones in flight waits until none is.
+  late, duplicate and overtaken frames) is judged as for any request, but for one more rule: the
+  reply a pipelined request took, again with the same stamp and bytes, is a DUPLICATE (two frames
+  cannot end on the wire at once), not the next request's reply. An ordinary request with the key
+  of pipelined ones in flight waits until none is.
 * **Streams**: a request whose key a motor streams (0xB6) is answered by the first stream frame that
   arrives after the request left (the same fact, fresh), as design.md's matching rule says.
 

@@ -27,6 +27,7 @@ __all__ = [
     "MALFORMED",
     "NO_MOTOR",
     "OVERTAKEN",
+    "REPEATED",
     "UNMATCHED",
     "Decision",
     "judge",
@@ -43,6 +44,7 @@ MALFORMED = 5  # does not decode (``error``); ``request``: the one it answered a
 OVERTAKEN = 6  # ``request``'s reply, stamped after its deadline: it timed out, this is its late reply
 ALONE = 7  # a stream or report frame that answers no request
 UNMATCHED = 8  # a reply that answers no request: late, duplicate or unsolicited (the keys' memory says)
+REPEATED = 9  # the reply a pipelined request's key just took, again at the same instant: a duplicate
 
 #: (what, codec, kind, key, reply, request, error): the motor whose frame it is, its kind and reply
 #: key, the decoded reply, the request it concerns, the codec's error if it does not decode.
@@ -104,6 +106,9 @@ def match(table: RequestTable, frame: Frame, now: float) -> Decision:
             echo = request.echo
             if echo is not None and frame.data == echo:
                 return (ECHOED, codec, kind, key, reply, request, None)
+            if request.pipelined and stamp and table.answers.get(key) == (stamp, frame.data):
+                # (two replies cannot end on the wire at once: the next request's is still to come)
+                return (REPEATED, codec, kind, key, reply, request, None)
             return (ANSWER, codec, kind, key, reply, request, None)
     if kind is KIND_STREAM or kind is KIND_REPORT:
         return (ALONE, codec, kind, key, reply, None, None)
@@ -129,7 +134,7 @@ def judge(decision: Decision, frame: Frame, now: float, table: RequestTable, key
         assert key is not None
         table.keep_early(key, codec, frame)  # judged (and counted) when the send report comes
         return Received(Traffic.EARLY, frame, codec)
-    if what == EARLY_AGAIN:
+    if what in (EARLY_AGAIN, REPEATED):
         count(codec, Traffic.DUPLICATE.value)
         return Received(Traffic.DUPLICATE, frame, codec, reply)
     if what == ECHOED and request is not None:

@@ -242,8 +242,7 @@ class Scheduler:
     # ---- received frames ----
 
     def receive(self, frame: Frame, now: float) -> Received:
-        """Classify ``frame`` (:func:`~servobus.scheduler._match.match`), resolve the request it
-        answers, count it."""
+        """Classify ``frame`` (:func:`~servobus.scheduler._match.match`), resolve its request, count it."""
         what, codec, kind, key, reply, request, error = match(self.table, frame, now)
         hosts, keys = self.hosts, self.keys
         if hosts.foreign and key in hosts.foreign and kind is KIND_REPLY and error is None:
@@ -259,6 +258,8 @@ class Scheduler:
         if self.table.move(request, _REPLIED, now) is not None:  # (an early frame of its key, unjudged)
             keys.end_early(codec, key, now)
         request.reply = reply
+        if request.pipelined and frame.timestamp:  # (a duplicate of it is told apart: _match.REPEATED)
+            self.table.answers[key] = (frame.timestamp, frame.data)
         replied = keys.replied  # (Keys.answered, written out for the hot path)
         replied[key] = now + keys.late_window_s
         if len(replied) > keys.limit:

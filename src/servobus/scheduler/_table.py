@@ -156,6 +156,8 @@ class RequestTable:
         pending: reply key -> the requests in flight with that key, oldest first.
         in_flight: the requests SENDING or SENT, in send order.
         early: reply key -> a reply-shaped frame that came before its request's send report.
+        answers: reply key -> when the last reply a pipelined request took ended, and its bytes (a
+            frame with both again is a duplicate: the next request's reply is still to come).
     """
 
     def __init__(
@@ -182,6 +184,8 @@ class RequestTable:
         self.pending: dict[Hashable, deque[Request]] = {}
         self.in_flight: dict[Request, None] = {}
         self.early: dict[Hashable, tuple[BoundCodec, Frame]] = {}
+        #: reply key -> (stamp, data) of the last reply a pipelined request with it took
+        self.answers: dict[Hashable, tuple[float, bytes]] = {}
         self.deadlines: list[tuple[float, int, Request]] = []  # a heap; entries of left requests stay
         self.provisional: list[Request] = []  # sent before anything was measured: timed again then
         self._overtaken: list[Request] = []  # timed out by a reply stamped after their deadline
