@@ -16,7 +16,7 @@ import pytest
 
 import servobus.transports.sim as sim_transport
 from cli._bus_cli import SERVOBUS, run, run_json
-from servobus.cli._demo_report import Summary, summary_lines
+from servobus.cli._demo_report import Summary, live_view, summary_lines
 from servobus.sim.faults import FaultInjector, FaultPlan
 
 
@@ -132,3 +132,18 @@ def test_ctrl_c_on_trio_stops_the_motors_and_exits_130() -> None:
     assert demo.returncode == 130, (out, err)
     assert "stopped     Ctrl-C: stop sent to myactuator motors 1-3 on bus 1" in out
     assert "errors      0 " in out
+
+
+def test_the_live_view_is_plain_fixed_width_lines_two_tables_side_by_side_where_they_fit() -> None:
+    rows = [
+        (str(n + 1), f"{n // 3 + 1}/{n % 3 + 1}", "   12.34", "  -12.30", "", "", "", "  1.02")
+        for n in range(32)
+    ]
+    wide = live_view(["32 motors", "loop 999.0/s"], rows).plain.splitlines()
+    assert wide[:3] == ["32 motors", "loop 999.0/s", ""]
+    assert wide[3].count("age ms") == 2 and len(wide) == 3 + 2 + 16
+    assert wide[5].split("|")[0].split() == ["1", "1/1", "12.34", "-12.30", "1.02"]
+    assert wide[-1].split("|")[1].split()[:2] == ["32", "11/2"]
+    narrow = live_view([], rows, width=80).plain.splitlines()
+    assert narrow[1].count("age ms") == 1 and len(narrow) == 1 + 2 + 32
+    assert len({len(line) for line in narrow[1:]}) == 1  # (every line as wide: the columns line up)

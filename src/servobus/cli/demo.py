@@ -272,6 +272,8 @@ async def _run(
         finally:
             if view is not None:
                 view.stop()
+                if not view.console.is_terminal:  # (rich ends the last frame's line on a terminal only)
+                    view.console.line()
         summary = _summarise(plan, buses, run, loop.metrics(), before)
         summary.interrupted = stopping.cancelled_caught
         summary.live = view is not None
@@ -394,7 +396,7 @@ class _Ticks:
                 if view is not None and tick.started >= next_refresh:
                     next_refresh = tick.started + REFRESH_S
                     header = _header(plan, buses, loop, self.count, tick.started - start)
-                    view.update(live_view(header, _rows(tick, sine)), refresh=True)
+                    view.update(live_view(header, _rows(tick, sine), view.console.width), refresh=True)
         finally:
             if sent_at is None:  # (stopped by a signal: up to now)
                 self._measured()
@@ -438,7 +440,7 @@ def _rows(tick: LoopTick, sine: _Sine) -> list[tuple[str, ...]]:
             "" if (value := getattr(reply, name, None)) is None else format(value, spec)
             for name, spec in _COLUMNS
         )
-        age = "" if state is None else f"{state.age_s * 1e3:.2f}"
+        age = "" if state is None else f"{state.age_s * 1e3:6.2f}"
         where = f"{motor.bus.name.removeprefix('bus ')}/{motor.motor_id}"
         rows.append((str(n + 1), where, values[0], f"{sine.targets[n]:8.2f}", *values[1:], age))
     return rows
