@@ -179,17 +179,20 @@ class Summary:
                 f"and {self.hz:g} Hz leaves {period_ms:.2f} ms per tick ({machine}). Fewer --motors or "
                 "a lower --hz keep up."
             )
-        # A tick's CPU fits the period, so the wall time lost was spent waiting for the core.
-        if cpu_share < 0.8 * min(1.0, self.hz * self.tick_p50_ms / 1e3):
+        mean_ms = self.cpu_s / self.ticks * 1e3
+        # A median tick's CPU fits the period: the wall time lost went to other work (the process
+        # ran less than the ticks it ran needed), or to pauses and ticks far dearer than the median.
+        if cpu_share < 0.8 * min(1.0, self.hz * mean_ms / 1e3):
             return (
                 f"the process got only {cpu_share:.0%} of a CPU core ({cores} cores, load average "
                 f"{load:.1f}, preempted {self.preempted:,} times): other work held the processor; a "
-                f"tick took {self.tick_p50_ms:.2f} ms of CPU (median) of {period_ms:.2f} ms"
+                f"tick took {self.tick_p50_ms:.2f} ms of CPU (median; {mean_ms:.2f} ms on average) of "
+                f"{period_ms:.2f} ms"
             )
         return (
             f"most ticks fit (median {self.tick_p50_ms:.2f} ms of CPU of {period_ms:.2f} ms, "
-            f"{sim_ms:.2f} ms of it simulating; {self.overruns:,} overrun(s)), but the loop paused now "
-            f"and then ({machine}): "
+            f"{sim_ms:.2f} ms of it simulating; {mean_ms:.2f} ms on average, {self.overruns:,} "
+            f"overrun(s)), but the loop paused now and then ({machine}): "
             + ("a redraw of the live view, or other processes" if self.live else "other processes")
         )
 
