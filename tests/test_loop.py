@@ -378,3 +378,32 @@ async def test_a_clean_exit_leaves_the_motors_to_the_bus() -> None:
             assert link.frames_of(0x81) == []
         assert len(link.frames_of(0x81)) == 1  # the Bus's own exit
         group.cancel_scope.cancel()
+
+
+async def test_a_motor_without_a_command_gets_no_frame_and_its_state_ages() -> None:
+    link = DelayLink(lambda i: 0.5 * PERIOD)
+    seen: list[tuple[int, MotorState | None]] = []
+    async with anyio.create_task_group() as group:
+        group.start_soon(link.run)
+        async with Bus(link, name="a", safe=None) as bus:
+            m = bus.motor("myactuator", 1)
+            async with Loop(HZ) as loop:
+                async for tick in loop.ticks(count=20):
+                    seen.append((tick.index, tick.state(m)))
+                    if tick.index < 5:  # commanded in ticks 0..4: its commands leave at 1..5
+                        tick.command(m, ma.SpeedControl(speed_dps=float(tick.index)))
+        group.cancel_scope.cancel()
+    assert len(link.frames_of(0xA2)) == 5
+    last = [(index, state) for index, state in seen if index >= 7]
+    for index, state in last:
+        assert state is not None and state.tick == 5 and _truth(state) == 5
+        assert state.age_ticks == index - 5 and state.fresh is (index == 6)
+    metrics = loop.metrics()
+    assert metrics.stale_states == 20 - 7 and metrics.lost == 0  # (ticks 7..19: no reply since)
+
+
+def test_the_loop_is_exported_by_the_package() -> None:
+    import servobus
+    import servobus.loop
+
+    assert servobus.Loop is servobus.loop.Loop and "Loop" in servobus.__all__

@@ -25,8 +25,8 @@ young). An entry with no reply within its horizon (twice its request's timeout, 
 late reply could come that long after) is dropped and counted ``lost``.
 
 Nothing here awaits per bus or per request: a request's outcome comes to the loop through a slotted
-context (:class:`_Out`), the batch of each bus is sent synchronously at the deadline
-(:mod:`servobus.bus.pipeline`), and the only await is the pacer's
+context (the motor's record in the loop, one per motor), the batch of each bus is sent synchronously
+at the deadline (:mod:`servobus.bus.pipeline`), and the only await is the pacer's
 (:func:`servobus.ticks.ticks`).
 """
 
@@ -36,14 +36,14 @@ from collections import deque
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from types import TracebackType
-from typing import TYPE_CHECKING, Any, Self
+from typing import TYPE_CHECKING, Any, NamedTuple, Self
 
 import anyio
 
 from servobus import runtime as _runtime
 from servobus.bus.pipeline import Superseded, prepare, send
 from servobus.bus.safety import stop_motors
-from servobus.errors import MotorNotExecuted, ProtocolError, TransportError
+from servobus.errors import MotorNotExecuted, ProtocolError
 from servobus.metrics import LatencyWindow
 from servobus.protocols import Command, Reply
 from servobus.scheduler import RequestState
@@ -58,12 +58,14 @@ __all__ = ["Loop", "LoopMetrics", "LoopTick", "MotorState"]
 #: a tick that starts later than this after its deadline is counted late (``late_ticks``)
 LATE_TICK_S = 200e-6
 
-_QUEUED = RequestState.QUEUED
+_QUEUED, _FAILED = RequestState.QUEUED, RequestState.FAILED
 
 
-@dataclass(frozen=True, slots=True)
-class MotorState:
+class MotorState(NamedTuple):
     """A motor's latest state, as a tick's body sees it (:meth:`LoopTick.state`).
+
+    A NamedTuple, not a frozen dataclass: one is made per motor and tick, and a frozen slotted
+    dataclass of six fields took 2.5 µs to make against 0.84 µs for this (3.11, this machine).
 
     Attributes:
         reply: the decoded reply (typed, the family's).
@@ -133,15 +135,20 @@ class _Counts:
 
 class _Track:
     """What the loop knows of one motor: its latest reply (which tick it answers, when that command
-    left, when it came) and the FIFO of its commands still outstanding (:class:`_Out`, oldest first)."""
+    left, when it came) and the FIFO of its commands still outstanding ((tick, request), oldest
+    first). It is also the context (``request.context``) of every request the loop sends the motor:
+    the Bus settles each outcome into it as into a waiter (``done``, ``set_result``,
+    ``set_exception``, ``cancel``, ``cancelled``), with no object per request."""
 
     __slots__ = (
         "bus",
+        "command",
         "commanded",
         "counts",
         "fifo",
         "last",
         "motor",
+        "period_s",
         "received_at",
         "reply",
         "sent_s",
@@ -149,115 +156,98 @@ class _Track:
         "time",
     )
 
-    def __init__(self, motor: Motor, counts: _Counts, time: Any) -> None:
+    def __init__(self, motor: Motor, counts: _Counts, time: Any, period_s: float) -> None:
         self.motor = motor
         self.bus: Bus = motor.bus  # type: ignore[assignment]
         self.counts = counts
         self.time = time
-        self.fifo: deque[_Out] = deque()
+        self.period_s = period_s
+        self.fifo: deque[tuple[int, Request]] = deque()
         self.reply: Reply | None = None
         self.tick = -1
         self.sent_s = 0.0
         self.received_at = -1.0
         self.commanded = False
+        self.command: Command | None = None  # (the next tick's, while it is being sent)
         self.last: Request | None = None  # its last request sent (withdrawn if still queued when superseded)
 
-    def answered(self, reply: Reply | None, context: _Out | None = None) -> None:
-        """A reply came for one of this motor's requests (``context``'s, as the Bus matched it; None:
-        the late reply of one that timed out): it answers the oldest outstanding command (``reply``
-        None: it answered, in a way that does not decode)."""
+    # ---- a waiter's interface, for the Bus (servobus.bus.delivery.Delivery.settle) ----
+
+    def done(self) -> bool:
+        return False  # (every outcome is taken)
+
+    def cancelled(self) -> bool:
+        return False
+
+    def cancel(self) -> bool:
+        return False
+
+    def set_result(self, reply: Reply | None) -> None:
+        """A reply came for one of the motor's requests (None: a command with no reply left)."""
+        if reply is not None:
+            self.answered(reply)
+
+    def set_exception(self, error: BaseException) -> None:
+        """One of the motor's requests ended without a reply: a timeout stays outstanding (its late
+        reply may still come, in order); a reply that does not decode answered, in order; the others
+        never left (dropped from the FIFO when they come to its front)."""
+        if isinstance(error, ProtocolError | MotorNotExecuted):
+            self.answered(None)
+        elif isinstance(error, Superseded):
+            self.counts.superseded += 1
+
+    # ---- attribution ----
+
+    def answered(self, reply: Reply | None) -> None:
+        """A reply came (the Bus matched it to one of this motor's requests, or it is the late reply
+        of one that timed out: ``MotorRecord.late``): it answers the OLDEST outstanding command
+        (``reply`` None: it answered, in a way that does not decode)."""
         now = self.time()
         fifo = self.fifo
-        self.expire(now)
-        if fifo and fifo[0].left_s() is not None:
-            front = fifo.popleft()
-            tick, left = front.tick, front.left_s()
-        elif context is not None:  # (not one of the FIFO's: a probe, or answered within its batch)
-            tick, left = context.tick, context.left_s()
-        else:
-            return  # (a late reply to a command past its horizon: counted lost already)
-        if reply is not None and tick >= self.tick:
-            self.reply, self.tick, self.received_at = reply, tick, now
-            self.sent_s = left if left is not None else now
+        while fifo:
+            tick, request = fifo[0]
+            left = request.sent_at
+            if left is None:
+                left = request.handed_at
+                if left is None or request.state is _FAILED:
+                    if request.state is _QUEUED:
+                        return  # (nothing older is outstanding: not ours to attribute)
+                    self.dropped(request)
+                    continue
+            if now - left > 2.0 * request.timeout_s + self.period_s:
+                fifo.popleft()
+                self.counts.lost += 1
+                continue
+            fifo.popleft()
+            if reply is not None and tick >= self.tick:
+                self.reply, self.tick, self.received_at, self.sent_s = reply, tick, now, left
+            return
 
-    def late(self, reply: Reply) -> None:
-        """The late reply of one of the motor's requests that timed out (the Bus's intake calls
-        this, ``MotorRecord.late``): it answers the oldest outstanding command, in order."""
-        self.answered(reply)
+    def dropped(self, request: Request) -> None:
+        """The FIFO's front never left: withdrawn (counted superseded), or the link refused it."""
+        self.fifo.popleft()
+        if request.state is _FAILED:
+            self.counts.not_sent += 1
 
     def expire(self, now: float) -> None:
         """Drop the commands that can no longer be answered: never left (superseded, refused), or
-        outstanding past their horizon (counted ``lost``)."""
+        outstanding past their horizon (twice the request's timeout, as the scheduler holds a key
+        for a late reply, plus a period; counted ``lost``)."""
         fifo = self.fifo
         while fifo:
-            front = fifo[0]
-            left = front.left_s()
+            request = fifo[0][1]
+            left = request.sent_at
             if left is None:
-                if not front.state:  # (still queued: waits for its turn)
-                    return
-            elif now - left <= front.horizon_s():
+                left = request.handed_at
+                if left is None or request.state is _FAILED:
+                    if request.state is _QUEUED:
+                        return  # (waits for its turn)
+                    self.dropped(request)
+                    continue
+            if now - left <= 2.0 * request.timeout_s + self.period_s:
                 return
-            else:
-                self.counts.lost += 1
             fifo.popleft()
-
-
-class _Out:
-    """One pipelined request's context (``request.context``): where the Bus settles its outcome, as
-    into a waiter (``done``, ``set_result``, ``set_exception``, ``cancel``, ``cancelled``)."""
-
-    __slots__ = ("period_s", "request", "state", "tick", "track")
-
-    def __init__(self, track: _Track, tick: int, period_s: float) -> None:
-        self.track = track
-        self.tick = tick
-        self.period_s = period_s
-        self.request: Request | None = None
-        self.state = 0  # 0 pending, 1 answered, 2 failed or cancelled
-
-    def left_s(self) -> float | None:
-        """When its frame left (handed to the link, when no send report says it); None: never."""
-        request = self.request
-        if request is None:
-            return None
-        sent_at = request.sent_at
-        return sent_at if sent_at is not None else request.handed_at
-
-    def horizon_s(self) -> float:
-        """How long after it left a reply can still come: twice its timeout (as the scheduler holds
-        a key for a late reply), plus a period."""
-        request = self.request
-        assert request is not None
-        return 2.0 * request.timeout_s + self.period_s
-
-    def done(self) -> bool:
-        return self.state != 0
-
-    def cancelled(self) -> bool:
-        return self.state == 2
-
-    def set_result(self, reply: Reply | None) -> None:
-        self.state = 1
-        if reply is not None:
-            self.track.answered(reply, self)
-
-    def set_exception(self, error: BaseException) -> None:
-        self.state = 2
-        counts = self.track.counts
-        if isinstance(error, ProtocolError | MotorNotExecuted):  # the motor answered: in order
-            self.track.answered(None, self)
-        elif isinstance(error, Superseded):
-            counts.superseded += 1
-        elif isinstance(error, TransportError) and self.left_s() is None:
-            counts.not_sent += 1
-        # (a timeout stays outstanding: its late reply may come, in order; MotorOffline and
-        # MotorStreaming were counted when the batch was sent)
-
-    def cancel(self) -> bool:
-        if self.state:
-            return False
-        self.state = 2
-        return True
+            self.counts.lost += 1
 
 
 class LoopTick:
@@ -388,7 +378,7 @@ class Loop:
         pacer, self._pacer = self._pacer, None
         for motor, track in self.tracks.items():
             record = track.bus.engine.registry.records.get(id(motor.codec))
-            if record is not None and record.late == track.late:
+            if record is not None and record.late == track.answered:
                 record.late = None
         with anyio.CancelScope(shield=True):
             if pacer is not None:
@@ -400,10 +390,10 @@ class Loop:
         """Track ``motor`` (done by its first command)."""
         if self._time is None:
             raise RuntimeError("use the Loop inside 'async with'")
-        track = self.tracks[motor] = _Track(motor, self.counts, self._time)
+        track = self.tracks[motor] = _Track(motor, self.counts, self._time, self.period_s)
         record = track.bus.engine.registry.records.get(id(motor.codec))
         if record is not None:
-            record.late = track.late  # (undone when the loop's block is left)
+            record.late = track.answered  # (undone when the loop's block is left)
         return track
 
     def __aiter__(self) -> Self:
@@ -448,19 +438,23 @@ class Loop:
                     on_time += 1
         n["sent"] += left
         n["on_time"] += on_time
-        sent = self._send(index)
         started = pace.started
         since = last.started if last is not None else started
         stale = 0
         add_age = self._ages.add
         for track in self.tracks.values():
-            if track.fifo:
-                track.expire(started)
+            fifo = track.fifo
+            if fifo:  # (expire() written out for its common case: the oldest within its horizon)
+                request = fifo[0][1]
+                sent_at = request.sent_at
+                if sent_at is None or started - sent_at > 2.0 * request.timeout_s + track.period_s:
+                    track.expire(started)
             if track.commanded:
                 if track.received_at < since:
                     stale += 1
                 if track.reply is not None:
                     add_age(started - track.sent_s)
+        sent = self._send(index)  # (after: a motor commanded first now is not stale yet)
         n["ticks"] += 1
         n["skipped"] += pace.skipped
         n["stale"] += stale
@@ -483,15 +477,14 @@ class Loop:
             return 0
         self.commands = {}
         tracks = self.tracks
-        period = self.period_s
-        batches: dict[Bus, tuple[list[tuple[Motor, Command]], list[_Out]]] = {}
+        batches: dict[Bus, tuple[list[tuple[Motor, Command]], list[_Track]]] = {}
         for motor, command in commands.items():
             track = tracks[motor]
             batch = batches.get(track.bus)
             if batch is None:
                 batch = batches[track.bus] = ([], [])
             batch[0].append((motor, command))
-            batch[1].append(_Out(track, index, period))
+            batch[1].append(track)
         timeout_s = self.timeout_s
         # every bus's commands encoded before any leaves: a ValueError sends nothing of the tick
         prepared = [
@@ -503,13 +496,11 @@ class Loop:
             queued, skipped = send(bus.engine, items, requests, contexts, bus.probe_interval_s)
             not_sent += skipped
             for request in queued:
-                context: _Out = request.context
-                context.request = request
-                track = context.track
+                track = request.context
                 track.commanded = True
                 track.last = request
-                if request.key is not None and not context.state:
-                    track.fifo.append(context)
+                if request.key is not None:
+                    track.fifo.append((index, request))
             sent += queued
         self.counts.not_sent += not_sent
         self._previous = sent
