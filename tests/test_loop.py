@@ -22,6 +22,7 @@ import pytest
 from _backends import BACKENDS
 from _backends import virtual as virtual_backend
 from servobus import Bus
+from servobus.errors import MotorTimeout
 from servobus.frame import Frame
 from servobus.loop import Loop, LoopTick, MotorState
 from servobus.protocols import lk
@@ -407,3 +408,19 @@ def test_the_loop_is_exported_by_the_package() -> None:
     import servobus.loop
 
     assert servobus.Loop is servobus.loop.Loop and "Loop" in servobus.__all__
+
+
+async def test_another_callers_late_reply_is_not_taken_as_one_of_the_loops() -> None:
+    # Beside the loop, a read of the same motor times out (0.5 ms) before its reply (1.5 ticks):
+    # that late reply has another key, and must not answer one of the loop's commands.
+    link = DelayLink(lambda i: 1.5 * PERIOD)
+
+    async def body(tick: LoopTick, motors: list[Any]) -> None:
+        if tick.index in (10, 20, 30):
+            with pytest.raises(MotorTimeout):
+                await motors[0].request(ma.ReadStatus1(), timeout_s=0.0005)
+
+    loop, seen = await _run([link], 50, body=body)
+    assert len(link.frames_of(0x9A)) == 3
+    assert _check_attribution(seen, exact=True) > 80
+    assert loop.metrics().lost == 0

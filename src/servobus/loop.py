@@ -44,6 +44,7 @@ from servobus import runtime as _runtime
 from servobus.bus.pipeline import Superseded, prepare, send
 from servobus.bus.safety import stop_motors
 from servobus.errors import MotorNotExecuted, ProtocolError
+from servobus.frame import Frame
 from servobus.metrics import LatencyWindow
 from servobus.protocols import Command, Reply
 from servobus.scheduler import RequestState
@@ -173,11 +174,9 @@ class _Track:
 
     # ---- a waiter's interface, for the Bus (servobus.bus.delivery.Delivery.settle) ----
 
-    def done(self) -> bool:
-        return False  # (every outcome is taken)
-
-    def cancelled(self) -> bool:
-        return False
+    # Never done (every outcome is taken), never cancelled: ``bool()`` is False, and a C call (done()
+    # is asked once per reply).
+    done = cancelled = staticmethod(bool)
 
     def cancel(self) -> bool:
         return False
@@ -202,7 +201,10 @@ class _Track:
         """A reply came (the Bus matched it to one of this motor's requests, or it is the late reply
         of one that timed out: ``MotorRecord.late``): it answers the OLDEST outstanding command
         (``reply`` None: it answered, in a way that does not decode)."""
-        now = self.time()
+        # (when it came in: the intake stamped the motor just before; no clock read per reply)
+        now = self.motor.last_seen if reply is not None else None
+        if now is None:
+            now = self.time()
         fifo = self.fifo
         while fifo:
             tick, request = fifo[0]
@@ -222,6 +224,14 @@ class _Track:
             if reply is not None and tick >= self.tick:
                 self.reply, self.tick, self.received_at, self.sent_s = reply, tick, now, left
             return
+
+    def late(self, reply: Reply, frame: Frame) -> None:
+        """The late reply of one of the motor's requests that timed out (``MotorRecord.late``, called
+        by the Bus's intake): taken in order if it has the key of the loop's commands (else it was
+        another caller's)."""
+        key = self.motor.codec.classify(frame)[1]
+        if any(request.key == key for _, request in self.fifo):
+            self.answered(reply)
 
     def dropped(self, request: Request) -> None:
         """The FIFO's front never left: withdrawn (counted superseded), or the link refused it."""
@@ -378,7 +388,7 @@ class Loop:
         pacer, self._pacer = self._pacer, None
         for motor, track in self.tracks.items():
             record = track.bus.engine.registry.records.get(id(motor.codec))
-            if record is not None and record.late == track.answered:
+            if record is not None and record.late == track.late:
                 record.late = None
         with anyio.CancelScope(shield=True):
             if pacer is not None:
@@ -393,7 +403,7 @@ class Loop:
         track = self.tracks[motor] = _Track(motor, self.counts, self._time, self.period_s)
         record = track.bus.engine.registry.records.get(id(motor.codec))
         if record is not None:
-            record.late = track.answered  # (undone when the loop's block is left)
+            record.late = track.late  # (undone when the loop's block is left)
         return track
 
     def __aiter__(self) -> Self:

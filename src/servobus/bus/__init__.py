@@ -14,7 +14,8 @@
 * ``tick``: a cycle's one waiter (``Tick``, ``Slot``) and how its items are sorted (``triage``).
 * ``delivery``: a judged frame to its motor and its request's waiter; ``events``: what a motor
   tells of itself (0xF1) and echoed commands; ``watchdog``: online/offline; ``restarts``: a motor
-  back online checked for a restart; ``safety``: the safe stop; ``broadcast``: one frame, many motors.
+  back online checked for a restart; ``safety``: the safe stop; ``broadcast``: one frame, many motors;
+  ``pipeline``: one bus's batch of a pipelined tick (servobus.loop), sent without waiting.
 
 One control tick, ``await bus.cycle([(motor, command), ...])`` of 32 motors, from the Bus to the link
 and back (``tests/bus/test_tick_path.py`` traces it; the family's codec and ``servobus.frame``, the
@@ -47,7 +48,7 @@ What this layer may import (``tests/test_layering.py``): servobus's base modules
 runtime, metrics, ...), the protocol contracts and families (a family's typed motor), the scheduler
 and the transports' contract; never the simulator, the remote bridge, the tools or the command line.
 Inside the package each module imports only those below it: motor; tick, watchdog; events;
-delivery; engine; broadcast, safety, restarts; core (no cycle: ``tests/bus/test_records.py``).
+delivery; engine; broadcast, safety, restarts, pipeline; core (no cycle: ``tests/bus/test_records.py``).
 """
 
 from servobus.bus.core import Bus

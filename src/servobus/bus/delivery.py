@@ -127,7 +127,7 @@ class Delivery:
         if got.request is not None:
             self._settle(got.request, None)
         elif got.traffic is _LATE and record is not None and record.late is not None:
-            record.late(reply)
+            record.late(reply, got.frame)
 
     def fail(self, requests: Iterable[Request]) -> None:
         """Each of ``requests`` ended with its error."""

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any, Protocol, Self, TypeVar
 import anyio
 
 from servobus.errors import MotorFault, MotorTimeout, TransportError
+from servobus.frame import Frame
 from servobus.metrics import Metrics
 from servobus.protocols import BoundCodec, Command, Family, Reply, get_family
 from servobus.protocols._restart import Seen
@@ -59,8 +60,9 @@ class MotorRecord:
         watchers: the frame iterators open on it (:class:`MotorFrames`: each adds and removes itself).
         commanded: the order in which the Bus first sent it a command that is not a read (0: never).
         undecodable_logged, echo_logged: its undecodable reply, its echoed request, logged once.
-        late: who takes its late replies (the reply of a request that timed out), besides its state:
-            a pipelined loop tracking it (servobus.loop), which attributes replies in order.
+        late: who takes its late replies (the reply of a request that timed out, and its frame),
+            besides its state: a pipelined loop tracking it (servobus.loop), which attributes
+            replies in order.
     """
 
     __slots__ = (
@@ -87,7 +89,7 @@ class MotorRecord:
         self.codec = codec
         self.misses = 0
         self.probe_at = 0.0
-        self.late: Callable[[Reply], object] | None = None
+        self.late: Callable[[Reply, Frame], object] | None = None
         evidence = getattr(codec, "RESTART", None)
         self.remembers: frozenset[type] = evidence.remembers if evidence is not None else frozenset()
         self.remembered: dict[type, Seen] = {}
