@@ -55,8 +55,10 @@ class DelayLink:
         silent: frozenset[int] = frozenset(),
         rules: LineRules | None = None,
         duplicate: Callable[[int], bool] = lambda i: False,
+        garble: Callable[[int], bool] = lambda i: False,
     ) -> None:
         self.delay, self.lose, self.silent, self.duplicate = delay, lose, silent, duplicate
+        self.garble = garble
         self.rules = rules or LineRules()
         self.sent: list[tuple[float, Frame]] = []
         self._due: list[tuple[float, int, Frame]] = []
@@ -107,6 +109,8 @@ class DelayLink:
         at = max(now + self.delay(i), self._last.get(motor_id, 0.0))
         self._last[motor_id] = at
         reply = _reply(frame, at)
+        if self.garble(i):  # (a reply that does not decode: too short)
+            reply = Frame(arbitration_id=reply.arbitration_id, data=reply.data[:3], timestamp=at)
         heapq.heappush(self._due, (at, i, reply))
         if self.duplicate(i):
             heapq.heappush(self._due, (at, i, reply))
@@ -349,14 +353,15 @@ async def test_a_cancelled_loop_sends_the_safe_stop_to_every_motor_it_commanded(
             group.start_soon(link.run)
         async with Bus(links[0], name="a") as a, Bus(links[1], name="b") as b:
             commanded = [a.motor("myactuator", 1), b.motor("myactuator", 2)]
-            idle = a.motor("myactuator", 3)  # only read by the loop: never commanded, never stopped
+            read = a.motor("myactuator", 3)  # only read by the loop: never commanded, never stopped
             with anyio.move_on_after(0.0205):
                 async with Loop(HZ) as loop:
                     async for tick in loop:
                         for m in commanded:
                             tick.command(m, ma.SpeedControl(speed_dps=10.0))
+                        tick.command(read, ma.ReadStatus2())
             stops_after_loop = [link.frames_of(0x81) for link in links]
-            assert loop.tracks.keys() == set(commanded) and idle not in loop.tracks
+            assert loop.tracks.keys() == {*commanded, read} and len(links[0].frames_of(0x9C)) > 10
             # ... and no stale command after the stop
             for link in links:
                 ((stop_at, _),) = link.frames_of(0x81)
@@ -423,4 +428,11 @@ async def test_another_callers_late_reply_is_not_taken_as_one_of_the_loops() -> 
     loop, seen = await _run([link], 50, body=body)
     assert len(link.frames_of(0x9A)) == 3
     assert _check_attribution(seen, exact=True) > 80
+    assert loop.metrics().lost == 0
+
+
+async def test_a_reply_that_does_not_decode_takes_its_place_in_the_order() -> None:
+    links = [DelayLink(lambda i: 1.5 * PERIOD, garble=lambda i: i in (30, 31, 50))]
+    loop, seen = await _run(links, 60)
+    assert _check_attribution(seen, exact=True) > 90
     assert loop.metrics().lost == 0

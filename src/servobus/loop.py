@@ -32,6 +32,7 @@ at the deadline (:mod:`servobus.bus.pipeline`), and the only await is the pacer'
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
@@ -155,6 +156,7 @@ class _Track:
         "sent_s",
         "tick",
         "time",
+        "wrote",
     )
 
     def __init__(self, motor: Motor, counts: _Counts, time: Any, period_s: float) -> None:
@@ -169,6 +171,7 @@ class _Track:
         self.sent_s = 0.0
         self.received_at = -1.0
         self.commanded = False
+        self.wrote = False  # (a command that is not a read: the motor gets the safe stop)
         self.command: Command | None = None  # (the next tick's, while it is being sent)
         self.last: Request | None = None  # its last request sent (withdrawn if still queued when superseded)
 
@@ -181,26 +184,28 @@ class _Track:
     def cancel(self) -> bool:
         return False
 
-    def set_result(self, reply: Reply | None) -> None:
-        """A reply came for one of the motor's requests (None: a command with no reply left)."""
-        if reply is not None:
-            self.answered(reply)
-
     def set_exception(self, error: BaseException) -> None:
         """One of the motor's requests ended without a reply: a timeout stays outstanding (its late
         reply may still come, in order); a reply that does not decode answered, in order; the others
         never left (dropped from the FIFO when they come to its front)."""
         if isinstance(error, ProtocolError | MotorNotExecuted):
-            self.answered(None)
+            self.answered(None, spoiled=True)
         elif isinstance(error, Superseded):
             self.counts.superseded += 1
 
     # ---- attribution ----
 
-    def answered(self, reply: Reply | None) -> None:
+    def answered(self, reply: Reply | None, spoiled: bool = False) -> None:
         """A reply came (the Bus matched it to one of this motor's requests, or it is the late reply
-        of one that timed out: ``MotorRecord.late``): it answers the OLDEST outstanding command
-        (``reply`` None: it answered, in a way that does not decode)."""
+        of one that timed out: :meth:`late`): it answers the OLDEST outstanding command. ``reply``
+        None: a command with no reply left (nothing to attribute), or with ``spoiled`` the motor
+        answered in a way that does not decode (it took its place in the order all the same).
+
+        No command is given up on here, however old: a reply taken in after a stall of the loop may
+        be the oldest's, and skipping it would make the state younger than it is (:meth:`expire`
+        gives them up, at a tick's start)."""
+        if reply is None and not spoiled:
+            return
         # (when it came in: the intake stamped the motor just before; no clock read per reply)
         now = self.motor.last_seen if reply is not None else None
         if now is None:
@@ -216,14 +221,13 @@ class _Track:
                         return  # (nothing older is outstanding: not ours to attribute)
                     self.dropped(request)
                     continue
-            if now - left > 2.0 * request.timeout_s + self.period_s:
-                fifo.popleft()
-                self.counts.lost += 1
-                continue
             fifo.popleft()
             if reply is not None and tick >= self.tick:
                 self.reply, self.tick, self.received_at, self.sent_s = reply, tick, now, left
             return
+
+    #: the Bus settles a request's reply here (None: a command with no reply left)
+    set_result = answered
 
     def late(self, reply: Reply, frame: Frame) -> None:
         """The late reply of one of the motor's requests that timed out (``MotorRecord.late``, called
@@ -452,13 +456,17 @@ class Loop:
         since = last.started if last is not None else started
         stale = 0
         add_age = self._ages.add
+        # Commands past their horizon are given up on as of the previous tick's start: the replies
+        # that came before it were taken in since, while the pacer waited (after an overrun it may
+        # not have: none is given up on then).
+        expiry = -math.inf if overrun else since
         for track in self.tracks.values():
             fifo = track.fifo
             if fifo:  # (expire() written out for its common case: the oldest within its horizon)
                 request = fifo[0][1]
                 sent_at = request.sent_at
-                if sent_at is None or started - sent_at > 2.0 * request.timeout_s + track.period_s:
-                    track.expire(started)
+                if sent_at is None or expiry - sent_at > 2.0 * request.timeout_s + track.period_s:
+                    track.expire(expiry)
             if track.commanded:
                 if track.received_at < since:
                     stale += 1
@@ -509,6 +517,8 @@ class Loop:
                 track = request.context
                 track.commanded = True
                 track.last = request
+                if request.writes:
+                    track.wrote = True
                 if request.key is not None:
                     track.fifo.append((index, request))
             sent += queued
@@ -521,12 +531,14 @@ class Loop:
         return left
 
     async def stop_motors(self) -> None:
-        """The safe stop (each Bus's ``safe`` command) to every motor the loop commanded, on all its
-        buses at once; the loop's commands still queued are withdrawn first."""
+        """The safe stop (each Bus's ``safe`` command) to every motor the loop sent a command that is
+        not a read (as the Bus's own safe stop), on all its buses at once; the loop's commands still
+        queued are withdrawn first."""
         by_bus: dict[Bus, dict[Motor, Command]] = {}
         for motor, track in self.tracks.items():
             bus = track.bus
-            if bus.safe is None or not bus.engine.link.is_open or bus.engine.runtime is None:
+            engine = bus.engine
+            if not track.wrote or bus.safe is None or not engine.link.is_open or engine.runtime is None:
                 continue
             bus.engine.withdraw(motor, Superseded(f"{bus.name}: the loop stops"), _not_pipelined)
             try:
