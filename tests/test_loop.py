@@ -235,6 +235,7 @@ async def test_each_state_answers_the_tick_whose_command_left_with_its_exact_age
     assert metrics.state_age_max_s is not None
     assert metrics.state_age_max_s <= (math.ceil(latency_ticks) + 1) * PERIOD + 1e-9
     assert all(tick.sent == (4 if tick.index else 0) for tick, _ in seen)
+    assert all(tick.commands_late == 0 for tick, _ in seen)
 
 
 async def test_jitter_loss_and_a_silent_motor_never_make_a_state_younger_than_its_command() -> None:
@@ -264,7 +265,7 @@ async def test_jitter_loss_and_a_silent_motor_never_make_a_state_younger_than_it
     assert metrics.lost >= sent - len(quiet.fifo)
     assert len(quiet.fifo) < sent
     last = seen[-1][0]
-    assert all(last.started - (out.left_s() or 0) <= out.horizon_s() for out in quiet.fifo)
+    assert all(last.started - (r.sent_at or 0) <= 2 * r.timeout_s + PERIOD for _, r in quiet.fifo)
     assert metrics.stale_states >= 299  # the silent motor, every tick after its first command
     assert all(tick.stale >= 1 for tick, _ in seen[2:])
 
@@ -315,7 +316,7 @@ async def test_a_command_still_queued_at_the_next_deadline_is_superseded_never_s
     # A half-duplex line, replies 2 ticks late: of two motors' commands one waits its turn, and the
     # next tick's command for that motor replaces it.
     link = DelayLink(lambda i: 2 * PERIOD, rules=LineRules(half_duplex=True))
-    loop, _ = await _run([link], 40)
+    loop, seen = await _run([link], 40)
     metrics = loop.metrics()
     assert metrics.superseded > 10
     for t, frame in link.frames_of(0xA2):
@@ -325,6 +326,10 @@ async def test_a_command_still_queued_at_the_next_deadline_is_superseded_never_s
         assert t <= (given + 1) * PERIOD + 1e-9, (t, given)
     # (bodies 0..39 gave 80: the last body's never leave, the one before's are judged at no tick)
     assert 76 <= metrics.commands_sent + metrics.superseded + metrics.not_sent <= 78
+    # (a tick whose commands did not all leave within it says so at the next)
+    late = [tick for tick, _ in seen if tick.commands_late]
+    # (ticks 1..38's commands, judged at ticks 2..39)
+    assert late and sum(tick.commands_late for tick in late) == 38 * 2 - metrics.commands_on_time
 
 
 async def test_a_refused_command_raises_before_any_frame_of_the_tick_leaves() -> None:
@@ -436,3 +441,45 @@ async def test_a_reply_that_does_not_decode_takes_its_place_in_the_order() -> No
     loop, seen = await _run(links, 60)
     assert _check_attribution(seen, exact=True) > 90
     assert loop.metrics().lost == 0
+
+
+async def test_a_tick_shows_the_states_as_of_its_start_while_its_body_awaits() -> None:
+    # Replies take half a tick: this tick's own reply comes while the body sleeps 0.8 of a period.
+    before_after: list[tuple[MotorState | None, MotorState | None]] = []
+
+    async def body(tick: LoopTick, motors: list[Any]) -> None:
+        if tick.index in (10, 11, 12):
+            before = tick.state(motors[0])
+            await anyio.sleep(0.8 * PERIOD)
+            before_after.append((before, tick.state(motors[0])))
+
+    links = [DelayLink(lambda i: 0.5 * PERIOD)]
+    await _run(links, 20, body=body)
+    assert len(before_after) == 3
+    for before, after in before_after:
+        assert before is not None and after == before and after.age_ticks == 1
+
+
+async def test_a_second_iteration_goes_on_on_the_same_grid() -> None:
+    link = DelayLink(lambda i: 0.5 * PERIOD)
+    indices: list[list[int]] = []
+    async with anyio.create_task_group() as group:
+        group.start_soon(link.run)
+        async with Bus(link, name="a", safe=None) as bus:
+            m = bus.motor("myactuator", 1)
+            async with Loop(HZ) as loop:
+                for count in (3, None, 2):
+                    run: list[int] = []
+                    async for tick in loop.ticks(count=count):
+                        run.append(tick.index)
+                        tick.command(m, ma.SpeedControl(speed_dps=float(tick.index)))
+                        if count is None and tick.index == 5:
+                            break
+                    indices.append(run)
+                    await anyio.sleep(2.5 * PERIOD)  # (two ticks' time passes between runs)
+        group.cancel_scope.cancel()
+    # (each pause of 2.5 periods skips one tick whole and makes the next late; the time between
+    # two iterations counts as the last body's: an overrun)
+    assert indices == [[0, 1, 2], [4, 5], [7, 8]]
+    metrics = loop.metrics()
+    assert (metrics.ticks, metrics.skipped, metrics.overruns, metrics.late_ticks) == (7, 2, 2, 2)

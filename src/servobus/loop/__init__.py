@@ -28,27 +28,28 @@ Nothing here awaits per bus or per request: a request's outcome comes to the loo
 context (the motor's record in the loop, one per motor), the batch of each bus is sent synchronously
 at the deadline (:mod:`servobus.bus.pipeline`), and the only await is the pacer's
 (:func:`servobus.ticks.ticks`).
+
+Its parts: ``_track`` (what the loop knows of each motor, and the attribution), ``_tick`` (a tick
+and a motor's state, as the body sees them); the :class:`Loop` here drives them.
 """
 
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from types import TracebackType
-from typing import TYPE_CHECKING, Any, NamedTuple, Self
+from typing import TYPE_CHECKING, Any, Self
 
 import anyio
 
 from servobus import runtime as _runtime
 from servobus.bus.pipeline import Superseded, prepare, send
 from servobus.bus.safety import stop_motors
-from servobus.errors import MotorNotExecuted, ProtocolError
-from servobus.frame import Frame
+from servobus.loop._tick import LoopTick, MotorState
+from servobus.loop._track import Counts, Track, not_pipelined
 from servobus.metrics import LatencyWindow
-from servobus.protocols import Command, Reply
-from servobus.scheduler import RequestState
+from servobus.protocols import Command
 from servobus.ticks import ticks
 
 if TYPE_CHECKING:
@@ -59,32 +60,6 @@ __all__ = ["Loop", "LoopMetrics", "LoopTick", "MotorState"]
 
 #: a tick that starts later than this after its deadline is counted late (``late_ticks``)
 LATE_TICK_S = 200e-6
-
-_QUEUED, _FAILED = RequestState.QUEUED, RequestState.FAILED
-
-
-class MotorState(NamedTuple):
-    """A motor's latest state, as a tick's body sees it (:meth:`LoopTick.state`).
-
-    A NamedTuple, not a frozen dataclass: one is made per motor and tick, and a frozen slotted
-    dataclass of six fields took 2.5 µs to make against 0.84 µs for this (3.11, this machine).
-
-    Attributes:
-        reply: the decoded reply (typed, the family's).
-        tick: the index of the tick whose command it answers (the tick at whose deadline it left).
-        age_ticks: the asking tick's index minus ``tick``.
-        age_s: the asking tick's start minus when that command left: an upper bound on the
-            measurement's age.
-        received_at: when the reply came in (the loop's clock).
-        fresh: a reply came since the previous tick started.
-    """
-
-    reply: Reply
-    tick: int
-    age_ticks: int
-    age_s: float
-    received_at: float
-    fresh: bool
 
 
 @dataclass(frozen=True, slots=True)
@@ -124,226 +99,6 @@ class LoopMetrics:
     late_p99_s: float | None
 
 
-class _Counts:
-    """The counters the motors' records and the contexts add to (one object, shared)."""
-
-    __slots__ = ("lost", "not_sent", "superseded")
-
-    def __init__(self) -> None:
-        self.lost = 0
-        self.not_sent = 0
-        self.superseded = 0
-
-
-class _Track:
-    """What the loop knows of one motor: its latest reply (which tick it answers, when that command
-    left, when it came) and the FIFO of its commands still outstanding ((tick, request), oldest
-    first). It is also the context (``request.context``) of every request the loop sends the motor:
-    the Bus settles each outcome into it as into a waiter (``done``, ``set_result``,
-    ``set_exception``, ``cancel``, ``cancelled``), with no object per request."""
-
-    __slots__ = (
-        "bus",
-        "command",
-        "commanded",
-        "counts",
-        "fifo",
-        "last",
-        "motor",
-        "period_s",
-        "received_at",
-        "reply",
-        "sent_s",
-        "tick",
-        "time",
-        "wrote",
-    )
-
-    def __init__(self, motor: Motor, counts: _Counts, time: Any, period_s: float) -> None:
-        self.motor = motor
-        self.bus: Bus = motor.bus  # type: ignore[assignment]
-        self.counts = counts
-        self.time = time
-        self.period_s = period_s
-        self.fifo: deque[tuple[int, Request]] = deque()
-        self.reply: Reply | None = None
-        self.tick = -1
-        self.sent_s = 0.0
-        self.received_at = -1.0
-        self.commanded = False
-        self.wrote = False  # (a command that is not a read: the motor gets the safe stop)
-        self.command: Command | None = None  # (the next tick's, while it is being sent)
-        self.last: Request | None = None  # its last request sent (withdrawn if still queued when superseded)
-
-    # ---- a waiter's interface, for the Bus (servobus.bus.delivery.Delivery.settle) ----
-
-    # Never done (every outcome is taken), never cancelled: ``bool()`` is False, and a C call (done()
-    # is asked once per reply).
-    done = cancelled = staticmethod(bool)
-
-    def cancel(self) -> bool:
-        return False
-
-    def set_exception(self, error: BaseException) -> None:
-        """One of the motor's requests ended without a reply: a timeout stays outstanding (its late
-        reply may still come, in order); a reply that does not decode answered, in order; the others
-        never left (dropped from the FIFO when they come to its front)."""
-        if isinstance(error, ProtocolError | MotorNotExecuted):
-            self.answered(None, spoiled=True)
-        elif isinstance(error, Superseded):
-            self.counts.superseded += 1
-
-    # ---- attribution ----
-
-    def answered(self, reply: Reply | None, spoiled: bool = False) -> None:
-        """A reply came (the Bus matched it to one of this motor's requests, or it is the late reply
-        of one that timed out: :meth:`late`): it answers the OLDEST outstanding command. ``reply``
-        None: a command with no reply left (nothing to attribute), or with ``spoiled`` the motor
-        answered in a way that does not decode (it took its place in the order all the same).
-
-        No command is given up on here, however old: a reply taken in after a stall of the loop may
-        be the oldest's, and skipping it would make the state younger than it is (:meth:`expire`
-        gives them up, at a tick's start)."""
-        if reply is None and not spoiled:
-            return
-        # (when it came in: the intake stamped the motor just before; no clock read per reply)
-        now = self.motor.last_seen if reply is not None else None
-        if now is None:
-            now = self.time()
-        fifo = self.fifo
-        while fifo:
-            tick, request = fifo[0]
-            left = request.sent_at
-            if left is None:
-                left = request.handed_at
-                if left is None or request.state is _FAILED:
-                    if request.state is _QUEUED:
-                        return  # (nothing older is outstanding: not ours to attribute)
-                    self.dropped(request)
-                    continue
-            fifo.popleft()
-            if reply is not None and tick >= self.tick:
-                self.reply, self.tick, self.received_at, self.sent_s = reply, tick, now, left
-            return
-
-    #: the Bus settles a request's reply here (None: a command with no reply left)
-    set_result = answered
-
-    def late(self, reply: Reply, frame: Frame) -> None:
-        """The late reply of one of the motor's requests that timed out (``MotorRecord.late``, called
-        by the Bus's intake): taken in order if it has the key of the loop's commands (else it was
-        another caller's)."""
-        key = self.motor.codec.classify(frame)[1]
-        if any(request.key == key for _, request in self.fifo):
-            self.answered(reply)
-
-    def dropped(self, request: Request) -> None:
-        """The FIFO's front never left: withdrawn (counted superseded), or the link refused it."""
-        self.fifo.popleft()
-        if request.state is _FAILED:
-            self.counts.not_sent += 1
-
-    def expire(self, now: float) -> None:
-        """Drop the commands that can no longer be answered: never left (superseded, refused), or
-        outstanding past their horizon (twice the request's timeout, as the scheduler holds a key
-        for a late reply, plus a period; counted ``lost``)."""
-        fifo = self.fifo
-        while fifo:
-            request = fifo[0][1]
-            left = request.sent_at
-            if left is None:
-                left = request.handed_at
-                if left is None or request.state is _FAILED:
-                    if request.state is _QUEUED:
-                        return  # (waits for its turn)
-                    self.dropped(request)
-                    continue
-            if now - left <= 2.0 * request.timeout_s + self.period_s:
-                return
-            fifo.popleft()
-            self.counts.lost += 1
-
-
-class LoopTick:
-    """One tick of a :class:`Loop`: the pacer's (:class:`servobus.ticks.Tick`) fields, what the loop
-    saw, the motors' states, and where the next tick's commands are given.
-
-    Attributes:
-        index, deadline, started, late_s, skipped: as :class:`servobus.ticks.Tick`.
-        overrun: the previous body ran past this tick's deadline.
-        stale: motors commanded before with no fresh state (no reply since the previous tick started).
-        sent: requests handed to their links at this deadline.
-    """
-
-    __slots__ = (
-        "_loop",
-        "_since",
-        "deadline",
-        "index",
-        "late_s",
-        "overrun",
-        "sent",
-        "skipped",
-        "stale",
-        "started",
-    )
-
-    def __init__(
-        self,
-        loop: Loop,
-        index: int,
-        deadline: float,
-        started: float,
-        skipped: int,
-        overrun: bool,
-        stale: int,
-        sent: int,
-        since: float,
-    ) -> None:
-        self._loop = loop
-        self.index = index
-        self.deadline = deadline
-        self.started = started
-        self.late_s = started - deadline
-        self.skipped = skipped
-        self.overrun = overrun
-        self.stale = stale
-        self.sent = sent
-        self._since = since
-
-    def state(self, motor: Motor) -> MotorState | None:
-        """``motor``'s latest state (None: no reply yet, or a motor the loop never commanded)."""
-        track = self._loop.tracks.get(motor)
-        if track is None or track.reply is None:
-            return None
-        return MotorState(
-            track.reply,
-            track.tick,
-            self.index - track.tick,
-            self.started - track.sent_s,
-            track.received_at,
-            track.received_at >= self._since,
-        )
-
-    def command(self, motor: Motor, command: Command) -> None:
-        """``command`` goes to ``motor`` at the next tick's deadline (a second one this tick replaces
-        it, counted ``superseded``). A command out of range raises ValueError at that deadline,
-        before any frame of the tick leaves."""
-        loop = self._loop
-        track = loop.tracks.get(motor)
-        if track is None:
-            track = loop.add(motor)
-        last = track.last
-        if last is not None and last.state is _QUEUED:  # the last tick's command has not left yet
-            track.last = None
-            track.bus.engine.withdraw(
-                motor, Superseded(f"{motor!r}: superseded before it left"), _not_pipelined
-            )
-        if loop.commands.setdefault(motor, command) is not command:
-            loop.commands[motor] = command
-            loop.counts.superseded += 1
-
-
 class Loop:
     """A pipelined fixed-rate control loop over the buses of the motors it commands.
 
@@ -368,14 +123,13 @@ class Loop:
         self.timeout_s = timeout_s
         self.safe_stop = safe_stop
         #: every motor the loop commanded, with what it knows of it
-        self.tracks: dict[Motor, _Track] = {}
+        self.tracks: dict[Motor, Track] = {}
         #: the commands given for the next tick
         self.commands: dict[Motor, Command] = {}
-        self.counts = _Counts()
+        self.counts = Counts()
         self._time: Any = None
         self._pacer: AsyncIterator[Any] | None = None
         self._count: int | None = None
-        self._offset = 0  # (tick indices go on across runs of ticks())
         self._last: LoopTick | None = None
         self._previous: list[Request] = []  # the last tick's requests (on time at the next?)
         self._ages = LatencyWindow(4096)
@@ -400,11 +154,11 @@ class Loop:
             if exc is not None and self.safe_stop:
                 await self.stop_motors()
 
-    def add(self, motor: Motor) -> _Track:
+    def add(self, motor: Motor) -> Track:
         """Track ``motor`` (done by its first command)."""
         if self._time is None:
             raise RuntimeError("use the Loop inside 'async with'")
-        track = self.tracks[motor] = _Track(motor, self.counts, self._time, self.period_s)
+        track = self.tracks[motor] = Track(motor, self.counts, self._time, self.period_s)
         record = track.bus.engine.registry.records.get(id(motor.codec))
         if record is not None:
             record.late = track.late  # (undone when the loop's block is left)
@@ -414,7 +168,9 @@ class Loop:
         return self
 
     def ticks(self, count: int | None = None) -> Self:
-        """Iterate ``count`` ticks (None: until the body breaks out)."""
+        """Iterate ``count`` ticks (None: until the body breaks out). The pacer runs on between
+        iterations of one block: a later ``async for`` goes on on the same grid (the ticks whose
+        time passed meanwhile are counted ``skipped``, the time between as the last body's)."""
         if count is not None and count < 0:
             raise ValueError(f"count={count} must be >= 0")
         self._count = count
@@ -422,33 +178,36 @@ class Loop:
 
     async def __anext__(self) -> LoopTick:
         body_end = self._time() if self._time is not None else 0.0
+        count = self._count
+        if count is not None:
+            if count == 0:
+                self._count = None  # (the next iteration, unless told, has no end)
+                raise StopAsyncIteration
+            self._count = count - 1
         if self._pacer is None:
             if self._time is None:
                 raise RuntimeError("use the Loop inside 'async with'")
-            self._pacer = ticks(self.hz, count=self._count).__aiter__()
-            self._count = None
-        try:
-            pace = await self._pacer.__anext__()
-        except StopAsyncIteration:
-            self._pacer = None
-            if self._last is not None:
-                self._offset = self._last.index + 1
-            raise
+            self._pacer = ticks(self.hz).__aiter__()
+        pace = await self._pacer.__anext__()
         return self._begin(pace, body_end)
 
     def _begin(self, pace: Any, body_end: float) -> LoopTick:
         """The tick the pacer gave: the last tick's requests judged, this one's sent, its view made."""
         n = self._n
         last = self._last
-        index = self._offset + pace.index
+        index = pace.index
         deadline = pace.deadline
         overrun = last is not None and body_end > last.deadline + self.period_s
+        # The last tick's commands, judged now (a send report may come after the hand-over): out
+        # within their tick, i.e. before the next deadline of the grid (this one, unless skipped).
+        within = last.deadline + self.period_s if last is not None else deadline
         left = on_time = 0
-        for request in self._previous:  # (judged now: a send report may come after the hand-over)
+        previous = self._previous
+        for request in previous:
             if request.handed_at is not None:
                 left += 1
                 sent_at = request.sent_at
-                if sent_at is not None and sent_at <= deadline:
+                if sent_at is not None and sent_at <= within:
                     on_time += 1
         n["sent"] += left
         n["on_time"] += on_time
@@ -482,8 +241,9 @@ class Loop:
         self._lates.add(late_s)
         if late_s > LATE_TICK_S:
             n["late"] += 1
+        commands_late = len(previous) - on_time
         tick = self._last = LoopTick(
-            self, index, deadline, started, pace.skipped, overrun, stale, sent, since
+            self, index, deadline, started, pace.skipped, overrun, stale, sent, since, commands_late
         )
         return tick
 
@@ -495,7 +255,7 @@ class Loop:
             return 0
         self.commands = {}
         tracks = self.tracks
-        batches: dict[Bus, tuple[list[tuple[Motor, Command]], list[_Track]]] = {}
+        batches: dict[Bus, tuple[list[tuple[Motor, Command]], list[Track]]] = {}
         for motor, command in commands.items():
             track = tracks[motor]
             batch = batches.get(track.bus)
@@ -540,7 +300,7 @@ class Loop:
             engine = bus.engine
             if not track.wrote or bus.safe is None or not engine.link.is_open or engine.runtime is None:
                 continue
-            bus.engine.withdraw(motor, Superseded(f"{bus.name}: the loop stops"), _not_pipelined)
+            bus.engine.withdraw(motor, Superseded(f"{bus.name}: the loop stops"), not_pipelined)
             try:
                 by_bus.setdefault(bus, {})[motor] = motor.codec.safe_command(bus.safe)
             except ValueError:
@@ -572,7 +332,3 @@ class Loop:
             late_p50_s=lates.p50_s,
             late_p99_s=lates.p99_s,
         )
-
-
-def _not_pipelined(request: Request) -> bool:
-    return not request.pipelined
