@@ -166,6 +166,7 @@ class Summary:
         cpu_share = self.cpu_s / self.seconds if self.seconds > 0 else 0.0
         sim_ms = self.simulator_cpu_s / self.ticks * 1e3
         host_ms = self.host_us_per_tick / 1e3
+        mean_ms = self.cpu_s / self.ticks * 1e3
         cores = os.cpu_count() or 1
         load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
         machine = self.machine()
@@ -174,12 +175,12 @@ class Summary:
         if self.tick_p50_ms > period_ms:
             return (
                 f"CPU-bound: a tick took {self.tick_p50_ms:.2f} ms of CPU (median; the wire needs "
-                f"{self.wire_ms:.2f} ms), {sim_ms:.2f} ms of it simulating {self.motors} motors and "
-                f"{host_ms:.2f} ms the host's loop; simulator and host share one core in one process, "
+                f"{self.wire_ms:.2f} ms), {mean_ms:.2f} ms on average, {sim_ms:.2f} ms of it simulating "
+                f"{self.motors} motors and {host_ms:.2f} ms the host's loop; simulator and host share one "
+                "core in one process, "
                 f"and {self.hz:g} Hz leaves {period_ms:.2f} ms per tick ({machine}). Fewer --motors or "
                 "a lower --hz keep up."
             )
-        mean_ms = self.cpu_s / self.ticks * 1e3
         # A median tick's CPU fits the period: the wall time lost went to other work (the process
         # ran less than the ticks it ran needed), or to pauses and ticks far dearer than the median.
         if cpu_share < 0.8 * min(1.0, self.hz * mean_ms / 1e3):
