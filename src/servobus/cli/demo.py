@@ -4,18 +4,23 @@ The motors are ``--family``'s (default: the registry's first, MyActuator), asked
 itself: its simulator part (``FAMILY.part("sim")``) builds them and says their turnaround, its
 command-line part's ``move`` (``FAMILY.part("cli")``) makes the absolute position set-point (0xA4
 for MyActuator). Each simulated 1 Mbit/s CAN bus is a :class:`~servobus.transports.sim.SimTransport`
-with its motors, driven by its own :class:`~servobus.bus.Bus`; one pacer
-(:func:`servobus.ticks.ticks`) drives every bus: at each tick every motor gets its set-point along a
-sine, and the buses' ``cycle()``\\ s run together (a task each, in the tick's task group). A live view
-shows each motor's position, speed, current and temperature with the achieved rate, missed ticks,
-latency, bus load and errors; with ``--duration`` the demo runs without it and prints a summary,
-including, when the rate was not kept, what was achieved and why (CPU time per tick, the
-simulator's share, the cores it would need).
+with its motors, driven by its own :class:`~servobus.bus.Bus`. Every motor's move is first started
+as the family starts one (hollow: its mode, the set-point, Start; a ``Bus.cycle`` per step), then one
+pipelined :class:`~servobus.loop.Loop` drives every bus: at each tick every motor is given its next
+set-point along a sine (``tick.command``; it leaves at the next tick's deadline, every bus's batch
+at once), and nothing waits for the replies: the body sees each motor's latest state and its age
+(``tick.state``). A live view shows each motor's position, speed, current, temperature and state age
+with the achieved rate, missed ticks, overruns, bus load and errors; with ``--duration`` the demo
+runs without it and prints a summary: the rate, the host's CPU per tick with the simulator's share
+apart, the state's age, the latency and the errors, and, when the rate was not kept, why. At the end
+of ``--duration`` the demo waits (a few ticks at most) for the replies to the last set-points, so
+that every tick counted was answered.
 
-Real time, one process: the simulated motors run on the same event loop as the host side, so the
-machine's one core pays for both. Ctrl-C or SIGTERM (or the end of ``--duration``) ends the loop
-(:func:`~servobus.cli._motors.stop_scope`) and every Bus sends its motors their stop. The loop runs on
-asyncio by default (``--backend trio``: on trio), through anyio either way.
+Real time, one process: the simulated motors run on the same event loop as the host side, so one
+core pays for both. Ctrl-C or SIGTERM (or the end of ``--duration``) ends the loop
+(:func:`~servobus.cli._motors.stop_scope`): on a signal the Loop sends its motors the safe stop, and
+every Bus sends its motors their stop as it is left. The loop runs on asyncio by default
+(``--backend trio``: on trio), through anyio either way.
 """
 
 from __future__ import annotations
@@ -23,15 +28,13 @@ from __future__ import annotations
 import contextlib
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import anyio
-import anyio.abc
 import click
 
-from servobus import runtime
 from servobus.bus import Bus, Motor
 from servobus.cli._connect import FamilyChoice, note_exit, sim_part, timeout_option
 from servobus.cli._demo_report import Layout, Summary, layout, live_view, summary_lines
@@ -39,10 +42,17 @@ from servobus.cli._motors import BACKENDS, run, stop_scope
 from servobus.cli._output import SETTINGS, FloatRange, console, emit_json, examples, json_option
 from servobus.protocols import DEFAULT_FAMILY, Command, get_family
 from servobus.sim.family import SimFamily, SimOptions
-from servobus.ticks import ticks
+
+try:
+    import resource
+except ImportError:  # (not on Windows: no preemption count there)
+    resource = None  # type: ignore[assignment]
 
 if TYPE_CHECKING:
     from servobus.cli.plugin import CliFamily, Op
+    from servobus.loop import Loop, LoopMetrics
+    from servobus.loop import LoopTick as LoopTick
+    from servobus.metrics import Metrics
 
 __all__ = ["demo"]
 
@@ -105,7 +115,9 @@ def demo(
     """Simulated motors on simulated CAN buses following sine trajectories, in real time.
 
     No hardware and no arguments needed: 32 MyActuator motors at 1 kHz by default, spread over as
-    many simulated 1 Mbit/s buses as classic CAN needs for that rate. Ctrl-C stops the motors cleanly.
+    many simulated 1 Mbit/s buses as classic CAN needs for that rate, driven by one pipelined loop
+    (each tick's set-points leave at the next deadline; the replies are not waited for). The summary
+    gives the rate kept, the host's CPU per tick and the state's age. Ctrl-C stops the motors cleanly.
     """
     parts = _parts(family)
     if buses is not None and buses > motors:
@@ -135,21 +147,26 @@ def demo(
 
 @dataclass(frozen=True, slots=True)
 class _Parts:
-    """What the demo asks of the family: its simulator and its ``move`` set-point."""
+    """What the demo asks of the family: its simulator and its ``move``."""
 
     family: str
     sim: SimFamily
     move: Op
 
+    def start(self, motor: Motor, angle_deg: float) -> Sequence[Command]:
+        """What starts an absolute move to ``angle_deg`` (hollow: its mode, the set-point, Start)."""
+        return self.move.first(motor.codec, _values(angle_deg))
+
     def setpoint(self, motor: Motor, angle_deg: float) -> Command:
-        """The absolute position set-point to ``angle_deg`` for ``motor``."""
-        values = {
-            "angle_deg": angle_deg,
-            "max_speed_dps": MAX_SPEED_DPS,
-            "relative": False,
-            "max_current_a": None,
-        }
-        return self.move.first(motor.codec, values)[-1]
+        """The absolute position set-point to ``angle_deg``, as the move resends it each tick (its
+        first command: LK's move also rereads the angle, which the demo does not)."""
+        values = _values(angle_deg)
+        again = self.move.repeat(motor.codec, values) if self.move.repeat is not None else None
+        return again[0] if again else self.move.first(motor.codec, values)[-1]
+
+
+def _values(angle_deg: float) -> dict[str, Any]:
+    return {"angle_deg": angle_deg, "max_speed_dps": MAX_SPEED_DPS, "relative": False, "max_current_a": None}
 
 
 def _parts(family: str) -> _Parts:
@@ -180,25 +197,36 @@ class _SimClock:
 
     On ``time.perf_counter``: the entry points never block or sleep, so their wall time is their CPU
     time, and the counter is read in tens of nanoseconds where ``time.thread_time`` is a system call
-    (timed with it, the demo spent a third of its loop reading the clock).
+    (timed with it, the demo spent a third of its loop reading the clock). An entry point called from
+    another (on the same network) is timed once, by the outer one.
     """
+
+    #: the networks' entry points the host side calls (those a network has; ``host_turn``: advance,
+    #: run ahead and the next event in one call, where the network offers it)
+    ENTRY_POINTS = ("send", "send_many", "advance", "run_ahead", "host_turn", "next_event_s")
 
     def __init__(self) -> None:
         self.seconds = 0.0
+        self._depth = 0
 
     def wrap(self, network: Any) -> None:
-        for name in ("send", "advance", "run_ahead"):
-            setattr(network, name, self._timed(getattr(network, name)))
+        for name in self.ENTRY_POINTS:
+            if callable(method := getattr(network, name, None)):
+                setattr(network, name, self._timed(method))
 
     def _timed(self, method: Callable[..., Any]) -> Callable[..., Any]:
         clock = time.perf_counter
 
         def timed(*args: Any, **kwargs: Any) -> Any:
+            if self._depth:
+                return method(*args, **kwargs)
+            self._depth = 1
             start = clock()
             try:
                 return method(*args, **kwargs)
             finally:
                 self.seconds += clock() - start
+                self._depth = 0
 
         return timed
 
@@ -206,11 +234,10 @@ class _SimClock:
 async def _run(
     plan: Layout, parts: _Parts, duration: float | None, *, live: bool, timeout_s: float | None
 ) -> Summary:
+    from servobus.loop import Loop
     from servobus.transports.sim import SimTransport
 
     revision = get_family(parts.family).default_revision
-
-    clock = runtime.current().time
     sim_clock = _SimClock()
     async with contextlib.AsyncExitStack() as stack:
         buses: list[tuple[Bus, list[Motor]]] = []
@@ -227,141 +254,214 @@ async def _run(
             sim_clock.wrap(transport.network)
             bus = await stack.enter_async_context(Bus(transport, name=f"bus {b + 1}"))
             buses.append((bus, [bus.motor(parts.family, i) for i in ids]))
-        flat = [(b, m) for b, (_, motors) in enumerate(buses) for m in motors]
-        phases = [2 * math.pi * n / len(flat) for n in range(len(flat))]
-        latest: list[Any] = [None] * len(flat)
-        targets = [0.0] * len(flat)
-        failed = 0
-        skipped = 0
-        lateness: list[float] = []
-        durations: list[float] = []  # tick start -> every bus's last reply
-        count = 0
+        sine = _Sine([m for _, motors in buses for m in motors], parts)
+        before = [bus.metrics() for bus, _ in buses]
         view = None
         if live:
             from rich.live import Live
 
             view = Live(console=console(), auto_refresh=False, transient=False)
             view.start()
-        cpu0, wall0 = time.process_time(), time.perf_counter()
-        start = clock()
-        next_refresh = start
-        cycles = _Cycles(buses, timeout_s)
+        loop = Loop(plan.hz, timeout_s=timeout_s)
+        run = _Ticks(sim_clock)
         try:
-            async with anyio.create_task_group() as workers:
-                await cycles.start(workers)
-                with stop_scope() as stopping:  # Ctrl-C, SIGTERM: leave the loop; the Buses stop the motors
-                    async for tick in ticks(plan.hz):
-                        t = tick.deadline - start
-                        if duration is not None and t >= duration:
-                            break
-                        count += 1
-                        skipped += tick.skipped
-                        lateness.append(tick.late_s)
-                        items_by_bus: list[list[tuple[Motor, Command]]] = [[] for _ in buses]
-                        for n, (b, motor) in enumerate(flat):
-                            targets[n] = AMPLITUDE_DEG * math.sin(2 * math.pi * t / PERIOD_S + phases[n])
-                            items_by_bus[b].append((motor, parts.setpoint(motor, round(targets[n], 2))))
-                        results = await cycles.tick(items_by_bus)
-                        durations.append(clock() - tick.started)
-                        n = 0
-                        for per_bus in results:
-                            for result in per_bus:
-                                if isinstance(result, BaseException):
-                                    failed += 1
-                                else:
-                                    latest[n] = result
-                                n += 1
-                        if view is not None and tick.started >= next_refresh:
-                            next_refresh = tick.started + REFRESH_S
-                            header = _header(plan, buses, count, skipped, tick.started - start, failed)
-                            view.update(live_view(header, _rows(flat, latest, targets)), refresh=True)
-                workers.cancel_scope.cancel()  # (parked on their next tick)
+            with stop_scope() as stopping:  # Ctrl-C, SIGTERM: the loop sends its stop, the Buses theirs
+                await _start(buses, sine, timeout_s)
+                before = [bus.metrics() for bus, _ in buses]  # (the loop's figures count from here)
+                async with loop:
+                    await run.go(loop, sine, duration, view, plan, buses)
         finally:
             if view is not None:
                 view.stop()
-        wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
-        summary = _summarise(plan, buses, count, skipped, lateness, durations, wall, cpu, sim_clock.seconds)
+                if not view.console.is_terminal:  # (rich ends the last frame's line on a terminal only)
+                    view.console.line()
+        summary = _summarise(plan, buses, run, loop.metrics(), before)
         summary.interrupted = stopping.cancelled_caught
         summary.live = view is not None
     return summary
 
 
-class _Cycles:
-    """Every bus's ``cycle()`` at once, each tick: a worker task per bus, started once in the run's
-    task group, parked on a one-shot waiter (:meth:`servobus.runtime.Runtime.waiter`) that the tick
-    resolves with its set-points. (A task group per tick starts 11 tasks every tick: ~0.25 ms more per
-    tick than this on asyncio, a quarter of the 1 kHz demo's rate.)
+async def _start(buses: list[tuple[Bus, list[Motor]]], sine: _Sine, timeout_s: float | None) -> None:
+    """Start every motor's move at its first target as the family's ``move`` does (hollow: its mode,
+    the set-point, Start), a ``Bus.cycle`` per step, every bus at once; a failure is counted in the
+    Bus's metrics, like the loop's."""
+    first = {id(m): sine.parts.start(m, sine.target(n, 0.0)) for n, m in enumerate(sine.motors)}
 
-    The replies are due within the tick, sooner than a sleeping loop wakes: the selector's timeout
-    has whole milliseconds (as :mod:`servobus.ticks` says), so a loop that sleeps until the
-    simulator's next reply, due 0.25 ms on, wakes after 1 ms. :meth:`tick` therefore yields
-    (``anyio.sleep(0)``) until the cycles are done, keeping the loop turning: the same spin as the
-    pacer's before a deadline.
+    async def start(bus: Bus, motors: list[Motor]) -> None:
+        for step in range(max(len(first[id(m)]) for m in motors)):
+            await bus.cycle(
+                [(m, first[id(m)][step]) for m in motors if step < len(first[id(m)])], timeout_s=timeout_s
+            )
+
+    async with anyio.create_task_group() as group:
+        for bus, motors in buses:
+            group.start_soon(start, bus, motors)
+
+
+class _Sine:
+    """Each motor's target along its sine (phases spread over the motors), and its set-point.
+
+    The targets are on a 0.01° grid and a sine revisits its values (every motor the same ones,
+    shifted by its phase), so each set-point is made once and reused: a command is an immutable value,
+    and making 32 a tick through the move's builder, range checks included, costs the host ~5 µs
+    each, as much as the loop's own work for them. Motors share a cache when their set-points are
+    equal (same family, revision and model: the motor's id is not in the command).
     """
 
-    def __init__(self, buses: list[tuple[Bus, list[Motor]]], timeout_s: float | None) -> None:
-        self._buses = [bus for bus, _ in buses]
-        self._timeout_s = timeout_s
-        self._runtime = runtime.current()
-        self._wake: list[Any] = [None] * len(buses)
-        self._results: list[list[Any]] = [[] for _ in buses]
-        self._pending = 0
+    #: angles at which two motors' set-points are compared to share a cache
+    PROBES_DEG = (-45.67, 0.0, 12.34)
 
-    async def start(self, group: anyio.abc.TaskGroup) -> None:
-        """Start the workers in ``group`` (cancel it to end them)."""
-        for b in range(len(self._buses)):
-            await group.start(self._work, b, name=f"servobus demo: bus {b + 1}")
+    def __init__(self, motors: list[Motor], parts: _Parts) -> None:
+        self.motors = motors
+        self.parts = parts
+        self.phases = [2 * math.pi * n / len(motors) for n in range(len(motors))]
+        self.targets = [0.0] * len(motors)
+        self._caches: list[dict[float, Command]] = []  # each motor's
+        kinds: list[tuple[tuple[Command, ...], dict[float, Command]]] = []
+        for motor in motors:
+            probes = tuple(parts.setpoint(motor, angle) for angle in self.PROBES_DEG)
+            cache = next((c for p, c in kinds if p == probes), None)
+            if cache is None:
+                cache = {}
+                kinds.append((probes, cache))
+            self._caches.append(cache)
 
-    async def tick(self, items_by_bus: list[list[tuple[Motor, Command]]]) -> list[list[Any]]:
-        """Run every bus's cycle with its items; the results in bus order (valid until the next tick)."""
-        self._pending = len(self._buses)
-        for wake, items in zip(self._wake, items_by_bus, strict=True):
-            wake.set_result(items)
-        while self._pending:
-            await anyio.sleep(0)
-        return self._results
+    def target(self, n: int, t: float) -> float:
+        return round(AMPLITUDE_DEG * math.sin(2 * math.pi * t / PERIOD_S + self.phases[n]), 2)
 
-    async def _work(self, b: int, *, task_status: anyio.abc.TaskStatus[None]) -> None:
-        bus = self._buses[b]
-        self._wake[b] = wake = self._runtime.waiter()
-        task_status.started()
-        while True:
-            items = await wake
-            self._results[b] = await bus.cycle(items, timeout_s=self._timeout_s)
-            self._wake[b] = wake = self._runtime.waiter()
-            self._pending -= 1
+    def command(self, tick: LoopTick, t: float) -> None:
+        """Give every motor its set-point for ``t`` (it leaves at the next tick's deadline): the
+        targets as :meth:`target` makes them, written out (32 motors a tick)."""
+        setpoint, command, targets, sin = self.parts.setpoint, tick.command, self.targets, math.sin
+        base = 2 * math.pi * t / PERIOD_S
+        for n, (motor, cache, phase) in enumerate(zip(self.motors, self._caches, self.phases, strict=True)):
+            targets[n] = angle = round(AMPLITUDE_DEG * sin(base + phase), 2)
+            made = cache.get(angle)
+            if made is None:
+                made = cache[angle] = setpoint(motor, angle)
+            command(motor, made)
+
+
+class _Ticks:
+    """The demo's loop body and what it measures: the process's CPU between tick starts (one
+    ``process_time`` read per tick); the age of the state one motor sees, a motor each tick in turn
+    (over the whole run, where the loop's own figures are of a recent window); and over the ticks
+    run, the CPU, the simulator's share of it, the wall time and the preemptions."""
+
+    def __init__(self, sim_clock: _SimClock) -> None:
+        self.count = 0  # ticks that gave every motor its set-point
+        self.tick_cpu: list[float] = []
+        self.ages_s: list[float] = []
+        self.wall_s = self.cpu_s = self.sim_s = 0.0
+        self.preempted = 0
+        self._sim_clock = sim_clock
+        self._from: tuple[float, float, float, int] = (0.0, 0.0, 0.0, 0)
+
+    async def go(
+        self,
+        loop: Loop,
+        sine: _Sine,
+        duration: float | None,
+        view: Any,
+        plan: Layout,
+        buses: list[tuple[Bus, list[Motor]]],
+    ) -> None:
+        cpu = time.process_time
+        self._from = (time.perf_counter(), cpu(), self._sim_clock.seconds, _preemptions())
+        last_cpu = self._from[1]
+        motors = sine.motors
+        drain = max(2, math.ceil(_DRAIN_S * loop.hz))
+        start: float | None = None
+        next_refresh = -math.inf
+        sent_at: int | None = None  # the tick whose deadline the last set-points left at
+        try:
+            async for tick in loop:
+                now_cpu = cpu()
+                if start is None:
+                    start = tick.deadline
+                elif sent_at is None:
+                    self.tick_cpu.append(now_cpu - last_cpu)
+                last_cpu = now_cpu
+                t = tick.deadline - start
+                if duration is not None and t >= duration:
+                    # The last set-points left at this deadline: wait (a few ticks at most) for their
+                    # replies, so that each tick run is answered before the summary counts it.
+                    if sent_at is None:
+                        sent_at = tick.index
+                        self._measured()
+                    if tick.index - sent_at > drain or _answered(tick, motors, sent_at):
+                        break
+                    continue
+                if (state := tick.state(motors[self.count % len(motors)])) is not None:
+                    self.ages_s.append(state.age_s)
+                self.count += 1
+                sine.command(tick, t)
+                if view is not None and tick.started >= next_refresh:
+                    next_refresh = tick.started + REFRESH_S
+                    header = _header(plan, buses, loop, self.count, tick.started - start)
+                    view.update(live_view(header, _rows(tick, sine), view.console.width), refresh=True)
+        finally:
+            if sent_at is None:  # (stopped by a signal: up to now)
+                self._measured()
+
+    def _measured(self) -> None:
+        wall0, cpu0, sim0, preempted0 = self._from
+        self.wall_s, self.cpu_s = time.perf_counter() - wall0, time.process_time() - cpu0
+        self.sim_s = self._sim_clock.seconds - sim0
+        self.preempted = _preemptions() - preempted0
+
+
+def _preemptions() -> int:
+    """The process's involuntary context switches so far (0 where the OS does not count them)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_nivcsw if resource is not None else 0
+
+
+#: how long past the end the demo waits for the last set-points' replies (2 ticks at least)
+_DRAIN_S = 0.05
+
+
+def _answered(tick: LoopTick, motors: list[Motor], index: int) -> bool:
+    """Every motor's state answers the set-point that left at tick ``index``."""
+    for motor in motors:
+        state = tick.state(motor)
+        if state is None or state.tick < index:
+            return False
+    return True
 
 
 #: the reply fields the live view shows, where the set-point's reply has them
 _COLUMNS = (("angle_deg", "8.2f"), ("speed_dps", "8.1f"), ("current_a", "6.2f"), ("temperature_c", ""))
 
 
-def _rows(flat: list[tuple[int, Motor]], latest: list[Any], targets: list[float]) -> list[tuple[Any, ...]]:
+def _rows(tick: LoopTick, sine: _Sine) -> list[tuple[str, ...]]:
+    """Each motor's latest state as this tick sees it (its reply's fields and its age), and target."""
     rows = []
-    for n, ((b, motor), reply) in enumerate(zip(flat, latest, strict=True)):
+    for n, motor in enumerate(sine.motors):
+        state = tick.state(motor)
+        reply = state.reply if state is not None else None
         values = tuple(
             "" if (value := getattr(reply, name, None)) is None else format(value, spec)
             for name, spec in _COLUMNS
         )
-        rows.append((str(n + 1), f"{b + 1}/{motor.motor_id}", values[0], f"{targets[n]:8.2f}", *values[1:]))
+        age = "" if state is None else f"{state.age_s * 1e3:6.2f}"
+        where = f"{motor.bus.name.removeprefix('bus ')}/{motor.motor_id}"
+        rows.append((str(n + 1), where, values[0], f"{sine.targets[n]:8.2f}", *values[1:], age))
     return rows
 
 
 def _header(
-    plan: Layout,
-    buses: list[tuple[Bus, list[Motor]]],
-    ticks_run: int,
-    skipped: int,
-    elapsed: float,
-    failed: int,
+    plan: Layout, buses: list[tuple[Bus, list[Motor]]], loop: Loop, ticks_run: int, elapsed: float
 ) -> list[str]:
     metrics = [bus.metrics() for bus, _ in buses]
-    p99 = [m.latency.p99_s for m in metrics if m.latency.p99_s is not None]
+    done = loop.metrics()
     loads = [m.bus_load_pct for m in metrics if m.bus_load_pct is not None]
+    failed = sum(m.timeouts + m.malformed for m in metrics) + done.not_sent
     rate = ticks_run / elapsed if elapsed > 0 else 0.0
+    age = done.state_age_p99_s
     return [
         f"{plan.motors} motors, {plan.buses} buses, target {plan.hz:g} Hz, {elapsed:.1f} s (Ctrl-C stops)",
-        f"loop {rate:,.1f}/s  missed {skipped:,}  p99 {max(p99) * 1e3 if p99 else 0:.2f} ms  "
+        f"loop {rate:,.1f}/s  missed {done.skipped:,}  overruns {done.overruns:,}  "
+        f"state age p99 {age * 1e3 if age is not None else 0:.2f} ms  "
         f"load {sum(loads) / len(loads) if loads else 0:.0f} %  errors {failed}",
     ]
 
@@ -369,40 +469,47 @@ def _header(
 def _summarise(
     plan: Layout,
     buses: list[tuple[Bus, list[Motor]]],
-    ticks_run: int,
-    skipped: int,
-    lateness: list[float],
-    durations: list[float],
-    wall: float,
-    cpu: float,
-    sim_cpu: float,
+    run: _Ticks,
+    done: LoopMetrics,
+    before: list[Metrics],
 ) -> Summary:
     metrics = [bus.metrics() for bus, _ in buses]
     p50 = [m.latency.p50_s for m in metrics if m.latency.p50_s is not None]
     p99 = [m.latency.p99_s for m in metrics if m.latency.p99_s is not None]
     loads = [m.bus_load_pct for m in metrics if m.bus_load_pct is not None]
-    late = sorted(lateness)
-    took = sorted(durations)
+    took = sorted(run.tick_cpu)
+    ages = sorted(run.ages_s)
     faults = sum(1 for _, motors in buses for m in motors if m.fault is not None)
+
     return Summary(
         hz=plan.hz,
         motors=plan.motors,
         buses=plan.buses,
-        seconds=wall,
-        ticks=ticks_run,
-        missed_ticks=skipped,
-        late_p99_ms=late[max(0, math.ceil(0.99 * len(late)) - 1)] * 1e3 if late else 0.0,
+        seconds=run.wall_s,
+        ticks=run.count,
+        missed_ticks=done.skipped,
+        late_p99_ms=(done.late_p99_s or 0.0) * 1e3,
         tick_p50_ms=took[len(took) // 2] * 1e3 if took else 0.0,
         wire_ms=plan.tick_wire_s(max(plan.per_bus)) * 1e3,
-        pairs=sum(m.replies for m in metrics),
+        pairs=sum(m.replies for m in metrics) - sum(m.replies for m in before),
         latency_p50_ms=max(p50) * 1e3 if p50 else None,
         latency_p99_ms=max(p99) * 1e3 if p99 else None,
         bus_load_mean_pct=sum(loads) / len(loads) if loads else None,
         bus_load_max_pct=max(loads) if loads else None,
         timeouts=sum(m.timeouts for m in metrics),
-        not_sent=sum(m.not_sent for m in metrics),
+        # (the loop counts its own requests the links refused: the Buses', before it, are the start's)
+        not_sent=sum(m.not_sent for m in before) + done.not_sent,
         malformed=sum(m.malformed for m in metrics),
         faults=faults,
-        cpu_s=cpu,
-        simulator_cpu_s=sim_cpu,
+        cpu_s=run.cpu_s,
+        simulator_cpu_s=run.sim_s,
+        state_age_p50_ms=ages[len(ages) // 2] * 1e3 if ages else None,
+        state_age_p99_ms=ages[max(0, math.ceil(0.99 * len(ages)) - 1)] * 1e3 if ages else None,
+        state_age_max_ms=ages[-1] * 1e3 if ages else None,
+        late_ticks=done.late_ticks,
+        overruns=done.overruns,
+        stale_states=done.stale_states,
+        superseded=done.superseded,
+        lost=done.lost,
+        preempted=run.preempted,
     )
