@@ -108,12 +108,20 @@ def match(table: RequestTable, frame: Frame, now: float) -> Decision:
             if echo is not None and frame.data == echo:
                 return (ECHOED, codec, kind, key, reply, request, None)
             if request.pipelined and sent_at is not None:
-                # The bytes of the key's last answer, sooner after this request left than any reply
-                # of it ever took: that answer again (a duplicate), not this request's reply. (Not
-                # "the same stamp": a link stamps every frame of one read alike, two real replies
-                # among them.)
+                # The bytes of the key's last answer again, with its stamp (two frames cannot end on
+                # the wire at once) or within half the key's shortest round trip after this request
+                # left: that answer again (a duplicate), not this request's reply. (Not "sooner than
+                # any reply took": a motor's turnaround is steady, so half its replies would come a
+                # hair sooner than the shortest yet. Two real, equal replies read in one chunk share
+                # a stamp: the second is then taken for a duplicate and its request times out, the
+                # safe side of the doubt: a state older than the truth, never younger.)
                 last = table.answers.get(key)
-                if last is not None and last[1] == frame.data and (stamp or now) < sent_at + last[0]:
+                at = stamp or now
+                if (
+                    last is not None
+                    and last[1] == frame.data
+                    and (at == last[2] or at < sent_at + 0.5 * last[0])
+                ):
                     return (REPEATED, codec, kind, key, reply, request, None)
             return (ANSWER, codec, kind, key, reply, request, None)
     if kind is KIND_STREAM or kind is KIND_REPORT:

@@ -169,7 +169,8 @@ class RequestTable:
         in_flight: the requests SENDING or SENT, in send order.
         early: reply key -> a reply-shaped frame that came before its request's send report.
         answers: reply key -> the shortest round trip a reply of a pipelined request took, and the
-            bytes of the last (again, sooner after the next one left than that: a duplicate).
+            bytes and stamp of the last (those bytes again with its stamp, or within half that
+            round trip after the next one left: a duplicate).
     """
 
     def __init__(
@@ -198,7 +199,7 @@ class RequestTable:
         self.early: dict[Hashable, tuple[BoundCodec, Frame]] = {}
         self.early_more: dict[Hashable, deque[tuple[BoundCodec, Frame]]] = {}  # (later requests')
         #: reply key -> (shortest round trip, data of the last reply) of its pipelined requests
-        self.answers: dict[Hashable, tuple[float, bytes]] = {}
+        self.answers: dict[Hashable, tuple[float, bytes, float]] = {}
         #: reply key -> until when it is held for an ORDINARY request's late reply (see ``passes``)
         self.ordinary_held: dict[Hashable, float] = {}
         self.deadlines: list[tuple[float, int, Request]] = []  # a heap; entries of left requests stay
@@ -470,10 +471,11 @@ def passes(table: RequestTable, key: Hashable, now: float) -> bool:
     return all(request.pipelined for request in table.pending.get(key, ()))
 
 
-def note_answer(table: RequestTable, key: Hashable, rtt_s: float, data: bytes) -> None:
-    """A pipelined request with ``key`` took a reply of ``data`` after ``rtt_s`` (``table.answers``)."""
+def note_answer(table: RequestTable, key: Hashable, rtt_s: float, data: bytes, stamp: float) -> None:
+    """A pipelined request with ``key`` took a reply of ``data`` stamped ``stamp`` after ``rtt_s``
+    (``table.answers``)."""
     last = table.answers.get(key)
-    table.answers[key] = (rtt_s if last is None or rtt_s < last[0] else last[0], data)
+    table.answers[key] = (rtt_s if last is None or rtt_s < last[0] else last[0], data, stamp)
 
 
 def early_room(table: RequestTable, key: Hashable) -> bool:
