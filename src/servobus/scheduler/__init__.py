@@ -46,9 +46,9 @@ when to ask again: :meth:`Scheduler.next_deadline`) and keeps every rule about m
   younger command than the oldest it could answer. Everything else (echoes, other hosts' requests,
   late, duplicate and overtaken frames) is judged as for any request, but for one more rule: the
   bytes of the reply a pipelined request took, again with its stamp or within half the key's
-  shortest round trip after the next request left, are a DUPLICATE, not the next request's reply. An ordinary request
-  with the key of pipelined ones in flight waits until none is; a pipelined one waits while an
-  ordinary one with its key is in flight or held for.
+  shortest round trip after the next request left, are a DUPLICATE, not the next request's reply.
+  An ordinary request with the key of pipelined ones in flight waits until none is; a pipelined one
+  waits while an ordinary one with its key is in flight or held for.
 * **Streams**: a request whose key a motor streams (0xB6) is answered by the first stream frame that
   arrives after the request left (the same fact, fresh), as design.md's matching rule says.
 
