@@ -242,8 +242,12 @@ class Engine:
 
     def pump(self) -> None:
         """Hand the requests the scheduler lets go to the link; tell the stale ones' callers."""
+        scheduler = self.scheduler
+        if not scheduler.table.queue and not scheduler.keys.held:
+            self.kick()  # (nothing can leave or go stale: poll() would change nothing)
+            return
         while True:
-            send, stale = self.scheduler.poll(self.time())
+            send, stale = scheduler.poll(self.time())
             for request in send:
                 try:
                     self.link.send(request.frame, request)
