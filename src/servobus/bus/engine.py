@@ -118,7 +118,8 @@ class Engine:
 
     def wake_at(self) -> float:
         """When the timer should next wake: the scheduler's next deadline, or the silence check's."""
-        deadline = self.scheduler.next_deadline()
+        scheduler = self.scheduler  # (Scheduler.next_deadline written out: once per pump)
+        deadline = scheduler.table.next_deadline(scheduler.keys.held)
         silence = self.watchdog.silence_at
         if silence is not None and (deadline is None or silence < deadline):
             return silence
