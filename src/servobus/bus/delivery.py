@@ -124,8 +124,14 @@ class Delivery:
                     callback(motor, got.traffic, reply)
                 except Exception:  # a subscriber's bug must not stop the reader
                     logger.exception("%s: subscriber %r failed", self.name, callback)
-        if got.request is not None:
-            self._settle(got.request, None)
+        request = got.request
+        if request is not None:
+            future = request.context
+            # (settle()'s common case written out: once per reply)
+            if future is not None and request.state is _REPLIED and not future.done():
+                future.set_result(request.reply)
+            else:
+                self._settle(request, None)
         elif got.traffic is _LATE and record is not None and record.late is not None:
             record.late(reply, got.frame)
 

@@ -118,7 +118,8 @@ class Engine:
 
     def wake_at(self) -> float:
         """When the timer should next wake: the scheduler's next deadline, or the silence check's."""
-        deadline = self.scheduler.next_deadline()
+        scheduler = self.scheduler  # (Scheduler.next_deadline written out: once per pump)
+        deadline = scheduler.table.next_deadline(scheduler.keys.held)
         silence = self.watchdog.silence_at
         if silence is not None and (deadline is None or silence < deadline):
             return silence
@@ -242,8 +243,12 @@ class Engine:
 
     def pump(self) -> None:
         """Hand the requests the scheduler lets go to the link; tell the stale ones' callers."""
+        scheduler = self.scheduler
+        if not scheduler.table.queue and not scheduler.keys.held:
+            self.kick()  # (nothing can leave or go stale: poll() would change nothing)
+            return
         while True:
-            send, stale = self.scheduler.poll(self.time())
+            send, stale = scheduler.poll(self.time())
             for request in send:
                 try:
                     self.link.send(request.frame, request)

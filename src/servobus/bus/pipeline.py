@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 from servobus.errors import MotorOffline, MotorStreaming, TransportError
 from servobus.protocols import Command
 from servobus.runtime import RuntimeMismatch
+from servobus.scheduler import batch_requests, submit_batch
 
 if TYPE_CHECKING:
     from servobus.bus.engine import Engine
@@ -54,11 +55,14 @@ def prepare(
     if engine.closing:
         raise engine.closed_error()
     # (Engine.prepare written out for a batch: its checks once, a call less per request)
-    request_for = engine.scheduler.request
+    made = batch_requests(
+        engine.scheduler,
+        [(motor.codec, command, context) for (motor, command), context in zip(items, contexts, strict=True)],
+        timeout_s,
+    )
     requests: list[Request | None] = []
-    for (motor, command), context in zip(items, contexts, strict=True):
-        codec = motor.codec
-        request = request_for(codec, command, timeout_s, 0, context)
+    for request in made:
+        codec = request.codec
         if request.key is None and codec.streams and not request.writes:
             requests.append(None)  # (it would not answer: told by send, once nothing can raise)
             continue
@@ -89,7 +93,6 @@ def send(
     if scheduler.table.queue:  # (the common case: the last batch left whole, nothing to withdraw)
         _supersede(engine, {id(m.codec) for m, _ in items}, now)
     records = engine.registry.records
-    submit = scheduler.submit
     queued: list[Request] = []
     not_sent = 0
     for (motor, command), request, context in zip(items, requests, contexts, strict=True):
@@ -115,8 +118,8 @@ def send(
             if known is not None and not known.commanded:
                 engine.registry.command(motor)
         codec.note_sent(command)
-        submit(request, now)
         queued.append(request)
+    submit_batch(scheduler, queued, now)
     engine.pump()
     return queued, not_sent
 

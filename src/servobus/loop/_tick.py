@@ -48,6 +48,9 @@ class MotorState(NamedTuple):
     fresh: bool
 
 
+_new_state = tuple.__new__
+
+
 class LoopTick:
     """One tick of a :class:`Loop`: the pacer's (:class:`servobus.ticks.Tick`) fields, what the loop
     saw, the motors' states, and where the next tick's commands are given.
@@ -114,8 +117,10 @@ class LoopTick:
             reply, tick, received_at, sent_s = track.previous
         else:
             return None
-        return MotorState(
-            reply, tick, self.index - tick, started - sent_s, received_at, received_at >= self._since
+        # (MotorState's own __new__ is a Python function: tuple.__new__ makes the same tuple, in C)
+        return _new_state(
+            MotorState,
+            (reply, tick, self.index - tick, started - sent_s, received_at, received_at >= self._since),
         )
 
     def command(self, motor: Motor, command: Command) -> None:

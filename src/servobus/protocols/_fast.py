@@ -65,15 +65,17 @@ def maker(cls: type, names: tuple[str, ...] | None = None) -> Callable[..., Any]
 
 
 def _twin_maker(cls: type, args: str, values: dict[str, str], namespace: dict[str, Any]) -> Any:
-    body = "".join(f"    self.{name} = {value}\n" for name, value in values.items()) or "    pass\n"
-    source = f"def __init__(self, {args}):\n{body}" if args else f"def __init__(self):\n{body}"
-    exec(source, namespace)
     twin = type(f"_{cls.__name__}Twin", cls.__bases__, {"__slots__": cls.__dict__.get("__slots__", ())})
     if any("__setattr__" in vars(base) for base in twin.__mro__[1:-1]):  # a frozen base would refuse
         return None
-    twin.__init__ = namespace.pop("__init__")  # type: ignore[misc]
+    # (made bare below: a __new__ of its own would be skipped)
+    if getattr(twin, "__new__", None) is not object.__new__:
+        return None
     namespace["_twin"] = twin
-    exec(f"def make({args}):\n    o = _twin({args})\n    o.__class__ = _cls\n    return o\n", namespace)
+    # The stores written in make itself, on a bare twin (object.__new__, in C): one Python call per
+    # object, not two (make, then an __init__).
+    body = "".join(f"    o.{name} = {value}\n" for name, value in values.items())
+    exec(f"def make({args}):\n    o = _new(_twin)\n{body}    o.__class__ = _cls\n    return o\n", namespace)
     make = namespace["make"]
     try:  # CPython checks the layouts on assignment: prove they match once, here
         probe: Any = object.__new__(twin)

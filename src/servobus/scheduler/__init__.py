@@ -119,7 +119,7 @@ On one control tick (a ``Bus.cycle`` of many motors) only the Scheduler's module
 """
 
 from servobus.rtt import TRUSTED_SAMPLES
-from servobus.scheduler._scheduler import Scheduler
+from servobus.scheduler._scheduler import Scheduler, batch_requests, submit_batch
 from servobus.scheduler._table import FINAL, TRANSITIONS, Received, Request, RequestState, Traffic
 
 __all__ = [
@@ -131,4 +131,6 @@ __all__ = [
     "RequestState",
     "Scheduler",
     "Traffic",
+    "batch_requests",
+    "submit_batch",
 ]

@@ -31,7 +31,7 @@ from servobus.scheduler._table import (
     note_answer,
 )
 
-__all__ = ["Scheduler"]
+__all__ = ["Scheduler", "batch_requests", "submit_batch"]
 
 _FAILED = RequestState.FAILED
 _QUEUED = RequestState.QUEUED
@@ -341,6 +341,53 @@ class Scheduler:
         """The longest timeout measured round trips give any command class of ``codec``'s motor
         (``min_timeout_s`` while none was measured)."""
         return self.estimates.motor_timeout_s(id(codec))
+
+
+def batch_requests(
+    scheduler: Scheduler, items: Sequence[tuple[BoundCodec, Command, Any]], timeout_s: float | None = None
+) -> list[Request]:
+    """:meth:`Scheduler.request` for each (codec, command, context) of a batch, with no retries (a
+    pipelined loop's tick: one call per bus, not per request). ValueError as ``request``, before
+    any of the batch is returned. (Beside the class: it is near its 300 lines.)"""
+    if timeout_s is not None and timeout_s <= 0:
+        raise ValueError(f"timeout_s={timeout_s} must be > 0 and retries=0 >= 0")
+    motors = scheduler.estimates.motors
+    adaptive = timeout_s is None
+    out: list[Request] = []
+    for codec, command, context in items:
+        # (request()'s body written out for the batch: keep the two in step)
+        rtts = motors.get(id(codec))
+        if rtts is None:
+            raise ValueError(f"{codec!r} is not on this bus: add() it first")
+        frame = codec.encode(command)
+        base = codec.timeout_s(command)
+        timeout = base if timeout_s is None else timeout_s
+        if timeout <= 0:
+            raise ValueError(f"timeout_s={timeout} must be > 0 and retries=0 >= 0")
+        writes = not codec.retry_safe(command)
+        rtt = rtts.get(type(command))
+        if rtt is None:
+            rtt = scheduler.estimates.new(id(codec), type(command), base)
+        key = codec.reply_key(command)
+        request = Request(codec, command, frame, key, timeout, 0, context, rtt, adaptive, writes)
+        if key is not None and (command.NEVER_ECHOED or getattr(codec, "echoing", False)):
+            request.echo = frame.data
+        out.append(request)
+    return out
+
+
+def submit_batch(scheduler: Scheduler, requests: Iterable[Request], now: float) -> None:
+    """:meth:`Scheduler.submit` each of ``requests``, in order (one call per batch)."""
+    queue = scheduler.table.queue
+    counts = scheduler.motor_counts
+    for request in requests:
+        if request.submitted:
+            _submit_once(request)
+        request.submitted = True
+        if request.writes:
+            request.queued_at = now
+        queue.append(request)
+        counts[id(request.codec)]["requests"] += 1
 
 
 def _merged(windows: Collection[LatencyWindow]) -> LatencyWindow:

@@ -435,6 +435,8 @@ class RequestTable:
         if not self.in_flight:
             self.deadlines.clear()  # every entry is of a request that left (a whole tick answered: at once)
             self._audit_at = None
+            if not self._overtaken and not self.queue:
+                return None  # (the common case after a burst was answered, without building a list)
         first = self._first_deadline()
         times = [first] if first is not None else []
         if self._overtaken:  # (missed already: for overdue() to say so)

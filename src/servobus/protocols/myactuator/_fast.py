@@ -15,7 +15,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Callable
 from enum import IntEnum, IntFlag
-from math import floor
+from math import copysign, floor
 from typing import Any
 
 from servobus.protocols._fast import Slow, maker
@@ -157,14 +157,20 @@ def compile_fixed(cls: type[Fixed]) -> Callable[[bytes], Any] | None:
         ScaledField,
         ScaledField,
     ] and not (any(limits for _, limits in steps[1:])):
-        (to_command, _), _, (iq, _), (speed, _), (angle, _) = steps
-        assert to_command is not None and iq is not None and speed is not None and angle is not None
+        # (the steps written out, as _converter makes them: no call per field)
+        mode, _, iq, speed, angle = (spec for _, spec in sorted(cls.FIELDS, key=lambda item: item[0]))
+        assert type(mode) is EnumField and type(iq) is type(speed) is type(angle) is ScaledField
+        to_command = {int(m): m for m in mode.enum}.get
+        iq_cpu, speed_cpu, angle_cpu = iq.counts_per_unit, speed.counts_per_unit, angle.counts_per_unit
 
         def decode_r2(data: bytes) -> Any:
             if len(data) != PAYLOAD_SIZE:
                 raise Slow
             c, t, i, s, a = unpack(data)
-            return make(to_command(c), t, iq(i), speed(s), angle(a))
+            command = to_command(c)
+            if command is None:
+                raise Slow  # (an undefined raw value: the full decoder reports it)
+            return make(command, t, i / iq_cpu, s / speed_cpu, a / angle_cpu)
 
         return decode_r2
     return decode
@@ -254,9 +260,30 @@ def compile_fixed_encoder(cls: type[Fixed]) -> Callable[[Any], bytes] | None:
     if not names:
         payload = pack(*order)
         return lambda message: payload
-    args = [repr(item) if isinstance(item, int) else f"_c{names.index(item)}(m.{item})" for item in order]
+    # A scaled or stepped field is rounded in the encoder's own code (round_half_away written out:
+    # two calls less per field, on every command of a control loop); the others through their step.
+    specs: dict[str, Any] = {spec.name: spec for _, spec in cls.FIELDS}
     namespace: dict[str, Any] = {"_pack": pack, **{f"_c{i}": c for i, c in enumerate(converts)}}
-    exec(f"def encode(m):\n    return _pack({', '.join(args)})\n", namespace)
+    namespace.update(_int=int, _abs=abs, _floor=floor, _copysign=copysign)
+    lines: list[str] = []
+    args: list[str] = []
+    for item in order:
+        if isinstance(item, int):
+            args.append(repr(item))
+            continue
+        index = names.index(item)
+        field = specs[item]
+        if type(field) is ScaledField:
+            namespace[f"_k{index}"] = field.counts_per_unit
+            lines.append(f"    v{index} = m.{item} * _k{index}\n")
+        elif type(field) is StepField:
+            namespace[f"_k{index}"] = field.step
+            lines.append(f"    v{index} = m.{item} / _k{index}\n")
+        else:
+            args.append(f"_c{index}(m.{item})")
+            continue
+        args.append(f"_int(_copysign(_floor(_abs(v{index}) + 0.5), v{index}))")
+    exec(f"def encode(m):\n{''.join(lines)}    return _pack({', '.join(args)})\n", namespace)
     encode: Callable[[Any], bytes] = namespace["encode"]
     return encode
 
