@@ -268,8 +268,7 @@ class Scheduler:
             keys.end_early(codec, key, now)
         request.reply = reply
         if request.pipelined and request.sent_at is not None:  # (its duplicate is told: _match.REPEATED)
-            at = frame.timestamp or now
-            note_answer(self.table, key, at - request.sent_at, frame.data, at)
+            note_answer(self.table, key, (at := frame.timestamp or now) - request.sent_at, frame.data, at)
         replied = keys.replied  # (Keys.answered, written out for the hot path)
         replied[key] = now + keys.late_window_s
         if len(replied) > keys.limit:

@@ -168,9 +168,9 @@ class RequestTable:
         pending: reply key -> the requests in flight with that key, oldest first.
         in_flight: the requests SENDING or SENT, in send order.
         early: reply key -> a reply-shaped frame that came before its request's send report.
-        answers: reply key -> the shortest round trip a reply of a pipelined request took, and the
-            bytes and stamp of the last (those bytes again with its stamp, or within half that
-            round trip after the next one left: a duplicate).
+        answers: reply key -> the shortest round trip of a pipelined request's reply, the last's bytes
+            and stamp (those bytes again: a duplicate, ``_match.REPEATED``).
+        ordinary_held: reply key -> until when it is held for an ORDINARY request's late reply.
     """
 
     def __init__(
@@ -198,9 +198,7 @@ class RequestTable:
         self.in_flight: dict[Request, None] = {}
         self.early: dict[Hashable, tuple[BoundCodec, Frame]] = {}
         self.early_more: dict[Hashable, deque[tuple[BoundCodec, Frame]]] = {}  # (later requests')
-        #: reply key -> (shortest round trip, data of the last reply) of its pipelined requests
         self.answers: dict[Hashable, tuple[float, bytes, float]] = {}
-        #: reply key -> until when it is held for an ORDINARY request's late reply (see ``passes``)
         self.ordinary_held: dict[Hashable, float] = {}
         self.deadlines: list[tuple[float, int, Request]] = []  # a heap; entries of left requests stay
         self.provisional: list[Request] = []  # sent before anything was measured: timed again then
@@ -449,8 +447,6 @@ class RequestTable:
             if held:
                 times.append(min(held.values()))
         return min(times) if times else None
-
-    # ---- views ----
 
     def flying(self, keys: Iterable[Hashable]) -> list[Request]:
         """The requests in flight with one of ``keys``."""
