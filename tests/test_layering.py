@@ -224,6 +224,10 @@ TYPE_ONLY: dict[str, dict[str, str]] = {
         "servobus.bus": "the typed calls are a Motor to a type checker (user code passes them where a "
         "servobus.Motor is expected); at run time the Bus composes them with its Motor",
     },
+    "servobus": {
+        "servobus.loop": "servobus.Loop is the package's name for the loop above the Bus: a type "
+        "checker sees the class, the run time imports it by name when first used (__getattr__)",
+    },
 }
 
 

@@ -24,6 +24,7 @@ from servobus.frame import Frame
 
 if TYPE_CHECKING:
     from servobus.bus import Bus, FrameLink, Motor, MotorStatus
+    from servobus.loop import Loop
 
 __all__ = [
     "Bus",
