@@ -82,6 +82,7 @@ class LoopMetrics:
             is judged at a later tick, by when the frame left).
         superseded: commands replaced by the next one for their motor before they left (never sent).
         not_sent: commands not sent (the motor offline between probes, streaming, a link refusing).
+        throttled: commands not sent because their motor had ``max_outstanding`` unanswered.
         lost: commands with no reply within their horizon, or whose reply the replies after it
             showed lost (the attribution resynchronised: docs/loop.md).
         stale_states: per tick, the motors commanded before with no fresh state, summed.
@@ -98,6 +99,7 @@ class LoopMetrics:
     commands_on_time: int
     superseded: int
     not_sent: int
+    throttled: int
     lost: int
     stale_states: int
     state_age_p50_s: float | None
@@ -116,14 +118,23 @@ class Loop:
         safe_stop: leaving the ``async with`` block by an exception or a cancellation sends the safe
             stop (the Bus's ``safe`` command) to every motor the loop commanded, shielded; a clean
             exit leaves the motors as they are (the Bus's own exit stops them).
+        max_outstanding: the most unanswered commands a motor may have; a motor with that many gets
+            no command this tick (counted ``throttled``; the next tick's supersedes it). A host or
+            a link that falls behind (a busy core, a stalled adapter) then holds this many of each
+            motor's replies at most, not an ever longer backlog whose state grows seconds old.
 
     Buses are found from the motors commanded (``motor.bus``); they must be entered (``async with``)
     around the loop, on the same event loop.
     """
 
-    def __init__(self, hz: float, *, timeout_s: float | None = None, safe_stop: bool = True) -> None:
+    def __init__(
+        self, hz: float, *, timeout_s: float | None = None, safe_stop: bool = True, max_outstanding: int = 4
+    ) -> None:
         if not (hz > 0 and hz != float("inf")):
             raise ValueError(f"hz={hz!r} must be a positive number")
+        if not (isinstance(max_outstanding, int) and max_outstanding >= 1):
+            raise ValueError(f"max_outstanding={max_outstanding!r} must be an integer >= 1")
+        self.max_outstanding = max_outstanding
         if timeout_s is not None and not timeout_s > 0:
             raise ValueError(f"timeout_s={timeout_s!r} must be positive")
         self.hz = hz
@@ -294,9 +305,13 @@ class Loop:
             return 0
         self.commands = {}
         tracks = self.tracks
+        window = self.max_outstanding
         batches: dict[Bus, tuple[list[tuple[Motor, Command]], list[Track]]] = {}
         for motor, command in commands.items():
             track = tracks[motor]
+            if len(track.fifo) >= window:  # (its replies are not being taken in: send no more)
+                self.counts.throttled += 1
+                continue
             batch = batches.get(track.bus)
             if batch is None:
                 batch = batches[track.bus] = ([], [])
@@ -363,6 +378,7 @@ class Loop:
             commands_on_time=n["on_time"],
             superseded=counts.superseded,
             not_sent=counts.not_sent,
+            throttled=counts.throttled,
             lost=counts.lost,
             stale_states=n["stale"],
             state_age_p50_s=ages.p50_s,

@@ -30,12 +30,13 @@ _RESYNC_REPLIES = 3
 class Counts:
     """The counters the motors' records and the contexts add to (one object, shared)."""
 
-    __slots__ = ("lost", "not_sent", "superseded")
+    __slots__ = ("lost", "not_sent", "superseded", "throttled")
 
     def __init__(self) -> None:
         self.lost = 0
         self.not_sent = 0
         self.superseded = 0
+        self.throttled = 0
 
 
 class Track:
