@@ -252,6 +252,7 @@ class _AsyncioReady:
         self._loop = asyncio.get_running_loop()
         self._future: asyncio.Future[None] | None = None
         self._loop.add_reader(self._fd, self._on_ready)
+        timer.before_close = self.close  # (unregistered before the descriptor goes, in any order)
 
     def _on_ready(self) -> None:
         self._timer.clear()  # (level-triggered: an expiry left in would call back at every turn)
@@ -266,9 +267,9 @@ class _AsyncioReady:
         return future
 
     def close(self) -> None:
-        # Before the descriptor is closed; or just after, when a garbage collection closed the timer
-        # first (see _TimerWait.__del__): the selector then drops a key the kernel already dropped.
-        if not self._loop.is_closed():
+        # Before the descriptor is closed, whoever closes it (the timer calls this first: see
+        # MonotonicTimer.before_close); once it is closed, its number is not ours to touch.
+        if not self._loop.is_closed() and not self._timer.closed:
             self._loop.remove_reader(self._fd)
 
 

@@ -14,6 +14,7 @@ Where the platform has no timerfd (not Linux), :func:`available` is False and op
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from types import TracebackType
 from typing import Any
 
@@ -74,10 +75,14 @@ class MonotonicTimer:
         OSError: the system refused one (out of descriptors).
     """
 
-    __slots__ = ("_err", "_fd")
+    __slots__ = ("_err", "_fd", "before_close")
 
     def __init__(self) -> None:
         self._fd = -1  # (set before anything can fail: __del__ reads it)
+        #: called just before the descriptor is closed, however it is (an event loop's registration
+        #: must go first: closed by the collector, its number may soon name another descriptor, and
+        #: a selector still holding the stale key would never poll that one)
+        self.before_close: Callable[[], object] | None = None
         if not _BUILT_WITH_TIMER:  # pragma: no cover - a stale build
             raise TimerUnsupported(_STALE)
         self._err = ffi.new("int *")
@@ -128,8 +133,14 @@ class MonotonicTimer:
 
     def close(self) -> None:
         """Close the descriptor (again: nothing). Wake any waiter first (``anyio.notify_closing``)."""
-        fd, self._fd = self._fd, -1
-        if fd >= 0:
+        if self._fd < 0:
+            return
+        before, self.before_close = self.before_close, None
+        try:
+            if before is not None:
+                before()
+        finally:
+            fd, self._fd = self._fd, -1
             os.close(fd)
 
     def __enter__(self) -> MonotonicTimer:
