@@ -330,7 +330,6 @@ class Loop:
             for request in queued:
                 track = request.context
                 track.commanded = True
-                track.last = request
                 if request.writes:
                     track.wrote = True
                 if request.key is not None:

@@ -52,7 +52,6 @@ class Track:
         "commanded",
         "counts",
         "fifo",
-        "last",
         "motor",
         "period_s",
         "previous",
@@ -92,7 +91,6 @@ class Track:
         self.commanded = False
         self.wrote = False  # (a command that is not a read: the motor gets the safe stop)
         self.command: Command | None = None  # (the next tick's, while it is being sent)
-        self.last: Request | None = None  # its last request sent
 
     # ---- a waiter's interface, for the Bus (servobus.bus.delivery.Delivery.settle) ----
 
