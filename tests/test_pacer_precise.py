@@ -196,8 +196,11 @@ def test_a_clock_at_another_rate_is_not_taken_for_the_real_one() -> None:
         got, opened = anyio.run(main, backend="trio", backend_options={"clock": clock})
         assert opened == before + timer_open, rate
         _on_the_grid(got, 500)
+        # On time: the median tick starts within half a period (1 ms, in the clock's units) of its
+        # deadline. A tighter bound failed in CI on a loaded machine (0.5 ms real at rate 2): it
+        # measured the machine, not the choice of wait this test is about.
         late = sorted(t.late_s for t in got)
-        assert late[len(late) // 2] < 0.0005 * rate, (rate, late)
+        assert late[len(late) // 2] < 0.001 * rate, (rate, late)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
