@@ -185,6 +185,8 @@ LAYERS: dict[str, list[str]] = {
     "remote": ["servobus.remote"],
     # what one does with a bus's traffic beside the control loop (issue 38): DBC, logs, recording
     "tools": ["servobus.tools"],
+    # the live web page of buses, motors and a loop (issue 40): above all of them, below the CLI
+    "dashboard": ["servobus.dashboard"],
     "app": [
         "servobus.cli",
         "servobus.dbc",  # (the deprecated alias of servobus.protocols.dbc and servobus.tools.dbc)
@@ -203,6 +205,17 @@ MAY_IMPORT: dict[str, set[str]] = {
     "loop": {"base", "protocols", "scheduler", "transports", "bus", "loop"},
     "remote": {"base", "protocols", "scheduler", "bus", "remote"},
     "tools": {"base", "protocols", "scheduler", "transports", "bus", "tools"},
+    "dashboard": {
+        "base",
+        "protocols",
+        "scheduler",
+        "transports",
+        "bus",
+        "loop",
+        "remote",
+        "tools",
+        "dashboard",
+    },
     "app": set(LAYERS),
 }
 #: the simulator modules a transport may import: the networks the in-process link runs and the

@@ -64,6 +64,7 @@ COMMANDS: dict[str, str] = {
     "sim": "servobus.cli.sim:sim",
     "bench": "servobus.cli.bench:bench",
     "bridge": "servobus.cli.bridge:bridge",
+    "dashboard": "servobus.cli.dashboard:dashboard",
 }
 
 

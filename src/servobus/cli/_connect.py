@@ -454,9 +454,13 @@ def note_exit(bus: Bus) -> None:
 
 
 @contextlib.asynccontextmanager
-async def open_bus(conn: Connection, **bus_options: Any) -> AsyncIterator[tuple[Bus, list[Motor]]]:
-    """The Bus on ``conn``'s transport with its motors bound; leaving it stops the commanded ones."""
-    bus = Bus(conn.transport(), **bus_options)
+async def open_bus(
+    conn: Connection, *, wrap: Callable[[Any], Any] | None = None, **bus_options: Any
+) -> AsyncIterator[tuple[Bus, list[Motor]]]:
+    """The Bus on ``conn``'s transport (given to ``wrap`` first, when given: a tap) with its motors
+    bound; leaving it stops the commanded ones."""
+    transport = conn.transport()
+    bus = Bus(transport if wrap is None else wrap(transport), **bus_options)
     try:
         async with bus:
             yield bus, [bus.motor(conn.family, i, **conn.bind_options()) for i in conn.motor_ids]

@@ -1,0 +1,292 @@
+"""``servobus dashboard``: every motor of a bus live in a browser (:mod:`servobus.dashboard`).
+
+On a local bus (``-i/-c``, ``--port``) the motors are read at ``--hz`` by a :class:`servobus.Loop`
+(reads only: nothing is commanded unless the page's stop is pressed, with ``--allow-commands``); on
+``--sim N`` the simulated motors follow the demo's sine so there is something to see (``--still``:
+they are only read); on ``--remote NODE/BUS`` the page shows what the bridge publishes. The page is
+served on 127.0.0.1 (``--listen``), beyond this host only with ``--users`` or ``--insecure``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import anyio
+import click
+
+from servobus.cli._connect import Connection, open_bus, remote_connection_options
+from servobus.cli._motors import BACKENDS, run, stop_scope
+from servobus.cli._output import SETTINGS, FloatRange, examples, refused
+from servobus.errors import ServobusError
+from servobus.protocols import Command
+
+if TYPE_CHECKING:
+    import socket
+
+    from servobus.bus import Bus, Motor
+    from servobus.cli._remote import Remote
+    from servobus.dashboard import Access, Dashboard, Watched
+    from servobus.loop import LoopTick
+
+__all__ = ["dashboard", "dashboard_extra", "parse_listen"]
+
+_File = click.Path(exists=True, dir_okay=False, path_type=Path)
+
+
+@contextlib.contextmanager
+def dashboard_extra() -> Any:
+    """Turn a missing ``dashboard`` extra into one line saying what to install (exit 1)."""
+    try:
+        yield
+    except ModuleNotFoundError as exc:
+        raise click.ClickException(
+            f"the dashboard needs {exc.name}: pip install 'servobus[dashboard]'"
+        ) from None
+
+
+def parse_listen(text: str) -> tuple[str, int]:
+    """``HOST:PORT`` (``[::1]:8765`` for IPv6; port 0: any free port).
+
+    Raises:
+        click.BadParameter: not a host and port.
+    """
+    host, sep, port = text.rpartition(":")
+    if not sep or not host or not port.isdigit() or int(port) > 65535:
+        raise click.BadParameter(f"{text!r}: expected HOST:PORT, e.g. 127.0.0.1:8765", param_hint="--listen")
+    return host.strip("[]"), int(port)
+
+
+@click.command(
+    context_settings=SETTINGS,
+    epilog=examples(
+        "servobus dashboard --sim 4                     # open the URL it prints",
+        "servobus dashboard --sim 4 --allow-commands    # with stop and off buttons",
+        "servobus dashboard -i socketcan -c can0 --ids 1-6 --hz 50",
+        "servobus dashboard --remote arm/can0           # what a bridge publishes",
+        "servobus dashboard -i socketcan -c can0 --listen 0.0.0.0:8765 --users users.txt --commander alice",
+    ),
+)
+@remote_connection_options
+@click.option(
+    "--listen",
+    default="127.0.0.1:8765",
+    show_default=True,
+    metavar="HOST:PORT",
+    help="Where the page is served (port 0: any free port); beyond this host only with --users "
+    "or --insecure.",
+)
+@click.option("--users", type=_File, help="user:password lines: the page asks for one (HTTP Basic).")
+@click.option(
+    "--commander", multiple=True, metavar="NAME", help="A user who may press stop (others only read)."
+)
+@click.option("--tls-cert", type=_File, help="Serve HTTPS with this certificate (PEM)...")
+@click.option("--tls-key", type=_File, help="...and its private key (PEM).")
+@click.option(
+    "--insecure",
+    is_flag=True,
+    help="Listen beyond this host without --users: anyone who reaches it sees the motors.",
+)
+@click.option(
+    "--allow-commands",
+    is_flag=True,
+    help="The page's stop and off buttons work (default: read-only; it can never command anything else).",
+)
+@click.option(
+    "--hz",
+    type=FloatRange(min=1, max=1000),
+    default=100.0,
+    show_default=True,
+    help="How often the motors are read (and, with --sim, sent their set-point).",
+)
+@click.option(
+    "--update-hz",
+    type=FloatRange(min=0.5, max=100),
+    default=30.0,
+    show_default=True,
+    help="The most updates per second the page gets.",
+)
+@click.option("--still", is_flag=True, help="With --sim: the simulated motors stay still (only read).")
+@click.option(
+    "--duration",
+    type=FloatRange(min=0, min_open=True),
+    help="Serve this many seconds [default: until Ctrl-C].",
+)
+@click.option(
+    "--backend", type=click.Choice(BACKENDS), default="asyncio", show_default=True, help="The event loop."
+)
+def dashboard(
+    conn: Connection,
+    remote: Remote | None,
+    listen: str,
+    users: Path | None,
+    commander: tuple[str, ...],
+    tls_cert: Path | None,
+    tls_key: Path | None,
+    insecure: bool,
+    allow_commands: bool,
+    hz: float,
+    update_hz: float,
+    still: bool,
+    duration: float | None,
+    backend: str,
+) -> None:
+    """Serve a live web page of the motors: their state and faults, live plots of any field beside its
+    set-point, the bus load and counters, a running loop's tick lateness and state age, and the raw
+    frames decoded (like python-can's viewer).
+
+    Its first line is the page's URL. Read-only by default: with --allow-commands the page gets stop
+    and off buttons, and nothing else. Ctrl-C or SIGTERM ends it; motors it commanded get their stop.
+    """
+    with dashboard_extra():
+        from servobus.dashboard import Access, listening_socket
+
+    if (tls_cert is None) != (tls_key is None):
+        raise click.UsageError("--tls-cert and --tls-key go together")
+    if commander and users is None:
+        raise click.UsageError("--commander names a user of --users: give --users")
+    host, port = parse_listen(listen)
+    with refused():  # a bad users file, an unknown commander, InsecureListen: one line, exit 2
+        access = Access.from_file(users, commander) if users is not None else None
+        if access is not None and allow_commands is False and commander:
+            raise ValueError("--commander: the page is read-only without --allow-commands")
+        sock = listening_socket(host, port, access=access, insecure=insecure)
+    served = _Served(sock, access, tls_cert, tls_key, allow_commands, update_hz)
+    with sock:
+        if remote is not None:
+            run(_remote(served, conn, remote, duration), backend=backend)
+        else:
+            run(_local(served, conn, hz, conn.sim is not None and not still, duration), backend=backend)
+
+
+class _Served:
+    """The page's socket and serving options, and the Dashboard made from them."""
+
+    def __init__(
+        self,
+        sock: socket.socket,
+        access: Access | None,
+        tls_cert: Path | None,
+        tls_key: Path | None,
+        allow_commands: bool,
+        update_hz: float,
+    ) -> None:
+        from servobus.dashboard import Dashboard
+
+        self.sock, self.access, self.tls = sock, access, (tls_cert, tls_key)
+        self.stopped: set[int] = set()  # ids of the motors a page stopped (the sine leaves them be)
+        self.dash: Dashboard = Dashboard(
+            allow_commands=allow_commands, update_hz=update_hz, on_stop=self._held
+        )
+
+    def _held(self, motors: Sequence[Watched]) -> None:
+        self.stopped.update(id(w.motor) for w in motors)
+
+    def announce(self, what: str) -> None:
+        from servobus.dashboard import url_of
+
+        url = url_of(self.sock, tls=self.tls[0] is not None)
+        mode = "stop and off allowed" if self.dash.allow_commands else "read-only"
+        click.echo(f"servobus dashboard: {url} ({what}; {mode}; Ctrl-C stops)")
+
+    async def serve(self, group: anyio.abc.TaskGroup, done: anyio.Event) -> None:
+        from servobus.dashboard import serve
+
+        cert, key = self.tls
+        group.start_soon(
+            lambda: serve(
+                self.dash.app(), self.sock, access=self.access, certfile=cert, keyfile=key, stopped=done
+            )
+        )
+
+
+async def _local(served: _Served, conn: Connection, hz: float, moving: bool, duration: float | None) -> None:
+    from servobus.loop import Loop
+
+    dash = served.dash
+    reads = _reads(conn.family)
+    async with open_bus(conn, wrap=dash.tap) as (bus, motors):
+        dash.watch(bus, name=bus.name if conn.sim is None else "sim")
+        loop = Loop(hz, timeout_s=conn.timeout_s)
+        dash.watch_loop(loop)
+        what = f"{len(motors)} {'simulated ' if conn.sim is not None else ''}{conn.family} motor(s)"
+        motion = _Motion(bus, motors, conn.family, served.stopped) if moving else None
+        done = anyio.Event()
+        with stop_scope():
+            async with anyio.create_task_group() as group:
+                await served.serve(group, done)
+                served.announce(what + (", moving" if moving else ""))
+                try:
+                    if motion is not None:
+                        await motion.start(conn.timeout_s)
+                    async with loop:
+                        start: float | None = None
+                        async for tick in loop:
+                            start = tick.deadline if start is None else start
+                            if duration is not None and tick.deadline - start >= duration:
+                                break
+                            for motor in motors:
+                                if motion is not None and id(motor) not in served.stopped:
+                                    motion.command(tick, motor, tick.deadline - start)
+                                elif reads:
+                                    for read in reads:
+                                        tick.command(motor, read)
+                finally:
+                    done.set()
+
+
+def _reads(family: str) -> list[Command]:
+    """The status reads each motor is sent (none where the family has no read-only request: hollow's
+    state comes with each set-point's reply; the page then shows what it hears). A command holds no
+    motor id: the same ones go to every motor."""
+    from servobus.cli._families import cli_part
+    from servobus.protocols import get_family
+
+    found = get_family(family)
+    return [read() for read in cli_part(found).status_reads(found)]
+
+
+class _Motion:
+    """The demo's sine for the simulated motors (``servobus demo``'s), but for the motors a page stopped."""
+
+    def __init__(self, bus: Bus, motors: list[Motor], family: str, stopped: set[int]) -> None:
+        from servobus.cli.demo import _parts, _Sine
+
+        self.bus, self.motors, self.stopped = bus, motors, stopped
+        self.parts = _parts(family)
+        self.sine = _Sine(motors, self.parts)
+        self.index = {id(m): n for n, m in enumerate(motors)}
+
+    async def start(self, timeout_s: float | None) -> None:
+        from servobus.cli.demo import _start
+
+        await _start([(self.bus, self.motors)], self.sine, timeout_s)
+
+    def command(self, tick: LoopTick, motor: Motor, t: float) -> None:
+        angle = self.sine.target(self.index[id(motor)], t)
+        command: Command = self.parts.setpoint(motor, angle)
+        tick.command(motor, command)
+
+
+async def _remote(served: _Served, conn: Connection, remote: Remote, duration: float | None) -> None:
+    from servobus.cli._remote import open_remote
+
+    dash = served.dash
+    async with open_remote(conn.ids, remote, read_only=not dash.allow_commands) as (bus, motors):
+        dash.watch(bus, name=remote.target)
+        done = anyio.Event()
+        with stop_scope():
+            async with anyio.create_task_group() as group:
+                await served.serve(group, done)
+                served.announce(f"{len(motors)} motor(s) of {remote.target}")
+                try:
+                    with anyio.move_on_after(math.inf if duration is None else duration):
+                        while True:  # the bridge's figures of the bus, once a second
+                            with contextlib.suppress(ServobusError):  # (a slow bridge: next second)
+                                dash.board.set_metrics(remote.target, await bus.metrics())
+                            await anyio.sleep(1.0)
+                finally:
+                    done.set()

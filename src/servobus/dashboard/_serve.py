@@ -1,0 +1,193 @@
+"""Serving the dashboard: hypercorn (asyncio and trio) on a socket bound here, loopback by default.
+
+Beyond this host only with users (HTTP Basic, a ``user:password`` file like the bridge's) or when
+told ``insecure``, as the bridge does; on loopback, requests must name this host (a page of another
+site that rebinds its name to 127.0.0.1 is refused).
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import hmac
+import ipaddress
+import logging
+import os
+import socket
+from collections.abc import Awaitable, Callable, Collection, Mapping, MutableMapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import anyio
+import sniffio
+
+from servobus.dashboard._app import MAY_COMMAND
+
+__all__ = ["DEFAULT_PORT", "Access", "InsecureListen", "listening_socket", "serve"]
+
+DEFAULT_PORT = 8765
+LOOPBACK_NAMES = ("127.0.0.1", "localhost", "[::1]", "::1")
+
+Scope = MutableMapping[str, Any]
+Receive = Callable[[], Awaitable[MutableMapping[str, Any]]]
+Send = Callable[[MutableMapping[str, Any]], Awaitable[None]]
+App = Callable[[Scope, Receive, Send], Awaitable[None]]
+
+
+class InsecureListen(ValueError):
+    """The dashboard was asked to listen beyond this host without users (and not ``insecure``)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Access:
+    """Who may open the page (HTTP Basic): ``users`` by name with their password; ``commanders``, the
+    names among them who may press stop (the others only read)."""
+
+    users: Mapping[str, str]
+    commanders: Collection[str] = ()
+
+    def __post_init__(self) -> None:
+        if not self.users:
+            raise ValueError("no users: a users file needs one user:password a line")
+        unknown = sorted(set(self.commanders) - set(self.users))
+        if unknown:
+            raise ValueError(f"--commander {', '.join(unknown)}: not in the users file")
+
+    @classmethod
+    def from_file(cls, path: Path, commanders: Collection[str] = ()) -> Access:
+        """``user:password`` lines (the bridge's ``--users`` file); blank lines and ``#`` comments
+        skipped.
+
+        Raises:
+            ValueError: a line that is not ``user:password``, or a commander not in the file.
+        """
+        users: dict[str, str] = {}
+        for number, line in enumerate(path.read_text().splitlines(), 1):
+            line = line.strip()
+            if not line or line.startswith("#"):
+                continue
+            user, sep, password = line.partition(":")
+            if not sep or not user or not password:
+                raise ValueError(f"{path}:{number}: expected user:password")
+            users[user] = password
+        return cls(users, frozenset(commanders))
+
+    def check(self, header: str | None) -> str | None:
+        """The user an ``Authorization`` header names with the right password, else None."""
+        if header is None or not header.startswith("Basic "):
+            return None
+        try:
+            user, _, password = base64.b64decode(header[6:], validate=True).decode().partition(":")
+        except (binascii.Error, UnicodeDecodeError):
+            return None
+        known = self.users.get(user)
+        # (compared whatever the user, in constant time: the answer's timing tells nothing)
+        if hmac.compare_digest((known or "\0").encode(), password.encode()) and known is not None:
+            return user
+        return None
+
+
+def guarded(app: App, *, access: Access | None, loopback: bool) -> App:
+    """``app`` behind the listening rules: users' passwords (when ``access``), and on loopback the
+    Host header naming this host."""
+
+    async def guard(scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] not in ("http", "websocket"):
+            await app(scope, receive, send)
+            return
+        headers = {k.decode("latin-1"): v.decode("latin-1") for k, v in scope.get("headers", ())}
+        if loopback and _host_name(headers.get("host", "")) not in LOOPBACK_NAMES:
+            await _refuse(send, 421, "this dashboard answers to 127.0.0.1 and localhost only")
+            return
+        if access is not None:
+            user = access.check(headers.get("authorization"))
+            if user is None:
+                await _refuse(send, 401, "log in", {"www-authenticate": 'Basic realm="servobus dashboard"'})
+                return
+            scope[MAY_COMMAND] = user in access.commanders
+        await app(scope, receive, send)
+
+    return guard
+
+
+def _host_name(host: str) -> str:
+    if host.startswith("["):
+        return host.split("]")[0] + "]"
+    return host.rsplit(":", 1)[0] if host.count(":") == 1 else host
+
+
+async def _refuse(send: Send, status: int, text: str, headers: Mapping[str, str] | None = None) -> None:
+    raw = [(b"content-type", b"text/plain; charset=utf-8")]
+    raw += [(k.encode(), v.encode()) for k, v in (headers or {}).items()]
+    await send({"type": "http.response.start", "status": status, "headers": raw})
+    await send({"type": "http.response.body", "body": text.encode() + b"\n"})
+
+
+def is_loopback(host: str) -> bool:
+    """``host`` is this host only (``localhost``, 127.0.0.0/8, ::1)."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+def listening_socket(
+    host: str = "127.0.0.1", port: int = DEFAULT_PORT, *, access: Access | None = None, insecure: bool = False
+) -> socket.socket:
+    """A socket listening on ``host:port`` (port 0: any free one), refused beyond this host without
+    ``access`` unless ``insecure``.
+
+    Raises:
+        InsecureListen: beyond loopback, no access and not insecure.
+        OSError: the address is taken or not this host's.
+    """
+    if not is_loopback(host) and access is None and not insecure:
+        raise InsecureListen(
+            f"refusing to listen on {host} without users: anyone who reaches it would see the motors"
+            " (give --users, or --insecure)"
+        )
+    family = socket.AF_INET6 if ":" in host.strip("[]") else socket.AF_INET
+    return socket.create_server((host.strip("[]"), port), family=family, backlog=64)
+
+
+async def serve(
+    app: App,
+    sock: socket.socket,
+    *,
+    access: Access | None = None,
+    certfile: Path | None = None,
+    keyfile: Path | None = None,
+    stopped: anyio.Event | None = None,
+) -> None:
+    """Serve ``app`` on ``sock`` (:func:`listening_socket`) until ``stopped`` is set or the caller
+    is cancelled, on the running event loop (asyncio or trio)."""
+    from hypercorn.config import Config
+
+    host = sock.getsockname()[0]
+    config = Config()
+    config.bind = [f"fd://{os.dup(sock.fileno())}"]  # (hypercorn closes what it serves: its own copy)
+    config.certfile = str(certfile) if certfile else None
+    config.keyfile = str(keyfile) if keyfile else None
+    config.accesslog = None
+    config.errorlog = logging.getLogger("servobus.dashboard.http")
+    config.graceful_timeout = 1.0
+    wrapped = guarded(app, access=access, loopback=is_loopback(host))
+    trigger = (stopped or anyio.Event()).wait
+    if sniffio.current_async_library() == "trio":
+        from hypercorn.trio import serve as serve_trio
+
+        await serve_trio(wrapped, config, shutdown_trigger=trigger)  # type: ignore[arg-type]
+    else:
+        from hypercorn.asyncio import serve as serve_asyncio
+
+        await serve_asyncio(wrapped, config, shutdown_trigger=trigger)  # type: ignore[arg-type]
+
+
+def url_of(sock: socket.socket, *, tls: bool = False) -> str:
+    """The page's address on ``sock``."""
+    host, port = sock.getsockname()[:2]
+    shown = f"[{host}]" if ":" in host else host
+    return f"{'https' if tls else 'http'}://{shown}:{port}/"
