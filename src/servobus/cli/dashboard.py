@@ -44,7 +44,7 @@ def dashboard_extra() -> Any:
         yield
     except ModuleNotFoundError as exc:
         raise click.ClickException(
-            f"the dashboard needs {exc.name}: pip install 'servobus[dashboard]'"
+            f"the dashboard needs {(exc.name or 'a module').split('.')[0]}: pip install 'servobus[dashboard]'"
         ) from None
 
 
@@ -249,6 +249,15 @@ def _reads(family: str) -> list[Command]:
     return [read() for read in cli_part(found).status_reads(found)]
 
 
+def _reads_of(motors: Sequence[Any]) -> list[tuple[Any, Command]]:
+    """Each bridge motor's status reads (its family's; none for a family without)."""
+    by_family: dict[str, list[Command]] = {}
+    for motor in motors:
+        if motor.codec.family not in by_family:
+            by_family[motor.codec.family] = _reads(motor.codec.family)
+    return [(motor, read) for motor in motors for read in by_family[motor.codec.family]]
+
+
 class _Motion:
     """The demo's sine for the simulated motors (``servobus demo``'s), but for the motors a page stopped."""
 
@@ -282,11 +291,16 @@ async def _remote(served: _Served, conn: Connection, remote: Remote, duration: f
             async with anyio.create_task_group() as group:
                 await served.serve(group, done)
                 served.announce(f"{len(motors)} motor(s) of {remote.target}")
+                reads = _reads_of(motors)
                 try:
                     with anyio.move_on_after(math.inf if duration is None else duration):
-                        while True:  # the bridge's figures of the bus, once a second
+                        while True:  # the bridge's figures and the motors' status, once a second
                             with contextlib.suppress(ServobusError):  # (a slow bridge: next second)
                                 dash.board.set_metrics(remote.target, await bus.metrics())
+                            for motor, read in reads:  # (between the states the bridge publishes)
+                                with contextlib.suppress(ServobusError):
+                                    reply = await motor.request(read, timeout_s=conn.timeout_s)
+                                    dash.board.note(remote.target, motor.remote, reply)
                             await anyio.sleep(1.0)
                 finally:
                     done.set()

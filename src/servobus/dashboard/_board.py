@@ -10,8 +10,10 @@ while none is.
 from __future__ import annotations
 
 import dataclasses
+import enum
 import json
 import math
+import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -74,7 +76,8 @@ class Board:
 
     Args:
         update_hz: the most updates per second the page gets (each is made once for all pages).
-        clock: the clock of updates' times (the buses' event loop's; set by the first ``watch``).
+        clock: the clock of updates' times (default: the first watched Bus's, its event loop's; else
+            ``time.monotonic``).
     """
 
     def __init__(self, *, update_hz: float = 30.0, clock: Callable[[], float] | None = None) -> None:
@@ -87,6 +90,7 @@ class Board:
         self._motors: dict[str, Watched] = {}
         self._by_motor: dict[int, Watched] = {}
         self._loops: list[Loop] = []
+        self._noters: dict[str, Callable[..., None]] = {}
         self._cached: tuple[int, str] | None = None
         self._last_at: float | None = None
         self._origin: float | None = None
@@ -126,30 +130,35 @@ class Board:
         by_motor = self._by_motor
 
         def replied(motor: Any, *rest: Any) -> None:  # (motor, traffic, reply) or a bridge's (motor, reply)
-            watched = by_motor.get(id(motor))
-            if watched is not None:
-                watched.reply = rest[-1]
-                watched.replied_at = None  # (stamped at the next update: no clock read per frame)
+            watched = by_motor.get(id(motor)) or self._add(label, motor)
+            watched.reply = rest[-1]
+            watched.replied_at = None  # (stamped at the next update: no clock read per frame)
+
+        self._noters[label] = replied
 
         def status(event: Any) -> None:
-            watched = by_motor.get(id(event.motor))
-            if watched is not None:
-                watched.status = "online" if event.online else "offline"
-                reason = getattr(event, "reason", "")
-                if reason == "restarted":
-                    watched.status = "restarted"
-                watched.reason = reason
+            watched = by_motor.get(id(event.motor)) or self._add(label, event.motor)
+            reason = getattr(event, "reason", "")
+            watched.status = "restarted" if reason == "restarted" else "online" if event.online else "offline"
+            watched.reason = reason
 
         bus.subscribe(replied)
         bus.subscribe_status(status)
+
+    def note(self, bus: str, motor: Any, reply: Reply) -> None:
+        """A reply of ``motor`` on the watched bus ``bus`` that the subscriber does not see (a bridge's
+        motor's reply to a request: only published states reach the subscriber)."""
+        self._noters[bus](motor, reply)
 
     def watch_loop(self, loop: Loop) -> None:
         """Show ``loop``'s figures: its tick lateness, state age and counters."""
         self._loops.append(loop)
 
     def set_metrics(self, bus: str, metrics: dict[str, Any]) -> None:
-        """A bus's metrics as fetched from elsewhere (a bridge's ``RemoteBus.metrics()``)."""
-        self._buses[bus].metrics = metrics
+        """A bus's metrics as fetched from elsewhere: a bridge's ``RemoteBus.metrics()`` (its Bus's
+        are under ``"bus"``), or :class:`servobus.metrics.Metrics` as a dict."""
+        found = metrics.get("bus", metrics)
+        self._buses[bus].metrics = found if isinstance(found, dict) else metrics
 
     # ---- the motors ----
 
@@ -159,7 +168,8 @@ class Board:
             for motor in _motors_of(entry.source):
                 if id(motor) not in self._by_motor:
                     self._add(entry.name, motor)
-        return list(self._motors.values())
+        order = {name: n for n, name in enumerate(self._buses)}
+        return sorted(self._motors.values(), key=lambda w: (order.get(w.bus, -1), w.motor_id, w.family))
 
     def find(self, key: str) -> Watched:
         """The motor of ``key`` (``BUS/ID``).
@@ -170,7 +180,7 @@ class Board:
         self.motors()
         return self._motors[key]
 
-    def _add(self, bus: str, motor: Any) -> None:
+    def _add(self, bus: str, motor: Any) -> Watched:
         family = _family_name(motor)
         key = f"{bus}/{motor.motor_id}"
         if key in self._motors:
@@ -184,11 +194,12 @@ class Board:
             watched.status = "online" if online else "offline"
         self._motors[key] = watched
         self._by_motor[id(motor)] = watched
+        return watched
 
     # ---- updates ----
 
     def _now(self) -> float:
-        return self._clock() if self._clock is not None else 0.0
+        return self._clock() if self._clock is not None else time.monotonic()
 
     def update(self) -> str:
         """The page's update as JSON, made once per update period (the same text for every page
@@ -224,8 +235,9 @@ class Board:
         reply = w.reply
         fields = _numbers(message_values(reply)) if reply is not None else {}
         setpoint = self._setpoint(w)
-        faults = getattr(reply, "FAULTS", None) if reply is not None else None
-        fault = getattr(reply, faults) if faults else None
+        fault = getattr(w.motor, "fault", None)  # (the Bus's record: kept until a reply without it)
+        if fault is None and reply is not None and (faults := getattr(reply, "FAULTS", None)):
+            fault = getattr(reply, faults)
         return {
             "key": w.key,
             "bus": w.bus,
@@ -346,14 +358,15 @@ def _numbers(values: dict[str, Any]) -> dict[str, float | int]:
 
 
 def _fault_names(fault: Any) -> list[str]:
-    if fault is None:
+    """A fault as flag names: a MotorFault's flags, a flag enum's members, a list's items."""
+    fault = getattr(fault, "flags", fault)
+    if not fault:
         return []
+    if isinstance(fault, enum.Flag):
+        return [member.name or str(member) for member in fault]
     if isinstance(fault, Iterable) and not isinstance(fault, str):
         return [getattr(f, "name", str(f)) for f in fault]
-    names = getattr(fault, "name", None)
-    if names is None:
-        return [str(fault)] if fault else []
-    return [n for n in str(names).split("|") if n] if fault else []
+    return [getattr(fault, "name", None) or str(fault)]
 
 
 def _bus_figures(entry: _Bus) -> dict[str, Any]:

@@ -1,0 +1,157 @@
+"""``servobus dashboard`` as a command: its refusals (one line, exit 2, nothing opened), a missing extra,
+and the page of a bridge's bus (``--remote``): read-only unless allowed, live as the bridge publishes."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import re
+import select
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from cli._bus_cli import SERVOBUS, one_line
+
+URL = re.compile(r"^servobus dashboard: (http://127\.0\.0\.1:\d+/) \(")
+
+
+@pytest.mark.parametrize(
+    ("args", "says"),
+    [
+        (["--listen", "nowhere"], "expected HOST:PORT"),
+        (["--listen", "127.0.0.1:99999"], "expected HOST:PORT"),
+        (["--listen", "0.0.0.0:0"], "refusing to listen on 0.0.0.0 without users"),
+        (["--tls-cert", "{users}"], "--tls-cert and --tls-key go together"),
+        (["--commander", "ann"], "--commander names a user of --users"),
+        (["--users", "{users}", "--commander", "ann"], "read-only without --allow-commands"),
+        (
+            ["--users", "{users}", "--commander", "zed", "--allow-commands"],
+            "--commander zed: not in the users",
+        ),
+        (["--users", "{bad}"], "expected user:password"),
+        (["--hz", "0"], "--hz"),
+    ],
+)
+def test_bad_arguments_are_one_line_and_exit_2(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, args: list[str], says: str
+) -> None:
+    (tmp_path / "users").write_text("ann:pw\n")
+    (tmp_path / "bad").write_text("ann\n")
+    given = [a.format(users=tmp_path / "users", bad=tmp_path / "bad") for a in args]
+    assert says in one_line(capsys, ["dashboard", "--sim", "2", *given])
+
+
+def test_a_port_in_use_is_one_line_and_exit_1(capsys: pytest.CaptureFixture[str]) -> None:
+    with socket.create_server(("127.0.0.1", 0)) as taken:
+        port = taken.getsockname()[1]
+        assert "in use" in one_line(
+            capsys, ["dashboard", "--sim", "1", "--listen", f"127.0.0.1:{port}"], code=1
+        )
+
+
+def test_without_the_extra_it_is_one_line_naming_it(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setitem(sys.modules, "starlette", None)  # (import starlette raises ModuleNotFoundError)
+    for name in [n for n in sys.modules if n.startswith(("servobus.dashboard", "starlette."))]:
+        monkeypatch.delitem(sys.modules, name)
+    said = one_line(capsys, ["dashboard", "--sim", "1"], code=1)
+    assert "the dashboard needs starlette: pip install 'servobus[dashboard]'" in said
+
+
+# ---- a bridge's bus ----
+
+
+def _free_port() -> int:
+    with contextlib.closing(socket.socket()) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+@contextlib.contextmanager
+def _process(args: list[str], first: str) -> Iterator[tuple[subprocess.Popen[str], str]]:
+    """``servobus ARGS`` in its own process, once its first line (starting with ``first``) is out;
+    stopped with SIGTERM at the end (killed if it does not go)."""
+    process = subprocess.Popen([*SERVOBUS, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert process.stdout is not None
+        ready, _, _ = select.select([process.stdout], [], [], 30)
+        line = process.stdout.readline().strip() if ready else ""
+        assert line.startswith(first), (line, process.poll(), process.stderr and process.stderr.read())
+        yield process, line
+        process.send_signal(signal.SIGTERM)
+        process.wait(timeout=20)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+
+
+def _get(url: str) -> Any:
+    with urllib.request.urlopen(url, timeout=10) as answer:
+        return json.load(answer)
+
+
+def _post(url: str, body: dict[str, Any]) -> tuple[int, Any]:
+    request = urllib.request.Request(
+        url, data=json.dumps(body).encode(), headers={"content-type": "application/json"}, method="POST"
+    )
+    try:
+        with urllib.request.urlopen(request, timeout=10) as answer:
+            return answer.status, json.load(answer)
+    except urllib.error.HTTPError as error:
+        return error.code, json.load(error)
+
+
+def _until(check: Any, seconds: float = 10.0) -> Any:
+    end = time.monotonic() + seconds
+    while True:
+        got = check()
+        if got or time.monotonic() > end:
+            return got
+        time.sleep(0.1)
+
+
+def test_the_page_of_a_bridge_s_bus_shows_its_motors_live_and_stops_only_when_allowed() -> None:
+    pytest.importorskip("zenoh")
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    remote = ["--remote", "n/sim1", "--endpoint", endpoint]
+    bridge = ["bridge", "--sim", "3", "--node", "n", "--listen", endpoint]
+    page = ["dashboard", *remote, "--listen", "127.0.0.1:0"]
+    with _process(bridge, "serving"), _process(page, "servobus dashboard:") as (_, line):
+        match = URL.match(line)
+        assert match, line
+        url = match.group(1)
+        rows = _get(url + "api/snapshot")["motors"]
+        assert [r["key"] for r in rows] == ["n/sim1/1", "n/sim1/2", "n/sim1/3"]
+        assert _until(lambda: all(r["reply"] for r in _get(url + "api/snapshot")["motors"]))  # read
+        assert _post(url + "api/stop", {"motors": "all"})[0] == 403  # read-only: refused
+        # another client turns motor 2: the states the bridge publishes show it
+        speed = ["speed", *remote, "--ids", "2", "--speed-dps", "90", "--duration", "20"]
+        turner = subprocess.Popen([*SERVOBUS, *speed], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+
+            def turning() -> bool:
+                return _get(url + "api/snapshot")["motors"][1]["fields"].get("speed_dps", 0) > 80
+
+            assert _until(turning, 15)
+        finally:
+            turner.kill()
+            turner.wait()
+    with (
+        _process(bridge, "serving"),
+        _process([*page, "--allow-commands"], "servobus dashboard:") as (_, line),
+    ):
+        url = URL.match(line).group(1)  # type: ignore[union-attr]
+        status, done = _post(url + "api/stop", {"motors": ["n/sim1/1"]})
+        assert status == 200 and done == {"acknowledged": ["n/sim1/1"], "not_acknowledged": []}
