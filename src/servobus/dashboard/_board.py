@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 from servobus.frame import Frame
 from servobus.protocols import Command, Reply
-from servobus.tools.logs import FrameDecoder, message_values
+from servobus.tools.logs import Decoded, FrameDecoder, message_values
 from servobus.tools.recording import TapLink
 
 if TYPE_CHECKING:
@@ -65,7 +65,7 @@ class _Bus:
     frames: dict[tuple[bool, int, bool], Frame] = field(default_factory=dict)
     frame_counts: dict[tuple[bool, int, bool], int] = field(default_factory=dict)
     decoders: dict[str, FrameDecoder] = field(default_factory=dict)
-    names: dict[tuple[int, bool, bytes], str] = field(default_factory=dict)  # decoded names, cached
+    decoded: dict[tuple[str, int, bool, bytes], Decoded] = field(default_factory=dict)  # (a cache)
     metrics: dict[str, Any] | None = None  # a remote bus's, as last fetched
     last_requests: int | None = None
     last_counts: dict[tuple[bool, int, bool], int] = field(default_factory=dict)
@@ -194,6 +194,9 @@ class Board:
             watched.status = "online" if online else "offline"
         self._motors[key] = watched
         self._by_motor[id(motor)] = watched
+        if (entry := self._buses.get(bus)) is not None:  # (its decoder knows the ids it was made for)
+            entry.decoders.pop(family, None)
+            entry.decoded.clear()
         return watched
 
     # ---- updates ----
@@ -265,7 +268,7 @@ class Board:
             frame = entry.frames.get((False, ident & 0x1FFFFFFF, ident > 0x7FF))
             if frame is None:
                 continue
-            decoded = self._decoder(entry, w.family).decode(frame)
+            decoded = self._decode(entry, w.family, frame)
             if isinstance(decoded.message, Command) and decoded.motor_id == w.motor_id:
                 return {
                     "name": type(decoded.message).__name__,
@@ -317,20 +320,23 @@ class Board:
         return rows
 
     def _name(self, entry: _Bus, families: Iterable[str], frame: Frame) -> str:
-        cache_key = (frame.arbitration_id, frame.is_extended_id, bytes(frame.data))
-        name = entry.names.get(cache_key)
-        if name is None:
-            name = "?"
-            for family in families:
-                decoded = self._decoder(entry, family).decode(frame)
-                if decoded.message is not None:
-                    who = "" if decoded.motor_id is None else f" (motor {decoded.motor_id})"
-                    name = f"{type(decoded.message).__name__}{who}"
-                    break
-            if len(entry.names) > 4096:  # (changing data: a set-point a tick; kept bounded)
-                entry.names.clear()
-            entry.names[cache_key] = name
-        return name
+        for family in families:
+            decoded = self._decode(entry, family, frame)
+            if decoded.message is not None:
+                who = "" if decoded.motor_id is None else f" (motor {decoded.motor_id})"
+                return f"{type(decoded.message).__name__}{who}"
+        return "?"
+
+    def _decode(self, entry: _Bus, family: str, frame: Frame) -> Decoded:
+        """``frame`` decoded as ``family``'s, once for the same bytes (the set-point and the frame
+        view ask for the same frames; a motor at rest sends the same ones again and again)."""
+        key = (family, frame.arbitration_id, frame.is_extended_id, bytes(frame.data))
+        found = entry.decoded.get(key)
+        if found is None:
+            if len(entry.decoded) > 4096:  # (changing data: a new set-point every tick; kept bounded)
+                entry.decoded.clear()
+            found = entry.decoded[key] = self._decoder(entry, family).decode(frame)
+        return found
 
 
 def _motors_of(source: Any) -> list[Any]:
