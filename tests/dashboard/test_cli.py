@@ -155,3 +155,44 @@ def test_the_page_of_a_bridge_s_bus_shows_its_motors_live_and_stops_only_when_al
         url = URL.match(line).group(1)  # type: ignore[union-attr]
         status, done = _post(url + "api/stop", {"motors": ["n/sim1/1"]})
         assert status == 200 and done == {"acknowledged": ["n/sim1/1"], "not_acknowledged": []}
+
+
+# ---- what it sends ----
+
+
+def _spinning(monkeypatch: pytest.MonkeyPatch) -> list[Any]:
+    """Have ``--sim`` build motors already turning at 30 dps (commanded before the dashboard came)."""
+    import servobus.cli._connect as connect
+    from servobus.protocols import myactuator as ma
+
+    made: list[Any] = []
+    build = connect.sim_devices
+
+    def devices(family: str, ids: tuple[int, ...], revision: str | None = None) -> list[Any]:
+        found = build(family, ids, revision)
+        for device in found:
+            device.handle(ma.SpeedControl(speed_dps=30.0), 0.0)
+        made.extend(found)
+        return found
+
+    monkeypatch.setattr(connect, "sim_devices", devices)
+    return made
+
+
+def test_reading_only_it_never_commands_a_motor_not_even_on_the_way_out(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from servobus.cli import main
+    from servobus.sim.plant import PositionControl, SpeedControl
+
+    devices = _spinning(monkeypatch)
+    args = ["dashboard", "--sim", "2", "--still", "--duration", "0.5", "--listen", "127.0.0.1:0"]
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert URL.match(out.splitlines()[0]) and "read-only" in out
+    assert len(devices) == 2 and all(isinstance(d.control, SpeedControl) for d in devices)
+    assert all(d.counters["received"] >= 10 for d in devices)  # (read, at --hz)
+    # moving them (the default with --sim), the dashboard commanded them: stopped on the way out
+    devices.clear()
+    assert main(args[:3] + args[4:]) == 0
+    assert len(devices) == 2 and all(isinstance(d.control, PositionControl) for d in devices)
