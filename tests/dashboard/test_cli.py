@@ -196,3 +196,32 @@ def test_reading_only_it_never_commands_a_motor_not_even_on_the_way_out(
     devices.clear()
     assert main(args[:3] + args[4:]) == 0
     assert len(devices) == 2 and all(isinstance(d.control, PositionControl) for d in devices)
+
+
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_sigterm_with_a_page_open_ends_it_cleanly_and_stops_the_motors_it_moved(backend: str) -> None:
+    import http.client
+
+    args = [*SERVOBUS, "dashboard", "--sim", "2", "--listen", "127.0.0.1:0", "--backend", backend]
+    process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert process.stdout is not None and process.stderr is not None
+        ready, _, _ = select.select([process.stdout], [], [], 30)
+        match = URL.match(process.stdout.readline() if ready else "")
+        assert match, process.poll()
+        host, port = match.group(1).split("//")[1].strip("/").split(":")
+        page = http.client.HTTPConnection(host, int(port), timeout=10)
+        page.request("GET", "/api/events")
+        stream = page.getresponse()
+        assert stream.status == 200 and stream.readline().startswith(b"event: update")  # a page open
+        process.send_signal(signal.SIGTERM)
+        assert process.wait(timeout=15) == 0
+        err = process.stderr.read()
+        assert err.splitlines() == [
+            "servobus dashboard: stopped by SIGTERM; stop sent to myactuator motors 1, 2 on sim"
+        ]
+        page.close()
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()

@@ -157,9 +157,14 @@ def dashboard(
     served = _Served(sock, access, tls_cert, tls_key, allow_commands, update_hz)
     with sock:
         if remote is not None:
-            run(_remote(served, conn, remote, duration), backend=backend)
+            signalled = run(_remote(served, conn, remote, duration), backend=backend)
         else:
-            run(_local(served, conn, hz, conn.sim is not None and not still, duration), backend=backend)
+            moving = conn.sim is not None and not still
+            signalled = run(_local(served, conn, hz, moving, duration), backend=backend)
+    from servobus.cli import SIGNALLED, safe_exits
+
+    by = (f" by {SIGNALLED[0].name}" if SIGNALLED else " by Ctrl-C") if signalled else ""
+    click.echo(f"servobus dashboard: stopped{by}{safe_exits()}", err=True)
 
 
 class _Served:
@@ -203,7 +208,9 @@ class _Served:
         )
 
 
-async def _local(served: _Served, conn: Connection, hz: float, moving: bool, duration: float | None) -> None:
+async def _local(served: _Served, conn: Connection, hz: float, moving: bool, duration: float | None) -> bool:
+    """Open the bus, serve its page and poll (or move) its motors until ``duration`` or a signal;
+    whether a signal came."""
     from servobus.loop import Loop
 
     dash = served.dash
@@ -215,7 +222,7 @@ async def _local(served: _Served, conn: Connection, hz: float, moving: bool, dur
         what = f"{len(motors)} {'simulated ' if conn.sim is not None else ''}{conn.family} motor(s)"
         motion = _Motion(bus, motors, conn.family, served.stopped) if moving else None
         done = anyio.Event()
-        with stop_scope():
+        with stop_scope() as stopping:
             async with anyio.create_task_group() as group:
                 await served.serve(group, done)
                 served.announce(what + (", moving" if moving else ""))
@@ -235,7 +242,9 @@ async def _local(served: _Served, conn: Connection, hz: float, moving: bool, dur
                                     for read in reads:
                                         tick.command(motor, read)
                 finally:
+                    dash.close()
                     done.set()
+    return bool(stopping.cancelled_caught)
 
 
 def _reads(family: str) -> list[Command]:
@@ -280,14 +289,15 @@ class _Motion:
         tick.command(motor, command)
 
 
-async def _remote(served: _Served, conn: Connection, remote: Remote, duration: float | None) -> None:
+async def _remote(served: _Served, conn: Connection, remote: Remote, duration: float | None) -> bool:
+    """Connect to the bridge, serve its bus's page until ``duration`` or a signal; whether one came."""
     from servobus.cli._remote import open_remote
 
     dash = served.dash
     async with open_remote(conn.ids, remote, read_only=not dash.allow_commands) as (bus, motors):
         dash.watch(bus, name=remote.target)
         done = anyio.Event()
-        with stop_scope():
+        with stop_scope() as stopping:
             async with anyio.create_task_group() as group:
                 await served.serve(group, done)
                 served.announce(f"{len(motors)} motor(s) of {remote.target}")
@@ -303,4 +313,6 @@ async def _remote(served: _Served, conn: Connection, remote: Remote, duration: f
                                     dash.board.note(remote.target, motor.remote, reply)
                             await anyio.sleep(1.0)
                 finally:
+                    dash.close()
                     done.set()
+    return bool(stopping.cancelled_caught)

@@ -68,6 +68,7 @@ class Dashboard:
         self.allow_commands = allow_commands
         self.stop_timeout_s = stop_timeout_s
         self.on_stop = on_stop
+        self._closing = anyio.Event()
 
     def tap(self, link: Any) -> TapLink:
         """:meth:`Board.tap`: give the result to the Bus for the raw frame view and the set-points."""
@@ -80,6 +81,11 @@ class Dashboard:
     def watch_loop(self, loop: Loop) -> None:
         """:meth:`Board.watch_loop`."""
         self.board.watch_loop(loop)
+
+    def close(self) -> None:
+        """End every page's stream of updates (before its server stops: a stream left open holds the
+        server's shutdown for its graceful timeout). A page open after this gets no updates."""
+        self._closing.set()
 
     async def stop(self, keys: Sequence[str] | None, kind: str = "stop") -> dict[str, list[str]]:
         """Send ``kind``'s safe command (``"stop"`` or ``"off"``) to the motors ``keys`` (all: None),
@@ -162,10 +168,13 @@ class Dashboard:
     async def _events(self, request: Request) -> Response:
         board = self.board
 
+        closing = self._closing
+
         async def updates() -> AsyncIterator[dict[str, str]]:
-            while True:
+            while not closing.is_set():
                 yield {"event": "update", "data": board.update()}
-                await anyio.sleep(board.period_s)
+                with anyio.move_on_after(board.period_s):
+                    await closing.wait()
 
         return EventSourceResponse(updates(), ping=15, headers={"cache-control": "no-store"})
 

@@ -27,6 +27,8 @@ from servobus.dashboard._app import MAY_COMMAND
 __all__ = ["DEFAULT_PORT", "Access", "InsecureListen", "listening_socket", "serve"]
 
 DEFAULT_PORT = 8765
+#: how long the server has to close its connections once told to stop (then it is cancelled)
+SHUTDOWN_S = 3.0
 LOOPBACK_NAMES = ("127.0.0.1", "localhost", "[::1]", "::1")
 
 Scope = MutableMapping[str, Any]
@@ -163,7 +165,8 @@ async def serve(
     stopped: anyio.Event | None = None,
 ) -> None:
     """Serve ``app`` on ``sock`` (:func:`listening_socket`) until ``stopped`` is set or the caller
-    is cancelled, on the running event loop (asyncio or trio)."""
+    is cancelled, on the running event loop (asyncio or trio); it closes its connections first
+    (an open page's stream within ``config.graceful_timeout``, 1 s)."""
     from hypercorn.config import Config
 
     host = sock.getsockname()[0]
@@ -175,15 +178,27 @@ async def serve(
     config.errorlog = logging.getLogger("servobus.dashboard.http")
     config.graceful_timeout = 1.0
     wrapped = guarded(app, access=access, loopback=is_loopback(host))
-    trigger = (stopped or anyio.Event()).wait
     if sniffio.current_async_library() == "trio":
-        from hypercorn.trio import serve as serve_trio
-
-        await serve_trio(wrapped, config, shutdown_trigger=trigger)  # type: ignore[arg-type]
+        from hypercorn.trio import serve as run
     else:
-        from hypercorn.asyncio import serve as serve_asyncio
+        from hypercorn.asyncio import serve as run  # type: ignore[assignment]
 
-        await serve_asyncio(wrapped, config, shutdown_trigger=trigger)  # type: ignore[arg-type]
+    # hypercorn's asyncio server does not survive being cancelled (its shutdown raises
+    # InvalidStateError); it is told to stop instead, and given SHUTDOWN_S to do so, shielded.
+    shutdown = anyio.Event()
+    server = anyio.CancelScope(shield=True)
+
+    async def hypercorn() -> None:
+        with server:
+            await run(wrapped, config, shutdown_trigger=shutdown.wait)  # type: ignore[arg-type]
+
+    async with anyio.create_task_group() as group:
+        group.start_soon(hypercorn)
+        try:
+            await (stopped or anyio.Event()).wait()
+        finally:
+            shutdown.set()
+            server.deadline = anyio.current_time() + SHUTDOWN_S
 
 
 def url_of(sock: socket.socket, *, tls: bool = False) -> str:
