@@ -11,6 +11,7 @@ import pytest
 
 from servobus.bus import Bus
 from servobus.dashboard import Board
+from servobus.dashboard._board import FIGURES_EVERY_S
 from servobus.errors import MotorTimeout
 from servobus.loop import Loop
 from servobus.protocols import myactuator as ma
@@ -36,7 +37,7 @@ async def test_every_motor_is_shown_with_its_latest_reply_its_set_point_and_its_
         await bus.cycle([(m, ma.SpeedControl(speed_dps=30.0 * m.motor_id)) for m in motors])
         await anyio.sleep(0.2)
         await bus.cycle([(m, ma.SpeedControl(speed_dps=30.0 * m.motor_id)) for m in motors])
-        await anyio.sleep(board.period_s)
+        await anyio.sleep(FIGURES_EVERY_S)  # (the counters and frames are made again twice a second)
         update = json.loads(board.update())
     rows = {row["key"]: row for row in update["motors"]}
     two = rows["arm/2"]

@@ -20,13 +20,21 @@ from typing import TYPE_CHECKING, Any
 
 from servobus.frame import Frame
 from servobus.protocols import Command, Reply
-from servobus.tools.logs import Decoded, FrameDecoder, message_values
+from servobus.tools.logs import FrameDecoder, message_values
 from servobus.tools.recording import TapLink
 
 if TYPE_CHECKING:
     from servobus.loop import Loop
 
-__all__ = ["Board", "Watched"]
+__all__ = ["FIGURES_EVERY_S", "FRAMES_EVERY_S", "NAME_EVERY_S", "Board", "Watched"]
+
+#: how often the counters, the latency and a loop's figures are made again (the percentiles sort
+#: thousands of samples: not for every update)
+FIGURES_EVERY_S = 0.5
+#: how often the frame view is made again (a bus's ``frames`` is in one update in this many seconds)
+FRAMES_EVERY_S = 0.25
+#: a frame view row's name is decoded again at most this often (when its bytes changed)
+NAME_EVERY_S = 1.0
 
 
 @dataclass(eq=False, slots=True)
@@ -58,16 +66,22 @@ class Watched:
 
 @dataclass(slots=True)
 class _Bus:
-    """A bus on the board: where its figures come from, its frames as last seen, per identifier."""
+    """A bus on the board: where its figures come from, its frames as last seen (per identifier and
+    direction), each motor's last command sent, and what was last shown of them."""
 
     name: str
     source: Any  # a servobus Bus (metrics()), or a bridge's RemoteBus (its metrics set from outside)
     frames: dict[tuple[bool, int, bool], Frame] = field(default_factory=dict)
     frame_counts: dict[tuple[bool, int, bool], int] = field(default_factory=dict)
+    commands: dict[int, Command] = field(default_factory=dict)  # by id(codec): the last not a read
     decoders: dict[str, FrameDecoder] = field(default_factory=dict)
-    decoded: dict[tuple[str, int, bool, bytes], Decoded] = field(default_factory=dict)  # (a cache)
+    names: dict[tuple[bool, int, bool], tuple[bytes, str, float]] = field(default_factory=dict)
     metrics: dict[str, Any] | None = None  # a remote bus's, as last fetched
+    figures: dict[str, Any] = field(default_factory=dict)
+    figures_at: float | None = None
     last_requests: int | None = None
+    frame_rows: list[dict[str, Any]] = field(default_factory=list)
+    frames_at: float | None = None
     last_counts: dict[tuple[bool, int, bool], int] = field(default_factory=dict)
 
 
@@ -92,8 +106,9 @@ class Board:
         self._loops: list[Loop] = []
         self._noters: dict[str, Callable[..., None]] = {}
         self._cached: tuple[int, str] | None = None
-        self._last_at: float | None = None
         self._origin: float | None = None
+        self._loops_at: float | None = None
+        self._loop_figures: list[dict[str, Any]] = []
 
     # ---- what is watched ----
 
@@ -101,14 +116,18 @@ class Board:
         """``link`` wrapped so that the board sees its frames, both ways (give the result to the
         Bus): the raw frame view lists them by identifier, like ``python -m can.viewer``."""
         entry = self._links.setdefault(link.name, _Bus(link.name, None))
-        frames, counts = entry.frames, entry.frame_counts
+        frames, counts, commands = entry.frames, entry.frame_counts, entry.commands
 
         def seen(frame: Frame, received: bool, _at: float) -> None:
             key = (received, frame.arbitration_id, frame.is_extended_id)
             frames[key] = frame
             counts[key] = counts.get(key, 0) + 1
 
-        return TapLink(link, seen, self._now)
+        def sent(request: Any) -> None:  # (the Bus's handle: the request, its command undecoded)
+            if getattr(request, "writes", False):
+                commands[id(request.codec)] = request.command
+
+        return TapLink(link, seen, self._now, sent)
 
     def watch(self, bus: Any, *, name: str | None = None) -> None:
         """Show ``bus`` (a :class:`servobus.Bus`, or a bridge's ``RemoteBus``) and its motors: every
@@ -196,7 +215,7 @@ class Board:
         self._by_motor[id(motor)] = watched
         if (entry := self._buses.get(bus)) is not None:  # (its decoder knows the ids it was made for)
             entry.decoders.pop(family, None)
-            entry.decoded.clear()
+            entry.names.clear()
         return watched
 
     # ---- updates ----
@@ -216,27 +235,29 @@ class Board:
         return text
 
     def snapshot(self, now: float | None = None) -> dict[str, Any]:
-        """What the page shows now: the motors' rows, each bus's figures and frames, the loops'."""
+        """What the page shows now: the motors' rows (every update), each bus's figures and a loop's
+        (every :data:`FIGURES_EVERY_S`), each bus's frames (every :data:`FRAMES_EVERY_S`: a bus's
+        ``frames`` is left out of the updates between)."""
         now = self._now() if now is None else now
         if self._origin is None:
             self._origin = now
-        dt = None if self._last_at is None else now - self._last_at
-        self._last_at = now
         rows = []
         for watched in self.motors():
             if watched.reply is not None and watched.replied_at is None:
                 watched.replied_at = now
             rows.append(self._row(watched, now))
+        if self._loops_at is None or now - self._loops_at >= FIGURES_EVERY_S:
+            self._loops_at, self._loop_figures = now, [_loop_figures(loop) for loop in self._loops]
         return {
             "t": round(now - self._origin, 4),
             "motors": rows,
-            "buses": [self._bus(entry, dt) for entry in self._buses.values()],
-            "loops": [_loop_figures(loop) for loop in self._loops],
+            "buses": [self._bus(entry, now) for entry in self._buses.values()],
+            "loops": self._loop_figures,
         }
 
     def _row(self, w: Watched, now: float) -> dict[str, Any]:
         reply = w.reply
-        fields = _numbers(message_values(reply)) if reply is not None else {}
+        fields = _numbers(reply) if reply is not None else {}
         setpoint = self._setpoint(w)
         fault = getattr(w.motor, "fault", None)  # (the Bus's record: kept until a reply without it)
         if fault is None and reply is not None and (faults := getattr(reply, "FAULTS", None)):
@@ -257,24 +278,12 @@ class Board:
         }
 
     def _setpoint(self, w: Watched) -> dict[str, Any] | None:
-        """The last command that left for the motor (seen by the tap), with its numbers."""
-        entry = self._buses[w.bus]
-        if not entry.frames:
-            return None
+        """The last command that is not a read sent to the motor (seen by the tap), with its numbers."""
         codec = getattr(w.motor, "codec", None)
-        if codec is None:
+        command = self._buses[w.bus].commands.get(id(codec)) if codec is not None else None
+        if command is None:
             return None
-        for ident in sorted(codec.request_ids):
-            frame = entry.frames.get((False, ident & 0x1FFFFFFF, ident > 0x7FF))
-            if frame is None:
-                continue
-            decoded = self._decode(entry, w.family, frame)
-            if isinstance(decoded.message, Command) and decoded.motor_id == w.motor_id:
-                return {
-                    "name": type(decoded.message).__name__,
-                    "fields": _numbers(message_values(decoded.message)),
-                }
-        return None
+        return {"name": type(command).__name__, "fields": _numbers(command)}
 
     def _decoder(self, entry: _Bus, family: str) -> FrameDecoder:
         found = entry.decoders.get(family)
@@ -285,18 +294,24 @@ class Board:
             found = entry.decoders[family] = FrameDecoder(family, ids=ids or None)
         return found
 
-    def _bus(self, entry: _Bus, dt: float | None) -> dict[str, Any]:
-        figures = _bus_figures(entry)
-        requests = figures.get("requests")
-        rate = None
-        if isinstance(requests, int) and entry.last_requests is not None and dt:
-            rate = round((requests - entry.last_requests) / dt, 1)
-        entry.last_requests = requests if isinstance(requests, int) else None
-        figures["request_rate_hz"] = rate
-        figures["frames"] = self._frames(entry, dt)
-        return figures
+    def _bus(self, entry: _Bus, now: float) -> dict[str, Any]:
+        since = None if entry.figures_at is None else now - entry.figures_at
+        if since is None or since >= FIGURES_EVERY_S:
+            figures = _bus_figures(entry)
+            requests = figures.get("requests")
+            rate = None
+            if isinstance(requests, int) and entry.last_requests is not None and since:
+                rate = round((requests - entry.last_requests) / since, 1)
+            entry.last_requests = requests if isinstance(requests, int) else None
+            figures["request_rate_hz"] = rate
+            entry.figures, entry.figures_at = figures, now
+        since = None if entry.frames_at is None else now - entry.frames_at
+        if since is not None and since < FRAMES_EVERY_S:
+            return entry.figures
+        entry.frame_rows, entry.frames_at = self._frames(entry, now, since), now
+        return {**entry.figures, "frames": entry.frame_rows}
 
-    def _frames(self, entry: _Bus, dt: float | None) -> list[dict[str, Any]]:
+    def _frames(self, entry: _Bus, now: float, since: float | None) -> list[dict[str, Any]]:
         """One row per identifier and direction, like ``can.viewer``: its count, rate and last data,
         and what it decodes to."""
         rows = []
@@ -313,30 +328,30 @@ class Board:
                     "id": f"0x{ident:08X}" if extended else f"0x{ident:03X}",
                     "data": frame.data.hex(" ").upper(),
                     "count": count,
-                    "rate_hz": None if before is None or not dt else round((count - before) / dt, 1),
-                    "name": self._name(entry, families, frame),
+                    "rate_hz": None if before is None or not since else round((count - before) / since, 1),
+                    "name": self._name(entry, key, families, frame, now),
                 }
             )
         return rows
 
-    def _name(self, entry: _Bus, families: Iterable[str], frame: Frame) -> str:
+    def _name(
+        self, entry: _Bus, key: tuple[bool, int, bool], families: Iterable[str], frame: Frame, now: float
+    ) -> str:
+        """What ``frame`` decodes to, decoded again when its bytes changed, at most every
+        :data:`NAME_EVERY_S` (a set-point's bytes change every tick; its name does not)."""
+        data = bytes(frame.data)
+        known = entry.names.get(key)
+        if known is not None and (known[0] == data or now - known[2] < NAME_EVERY_S):
+            return known[1]
+        name = "?"
         for family in families:
-            decoded = self._decode(entry, family, frame)
+            decoded = self._decoder(entry, family).decode(frame)
             if decoded.message is not None:
                 who = "" if decoded.motor_id is None else f" (motor {decoded.motor_id})"
-                return f"{type(decoded.message).__name__}{who}"
-        return "?"
-
-    def _decode(self, entry: _Bus, family: str, frame: Frame) -> Decoded:
-        """``frame`` decoded as ``family``'s, once for the same bytes (the set-point and the frame
-        view ask for the same frames; a motor at rest sends the same ones again and again)."""
-        key = (family, frame.arbitration_id, frame.is_extended_id, bytes(frame.data))
-        found = entry.decoded.get(key)
-        if found is None:
-            if len(entry.decoded) > 4096:  # (changing data: a new set-point every tick; kept bounded)
-                entry.decoded.clear()
-            found = entry.decoded[key] = self._decoder(entry, family).decode(frame)
-        return found
+                name = f"{type(decoded.message).__name__}{who}"
+                break
+        entry.names[key] = (data, name, now)
+        return name
 
 
 def _motors_of(source: Any) -> list[Any]:
@@ -354,13 +369,36 @@ def _family_name(motor: Any) -> str:
     return str(getattr(family, "name", family))
 
 
-def _numbers(values: dict[str, Any]) -> dict[str, float | int]:
-    """The numeric fields (the ones a plot can show), finite."""
+def _numbers(message: Any) -> dict[str, float | int]:
+    """A command's or reply's numeric fields (the ones a plot can show), finite; a message with other
+    kinds of fields (tuples, nested messages) through :func:`~servobus.tools.logs.message_values`."""
+    names = _FIELDS.get(type(message))
+    if names is None:
+        names = _FIELDS[type(message)] = tuple(f.name for f in dataclasses.fields(message))
+    out: dict[str, float | int] = {}
+    for name in names:
+        value = getattr(message, name)
+        kind = type(value)
+        if kind is float:
+            if math.isfinite(value):
+                out[name] = value
+        elif kind is int:
+            out[name] = value
+        elif not (value is None or isinstance(value, bool | str | enum.Enum)):
+            return _finite(message_values(message))
+    return out
+
+
+def _finite(values: dict[str, Any]) -> dict[str, float | int]:
     return {
         name: value
         for name, value in values.items()
         if isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
     }
+
+
+#: each message class's field names (read once per class)
+_FIELDS: dict[type, tuple[str, ...]] = {}
 
 
 def _fault_names(fault: Any) -> list[str]:
@@ -377,30 +415,25 @@ def _fault_names(fault: Any) -> list[str]:
 
 def _bus_figures(entry: _Bus) -> dict[str, Any]:
     """The counters the page shows of a bus (a local Bus's metrics, or a bridge's as fetched)."""
-    metrics: Any = entry.metrics
-    if metrics is None and hasattr(entry.source, "metrics") and hasattr(entry.source, "engine"):
-        metrics = dataclasses.asdict(entry.source.metrics())
-    metrics = metrics or {}
-    latency = metrics.get("latency") or {}
     out: dict[str, Any] = {"name": entry.name}
-    for name in (
-        "requests",
-        "replies",
-        "timeouts",
-        "late",
-        "ambiguous",
-        "duplicate",
-        "malformed",
-        "restarts",
-    ):
-        out[name] = metrics.get(name)
-    out["bus_load_pct"] = metrics.get("bus_load_pct")
+    names = ("requests", "replies", "timeouts", "late", "ambiguous", "duplicate", "malformed", "restarts")
+    if entry.metrics is None and hasattr(entry.source, "engine"):  # a local Bus
+        metrics = entry.source.metrics()
+        out.update({name: getattr(metrics, name) for name in names})
+        out["bus_load_pct"] = metrics.bus_load_pct
+        out["latency_p99_s"] = metrics.latency.p99_s
+        return out
+    found = entry.metrics or {}
+    latency = found.get("latency")
+    out.update({name: found.get(name) for name in names})
+    out["bus_load_pct"] = found.get("bus_load_pct")
     out["latency_p99_s"] = latency.get("p99_s") if isinstance(latency, dict) else None
     return out
 
 
 def _loop_figures(loop: Loop) -> dict[str, Any]:
-    figures = dataclasses.asdict(loop.metrics())
+    metrics = loop.metrics()
+    figures = {f.name: getattr(metrics, f.name) for f in dataclasses.fields(metrics)}
     figures["hz"] = loop.hz
     return figures
 

@@ -15,6 +15,7 @@ const state = {
   fields: new Set(),
   motorKeys: [],
   last: null,
+  frames: {},             // bus -> its frame view rows, as last sent
   plots: {},
   plotShape: {},
 };
@@ -183,12 +184,13 @@ function renderBuses(update) {
   $("#loops").style.display = update.loops.length ? "" : "none";
 }
 
-function renderFrames(update) {
+function renderFrames() {
   const wanted = $("#frame-filter").value.trim().toLowerCase();
   const rows = [];
   let total = 0;
-  for (const b of update.buses) {
-    for (const f of b.frames) {
+  for (const [bus, frames] of Object.entries(state.frames)) {
+    const b = { name: bus };
+    for (const f of frames) {
       total++;
       const text = `${b.name} ${f.dir} ${f.id} ${f.data} ${f.name}`.toLowerCase();
       if (wanted && !wanted.split(/\s+/).every((w) => text.includes(w))) continue;
@@ -304,10 +306,13 @@ async function command(motors, kind) {
 function take(update) {
   state.last = update;
   record(update);
+  // a bus's frames come in some updates only (the server makes them a few times a second)
+  const framed = update.buses.filter((b) => b.frames);
+  for (const b of framed) state.frames[b.name] = b.frames;
   if (state.paused) return;
   renderMotors(update);
   renderBuses(update);
-  renderFrames(update);
+  if (framed.length) renderFrames();
   renderPlots();
 }
 
@@ -329,7 +334,7 @@ async function start() {
   for (const id of ["#field", "#plot-motors", "#window", "#show-setpoints"]) {
     $(id).addEventListener("change", () => renderPlots());
   }
-  $("#frame-filter").addEventListener("input", () => state.last && renderFrames(state.last));
+  $("#frame-filter").addEventListener("input", () => renderFrames());
   window.addEventListener("resize", () => state.last && renderPlots());
   const events = new EventSource("api/events");
   events.addEventListener("update", (event) => {
