@@ -232,11 +232,17 @@ function drawPlot(id, title, lines, height) {
       width: l.dash ? 1 : 1.5,
       dash: l.dash ? [6, 4] : undefined,
       spanGaps: true,
+      scale: l.scale || "y",
     }))];
+    // one axis per unit: the first on the left, the others on the right
+    const units = [...new Set(lines.map((l) => l.scale || "y"))];
+    const axes = units.map((unit, i) => ({
+      scale: unit, side: i ? 1 : 3, label: unit === "y" ? undefined : unit, grid: { show: i === 0 },
+    }));
     plot = new uPlot({
       title, width: Math.floor(box.clientWidth), height,
       scales: { x: { time: false } },
-      axes: [{ label: "t (s)" }, {}],
+      axes: [{ label: "t (s)" }, ...(axes.length ? axes : [{}])],
       series,
     }, data, box);
     state.plots[id] = plot;
@@ -261,10 +267,14 @@ function renderPlots() {
   });
   drawPlot("plot", field ? `${field} by motor` : "no field yet", lines, 300);
   const bus = [], loop = [];
+  const kinds = {
+    load: ["load %", "%"], rate: ["requests/s", "requests/s"],
+    late: ["tick late p99", "ms"], age: ["state age p99", "ms"],
+  };
   for (const [key, values] of state.busSeries) {
     const [name, what] = key.split("|");
-    const line = { label: `${name} ${{ load: "load %", rate: "requests/s", late: "tick late p99 ms", age: "state age p99 ms" }[what]}`, values };
-    (what === "load" || what === "rate" ? bus : loop).push(line);
+    const [label, unit] = kinds[what];
+    (what === "load" || what === "rate" ? bus : loop).push({ label: `${name} ${label}`, values, scale: unit });
   }
   drawPlot("plot-bus", "bus load and request rate", bus, 180);
   drawPlot("plot-loop", "loop: tick lateness and state age", loop, 180);
