@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 from collections.abc import AsyncIterator, Sequence
 
+import anyio
 import httpx
 import pytest
 from starlette.applications import Starlette
@@ -13,6 +14,7 @@ from starlette.routing import Mount
 
 from servobus.bus import Bus, Motor
 from servobus.dashboard import Dashboard, Watched
+from servobus.loop import Loop
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.sim.plant import Off, PositionControl, SpeedControl
@@ -118,3 +120,35 @@ async def test_mounted_on_an_application_of_ones_own_the_page_finds_its_parts() 
             assert (await client.get("/dashboard/static/dashboard.js")).status_code == 200
             update = json.loads((await client.get("/dashboard/api/snapshot")).text)
             assert len(update["motors"]) == 3
+
+
+async def test_a_stop_is_not_undone_by_the_set_point_a_loop_was_to_send_next() -> None:
+    """The page's stop comes between two ticks: the set-point the last tick gave would leave at the
+    next deadline, after the stop, and set the motor turning again; the Dashboard drops it."""
+    stopped: set[int] = set()
+    dash = Dashboard(allow_commands=True, on_stop=lambda ws: stopped.update(w.motor_id for w in ws))
+    devices = [MyActuatorMotor(i) for i in (1, 2, 3)]
+    async with Bus(dash.tap(SimTransport(devices=devices)), safe=None) as bus:
+        dash.watch(bus, name="sim")
+        motors = [bus.motor("myactuator", i) for i in (1, 2, 3)]
+        loop = Loop(200)
+        dash.watch_loop(loop)
+        client = httpx.AsyncClient(transport=httpx.ASGITransport(app=dash.app()), base_url="http://h")
+        async with loop, client, anyio.create_task_group() as group:
+
+            async def control() -> None:  # the application: 60 dps to every motor not stopped
+                async for tick in loop:
+                    for motor in motors:
+                        if motor.motor_id not in stopped:
+                            tick.command(motor, ma.SpeedControl(speed_dps=60.0))
+
+            group.start_soon(control)
+            for key, device in (("sim/1", devices[0]), ("sim/2", devices[1])):
+                await anyio.sleep(0.1 + 0.0013 * len(stopped))  # (a press at another phase of the tick)
+                assert isinstance(device.control, SpeedControl)
+                answer = await client.post("/api/stop", json={"motors": [key]})
+                assert answer.json()["acknowledged"] == [key]
+                await anyio.sleep(0.05)
+                assert isinstance(device.control, PositionControl), (key, device.control)
+            assert isinstance(devices[2].control, SpeedControl)
+            group.cancel_scope.cancel()

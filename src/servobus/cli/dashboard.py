@@ -281,7 +281,9 @@ class _Motion:
     async def start(self, timeout_s: float | None) -> None:
         from servobus.cli.demo import _start
 
-        await _start([(self.bus, self.motors)], self.sine, timeout_s)
+        going = [m for m in self.motors if id(m) not in self.stopped]  # (a page may stop one already)
+        if going:
+            await _start([(self.bus, going)], self.sine, timeout_s)
 
     def command(self, tick: LoopTick, motor: Motor, t: float) -> None:
         angle = self.sine.target(self.index[id(motor)], t)

@@ -99,12 +99,17 @@ class Dashboard:
             KeyError: a key of no motor on the board.
             ValueError: an unknown kind, or a motor whose family has no such command.
         """
-        if kind not in KINDS:
+        if not isinstance(kind, str) or kind not in KINDS:
             raise ValueError(f"kind {kind!r}: expected one of {', '.join(KINDS)}")
         motors = self.board.motors() if keys is None else [self.board.find(k) for k in keys]
         commands = [(w, _codec(w.motor).safe_command(KINDS[kind])) for w in motors]
         if self.on_stop is not None:
-            self.on_stop(motors)
+            try:  # (the application stops giving them set-points; its failing must not cost the stop)
+                self.on_stop(motors)
+            except Exception:
+                logger.exception("dashboard: on_stop failed; the stop is sent all the same")
+        for loop in self.board.loops:  # what a loop was told to send next would follow the stop
+            loop.drop(w.motor for w in motors if w.motor in loop.tracks)
         done: dict[str, list[str]] = {"acknowledged": [], "not_acknowledged": []}
         with anyio.CancelScope(shield=True):
             by_bus: dict[int, list[tuple[Watched, Any]]] = {}
@@ -116,23 +121,42 @@ class Dashboard:
         return done
 
     async def _stop_on(self, commands: list[tuple[Watched, Any]], done: dict[str, list[str]]) -> None:
+        """The stops of one bus's motors, repeated until each acknowledged or ``stop_timeout_s``
+        ended; what fails is reported, never raised (another bus's stops go on)."""
         bus = _bus_of(commands[0][0])
         if hasattr(bus, "engine"):
             from servobus.bus.safety import stop_motors
 
-            outcome = await stop_motors(bus, {w.motor: c for w, c in commands}, self.stop_timeout_s)
-            for w, _ in commands:
-                done["acknowledged" if w.motor in outcome.acknowledged else "not_acknowledged"].append(w.key)
-            return
-        for w, command in commands:  # a bridge's motor: the bridge's Bus sends it
             try:
-                with anyio.fail_after(self.stop_timeout_s):
-                    await w.motor.request(command)
-            except (ServobusError, TimeoutError) as exc:
-                logger.warning("dashboard: %s: %s", w.key, exc)
-                done["not_acknowledged"].append(w.key)
-            else:
-                done["acknowledged"].append(w.key)
+                outcome = await stop_motors(bus, {w.motor: c for w, c in commands}, self.stop_timeout_s)
+                acknowledged = set(outcome.acknowledged)
+            except Exception:  # (a closed Bus: nothing acknowledged)
+                logger.exception("dashboard: the stop on %s failed", bus.name)
+                acknowledged = set()
+            for w, _ in commands:
+                done["acknowledged" if w.motor in acknowledged else "not_acknowledged"].append(w.key)
+            return
+        async with anyio.create_task_group() as group:  # a bridge's motors: the bridge's Bus sends it
+            for w, command in commands:
+                group.start_soon(self._stop_remote, w, command, done)
+
+    async def _stop_remote(self, w: Watched, command: Any, done: dict[str, list[str]]) -> None:
+        """A bridge's motor's stop, asked again until the bridge says it was acknowledged or
+        ``stop_timeout_s`` ended (the bridge refuses one another client holds: not acknowledged)."""
+        with anyio.move_on_after(self.stop_timeout_s):
+            while True:
+                try:
+                    await w.motor.request(command, timeout_s=self.stop_timeout_s)
+                except ServobusError as exc:  # (lost on the way, or a timeout: again)
+                    logger.debug("dashboard: %s: %s; again", w.key, exc)
+                    await anyio.sleep(0.01)
+                except Exception as exc:  # refused (another client holds it), or anything else
+                    logger.warning("dashboard: %s: the stop was refused: %s", w.key, exc)
+                    break
+                else:
+                    done["acknowledged"].append(w.key)
+                    return
+        done["not_acknowledged"].append(w.key)
 
     def app(self) -> Starlette:
         """The page and its API as an ASGI app, to serve (:func:`servobus.dashboard.serve`) or to

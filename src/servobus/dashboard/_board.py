@@ -173,6 +173,11 @@ class Board:
         """Show ``loop``'s figures: its tick lateness, state age and counters."""
         self._loops.append(loop)
 
+    @property
+    def loops(self) -> tuple[Loop, ...]:
+        """The loops watched."""
+        return tuple(self._loops)
+
     def set_metrics(self, bus: str, metrics: dict[str, Any]) -> None:
         """A bus's metrics as fetched from elsewhere: a bridge's ``RemoteBus.metrics()`` (its Bus's
         are under ``"bus"``), or :class:`servobus.metrics.Metrics` as a dict."""

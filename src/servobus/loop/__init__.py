@@ -38,7 +38,7 @@ and a motor's state, as the body sees them); the :class:`Loop` here drives them.
 from __future__ import annotations
 
 import math
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Iterable
 from dataclasses import dataclass
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Self
@@ -80,7 +80,8 @@ class LoopMetrics:
         commands_on_time: of those, the ones whose frame left before the next tick's deadline
             (each judged when its send report is known: one that comes later than the next tick
             is judged at a later tick, by when the frame left).
-        superseded: commands replaced by the next one for their motor before they left (never sent).
+        superseded: commands replaced by the next one for their motor before they left (never sent),
+            or dropped (:meth:`Loop.drop`).
         not_sent: commands not sent (the motor offline between probes, streaming, a link refusing).
         throttled: commands not sent because their motor had ``max_outstanding`` unanswered.
         lost: commands with no reply within their horizon, or whose reply the replies after it
@@ -342,6 +343,22 @@ class Loop:
             if request.handed_at is not None:
                 left += 1
         return left
+
+    def drop(self, motors: Iterable[Motor]) -> int:
+        """Drop the commands of ``motors`` that have not left: the one given for the next tick and
+        those still queued on their bus (counted ``superseded``), so that a stop sent next is not
+        followed by one of them; returns how many. The body's later commands are its own: a caller
+        that stops a motor stops giving it set-points too (servobus.dashboard's page does both)."""
+        dropped = 0
+        for motor in motors:
+            if self.commands.pop(motor, None) is not None:
+                self.counts.superseded += 1
+                dropped += 1
+            track = self.tracks.get(motor)
+            if track is not None and track.bus.engine.runtime is not None:
+                why = Superseded(f"{track.bus.name}: dropped")
+                dropped += len(track.bus.engine.withdraw(motor, why, not_pipelined))
+        return dropped
 
     async def stop_motors(self) -> None:
         """The safe stop (each Bus's ``safe`` command) to every motor the loop sent a command that is
