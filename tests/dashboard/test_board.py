@@ -126,3 +126,13 @@ def test_a_bad_rate_and_a_bus_watched_twice_are_refused() -> None:
     board.watch(Named())
     with pytest.raises(ValueError, match="'x' is on the board already"):
         board.watch(Named())
+
+
+async def test_a_reply_s_age_counts_from_when_it_came_not_from_when_a_page_looked() -> None:
+    board = Board()
+    async with Bus(SimTransport(devices=[MyActuatorMotor(1)]), safe=None) as bus:
+        board.watch(bus)
+        await bus.motor("myactuator", 1).read_status2()
+        await anyio.sleep(0.3)  # no page open meanwhile
+        (row,) = _rows(board).values()
+    assert row["age_s"] >= 0.29 and row["status"] == "online"

@@ -40,6 +40,8 @@ URL = re.compile(r"^servobus dashboard: (http://127\.0\.0\.1:\d+/) \(")
         ),
         (["--users", "{bad}"], "expected user:password"),
         (["--hz", "0"], "--hz"),
+        (["--users", "{users}", "--allow-commands"], "name who may press stop (--commander NAME)"),
+        (["--tls-cert", "{users}", "--tls-key", "{users}"], "--tls-cert"),
     ],
 )
 def test_bad_arguments_are_one_line_and_exit_2(

@@ -169,3 +169,36 @@ def test_a_users_file_is_checked(tmp_path: Path) -> None:
     assert access.check(_basic("ann", "pw2")["authorization"]) is None
     assert access.check(_basic("zed", "pw")["authorization"]) is None
     assert access.check("Bearer x") is None and access.check(None) is None
+
+
+def test_on_another_loopback_address_its_own_name_is_accepted() -> None:
+    from servobus.dashboard._serve import guarded
+
+    seen: list[int] = []
+
+    async def app(scope: Any, receive: Any, send: Any) -> None:
+        seen.append(1)
+
+    async def ask(host: str) -> int:
+        sent: list[dict[str, Any]] = []
+
+        async def send(message: Any) -> None:
+            sent.append(message)
+
+        scope = {"type": "http", "headers": [(b"host", host.encode())]}
+        await guarded(app, access=None, loopback="127.0.0.2")(scope, None, send)  # type: ignore[arg-type]
+        return int(sent[0]["status"]) if sent else 200
+
+    async def main() -> list[int]:
+        return [await ask(h) for h in ("127.0.0.2:8765", "localhost:1", "127.0.0.3:8765", "evil:8765")]
+
+    assert anyio.run(main) == [200, 200, 421, 421] and len(seen) == 2
+
+
+def test_the_auth_scheme_is_case_blind_and_a_password_of_another_length_is_refused(tmp_path: Path) -> None:
+    users = tmp_path / "users"
+    users.write_text("ann:secret\n")
+    access = Access.from_file(users)
+    token = base64.b64encode(b"ann:secret").decode()
+    assert access.check(f"basic {token}") == "ann" and access.check(f"BASIC  {token}") == "ann"
+    assert access.check("Basic " + base64.b64encode(b"ann:secret-and-more").decode()) is None

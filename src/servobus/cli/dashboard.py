@@ -153,6 +153,10 @@ def dashboard(
         access = Access.from_file(users, commander) if users is not None else None
         if access is not None and allow_commands is False and commander:
             raise ValueError("--commander: the page is read-only without --allow-commands")
+        if access is not None and allow_commands and not commander:
+            raise ValueError("--allow-commands with --users: name who may press stop (--commander NAME)")
+        if tls_cert is not None and tls_key is not None:
+            _check_tls(tls_cert, tls_key)
         sock = listening_socket(host, port, access=access, insecure=insecure)
     served = _Served(sock, access, tls_cert, tls_key, allow_commands, update_hz)
     with sock:
@@ -165,6 +169,20 @@ def dashboard(
 
     by = (f" by {SIGNALLED[0].name}" if SIGNALLED else " by Ctrl-C") if signalled else ""
     click.echo(f"servobus dashboard: stopped{by}{safe_exits()}", err=True)
+
+
+def _check_tls(cert: Path, key: Path) -> None:
+    """The certificate and key load (before anything is opened or printed).
+
+    Raises:
+        ValueError: they do not, with why.
+    """
+    import ssl
+
+    try:
+        ssl.create_default_context(ssl.Purpose.CLIENT_AUTH).load_cert_chain(cert, key)
+    except (ssl.SSLError, OSError) as exc:
+        raise ValueError(f"--tls-cert {cert} --tls-key {key}: {exc}") from None
 
 
 class _Served:

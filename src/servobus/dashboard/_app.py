@@ -8,6 +8,7 @@ Dashboard allows commands: a page can never leave a motor running, since all it 
 
 from __future__ import annotations
 
+import json
 import logging
 from collections.abc import AsyncIterator, Callable, Sequence
 from pathlib import Path
@@ -45,6 +46,8 @@ class Dashboard:
         allow_commands: the page's stop and off buttons work (default: read-only, they are refused).
         update_hz: the most updates per second each page gets (made once for all pages).
         stop_timeout_s: how long a stop is repeated until the motor acknowledges it.
+        max_pages: the most pages streamed at once (each costs the event loop its writes; one more
+            is answered 503).
         on_stop: called with the motors a page is about to stop (before their stop leaves), so the
             application stops commanding them: a control loop that went on would undo the stop.
 
@@ -63,12 +66,15 @@ class Dashboard:
         update_hz: float = 30.0,
         stop_timeout_s: float = 0.5,
         on_stop: Callable[[Sequence[Watched]], object] | None = None,
+        max_pages: int = 8,
     ) -> None:
         self.board = Board(update_hz=update_hz)
         self.allow_commands = allow_commands
         self.stop_timeout_s = stop_timeout_s
         self.on_stop = on_stop
         self._closing = anyio.Event()
+        self.max_pages = max_pages
+        self._pages = 0
 
     def tap(self, link: Any) -> TapLink:
         """:meth:`Board.tap`: give the result to the Bus for the raw frame view and the set-points."""
@@ -190,15 +196,20 @@ class Dashboard:
         return Response(self.board.update(), media_type="application/json")
 
     async def _events(self, request: Request) -> Response:
+        if self._pages >= self.max_pages:
+            return JSONResponse({"error": f"{self.max_pages} pages are open already"}, status_code=503)
         board = self.board
-
         closing = self._closing
 
         async def updates() -> AsyncIterator[dict[str, str]]:
-            while not closing.is_set():
-                yield {"event": "update", "data": board.update()}
-                with anyio.move_on_after(board.period_s):
-                    await closing.wait()
+            self._pages += 1  # (counted once streaming: a page gone before costs nothing)
+            try:
+                while not closing.is_set():
+                    yield {"event": "update", "data": board.update()}
+                    with anyio.move_on_after(board.period_s):
+                        await closing.wait()
+            finally:
+                self._pages -= 1
 
         return EventSourceResponse(updates(), ping=15, headers={"cache-control": "no-store"})
 
@@ -213,19 +224,44 @@ class Dashboard:
         if request.headers.get("content-type", "").split(";")[0].strip() != "application/json":
             return JSONResponse({"error": "send JSON (application/json)"}, status_code=415)
         try:
-            body = await request.json()
+            body = await _json(request)
             motors, kind = body.get("motors"), body.get("kind", "stop")
             if motors != "all" and not (isinstance(motors, list) and all(isinstance(m, str) for m in motors)):
                 raise ValueError('"motors": expected "all" or a list of motor keys')
             done = await self.stop(None if motors == "all" else motors, kind)
         except KeyError as exc:
             return JSONResponse({"error": f"no motor {exc.args[0]!r} on this dashboard"}, status_code=404)
+        except _TooLarge as exc:
+            return JSONResponse({"error": str(exc)}, status_code=413)
         except (ValueError, AttributeError) as exc:
             return JSONResponse({"error": str(exc)}, status_code=400)
         logger.info(
             "dashboard: %s sent to %s", kind, ", ".join(done["acknowledged"] + done["not_acknowledged"])
         )
         return JSONResponse(done)
+
+
+#: the largest stop request read (a list of every motor's key fits many times over)
+MAX_BODY = 16384
+
+
+class _TooLarge(Exception):
+    pass
+
+
+async def _json(request: Request) -> Any:
+    """The request's JSON body, read up to :data:`MAX_BODY` bytes (more is refused, not read).
+
+    Raises:
+        _TooLarge: a longer body.
+        ValueError: not JSON.
+    """
+    body = b""
+    async for chunk in request.stream():
+        body += chunk
+        if len(body) > MAX_BODY:
+            raise _TooLarge(f"a stop request is at most {MAX_BODY} bytes")
+    return json.loads(body)
 
 
 def _bus_of(watched: Watched) -> Any:

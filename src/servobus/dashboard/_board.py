@@ -35,6 +35,8 @@ FIGURES_EVERY_S = 0.5
 FRAMES_EVERY_S = 0.25
 #: a frame view row's name is decoded again at most this often (when its bytes changed)
 NAME_EVERY_S = 1.0
+#: a motor that restarted is shown ``restarted`` this long, then ``online`` (the reason says when)
+RESTART_SHOWN_S = 10.0
 
 
 @dataclass(eq=False, slots=True)
@@ -62,6 +64,9 @@ class Watched:
     status: str = "unknown"
     reason: str = ""
     replied_at: float | None = None
+    restarted_at: float | None = None
+    #: its replies are stamped by the board (a bridge's motor; a Bus's keeps ``last_seen`` itself)
+    stamped: bool = False
 
 
 @dataclass(slots=True)
@@ -79,10 +84,21 @@ class _Bus:
     metrics: dict[str, Any] | None = None  # a remote bus's, as last fetched
     figures: dict[str, Any] = field(default_factory=dict)
     figures_at: float | None = None
-    last_requests: int | None = None
+    last_requests: tuple[int, float] | None = None  # (the requests counter, when it was read)
+    request_rate_hz: float | None = None
     frame_rows: list[dict[str, Any]] = field(default_factory=list)
     frames_at: float | None = None
     last_counts: dict[tuple[bool, int, bool], int] = field(default_factory=dict)
+
+    def count_requests(self, requests: Any, at: float) -> None:
+        """The requests counter read at ``at``: the rate since the last reading."""
+        if not isinstance(requests, int):
+            self.last_requests = self.request_rate_hz = None
+            return
+        if self.last_requests is not None and at > self.last_requests[1]:
+            before, then = self.last_requests
+            self.request_rate_hz = round((requests - before) / (at - then), 1)
+        self.last_requests = (requests, at)
 
 
 class Board:
@@ -148,10 +164,13 @@ class Board:
             self._clock = bus.time
         by_motor = self._by_motor
 
+        now = self._now
+
         def replied(motor: Any, *rest: Any) -> None:  # (motor, traffic, reply) or a bridge's (motor, reply)
             watched = by_motor.get(id(motor)) or self._add(label, motor)
             watched.reply = rest[-1]
-            watched.replied_at = None  # (stamped at the next update: no clock read per frame)
+            if watched.stamped:  # (a Bus's motor has its last_seen: no clock read per frame here)
+                watched.replied_at = now()
 
         self._noters[label] = replied
 
@@ -160,6 +179,8 @@ class Board:
             reason = getattr(event, "reason", "")
             watched.status = "restarted" if reason == "restarted" else "online" if event.online else "offline"
             watched.reason = reason
+            if reason == "restarted":
+                watched.restarted_at = now()
 
         bus.subscribe(replied)
         bus.subscribe_status(status)
@@ -182,7 +203,9 @@ class Board:
         """A bus's metrics as fetched from elsewhere: a bridge's ``RemoteBus.metrics()`` (its Bus's
         are under ``"bus"``), or :class:`servobus.metrics.Metrics` as a dict."""
         found = metrics.get("bus", metrics)
-        self._buses[bus].metrics = found if isinstance(found, dict) else metrics
+        entry = self._buses[bus]
+        entry.metrics = found if isinstance(found, dict) else metrics
+        entry.count_requests(entry.metrics.get("requests"), self._now())
 
     # ---- the motors ----
 
@@ -209,7 +232,7 @@ class Board:
         key = f"{bus}/{motor.motor_id}"
         if key in self._motors:
             key = f"{bus}/{family}/{motor.motor_id}"
-        watched = Watched(key, bus, family, motor.motor_id, motor)
+        watched = Watched(key, bus, family, motor.motor_id, motor, stamped=not hasattr(motor, "last_seen"))
         latest = getattr(motor, "state", None)  # (a bridge's motor: its last published state)
         if isinstance(latest, Reply):
             watched.reply = latest
@@ -248,8 +271,6 @@ class Board:
             self._origin = now
         rows = []
         for watched in self.motors():
-            if watched.reply is not None and watched.replied_at is None:
-                watched.replied_at = now
             rows.append(self._row(watched, now))
         if self._loops_at is None or now - self._loops_at >= FIGURES_EVERY_S:
             self._loops_at, self._loop_figures = now, [_loop_figures(loop) for loop in self._loops]
@@ -267,15 +288,19 @@ class Board:
         fault = getattr(w.motor, "fault", None)  # (the Bus's record: kept until a reply without it)
         if fault is None and reply is not None and (faults := getattr(reply, "FAULTS", None)):
             fault = getattr(reply, faults)
+        seen = w.replied_at if w.stamped else getattr(w.motor, "last_seen", None)
+        status, reason = w.status, w.reason
+        if status == "restarted" and w.restarted_at is not None and now - w.restarted_at > RESTART_SHOWN_S:
+            status, reason = "online", f"restarted {now - w.restarted_at:.0f} s ago"
         return {
             "key": w.key,
             "bus": w.bus,
             "family": w.family,
             "id": w.motor_id,
-            "status": w.status,
-            "reason": w.reason,
+            "status": status,
+            "reason": reason,
             "reply": type(reply).__name__ if reply is not None else None,
-            "age_s": None if w.replied_at is None else round(now - w.replied_at, 4),
+            "age_s": None if seen is None else round(max(0.0, now - seen), 4),
             "fault": _fault_names(fault),
             "temperature_c": fields.get("temperature_c"),
             "fields": fields,
@@ -303,13 +328,10 @@ class Board:
         since = None if entry.figures_at is None else now - entry.figures_at
         if since is None or since >= FIGURES_EVERY_S:
             figures = _bus_figures(entry)
-            requests = figures.get("requests")
-            rate = None
-            if isinstance(requests, int) and entry.last_requests is not None and since:
-                rate = round((requests - entry.last_requests) / since, 1)
-            entry.last_requests = requests if isinstance(requests, int) else None
-            figures["request_rate_hz"] = rate
-            entry.figures, entry.figures_at = figures, now
+            if entry.metrics is None:  # (a local Bus's, read now; a bridge's, when they were fetched)
+                entry.count_requests(figures.get("requests"), now)
+            figures["request_rate_hz"] = entry.request_rate_hz
+            entry.figures, entry.figures_at = _finite_or_none(figures), now
         since = None if entry.frames_at is None else now - entry.frames_at
         if since is not None and since < FRAMES_EVERY_S:
             return entry.figures
@@ -440,7 +462,12 @@ def _loop_figures(loop: Loop) -> dict[str, Any]:
     metrics = loop.metrics()
     figures = {f.name: getattr(metrics, f.name) for f in dataclasses.fields(metrics)}
     figures["hz"] = loop.hz
-    return figures
+    return _finite_or_none(figures)
+
+
+def _finite_or_none(figures: dict[str, Any]) -> dict[str, Any]:
+    """``figures`` with a NaN or an infinity as None (JSON has neither: the page's parse would fail)."""
+    return {k: None if isinstance(v, float) and not math.isfinite(v) else v for k, v in figures.items()}
 
 
 def _jsonable(value: Any) -> Any:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import base64
 import binascii
+import hashlib
 import hmac
 import ipaddress
 import logging
@@ -77,29 +78,37 @@ class Access:
 
     def check(self, header: str | None) -> str | None:
         """The user an ``Authorization`` header names with the right password, else None."""
-        if header is None or not header.startswith("Basic "):
+        scheme, _, given = (header or "").strip().partition(" ")
+        if scheme.lower() != "basic":
             return None
         try:
-            user, _, password = base64.b64decode(header[6:], validate=True).decode().partition(":")
+            user, _, password = base64.b64decode(given.strip(), validate=True).decode().partition(":")
         except (binascii.Error, UnicodeDecodeError):
             return None
         known = self.users.get(user)
-        # (compared whatever the user, in constant time: the answer's timing tells nothing)
-        if hmac.compare_digest((known or "\0").encode(), password.encode()) and known is not None:
-            return user
-        return None
+        # compared whatever the user, digests of equal length: the answer's timing tells neither
+        # whether the user exists nor how long the password is
+        same = hmac.compare_digest(_digest(known or ""), _digest(password))
+        return user if same and known is not None else None
 
 
-def guarded(app: App, *, access: Access | None, loopback: bool) -> App:
-    """``app`` behind the listening rules: users' passwords (when ``access``), and on loopback the
-    Host header naming this host."""
+def _digest(text: str) -> bytes:
+    return hashlib.sha256(text.encode()).digest()
+
+
+def guarded(app: App, *, access: Access | None, loopback: str | None) -> App:
+    """``app`` behind the listening rules: users' passwords (when ``access``), and when listening
+    on the loopback address ``loopback``, a Host header naming this host (that address,
+    ``localhost`` or ``127.0.0.1``): a page of another site whose name was rebound to this host
+    names its own."""
+    names = {*LOOPBACK_NAMES, loopback, f"[{loopback}]"} if loopback else set()
 
     async def guard(scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] not in ("http", "websocket"):
             await app(scope, receive, send)
             return
         headers = {k.decode("latin-1"): v.decode("latin-1") for k, v in scope.get("headers", ())}
-        if loopback and _host_name(headers.get("host", "")) not in LOOPBACK_NAMES:
+        if names and _host_name(headers.get("host", "")) not in names:
             await _refuse(send, 421, "this dashboard answers to 127.0.0.1 and localhost only")
             return
         if access is not None:
@@ -177,7 +186,7 @@ async def serve(
     config.accesslog = None
     config.errorlog = logging.getLogger("servobus.dashboard.http")
     config.graceful_timeout = 1.0
-    wrapped = guarded(app, access=access, loopback=is_loopback(host))
+    wrapped = guarded(app, access=access, loopback=host if is_loopback(host) else None)
     if sniffio.current_async_library() == "trio":
         from hypercorn.trio import serve as run
     else:

@@ -9,6 +9,7 @@ const COLORS = ["#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b"
 const state = {
   commands: false,
   paused: false,
+  lastAt: 0,              // when the last update came (Date.now())
   times: [],              // update times (s since the dashboard started)
   series: new Map(),      // "motorKey|field" or "motorKey|set.field" -> values aligned with times
   busSeries: new Map(),   // "bus|load" ... -> values
@@ -314,19 +315,28 @@ async function command(motors, kind) {
 // ---- the stream ----
 
 function take(update) {
+  if (state.last && update.t < state.last.t) reset();  // the server restarted: a new run
   state.last = update;
+  state.lastAt = Date.now();
   record(update);
   // a bus's frames come in some updates only (the server makes them a few times a second)
   const framed = update.buses.filter((b) => b.frames);
   for (const b of framed) state.frames[b.name] = b.frames;
-  if (state.paused) return;
   renderMotors(update);
   renderBuses(update);
   if (framed.length) renderFrames();
-  renderPlots();
+  if (!state.paused) renderPlots();  // (Pause holds the plots still; the tables go on)
 }
 
-async function start() {
+function reset() {
+  state.times = [];
+  state.series = new Map();
+  state.busSeries = new Map();
+  state.frames = {};
+  state.motorKeys = [];
+}
+
+async function fetchInfo() {
   try {
     const info = await (await fetch("api/info")).json();
     state.commands = info.commands;
@@ -335,6 +345,15 @@ async function start() {
     say(`no answer from the dashboard: ${error}`, true);
   }
   applyMode();
+}
+
+function showConnection(text, live) {
+  $("#conn").textContent = text;
+  $("#conn").className = "badge " + (live ? "on" : "off");
+}
+
+async function start() {
+  await fetchInfo();
   $("#stop-all").addEventListener("click", () => command("all", "stop"));
   $("#off-all").addEventListener("click", () => command("all", "off"));
   $("#pause").addEventListener("click", () => {
@@ -347,15 +366,17 @@ async function start() {
   $("#frame-filter").addEventListener("input", () => renderFrames());
   window.addEventListener("resize", () => state.last && renderPlots());
   const events = new EventSource("api/events");
+  events.addEventListener("open", () => fetchInfo());  // (again after a reconnect: a new server)
   events.addEventListener("update", (event) => {
-    $("#conn").textContent = "live";
-    $("#conn").className = "badge on";
+    showConnection("live", true);
     take(JSON.parse(event.data));
   });
-  events.onerror = () => {
-    $("#conn").textContent = "disconnected";
-    $("#conn").className = "badge off";
-  };
+  events.onerror = () => showConnection("disconnected", false);
+  setInterval(() => {  // updates that stop coming without an error: say so
+    if (state.lastAt && Date.now() - state.lastAt > 2000 && events.readyState === EventSource.OPEN) {
+      showConnection("stale", false);
+    }
+  }, 1000);
 }
 
 start();
