@@ -202,3 +202,14 @@ def test_the_auth_scheme_is_case_blind_and_a_password_of_another_length_is_refus
     token = base64.b64encode(b"ann:secret").decode()
     assert access.check(f"basic {token}") == "ann" and access.check(f"BASIC  {token}") == "ann"
     assert access.check("Basic " + base64.b64encode(b"ann:secret-and-more").decode()) is None
+
+
+async def test_pages_beyond_the_most_streamed_are_answered_503_and_a_closed_one_frees_its_place() -> None:
+    dash = Dashboard(max_pages=1)
+    async with _served(dash) as url, httpx.AsyncClient(base_url=url) as client:
+        async with client.stream("GET", "api/events") as first:
+            assert first.status_code == 200
+            await first.aiter_lines().__anext__()  # (streaming)
+            second = await client.get("api/events")
+            assert second.status_code == 503 and "1 pages are open already" in second.json()["error"]
+        assert len(await _updates(client, 1)) == 1  # the first one closed: a place again
