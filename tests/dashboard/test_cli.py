@@ -124,6 +124,11 @@ def _until(check: Any, seconds: float = 10.0) -> Any:
         time.sleep(0.1)
 
 
+def _turning(url: str) -> bool:
+    """Motor 2 turns at about 90 dps, as the page shows it."""
+    return bool(_get(url + "api/snapshot")["motors"][1]["fields"].get("speed_dps", 0) > 80)
+
+
 def test_the_page_of_a_bridge_s_bus_shows_its_motors_live_and_stops_only_when_allowed() -> None:
     pytest.importorskip("zenoh")
     endpoint = f"tcp/127.0.0.1:{_free_port()}"
@@ -142,11 +147,7 @@ def test_the_page_of_a_bridge_s_bus_shows_its_motors_live_and_stops_only_when_al
         speed = ["speed", *remote, "--ids", "2", "--speed-dps", "90", "--duration", "20"]
         turner = subprocess.Popen([*SERVOBUS, *speed], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         try:
-
-            def turning() -> bool:
-                return _get(url + "api/snapshot")["motors"][1]["fields"].get("speed_dps", 0) > 80
-
-            assert _until(turning, 15)
+            assert _until(lambda: _turning(url), 15)
         finally:
             turner.kill()
             turner.wait()
@@ -157,6 +158,17 @@ def test_the_page_of_a_bridge_s_bus_shows_its_motors_live_and_stops_only_when_al
         url = URL.match(line).group(1)  # type: ignore[union-attr]
         status, done = _post(url + "api/stop", {"motors": ["n/sim1/1"]})
         assert status == 200 and done == {"acknowledged": ["n/sim1/1"], "not_acknowledged": []}
+        # another client holds motor 2: the bridge refuses the page its stop; the others are stopped
+        turner = subprocess.Popen([*SERVOBUS, *speed], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+            assert _until(lambda: _turning(url), 15)
+            status, done = _post(url + "api/stop", {"motors": "all"})
+            assert status == 200, done
+            assert sorted(done["acknowledged"]) == ["n/sim1/1", "n/sim1/3"], done
+            assert done["not_acknowledged"] == ["n/sim1/2"], done
+        finally:
+            turner.kill()
+            turner.wait()
 
 
 # ---- what it sends ----

@@ -148,8 +148,9 @@ class Dashboard:
 
     async def _stop_remote(self, w: Watched, command: Any, done: dict[str, list[str]]) -> None:
         """A bridge's motor's stop, asked again until the bridge says it was acknowledged or
-        ``stop_timeout_s`` ended (the bridge refuses one another client holds: not acknowledged)."""
-        with anyio.move_on_after(self.stop_timeout_s):
+        ``stop_timeout_s`` ended, and the network's allowance (the client's ``timeout_s``) after it (the
+        bridge refuses one another client holds: not acknowledged)."""
+        with anyio.move_on_after(self.stop_timeout_s + getattr(w.motor.bus, "timeout_s", 0.0)):
             while True:
                 try:
                     await w.motor.request(command, timeout_s=self.stop_timeout_s)
