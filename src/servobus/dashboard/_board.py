@@ -28,10 +28,10 @@ if TYPE_CHECKING:
 
 __all__ = ["FIGURES_EVERY_S", "FRAMES_EVERY_S", "NAME_EVERY_S", "Board", "Watched"]
 
-#: how often the counters, the latency and a loop's figures are made again (the percentiles sort
-#: thousands of samples: not for every update)
+#: how often a bus's counters and latency and a loop's figures are made again, at most (the
+#: percentiles sort thousands of samples: not for every update; one bus per update, in turn)
 FIGURES_EVERY_S = 0.5
-#: how often the frame view is made again (a bus's ``frames`` is in one update in this many seconds)
+#: how often a bus's frame view is made again, at most (its ``frames`` is in those updates only)
 FRAMES_EVERY_S = 0.25
 #: a frame view row's name is decoded again at most this often (when its bytes changed)
 NAME_EVERY_S = 1.0
@@ -124,6 +124,7 @@ class Board:
         self._cached: tuple[int, str] | None = None
         self._origin: float | None = None
         self._loops_at: float | None = None
+        self._turn = -1  # the bus whose figures are made again in this update
         self._loop_figures: list[dict[str, Any]] = []
 
     # ---- what is watched ----
@@ -277,7 +278,7 @@ class Board:
         return {
             "t": round(now - self._origin, 4),
             "motors": rows,
-            "buses": [self._bus(entry, now) for entry in self._buses.values()],
+            "buses": self._figures(now),
             "loops": self._loop_figures,
         }
 
@@ -324,16 +325,25 @@ class Board:
             found = entry.decoders[family] = FrameDecoder(family, ids=ids or None)
         return found
 
-    def _bus(self, entry: _Bus, now: float) -> dict[str, Any]:
+    def _figures(self, now: float) -> list[dict[str, Any]]:
+        """Each bus's figures: those of one bus made again per update, in turn (a bus's metrics sort
+        its latency window: the demo's 11 buses at once took milliseconds), as they are due."""
+        entries = list(self._buses.values())
+        if not entries:
+            return []
+        self._turn = (self._turn + 1) % len(entries)
+        return [self._bus(entry, now, n == self._turn) for n, entry in enumerate(entries)]
+
+    def _bus(self, entry: _Bus, now: float, turn: bool) -> dict[str, Any]:
         since = None if entry.figures_at is None else now - entry.figures_at
-        if since is None or since >= FIGURES_EVERY_S:
+        if since is None or (turn and since >= FIGURES_EVERY_S):
             figures = _bus_figures(entry)
             if entry.metrics is None:  # (a local Bus's, read now; a bridge's, when they were fetched)
                 entry.count_requests(figures.get("requests"), now)
             figures["request_rate_hz"] = entry.request_rate_hz
             entry.figures, entry.figures_at = _finite_or_none(figures), now
         since = None if entry.frames_at is None else now - entry.frames_at
-        if since is not None and since < FRAMES_EVERY_S:
+        if since is not None and (not turn or since < FRAMES_EVERY_S):
             return entry.figures
         entry.frame_rows, entry.frames_at = self._frames(entry, now, since), now
         return {**entry.figures, "frames": entry.frame_rows}
