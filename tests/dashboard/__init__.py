@@ -1,0 +1,1 @@
+"""The web dashboard (issue 40): its page in a real browser, and how it listens."""

@@ -1,0 +1,212 @@
+"""The dashboard's page in headless Chromium (issue 40): ``servobus dashboard --sim 4`` as a user sees it.
+
+The read-only tests share one dashboard and one browser (module-scoped); the test that stops motors has
+its own dashboard, as has the trio one. Every wait is bounded (WebDriverWait); every dashboard is killed
+on the way out.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from collections.abc import Iterator
+from typing import TYPE_CHECKING
+
+import pytest
+
+from dashboard._browser import chromium, script, wait_for
+from dashboard._serving import Served, dashboard
+
+if TYPE_CHECKING:
+    from selenium.webdriver.remote.webdriver import WebDriver
+
+KEYS = [f"sim/{n}" for n in range(1, 5)]
+LISTEN = ("--listen", "127.0.0.1:0")
+
+# Every motor row's cells, read at once (the page redraws them on every update).
+ROWS = """
+const out = {};
+for (const row of document.querySelectorAll('#motors tbody tr')) {
+  const cells = {};
+  for (const td of row.querySelectorAll('td[data-col]')) cells[td.dataset.col] = td.textContent;
+  out[row.dataset.key] = cells;
+}
+return out;
+"""
+FRAMES = """
+return [...document.querySelectorAll('#frames tbody tr')].map((row) => {
+  const cells = {};
+  for (const td of row.querySelectorAll('td[data-col]')) cells[td.dataset.col] = td.textContent;
+  return cells;
+});
+"""
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[WebDriver]:
+    with chromium() as driver:
+        yield driver
+
+
+@pytest.fixture(scope="module")
+def sim4(browser: WebDriver) -> Iterator[Served]:
+    """A read-only dashboard of 4 moving simulated motors (nothing here stops them)."""
+    with dashboard("--sim", "4", *LISTEN) as served:
+        yield served
+
+
+def rows(driver: WebDriver) -> dict[str, dict[str, str]]:
+    found: dict[str, dict[str, str]] = script(driver, ROWS)
+    return found
+
+
+def field(row: dict[str, str], name: str) -> float:
+    """A field's number in a row's ``fields`` cell (``speed_dps -114  angle_deg -41.5``)."""
+    found = re.search(rf"\b{name} (-?\d+(?:\.\d+)?)\b", row["fields"])
+    assert found, f"no {name} in {row['fields']!r}"
+    return float(found.group(1))
+
+
+def open_page(driver: WebDriver, served: Served, motors: int = 4) -> None:
+    """Load the page and wait until it is live with ``motors`` rows."""
+    driver.get(served.url)
+    wait_for(
+        driver,
+        lambda d: d.find_element("id", "conn").text == "live",
+        f"#conn never said live; the dashboard's stderr: {served.stderr()}",
+    )
+    wait_for(driver, lambda d: len(rows(d)) == motors, f"never {motors} motor rows")
+
+
+def test_page_names_every_motor(browser: WebDriver, sim4: Served) -> None:
+    open_page(browser, sim4)
+    seen = rows(browser)
+    assert sorted(seen) == KEYS
+    for n, key in enumerate(KEYS, 1):
+        row = seen[key]
+        assert (row["bus"], row["id"], row["family"]) == ("sim", str(n), "myactuator"), row
+        assert row["status"] == "online", row
+    assert browser.title == "servobus dashboard"
+    assert browser.find_element("id", "mode").text == "read-only"
+
+
+def test_numbers_and_plot_change_over_3_s(browser: WebDriver, sim4: Served) -> None:
+    open_page(browser, sim4)
+    canvas = "return document.querySelector('#plot .uplot canvas').toDataURL();"
+    # (the plot drawn once with its lines: a legend entry per motor's field)
+    wait_for(browser, lambda d: "sim/1 speed_dps" in d.find_element("id", "plot").text, "no sim/1 line")
+    before, picture = rows(browser), script(browser, canvas)
+    time.sleep(3.0)
+    after, later = rows(browser), script(browser, canvas)
+    for key in KEYS:
+        assert before[key]["fields"] != after[key]["fields"], (key, before[key], after[key])
+        assert field(before[key], "angle_deg") != field(after[key], "angle_deg")
+    assert picture != later, "the plot's canvas did not change in 3 s"
+    # the plots of the buses and the loop are drawn too
+    for plot in ("plot-bus", "plot-loop"):
+        assert browser.find_elements("css selector", f"#{plot} .uplot canvas"), plot
+
+
+def test_frame_view_shows_decoded_frames_and_filters(browser: WebDriver, sim4: Served) -> None:
+    open_page(browser, sim4)
+
+    def names(driver: WebDriver) -> dict[str, str]:
+        return {f["name"]: f["dir"] for f in script(driver, FRAMES)}
+
+    seen = wait_for(
+        browser,
+        lambda d: (found := names(d)) and "AbsolutePositionControl (motor 1)" in found and found,
+        "no decoded frames",
+    )
+    assert seen["StatusReply (motor 1)"] == "rx"
+    assert seen["AbsolutePositionControl (motor 1)"] == "tx"
+    assert {f"StatusReply (motor {n})" for n in range(1, 5)} <= set(seen)
+
+    box = browser.find_element("id", "frame-filter")
+    box.send_keys("0x241")
+    narrowed = wait_for(browser, lambda d: len(found := script(d, FRAMES)) == 1 and found, "filter 0x241")
+    assert narrowed[0]["name"] == "StatusReply (motor 1)" and narrowed[0]["id"] == "0x241"
+    box.clear()
+    box.send_keys("tx")
+    tx = wait_for(browser, lambda d: len(found := script(d, FRAMES)) == 4 and found, "filter tx")
+    assert {f["dir"] for f in tx} == {"tx"}
+    assert "4 of 8" in browser.find_element("id", "frame-count").text
+    box.clear()
+    wait_for(browser, lambda d: len(script(d, FRAMES)) == 8, "filter cleared")
+
+
+POST_STOP = """
+const done = arguments[arguments.length - 1];
+fetch('api/stop', {method: 'POST', headers: {'content-type': 'application/json'},
+                   body: JSON.stringify({motors: arguments[0], kind: 'stop'})})
+  .then(async (r) => done([r.status, await r.text()]), (e) => done([0, String(e)]));
+"""
+
+
+def test_read_only_page_cannot_stop(browser: WebDriver, sim4: Served) -> None:
+    open_page(browser, sim4)
+    buttons = browser.find_elements("css selector", "button.stop, button.off, #stop-all, #off-all")
+    assert len(buttons) == 2 * 4 + 2
+    assert all(not b.is_enabled() for b in buttons)
+
+    # the page's own origin asks anyway: refused, and the motor goes on
+    status, body = browser.execute_async_script(POST_STOP, ["sim/1"])
+    assert status == 403, body
+    assert "read-only" in body
+    status, body = browser.execute_async_script(POST_STOP, "all")
+    assert status == 403, body
+    before = rows(browser)["sim/1"]
+    time.sleep(1.0)
+    after = rows(browser)["sim/1"]
+    assert field(before, "angle_deg") != field(after, "angle_deg"), (before, after)
+
+
+def stopped(driver: WebDriver, keys: list[str]) -> bool:
+    now = rows(driver)
+    return all(field(now[k], "speed_dps") == 0 for k in keys)
+
+
+def test_stop_buttons_stop_motors(browser: WebDriver) -> None:
+    with dashboard("--sim", "4", "--allow-commands", *LISTEN) as served:
+        open_page(browser, served)
+        assert browser.find_element("id", "mode").text == "commands allowed"
+        buttons = browser.find_elements("css selector", "button.stop, button.off, #stop-all, #off-all")
+        assert buttons and all(b.is_enabled() for b in buttons)
+
+        # one motor's stop: it stops and stays stopped, the others go on
+        browser.find_element("css selector", 'button.stop[data-key="sim/2"]').click()
+        wait_for(browser, lambda d: "acknowledged by sim/2" in d.find_element("id", "message").text, "no ack")
+        assert "not acknowledged" not in browser.find_element("id", "message").text
+        wait_for(browser, lambda d: stopped(d, ["sim/2"]), "sim/2 never stopped")
+        others = ["sim/1", "sim/3", "sim/4"]
+        start = rows(browser)
+        for _ in range(10):  # a second
+            time.sleep(0.1)
+            assert stopped(browser, ["sim/2"]), rows(browser)["sim/2"]
+        end = rows(browser)
+        assert field(start["sim/2"], "angle_deg") == field(end["sim/2"], "angle_deg")
+        for key in others:
+            assert field(start[key], "angle_deg") != field(end[key], "angle_deg"), (key, start[key], end[key])
+
+        # stop all: every one
+        browser.find_element("id", "stop-all").click()
+        wait_for(
+            browser,
+            lambda d: "acknowledged by sim/1, sim/2, sim/3, sim/4" in d.find_element("id", "message").text,
+            "stop all not acknowledged",
+        )
+        wait_for(browser, lambda d: stopped(d, KEYS), "not all stopped")
+        start = rows(browser)
+        time.sleep(1.0)
+        assert stopped(browser, KEYS), rows(browser)
+        end = rows(browser)
+        for key in KEYS:
+            assert field(start[key], "angle_deg") == field(end[key], "angle_deg"), key
+
+
+def test_page_works_on_trio(browser: WebDriver) -> None:
+    with dashboard("--sim", "4", "--backend", "trio", *LISTEN) as served:
+        open_page(browser, served)
+        assert sorted(rows(browser)) == KEYS
+        before = rows(browser)["sim/1"]["fields"]
+        wait_for(browser, lambda d: rows(d)["sim/1"]["fields"] != before, "no update on trio")
