@@ -34,19 +34,19 @@ def _found(*names: str) -> str | None:
 
 def browser_paths() -> tuple[str, str]:
     """(chromium, chromedriver); a skip, or where the browser is required a failure, without them."""
-    missing = []
+    missing, hints = [], []
     try:
         import selenium  # noqa: F401
     except ModuleNotFoundError:
-        missing.append("selenium (pip install 'servobus[test]')")
+        missing.append("selenium")
+        hints.append("pip install 'servobus[test]'")
     chromium = _found("chromium", "chromium-browser")
     driver = _found("chromedriver")
-    if chromium is None:
-        missing.append(f"chromium ({INSTALL})")
-    if driver is None:
-        missing.append(f"chromedriver ({INSTALL})")
+    if chromium is None or driver is None:
+        missing += [name for name, path in (("chromium", chromium), ("chromedriver", driver)) if not path]
+        hints.append(INSTALL)
     if missing:
-        why = f"no headless Chromium for the page tests: {', '.join(missing)} not found"
+        why = f"no headless Chromium for the page tests: {', '.join(missing)} not found ({'; '.join(hints)})"
         if os.environ.get("SERVOBUS_REQUIRE_BROWSER") == "1":
             pytest.fail(why + " (SERVOBUS_REQUIRE_BROWSER=1)", pytrace=False)
         pytest.skip(why)
