@@ -127,11 +127,12 @@ function renderMotors(update) {
     cell("temperature").textContent = fmt(m.temperature_c, 0);
     cell("reply").textContent = m.reply || "–";
     cell("age").textContent = m.age_s === null ? "–" : m.age_s.toFixed(2) + " s";
+    // (a no-break space in each "name value": a narrow cell wraps between fields, not inside one)
     cell("fields").textContent = Object.entries(m.fields)
       .filter(([name]) => name !== "temperature_c")
-      .map(([name, value]) => `${name} ${fmt(value)}`).join("  ");
+      .map(([name, value]) => `${name}\u00a0${fmt(value)}`).join("  ");
     cell("setpoint").textContent = m.setpoint
-      ? m.setpoint.name + " " + Object.entries(m.setpoint.fields).map(([k, v]) => `${k} ${fmt(v)}`).join(" ")
+      ? m.setpoint.name + " " + Object.entries(m.setpoint.fields).map(([k, v]) => `${k}\u00a0${fmt(v)}`).join(" ")
       : "–";
   }
   const online = update.motors.filter((m) => m.status === "online").length;
@@ -230,11 +231,16 @@ function drawPlot(id, title, lines, height) {
       width: l.dash ? 1 : 1.5,
       dash: l.dash ? [6, 4] : undefined,
       spanGaps: true,
+      scale: l.scale || "y",
     }))];
+    // (a line of another scale, e.g. requests/s beside a load in %, gets its own axis on the right)
+    const scales = [...new Set(series.slice(1).map((s) => s.scale))];
+    const yAxes = (scales.length ? scales : ["y"]).map((scale, i) => ({ scale, side: i ? 1 : 3, grid: { show: !i } }));
+    const fromZero = { range: (u, min, max) => [0, Math.max(max, 1) * 1.1] };  // (rates: no zoom on jitter)
     plot = new uPlot({
       title, width: Math.floor(box.clientWidth), height,
-      scales: { x: { time: false } },
-      axes: [{ label: "t (s)" }, {}],
+      scales: { x: { time: false }, ...Object.fromEntries(scales.filter((k) => k !== "y").map((k) => [k, fromZero])) },
+      axes: [{ label: "t (s)" }, ...yAxes],
       series,
     }, data, box);
     state.plots[id] = plot;
@@ -261,7 +267,8 @@ function renderPlots() {
   const bus = [], loop = [];
   for (const [key, values] of state.busSeries) {
     const [name, what] = key.split("|");
-    const line = { label: `${name} ${{ load: "load %", rate: "requests/s", late: "tick late p99 ms", age: "state age p99 ms" }[what]}`, values };
+    const line = { label: `${name} ${{ load: "load %", rate: "requests/s", late: "tick late p99 ms", age: "state age p99 ms" }[what]}`, values,
+                   scale: what === "rate" ? "rate" : "y" };
     (what === "load" || what === "rate" ? bus : loop).push(line);
   }
   drawPlot("plot-bus", "bus load and request rate", bus, 180);
