@@ -231,6 +231,7 @@ function drawPlot(id, title, lines, height) {
       width: l.dash ? 1 : 1.5,
       dash: l.dash ? [6, 4] : undefined,
       spanGaps: true,
+      points: { show: false },  // (uPlot dots a sparse line: a slow first second, a loaded host)
       scale: l.scale || "y",
     }))];
     // (a line of another scale, e.g. requests/s beside a load in %, gets its own axis on the right)
