@@ -76,11 +76,14 @@ def chromium(width: int = WIDTH, height: int = HEIGHT) -> Iterator[WebDriver]:
         driver.quit()
 
 
-def wait_for(driver: WebDriver, what: Callable[[WebDriver], T], message: str, timeout_s: float = 10.0) -> T:
+def wait_for(
+    driver: WebDriver, what: Callable[[WebDriver], T | None], message: str, timeout_s: float = 10.0
+) -> T:
     """``what(driver)`` once it is truthy, waited for at most ``timeout_s``."""
     from selenium.webdriver.support.ui import WebDriverWait
 
-    result: T = WebDriverWait(driver, timeout_s, poll_frequency=0.05).until(what, message)
+    result = WebDriverWait(driver, timeout_s, poll_frequency=0.05).until(what, message)
+    assert result is not None  # (until returns only a truthy value)
     return result
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import re
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING
 
 import pytest
@@ -85,6 +85,11 @@ def sweeps(driver: WebDriver, keys: list[str], seconds: float = 1.0) -> dict[str
     return {k: max(v) - min(v) for k, v in seen.items()}
 
 
+def frames(driver: WebDriver) -> list[dict[str, str]]:
+    found: list[dict[str, str]] = script(driver, FRAMES)
+    return found
+
+
 def open_page(driver: WebDriver, served: Served, motors: int = 4) -> None:
     """Load the page and wait until it is live with ``motors`` rows."""
     driver.get(served.url)
@@ -128,29 +133,30 @@ def test_numbers_and_plot_change_over_3_s(browser: WebDriver, sim4: Served) -> N
 def test_frame_view_shows_decoded_frames_and_filters(browser: WebDriver, sim4: Served) -> None:
     open_page(browser, sim4)
 
-    def names(driver: WebDriver) -> dict[str, str]:
-        return {f["name"]: f["dir"] for f in script(driver, FRAMES)}
+    def decoded(driver: WebDriver) -> dict[str, str] | None:
+        """The frames' decoded names and directions, once motor 1's set-point is among them."""
+        found = {f["name"]: f["dir"] for f in frames(driver)}
+        return found if "AbsolutePositionControl (motor 1)" in found else None
 
-    seen = wait_for(
-        browser,
-        lambda d: (found := names(d)) and "AbsolutePositionControl (motor 1)" in found and found,
-        "no decoded frames",
-    )
+    def shown(count: int) -> Callable[[WebDriver], list[dict[str, str]] | None]:
+        return lambda driver: found if len(found := frames(driver)) == count else None
+
+    seen = wait_for(browser, decoded, "no decoded frames")
     assert seen["StatusReply (motor 1)"] == "rx"
     assert seen["AbsolutePositionControl (motor 1)"] == "tx"
     assert {f"StatusReply (motor {n})" for n in range(1, 5)} <= set(seen)
 
     box = browser.find_element("id", "frame-filter")
     box.send_keys("0x241")
-    narrowed = wait_for(browser, lambda d: len(found := script(d, FRAMES)) == 1 and found, "filter 0x241")
+    narrowed = wait_for(browser, shown(1), "filter 0x241")
     assert narrowed[0]["name"] == "StatusReply (motor 1)" and narrowed[0]["id"] == "0x241"
     box.clear()
     box.send_keys("tx")
-    tx = wait_for(browser, lambda d: len(found := script(d, FRAMES)) == 4 and found, "filter tx")
+    tx = wait_for(browser, shown(4), "filter tx")
     assert {f["dir"] for f in tx} == {"tx"}
     assert "4 of 8" in browser.find_element("id", "frame-count").text
     box.clear()
-    wait_for(browser, lambda d: len(script(d, FRAMES)) == 8, "filter cleared")
+    wait_for(browser, shown(8), "filter cleared")
 
 
 POST_STOP = """
