@@ -113,6 +113,21 @@ def test_page_names_every_motor(browser: WebDriver, sim4: Served) -> None:
     assert browser.find_element("id", "mode").text == "read-only"
 
 
+# How many pixels of a plot's canvas are about ``rgb`` (a line's colour, anti-aliased at its edges).
+INKED = """
+const [id, rgb] = arguments;
+const canvas = document.querySelector('#' + id + ' .uplot canvas');
+const px = canvas.getContext('2d').getImageData(0, 0, canvas.width, canvas.height).data;
+let n = 0;
+for (let i = 0; i < px.length; i += 4) {
+  if (px[i + 3] > 200 && [0, 1, 2].every((c) => Math.abs(px[i + c] - rgb[c]) < 24)) n++;
+}
+return n;
+"""
+SIM1_BLUE = (0x1F, 0x77, 0xB4)  # the page's first colour: sim/1's line, the bus's load, the loop's lateness
+MIN_INK = 200  # pixels: a line across the plot, not a legend's swatch
+
+
 def test_numbers_and_plot_change_over_3_s(browser: WebDriver, sim4: Served) -> None:
     open_page(browser, sim4)
     canvas = "return document.querySelector('#plot .uplot canvas').toDataURL();"
@@ -125,9 +140,11 @@ def test_numbers_and_plot_change_over_3_s(browser: WebDriver, sim4: Served) -> N
         assert before[key]["fields"] != after[key]["fields"], (key, before[key], after[key])
         assert swept[key] > MOVING_DEG, swept
     assert picture != later, "the plot's canvas did not change in 3 s"
-    # the plots of the buses and the loop are drawn too
-    for plot in ("plot-bus", "plot-loop"):
-        assert browser.find_elements("css selector", f"#{plot} .uplot canvas"), plot
+    # its lines are drawn (not only axes that follow the time): sim/1's colour across the canvas, and
+    # the buses' and the loop's plots have lines too
+    assert script(browser, INKED, "plot", SIM1_BLUE) > MIN_INK, "no sim/1 line in the plot"
+    assert script(browser, INKED, "plot-bus", SIM1_BLUE) > MIN_INK, "no line in the bus plot"
+    assert script(browser, INKED, "plot-loop", SIM1_BLUE) > MIN_INK, "no line in the loop plot"
 
 
 def test_frame_view_shows_decoded_frames_and_filters(browser: WebDriver, sim4: Served) -> None:
