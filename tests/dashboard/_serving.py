@@ -14,6 +14,7 @@ import tempfile
 import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+from typing import IO
 
 # (the package's own entry point, whether or not the ``servobus`` script is on PATH)
 COMMAND = [sys.executable, "-c", "import sys; from servobus.cli import main; sys.exit(main())", "dashboard"]
@@ -27,7 +28,7 @@ class Served:
     process: subprocess.Popen[bytes]
     url: str
     first_line: str
-    _stderr: tempfile._TemporaryFileWrapper[bytes]
+    _stderr: IO[bytes]
 
     def stderr(self) -> str:
         """What it wrote on stderr so far (for a failing test's message)."""

@@ -53,6 +53,7 @@ def sim4(browser: WebDriver) -> Iterator[Served]:
     """A read-only dashboard of 4 moving simulated motors (nothing here stops them)."""
     with dashboard("--sim", "4", *LISTEN) as served:
         yield served
+        assert "Traceback" not in served.stderr(), served.stderr()
 
 
 def rows(driver: WebDriver) -> dict[str, dict[str, str]]:
@@ -235,6 +236,12 @@ def test_stop_buttons_stop_motors(browser: WebDriver) -> None:
         assert stopped(browser, KEYS), rows(browser)
         assert all(swept[k] <= STILL_DEG for k in KEYS), swept
 
+        # a motor's off is sent and acknowledged too
+        browser.find_element("css selector", 'button.off[data-key="sim/3"]').click()
+        wait_for(browser, lambda d: d.find_element("id", "message").text.startswith("off: "), "no off")
+        assert browser.find_element("id", "message").text == "off: acknowledged by sim/3"
+        assert "Traceback" not in served.stderr(), served.stderr()
+
 
 def test_page_works_on_trio(browser: WebDriver) -> None:
     with dashboard("--sim", "4", "--backend", "trio", *LISTEN) as served:
@@ -242,3 +249,4 @@ def test_page_works_on_trio(browser: WebDriver) -> None:
         assert sorted(rows(browser)) == KEYS
         before = rows(browser)["sim/1"]["fields"]
         wait_for(browser, lambda d: rows(d)["sim/1"]["fields"] != before, "no update on trio")
+        assert "Traceback" not in served.stderr(), served.stderr()
