@@ -148,6 +148,39 @@ def test_numbers_and_plot_change_over_3_s(browser: WebDriver, sim4: Served) -> N
     assert script(browser, INKED, "plot-loop", SIM1_BLUE) > MIN_INK, "no line in the loop plot"
 
 
+LEGEND = "return [...document.querySelectorAll('#plot .u-legend .u-label')].map((l) => l.textContent);"
+
+
+def test_plot_shows_a_chosen_field_of_chosen_motors_beside_its_set_point(
+    browser: WebDriver, sim4: Served
+) -> None:
+    from selenium.webdriver.support.ui import Select
+
+    open_page(browser, sim4)
+    wait_for(
+        browser, lambda d: d.find_elements("css selector", '#field option[value="angle_deg"]'), "no field"
+    )
+    Select(browser.find_element("id", "field")).select_by_value("angle_deg")
+
+    def legend(driver: WebDriver) -> list[str] | None:
+        found: list[str] = script(driver, LEGEND)
+        return found if "sim/4 set-point" in found else None
+
+    labels = wait_for(browser, legend, "no set-point in the legend")
+    assert labels == ["t (s)"] + [
+        f"sim/{n} {what}" for n in range(1, 5) for what in ("angle_deg", "set-point")
+    ]
+
+    motors = Select(browser.find_element("id", "plot-motors"))
+    motors.deselect_all()
+    motors.select_by_value("sim/2")
+    wait_for(
+        browser, lambda d: script(d, LEGEND) == ["t (s)", "sim/2 angle_deg", "sim/2 set-point"], "sim/2 only"
+    )
+    browser.find_element("id", "show-setpoints").click()
+    wait_for(browser, lambda d: script(d, LEGEND) == ["t (s)", "sim/2 angle_deg"], "set-points hidden")
+
+
 def test_frame_view_shows_decoded_frames_and_filters(browser: WebDriver, sim4: Served) -> None:
     open_page(browser, sim4)
 
