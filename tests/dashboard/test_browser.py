@@ -75,8 +75,7 @@ STILL_DEG, MOVING_DEG = 2.0, 10.0
 
 
 def sweeps(driver: WebDriver, keys: list[str], seconds: float = 1.0) -> dict[str, float]:
-    """How far each motor's angle ranged over ``seconds`` (sampled each 0.1 s), checking on the way
-    that the motors that were stopped stay so."""
+    """How far each motor's angle ranged over ``seconds`` (sampled each 0.1 s)."""
     seen: dict[str, list[float]] = {k: [] for k in keys}
     for _ in range(round(seconds / 0.1)):
         now = rows(driver)
@@ -93,12 +92,13 @@ def frames(driver: WebDriver) -> list[dict[str, str]]:
 
 def open_page(driver: WebDriver, served: Served, motors: int = 4) -> None:
     """Load the page and wait until it is live with ``motors`` rows."""
+    from selenium.common.exceptions import TimeoutException
+
     driver.get(served.url)
-    wait_for(
-        driver,
-        lambda d: d.find_element("id", "conn").text == "live",
-        f"#conn never said live; the dashboard's stderr: {served.stderr()}",
-    )
+    try:
+        wait_for(driver, lambda d: d.find_element("id", "conn").text == "live", "#conn never said live")
+    except TimeoutException as exc:
+        raise AssertionError(f"{exc.msg}; the dashboard's stderr: {served.stderr()!r}") from None
     wait_for(driver, lambda d: len(rows(d)) == motors, f"never {motors} motor rows")
 
 
