@@ -129,11 +129,12 @@ function renderMotors(update) {
     cell("temperature").textContent = fmt(m.temperature_c, 0);
     cell("reply").textContent = m.reply || "–";
     cell("age").textContent = m.age_s === null ? "–" : m.age_s.toFixed(2) + " s";
+    // (a no-break space in each "name value": a narrow cell wraps between fields, not inside one)
     cell("fields").textContent = Object.entries(m.fields)
       .filter(([name]) => name !== "temperature_c")
-      .map(([name, value]) => `${name} ${fmt(value)}`).join("  ");
+      .map(([name, value]) => `${name}\u00a0${fmt(value)}`).join("  ");
     cell("setpoint").textContent = m.setpoint
-      ? m.setpoint.name + " " + Object.entries(m.setpoint.fields).map(([k, v]) => `${k} ${fmt(v)}`).join(" ")
+      ? m.setpoint.name + " " + Object.entries(m.setpoint.fields).map(([k, v]) => `${k}\u00a0${fmt(v)}`).join(" ")
       : "–";
   }
   const online = update.motors.filter((m) => m.status === "online").length;
@@ -233,16 +234,19 @@ function drawPlot(id, title, lines, height) {
       width: l.dash ? 1 : 1.5,
       dash: l.dash ? [6, 4] : undefined,
       spanGaps: true,
+      points: { show: false },  // (uPlot dots a sparse line: a slow first second, a loaded host)
       scale: l.scale || "y",
     }))];
-    // one axis per unit: the first on the left, the others on the right
+    // one axis per unit: the first on the left, the others on the right; a unit's scale (all
+    // counts, rates and times here) from 0 (no zoom on jitter); "y" (a motor's field) as it comes
     const units = [...new Set(lines.map((l) => l.scale || "y"))];
     const axes = units.map((unit, i) => ({
       scale: unit, side: i ? 1 : 3, label: unit === "y" ? undefined : unit, grid: { show: i === 0 },
     }));
+    const fromZero = { range: (u, min, max) => [0, Math.max(max, 1) * 1.1] };
     plot = new uPlot({
       title, width: Math.floor(box.clientWidth), height,
-      scales: { x: { time: false } },
+      scales: { x: { time: false }, ...Object.fromEntries(units.filter((k) => k !== "y").map((k) => [k, fromZero])) },
       axes: [{ label: "t (s)" }, ...(axes.length ? axes : [{}])],
       series,
     }, data, box);
