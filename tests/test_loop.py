@@ -485,3 +485,25 @@ async def test_a_second_iteration_goes_on_on_the_same_grid() -> None:
     assert indices == [[0, 1, 2], [4, 5], [7, 8]]
     metrics = loop.metrics()
     assert (metrics.ticks, metrics.skipped, metrics.overruns, metrics.late_ticks) == (7, 2, 2, 2)
+
+
+async def test_drop_takes_back_the_commands_of_a_motor_that_have_not_left() -> None:
+    """What a stop from elsewhere needs: the set-point the body gave for the next deadline is not
+    sent after the stop (Loop.drop; counted superseded); the other motors' commands leave."""
+    from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+    from servobus.sim.plant import SpeedControl
+    from servobus.transports.sim import SimTransport
+
+    devices = [MyActuatorMotor(1), MyActuatorMotor(2)]
+    async with Bus(SimTransport(devices=devices), safe=None) as bus:
+        one, two = bus.motor("myactuator", 1), bus.motor("myactuator", 2)
+        loop = Loop(100)
+        async with loop:
+            async for tick in loop.ticks(3):
+                if tick.index == 0:
+                    tick.command(one, ma.SpeedControl(speed_dps=30.0))
+                    tick.command(two, ma.SpeedControl(speed_dps=30.0))
+                    assert loop.drop([one]) == 1 and loop.drop([one]) == 0
+        await anyio.sleep(0.02)
+    assert not isinstance(devices[0].control, SpeedControl) and isinstance(devices[1].control, SpeedControl)
+    assert loop.metrics().superseded == 1
