@@ -1,10 +1,10 @@
 """What the dashboard shows, gathered beside the control loop and sampled for the page (sans-IO).
 
-The hot path pays one dictionary store per decoded reply (:meth:`Board.watch`'s subscriber) and one
-per frame (:meth:`Board.tap`'s callback): the latest of each is kept, nothing is decoded or copied
-there. Everything else (the rows, the frames' names, the rates, the JSON) is made when the page asks,
-at most once per update period (:meth:`Board.update`), however many pages are open, and not at all
-while none is.
+The hot path pays a dictionary store or two per decoded reply (:meth:`Board.watch`'s subscriber)
+and per frame (:meth:`Board.tap`'s callbacks: the frame, and a command sent, the Bus's own request
+object): the latest of each is kept, nothing is decoded or copied there. Everything else (the rows,
+the frames' names, the rates, the JSON) is made when a page asks, at most once per update period
+(:meth:`Board.update`) however many pages are open, and not at all while none is.
 """
 
 from __future__ import annotations
@@ -50,9 +50,11 @@ class Watched:
         motor_id: its id.
         motor: the Bus's Motor (or a bridge's RemoteMotor), what the page's stop goes to.
         reply: its latest decoded reply (any traffic: a reply, a stream frame, another host's).
-        replies: how many were seen (counted at each update, not per frame).
         status: ``"online"``, ``"offline"``, ``"restarted"``, or ``"unknown"`` before the watchdog said.
         reason: the watchdog's words for the status.
+        replied_at: when its latest reply came, on the board's clock, where the board stamps it
+            (``stamped``: a bridge's motor; a Bus's Motor keeps ``last_seen`` itself).
+        restarted_at: when the watchdog last said it restarted (the board's clock).
     """
 
     key: str
@@ -65,7 +67,6 @@ class Watched:
     reason: str = ""
     replied_at: float | None = None
     restarted_at: float | None = None
-    #: its replies are stamped by the board (a bridge's motor; a Bus's keeps ``last_seen`` itself)
     stamped: bool = False
 
 
@@ -116,7 +117,7 @@ class Board:
         self.period_s = 1.0 / update_hz
         self._clock = clock
         self._buses: dict[str, _Bus] = {}
-        self._links: dict[str, _Bus] = {}  # by link name, until the Bus is watched
+        self._links: dict[int, tuple[TapLink, _Bus]] = {}  # the taps made, until their Bus is watched
         self._motors: dict[str, Watched] = {}
         self._by_motor: dict[int, Watched] = {}
         self._loops: list[Loop] = []
@@ -132,7 +133,7 @@ class Board:
     def tap(self, link: Any) -> TapLink:
         """``link`` wrapped so that the board sees its frames, both ways (give the result to the
         Bus): the raw frame view lists them by identifier, like ``python -m can.viewer``."""
-        entry = self._links.setdefault(link.name, _Bus(link.name, None))
+        entry = _Bus(link.name, None)
         frames, counts, commands = entry.frames, entry.frame_counts, entry.commands
 
         def seen(frame: Frame, received: bool, _at: float) -> None:
@@ -144,7 +145,9 @@ class Board:
             if getattr(request, "writes", False):
                 commands[id(request.codec)] = request.command
 
-        return TapLink(link, seen, self._now, sent)
+        tapped = TapLink(link, seen, self._now, sent)
+        self._links[id(tapped)] = (tapped, entry)  # (the tap kept: its id is not reused meanwhile)
+        return tapped
 
     def watch(self, bus: Any, *, name: str | None = None) -> None:
         """Show ``bus`` (a :class:`servobus.Bus`, or a bridge's ``RemoteBus``) and its motors: every
@@ -157,8 +160,8 @@ class Board:
         if label in self._buses:
             raise ValueError(f"a bus named {label!r} is on the board already")
         link = getattr(getattr(bus, "engine", None), "link", None)
-        entry = self._links.pop(link.name, None) if isinstance(link, TapLink) else None
-        entry = entry or _Bus(label, bus)
+        tapped = self._links.pop(id(link), None)
+        entry = tapped[1] if tapped is not None else _Bus(label, bus)
         entry.name, entry.source = label, bus
         self._buses[label] = entry
         if self._clock is None and hasattr(bus, "time"):
