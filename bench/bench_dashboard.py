@@ -247,6 +247,7 @@ def demo_run(seconds: float, page: Page | None) -> dict[str, Any]:
         "state_age_p99_ms": summary["state_age_p99_ms"],
         "cpu_pct": summary["cpu_pct"],
         "missed_ticks": summary["missed_ticks"],
+        "preempted": summary["preempted"],
         "errors": summary["errors"],
         "load_before": load,
         **extra,

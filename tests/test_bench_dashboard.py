@@ -76,3 +76,36 @@ def test_medians_ratios_and_the_target(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setitem(b.RUNS, "demo", _fake({"without": [1000, 1000, 1000], "with": [900, 950, 940]}))
     missed = b.measure("demo", cfg, b.SseClient(), lambda _: None)["demo_targets_missed"]
     assert missed == ["dashboard.demo_ticks_s_ratio = 0.94 (target >= 0.95)"]  # host µs/tick: info only
+
+
+def test_the_boards_short_way_to_a_messages_numbers_is_the_long_ways() -> None:
+    """The board's fast path for a reply's numbers (bench_dashboard's cost) gives what it replaced."""
+    import dataclasses
+    import inspect
+
+    from servobus.dashboard._board import _numbers, _numbers_of
+    from servobus.protocols import hollow, lk
+    from servobus.protocols import myactuator as ma
+    from servobus.tools.logs import message_values
+
+    samples: list[Any] = [
+        ma.StatusReply(temperature_c=25, current_a=0.5, speed_dps=3.0, angle_deg=2.0),  # (an enum field)
+        ma.AbsolutePositionControl(angle_deg=3.0, max_speed_dps=500.0),
+    ]
+    for module in (ma, hollow, lk):
+        for cls in vars(module).values():
+            if inspect.isclass(cls) and dataclasses.is_dataclass(cls):
+                try:
+                    samples.append(cls())
+                except TypeError:  # (a message with required fields)
+                    continue
+    assert len(samples) > 20
+    for message in samples:
+        short, long = _numbers_of(message), _numbers(message_values(message))
+        assert list(short.items()) == list(long.items()), message
+    assert _numbers_of(samples[0]) == {
+        "temperature_c": 25,
+        "current_a": 0.5,
+        "speed_dps": 3.0,
+        "angle_deg": 2.0,
+    }
