@@ -1,7 +1,8 @@
 """The dashboard's cost on the control loop: ``servobus demo`` and loop1k with a page open, and without.
 
-What is measured (runs without and with the page alternated, A B A B ..., medians; the ratios are with /
-without, of the medians of the same invocation):
+What is measured (rounds of runs: without the page, with it open in a browser, and with only an SSE
+client beside them (the server's own cost), their order rotated each round; medians; the ratios are
+with / without, of the medians of the same invocation):
 
 * ``dashboard.demo_*``: ``servobus demo --duration S --json`` (32 simulated MyActuator motors on 11
   buses at 1 kHz, the simulator in the same process), and the same with ``--dashboard 127.0.0.1:0``
@@ -15,8 +16,10 @@ without, of the medians of the same invocation):
   measured window is with the page. ``loop1k_ticks_s`` (achieved rate), ``loop1k_state_age_p99_ms``,
   ``loop1k_host_cpu_pct`` (the host process's CPU, % of one core), and ``loop1k_on_time_pct`` (info).
   ``loop1k_updates_s``: the updates the host made per second of the window (the page's stream).
-* ``*_ratio``: with / without. Target (issue 40): the tick rates and loop1k's state age p99 and host
-  CPU within 5 % of without (tick rate ratio >= 0.95; age and CPU ratios <= 1.05).
+* ``*_ratio``: with the page / without. Target (issue 40): the tick rates and loop1k's state age p99
+  and host CPU within 5 % of without (tick rate ratio >= 0.95; age and CPU ratios <= 1.05).
+  ``*_sse_ratio`` (information): with the SSE client only / without: the dashboard's cost in the loop's
+  process (its updates, their JSON and their sending, the tap on every frame), the browser's CPU apart.
 
 "Open" is a real page: Debian's headless Chromium driven by selenium (chromedriver's path given, no
 browser download), which loads the page and gets its server-sent updates (30 a second) and draws them
@@ -292,44 +295,48 @@ COMPARED: dict[str, tuple[tuple[str, str], ...]] = {
 JUDGED = {"demo": ("ticks_s",), "loop1k": ("ticks_s", "state_age_p99_ms", "host_cpu_pct")}
 
 
-def measure(part: str, cfg: Config, page: Page, say: Callable[[str], None]) -> dict[str, Any]:
-    """``cfg.pairs`` runs without and with the page, alternated (A B, then B A: neither always first);
-    the medians, the ratios with / without, and the targets."""
-    runs: dict[str, list[dict[str, Any]]] = {"without": [], "with": []}
+def measure(part: str, cfg: Config, pages: Sequence[Page], say: Callable[[str], None]) -> dict[str, Any]:
+    """``cfg.pairs`` rounds of runs without the page and with each of ``pages`` (the real page first,
+    then the SSE client beside it when both are measured), their order rotated round by round; the
+    medians, the ratios with / without, and the targets (on the first page's)."""
+    variants: list[tuple[str, Page | None]] = [("without", None)]
+    variants += [("dashboard" if n == 0 else "sse", page) for n, page in enumerate(pages)]
+    runs: dict[str, list[dict[str, Any]]] = {name: [] for name, _ in variants}
     for i in range(cfg.pairs):
-        order = ("without", "with") if i % 2 == 0 else ("with", "without")
-        for which in order:
-            run = RUNS[part](cfg.seconds, page if which == "with" else None)
+        for which, page in variants[i % len(variants) :] + variants[: i % len(variants)]:
+            run = RUNS[part](cfg.seconds, page)
             runs[which].append(run)
             say(
-                f"  {part:<6} {which:<7} {i + 1}/{cfg.pairs}: "
+                f"  {part:<6} {which:<9} {i + 1}/{cfg.pairs}: "
                 + ", ".join(f"{k} {run[k]:,.2f}" for k, _ in COMPARED[part])
                 + (f", page cpu {run['page_cpu_pct']:.0f} %" if "page_cpu_pct" in run else "")
                 + f"; load {run['load_before'][0]:.2f}"
             )
     out: dict[str, Any] = {}
     for which, done in runs.items():
+        suffix = "" if which == "without" else f"_{which}"
         names = sorted({k for r in done for k, v in r.items() if isinstance(v, int | float)})
         for name in names:
             values = [r[name] for r in done if name in r]
-            suffix = "" if which == "without" else "_dashboard"
             out[f"{part}_{name}{suffix}"] = round(statistics.median(values), 3)
             out[f"{part}_{name}{suffix}_runs"] = [round(v, 3) for v in values]
-        out[f"{part}_load_before{'' if which == 'without' else '_dashboard'}"] = [
-            r["load_before"] for r in done
-        ]
+        out[f"{part}_load_before{suffix}"] = [r["load_before"] for r in done]
     missed = []
     for name, better in COMPARED[part]:
-        base, open_ = out[f"{part}_{name}"], out[f"{part}_{name}_dashboard"]
-        ratio = round(open_ / base, 4) if base else float("nan")
-        out[f"{part}_{name}_ratio"] = ratio
-        if name in JUDGED[part]:
-            ok = ratio >= TARGET_RATIO if better == "up" else ratio <= 2 - TARGET_RATIO
-            if not ok:
-                missed.append(
-                    f"{KEY}.{part}_{name}_ratio = {ratio} (target {'>=' if better == 'up' else '<='} "
-                    f"{TARGET_RATIO if better == 'up' else 2 - TARGET_RATIO:.2f})"
-                )
+        base = out[f"{part}_{name}"]
+        for which in runs:
+            if which == "without":
+                continue
+            suffix = "" if which == "dashboard" else f"_{which}"
+            ratio = round(out[f"{part}_{name}_{which}"] / base, 4) if base else float("nan")
+            out[f"{part}_{name}{suffix}_ratio"] = ratio
+            if which == "dashboard" and name in JUDGED[part]:
+                ok = ratio >= TARGET_RATIO if better == "up" else ratio <= 2 - TARGET_RATIO
+                if not ok:
+                    missed.append(
+                        f"{KEY}.{part}_{name}_ratio = {ratio} (target {'>=' if better == 'up' else '<='} "
+                        f"{TARGET_RATIO if better == 'up' else 2 - TARGET_RATIO:.2f})"
+                    )
     out[f"{part}_targets_missed"] = missed
     return out
 
@@ -342,18 +349,25 @@ def render_markdown(f: dict[str, Any], info: dict[str, Any]) -> str:
         "state_age_p99_ms": ("state age p99", "{:.2f} ms"),
         "host_cpu_pct": ("host CPU", "{:.1f} %"),
     }
+    sse = info.get("server_only") is not None
     rows = []
     for part in info["parts"]:
         for name, _ in COMPARED[part]:
             label, form = labels[name]
             judged = name in JUDGED[part]
+            ratio = f"{f[f'{part}_{name}_ratio']:.3f}"
             rows.append(
                 (
                     f"{part}: {label}" + ("" if judged else " (info)"),
                     f"`{KEY}.{part}_{name}_ratio`",
                     form.format(f[f"{part}_{name}"]),
                     form.format(f[f"{part}_{name}_dashboard"]),
-                    f"**{f[f'{part}_{name}_ratio']:.3f}**" if judged else f"{f[f'{part}_{name}_ratio']:.3f}",
+                    f"**{ratio}**" if judged else ratio,
+                    *(
+                        [f"{form.format(f[f'{part}_{name}_sse'])} ({f[f'{part}_{name}_sse_ratio']:.3f})"]
+                        if sse
+                        else []
+                    ),
                     ", ".join(form.format(v) for v in f[f"{part}_{name}_runs"]),
                     ", ".join(form.format(v) for v in f[f"{part}_{name}_dashboard_runs"]),
                 )
@@ -362,21 +376,29 @@ def render_markdown(f: dict[str, Any], info: dict[str, Any]) -> str:
     if "demo" in info["parts"]:
         notes.append(
             f"The demo's page was live {f['demo_page_live_after_s_dashboard']:.2f} s (median) after its URL "
-            f"line, of a {info['seconds']:g} s run; the browser's processes used "
+            f"line, of a {info['seconds']:g} s run (open "
+            f"{100 * max(0.0, 1 - f['demo_page_live_after_s_dashboard'] / info['seconds']):.0f} % of it; the "
+            "demo's start, before its first tick, is part of that); the page's processes used "
             f"{f['demo_page_cpu_pct_dashboard']:.0f} % of a core meanwhile."
         )
     if "loop1k" in info["parts"]:
         notes.append(
             f"loop1k with the page: {f['loop1k_updates_s_dashboard']:.1f} updates/s made in the measured "
             f"window (the page's stream); ticks on time {f['loop1k_on_time_pct']:.2f} % without, "
-            f"{f['loop1k_on_time_pct_dashboard']:.2f} % with; the browser used "
+            f"{f['loop1k_on_time_pct_dashboard']:.2f} % with; the page's processes used "
             f"{f['loop1k_page_cpu_pct_dashboard']:.0f} % of a core."
+        )
+    if sse:
+        notes.append(
+            "Server only: the same runs with an SSE client in another process instead of the browser "
+            f"({info['server_only']}): the dashboard's own cost in the loop's process, without the "
+            "browser's CPU on the machine's cores (information, in the same rounds)."
         )
     missed = f["targets_missed"]
     lines = [
         *_meta.header_lines("## The dashboard's cost on the loop (`bench/bench_dashboard.py`)", info),
-        f"- The page: {info['page']}; {info['pairs']} pairs of {info['seconds']:g} s runs per part, "
-        "alternated",
+        f"- The page: {info['page']}; {info['pairs']} rounds of {info['seconds']:g} s runs per part "
+        "(without, with the page" + (", with the SSE client only" if sse else "") + "; their order rotated)",
         "",
         "What is measured" + doc.rstrip(),
         "",
@@ -387,11 +409,12 @@ def render_markdown(f: dict[str, Any], info: dict[str, Any]) -> str:
                 "without",
                 "with the page",
                 "ratio",
+                *(["server only: SSE client (ratio)"] if sse else []),
                 "runs without",
                 "runs with",
             ],
             rows,
-            "llrrrll",
+            "llrrr" + ("r" if sse else "") + "ll",
         ),
         " ".join(notes),
         "",
@@ -420,6 +443,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parts = args.only or list(PARTS)
     say: Callable[[str], None] = lambda line: print(line, flush=True)  # noqa: E731
     page = make_page(args.page, say)
+    pages = [page] + ([SseClient()] if isinstance(page, Browser) and not args.quick else [])
     print(
         f"bench_dashboard ({cfg.mode}): {', '.join(parts)}, {cfg.pairs} pair(s) x {cfg.seconds:g} s; the "
         f"page: {page.kind}; load {load}",
@@ -428,7 +452,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     figures: dict[str, Any] = {}
     try:
         for part in parts:
-            figures |= measure(part, cfg, page, say)
+            figures |= measure(part, cfg, pages, say)
     finally:
         page.quit()
     figures["targets_missed"] = [m for part in parts for m in figures.pop(f"{part}_targets_missed")]
@@ -441,6 +465,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         pairs=cfg.pairs,
         seconds=cfg.seconds,
         page=page.kind,
+        server_only=SseClient.kind if len(pages) > 1 else None,
         load_average_at_start=load,
         statistic=f"median of {cfg.pairs} runs each, without and with the page alternated",
         runtime_s=round(time.perf_counter() - started, 1),
