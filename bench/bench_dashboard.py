@@ -1,8 +1,8 @@
 """The dashboard's cost on the control loop: ``servobus demo`` and loop1k with a page open, and without.
 
-What is measured (rounds of runs: without the page, with it open in a browser, and with only an SSE
-client beside them (the server's own cost), their order rotated each round; medians; the ratios are
-with / without, of the medians of the same invocation):
+What is measured (rounds of runs: without the dashboard, with its page open in a browser, and beside
+them with only an SSE client and with the dashboard served but no page, their order rotated each round;
+medians; the ratios are with / without, of the medians of the same invocation):
 
 * ``dashboard.demo_*``: ``servobus demo --duration S --json`` (32 simulated MyActuator motors on 11
   buses at 1 kHz, the simulator in the same process), and the same with ``--dashboard 127.0.0.1:0``
@@ -19,7 +19,9 @@ with / without, of the medians of the same invocation):
 * ``*_ratio``: with the page / without. Target (issue 40): the tick rates and loop1k's state age p99
   and host CPU within 5 % of without (tick rate ratio >= 0.95; age and CPU ratios <= 1.05).
   ``*_sse_ratio`` (information): with the SSE client only / without: the dashboard's cost in the loop's
-  process (its updates, their JSON and their sending, the tap on every frame), the browser's CPU apart.
+  process (its updates, their JSON and their sending, the tap on every frame), the browser's CPU apart;
+  ``*_unwatched_ratio`` (information): the dashboard served and its links tapped, no page: the tap's
+  cost on every frame alone.
 
 "Open" is a real page: Debian's headless Chromium driven by selenium (chromedriver's path given, no
 browser download), which loads the page and gets its server-sent updates (30 a second) and draws them
@@ -89,6 +91,7 @@ class Page:
     process. ``open(url)`` returns once updates flow; ``close()`` ends that page's stream."""
 
     kind = ""
+    label = ""  # its runs' suffix in results.json, when not the page measured (``dashboard``)
 
     def open(self, url: str) -> None:
         raise NotImplementedError
@@ -162,6 +165,7 @@ class SseClient(Page):
     written to a file: live once the first update is in it."""
 
     kind = "no browser: an SSE client in another process (curl -N on /api/events)"
+    label = "sse"
 
     def __init__(self) -> None:
         self.process: subprocess.Popen[bytes] | None = None
@@ -189,6 +193,27 @@ class SseClient(Page):
 
     def cpu_s(self) -> float:
         return self._spent + (_tree_cpu_s(self.process.pid) if self.process is not None else 0.0)
+
+
+class Unwatched(Page):
+    """No page: the dashboard served (its tap on every frame), nobody watching. loop1k's host waits for
+    a page's updates before it starts: three snapshots are asked for, then nothing more."""
+
+    kind = "no page: the dashboard served and its links tapped, nobody watching"
+    label = "unwatched"
+
+    def open(self, url: str) -> None:
+        import urllib.request
+
+        for _ in range(3):
+            with urllib.request.urlopen(url + "api/snapshot", timeout=30) as answer:
+                answer.read()
+
+    def close(self) -> None:
+        pass
+
+    def cpu_s(self) -> float:
+        return 0.0
 
 
 def make_page(kind: str, say: Callable[[str], None]) -> Page:
@@ -285,6 +310,8 @@ def loop1k_run(seconds: float, page: Page | None) -> dict[str, Any]:
     }
 
 
+#: the runs beside the page's (information): their label and header
+ALSO = {"sse": "SSE client", "unwatched": "served, no page"}
 RUNS: dict[str, Callable[[float, Page | None], dict[str, Any]]] = {"demo": demo_run, "loop1k": loop1k_run}
 #: per part: (figure, direction of "better") compared with / without; the first is the tick rate
 COMPARED: dict[str, tuple[tuple[str, str], ...]] = {
@@ -300,7 +327,7 @@ def measure(part: str, cfg: Config, pages: Sequence[Page], say: Callable[[str], 
     then the SSE client beside it when both are measured), their order rotated round by round; the
     medians, the ratios with / without, and the targets (on the first page's)."""
     variants: list[tuple[str, Page | None]] = [("without", None)]
-    variants += [("dashboard" if n == 0 else "sse", page) for n, page in enumerate(pages)]
+    variants += [("dashboard" if n == 0 else page.label, page) for n, page in enumerate(pages)]
     runs: dict[str, list[dict[str, Any]]] = {name: [] for name, _ in variants}
     for i in range(cfg.pairs):
         for which, page in variants[i % len(variants) :] + variants[: i % len(variants)]:
@@ -349,7 +376,7 @@ def render_markdown(f: dict[str, Any], info: dict[str, Any]) -> str:
         "state_age_p99_ms": ("state age p99", "{:.2f} ms"),
         "host_cpu_pct": ("host CPU", "{:.1f} %"),
     }
-    sse = info.get("server_only") is not None
+    also = [label for label in ALSO if label in info.get("also", ())]
     rows = []
     for part in info["parts"]:
         for name, _ in COMPARED[part]:
@@ -364,9 +391,8 @@ def render_markdown(f: dict[str, Any], info: dict[str, Any]) -> str:
                     form.format(f[f"{part}_{name}_dashboard"]),
                     f"**{ratio}**" if judged else ratio,
                     *(
-                        [f"{form.format(f[f'{part}_{name}_sse'])} ({f[f'{part}_{name}_sse_ratio']:.3f})"]
-                        if sse
-                        else []
+                        f"{form.format(f[f'{part}_{name}_{x}'])} ({f[f'{part}_{name}_{x}_ratio']:.3f})"
+                        for x in also
                     ),
                     ", ".join(form.format(v) for v in f[f"{part}_{name}_runs"]),
                     ", ".join(form.format(v) for v in f[f"{part}_{name}_dashboard_runs"]),
@@ -388,17 +414,18 @@ def render_markdown(f: dict[str, Any], info: dict[str, Any]) -> str:
             f"{f['loop1k_on_time_pct_dashboard']:.2f} % with; the page's processes used "
             f"{f['loop1k_page_cpu_pct_dashboard']:.0f} % of a core."
         )
-    if sse:
+    if also:
         notes.append(
-            "Server only: the same runs with an SSE client in another process instead of the browser "
-            f"({info['server_only']}): the dashboard's own cost in the loop's process, without the "
-            "browser's CPU on the machine's cores (information, in the same rounds)."
+            "Information, in the same rounds: *SSE client*, the same runs with curl taking the updates "
+            "instead of the browser (the dashboard's own cost in the loop's process, without the browser's "
+            "CPU on the machine's cores); *served, no page*, with the dashboard served and its links "
+            "tapped but nobody watching (the tap's cost on every frame alone)."
         )
     missed = f["targets_missed"]
     lines = [
         *_meta.header_lines("## The dashboard's cost on the loop (`bench/bench_dashboard.py`)", info),
         f"- The page: {info['page']}; {info['pairs']} rounds of {info['seconds']:g} s runs per part "
-        "(without, with the page" + (", with the SSE client only" if sse else "") + "; their order rotated)",
+        "(without, with the page" + "".join(f", {ALSO[label]}" for label in also) + "; their order rotated)",
         "",
         "What is measured" + doc.rstrip(),
         "",
@@ -409,12 +436,12 @@ def render_markdown(f: dict[str, Any], info: dict[str, Any]) -> str:
                 "without",
                 "with the page",
                 "ratio",
-                *(["server only: SSE client (ratio)"] if sse else []),
+                *(f"{ALSO[label]} (ratio)" for label in also),
                 "runs without",
                 "runs with",
             ],
             rows,
-            "llrrr" + ("r" if sse else "") + "ll",
+            "llrrr" + "r" * len(also) + "ll",
         ),
         " ".join(notes),
         "",
@@ -443,7 +470,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parts = args.only or list(PARTS)
     say: Callable[[str], None] = lambda line: print(line, flush=True)  # noqa: E731
     page = make_page(args.page, say)
-    pages = [page] + ([SseClient()] if isinstance(page, Browser) and not args.quick else [])
+    pages = [page] + ([SseClient(), Unwatched()] if isinstance(page, Browser) and not args.quick else [])
     print(
         f"bench_dashboard ({cfg.mode}): {', '.join(parts)}, {cfg.pairs} pair(s) x {cfg.seconds:g} s; the "
         f"page: {page.kind}; load {load}",
@@ -465,7 +492,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         pairs=cfg.pairs,
         seconds=cfg.seconds,
         page=page.kind,
-        server_only=SseClient.kind if len(pages) > 1 else None,
+        also=[page.label for page in pages[1:]],
         load_average_at_start=load,
         statistic=f"median of {cfg.pairs} runs each, without and with the page alternated",
         runtime_s=round(time.perf_counter() - started, 1),
