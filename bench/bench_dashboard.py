@@ -70,6 +70,7 @@ CHROMIUM = "/usr/bin/chromium"
 CHROMEDRIVER = "/usr/bin/chromedriver"
 SERVOBUS = [sys.executable, "-c", "import sys; from servobus.cli import main; sys.exit(main())"]
 PARTS = ("demo", "loop1k")
+OPEN_S = 60.0  # the longest a page may take to get its first update
 
 
 @dataclass(frozen=True, slots=True)
@@ -80,7 +81,7 @@ class Config:
 
 
 FULL = Config("full", pairs=5, seconds=15.0)
-QUICK = Config("quick", pairs=1, seconds=0.5)
+QUICK = Config("quick", pairs=1, seconds=2.0)  # (a page takes a second or two to open)
 
 
 # ============================================================================================ the page
@@ -93,7 +94,13 @@ class Page:
     kind = ""
     label = ""  # its runs' suffix in results.json, when not the page measured (``dashboard``)
 
-    def open(self, url: str) -> None:
+    def open(self, url: str, until: Callable[[], bool] = lambda: False) -> bool:
+        """Open the page at ``url``; True once updates flow, False if ``until()`` came first (what
+        serves it ended).
+
+        Raises:
+            RuntimeError: no update within OPEN_S.
+        """
         raise NotImplementedError
 
     def close(self) -> None:
@@ -134,20 +141,29 @@ class Browser(Page):
 
         options = webdriver.ChromeOptions()
         options.binary_location = CHROMIUM
+        options.page_load_strategy = "none"  # (open() waits for the page's first update itself)
         for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage"):
             options.add_argument(arg)
         self.driver = webdriver.Chrome(service=Service(executable_path=CHROMEDRIVER), options=options)
         self.driver.set_page_load_timeout(30)
         self.pid = self.driver.service.process.pid
 
-    def open(self, url: str) -> None:
+    def open(self, url: str, until: Callable[[], bool] = lambda: False) -> bool:
+        from selenium.common.exceptions import NoSuchElementException
         from selenium.webdriver.common.by import By
 
-        self.driver.get(url)
-        deadline = time.monotonic() + 30
-        while self.driver.find_element(By.ID, "conn").text != "live":  # (updates flow: the page's badge)
+        self.driver.get(url)  # (returns at once: the page load strategy is "none")
+        deadline = time.monotonic() + OPEN_S
+        while True:
+            try:
+                if self.driver.find_element(By.ID, "conn").text == "live":  # (updates flow: its badge)
+                    return True
+            except NoSuchElementException:  # (not loaded yet)
+                pass
+            if until():
+                return False
             if time.monotonic() > deadline:
-                raise RuntimeError(f"the page at {url} got no update within 30 s")
+                raise RuntimeError(f"the page at {url} got no update within {OPEN_S:g} s")
             time.sleep(0.02)
 
     def close(self) -> None:
@@ -172,14 +188,17 @@ class SseClient(Page):
         self.sink: IO[bytes] | None = None
         self._spent = 0.0
 
-    def open(self, url: str) -> None:
+    def open(self, url: str, until: Callable[[], bool] = lambda: False) -> bool:
         self.sink = tempfile.TemporaryFile()  # noqa: SIM115 (closed in close(), with its stream)
         self.process = subprocess.Popen(["curl", "-sN", url + "api/events"], stdout=self.sink)
-        deadline = time.monotonic() + 30
+        deadline = time.monotonic() + OPEN_S
         while os.fstat(self.sink.fileno()).st_size == 0:
+            if until():
+                return False
             if time.monotonic() > deadline or self.process.poll() is not None:
-                raise RuntimeError(f"no update from {url}api/events within 30 s")
+                raise RuntimeError(f"no update from {url}api/events within {OPEN_S:g} s")
             time.sleep(0.02)
+        return True
 
     def close(self) -> None:
         if self.process is not None:
@@ -202,12 +221,13 @@ class Unwatched(Page):
     kind = "no page: the dashboard served and its links tapped, nobody watching"
     label = "unwatched"
 
-    def open(self, url: str) -> None:
+    def open(self, url: str, until: Callable[[], bool] = lambda: False) -> bool:
         import urllib.request
 
         for _ in range(3):
-            with urllib.request.urlopen(url + "api/snapshot", timeout=30) as answer:
+            with urllib.request.urlopen(url + "api/snapshot", timeout=OPEN_S) as answer:
                 answer.read()
+        return True
 
     def close(self) -> None:
         pass
@@ -255,8 +275,10 @@ def demo_run(seconds: float, page: Page | None) -> dict[str, Any]:
             assert process.stderr is not None
             line = _line(process.stderr, 30)
             started, cpu0 = time.perf_counter(), page.cpu_s()
-            page.open(line.split()[2])
-            extra["page_live_after_s"] = time.perf_counter() - started
+            live = page.open(line.split()[2], until=lambda: process.poll() is not None)
+            extra["page_live"] = int(live)  # (0: the demo ended before the page got an update)
+            if live:
+                extra["page_live_after_s"] = time.perf_counter() - started
         process.wait(timeout=seconds * 4 + 60)
         if page is not None:
             extra["page_cpu_pct"] = 100 * (page.cpu_s() - cpu0) / max(1e-9, time.perf_counter() - started)
@@ -329,9 +351,17 @@ def measure(part: str, cfg: Config, pages: Sequence[Page], say: Callable[[str], 
     variants: list[tuple[str, Page | None]] = [("without", None)]
     variants += [("dashboard" if n == 0 else page.label, page) for n, page in enumerate(pages)]
     runs: dict[str, list[dict[str, Any]]] = {name: [] for name, _ in variants}
+    never = dict.fromkeys(runs, 0)  # runs whose page got no update before the run ended: left out
     for i in range(cfg.pairs):
         for which, page in variants[i % len(variants) :] + variants[: i % len(variants)]:
             run = RUNS[part](cfg.seconds, page)
+            if run.get("page_live", 1) == 0:
+                never[which] += 1
+                say(
+                    f"  {part:<6} {which:<9} {i + 1}/{cfg.pairs}: no update reached the page before the end "
+                    "(left out)"
+                )
+                continue
             runs[which].append(run)
             say(
                 f"  {part:<6} {which:<9} {i + 1}/{cfg.pairs}: "
@@ -342,6 +372,9 @@ def measure(part: str, cfg: Config, pages: Sequence[Page], say: Callable[[str], 
     out: dict[str, Any] = {}
     for which, done in runs.items():
         suffix = "" if which == "without" else f"_{which}"
+        if not done:
+            raise RuntimeError(f"{part} {which}: no run had its page open (see above)")
+        out[f"{part}_page_never_live{suffix}"] = never[which]
         names = sorted({k for r in done for k, v in r.items() if isinstance(v, int | float)})
         for name in names:
             values = [r[name] for r in done if name in r]
