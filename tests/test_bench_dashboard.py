@@ -123,3 +123,18 @@ def test_the_boards_short_way_to_a_messages_numbers_is_the_long_ways() -> None:
         "speed_dps": 3.0,
         "angle_deg": 2.0,
     }
+
+
+def test_a_starved_host_is_not_a_cheaper_one(monkeypatch: pytest.MonkeyPatch) -> None:
+    """loop1k's host CPU is judged within 5 % either way: less of a core with the page open is the
+    browser taking it, not the dashboard costing less."""
+
+    def run(seconds: float, page: object) -> dict[str, Any]:
+        cpu = 97.0 if page is None else 68.0
+        return {"ticks_s": 950.0, "state_age_p99_ms": 20.0, "host_cpu_pct": cpu, "load_before": [0.0]}
+
+    monkeypatch.setitem(b.RUNS, "loop1k", run)
+    met = b.measure("loop1k", b.Config("test", pairs=1, seconds=1.0), [b.SseClient()], lambda _: None)
+    assert met["loop1k_targets_missed"] == [
+        "dashboard.loop1k_host_cpu_pct_ratio = 0.701 (target 0.95 to 1.05)"
+    ]
