@@ -12,6 +12,7 @@ import selectors
 import socket
 import subprocess
 import sys
+import threading
 import time
 from typing import IO
 
@@ -79,6 +80,35 @@ def test_the_page_and_its_api_answer_while_the_demo_runs() -> None:
     assert process.returncode == 0
     assert out.startswith("servobus demo: 6 simulated myactuator motor(s) on 1 simulated CAN bus, 200 Hz")
     assert "\nerrors      0 " in out
+
+
+def test_a_page_still_open_at_the_end_is_closed_cleanly() -> None:
+    """The demo ends its page's update stream before its server stops: no stream cut by force (which
+    printed asyncio's traceback of a cancelled connection), and the page's stream ends."""
+    process = subprocess.Popen(
+        [*SERVOBUS, "demo", "--duration", "2", *SMALL, "--json", "--dashboard", "127.0.0.1:0"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    got: list[str] = []
+
+    def page(url: str) -> None:
+        with httpx.Client(timeout=10) as client, client.stream("GET", url + "api/events") as events:
+            got.extend(line for line in events.iter_lines() if line.startswith("event:"))
+
+    try:
+        assert process.stderr is not None
+        reader = threading.Thread(target=page, args=(_url(_line(process.stderr, 20)),), daemon=True)
+        reader.start()
+        out, err = process.communicate(timeout=30)
+        reader.join(timeout=10)
+    finally:
+        process.kill()
+        process.wait()
+    assert process.returncode == 0 and json.loads(out)["errors"] == 0
+    assert got and not reader.is_alive()  # (updates came, then the stream ended)
+    assert "Traceback" not in err and "CancelledError" not in err, err
 
 
 def test_json_stays_one_document_and_the_summary_is_the_demos(capsys: pytest.CaptureFixture[str]) -> None:

@@ -235,6 +235,7 @@ async def _local(served: _Served, conn: Connection, hz: float, moving: bool, dur
                                     for read in reads:
                                         tick.command(motor, read)
                 finally:
+                    dash.close()  # (the pages' streams end first: the server has nothing to cut)
                     done.set()
 
 
@@ -289,4 +290,5 @@ async def _remote(served: _Served, conn: Connection, remote: Remote, duration: f
                                 dash.board.set_metrics(remote.target, await bus.metrics())
                             await anyio.sleep(1.0)
                 finally:
+                    dash.close()  # (the pages' streams end first: the server has nothing to cut)
                     done.set()

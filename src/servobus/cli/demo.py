@@ -245,6 +245,7 @@ class _Page:
             try:
                 yield
             finally:
+                self.dash.close()  # (the pages' streams end within an update: nothing left to cut)
                 done.set()
 
 

@@ -68,6 +68,12 @@ class Dashboard:
         self.allow_commands = allow_commands
         self.stop_timeout_s = stop_timeout_s
         self.on_stop = on_stop
+        self.closed = False
+
+    def close(self) -> None:
+        """End the pages' update streams (within an update period): a server stopped after it stops at
+        once, with no stream to cut (hypercorn cancelling one printed a traceback)."""
+        self.closed = True
 
     def tap(self, link: Any) -> TapLink:
         """:meth:`Board.tap`: give the result to the Bus for the raw frame view and the set-points."""
@@ -163,7 +169,7 @@ class Dashboard:
         board = self.board
 
         async def updates() -> AsyncIterator[dict[str, str]]:
-            while True:
+            while not self.closed:
                 yield {"event": "update", "data": board.update()}
                 await anyio.sleep(board.period_s)
 
