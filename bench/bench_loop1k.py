@@ -353,6 +353,7 @@ class _Page:
                             await anyio.sleep(0.05)
                     yield
                 finally:
+                    self.dash.close()  # (the page's stream ends first: the server has nothing to cut)
                     done.set()
 
 
