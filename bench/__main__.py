@@ -28,6 +28,9 @@ Parts, in order (each is also a script of its own, ``python bench/bench_<part>.p
 * ``remote``: servobus.remote across processes on loopback: a Zenoh bridge serving 32 simulated motors,
   a client in another process: set-point updates/s, publish-to-wire latency, request round trip against
   the local Bus, the safe stop after the client is SIGKILLed (``bench_remote.py``; ``remote.*``).
+* ``dashboard``: the dashboard's cost on the loop: ``servobus demo``'s tick rate and loop1k's figures with
+  the page open in headless Chromium against without, runs alternated (``bench_dashboard.py``;
+  ``dashboard.*_ratio``).
 
 Every part writes its own key of results.json and its own section of RESULTS.md (others' keys and
 sections are kept); profiles (cProfile or py-spy) of each headline figure go into its section. The runner
@@ -66,6 +69,7 @@ PARTS = {
     "scaling": "bench_scaling",
     "remote": "bench_remote",
     "pacer": "bench_pacer",
+    "dashboard": "bench_dashboard",
 }
 SUMMARY = "summary"
 
@@ -132,11 +136,20 @@ HEADLINES: tuple[tuple[str, str, str, str], ...] = (
      "<= 250 ms"),
     ("remote.stop_after_client_loss_max_ms", "client SIGKILLed -> 32 motors stopped, max", "{:.0f} ms",
      "<= 250 ms"),
+    ("dashboard.demo_ticks_s_ratio", "`servobus demo` tick rate, dashboard open / without", "{:.3f}",
+     ">= 0.95"),
+    ("dashboard.loop1k_ticks_s_ratio", "loop1k ticks/s, dashboard open / without", "{:.3f}", ">= 0.95"),
+    ("dashboard.loop1k_state_age_p99_ms_ratio", "loop1k state age p99, dashboard open / without", "{:.3f}",
+     "<= 1.05"),
+    ("dashboard.loop1k_host_cpu_pct_ratio", "loop1k host CPU, dashboard open / without", "{:.3f}",
+     "0.95 to 1.05"),
     ("scaling.buses_per_process.64.cpu_us_per_transaction", "64 buses x 4 motors: CPU per transaction",
      "{:.2f} µs", "-"),
 )  # fmt: skip
 
-MISSED_KEYS = ("codec", "bus", "efficiency", "sim", "loop", "loop1k", "loop1k_fd", "remote", "pacer")
+MISSED_KEYS = (
+    "codec", "bus", "efficiency", "sim", "loop", "loop1k", "loop1k_fd", "remote", "pacer", "dashboard",
+)  # fmt: skip
 
 
 def summary_markdown(results: dict[str, Any], command: str, load: list[float], runtime_s: float) -> str:

@@ -45,6 +45,11 @@ ms, host CPU <= 50 % of one core, jitter p99 <= 200 µs (the earlier target, kep
 99.5 % on time. Reported as met or not, with a py-spy profile of the host (and of the device process)
 from an extra run of the Loop.
 
+With the dashboard open (``--host --dashboard``, driven by ``bench/bench_dashboard.py``): the host also
+serves ``servobus.dashboard`` on 127.0.0.1 (each link tapped, every Bus and the Loop watched), prints
+``URL <url>`` first, and starts the Loop once a page gets its updates (the runner opens one:
+:func:`one_run`'s ``on_url``); the run's figures then count the updates made in the measured window.
+
 Usage (from the repository root)::
 
     python bench/bench_loop1k.py             # 5 runs x 15 s per layout and mode, a profile run: ~10 min
@@ -195,13 +200,20 @@ def _percentiles(values: Sequence[float]) -> dict[str, float]:
     return {"p50": rank(0.5), "p99": rank(0.99), "max": ordered[-1]}
 
 
-async def host_loop(layout: Layout, paths: Sequence[str], seconds: float, device_pid: int) -> dict[str, Any]:
+async def host_loop(
+    layout: Layout, paths: Sequence[str], seconds: float, device_pid: int, dashboard: bool = False
+) -> dict[str, Any]:
     """The pipelined loop (``--mode loop``): one ``Loop(hz=1000)`` over every bus, each motor's command
-    given every tick, every motor's state read by the body, for ``seconds``; the figures of one run."""
+    given every tick, every motor's state read by the body, for ``seconds``; the figures of one run.
+    With ``dashboard``, the dashboard of it all is served and a page gets its updates throughout."""
     from servobus.loop import Loop
 
     async with contextlib.AsyncExitStack() as stack:
-        motors = await _open_motors(stack, layout, paths)
+        page = _Page() if dashboard else None
+        motors = await _open_motors(stack, layout, paths, page.dash.tap if page is not None else None)
+        loop = Loop(hz=HZ)
+        if page is not None:
+            await stack.enter_async_context(page.serving({m.bus for m in motors}, loop))
         command = layout.command()
         reply_type = layout.reply
         expected = len(motors)
@@ -213,8 +225,7 @@ async def host_loop(layout: Layout, paths: Sequence[str], seconds: float, device
         on_time = late_ticks = not_out = left_late = no_state = wrong = 0
         prev_ok: bool | None = None  # the previous tick's start and hand-over: judged whole at this one
         wrong_types: set[str] = set()
-        window = _Window(device_pid)
-        loop = Loop(hz=HZ)
+        window = _Window(device_pid, page)
         async with loop:
             async for tick in loop.ticks(count=end + 1):
                 index = tick.index
@@ -299,7 +310,51 @@ async def host_loop(layout: Layout, paths: Sequence[str], seconds: float, device
         "wall_s": wall,
         "load_before": [round(x, 2) for x in window.load_before],
         "load_after": [round(x, 2) for x in window.load_after],
+        **({"dashboard_updates": window.updates} if page is not None else {}),
     }
+
+
+class _Page:
+    """The dashboard of the host's buses and Loop, served on 127.0.0.1 (``--host --dashboard``), and
+    how many updates it made (one per update period while a page streams them)."""
+
+    def __init__(self) -> None:
+        from servobus.dashboard import Dashboard
+
+        self.dash = Dashboard()
+        self.updates = 0
+        made = self.dash.board.update
+
+        def counted() -> str:  # (the page's stream calls the board's update: counted here)
+            self.updates += 1
+            return made()
+
+        self.dash.board.update = counted  # type: ignore[method-assign]
+
+    @contextlib.asynccontextmanager
+    async def serving(self, buses: Any, loop: Any) -> Any:
+        """Served while inside, once a page got a few updates (the URL is printed first, for the
+        runner to open it); the server stopped on the way out."""
+        import anyio
+
+        from servobus.dashboard import listening_socket, serve, url_of
+
+        for bus in sorted(buses, key=lambda b: b.name):
+            self.dash.watch(bus)
+        self.dash.watch_loop(loop)
+        done = anyio.Event()
+        with listening_socket("127.0.0.1", 0) as sock:
+            async with anyio.create_task_group() as group:
+                group.start_soon(lambda: serve(self.dash.app(), sock, stopped=done))
+                try:
+                    print(f"URL {url_of(sock)}", flush=True)
+                    with anyio.fail_after(60):  # (bounded: a page that never came fails the run)
+                        while self.updates < 3:
+                            await anyio.sleep(0.05)
+                    yield
+                finally:
+                    self.dash.close()  # (the page's stream ends first: the server has nothing to cut)
+                    done.set()
 
 
 def _scaled(value: float | None, unit: float) -> float:
@@ -309,8 +364,10 @@ def _scaled(value: float | None, unit: float) -> float:
 class _Window:
     """The measured window of a loop run: metrics, process CPU, wall, device CPU and load at its ends."""
 
-    def __init__(self, device_pid: int) -> None:
+    def __init__(self, device_pid: int, page: _Page | None = None) -> None:
         self.device_pid = device_pid
+        self.page = page
+        self.updates = 0  # the dashboard's, in the window
         self.before: Any = None
         self.after: Any = None
         self.cpu_s = self.wall_s = self.device_s = 0.0
@@ -320,25 +377,34 @@ class _Window:
         self.before = metrics
         self.load_before = os.getloadavg()
         self.device_s = -_profile.proc_cpu_s(self.device_pid)
+        self.updates = -self.page.updates if self.page is not None else 0
         self.cpu_s, self.wall_s = -time.process_time(), -time.perf_counter()
 
     def close(self, metrics: Any) -> None:
         self.wall_s += time.perf_counter()
         self.cpu_s += time.process_time()
         self.device_s += _profile.proc_cpu_s(self.device_pid)
+        self.updates += self.page.updates if self.page is not None else 0
         self.load_after = os.getloadavg()
         self.after = metrics
 
 
-async def _open_motors(stack: contextlib.AsyncExitStack, layout: Layout, paths: Sequence[str]) -> list[Any]:
-    """One ``Bus(SlcanTransport(pty))`` per bus of ``layout``, motor ids 1, 2, ... across them."""
+async def _open_motors(
+    stack: contextlib.AsyncExitStack,
+    layout: Layout,
+    paths: Sequence[str],
+    wrap: Callable[[Any], Any] | None = None,
+) -> list[Any]:
+    """One ``Bus(SlcanTransport(pty))`` per bus of ``layout`` (each link ``wrap``-ped: the dashboard's
+    tap), motor ids 1, 2, ... across them."""
     motors = []
     first = 1
     for path, n in zip(paths, layout.motors, strict=True):
         transport = SlcanTransport(
             path, bitrate=1_000_000, data_bitrate=5_000_000 if layout.fd else None, fd=layout.fd
         )
-        bus = await stack.enter_async_context(Bus(transport, safe=None))
+        link = wrap(transport) if wrap is not None else transport
+        bus = await stack.enter_async_context(Bus(link, safe=None))
         motors += [bus.motor(layout.family, i, **layout.bind) for i in range(first, first + n)]
         first += n
     return motors
@@ -443,12 +509,17 @@ def host_main(argv: Sequence[str]) -> int:
     parser.add_argument(
         "--mode", choices=MODES, default="loop", help="loop: the pipelined Loop; cycle: the code before"
     )
+    parser.add_argument("--dashboard", action="store_true", help="the Loop with the dashboard open")
     args = parser.parse_args(argv)
     layout = LAYOUTS[args.layout]
     if args.motors:
         layout = dataclasses.replace(layout, motors=tuple(int(n) for n in args.motors.split(",")))
-    host = host_loop if args.mode == "loop" else host_cycle
-    result = asyncio.run(host(layout, json.loads(args.paths), args.seconds, args.device_pid))
+    paths = json.loads(args.paths)
+    if args.dashboard:
+        result = asyncio.run(host_loop(layout, paths, args.seconds, args.device_pid, dashboard=True))
+    else:
+        host = host_loop if args.mode == "loop" else host_cycle
+        result = asyncio.run(host(layout, paths, args.seconds, args.device_pid))
     print(json.dumps(result), flush=True)
     return 0
 
@@ -506,22 +577,43 @@ def host_command(
     ]  # fmt: skip
 
 
-def one_run(layout: Layout, seconds: float, mode: str = "loop") -> dict[str, Any]:
+def one_run(
+    layout: Layout, seconds: float, mode: str = "loop", on_url: Callable[[str], object] | None = None
+) -> dict[str, Any]:
+    """One run of ``mode``; with ``on_url``, the Loop with its dashboard served, ``on_url`` called with
+    the page's URL (to open it: the host starts once the page gets its updates)."""
     with devices(layout) as (process, paths):
-        done = subprocess.run(
-            [
-                *host_command(layout, paths, seconds, process.pid, mode),
-                "--motors",
-                ",".join(map(str, layout.motors)),
-            ],
-            capture_output=True,
-            text=True,
-            timeout=seconds * 4 + 60,
-            check=False,
-        )
-    if done.returncode != 0:
-        raise RuntimeError(f"{layout.key} {mode} host failed ({done.returncode}): {done.stderr[-2000:]}")
-    return dict(json.loads(done.stdout.strip().splitlines()[-1]))
+        command = [
+            *host_command(layout, paths, seconds, process.pid, mode),
+            "--motors",
+            ",".join(map(str, layout.motors)),
+        ]
+        if on_url is None:
+            done = subprocess.run(
+                command, capture_output=True, text=True, timeout=seconds * 4 + 60, check=False
+            )
+            code, out, err = done.returncode, done.stdout, done.stderr
+        else:
+            code, out, err = _with_page([*command, "--dashboard"], on_url, seconds * 4 + 120)
+    if code != 0:
+        raise RuntimeError(f"{layout.key} {mode} host failed ({code}): {err[-2000:]}")
+    return dict(json.loads(out.strip().splitlines()[-1]))
+
+
+def _with_page(command: list[str], on_url: Callable[[str], object], timeout_s: float) -> tuple[int, str, str]:
+    """Run the host ``command`` (``--dashboard``): its first line's URL to ``on_url`` while it waits for
+    a page; (exit status, the rest of stdout, stderr). Killed at the end whatever happened."""
+    host = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert host.stdout is not None
+        line = host.stdout.readline()  # (bounded: the host fails within 60 s without a page)
+        if line.startswith("URL "):
+            on_url(line.split()[1])
+        out, err = host.communicate(timeout=timeout_s)
+        return host.returncode, line + out, err
+    finally:
+        host.kill()
+        host.wait()
 
 
 def profile_run(layout: Layout, seconds: float, work: Path) -> dict[str, Any]:

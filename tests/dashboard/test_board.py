@@ -136,3 +136,36 @@ async def test_a_reply_s_age_counts_from_when_it_came_not_from_when_a_page_looke
         await anyio.sleep(0.3)  # no page open meanwhile
         (row,) = _rows(board).values()
     assert row["age_s"] >= 0.29 and row["status"] == "online"
+
+
+def test_the_boards_short_way_to_a_messages_numbers_is_the_long_ways() -> None:
+    """The board's fast path to a message's numbers gives what message_values gives, finite."""
+    import dataclasses
+    import inspect
+
+    from servobus.dashboard._board import _finite, _numbers
+    from servobus.protocols import hollow, lk
+    from servobus.protocols import myactuator as ma
+    from servobus.tools.logs import message_values
+
+    samples: list[Any] = [
+        ma.StatusReply(temperature_c=25, current_a=0.5, speed_dps=3.0, angle_deg=2.0),  # (an enum field)
+        ma.AbsolutePositionControl(angle_deg=3.0, max_speed_dps=500.0),
+    ]
+    for module in (ma, hollow, lk):
+        for cls in vars(module).values():
+            if inspect.isclass(cls) and dataclasses.is_dataclass(cls):
+                try:
+                    samples.append(cls())
+                except TypeError:  # (a message with required fields)
+                    continue
+    assert len(samples) > 20
+    for message in samples:
+        short, long = _numbers(message), _finite(message_values(message))
+        assert list(short.items()) == list(long.items()), message
+    assert _numbers(samples[0]) == {
+        "temperature_c": 25,
+        "current_a": 0.5,
+        "speed_dps": 3.0,
+        "angle_deg": 2.0,
+    }

@@ -42,7 +42,10 @@ from servobus.cli._output import SETTINGS, console, emit_json, examples, json_op
 __all__ = ["bench"]
 
 #: the parts of ``python -m bench``, in its order (``PARTS`` of bench/__main__.py; a test keeps them equal)
-PARTS = ("codec", "transport", "bus", "efficiency", "sim", "loop", "loop1k", "scaling", "remote", "pacer")
+PARTS = (
+    "codec", "transport", "bus", "efficiency", "sim", "loop", "loop1k", "scaling", "remote", "pacer",
+    "dashboard",
+)  # fmt: skip
 #: records of how a figure was measured, not figures
 SKIPPED = frozenset({"meta", "machine"})
 #: results.json keys whose targets are real-time figures (1 kHz, devices in a second process)

@@ -21,6 +21,11 @@ core pays for both. Ctrl-C or SIGTERM (or the end of ``--duration``) ends the lo
 (:func:`~servobus.cli._motors.stop_scope`): on a signal the Loop sends its motors the safe stop, and
 every Bus sends its motors their stop as it is left. The loop runs on asyncio by default
 (``--backend trio``: on trio), through anyio either way.
+
+``--dashboard [HOST:PORT]`` serves the live web page of :mod:`servobus.dashboard` while the demo runs
+(read-only, on this host only: ``servobus dashboard`` serves beyond it, with users): each simulated
+link tapped for the raw frames, every Bus and the Loop watched. Its URL is the first line (on stderr
+with ``--json``, so that stdout stays one JSON document).
 """
 
 from __future__ import annotations
@@ -28,7 +33,7 @@ from __future__ import annotations
 import contextlib
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import AsyncIterator, Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -49,7 +54,10 @@ except ImportError:  # (not on Windows: no preemption count there)
     resource = None  # type: ignore[assignment]
 
 if TYPE_CHECKING:
+    import socket
+
     from servobus.cli.plugin import CliFamily, Op
+    from servobus.dashboard import Dashboard
     from servobus.loop import Loop, LoopMetrics
     from servobus.loop import LoopTick as LoopTick
     from servobus.metrics import Metrics
@@ -60,6 +68,9 @@ AMPLITUDE_DEG = 90.0
 PERIOD_S = 4.0
 MAX_SPEED_DPS = 500.0
 REFRESH_S = 0.25
+#: where ``--dashboard`` given bare serves (servobus.dashboard's DEFAULT_PORT: the extra is not imported
+#: unless asked)
+DASHBOARD_AT = "127.0.0.1:8765"
 
 
 @click.command(
@@ -69,6 +80,7 @@ REFRESH_S = 0.25
         "servobus demo --duration 5         # no live view: a summary after 5 s",
         "servobus demo --hz 100 --motors 8  # what this machine keeps up with",
         "servobus demo --duration 5 --json",
+        "servobus demo --dashboard          # and watch it in a browser: open the URL it prints",
     ),
 )
 @click.option(
@@ -100,6 +112,16 @@ REFRESH_S = 0.25
     show_default=True,
     help="The event loop the buses and the simulator run on (through anyio).",
 )
+@click.option(
+    "--dashboard",
+    "dashboard_at",
+    is_flag=False,
+    flag_value=DASHBOARD_AT,
+    default=None,
+    metavar="[HOST:PORT]",
+    help=f"Serve the live web page of the buses and the loop while the demo runs (read-only; this host "
+    f"only; port 0: any free port) [bare: {DASHBOARD_AT}].",
+)
 @timeout_option
 @json_option
 def demo(
@@ -109,6 +131,7 @@ def demo(
     buses: int | None,
     family: str,
     backend: str,
+    dashboard_at: str | None,
     timeout_s: float | None,
     as_json: bool,
 ) -> None:
@@ -127,22 +150,103 @@ def demo(
     if as_json and duration is None:
         raise click.UsageError("--json prints the summary of a run: give --duration")
     plan = layout(hz, motors, buses, parts.sim.turnaround_s)
+    page = _Page.listen(dashboard_at) if dashboard_at is not None else None
+    with page.sock if page is not None else contextlib.nullcontext():
+        if page is not None:
+            page.announce(plan, err=as_json)
+        summary = _demo(plan, parts, family, duration, backend, timeout_s, as_json, page)
+    if summary.interrupted:
+        raise KeyboardInterrupt  # exit 130 (SIGTERM: 143), after the summary (the motors were stopped)
+    if summary.errors:
+        raise click.ClickException(f"{summary.errors} request(s) failed during the demo")
+
+
+def _demo(
+    plan: Layout,
+    parts: _Parts,
+    family: str,
+    duration: float | None,
+    backend: str,
+    timeout_s: float | None,
+    as_json: bool,
+    page: _Page | None,
+) -> Summary:
+    """The demo's own lines, the run, and its summary printed."""
     if not as_json:
         where = f"{plan.buses} simulated CAN bus" + ("es" if plan.buses > 1 else "")
-        click.echo(f"servobus demo: {motors} simulated {family} motor(s) on {where}, {hz:g} Hz")
+        click.echo(f"servobus demo: {plan.motors} simulated {family} motor(s) on {where}, {plan.hz:g} Hz")
         click.echo(plan.why())
         if (warning := plan.overload()) is not None:
             click.echo(f"warning: {warning}")
-    summary = run(_run(plan, parts, duration, live=duration is None, timeout_s=timeout_s), backend=backend)
+    summary = run(
+        _run(plan, parts, duration, live=duration is None, timeout_s=timeout_s, page=page), backend=backend
+    )
     if as_json:
         emit_json(summary.as_dict())
     else:
         for line in summary_lines(summary):
             click.echo(line)
-    if summary.interrupted:
-        raise KeyboardInterrupt  # exit 130 (SIGTERM: 143), after the summary (the motors were stopped)
-    if summary.errors:
-        raise click.ClickException(f"{summary.errors} request(s) failed during the demo")
+    return summary
+
+
+class _Page:
+    """``--dashboard``: the page's listening socket, and the read-only Dashboard of the demo's buses
+    and loop (made here, before the event loop: a missing extra or a bad address is refused first)."""
+
+    def __init__(self, sock: socket.socket, dash: Dashboard) -> None:
+        self.sock, self.dash = sock, dash
+
+    @classmethod
+    def listen(cls, text: str) -> _Page:
+        """Listening on ``text`` (``HOST:PORT``) of this host.
+
+        Raises:
+            click.BadParameter: not a host and port, or not this host (exit 2).
+            click.ClickException: the extra is missing, or the address is taken (exit 1).
+        """
+        from servobus.cli.dashboard import dashboard_extra, parse_listen
+
+        with dashboard_extra():
+            from servobus.dashboard import Dashboard, InsecureListen, listening_socket
+        try:
+            host, port = parse_listen(text)
+        except click.BadParameter as exc:
+            exc.param_hint = "--dashboard"
+            raise
+        try:
+            sock = listening_socket(host, port)
+        except InsecureListen:
+            raise click.BadParameter(
+                f"{host}: the demo serves its page on this host only (127.0.0.1, localhost, ::1); to "
+                "serve one beyond it, with users: servobus dashboard --sim N --listen HOST:PORT --users FILE",
+                param_hint="--dashboard",
+            ) from None
+        except OSError as exc:
+            raise click.ClickException(f"--dashboard {text}: {exc.strerror or exc}") from None
+        return cls(sock, Dashboard())
+
+    def announce(self, plan: Layout, *, err: bool) -> None:
+        from servobus.dashboard import url_of
+
+        where = f"{plan.buses} simulated bus" + ("es" if plan.buses > 1 else "")
+        click.echo(
+            f"servobus dashboard: {url_of(self.sock)} (the demo's {where} and its loop; read-only)", err=err
+        )
+
+    @contextlib.asynccontextmanager
+    async def serving(self) -> AsyncIterator[None]:
+        """The page served while inside (hypercorn on this event loop); its open streams closed on
+        the way out."""
+        from servobus.dashboard import serve
+
+        done = anyio.Event()
+        async with anyio.create_task_group() as group:
+            group.start_soon(lambda: serve(self.dash.app(), self.sock, stopped=done))
+            try:
+                yield
+            finally:
+                self.dash.close()  # (the pages' streams end within an update: nothing left to cut)
+                done.set()
 
 
 @dataclass(frozen=True, slots=True)
@@ -232,7 +336,13 @@ class _SimClock:
 
 
 async def _run(
-    plan: Layout, parts: _Parts, duration: float | None, *, live: bool, timeout_s: float | None
+    plan: Layout,
+    parts: _Parts,
+    duration: float | None,
+    *,
+    live: bool,
+    timeout_s: float | None,
+    page: _Page | None = None,
 ) -> Summary:
     from servobus.loop import Loop
     from servobus.transports.sim import SimTransport
@@ -252,8 +362,11 @@ async def _run(
             setup = parts.sim.devices(ids, revision, SimOptions())
             transport = SimTransport(devices=setup.can_devices, name=f"sim{b + 1}")
             sim_clock.wrap(transport.network)
-            bus = await stack.enter_async_context(Bus(transport, name=f"bus {b + 1}"))
+            link = page.dash.tap(transport) if page is not None else transport
+            bus = await stack.enter_async_context(Bus(link, name=f"bus {b + 1}"))
             buses.append((bus, [bus.motor(parts.family, i) for i in ids]))
+            if page is not None:
+                page.dash.watch(bus)
         sine = _Sine([m for _, motors in buses for m in motors], parts)
         before = [bus.metrics() for bus, _ in buses]
         view = None
@@ -263,6 +376,9 @@ async def _run(
             view = Live(console=console(), auto_refresh=False, transient=False)
             view.start()
         loop = Loop(plan.hz, timeout_s=timeout_s)
+        if page is not None:
+            page.dash.watch_loop(loop)
+            await stack.enter_async_context(page.serving())  # (left first: the page ends before the Buses)
         run = _Ticks(sim_clock)
         try:
             with stop_scope() as stopping:  # Ctrl-C, SIGTERM: the loop sends its stop, the Buses theirs

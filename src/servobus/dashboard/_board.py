@@ -14,6 +14,7 @@ import enum
 import json
 import math
 import time
+from collections import defaultdict
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -78,7 +79,7 @@ class _Bus:
     name: str
     source: Any  # a servobus Bus (metrics()), or a bridge's RemoteBus (its metrics set from outside)
     frames: dict[tuple[bool, int, bool], Frame] = field(default_factory=dict)
-    frame_counts: dict[tuple[bool, int, bool], int] = field(default_factory=dict)
+    frame_counts: defaultdict[tuple[bool, int, bool], int] = field(default_factory=lambda: defaultdict(int))
     commands: dict[int, Command] = field(default_factory=dict)  # by id(codec): the last not a read
     decoders: dict[str, FrameDecoder] = field(default_factory=dict)
     names: dict[tuple[bool, int, bool], tuple[bytes, str, float]] = field(default_factory=dict)
@@ -139,7 +140,7 @@ class Board:
         def seen(frame: Frame, received: bool, _at: float) -> None:
             key = (received, frame.arbitration_id, frame.is_extended_id)
             frames[key] = frame
-            counts[key] = counts.get(key, 0) + 1
+            counts[key] += 1  # (a defaultdict: a third cheaper than get() and a store)
 
         def sent(request: Any) -> None:  # (the Bus's handle: the request, its command undecoded)
             if getattr(request, "writes", False):
