@@ -21,8 +21,11 @@ from typing import TYPE_CHECKING, Any
 
 from servobus.frame import Frame
 from servobus.protocols import Command, Reply
+from servobus.scheduler import Request
 from servobus.tools.logs import FrameDecoder, message_values
 from servobus.tools.recording import TapLink
+from servobus.transports.base import SendReporter
+from servobus.transports.contract import Consumer
 
 if TYPE_CHECKING:
     from servobus.loop import Loop
@@ -50,7 +53,8 @@ class Watched:
         family: the motor's family.
         motor_id: its id.
         motor: the Bus's Motor (or a bridge's RemoteMotor), what the page's stop goes to.
-        reply: its latest decoded reply (any traffic: a reply, a stream frame, another host's).
+        reply: a bridge's motor's latest reply, as published or read (a Bus's Motor keeps its own:
+            ``Motor.state``, read at each update; nothing is done per frame).
         status: ``"online"``, ``"offline"``, ``"restarted"``, or ``"unknown"`` before the watchdog said.
         reason: the watchdog's words for the status.
         replied_at: when its latest reply came, on the board's clock, where the board stamps it
@@ -133,26 +137,17 @@ class Board:
 
     def tap(self, link: Any) -> TapLink:
         """``link`` wrapped so that the board sees its frames, both ways (give the result to the
-        Bus): the raw frame view lists them by identifier, like ``python -m can.viewer``."""
+        Bus): the raw frame view lists them by identifier, like ``python -m can.viewer``, and each
+        motor's set-point is the command of the last request sent to it that is not a read."""
         entry = _Bus(link.name, None)
-        frames, counts, commands = entry.frames, entry.frame_counts, entry.commands
-
-        def seen(frame: Frame, received: bool, _at: float) -> None:
-            key = (received, frame.arbitration_id, frame.is_extended_id)
-            frames[key] = frame
-            counts[key] += 1  # (a defaultdict: a third cheaper than get() and a store)
-
-        def sent(request: Any) -> None:  # (the Bus's handle: the request, its command undecoded)
-            if getattr(request, "writes", False):
-                commands[id(request.codec)] = request.command
-
-        tapped = TapLink(link, seen, self._now, sent)
+        tapped = _BoardTap(link, entry)
         self._links[id(tapped)] = (tapped, entry)  # (the tap kept: its id is not reused meanwhile)
         return tapped
 
     def watch(self, bus: Any, *, name: str | None = None) -> None:
         """Show ``bus`` (a :class:`servobus.Bus`, or a bridge's ``RemoteBus``) and its motors: every
-        decoded reply and watchdog status from now on; motors added to it later appear too.
+        reply (a Bus's motors' ``state``, read at each update; a bridge's, as it publishes them) and
+        watchdog status from now on; motors added to it later appear too.
 
         Raises:
             ValueError: a bus of that name is on the board already.
@@ -171,11 +166,10 @@ class Board:
 
         now = self._now
 
-        def replied(motor: Any, *rest: Any) -> None:  # (motor, traffic, reply) or a bridge's (motor, reply)
+        def replied(motor: Any, reply: Reply) -> None:  # (a bridge's motor: a state it published)
             watched = by_motor.get(id(motor)) or self._add(label, motor)
-            watched.reply = rest[-1]
-            if watched.stamped:  # (a Bus's motor has its last_seen: no clock read per frame here)
-                watched.replied_at = now()
+            watched.reply = reply
+            watched.replied_at = now()
 
         self._noters[label] = replied
 
@@ -187,7 +181,8 @@ class Board:
             if reason == "restarted":
                 watched.restarted_at = now()
 
-        bus.subscribe(replied)
+        if not hasattr(bus, "engine"):  # (a Bus's Motor keeps its latest reply: nothing per frame)
+            bus.subscribe(replied)
         bus.subscribe_status(status)
 
     def note(self, bus: str, motor: Any, reply: Reply) -> None:
@@ -287,7 +282,7 @@ class Board:
         }
 
     def _row(self, w: Watched, now: float) -> dict[str, Any]:
-        reply = w.reply
+        reply = w.reply if w.stamped else w.motor.state
         fields = _numbers(reply) if reply is not None else {}
         setpoint = self._setpoint(w)
         fault = getattr(w.motor, "fault", None)  # (the Bus's record: kept until a reply without it)
@@ -393,6 +388,64 @@ class Board:
                 break
         entry.names[key] = (data, name, now)
         return name
+
+
+class _BoardTap(TapLink):
+    """:class:`~servobus.tools.recording.TapLink` made cheap for the control loop: nothing wraps a
+    send (the Bus's handle is its request: frame, command and motor, reported as they are); a
+    received batch is counted in one loop; no clock is read. A frame sent is counted at its report."""
+
+    def __init__(self, inner: Any, entry: _Bus) -> None:
+        super().__init__(inner, _unused, _no_clock)
+        self._entry = entry
+
+    def send(self, frame: Frame, handle: object = None) -> None:
+        self._inner.send(frame, handle)
+
+    def set_consumer(self, consumer: Consumer | None) -> None:
+        if consumer is None:
+            self._inner.set_consumer(None)
+            return
+        frames, counts = self._entry.frames, self._entry.frame_counts
+
+        def tapped(batch: list[Frame]) -> object:
+            for frame in batch:
+                key = (True, frame.arbitration_id, frame.is_extended_id)
+                frames[key] = frame
+                counts[key] += 1
+            return consumer(batch)
+
+        self._inner.set_consumer(tapped)
+
+    def set_send_reporter(self, reporter: SendReporter | None) -> None:
+        if reporter is None:
+            self._inner.set_send_reporter(None)
+            return
+        frames, counts, commands = self._entry.frames, self._entry.frame_counts, self._entry.commands
+
+        def tapped(handle: Any, sent_at: float | None, reason: str | None) -> object:
+            if reason is None:
+                if handle.__class__ is Request:
+                    frame = handle.frame
+                    if handle.writes:
+                        commands[id(handle.codec)] = handle.command
+                else:
+                    frame = handle  # (a frame sent without a request: the Bus's broadcast)
+                if frame.__class__ is Frame:
+                    key = (False, frame.arbitration_id, frame.is_extended_id)
+                    frames[key] = frame
+                    counts[key] += 1
+            return reporter(handle, sent_at, reason)
+
+        self._inner.set_send_reporter(tapped)
+
+
+def _unused(*_: Any) -> None:
+    raise AssertionError("(the board's tap counts frames itself)")
+
+
+def _no_clock() -> float:
+    return 0.0
 
 
 def _motors_of(source: Any) -> list[Any]:

@@ -47,21 +47,13 @@ class TapLink:
     the inner link's, and the Bus's send handles are echoed to the Bus's reporter untouched. A send
     goes to ``inner`` with a handle of the tap's own that carries the frame and the caller's handle,
     so the tap knows which frame left whatever the inner link copies or re-encodes. Anything else
-    (a transport's own API) is read from ``inner``. ``on_sent``, when given, is shown the caller's
-    handle of each frame sent, with it (the Bus's handle is the request: its command, undecoded).
+    (a transport's own API) is read from ``inner``.
     """
 
-    def __init__(
-        self,
-        inner: Any,
-        on_frame: FrameCallback,
-        clock: Callable[[], float],
-        on_sent: Callable[[object], object] | None = None,
-    ) -> None:
+    def __init__(self, inner: Any, on_frame: FrameCallback, clock: Callable[[], float]) -> None:
         self._inner = inner
         self._on_frame = on_frame
         self._clock = clock
-        self._on_sent = on_sent
         self.name: str = inner.name
 
     def __getattr__(self, name: str) -> Any:
@@ -119,8 +111,6 @@ class TapLink:
                 return None
             if reason is None:
                 self._on_frame(handle.frame, False, sent_at if sent_at is not None else self._clock())
-                if self._on_sent is not None:
-                    self._on_sent(handle.handle)
             return reporter(handle.handle, sent_at, reason)
 
         self._inner.set_send_reporter(tapped)
