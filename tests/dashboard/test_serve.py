@@ -18,7 +18,7 @@ import httpx
 import pytest
 
 from servobus.bus import Bus
-from servobus.dashboard import Access, Dashboard, InsecureListen, listening_socket, serve, url_of
+from servobus.dashboard import Access, Dashboard, InsecureListen, listening_socket, serving
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.sim.attach import serve_python_can
@@ -52,13 +52,8 @@ async def _updates(client: httpx.AsyncClient, count: int) -> list[dict[str, Any]
 @contextlib.asynccontextmanager
 async def _served(dash: Dashboard, access: Access | None = None) -> AsyncIterator[str]:
     with listening_socket("127.0.0.1", 0, access=access) as sock:
-        stopped = anyio.Event()
-        async with anyio.create_task_group() as group:
-            group.start_soon(lambda: serve(dash.app(), sock, access=access, stopped=stopped))
-            try:
-                yield url_of(sock)
-            finally:
-                stopped.set()  # (hypercorn's own shutdown; bounded by its graceful timeout)
+        async with serving(dash, sock, access=access) as url:
+            yield url
 
 
 async def test_a_bus_on_a_python_can_adapter_is_streamed_live_and_a_commander_stops_a_motor(

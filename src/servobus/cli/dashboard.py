@@ -215,15 +215,12 @@ class _Served:
         mode = "stop and off allowed" if self.dash.allow_commands else "read-only"
         click.echo(f"servobus dashboard: {url} ({what}; {mode}; Ctrl-C stops)")
 
-    async def serve(self, group: anyio.abc.TaskGroup, done: anyio.Event) -> None:
-        from servobus.dashboard import serve
+    def serving(self) -> contextlib.AbstractAsyncContextManager[str]:
+        """The page served while inside (:func:`servobus.dashboard.serving`)."""
+        from servobus.dashboard import serving
 
         cert, key = self.tls
-        group.start_soon(
-            lambda: serve(
-                self.dash.app(), self.sock, access=self.access, certfile=cert, keyfile=key, stopped=done
-            )
-        )
+        return serving(self.dash, self.sock, access=self.access, certfile=cert, keyfile=key)
 
 
 async def _local(served: _Served, conn: Connection, hz: float, moving: bool, duration: float | None) -> bool:
@@ -239,29 +236,23 @@ async def _local(served: _Served, conn: Connection, hz: float, moving: bool, dur
         dash.watch_loop(loop)
         what = f"{len(motors)} {'simulated ' if conn.sim is not None else ''}{conn.family} motor(s)"
         motion = _Motion(bus, motors, conn.family, served.stopped) if moving else None
-        done = anyio.Event()
         with stop_scope() as stopping:
-            async with anyio.create_task_group() as group:
-                await served.serve(group, done)
+            async with served.serving():
                 served.announce(what + (", moving" if moving else ""))
-                try:
-                    if motion is not None:
-                        await motion.start(conn.timeout_s)
-                    async with loop:
-                        start: float | None = None
-                        async for tick in loop:
-                            start = tick.deadline if start is None else start
-                            if duration is not None and tick.deadline - start >= duration:
-                                break
-                            for motor in motors:
-                                if motion is not None and id(motor) not in served.stopped:
-                                    motion.command(tick, motor, tick.deadline - start)
-                                elif reads:
-                                    for read in reads:
-                                        tick.command(motor, read)
-                finally:
-                    dash.close()
-                    done.set()
+                if motion is not None:
+                    await motion.start(conn.timeout_s)
+                async with loop:
+                    start: float | None = None
+                    async for tick in loop:
+                        start = tick.deadline if start is None else start
+                        if duration is not None and tick.deadline - start >= duration:
+                            break
+                        for motor in motors:
+                            if motion is not None and id(motor) not in served.stopped:
+                                motion.command(tick, motor, tick.deadline - start)
+                            elif reads:
+                                for read in reads:
+                                    tick.command(motor, read)
     return bool(stopping.cancelled_caught)
 
 
@@ -316,23 +307,17 @@ async def _remote(served: _Served, conn: Connection, remote: Remote, duration: f
     dash = served.dash
     async with open_remote(conn.ids, remote, read_only=not dash.allow_commands) as (bus, motors):
         dash.watch(bus, name=remote.target)
-        done = anyio.Event()
         with stop_scope() as stopping:
-            async with anyio.create_task_group() as group:
-                await served.serve(group, done)
+            async with served.serving():
                 served.announce(f"{len(motors)} motor(s) of {remote.target}")
                 reads = _reads_of(motors)
-                try:
-                    with anyio.move_on_after(math.inf if duration is None else duration):
-                        while True:  # the bridge's figures and the motors' status, once a second
-                            with contextlib.suppress(ServobusError):  # (a slow bridge: next second)
-                                dash.board.set_metrics(remote.target, await bus.metrics())
-                            for motor, read in reads:  # (between the states the bridge publishes)
-                                with contextlib.suppress(ServobusError):
-                                    reply = await motor.request(read, timeout_s=conn.timeout_s)
-                                    dash.board.note(remote.target, motor.remote, reply)
-                            await anyio.sleep(1.0)
-                finally:
-                    dash.close()
-                    done.set()
+                with anyio.move_on_after(math.inf if duration is None else duration):
+                    while True:  # the bridge's figures and the motors' status, once a second
+                        with contextlib.suppress(ServobusError):  # (a slow bridge: next second)
+                            dash.board.set_metrics(remote.target, await bus.metrics())
+                        for motor, read in reads:  # (between the states the bridge publishes)
+                            with contextlib.suppress(ServobusError):
+                                reply = await motor.request(read, timeout_s=conn.timeout_s)
+                                dash.board.note(remote.target, motor.remote, reply)
+                        await anyio.sleep(1.0)
     return bool(stopping.cancelled_caught)

@@ -33,7 +33,7 @@ from __future__ import annotations
 import contextlib
 import math
 import time
-from collections.abc import AsyncIterator, Callable, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -233,20 +233,11 @@ class _Page:
             f"servobus dashboard: {url_of(self.sock)} (the demo's {where} and its loop; read-only)", err=err
         )
 
-    @contextlib.asynccontextmanager
-    async def serving(self) -> AsyncIterator[None]:
-        """The page served while inside (hypercorn on this event loop); its open streams closed on
-        the way out."""
-        from servobus.dashboard import serve
+    def serving(self) -> contextlib.AbstractAsyncContextManager[str]:
+        """The page served while inside (:func:`servobus.dashboard.serving`)."""
+        from servobus.dashboard import serving
 
-        done = anyio.Event()
-        async with anyio.create_task_group() as group:
-            group.start_soon(lambda: serve(self.dash.app(), self.sock, stopped=done))
-            try:
-                yield
-            finally:
-                self.dash.close()  # (the pages' streams end within an update: nothing left to cut)
-                done.set()
+        return serving(self.dash, self.sock)
 
 
 @dataclass(frozen=True, slots=True)

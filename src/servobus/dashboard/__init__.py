@@ -4,15 +4,24 @@
   :meth:`~Dashboard.watch_loop` a :class:`servobus.Loop`, :meth:`~Dashboard.tap` a link for the raw
   frames) and the page itself as an ASGI app (:meth:`~Dashboard.app`), to serve or to mount on a
   server of one's own.
-* :func:`serve`: hypercorn on the running event loop (asyncio or trio), on a socket that
-  :func:`listening_socket` binds (loopback unless users are given or ``insecure``).
+* :func:`serving` (a block) and :func:`serve` (a task): hypercorn on the running event loop
+  (asyncio or trio), on a socket that :func:`listening_socket` binds (loopback unless users are
+  given or ``insecure``).
 
 Needs the ``dashboard`` extra: ``pip install 'servobus[dashboard]'``.
 """
 
 from servobus.dashboard._app import KINDS, Dashboard
 from servobus.dashboard._board import Board, Watched
-from servobus.dashboard._serve import DEFAULT_PORT, Access, InsecureListen, listening_socket, serve, url_of
+from servobus.dashboard._serve import (
+    DEFAULT_PORT,
+    Access,
+    InsecureListen,
+    listening_socket,
+    serve,
+    serving,
+    url_of,
+)
 
 __all__ = [
     "DEFAULT_PORT",
@@ -24,5 +33,6 @@ __all__ = [
     "Watched",
     "listening_socket",
     "serve",
+    "serving",
     "url_of",
 ]

@@ -9,13 +9,15 @@ from __future__ import annotations
 
 import base64
 import binascii
+import contextlib
+import functools
 import hashlib
 import hmac
 import ipaddress
 import logging
 import os
 import socket
-from collections.abc import Awaitable, Callable, Collection, Mapping, MutableMapping
+from collections.abc import AsyncIterator, Awaitable, Callable, Collection, Iterable, Mapping, MutableMapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,9 +25,9 @@ from typing import Any
 import anyio
 import sniffio
 
-from servobus.dashboard._app import MAY_COMMAND
+from servobus.dashboard._app import MAY_COMMAND, Dashboard
 
-__all__ = ["DEFAULT_PORT", "Access", "InsecureListen", "listening_socket", "serve"]
+__all__ = ["DEFAULT_PORT", "Access", "InsecureListen", "listening_socket", "serve", "serving", "url_of"]
 
 DEFAULT_PORT = 8765
 #: how long the server has to close its connections once told to stop (then it is cancelled)
@@ -208,6 +210,45 @@ async def serve(
         finally:
             shutdown.set()
             server.deadline = anyio.current_time() + SHUTDOWN_S
+
+
+@contextlib.asynccontextmanager
+async def serving(
+    app: App | Dashboard,
+    sock: socket.socket,
+    *,
+    access: Access | None = None,
+    certfile: Path | None = None,
+    keyfile: Path | None = None,
+    closing: Iterable[Dashboard] = (),
+) -> AsyncIterator[str]:
+    """Serve ``app`` (a Dashboard's page, or an application that mounts one) on ``sock`` while
+    inside the block, in a task of its own on this event loop; yields the page's address. On the way
+    out, the pages' streams of the Dashboard (and of ``closing``) end first, then the server stops.
+
+    Example::
+
+        with listening_socket("127.0.0.1", 0) as sock:
+            async with serving(dash, sock) as url:
+                print(url)  # the page is served while the block runs
+    """
+    dashboards = [*closing]
+    if isinstance(app, Dashboard):
+        dashboards.append(app)
+        app = app.app()
+    stopped = anyio.Event()
+    async with anyio.create_task_group() as group:
+        group.start_soon(
+            functools.partial(
+                serve, app, sock, access=access, certfile=certfile, keyfile=keyfile, stopped=stopped
+            )
+        )
+        try:
+            yield url_of(sock, tls=certfile is not None)
+        finally:
+            for dash in dashboards:
+                dash.close()  # (their streams end within an update: the server has none to cut)
+            stopped.set()
 
 
 def url_of(sock: socket.socket, *, tls: bool = False) -> str:

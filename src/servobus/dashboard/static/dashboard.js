@@ -3,9 +3,11 @@
 "use strict";
 
 const MAX_WINDOW_S = 120;
-// The tables are redrawn at most this often (the plots at every update): rewriting them 30 times a
-// second took the browser a whole core, which on the control loop's machine slowed the loop
-const TABLES_MS = 200;
+// The tables and the plots are redrawn at most this often (the updates are kept at every one):
+// drawing them at every update (30 a second) took headless Chromium a whole core, and on the control
+// loop's own machine that core is the loop's (bench/RESULTS.md, the dashboard section)
+const TABLES_MS = 250;
+const PLOTS_MS = 100;
 const COLORS = ["#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2",
                 "#17becf", "#bcbd22", "#7f7f7f"];
 
@@ -14,6 +16,7 @@ const state = {
   paused: false,
   lastAt: 0,              // when the last update came (Date.now())
   tablesAt: -Infinity,    // when the tables were last redrawn (performance.now())
+  plotsAt: -Infinity,     // when the plots were
   framesNew: false,       // frames came since the frame table was drawn
   times: [],              // update times (s since the dashboard started)
   series: new Map(),      // "motorKey|field" or "motorKey|set.field" -> values aligned with times
@@ -343,7 +346,10 @@ function take(update) {
       renderFrames();
     }
   }
-  if (!state.paused) renderPlots();  // (Pause holds the plots still; the tables go on)
+  if (!state.paused && now - state.plotsAt >= PLOTS_MS) {  // (Pause holds the plots; the tables go on)
+    state.plotsAt = now;
+    renderPlots();
+  }
 }
 
 function reset() {
