@@ -153,6 +153,10 @@ def dashboard(
 
     if (tls_cert is None) != (tls_key is None):
         raise click.UsageError("--tls-cert and --tls-key go together")
+    if remote is not None and remote.read_only and allow_commands:
+        raise click.UsageError(
+            "--read-only and --allow-commands: the page's stop needs a commanding connection"
+        )
     if commander and users is None:
         raise click.UsageError("--commander names a user of --users: give --users")
     host, port = parse_listen(listen)
