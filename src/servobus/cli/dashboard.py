@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import math
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -21,6 +21,7 @@ import click
 from servobus.cli._connect import Connection, open_bus, remote_connection_options
 from servobus.cli._motors import BACKENDS, run, stop_scope
 from servobus.cli._output import SETTINGS, FloatRange, examples, refused
+from servobus.cli._page import dashboard_extra, parse_listen
 from servobus.errors import ServobusError
 from servobus.protocols import Command
 
@@ -32,39 +33,9 @@ if TYPE_CHECKING:
     from servobus.dashboard import Access, Dashboard, Watched
     from servobus.loop import LoopTick
 
-__all__ = ["dashboard", "dashboard_extra", "parse_listen"]
+__all__ = ["dashboard"]
 
 _File = click.Path(exists=True, dir_okay=False, path_type=Path)
-
-
-#: the ``dashboard`` extra's packages (a module missing from anywhere else is not the extra's fault)
-EXTRA = frozenset({"starlette", "hypercorn", "sse_starlette"})
-
-
-@contextlib.contextmanager
-def dashboard_extra() -> Iterator[None]:
-    """Turn a missing ``dashboard`` extra into one line saying what to install (exit 1)."""
-    try:
-        yield
-    except ModuleNotFoundError as exc:
-        missing = (exc.name or "").split(".")[0]
-        if missing not in EXTRA:
-            raise
-        raise click.ClickException(
-            f"the dashboard needs {missing}: pip install 'servobus[dashboard]'"
-        ) from None
-
-
-def parse_listen(text: str) -> tuple[str, int]:
-    """``HOST:PORT`` (``[::1]:8765`` for IPv6; port 0: any free port).
-
-    Raises:
-        click.BadParameter: not a host and port.
-    """
-    host, sep, port = text.rpartition(":")
-    if not sep or not host or not port.isdigit() or int(port) > 65535:
-        raise click.BadParameter(f"{text!r}: expected HOST:PORT, e.g. 127.0.0.1:8765", param_hint="--listen")
-    return host.strip("[]"), int(port)
 
 
 @click.command(

@@ -45,6 +45,7 @@ from servobus.cli._connect import FamilyChoice, note_exit, sim_part, timeout_opt
 from servobus.cli._demo_report import Layout, Summary, layout, live_view, summary_lines
 from servobus.cli._motors import BACKENDS, run, stop_scope
 from servobus.cli._output import SETTINGS, FloatRange, console, emit_json, examples, json_option
+from servobus.cli._page import DemoPage
 from servobus.protocols import DEFAULT_FAMILY, Command, get_family
 from servobus.sim.family import SimFamily, SimOptions
 
@@ -54,10 +55,7 @@ except ImportError:  # (not on Windows: no preemption count there)
     resource = None  # type: ignore[assignment]
 
 if TYPE_CHECKING:
-    import socket
-
     from servobus.cli.plugin import CliFamily, Op
-    from servobus.dashboard import Dashboard
     from servobus.loop import Loop, LoopMetrics
     from servobus.loop import LoopTick as LoopTick
     from servobus.metrics import Metrics
@@ -150,10 +148,10 @@ def demo(
     if as_json and duration is None:
         raise click.UsageError("--json prints the summary of a run: give --duration")
     plan = layout(hz, motors, buses, parts.sim.turnaround_s)
-    page = _Page.listen(dashboard_at) if dashboard_at is not None else None
+    page = DemoPage.listen(dashboard_at) if dashboard_at is not None else None
     with page.sock if page is not None else contextlib.nullcontext():
         if page is not None:
-            page.announce(plan, err=as_json)
+            page.announce(plan.buses, err=as_json)
         summary = _demo(plan, parts, family, duration, backend, timeout_s, as_json, page)
     if summary.interrupted:
         raise KeyboardInterrupt  # exit 130 (SIGTERM: 143), after the summary (the motors were stopped)
@@ -169,7 +167,7 @@ def _demo(
     backend: str,
     timeout_s: float | None,
     as_json: bool,
-    page: _Page | None,
+    page: DemoPage | None,
 ) -> Summary:
     """The demo's own lines, the run, and its summary printed."""
     if not as_json:
@@ -187,57 +185,6 @@ def _demo(
         for line in summary_lines(summary):
             click.echo(line)
     return summary
-
-
-class _Page:
-    """``--dashboard``: the page's listening socket, and the read-only Dashboard of the demo's buses
-    and loop (made here, before the event loop: a missing extra or a bad address is refused first)."""
-
-    def __init__(self, sock: socket.socket, dash: Dashboard) -> None:
-        self.sock, self.dash = sock, dash
-
-    @classmethod
-    def listen(cls, text: str) -> _Page:
-        """Listening on ``text`` (``HOST:PORT``) of this host.
-
-        Raises:
-            click.BadParameter: not a host and port, or not this host (exit 2).
-            click.ClickException: the extra is missing, or the address is taken (exit 1).
-        """
-        from servobus.cli.dashboard import dashboard_extra, parse_listen
-
-        with dashboard_extra():
-            from servobus.dashboard import Dashboard, InsecureListen, listening_socket
-        try:
-            host, port = parse_listen(text)
-        except click.BadParameter as exc:
-            exc.param_hint = "--dashboard"
-            raise
-        try:
-            sock = listening_socket(host, port)
-        except InsecureListen:
-            raise click.BadParameter(
-                f"{host}: the demo serves its page on this host only (127.0.0.1, localhost, ::1); to "
-                "serve one beyond it, with users: servobus dashboard --sim N --listen HOST:PORT --users FILE",
-                param_hint="--dashboard",
-            ) from None
-        except OSError as exc:
-            raise click.ClickException(f"--dashboard {text}: {exc.strerror or exc}") from None
-        return cls(sock, Dashboard())
-
-    def announce(self, plan: Layout, *, err: bool) -> None:
-        from servobus.dashboard import url_of
-
-        where = f"{plan.buses} simulated bus" + ("es" if plan.buses > 1 else "")
-        click.echo(
-            f"servobus dashboard: {url_of(self.sock)} (the demo's {where} and its loop; read-only)", err=err
-        )
-
-    def serving(self) -> contextlib.AbstractAsyncContextManager[str]:
-        """The page served while inside (:func:`servobus.dashboard.serving`)."""
-        from servobus.dashboard import serving
-
-        return serving(self.dash, self.sock)
 
 
 @dataclass(frozen=True, slots=True)
@@ -333,7 +280,7 @@ async def _run(
     *,
     live: bool,
     timeout_s: float | None,
-    page: _Page | None = None,
+    page: DemoPage | None = None,
 ) -> Summary:
     from servobus.loop import Loop
     from servobus.transports.sim import SimTransport
