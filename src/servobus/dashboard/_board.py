@@ -538,8 +538,7 @@ def _finite_or_none(figures: dict[str, Any]) -> dict[str, Any]:
 
 
 def _jsonable(value: Any) -> Any:
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
+    """What JSON has no type for (floats never come here: NaN is kept out by _finite_or_none)."""
     if isinstance(value, bytes):
         return value.hex()
     return str(value)
