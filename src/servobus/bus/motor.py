@@ -285,7 +285,8 @@ class Motor:
             checked = limits.apply(command, self.state)
         except LimitExceeded as exc:
             self.bus.scheduler.count(self.codec, "limit_refused")
-            raise LimitExceeded(f"{self!r}: {exc}", exc.field, exc.value, exc.limit) from None
+            where = f"{self.codec.family} motor {self.codec.motor_id} on {self.bus.name}"
+            raise LimitExceeded(f"{where}: {exc}", exc.field, exc.value, exc.limit) from None
         if checked is not command:
             self.bus.scheduler.count(self.codec, "limit_clamped")
         return checked

@@ -21,6 +21,8 @@ import click
 from servobus.bus import Bus, Motor
 from servobus.cli._output import FloatRange, refused
 from servobus.cli._remote import remote_from, remote_options
+from servobus.limits import LimitBook
+from servobus.limits import load as load_limits
 from servobus.protocols import DEFAULT_FAMILY, FAMILIES, available_families, get_family
 
 if TYPE_CHECKING:
@@ -90,6 +92,8 @@ class Connection:
     baud: int | None = None
     #: each request's reply timeout (``--timeout-ms``); None: the library's
     timeout_s: float | None = None
+    #: the motors' host-side limits (``--limits FILE``); None: none
+    limits: LimitBook | None = None
 
     @property
     def link(self) -> str:
@@ -341,6 +345,26 @@ timeout_option = click.option(
 )
 
 
+def _limits(ctx: click.Context, param: click.Parameter, value: str | None) -> LimitBook | None:
+    if value is None:
+        return None
+    try:
+        return load_limits(value)
+    except (OSError, ValueError) as exc:
+        raise click.BadParameter(str(exc)) from None
+
+
+#: ``--limits FILE``: the command receives ``limits`` (a LimitBook, or None)
+limits_option = click.option(
+    "--limits",
+    type=click.Path(dir_okay=False),
+    callback=_limits,
+    metavar="FILE",
+    help="The motors' host-side limits (a TOML file: servobus.limits): every command is checked "
+    "against them before it is sent, refused (exit 2) or clamped as the file says.",
+)
+
+
 def connection_options(func: F) -> F:
     """Add the connection options (and ``--timeout-ms``) to a click command; it receives
     ``conn: Connection``."""
@@ -392,6 +416,7 @@ def _connection_options(func: F, *, remote: bool) -> F:
     @click.option("--port", help="Serial port of an RS485 line (/dev/ttyUSB0).")
     @click.option("--baud", type=click.IntRange(min=1), help="Serial baud rate [default: the family's].")
     @timeout_option
+    @limits_option
     @(remote_options if remote else _unchanged)
     @functools.wraps(func)
     def wrapper(*args: Any, ids_text: str | None, **kwargs: Any) -> Any:
@@ -407,6 +432,7 @@ def _connection_options(func: F, *, remote: bool) -> F:
             "port",
             "baud",
             "timeout_s",
+            "limits",
         )
         fields = {name: kwargs.pop(name) for name in names}
         try:
@@ -421,7 +447,9 @@ def _connection_options(func: F, *, remote: bool) -> F:
         local = [flag for name, flag in _LOCAL.items() if fields[name] not in (None, False)]
         if local:
             raise click.UsageError(f"--remote and {', '.join(local)}: the bus is the bridge's, give one")
-        conn = Connection(family=fields["family"], ids=ids, timeout_s=fields["timeout_s"])
+        conn = Connection(
+            family=fields["family"], ids=ids, timeout_s=fields["timeout_s"], limits=fields["limits"]
+        )
         return func(*args, conn=conn, remote=target, **kwargs)
 
     return wrapper  # type: ignore[return-value]
@@ -460,6 +488,7 @@ async def open_bus(
     """The Bus on ``conn``'s transport (given to ``wrap`` first, when given: a tap) with its motors
     bound; leaving it stops the commanded ones."""
     transport = conn.transport()
+    bus_options.setdefault("limits", conn.limits)
     bus = Bus(transport if wrap is None else wrap(transport), **bus_options)
     try:
         async with bus:
