@@ -12,19 +12,15 @@ limit) or, with ``clamp=True``, sent clamped to it. The Bus applies a motor's li
 request, tick, pipelined loop and broadcast, and counts both outcomes in ``metrics()``
 (``limit_refused``, ``limit_clamped``).
 
-Which fields meet which limit (a field's name ends with the unit):
+Which fields meet which limit (a field's name ends with its unit):
 
-=================  ====================================  ==========================================
-limit              fields                                 checked as
-=================  ====================================  ==========================================
-``position_deg``   ``*_deg``, ``*_rad``                   the target within [low, high]; see below
-``speed_dps``      ``*_dps``, ``*_rad_s``, ``*_rpm``      \\|value\\| at most; a ``max_*`` bound at most,
-                                                          and None (no bound) beyond any limit
-``acceleration``   ``*_dps_s``, ``*_dps2``               at most
-``current_a``      ``*_a`` (each of a tuple: ``*s_a``)   \\|value\\| at most
-``torque_nm``      ``*_nm``                               \\|value\\| at most
-``fields``         ``"Class.field"`` or ``"field"``      within [low, high] (the class's key first)
-=================  ====================================  ==========================================
+- ``position_deg``: ``*_deg`` and ``*_rad`` fields, the target within [low, high] (see below);
+- ``speed_dps``: ``*_dps``, ``*_rad_s`` and ``*_rpm``, at most either way; a bound left open
+  (``max_speed_dps=None``, "no limit" on the wire) is beyond any limit;
+- ``acceleration_dps_s``: ``*_dps_s`` and ``*_dps2``, at most;
+- ``current_a``: ``*_a`` (each value of a tuple such as ``currents_a``), at most either way;
+- ``torque_nm``: ``*_nm``, at most either way;
+- ``fields``: any field by ``"Class.field"`` or ``"field"`` (the class's key first), within [low, high].
 
 A command says how its position is meant (``Command.POSITION``): ``"absolute"`` (the default) is
 checked as it is; ``"relative"`` (an increment) from the motor's last known angle (its latest
