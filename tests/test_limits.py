@@ -384,3 +384,33 @@ def test_limits_from_a_file_hold_through_python_can_s_virtual_bus(tmp_path: Any)
         if 0x141 <= f.arbitration_id <= 0x160 and f.data[:1] == b"\xa2"  # (requests, not replies)
     ]
     assert speeds == [-60.0]
+
+
+def test_out_of_its_range_a_motor_is_not_driven_further_out() -> None:
+    limits = Limits(position_deg=(-90, 90))
+    at_95 = ma.StatusReply(temperature_c=25, current_a=0.0, speed_dps=0.0, angle_deg=95.0)
+    with pytest.raises(
+        LimitExceeded, match=r"speed_dps=30 .*: it drives the motor further out \(at 95 deg\)"
+    ):
+        limits.apply(ma.SpeedControl(speed_dps=30.0), at_95)
+    with pytest.raises(LimitExceeded, match=r"current_a=0\.5"):
+        limits.apply(ma.TorqueControl(current_a=0.5), at_95)
+    back = ma.SpeedControl(speed_dps=-30.0)
+    assert limits.apply(back, at_95) is back
+    inside = ma.StatusReply(temperature_c=25, current_a=0.0, speed_dps=0.0, angle_deg=89.0)
+    assert limits.apply(ma.SpeedControl(speed_dps=30.0), inside).speed_dps == 30.0  # type: ignore[attr-defined]
+    clamped = Limits(position_deg=(-90, 90), clamp=True).apply(ma.SpeedControl(speed_dps=30.0), at_95)
+    assert clamped.speed_dps == 0.0  # type: ignore[attr-defined]
+
+
+@pytest.mark.anyio
+async def test_a_speed_loop_stops_its_motor_at_the_edge_of_its_range() -> None:
+    async with Bus(SimTransport(devices=[MyActuatorMotor(1)])) as bus:
+        motor = bus.motor(ma.FAMILY, 1)
+        motor.limits = Limits(position_deg=(-90, 90), clamp=True)
+        for _ in range(150):  # 1.5 s at 180 dps: 270 deg without the limit
+            await bus.cycle([(motor, ma.SpeedControl(speed_dps=180.0))])
+            await anyio.sleep(0.01)
+        status = await motor.read_status2()
+        assert 90.0 < status.angle_deg < 100.0 and abs(status.speed_dps) < 5.0
+        assert motor.metrics().limit_clamped > 50

@@ -26,7 +26,9 @@ A command says how its position is meant (``Command.POSITION``): ``"absolute"`` 
 checked as it is; ``"relative"`` (an increment) from the motor's last known angle (its latest
 status; refused, even with ``clamp``, before one is known); ``"single_turn"`` is refused whenever a
 position range is declared, because where it ends depends on the turn the motor is in. Fields in
-raw counts or percent meet no quantity limit: give them a ``fields`` range.
+raw counts or percent meet no quantity limit: give them a ``fields`` range. A speed, current or
+torque does not move a motor to a position, but once its last reported angle is out of the range,
+one that drives it further out is refused (clamped: 0); one that brings it back goes.
 
 A file declares limits for the motors of a bus (:func:`load`, TOML)::
 
@@ -171,12 +173,15 @@ class Limits:
             return command
         name = type(command).__name__
         changes: dict[str, Any] = {}
+        out = self._outside(state)
         for attribute, quantity, factor, bounded in checks:
             value = getattr(command, attribute)
             if quantity == "position_deg":
                 new = self._position(command, name, attribute, value, factor, state)
             else:
                 new = self._quantity(name, attribute, value, quantity, factor, bounded)
+                if out and not bounded and isinstance(new, int | float) and new * out[0] > 0:
+                    new = self._outward(name, attribute, new, out[1])
             if new is not value:
                 changes[attribute] = new
         for attribute in _field_names(type(command)):
@@ -214,6 +219,25 @@ class Limits:
         if self.clamp:
             return math.copysign(limit / factor, value)
         raise self._beyond(name, attribute, f"{value:g}", said)
+
+    def _outside(self, state: Reply | None) -> tuple[int, float] | None:
+        """Which way the motor's last reported angle is out of the position range (+1 above, -1
+        below) and that angle; None when it is within, or the range or angle is not known."""
+        limit = self.position_deg
+        angle = None if limit is None else angle_of(state)
+        if limit is None or angle is None or limit[0] <= angle <= limit[1]:
+            return None
+        return (1 if angle > limit[1] else -1), angle
+
+    def _outward(self, name: str, attribute: str, value: float, angle: float) -> float:
+        """A speed, current or torque that drives a motor already out of its range further out."""
+        if self.clamp:
+            return 0.0
+        assert self.position_deg is not None
+        said = f"position_deg [{self.position_deg[0]:g}, {self.position_deg[1]:g}]"
+        raise self._beyond(
+            name, attribute, f"{value:g}", said, f"it drives the motor further out (at {angle:g} deg)"
+        )
 
     def _position(
         self, command: Command, name: str, attribute: str, value: Any, factor: float, state: Reply | None
