@@ -34,7 +34,18 @@ import click
 from servobus.cli.plugin import Setting
 from servobus.protocols import Command
 
-__all__ = ["Entry", "SettingsFile", "entries", "file_value", "load", "render", "same", "shown", "text_of", "where"]
+__all__ = [
+    "Entry",
+    "SettingsFile",
+    "entries",
+    "file_value",
+    "load",
+    "render",
+    "same",
+    "shown",
+    "text_of",
+    "where",
+]
 
 #: a key TOML takes without quotes
 _BARE = re.compile(r"[A-Za-z0-9_-]+")
@@ -124,6 +135,11 @@ def _key(key: str) -> str:
     return key if _BARE.fullmatch(key) else _toml(key)
 
 
+def key_line(key: str, value: Any) -> str:
+    """``key = value`` in TOML (the key quoted where it has a dot)."""
+    return f"{_key(key)} = {_toml(value)}"
+
+
 def _comment(text: str) -> str:
     return "# " + " ".join(text.split())
 
@@ -160,10 +176,10 @@ def render(
                 lines.append(f"# {_key(s.key)} =")
             elif s.write is None:
                 lines.append(_comment(f"{s.help} [read-only: compared, never written]"))
-                lines.append(f"# {_key(s.key)} = {_toml(values[s.key])}")
+                lines.append(f"# {key_line(s.key, values[s.key])}")
             else:
                 lines.append(_comment(f"{s.help} [{where(s)}]"))
-                lines.append(f"{_key(s.key)} = {_toml(values[s.key])}")
+                lines.append(key_line(s.key, values[s.key]))
     return "\n".join(lines) + "\n"
 
 
@@ -205,7 +221,9 @@ def load(path: Path) -> SettingsFile:
         raise click.UsageError(f"{path}: not TOML: {exc}") from None
     family, revision, motors = data.get("family"), data.get("revision"), data.get("motor")
     if not isinstance(family, str) or not isinstance(revision, str):
-        raise click.UsageError(f"{path}: not a settings file: family and revision missing (servobus config dump)")
+        raise click.UsageError(
+            f"{path}: not a settings file: family and revision missing (servobus config dump)"
+        )
     unknown = sorted(set(data) - {"family", "revision", "motor"})
     if unknown:
         raise click.UsageError(f"{path}: unknown top-level key {unknown[0]!r} (family, revision, [motor.ID])")

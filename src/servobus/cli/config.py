@@ -28,7 +28,7 @@ from servobus.cli._output import (
     yes_option,
 )
 from servobus.cli.plugin import Op, Setting
-from servobus.protocols import Command, get_family
+from servobus.protocols import get_family
 from servobus.tools.recording import NewFiles
 
 __all__ = ["config"]
@@ -77,14 +77,11 @@ def list_(family: str, as_json: bool) -> None:
         emit_json(rows)
         return
     out = table(None, ["key", "read", "write", "rom", "help"], ([r[k] for k in r] for r in rows))
-    # the keys whole, whatever the width (a pipe gets rich's 80 columns): the help wraps instead
+    # the keys whole on a narrow terminal too: the help wraps instead
     out.columns[0].no_wrap = True
-    out.columns[0].min_width = max(len(r["key"]) for r in rows)
+    out.columns[0].min_width = max(len(s.key) for s in settings(family).values())
     out.columns[-1].justify = "left"
-    screen = console()
-    if not screen.is_terminal:  # piped (rich would take 80 columns): one line per setting, for grep
-        screen.width = 10_000
-    screen.print(out)
+    _print(out)
 
 
 @config.command(
@@ -155,6 +152,15 @@ def set_(conn: Connection, key: str, value: str, rom: bool, yes: bool, as_json: 
     rows = _rows(outcomes, [s], lambda s, reply: value if parsed is None else parsed)
     _show(rows, as_json)
     fail_if_any(outcomes)
+
+
+def _print(out: Any) -> None:
+    """``out`` on stdout; piped, as wide as it is (rich would cut it to 80 columns): one line per
+    row, for grep."""
+    screen = console()
+    if not screen.is_terminal:
+        screen.width = 10_000
+    screen.print(out)
 
 
 def _rows(outcomes: Sequence[Outcome], wanted: Sequence[Setting], value: Any) -> list[dict[str, Any]]:
@@ -310,14 +316,17 @@ def restore(conn: Connection, file: Path, rom: bool, dry_run: bool, yes: bool) -
     found = cfg.load(file)
     if found.family != conn.family:
         raise click.UsageError(
-            f"{file} holds {found.family} settings and --family is {conn.family}: give --family {found.family}"
+            f"{file} holds {found.family} settings and --family is {conn.family}: "
+            f"give --family {found.family}"
         )
     known = settings(conn.family)
     if not known:
         raise click.UsageError(f"{conn.family} motors have no settings the CLI can read or write")
     conn, tables = _targets(conn, found)
     bound = codecs(conn)
-    checked = [cfg.entries(found, table, known, codec, rom) for table, codec in zip(tables, bound, strict=True)]
+    checked = [
+        cfg.entries(found, table, known, codec, rom) for table, codec in zip(tables, bound, strict=True)
+    ]
     reads = [[e for e in entries if e.setting.read is not None] for entries in checked]
     outcomes = ask(conn, [[e.setting.read() for e in motor] for motor in reads])  # type: ignore[misc]
     _nothing_written(outcomes, "nothing written")
@@ -401,7 +410,9 @@ def _changes(
             continue
         now = now_of[id(e)]
         if not cfg.same(e, now, codec, rom):
-            out.append(_Change(e, cfg.shown(now), "read-only: not written" if s.write is None else cfg.where(s, rom)))
+            out.append(
+                _Change(e, cfg.shown(now), "read-only: not written" if s.write is None else cfg.where(s, rom))
+            )
         elif rom and s.rom is None and s.write is not None:
             out.append(_Change(e, cfg.shown(now), "ROM (RAM already holds it)"))
     return out
@@ -421,13 +432,15 @@ def _show_diff(ids: Sequence[int], changes: Sequence[Sequence[_Change]]) -> None
         out = table(None, ["id", "key", "now", "file", "written to"], rows)
         for column in out.columns[2:]:
             column.justify = "left"
-        console().print(out)
+        _print(out)
 
 
 def _confirm(conn: Connection, writes: Sequence[Sequence[_Change]], yes: bool) -> None:
     count = sum(len(motor) for motor in writes)
     to_rom = sorted({c.entry.setting.key for motor in writes for c in motor if c.to.startswith("ROM")})
-    where = f"to ROM (kept after power-off): {', '.join(to_rom)}" if to_rom else "all to RAM (lost at power-off)"
+    where = (
+        f"to ROM (kept after power-off): {', '.join(to_rom)}" if to_rom else "all to RAM (lost at power-off)"
+    )
     confirm(f"Write {count} setting(s) to motor(s) {_ids(conn.motor_ids)}, {where}. Continue?", yes)
 
 
@@ -466,4 +479,6 @@ def _check_back(
     note = f"; not read back (write-only): {', '.join(sorted(unchecked))}" if unchecked else ""
     if failed:
         raise click.ClickException("; ".join(failed))
-    click.echo(f"wrote {count} setting(s) to motor(s) {_ids(conn.motor_ids)}, read back the same{note}", err=True)
+    click.echo(
+        f"wrote {count} setting(s) to motor(s) {_ids(conn.motor_ids)}, read back the same{note}", err=True
+    )
