@@ -412,7 +412,9 @@ def test_dump_and_restore_over_python_can_virtual(
     capsys: pytest.CaptureFixture[str], virtual_bench: Any, tmp_path: Path
 ) -> None:
     channel, devices = virtual_bench
-    where = ["-i", "virtual", "-c", channel, "--ids", "1,2"]
+    # python-can's threads on a loaded machine: more than the library's few ms for a reply
+    link = ["-i", "virtual", "-c", channel, "--timeout-ms", "1000"]
+    where = [*link, "--ids", "1,2"]
     path = tmp_path / "virtual.toml"
     _, err = run(capsys, ["config", "dump", *where, "-o", str(path)])
     assert "2 motor(s)" in err
@@ -422,7 +424,7 @@ def test_dump_and_restore_over_python_can_virtual(
             "# comm_timeout_ms =", "comm_timeout_ms = 300", 1
         )
     )
-    _, err = run(capsys, ["config", "restore", str(path), "-i", "virtual", "-c", channel, "--yes"])
+    _, err = run(capsys, ["config", "restore", str(path), *link, "--yes"])
     assert "wrote 3 setting(s) to motor(s) 1, 2, read back the same" in err
     assert [d.ram.pid[PidIndex.SPEED_KP] for d in devices] == [0.75, 0.75]
     assert [d.rom.comm_timeout_ms for d in devices] == [300, 0]
