@@ -208,6 +208,9 @@ def dumped(capsys: pytest.CaptureFixture[str], bench: Bench, tmp_path: Path) -> 
         (lambda t: t.replace('"pid.speed_kp" = 0.5', '"pid.speed_kp" = '), "not TOML"),
         (lambda t: t.replace("[motor.2]", "[motor.two]"), "[motor.two]"),
         (lambda t: t.replace('family = "myactuator"\n', ""), "not a settings file"),
+        (lambda t: t.replace('"pid.speed_kp" = 0.5', "pid.speed_kp = 2024-01-01"), "pid.speed_kp = datetime"),
+        (lambda t: t.replace('"pid.speed_kp" = 0.5', "pid.speed_kp = [{a = 1}]"), "pid.speed_kp = [{"),
+        (lambda t: t.replace('"pid.speed_kp" = 0.5', '"pid.speed_kp" = 0.5\npid.speed_kp = 0.6'), "twice"),
     ],
 )
 def test_a_bad_file_is_one_line_exit_2_and_nothing_written(
@@ -228,6 +231,15 @@ def test_a_bad_file_is_one_line_exit_2_and_nothing_written(
     assert bench.opened == opened  # checked before any bus opened: nothing read, nothing written
     out, _ = run(capsys, ["config", "dump", "--sim", "2"])
     assert out == text  # pid.speed_kp still 0.5
+
+
+def test_dotted_keys_may_go_unquoted(capsys: pytest.CaptureFixture[str], dumped: tuple[Path, str]) -> None:
+    path, text = dumped
+    path.write_text(text.replace('"pid.speed_kp" = 0.5', "pid.speed_kp = 0.75"))  # TOML: a table pid
+    _, err = run(capsys, ["config", "restore", str(path), "--sim", "2", "--yes"])
+    assert "wrote 2 setting(s)" in err
+    _, after = dump(capsys, "--sim", "2")
+    assert after["motor"]["2"]["pid.speed_kp"] == 0.75
 
 
 def test_a_file_of_another_family_names_both(

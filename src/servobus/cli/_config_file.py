@@ -24,7 +24,7 @@ import math
 import re
 import struct
 import tomllib
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, fields, is_dataclass
 from pathlib import Path
 from typing import Any
@@ -233,8 +233,23 @@ def load(path: Path) -> SettingsFile:
     for name, table in motors.items():
         if not name.isdigit() or not isinstance(table, dict):
             raise click.UsageError(f"{path}: [motor.{name}]: a motor's table is [motor.ID], ID a number")
-        tables[int(name)] = table
+        flat = list(_flat(table))
+        keys = [key for key, _ in flat]
+        twice = sorted({key for key in keys if keys.count(key) > 1})
+        if twice:
+            raise click.UsageError(f"{path}: [motor.{name}]: {twice[0]} is given twice")
+        tables[int(name)] = dict(flat)
     return SettingsFile(str(path), family, revision, tables)
+
+
+def _flat(table: Mapping[str, Any], prefix: str = "") -> Iterator[tuple[str, Any]]:
+    """A table's keys with the dots put back: ``pid.speed_kp = 0.5`` without quotes is TOML's
+    dotted key, a table ``pid`` holding ``speed_kp``; both spellings name the setting."""
+    for key, value in table.items():
+        if isinstance(value, dict):
+            yield from _flat(value, f"{prefix}{key}.")
+        else:
+            yield f"{prefix}{key}", value
 
 
 def entries(
@@ -260,7 +275,10 @@ def entries(
         if key not in table:
             continue
         value = table[key]
-        shown = _toml(value) if isinstance(value, bool | int | float | str | list) else repr(value)
+        try:
+            shown = _toml(value)
+        except TypeError:  # a date, a table in a list: refused below
+            shown = repr(value)
         try:
             parsed = s.parse(text_of(value))
             command = None if s.write is None else s.write(parsed, rom)
