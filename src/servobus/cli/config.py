@@ -206,6 +206,7 @@ _output = click.option(
 
 @config.command(
     context_settings=SETTINGS,
+    short_help="Every setting of each motor to a TOML file, with units and RAM/ROM.",
     epilog=examples(
         "servobus config dump --sim 2",
         "servobus config dump -i slcan -c /dev/ttyACM0 --ids 1-4 -o bench.toml",
@@ -287,6 +288,7 @@ def _nothing_written(outcomes: Sequence[Outcome], what: str) -> None:
 
 @config.command(
     context_settings=SETTINGS,
+    short_help="A dump back to the motors: what differs, asked, written, read back.",
     epilog=examples(
         "servobus config restore motors.toml --sim 2 --dry-run",
         "servobus config restore motors.toml -i slcan -c /dev/ttyACM0 --yes",
