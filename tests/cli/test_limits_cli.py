@@ -180,3 +180,20 @@ def test_a_simulator_served_with_limits_keeps_its_motors_within_them(
         bus = ["-i", "servobus-slcan", "-c", path, "--ids", "1-2"]
         rows: Any = run_json(capsys, ["speed", *bus, "--speed-dps", "900", "--duration", "1"])
     assert [r["speed_dps"] for r in rows] == [pytest.approx(360, abs=10)] * 2
+
+
+def test_a_setting_beyond_a_field_range_is_refused_by_set_and_restore(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    limits = tmp_path / "pid.toml"
+    limits.write_text('clamp = true\n[all]\nfields = { "WritePidRam.value" = [0, 10] }\n')
+    err = one_line(capsys, ["config", "set", "--sim", "1", "pid.speed_kp", "99999", "--limits", str(limits)])
+    assert "WritePidRam.value=99999 is beyond the host limit fields value [0, 10]" in err  # (never clamped)
+    dump = tmp_path / "motor.toml"
+    run(capsys, ["config", "dump", "--sim", "1", "-o", str(dump)])
+    text = dump.read_text()
+    dump.write_text(text.replace('"pid.speed_kp" = 0.5', '"pid.speed_kp" = 99999'))
+    err = one_line(capsys, ["config", "restore", str(dump), "--sim", "1", "--yes", "--limits", str(limits)])
+    assert (
+        "pid.speed_kp = 99999: WritePidRam.value=99999 is beyond the host limit fields value [0, 10]" in err
+    )

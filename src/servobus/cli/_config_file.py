@@ -25,13 +25,14 @@ import re
 import struct
 import tomllib
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass, fields, is_dataclass
+from dataclasses import dataclass, fields, is_dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import click
 
 from servobus.cli.plugin import Setting
+from servobus.limits import Limits
 from servobus.protocols import Command
 
 __all__ = [
@@ -253,14 +254,21 @@ def _flat(table: Mapping[str, Any], prefix: str = "") -> Iterator[tuple[str, Any
 
 
 def entries(
-    file: SettingsFile, motor_id: int, known: Mapping[str, Setting], codec: Any, rom: bool
+    file: SettingsFile,
+    motor_id: int,
+    known: Mapping[str, Setting],
+    codec: Any,
+    rom: bool,
+    limits: Limits | None = None,
 ) -> list[Entry]:
     """Motor ``motor_id``'s table, each value parsed and built into its write (the setting's range
-    checks) and encoded by ``codec`` (the revision's), in the family's order of settings.
+    checks), within the motor's host-side ``limits`` (``--limits``; never clamped: a restore writes
+    what the file says or nothing), and encoded by ``codec`` (the revision's), in the family's order
+    of settings.
 
     Raises:
-        click.UsageError: an unknown key, a value the setting refuses (naming key, value and the
-            limit), or a setting the revision lacks (exit 2).
+        click.UsageError: an unknown key, a value the setting or the limits refuse (naming key, value
+            and the limit), or a setting the revision lacks (exit 2).
     """
     table = file.motors[motor_id]
     where_ = f"{file.path}: [motor.{motor_id}]"
@@ -282,6 +290,8 @@ def entries(
         try:
             parsed = s.parse(text_of(value))
             command = None if s.write is None else s.write(parsed, rom)
+            if command is not None and limits is not None:
+                replace(limits, clamp=False).apply(command)
             for made in (command, s.read() if s.read is not None else None):
                 if made is not None:
                     codec.encode(made)  # the revision has it

@@ -142,6 +142,10 @@ def set_(conn: Connection, key: str, value: str, rom: bool, yes: bool, as_json: 
         raise click.BadParameter(f"{s.key} {value}: {exc}", param_hint="VALUE") from None
     try:
         command = write(parsed, rom)  # the range checks, before anything is sent
+        for motor_id in conn.motor_ids if conn.limits is not None else ():  # (a setting is never clamped)
+            own = conn.limits.of(motor_id)  # type: ignore[union-attr]
+            if own is not None:
+                dataclasses.replace(own, clamp=False).apply(command)
     except ValueError as exc:
         raise click.BadParameter(f"{s.key} {value}: {exc}", param_hint="VALUE") from None
     op = Op(first=lambda codec, v: (command,))
@@ -328,7 +332,10 @@ def restore(conn: Connection, file: Path, rom: bool, dry_run: bool, yes: bool) -
     conn, tables = _targets(conn, found)
     bound = codecs(conn)
     checked = [
-        cfg.entries(found, table, known, codec, rom) for table, codec in zip(tables, bound, strict=True)
+        cfg.entries(
+            found, table, known, codec, rom, None if conn.limits is None else conn.limits.of(motor_id)
+        )
+        for table, codec, motor_id in zip(tables, bound, conn.motor_ids, strict=True)
     ]
     reads = [[e for e in entries if e.setting.read is not None] for entries in checked]
     outcomes = ask(conn, [[e.setting.read() for e in motor] for motor in reads])  # type: ignore[misc]
