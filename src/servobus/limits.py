@@ -168,44 +168,52 @@ class Limits:
             LimitExceeded: a field beyond its limit (without ``clamp``, or where no clamp is safe:
                 a single-turn position under a position range, an increment from an unknown angle).
         """
-        checks = _plan(type(command))
-        if not checks and not self.fields:
+        cls = type(command)
+        checks = _PLANS.get(cls)
+        if checks is None:
+            checks = _plan(cls)
+        fields = self.fields
+        if not checks and not fields:
             return command
-        name = type(command).__name__
+        name = cls.__name__
         changes: dict[str, Any] = {}
-        out = self._outside(state)
+        out = None if self.position_deg is None else self._outside(state)
         for attribute, quantity, factor, bounded in checks:
             value = getattr(command, attribute)
             if quantity == "position_deg":
                 new = self._position(command, name, attribute, value, factor, state)
             else:
-                new = self._quantity(name, attribute, value, quantity, factor, bounded)
+                limit = getattr(self, quantity)
+                # (the common case first: a number within the limit, nothing made)
+                if limit is None or (
+                    (value.__class__ is float or value.__class__ is int) and abs(value) * factor <= limit
+                ):
+                    new = value
+                else:
+                    new = self._quantity(name, attribute, value, quantity, factor, bounded)
                 if out and not bounded and isinstance(new, int | float) and new * out[0] > 0:
                     new = self._outward(name, attribute, new, out[1])
             if new is not value:
                 changes[attribute] = new
-        for attribute in _field_names(type(command)):
-            limit = self.fields.get(f"{name}.{attribute}") or self.fields.get(attribute)
-            if limit is None:
-                continue
-            value = changes.get(attribute, getattr(command, attribute))
-            new = self._within(
-                name, attribute, value, limit, f"fields {attribute} [{limit[0]:g}, {limit[1]:g}]"
-            )
-            if new is not value:
-                changes[attribute] = new
+        if fields:
+            for attribute, qualified in _field_keys(cls):
+                limit = fields.get(qualified) or fields.get(attribute)
+                if limit is None:
+                    continue
+                value = changes.get(attribute, getattr(command, attribute))
+                new = self._within(name, attribute, value, limit, "fields")
+                if new is not value:
+                    changes[attribute] = new
         return dataclasses.replace(command, **changes) if changes else command  # type: ignore[type-var]
 
     def _quantity(
         self, name: str, attribute: str, value: Any, quantity: str, factor: float, bounded: bool
     ) -> Any:
         limit = getattr(self, quantity)
-        if limit is None:
-            return value
-        said = f"{quantity} {limit:g}" + (f" ({limit / factor:.4g} in {attribute})" if factor != 1.0 else "")
         if isinstance(value, tuple):  # one value per motor (LK's multi-motor torque)
             new = tuple(self._quantity(name, attribute, v, quantity, factor, bounded) for v in value)
             return value if all(a is b for a, b in zip(new, value, strict=True)) else new
+        said = f"{quantity} {limit:g}" + (f" ({limit / factor:.4g} in {attribute})" if factor != 1.0 else "")
         if value is None:  # a bound left open ("no limit" on the wire)
             if not bounded:
                 return value
@@ -245,8 +253,10 @@ class Limits:
         limit = self.position_deg
         if limit is None or not isinstance(value, int | float):
             return value
+        kind = command.POSITION
+        if kind == "absolute" and limit[0] <= value * factor <= limit[1]:  # (the common case)
+            return value
         said = f"position_deg [{limit[0]:g}, {limit[1]:g}]"
-        kind = getattr(command, "POSITION", "absolute")
         if kind == "single_turn":
             raise self._beyond(
                 name, attribute, f"{value:g}", said,
@@ -273,9 +283,12 @@ class Limits:
         return self._within(name, attribute, value, (limit[0] / factor, limit[1] / factor), said)
 
     def _within(self, name: str, attribute: str, value: Any, limit: tuple[float, float], said: str) -> Any:
+        """``value`` within ``limit`` (``said``: the limit's name; ``"fields"`` for a field range)."""
         if not isinstance(value, int | float) or isinstance(value, bool) or limit[0] <= value <= limit[1]:
             return value
         if not self.clamp:
+            if said == "fields":
+                said = f"fields {attribute} [{limit[0]:g}, {limit[1]:g}]"
             raise self._beyond(name, attribute, f"{value:g}", said)
         if isinstance(value, int):  # (an integer field stays one)
             return min(max(value, math.ceil(limit[0])), math.floor(limit[1]))
@@ -322,6 +335,15 @@ def _plan(cls: type) -> tuple[tuple[str, str, float, bool], ...]:
 
 
 _NAMES: dict[type, tuple[str, ...]] = {}
+_KEYS_OF: dict[type, tuple[tuple[str, str], ...]] = {}
+
+
+def _field_keys(cls: type) -> tuple[tuple[str, str], ...]:
+    """Each field of ``cls`` with its ``"Class.field"`` key (made once per class)."""
+    keys = _KEYS_OF.get(cls)
+    if keys is None:
+        keys = _KEYS_OF[cls] = tuple((name, f"{cls.__name__}.{name}") for name in _field_names(cls))
+    return keys
 
 
 def _field_names(cls: type) -> tuple[str, ...]:
