@@ -414,3 +414,17 @@ async def test_a_speed_loop_stops_its_motor_at_the_edge_of_its_range() -> None:
         status = await motor.read_status2()
         assert 90.0 < status.angle_deg < 100.0 and abs(status.speed_dps) < 5.0
         assert motor.metrics().limit_clamped > 50
+
+
+def test_the_blocking_api_sets_and_meets_a_motor_s_limits() -> None:
+    from servobus import sync
+
+    with sync.Bus(SimTransport(devices=[MyActuatorMotor(1)]), limits=Limits(current_a=1)) as bus:
+        motor = bus.motor(ma.FAMILY, 1)
+        assert motor.limits == Limits(current_a=1)
+        with pytest.raises(LimitExceeded, match=r"TorqueControl\.current_a=2"):
+            motor.torque_control(current_a=2.0)
+        motor.limits = Limits(speed_dps=10)
+        motor.torque_control(current_a=2.0)
+        with pytest.raises(LimitExceeded, match="speed_dps 10"):
+            motor.speed_control(speed_dps=100.0)
