@@ -41,6 +41,7 @@ from servobus.frame import Frame
 from servobus.protocols import BoundCodec, Command, Reply
 from servobus.runtime import Runtime, RuntimeMismatch, Waiter
 from servobus.scheduler import Received, Request, RequestState, Scheduler, Traffic
+from servobus.timing import format_duration
 from servobus.transports._sending import not_sent_error
 from servobus.transports.contract import FrameLink
 from servobus.transports.events import StateChanged, TransportEvent, TransportState
@@ -371,7 +372,7 @@ def _timed_out(request: Request, now: float, seen: Any, motors: Iterable[Motor])
     diagnosis = diagnose(request.codec, seen, since, heard=heard, sent=request.frame)
     attempts = f" ({request.attempts} attempts)" if request.attempts > 1 else ""
     return MotorTimeout(
-        f"{request.describe()}: no reply within {request.timeout_s:g} s{attempts}; {diagnosis}",
+        f"{request.describe()}: no reply within {format_duration(request.timeout_s)}{attempts}; {diagnosis}",
         diagnosis=diagnosis,
     )
 
