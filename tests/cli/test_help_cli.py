@@ -205,6 +205,8 @@ def test_status_answers_from_n_motors_and_times_out_for_the_others(
     rows = run_json(capsys, ["status", "--sim", "2", "--ids", "1-4", "--timeout-ms", "20"], 1)
     assert [(r["id"], r["error"] is None) for r in rows] == [(1, True), (2, True), (3, False), (4, False)]
     assert all("no reply within 20 ms" in r["error"] for r in rows[2:])
+    # (motors 1 and 2 answered just before: the line works, the silent motor is the one to check)
+    assert rows[2]["error"].endswith("other frames came, none from motor 3: check its id, power and wiring")
 
 
 @pytest.mark.parametrize(

@@ -31,7 +31,7 @@ class MotorStatus:
         motor: the motor.
         online: its new state.
         at: when (the loop's clock).
-        reason: why, in words (``"3 replies missed"``, ``"silent for 0.5 s"``, ``"answered"``), or
+        reason: why, in words (``"3 replies missed"``, ``"silent for 500 ms"``, ``"answered"``), or
             ``"restarted"``: the motor, back online, had restarted (servobus.bus.restarts; it follows
             its ``"answered"``), so the set-points it held are lost; or
             what the motor said of itself while it stays online or offline (``"communication

@@ -346,6 +346,18 @@ def _revision(**grouped: Any) -> Callable[[F], F]:
     )
 
 
+class _FamilyOption(GroupedOption):
+    """``--family`` among the connection options: ``FAMILY`` for its value and the families in its
+    help, so the page's first column stays narrow."""
+
+    def get_help_record(self, ctx: click.Context) -> tuple[str, str] | None:
+        record = super().get_help_record(ctx)
+        if record is None or not isinstance(self.type, FamilyChoice):
+            return record
+        names, text = record
+        return names, text.replace("motors.", f"motors: {', '.join(self.type.choices)}.", 1)
+
+
 #: ``--family``/``-f``: the command receives ``family``
 family_option = _family()
 #: ``--revision``: the command receives ``revision`` (None: the family's default)
@@ -411,7 +423,7 @@ _LOCAL = {
 
 
 def _connection_options(func: F, *, remote: bool) -> F:
-    @_family(**_GROUP)
+    @_family(cls=_FamilyOption, help_group=CONNECTION, metavar="FAMILY")
     @_revision(**_GROUP)
     @click.option("--ids", "ids_text", metavar="IDS", help=IDS_HELP, **_GROUP)
     @click.option("--sim", type=int, metavar="N", help=SIM_RULE, **_GROUP)

@@ -38,6 +38,8 @@ class GroupedOption(click.Option):
         self.help_group = help_group
 
 
+#: the widest option names click keeps beside their help (longer ones get a line of their own)
+_COL_MAX = 30
 #: the commands :func:`with_help` has done (a command object is resolved once per use, not once)
 _HELPED: weakref.WeakSet[click.Command] = weakref.WeakSet()
 
@@ -78,10 +80,14 @@ def _format_options(self: click.Command, ctx: click.Context, formatter: click.He
         else:
             sections.setdefault(group or OPTIONS, []).append(record)
     sections[OPTIONS] += last
+    # one column for the help texts on the whole page: click sizes it per section (to the longest
+    # name that fits, at most 30), so each section's first name is padded to the page's widest
+    terms = [len(term) for rows in sections.values() for term, _ in rows]
+    width = max((n for n in terms if n <= _COL_MAX), default=0)
     for title, rows in sections.items():
         if rows:
             with formatter.section(title):
-                formatter.write_dl(rows)
+                formatter.write_dl([(rows[0][0].ljust(width), rows[0][1]), *rows[1:]], col_max=_COL_MAX)
     if isinstance(self, click.Group):
         self.format_commands(ctx, formatter)
 
