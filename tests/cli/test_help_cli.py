@@ -150,6 +150,21 @@ def test_every_command_groups_its_connection_options(
     assert _headings(out) == ["Options", "Connection", *(["Remote (a bridge's bus)"] if remote else [])]
 
 
+@pytest.mark.parametrize("command", _commands(), ids=" ".join)
+def test_every_help_page_aligns_its_help_texts_in_one_column(
+    capsys: pytest.CaptureFixture[str], command: list[str]
+) -> None:
+    out, _ = run(capsys, [*command, "--help"])
+    assert not [line for line in out.splitlines() if line.endswith(" ")]  # (a padded name, alone)
+    page = out.split("Examples:")[0]
+    columns = {
+        len(line) - len(line.split("  ", 2)[-1].lstrip())
+        for line in page.splitlines()
+        if re.match(r"  -[^ ].*?\S  +\S", line) and "  " in line.strip()
+    }
+    assert len(columns) <= 1, (columns, out)
+
+
 def test_a_group_keeps_its_commands_after_its_options(capsys: pytest.CaptureFixture[str]) -> None:
     out, _ = run(capsys, ["config", "--help"])
     assert _headings(out) == ["Options", "Commands"]

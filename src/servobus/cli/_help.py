@@ -87,9 +87,18 @@ def _format_options(self: click.Command, ctx: click.Context, formatter: click.He
     for title, rows in sections.items():
         if rows:
             with formatter.section(title):
-                formatter.write_dl([(rows[0][0].ljust(width), rows[0][1]), *rows[1:]], col_max=_COL_MAX)
+                formatter.write_dl(_padded(rows, width), col_max=_COL_MAX)
     if isinstance(self, click.Group):
         self.format_commands(ctx, formatter)
+
+
+def _padded(rows: list[tuple[str, str]], width: int) -> list[tuple[str, str]]:
+    """``rows`` with the name of the first that has a help text padded to ``width`` (an argument
+    without one would end its line in spaces)."""
+    for i, (term, text) in enumerate(rows):
+        if text:
+            return [*rows[:i], (term.ljust(width), text), *rows[i + 1 :]]
+    return rows
 
 
 def did_you_mean(exc: click.UsageError) -> str | None:
