@@ -264,3 +264,16 @@ def test_a_driving_command_drives_the_first_n_ids(
     ]
     rows = run_json(capsys, args, 1)  # (motor 2 is addressed, not simulated: it stays silent)
     assert rows[0]["error"] is None and "motor 2" in rows[1]["error"] and "within 20 ms" in rows[1]["error"]
+
+
+def test_the_dashboard_says_how_many_of_its_motors_are_simulated(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    pytest.importorskip("servobus.dashboard")
+    kept = keep_devices(monkeypatch)
+    base = ["dashboard", "--listen", "127.0.0.1:0", "--still", "--duration", "0.3", "--timeout-ms", "20"]
+    out, _ = run(capsys, [*base, "--sim", "1", "--ids", "4-5"])
+    assert "(2 myactuator motor(s), 1 simulated; read-only;" in out.splitlines()[0]
+    assert [d.motor_id for d in kept.last] == [4]
+    out, _ = run(capsys, [*base, "--sim", "2"])
+    assert "(2 simulated myactuator motor(s); read-only;" in out.splitlines()[0]

@@ -216,9 +216,9 @@ async def _local(served: _Served, conn: Connection, hz: float, moving: bool, dur
         dash.watch(bus, name=bus.name if conn.sim is None else "sim")
         loop = Loop(hz, timeout_s=conn.timeout_s)
         dash.watch_loop(loop)
-        what = f"{len(motors)} {conn.family} motor(s)"
-        if conn.sim is not None:  # (--ids may name more than are simulated: the others are silent)
-            what += f", {len(conn.sim_ids)} simulated" if len(conn.sim_ids) < len(motors) else ", simulated"
+        simulated = len(conn.sim_ids)  # (--ids may name more motors than --sim N: the others are silent)
+        what = f"{len(motors)} {'simulated ' if simulated == len(motors) else ''}{conn.family} motor(s)"
+        what += f", {simulated} simulated" if 0 < simulated < len(motors) else ""
         motion = _Motion(bus, motors, conn.family, served.stopped) if moving else None
         with stop_scope() as stopping:
             async with served.serving():
