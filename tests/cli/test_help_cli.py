@@ -5,8 +5,10 @@ durations in ms, and one rule for ``--sim N`` and ``--ids``."""
 from __future__ import annotations
 
 import re
+import shlex
 import subprocess
 import uuid
+from pathlib import Path
 
 import click
 import pytest
@@ -126,6 +128,7 @@ def test_move_help_lists_its_own_options_then_the_connection_then_the_remote(
         "--port",
         "--baud",
         "--timeout-ms",
+        "--limits",
     ]
     assert _rows(out, "Remote (a bridge's bus)") == [
         "--remote",
@@ -277,3 +280,34 @@ def test_the_dashboard_says_how_many_of_its_motors_are_simulated(
     assert [d.motor_id for d in kept.last] == [4]
     out, _ = run(capsys, [*base, "--sim", "2"])
     assert "(2 simulated myactuator motor(s); read-only;" in out.splitlines()[0]
+
+
+# ---- the page that says all this ----
+
+PAGE = Path(__file__).resolve().parents[2] / "docs" / "cli.md"
+
+
+def _said_errors() -> list[tuple[list[str], str]]:
+    """Each ``$ servobus ...`` line of docs/cli.md's console blocks that its error line follows."""
+    text = PAGE.read_text(encoding="utf-8")
+    found = []
+    for block in re.findall(r"^```console\n(.*?)^```$", text, re.S | re.M):
+        lines = block.splitlines()
+        for line, after in zip(lines, [*lines[1:], ""], strict=True):
+            if line.startswith("$ servobus ") and after.startswith("servobus") and ": error: " in after:
+                found.append((shlex.split(line.split("#")[0])[2:], after))
+    return found
+
+
+@pytest.mark.parametrize(
+    ("args", "said"), _said_errors(), ids=lambda v: " ".join(v) if isinstance(v, list) else ""
+)
+def test_the_page_s_errors_are_what_the_command_says(
+    capsys: pytest.CaptureFixture[str], args: list[str], said: str
+) -> None:
+    _, err = run(capsys, args, 2 if "No such" in said or "--sim 2 simulates" in said else 1)
+    assert said in err.splitlines()
+
+
+def test_the_page_shows_some_errors() -> None:
+    assert len(_said_errors()) >= 4

@@ -78,6 +78,7 @@ class Engine:
     ) -> None:
         self.name = name
         self.scheduler = scheduler
+        self.count = scheduler.count  # one more of a counter of a codec's motor (``Motor.metrics``)
         self.link = link
         self.watchdog = watchdog
         self.registry = registry
@@ -143,10 +144,6 @@ class Engine:
             self.watchdog.check_silence(now)
         self.pump()
 
-    def count(self, codec: BoundCodec, counter: str) -> None:
-        """One more ``counter`` in ``codec``'s motor's counts (``Motor.metrics``)."""
-        self.scheduler.count(codec, counter)
-
     def reach_s(self, codec: BoundCodec) -> float:
         """The longest a reply of ``codec``'s motor is waited for now (its measured timeout)."""
         return self.scheduler.motor_timeout_s(codec)
@@ -206,7 +203,9 @@ class Engine:
             raise RuntimeMismatch(f"{self.name}: use the Bus inside 'async with'")
         if self.closing and not safe:
             raise self.closed_error()
-        # (positional: a call by keyword costs more, and this is once per request)
+        if motor.limits is not None:  # (LimitExceeded, or the command clamped to them)
+            command = motor.limited(command)
+        # (positional: a call by keyword costs more; once per request)
         request = self.scheduler.request(
             motor.codec, command, timeout_s, retries, runtime.waiter() if context is None else context
         )

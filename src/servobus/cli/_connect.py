@@ -23,6 +23,8 @@ from servobus.bus import Bus, Motor
 from servobus.cli._help import CONNECTION, GroupedOption
 from servobus.cli._output import FloatRange, refused
 from servobus.cli._remote import remote_from, remote_options
+from servobus.limits import LimitBook
+from servobus.limits import load as load_limits
 from servobus.protocols import DEFAULT_FAMILY, FAMILIES, available_families, get_family
 
 if TYPE_CHECKING:
@@ -93,6 +95,8 @@ class Connection:
     baud: int | None = None
     #: each request's reply timeout (``--timeout-ms``); None: the library's
     timeout_s: float | None = None
+    #: the motors' host-side limits (``--limits FILE``); None: none
+    limits: LimitBook | None = None
 
     @property
     def link(self) -> str:
@@ -393,6 +397,31 @@ timeout_option = _timeout()
 _GROUP: dict[str, Any] = {"cls": GroupedOption, "help_group": CONNECTION}
 
 
+def _limits(ctx: click.Context, param: click.Parameter, value: str | None) -> LimitBook | None:
+    if value is None:
+        return None
+    try:
+        return load_limits(value)
+    except (OSError, ValueError) as exc:
+        raise click.BadParameter(str(exc)) from None
+
+
+def _limits_opt(**grouped: Any) -> Callable[[F], F]:
+    return click.option(
+        "--limits",
+        type=click.Path(dir_okay=False),
+        callback=_limits,
+        metavar="FILE",
+        help="The motors' host-side limits (a TOML file: servobus.limits): every command is checked "
+        "against them before it is sent, refused (exit 2) or clamped as the file says.",
+        **grouped,
+    )
+
+
+#: ``--limits FILE``: the command receives ``limits`` (a LimitBook, or None)
+limits_option = _limits_opt()
+
+
 def connection_options(func: F) -> F:
     """Add the connection options (and ``--timeout-ms``) to a click command; it receives
     ``conn: Connection``."""
@@ -448,6 +477,7 @@ def _connection_options(func: F, *, remote: bool) -> F:
         "--baud", type=click.IntRange(min=1), help="Serial baud rate [default: the family's].", **_GROUP
     )
     @_timeout(**_GROUP)
+    @_limits_opt(**_GROUP)
     @(remote_options if remote else _unchanged)
     @functools.wraps(func)
     def wrapper(*args: Any, ids_text: str | None, **kwargs: Any) -> Any:
@@ -463,6 +493,7 @@ def _connection_options(func: F, *, remote: bool) -> F:
             "port",
             "baud",
             "timeout_s",
+            "limits",
         )
         fields = {name: kwargs.pop(name) for name in names}
         try:
@@ -477,7 +508,9 @@ def _connection_options(func: F, *, remote: bool) -> F:
         local = [flag for name, flag in _LOCAL.items() if fields[name] not in (None, False)]
         if local:
             raise click.UsageError(f"--remote and {', '.join(local)}: the bus is the bridge's, give one")
-        conn = Connection(family=fields["family"], ids=ids, timeout_s=fields["timeout_s"])
+        conn = Connection(
+            family=fields["family"], ids=ids, timeout_s=fields["timeout_s"], limits=fields["limits"]
+        )
         return func(*args, conn=conn, remote=target, **kwargs)
 
     return wrapper  # type: ignore[return-value]
@@ -516,6 +549,7 @@ async def open_bus(
     """The Bus on ``conn``'s transport (given to ``wrap`` first, when given: a tap) with its motors
     bound; leaving it stops the commanded ones."""
     transport = conn.transport()
+    bus_options.setdefault("limits", conn.limits)
     bus = Bus(transport if wrap is None else wrap(transport), **bus_options)
     try:
         async with bus:

@@ -258,7 +258,7 @@ async def _serve(
                 transport = SimTransport(devices=devices, name=name)
             else:
                 transport = conn.transport()
-            bus = await stack.enter_async_context(Bus(transport, name=name))
+            bus = await stack.enter_async_context(Bus(transport, name=name, limits=conn.limits))
             opened.append(bus)
             served[name] = (bus, [bus.motor(conn.family, i, **conn.bind_options()) for i in ids])
         with stop_scope() as stopping:

@@ -16,6 +16,7 @@ import time
 from collections.abc import Callable
 
 from servobus import runtime
+from servobus.limits import LimitExceeded
 from servobus.remote import wire
 from servobus.remote._clients import Clients
 from servobus.remote._handover import Handover
@@ -97,8 +98,15 @@ class Setpoints:
             if clients.holder(served, mid, client) is not None:
                 served.counts["refused"] += 1
                 continue
+            motor = served.motors[mid]
+            try:  # beyond the motor's limits: refused here (or clamped), not by the tick it would void
+                command = motor.limited(command)
+            except LimitExceeded as exc:
+                served.counts["limited"] += 1
+                logger.debug("%s: set-point for motor %s refused: %s", key, mid, exc)
+                continue
             try:  # what the motor's codec refuses (a command its revision lacks) never reaches a tick
-                served.motors[mid].codec.encode(command)
+                motor.codec.encode(command)
             except ValueError as exc:
                 served.counts["malformed"] += 1
                 logger.debug("%s: set-point for motor %s refused by its codec: %s", key, mid, exc)
