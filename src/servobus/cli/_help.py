@@ -40,7 +40,7 @@ class GroupedOption(click.Option):
 
 #: the widest option names click keeps beside their help (longer ones get a line of their own)
 _COL_MAX = 30
-#: the commands :func:`with_help` has done (a command object is resolved once per use, not once)
+#: the commands :func:`with_help` has done (LazyGroup resolves a command each time it is named)
 _HELPED: weakref.WeakSet[click.Command] = weakref.WeakSet()
 
 
