@@ -41,6 +41,7 @@ from servobus.frame import Frame
 from servobus.protocols import BoundCodec, Command, Reply
 from servobus.runtime import Runtime, RuntimeMismatch, Waiter
 from servobus.scheduler import Received, Request, RequestState, Scheduler, Traffic
+from servobus.timing import format_duration
 from servobus.transports._sending import not_sent_error
 from servobus.transports.contract import FrameLink
 from servobus.transports.events import StateChanged, TransportEvent, TransportState
@@ -362,15 +363,21 @@ class Engine:
         return _timed_out(request, self.time(), self.scheduler.seen, self.registry.named.values())
 
 
+#: how long before a silent request another motor's frame still shows the line works (seconds)
+HEARD_BEFORE_S = 1.0
+
+
 def _timed_out(request: Request, now: float, seen: Any, motors: Iterable[Motor]) -> MotorTimeout:
     """The error of a request that got no reply, saying what the bus saw instead (computed off the
     reply path: only a time-out pays for it). ``seen``: the scheduler's record of recent frames."""
     since = request.sent_at if request.sent_at is not None else now - request.timeout_s
-    heard = any(m.last_seen is not None and m.last_seen >= since for m in motors)
+    # another motor heard just before counts too: asked one after the other (servobus status), the
+    # others answered before this request left, and the line is not the one to check
+    heard = any(m.last_seen is not None and m.last_seen >= since - HEARD_BEFORE_S for m in motors)
     diagnosis = diagnose(request.codec, seen, since, heard=heard, sent=request.frame)
     attempts = f" ({request.attempts} attempts)" if request.attempts > 1 else ""
     return MotorTimeout(
-        f"{request.describe()}: no reply within {request.timeout_s:g} s{attempts}; {diagnosis}",
+        f"{request.describe()}: no reply within {format_duration(request.timeout_s)}{attempts}; {diagnosis}",
         diagnosis=diagnosis,
     )
 

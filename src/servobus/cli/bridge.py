@@ -253,7 +253,7 @@ async def _serve(
         served: dict[str, tuple[Bus, list[Motor]]] = {}
         for name, ids in layout:
             if conn.sim is not None:  # (fd only when given, as Connection.transport)
-                where = (conn.family, ids, conn.revision)
+                where = (conn.family, ids[: conn.sim], conn.revision)  # (--sim N: the first N ids)
                 devices = sim_devices(*where, fd=True) if conn.fd else sim_devices(*where)
                 transport = SimTransport(devices=devices, name=name)
             else:

@@ -24,6 +24,7 @@ from servobus.remote._served import Held, Served
 from servobus.remote._stops import Stops
 from servobus.remote.keys import Keys
 from servobus.ticks import ticks
+from servobus.timing import format_duration
 
 __all__ = ["Setpoints"]
 
@@ -145,7 +146,7 @@ class Setpoints:
             if due:
                 for mid in due:
                     self._clients.revoke(served, mid)
-                self._stops.stop(served, due, f"set-points stale for {stop_after_s * 1e3:.0f} ms")
+                self._stops.stop(served, due, f"set-points stale for {format_duration(stop_after_s)}")
             if not items:
                 continue
             handed = time.time_ns()
