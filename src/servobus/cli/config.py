@@ -314,7 +314,7 @@ def restore(conn: Connection, file: Path, rom: bool, dry_run: bool, yes: bool) -
 
     The motors are the file's ids, or --ids: a file of one motor is written to every motor --ids
     names (dump one motor, restore it onto a bench of them); of several, --ids picks some of them.
-    With --sim, the simulated motors are these ids, at their defaults (fresh at each command).
+    With --sim N, the first N of these ids are simulated, at their defaults (fresh at each command).
     The revision is the file's (--revision must agree). Write-only settings given a value are
     written every time and cannot be checked; read-only ones are compared, never written. With
     --rom, the settings that have both forms are written to ROM even where their running (RAM)
