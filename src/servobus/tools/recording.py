@@ -18,7 +18,7 @@ import csv
 import json
 import os
 import tempfile
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any, Self, TextIO
 
@@ -151,14 +151,19 @@ class CandumpWriter:
         self._writer.stop()
 
 
-def telemetry_row(time_s: float, family: str, motor_id: int, reply: Reply) -> dict[str, Scalar]:
-    """One row: ``time_s``, ``motor_id``, ``family``, ``reply`` (its class), then its fields."""
+def telemetry_row(
+    time_s: float, family: str, motor_id: int, reply: Reply, setpoints: Mapping[str, Scalar] | None = None
+) -> dict[str, Scalar]:
+    """One row: ``time_s``, ``motor_id``, ``family``, ``reply`` (its class), the ``setpoints`` given
+    (``setpoint_angle_deg``: the set-point in effect when the reply came), then the reply's fields."""
     row: dict[str, Scalar] = {
         "time_s": round(time_s, 6),
         "motor_id": motor_id,
         "family": family,
         "reply": type(reply).__name__,
     }
+    if setpoints:
+        row.update(setpoints)
     for name, value in message_values(reply).items():
         row.setdefault(name, value)  # a reply's own motor_id is the row's
     return row
