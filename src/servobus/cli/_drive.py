@@ -74,12 +74,8 @@ class Wave:
 
     def extremes(self) -> tuple[float, ...]:
         """Every value the wave reaches at its ends (what is checked before anything is sent)."""
-        low = -self.amplitude if self.shape != "step" else 0.0
-        return (
-            round(self.offset + low, DIGITS),
-            round(self.offset, DIGITS),
-            round(self.offset + self.amplitude, DIGITS),
-        )
+        swing = (self.amplitude,) if self.shape == "step" else (self.amplitude, -self.amplitude)
+        return tuple(round(self.offset + value, DIGITS) for value in (0.0, *swing))
 
 
 @dataclass(frozen=True, slots=True)
@@ -121,6 +117,12 @@ class Drive:
         again = self.op.repeat
         return again(codec, self.values(target)) if again is not None else self.first(codec, target)
 
+    def reply_types(self, codec: Any) -> set[type]:
+        """The replies the resent commands get."""
+        return {
+            reply for command in self.repeat(codec, self.wave.offset) for reply in type(command).reply_types()
+        }
+
     def shows_status(self, codec: Any) -> bool:
         """The replies to the resent commands carry a position, speed or current (no poll needed)."""
         for command in self.repeat(codec, self.wave.offset):
@@ -147,7 +149,7 @@ class Drive:
         """``sine, position 0 ± 90 deg, period 2 s``."""
         unit = MODES[self.mode][2]
         wave = self.wave
-        around = f"{wave.offset:g} ± {wave.amplitude:g} {unit}"
+        around = f"{wave.offset:g} {'±' if wave.amplitude >= 0 else '∓'} {abs(wave.amplitude):g} {unit}"
         return f"{wave.shape}, {self.mode} {around}, period {wave.period_s:g} s"
 
 
@@ -167,16 +169,18 @@ def drive_options(func: F) -> F:
         ),
         click.option(
             "--amplitude-deg",
-            type=FloatRange(min=0),
+            type=FloatRange(),
             help=f"The wave's amplitude in position mode [default: {AMPLITUDE['position']:g}].",
         ),
         click.option(
             "--amplitude-dps",
-            type=FloatRange(min=0),
+            type=FloatRange(),
             help=f"The wave's amplitude in speed mode [default: {AMPLITUDE['speed']:g}].",
         ),
-        click.option("--offset-deg", type=float, help="The wave's centre in position mode [default: 0]."),
-        click.option("--offset-dps", type=float, help="The wave's centre in speed mode [default: 0]."),
+        click.option(
+            "--offset-deg", type=FloatRange(), help="The wave's centre in position mode [default: 0]."
+        ),
+        click.option("--offset-dps", type=FloatRange(), help="The wave's centre in speed mode [default: 0]."),
         click.option(
             "--period-s",
             type=FloatRange(min=0, min_open=True),

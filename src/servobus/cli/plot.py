@@ -28,7 +28,7 @@ colour on the panel of its quantity. Needs matplotlib: pip install 'servobus[plo
 
 \b
 Examples:
-  servobus record --sim 4 --drive sine --duration 3 -o run.csv && servobus plot run.csv -o run.png
+  servobus record --sim 4 --drive sine --stagger --duration 3 -o run.csv && servobus plot run.csv -o run.png
   servobus plot run.jsonl -o run.png --size 1600x1200 --title "bench run 3\""""
 
 #: the prefix of a set-point's column (``setpoint_angle_deg``): drawn on the panel of the rest

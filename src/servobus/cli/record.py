@@ -55,7 +55,8 @@ recording that is kept; on an error, only the files record created are removed. 
 
 \b
 Examples:
-  servobus record --sim 4 --drive sine --duration 3 -o run.csv && servobus plot run.csv -o run.png
+  servobus record --sim 4 --drive sine --stagger --duration 3 -o run.csv
+  servobus plot run.csv -o run.png
   servobus record --sim 4 --duration 5 -o telemetry.csv --log frames.log
   servobus record -i socketcan -c can0 --ids 1-3 --hz 200 -o run.jsonl
   servobus record --sim 2 --drive step --mode speed --amplitude-dps 180 --duration 2 -o step.csv
@@ -212,10 +213,13 @@ async def _record(
     frames = CandumpWriter(frames_file, epoch=time.time(), origin=origin) if frames_file else None
     kinds = {Traffic.REPLY, Traffic.STREAM, Traffic.REPORT, Traffic.LATE, Traffic.UNSOLICITED}
     setpoints: dict[int, float] = {}  # motor id -> the set-point last sent (--drive)
-    driving = [True]  # (False once the drive ended: the safe stop's echoes are the log's, not rows)
+    # Once the drive ended, only the replies it asked for are rows (a late one), not the safe stop's
+    # echoes (those are in --log, and the last line says the stop).
+    driving = [True]
+    asked: set[type] = set() if poll_class is None else set(poll_class.reply_types())
 
     def on_reply(motor: Motor, traffic: Traffic, reply: Reply) -> None:
-        if traffic not in kinds or not driving[0]:
+        if traffic not in kinds or not (driving[0] or type(reply) in asked):
             return
         tally.replies += 1
         tally.by_motor[motor.motor_id] = tally.by_motor.get(motor.motor_id, 0) + 1
@@ -239,6 +243,7 @@ async def _record(
         async with open_bus(conn, wrap=tap, safe=None if drive is None else "stop") as (bus, motors):
             bus.subscribe(on_reply)
             if drive is not None:
+                asked.update(*(drive.reply_types(motor.codec) for motor in motors))
                 args = (bus, motors, drive, poll_class, hz, duration, conn.timeout_s, setpoints, count)
                 try:
                     await drive_ticks(*args)
