@@ -6,6 +6,7 @@ the set-points dashed beside the responses. Through the in-process simulator and
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import os
@@ -26,10 +27,12 @@ from _cli_run import invoke, one_line_error
 from cli._bus_cli import Devices, keep_devices, run
 from servobus.bus import Bus
 from servobus.cli.plot import draw, read_rows
+from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.sim.attach import serve_python_can
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.plant import PositionControl, SpeedControl
+from servobus.transports.can import message_from_frame
 
 SCRIPT = [sys.executable, "-c", "import sys; from servobus.cli import main; sys.exit(main())"]
 #: the README's example, word for word (/work/prompts/out/rec_readme.md)
@@ -74,7 +77,10 @@ def _matches_the_log(telemetry: Path, log: Path, column: str, field: str) -> Non
     for motor, mine in rows.items():
         assert len(mine) == len(sent[motor]) >= 10
         for row, value in zip(mine, sent[motor], strict=True):
-            assert value is not None and row[column] == pytest.approx(value, abs=0.006), (motor, row)
+            if value is None:  # (nothing sent to it yet)
+                assert row[column] is None, (motor, row)
+            else:
+                assert row[column] == pytest.approx(value, abs=0.006), (motor, row)
 
 
 def test_the_readme_example_moves_the_motors_and_plots_the_set_points(
@@ -185,10 +191,15 @@ def test_other_families_are_driven_through_their_own_move(tmp_path: Path, family
 # ---- through python-can's virtual bus, the simulated motors attached on another thread ----
 
 
-@pytest.fixture
-def virtual_motors() -> Iterator[str]:
+#: the speeds another controller sends motor 1, in turn, every 20 ms (``virtual_motors(foreign=True)``)
+FOREIGN_SPEEDS_DPS = (30.0, 60.0, 90.0)
+
+
+@contextlib.contextmanager
+def _virtual_motors(*, foreign: bool = False) -> Iterator[str]:
     """Simulated MyActuator motors 1 and 2 on a python-can ``virtual`` channel (returned), served on
-    a thread of their own, as another node on the bus would be."""
+    a thread of their own, as another node on the bus would be; ``foreign``: with another controller
+    on that thread sending motor 1 speed set-points (:data:`FOREIGN_SPEEDS_DPS`)."""
     channel = f"record-drive-{os.getpid()}-{time.monotonic_ns()}"
     ready, stop = threading.Event(), threading.Event()
     devices = [MyActuatorMotor(1), MyActuatorMotor(2)]
@@ -196,15 +207,23 @@ def virtual_motors() -> Iterator[str]:
     def serve() -> None:
         async def main() -> None:
             bus = can.Bus(interface="virtual", channel=channel)
+            other = can.Bus(interface="virtual", channel=channel)
+            codec = ma.FAMILY.bind(1)
             try:
                 async with anyio.create_task_group() as group:
                     group.start_soon(serve_python_can, SimCanNetwork(devices), bus)
                     ready.set()
+                    n = 0
                     while not stop.is_set():
-                        await anyio.sleep(0.01)
+                        if foreign:
+                            speed = FOREIGN_SPEEDS_DPS[n % len(FOREIGN_SPEEDS_DPS)]
+                            other.send(message_from_frame(codec.encode(ma.SpeedControl(speed_dps=speed))))
+                            n += 1
+                        await anyio.sleep(0.02)
                     group.cancel_scope.cancel()
             finally:
                 bus.shutdown()
+                other.shutdown()
 
         anyio.run(main)
 
@@ -216,6 +235,18 @@ def virtual_motors() -> Iterator[str]:
     finally:
         stop.set()
         thread.join(5.0)
+
+
+@pytest.fixture
+def virtual_motors() -> Iterator[str]:
+    with _virtual_motors() as channel:
+        yield channel
+
+
+@pytest.fixture
+def controlled_motors() -> Iterator[str]:
+    with _virtual_motors(foreign=True) as channel:
+        yield channel
 
 
 def test_through_python_can_virtual_the_set_points_are_stored_as_sent(
@@ -230,6 +261,38 @@ def test_through_python_can_virtual_the_set_points_are_stored_as_sent(
     decoded = [json.loads(line) for line in invoke(["decode", "--json", str(log)]).stdout.splitlines()]
     last = {r["motor_id"]: r["type"] for r in decoded if r["direction"] == "request"}
     assert last == {1: "MotorStop", 2: "MotorStop"}  # the safe stop went out last, on the wire
+
+
+def test_another_controller_s_set_points_are_recorded_as_the_bus_carried_them(
+    tmp_path: Path, controlled_motors: str
+) -> None:
+    """--watch-setpoints: the speed set-points another node sends motor 1 (decoded from the bus with
+    the family's codec) are on motor 1's rows, each the last sent before the reply; motor 2, sent
+    none, has none; the replies to the other controller's requests are rows too."""
+    telemetry, log = tmp_path / "run.jsonl", tmp_path / "run.log"
+    connection = ["-i", "virtual", "-c", controlled_motors, "--ids", "1,2"]
+    result = invoke(["record", *connection, "--watch-setpoints", "--duration", "0.6", "-o", str(telemetry),
+                     "--log", str(log), "--timeout-ms", "50"])  # fmt: skip
+    seen = int(result.stderr.split(" set-points of another controller")[0].rsplit(" ", 1)[1])
+    assert seen >= 15  # every 20 ms for 0.6 s
+    assert "stop" not in result.stderr  # nothing commanded: nothing to stop
+    _matches_the_log(telemetry, log, "setpoint_speed_dps", "speed_dps")
+    rows = _by_motor(read_rows(telemetry))
+    assert {row["setpoint_speed_dps"] for row in rows[1]} - {None} == set(FOREIGN_SPEEDS_DPS)
+    assert {row["setpoint_speed_dps"] for row in rows[2]} == {None}
+    assert {row["setpoint_angle_deg"] for row in rows[1]} == {None}  # (a kind not sent stays empty)
+    assert {row["command"] for row in rows[1]} == {"READ_STATUS_2", "SPEED_CONTROL"}  # theirs too
+    decoded = [json.loads(line) for line in invoke(["decode", "--json", str(log)]).stdout.splitlines()]
+    ours = {r["type"] for r in decoded if r["direction"] == "request" and not r["rx"]}
+    assert ours == {"ReadStatus2"}  # record itself only read
+
+
+def test_watching_without_another_controller_leaves_the_columns_empty(tmp_path: Path) -> None:
+    path = tmp_path / "run.csv"
+    invoke(["record", "--sim", "1", "--watch-setpoints", "--duration", "0.1", "-o", str(path)])
+    rows = read_rows(path)
+    assert list(rows[0])[4:7] == ["setpoint_angle_deg", "setpoint_speed_dps", "setpoint_current_a"]
+    assert all(row[c] is None for row in rows for c in ("setpoint_angle_deg", "setpoint_speed_dps"))
 
 
 # ---- the safe stop on Ctrl-C and SIGTERM ----
@@ -367,6 +430,8 @@ def test_without_drive_nothing_is_commanded_and_no_stop_is_claimed(tmp_path: Pat
         (["--drive", "sine", "--period-s", "0"], "--period-s"),
         (["--drive", "sine", "--offset-deg", "nan"], "not a number"),
         (["--drive", "sine", "--period-s", "nan"], "not a number"),
+        (["--drive", "sine", "--watch-setpoints"], "not with --drive"),
+        (["--watch-setpoints", "--family", "hollow"], "hollow set-point frames do not say what they set"),
     ],
 )
 def test_bad_drive_options_are_one_line_and_exit_2_with_nothing_sent(

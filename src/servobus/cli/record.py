@@ -21,9 +21,12 @@ from servobus.cli._drive import Drive, drive_options, drive_ticks, make_drive
 from servobus.cli._families import cli_part
 from servobus.cli._motors import codecs, run
 from servobus.cli._output import FloatRange
+from servobus.cli._watch import SeenSetpoints
 from servobus.errors import MotorTimeout, TransportError
+from servobus.frame import Frame
 from servobus.protocols import Command, Reply, get_family
 from servobus.scheduler import Traffic
+from servobus.tools.logs import Scalar
 from servobus.tools.recording import CandumpWriter, NewFiles, TapLink, TelemetryWriter, telemetry_row
 
 __all__ = ["record"]
@@ -102,6 +105,12 @@ class Tally:
     "where it has none of that name].",
 )
 @click.option("--force", is_flag=True, help="Overwrite existing files (replaced when the recording is kept).")
+@click.option(
+    "--watch-setpoints",
+    is_flag=True,
+    help="Record the set-points another controller sends these motors, seen on the bus (columns "
+    "setpoint_angle_deg, setpoint_speed_dps, setpoint_current_a), and the replies to them.",
+)
 @drive_options
 def record(
     conn: Connection,
@@ -112,6 +121,7 @@ def record(
     duration: float | None,
     poll: str | None,
     force: bool,
+    watch_setpoints: bool,
     drive_args: dict[str, Any],
 ) -> None:
     """Record telemetry and raw frames from the motors; --drive moves them and records the set-points."""
@@ -127,6 +137,9 @@ def record(
         raise click.BadParameter(f"{log}: frames are written as a candump .log", param_hint="--log")
     bound = codecs(conn)
     drive = make_drive(conn.family, bound, drive_args)
+    watch = _watch(conn, bound) if watch_setpoints else None
+    if watch is not None and drive is not None:
+        raise click.UsageError("--watch-setpoints records another controller's set-points: not with --drive")
     poll_class: type[Command] | None = None
     if drive is None or poll is not None or not all(drive.shows_status(codec) for codec in bound):
         poll = poll or _default_poll(conn)
@@ -142,7 +155,7 @@ def record(
         frames_file = files.open(log) if log is not None else None
         tally = Tally()
         try:
-            run(_record(conn, poll_class, drive, hz, duration, telemetry, frames_file, tally))
+            run(_record(conn, poll_class, drive, watch, hz, duration, telemetry, frames_file, tally))
         except KeyboardInterrupt:  # Ctrl-C or SIGTERM
             interrupted = True
         if tally.replies == 0 and not interrupted:
@@ -158,9 +171,24 @@ def record(
     finally:
         files.close()
     cut_short = interrupted and duration is not None
-    _summary(tally, telemetry, output, log, interrupted, drive, stops=not cut_short)
+    _summary(tally, telemetry, output, log, interrupted, drive, watch, stops=not cut_short)
     if cut_short:
         raise KeyboardInterrupt  # cut short: exit 130, the files kept as far as they got
+
+
+def _watch(conn: Connection, bound: Sequence[Any]) -> SeenSetpoints:
+    """What ``--watch-setpoints`` keeps (refused for a family whose set-points it cannot tell)."""
+    if conn.port is not None:
+        raise click.UsageError(
+            "--watch-setpoints: another controller's frames are seen on CAN, not on --port"
+        )
+    watch = SeenSetpoints(conn.family, bound, conn.bind_options())
+    if not watch.columns:
+        raise click.UsageError(
+            f"--watch-setpoints: {conn.family} set-point frames do not say what they set "
+            "(no move, speed or torque command of its own)"
+        )
+    return watch
 
 
 def _default_poll(conn: Connection) -> str:
@@ -202,6 +230,7 @@ async def _record(
     conn: Connection,
     poll_class: type[Command] | None,
     drive: Drive | None,
+    watch: SeenSetpoints | None,
     hz: float,
     duration: float | None,
     telemetry: TelemetryWriter | None,
@@ -212,6 +241,8 @@ async def _record(
     origin = clock()
     frames = CandumpWriter(frames_file, epoch=time.time(), origin=origin) if frames_file else None
     kinds = {Traffic.REPLY, Traffic.STREAM, Traffic.REPORT, Traffic.LATE, Traffic.UNSOLICITED}
+    if watch is not None:  # (the replies to the other controller's requests: the motor's state too)
+        kinds.add(Traffic.CONTENDED)
     setpoints: dict[int, float] = {}  # motor id -> the set-point last sent (--drive)
     # Once the drive ended, only the replies it asked for are rows (a late one), not the safe stop's
     # echoes (those are in --log, and the last line says the stop).
@@ -224,8 +255,13 @@ async def _record(
         tally.replies += 1
         tally.by_motor[motor.motor_id] = tally.by_motor.get(motor.motor_id, 0) + 1
         if telemetry is not None:
-            when = (motor.last_seen or clock()) - origin
-            extra = None if drive is None else {drive.column: setpoints.get(motor.motor_id)}
+            seen_at = motor.last_seen or clock()
+            when = seen_at - origin
+            extra: dict[str, Scalar] | None = None
+            if drive is not None:
+                extra = {drive.column: setpoints.get(motor.motor_id)}
+            if watch is not None:
+                extra = watch.row(motor.motor_id, seen_at)
             telemetry.write(telemetry_row(when, conn.family, motor.motor_id, reply, extra))
 
     def count(results: Sequence[Any]) -> None:
@@ -235,8 +271,14 @@ async def _record(
             elif isinstance(result, TransportError):
                 tally.errors += 1
 
+    shown = [f for f in (frames.write if frames else None, watch.on_frame if watch else None) if f]
+
+    def on_frame(frame: Frame, received: bool, timestamp: float) -> None:
+        for each in shown:
+            each(frame, received, timestamp)
+
     def tap(link: Any) -> TapLink:
-        return TapLink(link, frames.write if frames else lambda *_: None, clock)
+        return TapLink(link, shown[0] if len(shown) == 1 else on_frame, clock)
 
     try:
         # Read only: no stop to send (nothing commanded); driven: the Bus's safe stop on the way out.
@@ -268,6 +310,7 @@ def _summary(
     log: Path | None,
     interrupted: bool,
     drive: Drive | None,
+    watch: SeenSetpoints | None,
     *,
     stops: bool,
 ) -> None:
@@ -280,6 +323,8 @@ def _summary(
         line = f"record: driven ({drive.describe()}), " + line.removeprefix("record: ")
     if tally.errors:
         line += f", {tally.errors} requests not sent"
+    if watch is not None:
+        line += f", {watch.count} set-points of another controller"
     if telemetry is not None and telemetry.skipped:
         line += f"; {telemetry.skipped} replies of another type left out of the CSV (JSONL keeps them)"
     stopped = safe_exits() if stops and drive is not None else ""

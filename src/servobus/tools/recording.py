@@ -2,7 +2,8 @@
 
 * :class:`TapLink` wraps a FrameLink and shows every frame that went out (at its send report) and
   every frame that came in to a callback, before the Bus sees it; the Bus works as without it (a
-  FrameLink itself: its send reports echo the Bus's handles).
+  FrameLink itself: its send reports echo the Bus's handles). Logging both directions of any link
+  is this: docs/recording.md has a runnable example.
 * :class:`CandumpWriter` writes those frames through python-can's ``CanutilsLogWriter``, ``R``/``T``
   marking direction, so :class:`servobus.tools.logs.FrameDecoder` tells requests from replies on reading.
 * :class:`TelemetryWriter` writes one row per decoded reply: ``time_s``, ``motor_id``, ``family``,
@@ -40,14 +41,41 @@ FrameCallback = Callable[[Frame, bool, float], object]
 
 
 class TapLink:
-    """A FrameLink around ``inner`` that shows ``on_frame`` every frame sent (once its send report
-    came) and every frame received, before the Bus sees it; the Bus works as without it.
+    """A FrameLink around ``inner`` that shows ``on_frame`` every frame of both directions: each frame
+    sent, once its send report says it left, and each frame received, before the Bus sees it. The
+    way to log a link (``servobus record --log`` is built on it); the Bus works as without it.
+
+    Wrap the transport and give the tap to the Bus::
+
+        async with Bus(TapLink(SimTransport(devices=...), on_frame, clock=anyio.current_time)) as bus:
+            ...
+
+    ``on_frame(frame, received, timestamp)`` is called on the event loop:
+
+    * ``received=False``: a frame the Bus sent, when the link reported it sent (``timestamp``: the
+      link's sent time, else ``clock()``). A frame the link refused or dropped (its report carries a
+      reason) is not shown: only what left is.
+    * ``received=True``: every frame the link received, ours or not: replies, stream frames, other
+      nodes' traffic, another controller's requests to our motors (``timestamp``: the frame's own,
+      else ``clock()``). Frames in a batch are shown in order, before the Bus decodes the batch.
+
+    The frames are the link's own objects (immutable); decode them with
+    :class:`servobus.tools.logs.FrameDecoder`, or write them with :class:`CandumpWriter`. The callback
+    runs on the receive and send-report paths: it must not block (hand slow work to a task or a
+    queue) and must not raise (what it raises escapes into the link's receive or send-report path).
 
     It follows the FrameLink contract (:mod:`servobus.transports.contract`): its rules and stats are
     the inner link's, and the Bus's send handles are echoed to the Bus's reporter untouched. A send
     goes to ``inner`` with a handle of the tap's own that carries the frame and the caller's handle,
     so the tap knows which frame left whatever the inner link copies or re-encodes. Anything else
-    (a transport's own API) is read from ``inner``.
+    (a transport's own API: ``unplug``, ``network``) is read from ``inner``. Opening and closing the
+    tap opens and closes ``inner``.
+
+    Args:
+        inner: the link to wrap (a transport: ``SimTransport``, ``CanTransport``, ...), not yet open.
+        on_frame: called with ``(frame, received, timestamp)`` for each frame, as above.
+        clock: the clock the timestamps are on where a frame carries none: the event loop's
+            (``anyio.current_time``; the Bus's, ``servobus.runtime.current().time``).
     """
 
     def __init__(self, inner: Any, on_frame: FrameCallback, clock: Callable[[], float]) -> None:
