@@ -55,32 +55,48 @@ def _by_motor(rows: list[dict[str, Any]]) -> dict[int, list[dict[str, Any]]]:
     return out
 
 
-def _sent_setpoints(log: Path, field: str) -> dict[int, list[float | None]]:
-    """For each reply in the log, per motor: the ``field`` of the last request to that motor that
-    carried one (what was in effect when the reply came), in the order of the replies."""
+def _sent_setpoints(log: Path, field: str) -> dict[int, list[tuple[dict[str, Any], float | None]]]:
+    """For each status reply in the log, per motor: its fields, and the ``field`` of the last request
+    to that motor that carried one (what was in effect when the reply came), in the log's order."""
     decoded = [json.loads(line) for line in invoke(["decode", "--json", str(log)]).stdout.splitlines()]
     last: dict[int, float] = {}
-    out: dict[int, list[float | None]] = {}
+    out: dict[int, list[tuple[dict[str, Any], float | None]]] = {}
     for record in decoded:
         motor = record["motor_id"]
         if record["direction"] == "request" and field in record["fields"]:
             last[motor] = record["fields"][field]
         elif record["direction"] == "reply" and record["type"] == "StatusReply":
-            out.setdefault(motor, []).append(last.get(motor))
+            out.setdefault(motor, []).append((record["fields"], last.get(motor)))
     return out
 
 
 def _matches_the_log(telemetry: Path, log: Path, column: str, field: str) -> None:
+    """Each row's set-point is the one in effect when its reply came, in the log: the rows and the
+    log's replies walked together, each row found by its fields (a reply the Bus did not make a row
+    of, such as a duplicate on a contended bus, is skipped: two at most)."""
     rows = _by_motor(read_rows(telemetry))
     sent = _sent_setpoints(log, field)
     assert sorted(rows) == sorted(sent)
     for motor, mine in rows.items():
-        assert len(mine) == len(sent[motor]) >= 10
-        for row, value in zip(mine, sent[motor], strict=True):
+        replies = iter(sent[motor])
+        skipped = 0
+        assert len(mine) >= 10
+        for row in mine:
+            fields = {k: v for k, v in row.items() if k not in ("time_s", "motor_id", "family", "reply")}
+            fields = {k: v for k, v in fields.items() if not k.startswith("setpoint_")}
+            value: float | None = None
+            for theirs, effective in replies:
+                if theirs == fields:
+                    value = effective
+                    break
+                skipped += 1
+            else:
+                raise AssertionError(f"motor {motor}: no reply in the log for {row}")
             if value is None:  # (nothing sent to it yet)
                 assert row[column] is None, (motor, row)
             else:
                 assert row[column] == pytest.approx(value, abs=0.006), (motor, row)
+        assert skipped <= 2, (motor, skipped)
 
 
 def test_the_readme_example_moves_the_motors_and_plots_the_set_points(
