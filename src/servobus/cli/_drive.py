@@ -146,9 +146,12 @@ class Drive:
                         codec.encode(command)
 
     def describe(self) -> str:
-        """``sine, position 0 ± 90 deg, period 2 s``."""
+        """``sine, position 0 ± 90 deg, period 2 s``; ``step, speed 0 → 180 dps at 1 s``."""
         unit = MODES[self.mode][2]
         wave = self.wave
+        if wave.shape == "step":
+            to = f"{wave.offset:g} → {wave.offset + wave.amplitude:g} {unit}"
+            return f"step, {self.mode} {to} at {wave.period_s / 2:g} s"
         around = f"{wave.offset:g} {'±' if wave.amplitude >= 0 else '∓'} {abs(wave.amplitude):g} {unit}"
         return f"{wave.shape}, {self.mode} {around}, period {wave.period_s:g} s"
 

@@ -116,7 +116,7 @@ def draw(rows: list[dict[str, Any]], *, title: str, size: tuple[int, int] = (120
                 Line2D([], [], color="0.3", linestyle="--", linewidth=1, label=f"set-point ({target})")
             )
         if (len(motors) > 1 or target is not None) and ax.has_data():
-            ax.legend(handles=handles, loc="upper right", fontsize="small")
+            ax.legend(handles=handles, loc="best", fontsize="small")
     axes[-1].set_xlabel("time_s")
     figure.suptitle(title)
     return figure
