@@ -147,7 +147,7 @@ def test_the_figure_draws_each_motor_s_set_point_dashed_in_its_colour(tmp_path: 
         assert max(response.get_ydata()) - min(response.get_ydata()) > 40  # the motor moved
     assert [line.get_linestyle() for line in speed.get_lines()] == ["-", "-"]  # (no speed set-point)
     labels = [text.get_text() for text in position.get_legend().get_texts()]
-    assert labels == ["motor 1", "motor 2", "set-point (setpoint_angle_deg)"]
+    assert labels == ["motor 1", "motor 2", "set-point"]
     assert current.get_lines()
 
 

@@ -112,11 +112,10 @@ def draw(rows: list[dict[str, Any]], *, title: str, size: tuple[int, int] = (120
                 ax.plot(xs, ys, color=colour, linestyle="--", linewidth=1, label=f"_set-point {motor}")
         handles, _ = ax.get_legend_handles_labels()
         if target is not None:
-            handles.append(
-                Line2D([], [], color="0.3", linestyle="--", linewidth=1, label=f"set-point ({target})")
-            )
-        if (len(motors) > 1 or target is not None) and ax.has_data():
-            ax.legend(handles=handles, loc="best", fontsize="small")
+            handles.append(Line2D([], [], color="0.3", linestyle="--", linewidth=1, label="set-point"))
+        if (len(motors) > 1 or target is not None) and ax.has_data():  # (beside the panel: over no line)
+            ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
+            figure.subplots_adjust(right=0.8)
     axes[-1].set_xlabel("time_s")
     figure.suptitle(title)
     return figure
