@@ -445,6 +445,7 @@ def test_without_drive_nothing_is_commanded_and_no_stop_is_claimed(tmp_path: Pat
         (["--drive", "sine", "--mode", "speed", "--amplitude-dps", "1e9"], "outside"),
         (["--drive", "sine", "--period-s", "0"], "--period-s"),
         (["--drive", "sine", "--offset-deg", "nan"], "not a number"),
+        (["--drive", "sine", "--mode", "speed", "--amplitude-dps", "inf"], "inf is not a number"),
         (["--drive", "sine", "--period-s", "nan"], "not a number"),
         (["--drive", "sine", "--watch-setpoints"], "not with --drive"),
         (["--watch-setpoints", "--family", "hollow"], "hollow set-point frames do not say what they set"),

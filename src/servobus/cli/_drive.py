@@ -156,6 +156,13 @@ class Drive:
         return f"{wave.shape}, {self.mode} {around}, period {wave.period_s:g} s"
 
 
+def _finite(ctx: click.Context, param: click.Parameter, value: float | None) -> float | None:
+    """A number, not NaN or infinity (a wave of them would be refused only after the first frame)."""
+    if value is not None and not math.isfinite(value):
+        raise click.BadParameter(f"{value} is not a number", ctx, param)
+    return value
+
+
 def drive_options(func: F) -> F:
     """The ``--drive`` options; the command receives them as ``drive_args`` (a dict)."""
     options = [
@@ -172,18 +179,25 @@ def drive_options(func: F) -> F:
         ),
         click.option(
             "--amplitude-deg",
-            type=FloatRange(),
+            type=float,
+            callback=_finite,
             help=f"The wave's amplitude in position mode [default: {AMPLITUDE['position']:g}].",
         ),
         click.option(
             "--amplitude-dps",
-            type=FloatRange(),
+            type=float,
+            callback=_finite,
             help=f"The wave's amplitude in speed mode [default: {AMPLITUDE['speed']:g}].",
         ),
         click.option(
-            "--offset-deg", type=FloatRange(), help="The wave's centre in position mode [default: 0]."
+            "--offset-deg",
+            type=float,
+            callback=_finite,
+            help="The wave's centre in position mode [default: 0].",
         ),
-        click.option("--offset-dps", type=FloatRange(), help="The wave's centre in speed mode [default: 0]."),
+        click.option(
+            "--offset-dps", type=float, callback=_finite, help="The wave's centre in speed mode [default: 0]."
+        ),
         click.option(
             "--period-s",
             type=FloatRange(min=0, min_open=True),

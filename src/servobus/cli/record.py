@@ -46,9 +46,11 @@ only reads: no motor is commanded.
 family's move, --amplitude-deg/--offset-deg; --mode speed: its speed, --amplitude-dps/--offset-dps;
 --period-s) in place of the poll (its reply is the status; a family whose set-point's reply has no
 position, speed or current is polled too), and each reply row carries the set-point last sent to
-its motor in a column after `reply`: setpoint_angle_deg or setpoint_speed_dps (pandas:
-read_csv(f).pivot(columns="motor_id")). At the end, on Ctrl-C or SIGTERM, the motors get the Bus's
-safe stop (said in the last line).
+its motor in a column after `reply`: setpoint_angle_deg or setpoint_speed_dps (plain CSV or JSON
+lines: pandas reads either). At the end, on Ctrl-C or SIGTERM, the motors get the Bus's safe stop
+(said in the last line). --watch-setpoints instead records the set-points another controller sends
+the motors (seen on the bus, decoded with the family's codec; not hollow's), the last of each kind
+before each reply: setpoint_angle_deg, setpoint_speed_dps, setpoint_current_a.
 
 \b
 Existing files are kept unless --force, and even then an existing file is replaced only by a
@@ -91,7 +93,7 @@ class Tally:
     type=FloatRange(min=0, min_open=True, max=10_000),
     default=100.0,
     show_default=True,
-    help="Polls per second.",
+    help="Polls (with --drive: set-points) per second.",
 )
 @click.option(
     "--duration",
