@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import csv
 import json
+import math
 import os
 import signal
 import subprocess
@@ -149,6 +150,18 @@ def test_the_figure_draws_each_motor_s_set_point_dashed_in_its_colour(tmp_path: 
     labels = [text.get_text() for text in position.get_legend().get_texts()]
     assert labels == ["motor 1", "motor 2", "set-point"]
     assert current.get_lines()
+
+
+def test_a_set_point_is_drawn_in_the_response_s_unit() -> None:
+    """hollow replies give speed in rad/s, the drive's set-point is in dps: drawn in rad/s."""
+    rows = [
+        {"time_s": t, "motor_id": 1, "position_deg": 0.0, "speed_rad_s": 3.0, "setpoint_speed_dps": 180.0}
+        for t in (0.0, 0.1)
+    ]
+    figure = draw(rows, title="t")
+    assert figure is not None
+    (target,) = [line for line in figure.axes[1].get_lines() if line.get_linestyle() == "--"]
+    assert list(target.get_ydata()) == pytest.approx([math.pi, math.pi])
 
 
 def test_a_recording_without_set_points_draws_none(tmp_path: Path) -> None:

@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import math
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -108,6 +109,8 @@ def draw(rows: list[dict[str, Any]], *, title: str, size: tuple[int, int] = (120
             if xs:
                 ax.plot(xs, ys, color=colour, label=f"motor {motor}", linewidth=1)
             xs, ys = _points(rows, motor, target)
+            scale = _scale(target, column)
+            ys = [y * scale for y in ys] if scale != 1.0 else ys
             if xs:  # (one legend entry says what a dashed line is: its colour is its motor's)
                 ax.plot(xs, ys, color=colour, linestyle="--", linewidth=1, label=f"_set-point {motor}")
         handles, _ = ax.get_legend_handles_labels()
@@ -119,6 +122,26 @@ def draw(rows: list[dict[str, Any]], *, title: str, size: tuple[int, int] = (120
     axes[-1].set_xlabel("time_s")
     figure.suptitle(title)
     return figure
+
+
+#: (a set-point column's unit, the response column's) -> the factor between them
+_SCALES = {
+    ("dps", "rad_s"): math.pi / 180.0,
+    ("deg", "rad"): math.pi / 180.0,
+    ("rad_s", "dps"): 180.0 / math.pi,
+    ("rad", "deg"): 180.0 / math.pi,
+}
+
+
+def _scale(target: str | None, column: str | None) -> float:
+    """What a set-point in ``target``'s unit is multiplied by to be drawn in ``column``'s (hollow
+    replies give speed in rad/s; ``record --drive`` its set-point in dps)."""
+    if target is None or column is None:
+        return 1.0
+    for (mine, theirs), factor in _SCALES.items():
+        if target.endswith(f"_{mine}") and column.endswith(f"_{theirs}"):
+            return factor
+    return 1.0
 
 
 def _motors(rows: list[dict[str, Any]]) -> list[int]:
