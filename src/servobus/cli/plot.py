@@ -25,7 +25,8 @@ Reads the telemetry `servobus record` writes (.csv or .jsonl) and draws three pa
 time_s, one line per motor: position (the first column named position*, angle* or encoder*), speed
 (speed*, velocity*) and current (current*, iq*). A set-point column (setpoint_angle_deg,
 setpoint_speed_dps, setpoint_current_a: what `record --drive` stores) is drawn dashed in its motor's
-colour on the panel of its quantity. Needs matplotlib: pip install 'servobus[plot]'.
+colour on the panel of its quantity, in the response's unit (dps as rad/s beside speed_rad_s).
+Needs matplotlib: pip install 'servobus[plot]'.
 
 \b
 Examples:
