@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import io
 import json
 import math
 import os
@@ -33,6 +34,7 @@ from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from servobus.sim.attach import serve_python_can
 from servobus.sim.network import SimCanNetwork
 from servobus.sim.plant import PositionControl, SpeedControl
+from servobus.tools.recording import TelemetryWriter
 from servobus.transports.can import message_from_frame
 
 SCRIPT = [sys.executable, "-c", "import sys; from servobus.cli import main; sys.exit(main())"]
@@ -215,6 +217,41 @@ def test_other_families_are_driven_through_their_own_move(tmp_path: Path, family
     rows = _csv(path)
     assert {row["motor_id"] for row in rows} == {1, 2}
     assert len({row["setpoint_angle_deg"] for row in rows}) > 10
+
+
+def test_a_csv_of_two_reply_kinds_keeps_both(tmp_path: Path) -> None:
+    """LK's move reads the multi-turn angle beside its set-point: one CSV holds both kinds of row,
+    each blank where it has no value, and the position panel draws the angle."""
+    path = tmp_path / "lk.csv"
+    result = invoke(["record", "--family", "lk", "--sim", "1", "--drive", "sine", "--duration", "0.5",
+                     "-o", str(path)])  # fmt: skip
+    assert "left out of the CSV" not in result.stderr
+    rows = read_rows(path)
+    kinds = {row["reply"] for row in rows}
+    assert kinds == {"Status2Reply", "MultiTurnAngleReply"}
+    angles = [row for row in rows if row["reply"] == "MultiTurnAngleReply"]
+    assert len(angles) >= 20 and all(isinstance(row["angle_deg"], float | int) for row in angles)
+    assert all(row["speed_dps"] is None for row in angles)  # (a column of the other kind: blank)
+    assert all(row["setpoint_angle_deg"] is not None for row in rows)
+    figure = draw(rows, title="t")
+    assert figure is not None and figure.axes[0].get_ylabel() == "angle_deg"
+
+
+def test_the_telemetry_writer_holds_the_header_for_the_kinds_asked() -> None:
+    text = io.StringIO()
+    writer = TelemetryWriter(text, "csv", reply_types=2)
+    writer.write({"time_s": 0.0, "reply": "A", "a": 1})
+    assert text.getvalue() == ""  # held: the other kind may bring columns
+    writer.write({"time_s": 0.1, "reply": "B", "b": 2})
+    writer.write({"time_s": 0.2, "reply": "C", "c": 3})  # a column the header lacks: left out
+    writer.write({"time_s": 0.3, "reply": "A", "a": 4})
+    assert text.getvalue().splitlines() == ["time_s,reply,a,b", "0.0,A,1,", "0.1,B,,2", "0.3,A,4,"]
+    assert (writer.count, writer.skipped) == (3, 1)
+    alone = io.StringIO()
+    held = TelemetryWriter(alone, "csv", reply_types=3)
+    held.write({"time_s": 0.0, "a": 1})
+    held.flush()  # (the end of a recording that never saw the other kinds)
+    assert alone.getvalue().splitlines() == ["time_s,a", "0.0,1"]
 
 
 # ---- through python-can's virtual bus, the simulated motors attached on another thread ----

@@ -70,7 +70,7 @@ class Wave:
             value = self.offset + (self.amplitude if half else -self.amplitude)
         else:
             value = self.offset + (self.amplitude if t >= self.period_s / 2 else 0.0)
-        return round(value, DIGITS)
+        return round(value, DIGITS) + 0.0  # (+ 0.0: no -0.0 in a row)
 
     def extremes(self) -> tuple[float, ...]:
         """Every value the wave reaches at its ends (what is checked before anything is sent)."""

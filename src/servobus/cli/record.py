@@ -153,13 +153,16 @@ def record(
         raise click.UsageError(str(exc)) from None
     interrupted = False
     try:
-        telemetry = TelemetryWriter(files.open(output), fmt or "csv") if output is not None else None
+        kinds = len(_reply_types(poll_class, drive, bound))  # (a CSV's header holds them all)
+        telemetry = TelemetryWriter(files.open(output), fmt or "csv", reply_types=kinds) if output else None
         frames_file = files.open(log) if log is not None else None
         tally = Tally()
         try:
             run(_record(conn, poll_class, drive, watch, hz, duration, telemetry, frames_file, tally))
         except KeyboardInterrupt:  # Ctrl-C or SIGTERM
             interrupted = True
+        if telemetry is not None:
+            telemetry.flush()  # (rows a CSV held back for its header)
         if tally.replies == 0 and not interrupted:
             asked = poll if drive is None else f"the {drive.wave.shape} set-points"
             raise click.ClickException(
@@ -176,6 +179,14 @@ def record(
     _summary(tally, telemetry, output, log, interrupted, drive, watch, stops=not cut_short)
     if cut_short:
         raise KeyboardInterrupt  # cut short: exit 130, the files kept as far as they got
+
+
+def _reply_types(poll_class: type[Command] | None, drive: Drive | None, bound: Sequence[Any]) -> set[type]:
+    """The kinds of reply the recording asks for (the poll's, the drive's set-points')."""
+    kinds: set[type] = set(poll_class.reply_types()) if poll_class is not None else set()
+    for codec in bound if drive is not None else ():
+        kinds |= drive.reply_types(codec)  # type: ignore[union-attr]
+    return kinds
 
 
 def _watch(conn: Connection, bound: Sequence[Any]) -> SeenSetpoints:
@@ -249,7 +260,7 @@ async def _record(
     # Once the drive ended, only the replies it asked for are rows (a late one), not the safe stop's
     # echoes (those are in --log, and the last line says the stop).
     driving = [True]
-    asked: set[type] = set() if poll_class is None else set(poll_class.reply_types())
+    asked = _reply_types(poll_class, None, ())
 
     def on_reply(motor: Motor, traffic: Traffic, reply: Reply) -> None:
         if traffic not in kinds or not (driving[0] or type(reply) in asked):
@@ -287,7 +298,7 @@ async def _record(
         async with open_bus(conn, wrap=tap, safe=None if drive is None else "stop") as (bus, motors):
             bus.subscribe(on_reply)
             if drive is not None:
-                asked.update(*(drive.reply_types(motor.codec) for motor in motors))
+                asked |= _reply_types(None, drive, [motor.codec for motor in motors])
                 args = (bus, motors, drive, poll_class, hz, duration, conn.timeout_s, setpoints, count)
                 try:
                     await drive_ticks(*args)

@@ -7,7 +7,8 @@
 * :class:`CandumpWriter` writes those frames through python-can's ``CanutilsLogWriter``, ``R``/``T``
   marking direction, so :class:`servobus.tools.logs.FrameDecoder` tells requests from replies on reading.
 * :class:`TelemetryWriter` writes one row per decoded reply: ``time_s``, ``motor_id``, ``family``,
-  ``reply`` and the reply's fields (:func:`servobus.tools.logs.message_values`: units in the names).
+  ``reply``, the set-points in effect (``record --drive``) and the reply's fields
+  (:func:`servobus.tools.logs.message_values`: units in the names).
 * :class:`NewFiles` opens outputs without overwriting what exists (unless told: then the old file is
   replaced only when the new one is kept) and, on failure, removes only the files it created.
 """
@@ -198,35 +199,66 @@ def telemetry_row(
 
 
 class TelemetryWriter:
-    """Rows as JSON lines, or as CSV whose columns are the first row's.
+    """Rows as JSON lines, or as CSV.
 
-    A CSV holds one reply type: rows whose fields differ from the first row's are not written and
-    are counted in ``skipped`` (JSONL keeps every row).
+    A CSV's columns are fixed by its header: those of the first rows, in the order they came. With
+    ``reply_types`` above one (a recording that asks more than one kind of reply: LK's set-point and
+    its angle read), the header waits for that many kinds of rows (or :data:`HOLD_ROWS` rows, or
+    :meth:`flush`) and holds all their columns; a row leaves blank the columns it lacks. A row with a
+    column the header lacks is not written and is counted in ``skipped`` (JSONL keeps every row).
     """
 
-    def __init__(self, file: TextIO, fmt: str) -> None:
+    #: the most rows a CSV holds back waiting for its reply types
+    HOLD_ROWS = 1000
+
+    def __init__(self, file: TextIO, fmt: str, *, reply_types: int = 1) -> None:
         if fmt not in ("csv", "jsonl"):
             raise ValueError(f"telemetry format {fmt!r} is not csv or jsonl")
         self._file = file
         self._fmt = fmt
         self._csv: csv.DictWriter[str] | None = None
+        self._columns: frozenset[str] = frozenset()
+        self._types = reply_types
+        self._held: list[dict[str, Scalar]] = []
+        self._kinds: set[tuple[str, ...]] = set()
         self.count = 0
         self.skipped = 0
 
     def write(self, row: dict[str, Scalar]) -> None:
         if self._fmt == "jsonl":
             self._file.write(json.dumps(row) + "\n")
-        else:
-            if self._csv is None:
-                self._csv = csv.DictWriter(self._file, fieldnames=list(row), lineterminator="\n")
-                self._csv.writeheader()
-            elif list(row) != self._csv.fieldnames:
-                self.skipped += 1
-                return
-            self._csv.writerow(row)
+            self.count += 1
+            return
+        if self._csv is None:
+            self._held.append(row)
+            self._kinds.add(tuple(row))
+            if len(self._kinds) >= self._types or len(self._held) >= self.HOLD_ROWS:
+                self.flush()
+            return
+        self._put(row)
+
+    def flush(self) -> None:
+        """Write the header and the rows held back for it (a CSV of fewer kinds than expected)."""
+        if self._csv is not None or not self._held:
+            return
+        columns = list(dict.fromkeys(name for row in self._held for name in row))
+        self._csv = csv.DictWriter(self._file, fieldnames=columns, lineterminator="\n", restval="")
+        self._columns = frozenset(columns)
+        self._csv.writeheader()
+        held, self._held = self._held, []
+        for row in held:
+            self._put(row)
+
+    def _put(self, row: dict[str, Scalar]) -> None:
+        assert self._csv is not None
+        if not self._columns.issuperset(row):
+            self.skipped += 1
+            return
+        self._csv.writerow(row)
         self.count += 1
 
     def close(self) -> None:
+        self.flush()
         self._file.close()
 
 
