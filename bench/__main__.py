@@ -28,6 +28,8 @@ Parts, in order (each is also a script of its own, ``python bench/bench_<part>.p
 * ``remote``: servobus.remote across processes on loopback: a Zenoh bridge serving 32 simulated motors,
   a client in another process: set-point updates/s, publish-to-wire latency, request round trip against
   the local Bus, the safe stop after the client is SIGKILLed (``bench_remote.py``; ``remote.*``).
+* ``limits``: host-side limits' cost on the pipelined Loop of ``loop``, every motor's limits set against
+  none, ``SpeedControl`` and ``MotionCommand`` set-points (``bench_limits.py``; ``limits.*_ratio``).
 * ``dashboard``: the dashboard's cost on the loop: ``servobus demo``'s tick rate and loop1k's figures with
   the page open in headless Chromium against without, runs alternated (``bench_dashboard.py``;
   ``dashboard.*_ratio``).
@@ -70,6 +72,7 @@ PARTS = {
     "remote": "bench_remote",
     "pacer": "bench_pacer",
     "dashboard": "bench_dashboard",
+    "limits": "bench_limits",
 }
 SUMMARY = "summary"
 
@@ -143,12 +146,17 @@ HEADLINES: tuple[tuple[str, str, str, str], ...] = (
      "<= 1.05"),
     ("dashboard.loop1k_host_cpu_pct_ratio", "loop1k host CPU, dashboard open / without", "{:.3f}",
      "0.95 to 1.05"),
+    ("limits.speed_ratio", "Loop 1 kHz x 32, `SpeedControl`: CPU with host-side limits / without", "{:.3f}",
+     "<= 1.10"),
+    ("limits.mit_ratio", "Loop 1 kHz x 32, `MotionCommand`: CPU with host-side limits / without", "{:.3f}",
+     "(info)"),
     ("scaling.buses_per_process.64.cpu_us_per_transaction", "64 buses x 4 motors: CPU per transaction",
      "{:.2f} µs", "-"),
 )  # fmt: skip
 
 MISSED_KEYS = (
     "codec", "bus", "efficiency", "sim", "loop", "loop1k", "loop1k_fd", "remote", "pacer", "dashboard",
+    "limits",
 )  # fmt: skip
 
 

@@ -108,7 +108,7 @@ static double current_command(const sb_plant *pl, sb_plant_state *s, double dt)
         limit = py_min(limit, sqrt(2 * pl->acceleration_dps2 * fabs(error)));
         return speed_loop(pl, s, clamp(wanted, limit), c->c, dt);
     case SB_CONTROL_SPEED:
-        return speed_loop(pl, s, c->a, c->b, dt);
+        return speed_loop(pl, s, clamp(c->a, p->speed_limit_dps), c->b, dt);
     }
     return 0.0;
 }

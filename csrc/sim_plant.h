@@ -29,6 +29,7 @@ typedef struct {
     double ambient_c;
     double supply_v;
     double supply_resistance_ohm;
+    double speed_limit_dps;  /* the speed mode's target is clamped to it (INFINITY: none) */
 } sb_plant_params;
 
 typedef struct {

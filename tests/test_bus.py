@@ -138,7 +138,7 @@ async def test_a_timeout_names_motor_command_and_time() -> None:
         async with Bus(SimTransport(devices=[motor])) as bus:
             await bus.motor("myactuator", 1).read_status2(timeout_s=0.05)
 
-    with pytest.raises(MotorTimeout, match=r"myactuator motor 1 ReadStatus2: no reply within 0\.05 s"):
+    with pytest.raises(MotorTimeout, match=r"myactuator motor 1 ReadStatus2: no reply within 50 ms"):
         await scenario()
 
 

@@ -85,7 +85,7 @@ async def test_a_silent_motor_goes_offline_after_the_silence_limit_and_only_then
             return events, heard, anyio.current_time()
 
     events, heard, end = await scenario()
-    assert _brief(events) == [(1, True, "answered"), (2, True, "answered"), (2, False, "silent for 0.5 s")]
+    assert _brief(events) == [(1, True, "answered"), (2, True, "answered"), (2, False, "silent for 500 ms")]
     assert events[-1].at == pytest.approx(heard + 0.5, abs=1e-6) and end > heard + 1.0
 
 

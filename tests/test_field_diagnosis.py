@@ -85,7 +85,7 @@ def _timeout(
 def test_lk_motors_read_as_myactuator_are_named_with_the_family_to_use(backend: str) -> None:
     exc = _timeout([LkMotor(1)], "myactuator", 1, ma.ReadStatus2(), backend)
     assert exc.diagnosis == "0x181 answered as lk (V2_36) would: --family lk?"
-    assert str(exc).endswith("no reply within 0.05 s; 0x181 answered as lk (V2_36) would: --family lk?")
+    assert str(exc).endswith("no reply within 50 ms; 0x181 answered as lk (V2_36) would: --family lk?")
 
 
 def test_an_old_lk_motor_replies_on_its_request_id_and_is_named_with_its_revision() -> None:

@@ -155,7 +155,7 @@ LAYERS: dict[str, list[str]] = {
         "servobus.rtt",
         "servobus.runtime",
     ],
-    "protocols": ["servobus.protocols"],
+    "protocols": ["servobus.protocols", "servobus.limits"],
     "family": ["servobus.protocols.<family>"],
     # the scheduler's and the Bus's parts (issue 28) are named here before they land
     "scheduler": [

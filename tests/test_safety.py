@@ -121,7 +121,7 @@ async def test_host_side_offline_detection_fires_within_its_configured_time() ->
         assert set(offline) == {1, 2}
         assert offline[1].reason == "3 replies missed"
         assert offline[1].at - silent_at <= 3 * 0.02 + 0.01  # three polls, each a 10 ms timeout
-        assert offline[2].reason == "silent for 0.2 s"
+        assert offline[2].reason == "silent for 200 ms"
         assert offline[2].at - m2.last_seen <= 0.2 + 1e-6  # type: ignore[operator]
         motor.unresponsive = False
         await anyio.sleep(0.05)

@@ -24,12 +24,16 @@ from servobus.frame import Frame
 
 if TYPE_CHECKING:
     from servobus.bus import Bus, FrameLink, Motor, MotorStatus
+    from servobus.limits import LimitBook, LimitExceeded, Limits
     from servobus.loop import Loop
 
 __all__ = [
     "Bus",
     "Frame",
     "FrameLink",
+    "LimitBook",
+    "LimitExceeded",
+    "Limits",
     "Loop",
     "Motor",
     "MotorBusy",
@@ -53,6 +57,8 @@ def __getattr__(name: str) -> object:
         from servobus import bus
 
         return getattr(bus, name)
+    if name in ("LimitBook", "LimitExceeded", "Limits"):  # (they import the protocols' contract)
+        return getattr(importlib.import_module("servobus.limits"), name)
     if name == "Loop":  # (the loop's layer is above this package's: imported by name, when used)
         return importlib.import_module("servobus.loop").Loop
     raise AttributeError(f"module 'servobus' has no attribute {name!r}")

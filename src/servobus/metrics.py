@@ -94,6 +94,9 @@ class Metrics:
         foreign_requests: another host's requests to the motor (CAN is broadcast: a second
             controller on the bus).
         contended: replies to another host's requests (the motor's state; never taken as ours).
+        limit_refused: commands refused because they went beyond the motor's host-side limits
+            (:mod:`servobus.limits`; never requests).
+        limit_clamped: commands sent clamped to the motor's host-side limits.
         latency: request-to-reply time of the last replies.
         bus_load_pct: share of the line used in the last second, from the transport (bus only;
             None when unknown).
@@ -128,6 +131,8 @@ class Metrics:
     comm_tripped: int = 0
     foreign_requests: int = 0
     contended: int = 0
+    limit_refused: int = 0
+    limit_clamped: int = 0
 
     @classmethod
     def of(cls, counts: Mapping[str, int], latency: Latency, bus_load_pct: float | None = None) -> Metrics:
@@ -159,4 +164,6 @@ class Metrics:
             comm_tripped=c("comm_tripped", 0),
             foreign_requests=c("foreign_requests", 0),
             contended=c("contended", 0),
+            limit_refused=c("limit_refused", 0),
+            limit_clamped=c("limit_clamped", 0),
         )

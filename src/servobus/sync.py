@@ -36,6 +36,7 @@ from typing import Any, Self, TypeVar
 from anyio.from_thread import BlockingPortal, start_blocking_portal
 
 from servobus import bus as _bus
+from servobus.limits import Limits
 from servobus.metrics import Metrics
 from servobus.protocols import Command, Family, Reply
 from servobus.scheduler import Traffic
@@ -78,6 +79,16 @@ class Motor:
     def fault(self) -> Any:
         """The faults of its latest report, or None (see :class:`servobus.Motor`)."""
         return self.motor.fault
+
+    @property
+    def limits(self) -> Limits | None:
+        """Its host-side limits (see :class:`servobus.Motor`); settable from this thread (the
+        Bus's next command meets the new ones: a reference swap)."""
+        return self.motor.limits
+
+    @limits.setter
+    def limits(self, limits: Limits | None) -> None:
+        self.motor.limits = limits
 
     def metrics(self) -> Metrics:
         """This motor's counters and latency (see :meth:`servobus.Motor.metrics`)."""

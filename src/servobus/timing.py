@@ -17,6 +17,8 @@ against.
 
 from __future__ import annotations
 
+import math
+
 from servobus.core._lib import ffi, lib
 from servobus.frame import Frame
 
@@ -26,6 +28,7 @@ __all__ = [
     "can_crc15",
     "classic_frame_bits",
     "fd_frame_bits",
+    "format_duration",
     "frame_time_s",
     "nominal_frame_time_s",
     "uart_time_s",
@@ -151,3 +154,26 @@ def uart_time_s(n_bytes: int, baud: float, *, bits_per_byte: int = 10) -> float:
     if baud <= 0 or n_bytes < 0:
         raise ValueError(f"need baud > 0 and n_bytes >= 0 (baud={baud}, n_bytes={n_bytes})")
     return n_bytes * bits_per_byte / baud
+
+
+#: (seconds per unit, unit, most decimals): below a second a tenth of the unit is the finest shown
+_UNITS = ((1.0, "s", 2), (1e-3, "ms", 1), (1e-6, "µs", 1))
+
+
+def format_duration(seconds: float) -> str:
+    """A duration as a person reads it: ``0.00677841`` -> ``"6.8 ms"``, ``1.25`` -> ``"1.25 s"``,
+    ``8.5e-05`` -> ``"85 µs"``; at most 3 significant digits (fewer below a second: a tenth of a ms
+    or µs is the finest), trailing zeros dropped. Every duration a message prints goes through this.
+    """
+    if not math.isfinite(seconds):
+        return f"{seconds} s"
+    magnitude = float(f"{abs(seconds):.3g}")  # rounded first, so 0.99996 s is "1 s", not "1000 ms"
+    if magnitude == 0:
+        return "0 s"
+    scale, unit, most = next((u for u in _UNITS if magnitude >= u[0]), _UNITS[-1])
+    value = round(magnitude / scale, 9)  # (0.00105 / 1e-3 is 1.0499999...)
+    decimals = min(most, max(0, 2 - math.floor(math.log10(value))))
+    text = f"{value:.{decimals}f}"
+    if "." in text:
+        text = text.rstrip("0").rstrip(".")
+    return f"{'-' if seconds < 0 else ''}{text} {unit}"

@@ -160,7 +160,7 @@ def test_a_bridge_beyond_loopback_without_access_control_refuses_to_start() -> N
     ("args", "said"),
     [
         (["--sim", "4", "--buses", "5"], "5 buses for 4 motors"),
-        (["--sim", "4", "--buses", "2", "--ids", "1,2"], "--ids with --buses"),
+        (["--sim", "4", "--buses", "2", "--ids", "1-4"], "--ids with --buses"),
         (["--sim", "2", "--node", "_x"], "--node"),
         (["--sim", "2", "--commander", "alice"], "no authentication"),
     ],

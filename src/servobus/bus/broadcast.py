@@ -30,6 +30,9 @@ async def broadcast(
     families = {m.codec.family for m in motors}
     if len(families) != 1:
         raise ValueError(f"a broadcast goes to motors of one family, not {sorted(families)}")
+    for motor in motors:  # one frame for all: within every motor's limits (clamped to the tightest)
+        if motor.limits is not None:
+            command = motor.limited(command)
     plan = get_family(families.pop()).broadcast(command, [m.codec for m in motors])
     runtime, now = engine.runtime, engine.time
     assert runtime is not None

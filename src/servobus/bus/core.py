@@ -68,6 +68,7 @@ from servobus.bus.restarts import Restarts
 from servobus.bus.safety import safe_stop
 from servobus.bus.tick import Result, Slot
 from servobus.bus.watchdog import MotorStatus, Watchdog
+from servobus.limits import LimitBook, Limits
 from servobus.metrics import Metrics
 from servobus.protocols import Command, Family, Reply, get_family
 from servobus.scheduler import Scheduler, Traffic
@@ -197,6 +198,9 @@ class Bus:
         sigterm: SIGTERM leaves the block as Ctrl-C does (safe stop, then exit status 143) while
             the Bus is open in the main thread and SIGTERM has Python's default disposition; False:
             this Bus takes no signal (:mod:`servobus.signals`).
+        limits: its motors' host-side limits (:mod:`servobus.limits`): a ``LimitBook`` by motor id
+            (``servobus.limits.load(path)``) or one ``Limits`` for all; each motor bound gets its own
+            ``Motor.limits``, which every command meets before its frame leaves.
 
     Attributes:
         safe_sent: the motors whose safe command left (the link reported it sent) when the
@@ -222,12 +226,14 @@ class Bus:
         max_timeout_s: float = 10.0,
         probe_interval_s: float = 0.1,
         sigterm: bool = True,
+        limits: LimitBook | Limits | None = None,
     ) -> None:
         if safe_timeout_s <= 0:
             raise ValueError(f"safe_timeout_s={safe_timeout_s} must be positive")
         if probe_interval_s <= 0:
             raise ValueError(f"probe_interval_s={probe_interval_s} must be positive")
         self.probe_interval_s = probe_interval_s
+        self.limits = LimitBook(limits) if isinstance(limits, Limits) else limits
         self.sigterm = sigterm
         self._sigterm: SigtermTaken | None = None  # this block's share of SIGTERM's default handler
         self.transport = transport
@@ -344,7 +350,9 @@ class Bus:
             return self.motors[key]
         codec = found.bind(motor_id, **options)
         self.scheduler.add(codec)
-        return self.registry.add(key, motor_class(found), self, codec, found.methods())
+        motor = self.registry.add(key, motor_class(found), self, codec, found.methods())
+        motor.limits = None if self.limits is None else self.limits.of(motor_id)  # (its own: settable)
+        return motor
 
     @property
     def commanded(self) -> tuple[Motor, ...]:

@@ -41,6 +41,7 @@ from servobus.frame import Frame
 from servobus.protocols import BoundCodec, Command, Reply
 from servobus.runtime import Runtime, RuntimeMismatch, Waiter
 from servobus.scheduler import Received, Request, RequestState, Scheduler, Traffic
+from servobus.timing import format_duration
 from servobus.transports._sending import not_sent_error
 from servobus.transports.contract import FrameLink
 from servobus.transports.events import StateChanged, TransportEvent, TransportState
@@ -77,6 +78,7 @@ class Engine:
     ) -> None:
         self.name = name
         self.scheduler = scheduler
+        self.count = scheduler.count  # one more of a counter of a codec's motor (``Motor.metrics``)
         self.link = link
         self.watchdog = watchdog
         self.registry = registry
@@ -142,10 +144,6 @@ class Engine:
             self.watchdog.check_silence(now)
         self.pump()
 
-    def count(self, codec: BoundCodec, counter: str) -> None:
-        """One more ``counter`` in ``codec``'s motor's counts (``Motor.metrics``)."""
-        self.scheduler.count(codec, counter)
-
     def reach_s(self, codec: BoundCodec) -> float:
         """The longest a reply of ``codec``'s motor is waited for now (its measured timeout)."""
         return self.scheduler.motor_timeout_s(codec)
@@ -205,7 +203,9 @@ class Engine:
             raise RuntimeMismatch(f"{self.name}: use the Bus inside 'async with'")
         if self.closing and not safe:
             raise self.closed_error()
-        # (positional: a call by keyword costs more, and this is once per request)
+        if motor.limits is not None:  # (LimitExceeded, or the command clamped to them)
+            command = motor.limited(command)
+        # (positional: a call by keyword costs more; once per request)
         request = self.scheduler.request(
             motor.codec, command, timeout_s, retries, runtime.waiter() if context is None else context
         )
@@ -363,15 +363,21 @@ class Engine:
         return _timed_out(request, self.time(), self.scheduler.seen, self.registry.named.values())
 
 
+#: how long before a silent request another motor's frame still shows the line works (seconds)
+HEARD_BEFORE_S = 1.0
+
+
 def _timed_out(request: Request, now: float, seen: Any, motors: Iterable[Motor]) -> MotorTimeout:
     """The error of a request that got no reply, saying what the bus saw instead (computed off the
     reply path: only a time-out pays for it). ``seen``: the scheduler's record of recent frames."""
     since = request.sent_at if request.sent_at is not None else now - request.timeout_s
-    heard = any(m.last_seen is not None and m.last_seen >= since for m in motors)
+    # another motor heard just before counts too: asked one after the other (servobus status), the
+    # others answered before this request left, and the line is not the one to check
+    heard = any(m.last_seen is not None and m.last_seen >= since - HEARD_BEFORE_S for m in motors)
     diagnosis = diagnose(request.codec, seen, since, heard=heard, sent=request.frame)
     attempts = f" ({request.attempts} attempts)" if request.attempts > 1 else ""
     return MotorTimeout(
-        f"{request.describe()}: no reply within {request.timeout_s:g} s{attempts}; {diagnosis}",
+        f"{request.describe()}: no reply within {format_duration(request.timeout_s)}{attempts}; {diagnosis}",
         diagnosis=diagnosis,
     )
 

@@ -19,6 +19,7 @@ import anyio
 
 from servobus.errors import MotorFault, MotorTimeout, TransportError
 from servobus.frame import Frame
+from servobus.limits import LimitExceeded, Limits
 from servobus.metrics import Metrics
 from servobus.protocols import BoundCodec, Command, Family, Reply, get_family
 from servobus.protocols._restart import Seen
@@ -240,6 +241,8 @@ class Motor:
             before either happened. A motor that answers again is online again.
         restarted_at: when the motor last came back online from a restart (the loop's clock; None:
             none was found). Its ``"restarted"`` MotorStatus says so too (servobus.bus.restarts).
+        limits: its host-side envelope (:class:`~servobus.limits.Limits`), applied to every command
+            before its frame leaves; None: none (set it at any time, or give ``Bus(limits=...)``).
     """
 
     def __init__(
@@ -256,6 +259,7 @@ class Motor:
         self.online: bool | None = None
         self.fault: MotorFault | None = None
         self.restarted_at: float | None = None
+        self.limits: Limits | None = None
         # by method name; from the Family the Bus bound it with (a plug-in may be unregistered)
         self._commands = command_classes(codec.family) if commands is None else commands
         self._record = MotorRecord(codec) if record is None else record  # (the Bus's Registry's)
@@ -266,6 +270,26 @@ class Motor:
         scheduler = self.bus.scheduler
         key = id(self.codec)
         return Metrics.of(scheduler.motor_counts[key], scheduler.motor_latency[key].snapshot())
+
+    def limited(self, command: Command[R]) -> Command[R]:
+        """``command`` within :attr:`limits` (clamped, when they say so), counted in :meth:`metrics`
+        as ``limit_clamped`` or ``limit_refused``.
+
+        Raises:
+            LimitExceeded: a ValueError naming the field, the value and the limit it went beyond.
+        """
+        limits = self.limits
+        if limits is None:
+            return command
+        try:
+            checked = limits.apply(command, self.state)
+        except LimitExceeded as exc:
+            self.bus.scheduler.count(self.codec, "limit_refused")
+            where = f"{self.codec.family} motor {self.codec.motor_id} on {self.bus.name}"
+            raise LimitExceeded(f"{where}: {exc}", exc.field, exc.value, exc.limit) from None
+        if checked is not command:
+            self.bus.scheduler.count(self.codec, "limit_clamped")
+        return checked
 
     @contextlib.asynccontextmanager
     async def stream(

@@ -57,7 +57,10 @@ def prepare(
     # (Engine.prepare written out for a batch: its checks once, a call less per request)
     made = batch_requests(
         engine.scheduler,
-        [(motor.codec, command, context) for (motor, command), context in zip(items, contexts, strict=True)],
+        [
+            (motor.codec, command if motor.limits is None else motor.limited(command), context)
+            for (motor, command), context in zip(items, contexts, strict=True)
+        ],
         timeout_s,
     )
     requests: list[Request | None] = []

@@ -15,6 +15,7 @@ import anyio
 from servobus.bus.tick import awaitable
 from servobus.errors import MotorNotExecuted, MotorTimeout, TransportError
 from servobus.protocols import Command
+from servobus.timing import format_duration
 
 if TYPE_CHECKING:
     from servobus.bus.engine import Engine
@@ -75,11 +76,11 @@ async def safe_stop(bus: SafeStopHost) -> None:
         missing = [m for m in commands if m not in outcome.acknowledged]
         if missing:
             logger.warning(
-                "%s: the %s command was not acknowledged by %s within %g s",
+                "%s: the %s command was not acknowledged by %s within %s",
                 bus.name,
                 bus.safe,
                 ", ".join(repr(m) for m in missing),
-                bus.safe_timeout_s,
+                format_duration(bus.safe_timeout_s),
             )
 
 

@@ -12,6 +12,8 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from servobus.timing import format_duration
+
 if TYPE_CHECKING:
     from servobus.bus.motor import Motor, MotorRecord
 
@@ -29,7 +31,7 @@ class MotorStatus:
         motor: the motor.
         online: its new state.
         at: when (the loop's clock).
-        reason: why, in words (``"3 replies missed"``, ``"silent for 0.5 s"``, ``"answered"``), or
+        reason: why, in words (``"3 replies missed"``, ``"silent for 500 ms"``, ``"answered"``), or
             ``"restarted"``: the motor, back online, had restarted (servobus.bus.restarts; it follows
             its ``"answered"``), so the set-points it held are lost; or
             what the motor said of itself while it stays online or offline (``"communication
@@ -135,7 +137,7 @@ class Watchdog:
         silent = self.offline_after_s
         for motor in self._motors():
             if motor.online and motor.last_seen is not None and motor.last_seen + silent <= at:
-                self.set_status(motor, False, now, f"silent for {silent:g} s")
+                self.set_status(motor, False, now, f"silent for {format_duration(silent)}")
         self.arm_silence()
 
     def stop(self) -> None:

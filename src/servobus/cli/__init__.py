@@ -69,7 +69,8 @@ COMMANDS: dict[str, str] = {
 
 
 class LazyGroup(click.Group):
-    """A group whose subcommands are imported when they are run or asked for help."""
+    """A group whose subcommands are imported when they are run or asked for help, each given the
+    grouped ``--help`` and ``--debug`` of :func:`servobus.cli._help.with_help` as it is resolved."""
 
     def list_commands(self, ctx: click.Context) -> list[str]:
         return sorted(COMMANDS)
@@ -81,7 +82,9 @@ class LazyGroup(click.Group):
         module, _, attribute = target.partition(":")
         command = getattr(importlib.import_module(module), attribute)
         assert isinstance(command, click.Command), target
-        return command
+        from servobus.cli._help import with_help
+
+        return with_help(command)
 
 
 @click.group(
@@ -176,8 +179,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             if isinstance(exc.__cause__, ValueError):
                 raise exc.__cause__ from None
             raise
+        from servobus.cli._help import did_you_mean
+
         where = f"{exc.ctx.command_path}: " if exc.ctx is not None else "servobus: "
-        click.echo(f"{where}error: {_one_line(exc.format_message())}", err=True)
+        message = did_you_mean(exc) or exc.format_message()
+        click.echo(f"{where}error: {_one_line(message)}", err=True)
         return 2
     except (click.Abort, KeyboardInterrupt) as exc:  # (click turns a KeyboardInterrupt into Abort)
         by = SIGNALLED[0] if SIGNALLED else signal.SIGINT

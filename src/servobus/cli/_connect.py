@@ -1,6 +1,7 @@
 """The connection options every bus command takes, in python-can's terms, and the Bus they open.
 
-``--sim N`` runs against N simulated motors in-process (real time); ``--interface/--channel``
+``--sim N`` runs against N simulated motors in-process (real time), with the first N ids of
+``--ids`` (:data:`SIM_RULE`, the one rule every command follows); ``--interface/--channel``
 (``-i``/``-c``) opens a CAN adapter through python-can (its configuration file and ``CAN_*``
 environment variables are the defaults), or with ``-i servobus-slcan`` an SLCAN adapter through
 servobus's own transport; ``--port`` opens an RS485 line. ``--family``,
@@ -19,14 +20,18 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import click
 
 from servobus.bus import Bus, Motor
+from servobus.cli._help import CONNECTION, GroupedOption
 from servobus.cli._output import FloatRange, refused
 from servobus.cli._remote import remote_from, remote_options
+from servobus.limits import LimitBook
+from servobus.limits import load as load_limits
 from servobus.protocols import DEFAULT_FAMILY, FAMILIES, available_families, get_family
 
 if TYPE_CHECKING:
     from servobus.sim.family import SimFamily
 
 __all__ = [
+    "SIM_RULE",
     "Connection",
     "FamilyChoice",
     "connection_options",
@@ -90,6 +95,8 @@ class Connection:
     baud: int | None = None
     #: each request's reply timeout (``--timeout-ms``); None: the library's
     timeout_s: float | None = None
+    #: the motors' host-side limits (``--limits FILE``); None: none
+    limits: LimitBook | None = None
 
     @property
     def link(self) -> str:
@@ -104,6 +111,12 @@ class Connection:
         if self.ids:
             return self.ids
         return tuple(range(1, (self.sim or 1) + 1))
+
+    @property
+    def sim_ids(self) -> tuple[int, ...]:
+        """The simulated motors' ids with ``--sim N`` (:data:`SIM_RULE`): the first N of
+        :attr:`motor_ids` (empty without ``--sim``)."""
+        return self.motor_ids[: self.sim or 0]
 
     def bind_options(self) -> dict[str, Any]:
         options: dict[str, Any] = {"link": self.link}
@@ -120,7 +133,7 @@ class Connection:
         if self.sim is not None:
             from servobus.transports.sim import SimTransport
 
-            where = (self.family, self.motor_ids, self.revision)
+            where = (self.family, self.sim_ids, self.revision)
             # fd only when given: the plain three-argument call is the one test doubles stand in for
             devices = sim_devices(*where, fd=True) if self.fd else sim_devices(*where)
             return SimTransport(devices=devices, name="sim")
@@ -205,6 +218,11 @@ def _check(conn: Connection) -> Connection:
         raise click.UsageError("--data-bitrate is the CAN FD data phase's bit rate: give --fd too")
     if conn.sim is not None and not 1 <= conn.sim <= 32:
         raise click.UsageError(f"--sim {conn.sim}: between 1 and 32 motors")
+    if conn.sim is not None and conn.ids and len(conn.ids) < conn.sim:
+        raise click.UsageError(
+            f"--sim {conn.sim} simulates the first {conn.sim} ids of --ids, which names "
+            f"{len(conn.ids)}: give {conn.sim} ids or more, or --sim {len(conn.ids)}"
+        )
     if conn.sim is not None:  # what the family's simulator serves: its one-line refusals
         from servobus.sim.family import SimOptions
 
@@ -306,17 +324,48 @@ class FamilyChoice(click.Choice[str]):
         """click.Choice sets its choices once; these are read each time instead."""
 
 
-#: ``--family``/``-f``: the command receives ``family``
-family_option = click.option(
-    "--family",
-    "-f",
-    type=FamilyChoice(),
-    default=DEFAULT_FAMILY,
-    show_default=True,
-    help="Protocol family of the motors.",
+#: the one rule of ``--sim N`` and ``--ids``, for every command that takes both (``--sim``'s help)
+SIM_RULE = (
+    "N simulated motors in-process, with the first N ids of --ids (1..N without --ids); the command "
+    "addresses every id of --ids: the others stay silent, as on a bus of N motors."
 )
+IDS_HELP = "Motor ids, e.g. 1-4,7 [default: 1, or 1..N with --sim N]."
+
+
+def _family(**grouped: Any) -> Callable[[F], F]:
+    return click.option(
+        "--family",
+        "-f",
+        type=FamilyChoice(),
+        default=DEFAULT_FAMILY,
+        show_default=True,
+        help="Protocol family of the motors.",
+        **grouped,
+    )
+
+
+def _revision(**grouped: Any) -> Callable[[F], F]:
+    return click.option(
+        "--revision", help="Protocol revision (myactuator V4_3/V4_4; lk V2_35/V2_36).", **grouped
+    )
+
+
+class _FamilyOption(GroupedOption):
+    """``--family`` among the connection options: ``FAMILY`` for its value and the families in its
+    help, so the page's first column stays narrow."""
+
+    def get_help_record(self, ctx: click.Context) -> tuple[str, str] | None:
+        record = super().get_help_record(ctx)
+        if record is None or not isinstance(self.type, FamilyChoice):
+            return record
+        names, text = record
+        return names, text.replace("motors.", f"motors: {', '.join(self.type.choices)}.", 1)
+
+
+#: ``--family``/``-f``: the command receives ``family``
+family_option = _family()
 #: ``--revision``: the command receives ``revision`` (None: the family's default)
-revision_option = click.option("--revision", help="Protocol revision (myactuator V4_3/V4_4; lk V2_35/V2_36).")
+revision_option = _revision()
 
 
 #: the shortest ``--timeout-ms``: about the shortest request and reply there are on a 1 Mbit/s CAN bus
@@ -329,16 +378,48 @@ def _seconds(ctx: click.Context, param: click.Parameter, value: float | None) ->
     return None if value is None else value / 1000.0
 
 
+def _timeout(**grouped: Any) -> Callable[[F], F]:
+    return click.option(
+        "--timeout-ms",
+        "timeout_s",
+        type=FloatRange(min=MIN_TIMEOUT_MS, max=MAX_TIMEOUT_MS),
+        callback=_seconds,
+        metavar="MS",
+        help="How long each request waits for its reply, in ms [default: the library's, per command]. "
+        "Raise it for a slow adapter.",
+        **grouped,
+    )
+
+
 #: ``--timeout-ms``: the command receives ``timeout_s`` (seconds; None: the library's timeout)
-timeout_option = click.option(
-    "--timeout-ms",
-    "timeout_s",
-    type=FloatRange(min=MIN_TIMEOUT_MS, max=MAX_TIMEOUT_MS),
-    callback=_seconds,
-    metavar="MS",
-    help="How long each request waits for its reply, in ms [default: the library's, per command]. "
-    "Raise it for a slow adapter.",
-)
+timeout_option = _timeout()
+#: the connection options' class and heading in --help (servobus.cli._help)
+_GROUP: dict[str, Any] = {"cls": GroupedOption, "help_group": CONNECTION}
+
+
+def _limits(ctx: click.Context, param: click.Parameter, value: str | None) -> LimitBook | None:
+    if value is None:
+        return None
+    try:
+        return load_limits(value)
+    except (OSError, ValueError) as exc:
+        raise click.BadParameter(str(exc)) from None
+
+
+def _limits_opt(**grouped: Any) -> Callable[[F], F]:
+    return click.option(
+        "--limits",
+        type=click.Path(dir_okay=False),
+        callback=_limits,
+        metavar="FILE",
+        help="The motors' host-side limits (a TOML file: servobus.limits): every command is checked "
+        "against them before it is sent, refused (exit 2) or clamped as the file says.",
+        **grouped,
+    )
+
+
+#: ``--limits FILE``: the command receives ``limits`` (a LimitBook, or None)
+limits_option = _limits_opt()
 
 
 def connection_options(func: F) -> F:
@@ -371,27 +452,32 @@ _LOCAL = {
 
 
 def _connection_options(func: F, *, remote: bool) -> F:
-    @family_option
-    @revision_option
-    @click.option(
-        "--ids", "ids_text", metavar="IDS", help="Motor ids, e.g. 1-4,7 (default: 1, or 1..N with --sim N)."
-    )
-    @click.option("--sim", type=int, metavar="N", help="Run against N simulated motors in-process.")
+    @_family(cls=_FamilyOption, help_group=CONNECTION, metavar="FAMILY")
+    @_revision(**_GROUP)
+    @click.option("--ids", "ids_text", metavar="IDS", help=IDS_HELP, **_GROUP)
+    @click.option("--sim", type=int, metavar="N", help=SIM_RULE, **_GROUP)
     @click.option(
         "--interface",
         "-i",
         help=f"python-can interface (socketcan, slcan, pcan, virtual, ...), or {NATIVE_SLCAN}: "
         "servobus's own SLCAN transport.",
+        **_GROUP,
     )
-    @click.option("--channel", "-c", help="python-can channel (can0, /dev/ttyACM0, ...).")
+    @click.option("--channel", "-c", help="python-can channel (can0, /dev/ttyACM0, ...).", **_GROUP)
     @click.option(
-        "--bitrate", type=click.IntRange(min=1), help="CAN bit rate [default: the adapter's config]."
+        "--bitrate",
+        type=click.IntRange(min=1),
+        help="CAN bit rate [default: the adapter's config].",
+        **_GROUP,
     )
-    @click.option("--fd", is_flag=True, help="CAN FD.")
-    @click.option("--data-bitrate", type=click.IntRange(min=1), help="CAN FD data-phase bit rate.")
-    @click.option("--port", help="Serial port of an RS485 line (/dev/ttyUSB0).")
-    @click.option("--baud", type=click.IntRange(min=1), help="Serial baud rate [default: the family's].")
-    @timeout_option
+    @click.option("--fd", is_flag=True, help="CAN FD.", **_GROUP)
+    @click.option("--data-bitrate", type=click.IntRange(min=1), help="CAN FD data-phase bit rate.", **_GROUP)
+    @click.option("--port", help="Serial port of an RS485 line (/dev/ttyUSB0).", **_GROUP)
+    @click.option(
+        "--baud", type=click.IntRange(min=1), help="Serial baud rate [default: the family's].", **_GROUP
+    )
+    @_timeout(**_GROUP)
+    @_limits_opt(**_GROUP)
     @(remote_options if remote else _unchanged)
     @functools.wraps(func)
     def wrapper(*args: Any, ids_text: str | None, **kwargs: Any) -> Any:
@@ -407,6 +493,7 @@ def _connection_options(func: F, *, remote: bool) -> F:
             "port",
             "baud",
             "timeout_s",
+            "limits",
         )
         fields = {name: kwargs.pop(name) for name in names}
         try:
@@ -421,7 +508,9 @@ def _connection_options(func: F, *, remote: bool) -> F:
         local = [flag for name, flag in _LOCAL.items() if fields[name] not in (None, False)]
         if local:
             raise click.UsageError(f"--remote and {', '.join(local)}: the bus is the bridge's, give one")
-        conn = Connection(family=fields["family"], ids=ids, timeout_s=fields["timeout_s"])
+        conn = Connection(
+            family=fields["family"], ids=ids, timeout_s=fields["timeout_s"], limits=fields["limits"]
+        )
         return func(*args, conn=conn, remote=target, **kwargs)
 
     return wrapper  # type: ignore[return-value]
@@ -460,6 +549,7 @@ async def open_bus(
     """The Bus on ``conn``'s transport (given to ``wrap`` first, when given: a tap) with its motors
     bound; leaving it stops the commanded ones."""
     transport = conn.transport()
+    bus_options.setdefault("limits", conn.limits)
     bus = Bus(transport if wrap is None else wrap(transport), **bus_options)
     try:
         async with bus:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import dataclasses
 import signal
 from collections.abc import Callable, Coroutine, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -23,6 +24,7 @@ from servobus.cli._output import confirm, refused
 from servobus.cli._remote import Remote, open_remote
 from servobus.cli.plugin import STATUS_SOURCES, Op
 from servobus.errors import ServobusError
+from servobus.limits import LimitBook, LimitExceeded, Limits
 from servobus.protocols import Command, Reply, get_family
 from servobus.signals import StopOn, stop_on
 
@@ -159,11 +161,14 @@ def plan(conn: Connection, op: Op, values: Mapping[str, Any]) -> list[Sequence[C
         click.UsageError: a value out of range, a command the motor's revision or link lacks, or a
             combination the family does not support (exit 2).
     """
-    return plan_codecs(codecs(conn), op, values)
+    return plan_codecs(codecs(conn), op, values, conn.limits)
 
 
-def plan_codecs(bound: Sequence[Any], op: Op, values: Mapping[str, Any]) -> list[Sequence[Command]]:
-    """:func:`plan` for motors' bound codecs (a bridge's motors: bound here after connecting).
+def plan_codecs(
+    bound: Sequence[Any], op: Op, values: Mapping[str, Any], limits: LimitBook | None = None
+) -> list[Sequence[Command]]:
+    """:func:`plan` for motors' bound codecs (a bridge's motors: bound here after connecting), each
+    command within the motor's ``limits`` (``--limits``: refused, or clamped with a line saying so).
 
     Raises:
         click.UsageError: as :func:`plan` (exit 2).
@@ -172,14 +177,48 @@ def plan_codecs(bound: Sequence[Any], op: Op, values: Mapping[str, Any]) -> list
     for codec in bound:
         with refused():
             commands = op.first(codec, values)
+            own = None if limits is None else limits.of(codec.motor_id)
+            if own is not None:
+                commands = tuple(_within(codec, own, command) for command in commands)
             for command in commands:
                 codec.encode(command)  # the revision and link checks, before anything is sent
         planned.append(commands)
     return planned
 
 
+def _within(codec: Any, limits: Limits, command: Command) -> Command:
+    """``command`` within ``limits`` (LimitExceeded: a ValueError), a line on stderr for each field
+    clamped. A relative move is left to the Bus: its target is known once the motor's angle is."""
+    if command.POSITION == "relative":
+        return command
+    try:
+        checked = limits.apply(command)
+    except LimitExceeded as exc:
+        raise LimitExceeded(
+            f"{codec.family} motor {codec.motor_id}: {exc}", exc.field, exc.value, exc.limit
+        ) from None
+    names = [f.name for f in dataclasses.fields(checked)] if checked is not command else []  # type: ignore[arg-type]
+    for name in names:
+        before, after = getattr(command, name), getattr(checked, name)
+        if before != after:
+            what = f"{codec.family} motor {codec.motor_id}: {type(command).__name__}.{name}"
+            click.echo(f"servobus: {what} {_said(before)} clamped to {_said(after)} (--limits)", err=True)
+    return checked
+
+
+def _said(value: Any) -> str:
+    if isinstance(value, float):
+        return f"{value:g}"
+    if isinstance(value, tuple):
+        return "(" + ", ".join(_said(v) for v in value) + ")"
+    return "none" if value is None else str(value)
+
+
 def plan_motors(
-    motors: Sequence[RemoteCliMotor], op_of: Callable[[str], Op], values: Mapping[str, Any]
+    motors: Sequence[RemoteCliMotor],
+    op_of: Callable[[str], Op],
+    values: Mapping[str, Any],
+    limits: LimitBook | None = None,
 ) -> list[Sequence[Command[Any]]]:
     """:func:`plan_codecs` for a bridge's motors, ``op_of(family)`` saying what each motor's family
     sends (a bridge's bus may mix families); built and checked before anything is sent.
@@ -194,7 +233,7 @@ def plan_motors(
         family = motor.codec.family
         if family not in ops:
             ops[family] = op_of(family)
-        planned.extend(plan_codecs([motor.codec], ops[family], values))
+        planned.extend(plan_codecs([motor.codec], ops[family], values, limits))
     return planned
 
 
@@ -233,7 +272,7 @@ async def remote_ask(
         The commands sent, each motor's outcome, and the motors' families.
     """
     async with open_remote(conn.ids, remote, read_only=read_only) as (_, motors):
-        planned = plan_motors(motors, op_of, values)
+        planned = plan_motors(motors, op_of, values, conn.limits)
         families = sorted({motor.codec.family for motor in motors})
         if rom is not None and any(op_of(family).rom for family in families):
             ids = ", ".join(str(m.motor_id) for m in motors)

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
+from servobus.cli._help import REMOTE, GroupedOption
 from servobus.cli._output import refused
 
 if TYPE_CHECKING:
@@ -120,18 +121,23 @@ def remote_extra() -> Iterator[None]:
         raise click.ClickException(str(exc)) from exc
 
 
+def _option(*names: str, **kwargs: Any) -> Callable[[F], F]:
+    """A remote option: under its own heading in --help (:mod:`servobus.cli._help`)."""
+    return click.option(*names, cls=GroupedOption, help_group=REMOTE, **kwargs)
+
+
 def remote_options(func: F) -> F:
     """Add ``--remote``, ``--endpoint``, ``--user``, ``--password`` and ``--read-only`` to a click
     command (its wrapper takes them out with :func:`remote_from`)."""
     for option in reversed(
         (
-            click.option(
+            _option(
                 "--remote",
                 metavar="NODE/BUS",
                 help="Talk to the motors of bus BUS on the bridge NODE (servobus bridge) instead of a "
                 "local bus.",
             ),
-            click.option(
+            _option(
                 "--endpoint",
                 "endpoints",
                 multiple=True,
@@ -139,16 +145,16 @@ def remote_options(func: F) -> F:
                 help="Where the bridge listens, a Zenoh endpoint; repeat for several "
                 f"[default: {_default()}].",
             ),
-            click.option(
+            _option(
                 "--user", envvar=ENV_USER, show_envvar=True, help="User name, when the bridge asks for one."
             ),
-            click.option(
+            _option(
                 "--password",
                 envvar=ENV_PASSWORD,
                 show_envvar=True,
                 help="Its password (from the environment, it stays out of the process list).",
             ),
-            click.option(
+            _option(
                 "--read-only",
                 is_flag=True,
                 help="Connect without the right to command: reads and states only.",

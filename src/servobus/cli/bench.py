@@ -44,7 +44,7 @@ __all__ = ["bench"]
 #: the parts of ``python -m bench``, in its order (``PARTS`` of bench/__main__.py; a test keeps them equal)
 PARTS = (
     "codec", "transport", "bus", "efficiency", "sim", "loop", "loop1k", "scaling", "remote", "pacer",
-    "dashboard",
+    "dashboard", "limits",
 )  # fmt: skip
 #: records of how a figure was measured, not figures
 SKIPPED = frozenset({"meta", "machine"})

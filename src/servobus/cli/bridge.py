@@ -253,12 +253,12 @@ async def _serve(
         served: dict[str, tuple[Bus, list[Motor]]] = {}
         for name, ids in layout:
             if conn.sim is not None:  # (fd only when given, as Connection.transport)
-                where = (conn.family, ids, conn.revision)
+                where = (conn.family, ids[: conn.sim], conn.revision)  # (--sim N: the first N ids)
                 devices = sim_devices(*where, fd=True) if conn.fd else sim_devices(*where)
                 transport = SimTransport(devices=devices, name=name)
             else:
                 transport = conn.transport()
-            bus = await stack.enter_async_context(Bus(transport, name=name))
+            bus = await stack.enter_async_context(Bus(transport, name=name, limits=conn.limits))
             opened.append(bus)
             served[name] = (bus, [bus.motor(conn.family, i, **conn.bind_options()) for i in ids])
         with stop_scope() as stopping:

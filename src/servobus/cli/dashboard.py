@@ -216,7 +216,9 @@ async def _local(served: _Served, conn: Connection, hz: float, moving: bool, dur
         dash.watch(bus, name=bus.name if conn.sim is None else "sim")
         loop = Loop(hz, timeout_s=conn.timeout_s)
         dash.watch_loop(loop)
-        what = f"{len(motors)} {'simulated ' if conn.sim is not None else ''}{conn.family} motor(s)"
+        simulated = len(conn.sim_ids)  # (--ids may name more motors than --sim N: the others are silent)
+        what = f"{len(motors)} {'simulated ' if simulated == len(motors) else ''}{conn.family} motor(s)"
+        what += f", {simulated} simulated" if 0 < simulated < len(motors) else ""
         motion = _Motion(bus, motors, conn.family, served.stopped) if moving else None
         with stop_scope() as stopping:
             async with served.serving():

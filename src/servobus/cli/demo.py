@@ -88,7 +88,12 @@ DASHBOARD_AT = "127.0.0.1:8765"
 )
 @click.option("--hz", type=FloatRange(min=1, max=2000), default=1000.0, show_default=True, help="Tick rate.")
 @click.option(
-    "--motors", type=click.IntRange(1, 320), default=32, show_default=True, help="Simulated motors."
+    "--motors",
+    type=click.IntRange(1, 320),
+    default=32,
+    show_default=True,
+    help="Simulated motors, ids 1.. on each bus (the demo has no --sim/--ids: every motor is simulated, "
+    "spread over --buses).",
 )
 @click.option(
     "--buses",

@@ -17,7 +17,6 @@ firmware date implies).
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -64,7 +63,8 @@ SECOND_TIMEOUT_S = 0.3
 def scan(conn: Connection, remote: Remote | None, as_json: bool) -> None:
     """Probe ids 1-32 (those of them the family allows; or --ids) for motors of the family; list id,
     revision, model, firmware date, state and error flags of those that answer. (With --sim N the
-    simulated motors are 1..N; with --remote, the motors the bridge serves on the bus.)"""
+    simulated motors are the first N ids of --ids, or 1..N; with --remote, the motors the bridge
+    serves on the bus.)"""
     if remote is not None:
         rows = run(_scan_remote(conn, remote))
         where = f"of {remote.target}"
@@ -94,7 +94,7 @@ async def _scan(
     conn: Connection, ids: Sequence[int], probe: Any, quiet: bool
 ) -> tuple[list[dict[str, Any]], str | None]:
     """The rows of the motors that answered, by id, and what else the bus saw (None: nothing)."""
-    transport = dataclasses.replace(conn, ids=()).transport()  # --sim N: motors 1..N, whatever is probed
+    transport = conn.transport()  # --sim N: the first N ids of --ids (1..N), whatever is probed
     part = cli_part(conn.family)
     found: dict[int, dict[str, Any]] = {}
     async with transport:

@@ -23,6 +23,7 @@ from servobus.cli._motors import Asked, Outcome, ask_all, codecs, fail_if_any, p
 from servobus.cli._output import SETTINGS, FloatRange, console, emit_json, examples, json_option, refused
 from servobus.cli._remote import open_remote
 from servobus.cli._status_view import Items, LiveStatus, status_rows, status_table, take, tick_items
+from servobus.limits import LimitBook
 from servobus.protocols import Command, Reply
 from servobus.ticks import ticks
 
@@ -60,7 +61,7 @@ def _drive(
             )
         outcomes = run(_remote_setpoints(conn, remote, name, values, rate_hz, duration, live, arrival))
     else:
-        planned, repeats = _setpoints(conn.family, name, codecs(conn), values)
+        planned, repeats = _setpoints(conn.family, name, codecs(conn), values, conn.limits)
         outcomes = run(_run_setpoints(conn, name, planned, repeats, rate_hz, duration, keep, live, arrival))
     rows = status_rows(outcomes)
     if as_json:
@@ -73,7 +74,7 @@ def _drive(
 
 
 def _setpoints(
-    family: str, name: str, bound: Sequence[Any], values: Mapping[str, Any]
+    family: str, name: str, bound: Sequence[Any], values: Mapping[str, Any], limits: LimitBook | None = None
 ) -> tuple[list[Sequence[Command]], list[Sequence[Command]]]:
     """The commands set-point command ``name`` sends each motor (its codec in ``bound``) first, and
     those it resends: all built and encoded now.
@@ -88,7 +89,7 @@ def _setpoints(
             f"{family} {name} carries no current limit: drop --max-current-a "
             f"(it is for {current_limit_users()})"
         )
-    planned = plan_codecs(bound, entry, values)
+    planned = plan_codecs(bound, entry, values, limits)
     repeat = entry.repeat
     assert repeat is not None
     with refused():  # refused here (exit 2), not after the first set-point went out
@@ -137,7 +138,7 @@ async def _remote_setpoints(
         planned: list[Sequence[Command]] = []
         repeats: list[Sequence[Command]] = []
         for motor in motors:  # (each in its own family: a bridge's bus may mix them)
-            first, again = _setpoints(motor.codec.family, name, [motor.codec], values)
+            first, again = _setpoints(motor.codec.family, name, [motor.codec], values, conn.limits)
             planned += first
             repeats += again
 

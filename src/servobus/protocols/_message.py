@@ -75,6 +75,11 @@ class Command(Message, Generic[R]):
         reply that is those bytes is the motor echoing it without executing it (MyActuator after
         its 0xB3 trip): the request fails with ``MotorNotExecuted`` (``BoundCodec.may_echo``).
 
+    ``POSITION``
+        How a position field of it is meant, for host-side limits (:mod:`servobus.limits`):
+        ``"absolute"`` (the default), ``"relative"`` (an increment from where the motor is) or
+        ``"single_turn"`` (an angle within the turn the motor is in).
+
     ``REPLY`` is not written by hand: it is the type argument of the command's base, read when the
     class is made (a union for a command answered by one of several layouts; None for no reply).
     """
@@ -88,6 +93,7 @@ class Command(Message, Generic[R]):
     NO_REPLY: ClassVar[str | None] = None
     NOTED: ClassVar[bool] = False
     NEVER_ECHOED: ClassVar[bool] = False
+    POSITION: ClassVar[str] = "absolute"
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)

@@ -12,6 +12,7 @@ import anyio
 from servobus import runtime
 from servobus.bus import Motor
 from servobus.errors import ServobusError
+from servobus.limits import LimitExceeded
 from servobus.remote import wire
 from servobus.remote._clients import Clients, safe_done
 from servobus.remote._served import Served
@@ -89,6 +90,9 @@ async def _run(
     try:
         reply = await served.bus.request(motor, command, timeout_s=request.timeout_s)
     except Withdrawn as exc:  # (its client lost the motor while it was queued: counted withdrawn)
+        return wire.Result(error=exc)
+    except LimitExceeded as exc:  # (the Bus counts it too: limit_refused)
+        served.counts["limited"] += 1
         return wire.Result(error=exc)
     except ServobusError as exc:
         if safe:

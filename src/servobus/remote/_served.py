@@ -36,6 +36,7 @@ COUNTS = {
     "reordered": "set-points older than the one held from the same client",
     "refused": "commands from a client without a token, or for a motor another live client holds",
     "malformed": "messages that did not parse, or were not a command the motor's codec takes",
+    "limited": "commands beyond the motor's host-side limits (servobus.limits), refused",
     "oversized": "messages longer than their key allows (remote/_limits.py), dropped before decoding",
     "shed": "queries dropped on arrival: their client's or their kind's queue was full",
     "requests": "commands through request",

@@ -16,6 +16,7 @@ import time
 from collections.abc import Callable
 
 from servobus import runtime
+from servobus.limits import LimitExceeded
 from servobus.remote import wire
 from servobus.remote._clients import Clients
 from servobus.remote._handover import Handover
@@ -23,6 +24,7 @@ from servobus.remote._served import Held, Served
 from servobus.remote._stops import Stops
 from servobus.remote.keys import Keys
 from servobus.ticks import ticks
+from servobus.timing import format_duration
 
 __all__ = ["Setpoints"]
 
@@ -96,8 +98,15 @@ class Setpoints:
             if clients.holder(served, mid, client) is not None:
                 served.counts["refused"] += 1
                 continue
+            motor = served.motors[mid]
+            try:  # beyond the motor's limits: refused here (or clamped), not by the tick it would void
+                command = motor.limited(command)
+            except LimitExceeded as exc:
+                served.counts["limited"] += 1
+                logger.debug("%s: set-point for motor %s refused: %s", key, mid, exc)
+                continue
             try:  # what the motor's codec refuses (a command its revision lacks) never reaches a tick
-                served.motors[mid].codec.encode(command)
+                motor.codec.encode(command)
             except ValueError as exc:
                 served.counts["malformed"] += 1
                 logger.debug("%s: set-point for motor %s refused by its codec: %s", key, mid, exc)
@@ -137,7 +146,7 @@ class Setpoints:
             if due:
                 for mid in due:
                     self._clients.revoke(served, mid)
-                self._stops.stop(served, due, f"set-points stale for {stop_after_s * 1e3:.0f} ms")
+                self._stops.stop(served, due, f"set-points stale for {format_duration(stop_after_s)}")
             if not items:
                 continue
             handed = time.time_ns()

@@ -46,6 +46,7 @@ from servobus.errors import (
     ServobusError,
     TransportError,
 )
+from servobus.limits import LimitExceeded
 from servobus.protocols import Command, Family, Reply, get_family
 
 __all__ = [
@@ -477,6 +478,7 @@ _ERRORS: dict[str, type[Exception]] = {
         ProtocolError,
         TransportError,
         ServobusError,
+        LimitExceeded,
         ValueError,
         PermissionError,
     )

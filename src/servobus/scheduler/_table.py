@@ -20,6 +20,7 @@ from servobus.errors import ProtocolError, RequestStateError, TransportError
 from servobus.frame import Frame
 from servobus.protocols import BoundCodec, Command, Reply
 from servobus.rtt import Estimates, RoundTrip
+from servobus.timing import format_duration
 
 __all__ = [
     "FINAL",
@@ -309,7 +310,7 @@ class RequestTable:
             if limit is not None and request.queued_at is not None and now - request.queued_at > limit:
                 request.error = TransportError(
                     f"{self.name}: {request.describe()} not sent (stale: waited its turn longer than "
-                    f"stale_after_s={limit:g} s)"
+                    f"{format_duration(limit)}, the link's stale_after_s)"
                 )
                 move(request, _FAILED, now)
                 stale.append(request)

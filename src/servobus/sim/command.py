@@ -17,6 +17,7 @@ name (the command answers its own usage errors, so its caller's error format nev
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 import signal
 import sys
@@ -30,10 +31,13 @@ import anyio
 import anyio.abc
 import click
 
+from servobus.limits import LimitBook
+from servobus.limits import load as load_limits
 from servobus.protocols import available_families, get_family
 from servobus.sim.attach import serve_rs485, serve_slcan
 from servobus.sim.corenet import CoreCanNetwork
 from servobus.sim.family import Setup, SimFamily, SimOptions
+from servobus.sim.limits import bound
 from servobus.sim.pty import PtyPort
 
 __all__ = ["ERROR_PREFIX", "EXIT_USAGE", "Served", "main", "sim"]
@@ -62,6 +66,7 @@ class Served:
     ids: range
     revision: Enum
     link: Path | None
+    limits: LimitBook | None = None
 
 
 if TYPE_CHECKING:
@@ -123,6 +128,12 @@ def _refuse(exc: click.UsageError) -> NoReturn:
 @click.option("--fd", is_flag=True, help="CAN FD motors, over SLCAN (where the family has them)")
 @click.option("--modbus", is_flag=True, help="the RS485 line in Modbus RTU mode (where the family has it)")
 @click.option("--link", help="also create this symlink to the pty (the path must not exist)")
+@click.option(
+    "--limits",
+    "limits_file",
+    type=click.Path(dir_okay=False),
+    help="a limits file (servobus.limits): the motors' current, speed and acceleration stay within it",
+)
 def sim(
     family: str,
     motors: int,
@@ -134,6 +145,7 @@ def sim(
     fd: bool,
     modbus: bool,
     link: str | None,
+    limits_file: str | None,
 ) -> None:
     """Simulated motors on a pseudo-terminal (SLCAN adapter or RS485 line) for any tool to open.
 
@@ -144,6 +156,11 @@ def sim(
         raise click.UsageError("--rs485: not allowed with --slcan")
     options = SimOptions(rs485=rs485, fd=fd, modbus=modbus, baud=baud)
     served = check(family, options, first_id, motors, revision, link)
+    if limits_file is not None:
+        try:
+            served = dataclasses.replace(served, limits=load_limits(limits_file))
+        except (OSError, ValueError) as exc:
+            raise click.UsageError(f"--limits {limits_file}: {exc}") from None
     setup = build(served)
     with contextlib.suppress(KeyboardInterrupt):  # (a Ctrl-C before the signals are taken)
         anyio.run(run, served, setup)
@@ -224,9 +241,12 @@ def build(served: Served) -> Setup:
         click.UsageError: a device refused its settings (a check above missed a rule).
     """
     try:
-        return served.sim.devices(served.ids, served.revision, served.options)
+        setup = served.sim.devices(served.ids, served.revision, served.options)
     except ValueError as exc:
         raise click.UsageError(str(exc)) from None
+    if served.limits is not None:
+        bound([*setup.can_devices, *setup.serial_devices], served.limits)
+    return setup
 
 
 def make_link(link: Path, target: str) -> None:

@@ -52,6 +52,9 @@ class PlantParams:
         winding_resistance_ohm, thermal_resistance_c_per_w, thermal_capacity_j_per_c: I²R heating.
         ambient_c: start and ambient temperature.
         supply_v, supply_resistance_ohm: bus voltage and its sag under load.
+        speed_limit_dps: the drive's speed limit in speed mode: a faster target is clamped to it
+            (``math.inf``: none; the host-side limits give the simulated motors theirs:
+            :mod:`servobus.sim.limits`).
     """
 
     inertia_kgm2: float = 0.005
@@ -70,6 +73,7 @@ class PlantParams:
     ambient_c: float = 25.0
     supply_v: float = 48.0
     supply_resistance_ohm: float = 0.02
+    speed_limit_dps: float = math.inf
 
     def __post_init__(self) -> None:
         for name in (
@@ -85,6 +89,8 @@ class PlantParams:
         ):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name}={getattr(self, name)!r} must be > 0")
+        if not self.speed_limit_dps >= 0:
+            raise ValueError(f"speed_limit_dps={self.speed_limit_dps!r} must be >= 0")
 
 
 # ---- what the drive is asked to do (set by the device model from decoded commands) ----
@@ -429,7 +435,7 @@ class Plant:
             # v = sqrt(2·a·|e|), or long fast moves overshoot and ring
             limit = min(limit, math.sqrt(2 * self._accel * abs(error)))
             return self._speed_loop(s, _clamp(wanted, limit), control.max_current_a, dt)
-        return self._speed_loop(s, control.speed_dps, control.max_current_a, dt)
+        return self._speed_loop(s, _clamp(control.speed_dps, p.speed_limit_dps), control.max_current_a, dt)
 
     def _speed_loop(self, s: _State, target_dps: float, max_current_a: float | None, dt: float) -> float:
         p = self.params

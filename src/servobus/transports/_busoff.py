@@ -15,6 +15,7 @@ import logging
 import math
 from collections.abc import Callable
 
+from servobus.timing import format_duration
 from servobus.transports._sending import BusOffError
 from servobus.transports.events import BusOff, BusRestarted, CanErrorClass, ErrorFrame, TransportEvent
 from servobus.transports.stats import TransportStats
@@ -89,7 +90,8 @@ class BusOffState:
         self.since = None
         self._back_at = at
         self._stats.restarted += 1
-        logger.info("%s: the CAN controller restarted after %.3f s bus-off", self._name, at - since)
+        took = format_duration(at - since)
+        logger.info("%s: the CAN controller restarted after %s bus-off", self._name, took)
         self._emit(BusRestarted(at))
 
     def forget(self) -> None:

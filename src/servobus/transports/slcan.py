@@ -43,7 +43,7 @@ import anyio
 from servobus.core import SlcanDeframer
 from servobus.errors import TransportError
 from servobus.frame import Frame
-from servobus.timing import nominal_frame_time_s
+from servobus.timing import format_duration, nominal_frame_time_s
 from servobus.transports._serialport import SerialPort
 from servobus.transports.base import Outgoing, Transport
 from servobus.transports.stats import TransportStats
@@ -265,8 +265,8 @@ class SlcanTransport(Transport[Frame, Frame]):
                     await self._answer.wait()
         except TimeoutError:
             raise TransportError(
-                f"{self.name}: no answer to {command.decode()!r} within {self.open_timeout_s} s: "
-                "is it an SLCAN adapter?"
+                f"{self.name}: no answer to {command.decode()!r} within "
+                f"{format_duration(self.open_timeout_s)}: is it an SLCAN adapter?"
             ) from None
         finally:
             self._answer = None

@@ -319,6 +319,8 @@ class IncrementalSetpoint(_SetpointFrame):
         speed_rad_s, kp, kd, current_a, model: as in :class:`Setpoint`.
     """
 
+    POSITION = "relative"  # (host-side limits: servobus.limits)
+
     WHAT: ClassVar[str] = "incremental setpoint"
     CAN_MODE: ClassVar[CanMode] = CanMode.EXTENDED
     FIELDS = _setpoint_fields("step_deg")

@@ -202,6 +202,8 @@ class SingleTurnPosition(LkCommand[Status2Reply]):
         direction: CLOCKWISE or COUNTER_CLOCKWISE (DATA[1]).
     """
 
+    POSITION = "single_turn"  # (host-side limits: servobus.limits)
+
     CODE: ClassVar[int] = 0xA5
     REVISIONS = V2_36_ONLY
     FIELDS = ((1, _DIRECTION), (4, SINGLE_TURN))
@@ -228,6 +230,8 @@ class SingleTurnPositionSpeed(LkCommand[Status2Reply]):
             must give at least 1. ``None`` sends 0, which the LK manuals do not define.
     """
 
+    POSITION = "single_turn"  # (host-side limits: servobus.limits)
+
     CODE: ClassVar[int] = 0xA6
     REVISIONS = V2_36_ONLY
     FIELDS = ((1, _DIRECTION), (2, MAX_SPEED), (4, SINGLE_TURN))
@@ -252,6 +256,8 @@ class IncrementalPosition(LkCommand[Status2Reply]):
         increment_deg: angleIncrement (int32 DATA[4..7], 0.01 °/LSB); the sign is the direction.
     """
 
+    POSITION = "relative"  # (host-side limits: servobus.limits)
+
     CODE: ClassVar[int] = 0xA7
     FIELDS = ((4, INCREMENT),)
     increment_deg: float
@@ -269,6 +275,8 @@ class IncrementalPositionSpeed(LkCommand[Status2Reply]):
         max_speed_dps: speed limit (uint16 DATA[2..3], 1 dps/LSB), rounded half away from zero; it
             must give at least 1. ``None`` sends 0, which the LK manuals do not define.
     """
+
+    POSITION = "relative"  # (host-side limits: servobus.limits)
 
     CODE: ClassVar[int] = 0xA8
     FIELDS = ((2, MAX_SPEED), (4, INCREMENT))

@@ -62,6 +62,13 @@ WHY_NOT = {
 }
 
 
+def _acceleration(text: str) -> float | None:
+    """dps/s, or ``none``/``off``/``0`` for no planning: the motor reports that as 0, so a value read
+    (``config dump``) is written back as it was; other numbers below 100 are refused by the write."""
+    value = plugin.parse_float_or_none(text)
+    return None if value == 0 else value
+
+
 def _settings() -> list[plugin.Setting]:
     out = [
         plugin.setting_of(
@@ -77,10 +84,11 @@ def _settings() -> list[plugin.Setting]:
     out += [
         plugin.setting_of(
             f"{accel.name.lower()}_dps_s",
-            f"{accel.name.lower().replace('_', ' ')}, 100..60000 dps/s or 'none' (no planning)",
+            f"{accel.name.lower().replace('_', ' ')}, 100..60000 dps/s or 'none' (no planning, reads 0)",
             read=ma.ReadAcceleration,
             write=ma.WriteAcceleration,
             keys={"index": accel},
+            parse=_acceleration,
             rom=True,
         )
         for accel in ma.AccelIndex

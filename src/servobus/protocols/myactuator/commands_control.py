@@ -113,6 +113,8 @@ class SingleTurnPositionControl(MyActuatorCommand[SingleTurnStatusReply]):
     """0xA6 single-turn position 0..360° in ``direction``. Reply: ``SingleTurnStatusReply`` (encoder).
     ``max_speed_dps=None`` asks for no speed limit (see :class:`AbsolutePositionControl`)."""
 
+    POSITION = "single_turn"  # (host-side limits: servobus.limits)
+
     CODE: ClassVar[int] = 0xA6
     TITLE: ClassVar[str] = "single-turn position control"
     NEVER_ECHOED = True  # the reply carries temperature and measurements (module docstring)
@@ -126,6 +128,8 @@ class SingleTurnPositionControl(MyActuatorCommand[SingleTurnStatusReply]):
 class IncrementalPositionControl(MyActuatorCommand[StatusReply]):
     """0xA8 move by ``angle_deg`` from the current position (its sign gives the direction).
     ``max_speed_dps=None`` asks for no speed limit (see :class:`AbsolutePositionControl`)."""
+
+    POSITION = "relative"  # (host-side limits: servobus.limits)
 
     CODE: ClassVar[int] = 0xA8
     TITLE: ClassVar[str] = "incremental position closed-loop control"

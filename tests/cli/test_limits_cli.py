@@ -1,0 +1,199 @@
+"""``--limits FILE`` on the command line: a command beyond a declared limit is refused (one line, exit
+2, nothing sent) or clamped (a line says so), through ``--sim``, python-can's virtual bus, a bridge
+started with ``--limits`` and a simulator served with ``--limits`` on a pty."""
+
+from __future__ import annotations
+
+import contextlib
+import select
+import signal
+import socket
+import subprocess
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import anyio
+import pytest
+
+from cli._bus_cli import SERVOBUS, one_line, pty_simulators, run, run_json
+from servobus.protocols.myactuator.sim.device import MyActuatorMotor
+from sim._standins import Sniffer
+
+REFUSE = "[all]\nspeed_dps = 360\n[motor.2]\nposition_deg = [-90, 90]\n"
+CLAMP = "clamp = true\n[all]\nspeed_dps = 360\n"
+
+
+@pytest.fixture
+def files(tmp_path: Path) -> tuple[str, str]:
+    refuse, clamp = tmp_path / "refuse.toml", tmp_path / "clamp.toml"
+    refuse.write_text(REFUSE)
+    clamp.write_text(CLAMP)
+    return str(refuse), str(clamp)
+
+
+def test_a_command_beyond_a_limit_is_one_line_and_exit_2(
+    capsys: pytest.CaptureFixture[str], files: tuple[str, str]
+) -> None:
+    refuse, _ = files
+    err = one_line(capsys, ["speed", "--sim", "2", "--speed-dps", "1000", "--limits", refuse])
+    assert "myactuator motor 1: SpeedControl.speed_dps=1000 is beyond the host limit speed_dps 360" in err
+    err = one_line(capsys, ["move", "--sim", "2", "--angle-deg", "120", "--limits", refuse])
+    assert (
+        "motor 2: AbsolutePositionControl.angle_deg=120 is beyond the host limit position_deg [-90, 90]"
+        in err
+    )
+    rows = run_json(
+        capsys, ["speed", "--sim", "2", "--speed-dps", "-360", "--duration", "0.3", "--limits", refuse]
+    )
+    assert [round(r["speed_dps"]) for r in rows] == [-360, -360]
+
+
+def test_a_clamping_file_sends_the_limit_and_says_so(
+    capsys: pytest.CaptureFixture[str], files: tuple[str, str]
+) -> None:
+    _, clamp = files
+    out, err = run(
+        capsys,
+        ["speed", "--sim", "1", "--speed-dps", "1000", "--duration", "0.3", "--limits", clamp, "--json"],
+    )
+    assert "servobus: myactuator motor 1: SpeedControl.speed_dps 1000 clamped to 360 (--limits)" in err
+    assert '"speed_dps": 360' in out
+
+
+@pytest.mark.parametrize(
+    ("text", "says"),
+    [
+        ("[all]\nspeed = 1\n", "unknown limit 'speed'"),
+        ("clamp = maybe\n", "not TOML"),
+        (None, "No such file"),
+    ],
+)
+def test_a_bad_limits_file_is_one_line_and_exit_2(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, text: str | None, says: str
+) -> None:
+    path = tmp_path / "limits.toml"
+    if text is not None:
+        path.write_text(text)
+    err = one_line(capsys, ["status", "--sim", "1", "--limits", str(path)])
+    assert "--limits" in err and says in err
+
+
+# ---- a real transport path: python-can's virtual bus, the simulated motors served on it ----
+
+
+@contextlib.contextmanager
+def _served_on_virtual(sniffer: Sniffer) -> Iterator[str]:
+    """Two simulated MyActuator motors and ``sniffer`` on a python-can virtual channel (named)."""
+    import can
+
+    from servobus.sim.attach import serve_python_can
+    from servobus.sim.network import SimCanNetwork
+
+    channel = f"limits-cli-{time.monotonic_ns()}"
+    network = SimCanNetwork([MyActuatorMotor(1), MyActuatorMotor(2), sniffer])
+    side = can.Bus(interface="virtual", channel=channel)
+    stop = threading.Event()
+
+    async def serve() -> None:
+        async with anyio.create_task_group() as group:
+            group.start_soon(lambda: serve_python_can(network, side))
+            while not stop.is_set():
+                await anyio.sleep(0.01)
+            group.cancel_scope.cancel()
+
+    thread = threading.Thread(target=anyio.run, args=(serve,), daemon=True)
+    thread.start()
+    try:
+        yield channel
+    finally:
+        stop.set()
+        thread.join(5)
+        side.shutdown()
+
+
+def _speeds(sniffer: Sniffer) -> list[float]:
+    return [
+        int.from_bytes(bytes(f.data[4:8]), "little", signed=True) / 100
+        for _, f in list(sniffer.seen)
+        if 0x141 <= f.arbitration_id <= 0x160 and f.data[:1] == b"\xa2"
+    ]
+
+
+def test_limits_hold_through_python_can_s_virtual_bus(
+    capsys: pytest.CaptureFixture[str], files: tuple[str, str]
+) -> None:
+    refuse, clamp = files
+    sniffer = Sniffer()
+    with _served_on_virtual(sniffer) as channel:
+        bus = ["-i", "virtual", "-c", channel, "--ids", "1-2", "--timeout-ms", "500"]
+        one_line(capsys, ["speed", *bus, "--speed-dps", "-900", "--limits", refuse])
+        assert _speeds(sniffer) == []  # refused before anything was sent
+        run(capsys, ["speed", *bus, "--speed-dps", "-900", "--duration", "0.3", "--limits", clamp])
+    speeds = _speeds(sniffer)
+    assert speeds and set(speeds) == {-360.0}
+
+
+# ---- the bridge and the simulator honour the same file ----
+
+
+def _free_port() -> int:
+    with contextlib.closing(socket.socket()) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def test_a_bridge_started_with_limits_refuses_a_remote_command_beyond_them(
+    capsys: pytest.CaptureFixture[str], files: tuple[str, str]
+) -> None:
+    pytest.importorskip("zenoh")
+    refuse, _ = files
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    args = ["bridge", "--sim", "2", "--node", "lim", "--listen", endpoint, "--limits", refuse]
+    process = subprocess.Popen([*SERVOBUS, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert process.stdout is not None
+        ready, _, _ = select.select([process.stdout], [], [], 20)
+        assert ready and process.stdout.readline().startswith("serving"), process.poll()
+        remote = ["--remote", "lim/sim1", "--endpoint", endpoint, "--ids", "1"]
+        err = one_line(capsys, ["speed", *remote, "--speed-dps", "1000", "--duration", "0.3"], code=1)
+        assert "SpeedControl.speed_dps=1000 is beyond the host limit speed_dps 360" in err
+        rows = run_json(capsys, ["speed", *remote, "--speed-dps", "300", "--duration", "0.5"])
+        assert rows[0]["speed_dps"] == pytest.approx(300, abs=10)
+        process.send_signal(signal.SIGTERM)
+        process.communicate(timeout=20)
+        assert process.returncode == 0
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+
+
+def test_a_simulator_served_with_limits_keeps_its_motors_within_them(
+    capsys: pytest.CaptureFixture[str], files: tuple[str, str]
+) -> None:
+    refuse, _ = files
+    with pty_simulators() as start:
+        path = start("--family", "myactuator", "--motors", "2", "--limits", refuse)
+        bus = ["-i", "servobus-slcan", "-c", path, "--ids", "1-2"]
+        rows: Any = run_json(capsys, ["speed", *bus, "--speed-dps", "900", "--duration", "1"])
+    assert [r["speed_dps"] for r in rows] == [pytest.approx(360, abs=10)] * 2
+
+
+def test_a_setting_beyond_a_field_range_is_refused_by_set_and_restore(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    limits = tmp_path / "pid.toml"
+    limits.write_text('clamp = true\n[all]\nfields = { "WritePidRam.value" = [0, 10] }\n')
+    err = one_line(capsys, ["config", "set", "--sim", "1", "pid.speed_kp", "99999", "--limits", str(limits)])
+    assert "WritePidRam.value=99999 is beyond the host limit fields value [0, 10]" in err  # (never clamped)
+    dump = tmp_path / "motor.toml"
+    run(capsys, ["config", "dump", "--sim", "1", "-o", str(dump)])
+    text = dump.read_text()
+    dump.write_text(text.replace('"pid.speed_kp" = 0.5', '"pid.speed_kp" = 99999'))
+    err = one_line(capsys, ["config", "restore", str(dump), "--sim", "1", "--yes", "--limits", str(limits)])
+    assert (
+        "pid.speed_kp = 99999: WritePidRam.value=99999 is beyond the host limit fields value [0, 10]" in err
+    )
