@@ -254,6 +254,62 @@ def test_the_telemetry_writer_holds_the_header_for_the_kinds_asked() -> None:
     assert alone.getvalue().splitlines() == ["time_s,a", "0.0,1"]
 
 
+# ---- --limits ----
+
+LIMITS = "[all]\nposition_deg = [-45, 45]\nspeed_dps = 360\n"
+
+
+@pytest.mark.parametrize(
+    ("clamp", "args", "says"),
+    [
+        (
+            False,
+            [],
+            "myactuator motor 1: the wave reaches angle_deg=90: AbsolutePositionControl.angle_deg=90",
+        ),
+        (True, [], "the wave reaches angle_deg=90, which --limits clamps to 45: a smaller wave"),
+        (False, ["--amplitude-deg", "40", "--max-speed-dps", "400"], "max_speed_dps=400 is beyond"),
+        (
+            True,
+            ["--mode", "speed", "--amplitude-dps", "400"],
+            "the wave reaches speed_dps=400, which --limits",
+        ),
+    ],
+)
+def test_a_wave_beyond_the_limits_is_one_line_and_exit_2_with_nothing_sent(
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    clamp: bool,
+    args: list[str],
+    says: str,
+) -> None:
+    """The rows say what was sent: a wave the limits would refuse or clamp is refused before it starts."""
+    limits = tmp_path / "limits.toml"
+    limits.write_text(("clamp = true\n" if clamp else "") + LIMITS)
+    devices = keep_devices(monkeypatch)
+    output = tmp_path / "x.csv"
+    full = ["record", "--sim", "2", "--drive", "sine", *args, "--limits", str(limits), "-o", str(output)]
+    assert says in one_line_error(capsys, full)
+    assert not output.exists() and devices.made == []
+
+
+def test_a_wave_within_the_limits_runs_with_their_speed_limit(tmp_path: Path) -> None:
+    """Without --max-speed-dps the set-points carry the limits' speed; clamped, another field is said."""
+    limits, log = tmp_path / "limits.toml", tmp_path / "run.log"
+    limits.write_text(LIMITS)
+    args = ["record", "--sim", "1", "--drive", "sine", "--amplitude-deg", "40", "--limits", str(limits)]
+    invoke([*args, "--duration", "0.3", "--log", str(log)])
+    decoded = [json.loads(line) for line in invoke(["decode", "--json", str(log)]).stdout.splitlines()]
+    moves = [r["fields"] for r in decoded if r["type"] == "AbsolutePositionControl"]
+    assert moves and {m["max_speed_dps"] for m in moves} == {360.0}
+    assert max(abs(m["angle_deg"]) for m in moves) <= 40.0
+    limits.write_text("clamp = true\n" + LIMITS)
+    result = invoke([*args, "--max-speed-dps", "400", "--duration", "0.1", "-o", str(tmp_path / "c.csv")])
+    said = "servobus: myactuator motor 1: AbsolutePositionControl.max_speed_dps 400 clamped to 360 (--limits)"
+    assert result.stderr.splitlines()[0] == said
+
+
 # ---- through python-can's virtual bus, the simulated motors attached on another thread ----
 
 

@@ -27,7 +27,9 @@ from servobus.bus import Bus, Motor
 from servobus.cli._families import op
 from servobus.cli._output import FloatRange, refused
 from servobus.cli.plugin import STATUS_SOURCES, Op
+from servobus.limits import LimitBook, LimitExceeded, Limits
 from servobus.protocols import Command
+from servobus.tools.logs import message_values
 
 __all__ = ["MODES", "WAVES", "Drive", "Wave", "drive_options", "drive_ticks", "make_drive"]
 
@@ -133,17 +135,66 @@ class Drive:
                     return True
         return False
 
-    def check(self, codecs: Sequence[Any]) -> None:
-        """Build and encode every value the wave reaches for every motor: nothing is sent.
+    def check(self, codecs: Sequence[Any], limits: LimitBook | None = None) -> None:
+        """Build and encode every value the wave reaches for every motor, and meet each motor's
+        ``limits`` (``--limits``) with it: nothing is sent.
+
+        A limit the file clamps to may clamp what else a set-point carries (its speed limit: the
+        Bus does so as it sends), never the wave's own value: the rows say what was sent.
 
         Raises:
-            click.UsageError: a value out of range, a command the motor's revision lacks (exit 2).
+            click.UsageError: a value out of range or beyond a limit, a command the motor's
+                revision lacks (exit 2).
         """
+        if not codecs:
+            return
+        carried = moved_fields(self.op, codecs[0], self.name, self.values(0.0))
+        lines: set[str] = set()  # (each clamp said once)
         with refused():
             for codec in codecs:
+                own = None if limits is None else limits.of(codec.motor_id)
                 for target in self.wave.extremes():
                     for command in (*self.first(codec, target), *self.repeat(codec, target)):
                         codec.encode(command)
+                        if own is not None and not command.READ:
+                            self._within(codec, own, command, target, carried, lines)
+
+    def _within(
+        self,
+        codec: Any,
+        limits: Limits,
+        command: Command,
+        target: float,
+        carried: Mapping[type, tuple[str, float]],
+        lines: set[str],
+    ) -> None:
+        """``command`` meets ``limits`` with the wave's value as it is.
+
+        Raises:
+            ValueError: a limit refuses it (LimitExceeded), or would clamp the wave's value.
+        """
+        where = f"{codec.family} motor {codec.motor_id}"
+        field = carried.get(type(command))
+        try:
+            checked = limits.apply(command)
+        except LimitExceeded as exc:
+            mine = field is not None and exc.field.endswith(f".{field[0]}")
+            said = f"the wave reaches {self.name}={target:g}: " if mine else ""
+            raise ValueError(f"{where}: {said}{exc}") from None
+        if field is not None and getattr(checked, field[0]) != getattr(command, field[0]):
+            raise ValueError(
+                f"{where}: the wave reaches {self.name}={target:g}, which --limits clamps to "
+                f"{getattr(checked, field[0]) / field[1]:g}: a smaller wave, or the recording would "
+                "not be what was sent"
+            )
+        if checked is not command:  # another field clamped (the speed limit it carries): said once
+            for name in (f.name for f in dataclasses.fields(command)):  # type: ignore[arg-type]
+                before, after = getattr(command, name), getattr(checked, name)
+                what = f"{where}: {type(command).__name__}.{name}"
+                said = f"{what} {_said(before)} clamped to {_said(after)} (--limits)"
+                if before != after and said not in lines:
+                    lines.add(said)
+                    click.echo(f"servobus: {said}", err=True)
 
     def describe(self) -> str:
         """``sine, position 0 ± 90 deg, period 2 s``; ``step, speed 0 → 180 dps at 1 s``."""
@@ -213,7 +264,8 @@ def drive_options(func: F) -> F:
         click.option(
             "--max-speed-dps",
             type=FloatRange(min=0, min_open=True),
-            help=f"The speed limit position set-points carry [default: {MAX_SPEED_DPS:g}].",
+            help=f"The speed limit position set-points carry [default: {MAX_SPEED_DPS:g}, or the "
+            "lowest speed_dps of --limits].",
         ),
     ]
 
@@ -228,8 +280,11 @@ def drive_options(func: F) -> F:
     return wrapped  # type: ignore[return-value]
 
 
-def make_drive(family: str, codecs: Sequence[Any], args: Mapping[str, Any]) -> Drive | None:
-    """The drive the options say (None: no ``--drive``), checked for every motor's codec.
+def make_drive(
+    family: str, codecs: Sequence[Any], args: Mapping[str, Any], limits: LimitBook | None = None
+) -> Drive | None:
+    """The drive the options say (None: no ``--drive``), checked for every motor's codec and
+    ``limits``.
 
     Raises:
         click.UsageError: a wave option without ``--drive``, an option of the other mode, a family
@@ -254,9 +309,9 @@ def make_drive(family: str, codecs: Sequence[Any], args: Mapping[str, Any]) -> D
         period_s=_first(args["period_s"], PERIOD_S),
     )
     stagger_s = wave.period_s / len(codecs) if args["stagger"] else 0.0
-    max_speed_dps = _first(args["max_speed_dps"], MAX_SPEED_DPS)
+    max_speed_dps = _first(args["max_speed_dps"], _speed_limit(limits, codecs))
     drive = Drive(wave, mode, op(family, MODES[mode][0]), max_speed_dps, stagger_s)
-    drive.check(codecs)
+    drive.check(codecs, limits)
     return drive
 
 
@@ -268,6 +323,48 @@ _MODE_OF = {
     "--amplitude-dps": "speed",
     "--offset-dps": "speed",
 }
+
+
+def moved_fields(
+    entry: Op, codec: Any, key: str, others: Mapping[str, Any]
+) -> dict[type[Command], tuple[str, float]]:
+    """Command class -> (the field that carries the command line's value ``key``, its value per unit
+    of ``key``'s) for what ``entry`` builds: found by building it for two values (``others``
+    besides) and seeing which one field moved. Reads, and commands where not one field moved, are
+    left out; so is all of it when the builder needs more than ``others`` give.
+    """
+    try:
+        low, high = (_built(entry, codec, {**others, key: value}) for value in (10.0, 20.0))
+    except (ValueError, TypeError, KeyError):
+        return {}
+    found: dict[type[Command], tuple[str, float]] = {}
+    for a, b in zip(low, high, strict=True):
+        cls = type(a)
+        if cls is not type(b) or cls.READ:
+            continue
+        before, after = message_values(a), message_values(b)
+        moved = [k for k, v in before.items() if isinstance(v, int | float) and v != after.get(k)]
+        if len(moved) == 1:
+            found[cls] = (moved[0], (float(after[moved[0]]) - float(before[moved[0]])) / 10.0)  # type: ignore[arg-type]
+    return found
+
+
+def _built(entry: Op, codec: Any, values: Mapping[str, Any]) -> list[Command]:
+    return [*entry.first(codec, values), *(entry.repeat(codec, values) if entry.repeat else ())]
+
+
+def _said(value: Any) -> str:
+    return f"{value:g}" if isinstance(value, float) else "none" if value is None else str(value)
+
+
+def _speed_limit(limits: LimitBook | None, codecs: Sequence[Any]) -> float:
+    """:data:`MAX_SPEED_DPS`, or the lowest speed limit ``--limits`` gives these motors."""
+    lowest = MAX_SPEED_DPS
+    for codec in codecs if limits is not None else ():
+        own = limits.of(codec.motor_id)  # type: ignore[union-attr]
+        if own is not None and own.speed_dps is not None:
+            lowest = min(lowest, own.speed_dps)
+    return lowest
 
 
 def _first(value: float | None, default: float) -> float:

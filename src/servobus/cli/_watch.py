@@ -15,10 +15,11 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from servobus.cli._drive import moved_fields
 from servobus.cli._families import cli_part
 from servobus.frame import Frame
 from servobus.protocols import Command
-from servobus.tools.logs import FrameDecoder, Scalar, message_values
+from servobus.tools.logs import FrameDecoder, Scalar
 
 __all__ = ["SEEN", "SeenSetpoints"]
 
@@ -88,7 +89,8 @@ class SeenSetpoints:
 
 def _kinds(family: str, codec: Any) -> dict[type[Command], tuple[str, str, float]]:
     """Set-point command class -> (its column, the field holding the value, the field's value per
-    unit of the CLI's): found by building each command for two values and seeing which field moved."""
+    unit of the CLI's), from what the family's move, speed and torque build; a class two of them
+    share says no kind by itself and is left out."""
     part = cli_part(family)
     found: dict[type[Command], tuple[str, str, float]] = {}
     shared: set[type[Command]] = set()
@@ -96,25 +98,8 @@ def _kinds(family: str, codec: Any) -> dict[type[Command], tuple[str, str, float
         entry = part.op(name)
         if entry is None:
             continue
-        try:
-            pairs = zip(*(_built(entry, codec, {**_OTHERS, key: v}) for v in (10.0, 20.0)), strict=True)
-        except (ValueError, TypeError, KeyError):  # a builder that needs more than the command line has
-            continue
-        for low, high in pairs:
-            cls = type(low)
-            if cls is not type(high) or cls.READ:
-                continue
-            a, b = message_values(low), message_values(high)
-            moved = [k for k, v in a.items() if isinstance(v, int | float) and v != b.get(k)]
-            if len(moved) != 1:
-                continue
-            scale = (float(b[moved[0]]) - float(a[moved[0]])) / 10.0  # type: ignore[arg-type]
+        for cls, (field, scale) in moved_fields(entry, codec, key, _OTHERS).items():
             if cls in found and found[cls][0] != column:
                 shared.add(cls)
-            found[cls] = (column, moved[0], scale)
+            found[cls] = (column, field, scale)
     return {cls: kind for cls, kind in found.items() if cls not in shared}
-
-
-def _built(entry: Any, codec: Any, values: Mapping[str, Any]) -> list[Command]:
-    commands = [*entry.first(codec, values), *(entry.repeat(codec, values) if entry.repeat else ())]
-    return commands

@@ -48,9 +48,13 @@ family's move, --amplitude-deg/--offset-deg; --mode speed: its speed, --amplitud
 position, speed or current is polled too), and each reply row carries the set-point last sent to
 its motor in a column after `reply`: setpoint_angle_deg or setpoint_speed_dps (plain CSV or JSON
 lines: pandas reads either). At the end, on Ctrl-C or SIGTERM, the motors get the Bus's safe stop
-(said in the last line). --watch-setpoints instead records the set-points another controller sends
-the motors (seen on the bus, decoded with the family's codec; not hollow's), the last of each kind
-before each reply: setpoint_angle_deg, setpoint_speed_dps, setpoint_current_a.
+(said in the last line). With --limits, a wave the limits would refuse or clamp is refused before
+anything is sent (the rows say what was sent).
+
+\b
+--watch-setpoints instead records the set-points another controller sends the motors (seen on the
+bus, decoded with the family's codec; not hollow's), the last of each kind before each reply:
+setpoint_angle_deg, setpoint_speed_dps, setpoint_current_a.
 
 \b
 Existing files are kept unless --force, and even then an existing file is replaced only by a
@@ -138,7 +142,7 @@ def record(
     if log is not None and log.suffix.lower() != ".log":
         raise click.BadParameter(f"{log}: frames are written as a candump .log", param_hint="--log")
     bound = codecs(conn)
-    drive = make_drive(conn.family, bound, drive_args)
+    drive = make_drive(conn.family, bound, drive_args, conn.limits)
     watch = _watch(conn, bound) if watch_setpoints else None
     if watch is not None and drive is not None:
         raise click.UsageError("--watch-setpoints records another controller's set-points: not with --drive")
