@@ -193,6 +193,7 @@ def test_each_row_s_set_point_is_the_one_the_log_s_request_carried(
     _matches_the_log(telemetry, log, column, field)
     values = {row[column] for row in read_rows(telemetry)}
     assert len(values) >= 2  # it moved
+    assert {row["reply"] for row in read_rows(telemetry)} == {"StatusReply"}  # (not the stop's Echo)
 
 
 def test_the_square_and_step_waves_take_the_values_asked(tmp_path: Path) -> None:

@@ -263,11 +263,11 @@ async def _record(
     setpoints: dict[int, float] = {}  # motor id -> the set-point last sent (--drive)
     # Once the drive ended, only the replies it asked for are rows (a late one), not the safe stop's
     # echoes (those are in --log, and the last line says the stop).
-    driving = [True]
+    driving = True
     asked = _reply_types(poll_class, None, ())
 
     def on_reply(motor: Motor, traffic: Traffic, reply: Reply) -> None:
-        if traffic not in kinds or not (driving[0] or type(reply) in asked):
+        if traffic not in kinds or not (driving or type(reply) in asked):
             return
         tally.replies += 1
         tally.by_motor[motor.motor_id] = tally.by_motor.get(motor.motor_id, 0) + 1
@@ -307,7 +307,7 @@ async def _record(
                 try:
                     await drive_ticks(*args)
                 finally:
-                    driving[0] = False
+                    driving = False
                 return
             assert poll_class is not None
             items = [(motor, poll_class()) for motor in motors]
