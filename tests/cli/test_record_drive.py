@@ -255,6 +255,24 @@ def test_the_telemetry_writer_holds_the_header_for_the_kinds_asked() -> None:
     assert alone.getvalue().splitlines() == ["time_s,a", "0.0,1"]
 
 
+def test_a_set_point_whose_reply_has_no_status_is_polled_beside() -> None:
+    """The poll goes out with the set-point only where the set-point's reply says no position, speed
+    or current (an Echo): record asks :meth:`Drive.shows_status`."""
+    from servobus.cli._drive import Drive, Wave
+    from servobus.cli.plugin import setpoint
+
+    wave = Wave("sine", 1.0, 0.0, 1.0)
+    codec = ma.FAMILY.bind(1)
+    status = Drive(
+        wave,
+        "position",
+        setpoint(lambda c, v: ma.AbsolutePositionControl(angle_deg=v["angle_deg"], max_speed_dps=90.0)),
+        1.0,
+    )
+    echo = Drive(wave, "position", setpoint(lambda c, v: ma.BrakeLock()), 1.0)
+    assert status.shows_status(codec) and not echo.shows_status(codec)
+
+
 # ---- --limits ----
 
 LIMITS = "[all]\nposition_deg = [-45, 45]\nspeed_dps = 360\n"
