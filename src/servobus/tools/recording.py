@@ -2,11 +2,13 @@
 
 * :class:`TapLink` wraps a FrameLink and shows every frame that went out (at its send report) and
   every frame that came in to a callback, before the Bus sees it; the Bus works as without it (a
-  FrameLink itself: its send reports echo the Bus's handles).
+  FrameLink itself: its send reports echo the Bus's handles). Logging both directions of any link
+  is this: docs/recording.md has a runnable example.
 * :class:`CandumpWriter` writes those frames through python-can's ``CanutilsLogWriter``, ``R``/``T``
   marking direction, so :class:`servobus.tools.logs.FrameDecoder` tells requests from replies on reading.
 * :class:`TelemetryWriter` writes one row per decoded reply: ``time_s``, ``motor_id``, ``family``,
-  ``reply`` and the reply's fields (:func:`servobus.tools.logs.message_values`: units in the names).
+  ``reply``, the set-points in effect (``record --drive``) and the reply's fields
+  (:func:`servobus.tools.logs.message_values`: units in the names).
 * :class:`NewFiles` opens outputs without overwriting what exists (unless told: then the old file is
   replaced only when the new one is kept) and, on failure, removes only the files it created.
 """
@@ -18,7 +20,7 @@ import csv
 import json
 import os
 import tempfile
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any, Self, TextIO
 
@@ -40,14 +42,41 @@ FrameCallback = Callable[[Frame, bool, float], object]
 
 
 class TapLink:
-    """A FrameLink around ``inner`` that shows ``on_frame`` every frame sent (once its send report
-    came) and every frame received, before the Bus sees it; the Bus works as without it.
+    """A FrameLink around ``inner`` that shows ``on_frame`` every frame of both directions: each frame
+    sent, once its send report says it left, and each frame received, before the Bus sees it. The
+    way to log a link (``servobus record --log`` is built on it); the Bus works as without it.
+
+    Wrap the transport and give the tap to the Bus::
+
+        async with Bus(TapLink(SimTransport(devices=...), on_frame, clock=anyio.current_time)) as bus:
+            ...
+
+    ``on_frame(frame, received, timestamp)`` is called on the event loop:
+
+    * ``received=False``: a frame the Bus sent, when the link reported it sent (``timestamp``: the
+      link's sent time, else ``clock()``). A frame the link refused or dropped (its report carries a
+      reason) is not shown: only what left is.
+    * ``received=True``: every frame the link received, ours or not: replies, stream frames, other
+      nodes' traffic, another controller's requests to our motors (``timestamp``: the frame's own,
+      else ``clock()``). Frames in a batch are shown in order, before the Bus decodes the batch.
+
+    The frames are the link's own objects (immutable); decode them with
+    :class:`servobus.tools.logs.FrameDecoder`, or write them with :class:`CandumpWriter`. The callback
+    runs on the receive and send-report paths: it must not block (hand slow work to a task or a
+    queue) and must not raise (what it raises escapes into the link's receive or send-report path).
 
     It follows the FrameLink contract (:mod:`servobus.transports.contract`): its rules and stats are
     the inner link's, and the Bus's send handles are echoed to the Bus's reporter untouched. A send
     goes to ``inner`` with a handle of the tap's own that carries the frame and the caller's handle,
     so the tap knows which frame left whatever the inner link copies or re-encodes. Anything else
-    (a transport's own API) is read from ``inner``.
+    (a transport's own API: ``unplug``, ``network``) is read from ``inner``. Opening and closing the
+    tap opens and closes ``inner``.
+
+    Args:
+        inner: the link to wrap (a transport: ``SimTransport``, ``CanTransport``, ...), not yet open.
+        on_frame: called with ``(frame, received, timestamp)`` for each frame, as above.
+        clock: the clock the timestamps are on where a frame carries none: the event loop's
+            (``anyio.current_time``; the Bus's, ``servobus.runtime.current().time``).
     """
 
     def __init__(self, inner: Any, on_frame: FrameCallback, clock: Callable[[], float]) -> None:
@@ -151,49 +180,85 @@ class CandumpWriter:
         self._writer.stop()
 
 
-def telemetry_row(time_s: float, family: str, motor_id: int, reply: Reply) -> dict[str, Scalar]:
-    """One row: ``time_s``, ``motor_id``, ``family``, ``reply`` (its class), then its fields."""
+def telemetry_row(
+    time_s: float, family: str, motor_id: int, reply: Reply, setpoints: Mapping[str, Scalar] | None = None
+) -> dict[str, Scalar]:
+    """One row: ``time_s``, ``motor_id``, ``family``, ``reply`` (its class), the ``setpoints`` given
+    (``setpoint_angle_deg``: the set-point in effect when the reply came), then the reply's fields."""
     row: dict[str, Scalar] = {
         "time_s": round(time_s, 6),
         "motor_id": motor_id,
         "family": family,
         "reply": type(reply).__name__,
     }
+    if setpoints:
+        row.update(setpoints)
     for name, value in message_values(reply).items():
         row.setdefault(name, value)  # a reply's own motor_id is the row's
     return row
 
 
 class TelemetryWriter:
-    """Rows as JSON lines, or as CSV whose columns are the first row's.
+    """Rows as JSON lines, or as CSV.
 
-    A CSV holds one reply type: rows whose fields differ from the first row's are not written and
-    are counted in ``skipped`` (JSONL keeps every row).
+    A CSV's columns are fixed by its header: those of the first rows, in the order they came. With
+    ``reply_types`` above one (a recording that asks more than one kind of reply: LK's set-point and
+    its angle read), the header waits for that many kinds of rows (or :data:`HOLD_ROWS` rows, or
+    :meth:`flush`) and holds all their columns; a row leaves blank the columns it lacks. A row with a
+    column the header lacks is not written and is counted in ``skipped`` (JSONL keeps every row).
     """
 
-    def __init__(self, file: TextIO, fmt: str) -> None:
+    #: the most rows a CSV holds back waiting for its reply types
+    HOLD_ROWS = 1000
+
+    def __init__(self, file: TextIO, fmt: str, *, reply_types: int = 1) -> None:
         if fmt not in ("csv", "jsonl"):
             raise ValueError(f"telemetry format {fmt!r} is not csv or jsonl")
         self._file = file
         self._fmt = fmt
         self._csv: csv.DictWriter[str] | None = None
+        self._columns: frozenset[str] = frozenset()
+        self._types = reply_types
+        self._held: list[dict[str, Scalar]] = []
+        self._kinds: set[tuple[str, ...]] = set()
         self.count = 0
         self.skipped = 0
 
     def write(self, row: dict[str, Scalar]) -> None:
         if self._fmt == "jsonl":
             self._file.write(json.dumps(row) + "\n")
-        else:
-            if self._csv is None:
-                self._csv = csv.DictWriter(self._file, fieldnames=list(row), lineterminator="\n")
-                self._csv.writeheader()
-            elif list(row) != self._csv.fieldnames:
-                self.skipped += 1
-                return
-            self._csv.writerow(row)
+            self.count += 1
+            return
+        if self._csv is None:
+            self._held.append(row)
+            self._kinds.add(tuple(row))
+            if len(self._kinds) >= self._types or len(self._held) >= self.HOLD_ROWS:
+                self.flush()
+            return
+        self._put(row)
+
+    def flush(self) -> None:
+        """Write the header and the rows held back for it (a CSV of fewer kinds than expected)."""
+        if self._csv is not None or not self._held:
+            return
+        columns = list(dict.fromkeys(name for row in self._held for name in row))
+        self._csv = csv.DictWriter(self._file, fieldnames=columns, lineterminator="\n", restval="")
+        self._columns = frozenset(columns)
+        self._csv.writeheader()
+        held, self._held = self._held, []
+        for row in held:
+            self._put(row)
+
+    def _put(self, row: dict[str, Scalar]) -> None:
+        assert self._csv is not None
+        if not self._columns.issuperset(row):
+            self.skipped += 1
+            return
+        self._csv.writerow(row)
         self.count += 1
 
     def close(self) -> None:
+        self.flush()
         self._file.close()
 
 
