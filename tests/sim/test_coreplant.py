@@ -50,7 +50,7 @@ PARAMS = [
     LK_PLANT_PARAMS,
     HOLLOW_PLANT_PARAMS,
     PlantParams(max_current_a=2.0, current_time_constant_s=2e-3, thermal_capacity_j_per_c=5.0),
-    PlantParams(speed_limit_dps=300.0, max_speed_dps=300.0),  # (a limits file's envelope: servobus.sim.limits)
+    PlantParams(speed_limit_dps=300.0, max_speed_dps=300.0),  # (a limits file's: servobus.sim.limits)
 ]
 
 
