@@ -78,7 +78,6 @@ class Engine:
     ) -> None:
         self.name = name
         self.scheduler = scheduler
-        self.count = scheduler.count  # one more of a counter of a codec's motor (``Motor.metrics``)
         self.link = link
         self.watchdog = watchdog
         self.registry = registry
@@ -144,6 +143,10 @@ class Engine:
             self.watchdog.check_silence(now)
         self.pump()
 
+    def count(self, codec: BoundCodec, counter: str) -> None:
+        """One more ``counter`` in ``codec``'s motor's counts (``Motor.metrics``)."""
+        self.scheduler.count(codec, counter)
+
     def reach_s(self, codec: BoundCodec) -> float:
         """The longest a reply of ``codec``'s motor is waited for now (its measured timeout)."""
         return self.scheduler.motor_timeout_s(codec)
@@ -203,10 +206,8 @@ class Engine:
             raise RuntimeMismatch(f"{self.name}: use the Bus inside 'async with'")
         if self.closing and not safe:
             raise self.closed_error()
-        if motor.limits is not None:  # (LimitExceeded, or the command clamped to them)
-            command = motor.limited(command)
-        # (positional: a call by keyword costs more; once per request)
-        request = self.scheduler.request(
+        command = command if motor.limits is None else motor.limited(command)  # (LimitExceeded, or clamped)
+        request = self.scheduler.request(  # (positional: a keyword costs more, once per request)
             motor.codec, command, timeout_s, retries, runtime.waiter() if context is None else context
         )
         if request.key is None and motor.codec.streams and not request.writes:
