@@ -107,7 +107,7 @@ def test_units_are_converted_to_the_limit_s() -> None:
     clamped = Limits(speed_dps=720, position_deg=(-45, 45), clamp=True).apply(mit)
     assert clamped.velocity_rad_s == pytest.approx(math.radians(720))  # type: ignore[attr-defined]
     assert clamped.position_rad == pytest.approx(math.radians(45))  # type: ignore[attr-defined]
-    fd = ho.FdCommand(position_deg=0.0, velocity_rpm=200.0, current_raw=0)
+    fd = ho.FdCommand(velocity_rpm=200.0, mode=ho.ControlMode.VELOCITY, run=True)
     with pytest.raises(LimitExceeded, match="velocity_rpm=200"):  # 200 rpm = 1200 dps
         Limits(speed_dps=1000).apply(fd)
 
@@ -428,3 +428,93 @@ def test_the_blocking_api_sets_and_meets_a_motor_s_limits() -> None:
         motor.torque_control(current_a=2.0)
         with pytest.raises(LimitExceeded, match="speed_dps 10"):
             motor.speed_control(speed_dps=100.0)
+
+
+# ---- what the review found: stops, single-turn angles, frames for several motors, bounds, modes ----
+
+
+@pytest.mark.anyio
+async def test_a_safe_command_is_never_limited_and_the_safe_stop_goes_out() -> None:
+    from servobus.cli._connect import sim_devices
+
+    async with Bus(SimTransport(devices=sim_devices("hollow", (1,), fd=True))) as bus:
+        motor = bus.motor(ho.FAMILY, 1, link="canfd")
+        motor.limits = Limits(position_deg=(10, 90))  # the stop frame's position is 0
+        stop = motor.codec.safe_command("stop")
+        assert motor.limited(stop) is stop
+        await motor.request(ho.FdCommand(position_deg=45.0, mode=ho.ControlMode.POSITION, run=True, kp=10))
+    assert bus.safe_sent == (motor,) and bus.safe_acknowledged == (motor,)
+    assert motor.metrics().limit_refused == 0
+
+
+def test_a_single_turn_angle_is_not_where_the_motor_is() -> None:
+    step = ma.IncrementalPositionControl(angle_deg=300.0, max_speed_dps=100)
+    limits = Limits(position_deg=(-720, 720))
+    within_turn = ma.SingleTurnAngleReply(angle_deg=140.0)
+    with pytest.raises(LimitExceeded, match="not known yet"):
+        limits.apply(step, within_turn)
+    at_500 = ma.MultiTurnAngleReply(angle_deg=500.0)
+    with pytest.raises(LimitExceeded, match="to 800 deg from 500"):
+        limits.apply(step, at_500)
+    assert angle_of(lk.SingleTurnAngleReply(angle_deg=10.0)) is None
+
+
+@pytest.mark.anyio
+async def test_a_frame_for_several_motors_meets_each_motor_s_own_limit_asked_or_not() -> None:
+    from servobus.cli._connect import sim_devices
+
+    sniffer = Sniffer()
+    devices = [*sim_devices("lk", (1, 2, 3, 4), "V2_35"), sniffer]
+    async with Bus(SimTransport(devices=devices)) as bus:
+        motors = [bus.motor(lk.FAMILY, i, revision="V2_35") for i in (1, 2, 3, 4)]
+        motors[2].limits = Limits(current_a=1.0, clamp=True)  # motor 3, not asked below
+        command = lk.MultiMotorTorque(motor_type=lk.MotorType.MG, currents_a=(2.0, -2.0, 8.0, 0.5))
+        await bus.broadcast(command, motors[:2])
+        sent = [f for _, f in sniffer.seen if f.arbitration_id == 0x280]
+        expected = lk.MultiMotorTorque(motor_type=lk.MotorType.MG, currents_a=(2.0, -2.0, 1.0, 0.5))
+        frame = lk.FAMILY.broadcast(expected, [m.codec for m in motors[:2]]).frame
+        assert [bytes(f.data) for f in sent] == [bytes(frame.data)]
+        motors[2].limits = Limits(current_a=1.0)
+        with pytest.raises(LimitExceeded, match="motor 3"):
+            await bus.broadcast(command, motors[:2])
+        motors[2].limits = None
+        motors[0].limits = Limits(current_a=3.0)  # its own slot only: slot 3's 8 A is not its
+        await bus.broadcast(command, motors[:2])
+
+
+def test_a_bound_or_a_setting_is_never_a_motor_driven_out_of_its_range() -> None:
+    limits = Limits(position_deg=(-90, 90), acceleration_dps_s=5000)
+    at_95 = ma.StatusReply(temperature_c=25, current_a=0.0, speed_dps=0.0, angle_deg=95.0)
+    accel = ma.WriteAcceleration(index=ma.AccelIndex.POSITION_ACCELERATION, acceleration_dps_s=500)
+    assert limits.apply(accel, at_95) is accel
+    back = ho.Setpoint(position_deg=45.0, speed_rad_s=2.0, kp=100, kd=1, current_a=3.0)  # its speed: a bound
+    assert (
+        limits.apply(back, ho.NormalReply(motor_id=1, position_deg=95.0, speed_rad_s=0.0, current_a=0.0))
+        is back
+    )
+
+
+def test_a_position_its_motor_ignores_is_not_checked() -> None:
+    limits = Limits(position_deg=(10, 90))
+    velocity = ho.Setpoint(position_deg=0.0, speed_rad_s=1.0, kp=0, kd=0, current_a=3.0)
+    assert limits.apply(velocity) is velocity  # kp = 0: a speed set-point
+    mit = ma.MotionCommand(position_rad=0.0, velocity_rad_s=1.0, kp=0, kd=1, torque_ff_nm=0)
+    assert limits.apply(mit) is mit
+    with pytest.raises(LimitExceeded, match="position_rad=0"):
+        limits.apply(dataclasses.replace(mit, kp=5))
+    torque = ho.FdCommand(position_deg=0.0, current_raw=100, mode=ho.ControlMode.TORQUE, run=True)
+    assert limits.apply(torque) is torque
+    with pytest.raises(LimitExceeded, match="position_deg=0"):
+        limits.apply(dataclasses.replace(torque, mode=ho.ControlMode.POSITION))
+
+
+def test_no_planning_is_beyond_an_acceleration_limit_and_a_raw_current_limit_is_not_open() -> None:
+    open_ended = ma.WriteAcceleration(index=ma.AccelIndex.POSITION_ACCELERATION, acceleration_dps_s=None)
+    with pytest.raises(LimitExceeded, match="acceleration_dps_s=none"):
+        Limits(acceleration_dps_s=5000).apply(open_ended)
+    raw = lk.SpeedControl(speed_dps=10.0, motor_type=lk.MotorType.MH, iq_limit_counts=100)
+    assert Limits(current_a=1.0).apply(raw) is raw
+    assert Limits(current_a=1.0, clamp=True).apply(raw) is raw
+    counts = lk.MultiMotorTorque(motor_type=lk.MotorType.MH, iq_counts=(10, 900, 0, 0))
+    with pytest.raises(LimitExceeded, match="iq_counts"):
+        Limits(fields={"iq_counts": (-500, 500)}).apply(counts)

@@ -17,18 +17,24 @@ Which fields meet which limit (a field's name ends with its unit):
 - ``position_deg``: ``*_deg`` and ``*_rad`` fields, the target within [low, high] (see below);
 - ``speed_dps``: ``*_dps``, ``*_rad_s`` and ``*_rpm``, at most either way; a bound left open
   (``max_speed_dps=None``, "no limit" on the wire) is beyond any limit;
-- ``acceleration_dps_s``: ``*_dps_s`` and ``*_dps2``, at most;
-- ``current_a``: ``*_a`` (each value of a tuple such as ``currents_a``), at most either way;
+- ``acceleration_dps_s``: ``*_dps_s`` and ``*_dps2``, at most; "no planning" (None) is beyond;
+- ``current_a``: ``*_a``, at most either way (a tuple such as ``currents_a`` holds one value per
+  motor: each, or the motor's own ``slot``);
 - ``torque_nm``: ``*_nm``, at most either way;
 - ``fields``: any field by ``"Class.field"`` or ``"field"`` (the class's key first), within [low, high].
 
-A command says how its position is meant (``Command.POSITION``): ``"absolute"`` (the default) is
+A field the motor ignores as the command is set (``Command.inactive()``: a position with kp = 0)
+is not checked, and a family's safe commands (stop, shutdown, brake) are never limited (the Bus
+exempts them: :func:`safe_commands`). A command says how its position is meant
+(``Command.POSITION``): ``"absolute"`` (the default) is
 checked as it is; ``"relative"`` (an increment) from the motor's last known angle (its latest
 status; refused, even with ``clamp``, before one is known); ``"single_turn"`` is refused whenever a
 position range is declared, because where it ends depends on the turn the motor is in. Fields in
 raw counts or percent meet no quantity limit: give them a ``fields`` range. A speed, current or
-torque does not move a motor to a position, but once its last reported angle is out of the range,
-one that drives it further out is refused (clamped: 0); one that brings it back goes.
+torque command (one without a position field) does not move a motor to a position, but once its
+last reported angle is out of the range, one that drives it further out is refused (clamped: 0);
+one that brings it back goes. A single-turn angle (``Reply.SINGLE_TURN``) is never taken for the
+motor's position.
 
 A file declares limits for the motors of a bus (:func:`load`, TOML)::
 
@@ -58,7 +64,7 @@ from typing import Any
 
 from servobus.protocols import Command, Reply
 
-__all__ = ["LimitBook", "LimitExceeded", "Limits", "load", "parse"]
+__all__ = ["LimitBook", "LimitExceeded", "Limits", "angle_of", "load", "parse", "safe_commands"]
 
 _DEG_PER_RAD = 180.0 / math.pi
 
@@ -157,12 +163,16 @@ class Limits:
         }
         return dataclasses.replace(self, **changes, fields={**self.fields, **over.fields}, clamp=over.clamp)
 
-    def apply(self, command: Command, state: Reply | None = None) -> Command:
+    def apply(self, command: Command, state: Reply | None = None, slot: int | None = None) -> Command:
         """``command`` if it is within these limits, else clamped to them (``clamp``).
 
         Args:
             command: the command about to be sent.
-            state: the motor's latest status, for a relative position's target (None: unknown).
+            state: the motor's latest status, for a relative position's target and the range's
+                rule for speeds (None: unknown).
+            slot: for a frame that carries one value per motor (a tuple field: LK's multi-motor
+                torque, motors 1-4 in order), the index of this motor's value: only it is checked
+                (None: every value).
 
         Raises:
             LimitExceeded: a field beyond its limit (without ``clamp``, or where no clamp is safe:
@@ -177,8 +187,11 @@ class Limits:
             return command
         name = cls.__name__
         changes: dict[str, Any] = {}
-        out = None if self.position_deg is None else self._outside(state)
-        for attribute, quantity, factor, bounded in checks:
+        inactive = command.inactive() if cls in _INACTIVE else _NONE
+        out = None if self.position_deg is None else self._outside(state, checks)
+        for attribute, quantity, factor, kind in checks:
+            if attribute in inactive:
+                continue
             value = getattr(command, attribute)
             if quantity == "position_deg":
                 new = self._position(command, name, attribute, value, factor, state)
@@ -190,32 +203,33 @@ class Limits:
                 ):
                     new = value
                 else:
-                    new = self._quantity(name, attribute, value, quantity, factor, bounded)
-                if out and not bounded and isinstance(new, int | float) and new * out[0] > 0:
+                    new = self._quantity(name, attribute, value, quantity, factor, kind, slot)
+                if out and kind == _TARGET and isinstance(new, int | float) and new * out[0] > 0:
                     new = self._outward(name, attribute, new, out[1])
             if new is not value:
                 changes[attribute] = new
         if fields:
             for attribute, qualified in _field_keys(cls):
                 limit = fields.get(qualified) or fields.get(attribute)
-                if limit is None:
+                if limit is None or attribute in inactive:
                     continue
                 value = changes.get(attribute, getattr(command, attribute))
-                new = self._within(name, attribute, value, limit, "fields")
+                new = self._within(name, attribute, value, limit, "fields", slot)
                 if new is not value:
                     changes[attribute] = new
         return dataclasses.replace(command, **changes) if changes else command  # type: ignore[type-var]
 
     def _quantity(
-        self, name: str, attribute: str, value: Any, quantity: str, factor: float, bounded: bool
+        self, name: str, attribute: str, value: Any, quantity: str, factor: float, kind: str, slot: int | None
     ) -> Any:
         limit = getattr(self, quantity)
         if isinstance(value, tuple):  # one value per motor (LK's multi-motor torque)
-            new = tuple(self._quantity(name, attribute, v, quantity, factor, bounded) for v in value)
-            return value if all(a is b for a, b in zip(new, value, strict=True)) else new
+            return _each(
+                value, slot, lambda v: self._quantity(name, attribute, v, quantity, factor, kind, None)
+            )
         said = f"{quantity} {limit:g}" + (f" ({limit / factor:.4g} in {attribute})" if factor != 1.0 else "")
-        if value is None:  # a bound left open ("no limit" on the wire)
-            if not bounded:
+        if value is None:  # a bound left open: "no limit" on the wire (or given another way: a raw limit)
+            if kind != _OPEN:
                 return value
             if self.clamp:
                 return limit / factor
@@ -228,12 +242,19 @@ class Limits:
             return math.copysign(limit / factor, value)
         raise self._beyond(name, attribute, f"{value:g}", said)
 
-    def _outside(self, state: Reply | None) -> tuple[int, float] | None:
+    def _outside(
+        self, state: Reply | None, checks: tuple[tuple[str, str, float, str], ...]
+    ) -> tuple[int, float] | None:
         """Which way the motor's last reported angle is out of the position range (+1 above, -1
-        below) and that angle; None when it is within, or the range or angle is not known."""
+        below) and that angle, for a command that moves it by a speed, current or torque alone;
+        None when it is within, the range or angle is not known, or the command has a position
+        field (an MIT-style frame: whether its speed and current are targets or bounds depends on
+        its gains and the motor's mode; its position, when active, meets the range)."""
         limit = self.position_deg
         angle = None if limit is None else angle_of(state)
         if limit is None or angle is None or limit[0] <= angle <= limit[1]:
+            return None
+        if any(q == "position_deg" for _, q, _, _ in checks):
             return None
         return (1 if angle > limit[1] else -1), angle
 
@@ -282,8 +303,19 @@ class Limits:
             said += f" ([{limit[0] / factor:.4g}, {limit[1] / factor:.4g}] in {attribute})"
         return self._within(name, attribute, value, (limit[0] / factor, limit[1] / factor), said)
 
-    def _within(self, name: str, attribute: str, value: Any, limit: tuple[float, float], said: str) -> Any:
-        """``value`` within ``limit`` (``said``: the limit's name; ``"fields"`` for a field range)."""
+    def _within(
+        self,
+        name: str,
+        attribute: str,
+        value: Any,
+        limit: tuple[float, float],
+        said: str,
+        slot: int | None = None,
+    ) -> Any:
+        """``value`` within ``limit`` (``said``: the limit's name; ``"fields"`` for a field range;
+        a tuple value: each of it, or its ``slot``'s)."""
+        if isinstance(value, tuple):
+            return _each(value, slot, lambda v: self._within(name, attribute, v, limit, said))
         if not isinstance(value, int | float) or isinstance(value, bool) or limit[0] <= value <= limit[1]:
             return value
         if not self.clamp:
@@ -300,9 +332,21 @@ class Limits:
         return LimitExceeded(message, where, value, limit)
 
 
+def safe_commands(codec: Any) -> tuple[Command, ...]:
+    """``codec``'s safe commands (``safe_command`` of ``"stop"``, ``"shutdown"``, ``"brake"``, those
+    its family has): never limited, since stopping a motor is always allowed."""
+    made = []
+    for kind in ("stop", "shutdown", "brake"):
+        try:
+            made.append(codec.safe_command(kind))
+        except (ValueError, LookupError, NotImplementedError, AttributeError):
+            continue  # (a family without that kind of stop)
+    return tuple(made)
+
+
 def angle_of(state: Reply | None) -> float | None:
     """The output angle, in degrees, a motor's latest status reports (None: none does)."""
-    if state is None:
+    if state is None or state.SINGLE_TURN:  # (an angle within the turn is not where the motor is)
         return None
     for name, factor in _ANGLES:
         value = getattr(state, name, None)
@@ -311,12 +355,20 @@ def angle_of(state: Reply | None) -> float | None:
     return None
 
 
-_PLANS: dict[type, tuple[tuple[str, str, float, bool], ...]] = {}
+_PLANS: dict[type, tuple[tuple[str, str, float, str], ...]] = {}
 
 
-def _plan(cls: type) -> tuple[tuple[str, str, float, bool], ...]:
+#: what a field is to its limit: a target (signed: a direction), a bound (at most; None: given
+#: another way), a bound whose None is "no limit" (``max_*``; an acceleration's "no planning")
+_TARGET, _BOUND, _OPEN = "target", "bound", "open"
+_NONE: frozenset[str] = frozenset()
+#: the command classes with fields their motor may ignore as set (``Command.inactive``)
+_INACTIVE: set[type] = set()
+
+
+def _plan(cls: type) -> tuple[tuple[str, str, float, str], ...]:
     """The fields of command class ``cls`` a quantity limit meets: (field, quantity, factor to the
-    limit's unit, whether the field is a bound: ``max_*``, ``*_limit_*``), once per class."""
+    limit's unit, what the field is: target, bound or open bound), once per class."""
     plan = _PLANS.get(cls)
     if plan is None:
         found = []
@@ -324,14 +376,25 @@ def _plan(cls: type) -> tuple[tuple[str, str, float, bool], ...]:
             for suffix, quantity, factor in _UNITS:
                 stem = name.removesuffix(suffix)
                 if stem != name and stem:
-                    bounded = name.startswith("max_") or "_limit" in name
-                    found.append((name, quantity, factor, bounded))
+                    if name.startswith("max_") or quantity == "acceleration_dps_s":
+                        kind = _OPEN
+                    else:
+                        kind = _BOUND if "_limit" in name else _TARGET
+                    found.append((name, quantity, factor, kind))
                     break
         position = getattr(cls, "POSITION", "absolute")
         if position not in _POSITIONS:
             raise ValueError(f"{cls.__name__}.POSITION={position!r}: one of {', '.join(_POSITIONS)}")
+        if getattr(cls, "inactive", Command.inactive) is not Command.inactive:
+            _INACTIVE.add(cls)
         plan = _PLANS[cls] = tuple(found)
     return plan
+
+
+def _each(values: tuple[Any, ...], slot: int | None, check: Any) -> tuple[Any, ...]:
+    """``check`` on each of ``values`` (or on the one at ``slot``); the same tuple when none changed."""
+    new = tuple(check(v) if slot is None or i == slot else v for i, v in enumerate(values))
+    return values if all(a is b for a, b in zip(new, values, strict=True)) else new
 
 
 _NAMES: dict[type, tuple[str, ...]] = {}

@@ -158,7 +158,7 @@ def test_a_bridge_started_with_limits_refuses_a_remote_command_beyond_them(
         ready, _, _ = select.select([process.stdout], [], [], 20)
         assert ready and process.stdout.readline().startswith("serving"), process.poll()
         remote = ["--remote", "lim/sim1", "--endpoint", endpoint, "--ids", "1"]
-        err = one_line(capsys, ["speed", *remote, "--speed-dps", "1000", "--duration", "0.3"], code=1)
+        err = one_line(capsys, ["speed", *remote, "--speed-dps", "1000", "--duration", "0.3"], code=2)
         assert "SpeedControl.speed_dps=1000 is beyond the host limit speed_dps 360" in err
         rows = run_json(capsys, ["speed", *remote, "--speed-dps", "300", "--duration", "0.5"])
         assert rows[0]["speed_dps"] == pytest.approx(300, abs=10)
@@ -197,3 +197,57 @@ def test_a_setting_beyond_a_field_range_is_refused_by_set_and_restore(
     assert (
         "pid.speed_kp = 99999: WritePidRam.value=99999 is beyond the host limit fields value [0, 10]" in err
     )
+
+
+def test_a_relative_move_beyond_the_range_is_exit_2_once_the_angle_is_read(
+    capsys: pytest.CaptureFixture[str], files: tuple[str, str]
+) -> None:
+    refuse, _ = files
+    err = one_line(
+        capsys, ["move", "--sim", "1", "--ids", "2", "--angle-deg", "120", "--relative", "--limits", refuse]
+    )
+    assert "IncrementalPositionControl.angle_deg=120 (to 120 deg from 0) is beyond the host limit" in err
+
+
+def test_a_sim_bus_given_limits_has_drives_within_them(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, files: tuple[str, str]
+) -> None:
+    from cli._bus_cli import keep_devices
+
+    refuse, _ = files
+    devices = keep_devices(monkeypatch)
+    run(capsys, ["status", "--sim", "2", "--limits", refuse])
+    assert [d.plant.params.speed_limit_dps for d in devices.last] == [360.0, 360.0]
+
+
+def test_record_s_rows_say_the_set_point_the_limits_left(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """A speed step past the range: once the motor is out, the range's rule sends 0, and the rows
+    say 0, not the wave's value."""
+    import csv
+
+    limits = tmp_path / "range.toml"
+    limits.write_text("clamp = true\n[all]\nposition_deg = [-90, 90]\n")
+    out = tmp_path / "run.csv"
+    args = ["record", "--sim", "1", "--drive", "step", "--mode", "speed", "--amplitude-dps", "180"]
+    run(capsys, [*args, "--duration", "2.5", "-o", str(out), "--limits", str(limits)])
+    rows = list(csv.DictReader(out.open()))
+    angles = [float(r["angle_deg"]) for r in rows if r["angle_deg"]]
+    assert 90 < max(angles) < 130, max(angles)  # stopped past the edge, not 270 deg on
+    last = rows[-1]
+    assert float(last["setpoint_speed_dps"]) == 0.0 and abs(float(last["speed_dps"])) < 5
+    assert any(float(r["setpoint_speed_dps"]) == 180.0 for r in rows)
+
+
+def test_restore_names_only_the_motors_it_wrote(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    dump = tmp_path / "two.toml"
+    run(capsys, ["config", "dump", "--sim", "2", "-o", str(dump)])
+    text = dump.read_text()
+    head, motor_2 = text.split("[motor.2]")
+    dump.write_text(head + "[motor.2]" + motor_2.replace('"pid.speed_kp" = 0.5', '"pid.speed_kp" = 0.75', 1))
+    _, err = run(capsys, ["config", "restore", str(dump), "--sim", "2", "--yes"])
+    assert "wrote 1 setting(s) to motor(s) motor 2" in err or "to motor(s) 2," in err or "motor 2," in err, (
+        err
+    )
+    assert "1, 2" not in err.splitlines()[-1], err

@@ -30,10 +30,13 @@ async def broadcast(
     families = {m.codec.family for m in motors}
     if len(families) != 1:
         raise ValueError(f"a broadcast goes to motors of one family, not {sorted(families)}")
-    for motor in motors:  # one frame for all: within every motor's limits (clamped to the tightest)
-        if motor.limits is not None:
-            command = motor.limited(command)
-    plan = get_family(families.pop()).broadcast(command, [m.codec for m in motors])
+    family = families.pop()
+    # One frame reaches every motor of the family on the bus, asked or not: within each one's limits
+    # (clamped to the tightest), a value per motor (LK's multi-motor torque) within its own.
+    for motor in engine.registry.named.values():
+        if motor.limits is not None and motor.codec.family == family:
+            command = motor.limited(command, slot=motor.motor_id - 1)
+    plan = get_family(family).broadcast(command, [m.codec for m in motors])
     runtime, now = engine.runtime, engine.time
     assert runtime is not None
     keys = list(plan.replies.values())

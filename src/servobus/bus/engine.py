@@ -364,17 +364,18 @@ class Engine:
         return _timed_out(request, self.time(), self.scheduler.seen, self.registry.named.values())
 
 
-#: how long before a silent request another motor's frame still shows the line works (seconds)
-HEARD_BEFORE_S = 1.0
+#: how long before a silent request another motor's reply still shows the line works (seconds): a
+#: command asking one motor after the other (servobus status) heard the last one just before
+HEARD_BEFORE_S = 0.1
 
 
 def _timed_out(request: Request, now: float, seen: Any, motors: Iterable[Motor]) -> MotorTimeout:
     """The error of a request that got no reply, saying what the bus saw instead (computed off the
     reply path: only a time-out pays for it). ``seen``: the scheduler's record of recent frames."""
     since = request.sent_at if request.sent_at is not None else now - request.timeout_s
-    # another motor heard just before counts too: asked one after the other (servobus status), the
-    # others answered before this request left, and the line is not the one to check
-    heard = any(m.last_seen is not None and m.last_seen >= since - HEARD_BEFORE_S for m in motors)
+    # another motor heard since, or just before, shows the line works; the silent one never does
+    own, before = request.codec, since - HEARD_BEFORE_S
+    heard = any(m.last_seen is not None and m.last_seen >= before and m.codec is not own for m in motors)
     diagnosis = diagnose(request.codec, seen, since, heard=heard, sent=request.frame)
     attempts = f" ({request.attempts} attempts)" if request.attempts > 1 else ""
     return MotorTimeout(

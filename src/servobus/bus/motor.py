@@ -19,7 +19,7 @@ import anyio
 
 from servobus.errors import MotorFault, MotorTimeout, TransportError
 from servobus.frame import Frame
-from servobus.limits import LimitExceeded, Limits
+from servobus.limits import LimitExceeded, Limits, safe_commands
 from servobus.metrics import Metrics
 from servobus.protocols import BoundCodec, Command, Family, Reply, get_family
 from servobus.protocols._restart import Seen
@@ -260,6 +260,7 @@ class Motor:
         self.fault: MotorFault | None = None
         self.restarted_at: float | None = None
         self.limits: Limits | None = None
+        self._safe: tuple[Command, ...] | None = None  # its safe commands, never limited (made when needed)
         # by method name; from the Family the Bus bound it with (a plug-in may be unregistered)
         self._commands = command_classes(codec.family) if commands is None else commands
         self._record = MotorRecord(codec) if record is None else record  # (the Bus's Registry's)
@@ -271,9 +272,11 @@ class Motor:
         key = id(self.codec)
         return Metrics.of(scheduler.motor_counts[key], scheduler.motor_latency[key].snapshot())
 
-    def limited(self, command: Command[R]) -> Command[R]:
+    def limited(self, command: Command[R], slot: int | None = None) -> Command[R]:
         """``command`` within :attr:`limits` (clamped, when they say so), counted in :meth:`metrics`
-        as ``limit_clamped`` or ``limit_refused``.
+        as ``limit_clamped`` or ``limit_refused``. The family's safe commands (stop, shutdown,
+        brake) are never limited: stopping a motor is always allowed. ``slot``: this motor's value
+        in a frame that carries one per motor (``Limits.apply``).
 
         Raises:
             LimitExceeded: a ValueError naming the field, the value and the limit it went beyond.
@@ -281,8 +284,12 @@ class Motor:
         limits = self.limits
         if limits is None:
             return command
+        if self._safe is None:
+            self._safe = safe_commands(self.codec)
+        if command in self._safe:  # (== on frozen dataclasses: few, and a miss is cheap)
+            return command
         try:
-            checked = limits.apply(command, self.state)
+            checked = limits.apply(command, self.state, slot)
         except LimitExceeded as exc:
             self.bus.scheduler.count(self.codec, "limit_refused")
             where = f"{self.codec.family} motor {self.codec.motor_id} on {self.bus.name}"

@@ -120,7 +120,7 @@ def send(
             known = records.get(id(codec))
             if known is not None and not known.commanded:
                 engine.registry.command(motor)
-        codec.note_sent(command)
+        codec.note_sent(request.command)  # (the command sent: within the motor's limits)
         queued.append(request)
     submit_batch(scheduler, queued, now)
     engine.pump()

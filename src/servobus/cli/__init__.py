@@ -9,7 +9,8 @@ exit code   meaning
 ==========  ==================================================================================
 0           done (also when stdout was closed early: ``servobus monitor --json | head``)
 1           the job failed: a motor did not answer, the adapter was lost, a file did not parse
-2           bad usage: an unknown option, a value out of range, a missing or contradictory flag
+2           bad usage: an unknown option, a value out of range or beyond --limits, a missing or
+            contradictory flag
 130         interrupted (Ctrl-C); a command that drives motors (move, speed, torque, mit, demo)
             sends them its safe stop first, and the line says which motors it went to
 143         terminated (SIGTERM: systemd, ``docker stop``, ``timeout``): as Ctrl-C, safe stop first
@@ -194,7 +195,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         if debug:  # the values from the command line are checked first (servobus.cli._output.refused)
             raise
         click.echo(f"servobus: error: {_one_line(str(exc)) or type(exc).__name__}", err=True)
-        return 1
+        from servobus.limits import LimitExceeded  # (imported on the way out only: --help stays light)
+
+        # beyond --limits (or a bridge's) once the motor's state was known (a relative move): bad usage
+        return 2 if isinstance(exc, LimitExceeded) else 1
     except (ServobusError, OSError, click.ClickException) as exc:
         if debug:
             raise

@@ -136,6 +136,10 @@ class Connection:
             where = (self.family, self.sim_ids, self.revision)
             # fd only when given: the plain three-argument call is the one test doubles stand in for
             devices = sim_devices(*where, fd=True) if self.fd else sim_devices(*where)
+            if self.limits is not None:  # the simulated drives' own envelope too (servobus sim --limits)
+                from servobus.sim.limits import bound
+
+                bound(devices, self.limits)
             return SimTransport(devices=devices, name="sim")
         if self.port is not None:
             from servobus.transports.rs485 import SerialTransport

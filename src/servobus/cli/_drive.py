@@ -389,20 +389,47 @@ async def drive_ticks(
     clock = anyio.current_time
     start = clock()
     scope = anyio.move_on_after(duration) if duration is not None else contextlib.nullcontext()
+    carried = moved_fields(drive.op, motors[0].codec, drive.name, drive.values(0.0)) if motors else {}
+
+    def sent(motor: Motor, commands: Sequence[Command], target: float) -> Sequence[Command]:
+        """``commands`` as the Bus sends them (within the motor's limits, which a check before the
+        start cannot see all of: the range's rule for a motor out of it), its rows' set-point the
+        value they carry; none this tick when a limit refuses one."""
+        if motor.limits is None:
+            setpoints[motor.motor_id] = target
+            return commands
+        try:
+            checked = [motor.limited(command) for command in commands]
+        except LimitExceeded:
+            return ()
+        for before, after in zip(commands, checked, strict=True):
+            field = carried.get(type(after))
+            if field is not None and after is not before:
+                target = getattr(after, field[0]) / field[1]
+        setpoints[motor.motor_id] = target
+        return checked
+
     with scope:
-        first = []
-        for n, motor in enumerate(motors):
-            setpoints[motor.motor_id] = target = drive.wave.at(-n * drive.stagger_s)
-            first.append(drive.first(motor.codec, target))
+        first = [
+            sent(
+                motor,
+                drive.first(motor.codec, drive.wave.at(-n * drive.stagger_s)),
+                drive.wave.at(-n * drive.stagger_s),
+            )
+            for n, motor in enumerate(motors)
+        ]
         for step in range(max(len(commands) for commands in first)):
             items = [(m, c[step]) for m, c in zip(motors, first, strict=True) if step < len(c)]
-            count(await bus.cycle(items, timeout_s=timeout_s))
+            if items:
+                count(await bus.cycle(items, timeout_s=timeout_s))
         async for _ in bus.ticks(hz):
             t = clock() - start
             items = []
             for n, motor in enumerate(motors):
-                setpoints[motor.motor_id] = target = drive.wave.at(t - n * drive.stagger_s)
-                items += [(motor, command) for command in drive.repeat(motor.codec, target)]
+                target = drive.wave.at(t - n * drive.stagger_s)
+                items += [
+                    (motor, command) for command in sent(motor, drive.repeat(motor.codec, target), target)
+                ]
                 if poll is not None:
                     items.append((motor, poll()))
             count(await bus.cycle(items, timeout_s=timeout_s))

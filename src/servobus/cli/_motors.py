@@ -24,7 +24,7 @@ from servobus.cli._output import confirm, refused
 from servobus.cli._remote import Remote, open_remote
 from servobus.cli.plugin import STATUS_SOURCES, Op
 from servobus.errors import ServobusError
-from servobus.limits import LimitBook, LimitExceeded, Limits
+from servobus.limits import LimitBook, LimitExceeded, Limits, safe_commands
 from servobus.protocols import Command, Reply, get_family
 from servobus.signals import StopOn, stop_on
 
@@ -189,7 +189,7 @@ def plan_codecs(
 def _within(codec: Any, limits: Limits, command: Command) -> Command:
     """``command`` within ``limits`` (LimitExceeded: a ValueError), a line on stderr for each field
     clamped. A relative move is left to the Bus: its target is known once the motor's angle is."""
-    if command.POSITION == "relative":
+    if command.POSITION == "relative" or command in safe_commands(codec):  # (a stop: always allowed)
         return command
     try:
         checked = limits.apply(command)

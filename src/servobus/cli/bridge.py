@@ -240,6 +240,7 @@ async def _serve(
 ) -> bool:
     """Open the buses and serve them until a signal; whether one came."""
     from servobus.remote import Bridge
+    from servobus.sim.limits import bound
     from servobus.transports.sim import SimTransport
 
     async with contextlib.AsyncExitStack() as stack:
@@ -255,6 +256,8 @@ async def _serve(
             if conn.sim is not None:  # (fd only when given, as Connection.transport)
                 where = (conn.family, ids[: conn.sim], conn.revision)  # (--sim N: the first N ids)
                 devices = sim_devices(*where, fd=True) if conn.fd else sim_devices(*where)
+                if conn.limits is not None:  # (the simulated drives' own envelope too)
+                    bound(devices, conn.limits)
                 transport = SimTransport(devices=devices, name=name)
             else:
                 transport = conn.transport()

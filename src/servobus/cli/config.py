@@ -451,7 +451,12 @@ def _confirm(conn: Connection, writes: Sequence[Sequence[_Change]], yes: bool) -
     where = (
         f"to ROM (kept after power-off): {', '.join(to_rom)}" if to_rom else "all to RAM (lost at power-off)"
     )
-    confirm(f"Write {count} setting(s) to motor(s) {_ids(conn.motor_ids)}, {where}. Continue?", yes)
+    confirm(f"Write {count} setting(s) to motor(s) {_ids(_written(conn, writes))}, {where}. Continue?", yes)
+
+
+def _written(conn: Connection, writes: Sequence[Sequence[_Change]]) -> list[int]:
+    """The motors that get a write (those whose settings all match get none)."""
+    return [motor_id for motor_id, motor in zip(conn.motor_ids, writes, strict=True) if motor]
 
 
 def _check_back(
@@ -489,6 +494,5 @@ def _check_back(
     note = f"; not read back (write-only): {', '.join(sorted(unchecked))}" if unchecked else ""
     if failed:
         raise click.ClickException("; ".join(failed))
-    click.echo(
-        f"wrote {count} setting(s) to motor(s) {_ids(conn.motor_ids)}, read back the same{note}", err=True
-    )
+    ids = _ids(_written(conn, writes))
+    click.echo(f"wrote {count} setting(s) to motor(s) {ids}, read back the same{note}", err=True)

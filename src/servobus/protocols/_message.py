@@ -78,7 +78,8 @@ class Command(Message, Generic[R]):
     ``POSITION``
         How a position field of it is meant, for host-side limits (:mod:`servobus.limits`):
         ``"absolute"`` (the default), ``"relative"`` (an increment from where the motor is) or
-        ``"single_turn"`` (an angle within the turn the motor is in).
+        ``"single_turn"`` (an angle within the turn the motor is in); :meth:`inactive` says which
+        fields its motor ignores as it is set.
 
     ``REPLY`` is not written by hand: it is the type argument of the command's base, read when the
     class is made (a union for a command answered by one of several layouts; None for no reply).
@@ -112,6 +113,11 @@ class Command(Message, Generic[R]):
         ):
             raise TypeError(f"{cls.__name__} is declared without a reply: say why in NO_REPLY")
 
+    def inactive(self) -> frozenset[str]:
+        """The fields the motor does not act on as this command is set (a position with kp = 0, a
+        mode that ignores it): host-side limits (:mod:`servobus.limits`) leave them alone."""
+        return frozenset()
+
     @classmethod
     def reply_types(cls) -> tuple[type[Reply], ...]:
         """The reply classes that may answer this command (empty when none comes)."""
@@ -133,12 +139,16 @@ class Reply(Message):
     answer, not a measurement: MyActuator's 0xF1 communication trip): the Bus counts it under that
     name, shows it in ``motor.fault`` until the motor executes a command again, and tells the
     status listeners ``EVENT_REASON``. None in every other reply.
+
+    ``SINGLE_TURN`` says its angle is within one turn, not where the motor is (MyActuator 0x94,
+    LK 0x94): host-side limits (:mod:`servobus.limits`) never take it for the motor's position.
     """
 
     __slots__ = ()
     FAULTS: ClassVar[str | None] = None
     EVENT: ClassVar[str | None] = None
     EVENT_REASON: ClassVar[str] = ""
+    SINGLE_TURN: ClassVar[bool] = False
 
 
 Command.REPLY = Reply

@@ -99,12 +99,14 @@ class Setpoints:
                 served.counts["refused"] += 1
                 continue
             motor = served.motors[mid]
-            try:  # beyond the motor's limits: refused here (or clamped), not by the tick it would void
-                command = motor.limited(command)
-            except LimitExceeded as exc:
-                served.counts["limited"] += 1
-                logger.debug("%s: set-point for motor %s refused: %s", key, mid, exc)
-                continue
+            # beyond its limits: refused here (or clamped), not by the tick it would void
+            if motor.limits is not None:
+                try:
+                    command = motor.limited(command)
+                except LimitExceeded as exc:
+                    served.counts["limited"] += 1
+                    logger.debug("%s: set-point for motor %s refused: %s", key, mid, exc)
+                    continue
             try:  # what the motor's codec refuses (a command its revision lacks) never reaches a tick
                 motor.codec.encode(command)
             except ValueError as exc:

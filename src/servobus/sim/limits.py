@@ -2,10 +2,11 @@
 
 A real drive has its own limits (its maximum current, speed and acceleration settings), whatever
 the host sends; :func:`bound` gives the simulated motors the ones a limits file declares, so a
-simulator served to other tools (``servobus sim --limits FILE``), or a ``--sim`` bus whose host
-checks were clamped away, moves within the same envelope. Only what a drive enforces is taken:
-``current_a`` (and ``torque_nm`` through the motor's torque constant), ``speed_dps`` and
-``acceleration_dps_s``. A drive has no position range, nor field ranges: those are the host's.
+simulator served to other tools (``servobus sim --limits FILE``), and a command's or a bridge's
+``--sim`` bus given ``--limits``, move within the same envelope whoever commands them. Only what a
+drive enforces is taken: ``current_a`` (and ``torque_nm`` through the motor's torque constant),
+``speed_dps`` and ``acceleration_dps_s``. A drive has no position range, nor field ranges: those
+are the host's.
 
 Sans-IO: it changes the devices' plants before they are served.
 """

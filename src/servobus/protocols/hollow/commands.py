@@ -256,6 +256,10 @@ def _setpoint_fields(position: str) -> tuple[Any, ...]:
     return (p, v, Int("kp", 0, SETPOINT_GAIN_MAX), Int("kd", 0, SETPOINT_GAIN_MAX), t)
 
 
+#: what kp = 0 leaves unused in a setpoint (Command.inactive)
+_POSITION = frozenset({"position_deg", "step_deg"})
+
+
 class _SetpointFrame(Packed, HollowCommand[ClassicReply]):
     """The 8-byte setpoint bytes (§4.2): the motor's CAN mode tells which class they are (§5.2)."""
 
@@ -268,6 +272,10 @@ class _SetpointFrame(Packed, HollowCommand[ClassicReply]):
     @classmethod
     def claims(cls, data: bytes, can_mode: CanMode) -> bool:
         return can_mode is cls.CAN_MODE and not is_special_command(data)
+
+    def inactive(self) -> frozenset[str]:
+        """With kp = 0 the position (or step) is not acted on: velocity and torque set-points."""
+        return _POSITION if getattr(self, "kp", 1) == 0 else frozenset()
 
     @classmethod
     def refuse(cls, data: bytes) -> None:

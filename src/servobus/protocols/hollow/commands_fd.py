@@ -33,6 +33,14 @@ __all__ = [
 FD_GAIN_MAX = 0xFF  # §7.2: Kp, Kd 0..255
 
 
+#: the fields a running motor does not act on in each mode, and a stopped one (FdCommand.inactive)
+_UNUSED = {
+    ControlMode.TORQUE: frozenset({"position_deg", "velocity_rpm"}),
+    ControlMode.VELOCITY: frozenset({"position_deg"}),
+}
+_UNUSED_STOPPED = frozenset({"position_deg", "velocity_rpm", "current_raw"})
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class FdCommand(Packed, HollowCommand[FdReply]):
     """The 16-byte CAN FD request (§7.2); all defaults give the all-zero status poll [H20].
@@ -81,6 +89,13 @@ class FdCommand(Packed, HollowCommand[FdReply]):
     kd: int = 0
     zero: bool = False
     model: HollowModel = field(default=DEFAULT_MODEL, repr=False)
+
+    def inactive(self) -> frozenset[str]:
+        """What its mode leaves unused: all of it when not running (the stop frame), the position
+        and speed in torque mode, the position in velocity mode (Command.inactive)."""
+        if not self.run:
+            return _UNUSED_STOPPED
+        return _UNUSED.get(self.mode, frozenset())
 
     @property
     def position_counts(self) -> int:

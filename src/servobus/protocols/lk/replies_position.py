@@ -132,6 +132,7 @@ class SingleTurnAngleReply(LkReply):
     """
 
     CODE: ClassVar[int] = 0x94
+    SINGLE_TURN: ClassVar[bool] = True  # (not the motor's position: servobus.limits)
     REVISIONS = V2_36_ONLY
     FIELDS = ((4, CIRCLE),)
     angle_deg: float
@@ -143,6 +144,7 @@ class SingleTurnAngleReplyV235(LkReply):
     (spec §4.25, D9)."""
 
     CODE: ClassVar[int] = 0x94
+    SINGLE_TURN: ClassVar[bool] = True  # (not the motor's position: servobus.limits)
     REVISIONS = V2_35_ONLY
     FIELDS = ((6, CIRCLE_V235),)
     angle_deg: float

@@ -205,6 +205,10 @@ class MotionReply(MyActuatorMessage, Reply):
         return construct(cls, data, values)
 
 
+#: what kp = 0 leaves unused (Command.inactive)
+_POSITION = frozenset({"position_rad"})
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class MotionCommand(MyActuatorMessage, Command[MotionReply]):
     """Motion (MIT) mode setpoint, sent on 0x400 + ID (§5.1):
@@ -222,6 +226,10 @@ class MotionCommand(MyActuatorMessage, Command[MotionReply]):
     kd: float
     torque_ff_nm: float
     scales: MotionScales = field(default=MOTION_SCALES[Revision.V4_4])
+
+    def inactive(self) -> frozenset[str]:
+        """With kp = 0 the position is not acted on (a speed or torque set-point): see Command."""
+        return _POSITION if self.kp == 0 else frozenset()
 
     def __post_init__(self) -> None:
         _check(self._named(), self.scales.command_scales())

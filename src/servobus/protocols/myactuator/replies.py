@@ -346,6 +346,7 @@ class SingleTurnAngleReply(MyActuatorReply):
     """0x94 reply, V4.4 layout: int32 0.01° in DATA[4..7], -180..+180° (§4.13)."""
 
     CODE: ClassVar[int] = 0x94
+    SINGLE_TURN: ClassVar[bool] = True  # (not the motor's position: servobus.limits)
     TITLE: ClassVar[str] = "read single-turn angle (int32 ±180°)"
     REVISIONS = ONLY_V4_4
     # [000] §2.12.1: "The single-turn angle range of the motor is -180° to +180°" (int32, 0.01°/LSB).
@@ -359,6 +360,7 @@ class CircleAngleReply(MyActuatorReply):
     zero, increasing clockwise (§4.13)."""
 
     CODE: ClassVar[int] = 0x94
+    SINGLE_TURN: ClassVar[bool] = True  # (not the motor's position: servobus.limits)
     TITLE: ClassVar[str] = "read single-turn angle (uint16 0..359.99°)"
     REVISIONS = ONLY_V4_3
     # [002] §2.13.3: circleAngle "数值范围 0~35999" (0..359.99°, 0.01°/LSB).

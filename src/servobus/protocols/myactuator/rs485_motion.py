@@ -171,6 +171,10 @@ class Rs485MotionReply(_Rs485MotionFrame, Reply):
     errors: ErrorFlags = ErrorFlags.NONE
 
 
+#: what kp = 0 leaves unused (Command.inactive)
+_POSITION = frozenset({"position_rad"})
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Rs485MotionCommand(_Rs485MotionFrame, Command[Rs485MotionReply]):
     """RS485 motion-mode request (V4.4 only): the CAN motion mode's control law with float32 values.
@@ -197,6 +201,10 @@ class Rs485MotionCommand(_Rs485MotionFrame, Command[Rs485MotionReply]):
     kd: float
     torque_ff_nm: float
     mode: Rs485MotionMode = Rs485MotionMode.SERVO
+
+    def inactive(self) -> frozenset[str]:
+        """With kp = 0 the position is not acted on (a speed or torque set-point): see Command."""
+        return _POSITION if self.kp == 0 else frozenset()
 
     def __post_init__(self) -> None:
         _Rs485MotionFrame.__post_init__(self)
