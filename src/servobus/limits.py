@@ -67,6 +67,11 @@ from servobus.protocols import Command, Reply
 __all__ = ["LimitBook", "LimitExceeded", "Limits", "angle_of", "load", "parse", "safe_commands"]
 
 _DEG_PER_RAD = 180.0 / math.pi
+#: what of a Limits meets a command class: (field, quantity, factor, kind, bound in the field's unit
+#: or None for a position) per field, (field, range) per field range, the range's rule for speeds
+_Compiled = tuple[
+    tuple[tuple[str, str, float, str, float | None], ...], tuple[tuple[str, tuple[float, float]], ...], bool
+]
 
 #: a field's unit suffix -> (the quantity it meets, the factor to the limit's unit); longest first
 _UNITS: tuple[tuple[str, str, float], ...] = (
@@ -143,6 +148,8 @@ class Limits:
     torque_nm: float | None = None
     fields: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     clamp: bool = False
+    #: command class -> what of these limits meets it (made once per class: :meth:`_compile`)
+    _compiled: dict[type, _Compiled] = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.position_deg is not None:
@@ -159,7 +166,7 @@ class Limits:
         changes: dict[str, Any] = {
             f.name: getattr(over, f.name)
             for f in dataclasses.fields(over)
-            if f.name not in ("fields", "clamp") and getattr(over, f.name) is not None
+            if f.init and f.name not in ("fields", "clamp") and getattr(over, f.name) is not None
         }
         return dataclasses.replace(self, **changes, fields={**self.fields, **over.fields}, clamp=over.clamp)
 
@@ -179,50 +186,77 @@ class Limits:
                 a single-turn position under a position range, an increment from an unknown angle).
         """
         cls = type(command)
-        checks = _PLANS.get(cls)
-        if checks is None:
-            checks = _plan(cls)
-        fields = self.fields
-        if not checks and not fields:
+        compiled = self._compiled.get(cls)
+        if compiled is None:
+            compiled = self._compile(cls)
+        checks, ranges, outward = compiled
+        if not checks and not ranges:
             return command
         name = cls.__name__
         changes: dict[str, Any] = {}
         inactive = command.inactive() if cls in _INACTIVE else _NONE
-        out = None if self.position_deg is None else self._outside(state, checks)
-        for attribute, quantity, factor, kind in checks:
+        out = self._outside(state) if outward else None
+        for attribute, quantity, factor, kind, bound in checks:
             if attribute in inactive:
                 continue
             value = getattr(command, attribute)
-            if quantity == "position_deg":
+            if bound is None:  # (a position)
                 new = self._position(command, name, attribute, value, factor, state)
             else:
-                limit = getattr(self, quantity)
                 # (the common case first: a number within the limit, nothing made)
-                if limit is None or (
-                    (value.__class__ is float or value.__class__ is int) and abs(value) * factor <= limit
-                ):
+                if (value.__class__ is float or value.__class__ is int) and -bound <= value <= bound:
                     new = value
                 else:
                     new = self._quantity(name, attribute, value, quantity, factor, kind, slot)
-                if out and kind == _TARGET and isinstance(new, int | float) and new * out[0] > 0:
+                if (
+                    out
+                    and kind == _TARGET
+                    and quantity in _DRIVING
+                    and isinstance(new, int | float)
+                    and new * out[0] > 0
+                ):
                     new = self._outward(name, attribute, new, out[1])
             if new is not value:
                 changes[attribute] = new
-        if fields:
-            for attribute, qualified in _field_keys(cls):
-                limit = fields.get(qualified) or fields.get(attribute)
-                if limit is None or attribute in inactive:
-                    continue
-                value = changes.get(attribute, getattr(command, attribute))
-                new = self._within(name, attribute, value, limit, "fields", slot)
-                if new is not value:
-                    changes[attribute] = new
+        for attribute, limit in ranges:
+            if attribute in inactive:
+                continue
+            value = changes.get(attribute, getattr(command, attribute))
+            new = self._within(name, attribute, value, limit, "fields", slot)
+            if new is not value:
+                changes[attribute] = new
         return dataclasses.replace(command, **changes) if changes else command  # type: ignore[type-var]
+
+    def _compile(self, cls: type) -> _Compiled:
+        """What of these limits meets command class ``cls``: its fields a set limit meets, with the
+        bound in the field's own unit (None for a position); its fields' ranges; whether the range's
+        rule for speeds applies (a range is set, and ``cls`` has no position field)."""
+        plan = _PLANS.get(cls)
+        if plan is None:
+            plan = _plan(cls)
+        outward = self.position_deg is not None and not any(q == "position_deg" for _, q, _, _ in plan)
+        checks = []
+        for attribute, quantity, factor, kind in plan:
+            limit = getattr(self, quantity)
+            if limit is not None:
+                bound = None if quantity == "position_deg" else limit / factor
+                checks.append((attribute, quantity, factor, kind, bound))
+            elif outward and kind == _TARGET and quantity in _DRIVING:  # (the range's rule alone)
+                checks.append((attribute, quantity, factor, kind, math.inf))
+        ranges = []
+        for attribute, qualified in _field_keys(cls) if self.fields else ():
+            limit = self.fields.get(qualified) or self.fields.get(attribute)
+            if limit is not None:
+                ranges.append((attribute, limit))
+        compiled = self._compiled[cls] = (tuple(checks), tuple(ranges), outward)
+        return compiled
 
     def _quantity(
         self, name: str, attribute: str, value: Any, quantity: str, factor: float, kind: str, slot: int | None
     ) -> Any:
         limit = getattr(self, quantity)
+        if limit is None:  # (checked for the range's rule alone)
+            return value
         if isinstance(value, tuple):  # one value per motor (LK's multi-motor torque)
             return _each(
                 value, slot, lambda v: self._quantity(name, attribute, v, quantity, factor, kind, None)
@@ -242,9 +276,7 @@ class Limits:
             return math.copysign(limit / factor, value)
         raise self._beyond(name, attribute, f"{value:g}", said)
 
-    def _outside(
-        self, state: Reply | None, checks: tuple[tuple[str, str, float, str], ...]
-    ) -> tuple[int, float] | None:
+    def _outside(self, state: Reply | None) -> tuple[int, float] | None:
         """Which way the motor's last reported angle is out of the position range (+1 above, -1
         below) and that angle, for a command that moves it by a speed, current or torque alone;
         None when it is within, the range or angle is not known, or the command has a position
@@ -253,8 +285,6 @@ class Limits:
         limit = self.position_deg
         angle = None if limit is None else angle_of(state)
         if limit is None or angle is None or limit[0] <= angle <= limit[1]:
-            return None
-        if any(q == "position_deg" for _, q, _, _ in checks):
             return None
         return (1 if angle > limit[1] else -1), angle
 
@@ -362,6 +392,8 @@ _PLANS: dict[type, tuple[tuple[str, str, float, str], ...]] = {}
 #: another way), a bound whose None is "no limit" (``max_*``; an acceleration's "no planning")
 _TARGET, _BOUND, _OPEN = "target", "bound", "open"
 _NONE: frozenset[str] = frozenset()
+#: what drives a motor without a position: the range's rule for speeds meets these
+_DRIVING = frozenset({"speed_dps", "current_a", "torque_nm"})
 #: the command classes with fields their motor may ignore as set (``Command.inactive``)
 _INACTIVE: set[type] = set()
 

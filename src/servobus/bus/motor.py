@@ -260,7 +260,8 @@ class Motor:
         self.fault: MotorFault | None = None
         self.restarted_at: float | None = None
         self.limits: Limits | None = None
-        self._safe: tuple[Command, ...] | None = None  # its safe commands, never limited (made when needed)
+        # its safe commands by class, never limited (made when first needed)
+        self._safe: dict[type, list[Command]] | None = None
         # by method name; from the Family the Bus bound it with (a plug-in may be unregistered)
         self._commands = command_classes(codec.family) if commands is None else commands
         self._record = MotorRecord(codec) if record is None else record  # (the Bus's Registry's)
@@ -284,9 +285,13 @@ class Motor:
         limits = self.limits
         if limits is None:
             return command
-        if self._safe is None:
-            self._safe = safe_commands(self.codec)
-        if command in self._safe:  # (== on frozen dataclasses: few, and a miss is cheap)
+        safe = self._safe
+        if safe is None:
+            safe = self._safe = {}
+            for made in safe_commands(self.codec):
+                safe.setdefault(type(made), []).append(made)
+        same = safe.get(type(command))  # (a class test first: a control command is never one)
+        if same is not None and command in same:
             return command
         try:
             checked = limits.apply(command, self.state, slot)
