@@ -15,7 +15,7 @@ Target: ``limits.speed_ratio`` <= 1.10 (a loop that declares its limits keeps 90
 
 Usage (from the repository root)::
 
-    python bench/bench_limits.py            # full: 7 repeats x 2,000 ticks per runner (~1 min)
+    python bench/bench_limits.py            # full: 11 repeats x 3,000 ticks per runner (~3 min)
     python bench/bench_limits.py --quick    # CI smoke (a few s), writes nothing
 """
 
@@ -165,7 +165,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     started = time.perf_counter()
     load = _meta.load_average()
-    ticks, warmup, repeats = (100, 10, 1) if args.quick else (2000, 100, 7)
+    ticks, warmup, repeats = (100, 10, 1) if args.quick else (3000, 100, 11)
     out_dir: Path | None = args.output if args.output is not None else (None if args.quick else BENCH_DIR)
     print(f"bench_limits: {ticks} ticks x {repeats} repeat(s) per runner", flush=True)
     figures = summarise(measure(ticks, warmup, repeats, lambda line: print(line, flush=True)), ticks, repeats)
