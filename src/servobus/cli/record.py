@@ -49,7 +49,8 @@ position, speed or current is polled too), and each reply row carries the set-po
 its motor in a column after `reply`: setpoint_angle_deg or setpoint_speed_dps (plain CSV or JSON
 lines: pandas reads either). At the end, on Ctrl-C or SIGTERM, the motors get the Bus's safe stop
 (said in the last line). With --limits, a wave the limits would refuse or clamp is refused before
-anything is sent (the rows say what was sent).
+anything is sent; what they change as it runs (a motor out of its range gets speed 0) is in the
+rows as sent.
 
 \b
 --watch-setpoints instead records the set-points another controller sends the motors (seen on the
