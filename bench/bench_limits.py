@@ -58,7 +58,8 @@ COMMANDS: dict[str, Command] = {
 
 
 async def run(n: int, warmup: int, replies: dict[int, Frame], command: Command, limited: bool) -> Sample:
-    """The Loop giving every motor ``command`` each tick, its limits set (``limited``) or not."""
+    """The Loop giving every motor ``command`` each tick, its limits set (``limited``) or not (a
+    set-point beyond them would end the run with LimitExceeded: ``LIMITS`` refuse, never clamp)."""
     window = _Window()
     async with contextlib.AsyncExitStack() as stack:
         buses = await _open_buses(stack, replies)
@@ -73,9 +74,6 @@ async def run(n: int, warmup: int, replies: dict[int, Frame], command: Command, 
                     tick.state(motor)
                     tick.command(motor, command)
             sample = window.sample(n)
-        refused = sum(bus.metrics().limit_refused + bus.metrics().limit_clamped for bus in buses)
-    if refused:
-        raise RuntimeError(f"{refused} set-points were refused or clamped: the bench measures checks only")
     return sample
 
 

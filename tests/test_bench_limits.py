@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from servobus.limits import LimitExceeded
 from servobus.sim import virtual
 
 BENCH = Path(__file__).resolve().parents[1] / "bench"
@@ -29,9 +30,10 @@ def test_the_loop_runs_with_and_without_limits_and_refuses_nothing(name: str) ->
 
 
 def test_a_set_point_beyond_the_limits_fails_the_run() -> None:
+    assert not bench_limits.LIMITS.clamp  # (so that nothing is measured clamped)
     command = bench_limits.ma.SpeedControl(speed_dps=5000.0)
     replies = bench_limits.prebuilt_replies(command)
-    with pytest.raises(Exception, match="beyond the host limit"):
+    with pytest.raises(LimitExceeded, match="beyond the host limit"):
         virtual.run(bench_limits.run(5, 1, replies, command, True))
 
 

@@ -387,20 +387,36 @@ def test_limits_from_a_file_hold_through_python_can_s_virtual_bus(tmp_path: Any)
 
 
 def test_out_of_its_range_a_motor_is_not_driven_further_out() -> None:
-    limits = Limits(position_deg=(-90, 90))
+    """Sent as 0, whether the limits refuse or clamp: where the motor is, no caller can check."""
     at_95 = ma.StatusReply(temperature_c=25, current_a=0.0, speed_dps=0.0, angle_deg=95.0)
-    with pytest.raises(
-        LimitExceeded, match=r"speed_dps=30 .*: it drives the motor further out \(at 95 deg\)"
-    ):
-        limits.apply(ma.SpeedControl(speed_dps=30.0), at_95)
-    with pytest.raises(LimitExceeded, match=r"current_a=0\.5"):
-        limits.apply(ma.TorqueControl(current_a=0.5), at_95)
-    back = ma.SpeedControl(speed_dps=-30.0)
-    assert limits.apply(back, at_95) is back
-    inside = ma.StatusReply(temperature_c=25, current_a=0.0, speed_dps=0.0, angle_deg=89.0)
-    assert limits.apply(ma.SpeedControl(speed_dps=30.0), inside).speed_dps == 30.0  # type: ignore[attr-defined]
-    clamped = Limits(position_deg=(-90, 90), clamp=True).apply(ma.SpeedControl(speed_dps=30.0), at_95)
-    assert clamped.speed_dps == 0.0  # type: ignore[attr-defined]
+    for limits in (Limits(position_deg=(-90, 90)), Limits(position_deg=(-90, 90), clamp=True)):
+        assert limits.apply(ma.SpeedControl(speed_dps=30.0), at_95) == ma.SpeedControl(speed_dps=0.0)
+        assert limits.apply(ma.TorqueControl(current_a=0.5), at_95) == ma.TorqueControl(current_a=0.0)
+        back = ma.SpeedControl(speed_dps=-30.0)
+        assert limits.apply(back, at_95) is back
+        inside = ma.StatusReply(temperature_c=25, current_a=0.0, speed_dps=0.0, angle_deg=89.0)
+        forward = ma.SpeedControl(speed_dps=30.0)
+        assert limits.apply(forward, inside) is forward
+
+
+@pytest.mark.anyio
+async def test_one_motor_out_of_its_range_costs_the_others_nothing_of_the_tick() -> None:
+    sniffer = Sniffer()
+    async with Bus(SimTransport(devices=[MyActuatorMotor(1), MyActuatorMotor(2), sniffer])) as bus:
+        one, two = bus.motor(ma.FAMILY, 1), bus.motor(ma.FAMILY, 2)
+        one.limits = Limits(position_deg=(-10, 10))  # refusing, not clamping
+        for _ in range(60):  # motor 1 runs out of its range at 60 dps
+            await bus.cycle([(one, ma.SpeedControl(speed_dps=60.0)), (two, ma.SpeedControl(speed_dps=60.0))])
+            await anyio.sleep(0.01)
+        results = await bus.cycle(
+            [(one, ma.SpeedControl(speed_dps=60.0)), (two, ma.SpeedControl(speed_dps=60.0))]
+        )
+        assert all(isinstance(r, ma.StatusReply) for r in results)
+        assert 10.0 < (await one.read_status2()).angle_deg < 30.0
+        assert (await two.read_status2()).angle_deg > 30.0
+        assert one.metrics().limit_clamped > 0 and one.metrics().limit_refused == 0
+        sent_to_1 = [f.data for _, f in sniffer.seen if f.arbitration_id == 0x141 and f.data[0] == 0xA2]
+        assert sent_to_1[-1] == ma.SpeedControl(speed_dps=0.0).encode()
 
 
 @pytest.mark.anyio

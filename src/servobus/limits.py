@@ -32,9 +32,10 @@ status; refused, even with ``clamp``, before one is known); ``"single_turn"`` is
 position range is declared, because where it ends depends on the turn the motor is in. Fields in
 raw counts or percent meet no quantity limit: give them a ``fields`` range. A speed, current or
 torque command (one without a position field) does not move a motor to a position, but once its
-last reported angle is out of the range, one that drives it further out is refused (clamped: 0);
-one that brings it back goes. A single-turn angle (``Reply.SINGLE_TURN``) is never taken for the
-motor's position.
+last reported angle is out of the range, one that drives it further out is sent as 0 (counted
+``limit_clamped``, with ``clamp`` or without: refusing it would fail the whole tick, or a bridge's,
+for where the motor is, which no caller could check beforehand); one that brings it back goes. A
+single-turn angle (``Reply.SINGLE_TURN``) is never taken for the motor's position.
 
 A file declares limits for the motors of a bus (:func:`load`, TOML)::
 
@@ -195,7 +196,7 @@ class Limits:
         name = cls.__name__
         changes: dict[str, Any] = {}
         inactive = command.inactive() if cls in _INACTIVE else _NONE
-        out = self._outside(state) if outward else None
+        out = self._outside(state) if outward else 0
         for attribute, quantity, factor, kind, bound in checks:
             if attribute in inactive:
                 continue
@@ -208,14 +209,15 @@ class Limits:
                     new = value
                 else:
                     new = self._quantity(name, attribute, value, quantity, factor, kind, slot)
+                # (driving a motor out of its range further out: sent as 0, never refused, see above)
                 if (
                     out
                     and kind == _TARGET
                     and quantity in _DRIVING
                     and isinstance(new, int | float)
-                    and new * out[0] > 0
+                    and new * out > 0
                 ):
-                    new = self._outward(name, attribute, new, out[1])
+                    new = 0.0
             if new is not value:
                 changes[attribute] = new
         for attribute, limit in ranges:
@@ -227,13 +229,19 @@ class Limits:
                 changes[attribute] = new
         return dataclasses.replace(command, **changes) if changes else command  # type: ignore[type-var]
 
+    def check(self, command: Command) -> None:
+        """Raise LimitExceeded if ``command`` is beyond these limits, whatever ``clamp`` says: a
+        setting is written as given or not at all (``servobus config set``/``restore``)."""
+        if self.clamp:
+            dataclasses.replace(self, clamp=False).check(command)
+        else:
+            self.apply(command)
+
     def _compile(self, cls: type) -> _Compiled:
         """What of these limits meets command class ``cls``: its fields a set limit meets, with the
         bound in the field's own unit (None for a position); its fields' ranges; whether the range's
         rule for speeds applies (a range is set, and ``cls`` has no position field)."""
-        plan = _PLANS.get(cls)
-        if plan is None:
-            plan = _plan(cls)
+        plan = _plan(cls)
         outward = self.position_deg is not None and not any(q == "position_deg" for _, q, _, _ in plan)
         checks = []
         for attribute, quantity, factor, kind in plan:
@@ -244,8 +252,8 @@ class Limits:
             elif outward and kind == _TARGET and quantity in _DRIVING:  # (the range's rule alone)
                 checks.append((attribute, quantity, factor, kind, math.inf))
         ranges = []
-        for attribute, qualified in _field_keys(cls) if self.fields else ():
-            limit = self.fields.get(qualified) or self.fields.get(attribute)
+        for attribute in _field_names(cls) if self.fields else ():
+            limit = self.fields.get(f"{cls.__name__}.{attribute}") or self.fields.get(attribute)
             if limit is not None:
                 ranges.append((attribute, limit))
         compiled = self._compiled[cls] = (tuple(checks), tuple(ranges), outward)
@@ -276,27 +284,14 @@ class Limits:
             return math.copysign(limit / factor, value)
         raise self._beyond(name, attribute, f"{value:g}", said)
 
-    def _outside(self, state: Reply | None) -> tuple[int, float] | None:
-        """Which way the motor's last reported angle is out of the position range (+1 above, -1
-        below) and that angle, for a command that moves it by a speed, current or torque alone;
-        None when it is within, the range or angle is not known, or the command has a position
-        field (an MIT-style frame: whether its speed and current are targets or bounds depends on
-        its gains and the motor's mode; its position, when active, meets the range)."""
+    def _outside(self, state: Reply | None) -> int:
+        """Which way the motor's last reported angle is out of the position range: +1 above, -1
+        below, 0 within it (or the range or angle not known)."""
         limit = self.position_deg
         angle = None if limit is None else angle_of(state)
         if limit is None or angle is None or limit[0] <= angle <= limit[1]:
-            return None
-        return (1 if angle > limit[1] else -1), angle
-
-    def _outward(self, name: str, attribute: str, value: float, angle: float) -> float:
-        """A speed, current or torque that drives a motor already out of its range further out."""
-        if self.clamp:
-            return 0.0
-        assert self.position_deg is not None
-        said = f"position_deg [{self.position_deg[0]:g}, {self.position_deg[1]:g}]"
-        raise self._beyond(
-            name, attribute, f"{value:g}", said, f"it drives the motor further out (at {angle:g} deg)"
-        )
+            return 0
+        return 1 if angle > limit[1] else -1
 
     def _position(
         self, command: Command, name: str, attribute: str, value: Any, factor: float, state: Reply | None
@@ -362,16 +357,17 @@ class Limits:
         return LimitExceeded(message, where, value, limit)
 
 
-def safe_commands(codec: Any) -> tuple[Command, ...]:
+def safe_commands(codec: Any) -> frozenset[Command]:
     """``codec``'s safe commands (``safe_command`` of ``"stop"``, ``"shutdown"``, ``"brake"``, those
-    its family has): never limited, since stopping a motor is always allowed."""
-    made = []
+    its family or revision has): never limited, since stopping a motor is always allowed (and what a
+    bridge lets any client send)."""
+    made = set()
     for kind in ("stop", "shutdown", "brake"):
         try:
-            made.append(codec.safe_command(kind))
-        except (ValueError, LookupError, NotImplementedError, AttributeError):
-            continue  # (a family without that kind of stop)
-    return tuple(made)
+            made.add(codec.safe_command(kind))
+        except ValueError:  # (a kind this family or revision has no command for)
+            continue
+    return frozenset(made)
 
 
 def angle_of(state: Reply | None) -> float | None:
@@ -430,15 +426,6 @@ def _each(values: tuple[Any, ...], slot: int | None, check: Any) -> tuple[Any, .
 
 
 _NAMES: dict[type, tuple[str, ...]] = {}
-_KEYS_OF: dict[type, tuple[tuple[str, str], ...]] = {}
-
-
-def _field_keys(cls: type) -> tuple[tuple[str, str], ...]:
-    """Each field of ``cls`` with its ``"Class.field"`` key (made once per class)."""
-    keys = _KEYS_OF.get(cls)
-    if keys is None:
-        keys = _KEYS_OF[cls] = tuple((name, f"{cls.__name__}.{name}") for name in _field_names(cls))
-    return keys
 
 
 def _field_names(cls: type) -> tuple[str, ...]:
@@ -519,9 +506,6 @@ def _limits(values: object, clamp: bool, where: str) -> Limits:
     if unknown:
         raise ValueError(f"{where}: unknown limit {sorted(unknown)[0]!r} (one of {', '.join(sorted(_KEYS))})")
     try:
-        values = dict(values)
-        if "position_deg" in values:
-            values["position_deg"] = _range("position_deg", values["position_deg"])
         return Limits(**values, clamp=clamp)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{where}: {exc}") from None

@@ -9,7 +9,6 @@ import contextlib
 import json
 import select
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -18,17 +17,12 @@ from pathlib import Path
 
 import pytest
 
+from _ports import free_port as _free_port
 from cli._bus_cli import SERVOBUS, one_line, run, run_json
 
 pytest.importorskip("zenoh")
 
 NODE = "n"
-
-
-def _free_port() -> int:
-    with contextlib.closing(socket.socket()) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
 
 
 @pytest.fixture(scope="module")

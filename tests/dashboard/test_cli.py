@@ -20,6 +20,7 @@ from typing import Any
 
 import pytest
 
+from _ports import free_port as _free_port
 from cli._bus_cli import SERVOBUS, one_line
 
 URL = re.compile(r"^servobus dashboard: (http://127\.0\.0\.1:\d+/) \(")
@@ -72,12 +73,6 @@ def test_without_the_extra_it_is_one_line_naming_it(
 
 
 # ---- a bridge's bus ----
-
-
-def _free_port() -> int:
-    with contextlib.closing(socket.socket()) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
 
 
 @contextlib.contextmanager

@@ -4,7 +4,6 @@ stale set-points, what a read may be, clients without a token, a bridge that goe
 from __future__ import annotations
 
 import contextlib
-import socket
 import time
 import uuid
 from collections.abc import AsyncIterator
@@ -13,6 +12,7 @@ import anyio
 import pytest
 
 import servobus
+from _ports import loopback_endpoint as _endpoint
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.sim import MyActuatorMotor
 from servobus.remote import Bridge, BridgeLost, RemoteError, connect, wire
@@ -22,12 +22,6 @@ from servobus.transports.sim import SimTransport
 pytestmark = pytest.mark.anyio
 
 zenoh = pytest.importorskip("zenoh")
-
-
-def _endpoint() -> str:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
 
 
 class Served:

@@ -4,13 +4,13 @@ set-point beyond them is dropped and counted (refused) or goes out clamped; the 
 from __future__ import annotations
 
 import contextlib
-import socket
 from collections.abc import AsyncIterator
 
 import anyio
 import pytest
 
 import servobus
+from _ports import loopback_endpoint as _endpoint
 from servobus import LimitExceeded, Limits
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.sim import MyActuatorMotor
@@ -22,12 +22,6 @@ from sim._standins import Sniffer
 pytestmark = pytest.mark.anyio
 
 zenoh = pytest.importorskip("zenoh")
-
-
-def _endpoint() -> str:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
 
 
 async def _until(predicate: object, timeout_s: float = 3.0) -> None:

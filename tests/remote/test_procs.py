@@ -18,7 +18,6 @@ import os
 import queue
 import random
 import signal
-import socket
 import struct
 import subprocess
 import sys
@@ -32,6 +31,7 @@ from typing import Any
 import pytest
 
 import servobus
+from _ports import free_port
 from servobus.protocols import myactuator as ma
 from servobus.remote import wire
 
@@ -116,12 +116,6 @@ class Proc:
                 with contextlib.suppress(OSError):
                     stream.close()
         self.err.close()
-
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return int(probe.getsockname()[1])
 
 
 @pytest.fixture

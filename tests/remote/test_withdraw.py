@@ -7,7 +7,6 @@ a reply still due, and what reached each motor is the list of frames the transpo
 from __future__ import annotations
 
 import functools
-import socket
 from collections.abc import AsyncIterator
 from typing import Any
 
@@ -16,6 +15,7 @@ import anyio.lowlevel
 import pytest
 
 import servobus
+from _ports import loopback_endpoint as _endpoint
 from servobus.protocols import myactuator as ma
 from servobus.protocols.myactuator.sim import MyActuatorMotor
 from servobus.remote import Bridge, connect
@@ -44,12 +44,6 @@ class Logged(SimTransport):
 
 def slow_bus(*ids: int) -> Logged:
     return Logged(devices=[MyActuatorMotor(i) for i in ids], bus=CanBusModel(bitrate=10_000))
-
-
-def _endpoint() -> str:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
 
 
 async def _until(predicate: Any, timeout_s: float = 5.0) -> None:

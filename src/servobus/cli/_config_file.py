@@ -25,7 +25,7 @@ import re
 import struct
 import tomllib
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass, fields, is_dataclass, replace
+from dataclasses import dataclass, fields, is_dataclass
 from pathlib import Path
 from typing import Any
 
@@ -291,7 +291,7 @@ def entries(
             parsed = s.parse(text_of(value))
             command = None if s.write is None else s.write(parsed, rom)
             if command is not None and limits is not None:
-                replace(limits, clamp=False).apply(command)
+                limits.check(command)
             for made in (command, s.read() if s.read is not None else None):
                 if made is not None:
                     codec.encode(made)  # the revision has it

@@ -422,10 +422,6 @@ def _limits_opt(**grouped: Any) -> Callable[[F], F]:
     )
 
 
-#: ``--limits FILE``: the command receives ``limits`` (a LimitBook, or None)
-limits_option = _limits_opt()
-
-
 def connection_options(func: F) -> F:
     """Add the connection options (and ``--timeout-ms``) to a click command; it receives
     ``conn: Connection``."""

@@ -145,7 +145,7 @@ def set_(conn: Connection, key: str, value: str, rom: bool, yes: bool, as_json: 
         for motor_id in conn.motor_ids if conn.limits is not None else ():  # (a setting is never clamped)
             own = conn.limits.of(motor_id)  # type: ignore[union-attr]
             if own is not None:
-                dataclasses.replace(own, clamp=False).apply(command)
+                own.check(command)
     except ValueError as exc:
         raise click.BadParameter(f"{s.key} {value}: {exc}", param_hint="VALUE") from None
     op = Op(first=lambda codec, v: (command,))

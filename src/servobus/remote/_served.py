@@ -13,6 +13,7 @@ from typing import Any
 
 from servobus._version import __version__
 from servobus.bus import Bus, Motor
+from servobus.limits import safe_commands
 from servobus.protocols import Command, Reply
 from servobus.remote import wire
 from servobus.remote.keys import check_name
@@ -72,7 +73,7 @@ class Served:
             self.motors[motor.motor_id] = motor
         self.schemas = {mid: wire.Schema.of(m.codec.family) for mid, m in self.motors.items()}
         #: the commands with which a client makes a motor safe itself (then it no longer holds it)
-        self.safe_commands = {mid: _safe_commands(m) for mid, m in self.motors.items()}
+        self.safe_commands = {mid: safe_commands(m.codec) for mid, m in self.motors.items()}
         #: what a motor gets when its client leaves: the Bus's safe kind, "stop" where the Bus has none
         self.stop_commands = {mid: _stop_command(m, bus.safe or "stop") for mid, m in self.motors.items()}
         self.held: dict[int, Held] = {}
@@ -154,17 +155,6 @@ class Served:
             "setpoint_to_wire_ms": {"p50": pct(0.5), "p99": pct(0.99), "n": len(samples)},
             "owners": {str(mid): wire.shown_id(owner) for mid, owner in sorted(self.owners.items())},
         }
-
-
-def _safe_commands(motor: Motor) -> frozenset[Command]:
-    """The commands that make ``motor`` safe (each kind its family has)."""
-    found = set()
-    for kind in ("stop", "shutdown", "brake"):
-        try:
-            found.add(motor.codec.safe_command(kind))
-        except ValueError:  # a kind this family or revision has no command for
-            continue
-    return frozenset(found)
 
 
 def _stop_command(motor: Motor, kind: str) -> Command | None:
