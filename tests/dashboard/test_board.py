@@ -151,6 +151,13 @@ def test_the_boards_short_way_to_a_messages_numbers_is_the_long_ways() -> None:
     samples: list[Any] = [
         ma.StatusReply(temperature_c=25, current_a=0.5, speed_dps=3.0, angle_deg=2.0),  # (an enum field)
         ma.AbsolutePositionControl(angle_deg=3.0, max_speed_dps=500.0),
+        ma.Status1Reply(  # (a flag field: the motor's faults)
+            temperature_c=30,
+            mos_temperature_c=31,
+            brake_released=True,
+            voltage_v=48.0,
+            errors=ma.ErrorFlags.OVER_VOLTAGE,
+        ),
     ]
     for module in (ma, hollow, lk):
         for cls in vars(module).values():

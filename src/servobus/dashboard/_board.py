@@ -478,6 +478,8 @@ def _numbers(message: Any) -> dict[str, float | int]:
                 out[name] = value
         elif kind is int:
             out[name] = value
+        elif isinstance(value, enum.Flag):  # (a reply's fault flags: their bits, as message_values)
+            out[name] = int(value.value)
         elif not (value is None or isinstance(value, bool | str | enum.Enum)):
             return _finite(message_values(message))
     return out
