@@ -337,24 +337,18 @@ class _Page:
         runner to open it); the server stopped on the way out."""
         import anyio
 
-        from servobus.dashboard import listening_socket, serve, url_of
+        from servobus.dashboard import listening_socket, serving
 
         for bus in sorted(buses, key=lambda b: b.name):
             self.dash.watch(bus)
         self.dash.watch_loop(loop)
-        done = anyio.Event()
         with listening_socket("127.0.0.1", 0) as sock:
-            async with anyio.create_task_group() as group:
-                group.start_soon(lambda: serve(self.dash.app(), sock, stopped=done))
-                try:
-                    print(f"URL {url_of(sock)}", flush=True)
-                    with anyio.fail_after(60):  # (bounded: a page that never came fails the run)
-                        while self.updates < 3:
-                            await anyio.sleep(0.05)
-                    yield
-                finally:
-                    self.dash.close()  # (the page's stream ends first: the server has nothing to cut)
-                    done.set()
+            async with serving(self.dash, sock) as url:  # (its streams end first on the way out)
+                print(f"URL {url}", flush=True)
+                with anyio.fail_after(60):  # (bounded: a page that never came fails the run)
+                    while self.updates < 3:
+                        await anyio.sleep(0.05)
+                yield
 
 
 def _scaled(value: float | None, unit: float) -> float:
