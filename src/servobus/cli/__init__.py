@@ -29,7 +29,7 @@ import click
 from servobus import __version__
 from servobus.errors import ServobusError
 
-__all__ = ["SAFE_EXITS", "SIGNALLED", "cli", "main"]
+__all__ = ["SAFE_EXITS", "SIGNALLED", "cli", "main", "safe_exits", "stopped_by"]
 
 #: What the Buses of this command sent their commanded motors when their blocks were left, for the
 #: line Ctrl-C prints (:func:`servobus.cli._connect.note_exit`): (bus name, family, safe command,
@@ -127,6 +127,11 @@ def _interrupted(by: signal.Signals = signal.SIGINT) -> str:
     commanded no motor)."""
     line = "servobus: interrupted" if by == signal.SIGINT else f"servobus: interrupted by {by.name}"
     return line + safe_exits()
+
+
+def stopped_by() -> str:
+    """What ended a command that ends on a signal: ``"Ctrl-C"``, or the other signal's name."""
+    return SIGNALLED[0].name if SIGNALLED else "Ctrl-C"
 
 
 def safe_exits() -> str:

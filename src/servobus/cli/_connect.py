@@ -124,6 +124,20 @@ class Connection:
             options["revision"] = self.revision
         return options
 
+    def sim_transport(self, ids: tuple[int, ...], name: str = "sim") -> Any:
+        """The in-process simulated bus of this connection's family with motors ``ids`` (not yet
+        open), their drives within ``limits`` too (as ``servobus sim --limits``)."""
+        from servobus.transports.sim import SimTransport
+
+        where = (self.family, ids, self.revision)
+        # fd only when given: the plain three-argument call is the one test doubles stand in for
+        devices = sim_devices(*where, fd=True) if self.fd else sim_devices(*where)
+        if self.limits is not None:
+            from servobus.sim.limits import bound
+
+            bound(devices, self.limits)
+        return SimTransport(devices=devices, name=name)
+
     def transport(self) -> Any:
         """The transport (not yet open) this connection names.
 
@@ -131,16 +145,7 @@ class Connection:
             click.UsageError: no bus named, or contradictory flags.
         """
         if self.sim is not None:
-            from servobus.transports.sim import SimTransport
-
-            where = (self.family, self.sim_ids, self.revision)
-            # fd only when given: the plain three-argument call is the one test doubles stand in for
-            devices = sim_devices(*where, fd=True) if self.fd else sim_devices(*where)
-            if self.limits is not None:  # the simulated drives' own envelope too (servobus sim --limits)
-                from servobus.sim.limits import bound
-
-                bound(devices, self.limits)
-            return SimTransport(devices=devices, name="sim")
+            return self.sim_transport(self.sim_ids)
         if self.port is not None:
             from servobus.transports.rs485 import SerialTransport
 

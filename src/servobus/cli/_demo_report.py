@@ -244,9 +244,9 @@ def summary_lines(s: Summary) -> list[str]:
     if why:
         lines.append(f"why         {why}")
     if s.interrupted:
-        from servobus.cli import SIGNALLED, safe_exits
+        from servobus.cli import safe_exits, stopped_by
 
-        by = SIGNALLED[0].name if SIGNALLED else "Ctrl-C"
+        by = stopped_by()
         stops = safe_exits().removeprefix("; ") or "no motor was commanded"
         lines.append(f"stopped     {by}: {stops}")
     return lines

@@ -26,7 +26,7 @@ import anyio
 import click
 
 from servobus.bus import Bus, Motor
-from servobus.cli._connect import Connection, connection_options, note_exit, sim_devices
+from servobus.cli._connect import Connection, connection_options, note_exit
 from servobus.cli._motors import run, stop_scope
 from servobus.cli._output import SETTINGS, FloatRange, examples, refused
 from servobus.cli._remote import remote_extra
@@ -172,9 +172,9 @@ def bridge(
     if stop_after_ms is not None:
         options["stop_after_s"] = stop_after_ms / 1000.0
     signalled = run(_serve(conn, node, layout, endpoints, config, options))
-    from servobus.cli import SIGNALLED, safe_exits
+    from servobus.cli import safe_exits, stopped_by
 
-    by = (f" by {SIGNALLED[0].name}" if SIGNALLED else " by Ctrl-C") if signalled else ""
+    by = f" by {stopped_by()}" if signalled else ""
     click.echo(f"servobus bridge: {node} stopped{by}{safe_exits()}", err=True)
 
 
@@ -240,8 +240,6 @@ async def _serve(
 ) -> bool:
     """Open the buses and serve them until a signal; whether one came."""
     from servobus.remote import Bridge
-    from servobus.sim.limits import bound
-    from servobus.transports.sim import SimTransport
 
     async with contextlib.AsyncExitStack() as stack:
         opened: list[Bus] = []
@@ -253,14 +251,8 @@ async def _serve(
         stack.callback(noted)  # (first in, so it runs after every Bus was left)
         served: dict[str, tuple[Bus, list[Motor]]] = {}
         for name, ids in layout:
-            if conn.sim is not None:  # (fd only when given, as Connection.transport)
-                where = (conn.family, ids[: conn.sim], conn.revision)  # (--sim N: the first N ids)
-                devices = sim_devices(*where, fd=True) if conn.fd else sim_devices(*where)
-                if conn.limits is not None:  # (the simulated drives' own envelope too)
-                    bound(devices, conn.limits)
-                transport = SimTransport(devices=devices, name=name)
-            else:
-                transport = conn.transport()
+            # (--sim N: the first N ids simulated)
+            transport = conn.transport() if conn.sim is None else conn.sim_transport(ids[: conn.sim], name)
             bus = await stack.enter_async_context(Bus(transport, name=name, limits=conn.limits))
             opened.append(bus)
             served[name] = (bus, [bus.motor(conn.family, i, **conn.bind_options()) for i in ids])

@@ -147,9 +147,9 @@ def dashboard(
         else:
             moving = conn.sim is not None and not still
             signalled = run(_local(served, conn, hz, moving, duration), backend=backend)
-    from servobus.cli import SIGNALLED, safe_exits
+    from servobus.cli import safe_exits, stopped_by
 
-    by = (f" by {SIGNALLED[0].name}" if SIGNALLED else " by Ctrl-C") if signalled else ""
+    by = f" by {stopped_by()}" if signalled else ""
     click.echo(f"servobus dashboard: stopped{by}{safe_exits()}", err=True)
 
 
