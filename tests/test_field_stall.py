@@ -256,3 +256,30 @@ def test_a_reply_in_doubt_is_counted_and_the_key_waits_for_the_replies_still_owe
     third = _sent(scheduler, codec, 0.054)
     assert scheduler.receive(_status(0.055), 0.055).request is third
     assert scheduler.counts["ambiguous"] == 1
+
+
+def test_replies_taken_while_earlier_ones_are_owed_are_all_in_doubt() -> None:
+    """The CI run that found it: a motor whose replies fell one request behind. After the second
+    episode of doubt the key is not held again (one hold per episode), so the next request goes at
+    once, and its reply may be the one still owed: in doubt too, not taken silently."""
+    codec = ma.FAMILY.bind(1)
+    scheduler = Scheduler([codec])
+    first = _sent(scheduler, codec, 0.0)
+    assert scheduler.expire(0.005) == [first]
+    scheduler.poll(0.050)  # (its hold ended without the late reply)
+    second = _sent(scheduler, codec, 0.050)
+    assert scheduler.receive(_status(0.051), 0.051).request is second  # the first's, or its own?
+    assert scheduler.counts["ambiguous"] == 1
+    scheduler.poll(0.100)  # (held once, for the second's own reply: it did not come)
+    third = _sent(scheduler, codec, 0.100)
+    assert scheduler.receive(_status(0.101), 0.101).request is third
+    assert scheduler.counts["ambiguous"] == 2
+    assert not scheduler.busy(third.key, 0.102)  # (a second episode: not held again)
+    fourth = _sent(scheduler, codec, 0.102)
+    assert scheduler.receive(_status(0.103), 0.103).request is fourth
+    assert scheduler.counts["ambiguous"] == 3  # the third's own may still be owed: in doubt
+    # the owed reply comes, with no request waiting: late, and the key is clear again
+    assert scheduler.receive(_status(0.104), 0.104).traffic is Traffic.LATE
+    fifth = _sent(scheduler, codec, 0.110)
+    assert scheduler.receive(_status(0.111), 0.111).request is fifth
+    assert scheduler.counts["ambiguous"] == 3

@@ -140,16 +140,23 @@ class Keys:
         were given up on (their holds ended) and have had no reply. The reply may be the first of
         those's: True (count it ``ambiguous``). Either it was (and as many replies as there were
         such requests are still owed, the last ``request``'s own) or they were lost: they stay owed
-        for as long as the earlier ones could have come (a reply taken meanwhile is in doubt too),
-        and the key is held once, until ``request``'s hold would end (a frame then is late; none:
-        the next exchange goes, at the cost of one hold per episode)."""
+        for as long as the earlier ones could have come, and the key stays in doubt meanwhile (a
+        motor whose replies fell behind answers each request with the one before's: every reply
+        taken is in doubt until a late one comes alone), and the key is held once, until
+        ``request``'s hold would end (a frame then is late; none: the next exchange goes, at the
+        cost of one hold per episode)."""
         key = request.key
         self.doubtful.discard(key)
         late = self.late.get(key)
         sent_at = request.sent_at
         if not late or sent_at is None:
             return False
-        earlier = [e for e in late if e[0] > now and e[3] <= now and (e[1] is None or e[1] < sent_at)]
+        # (an owed entry, no round trip, is in doubt from the start: its key is held once per episode)
+        earlier = [
+            e
+            for e in late
+            if e[0] > now and (e[3] <= now or e[2] is None) and (e[1] is None or e[1] < sent_at)
+        ]
         if not earlier:
             return False  # clear: nothing earlier can still answer
         for entry in earlier:
@@ -159,6 +166,7 @@ class Keys:
         window = max(e[0] for e in earlier)
         # (owed, with no round trip: a reply to one is no sample of anyone's)
         late.extend([(window, sent_at, None, until)] * len(earlier))
+        self.doubtful.add(key)  # (a reply taken while they are owed is in doubt too)
         if all(e[2] is not None for e in earlier):  # a new episode: hold once
             self.held[key] = max(until, self.held.get(key, until))
             if not request.pipelined:
