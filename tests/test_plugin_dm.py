@@ -14,6 +14,7 @@ under ``mypy --strict``.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import importlib
 import inspect
 import json
@@ -139,6 +140,22 @@ def test_the_special_commands_and_the_refresh_are_fixed_payloads(dm: ModuleType)
     refresh = codec.encode(dm.RefreshState())
     assert (refresh.arbitration_id, refresh.data) == (0x7FF, bytes.fromhex("07 00 CC 00 00 00 00 00"))
     assert dm.FAMILY.decode_request(0x7FF, refresh.data).motor_id == 7
+
+
+def test_a_set_point_whose_payload_is_a_special_command_is_never_sent(dm: ModuleType) -> None:
+    codec = dm.FAMILY.bind(1)
+    m = codec.model
+    # every code at its top but the torque's, whose low byte is then FC: Enable's payload
+    enable = dm.MitControl(
+        position_rad=m.p_max,
+        velocity_rad_s=m.v_max,
+        kp=500.0,
+        kd=5.0,
+        torque_nm=-m.t_max + 0xFFC * 2 * m.t_max / 0xFFF,
+    )
+    with pytest.raises(ValueError, match=r"encodes to FF FF FF FF FF FF FF FC, the Enable command's payload"):
+        codec.encode(enable)
+    assert codec.encode(dataclasses.replace(enable, kd=4.99)).data[:7] != b"\xff" * 7
 
 
 def test_the_feedback_decodes_with_the_model_s_ranges(dm: ModuleType) -> None:

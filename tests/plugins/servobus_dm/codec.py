@@ -170,8 +170,9 @@ class DmCodec(CodecBase):
         """The frame that sends ``command`` to this motor, scaled by its model.
 
         Raises:
-            ValueError: not a DM-J command, or a value outside this motor's model's range (naming
-                the field, its limits and the model).
+            ValueError: not a DM-J command, a value outside this motor's model's range (naming
+                the field, its limits and the model), or a set-point whose payload is a special
+                command's (FF x 7 + code: the motor would read it as that command).
         """
         if isinstance(command, RefreshState):
             return classic_request(REFRESH_ID, dataclasses.replace(command, motor_id=self.motor_id).encode())
@@ -179,7 +180,15 @@ class DmCodec(CodecBase):
             command = dataclasses.replace(command, model=self.model)
         if not isinstance(command, DmCommand):
             raise ValueError(f"{command!r} is not a dm command")
-        return classic_request(self.motor_id, command.encode())
+        data = command.encode()
+        special = _SPECIALS.get(data)
+        if special is not None and not isinstance(command, special):
+            # the motor reads the payload as the special command: never send it as a set-point
+            raise ValueError(
+                f"{command!r} encodes to {data.hex(' ').upper()}, the {special.__name__} command's payload: "
+                "the motor would read it so (lower a value by one step)"
+            )
+        return classic_request(self.motor_id, data)
 
     def reply_key(self, command: Command) -> Hashable | None:
         """The feedback's key (every feedback of the motor is alike); None for a command without one.
