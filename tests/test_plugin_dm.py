@@ -20,6 +20,7 @@ import inspect
 import json
 import math
 import os
+import subprocess
 import sys
 import threading
 import time
@@ -33,7 +34,7 @@ import can
 import pytest
 
 from _backends import BACKENDS, virtual
-from _toy import PLUGINS
+from _toy import PLUGINS, SERVOBUS
 from servobus.bus import Bus
 from servobus.cli import main
 from servobus.frame import Frame
@@ -541,3 +542,72 @@ def test_a_dm_motor_is_typed_for_a_user_s_type_checker(
     assert [
         line for line in stdout.splitlines() if "servobus_dm" in line.split(":")[0]
     ] == []  # the package is clean
+
+
+# ---- served by `servobus sim`, and a log decoded (subprocesses: the family installed by PYTHONPATH) ----
+
+
+def _run_cli(*args: str, timeout_s: float = 60.0) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [*SERVOBUS, *args], capture_output=True, text=True, timeout=timeout_s, env=_env(), check=False
+    )
+
+
+def _env() -> dict[str, str]:
+    path = os.pathsep.join(p for p in (str(PLUGINS), os.environ.get("PYTHONPATH")) if p)
+    return {**os.environ, "PYTHONPATH": path}
+
+
+def test_servobus_sim_family_dm_serves_an_slcan_adapter() -> None:
+    server = subprocess.Popen(
+        [*SERVOBUS, "sim", "--family", "dm", "--motors", "2"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=_env(),
+    )
+    try:
+        assert server.stdout is not None
+        pty = server.stdout.readline().strip()
+        assert pty.startswith("/"), (pty, server.stderr.read() if server.poll() is not None else "")
+        result = _run_cli("status", "-f", "dm", "-i", "servobus-slcan", "-c", pty, "--ids", "1-2", "--json")
+        assert result.returncode == 0, result.stderr
+        assert [(r["id"], r["error"]) for r in json.loads(result.stdout)] == [(1, None), (2, None)]
+    finally:
+        server.terminate()
+        assert server.wait(timeout=5) == 0
+
+
+LOG = """\
+(1700000000.000100) can0 7FF#0100CC0000000000 T
+(1700000000.000400) can0 011#0180008008001919 R
+(1700000000.001000) can0 001#FFFFFFFFFFFFFFFC T
+(1700000000.002000) can0 001#FFFF000FFF000FFF T
+(1700000000.002400) can0 011#11FFFF000FFF2925 R
+(1700000000.003000) can0 001#FFFFFFFFFFFFFFFD T
+"""
+
+
+def test_servobus_decode_family_dm(tmp_path: Path) -> None:
+    log = tmp_path / "dm.log"
+    log.write_text(LOG)
+    result = _run_cli("decode", "--family", "dm", "--json", str(log))
+    assert result.returncode == 0, result.stderr
+    records = [json.loads(line) for line in result.stdout.splitlines()]
+    assert [(r["direction"], r["motor_id"], r["type"]) for r in records] == [
+        ("request", None, "RefreshState"),  # on 0x7FF, which every motor shares: the address is a field
+        ("reply", 1, "Feedback"),
+        ("request", 1, "Enable"),
+        ("request", 1, "MitControl"),
+        ("reply", 1, "Feedback"),
+        ("request", 1, "Disable"),
+    ]
+    assert records[0]["fields"] == {"motor_id": 1}
+    mit, feedback = records[3]["fields"], records[4]["fields"]
+    assert (mit["position_rad"], mit["velocity_rad_s"], mit["kp"], mit["torque_nm"]) == (
+        12.5,
+        -30.0,
+        500.0,
+        10.0,
+    )
+    assert (feedback["position_rad"], feedback["torque_nm"], feedback["temperature_c"]) == (12.5, 10.0, 41)
