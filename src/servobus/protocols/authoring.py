@@ -2,7 +2,10 @@
 
 A family (built in, or a third party's package registered under the ``servobus.families`` entry
 point) declares its commands and replies on these bases and field kinds, implements the bound-codec
-contract on :class:`CodecBase`, and describes itself with a :class:`Family`; ``tests/plugins``
+contract on :class:`CodecBase`, and describes itself with a :class:`Family`. Payloads with a command
+byte and whole-byte fields are :class:`Layout` classes; bit-packed ones (MIT-style set-points and
+feedback, ``FF x 7 + code`` special commands, scales from the motor's model) are :class:`BitLayout`
+classes (:mod:`servobus.protocols.bits`); ``tests/plugins``
 holds a complete example (a toy family in its own package). Typed motor methods for it are generated with
 ``python -m servobus.protocols._calls <package>``.
 """
@@ -42,6 +45,22 @@ from servobus.protocols._layout import (
     StepField,
 )
 from servobus.protocols._message import Command, Message, R, Reply, construct, decode_by_code, require_length
+from servobus.protocols.bits import (
+    BitField,
+    BitLayout,
+    Bits,
+    Choice,
+    Code,
+    Const,
+    Flag,
+    Linear,
+    OffsetBinary,
+    Scale,
+    Signed,
+    claimant,
+    field_names,
+    le,
+)
 
 __all__ = [
     "EXTENDED",
@@ -50,14 +69,21 @@ __all__ = [
     "KIND_REPORT",
     "KIND_STREAM",
     "AsciiField",
+    "BitField",
+    "BitLayout",
+    "Bits",
     "BoolField",
     "BoundCodec",
     "Broadcast",
+    "Choice",
+    "Code",
     "CodecBase",
     "Command",
+    "Const",
     "EnumField",
     "Family",
     "FieldCodec",
+    "Flag",
     "FlagsField",
     "Float32Field",
     "FrameKind",
@@ -65,23 +91,30 @@ __all__ = [
     "IntField",
     "Layout",
     "LayoutMismatch",
+    "Linear",
     "Message",
+    "OffsetBinary",
     "OpenEnumField",
     "R",
     "Reply",
+    "Scale",
     "ScaledField",
     "SerialLine",
+    "Signed",
     "StepField",
     "StreamDeframer",
     "check_bus",
     "check_choice",
     "check_range",
+    "claimant",
     "command_classes",
     "construct",
     "decode_by_code",
     "echo_key",
+    "field_names",
     "frame_key",
     "id_key",
+    "le",
     "method_name",
     "motor_ids_of",
     "require_length",

@@ -206,7 +206,9 @@ def test_setpoint_values_just_outside_raise(
     values[field] = limit
     Setpoint(**values, model=model)  # type: ignore[arg-type]
     values[field] = _just_outside(limit)
-    with pytest.raises(ValueError, match=rf"^{field}=.* is outside \[-{abs(limit)!r}, {abs(limit)!r}\]$"):
+    # (the limits come from the model, and the error names it)
+    where = rf"\[-{abs(limit)!r}, {abs(limit)!r}\] for model {model.name}$"
+    with pytest.raises(ValueError, match=rf"^{field}=.* is outside {where}"):
         Setpoint(**values, model=model)  # type: ignore[arg-type]
 
 
@@ -219,7 +221,8 @@ def test_setpoint_gains_outside_raise(field: str, value: int) -> None:
 
 
 def test_incremental_setpoint_names_its_step_field() -> None:
-    with pytest.raises(ValueError, match=r"^step_deg=361\.0 is outside \[-360\.0, 360\.0\]$"):
+    message = r"^step_deg=361\.0 is outside \[-360\.0, 360\.0\] for model default$"
+    with pytest.raises(ValueError, match=message):
         IncrementalSetpoint(step_deg=361.0, speed_rad_s=0.0, kp=0, kd=0, current_a=0.0)
 
 

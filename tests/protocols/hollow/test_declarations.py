@@ -29,7 +29,7 @@ from servobus.protocols import hollow as ho
 from servobus.protocols._family import command_classes
 from servobus.protocols._message import Command
 from servobus.protocols.hollow import bound
-from servobus.protocols.hollow._packed import Choice, Flag, Int, OnLinks, Packed, Real
+from servobus.protocols.hollow._packed import OnLinks, Packed
 from servobus.protocols.hollow.codec import decode_request_frame
 from servobus.protocols.hollow.commands import request_classes
 from servobus.protocols.hollow.sim.converter import ConverterMode, HollowConverter
@@ -44,15 +44,14 @@ CONVERTER_MODES = {"rs485": ConverterMode.TRANSPARENT, "modbus": ConverterMode.M
 
 def _field_value(spec: Any, end: int) -> Any:
     """A value of ``spec`` near its low (end 0) or high (end 1) limit, for the default model."""
-    if isinstance(spec, Real):
-        lo, hi = spec.limits(ho.DEFAULT_MODEL)
-        return (lo, hi)[end] * 0.5
-    if isinstance(spec, Int):
-        return (spec.lo, spec.hi)[end]
-    if isinstance(spec, Flag):
+    scale = spec.scale_for(ho.DEFAULT_MODEL)
+    if spec.kind is float:
+        return (scale.lo, scale.hi)[end] * 0.5
+    if spec.kind is int:
+        return (int(scale.lo), int(scale.hi))[end]
+    if spec.kind is bool:
         return bool(end)
-    assert isinstance(spec, Choice)
-    return list(spec.enum)[-end]
+    return list(spec.kind)[-end]
 
 
 def examples(cls: type[Command[Any]]) -> list[Command[Any]]:

@@ -153,7 +153,8 @@ def test_classic_reply_motor_id_range(cls: type[NormalReply] | type[ExtendedRepl
 def test_classic_reply_speed_and_current_just_outside(model: HollowModel, cls: type[NormalReply]) -> None:
     speed = model.speed_full_scale_rad_s
     current = model.current_full_scale_a
-    with pytest.raises(ValueError, match=rf"^speed_rad_s=.* is outside \[-{speed!r}, {speed!r}\]$"):
+    where = rf" for model {model.name}$"
+    with pytest.raises(ValueError, match=rf"^speed_rad_s=.* is outside \[-{speed!r}, {speed!r}\]{where}"):
         cls(
             motor_id=1,
             position_deg=0.0,
@@ -161,7 +162,7 @@ def test_classic_reply_speed_and_current_just_outside(model: HollowModel, cls: t
             current_a=0.0,
             model=model,
         )
-    with pytest.raises(ValueError, match=rf"^current_a=.* is outside \[-{current!r}, {current!r}\]$"):
+    with pytest.raises(ValueError, match=rf"^current_a=.* is outside \[-{current!r}, {current!r}\]{where}"):
         cls(
             motor_id=1,
             position_deg=0.0,

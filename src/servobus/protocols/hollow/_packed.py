@@ -1,46 +1,36 @@
-"""Hollow payloads declared once (private): the fields a C-core packer carries, and the class that
-derives validation, ``encode`` and ``decode`` from them.
+"""Hollow payloads declared once (private): :class:`Packed`, a public bit layout
+(:mod:`servobus.protocols.bits`, what a plug-in family declares its packed frames with) that the C core packs.
 
 The hollow frames are bit-packed (16/12/12/12/12 setpoints, 40-bit FD positions) and their scales
 depend on the motor model, so they are not the byte-aligned layouts of :mod:`servobus.protocols._layout`:
-a :class:`Packed` class names its packer in :class:`~servobus.protocols.hollow.model.Packers` and lists
-its fields in the packer's order, each with its kind and limits (a function of the model where the
-manual leaves the scale per motor). The C core keeps the packing fast; the field list keeps the
-validation, the decoders and the fast paths of :mod:`servobus.protocols.hollow.bound` in step.
+a :class:`Packed` class declares its fields at their bits, each with its scale (a function of the
+model where the manual leaves the scale per motor), and names the C-core packer that packs the same
+fields in the same order (:class:`~servobus.protocols.hollow.model.Packers`). The declaration gives
+the validation and the decoders; the C core keeps the packing fast, and is tested against it.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
-from enum import IntEnum
 from operator import attrgetter
 from typing import Any, ClassVar, Protocol, Self
 
-from servobus.protocols._message import Message
-from servobus.protocols.hollow._checks import (
-    build,
-    check_flag,
-    check_int,
-    check_real,
-    decode_enum,
-    require_size,
-    to_enum,
-)
+from servobus.protocols.bits import BitField, BitLayout
+from servobus.protocols.hollow._checks import require_size
 from servobus.protocols.hollow.model import COUNTS_PER_TURN, DEFAULT_MODEL, HollowModel, packers
 
 __all__ = [
-    "Choice",
-    "Flag",
-    "Int",
     "OnLinks",
     "Packed",
-    "PackedField",
-    "Real",
     "check_model",
     "fd_position_limits_deg",
     "fd_velocity_limits_rpm",
 ]
+
+
+class _Getter(Protocol):
+    """A getter of field values (an ``attrgetter``): a callable object, not a method."""
+
+    def __call__(self, message: Any, /) -> tuple[Any, ...]: ...
 
 
 def check_model(model: object) -> None:
@@ -61,87 +51,11 @@ def fd_velocity_limits_rpm(model: HollowModel) -> tuple[float, float]:
     return (-(1 << 31) / per_rpm, ((1 << 31) - 1) / per_rpm)
 
 
-class PackedField(Protocol):
-    """One field of a packed payload: its attribute name, its check and its decoded value."""
-
-    @property
-    def name(self) -> str: ...
-
-    def check(self, value: Any, model: HollowModel, /) -> Any:
-        """``value`` as stored (an enum member, a bool); ValueError naming field and limits."""
-
-    def decode(self, raw: float, data: bytes, /) -> Any:
-        """The packer's number as the constructor's argument (ProtocolError for a bad enum code)."""
-
-
-@dataclass(frozen=True, slots=True)
-class Real:
-    """A real number within limits that may depend on the model (a scaled bit field)."""
-
-    name: str
-    limits: Callable[[HollowModel], tuple[float, float]]
-
-    def check(self, value: Any, model: HollowModel) -> Any:
-        check_real(self.name, value, *self.limits(model))
-        return value
-
-    def decode(self, raw: float, data: bytes) -> Any:
-        return raw
-
-
-@dataclass(frozen=True, slots=True)
-class Int:
-    """An integer code within [lo, hi] (gains, ids, raw currents)."""
-
-    name: str
-    lo: int
-    hi: int
-
-    def check(self, value: Any, model: HollowModel) -> Any:
-        check_int(self.name, value, self.lo, self.hi)
-        return value
-
-    def decode(self, raw: float, data: bytes) -> Any:
-        return int(raw)
-
-
-@dataclass(frozen=True, slots=True)
-class Flag:
-    """A 0/1 byte stored as a bool; any other byte does not decode."""
-
-    name: str
-
-    def check(self, value: Any, model: HollowModel) -> Any:
-        return check_flag(self.name, value)
-
-    def decode(self, raw: float, data: bytes) -> Any:
-        return int(raw)
-
-
-class _Getter(Protocol):
-    """A getter of field values (an ``attrgetter``): a callable object, not a method."""
-
-    def __call__(self, message: Any, /) -> tuple[Any, ...]: ...
-
-
-@dataclass(frozen=True, slots=True)
-class Choice:
-    """An IntEnum byte; ``label`` names it in a decoding error (the manual's name, "Mode Sel")."""
-
-    name: str
-    enum: type[IntEnum]
-    label: str
-
-    def check(self, value: Any, model: HollowModel) -> Any:
-        return to_enum(self.name, value, self.enum)
-
-    def decode(self, raw: float, data: bytes) -> Any:
-        return decode_enum(self.label, int(raw), self.enum, data)
-
-
-class Packed(Message):
-    """A payload packed by the C core: ``PACKER`` (a :class:`Packers` attribute), ``SIZE`` bytes,
-    ``FIELDS`` in the packer's order, and a ``model`` attribute giving the scales.
+class Packed(BitLayout):
+    """A hollow payload: a :class:`~servobus.protocols.bits.BitLayout` (``SIZE``, ``FIELDS`` at
+    their bits, scales from the ``model`` attribute) that the C core packs: ``PACKER`` names its
+    packer in :class:`~servobus.protocols.hollow.model.Packers`, whose fields are ``FIELDS`` in
+    order. The declaration is the reference the packer is tested against (tests/protocols/test_bits.py).
 
     ``WHAT`` names the payload in length errors. :meth:`refuse` lets a layout reject bytes that are
     another frame (a setpoint that is the special-command pattern).
@@ -149,9 +63,7 @@ class Packed(Message):
 
     __slots__ = ()
     PACKER: ClassVar[str]
-    SIZE: ClassVar[int]
-    WHAT: ClassVar[str]
-    FIELDS: ClassVar[tuple[PackedField, ...]]
+    FIELDS: ClassVar[tuple[BitField, ...]]
     _VALUES: ClassVar[_Getter]  # the field values in FIELDS order
     model: HollowModel
 
@@ -161,13 +73,8 @@ class Packed(Message):
             cls._VALUES = attrgetter(*(spec.name for spec in cls.FIELDS))
 
     def __post_init__(self) -> None:
-        model = self.model
-        check_model(model)
-        for spec in self.FIELDS:
-            value = getattr(self, spec.name)
-            checked = spec.check(value, model)
-            if checked is not value:
-                object.__setattr__(self, spec.name, checked)
+        check_model(self.model)
+        BitLayout.__post_init__(self)
 
     def encode(self) -> bytes:
         packed: bytes = getattr(packers(self.model), self.PACKER).pack(self._VALUES(self))
@@ -186,9 +93,7 @@ class Packed(Message):
         """
         require_size(data, cls.SIZE, what=cls.WHAT)
         cls.refuse(data)
-        raws = getattr(packers(model), cls.PACKER).unpack(data)
-        values = {spec.name: spec.decode(raw, data) for spec, raw in zip(cls.FIELDS, raws, strict=True)}
-        return build(cls, data, model=model, **values)
+        return super().decode(data, model=model)
 
 
 class OnLinks:

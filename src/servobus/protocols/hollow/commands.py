@@ -24,8 +24,9 @@ from typing import Any, ClassVar, Self
 from servobus.errors import ProtocolError
 from servobus.protocols._layout import EnumField, Float32BEField, Layout
 from servobus.protocols._message import Command, R
+from servobus.protocols.bits import Code
 from servobus.protocols.hollow._checks import require_size, to_enum
-from servobus.protocols.hollow._packed import Int, OnLinks, Packed, check_model
+from servobus.protocols.hollow._packed import OnLinks, Packed, check_model
 from servobus.protocols.hollow.enums import CanMode, ControlMode, PiGain
 from servobus.protocols.hollow.model import DEFAULT_MODEL, HollowModel
 from servobus.protocols.hollow.replies import (
@@ -251,9 +252,9 @@ def decode_special(data: bytes) -> SpecialCommand:
 
 
 def _setpoint_fields(position: str) -> tuple[Any, ...]:
-    # HOLLOW_SETPOINT's order: P (position or step), V, KP, KD, T (§4.2).
-    p, v, t = classic_fields(position)
-    return (p, v, Int("kp", 0, SETPOINT_GAIN_MAX), Int("kd", 0, SETPOINT_GAIN_MAX), t)
+    # §4.2, big-endian bits: P (position or step) 16, V 12, KP 12, KD 12, T 12 (HOLLOW_SETPOINT's order).
+    p, v, t = classic_fields(position, ((0, 16), (16, 12), (52, 12)))
+    return (p, v, Code("kp", (28, 12), 0, SETPOINT_GAIN_MAX), Code("kd", (40, 12), 0, SETPOINT_GAIN_MAX), t)
 
 
 #: what kp = 0 leaves unused in a setpoint (Command.inactive)

@@ -11,13 +11,8 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 from servobus.protocols._fields import round_half_away
-from servobus.protocols.hollow._packed import (
-    Flag,
-    Int,
-    Packed,
-    fd_position_limits_deg,
-    fd_velocity_limits_rpm,
-)
+from servobus.protocols.bits import Code, Flag
+from servobus.protocols.hollow._packed import Packed, fd_position_limits_deg, fd_velocity_limits_rpm
 from servobus.protocols.hollow.commands import ControlMode, HollowCommand
 from servobus.protocols.hollow.model import COUNTS_PER_TURN, DEFAULT_MODEL, HollowModel
 from servobus.protocols.hollow.replies import FD_PAYLOAD_SIZE, FdReply, fd_motion_fields
@@ -75,10 +70,10 @@ class FdCommand(Packed, HollowCommand[FdReply]):
     WHAT: ClassVar[str] = "CAN FD request"
     FIELDS = (
         *fd_motion_fields("Mode Sel"),
-        Flag("run"),
-        Int("kp", 0, FD_GAIN_MAX),
-        Int("kd", 0, FD_GAIN_MAX),
-        Flag("zero"),
+        Flag("run", (96, 8)),
+        Code("kp", (104, 8), 0, FD_GAIN_MAX),
+        Code("kd", (112, 8), 0, FD_GAIN_MAX),
+        Flag("zero", (120, 8)),
     )
     position_deg: float = 0.0
     velocity_rpm: float = 0.0

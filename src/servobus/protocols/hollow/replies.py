@@ -15,15 +15,8 @@ from typing import Any, ClassVar, Self, TypeAlias
 
 from servobus.protocols._fields import round_half_away
 from servobus.protocols._message import Reply
-from servobus.protocols.hollow._packed import (
-    Choice,
-    Flag,
-    Int,
-    Packed,
-    Real,
-    fd_position_limits_deg,
-    fd_velocity_limits_rpm,
-)
+from servobus.protocols.bits import BitField, Bits, Choice, Code, Flag, OffsetBinary, Signed
+from servobus.protocols.hollow._packed import Packed
 from servobus.protocols.hollow.enums import ControlMode
 from servobus.protocols.hollow.ids import MOTOR_IDS
 from servobus.protocols.hollow.model import COUNTS_PER_TURN, DEFAULT_MODEL, HollowModel
@@ -43,7 +36,7 @@ __all__ = [
 ]
 
 FD_PAYLOAD_SIZE = 16
-_MOTOR_ID = Int("motor_id", MOTOR_IDS.start, MOTOR_IDS.stop - 1)
+_MOTOR_ID = Code("motor_id", (0, 8), MOTOR_IDS.start, MOTOR_IDS.stop - 1)
 # §5.3: X is int32 counts, 20-bit single turn, so -2048 .. +2048 turns minus one count (A10).
 EXTENDED_POSITION_LIMITS_DEG = (
     -(1 << 31) * 360.0 / COUNTS_PER_TURN,
@@ -54,31 +47,29 @@ EXTENDED_POSITION_LIMITS_DEG = (
 FD_TEMPERATURE_LIMITS_C = (-125, 125)
 
 
-def _classic_position(model: HollowModel) -> tuple[float, float]:
-    return (-model.position_full_scale_deg, model.position_full_scale_deg)
-
-
-def classic_fields(position: str) -> tuple[Real, Real, Real]:
-    """(``position`` or step, speed, current): the classic-CAN scaled fields, within ±Pmax turns,
+def classic_fields(position: str, at: tuple[Bits, Bits, Bits]) -> tuple[BitField, BitField, BitField]:
+    """(``position`` or step, speed, current) at the bits ``at``: offset binary within ±Pmax turns,
     ±ω_fs and ±I_fs of the model (§4.3)."""
+    p, v, t = at
     return (
-        Real(position, _classic_position),
-        Real("speed_rad_s", lambda m: (-m.speed_full_scale_rad_s, m.speed_full_scale_rad_s)),
-        Real("current_a", lambda m: (-m.current_full_scale_a, m.current_full_scale_a)),
+        OffsetBinary(position, p, lambda m: m.position_full_scale_deg),
+        OffsetBinary("speed_rad_s", v, lambda m: m.speed_full_scale_rad_s),
+        OffsetBinary("current_a", t, lambda m: m.current_full_scale_a),
     )
 
 
-_POSITION, _SPEED, _CURRENT = classic_fields("position_deg")
+# §4.5: D0 the motor id, then position 16, speed 12, current 12 bits (the setpoint's order).
+_POSITION, _SPEED, _CURRENT = classic_fields("position_deg", ((8, 16), (24, 12), (36, 12)))
 
 
-def fd_motion_fields(mode_label: str) -> tuple[Real, Real, Int, Choice]:
-    """Pos, Vel, Cur and the mode byte (``mode_label``: its name in the manual): the first fields of
-    the CAN FD request and reply (§7.2, §7.3)."""
+def fd_motion_fields(mode_label: str) -> tuple[BitField, BitField, BitField, BitField]:
+    """Pos, Vel, Cur and the mode byte (``mode_label``: its name in the manual): the first 12 bytes
+    of the CAN FD request and reply, big-endian (§7.2, §7.3)."""
     return (
-        Real("position_deg", fd_position_limits_deg),
-        Real("velocity_rpm", fd_velocity_limits_rpm),
-        Int("current_raw", -(1 << 15), (1 << 15) - 1),  # int16, unit not stated (A27)
-        Choice("mode", ControlMode, mode_label),
+        Signed("position_deg", (0, 40), COUNTS_PER_TURN, span=360.0),
+        Signed("velocity_rpm", (40, 32), lambda m: m.fd_velocity_counts_per_rpm),
+        Code("current_raw", (72, 16), -(1 << 15), (1 << 15) - 1),  # int16, unit not stated (A27)
+        Choice("mode", (88, 8), ControlMode, mode_label),
     )
 
 
@@ -162,7 +153,8 @@ class ExtendedReply(Packed, HollowReply):
     WHAT: ClassVar[str] = "extended-mode reply"
     FIELDS = (
         _MOTOR_ID,
-        Real("position_deg", lambda m: EXTENDED_POSITION_LIMITS_DEG),
+        # §5.3: X is int32 counts, D1-D2 its low half and D6-D7 its high half
+        Signed("position_deg", ((48, 16), (8, 16)), COUNTS_PER_TURN, span=360.0),
         _SPEED,
         _CURRENT,
     )
@@ -207,10 +199,10 @@ class FdReply(Packed, HollowReply):
     WHAT: ClassVar[str] = "CAN FD reply"
     FIELDS = (
         *fd_motion_fields("Mode"),
-        Flag("running"),
-        Int("reserved", 0, 0xFF),
-        Int("temperature_c", *FD_TEMPERATURE_LIMITS_C),
-        Int("slave_id", MOTOR_IDS.start, MOTOR_IDS.stop - 1),
+        Flag("running", (96, 8)),
+        Code("reserved", (104, 8), 0, 0xFF),
+        Code("temperature_c", (112, 8), *FD_TEMPERATURE_LIMITS_C),
+        Code("slave_id", (120, 8), MOTOR_IDS.start, MOTOR_IDS.stop - 1),
     )
     position_deg: float = 0.0
     velocity_rpm: float = 0.0
