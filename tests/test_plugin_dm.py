@@ -69,8 +69,9 @@ def dm() -> Iterator[ModuleType]:
 
 
 def _codes(value: float, lo: float, hi: float, bits: int) -> int:
-    """The MIT linear map, as the public driver's ``float_to_uint`` states it (rounded)."""
-    return round((value - lo) * ((1 << bits) - 1) / (hi - lo))
+    """The MIT linear map of the public driver's ``float_to_uint``, rounded to the nearest code, ties
+    up (servobus's scales round; the driver truncates, at most one code lower)."""
+    return math.floor((value - lo) * ((1 << bits) - 1) / (hi - lo) + 0.5)
 
 
 def _mit_bytes(p: int, v: int, kp: int, kd: int, t: int) -> bytes:
@@ -126,9 +127,13 @@ def test_a_mit_frame_is_the_public_driver_s_packing_scaled_by_the_model(dm: Modu
 def test_the_range_ends_are_the_code_ends(dm: ModuleType) -> None:
     codec = dm.FAMILY.bind(1, model="DM8009")
     m = codec.model
-    top = dm.MitControl(position_rad=m.p_max, velocity_rad_s=-m.v_max, kp=500.0, kd=0.0, torque_nm=m.t_max)
+    top = dm.MitControl(
+        position_rad=m.p_max, velocity_rad_s=-m.v_max, kp=500.0, kd=0.0, torque_nm=m.t_max, model=m
+    )
     assert codec.encode(top).data == bytes.fromhex("FFFF000FFF000FFF")
-    bottom = dm.MitControl(position_rad=-m.p_max, velocity_rad_s=m.v_max, kp=0.0, kd=5.0, torque_nm=-m.t_max)
+    bottom = dm.MitControl(
+        position_rad=-m.p_max, velocity_rad_s=m.v_max, kp=0.0, kd=5.0, torque_nm=-m.t_max, model=m
+    )
     assert codec.encode(bottom).data == bytes.fromhex("0000FFF000FFF000")
 
 
@@ -478,7 +483,9 @@ def test_servobus_dbc_family_dm(dm: ModuleType, tmp_path: Path, capsys: pytest.C
     db = cantools.database.load_file(str(out))
     assert sorted(m.frame_id for m in db.messages) == [0x01, 0x02, 0x11, 0x12, 0x7FF]
     codec = dm.FAMILY.bind(2, model="DM8009")
-    point = dm.MitControl(position_rad=1.25, velocity_rad_s=-2.5, kp=33.0, kd=1.5, torque_nm=-20.0)
+    point = dm.MitControl(
+        position_rad=1.25, velocity_rad_s=-2.5, kp=33.0, kd=1.5, torque_nm=-20.0, model=codec.model
+    )
     decoded = db.decode_message(0x02, codec.encode(point).data)
     sent = dm.FAMILY.decode_request(2, codec.encode(point).data, model="DM8009")
     assert decoded == pytest.approx({k: getattr(sent, k) for k in decoded})

@@ -27,5 +27,5 @@ class Motor(TypedCalls):
     async def save_zero(self, *, timeout_s: float | None = None, retries: int = 0) -> None: return await self.request(messages.SaveZero(), timeout_s=timeout_s, retries=retries)
     # FF x 7 FB: clear the error the motor latched (it comes back disabled).
     async def clear_error(self, *, timeout_s: float | None = None, retries: int = 0) -> None: return await self.request(messages.ClearError(), timeout_s=timeout_s, retries=retries)
-    # On 0x7FF, DATA[0..1] the motor's id, DATA[2] 0xCC: read the state; changes nothing.
+    # On 0x7FF, DATA[0..1] the motor's id (little-endian), DATA[2] 0xCC: read the state; changes nothing.
     async def refresh_state(self, motor_id: int = 0, *, timeout_s: float | None = None, retries: int = 0) -> messages.Feedback: return await self.request(messages.RefreshState(motor_id=motor_id), timeout_s=timeout_s, retries=retries)

@@ -26,7 +26,7 @@ from typing import Any
 from servobus.errors import ProtocolError
 from servobus.frame import Frame, classic_request
 from servobus.protocols import Broadcast, Command, FrameKind, Reply
-from servobus.protocols.authoring import CodecBase, command_classes, frame_key
+from servobus.protocols.authoring import CodecBase, claimant, command_classes, frame_key
 from servobus_dm import messages
 from servobus_dm.messages import (
     Disable,
@@ -67,10 +67,8 @@ SLOW_TIMEOUT_S = 0.2
 
 #: Every command class, in declaration order.
 COMMANDS: tuple[type[DmCommand[Any]], ...] = command_classes(vars(messages).values())  # type: ignore[assignment]
-#: payload -> the special command it is (its constant bits are all of it)
-_SPECIALS: dict[bytes, type[SpecialCommand[Any]]] = {
-    cls().encode(): cls for cls in COMMANDS if issubclass(cls, SpecialCommand)
-}
+#: the commands told by their whole payload (FF x 7 + code), which the motor reads before a set-point
+_SPECIALS: tuple[type[SpecialCommand[Any]], ...] = tuple(c for c in COMMANDS if issubclass(c, SpecialCommand))
 
 
 def request_id(motor_id: int) -> int:
@@ -115,9 +113,9 @@ def decode_request(
         return RefreshState.decode(data)
     if can_id not in MOTOR_IDS:
         raise ProtocolError(f"0x{can_id:03X} is no dm request identifier", raw=data)
-    special = _SPECIALS.get(bytes(data))
+    special = claimant(_SPECIALS, data)
     if special is not None:
-        return special.decode(data)
+        return special.decode(data)  # type: ignore[return-value]
     return MitControl.decode(data, model=find_model(model))
 
 
@@ -181,7 +179,7 @@ class DmCodec(CodecBase):
         if not isinstance(command, DmCommand):
             raise ValueError(f"{command!r} is not a dm command")
         data = command.encode()
-        special = _SPECIALS.get(data)
+        special = claimant(_SPECIALS, data)
         if special is not None and not isinstance(command, special):
             # the motor reads the payload as the special command: never send it as a set-point
             raise ValueError(

@@ -8,9 +8,7 @@ offset and width, scaled over the range of the motor model (option ``model``, a 
 
 from __future__ import annotations
 
-from typing import Any
-
-from servobus.protocols.bits import Code, Const, Scaled
+from servobus.protocols.authoring import BitField, BitLayout, le
 from servobus.protocols.dbc import (
     DbcFamily,
     DbcOption,
@@ -30,34 +28,43 @@ __all__ = ["DBC", "bit_signals"]
 _UNITS = (("_rad_s", "rad/s"), ("_rad", "rad"), ("_nm", "N.m"), ("_c", "degC"))
 
 
-def bit_signals(cls: type[Any], model: DmModel) -> tuple[SignalSpec, ...]:
-    """The signals of ``cls``'s declared bit fields (constant bits are not signals), scaled by
-    ``model``: big-endian, a DBC start bit being the field's most significant bit."""
+def bit_signals(cls: type[BitLayout], model: DmModel) -> tuple[SignalSpec, ...]:
+    """The signals of ``cls``'s declared fields (constant bits are not signals), scaled by ``model``:
+    a field of one run of bits is big-endian (a DBC start bit is its most significant bit), one of
+    whole little-endian bytes (:func:`~servobus.protocols.bits.le`) little-endian.
+
+    Raises:
+        ValueError: a field split otherwise (this family has none).
+    """
     signals = []
     for spec in cls.FIELDS:
-        if isinstance(spec, Const):
+        if not isinstance(spec, BitField):
             continue
-        start = (spec.offset // 8) * 8 + 7 - spec.offset % 8
         unit = next((u for suffix, u in _UNITS if spec.name.endswith(suffix)), "")
-        codes = (1 << spec.width) - 1
-        if isinstance(spec, Scaled):
-            lo, hi = spec.range(model)
-            signals.append(
-                SignalSpec(
-                    spec.name,
-                    start,
-                    spec.width,
-                    "big_endian",
-                    scale=(hi - lo) / codes,
-                    offset=lo,
-                    minimum=lo,
-                    maximum=hi,
-                    unit=unit,
-                )
-            )
+        scale = spec.scale_for(model)
+        choices = enum_choices(spec.kind) if spec.kind not in (float, int, bool) else ()
+        if len(spec.pieces) == 1:
+            ((offset, width),) = spec.pieces
+            start, order = (offset // 8) * 8 + 7 - offset % 8, "big_endian"
+        elif spec.pieces == le(spec.pieces[-1][0] // 8, len(spec.pieces)):
+            start, width, order = spec.pieces[-1][0], spec.width, "little_endian"
         else:
-            choices = enum_choices(spec.enum) if isinstance(spec, Code) else ()
-            signals.append(SignalSpec(spec.name, start, spec.width, "big_endian", choices=choices, unit=unit))
+            raise ValueError(f"{cls.__name__}.{spec.name}: bits {spec.pieces} are no DBC signal")
+        signals.append(
+            SignalSpec(
+                spec.name,
+                start,
+                width,
+                order,  # type: ignore[arg-type]
+                signed=scale.lo < scale.origin,
+                scale=scale.span / scale.codes,
+                offset=scale.origin,
+                choices=choices,
+                minimum=scale.lo,
+                maximum=scale.hi,
+                unit=unit,
+            )
+        )
     return tuple(signals)
 
 

@@ -1,11 +1,12 @@
 """The Damiao DM-J MIT-mode commands and their feedback, each declared once as bit fields.
 
-Every frame is 8 bytes, read as one big-endian 64-bit word; a field is a run of bits at an offset
-(bit 0 is the most significant bit of DATA[0]) and a width. A scaled field maps its range linearly
-onto the codes, ``code = (x - lo) * (2**width - 1) / (hi - lo)`` (the MIT map), and its range may
-come from the motor's model (``lambda m: (-m.p_max, m.p_max)``): the message carries its ``model``
-and refuses, before a frame leaves, a value outside the range of that model, naming field, limits
-and model. A command told by a fixed payload (FF x 7 and a code byte) declares constant bits.
+Every frame is 8 bytes, declared on :class:`~servobus.protocols.bits.BitLayout`: a field is a run
+of bits at an offset (bit 0 is the most significant bit of DATA[0]) and a width. A :func:`Linear`
+field maps its range onto every code, ``code = (x - lo) * (2**width - 1) / (hi - lo)`` rounded (the
+MIT map), and its range may come from the motor's model (``_velocity(m) = (-m.v_max, m.v_max)``):
+the message carries its ``model`` and refuses to be made with a value outside the range of that
+model, naming field, limits and model. A command told by a fixed payload (FF x 7 and a code byte)
+declares constant bits (:class:`Const`) and nothing else.
 
 The five commands to motor ID (CAN id ID) and the read on 0x7FF; the feedback comes on ID + 0x10:
 
@@ -29,7 +30,7 @@ from dataclasses import dataclass, field
 from typing import ClassVar, TypeVar
 
 from servobus.protocols import Command, Reply
-from servobus.protocols.bits import BitLayout, Code, Const, Scaled, Uint
+from servobus.protocols.authoring import BitLayout, Choice, Code, Const, Linear, le
 from servobus_dm.models import DEFAULT_MODEL, KD_RANGE, KP_RANGE, DmModel
 
 __all__ = [
@@ -103,13 +104,13 @@ class Feedback(BitLayout, Reply):
 
     SIZE: ClassVar[int] = 8
     FIELDS = (
-        Code("state", 0, 4, DmState),
-        Uint("motor_id", 4, 4),
-        Scaled("position_rad", 8, 16, _position),
-        Scaled("velocity_rad_s", 24, 12, _velocity),
-        Scaled("torque_nm", 36, 12, _torque),
-        Uint("temperature_c", 48, 8),
-        Uint("rotor_temperature_c", 56, 8),
+        Choice("state", (0, 4), DmState, label="ERR"),
+        Code("motor_id", (4, 4)),
+        Linear("position_rad", (8, 16), _position),
+        Linear("velocity_rad_s", (24, 12), _velocity),
+        Linear("torque_nm", (36, 12), _torque),
+        Code("temperature_c", (48, 8)),
+        Code("rotor_temperature_c", (56, 8)),
     )
     state: DmState
     motor_id: int
@@ -133,11 +134,11 @@ class MitControl(DmCommand[Feedback]):
     """
 
     FIELDS = (
-        Scaled("position_rad", 0, 16, _position),
-        Scaled("velocity_rad_s", 16, 12, _velocity),
-        Scaled("kp", 28, 12, KP_RANGE),
-        Scaled("kd", 40, 12, KD_RANGE),
-        Scaled("torque_nm", 52, 12, _torque),
+        Linear("position_rad", (0, 16), _position),
+        Linear("velocity_rad_s", (16, 12), _velocity),
+        Linear("kp", (28, 12), KP_RANGE),
+        Linear("kd", (40, 12), KD_RANGE),
+        Linear("torque_nm", (52, 12), _torque),
     )
     position_rad: float
     velocity_rad_s: float = 0.0
@@ -157,28 +158,28 @@ class SpecialCommand(DmCommand[R]):
     __slots__ = ()
 
 
-_FF7 = Const(0, 56, (1 << 56) - 1)
+_FF7 = Const((0, 56), (1 << 56) - 1)
 
 
 @dataclass(frozen=True, slots=True)
 class Enable(SpecialCommand[Feedback]):
     """FF x 7 FC: the motor drives the MIT law (of the set-points that follow)."""
 
-    FIELDS = (_FF7, Const(56, 8, 0xFC))
+    FIELDS = (_FF7, Const((56, 8), 0xFC))
 
 
 @dataclass(frozen=True, slots=True)
 class Disable(SpecialCommand[Feedback]):
     """FF x 7 FD: output off, the shaft coasts (the Bus's safe stop)."""
 
-    FIELDS = (_FF7, Const(56, 8, 0xFD))
+    FIELDS = (_FF7, Const((56, 8), 0xFD))
 
 
 @dataclass(frozen=True, slots=True)
 class SaveZero(SpecialCommand[None]):
     """FF x 7 FE: the position now becomes zero, kept in flash (send it while disabled)."""
 
-    FIELDS = (_FF7, Const(56, 8, 0xFE))
+    FIELDS = (_FF7, Const((56, 8), 0xFE))
     SLOW: ClassVar[bool] = True
     NO_REPLY: ClassVar[str | None] = "the motor does not answer a zero"
 
@@ -187,18 +188,18 @@ class SaveZero(SpecialCommand[None]):
 class ClearError(SpecialCommand[None]):
     """FF x 7 FB: clear the error the motor latched (it comes back disabled)."""
 
-    FIELDS = (_FF7, Const(56, 8, 0xFB))
+    FIELDS = (_FF7, Const((56, 8), 0xFB))
     NO_REPLY: ClassVar[str | None] = "the motor does not answer a clear"
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class RefreshState(DmCommand[Feedback]):
-    """On 0x7FF, DATA[0..1] the motor's id, DATA[2] 0xCC: read the state; changes nothing.
+    """On 0x7FF, DATA[0..1] the motor's id (little-endian), DATA[2] 0xCC: read the state; changes nothing.
 
     ``motor_id`` is the address, filled in by the bound codec (it is not part of what is asked:
     two refreshes of different motors compare equal).
     """
 
-    FIELDS = (Uint("motor_id", 0, 8), Const(8, 8, 0), Const(16, 8, 0xCC), Const(24, 40, 0))
+    FIELDS = (Code("motor_id", le(0, 2)), Const((16, 8), 0xCC), Const((24, 40), 0))
     READ: ClassVar[bool] = True
     motor_id: int = field(default=0, compare=False)
