@@ -29,8 +29,10 @@ from servobus.protocols.bits import (
     field_names,
     le,
 )
+from servobus.protocols.dbc import bit_signals, packed_signals
 from servobus.protocols.hollow._packed import Packed
 from servobus.protocols.hollow.commands import is_special_command
+from servobus.protocols.hollow.model import packers
 
 
 @dataclass(frozen=True, slots=True)
@@ -254,3 +256,35 @@ def test_a_wrong_kind_of_value_is_refused() -> None:
     zero = Mit(position_rad=0.0, velocity_rad_s=0.0, kp=0.0, kd=0.0, torque_nm=0.0)
     with pytest.raises(ValueError, match=r"kp=-1\.0 is outside"):  # (a replace is checked too)
         dataclasses.replace(zero, kp=-1.0)
+
+
+@pytest.mark.parametrize("cls", HOLLOW_PACKED, ids=lambda c: c.__name__)
+@pytest.mark.parametrize("model", list(ho.MODELS.values()), ids=lambda m: m.name)
+def test_the_dbc_signals_of_a_declaration_are_those_of_its_c_packer(cls: type[Packed], model: Any) -> None:
+    """The same bits and scales; the ranges are the fields' (a motor id 0..100 in its byte, where
+    the packer accepts every code)."""
+    declared = bit_signals(cls, model)
+    packed = packed_signals(getattr(packers(model), cls.PACKER), cls)
+    ranges = [(s.minimum, s.maximum) for s in declared]
+    assert [
+        dataclasses.replace(s, minimum=lo, maximum=hi) for s, (lo, hi) in zip(packed, ranges, strict=True)
+    ] == list(declared)
+    for ours, theirs in zip(declared, packed, strict=True):
+        assert theirs.minimum <= ours.minimum <= ours.maximum <= theirs.maximum  # type: ignore[operator]
+
+
+def test_the_dbc_signals_of_a_plug_in_s_declaration() -> None:
+    position, *_, torque = bit_signals(Mit, BIG)
+    assert (position.field, position.start, position.length, position.byte_order) == (
+        "position_rad",
+        7,
+        16,
+        "big_endian",
+    )
+    assert (position.minimum, position.maximum) == (-12.5, 12.5)
+    assert (torque.start, torque.length, torque.maximum) == (51, 12, 28.0)
+    count = [s for s in bit_signals(Feedback) if s.field == "count"]
+    assert [(s.start, s.length, s.signed) for s in count] == [
+        (15, 8, False),
+        (23, 8, True),
+    ]  # (big-endian signals start at their MSB)

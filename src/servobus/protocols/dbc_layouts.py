@@ -51,6 +51,7 @@ from servobus.protocols._layout import (
 )
 from servobus.protocols._message import Command
 from servobus.protocols._special import SpecialZero
+from servobus.protocols.bits import BitField, BitLayout
 
 __all__ = [
     "CONFIG_FIELDS",
@@ -65,6 +66,7 @@ __all__ = [
     "Mux",
     "ResultByte",
     "SignalSpec",
+    "bit_signals",
     "dbc_name",
     "enum_choices",
     "fields_layout",
@@ -384,10 +386,42 @@ def packed_signals(packer: Packer, message: type) -> tuple[SignalSpec, ...]:
     fields = _packed_fields(message)
     if len(fields) != len(layout.fields):
         raise ValueError(f"{message.__name__} has {len(fields)} fields, {layout.name} {len(layout.fields)}")
+    return _code_signals(
+        zip(fields, packer.scales, layout.bits, _bit_positions(layout, packer.stride), strict=True)
+    )
+
+
+def bit_signals(message: type[BitLayout], model: Any = None) -> tuple[SignalSpec, ...]:
+    """The signals of a :class:`~servobus.protocols.bits.BitLayout` payload, from its declaration:
+    each field's bits, and its scale for ``model`` (None: the class's default model). Constant bits
+    (a payload's identity) are no signal. What :func:`packed_signals` gives a C-core packer's frame."""
+    if model is None:
+        model = message.default_model()
+    hints = typing.get_type_hints(message)
+    rows = []
+    for spec in message.FIELDS:
+        if not isinstance(spec, BitField):
+            continue
+        scale = spec.scale_for(model)
+        width = spec.width
+        bits = -width if spec.code_range(scale)[0] < 0 else width
+        # (the code's bits, least significant first, as (byte, bit) of the payload)
+        positions = tuple(
+            ((o + w - 1 - j) // 8, 7 - (o + w - 1 - j) % 8)
+            for o, w in reversed(spec.pieces)
+            for j in range(w)
+        )
+        rows.append(((spec.name, hints.get(spec.name, spec.kind)), scale, bits, positions))
+    return _code_signals(rows)
+
+
+def _code_signals(
+    rows: Iterable[tuple[tuple[str, Any], FieldScale, int, Sequence[tuple[int, int]]]],
+) -> tuple[SignalSpec, ...]:
+    """One signal per field (per bit run, for a field split over the frame) of ``rows``: a field's
+    name and type, its scale, its width (negative: signed) and where each bit of its code lands."""
     signals: list[SignalSpec] = []
-    for (name, kind), scale, bits, positions in zip(
-        fields, packer.scales, layout.bits, _bit_positions(layout, packer.stride), strict=True
-    ):
+    for (name, kind), scale, bits, positions in rows:
         factor = scale.span / scale.codes
         cmin, cmax = _code_range(bits)
         choices: tuple[tuple[int, str], ...] = ()

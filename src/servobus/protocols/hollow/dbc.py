@@ -1,11 +1,11 @@
 """The hollow DBC part (``FAMILY.part("dbc")``): its frames are C-core bit layouts, not field tables.
 
 Per motor its requests on the motor id and one reply message on the host id, in one CAN mode (option
-``can_mode``: ``normal``, ``extended`` or ``fd``; they share the identifiers): the C core's packers of
-the motor model (``hollow.model.packers``) each frame's class names as its ``PACKER``, with its
-``FIELDS`` and ``SIZE``: ``Setpoint``/``NormalReply`` (normal mode), ``IncrementalSetpoint``/
-``ExtendedReply`` (extended mode), ``FdCommand``/``FdReply`` (CAN FD, 16 bytes); bit positions from
-:func:`servobus.protocols.dbc.packed_signals`. The extended-id frames (CAN
+``can_mode``: ``normal``, ``extended`` or ``fd``; they share the identifiers): each frame's class
+declares its bits and scales (``FIELDS``, ``SIZE``: a :class:`~servobus.protocols.bits.BitLayout`,
+as a plug-in's would), read for the motor model by :func:`servobus.protocols.dbc.bit_signals`:
+``Setpoint``/``NormalReply`` (normal mode), ``IncrementalSetpoint``/``ExtendedReply`` (extended
+mode), ``FdCommand``/``FdReply`` (CAN FD, 16 bytes). The extended-id frames (CAN
 mode switch, PI multiplier) are laid out in their classes' code; :func:`hollow_config` states them.
 Options: ``model`` (a ``HollowModel`` or a name of ``hollow.MODELS``), ``host_id`` (default 100).
 """
@@ -25,12 +25,11 @@ from servobus.protocols.dbc import (
     MessageSpec,
     Mux,
     SignalSpec,
+    bit_signals,
     enum_choices,
-    packed_signals,
 )
 from servobus.protocols.hollow import CanMode, PiGain
 from servobus.protocols.hollow.ids import check_host_id, check_motor_id
-from servobus.protocols.hollow.model import packers
 
 __all__ = ["CAN_MODES", "DBC", "hollow_config"]
 
@@ -95,7 +94,6 @@ def _describe(query: DbcQuery) -> Described:
         check_motor_id(motor_id)
     if host in ids:
         raise ValueError(f"motor id {host} is the host id the replies go to: give another --host-id")
-    p = packers(model)
     left_out = [
         f"RS-485 converter frames (transparent, Modbus RTU, configuration: {', '.join(_serial_only())}): "
         "serial frames, not CAN",
@@ -111,11 +109,8 @@ def _describe(query: DbcQuery) -> Described:
             "high half DATA[6..7]), so it is two signals whose values add up to it (position_deg_b0 + "
             "position_deg_b16)"
         )
-    # Each frame: its message name, and its class's declared packer (PACKER), fields and SIZE.
-    request, reply = (
-        (name, cls.SIZE, packed_signals(getattr(p, cls.PACKER), cls), cls.__name__)
-        for name, cls in _FRAMES[mode]
-    )
+    # Each frame: its message name, and its class's declared fields and SIZE.
+    request, reply = ((name, cls.SIZE, bit_signals(cls, model), cls.__name__) for name, cls in _FRAMES[mode])
     others = [m for m in CAN_MODES if m != mode]
     left_out.append(
         f"the {' and '.join(others)} frames: they use the same identifiers (the motor id for requests, the "
