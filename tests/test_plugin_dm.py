@@ -489,6 +489,12 @@ def test_servobus_dbc_family_dm(dm: ModuleType, tmp_path: Path, capsys: pytest.C
     decoded = db.decode_message(0x02, codec.encode(point).data)
     sent = dm.FAMILY.decode_request(2, codec.encode(point).data, model="DM8009")
     assert decoded == pytest.approx({k: getattr(sent, k) for k in decoded})
+    # the refresh's 16-bit little-endian id: two signals (bit_signals splits a field over bytes into
+    # runs whose values add up to it)
+    assert db.decode_message(0x7FF, codec.encode(dm.RefreshState()).data) == {
+        "motor_id_b0": 2,
+        "motor_id_b8": 0,
+    }
     feedback = bytes.fromhex("12 FF FF 00 0F FF 29 25")
     assert db.decode_message(0x12, feedback, decode_choices=False) == pytest.approx(
         {

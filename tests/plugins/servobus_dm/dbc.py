@@ -1,14 +1,13 @@
 """The DM-J family's DBC part (``FAMILY.part("dbc")``): its frames are bit fields, not byte layouts.
 
 Per motor: the MIT set-point on the motor's id and its feedback on id + 0x10; once: the refresh on
-0x7FF. Each signal is a declared bit field of the frame's class (``FIELDS``): big-endian, at its
-offset and width, scaled over the range of the motor model (option ``model``, a name of
+0x7FF. The signals are the frame classes' declared bit fields (:func:`bit_signals` of their
+``FIELDS``), scaled over the ranges of the motor model (option ``model``, a name of
 ``servobus_dm.MODELS``; default DM4310).
 """
 
 from __future__ import annotations
 
-from servobus.protocols.authoring import BitField, BitLayout, le
 from servobus.protocols.dbc import (
     DbcFamily,
     DbcOption,
@@ -16,56 +15,13 @@ from servobus.protocols.dbc import (
     Described,
     Layout,
     MessageSpec,
-    SignalSpec,
-    enum_choices,
+    bit_signals,
 )
 from servobus_dm.codec import FEEDBACK_OFFSET, REFRESH_ID, request_id
 from servobus_dm.messages import Feedback, MitControl, RefreshState, Revision
-from servobus_dm.models import DmModel, find_model
+from servobus_dm.models import find_model
 
-__all__ = ["DBC", "bit_signals"]
-
-_UNITS = (("_rad_s", "rad/s"), ("_rad", "rad"), ("_nm", "N.m"), ("_c", "degC"))
-
-
-def bit_signals(cls: type[BitLayout], model: DmModel) -> tuple[SignalSpec, ...]:
-    """The signals of ``cls``'s declared fields (constant bits are not signals), scaled by ``model``:
-    a field of one run of bits is big-endian (a DBC start bit is its most significant bit), one of
-    whole little-endian bytes (:func:`~servobus.protocols.bits.le`) little-endian.
-
-    Raises:
-        ValueError: a field split otherwise (this family has none).
-    """
-    signals = []
-    for spec in cls.FIELDS:
-        if not isinstance(spec, BitField):
-            continue
-        unit = next((u for suffix, u in _UNITS if spec.name.endswith(suffix)), "")
-        scale = spec.scale_for(model)
-        choices = enum_choices(spec.kind) if spec.kind not in (float, int, bool) else ()
-        if len(spec.pieces) == 1:
-            ((offset, width),) = spec.pieces
-            start, order = (offset // 8) * 8 + 7 - offset % 8, "big_endian"
-        elif spec.pieces == le(spec.pieces[-1][0] // 8, len(spec.pieces)):
-            start, width, order = spec.pieces[-1][0], spec.width, "little_endian"
-        else:
-            raise ValueError(f"{cls.__name__}.{spec.name}: bits {spec.pieces} are no DBC signal")
-        signals.append(
-            SignalSpec(
-                spec.name,
-                start,
-                width,
-                order,  # type: ignore[arg-type]
-                signed=scale.lo < scale.origin,
-                scale=scale.span / scale.codes,
-                offset=scale.origin,
-                choices=choices,
-                minimum=scale.lo,
-                maximum=scale.hi,
-                unit=unit,
-            )
-        )
-    return tuple(signals)
+__all__ = ["DBC"]
 
 
 def _describe(query: DbcQuery) -> Described:
