@@ -451,6 +451,21 @@ def test_servobus_refuses_what_a_dm_motor_cannot_do_in_one_line(
     assert "servobus mit --kp 0 --kd 0 --torque-ff-nm" in err
 
 
+def test_servobus_zero_clear_errors_off_and_monitor_on_dm_motors(
+    dm: ModuleType, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (zeroed,) = _json(capsys, ["zero", "-f", "dm", "--sim", "1", "--yes", "--json"])
+    assert zeroed[0]["sent"] == ["Disable", "SaveZero"]
+    (cleared,) = _json(capsys, ["clear-errors", "-f", "dm", "--sim", "1", "--json"])
+    assert cleared[0]["sent"] == ["ClearError"]
+    (off,) = _json(capsys, ["off", "-f", "dm", "--sim", "2", "--json"])
+    assert [(r["id"], r["sent"]) for r in off] == [(1, ["Disable"]), (2, ["Disable"])]
+    samples = _json(
+        capsys, ["monitor", "-f", "dm", "--sim", "2", "--rate-hz", "20", "--duration", "0.2", "--json"]
+    )
+    assert {r["id"] for r in samples} == {1, 2} and len(samples) >= 4
+
+
 def test_servobus_demo_runs_simulated_dm_motors(dm: ModuleType, capsys: pytest.CaptureFixture[str]) -> None:
     (summary,) = _json(
         capsys, ["demo", "-f", "dm", "--motors", "2", "--duration", "0.5", "--hz", "200", "--json"]

@@ -69,6 +69,7 @@ CLI = CliFamily(
         "speed": _enabled(_speed),
         "zero": Op(
             first=lambda codec, v: (Disable(), SaveZero()),
+            rom=True,  # a flash write: asked first
             note="the zero is kept in flash; the motor was disabled for it",
         ),
         "clear-errors": once(lambda codec, v: ClearError(), note="the motor is disabled: enable it to drive"),
