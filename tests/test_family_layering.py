@@ -36,6 +36,7 @@ BLIND = [
     "protocols/cli.py",
     "protocols/dbc.py",
     "protocols/dbc_layouts.py",
+    "protocols/dbc_packed.py",
     "protocols/_calls.py",
 ]
 #: keyword arguments whose strings are documentation (click's and argparse's)

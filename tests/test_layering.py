@@ -163,7 +163,8 @@ LAYERS: dict[str, list[str]] = {
         "servobus.diagnosis",  # (what the bus saw instead of a reply: sans-IO, asks the registry)
     ],
     "transports": ["servobus.transports"],
-    "sim": ["servobus.sim", "servobus.protocols.<family>.sim"],
+    # (servobus.authoring: everything a plug-in family writes with, the simulator's contract too)
+    "sim": ["servobus.sim", "servobus.protocols.<family>.sim", "servobus.authoring"],
     "sim-front": [
         "servobus.sim.attach",
         "servobus.sim.pty",

@@ -39,7 +39,6 @@ from servobus.protocols.dbc_layouts import (
     Mux,
     ResultByte,
     SignalSpec,
-    bit_signals,
     dbc_name,
     enum_choices,
     fields_layout,
@@ -48,11 +47,11 @@ from servobus.protocols.dbc_layouts import (
     le_signal,
     message_fields,
     muxed,
-    packed_signals,
     reply_keys,
     request_keys,
     signal_spec,
 )
+from servobus.protocols.dbc_packed import bit_signals, packed_signals
 
 __all__ = [
     "CONFIG_FIELDS",

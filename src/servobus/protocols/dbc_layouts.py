@@ -17,7 +17,8 @@ decoded by a rule of its own or holding text is left out with the reason. A C-co
 :func:`packed_signals` packs one bit of one field at a time through the C core and reads where it lands,
 so the DBC places every bit where ``servobus._core`` does. A field whose bits are not one big-endian run
 becomes one signal per run (``position_deg_b0``, ``position_deg_b16``), whose values add up to the
-field's.
+field's. Bit-packed payloads (:func:`packed_signals`, :func:`bit_signals`) are
+:mod:`servobus.protocols.dbc_packed`'s.
 
 A :class:`MessageSpec` is one identifier's message: a tree of :class:`Layout` s, multiplexed by a
 :class:`Mux` on DATA[0] (the signal :data:`MUX`) or on a parameter byte under it.
@@ -29,14 +30,12 @@ from __future__ import annotations
 
 import dataclasses
 import enum
-import functools
 import re
 import typing
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, Literal, TypeAlias
 
-from servobus.core import FieldScale, Packer
 from servobus.protocols._fields import IntField, ScaledField
 from servobus.protocols._layout import (
     BoolField,
@@ -51,7 +50,6 @@ from servobus.protocols._layout import (
 )
 from servobus.protocols._message import Command
 from servobus.protocols._special import SpecialZero
-from servobus.protocols.bits import BitField, BitLayout
 
 __all__ = [
     "CONFIG_FIELDS",
@@ -66,7 +64,6 @@ __all__ = [
     "Mux",
     "ResultByte",
     "SignalSpec",
-    "bit_signals",
     "dbc_name",
     "enum_choices",
     "fields_layout",
@@ -75,7 +72,6 @@ __all__ = [
     "le_signal",
     "message_fields",
     "muxed",
-    "packed_signals",
     "reply_keys",
     "request_keys",
     "signal_spec",
@@ -207,7 +203,7 @@ class MessageSpec:
     motor_id: int | None = None
 
 
-def _unit(name: str) -> str:
+def unit_of(name: str) -> str:
     name = re.sub(r"\[\d+\]$", "", name)  # an item of a tuple value: currents_a[0]
     return next((unit for suffix, unit in UNITS if name.endswith(suffix)), "")
 
@@ -215,10 +211,10 @@ def _unit(name: str) -> str:
 def le_signal(field: str, offset: int, size: int, **kwargs: Any) -> SignalSpec:
     """A little-endian signal of ``size`` bytes at DATA[offset], its unit from the field's name
     (``kwargs``: the other :class:`SignalSpec` attributes)."""
-    return SignalSpec(field, 8 * offset, 8 * size, unit=_unit(field), **kwargs)
+    return SignalSpec(field, 8 * offset, 8 * size, unit=unit_of(field), **kwargs)
 
 
-def _bool_choices() -> tuple[tuple[int, str], ...]:
+def bool_choices() -> tuple[tuple[int, str], ...]:
     return ((0, "False"), (1, "True"))
 
 
@@ -300,167 +296,19 @@ def signal_spec(offset: int, field: Any, name: str | None = None) -> SignalSpec 
         flags = ", ".join(f"{m.name}=0x{int(m):X}" for m in field.flags if m.name and int(m))
         return le_signal(name, offset, field.size, comment=f"flags: {flags}")
     if isinstance(field, BoolField):
-        return le_signal(name, offset, field.size, choices=_bool_choices(), minimum=0, maximum=1)
+        return le_signal(name, offset, field.size, choices=bool_choices(), minimum=0, maximum=1)
     if isinstance(field, Float32Field):
         return le_signal(name, offset, field.size, signed=True, is_float=True)
     return None  # AsciiField: text
 
 
-# ---- C-core layouts: bit positions found by packing through the C core --------------------------
-
-
-def _code_range(bits: int) -> tuple[int, int]:
-    width = abs(bits)
-    return (-(1 << (width - 1)), (1 << (width - 1)) - 1) if bits < 0 else (0, (1 << width) - 1)
-
-
-@functools.cache
-def _bit_positions(layout: Any, stride: int) -> tuple[tuple[tuple[int, int], ...], ...]:
-    """For each field of a C-core layout, the ``(byte, bit)`` each bit of its code lands on, LSB first.
-
-    Found by packing codes with one bit set (the sign bit of a signed field is its most negative code)
-    through the C core with identity scales, and reading which frame bit it set.
-    """
-    scales = [FieldScale.integer(f"probe_{k}", *_code_range(bits)) for k, bits in enumerate(layout.bits)]
-    probe = Packer(layout, scales, stride=stride)
-    fields = []
-    for k, bits in enumerate(layout.bits):
-        width = abs(bits)
-        positions = []
-        for b in range(width):
-            row = [0.0] * len(layout.bits)
-            row[k] = float(-(1 << b) if bits < 0 and b == width - 1 else 1 << b)
-            frame = probe.pack(row)
-            ones = [(i, j) for i, byte in enumerate(frame) for j in range(8) if byte >> j & 1]
-            if len(ones) != 1 or probe.unpack(frame) != tuple(row):
-                raise AssertionError(f"{layout.name} field {k} bit {b} packs to {frame.hex()}")
-            positions.append(ones[0])
-        fields.append(tuple(positions))
-    return tuple(fields)
-
-
-def _runs(positions: Sequence[tuple[int, int]]) -> list[tuple[int, int]]:
-    """``(first field bit, length)`` of each big-endian run: bit b+1 sits just above bit b (in Motorola
-    order: the next more significant bit of the byte, or bit 0 of the byte before)."""
-
-    def order(pos: tuple[int, int]) -> int:
-        return 8 * pos[0] + 7 - pos[1]
-
-    runs = []
-    first = 0
-    for b in range(1, len(positions) + 1):
-        if b == len(positions) or order(positions[b]) != order(positions[b - 1]) - 1:
-            runs.append((first, b - first))
-            first = b
-    return runs
+# ---- message fields ----------------------------------------------------------------------------
 
 
 def message_fields(message: type) -> list[tuple[str, Any]]:
     """A message class's value fields (its dataclass fields without configuration) and their types."""
     hints = typing.get_type_hints(message)
     return [(f.name, hints[f.name]) for f in dataclasses.fields(message) if f.name not in CONFIG_FIELDS]
-
-
-def _packed_fields(message: type) -> list[tuple[str, Any]]:
-    """The fields a packer carries for ``message``, with their types: its declared ``FIELDS`` (named
-    field objects in the packer's order), else its value fields (:func:`message_fields`)."""
-    declared = getattr(message, "FIELDS", ())
-    if declared and all(isinstance(getattr(f, "name", None), str) for f in declared):
-        hints = typing.get_type_hints(message)
-        return [(f.name, hints.get(f.name)) for f in declared]
-    return message_fields(message)
-
-
-def packed_signals(packer: Packer, message: type) -> tuple[SignalSpec, ...]:
-    """The signals of a C-core packer's frame, named after ``message``'s fields in the packer's order
-    (its declared ``FIELDS``, or its dataclass fields but :data:`CONFIG_FIELDS`).
-
-    Factor and offset come from each field's :class:`~servobus.core.FieldScale` (``span / codes`` and
-    ``origin``), the range from its limits and code range, choices from the message field's type (an
-    IntEnum, or bool), the bit positions from :func:`_bit_positions`.
-
-    Raises:
-        ValueError: the message's fields do not match the layout's.
-    """
-    layout = packer.layout
-    fields = _packed_fields(message)
-    if len(fields) != len(layout.fields):
-        raise ValueError(f"{message.__name__} has {len(fields)} fields, {layout.name} {len(layout.fields)}")
-    return _code_signals(
-        zip(fields, packer.scales, layout.bits, _bit_positions(layout, packer.stride), strict=True)
-    )
-
-
-def bit_signals(message: type[BitLayout], model: Any = None) -> tuple[SignalSpec, ...]:
-    """The signals of a :class:`~servobus.protocols.bits.BitLayout` payload, from its declaration:
-    each field's bits, and its scale for ``model`` (None: the class's default model). Constant bits
-    (a payload's identity) are no signal. What :func:`packed_signals` gives a C-core packer's frame."""
-    if model is None:
-        model = message.default_model()
-    hints = typing.get_type_hints(message)
-    rows = []
-    for spec in message.FIELDS:
-        if not isinstance(spec, BitField):
-            continue
-        scale = spec.scale_for(model)
-        width = spec.width
-        bits = -width if spec.code_range(scale)[0] < 0 else width
-        # (the code's bits, least significant first, as (byte, bit) of the payload)
-        positions = tuple(
-            ((o + w - 1 - j) // 8, 7 - (o + w - 1 - j) % 8)
-            for o, w in reversed(spec.pieces)
-            for j in range(w)
-        )
-        rows.append(((spec.name, hints.get(spec.name, spec.kind)), scale, bits, positions))
-    return _code_signals(rows)
-
-
-def _code_signals(
-    rows: Iterable[tuple[tuple[str, Any], FieldScale, int, Sequence[tuple[int, int]]]],
-) -> tuple[SignalSpec, ...]:
-    """One signal per field (per bit run, for a field split over the frame) of ``rows``: a field's
-    name and type, its scale, its width (negative: signed) and where each bit of its code lands."""
-    signals: list[SignalSpec] = []
-    for (name, kind), scale, bits, positions in rows:
-        factor = scale.span / scale.codes
-        cmin, cmax = _code_range(bits)
-        choices: tuple[tuple[int, str], ...] = ()
-        if kind is bool:
-            choices = _bool_choices()
-        elif isinstance(kind, type) and issubclass(kind, enum.IntEnum):
-            choices = enum_choices(kind)
-        runs = _runs(positions)
-        for first, length in runs:
-            msb = positions[first + length - 1]
-            whole = len(runs) == 1
-            signed = bits < 0 and first + length == abs(bits)
-            lo, hi = _code_range(-length if signed else length)
-            part_scale = factor * (1 << first)
-            origin = scale.origin if first == 0 else 0.0
-            comment = ""
-            if not whole:
-                comment = (
-                    f"bits {first}..{first + length - 1} of the {abs(bits)}-bit {name} code: {name} is the "
-                    "sum of its parts"
-                )
-            signals.append(
-                SignalSpec(
-                    name,
-                    8 * msb[0] + msb[1],
-                    length,
-                    "big_endian",
-                    signed=signed,
-                    scale=part_scale,
-                    offset=origin,
-                    choices=choices,
-                    minimum=max(scale.lo, cmin * factor + origin) if whole else lo * part_scale + origin,
-                    maximum=min(scale.hi, cmax * factor + origin) if whole else hi * part_scale + origin,
-                    unit=_unit(name),
-                    comment=comment,
-                    part=None if whole else first,
-                )
-            )
-    return tuple(signals)
 
 
 # ---- declared layouts -> DBC layouts ------------------------------------------------------------
