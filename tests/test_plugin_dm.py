@@ -102,6 +102,20 @@ def test_its_messages_are_declared_not_hand_encoded(dm: ModuleType) -> None:
     assert "def encode" not in source and "def decode" not in source
 
 
+def test_it_is_written_with_the_one_public_authoring_module() -> None:
+    """Every servobus name the package's hand-written modules use comes from ``servobus.authoring``
+    (the generated ``_motor.py`` imports what the generator writes)."""
+    imported = {
+        (path.name, line.split()[1])
+        for path in PACKAGE.glob("*.py")
+        if path.name != "_motor.py"
+        for line in path.read_text().splitlines()
+        if line.lstrip().startswith(("from servobus", "import servobus"))
+        and not line.split()[1].startswith("servobus_dm")
+    }
+    assert {module for _, module in imported} == {"servobus.authoring"}, imported
+
+
 # ---- the bytes ----
 
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from servobus.protocols import Family
+from servobus.authoring import Family
 from servobus_dm.codec import COMMANDS, LINKS, MOTOR_IDS, bind, broadcast, decode_reply, decode_request
 from servobus_dm.messages import (
     ClearError,

@@ -15,8 +15,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from servobus.protocols import BoundCodec, Command
-from servobus.protocols.cli import CliFamily, Make, Op, Values, once
+from servobus.authoring import BoundCodec, CliFamily, Command, Make, Op, Values, once
 from servobus_dm.messages import ClearError, Disable, Enable, MitControl, SaveZero
 
 __all__ = ["CLI", "MOVE_KD", "MOVE_KP", "SPEED_KD"]

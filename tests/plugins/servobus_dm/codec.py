@@ -23,10 +23,19 @@ import dataclasses
 from collections.abc import Hashable, Sequence
 from typing import Any
 
-from servobus.errors import ProtocolError
-from servobus.frame import Frame, classic_request
-from servobus.protocols import Broadcast, Command, FrameKind, Reply
-from servobus.protocols.authoring import CodecBase, claimant, command_classes, frame_key
+from servobus.authoring import (
+    Broadcast,
+    CodecBase,
+    Command,
+    Frame,
+    FrameKind,
+    ProtocolError,
+    Reply,
+    claimant,
+    classic_request,
+    command_classes,
+    frame_key,
+)
 from servobus_dm import messages
 from servobus_dm.messages import (
     Disable,

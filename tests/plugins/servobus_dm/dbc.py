@@ -8,12 +8,12 @@ Per motor: the MIT set-point on the motor's id and its feedback on id + 0x10; on
 
 from __future__ import annotations
 
-from servobus.protocols.dbc import (
+from servobus.authoring import (
     DbcFamily,
+    DbcLayout,
     DbcOption,
     DbcQuery,
     Described,
-    Layout,
     MessageSpec,
     bit_signals,
 )
@@ -38,7 +38,7 @@ def _describe(query: DbcQuery) -> Described:
                 f"dm_mit_{motor_id}",
                 8,
                 "request",
-                Layout(None, "", bit_signals(MitControl, model), message="MitControl"),
+                DbcLayout(None, "", bit_signals(MitControl, model), message="MitControl"),
                 ("host",),
                 f"{what} MIT set-point to motor {motor_id}",
                 motor_id=motor_id,
@@ -50,7 +50,7 @@ def _describe(query: DbcQuery) -> Described:
                 f"dm_feedback_{motor_id}",
                 8,
                 "reply",
-                Layout(None, "", bit_signals(Feedback, model), message="Feedback"),
+                DbcLayout(None, "", bit_signals(Feedback, model), message="Feedback"),
                 (f"motor_{motor_id}",),
                 f"{what} feedback of motor {motor_id}",
                 motor_id=motor_id,
@@ -62,7 +62,7 @@ def _describe(query: DbcQuery) -> Described:
             "dm_refresh",
             8,
             "request",
-            Layout(
+            DbcLayout(
                 None, "", bit_signals(RefreshState, model), constants=((2, 0xCC),), message="RefreshState"
             ),
             ("host",),

@@ -19,11 +19,17 @@ from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
-from servobus.errors import ProtocolError
-from servobus.frame import Frame
-from servobus.protocols.authoring import method_name
-from servobus.sim.device import Emission, ListeningDevice
-from servobus.sim.plant import Impedance, Off, Plant, PlantParams
+from servobus.authoring import (
+    Emission,
+    Frame,
+    Impedance,
+    ListeningDevice,
+    Off,
+    Plant,
+    PlantParams,
+    ProtocolError,
+    method_name,
+)
 from servobus_dm.codec import COMMANDS, REFRESH_ID, decode_request, feedback_id, request_id
 from servobus_dm.messages import (
     ClearError,

@@ -29,8 +29,7 @@ import enum
 from dataclasses import dataclass, field
 from typing import ClassVar, TypeVar
 
-from servobus.protocols import Command, Reply
-from servobus.protocols.authoring import BitLayout, Choice, Code, Const, Linear, le
+from servobus.authoring import BitLayout, Choice, Code, Command, Const, Linear, Reply, le
 from servobus_dm.models import DEFAULT_MODEL, KD_RANGE, KP_RANGE, DmModel
 
 __all__ = [

@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from enum import Enum
 
-from servobus.sim.family import Setup, SimFamily, SimOptions
+from servobus.authoring import Setup, SimFamily, SimOptions
 from servobus_dm.device import DEFAULT_TURNAROUND_S, DmMotor
 from servobus_dm.messages import Revision
 
