@@ -311,7 +311,8 @@ async def _drive(
             timeout_s=timeout_s,
         )
     last = {m.motor_id: await m.refresh_state() for m in motors}
-    return {"replies": replies, "last": last, "typed": all(isinstance(m, dm.FAMILY.motor()) for m in motors)}
+    typed = all(isinstance(m, dm.FAMILY.motor()) for m in motors)
+    return {"replies": replies, "last": last, "typed": typed, "metrics": bus.metrics()}
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -403,7 +404,7 @@ def test_mit_set_points_at_200_hz_through_python_can_virtual(dm: ModuleType, bac
     replies = out["replies"]
     assert len(replies) == TICKS * MOTORS
     failed = [r for r in replies if not isinstance(r, dm.Feedback)]
-    assert failed == []
+    assert failed == [], (len(failed), failed[:3], out["metrics"])
     assert all(r.state is dm.DmState.ENABLED for r in replies)
 
 
