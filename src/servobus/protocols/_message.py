@@ -28,6 +28,7 @@ __all__ = ["Command", "Message", "Reply", "construct", "decode_by_code", "requir
 
 M = TypeVar("M", bound="Message")
 R = TypeVar("R", covariant=True, default=Any)
+"""A command's reply type: ``Command[StatusReply]`` (``Command[None]``: no reply comes)."""
 
 
 class Message:

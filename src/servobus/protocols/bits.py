@@ -75,11 +75,11 @@ __all__ = [
     "le",
 ]
 
-#: where a field's bits sit: ``(offset, width)``, or its pieces ``((offset, width), ...)``, most
-#: significant first
 Bits: TypeAlias = tuple[int, int] | tuple[tuple[int, int], ...]
-#: a field's scale, or a function of the message's model returning it
+"""Where a field's bits sit: ``(offset, width)``, or its pieces ``((offset, width), ...)``, most
+significant first."""
 Scale: TypeAlias = FieldScale | Callable[[Any], FieldScale]
+"""A field's scale, or a function of the message's model returning it."""
 Limits: TypeAlias = tuple[float, float] | Callable[[Any], tuple[float, float]]
 Pieces: TypeAlias = tuple[tuple[int, int], ...]
 
