@@ -181,6 +181,8 @@ class BitField:
             x = code * scale.span / scale.codes + scale.origin
             # (a code within the field's range is data; a last-ulp excess is the arithmetic's)
             return scale.lo if x < scale.lo and code == self.code_range(scale)[0] else x
+        if scale.origin or scale.codes != scale.span:  # (an integer with an offset or a step)
+            code = round(code * scale.span / scale.codes + scale.origin)
         if isinstance(kind, type) and issubclass(kind, IntEnum):
             try:
                 return kind(code)
