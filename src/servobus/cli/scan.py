@@ -207,7 +207,10 @@ def _row(motor: Asked, reply: Reply) -> dict[str, Any]:
     row: dict[str, Any] = dict.fromkeys(COLUMNS)
     row.update(id=motor.motor_id, family=motor.codec.family, revision=motor.codec.revision.name)
     row["errors"] = fault_names(reply)
-    row["state"] = jsonable(getattr(reply, "motor_state", None))
+    state = getattr(reply, "motor_state", None)
+    if state is None and reply.FAULT_CODE is not None:  # (a code that is no fault is a state)
+        state = getattr(reply, reply.FAULT_CODE)
+    row["state"] = jsonable(state)
     return row
 
 

@@ -445,14 +445,16 @@ def fault_names(reply: Reply | None) -> list[str] | None:
     """The faults ``reply`` reports, by name: its flags (``Reply.FAULTS``), or its fault code
     (``Reply.FAULT_CODE``; a code in ``NO_FAULT_CODES`` is a state, no fault: ``[]``); None for a
     reply with neither field (the ``errors`` column of ``status`` and ``scan``)."""
-    if reply is None:
-        return None
-    if reply.FAULTS is not None:
-        flags = getattr(reply, reply.FAULTS)
+    faults = getattr(reply, "FAULTS", None)
+    if faults is not None:
+        flags = getattr(reply, faults)
+        if not isinstance(flags, enum.Flag):  # (flags declared as a plain int)
+            return [f"0x{int(flags):X}"] if flags else []
         return [m.name for m in type(flags) if m.value and m in flags and m.name]
-    if reply.FAULT_CODE is not None:
-        code = getattr(reply, reply.FAULT_CODE)
-        if code in reply.NO_FAULT_CODES:
+    code_field = getattr(reply, "FAULT_CODE", None)
+    if code_field is not None:
+        code = getattr(reply, code_field)
+        if code in getattr(reply, "NO_FAULT_CODES", ()):
             return []
         return [code.name if isinstance(code, enum.Enum) else f"code {int(code)}"]
     return None
