@@ -25,7 +25,7 @@ from servobus_toy import FAMILY as TOY
 from servobus_toy.cli import CLI as TOY_CLI
 from servobus_toy.codec import ToyCodec
 from servobus_toy.device import DEFAULT_TURNAROUND_S, ToyMotor
-from servobus_toy.messages import Revision, StateReply, ToyFaults, ToyReply
+from servobus_toy.messages import ReadState, Revision, SpeedLimitEcho, StateReply, ToyFaults, ToyReply
 
 from servobus.errors import ProtocolError
 from servobus.frame import Frame
@@ -33,7 +33,20 @@ from servobus.protocols import Reply
 from servobus.protocols.authoring import OpenEnumField, ScaledField
 from servobus.sim.family import Setup, SimFamily, SimOptions
 
-__all__ = ["CLI", "FAMILY", "SIM", "CodedState", "DmState", "TwinCodec", "TwinMotor", "installed"]
+__all__ = [
+    "CLI",
+    "FAMILY",
+    "SIM",
+    "CodedState",
+    "DmState",
+    "ReadState",
+    "SpeedLimitEcho",
+    "StateReply",
+    "ToyFaults",
+    "TwinCodec",
+    "TwinMotor",
+    "installed",
+]
 
 MOTOR_IDS = range(1, 33)
 REQUEST_BASE = 0x600

@@ -8,23 +8,20 @@ The colliding family is ``twin`` (tests/cli/_twin.py: the toy plug-in with Damia
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import math
-import threading
-import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator
 from importlib.metadata import EntryPoint
 from types import ModuleType
 from typing import Any
 
-import anyio
 import click
 import pytest
 
 import servobus.cli._connect as connect
 import servobus.cli.setpoints as setpoints
 from cli._bus_cli import one_line, run, run_json
+from cli._virtual import served_on_virtual
 from servobus import _plugins
 from servobus.cli._demo_parts import MAX_SPEED_DPS, MIT_KD, MIT_KP, parts
 from servobus.cli.plugin import CliFamily, sharing_rounds
@@ -85,36 +82,6 @@ def test_a_family_whose_reply_ids_collide_scans_1_32_with_sim(
     monkeypatch.setattr(connect, "sim_devices", _twins())
     err = one_line(capsys, ["scan", "--family", "twin", "--sim", "1"], 1)
     assert "no twin motor answered on ids 1-32" in err
-
-
-@contextlib.contextmanager
-def served_on_virtual(devices: Sequence[Any]) -> Iterator[str]:
-    """``devices`` on a python-can virtual channel (named), served from a thread."""
-    import can
-
-    from servobus.sim.attach import serve_python_can
-    from servobus.sim.network import SimCanNetwork
-
-    channel = f"family-declares-{time.monotonic_ns()}"
-    network = SimCanNetwork(list(devices))
-    side = can.Bus(interface="virtual", channel=channel)
-    stop = threading.Event()
-
-    async def serve() -> None:
-        async with anyio.create_task_group() as group:
-            group.start_soon(lambda: serve_python_can(network, side))
-            while not stop.is_set():
-                await anyio.sleep(0.01)
-            group.cancel_scope.cancel()
-
-    thread = threading.Thread(target=anyio.run, args=(serve,), daemon=True)
-    thread.start()
-    try:
-        yield channel
-    finally:
-        stop.set()
-        thread.join(5)
-        side.shutdown()
 
 
 def test_a_family_whose_reply_ids_collide_scans_1_32_through_python_can_virtual(
