@@ -113,3 +113,11 @@ def test_a_fault_code_reaches_status_through_python_can_virtual(
         assert rows[0]["errors"] == []
         rows = run_json(capsys, ["status", *bus, "--ids", "17"])
         assert rows[0]["errors"] == ["UNDER_VOLTAGE"]
+
+
+def test_the_dashboard_names_a_fault_code(twin: ModuleType) -> None:
+    from servobus.dashboard._board import _fault_names
+
+    assert _fault_names(MotorFault("m", code=twin.DmState.OVERLOAD, motor_id=1)) == ["OVERLOAD"]
+    assert _fault_names(MotorFault("m", flags=ma.ErrorFlags.OVER_VOLTAGE, motor_id=1)) == ["OVER_VOLTAGE"]
+    assert _fault_names(MotorFault("m", flags=None, motor_id=1)) == []  # (an event's: no names)
