@@ -65,14 +65,13 @@ SECOND_TIMEOUT_S = 0.3
 @json_option
 def scan(conn: Connection, remote: Remote | None, as_json: bool) -> None:
     """Probe ids 1-32 (or the ids the family's CLI part declares, those of them the family allows; or
-    --ids) for motors of the family; list id, revision, model, firmware date, state and error flags of
-    those that answer. (With --sim N the simulated motors are the first N ids of --ids, or 1..N; with
-    --remote, the motors the bridge serves on the bus.)
+    --ids) for motors of the family; list id, revision, model, firmware date, state and errors (flags,
+    or a fault code) of those that answer. (With --sim N the simulated motors are the first N ids of
+    --ids, or 1..N; with --remote, the motors the bridge serves on the bus.)
 
-    The ids are probed in rounds of motors whose frames cannot be told apart from each other's: two
-    ids whose request or reply identifiers collide (Damiao: motor 1's feedback 0x11 is motor 17's
-    command id) are never probed at once, so each round is a set of motors that could share a bus,
-    and --ids 1-32 works for such a family too.
+    The ids are probed in rounds: two ids whose request or reply identifiers collide (Damiao: motor
+    1's feedback 0x11 is motor 17's command id) are never probed at once, each round being motors
+    that could share a bus, so --ids 1-32 works for such a family too.
     """
     if remote is not None:
         rows = run(_scan_remote(conn, remote))

@@ -270,7 +270,7 @@ _keep = click.option(
 @click.option(
     "--no-speed-limit",
     is_flag=True,
-    help="Send the family's 'no limit' value, even with --max-speed-dps (as without it).",
+    help="Send the family's 'no limit' value (None) even where --max-speed-dps or --limits gives a speed.",
 )
 @click.option("--relative", is_flag=True, help="Move by --angle-deg from where the motor is.")
 @click.option(
