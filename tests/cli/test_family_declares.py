@@ -156,6 +156,18 @@ def test_the_demo_drives_a_family_without_move_through_mit(
     assert summary["errors"] == 0 and summary["ticks"] > 0 and summary["pairs"] == 2 * summary["ticks"]
 
 
+def test_the_demo_puts_on_a_bus_only_motors_that_can_share_it(twin: ModuleType) -> None:
+    """Each simulated bus's ids: 1..N, unless some collide (the twin's 17 is 1's reply id)."""
+    from servobus.cli._demo_parts import Parts
+
+    chosen = parts("myactuator")
+    assert chosen.ids(32) == list(range(1, 33))
+    twins = Parts("twin", twin.SIM, chosen.op, chosen.values)
+    assert twins.ids(3) == [1, 2, 3] and twins.ids(16) == list(range(1, 17))
+    with pytest.raises(click.BadParameter, match="17 twin motors on one bus: at most 16 can share one"):
+        twins.ids(17)
+
+
 def test_the_demo_keeps_its_own_speed_for_a_move() -> None:
     chosen = parts("myactuator")
     assert chosen.uses == "move" and chosen.values(10.0)["max_speed_dps"] == MAX_SPEED_DPS

@@ -14,6 +14,7 @@ import click
 
 from servobus.bus import Motor
 from servobus.cli._connect import sim_part
+from servobus.cli.plugin import sharing_rounds
 from servobus.protocols import Command, get_family
 from servobus.sim.family import SimFamily, SimOptions
 
@@ -50,6 +51,25 @@ class Parts:
         values = self.values(angle_deg)
         again = self.op.repeat(motor.codec, values) if self.op.repeat is not None else None
         return again[0] if again else self.op.first(motor.codec, values)[-1]
+
+    def ids(self, count: int) -> list[int]:
+        """The ids of ``count`` motors on one simulated bus: the family's first ids from 1 that can
+        share a bus (:func:`~servobus.protocols.check_bus`): 1..count, unless some ids' frames
+        collide (Damiao: motor 1's feedback id is motor 17's command id, so 1-16, then 33..).
+
+        Raises:
+            click.BadParameter: the family has fewer such ids (exit 2).
+        """
+        family = get_family(self.family)
+        codecs = [family.bind(i) for i in family.motor_ids if i >= 1]
+        chosen = sharing_rounds(codecs)[0][:count] if codecs else []
+        if len(chosen) < count:
+            raise click.BadParameter(
+                f"{count} {self.family} motors on one bus: at most {len(chosen)} can share one; "
+                "give more --buses",
+                param_hint="--motors",
+            )
+        return [c.motor_id for c in chosen]
 
     @property
     def how(self) -> str:

@@ -46,8 +46,8 @@ from servobus.cli._demo_report import Layout, Summary, layout, live_view, summar
 from servobus.cli._motors import BACKENDS, run, stop_scope
 from servobus.cli._output import SETTINGS, FloatRange, console, emit_json, examples, json_option
 from servobus.cli._page import DemoPage
+from servobus.cli.plugin import STATUS_SOURCES
 from servobus.protocols import DEFAULT_FAMILY, Command, get_family
-from servobus.protocols.cli import STATUS_SOURCES
 from servobus.sim.family import SimOptions
 
 try:
@@ -158,6 +158,7 @@ def demo(
     if as_json and duration is None:
         raise click.UsageError("--json prints the summary of a run: give --duration")
     plan = layout(hz, motors, buses, parts.sim.turnaround_s)
+    parts.ids(max(plan.per_bus))  # (refused here, in one line, where the family has too few)
     page = DemoPage.listen(dashboard_at) if dashboard_at is not None else None
     with page.sock if page is not None else contextlib.nullcontext():
         if page is not None:
@@ -261,7 +262,7 @@ async def _run(
 
         stack.callback(noted)  # (first in, so it runs after every Bus was left)
         for b, count in enumerate(plan.per_bus):
-            ids = range(1, count + 1)
+            ids = parts.ids(count)  # (1..count where the family's ids never collide)
             setup = parts.sim.devices(ids, revision, SimOptions())
             transport = SimTransport(devices=setup.can_devices, name=f"sim{b + 1}")
             sim_clock.wrap(transport.network)

@@ -236,15 +236,22 @@ def sharing_rounds(codecs: Sequence[BoundCodec]) -> list[list[BoundCodec]]:
     rounds: list[list[BoundCodec]] = []
     for codec in codecs:
         for members in rounds:
-            try:
-                check_bus([*members, codec])
-            except ValueError:
-                continue
-            members.append(codec)
-            break
+            if _shares(members, codec):
+                members.append(codec)
+                break
         else:
             rounds.append([codec])
     return rounds
+
+
+def _shares(members: Sequence[BoundCodec], codec: BoundCodec) -> bool:
+    """Whether ``codec`` can join ``members`` on a bus (check_bus is pairwise: the new pairs only)."""
+    try:
+        for member in members:
+            check_bus([member, codec])
+    except ValueError:
+        return False
+    return True
 
 
 # ---- config ----
