@@ -6,7 +6,8 @@
      │    ├── MotorOffline  cycle(): the motor is offline, the tick did not wait for it
      │    └── MotorBusy     cycle(): its last reply is still due, this tick's command was not sent
      ├── MotorStreaming     the motor streams (0xB6) and answers no other request meanwhile
-     ├── MotorFault         the motor reported error flags (decoded), or an event frame (0xF1 trip)
+     ├── MotorFault         the motor reported error flags or an error code (decoded), or an event
+     │                      frame (0xF1 trip)
      ├── MotorNotExecuted   the motor echoed the request's bytes instead of executing it
      └── TransportError     adapter lost, bus-off, port closed (raised from its cause)
           ├── SendQueueFull  (servobus.transports) a send found the queue (or the adapter's) full
@@ -119,18 +120,33 @@ class MotorStreaming(ServobusError):
 
 
 class MotorFault(ServobusError):
-    """A motor reported error flags, or a frame that tells of a fault (MyActuator's 0xF1: its own
-    communication watchdog, 0xB3, cut the output).
+    """A motor reported error flags or an error code, or a frame that tells of a fault (MyActuator's
+    0xF1: its own communication watchdog, 0xB3, cut the output).
+
+    A family's reply declares which it carries (:class:`~servobus.protocols.Reply`): ``FAULTS``
+    names a field of flags (an ``enum.Flag``: several faults at once, 0 none), ``FAULT_CODE`` a
+    field of one code (an ``enum.IntEnum`` or an int: one state or fault at a time, the codes in
+    ``NO_FAULT_CODES`` being no fault: Damiao's 0 disabled and 1 enabled).
 
     Attributes:
         flags: the decoded flags (the family's flag enum; unknown bits kept); None for a fault told
-            by an event frame, which carries no flags.
+            by a code or by an event frame, which carries no flags.
+        code: the fault code (the family's IntEnum member, or the int where the enum has no member
+            for it); None for a fault told by flags or by an event frame.
         motor_id: the motor that reported them.
     """
 
-    def __init__(self, message: str, *, flags: enum.Flag | None, motor_id: int) -> None:
+    def __init__(
+        self,
+        message: str,
+        *,
+        flags: enum.Flag | None = None,
+        motor_id: int,
+        code: int | None = None,
+    ) -> None:
         super().__init__(message)
         self.flags = flags
+        self.code = code
         self.motor_id = motor_id
 
 

@@ -288,3 +288,14 @@ def test_the_dbc_signals_of_a_plug_in_s_declaration() -> None:
         (15, 8, False),
         (23, 8, True),
     ]  # (big-endian signals start at their MSB)
+
+
+def test_hollow_s_special_commands_are_declared_by_their_constants() -> None:
+    for command, code in ((ho.Start(), 0xFC), (ho.Stop(), 0xFD), (ho.SetZero(), 0xFE)):
+        assert isinstance(command, BitLayout)
+        assert command.encode() == b"\xff" * 7 + bytes([code])
+        assert all(isinstance(spec, Const) for spec in command.FIELDS)
+    assert ho.SelectMode(mode=ho.ControlMode.POSITION).encode() == b"\xff" * 7 + b"\xfb"
+    assert claimant([ho.Start, ho.Stop, ho.SetZero], b"\xff" * 7 + b"\xfd") is ho.Stop
+    with pytest.raises(ProtocolError, match="is not Start"):
+        ho.Start.decode(b"\xff" * 7 + b"\xfd")

@@ -9,6 +9,7 @@ this module imports nothing of the bus package above it."""
 
 from __future__ import annotations
 
+import enum
 import logging
 from collections.abc import Callable, Iterable
 from typing import Any, Protocol
@@ -115,6 +116,8 @@ class Delivery:
                 self.events.executed(record)
             if reply.FAULTS is not None:
                 self._note_faults(motor, getattr(reply, reply.FAULTS))
+            elif reply.FAULT_CODE is not None:
+                self._note_code(motor, getattr(reply, reply.FAULT_CODE), reply.NO_FAULT_CODES)
             if record.ending and got.request is None and got.traffic is not _STREAM:
                 self.stream_goes_on(record, got.frame, now)
             for watcher in record.watchers:
@@ -162,6 +165,15 @@ class Delivery:
             motor.fault = None
         elif motor.fault is None or motor.fault.flags != flags:
             motor.fault = MotorFault(f"{motor!r} reports {flags!r}", flags=flags, motor_id=motor.motor_id)
+            logger.warning("%s: %s", self.name, motor.fault)
+
+    def _note_code(self, motor: Any, code: int, no_fault: frozenset[int]) -> None:
+        """A reply's error code (``Reply.FAULT_CODE``): a fault unless one of ``no_fault`` (a state)."""
+        if code in no_fault:
+            motor.fault = None
+        elif motor.fault is None or motor.fault.code != code:
+            said = f"{type(code).__name__}.{code.name}" if isinstance(code, enum.Enum) else f"code {code}"
+            motor.fault = MotorFault(f"{motor!r} reports {said}", code=code, motor_id=motor.motor_id)
             logger.warning("%s: %s", self.name, motor.fault)
 
     def stream_goes_on(self, record: MotorRecord, frame: Frame, now: float) -> None:

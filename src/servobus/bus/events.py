@@ -77,8 +77,8 @@ class MotorEvents:
             return
         self.tripped.discard(record)
         motor = record.motor
-        if motor.fault is not None and motor.fault.flags is None:
-            motor.fault = None
+        if motor.fault is not None and motor.fault.flags is None and motor.fault.code is None:
+            motor.fault = None  # (the event's: a fault told by flags or a code stays until they clear)
         logger.info("%s: %r executes commands again", self.name, motor)
 
     def not_executed(self, got: Received, record: MotorRecord | None) -> None:

@@ -22,7 +22,7 @@ import click
 from servobus.cli._connect import Connection, open_bus
 from servobus.cli._output import confirm, refused
 from servobus.cli._remote import Remote, open_remote
-from servobus.cli.plugin import STATUS_SOURCES, Op
+from servobus.cli.plugin import STATUS_SOURCES, Op, fault_names
 from servobus.errors import ServobusError
 from servobus.limits import LimitBook, LimitExceeded, Limits, safe_commands
 from servobus.protocols import Command, Reply, get_family
@@ -299,10 +299,8 @@ def status_of(replies: Sequence[Reply | None]) -> dict[str, Any]:
     """The status columns found in ``replies`` (a later reply fills only what earlier ones left), in
     the columns' units (radians converted to degrees).
 
-    ``errors`` is the reply's own fault field (``Reply.FAULTS``), as a list of flag names.
+    ``errors`` is the reply's own fault field (``Reply.FAULTS`` or ``FAULT_CODE``), as a list of names.
     """
-    from servobus.cli._output import jsonable
-
     out: dict[str, Any] = dict.fromkeys(STATUS_COLUMNS)
     for reply in replies:
         if reply is None:
@@ -315,9 +313,8 @@ def status_of(replies: Sequence[Reply | None]) -> dict[str, Any]:
                 if isinstance(value, int | float) and not isinstance(value, bool):
                     out[column] = value * factor if factor != 1.0 else value
                     break
-        faults = getattr(reply, "FAULTS", None)
-        if faults is not None and out["errors"] is None:
-            out["errors"] = jsonable(getattr(reply, faults))
+        if out["errors"] is None:  # its flags, or its fault code (Reply.FAULTS, FAULT_CODE)
+            out["errors"] = fault_names(reply)
     return out
 
 

@@ -1,20 +1,20 @@
 """``servobus demo``: simulated motors following smooth trajectories at 1 kHz, no hardware.
 
-The motors are ``--family``'s (default: the registry's first, MyActuator), asked of the family
-itself: its simulator part (``FAMILY.part("sim")``) builds them and says their turnaround, its
-command-line part's ``move`` (``FAMILY.part("cli")``) makes the absolute position set-point (0xA4
-for MyActuator). Each simulated 1 Mbit/s CAN bus is a :class:`~servobus.transports.sim.SimTransport`
-with its motors, driven by its own :class:`~servobus.bus.Bus`. Every motor's move is first started
-as the family starts one (hollow: its mode, the set-point, Start; a ``Bus.cycle`` per step), then one
-pipelined :class:`~servobus.loop.Loop` drives every bus: at each tick every motor is given its next
-set-point along a sine (``tick.command``; it leaves at the next tick's deadline, every bus's batch
-at once), and nothing waits for the replies: the body sees each motor's latest state and its age
-(``tick.state``). A live view shows each motor's position, speed, current, temperature and state age
-with the achieved rate, missed ticks, overruns, bus load and errors; with ``--duration`` the demo
-runs without it and prints a summary: the rate, the host's CPU per tick with the simulator's share
-apart, the state's age, the latency and the errors, and, when the rate was not kept, why. At the end
-of ``--duration`` the demo waits (a few ticks at most) for the replies to the last set-points, so
-that every tick counted was answered.
+The motors are ``--family``'s (default: the registry's first, MyActuator), asked of the family itself:
+its simulator part (``FAMILY.part("sim")``) builds them and says their turnaround, its command-line
+part's ``move`` (``FAMILY.part("cli")``) makes the absolute position set-point (0xA4 for MyActuator; a
+family without ``move``: its ``mit`` set-point, :mod:`servobus.cli._demo_parts`). Each simulated 1
+Mbit/s CAN bus is a :class:`~servobus.transports.sim.SimTransport` with its motors, driven by its own
+:class:`~servobus.bus.Bus`. Every motor's move is first started as the family starts one (hollow: its
+mode, the set-point, Start; a ``Bus.cycle`` per step), then one pipelined :class:`~servobus.loop.Loop`
+drives every bus: at each tick every motor is given its next set-point along a sine (``tick.command``;
+it leaves at the next tick's deadline, every bus's batch at once), and nothing waits for the replies:
+the body sees each motor's latest state and its age (``tick.state``). A live view shows each motor's
+position, speed, current, temperature and state age with the achieved rate, missed ticks, overruns, bus
+load and errors; with ``--duration`` the demo runs without it and prints a summary: the rate, the host's
+CPU per tick with the simulator's share apart, the state's age, the latency and the errors, and, when
+the rate was not kept, why. At the end of ``--duration`` the demo waits (a few ticks at most) for the
+replies to the last set-points, so that every tick counted was answered.
 
 Real time, one process: the simulated motors run on the same event loop as the host side, so one
 core pays for both. Ctrl-C or SIGTERM (or the end of ``--duration``) ends the loop
@@ -33,21 +33,22 @@ from __future__ import annotations
 import contextlib
 import math
 import time
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import anyio
 import click
 
 from servobus.bus import Bus, Motor
-from servobus.cli._connect import FamilyChoice, note_exit, sim_part, timeout_option
+from servobus.cli._connect import FamilyChoice, note_exit, timeout_option
+from servobus.cli._demo_parts import Parts, parts
 from servobus.cli._demo_report import Layout, Summary, layout, live_view, summary_lines
 from servobus.cli._motors import BACKENDS, run, stop_scope
 from servobus.cli._output import SETTINGS, FloatRange, console, emit_json, examples, json_option
 from servobus.cli._page import DemoPage
+from servobus.cli.plugin import STATUS_SOURCES
 from servobus.protocols import DEFAULT_FAMILY, Command, get_family
-from servobus.sim.family import SimFamily, SimOptions
+from servobus.sim.family import SimOptions
 
 try:
     import resource
@@ -55,16 +56,16 @@ except ImportError:  # (not on Windows: no preemption count there)
     resource = None  # type: ignore[assignment]
 
 if TYPE_CHECKING:
-    from servobus.cli.plugin import CliFamily, Op
     from servobus.loop import Loop, LoopMetrics
     from servobus.loop import LoopTick as LoopTick
     from servobus.metrics import Metrics
 
 __all__ = ["demo"]
 
+_parts = parts  # (the dashboard's demo motion asks for it here, with _Sine and _start)
+
 AMPLITUDE_DEG = 90.0
 PERIOD_S = 4.0
-MAX_SPEED_DPS = 500.0
 REFRESH_S = 0.25
 #: where ``--dashboard`` given bare serves (servobus.dashboard's DEFAULT_PORT: the extra is not imported
 #: unless asked)
@@ -106,7 +107,7 @@ DASHBOARD_AT = "127.0.0.1:8765"
     type=FamilyChoice(),
     default=DEFAULT_FAMILY,
     show_default=True,
-    help="Protocol family of the simulated motors (one with a simulator and a move).",
+    help="Protocol family of the simulated motors (one with a simulator, and a move or mit).",
 )
 @click.option(
     "--backend",
@@ -144,6 +145,10 @@ def demo(
     many simulated 1 Mbit/s buses as classic CAN needs for that rate, driven by one pipelined loop
     (each tick's set-points leave at the next deadline; the replies are not waited for). The summary
     gives the rate kept, the host's CPU per tick and the state's age. Ctrl-C stops the motors cleanly.
+
+    Each motor is moved by its family's move, at most 500 dps (the demo's own limit); a family
+    without a move is driven by its mit set-point (the target position, velocity 0, kp 20, kd 1);
+    one with neither is refused.
     """
     parts = _parts(family)
     if buses is not None and buses > motors:
@@ -153,6 +158,7 @@ def demo(
     if as_json and duration is None:
         raise click.UsageError("--json prints the summary of a run: give --duration")
     plan = layout(hz, motors, buses, parts.sim.turnaround_s)
+    parts.ids(max(plan.per_bus))  # (refused here, in one line, where the family has too few)
     page = DemoPage.listen(dashboard_at) if dashboard_at is not None else None
     with page.sock if page is not None else contextlib.nullcontext():
         if page is not None:
@@ -166,7 +172,7 @@ def demo(
 
 def _demo(
     plan: Layout,
-    parts: _Parts,
+    parts: Parts,
     family: str,
     duration: float | None,
     backend: str,
@@ -179,6 +185,8 @@ def _demo(
         where = f"{plan.buses} simulated CAN bus" + ("es" if plan.buses > 1 else "")
         click.echo(f"servobus demo: {plan.motors} simulated {family} motor(s) on {where}, {plan.hz:g} Hz")
         click.echo(plan.why())
+        if parts.uses != "move":
+            click.echo(f"{family} motors have no move: each follows its {parts.uses} set-point ({parts.how})")
         if (warning := plan.overload()) is not None:
             click.echo(f"warning: {warning}")
     summary = run(
@@ -190,53 +198,6 @@ def _demo(
         for line in summary_lines(summary):
             click.echo(line)
     return summary
-
-
-@dataclass(frozen=True, slots=True)
-class _Parts:
-    """What the demo asks of the family: its simulator and its ``move``."""
-
-    family: str
-    sim: SimFamily
-    move: Op
-
-    def start(self, motor: Motor, angle_deg: float) -> Sequence[Command]:
-        """What starts an absolute move to ``angle_deg`` (hollow: its mode, the set-point, Start)."""
-        return self.move.first(motor.codec, _values(angle_deg))
-
-    def setpoint(self, motor: Motor, angle_deg: float) -> Command:
-        """The absolute position set-point to ``angle_deg``, as the move resends it each tick (its
-        first command: LK's move also rereads the angle, which the demo does not)."""
-        values = _values(angle_deg)
-        again = self.move.repeat(motor.codec, values) if self.move.repeat is not None else None
-        return again[0] if again else self.move.first(motor.codec, values)[-1]
-
-
-def _values(angle_deg: float) -> dict[str, Any]:
-    return {"angle_deg": angle_deg, "max_speed_dps": MAX_SPEED_DPS, "relative": False, "max_current_a": None}
-
-
-def _parts(family: str) -> _Parts:
-    """The family's simulator and ``move``, or a one-line refusal (exit 2) saying which it lacks."""
-    try:
-        sim = sim_part(family)
-        sim.check(SimOptions())
-    except ValueError as exc:
-        raise click.BadParameter(str(exc).removeprefix("--sim: "), param_hint="--family") from None
-    try:
-        cli: CliFamily = get_family(family).part("cli")
-    except LookupError as exc:
-        raise click.BadParameter(
-            f"{exc}: the demo moves motors with its move", param_hint="--family"
-        ) from None
-    move = cli.op("move")
-    if move is None:
-        why = cli.why_not.get("move", "")
-        raise click.BadParameter(
-            f"the demo moves motors, and {family} motors have no move" + (f": {why}" if why else ""),
-            param_hint="--family",
-        )
-    return _Parts(family, sim, move)
 
 
 class _SimClock:
@@ -280,7 +241,7 @@ class _SimClock:
 
 async def _run(
     plan: Layout,
-    parts: _Parts,
+    parts: Parts,
     duration: float | None,
     *,
     live: bool,
@@ -301,7 +262,7 @@ async def _run(
 
         stack.callback(noted)  # (first in, so it runs after every Bus was left)
         for b, count in enumerate(plan.per_bus):
-            ids = range(1, count + 1)
+            ids = parts.ids(count)  # (1..count where the family's ids never collide)
             setup = parts.sim.devices(ids, revision, SimOptions())
             transport = SimTransport(devices=setup.can_devices, name=f"sim{b + 1}")
             sim_clock.wrap(transport.network)
@@ -370,7 +331,7 @@ class _Sine:
     #: angles at which two motors' set-points are compared to share a cache
     PROBES_DEG = (-45.67, 0.0, 12.34)
 
-    def __init__(self, motors: list[Motor], parts: _Parts) -> None:
+    def __init__(self, motors: list[Motor], parts: Parts) -> None:
         self.motors = motors
         self.parts = parts
         self.phases = [2 * math.pi * n / len(motors) for n in range(len(motors))]
@@ -488,8 +449,17 @@ def _answered(tick: LoopTick, motors: list[Motor], index: int) -> bool:
     return True
 
 
-#: the reply fields the live view shows, where the set-point's reply has them
+#: the status columns the live view shows (read from the reply's fields as STATUS_SOURCES says: an
+#: MIT reply's ``position_rad`` is shown in degrees), where the set-point's reply has them
 _COLUMNS = (("angle_deg", "8.2f"), ("speed_dps", "8.1f"), ("current_a", "6.2f"), ("temperature_c", ""))
+
+
+def _column(reply: Any, column: str) -> float | None:
+    for name, factor in STATUS_SOURCES[column]:
+        value = getattr(reply, name, None)
+        if isinstance(value, int | float) and not isinstance(value, bool):
+            return value * factor
+    return None
 
 
 def _rows(tick: LoopTick, sine: _Sine) -> list[tuple[str, ...]]:
@@ -499,8 +469,7 @@ def _rows(tick: LoopTick, sine: _Sine) -> list[tuple[str, ...]]:
         state = tick.state(motor)
         reply = state.reply if state is not None else None
         values = tuple(
-            "" if (value := getattr(reply, name, None)) is None else format(value, spec)
-            for name, spec in _COLUMNS
+            "" if (value := _column(reply, name)) is None else format(value, spec) for name, spec in _COLUMNS
         )
         age = "" if state is None else f"{state.age_s * 1e3:6.2f}"
         where = f"{motor.bus.name.removeprefix('bus ')}/{motor.motor_id}"

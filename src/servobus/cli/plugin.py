@@ -22,6 +22,7 @@ from servobus.protocols.cli import (
     Values,
     build,
     derived_status,
+    fault_names,
     move,
     once,
     parse_bool,
@@ -32,6 +33,7 @@ from servobus.protocols.cli import (
     safe,
     setpoint,
     setting_of,
+    sharing_rounds,
 )
 
 __all__ = [
@@ -47,6 +49,7 @@ __all__ = [
     "Values",
     "build",
     "derived_status",
+    "fault_names",
     "move",
     "once",
     "parse_bool",
@@ -57,4 +60,5 @@ __all__ = [
     "safe",
     "setpoint",
     "setting_of",
+    "sharing_rounds",
 ]

@@ -264,11 +264,14 @@ _keep = click.option(
 @click.option(
     "--max-speed-dps",
     type=FloatRange(min=0, min_open=True),
-    default=180.0,
-    show_default=True,
-    help="Speed limit of the move.",
+    help="Speed limit of the move [default: the lowest speed_dps of --limits, else none: the family's "
+    "move sends its 'no limit' (MyActuator maxSpeed 0, LK none, hollow its full speed)].",
 )
-@click.option("--no-speed-limit", is_flag=True, help="Send the family's 'no limit' value instead.")
+@click.option(
+    "--no-speed-limit",
+    is_flag=True,
+    help="Send the family's 'no limit' value (None) even where --max-speed-dps or --limits gives a speed.",
+)
 @click.option("--relative", is_flag=True, help="Move by --angle-deg from where the motor is.")
 @click.option(
     "--tolerance-deg",
@@ -286,7 +289,7 @@ def move(
     conn: Connection,
     remote: Remote | None,
     angle_deg: float,
-    max_speed_dps: float,
+    max_speed_dps: float | None,
     no_speed_limit: bool,
     relative: bool,
     tolerance_deg: float,
@@ -302,8 +305,12 @@ def move(
     and has come to rest (at most 1 dps, or 1 s after it arrived), or after --duration, or at Ctrl-C;
     the motors then stop and hold where they are. An absolute
     target is resent at --rate-hz; a relative move reads the angle, sends the increment once, and
-    its target is that angle plus the increment.
+    its target is that angle plus the increment. The move's speed is limited only where the user
+    says so: --max-speed-dps, else the lowest speed limit --limits gives the motors; without either
+    the family's move is given no limit (None).
     """
+    if max_speed_dps is None and not no_speed_limit:
+        max_speed_dps = _limits_speed(conn)
     values = {"angle_deg": angle_deg, "max_speed_dps": None if no_speed_limit else max_speed_dps}
     values["relative"] = relative
     values["max_current_a"] = max_current_a
@@ -331,6 +338,18 @@ def move(
         arrival=arrival,
         remote=remote,
     )
+
+
+def _limits_speed(conn: Connection) -> float | None:
+    """The lowest speed limit ``--limits`` gives the motors addressed (None: it gives none)."""
+    if conn.limits is None:
+        return None
+    given = [
+        own.speed_dps
+        for motor_id in conn.motor_ids
+        if (own := conn.limits.of(motor_id)) is not None and own.speed_dps is not None
+    ]
+    return min(given, default=None)
 
 
 def _same(func: F) -> F:

@@ -498,8 +498,9 @@ _FIELDS: dict[type, tuple[str, ...]] = {}
 
 
 def _fault_names(fault: Any) -> list[str]:
-    """A fault as flag names: a MotorFault's flags, a flag enum's members, a list's items."""
-    fault = getattr(fault, "flags", fault)
+    """A fault as flag names: a MotorFault's flags (or its code), a flag enum's members, a list's items."""
+    if hasattr(fault, "flags"):  # a MotorFault: its flags, or its code (Reply.FAULT_CODE)
+        fault = fault.flags if fault.flags is not None else getattr(fault, "code", None)
     if not fault:
         return []
     if isinstance(fault, enum.Flag):

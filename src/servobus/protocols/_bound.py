@@ -69,9 +69,9 @@ __all__ = [
     "id_key",
 ]
 
-#: Flag or-ed into an identifier in ``request_ids``/``reply_ids`` for 29-bit (extended) identifiers,
-#: which are a different identifier space on the wire from the 11-bit ones.
 EXTENDED = 1 << 29
+"""Or-ed into an identifier in ``request_ids``/``reply_ids`` for a 29-bit (extended) identifier,
+which is a different identifier space on the wire from the 11-bit ones."""
 
 
 class FrameKind(enum.Enum):
@@ -86,8 +86,14 @@ class FrameKind(enum.Enum):
 # The members as module globals for the per-frame paths (every codec's classify, the scheduler's
 # intake): in CPython 3.11 ``FrameKind.REPLY`` is a metaclass attribute lookup (~55 ns), a global is
 # one dict read.
-KIND_REPLY, KIND_STREAM, KIND_REPORT = FrameKind.REPLY, FrameKind.STREAM, FrameKind.REPORT
+KIND_REPLY = FrameKind.REPLY
+"""``FrameKind.REPLY`` as a module global (a codec's ``classify`` runs per frame)."""
+KIND_STREAM = FrameKind.STREAM
+"""``FrameKind.STREAM`` as a module global."""
+KIND_REPORT = FrameKind.REPORT
+"""``FrameKind.REPORT`` as a module global."""
 KIND_NOT_OURS = FrameKind.NOT_OURS
+"""``FrameKind.NOT_OURS`` as a module global."""
 
 
 def id_key(arbitration_id: int, is_extended_id: bool = False) -> int:

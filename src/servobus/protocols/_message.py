@@ -28,6 +28,7 @@ __all__ = ["Command", "Message", "Reply", "construct", "decode_by_code", "requir
 
 M = TypeVar("M", bound="Message")
 R = TypeVar("R", covariant=True, default=Any)
+"""A command's reply type: ``Command[StatusReply]`` (``Command[None]``: no reply comes)."""
 
 
 class Message:
@@ -135,6 +136,12 @@ class Reply(Message):
     ``FAULTS`` names the field that holds the motor's error flags in replies that carry them (the Bus
     keeps ``motor.fault`` from it); None in every other reply.
 
+    ``FAULT_CODE`` names the field that holds the motor's error *code* where the family reports one
+    code rather than flags (an ``enum.IntEnum`` field, or an int): the Bus keeps ``motor.fault`` from
+    it (a :class:`~servobus.errors.MotorFault` with ``code``), except for the codes in
+    ``NO_FAULT_CODES``, which are states and no fault (default: 0; Damiao: 0 disabled, 1 enabled).
+    A reply declares one of ``FAULTS`` and ``FAULT_CODE``, not both; None in every other reply.
+
     ``EVENT`` names a frame the motor sends of itself to tell that something happened to it (not an
     answer, not a measurement: MyActuator's 0xF1 communication trip): the Bus counts it under that
     name, shows it in ``motor.fault`` until the motor executes a command again, and tells the
@@ -146,6 +153,8 @@ class Reply(Message):
 
     __slots__ = ()
     FAULTS: ClassVar[str | None] = None
+    FAULT_CODE: ClassVar[str | None] = None
+    NO_FAULT_CODES: ClassVar[frozenset[int]] = frozenset({0})
     EVENT: ClassVar[str | None] = None
     EVENT_REASON: ClassVar[str] = ""
     SINGLE_TURN: ClassVar[bool] = False

@@ -75,11 +75,11 @@ __all__ = [
     "le",
 ]
 
-#: where a field's bits sit: ``(offset, width)``, or its pieces ``((offset, width), ...)``, most
-#: significant first
 Bits: TypeAlias = tuple[int, int] | tuple[tuple[int, int], ...]
-#: a field's scale, or a function of the message's model returning it
+"""Where a field's bits sit: ``(offset, width)``, or its pieces ``((offset, width), ...)``, most
+significant first."""
 Scale: TypeAlias = FieldScale | Callable[[Any], FieldScale]
+"""A field's scale, or a function of the message's model returning it."""
 Limits: TypeAlias = tuple[float, float] | Callable[[Any], tuple[float, float]]
 Pieces: TypeAlias = tuple[tuple[int, int], ...]
 
@@ -181,6 +181,8 @@ class BitField:
             x = code * scale.span / scale.codes + scale.origin
             # (a code within the field's range is data; a last-ulp excess is the arithmetic's)
             return scale.lo if x < scale.lo and code == self.code_range(scale)[0] else x
+        if scale.origin or scale.codes != scale.span:  # (an integer with an offset or a step)
+            code = round(code * scale.span / scale.codes + scale.origin)
         if isinstance(kind, type) and issubclass(kind, IntEnum):
             try:
                 return kind(code)

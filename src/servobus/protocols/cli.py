@@ -51,6 +51,15 @@ The contract, as the CLI uses it:
 ``CliFamily.identify`` / ``CliFamily.describe``
     What ``scan`` asks a motor that answered its probe (:class:`Query`): ``identify`` on the probe's
     binding (it may name the motor's revision), then ``describe`` on a binding in that revision.
+``CliFamily.scan_ids``
+    The ids ``scan`` probes without ``--ids`` (None: 1-32, those of them the family's ``motor_ids``
+    allow). Whatever the ids, ``scan`` probes them in rounds of motors that can share one bus
+    (:func:`sharing_rounds`: the bound codecs' request and reply ids, as
+    :func:`~servobus.protocols.check_bus` checks them): a family whose reply id of motor N is
+    another motor's request id (Damiao: feedback N + 0x10) needs no rule of its own.
+``CliFamily.supports`` / ``CliFamily.operations``
+    What a command, or the demo, may ask a family's part: whether it offers a CLI command, and
+    which it offers (the ``demo`` moves motors with ``move``, else ``mit``).
 
 Everything here is sans-IO: a family's part builds commands and reads replies; the CLI sends them.
 """
@@ -58,6 +67,7 @@ Everything here is sans-IO: a family's part builds commands and reads replies; t
 from __future__ import annotations
 
 import dataclasses
+import enum
 import functools
 import math
 import types
@@ -66,7 +76,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Union
 
-from servobus.protocols._bound import BoundCodec
+from servobus.protocols._bound import BoundCodec, check_bus
 from servobus.protocols._family import Family
 from servobus.protocols._message import Command, Reply
 
@@ -83,6 +93,7 @@ __all__ = [
     "Values",
     "build",
     "derived_status",
+    "fault_names",
     "move",
     "once",
     "parse_bool",
@@ -93,6 +104,7 @@ __all__ = [
     "safe",
     "setpoint",
     "setting_of",
+    "sharing_rounds",
 ]
 
 #: the command line's values, keyed by name with the unit (``speed_dps``); see the module's table
@@ -211,6 +223,35 @@ class Query:
 
     reads: Callable[[BoundCodec], Sequence[Command]]
     columns: Callable[[BoundCodec, Sequence[Reply | None]], Mapping[str, Any]]
+
+
+def sharing_rounds(codecs: Sequence[BoundCodec]) -> list[list[BoundCodec]]:
+    """``codecs`` in rounds of motors that can share one bus: each motor, in order, joins the first
+    round it can share a bus with (:func:`~servobus.protocols.check_bus`), or starts a new one.
+
+    What ``scan`` probes at once: a family whose motors' ids never collide gets one round; Damiao's
+    (command id N, feedback id N + 0x10: motor 1's feedback is motor 17's command id) gets two for
+    ids 1-32, 1-16 then 17-32.
+    """
+    rounds: list[list[BoundCodec]] = []
+    for codec in codecs:
+        for members in rounds:
+            if _shares(members, codec):
+                members.append(codec)
+                break
+        else:
+            rounds.append([codec])
+    return rounds
+
+
+def _shares(members: Sequence[BoundCodec], codec: BoundCodec) -> bool:
+    """Whether ``codec`` can join ``members`` on a bus (check_bus is pairwise: the new pairs only)."""
+    try:
+        for member in members:
+            check_bus([member, codec])
+    except ValueError:
+        return False
+    return True
 
 
 # ---- config ----
@@ -407,6 +448,25 @@ def _shows_status(cls: type[Command]) -> bool:
     return False
 
 
+def fault_names(reply: Reply | None) -> list[str] | None:
+    """The faults ``reply`` reports, by name: its flags (``Reply.FAULTS``), or its fault code
+    (``Reply.FAULT_CODE``; a code in ``NO_FAULT_CODES`` is a state, no fault: ``[]``); None for a
+    reply with neither field (the ``errors`` column of ``status`` and ``scan``)."""
+    faults = getattr(reply, "FAULTS", None)
+    if faults is not None:
+        flags = getattr(reply, faults)
+        if not isinstance(flags, enum.Flag):  # (flags declared as a plain int)
+            return [f"0x{int(flags):X}"] if flags else []
+        return [m.name for m in type(flags) if m.value and m in flags and m.name]
+    code_field = getattr(reply, "FAULT_CODE", None)
+    if code_field is not None:
+        code = getattr(reply, code_field)
+        if code in getattr(reply, "NO_FAULT_CODES", ()):
+            return []
+        return [code.name if isinstance(code, enum.Enum) else f"code {int(code)}"]
+    return None
+
+
 # ---- the part ----
 
 
@@ -427,6 +487,9 @@ class CliFamily:
         settings: ``servobus config``'s settings, keys unique.
         identify: scan's first query, on the probe's binding (None: nothing more to ask).
         describe: scan's second query, on a binding in the revision ``identify`` named.
+        scan_ids: the ids ``scan`` probes without ``--ids`` (None: 1-32, those of them the family's
+            ``motor_ids`` allow); probed in rounds of motors that can share a bus
+            (:func:`sharing_rounds`), so ids whose request and reply ids collide need no rule here.
     """
 
     ops: Mapping[str, Op] = field(default_factory=_no_ops)
@@ -435,6 +498,7 @@ class CliFamily:
     settings: Sequence[Setting] = ()
     identify: Query | None = None
     describe: Query | None = None
+    scan_ids: Sequence[int] | None = None
 
     def __post_init__(self) -> None:
         keys = [s.key for s in self.settings]
@@ -450,6 +514,23 @@ class CliFamily:
         if found is None and command not in self.why_not:
             return DEFAULT_OPS.get(command)
         return found
+
+    def supports(self, command: str, family: Family | None = None) -> bool:
+        """Whether the family offers CLI command ``command`` (one of :data:`OPERATIONS`): an entry in
+        :attr:`ops` (or a default: ``stop``, ``off``), not refused in :attr:`why_not`. For
+        ``status``: reads given in :attr:`status`, or, where it is None, derived from ``family``'s
+        commands (assumed there without ``family``)."""
+        if command == "status":
+            if "status" in self.why_not:
+                return False
+            if self.status is None:
+                return family is None or bool(derived_status(family))
+            return bool(self.status)
+        return self.op(command) is not None
+
+    def operations(self, family: Family | None = None) -> tuple[str, ...]:
+        """The CLI commands the family offers, in :data:`OPERATIONS`' order (see :meth:`supports`)."""
+        return tuple(c for c in OPERATIONS if self.supports(c, family))
 
     def status_reads(self, family: Family) -> Sequence[Callable[[], Command]]:
         """:attr:`status`, or the reads derived from ``family``'s commands where it is None."""

@@ -79,11 +79,12 @@ __all__ = [
 
 ByteOrder: TypeAlias = Literal["little_endian", "big_endian"]
 
-#: The multiplexer signal on DATA[0].
 MUX = "code"
+"""The multiplexer signal on DATA[0]."""
 DIRECTIONS = ("request", "reply")
-#: Fields a message carries to be self-contained, not values of its frame.
+"""A :class:`MessageSpec`'s ``kind``: a frame the host sends, or one a motor sends."""
 CONFIG_FIELDS = frozenset({"model", "scales", "motor_type", "encoder_bits"})
+"""Fields a message carries to be self-contained, not values of its frame (no signal)."""
 
 #: Unit of a field, from its name's suffix (longest suffix first).
 UNITS = (

@@ -42,10 +42,10 @@ from servobus.sim.device import Device, SerialDevice
 
 __all__ = ["MEDIA", "OPTIONS", "Setup", "SimFamily", "SimOptions", "offered_by"]
 
-#: what a simulator part may serve: classic CAN, CAN FD, the family's RS485 line
 MEDIA = ("can", "canfd", "rs485")
-#: the optional flags a simulator part may take
+"""What a simulator part may serve: classic CAN, CAN FD, the family's RS485 line."""
 OPTIONS = ("baud", "modbus")
+"""The optional flags a simulator part may take."""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

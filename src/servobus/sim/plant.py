@@ -108,17 +108,25 @@ class Brake:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class CurrentControl:
+    """Current (torque) control: the drive holds ``current_a``."""
+
     current_a: float
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class SpeedControl:
+    """Speed control: the drive holds ``speed_dps``, its current within ``max_current_a`` (None:
+    the plant's own limit)."""
+
     speed_dps: float
     max_current_a: float | None = None
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class PositionControl:
+    """Position control: the drive moves to ``position_deg`` at most at ``max_speed_dps``, its
+    current within ``max_current_a`` (None: the plant's own limits)."""
+
     position_deg: float
     max_speed_dps: float | None = None
     max_current_a: float | None = None
@@ -136,10 +144,11 @@ class Impedance:
 
 
 Control = Off | Brake | CurrentControl | SpeedControl | PositionControl | Impedance
+"""What a device model asks of its :class:`Plant` (``plant.control``), set from decoded commands."""
 
 
-#: the integrated quantities, in csrc/sim_plant.h ``sb_plant_state``'s order
 STATE_FIELDS = ("position_deg", "speed_dps", "current_a", "temperature_c", "speed_integral", "speed_ref")
+"""The plant's integrated quantities, in csrc/sim_plant.h ``sb_plant_state``'s order."""
 
 
 @dataclass(frozen=True, slots=True)

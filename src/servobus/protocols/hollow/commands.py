@@ -21,10 +21,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Self
 
+from servobus.core import FieldScale
 from servobus.errors import ProtocolError
 from servobus.protocols._layout import EnumField, Float32BEField, Layout
 from servobus.protocols._message import Command, R
-from servobus.protocols.bits import Code
+from servobus.protocols.bits import BitField, BitLayout, Code, Const
 from servobus.protocols.hollow._checks import require_size, to_enum
 from servobus.protocols.hollow._packed import OnLinks, Packed, check_model
 from servobus.protocols.hollow.enums import CanMode, ControlMode, PiGain
@@ -144,29 +145,29 @@ def claimant(data: bytes, *, extended_id: bool, fd: bool, can_mode: CanMode) -> 
 # ---- special commands (§4.1) ----
 
 
-class SpecialCommand(HollowCommand[ClassicReply]):
-    """An 8-byte ``FF x7 + code`` command, the same in normal and extended mode (§4.1, §5.2)."""
+class SpecialCommand(BitLayout, HollowCommand[ClassicReply]):
+    """An 8-byte ``FF x7 + code`` command, the same in normal and extended mode (§4.1, §5.2),
+    declared as a bit layout: the prefix and the code are constants (:class:`Const`), which are the
+    command's identity (:meth:`claims`)."""
 
     __slots__ = ()
+    SIZE: ClassVar[int] = _SETPOINT_SIZE
     SPECIAL_CODE: ClassVar[int]
     SPECIAL_COUNT: ClassVar[int] = 1  # how many codes from SPECIAL_CODE on are this command
 
     @property
     def special_code(self) -> int:
         """D7 of the frame."""
-        return self.SPECIAL_CODE
-
-    def encode(self) -> bytes:
-        return SPECIAL_PREFIX + bytes([self.special_code])
+        return self.encode()[7]
 
     @classmethod
     def claims(cls, data: bytes, can_mode: CanMode) -> bool:
-        return is_special_command(data) and 0 <= data[7] - cls.SPECIAL_CODE < cls.SPECIAL_COUNT
+        return is_special_command(data) and cls.matches(data)
 
     @classmethod
     def from_code(cls, code: int) -> Self:
         """The command whose D7 is ``code`` (one of its codes)."""
-        return cls()
+        return cls.decode(SPECIAL_PREFIX + bytes([code]))
 
     @classmethod
     def decode(cls, data: bytes, *, model: HollowModel = DEFAULT_MODEL) -> Self:
@@ -175,12 +176,19 @@ class SpecialCommand(HollowCommand[ClassicReply]):
         Raises:
             ProtocolError: not the special pattern, or another special command.
         """
-        command = decode_special(data)
-        if not isinstance(command, cls):
+        require_size(data, _SETPOINT_SIZE, what="special command")
+        if not is_special_command(data):
+            raise ProtocolError("not a special command (FF x7 + F9..FE)", raw=data)
+        if not cls.matches(data):
             raise ProtocolError(
                 f"special command 0x{data[7]:02X} is not {cls.__name__}", raw=data, command=data[7]
             )
-        return command
+        return super().decode(data)
+
+
+def _special(code: int) -> tuple[Const, Const]:
+    """The FIELDS of the special command ``code``: FF x7, then the code (§4.1)."""
+    return (Const((0, 56), int.from_bytes(SPECIAL_PREFIX, "big")), Const((56, 8), code))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -191,6 +199,7 @@ class Start(SpecialCommand):
     """
 
     SPECIAL_CODE: ClassVar[int] = 0xFC
+    FIELDS = _special(SPECIAL_CODE)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -198,6 +207,7 @@ class Stop(SpecialCommand):
     """FD: no output power, the motor is free (§4.1; bytes reconstructed, A2)."""
 
     SPECIAL_CODE: ClassVar[int] = 0xFD
+    FIELDS = _special(SPECIAL_CODE)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -208,6 +218,7 @@ class SetZero(SpecialCommand):
     """
 
     SPECIAL_CODE: ClassVar[int] = 0xFE
+    FIELDS = _special(SPECIAL_CODE)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -220,18 +231,17 @@ class SelectMode(SpecialCommand):
 
     SPECIAL_CODE: ClassVar[int] = 0xF9  # + mode
     SPECIAL_COUNT: ClassVar[int] = len(ControlMode)
+    # (D7 is the mode plus 0xF9: a scale whose code 0 is the value -0xF9)
+    FIELDS = (
+        _special(0)[0],
+        BitField(
+            "mode",
+            ((56, 8),),
+            FieldScale(name="mode", lo=0, hi=len(ControlMode) - 1, origin=-SPECIAL_CODE),
+            ControlMode,
+        ),
+    )
     mode: ControlMode
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "mode", to_enum("mode", self.mode, ControlMode))
-
-    @property
-    def special_code(self) -> int:
-        return self.SPECIAL_CODE + self.mode
-
-    @classmethod
-    def from_code(cls, code: int) -> Self:
-        return cls(mode=ControlMode(code - cls.SPECIAL_CODE))
 
 
 def decode_special(data: bytes) -> SpecialCommand:
@@ -245,7 +255,7 @@ def decode_special(data: bytes) -> SpecialCommand:
         raise ProtocolError("not a special command (FF x7 + F9..FE)", raw=data)
     cls = claimant(data, extended_id=False, fd=False, can_mode=CanMode.NORMAL)
     assert issubclass(cls, SpecialCommand)  # the special pattern is claimed by a special command
-    return cls.from_code(data[7])
+    return cls.decode(data)
 
 
 # ---- setpoints (§4.2-§4.4, §5.2) ----
