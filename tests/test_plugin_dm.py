@@ -356,6 +356,32 @@ def test_a_value_out_of_range_names_the_model_and_leaves_nothing_on_the_bus(dm: 
     assert device.counters["received"] == 0
 
 
+def test_an_error_code_is_the_motor_s_fault_and_its_states_are_none(dm: ModuleType) -> None:
+    from servobus_dm.device import DmMotor
+
+    from servobus.errors import MotorFault
+
+    device = DmMotor(1)
+
+    async def scenario() -> list[MotorFault | None]:
+        async with Bus(SimTransport(devices=[device])) as bus:
+            motor = bus.motor(dm.FAMILY, 1)
+            faults = [None if (await motor.enable()).state is not dm.DmState.ENABLED else motor.fault]
+            device.inject_fault(dm.DmState.OVER_CURRENT)
+            await motor.refresh_state()
+            faults.append(motor.fault)
+            await motor.clear_error()
+            await motor.refresh_state()  # DISABLED: a state, no fault
+            faults.append(motor.fault)
+            return faults
+
+    name, options = virtual("asyncio")
+    enabled, fault, cleared = anyio.run(scenario, backend=name, backend_options=options)
+    assert enabled is None and cleared is None
+    assert isinstance(fault, MotorFault) and fault.flags is None
+    assert fault.code is dm.DmState.OVER_CURRENT and fault.motor_id == 1
+
+
 @contextlib.contextmanager
 def _virtual_dm_motors(ids: range) -> Iterator[str]:
     """Simulated DM-J motors ``ids`` on a python-can ``virtual`` channel (returned), served on a thread
@@ -435,7 +461,8 @@ def test_servobus_scan_finds_dm_motors_on_the_ids_the_family_allows(
     (found,) = _json(capsys, ["scan", "-f", "dm", "--sim", "3", "--json"])
     assert [(r["id"], r["family"]) for r in found] == [(1, "dm"), (2, "dm"), (3, "dm")]
     (found,) = _json(capsys, ["scan", "-f", "dm", "--sim", "2", "--ids", "1-8", "--json"])
-    assert [r["id"] for r in found] == [1, 2]
+    assert [(r["id"], r["errors"]) for r in found] == [(1, []), (2, [])]  # DISABLED: a state, no fault
+    assert get_family("dm").part("cli").scan_ids == range(1, 16)
 
 
 def test_servobus_status_mit_and_move_drive_simulated_dm_motors(
@@ -447,10 +474,9 @@ def test_servobus_status_mit_and_move_drive_simulated_dm_motors(
     mit = ["mit", "-f", "dm", "--sim", "1", "--position-rad", "1", "--kp", "20", "--kd", "1"]
     (held,) = _json(capsys, [*mit, "--duration", "0.5", "--json"])
     assert held[0]["angle_deg"] == pytest.approx(math.degrees(1.0), abs=1.0)
-    (moved,) = _json(
-        capsys, ["move", "-f", "dm", "--sim", "1", "--angle-deg", "45", "--duration", "0.5", "--json"]
-    )
-    assert moved[0]["angle_deg"] == pytest.approx(45.0, abs=1.0)
+    capsys.readouterr()
+    assert main(["move", "-f", "dm", "--sim", "1", "--angle-deg", "45", "--duration", "0.5", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)[0]["angle_deg"] == pytest.approx(45.0, abs=1.0)
 
 
 def test_servobus_refuses_what_a_dm_motor_cannot_do_in_one_line(

@@ -3,8 +3,8 @@ set-point after an :class:`Enable`, a special command, or the refresh. The contr
 :mod:`servobus.protocols.cli`'s.
 
 ``mit`` sends the user's set-point as it is; ``move`` a MIT position set-point with the gains
-:data:`MOVE_KP`/:data:`MOVE_KD` (the MIT law has no speed limit: a given ``--max-speed-dps`` is not
-sent, the gains set how fast it moves); ``speed`` a velocity set-point (kp = 0, kd
+:data:`MOVE_KP`/:data:`MOVE_KD` (the MIT law has no speed limit: a ``max_speed_dps`` given, the
+user's or the demo's, is not sent; the gains set the pace); ``speed`` a velocity set-point (kp = 0, kd
 :data:`SPEED_KD`). ``status``, ``monitor`` and ``scan`` read with :class:`RefreshState` (derived
 from the declarations: it is ``READ``); ``stop`` and ``off`` are the bound codec's safe command,
 :class:`Disable`.
@@ -16,6 +16,7 @@ import math
 from collections.abc import Sequence
 
 from servobus.authoring import BoundCodec, CliFamily, Command, Make, Op, Values, once
+from servobus_dm.codec import MOTOR_IDS
 from servobus_dm.messages import ClearError, Disable, Enable, MitControl, SaveZero
 
 __all__ = ["CLI", "MOVE_KD", "MOVE_KP", "SPEED_KD"]
@@ -62,6 +63,7 @@ def _enabled(make: Make) -> Op:
 
 
 CLI = CliFamily(
+    scan_ids=MOTOR_IDS,  # 1..15: their feedback ids (0x11..0x1F) are no motor's command id
     ops={
         "mit": _enabled(_mit),
         "move": _enabled(_move),

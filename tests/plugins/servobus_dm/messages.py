@@ -95,13 +95,16 @@ class DmCommand(BitLayout, Command[R]):
 class Feedback(BitLayout, Reply):
     """The motor's state (on ID + 0x10), its answer to every command that gets one.
 
-    ``state`` is the ERR code (:class:`DmState`: disabled, enabled or the error latched),
+    ``state`` is the ERR code (:class:`DmState`: disabled, enabled or the error latched; the
+    Bus keeps an error as the motor's ``MotorFault``, its ``code`` the member),
     ``motor_id`` the low nibble of the motor's id, ``temperature_c`` the driver's MOS temperature
     and ``rotor_temperature_c`` the coil's (whole °C). Position, velocity and torque are scaled by
     the ``model``'s ranges, as in :class:`MitControl`.
     """
 
     SIZE: ClassVar[int] = 8
+    FAULT_CODE: ClassVar[str | None] = "state"  # one code, not flags: the Bus's MotorFault.code
+    NO_FAULT_CODES: ClassVar[frozenset[int]] = frozenset({DmState.DISABLED, DmState.ENABLED})
     FIELDS = (
         Choice("state", (0, 4), DmState, label="ERR"),
         Code("motor_id", (4, 4)),
