@@ -102,6 +102,7 @@ from servobus.protocols.cli import (
     Values,
     build,
     derived_status,
+    fault_names,
     move,
     once,
     parse_bool,
@@ -112,6 +113,7 @@ from servobus.protocols.cli import (
     safe,
     setpoint,
     setting_of,
+    sharing_rounds,
 )
 from servobus.protocols.dbc import (
     CONFIG_FIELDS,
@@ -280,6 +282,7 @@ __all__ = [
     "derived_status",
     "echo_key",
     "enum_choices",
+    "fault_names",
     "field_names",
     "fields_layout",
     "frame_key",
@@ -308,5 +311,6 @@ __all__ = [
     "safe",
     "setpoint",
     "setting_of",
+    "sharing_rounds",
     "signal_spec",
 ]

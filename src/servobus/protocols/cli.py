@@ -107,12 +107,12 @@ __all__ = [
     "sharing_rounds",
 ]
 
-#: the command line's values, keyed by name with the unit (``speed_dps``); see the module's table
 Values = Mapping[str, Any]
-#: (the motor's bound codec, the values) -> the commands, in order
+"""The command line's values, keyed by name with the unit (``speed_dps``); see the module's table."""
 Build = Callable[[BoundCodec, Values], Sequence[Command]]
-#: (the motor's bound codec, the values) -> one command
+"""(the motor's bound codec, the values) -> the commands, in order."""
 Make = Callable[[BoundCodec, Values], Command]
+"""(the motor's bound codec, the values) -> one command."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -285,6 +285,7 @@ class Setting:
 
 
 def parse_float(text: str) -> float:
+    """``text`` as a float (ValueError otherwise): a setting's parser."""
     return float(text)
 
 
@@ -412,8 +413,6 @@ def _optional(kind: Any) -> Any:
 # ---- status ----
 
 _DEG_PER_RAD = 180.0 / math.pi
-#: the status columns and the reply fields they are read from, (field, factor) in order of preference:
-#: a family's replies show in ``status``/``monitor``/``move`` by naming their fields so
 STATUS_SOURCES: dict[str, tuple[tuple[str, float], ...]] = {
     "angle_deg": (("angle_deg", 1.0), ("position_deg", 1.0), ("position_rad", _DEG_PER_RAD)),
     "speed_dps": (("speed_dps", 1.0), ("speed_rad_s", _DEG_PER_RAD), ("velocity_rad_s", _DEG_PER_RAD)),
@@ -422,6 +421,8 @@ STATUS_SOURCES: dict[str, tuple[tuple[str, float], ...]] = {
     "temperature_c": (("temperature_c", 1.0),),
     "voltage_v": (("voltage_v", 1.0),),
 }
+"""The status columns and the reply fields they are read from, ``(field, factor)`` in order of
+preference: a family's replies show in ``status``/``monitor``/``move`` by naming their fields so."""
 _STATUS_FIELDS = frozenset(name for sources in STATUS_SOURCES.values() for name, _ in sources)
 
 
@@ -537,7 +538,6 @@ class CliFamily:
         return derived_status(family) if self.status is None else self.status
 
 
-#: the CLI commands a family's part offers (``ops``, ``status``) or refuses (``why_not``)
 OPERATIONS = (
     "status",
     "move",
@@ -552,6 +552,7 @@ OPERATIONS = (
     "clear-errors",
     "reset",
 )
+"""The CLI commands a family's part offers (``ops``, ``status``) or refuses (``why_not``)."""
 
-#: the CLI commands every family has without a table: its bound codec's safe commands
 DEFAULT_OPS: Mapping[str, Op] = {"stop": safe("stop"), "off": safe("shutdown")}
+"""The CLI commands every family has without a table: its bound codec's safe commands."""
