@@ -166,9 +166,8 @@ def test_a_simulated_motor_that_does_not_answer_is_refused(
 
     assert check_sim_answers(toy.FAMILY) == 4  # the commands that get a reply
     monkeypatch.setattr(ToyMotor, "receive", lambda self, frame, now_s: [])
-    with pytest.raises(
-        AssertionError, match="the simulated motor's answer to ReadState.*none with the reply key"
-    ):
+    answer = r"the simulated motor's answer to ReadState.*none with the reply key"
+    with pytest.raises(AssertionError, match=answer):
         check_sim_answers(toy.FAMILY)
 
 
