@@ -75,8 +75,7 @@ def field_strategy(spec: Any) -> st.SearchStrategy[Any] | None:
     Known kinds: :class:`ScaledField` (counts within its limits), :class:`IntField`,
     :class:`StepField`, :class:`BoolField`, :class:`Float32Field` (binary32 values), :class:`AsciiField`,
     any field with an ``enum`` or ``members`` enum (its members) or ``flags`` (unions of its flags),
-    a ``SpecialZero``-like field with an ``inner`` field (the inner field's values), and any other
-    field with integer ``limits``.
+    and a ``SpecialZero``-like field with an ``inner`` field (the inner field's values).
     """
     if isinstance(spec, ScaledField):
         return _scaled(spec)
@@ -100,23 +99,17 @@ def field_strategy(spec: Any) -> st.SearchStrategy[Any] | None:
     inner = getattr(spec, "inner", None)
     if inner is not None:
         return field_strategy(inner)
-    limits = getattr(spec, "limits", None)
-    if isinstance(limits, tuple) and len(limits) == 2 and all(type(x) is int for x in limits):
-        return st.integers(*limits)
-    return None
+    return None  # (limits alone do not say which values decode to themselves: a scaled bit field's don't)
 
 
-def _declared(cls: type[Message]) -> list[Any] | None:
-    """The field objects ``cls`` declares (``FIELDS`` of pairs or of bare fields), or None."""
-    declared = getattr(cls, "FIELDS", None)
-    if declared is None:
-        return None
+def _declared(cls: type[Message]) -> list[Any]:
+    """The named field objects ``cls`` declares (``FIELDS`` of ``(offset, field)`` pairs or of bare
+    fields); an entry without a name is a constant of the layout, not a value."""
     out = []
-    for entry in declared:
+    for entry in getattr(cls, "FIELDS", ()):
         spec = entry[1] if isinstance(entry, tuple) and len(entry) == 2 else entry
-        if not isinstance(getattr(spec, "name", None), str):
-            return None
-        out.append(spec)
+        if isinstance(getattr(spec, "name", None), str):
+            out.append(spec)
     return out
 
 
@@ -138,7 +131,7 @@ def message_strategy(cls: type[Message]) -> st.SearchStrategy[Message] | None:
     """
     if not dataclasses.is_dataclass(cls):
         return None
-    declared = _declared(cls) or []
+    declared = _declared(cls)
     by_name = {spec.name: spec for spec in declared}
     fields: dict[str, st.SearchStrategy[Any]] = {}
     for f in dataclasses.fields(cls):
