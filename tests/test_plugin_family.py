@@ -425,7 +425,7 @@ def test_servobus_sim_family_toy_serves_an_slcan_adapter() -> None:
     ("args", "error"),
     [
         (("--rs485",), "--rs485: the toy protocol is CAN only; use --slcan"),
-        (("--fd",), "--fd: the simulated toy motors speak classic CAN only (CAN FD: --family hollow)"),
+        (("--fd",), "--fd: the simulated toy motors speak classic CAN only (CAN FD: {canfd})"),
         (
             ("--motors", "2", "--first-id", "31"),
             "--first-id 31 --motors 2: ids 31..32, but toy motor ids are 1..31",
@@ -433,6 +433,11 @@ def test_servobus_sim_family_toy_serves_an_slcan_adapter() -> None:
     ],
 )
 def test_servobus_sim_refuses_what_the_toy_sim_part_cannot_serve(args: tuple[str, ...], error: str) -> None:
+    from servobus.sim.family import offered_by
+
+    # the families offering CAN FD: hollow, and any installed plug-in that does
+    assert "hollow" in offered_by("canfd")
+    error = error.format(canfd=", ".join(f"--family {name}" for name in offered_by("canfd")))
     result = run_cli("sim", "--family", "toy", *args, timeout_s=20)
     assert (result.returncode, result.stdout, result.stderr) == (2, "", f"servobus.sim: error: {error}\n")
 

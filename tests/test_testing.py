@@ -102,6 +102,25 @@ def test_the_project_suite_runs_the_contract_over_another_installed_family(tmp_p
     assert _passed(result) == len(CONTRACT_TESTS) + 2  # the contract, the parts, the list of families
 
 
+def test_the_tests_that_list_families_pass_with_another_family_installed(tmp_path: Path) -> None:
+    """The tests that name the installed families (an unknown family's error, the "use --family X"
+    hints) mean the built-ins are among them, not that they are all: with a plug-in that sorts first
+    and offers CAN FD and RS485 installed, they still pass."""
+    site = another_family(tmp_path / "site", "aaa", media=("can", "canfd", "rs485"))
+    result = _pytest(
+        [
+            "tests/sim/test_family.py",
+            "tests/test_plugin_family.py",
+            "-k",
+            "offer or refuses_what or unknown or registers",
+        ],
+        cwd=ROOT,
+        path=[site],
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert _passed(result) == 7
+
+
 # ---- the contract fails a family that breaks it ----
 
 
