@@ -20,6 +20,7 @@ from hypothesis import given, settings
 from _toy import another_family
 from servobus.testing import (
     FamilyContract,
+    bindings,
     check_bound_codecs,
     check_command_round_trips,
     check_declarations,
@@ -214,6 +215,28 @@ class TestAFamilyWithAClassWithoutStrategy(FamilyContract):
 
     def test_the_typed_motor_has_a_method_per_command(self, **_: Any) -> None:  # type: ignore[override]
         pytest.skip("the typed motor is generated without Calibrate")
+
+
+def test_bind_options_bind_each_model_and_reach_the_request_decoder(toy: ModuleType) -> None:
+    from servobus_toy.codec import bind
+
+    seen: set[str] = set()
+
+    def bind_model(motor_id: int, *, model: str = "small", **options: Any) -> Any:
+        if model not in ("small", "large"):
+            raise ValueError(f"no model {model!r}")
+        seen.add(f"bind {model}")
+        return bind(motor_id, **options)
+
+    def decode_model(can_id: int, data: bytes, *, model: str = "small", **options: Any) -> Any:
+        seen.add(f"decode {model}")
+        return toy.FAMILY.decode_request(can_id, data, **options)
+
+    family = _toy_with(toy, bind=bind_model, decode_request=decode_model)
+    options = [{"model": "large"}, {"model": "huge"}]  # huge: refused, skipped
+    assert len(list(bindings(family, options=options))) == 1
+    check_command_round_trips(family, bind_options=options, max_examples=2)
+    assert seen == {"bind large", "decode large"}
 
 
 # ---- the strategies ----

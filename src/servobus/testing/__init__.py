@@ -40,6 +40,7 @@ field no declared field covers: a motor model) gets its strategy from the family
         family = FAMILY
         strategies = {Mit: st.builds(Mit, position_rad=st.floats(-12.5, 12.5))}
         unbuilt_ok = frozenset({"Calibrate"})  # checked by the package's own tests instead
+        bind_options = [{"model": "DM4310"}, {"model": "DM8009"}]  # bind (and decode) each model
         max_examples = 50
 
 Every check is also a plain function (``check_declarations(FAMILY)``, ...), for a test runner other
@@ -49,6 +50,8 @@ than pytest or a test of one part.
 from __future__ import annotations
 
 from servobus.testing._checks import (
+    NO_OPTIONS,
+    BindOptions,
     bindings,
     check_bound_codecs,
     check_bus_of,
@@ -71,6 +74,8 @@ from servobus.testing._strategies import (
 )
 
 __all__ = [
+    "NO_OPTIONS",
+    "BindOptions",
     "FamilyContract",
     "Strategies",
     "bindings",

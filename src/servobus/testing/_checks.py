@@ -4,7 +4,7 @@ AssertionError naming the family and the class, or returns what it checked)."""
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Any
 
 from hypothesis import HealthCheck, find, given, settings
@@ -19,6 +19,8 @@ from servobus.testing._strategies import Strategies, message_classes, strategies
 
 __all__ = [
     "FLAGS",
+    "NO_OPTIONS",
+    "BindOptions",
     "bindings",
     "check_bound_codecs",
     "check_bus_of",
@@ -34,6 +36,10 @@ __all__ = [
 
 #: the bool class attributes every command declares (``Command``'s docstring)
 FLAGS = ("READ", "SLOW", "ECHO", "STREAMABLE", "NOTED", "NEVER_ECHOED")
+#: ``bind``'s keyword arguments, one mapping per binding to check (a motor model, a bound codec's options)
+BindOptions = Sequence[Mapping[str, Any]]
+#: bind with the family's defaults only
+NO_OPTIONS: BindOptions = ({},)
 #: the kinds of safe command a bound codec may give (``BoundCodec.safe_command``)
 SAFE_KINDS = ("stop", "shutdown", "brake")
 
@@ -62,26 +68,43 @@ def check_declarations(family: Family[Any]) -> None:
     family.methods()  # ValueError: two commands with one method name
 
 
-def bindings(family: Family[Any], motor_id: int | None = None) -> Iterator[BoundCodec]:
-    """One motor's bound codec on every link and revision the family binds (a pair it refuses with
-    ValueError is skipped); ``motor_id`` defaults to the family's second id (its first may be special)."""
+def _bound(
+    family: Family[Any], options: BindOptions = NO_OPTIONS, motor_id: int | None = None
+) -> list[tuple[BoundCodec, dict[str, Any]]]:
+    """(codec, the options it was bound with) for every options, link and revision the family binds."""
     ids = family.motor_ids
     chosen = motor_id if motor_id is not None else ids[1] if len(ids) > 1 else ids[0]
-    for link in family.links:
-        for revision in family.revisions:
-            try:
-                yield family.bind(chosen, revision=revision, link=link)
-            except ValueError:
-                continue
+    out = []
+    for opts in options:
+        for link in family.links:
+            for revision in family.revisions:
+                try:
+                    out.append((family.bind(chosen, revision=revision, link=link, **opts), dict(opts)))
+                except ValueError:
+                    continue
+    return out
 
 
-def _can_bindings(family: Family[Any]) -> list[BoundCodec]:
-    return [codec for codec in bindings(family) if codec.framing is None]
+def bindings(
+    family: Family[Any], motor_id: int | None = None, options: BindOptions = NO_OPTIONS
+) -> Iterator[BoundCodec]:
+    """One motor's bound codec on every link and revision the family binds, with each of
+    ``options`` (``bind``'s keyword arguments, a motor model: none by default); a combination the
+    family refuses with ValueError is skipped. ``motor_id`` defaults to the family's second id
+    (its first may be special)."""
+    for codec, _ in _bound(family, options, motor_id):
+        yield codec
 
 
-def _sent_on_can(family: Family[Any], strategies: Strategies | None) -> set[type[Command]]:
+def _can_bindings(family: Family[Any], options: BindOptions) -> list[tuple[BoundCodec, dict[str, Any]]]:
+    return [(codec, opts) for codec, opts in _bound(family, options) if codec.framing is None]
+
+
+def _sent_on_can(
+    family: Family[Any], strategies: Strategies | None, options: BindOptions
+) -> set[type[Command]]:
     """The command classes whose simplest command encodes on a CAN binding."""
-    codecs = _can_bindings(family)
+    codecs = [codec for codec, _ in _can_bindings(family, options)]
     out: set[type[Command]] = set()
     for cls, command in _examples(family, strategies).items():
         for codec in codecs:
@@ -129,14 +152,19 @@ def _reply_frames(codec: BoundCodec, data: bytes) -> Iterator[Frame]:
 
 
 def check_command_round_trips(
-    family: Family[Any], strategies: Strategies | None = None, *, max_examples: int = 20
+    family: Family[Any],
+    strategies: Strategies | None = None,
+    *,
+    max_examples: int = 20,
+    bind_options: BindOptions = NO_OPTIONS,
 ) -> list[str]:
     """Each command class with a strategy that is sent on CAN: every drawn command encodes on a CAN
     binding that takes it, and the family's request decoder (``Family.decode_request``, which takes
-    a CAN identifier) gives back an equal command there. Returns the classes checked."""
-    codecs = _can_bindings(family)
+    a CAN identifier, and the options the codec was bound with) gives back an equal command there.
+    Returns the classes checked."""
+    codecs = _can_bindings(family, bind_options)
     built = strategies_of(family, strategies)
-    on_can = _sent_on_can(family, strategies)
+    on_can = _sent_on_can(family, strategies, bind_options)
     checked = []
     for cls in family.commands:
         if cls not in built or cls not in on_can:
@@ -144,13 +172,15 @@ def check_command_round_trips(
 
         def round_trip(command: Message) -> None:
             tried = []
-            for codec in codecs:
+            for codec, opts in codecs:
                 try:
                     frame = codec.encode(command)  # type: ignore[arg-type]
                 except ValueError:  # not on this link or revision
                     continue
                 try:
-                    decoded = family.decode_request(frame.arbitration_id, frame.data, revision=codec.revision)
+                    decoded = family.decode_request(
+                        frame.arbitration_id, frame.data, revision=codec.revision, **opts
+                    )
                 except ProtocolError as exc:
                     tried.append(f"{codec!r}: {exc}")
                     continue
@@ -166,14 +196,19 @@ def check_command_round_trips(
 
 
 def check_reply_round_trips(
-    family: Family[Any], strategies: Strategies | None = None, *, max_examples: int = 20
+    family: Family[Any],
+    strategies: Strategies | None = None,
+    *,
+    max_examples: int = 20,
+    bind_options: BindOptions = NO_OPTIONS,
 ) -> list[str]:
     """Each reply class with a strategy that answers a command sent on CAN: every drawn reply's
     bytes, arriving on a motor's reply identifier, are the motor's (``classify`` is not NOT_OURS)
     and decode to an equal reply on some CAN binding. Returns the classes checked."""
-    codecs = _can_bindings(family)
+    codecs = [codec for codec, _ in _can_bindings(family, bind_options)]
     built = strategies_of(family, strategies)
-    replies = list(dict.fromkeys(r for cls in _sent_on_can(family, strategies) for r in cls.reply_types()))
+    sent = _sent_on_can(family, strategies, bind_options)
+    replies = list(dict.fromkeys(r for cls in sent for r in cls.reply_types()))
     checked = []
     for cls in replies:
         if cls not in built:
@@ -216,16 +251,17 @@ def _examples(family: Family[Any], strategies: Strategies | None) -> dict[type[C
     return out
 
 
-def check_bound_codecs(family: Family[Any], strategies: Strategies | None = None) -> int:
+def check_bound_codecs(
+    family: Family[Any], strategies: Strategies | None = None, *, bind_options: BindOptions = NO_OPTIONS
+) -> int:
     """Every binding (link, revision) follows the declarations for every command it takes: it
     encodes on one of the motor's own or the family's shared identifiers, ``retry_safe`` is ``READ``,
     a reply key exactly when a reply is declared, a positive ``timeout_s``. Returns the (binding,
     command) pairs checked."""
     checked = 0
     examples = _examples(family, strategies)
-    for codec in bindings(family):
+    for codec in bindings(family, options=bind_options):
         for cls, command in examples.items():
-            assert isinstance(command, Command)
             try:
                 frame = codec.encode(command)
                 key = codec.reply_key(command)
@@ -244,10 +280,10 @@ def check_bound_codecs(family: Family[Any], strategies: Strategies | None = None
     return checked
 
 
-def check_safe_commands(family: Family[Any]) -> None:
+def check_safe_commands(family: Family[Any], *, bind_options: BindOptions = NO_OPTIONS) -> None:
     """Every binding gives a safe command of one of its kinds (``stop``, ``shutdown``, ``brake``), a
     command of the family that encodes; an unknown kind is a ValueError."""
-    for codec in bindings(family):
+    for codec in bindings(family, options=bind_options):
         found = []
         for kind in SAFE_KINDS:
             try:
@@ -266,17 +302,19 @@ def check_safe_commands(family: Family[Any]) -> None:
             raise AssertionError(f"{family.name} {codec!r}: an unknown safe-command kind is accepted")
 
 
-def check_bus_of(family: Family[Any], count: int = 3) -> None:
-    """``count`` motors of the family (its first ids but 0) share a bus on every link."""
+def check_bus_of(family: Family[Any], count: int = 3, *, bind_options: BindOptions = NO_OPTIONS) -> None:
+    """``count`` motors of the family (its first ids but 0) share a bus on every link, with each
+    of ``bind_options``."""
     ids = [i for i in family.motor_ids if i != 0][:count]
-    for link in family.links:
-        codecs = []
-        for motor_id in ids:
-            try:
-                codecs.append(family.bind(motor_id, link=link))
-            except ValueError:
-                break
-        check_bus(codecs)
+    for opts in bind_options:
+        for link in family.links:
+            codecs = []
+            for motor_id in ids:
+                try:
+                    codecs.append(family.bind(motor_id, link=link, **opts))
+                except ValueError:
+                    break
+            check_bus(codecs)
 
 
 def check_sim_answers(family: Family[Any], strategies: Strategies | None = None) -> int:
@@ -291,11 +329,10 @@ def check_sim_answers(family: Family[Any], strategies: Strategies | None = None)
     assert isinstance(sim, SimFamily), f"{family.name}: the sim part is {type(sim).__name__}"
     examples = _examples(family, strategies)
     checked = 0
-    for codec in bindings(family):
+    for codec in bindings(family):  # the family's defaults: the simulated motors' model
         if codec.link != "can" or codec.framing is not None:
             continue
         for cls, command in examples.items():
-            assert isinstance(command, Command)
             try:
                 frame = codec.encode(command)
                 key = codec.reply_key(command)

@@ -8,6 +8,7 @@ import pytest
 
 from servobus.protocols import Family
 from servobus.testing import _checks as checks
+from servobus.testing._checks import NO_OPTIONS, BindOptions
 from servobus.testing._strategies import Strategies
 
 __all__ = ["FamilyContract"]
@@ -24,16 +25,20 @@ class FamilyContract:
             family's own tests check them); any other class without one fails
             :meth:`test_every_message_class_has_a_strategy`.
         max_examples: hypothesis examples per class in the round trips.
+        bind_options: ``bind``'s keyword arguments, one mapping per binding to check besides every
+            link and revision (``[{"model": "DM4310"}, {"model": "DM8009"}]``: every model); the
+            default binds with the family's defaults. The request decoder is given the same ones.
 
-    The tests take the family, the strategies and ``unbuilt_ok`` through the fixtures
-    ``contract_family``, ``contract_strategies`` and ``contract_unbuilt_ok``, which return the
-    attributes: a suite checking several families overrides the fixtures (parametrized) instead.
+    The tests take these through the fixtures ``contract_family``, ``contract_strategies``,
+    ``contract_unbuilt_ok`` and ``contract_bind_options``, which return the attributes: a suite
+    checking several families overrides the fixtures (parametrized) instead.
     """
 
     family: ClassVar[Family[Any]]
     strategies: ClassVar[Strategies] = {}
     unbuilt_ok: ClassVar[frozenset[str]] = frozenset()
     max_examples: ClassVar[int] = 20
+    bind_options: ClassVar[BindOptions] = NO_OPTIONS
 
     @pytest.fixture
     def contract_family(self) -> Family[Any]:
@@ -49,6 +54,11 @@ class FamilyContract:
     def contract_unbuilt_ok(self) -> frozenset[str]:
         """The classes the contract may leave unbuilt (:attr:`unbuilt_ok`)."""
         return self.unbuilt_ok
+
+    @pytest.fixture
+    def contract_bind_options(self) -> BindOptions:
+        """The bindings' options (:attr:`bind_options`)."""
+        return self.bind_options
 
     def test_every_command_declares_its_reply_or_why_none_comes(self, contract_family: Family[Any]) -> None:
         checks.check_declarations(contract_family)
@@ -66,28 +76,49 @@ class FamilyContract:
         )
 
     def test_commands_encode_and_decode_back(
-        self, contract_family: Family[Any], contract_strategies: Strategies
+        self,
+        contract_family: Family[Any],
+        contract_strategies: Strategies,
+        contract_bind_options: BindOptions,
     ) -> None:
         checked = checks.check_command_round_trips(
-            contract_family, contract_strategies, max_examples=self.max_examples
+            contract_family,
+            contract_strategies,
+            max_examples=self.max_examples,
+            bind_options=contract_bind_options,
         )
         assert checked, f"{contract_family.name}: no command was round-tripped"
 
     def test_replies_encode_and_decode_back(
-        self, contract_family: Family[Any], contract_strategies: Strategies
+        self,
+        contract_family: Family[Any],
+        contract_strategies: Strategies,
+        contract_bind_options: BindOptions,
     ) -> None:
-        checks.check_reply_round_trips(contract_family, contract_strategies, max_examples=self.max_examples)
+        checks.check_reply_round_trips(
+            contract_family,
+            contract_strategies,
+            max_examples=self.max_examples,
+            bind_options=contract_bind_options,
+        )
 
     def test_the_bound_codec_follows_the_declarations(
-        self, contract_family: Family[Any], contract_strategies: Strategies
+        self,
+        contract_family: Family[Any],
+        contract_strategies: Strategies,
+        contract_bind_options: BindOptions,
     ) -> None:
-        checks.check_bound_codecs(contract_family, contract_strategies)
+        checks.check_bound_codecs(contract_family, contract_strategies, bind_options=contract_bind_options)
 
-    def test_every_binding_has_a_safe_command(self, contract_family: Family[Any]) -> None:
-        checks.check_safe_commands(contract_family)
+    def test_every_binding_has_a_safe_command(
+        self, contract_family: Family[Any], contract_bind_options: BindOptions
+    ) -> None:
+        checks.check_safe_commands(contract_family, bind_options=contract_bind_options)
 
-    def test_a_few_motors_share_a_bus(self, contract_family: Family[Any]) -> None:
-        checks.check_bus_of(contract_family)
+    def test_a_few_motors_share_a_bus(
+        self, contract_family: Family[Any], contract_bind_options: BindOptions
+    ) -> None:
+        checks.check_bus_of(contract_family, bind_options=contract_bind_options)
 
     def test_the_simulated_motor_answers_its_own_codec(
         self, contract_family: Family[Any], contract_strategies: Strategies
