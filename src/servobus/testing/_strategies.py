@@ -1,11 +1,11 @@
 """Hypothesis strategies for a family's messages, built from each class's declared field limits.
 
 A message class that declares its payload (``FIELDS``: ``(offset, field)`` pairs, or bare fields)
-gets a strategy drawing every declared field within the field's own limits, on the field's
-resolution (a scaled value is a whole number of counts, so it decodes to itself), and leaving every
-other dataclass field at its default. A class with a field the rules below do not know, or a
-required dataclass field no declared field covers (a motor model, a parameter chosen by name), has
-no derived strategy: the family passes one (``strategies={Cls: st.builds(...)}``).
+gets a strategy drawing every declared field of a kind :func:`field_strategy` knows within the
+field's own limits, on the field's resolution (a scaled value is a whole number of counts, so it
+decodes to itself), and leaving every other dataclass field at its default. A class with a required
+field that no such declaration covers (a motor model, a parameter chosen by name, a field kind the
+rules do not know) has no derived strategy: the family passes one (``strategies={Cls: ...}``).
 """
 
 from __future__ import annotations
@@ -124,8 +124,9 @@ def _built(draw: st.DrawFn, cls: type[Message], fields: dict[str, st.SearchStrat
 
 
 def message_strategy(cls: type[Message]) -> st.SearchStrategy[Message] | None:
-    """Instances of ``cls`` drawn from its declared field limits; None where they do not say enough
-    (an undeclared required field, a field kind :func:`field_strategy` does not know).
+    """Instances of ``cls`` drawn from its declared field limits (a field they do not describe kept at
+    its default); None where a required field is not described (undeclared, or a field kind
+    :func:`field_strategy` does not know).
 
     Values a class refuses as a whole (two fields that exclude each other) are rejected, not failed.
     """
@@ -138,14 +139,11 @@ def message_strategy(cls: type[Message]) -> st.SearchStrategy[Message] | None:
         if not f.init:
             continue
         spec = by_name.get(f.name)
-        if spec is None:
-            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-                return None  # required, and no declaration says what it holds
-            continue
-        strategy = field_strategy(spec)
-        if strategy is None:
-            return None
-        fields[f.name] = strategy
+        strategy = None if spec is None else field_strategy(spec)
+        if strategy is not None:
+            fields[f.name] = strategy
+        elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+            return None  # required, and no declaration says what it holds (or not in known terms)
     return _built(cls, fields)
 
 
