@@ -31,14 +31,20 @@ pytest collects the ``test_*`` methods of the subclass. Each checks one part of 
   every CLI operation; the ``dbc`` part, if any, is a :class:`servobus.protocols.dbc.DbcFamily`,
   and the family's DBC builds and loads in cantools.
 
-A class whose instances the declarations do not describe (a field the rules do not know, a required
-field no declared field covers: a motor model) gets its strategy from the family::
+A class whose required fields the declarations do not describe (a field kind the rules do not
+know, a required field no declared field covers: a motor model) gets its strategy from the family;
+it must draw values the decoder gives back unchanged (a bit field scaled over ``[lo, hi]`` in
+``bits`` bits: ``lo + k * (hi - lo) / (2**bits - 1)``)::
 
     from hypothesis import strategies as st
 
+    def grid(lo: float, hi: float, bits: int) -> st.SearchStrategy[float]:
+        top = (1 << bits) - 1
+        return st.integers(0, top).map(lambda k: lo + k * (hi - lo) / top)
+
     class TestMyFamily(FamilyContract):
         family = FAMILY
-        strategies = {Mit: st.builds(Mit, position_rad=st.floats(-12.5, 12.5))}
+        strategies = {Mit: st.builds(Mit, position_rad=grid(-12.5, 12.5, 16))}
         unbuilt_ok = frozenset({"Calibrate"})  # checked by the package's own tests instead
         bind_options = [{"model": "DM4310"}, {"model": "DM8009"}]  # bind (and decode) each model
         max_examples = 50
