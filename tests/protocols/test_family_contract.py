@@ -66,7 +66,6 @@ BUILT_IN_UNBUILT = {
             "PiMultiplier",
             "SelectMode",
             "Setpoint",
-            "FdCommand",
             "ModbusRead",
             "ModbusWrite",
             "NormalReply",

@@ -4,6 +4,7 @@ AssertionError naming the family and the class, or returns what it checked)."""
 from __future__ import annotations
 
 import dataclasses
+import inspect
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Any
 
@@ -151,6 +152,21 @@ def _reply_frames(codec: BoundCodec, data: bytes) -> Iterator[Frame]:
         )
 
 
+def _request_options(
+    family: Family[Any], codec: BoundCodec, frame: Frame, opts: Mapping[str, Any]
+) -> dict[str, Any]:
+    """``decode_request``'s keyword arguments for ``frame``, as servobus' log decoder gives them
+    (the revision; the codec's model and the frame's flags where the decoder takes them), and the
+    binding's own options it takes."""
+    params = inspect.signature(family.decode_request).parameters
+    takes_any = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
+    options: dict[str, Any] = {"revision": codec.revision}
+    derived = {"model": codec.model, "is_extended_id": frame.is_extended_id, "is_fd": frame.is_fd}
+    options.update((name, value) for name, value in derived.items() if name in params)
+    options.update((name, value) for name, value in opts.items() if name in params or takes_any)
+    return options
+
+
 def check_command_round_trips(
     family: Family[Any],
     strategies: Strategies | None = None,
@@ -160,7 +176,8 @@ def check_command_round_trips(
 ) -> list[str]:
     """Each command class with a strategy that is sent on CAN: every drawn command encodes on a CAN
     binding that takes it, and the family's request decoder (``Family.decode_request``, which takes
-    a CAN identifier, and the options the codec was bound with) gives back an equal command there.
+    a CAN identifier; given the revision, the codec's model, the frame's ``is_extended_id`` and
+    ``is_fd`` where it names them, and the binding's options) gives back an equal command there.
     Returns the classes checked."""
     codecs = _can_bindings(family, bind_options)
     built = strategies_of(family, strategies)
@@ -179,7 +196,7 @@ def check_command_round_trips(
                     continue
                 try:
                     decoded = family.decode_request(
-                        frame.arbitration_id, frame.data, revision=codec.revision, **opts
+                        frame.arbitration_id, frame.data, **_request_options(family, codec, frame, opts)
                     )
                 except ProtocolError as exc:
                     tried.append(f"{codec!r}: {exc}")
