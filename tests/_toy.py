@@ -26,3 +26,23 @@ def installed() -> Iterator[ModuleType]:
         sys.path.remove(str(PLUGINS))
         for name in [n for n in sys.modules if n.partition(".")[0] == "servobus_toy"]:
             del sys.modules[name]
+
+
+def another_family(into: Path, name: str = "fake", media: tuple[str, ...] = ("can",)) -> Path:
+    """A copy of ``servobus_toy`` registered as the family ``name`` (package ``servobus_<name>``, with a
+    dist-info whose entry point registers it) written into ``into``, which is returned: on ``sys.path``
+    or ``PYTHONPATH`` it is another installed plug-in family, to show that no test depends on which
+    families are installed besides those it uses. ``media``: what its simulator part says it serves
+    (listed in other families' "use --family X" hints; its motors still speak classic CAN only)."""
+    package = f"servobus_{name}"
+    target = into / package
+    target.mkdir(parents=True)
+    for source in (PLUGINS / "servobus_toy").glob("*.py"):
+        text = source.read_text().replace("servobus_toy", package).replace('"toy"', f'"{name}"')
+        text = text.replace('media=("can",)', f"media={media!r}")
+        (target / source.name).write_text(text)
+    info = into / f"{package}-1.0.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {package}\nVersion: 1.0\n")
+    (info / "entry_points.txt").write_text(f"[servobus.families]\n{name} = {package}:FAMILY\n")
+    return into

@@ -123,6 +123,8 @@ def test_the_check_catches_violations() -> None:
 #   bus         the Bus and what runs beside it (ticks, signals, sync, logs, recording): on the
 #               scheduler and the transports, never on the simulator
 #   tools       the DBC exporter, log decoding, recording: on the Bus and what is below it
+#   testing     the family contract as a test suite (servobus.testing, issue 42): on the simulator's
+#               family part and the DBC exporter it checks, imported by tests only
 #   app         the command line: any layer
 #
 # A family's cli and dbc parts and its typed calls (_motor) are in the family layer: they implement
@@ -188,6 +190,7 @@ LAYERS: dict[str, list[str]] = {
     "tools": ["servobus.tools"],
     # the live web page of buses, motors and a loop (issue 40): above all of them, below the CLI
     "dashboard": ["servobus.dashboard"],
+    "testing": ["servobus.testing"],
     "app": [
         "servobus.cli",
         "servobus.dbc",  # (the deprecated alias of servobus.protocols.dbc and servobus.tools.dbc)
@@ -217,6 +220,7 @@ MAY_IMPORT: dict[str, set[str]] = {
         "tools",
         "dashboard",
     },
+    "testing": {"base", "protocols", "scheduler", "transports", "sim", "bus", "tools", "testing"},
     "app": set(LAYERS),
 }
 #: the simulator modules a transport may import: the networks the in-process link runs and the

@@ -74,8 +74,11 @@ def test_without_its_distribution_the_family_is_unknown(monkeypatch: pytest.Monk
     monkeypatch.setattr(sys, "path", [p for p in sys.path if Path(p).resolve() != PLUGINS])
     monkeypatch.delitem(sys.modules, "servobus_toy", raising=False)  # (servobus keeps a loaded plug-in)
     assert "toy" not in available_families()
-    with pytest.raises(ValueError, match=r"unknown protocol family 'toy' \(known: hollow, lk, myactuator"):
+    with pytest.raises(ValueError, match=r"unknown protocol family 'toy' \(known: ") as refused:
         get_family("toy")
+    # the families it names are those installed: the built-ins and any other plug-in, never the toy
+    known = str(refused.value).partition("(known: ")[2].rstrip(")").split(", ")
+    assert set(FAMILIES) <= set(known) and "toy" not in known and known == sorted(known)
 
 
 def test_the_entry_point_alone_registers_the_family(toy: ModuleType) -> None:
@@ -422,7 +425,7 @@ def test_servobus_sim_family_toy_serves_an_slcan_adapter() -> None:
     ("args", "error"),
     [
         (("--rs485",), "--rs485: the toy protocol is CAN only; use --slcan"),
-        (("--fd",), "--fd: the simulated toy motors speak classic CAN only (CAN FD: --family hollow)"),
+        (("--fd",), "--fd: the simulated toy motors speak classic CAN only (CAN FD: {canfd})"),
         (
             ("--motors", "2", "--first-id", "31"),
             "--first-id 31 --motors 2: ids 31..32, but toy motor ids are 1..31",
@@ -430,6 +433,11 @@ def test_servobus_sim_family_toy_serves_an_slcan_adapter() -> None:
     ],
 )
 def test_servobus_sim_refuses_what_the_toy_sim_part_cannot_serve(args: tuple[str, ...], error: str) -> None:
+    from servobus.sim.family import offered_by
+
+    # the families offering CAN FD: hollow, and any installed plug-in that does
+    assert "hollow" in offered_by("canfd")
+    error = error.format(canfd=", ".join(f"--family {name}" for name in offered_by("canfd")))
     result = run_cli("sim", "--family", "toy", *args, timeout_s=20)
     assert (result.returncode, result.stdout, result.stderr) == (2, "", f"servobus.sim: error: {error}\n")
 
