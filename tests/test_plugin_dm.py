@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import enum
 import importlib
 import inspect
 import json
@@ -42,6 +43,7 @@ from servobus.protocols import FrameKind, available_families, check_bus, get_fam
 from servobus.protocols.bits import BitLayout
 from servobus.sim.attach import serve_python_can
 from servobus.sim.network import SimCanNetwork
+from servobus.testing import FamilyContract
 from servobus.transports.can import CanTransport
 from servobus.transports.sim import SimTransport
 
@@ -680,3 +682,52 @@ def test_servobus_decode_family_dm(tmp_path: Path) -> None:
         10.0,
     )
     assert (feedback["position_rad"], feedback["torque_nm"], feedback["temperature_c"]) == (12.5, 10.0, 41)
+
+
+# ---- the public contract suite (servobus.testing) ----
+
+
+def _declared(cls: type[BitLayout], **fixed: Any) -> Any:
+    """Instances of ``cls`` (default model) whose every field is a code of its declaration, so they
+    encode and decode back equal (a value between two codes comes back as the nearer code)."""
+    from hypothesis import strategies as st
+
+    from servobus.authoring import BitField
+
+    model = cls.default_model()
+    fields: dict[str, Any] = {}
+    for spec in cls.FIELDS:
+        if isinstance(spec, BitField) and spec.name not in fixed:
+            scale = spec.scale_for(model)
+            lo, hi = spec.code_range(scale)
+            if isinstance(spec.kind, type) and issubclass(spec.kind, enum.IntEnum):
+                fields[spec.name] = st.sampled_from(list(spec.kind))
+            else:
+                fields[spec.name] = st.integers(max(lo, int(scale.lo)) if spec.kind is int else lo, hi).map(
+                    lambda code, spec=spec, scale=scale: spec.value(code, scale, b"")
+                )
+    return st.builds(cls, **fields, **{k: st.just(v) for k, v in fixed.items()})
+
+
+@pytest.fixture(scope="module")
+def dm_strategies(dm: ModuleType) -> Any:
+    # the contract binds motor 2 (the family's second id): its feedback names motor 2
+    return {dm.MitControl: _declared(dm.MitControl), dm.Feedback: _declared(dm.Feedback, motor_id=2)}
+
+
+class TestDm(FamilyContract):
+    """servobus.testing's contract, as dm's own package runs it: every model bound, the bit-packed
+    classes drawn on their codes."""
+
+    bind_options = tuple(
+        {"model": name} for name in ("DM4310", "DM4340", "DM6006", "DM8006", "DM8009", "DM10010L")
+    )
+    max_examples = 30
+
+    @pytest.fixture
+    def contract_family(self, dm: ModuleType) -> Any:
+        return dm.FAMILY
+
+    @pytest.fixture
+    def contract_strategies(self, dm_strategies: Any) -> Any:
+        return dm_strategies
