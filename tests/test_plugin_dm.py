@@ -688,8 +688,8 @@ def test_servobus_decode_family_dm(tmp_path: Path) -> None:
 
 
 def _declared(cls: type[BitLayout], **fixed: Any) -> Any:
-    """Instances of ``cls`` (default model) whose every field is a code of its declaration, so they
-    encode and decode back equal (a value between two codes comes back as the nearer code)."""
+    """Instances of ``cls`` whose every field is one of its codes (its default model's scale), so they
+    encode and decode back equal (a value between two codes comes back as the nearer one)."""
     from hypothesis import strategies as st
 
     from servobus.authoring import BitField
@@ -699,11 +699,10 @@ def _declared(cls: type[BitLayout], **fixed: Any) -> Any:
     for spec in cls.FIELDS:
         if isinstance(spec, BitField) and spec.name not in fixed:
             scale = spec.scale_for(model)
-            lo, hi = spec.code_range(scale)
             if isinstance(spec.kind, type) and issubclass(spec.kind, enum.IntEnum):
                 fields[spec.name] = st.sampled_from(list(spec.kind))
             else:
-                fields[spec.name] = st.integers(max(lo, int(scale.lo)) if spec.kind is int else lo, hi).map(
+                fields[spec.name] = st.integers(*spec.code_range(scale)).map(
                     lambda code, spec=spec, scale=scale: spec.value(code, scale, b"")
                 )
     return st.builds(cls, **fields, **{k: st.just(v) for k, v in fixed.items()})
