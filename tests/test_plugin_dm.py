@@ -730,3 +730,19 @@ class TestDm(FamilyContract):
     @pytest.fixture
     def contract_strategies(self, dm_strategies: Any) -> Any:
         return dm_strategies
+
+
+@pytest.mark.parametrize(
+    ("args", "error"),
+    [
+        (("--rs485",), "--rs485: DM-J motors in MIT mode speak classic CAN only; use --slcan"),
+        (("--fd",), "--fd: DM-J motors in MIT mode speak classic CAN only (CAN FD: --family hollow)"),
+        (
+            ("--motors", "2", "--first-id", "15"),
+            "--first-id 15 --motors 2: ids 15..16, but dm motor ids are 1..15",
+        ),
+    ],
+)
+def test_servobus_sim_refuses_what_the_dm_sim_part_cannot_serve(args: tuple[str, ...], error: str) -> None:
+    result = _run_cli("sim", "--family", "dm", *args, timeout_s=20)
+    assert (result.returncode, result.stdout, result.stderr) == (2, "", f"servobus.sim: error: {error}\n")

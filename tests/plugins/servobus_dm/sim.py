@@ -34,5 +34,8 @@ SIM = DmSim(
     family="dm",
     media=("can",),
     turnaround_s=DEFAULT_TURNAROUND_S,
-    refusals={"rs485": "DM-J motors in MIT mode speak classic CAN only", "canfd": "classic CAN only"},
+    refusals={
+        "rs485": "DM-J motors in MIT mode speak classic CAN only",
+        "canfd": "DM-J motors in MIT mode speak classic CAN only",
+    },
 )
