@@ -18,6 +18,7 @@ import pytest
 
 from _toy import installed
 from servobus.protocols import FAMILIES, Command, Family, Reply, available_families, get_family
+from servobus.protocols import hollow as ho
 from servobus.testing import FamilyContract, Strategies, message_classes
 
 # Every family installed where the suite runs: the built-ins, the toy plug-in (its folder put on
@@ -62,21 +63,27 @@ BUILT_IN_UNBUILT = {
     "hollow": frozenset(
         {
             "CanModeSwitch",
-            "IncrementalSetpoint",
-            "PiMultiplier",
-            "SelectMode",
-            "Setpoint",
-            "ModbusRead",
-            "ModbusWrite",
+            "IncrementalSetpoint",  # (HOLLOW_CONTEXT)
             "NormalReply",
             "ExtendedReply",
             "FdReply",
+            "PiMultiplier",
+            "ModbusRead",
+            "ModbusWrite",
             "ModbusReadReply",
             "ModbusException",
             "ModbusWriteAck",
         }
     ),
 }
+
+
+#: hollow's bit layouts whose round trip needs what a drawn value lacks, left to tests/protocols/hollow:
+#: the motor's CAN mode, not the bytes, tells an incremental setpoint from a setpoint, and the
+#: replies are told apart by the mode and link of the motor that sent them
+HOLLOW_CONTEXT: Strategies = dict.fromkeys(
+    (ho.IncrementalSetpoint, ho.NormalReply, ho.ExtendedReply, ho.FdReply)
+)
 
 
 pytestmark = pytest.mark.usefixtures("toy")  # the plug-in installed (tests/_toy.py)
@@ -96,8 +103,8 @@ class TestEveryInstalledFamily(FamilyContract):
         return family
 
     @pytest.fixture
-    def contract_strategies(self) -> Strategies:
-        return {}
+    def contract_strategies(self, family: Family[Any]) -> Strategies:
+        return HOLLOW_CONTEXT if family.name == "hollow" else {}
 
     @pytest.fixture
     def contract_unbuilt_ok(self, family: Family[Any]) -> frozenset[str]:
