@@ -180,7 +180,8 @@ class BitField:
         if kind is float:
             x = code * scale.span / scale.codes + scale.origin
             # (a code within the field's range is data; a last-ulp excess is the arithmetic's)
-            return scale.lo if x < scale.lo and code == self.code_range(scale)[0] else x
+            lo, hi = self.code_range(scale)
+            return scale.lo if x < scale.lo and code == lo else scale.hi if x > scale.hi and code == hi else x
         if scale.origin or scale.codes != scale.span:  # (an integer with an offset or a step)
             code = round(code * scale.span / scale.codes + scale.origin)
         if isinstance(kind, type) and issubclass(kind, IntEnum):

@@ -22,6 +22,8 @@ from hypothesis import strategies as st
 from servobus.protocols import Family, Message
 from servobus.protocols.authoring import (
     AsciiField,
+    BitField,
+    BitLayout,
     BoolField,
     Float32Field,
     IntField,
@@ -31,8 +33,8 @@ from servobus.protocols.authoring import (
 
 __all__ = ["Strategies", "field_strategy", "message_classes", "message_strategy", "strategies_of"]
 
-#: message class -> the strategy drawing its instances
-Strategies = Mapping[type[Message], st.SearchStrategy[Any]]
+#: message class -> the strategy drawing its instances (None: none, see :func:`strategies_of`)
+Strategies = Mapping[type[Message], st.SearchStrategy[Any] | None]
 
 
 def message_classes(family: Family[Any]) -> tuple[type[Message], ...]:
@@ -68,15 +70,19 @@ def _ascii(size: int) -> st.SearchStrategy[str]:
     return st.text(printable, max_size=size).filter(lambda s: s == s.rstrip(" "))
 
 
-def field_strategy(spec: Any) -> st.SearchStrategy[Any] | None:
+def field_strategy(spec: Any, model: Any = None) -> st.SearchStrategy[Any] | None:
     """Values ``spec`` (one declared field) accepts and decodes to themselves; None: a field kind
     these rules do not know (the family gives the class's strategy itself).
 
-    Known kinds: :class:`ScaledField` (counts within its limits), :class:`IntField`,
-    :class:`StepField`, :class:`BoolField`, :class:`Float32Field` (binary32 values), :class:`AsciiField`,
-    any field with an ``enum`` or ``members`` enum (its members) or ``flags`` (unions of its flags),
-    and a ``SpecialZero``-like field with an ``inner`` field (the inner field's values).
+    Known kinds: a bit field (:class:`~servobus.protocols.bits.BitField`: the values of its codes
+    within its limits, with ``model``'s scale), :class:`ScaledField` (counts within its limits),
+    :class:`IntField`, :class:`StepField`, :class:`BoolField`, :class:`Float32Field` (binary32
+    values), :class:`AsciiField`, any field with an ``enum`` or ``members`` enum (its members) or
+    ``flags`` (unions of its flags), and a ``SpecialZero``-like field with an ``inner`` field (the
+    inner field's values).
     """
+    if isinstance(spec, BitField):
+        return _bits(spec, model)
     if isinstance(spec, ScaledField):
         return _scaled(spec)
     if isinstance(spec, StepField):
@@ -100,6 +106,24 @@ def field_strategy(spec: Any) -> st.SearchStrategy[Any] | None:
     if inner is not None:
         return field_strategy(inner)
     return None  # (limits alone do not say which values decode to themselves: a scaled bit field's don't)
+
+
+def _bits(spec: BitField, model: Any) -> st.SearchStrategy[Any]:
+    """The values of ``spec``'s codes that its limits hold: each encodes to its code and decodes
+    back to itself (an enum's members, a flag's two values)."""
+    if spec.kind is bool:
+        return st.booleans()
+    if isinstance(spec.kind, type) and issubclass(spec.kind, enum.Enum):
+        return st.sampled_from(list(spec.kind))
+    scale = spec.scale_for(model)
+    lo, hi = spec.code_range(scale)
+    low, high = max(lo, spec.code(scale.lo, scale)), min(hi, spec.code(scale.hi, scale))
+    value = spec.value
+    return (
+        st.integers(low, high)
+        .map(lambda code: value(code, scale, b""))
+        .filter(lambda v: scale.lo <= v <= scale.hi)
+    )
 
 
 def _declared(cls: type[Message]) -> list[Any]:
@@ -134,12 +158,13 @@ def message_strategy(cls: type[Message]) -> st.SearchStrategy[Message] | None:
         return None
     declared = _declared(cls)
     by_name = {spec.name: spec for spec in declared}
+    model = cls.default_model() if issubclass(cls, BitLayout) else None
     fields: dict[str, st.SearchStrategy[Any]] = {}
     for f in dataclasses.fields(cls):
         if not f.init:
             continue
         spec = by_name.get(f.name)
-        strategy = None if spec is None else field_strategy(spec)
+        strategy = None if spec is None else field_strategy(spec, model)
         if strategy is not None:
             fields[f.name] = strategy
         elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
@@ -149,7 +174,9 @@ def message_strategy(cls: type[Message]) -> st.SearchStrategy[Message] | None:
 
 def strategies_of(family: Family[Any], given: Strategies | None = None) -> dict[type[Message], Any]:
     """Every message class of ``family`` with its strategy: ``given`` first, else derived from the
-    declarations; classes with neither are left out (see :func:`message_strategy`)."""
+    declarations; classes with neither are left out (see :func:`message_strategy`), and so are those
+    ``given`` maps to None (a class whose instances cannot be drawn without context the contract
+    does not have: name it in ``unbuilt_ok`` too)."""
     out: dict[type[Message], Any] = {}
     for cls in message_classes(family):
         strategy = given[cls] if given is not None and cls in given else message_strategy(cls)
