@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import enum
 import importlib
 import inspect
 import json
@@ -219,7 +218,11 @@ def test_bytes_that_are_not_a_dm_frame_do_not_decode(dm: ModuleType) -> None:
     from servobus.errors import ProtocolError
 
     with pytest.raises(ProtocolError):
-        dm.FAMILY.decode_reply(0x13, bytes.fromhex("14 00 00 00 00 00 00 00"))  # motor 4 on 3's id
+        dm.FAMILY.decode_reply(0x13, bytes.fromhex("F3 00 00 00 00 00 00 00"))  # ERR 0xF: no code
+    with pytest.raises(ProtocolError):
+        dm.FAMILY.decode_reply(0x20, bytes(8))  # motor 16's: no dm feedback identifier
+    # the identifier says whose the feedback is; D0's nibble comes as it is
+    assert dm.FAMILY.decode_reply(0x13, bytes.fromhex("14 00 00 00 00 00 00 00")).motor_id == 4
     with pytest.raises(ProtocolError):
         dm.FAMILY.decode_reply(0x13, bytes.fromhex("13 00"))
     with pytest.raises(ProtocolError):
@@ -687,36 +690,9 @@ def test_servobus_decode_family_dm(tmp_path: Path) -> None:
 # ---- the public contract suite (servobus.testing) ----
 
 
-def _declared(cls: type[BitLayout], **fixed: Any) -> Any:
-    """Instances of ``cls`` whose every field is one of its codes (its default model's scale), so they
-    encode and decode back equal (a value between two codes comes back as the nearer one)."""
-    from hypothesis import strategies as st
-
-    from servobus.authoring import BitField
-
-    model = cls.default_model()
-    fields: dict[str, Any] = {}
-    for spec in cls.FIELDS:
-        if isinstance(spec, BitField) and spec.name not in fixed:
-            scale = spec.scale_for(model)
-            if isinstance(spec.kind, type) and issubclass(spec.kind, enum.IntEnum):
-                fields[spec.name] = st.sampled_from(list(spec.kind))
-            else:
-                fields[spec.name] = st.integers(*spec.code_range(scale)).map(
-                    lambda code, spec=spec, scale=scale: spec.value(code, scale, b"")
-                )
-    return st.builds(cls, **fields, **{k: st.just(v) for k, v in fixed.items()})
-
-
-@pytest.fixture(scope="module")
-def dm_strategies(dm: ModuleType) -> Any:
-    # the contract binds motor 2 (the family's second id): its feedback names motor 2
-    return {dm.MitControl: _declared(dm.MitControl), dm.Feedback: _declared(dm.Feedback, motor_id=2)}
-
-
 class TestDm(FamilyContract):
-    """servobus.testing's contract, as dm's own package runs it: every model bound, the bit-packed
-    classes drawn on their codes."""
+    """servobus.testing's contract, as dm's own package runs it: every model bound (its messages
+    drawn from their declarations: each bit field's codes)."""
 
     bind_options = tuple(
         {"model": name} for name in ("DM4310", "DM4340", "DM6006", "DM8006", "DM8009", "DM10010L")
@@ -726,10 +702,6 @@ class TestDm(FamilyContract):
     @pytest.fixture
     def contract_family(self, dm: ModuleType) -> Any:
         return dm.FAMILY
-
-    @pytest.fixture
-    def contract_strategies(self, dm_strategies: Any) -> Any:
-        return dm_strategies
 
 
 @pytest.mark.parametrize(

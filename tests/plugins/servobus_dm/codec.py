@@ -131,23 +131,18 @@ def decode_request(
 def decode_reply(
     can_id: int, data: bytes, *, revision: Revision | str | None = None, model: DmModel | str | None = None
 ) -> Feedback:
-    """The feedback in a frame on a feedback identifier (0x11..0x1F), scaled by ``model``.
+    """The feedback in a frame on a feedback identifier (0x11..0x1F), scaled by ``model``. The
+    identifier says whose it is (motor id + 0x10); D0's low nibble, which tells motors apart where
+    several share one master id, is given as it came (``Feedback.motor_id``).
 
     Raises:
-        ProtocolError: not a feedback identifier, bytes that do not decode, or a feedback naming
-            another motor than its identifier's.
+        ProtocolError: not a feedback identifier, or bytes that do not decode.
         ValueError: an unknown revision or model.
     """
     _revision(revision)
-    motor_id = can_id - FEEDBACK_OFFSET
-    if motor_id not in MOTOR_IDS:
+    if can_id - FEEDBACK_OFFSET not in MOTOR_IDS:
         raise ProtocolError(f"0x{can_id:03X} is no dm feedback identifier", raw=data)
-    feedback = Feedback.decode(data, model=find_model(model))
-    if feedback.motor_id != motor_id:
-        raise ProtocolError(
-            f"a feedback of motor {feedback.motor_id} on motor {motor_id}'s identifier", raw=data
-        )
-    return feedback
+    return Feedback.decode(data, model=find_model(model))
 
 
 class DmCodec(CodecBase):
