@@ -361,6 +361,29 @@ def test_a_value_out_of_range_names_the_model_and_leaves_nothing_on_the_bus(dm: 
     assert device.counters["received"] == 0
 
 
+def test_a_typed_call_is_checked_against_the_motor_s_own_model(dm: ModuleType) -> None:
+    """40 rad/s is beyond the default DM4310's ±30 but within a DM6006's ±45: the typed call
+    builds the command with the model the motor was bound with (servobus.protocols._calls.given_model)."""
+    from servobus_dm.device import DmMotor
+
+    model = dm.MODELS["DM6006"]
+    device = DmMotor(1, model=model)
+
+    async def scenario() -> None:
+        async with Bus(SimTransport(devices=[device])) as bus:
+            motor = bus.motor(dm.FAMILY, 1, model="DM6006")
+            await motor.enable()
+            await motor.mit_control(position_rad=0.0, velocity_rad_s=40.0, kd=1.0)
+            with pytest.raises(
+                ValueError, match=r"^velocity_rad_s=46\.0 is outside \[-45\.0, 45\.0\] for model DM6006$"
+            ):
+                await motor.mit_control(position_rad=0.0, velocity_rad_s=46.0)
+
+    name, options = virtual("asyncio")
+    anyio.run(scenario, backend=name, backend_options=options)
+    assert device.counters["received"] == 3  # (the enable, the 40 rad/s set-point, the stop on leaving)
+
+
 def test_an_error_code_is_the_motor_s_fault_and_its_states_are_none(dm: ModuleType) -> None:
     from servobus_dm.device import DmMotor
 

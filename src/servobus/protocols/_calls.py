@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Any
 from servobus.protocols._family import Family
 from servobus.protocols._message import Command
 
-__all__ = ["DEFAULT", "TypedCalls", "given", "module_path", "render"]
+__all__ = ["DEFAULT", "TypedCalls", "given", "given_model", "module_path", "render"]
 
 if TYPE_CHECKING:
     # Type-only: to a type checker the typed calls are a Motor (user code passes them where a
@@ -65,6 +65,15 @@ DEFAULT: Any = object()
 def given(**fields: Any) -> dict[str, Any]:
     """The fields a generated method was given (those not left at :data:`DEFAULT`)."""
     return {name: value for name, value in fields.items() if value is not DEFAULT}
+
+
+def given_model(motor: Any, model: Any) -> dict[str, Any]:
+    """A command's ``model`` field in a generated method: ``model`` where given, else the motor's
+    own (its bound codec's), so the command is checked against the ranges of the motor it goes to,
+    and a value beyond them names that model; nothing where the codec has none (the command's default)."""
+    if model is DEFAULT:
+        model = getattr(motor.codec, "model", None)
+    return {} if model is None else {"model": model}
 
 
 _BUILTINS = {int, float, bool, str, bytes, type(None), object}
@@ -163,6 +172,8 @@ def _parameters(cls: type[Command], imports: _Imports) -> tuple[list[str], list[
             written = _default(f.default, imports) if f.default is not _NO_DEFAULT else None
             if written is None:
                 written, arg = "DEFAULT", f"**given({f.name}={f.name})"
+                if f.name == "model":  # (the motor's model where none is given: given_model)
+                    arg = "**given_model(self, model)"
             text += f" = {written}"
             seen_default = True
         elif seen_default and not keyword_only:
@@ -179,6 +190,12 @@ def _summary(cls: type) -> str:
     doc = (cls.__doc__ or "").strip().splitlines()
     line = doc[0].strip() if doc else cls.__name__
     return line.replace('"""', "'''").replace("\\", "\\\\")
+
+
+def _helpers(methods: str) -> str:
+    """The names of this module the generated ``methods`` use."""
+    names = [n for n in ("given", "given_model") if f"**{n}(" in methods]
+    return ", ".join(["DEFAULT", "TypedCalls", *names] if names else ["TypedCalls"])
 
 
 def render(family: Family[Any]) -> str:
@@ -206,8 +223,7 @@ def render(family: Family[Any]) -> str:
         "",
         "from typing import Any, Literal  # noqa: F401",
         "",
-        "from servobus.protocols._calls import "
-        + ("DEFAULT, TypedCalls, given" if "**given(" in "".join(methods) else "TypedCalls"),
+        "from servobus.protocols._calls import " + _helpers("".join(methods)),
         *imports.lines(),
         "",
         '__all__ = ["Motor"]',

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Any, Literal  # noqa: F401
 
-from servobus.protocols._calls import DEFAULT, TypedCalls, given
+from servobus.protocols._calls import DEFAULT, TypedCalls, given_model
 from servobus_dm import messages, models
 
 __all__ = ["Motor"]
@@ -18,7 +18,7 @@ class Motor(TypedCalls):
     (the Bus's Motor, which the Bus composes after this class, sends them)."""
 
     # The MIT set-point: torque = kp·(position_rad - pos) + kd·(velocity_rad_s - vel) + torque_nm.
-    async def mit_control(self, position_rad: float, velocity_rad_s: float = 0.0, kp: float = 0.0, kd: float = 0.0, torque_nm: float = 0.0, model: models.DmModel = DEFAULT, *, timeout_s: float | None = None, retries: int = 0) -> messages.Feedback: return await self.request(messages.MitControl(position_rad=position_rad, velocity_rad_s=velocity_rad_s, kp=kp, kd=kd, torque_nm=torque_nm, **given(model=model)), timeout_s=timeout_s, retries=retries)
+    async def mit_control(self, position_rad: float, velocity_rad_s: float = 0.0, kp: float = 0.0, kd: float = 0.0, torque_nm: float = 0.0, model: models.DmModel = DEFAULT, *, timeout_s: float | None = None, retries: int = 0) -> messages.Feedback: return await self.request(messages.MitControl(position_rad=position_rad, velocity_rad_s=velocity_rad_s, kp=kp, kd=kd, torque_nm=torque_nm, **given_model(self, model)), timeout_s=timeout_s, retries=retries)
     # FF x 7 FC: the motor drives the MIT law (of the set-points that follow).
     async def enable(self, *, timeout_s: float | None = None, retries: int = 0) -> messages.Feedback: return await self.request(messages.Enable(), timeout_s=timeout_s, retries=retries)
     # FF x 7 FD: output off, the shaft coasts (the Bus's safe stop).

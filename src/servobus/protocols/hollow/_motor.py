@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Any, Literal  # noqa: F401
 
-from servobus.protocols._calls import DEFAULT, TypedCalls, given
+from servobus.protocols._calls import DEFAULT, TypedCalls, given, given_model
 from servobus.protocols.hollow import commands, commands_fd, enums, model, replies, rs485
 
 __all__ = ["Motor"]
@@ -20,13 +20,13 @@ class Motor(TypedCalls):
     # Select normal (absolute) or extended (incremental) CAN mode: extended id, DLC 8 (§5.1).
     async def can_mode_switch(self, mode: enums.CanMode, *, timeout_s: float | None = None, retries: int = 0) -> replies.NormalReply | replies.ExtendedReply: return await self.request(commands.CanModeSwitch(mode=mode), timeout_s=timeout_s, retries=retries)
     # The extended-mode setpoint: the same bytes as :class:`Setpoint`, but P is a step (§5.2).
-    async def incremental_setpoint(self, step_deg: float, speed_rad_s: float, kp: int, kd: int, current_a: float, model: model.HollowModel = DEFAULT, *, timeout_s: float | None = None, retries: int = 0) -> replies.NormalReply | replies.ExtendedReply: return await self.request(commands.IncrementalSetpoint(step_deg=step_deg, speed_rad_s=speed_rad_s, kp=kp, kd=kd, current_a=current_a, **given(model=model)), timeout_s=timeout_s, retries=retries)
+    async def incremental_setpoint(self, step_deg: float, speed_rad_s: float, kp: int, kd: int, current_a: float, model: model.HollowModel = DEFAULT, *, timeout_s: float | None = None, retries: int = 0) -> replies.NormalReply | replies.ExtendedReply: return await self.request(commands.IncrementalSetpoint(step_deg=step_deg, speed_rad_s=speed_rad_s, kp=kp, kd=kd, current_a=current_a, **given_model(self, model)), timeout_s=timeout_s, retries=retries)
     # Scale one speed- or current-loop PI gain at runtime: extended id (§6).
     async def pi_multiplier(self, gain: enums.PiGain, multiplier: float, *, timeout_s: float | None = None, retries: int = 0) -> replies.NormalReply | replies.ExtendedReply | replies.FdReply: return await self.request(commands.PiMultiplier(gain=gain, multiplier=multiplier), timeout_s=timeout_s, retries=retries)
     # F9/FA/FB: switch the control mode until power-off (§4.1; D7 = 0xF9 + mode, A3).
     async def select_mode(self, mode: enums.ControlMode, *, timeout_s: float | None = None, retries: int = 0) -> replies.NormalReply | replies.ExtendedReply: return await self.request(commands.SelectMode(mode=mode), timeout_s=timeout_s, retries=retries)
     # The normal-mode setpoint frame: absolute position plus limits and gains (§4.2-§4.4).
-    async def setpoint(self, position_deg: float, speed_rad_s: float, kp: int, kd: int, current_a: float, model: model.HollowModel = DEFAULT, *, timeout_s: float | None = None, retries: int = 0) -> replies.NormalReply | replies.ExtendedReply: return await self.request(commands.Setpoint(position_deg=position_deg, speed_rad_s=speed_rad_s, kp=kp, kd=kd, current_a=current_a, **given(model=model)), timeout_s=timeout_s, retries=retries)
+    async def setpoint(self, position_deg: float, speed_rad_s: float, kp: int, kd: int, current_a: float, model: model.HollowModel = DEFAULT, *, timeout_s: float | None = None, retries: int = 0) -> replies.NormalReply | replies.ExtendedReply: return await self.request(commands.Setpoint(position_deg=position_deg, speed_rad_s=speed_rad_s, kp=kp, kd=kd, current_a=current_a, **given_model(self, model)), timeout_s=timeout_s, retries=retries)
     # FE: the present position becomes the mechanical zero, multi-turn count cleared.
     async def set_zero(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.NormalReply | replies.ExtendedReply: return await self.request(commands.SetZero(), timeout_s=timeout_s, retries=retries)
     # FC: run in the selected mode with the last received setpoint (send a setpoint first).
@@ -34,7 +34,7 @@ class Motor(TypedCalls):
     # FD: no output power, the motor is free (§4.1; bytes reconstructed, A2).
     async def stop(self, *, timeout_s: float | None = None, retries: int = 0) -> replies.NormalReply | replies.ExtendedReply: return await self.request(commands.Stop(), timeout_s=timeout_s, retries=retries)
     # The 16-byte CAN FD request (§7.2); all defaults give the all-zero status poll [H20].
-    async def fd_command(self, position_deg: float = 0.0, velocity_rpm: float = 0.0, current_raw: int = 0, mode: enums.ControlMode = enums.ControlMode.TORQUE, run: bool = False, kp: int = 0, kd: int = 0, zero: bool = False, model: model.HollowModel = DEFAULT, *, timeout_s: float | None = None, retries: int = 0) -> replies.FdReply: return await self.request(commands_fd.FdCommand(position_deg=position_deg, velocity_rpm=velocity_rpm, current_raw=current_raw, mode=mode, run=run, kp=kp, kd=kd, zero=zero, **given(model=model)), timeout_s=timeout_s, retries=retries)
+    async def fd_command(self, position_deg: float = 0.0, velocity_rpm: float = 0.0, current_raw: int = 0, mode: enums.ControlMode = enums.ControlMode.TORQUE, run: bool = False, kp: int = 0, kd: int = 0, zero: bool = False, model: model.HollowModel = DEFAULT, *, timeout_s: float | None = None, retries: int = 0) -> replies.FdReply: return await self.request(commands_fd.FdCommand(position_deg=position_deg, velocity_rpm=velocity_rpm, current_raw=current_raw, mode=mode, run=run, kp=kp, kd=kd, zero=zero, **given_model(self, model)), timeout_s=timeout_s, retries=retries)
     # Function 0x03: read the 16 CAN FD reply bytes from registers 0x0000..0x000F [H16].
     async def modbus_read(self, slave_id: int, *, timeout_s: float | None = None, retries: int = 0) -> rs485.ModbusReadReply | rs485.ModbusException: return await self.request(rs485.ModbusRead(slave_id=slave_id), timeout_s=timeout_s, retries=retries)
     # Function 0x10: write the 16 CAN FD request bytes to registers 0x0000..0x000F [H14].
