@@ -518,6 +518,9 @@ def test_servobus_refuses_what_a_dm_motor_cannot_do_in_one_line(
     assert "kp" in err and "500" in err
     err = _refused(capsys, ["torque", "-f", "dm", "--sim", "1", "--current-a", "1"])
     assert "servobus mit --kp 0 --kd 0 --torque-ff-nm" in err
+    # its move is the MIT law: the gains set the pace, so a speed limit would be a promise not kept
+    err = _refused(capsys, ["move", "-f", "dm", "--sim", "1", "--angle-deg", "10", "--max-speed-dps", "50"])
+    assert "dm move carries no speed limit: drop --max-speed-dps" in err
 
 
 def test_servobus_zero_clear_errors_off_and_monitor_on_dm_motors(
@@ -540,6 +543,11 @@ def test_servobus_demo_runs_simulated_dm_motors(dm: ModuleType, capsys: pytest.C
         capsys, ["demo", "-f", "dm", "--motors", "2", "--duration", "0.5", "--hz", "200", "--json"]
     )
     assert summary["errors"] == 0, summary
+    # its move takes no speed limit (the MIT law's gains set the pace): the demo gives it none
+    from servobus.cli._demo_parts import MAX_SPEED_DPS, parts
+
+    assert parts("dm").values(10.0)["max_speed_dps"] is None
+    assert parts("myactuator").values(10.0)["max_speed_dps"] == MAX_SPEED_DPS
 
 
 def test_servobus_scan_status_and_stop_through_python_can_virtual(

@@ -84,6 +84,11 @@ def _move_values(angle_deg: float) -> dict[str, Any]:
     return {"angle_deg": angle_deg, "max_speed_dps": MAX_SPEED_DPS, "relative": False, "max_current_a": None}
 
 
+def _move_without_limit(angle_deg: float) -> dict[str, Any]:
+    """``move``'s values for a move that takes no speed limit (``Op.speed_limit``): none given."""
+    return {**_move_values(angle_deg), "max_speed_dps": None}
+
+
 def _mit_values(angle_deg: float) -> dict[str, Any]:
     """``mit``'s values, the fallback without a move: the position, no velocity or torque
     feed-forward, the demo's gains (:data:`MIT_KP`, :data:`MIT_KD`)."""
@@ -120,6 +125,8 @@ def parts(family: str) -> Parts:
     for name, values in _DRIVES:
         op = cli.op(name)
         if op is not None:
+            if name == "move" and not op.speed_limit:
+                values = _move_without_limit
             return Parts(family, sim, op, values, name)
     # (the move's reason last: the demo's first choice, what the user most likely looks for)
     no_mit = cli.why_not.get("mit", "the family's cli part has none")

@@ -307,8 +307,13 @@ def move(
     target is resent at --rate-hz; a relative move reads the angle, sends the increment once, and
     its target is that angle plus the increment. The move's speed is limited only where the user
     says so: --max-speed-dps, else the lowest speed limit --limits gives the motors; without either
-    the family's move is given no limit (None).
+    the family's move is given no limit (None). A move that takes no speed limit (an MIT law's: its
+    gains set the pace) refuses --max-speed-dps.
     """
+    if not op(conn.family, "move").speed_limit:  # (an MIT law's move: its gains set the pace)
+        if max_speed_dps is not None:
+            raise click.UsageError(f"{conn.family} move carries no speed limit: drop --max-speed-dps")
+        no_speed_limit = True
     if max_speed_dps is None and not no_speed_limit:
         max_speed_dps = _limits_speed(conn)
     values = {"angle_deg": angle_deg, "max_speed_dps": None if no_speed_limit else max_speed_dps}

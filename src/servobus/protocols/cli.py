@@ -128,6 +128,9 @@ class Op:
         note: said after it succeeded (what else the user must do).
         current_limit: its set-point carries a current limit (``--max-current-a``; without it, the
             motor's full scale); a command without one refuses the option.
+        speed_limit: a ``move`` whose set-point carries its speed limit (``max_speed_dps``; None:
+            the family's own "no limit"); a move without one (an MIT law: its gains set the pace)
+            refuses ``--max-speed-dps``, and the demo gives it none.
     """
 
     first: Build
@@ -135,6 +138,7 @@ class Op:
     rom: bool = False
     note: str = ""
     current_limit: bool = False
+    speed_limit: bool = False
 
 
 def build(cls: type[Command], **renamed: str) -> Make:
@@ -205,7 +209,7 @@ def move(
             return (angle(), *(read() for read in reads))
         return (absolute(codec, v), *(() if angle_in_reply else (angle(),)))
 
-    return Op(first=first, repeat=repeat)
+    return Op(first=first, repeat=repeat, speed_limit=True)
 
 
 # ---- scan ----

@@ -62,6 +62,7 @@ def _setpoint(mode: ControlMode) -> Op:
         first=first,
         repeat=lambda codec, v: (setpoint(codec, v),),
         current_limit=mode is not ControlMode.TORQUE,
+        speed_limit=mode is ControlMode.POSITION,  # (V is the position mode's maximum speed)
     )
 
 
@@ -71,7 +72,7 @@ def _absolute_only(op: Op) -> Op:
             raise ValueError("hollow motors: --relative needs their extended CAN mode; give the angle")
         return op.first(codec, v)
 
-    return Op(first=first, repeat=op.repeat, current_limit=op.current_limit)
+    return Op(first=first, repeat=op.repeat, current_limit=op.current_limit, speed_limit=op.speed_limit)
 
 
 def _zero(codec: BoundCodec, v: Values) -> Sequence[Command]:
