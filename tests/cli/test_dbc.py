@@ -350,7 +350,8 @@ def test_without_cantools_one_line_says_how_to_install(
         (["--family", "lk", "--model", "XY"], "motor type"),
         (["--family", "lk", "--encoder-bits", "13"], "encoder_bits"),
         (["--family", "lk", "--can-mode", "fd"], "--can-mode is an option of hollow"),
-        (["--family", "myactuator", "--model", "MG"], "--model is an option of lk and hollow"),
+        # (other installed families with a model option come first: "of dm, lk and hollow")
+        (["--family", "myactuator", "--model", "MG"], "lk and hollow, not of myactuator"),
         (["--family", "hollow", "--max-torque", "3"], "--max-torque is an option of myactuator"),
         (["--revision", "V4_3", "--max-torque", "3"], "V4.4"),
         (["--family", "hollow", "--can-mode", "turbo"], "--can-mode"),

@@ -8,17 +8,14 @@ import contextlib
 import select
 import signal
 import subprocess
-import threading
-import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-import anyio
 import pytest
 
 from _ports import free_port as _free_port
 from cli._bus_cli import SERVOBUS, one_line, pty_simulators, run, run_json
+from cli._virtual import served_on_virtual
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
 from sim._standins import Sniffer
 
@@ -84,34 +81,9 @@ def test_a_bad_limits_file_is_one_line_and_exit_2(
 # ---- a real transport path: python-can's virtual bus, the simulated motors served on it ----
 
 
-@contextlib.contextmanager
-def _served_on_virtual(sniffer: Sniffer) -> Iterator[str]:
+def _served_on_virtual(sniffer: Sniffer) -> contextlib.AbstractContextManager[str]:
     """Two simulated MyActuator motors and ``sniffer`` on a python-can virtual channel (named)."""
-    import can
-
-    from servobus.sim.attach import serve_python_can
-    from servobus.sim.network import SimCanNetwork
-
-    channel = f"limits-cli-{time.monotonic_ns()}"
-    network = SimCanNetwork([MyActuatorMotor(1), MyActuatorMotor(2), sniffer])
-    side = can.Bus(interface="virtual", channel=channel)
-    stop = threading.Event()
-
-    async def serve() -> None:
-        async with anyio.create_task_group() as group:
-            group.start_soon(lambda: serve_python_can(network, side))
-            while not stop.is_set():
-                await anyio.sleep(0.01)
-            group.cancel_scope.cancel()
-
-    thread = threading.Thread(target=anyio.run, args=(serve,), daemon=True)
-    thread.start()
-    try:
-        yield channel
-    finally:
-        stop.set()
-        thread.join(5)
-        side.shutdown()
+    return served_on_virtual([MyActuatorMotor(1), MyActuatorMotor(2), sniffer])
 
 
 def _speeds(sniffer: Sniffer) -> list[float]:

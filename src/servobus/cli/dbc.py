@@ -131,7 +131,7 @@ def dbc(
         raise click.ClickException("dbc needs cantools: pip install 'servobus[dbc]'") from None
     from servobus.protocols import get_family
     from servobus.protocols.dbc import dbc_part
-    from servobus.tools.dbc import database, dbc_text, option_owners, plan
+    from servobus.tools.dbc import database, dbc_text, owners_of, plan
 
     part = dbc_part(get_family(family))
     given = {
@@ -156,7 +156,7 @@ def dbc(
             raise click.BadParameter(f"{option}: {exc}", param_hint="--option") from None
     for option, flag in flags.items():
         if part.option(option) is None:
-            owners = " and ".join(option_owners(option))
+            owners = owners_of(option)
             says = f"is an option of {owners}, not of {family}" if owners else f"is not an option of {family}"
             name = option if flag == "--option" else flag
             raise click.BadParameter(f"{name} {says}", param_hint=flag)

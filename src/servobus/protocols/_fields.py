@@ -17,9 +17,20 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from enum import Enum
+from enum import Enum, IntEnum
+from typing import TypeVar
 
-__all__ = ["IntField", "ScaledField", "check_choice", "check_range", "round_half_away"]
+__all__ = [
+    "IntField",
+    "ScaledField",
+    "check_choice",
+    "check_flag",
+    "check_range",
+    "round_half_away",
+    "to_enum",
+]
+
+E = TypeVar("E", bound=IntEnum)
 
 
 def round_half_away(x: float) -> int:
@@ -31,6 +42,39 @@ def check_range(name: str, value: float, lo: float, hi: float) -> None:
     """Raise ValueError unless lo <= value <= hi (NaN and infinities are outside every range)."""
     if not lo <= value <= hi:
         raise ValueError(f"{name}={value!r} is outside [{lo!r}, {hi!r}]")
+
+
+def check_flag(name: str, value: object) -> bool:
+    """``value`` as a bool; accepts True/False and 0/1.
+
+    Raises:
+        ValueError: anything else.
+    """
+    if value is True or value is False:
+        return value
+    if isinstance(value, int) and value in (0, 1):
+        return bool(value)
+    raise ValueError(f"{name}={value!r} is not one of False, True")
+
+
+def to_enum(name: str, value: object, enum: type[E]) -> E:
+    """``value`` as a member of ``enum`` (members and their integer values are accepted).
+
+    Raises:
+        ValueError: no member has that value (the message lists the members).
+    """
+    # A member of another enum (CanMode.NORMAL for a ControlMode) is a mistake, not its integer.
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int)
+        or (isinstance(value, IntEnum) and not isinstance(value, enum))
+    ):
+        raise ValueError(f"{name}={value!r} is not one of {', '.join(m.name for m in enum)}")
+    try:
+        return enum(value)
+    except ValueError:
+        members = ", ".join(f"{m.name}={m.value}" for m in enum)
+        raise ValueError(f"{name}={value!r} is not one of {members}") from None
 
 
 def check_choice(name: str, value: object, choices: object) -> None:

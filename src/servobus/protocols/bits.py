@@ -56,6 +56,7 @@ from typing import Any, ClassVar, Self, TypeAlias
 
 from servobus.core import FieldScale
 from servobus.errors import ProtocolError
+from servobus.protocols._fields import check_flag, to_enum
 from servobus.protocols._message import Message, construct
 
 __all__ = [
@@ -133,23 +134,9 @@ class BitField:
         limits (and the model, where they come from it)."""
         kind, name = self.kind, self.name
         if kind is bool:
-            if value is True or value is False:
-                return value
-            if isinstance(value, int) and value in (0, 1):
-                return bool(value)
-            raise ValueError(f"{name}={value!r} is not one of False, True")
+            return check_flag(name, value)
         if isinstance(kind, type) and issubclass(kind, IntEnum):
-            if (
-                isinstance(value, bool)
-                or not isinstance(value, int)
-                or (isinstance(value, IntEnum) and not isinstance(value, kind))
-            ):
-                raise ValueError(f"{name}={value!r} is not one of {', '.join(m.name for m in kind)}")
-            try:
-                return kind(value)
-            except ValueError:
-                members = ", ".join(f"{m.name}={m.value}" for m in kind)
-                raise ValueError(f"{name}={value!r} is not one of {members}") from None
+            return to_enum(name, value, kind)
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise ValueError(f"{name}={value!r} is not {'an integer' if kind is int else 'a number'}")
         if kind is int and not isinstance(value, int):

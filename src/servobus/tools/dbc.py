@@ -66,6 +66,7 @@ __all__ = [
     "database",
     "dbc_text",
     "option_owners",
+    "owners_of",
     "plan",
     "signal_table",
 ]
@@ -111,6 +112,12 @@ def option_owners(option: str) -> list[str]:
     return owners
 
 
+def owners_of(option: str) -> str:
+    """:func:`option_owners` as words: ``"dm, lk and hollow"`` ("" for none)."""
+    owners = option_owners(option)
+    return " and ".join([", ".join(owners[:-1]), owners[-1]] if len(owners) > 1 else owners)
+
+
 def plan(
     family: str | Family,
     ids: Iterable[int],
@@ -147,7 +154,7 @@ def plan(
     given = {name: value for name, value in options.items() if value is not None}
     for name in given:
         if part.option(name) is None:
-            owners = " and ".join(option_owners(name)) or "no family"
+            owners = owners_of(name) or "no family"
             raise ValueError(f"{name} is an option of {owners}, not of {family.name}")
     query = DbcQuery(
         family=family,

@@ -11,7 +11,7 @@ from enum import IntEnum
 from typing import Any, TypeVar
 
 from servobus.errors import ProtocolError
-from servobus.protocols._fields import check_range
+from servobus.protocols._fields import check_flag, check_range, to_enum
 from servobus.protocols._message import Message, construct
 
 __all__ = [
@@ -40,39 +40,6 @@ def check_int(name: str, value: object, lo: int, hi: int) -> None:
     if isinstance(value, bool) or not isinstance(value, int):
         raise ValueError(f"{name}={value!r} is not an integer")
     check_range(name, value, lo, hi)
-
-
-def check_flag(name: str, value: object) -> bool:
-    """``value`` as a bool; accepts True/False and 0/1.
-
-    Raises:
-        ValueError: anything else.
-    """
-    if value is True or value is False:
-        return value
-    if isinstance(value, int) and value in (0, 1):
-        return bool(value)
-    raise ValueError(f"{name}={value!r} is not one of False, True")
-
-
-def to_enum(name: str, value: object, enum: type[E]) -> E:
-    """``value`` as a member of ``enum`` (members and their integer values are accepted).
-
-    Raises:
-        ValueError: no member has that value (the message lists the members).
-    """
-    # A member of another enum (CanMode.NORMAL for a ControlMode) is a mistake, not its integer.
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, int)
-        or (isinstance(value, IntEnum) and not isinstance(value, enum))
-    ):
-        raise ValueError(f"{name}={value!r} is not one of {', '.join(m.name for m in enum)}")
-    try:
-        return enum(value)
-    except ValueError:
-        members = ", ".join(f"{m.name}={m.value}" for m in enum)
-        raise ValueError(f"{name}={value!r} is not one of {members}") from None
 
 
 def decode_enum(name: str, value: int, enum: type[E], data: bytes, *, motor_id: int | None = None) -> E:
