@@ -2,32 +2,7 @@
 
 A bound codec is one motor's codec (family, id, revision, model, link fixed at bind time), working on
 :class:`~servobus.Frame` only. The Bus, the scheduler and the CLI use nothing else, so none of them ever
-writes ``if family == ...``:
-
-==================================  ================================================================
-member                              gives
-==================================  ================================================================
-``encode(command)``                 the Frame to send (values already checked by the command class)
-``reply_key(command)``              the key the reply will carry, or None when no reply comes
-``classify(frame)``                 ``(FrameKind, key)`` from ids and DATA[0] (and the echoed bytes
-                                    of a reply that echoes a written value), no payload decode
-``decode(frame)``                   the typed reply (``ProtocolError`` for bytes that do not decode)
-``timeout_s(command)``              how long a reply may take (brake release, ROM writes: longer)
-``retry_safe(command)``             True only for commands that change nothing (reads)
-``note_sent(command)``              tell the codec a command left (0xB6 streams, 0x9A reports change
-                                    what the motor's frames mean)
-``may_echo(command)``               True when a reply that is ``command``'s own bytes would be the
-                                    motor echoing it unexecuted: ``Command.NEVER_ECHOED``, or
-                                    ``echoing`` (the family saw its motor say it will echo the next
-                                    command: MyActuator's 0xF1)
-``safe_command(kind)``              the command that stops the motor: ``"stop"``, ``"shutdown"`` or
-                                    ``"brake"`` (ValueError where the motor has no such command)
-``request_key(frame)``              the key of the reply this motor will give to ``frame``, a request
-                                    of ANOTHER host to it (None: not one, or can't be told from a reply)
-``request_ids`` / ``reply_ids``     this motor's own identifiers (filters, the collision check)
-``shared_ids``                      identifiers every motor of the family uses (broadcasts, a host id)
-``framing``                         serial links: Frame <-> bytes on the wire; None on CAN
-==================================  ================================================================
+writes ``if family == ...``; :class:`BoundCodec` lists its members and what each gives.
 
 A key is an opaque hashable (an ``int`` in the built-in families, cheap to hash): equal keys mean "this
 frame can answer that request". The key of a reply that echoes the value its request wrote holds the
@@ -160,7 +135,32 @@ class Broadcast:
 
 
 class BoundCodec(Protocol):
-    """One motor's codec; see the module docstring for the meaning of each member."""
+    """One motor's codec (family, id, revision, model, link fixed at bind time), working on Frames:
+    all the Bus, the scheduler and the CLI ask of a family.
+
+    * ``encode(command)``: the Frame to send (values already checked by the command class)
+    * ``reply_key(command)``: the key the reply will carry, or None when no reply comes
+    * ``classify(frame)``: ``(FrameKind, key)`` from ids and DATA[0] (and the echoed bytes of a reply that
+      echoes a written value), no payload decode
+    * ``decode(frame)``: the typed reply (``ProtocolError`` for bytes that do not decode)
+    * ``timeout_s(command)``: how long a reply may take (brake release, ROM writes: longer)
+    * ``retry_safe(command)``: True only for commands that change nothing (reads)
+    * ``note_sent(command)``: tell the codec a command left (0xB6 streams, 0x9A reports change what the
+      motor's frames mean)
+    * ``may_echo(command)``: True when a reply that is ``command``'s own bytes would be the motor echoing it
+      unexecuted: ``Command.NEVER_ECHOED``, or ``echoing`` (the family saw its motor say it will echo the
+      next command: MyActuator's 0xF1)
+    * ``safe_command(kind)``: the command that stops the motor: ``"stop"``, ``"shutdown"`` or ``"brake"``
+      (ValueError where the motor has no such command)
+    * ``request_key(frame)``: the key of the reply this motor will give to ``frame``, a request of ANOTHER
+      host to it (None: not one, or can't be told from a reply)
+    * ``request_ids`` / ``reply_ids``: this motor's own identifiers (filters, the collision check)
+    * ``shared_ids``: identifiers every motor of the family uses (broadcasts, a host id)
+    * ``framing``: serial links: Frame <-> bytes on the wire; None on CAN
+
+    A key is an opaque hashable: equal keys mean "this frame can answer that request"
+    (:func:`id_key`, :func:`frame_key`, :func:`echo_key`).
+    """
 
     @property
     def family(self) -> str: ...
