@@ -30,7 +30,7 @@ from __future__ import annotations
 
 from servobus.errors import MotorFault, ProtocolError
 from servobus.frame import Frame, classic_request
-from servobus.protocols._calls import TypedCalls
+from servobus.protocols._calls import DEFAULT, TypedCalls, given, given_model
 from servobus.protocols.authoring import (
     EXTENDED,
     KIND_NOT_OURS,
@@ -174,6 +174,7 @@ from servobus.sim.plant import (
 
 __all__ = [
     "CONFIG_FIELDS",
+    "DEFAULT",
     "DEFAULT_OPS",
     "DIRECTIONS",
     "EXTENDED",
@@ -286,6 +287,8 @@ __all__ = [
     "field_names",
     "fields_layout",
     "frame_key",
+    "given",
+    "given_model",
     "id_key",
     "in_revision",
     "keyed_layouts",

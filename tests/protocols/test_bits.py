@@ -178,7 +178,7 @@ def test_every_hollow_payload_s_declaration_packs_as_its_c_packer(
     ):
         return  # (the C packer steps such a position one code down: tests/protocols/hollow)
     assert BitLayout.encode(message) == c_bytes
-    assert cls.decode(c_bytes, model=model) == cls.decode(c_bytes, model=model)  # (decodes)
+    assert BitLayout.encode(cls.decode(c_bytes, model=model)) == c_bytes  # (its own bytes decode back)
 
 
 def test_hollow_classes_are_declared_with_the_public_bit_layout() -> None:
@@ -299,3 +299,50 @@ def test_hollow_s_special_commands_are_declared_by_their_constants() -> None:
     assert claimant([ho.Start, ho.Stop, ho.SetZero], b"\xff" * 7 + b"\xfd") is ho.Stop
     with pytest.raises(ProtocolError, match="is not Start"):
         ho.Start.decode(b"\xff" * 7 + b"\xfd")
+
+
+def test_a_field_whose_range_its_bits_cannot_carry_is_refused_when_declared() -> None:
+    with pytest.raises(ValueError, match="beyond the 4-bit field"):
+        Code("motor_id", (0, 4), 0, 31)  # (31 in 4 bits would go out as 15)
+    with pytest.raises(ValueError, match="beyond the 2-bit field"):
+        Choice("state", (0, 2), State)  # (HOT = 0xB)
+    with pytest.raises(ValueError, match="does not fit its 8 bits"):
+        Const((0, 8), 0x1FC)
+    wide = Linear("v", (0, 4), lambda m: (-m.v_max, m.v_max))
+    wide.scale_for(SMALL)  # (a model's scale: checked when first made, and fits)
+
+
+def test_a_model_dependent_field_needs_a_model() -> None:
+    with pytest.raises(TypeError, match=r"\['v'\] take their ranges from a model"):
+
+        class Modelless(BitLayout):
+            SIZE = 2
+            FIELDS = (Linear("v", (0, 16), lambda m: (-m.v_max, m.v_max)),)
+            v: float
+
+
+def test_rounding_is_the_c_core_s_to_the_last_bit() -> None:
+    """0.49999999999999994 + 0.5 is 1.0 in floating point: the code is still 0, as C's round()."""
+    packer = Packer(
+        MIT_COMMAND,
+        [
+            FieldScale.linear(n, 0.0, 65535.0 if n == "p" else 1.0, b)
+            for n, b in (("p", 16), ("v", 12), ("kp", 12), ("kd", 12), ("t", 12))
+        ],
+    )
+    field = Linear("p", (0, 16), (0.0, 65535.0))
+    assert field.code(0.49999999999999994, field.scale_for(None)) == 0
+    assert packer.pack([0.49999999999999994, 0.0, 0.0, 0.0, 0.0])[:2] == b"\x00\x00"
+    assert field.code(0.5, field.scale_for(None)) == 1 and field.code(2.5, field.scale_for(None)) == 3
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Serial(BitLayout):
+    SIZE: ClassVar[int] = 8
+    FIELDS = (Code("serial", le(0, 8)),)
+    serial: int
+
+
+def test_a_wide_integer_is_carried_exactly() -> None:
+    big = (1 << 53) + 1  # (not a float)
+    assert Serial.decode(Serial(serial=big).encode()).serial == big

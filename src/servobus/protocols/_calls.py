@@ -57,9 +57,9 @@ else:
         __slots__ = ()
 
 
-#: a generated method's default for a field whose own default a signature cannot spell (an object):
-#: the field is then left out, and the command fills it in
 DEFAULT: Any = object()
+"""A generated method's default for a field whose own default a signature cannot spell (an
+object): the field is then left out, and the command fills it in."""
 
 
 def given(**fields: Any) -> dict[str, Any]:
@@ -192,6 +192,13 @@ def _summary(cls: type) -> str:
     return line.replace('"""', "'''").replace("\\", "\\\\")
 
 
+def _helpers_module(family: Family[Any]) -> str:
+    """Where a generated module imports its helpers from: a plug-in family's from the one public
+    module it is written with (servobus.authoring), a built-in's from the protocols layer's own."""
+    package = getattr(family, "package", None) or ""
+    return "servobus.protocols._calls" if package.startswith("servobus.") else "servobus.authoring"
+
+
 def _helpers(methods: str) -> str:
     """The names of this module the generated ``methods`` use."""
     names = [n for n in ("given", "given_model") if f"**{n}(" in methods]
@@ -223,7 +230,7 @@ def render(family: Family[Any]) -> str:
         "",
         "from typing import Any, Literal  # noqa: F401",
         "",
-        "from servobus.protocols._calls import " + _helpers("".join(methods)),
+        f"from {_helpers_module(family)} import " + _helpers("".join(methods)),
         *imports.lines(),
         "",
         '__all__ = ["Motor"]',

@@ -115,6 +115,10 @@ class BitField:
     kind: type = float
     label: str = ""
 
+    def __post_init__(self) -> None:
+        if isinstance(self.scale, FieldScale):  # (a model's scale is checked when first made)
+            _fits(self.scale, self.width, "a bit field")
+
     @property
     def width(self) -> int:
         """The field's width in bits."""
@@ -148,9 +152,15 @@ class BitField:
         return value
 
     def code(self, value: Any, scale: FieldScale) -> int:
-        """The code of a checked ``value``, as the C core computes it (clamped to the field's codes)."""
-        y = (float(value) - scale.origin) * scale.codes / scale.span
-        code = int(math.copysign(math.floor(abs(y) + 0.5), y))
+        """The code of a checked ``value``, as the C core computes it (clamped to the field's codes):
+        ``round((x - origin) * codes / span)``, ties away from zero; an integer one code per unit
+        exactly, however wide."""
+        if self.kind is not float and _whole_units(scale):
+            code = int(value) - int(scale.origin)
+        else:
+            y = abs((float(value) - scale.origin) * scale.codes / scale.span)
+            whole = math.floor(y)
+            code = int(math.copysign(whole + (y - whole >= 0.5), (float(value) - scale.origin)))
         lo, hi = self.code_range(scale)
         return lo if code <= lo else hi if code >= hi else code
 
@@ -169,7 +179,9 @@ class BitField:
             # (a code within the field's range is data; a last-ulp excess is the arithmetic's)
             lo, hi = self.code_range(scale)
             return scale.lo if x < scale.lo and code == lo else scale.hi if x > scale.hi and code == hi else x
-        if scale.origin or scale.codes != scale.span:  # (an integer with an offset or a step)
+        if _whole_units(scale):
+            code += int(scale.origin)  # (exact, however wide)
+        else:  # (an integer with a step)
             code = round(code * scale.span / scale.codes + scale.origin)
         if isinstance(kind, type) and issubclass(kind, IntEnum):
             try:
@@ -190,7 +202,7 @@ def Linear(name: str, bits: Bits, limits: Limits) -> BitField:
     width = sum(w for _, w in pieces)
     if callable(limits):
         get = _limits(limits)
-        return BitField(name, pieces, _cached(lambda m: FieldScale.linear(name, *get(m), width)))
+        return BitField(name, pieces, _cached(lambda m: FieldScale.linear(name, *get(m), width), width))
     return BitField(name, pieces, FieldScale.linear(name, limits[0], limits[1], width))
 
 
@@ -202,7 +214,7 @@ def OffsetBinary(name: str, bits: Bits, full_scale: float | Callable[[Any], floa
     width = sum(w for _, w in pieces)
     if callable(full_scale):
         get = full_scale
-        return BitField(name, pieces, _cached(lambda m: FieldScale.offset_binary(name, get(m), width)))
+        return BitField(name, pieces, _cached(lambda m: FieldScale.offset_binary(name, get(m), width), width))
     return BitField(name, pieces, FieldScale.offset_binary(name, full_scale, width))
 
 
@@ -216,7 +228,9 @@ def Signed(
     if callable(per_unit):
         get = per_unit
         return BitField(
-            name, pieces, _cached(lambda m: FieldScale.twos_complement(name, width, codes=get(m), span=span))
+            name,
+            pieces,
+            _cached(lambda m: FieldScale.twos_complement(name, width, codes=get(m), span=span), width),
         )
     return BitField(name, pieces, FieldScale.twos_complement(name, width, codes=per_unit, span=span))
 
@@ -252,15 +266,37 @@ class Const:
     bits: Bits
     value: int
 
+    def __post_init__(self) -> None:
+        width = sum(w for _, w in self.pieces)
+        if (
+            isinstance(self.value, bool)
+            or not isinstance(self.value, int)
+            or not 0 <= self.value < 1 << width
+        ):
+            raise ValueError(f"Const value {self.value!r} does not fit its {width} bits")
+
     @property
     def pieces(self) -> Pieces:
         """The constant's pieces (bit offset and width, most significant first)."""
         return _pieces(self.bits)
 
 
-def _cached(make: Callable[[Any], FieldScale]) -> Callable[[Any], FieldScale]:
-    """``make`` once per model (models are hashable; a control loop never rebuilds a scale)."""
-    return lru_cache(maxsize=64)(make)
+def _whole_units(scale: FieldScale) -> bool:
+    """One code per unit from a whole origin: an integer's codes are its values, shifted."""
+    return scale.codes == scale.span and float(scale.origin).is_integer()
+
+
+def _fits(scale: FieldScale, width: int, where: str) -> FieldScale:
+    """``scale`` if its range maps within a ``width``-bit field (signed when its lo is below its
+    origin), else ValueError: good values would be clamped silently (``FieldScale.check_fits``)."""
+    scale.check_fits(-width if scale.lo < scale.origin else width, where)
+    return scale
+
+
+def _cached(make: Callable[[Any], FieldScale], width: int) -> Callable[[Any], FieldScale]:
+    """``make`` once per model (models are hashable; a control loop never rebuilds a scale), each
+    model's scale checked to fit the field when first made."""
+    return lru_cache(maxsize=64)(lambda model: _fits(make(model), width, f"model {_model_name(model)}"))
 
 
 # ---- the layout ----
@@ -385,6 +421,9 @@ def _check_declaration(cls: type[BitLayout]) -> None:
     annotated = {n for klass in cls.__mro__ for n in getattr(klass, "__annotations__", {})}
     if missing := sorted(names - annotated):
         raise TypeError(f"{cls.__name__}: fields {missing} name no attribute of the class")
+    ruled = [s.name for s in cls.FIELDS if isinstance(s, BitField) and s.model_dependent]
+    if ruled and "model" not in annotated:
+        raise TypeError(f"{cls.__name__}: fields {ruled} take their ranges from a model; it has no `model`")
 
 
 def claimant(classes: Iterable[type[BitLayout]], data: bytes) -> type[BitLayout] | None:

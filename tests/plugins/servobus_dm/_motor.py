@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Any, Literal  # noqa: F401
 
-from servobus.protocols._calls import DEFAULT, TypedCalls, given_model
+from servobus.authoring import DEFAULT, TypedCalls, given_model
 from servobus_dm import messages, models
 
 __all__ = ["Motor"]

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Any, Literal  # noqa: F401
 
-from servobus.protocols._calls import TypedCalls
+from servobus.authoring import TypedCalls
 from servobus_toy import messages
 
 __all__ = ["Motor"]

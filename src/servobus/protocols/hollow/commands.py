@@ -162,7 +162,12 @@ class SpecialCommand(BitLayout, HollowCommand[ClassicReply]):
 
     @classmethod
     def claims(cls, data: bytes, can_mode: CanMode) -> bool:
-        return is_special_command(data) and cls.matches(data)
+        return is_special_command(data) and cls._is_code(data[7]) and cls.matches(data)
+
+    @classmethod
+    def _is_code(cls, code: int) -> bool:
+        """Whether D7 ``code`` is one of this command's (SelectMode's constants are the prefix only)."""
+        return 0 <= code - cls.SPECIAL_CODE < cls.SPECIAL_COUNT
 
     @classmethod
     def from_code(cls, code: int) -> Self:
@@ -179,7 +184,7 @@ class SpecialCommand(BitLayout, HollowCommand[ClassicReply]):
         require_size(data, _SETPOINT_SIZE, what="special command")
         if not is_special_command(data):
             raise ProtocolError("not a special command (FF x7 + F9..FE)", raw=data)
-        if not cls.matches(data):
+        if not (cls._is_code(data[7]) and cls.matches(data)):
             raise ProtocolError(
                 f"special command 0x{data[7]:02X} is not {cls.__name__}", raw=data, command=data[7]
             )
