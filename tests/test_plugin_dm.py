@@ -748,3 +748,15 @@ class TestDm(FamilyContract):
 def test_servobus_sim_refuses_what_the_dm_sim_part_cannot_serve(args: tuple[str, ...], error: str) -> None:
     result = _run_cli("sim", "--family", "dm", *args, timeout_s=20)
     assert (result.returncode, result.stdout, result.stderr) == (2, "", f"servobus.sim: error: {error}\n")
+
+
+def test_a_fault_code_crosses_the_bridge_s_wire(dm: ModuleType) -> None:
+    """A bridge publishes a family's fault code as it publishes error flags (remote/_served.py)."""
+    import time
+
+    from servobus.remote import wire
+
+    schema = wire.Schema.of("dm")
+    reply = dm.Feedback.decode(bytes.fromhex("A1 80 00 80 08 00 28 1E"))
+    state = wire.State(1, time.time_ns(), True, reply, dm.DmState.OVER_CURRENT)
+    assert wire.decode_state(schema, wire.encode_state(schema, state)) == state

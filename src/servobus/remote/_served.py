@@ -4,6 +4,7 @@ motor holds, which client holds each motor, the counters and the figures the bri
 from __future__ import annotations
 
 import dataclasses
+import enum
 import logging
 import time
 from collections import deque
@@ -96,7 +97,9 @@ class Served:
     def publish(self, mid: int, now: float) -> None:
         """Publish motor ``mid``'s state now (``now``: the loop's clock)."""
         motor = self.motors[mid]
-        fault = motor.fault.flags if motor.fault is not None else None
+        fault: enum.Flag | enum.IntEnum | None = motor.fault.flags if motor.fault is not None else None
+        if fault is None and motor.fault is not None and isinstance(motor.fault.code, enum.IntEnum):
+            fault = motor.fault.code  # (a family that reports one code: Damiao's ERR)
         state = wire.State(mid, time.time_ns(), motor.online is not False, motor.state, fault)
         try:
             self.publishers[mid].put(wire.encode_state(self.schemas[mid], state))

@@ -76,7 +76,7 @@ class RemoteMotor:
         self.schema = wire.Schema.of(family.name)
         self.state: Reply | None = None
         self.online: bool | None = None
-        self.fault: Any = None
+        self.fault: Any = None  # its error flags, or the one code its family reports (None: none)
         self.stamp_unix_ns = 0
         self._methods = family.methods()
 

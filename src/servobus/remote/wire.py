@@ -541,13 +541,14 @@ def decode_result(schema: Schema, data: bytes) -> Result:
 @dataclass(frozen=True, slots=True)
 class State:
     """What a bridge publishes of one motor: its latest reply or stream frame (None before any),
-    whether the watchdog has it online, and its last reported error flags (None: none reported)."""
+    whether the watchdog has it online, and its last reported fault: error flags, or the one code a
+    family reports (``MotorFault.code``; None: none reported)."""
 
     motor_id: int
     stamp_unix_ns: int
     online: bool
     reply: Reply | None
-    fault: enum.Flag | None = None
+    fault: enum.Flag | enum.IntEnum | None = None
 
 
 def encode_state(schema: Schema, state: State) -> bytes:
@@ -580,6 +581,6 @@ def decode_state(schema: Schema, data: bytes) -> State:
     reader.end()
     if online > 1 or (reply is not None and not isinstance(reply, Reply)):
         raise WireError("a state that is not a motor's")
-    if fault is not None and not isinstance(fault, enum.Flag):
-        raise WireError("a fault that is not error flags")
+    if fault is not None and not isinstance(fault, enum.Flag | enum.IntEnum):
+        raise WireError("a fault that is not error flags or a code")
     return State(motor_id, stamp, bool(online), reply, fault)
