@@ -6,10 +6,10 @@ from typing import Any, ClassVar
 
 import pytest
 
-from servobus.protocols import Family
+from servobus.protocols import Family, Reply
 from servobus.testing import _checks as checks
 from servobus.testing._checks import NO_OPTIONS, BindOptions
-from servobus.testing._strategies import Strategies
+from servobus.testing._strategies import Strategies, strategies_of
 
 __all__ = ["FamilyContract"]
 
@@ -95,12 +95,15 @@ class FamilyContract:
         contract_strategies: Strategies,
         contract_bind_options: BindOptions,
     ) -> None:
-        checks.check_reply_round_trips(
+        checked = checks.check_reply_round_trips(
             contract_family,
             contract_strategies,
             max_examples=self.max_examples,
             bind_options=contract_bind_options,
         )
+        built = strategies_of(contract_family, contract_strategies)
+        drawn = [cls.__name__ for cls in built if issubclass(cls, Reply)]
+        assert checked or not drawn, f"{contract_family.name}: no reply was round-tripped (of {drawn})"
 
     def test_the_bound_codec_follows_the_declarations(
         self,
