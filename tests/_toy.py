@@ -46,3 +46,27 @@ def another_family(into: Path, name: str = "fake", media: tuple[str, ...] = ("ca
     (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {package}\nVersion: 1.0\n")
     (info / "entry_points.txt").write_text(f"[servobus.families]\n{name} = {package}:FAMILY\n")
     return into
+
+
+def mypy_strict(source: str, tmp_path: Path) -> tuple[list[str], str]:
+    """A user's script ``source`` checked by ``mypy --strict`` with the plug-ins installed: the
+    lines about it (``note: ...``, ``error: ...``), and mypy's whole output."""
+    import os
+
+    import mypy.api as mypy_api
+
+    user = tmp_path / "user.py"
+    user.write_text(source)
+    before = os.environ.get("MYPYPATH")
+    os.environ["MYPYPATH"] = str(PLUGINS)
+    try:
+        stdout, stderr, _ = mypy_api.run(
+            ["--strict", "--no-incremental", "--cache-dir", str(tmp_path / ".cache"), str(user)]
+        )
+    finally:
+        if before is None:
+            del os.environ["MYPYPATH"]
+        else:
+            os.environ["MYPYPATH"] = before
+    assert not stderr, stderr
+    return [line.split(": ", 1)[1] for line in stdout.splitlines() if line.startswith(str(user))], stdout

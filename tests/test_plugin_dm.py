@@ -34,7 +34,7 @@ import can
 import pytest
 
 from _backends import BACKENDS, virtual
-from _toy import PLUGINS, SERVOBUS
+from _toy import PLUGINS, SERVOBUS, mypy_strict
 from servobus.bus import Bus
 from servobus.cli import main
 from servobus.frame import Frame
@@ -619,19 +619,8 @@ async def main(bus: Bus) -> None:
 """
 
 
-def test_a_dm_motor_is_typed_for_a_user_s_type_checker(
-    dm: ModuleType, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    import mypy.api as mypy_api
-
-    user = tmp_path / "user.py"
-    user.write_text(USER_FILE)
-    monkeypatch.setenv("MYPYPATH", str(PLUGINS))
-    stdout, stderr, _ = mypy_api.run(
-        ["--strict", "--no-incremental", "--cache-dir", str(tmp_path / ".cache"), str(user)]
-    )
-    assert not stderr, stderr
-    lines = [line.split(": ", 1)[1] for line in stdout.splitlines() if line.startswith(str(user))]
+def test_a_dm_motor_is_typed_for_a_user_s_type_checker(dm: ModuleType, tmp_path: Path) -> None:
+    lines, stdout = mypy_strict(USER_FILE, tmp_path)
     assert [line for line in lines if line.startswith("note: Revealed")] == [
         'note: Revealed type is "servobus_dm.messages.Feedback"',
         'note: Revealed type is "servobus_dm.messages.Feedback"',
