@@ -151,6 +151,8 @@ def test_the_page_of_a_bridge_s_bus_shows_its_motors_live_and_stops_only_when_al
         _process([*page, "--allow-commands"], "servobus dashboard:") as (_, line),
     ):
         url = URL.match(line).group(1)  # type: ignore[union-attr]
+        # a stop sent before the page has heard from the bridge is honestly not acknowledged: wait for it
+        assert _until(lambda: all(r["reply"] for r in _get(url + "api/snapshot")["motors"]))
         status, done = _post(url + "api/stop", {"motors": ["n/sim1/1"]})
         assert status == 200 and done == {"acknowledged": ["n/sim1/1"], "not_acknowledged": []}
         # another client holds motor 2: the bridge refuses the page its stop; the others are stopped
