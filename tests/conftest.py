@@ -4,9 +4,10 @@ tests/reference/ (the pure-Python oracle of the C core) is imported as ``referen
 import mode already puts tests/ on sys.path; this keeps that true under --import-mode=importlib too.
 
 Hypothesis profiles, chosen with HYPOTHESIS_PROFILE (or hypothesis' own ``--hypothesis-profile``):
-``default`` (300 examples per property, the everyday run) and ``ci`` (3,000, the long run). Every
-property follows the profile, the oracle tests included (tests/reference/settings.py); a test keeps a
-lower count of its own only where one example is expensive.
+``default`` (200 examples per property, the everyday run), ``ci`` (3,000, the long run) and ``quick``
+(50, the sanitizer smoke run of .ci/sanitize --quick). Every property follows the profile, the oracle
+tests included (tests/reference/settings.py); a test keeps a lower count of its own only where one
+example is expensive.
 """
 
 from __future__ import annotations
@@ -22,8 +23,9 @@ from hypothesis import settings
 
 # No deadline: what an example costs is measured in bench/, and on a shared 2-core host a slow
 # example is the machine's load, not a failure of the property.
-settings.register_profile("default", max_examples=300, deadline=None)
+settings.register_profile("default", max_examples=200, deadline=None)
 settings.register_profile("ci", max_examples=3000, deadline=None)
+settings.register_profile("quick", max_examples=50, deadline=None)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
 
 _TESTS = str(Path(__file__).resolve().parent)
