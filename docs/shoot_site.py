@@ -34,6 +34,13 @@ if TYPE_CHECKING:
 
 #: The pages shot by default: (site path, image name).
 PAGES = [("", "home"), ("tutorial/", "tutorial"), ("api/servobus/", "api-servobus")]
+#: Material hides the header's tabs once the page is scrolled, which a full-page capture does: shown.
+_SHOWN_TABS = """
+const style = document.createElement('style');
+style.textContent = '.md-tabs[hidden] .md-tabs__link {opacity: 1 !important; transform: none !important;'
+    + ' transition: none !important}';
+document.head.appendChild(style);
+"""
 #: Chromium draws no taller image than this (and a viewer shows none usefully).
 MAX_HEIGHT = 16000
 
@@ -75,7 +82,8 @@ def shoot(browser: WebDriver, url: str, out: Path, width: int, dark: bool) -> No
         "Emulation.setDeviceMetricsOverride",
         {"width": width, "height": height, "deviceScaleFactor": 1, "mobile": False},
     )
-    time.sleep(0.5)  # (the header's tabs fade in once the page is laid out again)
+    browser.execute_script(_SHOWN_TABS)
+    time.sleep(0.5)  # (the layout settles at the new height)
     shot = browser.execute_cdp_cmd(
         "Page.captureScreenshot",
         {

@@ -9,17 +9,21 @@ warning. Every Sphinx Python role is taken (``:class:``, ``:meth:``, ``:func:``,
 follows Sphinx: the name as written, its last part after ``~``, the title of ``title <target>``, and
 ``()`` after a function or method.
 
+A paragraph that ends with Sphinx's literal-block marker (``blocking::``, or ``::`` alone) loses it
+as Sphinx drops it (``blocking:``; nothing): the indented block after it is already Markdown's code.
+
 A name is resolved as Sphinx would find it, against the object whose docstring it is, then its
 class, its module, the packages above it, and ``servobus``; an alias found so (``servobus.Frame``, a
 name a module imports) is followed to the object's own path, the one its page renders it under.
 What resolves nowhere keeps the name as written (a code span on the page).
 
-Private defaults. A parameter whose default is a private name (``stale_after_s=_DEFAULT`` in Bus:
-a sentinel meaning "the link's own value") would show that name, which a reader cannot use. A private
+Private defaults. A parameter whose default is a private name (``stale_after_s=_DEFAULT`` in Bus: a
+sentinel meaning "the link's own value") would show that name, which a reader cannot use. A private
 constant bound to a literal (``high_water_bytes=_HIGH_WATER_BYTES``, 64) shows its value; any other
-private default shows as ``...`` (the typeshed convention: there is a default, and the docstring's
-Args entry says what it is). A private type in the annotation (``float | _Default | None``) is
-dropped from the union, since no caller passes it.
+private default (a sentinel, a dataclass field's private ``default_factory``) shows as ``...`` (the
+typeshed convention: there is a default, and the docstring's Args entry says what it is). A private
+type in the annotation (``float | _Default | None``) is dropped from the union, since no caller
+passes it.
 """
 
 from __future__ import annotations
@@ -37,6 +41,8 @@ ROLE = re.compile(r":(?:py:)?(?P<role>class|meth|func|attr|data|mod|exc|obj|cons
 _TITLED = re.compile(r"^(?P<title>.*?)\s*<(?P<target>[^<>]+)>$", re.S)
 _CALLABLE = ("meth", "func")
 _PRIVATE = re.compile(r"^_[A-Za-z0-9_]*$")
+#: A private name or a call of one (a dataclass field's ``default_factory=_no_ops`` is ``_no_ops()``).
+_PRIVATE_DEFAULT = re.compile(r"^_[A-Za-z0-9_]*(?:\(\))?$")
 
 
 def _members(obj: griffe.Object) -> Iterator[griffe.Object]:
@@ -99,9 +105,19 @@ def _replace(match: re.Match[str], obj: griffe.Object, root: griffe.Object) -> s
     return f'<autoref identifier="{html.escape(full)}" optional><code>{html.escape(title)}</code></autoref>'
 
 
+#: Sphinx's literal-block marker at the end of a paragraph, a blank line (or the end) after it.
+_LITERAL = re.compile(r"(?P<before>\S?)(?P<space>[ \t]*)::[ \t]*(?=\n[ \t]*(?:\n|\Z)|\Z)")
+
+
+def _literal_marker(match: re.Match[str]) -> str:
+    if not match["before"]:  # ("::" alone on its line: dropped)
+        return ""
+    return match["before"] + ("" if match["space"] else ":")  # ("text ::" -> "text", "text::" -> "text:")
+
+
 def convert(text: str, obj: griffe.Object, root: griffe.Object) -> str:
-    """``text`` with every Sphinx role made a cross-reference."""
-    return ROLE.sub(lambda m: _replace(m, obj, root), text)
+    """``text`` with every Sphinx role made a cross-reference and its literal-block markers dropped."""
+    return _LITERAL.sub(_literal_marker, ROLE.sub(lambda m: _replace(m, obj, root), text))
 
 
 def _literal(module: griffe.Module, name: str) -> str | None:
@@ -145,7 +161,7 @@ def public_defaults(function: griffe.Function) -> None:
     module = function.module
     for parameter in function.parameters:
         default = parameter.default
-        if default is not None and _PRIVATE.match(str(default)):
+        if default is not None and _PRIVATE_DEFAULT.match(str(default)):
             parameter.default = _literal(module, str(default)) or "..."
             parameter.annotation = _without_private(parameter.annotation)
 
