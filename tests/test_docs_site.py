@@ -169,9 +169,28 @@ def test_the_extension_converts_every_role_form() -> None:
         ),
     }
     for role, (identifier, shown) in cases.items():
-        out = convert(role, bus, package)
+        out = convert(role, bus, package)  # type: ignore[arg-type]
         assert identifier in out and shown in out and " optional>" in out, (role, out)
         assert not ROLE.search(out), out
+
+
+def test_the_extension_makes_private_defaults_readable() -> None:
+    import griffe
+    from servobus_griffe import ServobusDocstrings
+
+    extensions = griffe.load_extensions("dataclasses", ServobusDocstrings())
+    package = griffe.load("servobus", search_paths=[str(ROOT / "src")], extensions=extensions)
+
+    def parameter(path: str, name: str) -> griffe.Parameter:
+        function = package[path]
+        return function.parameters[name]  # type: ignore[no-any-return]
+
+    stale = parameter("bus.core.Bus.__init__", "stale_after_s")  # (a sentinel: "the link's own")
+    assert (str(stale.default), str(stale.annotation)) == ("...", "float | None")
+    high_water = parameter("transports.rs485.SerialTransport.__init__", "high_water_bytes")
+    assert str(high_water.default) == "64"  # (a private constant bound to a literal: its value)
+    ops = parameter("protocols.cli.CliFamily", "ops")  # (a dataclass field's private default_factory)
+    assert str(ops.default) == "..."
 
 
 def test_no_raw_sphinx_role_on_any_page(site: Site) -> None:
@@ -186,7 +205,9 @@ def test_no_raw_sphinx_role_on_any_page(site: Site) -> None:
 def test_roles_became_links(site: Site) -> None:
     """``:meth:`cycle``` in Bus's docstring links to Bus.cycle on the same page."""
     page = site.pages["api/servobus/"]
-    assert re.search(r'<a class="autorefs autorefs-internal"[^>]*href="#servobus\.(?:bus\.)?Bus\.cycle"', page)
+    assert re.search(
+        r'<a class="autorefs autorefs-internal"[^>]*href="#servobus\.(?:bus\.)?Bus\.cycle"', page
+    )
 
 
 def test_no_private_name_as_a_default(site: Site) -> None:
@@ -236,7 +257,7 @@ def test_no_page_repeats_an_entry_of_its_contents(site: Site) -> None:
 
 def test_a_section_does_not_repeat_its_only_entry_s_name(site: Site) -> None:
     """The "Frame" section holding the class Frame (the sidebar's "Frame" twice)."""
-    doubled = {}
+    doubled: dict[str, list[str]] = {}
     for page in site.pages:
         toc = site.dom(page).find("nav", "md-nav--secondary")
         for li in toc.find_all("li") if toc else ():
@@ -253,16 +274,27 @@ def test_a_section_does_not_repeat_its_only_entry_s_name(site: Site) -> None:
 
 # ---- the navigation ----
 
+#: (title, href) for a page, (title, [entries]) for a section.
+NavEntry = tuple[str, "str | list[NavEntry]"]
 
-def _nav(ul: Node) -> list[tuple[str, str | list]]:
+
+def _primary(site: Site) -> list[NavEntry]:
+    """The home page's navigation (the sidebar's, which the header's tabs show the top of)."""
+    nav = site.dom("").find("nav", "md-nav--primary")
+    ul = nav.find("ul") if nav else None
+    assert ul is not None, "no navigation"
+    return _nav(ul)
+
+
+def _nav(ul: Node) -> list[NavEntry]:
     """The primary navigation as (title, href) for a page, (title, [...]) for a section."""
-    out: list[tuple[str, str | list]] = []
+    out: list[NavEntry] = []
     for li in ul.kids("li"):
         if "md-nav__item--nested" in li.classes:
             label = li.find("label")
             nested = li.find("nav")
-            title = label.text() if label else ""
-            out.append((title, _nav(nested.find("ul")) if nested and nested.find("ul") else []))
+            ul_nested = nested.find("ul") if nested else None
+            out.append((label.text() if label else "", _nav(ul_nested) if ul_nested else []))
         else:
             link = next((a for a in li.find_all("a") if "md-nav__link" in a.classes), None)
             if link is not None:
@@ -270,7 +302,7 @@ def _nav(ul: Node) -> list[tuple[str, str | list]]:
     return out
 
 
-def _flat(entries: list[tuple[str, str | list]]) -> list[tuple[str, str]]:
+def _flat(entries: list[NavEntry]) -> list[tuple[str, str]]:
     pages: list[tuple[str, str]] = []
     for title, target in entries:
         pages += _flat(target) if isinstance(target, list) else [(title, target)]
@@ -278,7 +310,7 @@ def _flat(entries: list[tuple[str, str | list]]) -> list[tuple[str, str]]:
 
 
 def test_the_four_sections_and_the_pages_the_issue_names(site: Site) -> None:
-    nav = _nav(site.dom("").find("nav", "md-nav--primary").find("ul"))
+    nav = _primary(site)
     titles = [t for t, _ in nav]
     for section in ("Tutorial", "How-to guides", "Reference", "Explanation"):
         assert section in titles, titles
@@ -295,13 +327,13 @@ def test_the_four_sections_and_the_pages_the_issue_names(site: Site) -> None:
 
 
 def test_the_sidebar_has_no_repeated_entry(site: Site) -> None:
-    def levels(entries: list[tuple[str, str | list]]) -> Iterator[list[str]]:
+    def levels(entries: list[NavEntry]) -> Iterator[list[str]]:
         yield [t for t, _ in entries]
         for _, target in entries:
             if isinstance(target, list):
                 yield from levels(target)
 
-    nav = _nav(site.dom("").find("nav", "md-nav--primary").find("ul"))
+    nav = _primary(site)
     assert not [r for level in levels(nav) for r in _repeats(level)]
 
 
