@@ -167,6 +167,10 @@ def test_the_extension_converts_every_role_form() -> None:
             'identifier="servobus.errors.TransportError"',
             "<code>TransportError</code>",
         ),
+        ":ref:`the loop <pipelined-servobusloop>`": (
+            'identifier="pipelined-servobusloop"',
+            "<code>the loop</code>",
+        ),
     }
     for role, (identifier, shown) in cases.items():
         out = convert(role, bus, package)  # type: ignore[arg-type]

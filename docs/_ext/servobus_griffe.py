@@ -99,9 +99,8 @@ def _replace(match: re.Match[str], obj: griffe.Object, root: griffe.Object) -> s
         if match["role"] in _CALLABLE and not title.endswith(")"):
             title += "()"
     target = target.lstrip("~").removesuffix("()")
-    if match["role"] == "ref":  # (a label, not an object: no link to make)
-        return f"<code>{html.escape(title)}</code>"
-    full = resolve(target, obj, root)
+    # (a :ref: names a label: a heading's anchor, which autorefs knows as it knows objects)
+    full = target if match["role"] == "ref" else resolve(target, obj, root)
     return f'<autoref identifier="{html.escape(full)}" optional><code>{html.escape(title)}</code></autoref>'
 
 
