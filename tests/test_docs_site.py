@@ -363,6 +363,7 @@ def _cli_sections(page_html: str) -> dict[str, str]:
 
 
 def test_every_command_and_option_is_on_the_cli_page(site: Site) -> None:
+    """Under each command's heading: its usage line, every option, and its first example."""
     from servobus.cli import cli
 
     sections = _cli_sections(site.pages["reference/cli/"])
@@ -374,6 +375,10 @@ def test_every_command_and_option_is_on_the_cli_page(site: Site) -> None:
         text = " ".join(sections.get(anchor, "").split())
         if f"{' '.join(path)} [OPTIONS]" not in text:
             missing.append(f"{' '.join(path)}: no usage line")
+        if command.epilog and "\b\n" in command.epilog:  # (its examples, as --help shows them)
+            example = command.epilog.split("\b\n", 1)[1].strip().splitlines()[0]
+            if " ".join(example.split()) not in text:
+                missing.append(f"{' '.join(path)}: not its example {example!r}")
         ctx = click.Context(command, info_name=path[-1])
         for param in command.get_params(ctx):
             shown = isinstance(param, click.Option) and not param.hidden
