@@ -206,6 +206,17 @@ def test_no_raw_sphinx_role_on_any_page(site: Site) -> None:
     assert not raw, raw
 
 
+def test_every_docstring_section_parsed(site: Site) -> None:
+    """A Google section griffe did not take as one shows as a paragraph "Raises: WireError (...)"."""
+    unparsed = {
+        page: found
+        for page, text in site.pages.items()
+        if page.startswith("api/")
+        and (found := re.findall(r"<p>(?:Args|Arguments|Returns|Raises|Yields|Attributes):", text))
+    }
+    assert not unparsed, unparsed
+
+
 def test_roles_became_links(site: Site) -> None:
     """``:meth:`cycle``` in Bus's docstring links to Bus.cycle on the same page."""
     page = site.pages["api/servobus/"]
