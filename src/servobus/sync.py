@@ -4,6 +4,7 @@
 portal) and gives the same calls, blocking::
 
     from servobus import sync
+    from servobus.protocols.myactuator import SpeedControl
     from servobus.transports import CanTransport
 
     with sync.Bus(CanTransport("slcan", "/dev/ttyACM0", bitrate=1_000_000)) as bus:

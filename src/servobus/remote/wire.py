@@ -455,7 +455,11 @@ def encode_request(schema: Schema, message: Request) -> bytes:
 
 
 def decode_request(schema: Schema, data: bytes) -> Request:
-    """Raises: WireError, as :func:`decode_setpoints`; also a timeout that is not a positive number."""
+    """The request in ``data``.
+
+    Raises:
+        WireError: as :func:`decode_setpoints`; also a timeout that is not a positive number.
+    """
     reader = _open(data, REQUEST)
     client_id = _client_id(reader)
     timeout = reader.take(_F64)
@@ -513,7 +517,11 @@ def encode_result(schema: Schema, result: Result) -> bytes:
 
 
 def decode_result(schema: Schema, data: bytes) -> Result:
-    """Raises: WireError (bytes that do not parse, a reply that is not the family's)."""
+    """The result in ``data``.
+
+    Raises:
+        WireError: bytes that do not parse, a reply that is not the family's.
+    """
     reader = _open(data, RESULT)
     ok = reader.take(_U8)
     if ok == 1:
@@ -574,7 +582,11 @@ def peek_motor(data: bytes) -> int:
 
 
 def decode_state(schema: Schema, data: bytes) -> State:
-    """Raises: WireError (bytes that do not parse, values that are not the family's)."""
+    """The state in ``data``.
+
+    Raises:
+        WireError: bytes that do not parse, values that are not the family's.
+    """
     reader = _open(data, STATE)
     motor_id, stamp, online = reader.take(_U16), reader.take(_U64), reader.take(_U8)
     reply, fault = decode_value(schema, reader), decode_value(schema, reader)
