@@ -19,7 +19,6 @@ import threading
 import time
 import tomllib
 import unicodedata
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +26,8 @@ import anyio
 import click
 import pytest
 
+from _adapters import HARDWARE
+from _adapters import simulated as _simulated
 from _backends import BACKENDS
 from servobus.cli import cli
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
@@ -45,10 +46,6 @@ COMMANDS = (
     "python3 -m venv .venv && . .venv/bin/activate && pip install . && servobus demo --duration 5\n",
     "python3 -m venv .venv && . .venv/bin/activate && pip install '.[test]' && pytest\n",
 )
-#: how a block that needs hardware starts (its first line), naming each adapter and its path
-HARDWARE = "# needs hardware:"
-#: "an SLCAN adapter on /dev/ttyACM0", "an RS485 adapter on /dev/ttyUSB0" in that first line
-ADAPTER = re.compile(r"\b(SLCAN|RS485) adapter on (/dev/\S+?)(?=[\s,;]|$)")
 
 
 def _fenced(text: str, language: str = r"\w*") -> list[tuple[int, str, str]]:
@@ -78,29 +75,6 @@ def _section(text: str, title: str) -> str:
 
 def _page(path: Path) -> str:
     return path.read_text(encoding="utf-8")
-
-
-@contextlib.contextmanager
-def _simulated(code: str, folder: Path) -> Iterator[str]:
-    """The adapters a hardware block's first line names, simulated (one MyActuator motor behind each,
-    on a pty linked in ``folder``); the code with their device paths swapped for those links."""
-    adapters = ADAPTER.findall(code.splitlines()[0])
-    assert adapters, f"{code.splitlines()[0]!r} names no 'SLCAN|RS485 adapter on /dev/...'"
-    sims: list[subprocess.Popen[str]] = []
-    try:
-        for kind, device in adapters:
-            link = folder / Path(device).name
-            mode = "--slcan" if kind == "SLCAN" else "--rs485"
-            command = [sys.executable, "-m", "servobus.sim", "--family", "myactuator", mode]
-            sims.append(subprocess.Popen([*command, "--link", str(link)], stdout=subprocess.PIPE, text=True))
-            assert sims[-1].stdout is not None
-            assert sims[-1].stdout.readline().strip() == str(link)  # up: the first line is the pty
-            code = code.replace(device, str(link))
-        yield code
-    finally:
-        for sim in sims:
-            sim.terminate()
-            sim.wait(timeout=10)
 
 
 # -- the front door -------------------------------------------------------------------------------
