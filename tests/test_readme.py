@@ -1,12 +1,15 @@
-"""The README runs as written: every ```python block as a script (those that need hardware on simulated
-devices behind ptys, their device paths swapped), every ```pycon block as a doctest; the quick start,
-the service and the signal example also for what they do, on asyncio and on trio; the CLI section shows
-every command and the Dependencies section names every runtime dependency."""
+"""The README is the front door and runs as written; the content it sent into the site still does.
+
+The README: under 250 lines, its two commands (which .ci/run runs) its first two blocks, every link
+resolving to a file of the repository and its #anchor to a heading there, its quick start running on
+asyncio and trio. The pages it moved into docs/guides and docs/explanation: the Bus guide's service
+and signal examples do what they say, the C core and codec screens print what the page says, every
+command of the CLI is on the command-line guide and every runtime dependency on the development guide,
+and their own links resolve. (tests/test_docs_pages.py runs every block of every page as well.)"""
 
 from __future__ import annotations
 
 import contextlib
-import doctest
 import os
 import re
 import signal
@@ -15,7 +18,7 @@ import sys
 import threading
 import time
 import tomllib
-from collections.abc import Iterator
+import unicodedata
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +26,8 @@ import anyio
 import click
 import pytest
 
+from _adapters import HARDWARE
+from _adapters import simulated as _simulated
 from _backends import BACKENDS
 from servobus.cli import cli
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
@@ -32,69 +37,77 @@ from servobus.transports.sim import SimTransport
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 TEXT = README.read_text(encoding="utf-8")
-#: how a block that needs hardware starts (its first line), naming each adapter and its path
-HARDWARE = "# needs hardware:"
-#: "an SLCAN adapter on /dev/ttyACM0", "an RS485 adapter on /dev/ttyUSB0" in that first line
-ADAPTER = re.compile(r"\b(SLCAN|RS485) adapter on (/dev/\S+?)(?=[\s,;]|$)")
+DOCS = ROOT / "docs"
+#: the pages the README's long sections moved to (the guides' hardware and metrics pages are the tutorial's)
+MOVED = sorted(
+    page
+    for page in [*DOCS.glob("guides/*.md"), *DOCS.glob("explanation/*.md")]
+    if page.name not in {"hardware.md", "metrics.md"}
+)
+BUS_GUIDE = DOCS / "guides" / "bus.md"
+#: the README's two commands, byte for byte: .ci/run runs them as "the README's" commands
+COMMANDS = (
+    "python3 -m venv .venv && . .venv/bin/activate && pip install . && servobus demo --duration 5\n",
+    "python3 -m venv .venv && . .venv/bin/activate && pip install '.[test]' && pytest\n",
+)
 
 
-def _fenced(language: str) -> list[tuple[int, str]]:
-    """Every ```LANGUAGE block of the README: (the line its code starts on, its code)."""
+def _fenced(text: str, language: str = r"\w*") -> list[tuple[int, str, str]]:
+    """Every fenced block of ``text`` in ``language``: (the line its code starts on, language, code)."""
     return [
-        (TEXT.count("\n", 0, match.start(1)) + 1, match.group(1))
-        for match in re.finditer(rf"^```{language}\n(.*?)^```$", TEXT, re.S | re.M)
+        (text.count("\n", 0, match.start(2)) + 1, match.group(1), match.group(2))
+        for match in re.finditer(rf"^```({language})\n(.*?)^```$", text, re.S | re.M)
     ]
 
 
-PYTHON = _fenced("python")
-PYCON = _fenced("pycon")
+PYTHON = [(line, code) for line, _, code in _fenced(TEXT, "python")]
 
 
-def _block(marker: str) -> str:
+def _block(marker: str, text: str = TEXT) -> str:
     """The ```python block that follows the ``<!-- marker: ... -->`` comment."""
-    match = re.search(rf"<!-- {marker}:[^\n]*-->\n```python\n(.*?)```", TEXT, re.S)
-    assert match, f"README has no python block after a <!-- {marker}: ... --> comment"
+    match = re.search(rf"<!-- {marker}:[^\n]*-->\n```python\n(.*?)```", text, re.S)
+    assert match, f"no python block after a <!-- {marker}: ... --> comment"
     return match.group(1)
 
 
-def _section(title: str) -> str:
-    """The README's ``## TITLE`` section, up to the next ``## ``."""
-    match = re.search(rf"^## {re.escape(title)}\n(.*?)(?=^## |\Z)", TEXT, re.S | re.M)
-    assert match, f"README has no '## {title}' section"
+def _section(text: str, title: str) -> str:
+    """The ``## TITLE`` section of ``text``, up to the next ``## ``."""
+    match = re.search(rf"^## {re.escape(title)}\n(.*?)(?=^## |\Z)", text, re.S | re.M)
+    assert match, f"no '## {title}' section"
     return match.group(1)
 
 
-@contextlib.contextmanager
-def _simulated(code: str, folder: Path) -> Iterator[str]:
-    """The adapters a hardware block's first line names, simulated (one MyActuator motor behind each,
-    on a pty linked in ``folder``); the code with their device paths swapped for those links."""
-    adapters = ADAPTER.findall(code.splitlines()[0])
-    assert adapters, f"{code.splitlines()[0]!r} names no 'SLCAN|RS485 adapter on /dev/...'"
-    sims: list[subprocess.Popen[str]] = []
-    try:
-        for kind, device in adapters:
-            link = folder / Path(device).name
-            mode = "--slcan" if kind == "SLCAN" else "--rs485"
-            command = [sys.executable, "-m", "servobus.sim", "--family", "myactuator", mode]
-            sims.append(subprocess.Popen([*command, "--link", str(link)], stdout=subprocess.PIPE, text=True))
-            assert sims[-1].stdout is not None
-            assert sims[-1].stdout.readline().strip() == str(link)  # up: the first line is the pty
-            code = code.replace(device, str(link))
-        yield code
-    finally:
-        for sim in sims:
-            sim.terminate()
-            sim.wait(timeout=10)
+def _page(path: Path) -> str:
+    return path.read_text(encoding="utf-8")
 
 
-def test_the_readme_has_its_blocks() -> None:
-    assert len(PYTHON) >= 5 and len(PYCON) >= 2, (len(PYTHON), len(PYCON))
+# -- the front door -------------------------------------------------------------------------------
+
+
+def test_the_readme_is_under_250_lines() -> None:
+    assert len(TEXT.splitlines()) < 250, len(TEXT.splitlines())
+
+
+def test_its_two_commands_are_its_first_two_blocks_word_for_word() -> None:
+    blocks = _fenced(TEXT)
+    assert [(language, code) for _, language, code in blocks[:2]] == [("sh", c) for c in COMMANDS]
+    ci = (ROOT / ".ci" / "run").read_text(encoding="utf-8")  # what CI runs of them
+    assert "pip install '.[test]'\npytest\n" in ci and "servobus demo --duration" in ci
+
+
+def test_it_shows_a_picture_the_quick_start_and_links_into_the_site() -> None:
+    targets = {target.split("#")[0] for _, target in _links(TEXT)}
+    assert any(target.endswith(".png") for target in targets), targets
+    for page in ("docs/tutorial.md", "docs/reference/cli.md", "docs/guides/bus.md", "docs/api/servobus.md"):
+        assert page in targets, page
+    assert len(PYTHON) == 1 and _block("quickstart") == PYTHON[0][1]
 
 
 def test_a_block_that_names_a_device_says_it_needs_hardware_in_its_first_line() -> None:
-    for line, code in PYTHON:
-        if "/dev/" in code:
-            assert code.startswith(HARDWARE), f"README.md:{line} names a device but not '{HARDWARE}'"
+    for path in [README, *MOVED]:
+        for line, _, code in _fenced(_page(path), "python"):
+            if "/dev/" in code:
+                assert code.startswith(HARDWARE), f"{path.name}:{line} names a device but not '{HARDWARE}'"
 
 
 @pytest.mark.parametrize(("line", "code"), PYTHON, ids=[f"README.md:{line}" for line, _ in PYTHON])
@@ -110,14 +123,91 @@ def test_every_python_block_runs_as_written(line: int, code: str, tmp_path: Path
     assert done.returncode == 0, f"README.md:{line}\n{done.stderr}"
 
 
-@pytest.mark.parametrize(("line", "text"), PYCON, ids=[f"README.md:{line}" for line, _ in PYCON])
-def test_every_pycon_block_passes_as_a_doctest(line: int, text: str) -> None:
-    test = doctest.DocTestParser().get_doctest(text, {}, f"README.md:{line}", str(README), line - 1)
-    assert test.examples
-    report: list[str] = []
-    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS)
-    runner.run(test, out=report.append, clear_globs=True)
-    assert runner.failures == 0, "".join(report)
+# -- links ----------------------------------------------------------------------------------------
+
+
+def _links(text: str) -> list[tuple[int, str]]:
+    """(line, target) of every markdown link and image of ``text`` that is not a URL, code aside."""
+    prose = re.sub(r"^```.*?^```$", lambda m: "\n" * m.group(0).count("\n"), text, flags=re.S | re.M)
+    prose = re.sub(r"`[^`\n]*`", lambda m: " " * len(m.group(0)), prose)
+    return [
+        (prose.count("\n", 0, match.start()) + 1, match.group(1))
+        for match in re.finditer(r"!?\[[^\]]*\]\(([^)\s]+)\)", prose)
+        if not re.match(r"[a-z]+:", match.group(1))
+    ]
+
+
+def _mkdocs_slug(title: str) -> str:
+    """Python-Markdown's toc slugify, mkdocs's default."""
+    text = unicodedata.normalize("NFKD", title).encode("ascii", "ignore").decode("ascii")
+    return re.sub(r"[-\s]+", "-", re.sub(r"[^\w\s-]", "", text).strip().lower())
+
+
+def _github_slug(title: str) -> str:
+    """GitHub's heading anchors: lower case, punctuation dropped, each space a hyphen."""
+    return re.sub(r"[^\w\- ]", "", title.lower()).replace(" ", "-")
+
+
+def _anchors(text: str) -> set[str]:
+    """The anchors of ``text``'s headings as both mkdocs and GitHub make them (repeats numbered)."""
+    found: set[str] = set()
+    for slug in (_mkdocs_slug, _github_slug):
+        seen: dict[str, int] = {}
+        for match in re.finditer(
+            r"^#{1,6} +(.+?) *#*$", re.sub(r"^```.*?^```$", "", text, flags=re.S | re.M), re.M
+        ):
+            title = re.sub(r"[`*_]|\[([^\]]*)\]\([^)]*\)", r"\1", match.group(1))
+            anchor = slug(title)
+            found.add(f"{anchor}-{seen[anchor]}" if anchor in seen else anchor)
+            seen[anchor] = seen.get(anchor, 0) + 1
+    return found
+
+
+def _check_links(path: Path, root: Path = ROOT) -> list[str]:
+    """Each link of ``path`` whose file does not exist, or whose #anchor is no heading of it."""
+    text = _page(path)
+    broken = []
+    for line, target in _links(text):
+        file, _, anchor = target.partition("#")
+        resolved = (path.parent / file).resolve() if file else path
+        where = f"{path.relative_to(root)}:{line} -> {target}"
+        if not resolved.is_file():
+            broken.append(f"{where}: no such file")
+        elif anchor and resolved.suffix == ".md":
+            target_text = resolved.read_text(encoding="utf-8")
+            if _mkdocs_slug(anchor) != anchor or anchor not in _anchors(target_text):
+                broken.append(f"{where}: no heading with that anchor")
+    return broken
+
+
+def test_every_link_of_the_readme_resolves_to_a_file_and_a_heading() -> None:
+    assert len(_links(TEXT)) >= 10
+    assert _check_links(README) == []
+
+
+@pytest.mark.parametrize("page", MOVED, ids=[str(p.relative_to(DOCS)) for p in MOVED])
+def test_every_link_of_a_moved_page_resolves(page: Path) -> None:
+    assert _check_links(page) == []
+
+
+def test_the_link_check_finds_a_missing_file_and_a_missing_heading(tmp_path: Path) -> None:
+    (tmp_path / "b.md").write_text("# Title\n\n## The 1 kHz loop: `cycle()`\n", encoding="utf-8")
+    page = tmp_path / "a.md"
+    page.write_text(
+        "[ok](b.md#the-1-khz-loop-cycle) [gone](c.md) [no](b.md#nothing) `[code](c.md)` [web](https://x.org)\n",
+        encoding="utf-8",
+    )
+    assert _check_links(page, tmp_path) == [
+        "a.md:1 -> c.md: no such file",
+        "a.md:1 -> b.md#nothing: no heading with that anchor",
+    ]
+
+
+# -- what the moved sections still show -----------------------------------------------------------
+
+
+def test_the_bus_guide_s_quick_start_is_the_readme_s() -> None:
+    assert _block("quickstart", _page(BUS_GUIDE)) == _block("quickstart")
 
 
 def _on(backend: str, code: str) -> str:
@@ -145,7 +235,7 @@ def test_the_quick_start_drives_simulated_motors_through_bus_and_motor(backend: 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_the_service_example_runs_in_a_task_group_and_stops_its_motors(backend: str) -> None:
     namespace: dict[str, Any] = {}
-    exec(compile(_block("service"), "README service", "exec"), namespace)
+    exec(compile(_block("service", _page(BUS_GUIDE)), "bus.md service", "exec"), namespace)
     devices = [MyActuatorMotor(i) for i in (1, 2, 3)]
 
     async def main() -> None:
@@ -160,7 +250,7 @@ def test_the_service_example_runs_in_a_task_group_and_stops_its_motors(backend: 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_the_signal_example_stops_its_motor_and_exits_143_on_sigterm(backend: str) -> None:
     namespace: dict[str, Any] = {}
-    exec(compile(_block("signals"), "README signals", "exec"), namespace)
+    exec(compile(_block("signals", _page(BUS_GUIDE)), "bus.md signals", "exec"), namespace)
     device = MyActuatorMotor(1)
 
     ended = threading.Event()
@@ -186,14 +276,38 @@ def test_the_signal_example_stops_its_motor_and_exits_143_on_sigterm(backend: st
     assert isinstance(device.control, PositionControl), device.control  # it turned; the stop made it hold
 
 
-def test_the_command_line_section_shows_every_command() -> None:
+ARCHITECTURE = _page(DOCS / "explanation" / "architecture.md")
+#: the C core's and the codecs' screens (once doctests in the README): each script and what it prints
+SCREENS = re.findall(r"^```python\n(.*?)^```\n\nIt prints:\n\n```text\n(.*?)^```$", ARCHITECTURE, re.S | re.M)
+
+
+def test_no_doctest_is_left_and_the_screens_say_what_they_print() -> None:
+    assert not [p for p in [README, *MOVED] if "```pycon" in _page(p)]
+    assert len(SCREENS) == 2 and "crc16_modbus" in SCREENS[0][0] and "check_bus" in SCREENS[1][0]
+
+
+@pytest.mark.parametrize(("code", "prints"), SCREENS, ids=["c-core", "codecs"])
+def test_the_c_core_and_codec_screens_print_what_the_page_says(
+    code: str, prints: str, tmp_path: Path
+) -> None:
+    done = subprocess.run(
+        [sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout == prints
+
+
+def test_every_command_is_on_the_command_line_guide_and_the_readme_links_the_reference() -> None:
     commands = cli.list_commands(click.Context(cli))
-    shown = set(re.findall(r"^servobus ([\w-]+)", _section("Command line"), re.M))
+    shown = set(re.findall(r"\bservobus ([\w-]+)", _page(DOCS / "guides" / "command-line.md")))
     assert len(commands) >= 22 and not set(commands) - shown, sorted(set(commands) - shown)
+    assert "docs/reference/cli.md" in {target for _, target in _links(TEXT)}
 
 
-def test_the_dependencies_section_names_every_runtime_dependency() -> None:
+def test_the_development_guide_names_every_runtime_dependency() -> None:
     project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
     names = [re.split(r"[\s<>=!~;\[]", spec)[0] for spec in project["dependencies"]]
-    section = _section("Dependencies").lower()
+    section = _section(_page(DOCS / "guides" / "development.md"), "Dependencies").lower()
     assert len(names) >= 6 and not [n for n in names if n.lower() not in section], names
+    extras = project["optional-dependencies"]
+    assert not [extra for extra in extras if not re.search(rf"[`\[]{extra}[`\]]", section)], sorted(extras)
