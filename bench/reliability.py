@@ -294,7 +294,7 @@ def report() -> None:
         "",
         "Written by `python bench/reliability.py` from `bench/results.json` (key `reliability`); rerun",
         "`python bench/reliability.py --long` to measure again. What is promised, and the test that shows",
-        'each promise, is in README.md ("What servobus promises under faults").',
+        'each promise, is in docs/explanation/faults.md ("What servobus promises under faults").',
         "",
     ]
     fz = data.get("fuzz")
@@ -438,8 +438,8 @@ FINDINGS = """
     (`tests/test_soak.py::test_a_write_the_motor_received_twice_never_answers_the_next_write_with_its_echo`
     and its LK twin). A status reply carries nothing of its request, so a set-point or read answered
     twice can still resolve the next request with the same key with a status one exchange old;
-    the soak's tokens are echoes, so its mismatch count covers writes only (README, "What these
-    wires cannot tell apart");
+    the soak's tokens are echoes, so its mismatch count covers writes only (docs/explanation/faults.md,
+    "What these wires cannot tell apart");
   * on a stalled half-duplex serial port, the commands of a `cycle()` waited in the Scheduler's
     queue without a freshness limit and reached the motor up to (n - 1) x `stale_after_s` after they
     were made; queued commands now fail `not_sent_stale` instead
@@ -458,7 +458,8 @@ FINDINGS = """
   (`MotorNotExecuted`), and no set-point's echo was taken for a reply. The simulated motors sent 241
   echoes; the soak does not tell what became of the other 6: an echo dropped on the faulty link
   times its request out, and a read's or a write's echo after a trip whose 0xF1 frames were all lost
-  looks like a reply (README, "What these wires cannot tell apart"). `ambiguous` rose from 24,935
+  looks like a reply (docs/explanation/faults.md, "What these wires cannot tell apart").
+  `ambiguous` rose from 24,935
   to 41,291: the other host's replies cross the same faulty link (38,286 replies dropped towards the
   host, against 20,509), and a reply taken after a lost one is counted.
 * After issue [field] changed the scheduler and the CAN codecs, their four targets ran again, sanitized

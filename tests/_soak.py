@@ -323,7 +323,8 @@ class _Soak:
             and reply.temperature_c == 0
         ):
             # (a set-point's echo reads as 0 °C; a read's echo after a trip whose 0xF1 was lost is
-            # all zeros and cannot be told from a reply: README, "What these wires cannot tell apart")
+            # all zeros and cannot be told from a reply: docs/explanation/faults.md, "What these wires
+            # cannot tell apart")
             self.result.mismatched.append(f"{what} got its own bytes back as a reply: {reply!r}")
 
     def reached(self, bus: int, frame: Frame, now_s: float) -> None:

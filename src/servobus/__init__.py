@@ -1,7 +1,7 @@
 """servobus: asyncio orchestrator for buses of servo actuators, with a small C core.
 
-Layers (see the README's map): ``servobus.core`` wraps the C core (CRCs, bit packing, de-framers);
-protocol families, the scheduler, transports, the simulator and the Bus build on it.
+Layers (docs/explanation/architecture.md): ``servobus.core`` wraps the C core (CRCs, bit packing,
+de-framers); protocol families, the scheduler, transports, the simulator and the Bus build on it.
 """
 
 import importlib

@@ -2,7 +2,7 @@
 
 The public headers (HEADERS: csrc/servobus_core.h, then the simulator's) are the cdef; csrc/*.c are
 compiled in. Switches:
-  SERVOBUS_SANITIZE=1   build with -fsanitize=address,undefined (see README, "Sanitizers")
+  SERVOBUS_SANITIZE=1   build with -fsanitize=address,undefined (see docs/guides/development.md, "Sanitizers")
   SERVOBUS_DEBUG=1      build with -O0 -g
 """
 

@@ -38,7 +38,7 @@ from servobus.tools.recording import TelemetryWriter
 from servobus.transports.can import message_from_frame
 
 SCRIPT = [sys.executable, "-c", "import sys; from servobus.cli import main; sys.exit(main())"]
-#: the README's example, word for word (/work/prompts/out/rec_readme.md)
+#: the recording page's example, word for word (docs/recording.md)
 README = (
     "servobus record --sim 4 --drive sine --stagger --duration 3 -o run.csv",
     "servobus plot run.csv -o run.png",
