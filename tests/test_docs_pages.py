@@ -1,10 +1,12 @@
-"""The guides under docs/ run as written: every ```python block as a script (in a folder of its own),
-its output compared with the block after "It prints:" where there is one; every ```toml block parses
-(a limits file's with servobus.limits)."""
+"""Every fenced block of every page under docs/ runs as written (docs/api/families.md: its own test),
+one test per block (``page.md:line``): python blocks as scripts, console blocks command by command
+with their output checked, toml blocks parsed; and no block is of a kind nothing runs. The convention
+(how outputs are matched, which devices are simulated, the shims) is tests/_docs_blocks.py's
+docstring."""
 
 from __future__ import annotations
 
-import re
+import contextlib
 import subprocess
 import sys
 import tomllib
@@ -12,43 +14,164 @@ from pathlib import Path
 
 import pytest
 
-DOCS = Path(__file__).resolve().parents[1] / "docs"
-#: the guides whose blocks are checked (more join as they are written to run)
-PAGES = ["limits.md"]  # (recording.md: tests/test_taplink_doc.py runs and compares its blocks)
+from _adapters import HARDWARE, simulated
+from _docs_blocks import (
+    DEVICES,
+    Block,
+    blocks,
+    commands,
+    devices_for,
+    environment,
+    files,
+    line_matches,
+    output_matches,
+    pages,
+    run_command,
+    unrunnable,
+)
+
+ALL = [block for page in pages() for block in blocks(page)]
+RUN = [block for block in ALL if block.kind in ("python", "console", "toml")]
 
 
-def _blocks(page: str) -> list[tuple[str, int, str, str | None]]:
-    """(page, line, code, what it prints or None) for each ```python block of ``page``."""
-    text = (DOCS / page).read_text(encoding="utf-8")
-    found = []
-    pattern = r"^```python\n(.*?)^```\n(?:\nIt prints:\n\n```\n(.*?)^```\n)?"
-    for match in re.finditer(pattern, text, re.S | re.M):
-        found.append((page, text.count("\n", 0, match.start()) + 1, match.group(1), match.group(2)))
-    return found
+def _folder(block: Block, tmp_path: Path) -> Path:
+    """A fresh folder for ``block``, holding the files its page names (``<!-- file: NAME -->``)."""
+    folder = tmp_path / "block"
+    folder.mkdir()
+    for name, content in files(block.page).items():
+        (folder / name).write_text(content, encoding="utf-8")
+    return folder
 
 
-BLOCKS = [block for page in PAGES for block in _blocks(page)]
+def _python(block: Block, folder: Path) -> None:
+    hardware = block.code.startswith(HARDWARE)
+    if not hardware:
+        assert not any(device in block.code for device in DEVICES), (
+            f"{block.id} names a device: start it {HARDWARE!r}"
+        )
+    motors = 1
+    if hardware:
+        import re
+
+        said = re.search(r"(\d+) motors", block.code.splitlines()[0])
+        motors = int(said.group(1)) if said else 1
+    with (
+        simulated(block.code, folder, motors=motors)
+        if hardware
+        else contextlib.nullcontext(block.code) as code
+    ):
+        (folder / "block.py").write_text(code, encoding="utf-8")
+        done = subprocess.run(
+            [sys.executable, "block.py"],
+            cwd=folder,
+            env=environment(folder),
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+    assert done.returncode == 0, f"{block.id}\n{done.stderr}"
+    if block.prints is not None:
+        assert done.stdout == block.prints, f"{block.id}: printed\n{done.stdout}"
 
 
-@pytest.mark.parametrize(("page", "line", "code", "prints"), BLOCKS, ids=[f"{b[0]}:{b[1]}" for b in BLOCKS])
-def test_every_python_block_runs_as_written(
-    page: str, line: int, code: str, prints: str | None, tmp_path: Path
-) -> None:
-    result = subprocess.run(
-        [sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=120
+def _console(block: Block, folder: Path) -> None:
+    env = environment(folder)
+    with devices_for(block.code, folder) as code:
+        for command in commands(code):
+            status, output = run_command(command, folder, env)
+            said = "\n".join(output)
+            expected = command.exit_code
+            if expected is None:
+                assert status != 0, (
+                    f"{block.id}: {command.line!r} exited 0, its output shows an error\n{said}"
+                )
+            else:
+                assert status == expected, f"{block.id}: {command.line!r} exited {status}\n{said}"
+            if command.output:
+                assert output_matches(command.output, output), (
+                    f"{block.id}: {command.line!r} printed\n{said}\n--- the page shows\n"
+                    + "\n".join(command.output)
+                )
+
+
+def _toml(block: Block) -> None:
+    content = tomllib.loads(block.code)
+    if block.page == "limits.md" or (block.file or "").startswith("limits"):
+        from servobus.limits import parse
+
+        parse(block.code)
+    assert content is not None
+
+
+@pytest.mark.parametrize("block", RUN, ids=[block.id for block in RUN])
+def test_every_block_runs_as_written(block: Block, tmp_path: Path) -> None:
+    if block.kind == "toml":
+        _toml(block)
+    elif block.kind == "python":
+        _python(block, _folder(block, tmp_path))
+    else:
+        _console(block, _folder(block, tmp_path))
+
+
+def test_every_block_on_the_site_is_of_a_kind_that_runs() -> None:
+    wrong = [f"{block.id}: {why}" for block in ALL if (why := unrunnable(block))]
+    assert not wrong, "\n".join(wrong)
+
+
+def test_the_pages_have_blocks_of_every_kind() -> None:
+    assert {block.kind for block in RUN} == {"python", "console", "toml"}
+    assert len(RUN) >= 30, len(RUN)
+
+
+# ---- the runner's own rules ------------------------------------------------------------------------
+
+
+def test_a_line_matches_with_other_numbers_but_not_other_words() -> None:
+    assert line_matches("latency p50 0.57 ms", "latency p50 1.25 ms")
+    assert line_matches("1176 replies (1: 294)", "1180 replies (1: 295)")
+    assert not line_matches("1176 replies", "1176 requests")
+    assert not line_matches("moved 1 motor", "moved 1 motor 2")
+    assert line_matches("┏━━━┳━━┓", "┏━━━━━┳━┓") and line_matches("│  1 │ a  │", "│ 10 │ a    │")
+
+
+def test_an_output_matches_in_order_with_dots_skipping_lines() -> None:
+    assert output_matches(["a", "...", "d"], ["a", "b", "c", "d"])
+    assert output_matches(["a", "...", "b"], ["a", "b"])
+    assert not output_matches(["a", "d"], ["a", "b", "d"])
+    assert not output_matches(["d", "...", "a"], ["a", "b", "d"])
+    assert not output_matches(["a"], ["a", "b"])
+
+
+def test_a_command_s_exit_code_is_zero_unless_it_says_or_shows_an_error() -> None:
+    block = "$ servobus scan --sim 1\n$ servobus status --sim 1 --ids 1-2  # (exit 1)\n$ servobus scna\n"
+    one, two, three = commands(block + "servobus: error: No such command 'scna'.")
+    assert (one.exit_code, two.exit_code, three.exit_code) == (0, 1, None)
+    (long,) = commands("$ servobus bridge \\\n    --sim 2  # until Ctrl-C")
+    assert long.line == "servobus bridge --sim 2  # until Ctrl-C" and long.until_ctrl_c
+
+
+@pytest.mark.parametrize(
+    ("line", "ok"),
+    [
+        ("sudo ip link set can0 up type can bitrate 1000000", True),
+        ("sudo ip link set can0 up type can bitrate 1000000 dbitrate 5000000 fd on", True),
+        ("sudo ip link set can0 down", True),
+        ("ip link set can0 up type can bitrate 1000000", False),  # not as root
+        ("sudo ip link set can0 up type can bitrate 1000001", False),
+        ("sudo ip link set can0 up bitrate 1000000", False),  # no type can
+        ("sudo ip link set can0 up type can bitrate 1000000 dbitrate 5000000", False),  # no fd on
+        ("sudo slcand -o -c -s8 ttyACM0 can0", True),
+        ("sudo slcand -o -c -s9 ttyACM0 can0", False),
+        ("slcand -o -c -s8 ttyACM0 can0", False),
+        ("pip install 'servobus[dashboard]'", True),
+        ("pip install 'servobus[dashbord]'", False),
+    ],
+)
+def test_the_shims_check_their_arguments(line: str, ok: bool, tmp_path: Path) -> None:
+    folder = tmp_path / "shims"
+    folder.mkdir()
+    (folder / "ttyACM0").touch()
+    done = subprocess.run(
+        ["bash", "-c", line], cwd=folder, env=environment(folder), capture_output=True, text=True
     )
-    assert result.returncode == 0, (page, line, result.stderr)
-    if prints is not None:
-        assert result.stdout == prints, (page, line)
-
-
-def test_the_limits_page_s_file_is_a_limits_file() -> None:
-    from servobus.limits import parse
-
-    text = (DOCS / "limits.md").read_text(encoding="utf-8")
-    files = re.findall(r"^```toml\n(.*?)^```$", text, re.S | re.M)
-    assert files
-    for content in files:
-        tomllib.loads(content)
-        book = parse(content)
-        assert book.all is not None and book.of(3) is not None
+    assert (done.returncode == 0) == ok, done.stderr

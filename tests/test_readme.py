@@ -15,7 +15,6 @@ import sys
 import threading
 import time
 import tomllib
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +22,8 @@ import anyio
 import click
 import pytest
 
+from _adapters import HARDWARE
+from _adapters import simulated as _simulated
 from _backends import BACKENDS
 from servobus.cli import cli
 from servobus.protocols.myactuator.sim.device import MyActuatorMotor
@@ -32,10 +33,6 @@ from servobus.transports.sim import SimTransport
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 TEXT = README.read_text(encoding="utf-8")
-#: how a block that needs hardware starts (its first line), naming each adapter and its path
-HARDWARE = "# needs hardware:"
-#: "an SLCAN adapter on /dev/ttyACM0", "an RS485 adapter on /dev/ttyUSB0" in that first line
-ADAPTER = re.compile(r"\b(SLCAN|RS485) adapter on (/dev/\S+?)(?=[\s,;]|$)")
 
 
 def _fenced(language: str) -> list[tuple[int, str]]:
@@ -62,29 +59,6 @@ def _section(title: str) -> str:
     match = re.search(rf"^## {re.escape(title)}\n(.*?)(?=^## |\Z)", TEXT, re.S | re.M)
     assert match, f"README has no '## {title}' section"
     return match.group(1)
-
-
-@contextlib.contextmanager
-def _simulated(code: str, folder: Path) -> Iterator[str]:
-    """The adapters a hardware block's first line names, simulated (one MyActuator motor behind each,
-    on a pty linked in ``folder``); the code with their device paths swapped for those links."""
-    adapters = ADAPTER.findall(code.splitlines()[0])
-    assert adapters, f"{code.splitlines()[0]!r} names no 'SLCAN|RS485 adapter on /dev/...'"
-    sims: list[subprocess.Popen[str]] = []
-    try:
-        for kind, device in adapters:
-            link = folder / Path(device).name
-            mode = "--slcan" if kind == "SLCAN" else "--rs485"
-            command = [sys.executable, "-m", "servobus.sim", "--family", "myactuator", mode]
-            sims.append(subprocess.Popen([*command, "--link", str(link)], stdout=subprocess.PIPE, text=True))
-            assert sims[-1].stdout is not None
-            assert sims[-1].stdout.readline().strip() == str(link)  # up: the first line is the pty
-            code = code.replace(device, str(link))
-        yield code
-    finally:
-        for sim in sims:
-            sim.terminate()
-            sim.wait(timeout=10)
 
 
 def test_the_readme_has_its_blocks() -> None:

@@ -15,14 +15,14 @@ __all__ = ["served_on_virtual"]
 
 
 @contextlib.contextmanager
-def served_on_virtual(devices: Sequence[Any]) -> Iterator[str]:
-    """``devices`` on a python-can virtual channel (named), served from a thread."""
+def served_on_virtual(devices: Sequence[Any], channel: str | None = None) -> Iterator[str]:
+    """``devices`` on a python-can virtual channel (``channel``, else a fresh name), served from a thread."""
     import can
 
     from servobus.sim.attach import serve_python_can
     from servobus.sim.network import SimCanNetwork
 
-    channel = f"twin-{time.monotonic_ns()}"
+    channel = channel or f"twin-{time.monotonic_ns()}"
     network = SimCanNetwork(list(devices))
     side = can.Bus(interface="virtual", channel=channel)
     stop = threading.Event()
