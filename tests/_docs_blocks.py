@@ -18,10 +18,16 @@ The convention (what a page writes, what is checked):
 - A command naming ``/dev/ttyACM0`` (SLCAN) or ``/dev/ttyUSB0`` (RS485) runs on simulated motors
   behind a pty in their place (the highest id of the block's ``--ids``, 1 without); ``-i socketcan
   -c can0`` on python-can's ``virtual`` interface with the simulated motors of ``--family`` served on
-  it. ``sudo``, ``ip``, ``slcand`` and ``pip`` are shims that check their arguments the way the real
-  ones would (``ip link set can0 up type can bitrate 1000000``) and change nothing on this computer.
+  it. A ``servobus`` command on such a pty gets ``--timeout-ms 200`` unless it gives one (a
+  simulator behind a pty on a loaded computer answers slower than a motor). ``sudo``, ``ip``,
+  ``slcand`` and ``pip`` are shims that check their arguments the way the real ones would (``ip link
+  set can0 up type can bitrate 1000000``) and change nothing on this computer.
 - A command ending ``# until Ctrl-C`` serves until stopped: it is started, its first line awaited
   (and matched with the first line shown), it must still be alive, and SIGINT ends it.
+- Such a command keeps serving while the block's next commands run ("in another terminal": a
+  ``servobus status --remote`` of the bridge it started), until the next such command or the end of
+  the block. A python block whose first line is ``# needs a bridge: servobus bridge ...`` runs while
+  that command serves.
 - A block after ``<!-- file: NAME -->`` is also written as NAME into the folder of every block of
   its page (the ``limits.toml`` a command names).
 - ```toml: parsed by tomllib; a limits file (on limits.md, or a file named ``limits*.toml``) also by
@@ -37,6 +43,7 @@ import re
 import signal
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from functools import cache
@@ -55,6 +62,8 @@ RUNS = ("python", "console", "toml")
 FENCE = re.compile(r"^([ \t]*)```([\w+-]*)[^\n]*\n(.*?)^\1```[ \t]*$", re.S | re.M)
 FILE = re.compile(r"<!-- file: (\S+) -->\s*$")
 UNTIL_CTRL_C = "# until Ctrl-C"
+#: a python block's first line naming the bridge it talks to
+NEEDS_BRIDGE = re.compile(r"^# needs a bridge: (servobus bridge [^#\n]*)")
 DEVICES = {"/dev/ttyACM0": "SLCAN", "/dev/ttyUSB0": "RS485"}
 
 
@@ -238,52 +247,74 @@ def environment(folder: Path) -> dict[str, str]:
     return {**os.environ, "PATH": path, "PYTHONPATH": python_path, "COLUMNS": "100", "TERM": "dumb"}
 
 
-def run_command(command: Command, folder: Path, env: dict[str, str]) -> tuple[int, list[str]]:
-    """Run ``command`` in ``folder``: its exit code and its output lines."""
-    if not command.until_ctrl_c:
-        done = subprocess.run(
-            ["bash", "-c", command.line],
-            cwd=folder,
-            env=env,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-            timeout=120,
+class Session:
+    """A block's commands, run in its folder one after the other; a command that serves until Ctrl-C
+    keeps serving while the next ones run ("in another terminal"), until the next such command or
+    the end of the block, and is then stopped with SIGINT."""
+
+    def __init__(self, folder: Path, env: dict[str, str]) -> None:
+        self.folder, self.env = folder, env
+        self.server: tuple[str, subprocess.Popen[bytes], Path] | None = None
+
+    def run(self, command: Command) -> tuple[int, list[str]]:
+        """Run ``command``: its exit code and its output lines (a server's: its first line)."""
+        if not command.until_ctrl_c:
+            done = subprocess.run(
+                ["bash", "-c", command.line],
+                cwd=self.folder,
+                env=self.env,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT,
+                text=True,
+                timeout=120,
+            )
+            return done.returncode, done.stdout.splitlines()
+        self.stop()
+        log = self.folder.parent / f"server-{time.monotonic_ns()}.out"
+        with log.open("wb") as out:
+            server = subprocess.Popen(
+                ["bash", "-c", f"exec {command.line}"],
+                cwd=self.folder,
+                env=self.env,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+            )
+        self.server = (command.line, server, log)
+        deadline = time.monotonic() + 60
+        while b"\n" not in log.read_bytes() and server.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        first = log.read_bytes().decode().split("\n", 1)[0]
+        assert server.poll() is None, (
+            f"{command.line!r} ended by itself: it should serve until Ctrl-C\n{log.read_text()}"
         )
-        return done.returncode, done.stdout.splitlines()
-    server = subprocess.Popen(
-        ["bash", "-c", f"exec {command.line}"],
-        cwd=folder,
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        start_new_session=True,
-    )
-    assert server.stdout is not None
-    try:
-        first = _first_line(server, timeout=60)
-        alive = server.poll() is None
+        assert first, f"{command.line!r} printed no line within 60 s"
+        return 0, [first]
+
+    def stop(self) -> None:
+        """Stop the command serving, if any, with SIGINT: it must end within 30 s, as Ctrl-C ends it."""
+        if self.server is None:
+            return
+        line, server, log = self.server
+        self.server = None
         server.send_signal(signal.SIGINT)
-        rest, _ = server.communicate(timeout=30)
-    finally:
-        if server.poll() is None:
-            os.killpg(server.pid, signal.SIGKILL)
-            server.wait()
-    assert alive, f"{command.line!r} ended by itself after {first!r}: it should serve until Ctrl-C"
-    assert server.returncode in (0, 130), (command.line, server.returncode, rest)
-    return 0, [first]
+        try:
+            server.wait(timeout=30)
+        finally:
+            if server.poll() is None:
+                os.killpg(server.pid, signal.SIGKILL)
+                server.wait()
+        assert server.returncode in (0, 130), f"{line!r} ended with {server.returncode}\n{log.read_text()}"
 
+    def __enter__(self) -> Session:
+        return self
 
-def _first_line(process: subprocess.Popen[str], timeout: float) -> str:
-    import threading
-
-    got: list[str] = []
-    reader = threading.Thread(target=lambda: got.append(process.stdout.readline()), daemon=True)  # type: ignore[union-attr]
-    reader.start()
-    reader.join(timeout)
-    assert got and got[0], f"no line within {timeout} s"
-    return got[0].rstrip("\n")
+    def __exit__(self, *exc: object) -> None:
+        if exc[0] is not None:
+            with contextlib.suppress(AssertionError):
+                self.stop()
+        else:
+            self.stop()
 
 
 # ---- the shims: what a console command calls that must not touch this computer -----------------
@@ -406,11 +437,15 @@ for spec in args[1:]:
 """
 
 _SERVOBUS = """\
-import re, sys
+import os, re, sys
 sys.path.insert(0, %(tests)r)
 args = sys.argv[1:]
 from servobus.cli import main
 line = " ".join(args)
+# a simulator behind a pty on a loaded computer answers slower than a motor: a timeout of its pace
+if os.environ.get("SERVOBUS_DOCS_PTYS") and "--timeout-ms" not in args:
+    if any(pty in args for pty in os.environ["SERVOBUS_DOCS_PTYS"].split(os.pathsep)):
+        args += ["--timeout-ms", "200"]
 if not re.search(r"(-i|--interface)[ =]socketcan\\b", line):
     sys.exit(main(args))
 from cli._virtual import served_on_virtual

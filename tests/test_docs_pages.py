@@ -7,6 +7,8 @@ docstring."""
 from __future__ import annotations
 
 import contextlib
+import os
+import re
 import subprocess
 import sys
 import tomllib
@@ -17,7 +19,12 @@ import pytest
 from _adapters import HARDWARE, simulated
 from _docs_blocks import (
     DEVICES,
+    NEEDS_BRIDGE,
+    UNTIL_CTRL_C,
     Block,
+    Command,
+    Session,
+    adapters,
     blocks,
     commands,
     devices_for,
@@ -26,7 +33,6 @@ from _docs_blocks import (
     line_matches,
     output_matches,
     pages,
-    run_command,
     unrunnable,
 )
 
@@ -44,27 +50,22 @@ def _folder(block: Block, tmp_path: Path) -> Path:
 
 
 def _python(block: Block, folder: Path) -> None:
-    hardware = block.code.startswith(HARDWARE)
+    first = block.code.splitlines()[0]
+    hardware = first.startswith(HARDWARE)
     if not hardware:
-        assert not any(device in block.code for device in DEVICES), (
-            f"{block.id} names a device: start it {HARDWARE!r}"
-        )
-    motors = 1
-    if hardware:
-        import re
-
-        said = re.search(r"(\d+) motors", block.code.splitlines()[0])
-        motors = int(said.group(1)) if said else 1
-    with (
-        simulated(block.code, folder, motors=motors)
-        if hardware
-        else contextlib.nullcontext(block.code) as code
-    ):
+        assert not any(device in block.code for device in DEVICES), f"{block.id}: a device, not {HARDWARE!r}"
+    said = re.search(r"(\d+) motors", first)
+    bridge = NEEDS_BRIDGE.match(first)
+    adapters = simulated(block.code, folder, motors=int(said.group(1)) if said else 1) if hardware else None
+    env = environment(folder)
+    with adapters or contextlib.nullcontext(block.code) as code, Session(folder, env) as session:
+        if bridge:  # served while the script runs, as in another terminal
+            session.run(Command(f"{bridge.group(1).strip()}  {UNTIL_CTRL_C}", []))
         (folder / "block.py").write_text(code, encoding="utf-8")
         done = subprocess.run(
             [sys.executable, "block.py"],
             cwd=folder,
-            env=environment(folder),
+            env=env,
             capture_output=True,
             text=True,
             timeout=120,
@@ -76,9 +77,12 @@ def _python(block: Block, folder: Path) -> None:
 
 def _console(block: Block, folder: Path) -> None:
     env = environment(folder)
-    with devices_for(block.code, folder) as code:
+    with devices_for(block.code, folder) as code, Session(folder, env) as session:
+        env["SERVOBUS_DOCS_PTYS"] = os.pathsep.join(
+            str(folder / Path(d).name) for _, d in adapters(block.code)
+        )
         for command in commands(code):
-            status, output = run_command(command, folder, env)
+            status, output = session.run(command)
             said = "\n".join(output)
             expected = command.exit_code
             if expected is None:
