@@ -25,9 +25,9 @@ The convention (what a page writes, what is checked):
 - A command ending ``# until Ctrl-C`` serves until stopped: it is started, its first line awaited
   (and matched with the first line shown), it must still be alive, and SIGINT ends it.
 - Such a command keeps serving while the block's next commands run ("in another terminal": a
-  ``servobus status --remote`` of the bridge it started), until the next such command or the end of
-  the block. A python block whose first line is ``# needs a bridge: servobus bridge ...`` runs while
-  that command serves.
+  ``servobus status --remote`` of the bridge it started), until the end of the block (two servers
+  of one port: two blocks). A python block whose first line is ``# needs a bridge: servobus bridge
+  ...`` runs while that command serves.
 - A block after ``<!-- file: NAME -->`` is also written as NAME into the folder of every block of
   its page (the ``limits.toml`` a command names).
 - ```toml: parsed by tomllib; a limits file (on limits.md, or a file named ``limits*.toml``) also by
@@ -249,12 +249,12 @@ def environment(folder: Path) -> dict[str, str]:
 
 class Session:
     """A block's commands, run in its folder one after the other; a command that serves until Ctrl-C
-    keeps serving while the next ones run ("in another terminal"), until the next such command or
-    the end of the block, and is then stopped with SIGINT."""
+    keeps serving while the next ones run ("in another terminal"), until the end of the block, and is
+    then stopped with SIGINT (the last started first)."""
 
     def __init__(self, folder: Path, env: dict[str, str]) -> None:
         self.folder, self.env = folder, env
-        self.server: tuple[str, subprocess.Popen[bytes], Path] | None = None
+        self.servers: list[tuple[str, subprocess.Popen[bytes], Path]] = []
 
     def run(self, command: Command) -> tuple[int, list[str]]:
         """Run ``command``: its exit code and its output lines (a server's: its first line)."""
@@ -269,7 +269,6 @@ class Session:
                 timeout=120,
             )
             return done.returncode, done.stdout.splitlines()
-        self.stop()
         log = self.folder.parent / f"server-{time.monotonic_ns()}.out"
         with log.open("wb") as out:
             server = subprocess.Popen(
@@ -280,7 +279,7 @@ class Session:
                 stderr=subprocess.STDOUT,
                 start_new_session=True,
             )
-        self.server = (command.line, server, log)
+        self.servers.append((command.line, server, log))
         deadline = time.monotonic() + 60
         while b"\n" not in log.read_bytes() and server.poll() is None and time.monotonic() < deadline:
             time.sleep(0.05)
@@ -292,19 +291,20 @@ class Session:
         return 0, [first]
 
     def stop(self) -> None:
-        """Stop the command serving, if any, with SIGINT: it must end within 30 s, as Ctrl-C ends it."""
-        if self.server is None:
-            return
-        line, server, log = self.server
-        self.server = None
-        server.send_signal(signal.SIGINT)
-        try:
-            server.wait(timeout=30)
-        finally:
-            if server.poll() is None:
+        """Stop the commands serving with SIGINT, the last first: each must end within 30 s."""
+        wrong = []
+        while self.servers:
+            line, server, log = self.servers.pop()
+            server.send_signal(signal.SIGINT)
+            try:
+                server.wait(timeout=30)
+            except subprocess.TimeoutExpired:
                 os.killpg(server.pid, signal.SIGKILL)
                 server.wait()
-        assert server.returncode in (0, 130), f"{line!r} ended with {server.returncode}\n{log.read_text()}"
+                wrong.append(f"{line!r} still ran 30 s after SIGINT\n{log.read_text()}")
+            if server.returncode not in (0, 130, -signal.SIGINT, -signal.SIGKILL):  # as Ctrl-C ends it
+                wrong.append(f"{line!r} ended with {server.returncode} on SIGINT\n{log.read_text()}")
+        assert not wrong, "\n".join(wrong)
 
     def __enter__(self) -> Session:
         return self

@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import os
 import re
+import signal
 import subprocess
 import sys
 import tomllib
@@ -179,3 +180,19 @@ def test_the_shims_check_their_arguments(line: str, ok: bool, tmp_path: Path) ->
         ["bash", "-c", line], cwd=folder, env=environment(folder), capture_output=True, text=True
     )
     assert (done.returncode == 0) == ok, done.stderr
+
+
+def test_a_served_command_must_serve_until_stopped_and_is_stopped_at_the_block_s_end(tmp_path: Path) -> None:
+    folder = tmp_path / "served"
+    folder.mkdir()
+    env = environment(folder)
+    with Session(folder, env) as session:
+        with pytest.raises(AssertionError, match="ended by itself"):
+            session.run(Command("echo up  # until Ctrl-C", []))
+        session.servers.clear()  # it ended: nothing to stop
+        status, first = session.run(
+            Command("python -c 'import time; print(\"up\", flush=True); time.sleep(60)'  # until Ctrl-C", [])
+        )
+        assert (status, first) == (0, ["up"])
+        (_, server, _) = session.servers[0]
+    assert server.returncode == -signal.SIGINT  # stopped at the block's end, as by Ctrl-C
