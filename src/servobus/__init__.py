@@ -1,6 +1,6 @@
 """servobus: asyncio orchestrator for buses of servo actuators, with a small C core.
 
-Layers (docs/explanation/architecture.md): ``servobus.core`` wraps the C core (CRCs, bit packing,
+Layers (the docs' "How servobus is built"): ``servobus.core`` wraps the C core (CRCs, bit packing,
 de-framers); protocol families, the scheduler, transports, the simulator and the Bus build on it.
 """
 
