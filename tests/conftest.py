@@ -13,7 +13,9 @@ example is expensive.
 from __future__ import annotations
 
 import os
+import subprocess
 import sys
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
@@ -59,3 +61,20 @@ def toy() -> Iterator[ModuleType]:
 
     with installed() as package:
         yield package
+
+
+@pytest.fixture(scope="session")
+def built_site(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, float]:
+    """The docs site built once per run as CI builds it (``mkdocs build --strict``: a warning fails
+    it), and the seconds the build took; the pages' tests read it."""
+    out = tmp_path_factory.mktemp("site") / "site"
+    started = time.monotonic()
+    result = subprocess.run(
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "-q", "-d", str(out)],
+        cwd=Path(__file__).resolve().parents[1],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stderr
+    return out, time.monotonic() - started

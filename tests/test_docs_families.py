@@ -126,18 +126,10 @@ def test_every_command_runs_with_the_family_installed(
         assert result.returncode == 0, (line, command, result.stderr)
 
 
-def test_the_rendered_page_lists_every_name_with_its_docstring(tmp_path: Path) -> None:
+def test_the_rendered_page_lists_every_name_with_its_docstring(built_site: tuple[Path, float]) -> None:
     """The site built as CI builds it (``mkdocs build --strict``): the page has an entry, with a
     docstring, for each name of servobus.authoring."""
-    site = tmp_path / "site"
-    result = subprocess.run(
-        [sys.executable, "-m", "mkdocs", "build", "--strict", "-q", "-d", str(site)],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert result.returncode == 0, result.stderr
+    site, _ = built_site
     html = (site / "api" / "families" / "index.html").read_text(encoding="utf-8")
     for name in authoring.__all__:
         entry = re.search(

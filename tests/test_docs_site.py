@@ -7,9 +7,7 @@ from __future__ import annotations
 
 import html
 import re
-import subprocess
 import sys
-import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from html.parser import HTMLParser
@@ -113,19 +111,9 @@ class Site:
 
 
 @pytest.fixture(scope="module")
-def site(tmp_path_factory: pytest.TempPathFactory) -> Site:
+def site(built_site: tuple[Path, float]) -> Site:
     """The site built as CI builds it (.ci/run: ``mkdocs build --strict``, a warning fails it)."""
-    out = tmp_path_factory.mktemp("site") / "site"
-    started = time.monotonic()
-    result = subprocess.run(
-        [sys.executable, "-m", "mkdocs", "build", "--strict", "-q", "-d", str(out)],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    seconds = time.monotonic() - started
-    assert result.returncode == 0, result.stderr
+    out, seconds = built_site
     pages = {}
     for path in out.rglob("index.html"):
         where = path.parent.relative_to(out).as_posix()
@@ -139,10 +127,9 @@ def _prose(page_html: str) -> str:
     return html.unescape(re.sub(r"<[^>]+>", "", text))
 
 
-def test_the_site_builds_strict_in_reasonable_time(site: Site) -> None:
+def test_the_site_builds_strict_with_every_page(site: Site) -> None:
     print(f"mkdocs build --strict: {site.seconds:.1f} s, {len(site.pages)} pages")
     assert len(site.pages) >= 25
-    assert site.seconds < 240
 
 
 # ---- docstrings that render ----
