@@ -1,8 +1,8 @@
 """Hypothesis settings shared by the oracle tests (tests/test_oracle_*.py).
 
-The example count follows the Hypothesis profile (tests/conftest.py: ``default`` 200, ``ci`` 3,000, ``quick`` 50;
-HYPOTHESIS_PROFILE chooses). SERVOBUS_ORACLE_EXAMPLES overrides it for these tests alone (a sanitizer
-smoke run, say): ``SERVOBUS_ORACLE_EXAMPLES=500 pytest tests/test_oracle_*.py``.
+The example count follows the Hypothesis profile (tests/conftest.py: ``default`` 200, ``ci`` 3,000,
+``quick`` 50; HYPOTHESIS_PROFILE chooses). SERVOBUS_ORACLE_EXAMPLES overrides it for these tests alone
+(the sanitizer smoke run, say): ``SERVOBUS_ORACLE_EXAMPLES=500 pytest tests/test_oracle_*.py``.
 """
 
 from __future__ import annotations
