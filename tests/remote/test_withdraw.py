@@ -140,10 +140,15 @@ async def test_a_client_taken_over_loses_its_queued_requests_and_its_set_point(
 
         await a.cycle([(a.motor(1), ma.SpeedControl(speed_dps=10.0))], valid_for_s=5.0)
         await _until(lambda: bridge.served["b"].owners.get(1) == a.token_id)
+        counts = bridge.served["b"].counts
+        requests_before = counts["requests"]
         async with anyio.create_task_group() as group:
             for _ in range(6):
                 group.start_soon(a_speed)
-            await _until(lambda: bus.scheduler.pending >= 4)  # A's requests queue on the Bus
+            # all six reached the bridge (one still on its way would take the motor back from B, as
+            # takeover allows: CI failed there), and A's requests queue on the Bus
+            await _until(lambda: counts["requests"] == requests_before + 6)
+            await _until(lambda: bus.scheduler.pending >= 4)
             assert isinstance(await b.motor(1).speed_control(speed_dps=-30.0), ma.StatusReply)
         assert bridge.served["b"].owners == {1: b.token_id}
         assert 1 not in bridge.served["b"].held  # A's set-point went with its hold
