@@ -147,7 +147,7 @@ async def test_a_client_taken_over_loses_its_queued_requests_and_its_set_point(
                 group.start_soon(a_speed)
             # all six reached the bridge (one still on its way would take the motor back from B, as
             # takeover allows: CI failed there), and A's requests queue on the Bus
-            await _until(lambda: counts["requests"] == requests_before + 6)
+            await _until(lambda: counts["requests"] >= requests_before + 6)
             await _until(lambda: bus.scheduler.pending >= 4)
             assert isinstance(await b.motor(1).speed_control(speed_dps=-30.0), ma.StatusReply)
         assert bridge.served["b"].owners == {1: b.token_id}
