@@ -163,6 +163,14 @@ def test_the_extension_converts_every_role_form() -> None:
         out = convert(role, bus, package)  # type: ignore[arg-type]
         assert identifier in out and shown in out and " optional>" in out, (role, out)
         assert not ROLE.search(out), out
+    # in code (indented after a blank line, or fenced) a role is the text it shows, never HTML
+    text = "Options:\n\n    late_hold_s: see :meth:`~servobus.rtt.RoundTrip.late_s`\n\nAnd :meth:`cycle`."
+    out = convert(text, bus, package)  # type: ignore[arg-type]
+    assert "    late_hold_s: see late_s()\n" in out and out.count("<autoref") == 1, out
+    fenced = convert("```\nbus.cycle()  # :meth:`cycle`\n```", bus, package)  # type: ignore[arg-type]
+    assert fenced == "```\nbus.cycle()  # cycle()\n```", fenced
+    section = convert("Args:\n    items: as :meth:`cycle` takes", bus, package)  # type: ignore[arg-type]
+    assert "<autoref" in section, section  # (a Google section's entries are not code)
 
 
 def test_the_extension_makes_private_defaults_readable() -> None:
@@ -191,6 +199,10 @@ def test_no_raw_sphinx_role_on_any_page(site: Site) -> None:
         if RAW_ROLE.search(_prose(text))
     }
     assert not raw, raw
+    # (nor a converted one shown as text: a role in a docstring's code block, where Markdown escapes
+    # the cross-reference's HTML)
+    leaked = [page for page, text in site.pages.items() if "&lt;autoref" in text]
+    assert not leaked, leaked
 
 
 def test_every_docstring_section_parsed(site: Site) -> None:

@@ -87,7 +87,8 @@ def resolve(target: str, obj: griffe.Object, root: griffe.Object) -> str:
     return dotted
 
 
-def _replace(match: re.Match[str], obj: griffe.Object, root: griffe.Object) -> str:
+def _parts(match: re.Match[str], obj: griffe.Object, root: griffe.Object) -> tuple[str, str]:
+    """What a role shows and the full path of what it names."""
     text = " ".join(match["text"].split())
     titled = _TITLED.match(text)
     if titled:
@@ -100,8 +101,32 @@ def _replace(match: re.Match[str], obj: griffe.Object, root: griffe.Object) -> s
             title += "()"
     target = target.lstrip("~").removesuffix("()")
     # (a :ref: names a label: a heading's anchor, which autorefs knows as it knows objects)
-    full = target if match["role"] == "ref" else resolve(target, obj, root)
+    return title, target if match["role"] == "ref" else resolve(target, obj, root)
+
+
+def _replace(match: re.Match[str], obj: griffe.Object, root: griffe.Object) -> str:
+    title, full = _parts(match, obj, root)
     return f'<autoref identifier="{html.escape(full)}" optional><code>{html.escape(title)}</code></autoref>'
+
+
+def _code_lines(lines: list[str]) -> list[bool]:
+    """Which of a docstring's lines Markdown shows as code: in a ``` fence, or indented four spaces
+    after a blank line (a Google section's entries follow their heading with no blank line)."""
+    code, fenced, in_block, after_blank = [], False, False, True
+    for line in lines:
+        stripped = line.strip()
+        if stripped.startswith("```"):
+            code.append(True)
+            fenced, after_blank = not fenced, False
+            continue
+        if fenced:
+            code.append(True)
+            continue
+        if stripped:
+            in_block = len(line) - len(line.lstrip()) >= 4 and (in_block or after_blank)
+        code.append(in_block)
+        after_blank = not stripped
+    return code
 
 
 #: Sphinx's literal-block marker at the end of a paragraph, a blank line (or the end) after it.
@@ -115,7 +140,13 @@ def _literal_marker(match: re.Match[str]) -> str:
 
 
 def convert(text: str, obj: griffe.Object, root: griffe.Object) -> str:
-    """``text`` with every Sphinx role made a cross-reference and its literal-block markers dropped."""
+    """``text`` with every Sphinx role made a cross-reference and its literal-block markers dropped;
+    in code (where Markdown would show the cross-reference's HTML as text) a role is what it shows."""
+    lines = text.split("\n")
+    for i, code in enumerate(_code_lines(lines)):
+        if code:
+            lines[i] = ROLE.sub(lambda m: _parts(m, obj, root)[0], lines[i])
+    text = "\n".join(lines)
     return _LITERAL.sub(_literal_marker, ROLE.sub(lambda m: _replace(m, obj, root), text))
 
 
