@@ -326,6 +326,8 @@ while args and args[0].startswith("-"):
     assert args[0] in ("-E", "--preserve-env"), f"sudo: this shim knows no option {args[0]}"
     args = args[1:]
 assert args, "usage: sudo command"
+# (only the shims: a page's sudo must never run a real command as this computer's root)
+assert args[0] in ("ip", "slcand"), f"sudo (docs shim): runs only the ip and slcand shims, not {args[0]}"
 os.environ["SERVOBUS_DOCS_ROOT"] = "1"
 os.execvp(args[0], args)
 """
@@ -342,7 +344,7 @@ while args and args[0].startswith("-"):
     if args[0] not in ("-details", "-d", "-statistics", "-s", "-detail"):
         fail(f"unknown option {args[0]}")
     args = args[1:]
-if args[:2] == ["link", "show"] or args[:2] == ["-d", "link"] or args == ["link"]:
+if args[:2] == ["link", "show"] or args == ["link"]:
     dev = args[2] if len(args) > 2 else "can0"
     print(f"3: {dev}: <NOARP,UP,LOWER_UP,ECHO> mtu 16 qdisc pfifo_fast state UP mode DEFAULT group default "
           "qlen 10")
@@ -391,6 +393,8 @@ if "sample-point" in opts and not 0 < float(opts["sample-point"]) < 1:
     fail("sample-point is between 0 and 1 (0.875)")
 if state is None and not opts:
     fail("nothing to set")
+if state == "up" and opts.get("type") == "can" and "bitrate" not in opts:
+    fail("a CAN interface goes up with its bit timing: bitrate N")
 """
 
 _SLCAND = """\
@@ -399,12 +403,17 @@ if os.environ.get("SERVOBUS_DOCS_ROOT") != "1":
     sys.exit("slcand: failed to open the TTY: Permission denied (run it with sudo)")
 args = sys.argv[1:]
 positional = []
-for arg in args:
-    if arg.startswith("-"):
-        if not re.fullmatch(r"-(o|c|f|F|s[0-8]|S\\d+|t(hw|sw))", arg) and arg not in ("-S", "-t"):
+rest = iter(args)
+for arg in rest:
+    if arg in ("-S", "-t"):  # (their value as the next argument)
+        next(rest, None)
+    elif arg.startswith("-"):
+        if not re.fullmatch(r"-(o|c|f|F|s[0-8]|S\\d+|t(hw|sw))", arg):
             sys.exit(f"slcand (docs shim): unknown option {arg} (-o -c -f -s0..-s8 -S baud)")
     else:
         positional.append(arg)
+if len(positional) > 2:
+    sys.exit(f"slcand (docs shim): one TTY and at most one interface name, not {positional}")
 speeds = [a for a in args if re.fullmatch(r"-s[0-8]", a)]
 if len(speeds) != 1:
     sys.exit("slcand (docs shim): give the CAN bit rate once: -s8 is 1 Mbit/s, -s6 500 kbit/s")

@@ -168,6 +168,10 @@ def test_a_command_s_exit_code_is_zero_unless_it_says_or_shows_an_error() -> Non
         ("sudo slcand -o -c -s8 ttyACM0 can0", True),
         ("sudo slcand -o -c -s9 ttyACM0 can0", False),
         ("slcand -o -c -s8 ttyACM0 can0", False),
+        ("sudo slcand -o -c -S 3000000 -s8 ttyACM0 can0", True),  # (a value after its option)
+        ("sudo slcand -o -c -s8 ttyACM0 can0 extra", False),
+        ("sudo ip link set can0 up type can", False),  # no bit timing
+        ("sudo touch ran-as-root", False),  # the shim runs only the shims
         ("pip install 'servobus[dashboard]'", True),
         ("pip install 'servobus[dashbord]'", False),
     ],
