@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import contextlib
 import re
-import subprocess
-import sys
 from collections.abc import Iterator
 from pathlib import Path
+
+from cli._bus_cli import pty_simulators
 
 #: how a block that needs hardware starts (its first line), naming each adapter and its path
 HARDWARE = "# needs hardware:"
@@ -27,19 +27,10 @@ def simulated(
     if adapters is None:
         adapters = ADAPTER.findall(code.splitlines()[0])
         assert adapters, f"{code.splitlines()[0]!r} names no 'SLCAN|RS485 adapter on /dev/...'"
-    sims: list[subprocess.Popen[str]] = []
-    try:
+    with pty_simulators() as start:
         for kind, device in adapters:
             link = folder / Path(device).name
             mode = "--slcan" if kind == "SLCAN" else "--rs485"
-            command = [sys.executable, "-m", "servobus.sim", "--family", "myactuator", mode]
-            command += ["--motors", str(motors), "--link", str(link)]
-            sims.append(subprocess.Popen(command, stdout=subprocess.PIPE, text=True))
-            assert sims[-1].stdout is not None
-            assert sims[-1].stdout.readline().strip() == str(link)  # up: the first line is the pty
+            start("--family", "myactuator", mode, "--motors", str(motors), "--link", str(link))
             code = code.replace(device, str(link))
         yield code
-    finally:
-        for sim in sims:
-            sim.terminate()
-            sim.wait(timeout=10)

@@ -86,6 +86,7 @@ def pty_simulators() -> Iterator[Callable[..., str]]:
     try:
         yield start
     finally:
-        for process in processes:
+        for process in processes:  # (all told first: one slow to go leaves none of the others running)
             process.terminate()
-            assert process.wait(timeout=5) == 0
+        codes = [process.wait(timeout=5) for process in processes]
+        assert codes == [0] * len(processes), codes
