@@ -243,7 +243,8 @@ def environment(folder: Path) -> dict[str, str]:
         path.write_text(f"#!{sys.executable}\n{body}", encoding="utf-8")
         path.chmod(0o755)
     path = os.pathsep.join([str(shims), str(Path(sys.executable).parent), os.environ.get("PATH", "")])
-    python_path = os.pathsep.join([str(TESTS), *sys.path])
+    # (without tests/, which pytest puts on sys.path: a page's script sees what a user has)
+    python_path = os.pathsep.join(p for p in sys.path if p and Path(p).resolve() != TESTS)
     return {**os.environ, "PATH": path, "PYTHONPATH": python_path, "COLUMNS": "100", "TERM": "dumb"}
 
 
@@ -460,10 +461,8 @@ if not re.search(r"(-i|--interface)[ =]socketcan\\b", line):
 from cli._virtual import served_on_virtual
 from servobus.cli._connect import sim_devices
 family = re.search(r"(?:-f|--family)[ =](\\S+)", line)
-highest = 1
-for ids in re.findall(r"--ids[ =]([\\d,\\-]+)", line):
-    highest = max([highest, *(int(n) for n in re.findall(r"\\d+", ids))])
-devices = sim_devices(family.group(1) if family else "myactuator", tuple(range(1, highest + 1)))
+from _docs_blocks import highest_id
+devices = sim_devices(family.group(1) if family else "myactuator", tuple(range(1, highest_id(line) + 1)))
 # a virtual channel of this process named as the page's interface, so that what is printed is the same
 with served_on_virtual(devices, channel="can0"):
     code = main(["virtual" if arg == "socketcan" else arg for arg in args])

@@ -392,7 +392,8 @@ def test_every_command_and_option_is_on_the_cli_page(site: Site) -> None:
         ctx = click.Context(command, info_name=path[-1])
         for param in command.get_params(ctx):
             shown = isinstance(param, click.Option) and not param.hidden
-            if shown and not all(opt in text for opt in param.opts):
+            named = (re.search(rf"(?<![\w-]){re.escape(opt)}(?![\w-])", text) for opt in param.opts)
+            if shown and not all(named):
                 missing.append(f"{' '.join(path)} {param.opts}")
     assert not missing, missing
 
