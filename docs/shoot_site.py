@@ -75,7 +75,7 @@ def shoot(browser: WebDriver, url: str, out: Path, width: int, dark: bool) -> No
     browser.execute_cdp_cmd("Emulation.clearDeviceMetricsOverride", {})  # (the last page's height)
     browser.get(url)
     wait_for(browser, lambda d: d.execute_script("return document.readyState") == "complete", url)
-    if dark:  # (material keeps the reader's choice in localStorage; the toggle sets it)
+    if dark:  # (the scheme material's toggle would set on the page)
         browser.execute_script("document.body.setAttribute('data-md-color-scheme', 'slate')")
     height = min(int(browser.execute_script("return document.documentElement.scrollHeight")), MAX_HEIGHT)
     browser.execute_cdp_cmd(
