@@ -38,7 +38,7 @@ from servobus.tools.recording import TelemetryWriter
 from servobus.transports.can import message_from_frame
 
 SCRIPT = [sys.executable, "-c", "import sys; from servobus.cli import main; sys.exit(main())"]
-#: the recording page's example, word for word (docs/recording.md)
+#: the README's record -> plot example, word for word (also on docs/recording.md)
 README = (
     "servobus record --sim 4 --drive sine --stagger --duration 3 -o run.csv",
     "servobus plot run.csv -o run.png",
@@ -105,6 +105,10 @@ def _matches_the_log(telemetry: Path, log: Path, column: str, field: str) -> Non
 def test_the_readme_example_moves_the_motors_and_plots_the_set_points(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    root = Path(__file__).resolve().parents[2]
+    for page in ("README.md", "docs/recording.md"):  # (the example as both show it)
+        text = (root / page).read_text(encoding="utf-8")
+        assert all(line in text for line in README), page
     monkeypatch.chdir(tmp_path)
     record, plot = (line.split()[1:] for line in README)
     result = invoke(record)
