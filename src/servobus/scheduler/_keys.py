@@ -167,7 +167,7 @@ class Keys:
         # (owed, with no round trip: a reply to one is no sample of anyone's)
         late.extend([(window, sent_at, None, until)] * len(earlier))
         self.doubtful.add(key)  # (a reply taken while they are owed is in doubt too)
-        if all(e[2] is not None for e in earlier):  # a new episode: hold once
+        if any(e[2] is not None for e in earlier):  # a new episode (owed ones aside): hold once
             self.held[key] = max(until, self.held.get(key, until))
             if not request.pipelined:
                 self._hold_ordinary(key, until)
